@@ -1,0 +1,1 @@
+"""One module per effect; each registers a Plugin subclass (see clfx.plugin)."""
