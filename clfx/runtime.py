@@ -413,6 +413,24 @@ class Runtime:
         self.cl.enqueue_copy(self.queue, dst.buffer, src.buffer, byte_count=src.nbytes)
         return dst
 
+    def reframe(self, img: DeviceImage, window: Rect, border: str = "zero") -> DeviceImage:
+        """``img`` moved into ``window``: covered pixels copied, the rest ``border``-filled.
+
+        ``border``: ``"zero"`` (transparent black) or ``"clamp"`` (nearest edge pixel, used to
+        extend depth and velocity passes when an effect grows the beauty's window).
+        """
+        if window == img.window:
+            return img
+        dst = self.image(window, img.channels)
+        knl = self.kernel("image.cl", "image_reframe", CH=img.channels,
+                          BORDER={"zero": 0, "clamp": 1}[border])
+        dx, dy = window.x0 - img.window.x0, window.y0 - img.window.y0
+        self.launch(knl, (window.width, window.height), img, np.int32(img.pitch),
+                    np.int32(img.width), np.int32(img.height), dst, np.int32(dst.pitch),
+                    np.int32(window.width), np.int32(window.height), np.int32(dx), np.int32(dy),
+                    local=None)
+        return dst
+
     def to_device(self, array: np.ndarray):
         """A pooled raw buffer holding a copy of a small host array (weights, tables)."""
         a = np.ascontiguousarray(array)

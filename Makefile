@@ -1,0 +1,26 @@
+# clfx: the two commands of the README's quick start are `make demo` and `make test`.
+# Each installs what is missing first (Debian's PoCL and OpenCL headers, a .venv with clfx,
+# its test extras and pyvkfft built for OpenCL): see scripts/setup.sh.
+
+VENV ?= .venv
+PY := $(VENV)/bin/python
+CLFX := $(VENV)/bin/clfx
+DEMO_OUT ?= demo-out
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	$(CLFX) demo $(DEMO_OUT)
+
+test: setup
+	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+bench: setup
+	$(CLFX) bench --size 1920x1080 --markdown bench.md --json > bench.jsonl
+
+clean:
+	rm -rf $(DEMO_OUT) build dist *.egg-info .pytest_cache

@@ -1,0 +1,111 @@
+"""The plugin host: registry, parameter validation, look rendering on the device."""
+import numpy as np
+import pytest
+
+from clfx.camera import Camera
+from clfx.errors import ClipError, ParamError
+from clfx.frame import Frame
+from clfx.look import Look, Step, render_frame
+from clfx.plugin import (QUALITY_LEVELS, BoolParam, ChoiceParam, FloatParam, IntParam, RGBParam,
+                         Vec2Param, discover, get_plugin)
+from clfx.rect import Rect
+
+
+def test_every_plugin_descriptor_is_complete():
+    reg = discover()
+    assert "vignette" in reg
+    for name, cls in reg.items():
+        d = cls.descriptor.describe()
+        assert d["name"] == name and d["kernel"].endswith(".cl")
+        assert set(d["quality"]) == set(QUALITY_LEVELS) and all(d["quality"].values())
+        for p in d["params"]:
+            assert p["hint"], f"{name}.{p['name']} has no hint"
+
+
+def test_every_plugin_has_its_kernel_file_shipped():
+    from clfx.runtime import kernel_dir
+
+    for cls in discover().values():
+        assert (kernel_dir() / cls.descriptor.kernel).is_file()
+
+
+def test_unknown_effect_suggests_closest():
+    with pytest.raises(ParamError, match="did you mean 'vignette'"):
+        get_plugin("vignete")
+
+
+@pytest.mark.parametrize("param, good, bad", [
+    (FloatParam("x", 0.5, min=0.0, max=1.0, hint="h"), 1, 1.5),
+    (IntParam("n", 3, min=1, max=8, hint="h"), 8, 9),
+    (BoolParam("b", True, hint="h"), False, 1),
+    (ChoiceParam("c", "a", choices=("a", "b"), hint="h"), "b", "z"),
+    (RGBParam("t", (1.0, 1.0, 1.0), hint="h"), [0.5, 1, 2], [1, -1, 0]),
+    (Vec2Param("v", (0.0, 0.0), min=-1, max=1, hint="h"), (0.5, -0.5), (2, 0)),
+])
+def test_param_validation(param, good, bad):
+    param.validate(good)
+    with pytest.raises(ParamError):
+        param.validate(bad)
+
+
+def test_params_reject_unknown_names_and_out_of_range():
+    cls = get_plugin("vignette")
+    with pytest.raises(ParamError, match="did you mean 'amount'"):
+        cls.params(amout=0.3)
+    with pytest.raises(ParamError, match=r"outside the allowed range \[-1, 1\]"):
+        cls.params(amount=3.0)
+    with pytest.raises(ParamError, match="not a number"):
+        cls.params(amount="lots")
+
+
+def test_look_renders_with_one_upload_and_one_download(rt, rng, monkeypatch):
+    src = rng.uniform(0, 4, (20, 30, 4)).astype(np.float32)
+    frame = Frame.from_array(src)
+    cls = get_plugin("vignette")
+    look = Look("two", steps=[Step("vignette", cls.params(amount=0.3)),
+                              Step("vignette", cls.params(amount=0.0, natural=0.0)),
+                              Step("vignette", cls.params(amount=0.2, natural=0.5))])
+    calls = {"upload": 0, "download": 0}
+    up, down = rt.upload, rt.download
+    monkeypatch.setattr(rt, "upload", lambda *a, **k: calls.__setitem__("upload", calls["upload"] + 1) or up(*a, **k))
+    monkeypatch.setattr(rt, "download", lambda *a, **k: calls.__setitem__("download", calls["download"] + 1) or down(*a, **k))
+    out, report = render_frame(rt, look, frame, frame_number=7)
+    assert calls == {"upload": 1, "download": 1}
+    assert [s.ran for s in report.steps] == [True, False, True]
+    assert report.steps[1].reason == "natural and amount are 0"
+    one = cls().apply(rt, cls.params(amount=0.3), src)
+    two = cls().apply(rt, cls.params(amount=0.2, natural=0.5), one)
+    np.testing.assert_allclose(out.rgba, two, rtol=1e-6)
+    assert out.metadata["clfx:look"] == "two" and len(out.metadata["clfx:paramsHash"]) == 16
+
+
+def test_look_keeps_windows(rt, rng):
+    src = rng.uniform(0, 1, (10, 12, 4)).astype(np.float32)
+    frame = Frame(src, Rect(5, 6, 17, 16), Rect(0, 0, 40, 30), pixel_aspect=1.5)
+    look = Look("v", steps=[Step("vignette", get_plugin("vignette").params(amount=0.5))])
+    out, _ = render_frame(rt, look, frame)
+    assert out.data_window == frame.data_window and out.display_window == frame.display_window
+    assert out.pixel_aspect == 1.5
+
+
+def test_missing_required_pass_is_reported_before_rendering(rt):
+    from clfx.plugin import Clip, Descriptor, Plugin
+
+    class NeedsDepth(Plugin):
+        descriptor = Descriptor(name="needs_depth", label="x", group="t", summary="x",
+                                kernel="image.cl", clips=(Clip("source"), Clip("depth")),
+                                quality={q: "x" for q in QUALITY_LEVELS})
+
+    look = Look("d", steps=[Step("needs_depth", NeedsDepth.params(), plugin=NeedsDepth())])
+    frame = Frame.from_array(np.zeros((4, 4, 4), np.float32))
+    frame.source = "shot.0001.exr"
+    with pytest.raises(ClipError, match="shot.0001.exr.*needs a depth pass"):
+        render_frame(rt, look, frame)
+
+
+def test_params_hash_changes_with_params_and_camera():
+    cls = get_plugin("vignette")
+    a = Look("a", steps=[Step("vignette", cls.params(amount=0.3))])
+    b = Look("a", steps=[Step("vignette", cls.params(amount=0.4))])
+    c = Look("a", camera=Camera(focal_length=50), steps=[Step("vignette", cls.params(amount=0.3))])
+    assert len({a.params_hash(), b.params_hash(), c.params_hash()}) == 3

@@ -1,0 +1,123 @@
+"""Device choice, program cache, device images."""
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from clfx import runtime
+from clfx.errors import DeviceError, KernelBuildError
+from clfx.rect import Rect
+
+
+class _FakeDevice:
+    name = "Broken GPU"
+    version = "OpenCL 3.0 broken"
+    extensions = ""
+    type = cl.device_type.GPU
+
+
+class _BrokenPlatform:
+    """A platform listed first whose device cannot even create a context."""
+
+    name = "Broken ICD"
+    version = "OpenCL 3.0"
+
+    def get_devices(self):
+        return [_FakeDevice()]
+
+
+class _UnlistablePlatform:
+    name = "Unlistable ICD"
+    version = "OpenCL 1.2"
+
+    def get_devices(self):
+        raise cl.RuntimeError("clGetDeviceIDs failed: DEVICE_NOT_FOUND")
+
+
+def test_working_device_chosen_when_broken_platforms_listed_first(monkeypatch):
+    real = cl.get_platforms()
+    monkeypatch.setattr(cl, "get_platforms", lambda: [_BrokenPlatform(), _UnlistablePlatform()] + real)
+    reports, chosen = runtime.survey_devices()
+    assert chosen is not None
+    by_platform = {r.platform: r for r in reports}
+    assert not by_platform["Broken ICD"].usable
+    assert "test kernel failed" in by_platform["Broken ICD"].reason
+    assert "cannot list devices" in by_platform["Unlistable ICD"].reason
+    chosen_reports = [r for r in reports if r.chosen]
+    assert len(chosen_reports) == 1 and chosen_reports[0].kind == "CPU"
+    rt = runtime.Runtime(device=chosen)
+    img = rt.upload(np.ones((3, 5, 4), np.float32))
+    assert rt.download(img).shape == (3, 5, 4)
+
+
+def test_no_usable_device_names_the_fix(monkeypatch):
+    monkeypatch.setattr(cl, "get_platforms", lambda: [_BrokenPlatform()])
+    with pytest.raises(DeviceError) as err:
+        runtime.Runtime()
+    msg = str(err.value)
+    assert "pocl-opencl-icd" in msg and "Broken ICD" in msg and "\n" not in msg
+
+
+def test_selector_that_matches_nothing_is_an_error():
+    reports, chosen = runtime.survey_devices("no-such-device-xyz")
+    assert chosen is None
+    assert all("not selected" in r.reason for r in reports)
+
+
+def test_selector_by_index_and_name():
+    _, by_index = runtime.survey_devices("0:0")
+    _, by_name = runtime.survey_devices("pthread")
+    assert by_index is not None and by_name is not None
+
+
+def test_program_built_once_and_kernels_reused(rt):
+    k1 = rt.kernel("vignette.cl", "vignette_apply")
+    k2 = rt.kernel("vignette.cl", "vignette_apply")
+    assert k1 is k2
+    assert rt.program("vignette.cl") is rt.program("vignette.cl")
+
+
+def test_failed_build_shows_the_build_log(rt, tmp_path, monkeypatch):
+    (tmp_path / "common.h").write_text("")
+    (tmp_path / "bad.cl").write_text("kernel void bad(global float *x) { x[0] = undefined_name; }\n")
+    monkeypatch.setattr(rt, "kernel_dir", tmp_path)
+    with pytest.raises(KernelBuildError) as err:
+        rt.program("bad.cl")
+    assert "undefined_name" in str(err.value)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (5, 3), (17, 33)])
+@pytest.mark.parametrize("channels", [1, 2, 4])
+def test_upload_download_round_trip_with_padding(rt, rng, shape, channels):
+    a = rng.standard_normal(shape + ((channels,) if channels > 1 else ())).astype(np.float32)
+    img = rt.upload(a)
+    assert img.pitch % runtime.ALIGN_PX == 0 and img.pitch >= shape[1]
+    np.testing.assert_array_equal(rt.download(img), a)
+    np.testing.assert_array_equal(rt.download(rt.copy(img)), a)
+
+
+def test_reframe_zero_and_clamp(rt):
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    img = rt.upload(a, Rect(10, 10, 14, 13))
+    grown = Rect(9, 9, 15, 14)
+    z = rt.download(rt.reframe(img, grown, "zero"))
+    c = rt.download(rt.reframe(img, grown, "clamp"))
+    assert z[0].sum() == 0 and np.array_equal(z[1:4, 1:5], a)
+    assert c[0, 0] == a[0, 0] and c[-1, -1] == a[-1, -1] and np.array_equal(c[1:4, 1:5], a)
+
+
+def test_buffers_return_to_the_pool(rt):
+    import gc
+
+    nbytes = rt.image((7, 9), 4).nbytes
+    gc.collect()
+    before = len(rt.pool._free.get(nbytes, []))
+    img = rt.image((7, 9), 4)
+    del img
+    gc.collect()
+    assert len(rt.pool._free.get(nbytes, [])) >= before
+
+
+def test_pocl_cache_dir_is_persistent_by_default():
+    import os
+
+    assert os.environ.get("POCL_CACHE_DIR")
