@@ -126,7 +126,7 @@ class Batch:
             next_read: Future | None = pool.submit(self._read, self.jobs[0]) if self.jobs else None
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
-                frame_in = next_read.result()
+                frame_in, read_ms = next_read.result()
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
                 frame_out, report = render_frame(
                     rt, self.look, frame_in, frame_number=job.frame,
@@ -134,8 +134,7 @@ class Batch:
                     keep_overscan=self.options.get("keep_overscan", False),
                     analysis_summary=bool(self.options.get("as_json")))
                 report.input, report.output = job.input, job.output
-                report.read_ms = frame_in.metadata.pop("clfx:read_ms", 0.0)
-                frame_out.metadata.pop("clfx:read_ms", None)
+                report.read_ms = read_ms
                 writes.append((pool.submit(self._write, frame_out, job, report), report))
                 writes = self._drain(writes, block=False)
                 reports.append(report)
@@ -168,14 +167,14 @@ class Batch:
                 self._err(report.explain())
         return writes
 
-    def _read(self, job: Job) -> Frame:
+    def _read(self, job: Job) -> tuple[Frame, float]:
+        """The job's frame and the milliseconds it took to read."""
         from clfx.io import read_frame
 
         t0 = time.perf_counter()
         frame = read_frame(job.input, passes=self.passes, colorspace=self.options.get("colorspace"),
                            depth_path=job.depth, velocity_path=job.velocity)
-        frame.metadata["clfx:read_ms"] = (time.perf_counter() - t0) * 1e3
-        return frame
+        return frame, (time.perf_counter() - t0) * 1e3
 
     def _write(self, frame: Frame, job: Job, report) -> None:
         from clfx.io import write_frame

@@ -11,6 +11,7 @@ progress is shown only when stderr is a terminal and ``-q`` is not given.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import sys
@@ -34,6 +35,27 @@ def _on_sigterm(signum, frame):
     raise _Terminated()
 
 
+class ClfxClickError(click.ClickException):
+    """A ClfxError shown as one line (``clfx: error: ...``) with exit code 1."""
+
+    exit_code = 1
+
+    def show(self, file=None):
+        click.echo(f"clfx: error: {self.message}", err=True)
+
+
+class ClfxGroup(click.Group):
+    """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except ClfxError as exc:
+            msg = str(exc)
+            # Build logs keep their lines; everything else is one line.
+            raise ClfxClickError(msg if "\n" in msg and "build" in msg else " ".join(msg.split())) from exc
+
+
 def _runtime(ctx: click.Context):
     from clfx.runtime import Runtime
 
@@ -45,7 +67,7 @@ def _log(ctx, msg: str, level: int = 1):
         click.echo(msg, err=True)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=ClfxGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="clfx")
 @click.option("-v", "--verbose", count=True, help="More messages on stderr.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress or messages on stderr.")
@@ -156,7 +178,7 @@ def looks(as_json):
             click.echo(f"{'':<31}effects: {', '.join(r['effects']) or '(none)'}")
 
 
-@cli.group()
+@cli.group(cls=ClfxGroup)
 def look():
     """Inspect looks."""
 
@@ -257,11 +279,16 @@ def _pass_spec(kw):
     from clfx.io import PassSpec
 
     vc = kw.get("velocity_channels")
+    for name in ("depth_scale", "velocity_scale"):
+        value = kw.get(name, 1.0)
+        if not (value > 0 and math.isfinite(value)):
+            raise click.BadParameter(f"{value} must be a positive number",
+                                     param_hint=f"--{name.replace('_', '-')}")
     return PassSpec(depth_channel=kw.get("depth_channel"), depth_mode=kw.get("depth_mode") or "auto",
-                    depth_scale=kw.get("depth_scale") or 1.0,
+                    depth_scale=kw.get("depth_scale", 1.0),
                     velocity_channels=tuple(vc.split(",")) if vc else None,
                     velocity_y_up=kw.get("velocity_y_up"),
-                    velocity_scale=kw.get("velocity_scale") or 1.0)
+                    velocity_scale=kw.get("velocity_scale", 1.0))
 
 
 for _cmd in (probe,):
@@ -340,6 +367,42 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
              verbosity=ctx.obj.get("verbosity", 1))
 
 
+@cli.command()
+@click.option("--effects", default=None, metavar="A,B", help="Effects to measure (default: all).")
+@click.option("--looks", default=None, metavar="A,B",
+              help="Looks to measure (default: every built-in look; 'none' to skip).")
+@click.option("--size", default="1920x1080", show_default=True, help="WxH of the bench frames.")
+@click.option("--repeat", default=5, show_default=True, help="Warm runs per measurement (median).")
+@click.option("--sequence-frames", default=8, show_default=True,
+              help="Frames for the sequence-throughput measurement (0 to skip).")
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON on stdout.")
+@click.option("--plot", "plot_path", default=None, metavar="FILE", help="Pareto plot PNG (matplotlib).")
+@click.option("--markdown", "md_path", default=None, metavar="FILE", help="Write the tables as markdown.")
+@click.pass_context
+def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path, md_path):
+    """What accuracy costs in time: every effect at every quality level against its reference
+    (with OpenCV/SciPy peers), whole looks, sequence throughput, and scene-analysis skipping."""
+    from clfx.bench import markdown, pareto_plot, run_bench
+
+    w, h = _parse_size(size)
+    look_list = None if looks is None else ([] if looks == "none" else looks.split(","))
+    verbose = ctx.obj.get("verbosity", 1) > 0
+    results = run_bench(_runtime(ctx), effects=effects.split(",") if effects else None,
+                        looks=look_list, width=w, height=h, repeat=max(1, repeat),
+                        sequence_frames=sequence_frames,
+                        log=(lambda m: click.echo(m, err=True)) if verbose else (lambda m: None))
+    table = markdown(results)
+    if md_path:
+        with open(md_path, "w") as f:
+            f.write(table)
+    if plot_path:
+        pareto_plot(results, plot_path)
+    if as_json:
+        click.echo(json.dumps(results, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
+    else:
+        click.echo(table)
+
+
 def _parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -361,9 +424,9 @@ def main(argv=None):
     except click.ClickException as exc:
         exc.show()
         sys.exit(exc.exit_code)
-    except ClfxError as exc:
-        click.echo(f"clfx: error: {' '.join(str(exc).split()) if chr(10) not in str(exc) else str(exc)}", err=True)
-        sys.exit(exc.exit_code)
+    except ClfxError as exc:  # raised outside a subcommand (e.g. while parsing)
+        ClfxClickError(" ".join(str(exc).split())).show()
+        sys.exit(1)
     except KeyboardInterrupt:
         click.echo("clfx: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)

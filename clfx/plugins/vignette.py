@@ -41,6 +41,16 @@ def vignette_geometry(p, camera, display_window, pixel_aspect):
     return cx, cy, sx, sy, ax, ay
 
 
+def bench_case(width, height, rng):
+    """A textured HDR frame under a wide lens with a strong artistic falloff."""
+    from clfx.camera import Camera
+
+    src = rng.uniform(0.0, 4.0, (height, width, 4)).astype(np.float32)
+    src[..., 3] = 1.0
+    return {"source": src, "camera": Camera(focal_length=18.0),
+            "params": {"natural": 1.0, "amount": 0.4, "radius": 0.3, "softness": 0.6}}
+
+
 @register
 class Vignette(Plugin):
     descriptor = Descriptor(

@@ -1,0 +1,217 @@
+"""The command line on real files: render, apply, probe, listings, bad input, interrupts."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from clfx.cli import cli
+
+BEACH = "Beachball/singlepart.{:04d}.exr"
+
+
+def run(*args, code=0):
+    result = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+    assert result.exit_code == code, (result.exit_code, result.output, result.stderr)
+    return result
+
+
+def one_line_error(result, *fragments):
+    err = result.stderr.strip()
+    assert err.startswith("clfx: error:") and "\n" not in err, err
+    for f in fragments:
+        assert f in err, err
+    return err
+
+
+def no_temp_files(folder: Path):
+    return [p.name for p in folder.iterdir() if ".tmp" in p.name]
+
+
+# -- listings -----------------------------------------------------------------------------
+def test_devices_marks_the_device_in_use(rt):
+    out = run("devices").stdout
+    assert out.count("* [") == 1 and "in use" in out
+
+
+def test_devices_with_impossible_selector_fails_naming_the_fix():
+    r = run("--device", "nonexistent-device", "devices", code=1)
+    one_line_error(r, "pocl-opencl-icd")
+
+
+def test_plugins_describe_looks_and_look_show():
+    assert "vignette" in run("plugins").stdout
+    d = json.loads(run("describe", "vignette", "--json").stdout)
+    assert d["name"] == "vignette" and set(d["quality"]) == {"draft", "preview", "final", "reference"}
+    assert "quality levels:" in run("describe", "vignette").stdout
+    assert "default" in run("looks").stdout
+    shown = json.loads(run("look", "show", "default", "--json").stdout)
+    assert shown["name"] == "default" and shown["effects"]
+    one_line_error(run("describe", "vignete", code=1), "did you mean 'vignette'")
+
+
+def test_probe_beachball(exr_images):
+    out = run("probe", exr_images / BEACH.format(1)).stdout
+    assert "depth: Z" in out and "forward" in out and "2048x1556" in out
+
+
+# -- render / apply on real files ------------------------------------------------------------
+def test_render_beachball_sequence_keeps_windows_and_resumes(rt, exr_images, tmp_path):
+    from clfx.io import read_frame
+
+    pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
+    out = tmp_path / "out.####.exr"
+    r = run("render", pattern, out, "--look", "default", "--json")
+    lines = [json.loads(line) for line in r.stdout.splitlines()]
+    assert [rec["frame"] for rec in lines[:-1]] == list(range(1, 9))
+    assert lines[-1]["summary"] and lines[-1]["frames"] == 8
+    written = sorted(tmp_path.glob("out.*.exr"))
+    assert len(written) == 8 and not no_temp_files(tmp_path)
+    src, dst = read_frame(exr_images / BEACH.format(3)), read_frame(tmp_path / "out.0003.exr")
+    assert dst.data_window == src.data_window and dst.display_window == src.display_window
+    assert dst.metadata.get("clfx:look") == "default"
+    # an existing output is refused, --skip-existing resumes, --frames subsets
+    one_line_error(run("render", pattern, out, code=1), "exists", "--overwrite")
+    (tmp_path / "out.0005.exr").unlink()
+    r = run("render", pattern, out, "--skip-existing", "--json")
+    assert [json.loads(x)["frame"] for x in r.stdout.splitlines()[:-1]] == [5]
+    r = run("render", pattern, tmp_path / "sub.####.exr", "--frames", "2-6x2", "--json")
+    assert [json.loads(x)["frame"] for x in r.stdout.splitlines()[:-1]] == [2, 4, 6]
+
+
+def test_frame_alone_equals_frame_in_batch(rt, exr_images, tmp_path):
+    from clfx.io import read_frame
+
+    pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
+    run("render", pattern, tmp_path / "batch.####.exr", "--frames", "1-4", "--float")
+    run("render", exr_images / BEACH.format(3), tmp_path / "alone.exr", "--float")
+    a = read_frame(tmp_path / "batch.0003.exr").rgba
+    b = read_frame(tmp_path / "alone.exr").rgba
+    assert np.array_equal(a, b)
+
+
+def test_apply_one_effect_on_exr_and_png(rt, exr_images, tmp_path):
+    from clfx.io import read_frame
+
+    run("apply", "vignette", exr_images / BEACH.format(1), tmp_path / "v.exr", "amount=0.5")
+    run("apply", "vignette", tmp_path / "v.exr", tmp_path / "v.png", "amount=0.2", "roundness=0")
+    png = read_frame(tmp_path / "v.png")
+    assert png.display_referred and png.rgba.shape[2] == 4
+    run("apply", "vignette", tmp_path / "v.png", tmp_path / "v2.png", "amount=0.2")
+    one_line_error(run("apply", "vignette", tmp_path / "v.exr", tmp_path / "x.exr", "amout=1", code=1),
+                   "did you mean 'amount'")
+    one_line_error(run("apply", "vignette", tmp_path / "v.exr", tmp_path / "x.exr", "amount=5", code=1),
+                   "outside the allowed range")
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_explain_reports_skipped_effects(rt, exr_images, tmp_path):
+    r = run("render", exr_images / BEACH.format(1), tmp_path / "e.exr", "--explain",
+            "--set", "vignette.amount=0", "--set", "vignette.natural=0")
+    assert "skipped vignette" in r.stderr and "natural and amount are 0" in r.stderr
+
+
+def test_input_is_never_overwritten(rt, exr_images, tmp_path):
+    import shutil
+
+    src = tmp_path / "in.exr"
+    shutil.copy(exr_images / BEACH.format(1), src)
+    before = src.read_bytes()
+    one_line_error(run("render", src, src, "--overwrite", code=1), "never overwrites")
+    assert src.read_bytes() == before
+
+
+# -- bad input -------------------------------------------------------------------------------
+def test_missing_file(tmp_path):
+    one_line_error(run("render", tmp_path / "nope.exr", tmp_path / "o.exr", code=1), "nope.exr")
+
+
+def test_missing_frames_named_or_skipped(rt, exr_images, tmp_path):
+    import shutil
+
+    for f in (1, 2, 5):
+        shutil.copy(exr_images / BEACH.format(f), tmp_path / f"s.{f:04d}.exr")
+    r = run("render", tmp_path / "s.####.exr", tmp_path / "o.####.exr", "--frames", "1-5", code=1)
+    one_line_error(r, "missing", "3-4")
+    assert not list(tmp_path.glob("o.*"))
+    r = run("render", tmp_path / "s.####.exr", tmp_path / "o.####.exr", "--frames", "1-5",
+            "--skip-missing", "--json")
+    assert [json.loads(x)["frame"] for x in r.stdout.splitlines()[:-1]] == [1, 2, 5]
+
+
+def test_bad_looks_from_the_cli(tmp_path, exr_images):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\neffects:\n  - effect: vignette\n    params: {amount: 9}\n")
+    r = run("render", exr_images / BEACH.format(1), tmp_path / "o.exr", "--look", bad, code=1)
+    one_line_error(r, f"{bad}:4", "params.amount")
+    bad.write_text("name: bad\neffects: [\n")
+    one_line_error(run("render", exr_images / BEACH.format(1), tmp_path / "o.exr", "--look", bad, code=1),
+                   "malformed YAML")
+    one_line_error(run("render", exr_images / BEACH.format(1), tmp_path / "o.exr", "--look", "nolook", code=1),
+                   "unknown look")
+    one_line_error(run("render", exr_images / BEACH.format(1), tmp_path / "o.exr",
+                       "--set", "glaare.size=1", code=1), "has no effect 'glaare'")
+    assert not (tmp_path / "o.exr").exists()
+
+
+def test_unwritable_output_folder(exr_images, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    r = run("render", exr_images / BEACH.format(1), blocker / "o.exr", code=1)
+    one_line_error(r, str(blocker))
+
+
+def test_every_damaged_file_is_rejected_cleanly(rt, exr_images, tmp_path):
+    damaged = sorted((exr_images / "Damaged").iterdir())
+    damaged = [p for p in damaged if p.suffix != ".rst"]
+    assert len(damaged) > 100
+    for path in damaged:
+        r = run("render", path, tmp_path / "o.exr", code=1)
+        one_line_error(r, path.name)
+    assert not list(tmp_path.iterdir())
+
+
+def test_usage_error_exit_code_2():
+    run("render", code=2)
+    run("nosuchcommand", code=2)
+
+
+# -- interrupts ------------------------------------------------------------------------------
+def test_sigterm_leaves_no_partial_file(rt, exr_images, tmp_path):
+    pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
+    env = dict(os.environ)
+    proc = subprocess.Popen([sys.executable, "-m", "clfx.cli", "render", pattern,
+                             str(tmp_path / "o.####.exr"), "--float", "--compression", "zip"],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    while time.time() < deadline and not list(tmp_path.glob("o.*.exr")):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode in (143, 0), err  # 0 only if it finished before the signal
+    assert not no_temp_files(tmp_path), err
+    from clfx.io import read_frame
+
+    for p in tmp_path.glob("o.*.exr"):
+        read_frame(p)  # every file present is complete
+
+
+def test_demo_writes_frames_previews_and_contact_sheet(rt, tmp_path):
+    r = run("demo", tmp_path / "demo", "--frames", "3", "--size", "160x90", "--json")
+    summary = json.loads(r.stdout.splitlines()[-1])
+    assert summary["frames"] == 3
+    names = sorted(p.name for p in (tmp_path / "demo").iterdir())
+    for f in (1, 2, 3):
+        assert f"demo.{f:04d}.exr" in names and f"demo.{f:04d}.png" in names
+        assert f"scene.{f:04d}.exr" in names
+    assert "contact_sheet.png" in names
+    from clfx.io import read_frame
+
+    scene = read_frame(tmp_path / "demo" / "scene.0002.exr")
+    assert scene.depth is not None and scene.velocity is not None

@@ -1,0 +1,123 @@
+"""clfx.sequence: frame patterns, ranges, missing frames."""
+import pytest
+
+from clfx.errors import SequenceError
+from clfx.sequence import FrameSpec, Pattern, output_path, parse_frames, resolve_inputs
+
+
+@pytest.mark.parametrize("text, frame, want", [
+    ("shot.####.exr", 7, "shot.0007.exr"),        # one digit per # when there are several
+    ("shot.#.exr", 7, "shot.0007.exr"),           # a lone # is 4 digits (fileseq default)
+    ("shot.##.exr", 7, "shot.07.exr"),
+    ("shot.%04d.exr", 7, "shot.0007.exr"),
+    ("shot.%d.exr", 7, "shot.7.exr"),
+    ("shot.$F4.exr", 7, "shot.0007.exr"),
+    ("shot.@.exr", 7, "shot.7.exr"),
+    ("shot.@@@@.exr", 7, "shot.0007.exr"),
+    ("/renders/a/shot.####.exr", 1001, "/renders/a/shot.1001.exr"),
+    ("shot.####.exr", 12345, "shot.12345.exr"),   # wider than the padding: written in full
+])
+def test_pattern_tokens(text, frame, want):
+    p = Pattern.parse(text)
+    assert p.is_sequence
+    assert p.path(frame) == want
+    assert output_path(p, frame) == want
+
+
+@pytest.mark.parametrize("text", ["shot.exr", "shot.0042.exr", "/a/b/plate.tif", "-"])
+def test_plain_files(text):
+    p = Pattern.parse(text)
+    assert not p.is_sequence
+    assert p.path(5) == text
+
+
+def test_plain_file_frame_number():
+    assert Pattern.parse("shot.0042.exr").frame_from_name() == 42
+    assert Pattern.parse("shot.exr").frame_from_name() == 1
+
+
+@pytest.mark.parametrize("spec, want", [
+    ("1-5", [1, 2, 3, 4, 5]),
+    ("1-10x2", [1, 3, 5, 7, 9]),
+    ("1,5,10-12", [1, 5, 10, 11, 12]),
+    ("10-7", [10, 9, 8, 7]),
+    ("1-10:3", [1, 4, 7, 10]),                     # farm step, not fileseq's stagger
+    ("1-10:3,20", [1, 4, 7, 10, 20]),
+    (" 1 - 3 ", [1, 2, 3]),
+    ("1001", [1001]),
+    ("-3--1", [-3, -2, -1]),
+])
+def test_parse_frames(spec, want):
+    assert parse_frames(spec) == want
+
+
+def test_parse_frames_long_range():
+    assert len(parse_frames("1-100")) == 100
+    assert parse_frames("1-100x2")[:3] == [1, 3, 5] and len(parse_frames("1-100x2")) == 50
+
+
+@pytest.mark.parametrize("spec", ["", "abc", "1-", "1,,2", "1-10x0", "1.5", "1-1000000000"])
+def test_bad_ranges_name_the_spec(spec):
+    with pytest.raises(SequenceError) as info:
+        parse_frames(spec)
+    assert repr(spec) in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_frame_spec():
+    fs = FrameSpec.parse("1-5,9")
+    assert fs.frames == (1, 2, 3, 4, 5, 9) and len(fs) == 6 and str(fs) == "1-5,9"
+    assert list(fs) == [1, 2, 3, 4, 5, 9]
+
+
+@pytest.fixture
+def shots(tmp_path):
+    for f in (1, 2, 5, 6, 7, 10):
+        (tmp_path / f"shot.{f:04d}.exr").write_bytes(b"x")
+    (tmp_path / "shot.8.exr").write_bytes(b"x")          # wrong padding: not part of ####
+    (tmp_path / "other.0003.exr").write_bytes(b"x")
+    return tmp_path
+
+
+@pytest.mark.parametrize("token", ["####", "#", "%04d", "$F4", "@@@@"])
+def test_existing_frames(shots, token):
+    p = Pattern.parse(str(shots / f"shot.{token}.exr"))
+    assert p.existing_frames() == [1, 2, 5, 6, 7, 10]
+
+
+def test_existing_frames_none(tmp_path):
+    assert Pattern.parse(str(tmp_path / "none.####.exr")).existing_frames() == []
+
+
+def test_resolve_inputs_all_on_disk(shots):
+    p = Pattern.parse(str(shots / "shot.####.exr"))
+    got = resolve_inputs(p, None, skip_missing=False)
+    assert [f for f, _ in got] == [1, 2, 5, 6, 7, 10]
+    assert got[0][1] == str(shots / "shot.0001.exr")
+
+
+def test_missing_frames_listed_compactly(shots):
+    p = Pattern.parse(str(shots / "shot.####.exr"))
+    with pytest.raises(SequenceError) as info:
+        resolve_inputs(p, parse_frames("1-10"), skip_missing=False)
+    assert "missing frames 3-4,8-9 of" in str(info.value)
+    assert "shot.####.exr" in str(info.value)
+    got = resolve_inputs(p, parse_frames("1-10"), skip_missing=True)
+    assert [f for f, _ in got] == [1, 2, 5, 6, 7, 10]
+
+
+def test_resolve_single_file(shots):
+    p = Pattern.parse(str(shots / "shot.0005.exr"))
+    assert resolve_inputs(p, None, skip_missing=False) == [(5, str(shots / "shot.0005.exr"))]
+    # a still serves every requested frame
+    assert [f for f, _ in resolve_inputs(p, [1, 2], skip_missing=False)] == [1, 2]
+    gone = Pattern.parse(str(shots / "gone.exr"))
+    with pytest.raises(SequenceError, match="gone.exr"):
+        resolve_inputs(gone, None, skip_missing=False)
+    assert resolve_inputs(gone, None, skip_missing=True) == []
+
+
+def test_no_frames_on_disk(tmp_path):
+    p = Pattern.parse(str(tmp_path / "none.####.exr"))
+    with pytest.raises(SequenceError, match="no frames"):
+        resolve_inputs(p, None, skip_missing=False)
