@@ -8,7 +8,9 @@ Three parts, all measured in one run so ratios compare like with like:
    the case's ``truth`` when it has one (the multisample ground truth for depth of field and
    motion blur), else the effect's own ``reference`` level (float64 / direct evaluation).
    Errors: RMSE and max in linear light, relative RMSE (RMSE / RMS of the reference), PSNR
-   after a log tone map, and edge-band RMSE where the case marks an edge band.  Peers
+   after a log tone map, and edge-band RMSE where the case marks an edge band
+   (``edge_mask``).  Noise effects, whose levels draw different samples, supply
+   ``bench_metrics(out, ref, case)`` comparing statistics with their model instead.  Peers
    (OpenCV, SciPy) doing the same operation are timed beside it where a module declares
    them with ``bench_peers(case, params)``.
 2. Whole looks: each built-in look at the bench size, ms per frame with a per-effect
@@ -133,8 +135,10 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     res.reference_kind = "ground truth" if truth is not None else "reference level"
     edge = case.get("edge_mask")
     ref_ms = next(r["ms"] for r in res.rows if r["quality"] == "reference")
+    # Noise-like effects compare statistics, not pixels: a module may supply its own metric.
+    metric = getattr(module, "bench_metrics", None) or (lambda out, ref_, c: error_metrics(out, ref_, edge))
     for row in res.rows:
-        row.update(error_metrics(outputs[row["quality"]], ref, edge))
+        row.update(metric(outputs[row["quality"]], ref, case))
         row["speedup_vs_reference"] = ref_ms / row["ms"] if row["ms"] > 0 else None
         row["reference"] = res.reference_kind
     ref_err = next(r for r in res.rows if r["quality"] == "reference")["rel_rmse"]

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import difflib
 import os
-from importlib import resources
 from pathlib import Path
 
 import yaml
@@ -45,13 +44,12 @@ DEFAULT_LOOK = "default"
 
 
 def builtin_dir() -> Path:
-    try:
-        path = Path(str(resources.files("clfx.presets")))
+    """The built-in looks: ``clfx/presets`` in a wheel, or the repository's ``presets/``."""
+    here = Path(__file__).resolve().parent
+    for path in (here / "presets", here.parent / "presets"):
         if path.is_dir() and any(path.glob("*.yaml")):
             return path
-    except (ModuleNotFoundError, TypeError):
-        pass
-    return Path(__file__).resolve().parent.parent / "presets"
+    return here.parent / "presets"
 
 
 def user_dir() -> Path:

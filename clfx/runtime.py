@@ -22,7 +22,6 @@ import os
 import threading
 import weakref
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -66,17 +65,14 @@ def _ensure_pocl_cache() -> None:
 
 
 def kernel_dir() -> Path:
-    """Folder holding the ``.cl`` files: the ``clfx.kernels`` data package."""
-    try:
-        path = Path(str(resources.files("clfx.kernels")))
-        if (path / "common.h").exists():
+    """Folder holding the ``.cl`` files: ``clfx/kernels`` in an installed wheel, or the
+    repository's top-level ``kernels/`` in a source checkout (editable install)."""
+    here = Path(__file__).resolve().parent
+    for path in (here / "kernels", here.parent / "kernels"):
+        if (path / "common.h").is_file():
             return path
-    except (ModuleNotFoundError, TypeError):
-        pass
-    path = Path(__file__).resolve().parent.parent / "kernels"
-    if (path / "common.h").exists():
-        return path
-    raise KernelBuildError("cannot find clfx's kernels folder (is the package installed correctly?)")
+    raise KernelBuildError(f"cannot find clfx's kernels folder next to {here} "
+                           f"(is the package installed correctly?)")
 
 
 @dataclass

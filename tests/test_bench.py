@@ -1,0 +1,83 @@
+"""`clfx bench`: runs on a small size, error falls as quality rises, analysis skips what it should.
+
+No wall-time assertions: timings are reported, never asserted.
+"""
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from clfx.bench import analysis_frames, bench_effect, error_metrics
+from clfx.cli import cli
+from clfx.plugin import QUALITY_LEVELS, discover
+
+SIZE = (96, 64)
+# Relative slack when comparing errors of neighbouring levels: two levels may be equally
+# accurate (e.g. exact closed forms), and float32 round-off differs between code paths.
+SLACK = 1.05
+FLOOR = 1e-6
+
+
+@pytest.fixture(scope="module")
+def effect_results(rt):
+    return {name: bench_effect(rt, name, *SIZE, repeat=1) for name in discover()}
+
+
+@pytest.mark.parametrize("name", sorted(discover()))
+def test_every_effect_is_benchmarked(effect_results, name):
+    res = effect_results[name]
+    assert res.note == "", f"{name}: {res.note}"
+    assert [r["quality"] for r in res.rows] == list(QUALITY_LEVELS)
+    for r in res.rows:
+        assert r["ms"] >= 0 and np.isfinite(r["rmse"])
+
+
+@pytest.mark.parametrize("name", sorted(discover()))
+def test_error_falls_monotonically_as_quality_rises(effect_results, name):
+    rows = {r["quality"]: r for r in effect_results[name].rows}
+    errors = [rows[q]["rel_rmse"] for q in QUALITY_LEVELS]
+    for lo, hi, e_lo, e_hi in zip(QUALITY_LEVELS, QUALITY_LEVELS[1:], errors, errors[1:]):
+        assert e_hi <= e_lo * SLACK + FLOOR, f"{name}: {hi} error {e_hi:.3g} > {lo} error {e_lo:.3g}"
+
+
+def test_error_metrics():
+    ref = np.ones((4, 4, 4))
+    m = error_metrics(ref, ref)
+    assert m["rmse"] == 0 and m["psnr_log"] == float("inf")
+    worse = error_metrics(ref * 1.1, ref)
+    assert worse["rel_rmse"] == pytest.approx(0.1) and np.isfinite(worse["psnr_log"])
+
+
+def test_bench_cli_json_small(rt, tmp_path):
+    r = CliRunner().invoke(cli, ["bench", "--size", "64x48", "--repeat", "1", "--effects", "vignette",
+                                 "--looks", "default", "--sequence-frames", "2", "--json",
+                                 "--markdown", str(tmp_path / "b.md")], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    assert data["effects"][0]["effect"] == "vignette" and data["looks"][0]["look"] == "default"
+    assert data["sequence"]["frames"] == 2
+    assert "| vignette | draft |" in (tmp_path / "b.md").read_text()
+
+
+def test_scene_analysis_skips_what_frames_a_b_c_do_not_need(rt):
+    """Frame (a) needs everything; (b) static, dim, in focus needs nothing spatial;
+    (c) needs only motion blur, and only in the moving tiles."""
+    from clfx.look import render_frame
+    from clfx.presets import load_look
+
+    look = load_look("cinema")
+    frames = analysis_frames(256, 144, look.camera)
+    ran = {}
+    for key, frame in frames.items():
+        _, report = render_frame(rt, look, frame, frame_number=1)
+        ran[key] = {s.effect: s for s in report.steps}
+    spatial = {"dof", "motion_blur", "glare", "streaks"}
+    present = spatial & set(ran["a_needs_everything"])
+    assert present == spatial, f"cinema look lacks {spatial - present}"
+    assert all(ran["a_needs_everything"][e].ran for e in spatial)
+    b = ran["b_static_dim_in_focus"]
+    assert not any(b[e].ran for e in spatial), {e: b[e].reason for e in spatial}
+    assert "velocity" in b["motion_blur"].reason and "threshold" in b["glare"].reason
+    c = ran["c_small_region_moves"]
+    assert c["motion_blur"].ran and not c["dof"].ran and not c["glare"].ran
