@@ -1,0 +1,124 @@
+/* camera_blur.cl: blur from camera motion during the shutter (clfx/plugins/camera_blur.py).
+ *
+ *   camera_blur_similarity  pan + roll + zoom without trucking: every pixel averages the sharp
+ *                           image along its exact path p(t) = c + (1 + zoom t) R(roll t)(p0 - c)
+ *                           + shift t, inverted per instant (linear, spin and radial gathers
+ *                           in one; exact because a rotating/zooming camera changes no
+ *                           occlusion)
+ *   camera_blur_velocity    the same motion plus trucking/dolly as a velocity field (px/frame)
+ *                           for motion_blur's reconstruction: near things move more (f / z)
+ * Each work-item handles 4 pixels of a row.
+ */
+#include "common.h"
+
+#ifndef ACC
+#define ACC float
+#define ACC16 float16
+#define CONVERT_ACC16 convert_float16
+#define CONVERT_FROM_ACC16 convert_float16
+#endif
+#ifndef BILINEAR
+#define BILINEAR 1
+#endif
+#ifndef JITTER
+#define JITTER 1
+#endif
+
+inline float4 cb_fetch(global const float *col, const int pitch, const int w, const int h,
+                       const float px, const float py)
+{
+#if BILINEAR
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v);
+  const float ax = u - fu, ay = v - fv;
+  const int iu = (int)clamp(fu, -1.0f, (float)w), iv = (int)clamp(fv, -1.0f, (float)h);
+  const int xa = clfx_clampi(iu, 0, w - 1), xb = clfx_clampi(iu + 1, 0, w - 1);
+  const int ya = clfx_clampi(iv, 0, h - 1), yb = clfx_clampi(iv + 1, 0, h - 1);
+  const float4 c00 = vload4(ya * pitch + xa, col), c10 = vload4(ya * pitch + xb, col);
+  const float4 c01 = vload4(yb * pitch + xa, col), c11 = vload4(yb * pitch + xb, col);
+  const float4 top = c00 + (c10 - c00) * ax, bot = c01 + (c11 - c01) * ax;
+  return top + (bot - top) * ay;
+#else
+  const int x = (int)clamp(floor(px), 0.0f, (float)(w - 1));
+  const int y = (int)clamp(floor(py), 0.0f, (float)(h - 1));
+  return vload4(y * pitch + x, col);
+#endif
+}
+
+/* Interleaved gradient noise (Jimenez 2014), shifted per frame; 0.5 without jitter. */
+inline float4 cb_jitter(const float4 x, const float y, const int frame)
+{
+#if !JITTER
+  return (float4)(0.5f);
+#endif
+  const float o = 5.588238f * (float)(frame & 63);
+  const float4 a = 0.06711056f * (x + o) + 0.00583715f * (y + o);
+  const float4 b = 52.9829189f * (a - floor(a));
+  return b - floor(b);
+}
+
+/* (x0, y0): the window's origin in the frame; (cx, cy): the motion's centre in the frame;
+ * roll in radians per frame (+ turns +x towards +y); zoom: scale growth per frame. */
+kernel void camera_blur_similarity(global const float *col, global float *dst, const int pitch,
+                                   const int width, const int height, const int x0,
+                                   const int y0, const float cx, const float cy,
+                                   const float sx, const float sy, const float roll,
+                                   const float zoom, const float t0, const float t1,
+                                   const int n, const int frame)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const float4 lane = (float4)(qx * 4) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
+  const float fy = (float)y;
+  const float4 qx0 = lane + 0.5f + (float)x0 - cx;         /* relative to the centre */
+  const float qy0 = fy + 0.5f + (float)y0 - cy;
+  const float dt = (t1 - t0) / (float)n;
+  const float4 jit = cb_jitter(lane, fy, frame);
+  ACC16 acc = (ACC16)(0);
+  for(int i = 0; i < n; i++)
+  {
+    const float4 t = t0 + ((float)i + jit) * dt;
+    const float4 qx = qx0 - sx * t, qy = qy0 - sy * t;
+    float4 c;
+    const float4 s = sincos(roll * t, &c);
+    const float4 inv_k = 1.0f / fmax(1.0f + zoom * t, 1e-3f);
+    /* inverse rotation, then inverse scale, back to window coordinates */
+    const float4 rx = (c * qx + s * qy) * inv_k + cx - (float)x0;
+    const float4 ry = (-s * qx + c * qy) * inv_k + cy - (float)y0;
+    const float16 v = (float16)(cb_fetch(col, pitch, width, height, rx.x, ry.x),
+                                cb_fetch(col, pitch, width, height, rx.y, ry.y),
+                                cb_fetch(col, pitch, width, height, rx.z, ry.z),
+                                cb_fetch(col, pitch, width, height, rx.w, ry.w));
+    acc += CONVERT_ACC16(v);
+  }
+  vstore16(CONVERT_FROM_ACC16(acc / (ACC)n), 0, dst + (y * pitch + qx * 4) * 4);
+}
+
+/* Velocity (px/frame) of the camera motion at each pixel; depth (if HAS_DEPTH) scales the
+ * trucking terms: lateral -f_px * truck / z, dolly (p - c) * dolly / (z - dolly). */
+kernel void camera_blur_velocity(global const float *depth, global float *vel, const int pitch,
+                                 const int width, const int height, const int x0, const int y0,
+                                 const float cx, const float cy, const float sx,
+                                 const float sy, const float roll, const float zoom,
+                                 const float truck_px_x, const float truck_px_y,
+                                 const float dolly)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int i = y * pitch + qx * 4;
+  const float4 px = (float4)(qx * 4) + (float4)(0.0f, 1.0f, 2.0f, 3.0f) + 0.5f + (float)x0 - cx;
+  const float py = (float)y + 0.5f + (float)y0 - cy;
+  float4 vx = sx + zoom * px - roll * py;      /* d/dt of R(roll t)(p - c): roll x perp */
+  float4 vy = sy + zoom * py + roll * px;
+#if HAS_DEPTH
+  const float4 z = vload4(0, depth + i);
+  const int4 valid = (z > 0.0f) & ((as_int4(z) & 0x7f800000) != 0x7f800000);  /* inf: 0 */
+  const float4 iz = select((float4)(0.0f), 1.0f / z, valid);
+  /* a point nearer than the dolly step would pass the camera: cap its expansion at 1/frame */
+  const float4 dz = select((float4)(0.0f), fmin(dolly * iz / fmax(1.0f - dolly * iz, 1e-3f),
+                                                1.0f), valid);
+  vx += -truck_px_x * iz + px * dz;
+  vy += -truck_px_y * iz + py * dz;
+#endif
+  vstore8((float8)(vx.x, vy.x, vx.y, vy.y, vx.z, vy.z, vx.w, vy.w), 0, vel + 2 * i);
+}

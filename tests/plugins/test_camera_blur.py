@@ -1,0 +1,117 @@
+import math
+
+import numpy as np
+import pytest
+
+from clfx.camera import Camera
+from clfx.errors import ClipError
+from clfx.plugin import RenderContext
+from clfx.plugins.camera_blur import CameraBlur
+from tests.conftest import hard_shapes
+from tests.plugins.test_motion_blur import smooth_texture
+from tests.reference.motion_blur import line_blur, similarity_blur
+
+QUALITIES = ("draft", "preview", "final", "reference")
+CAM = Camera(shutter_angle=180.0, shutter_offset="centered")
+
+
+def run(rt, src, quality="final", depth=None, camera=CAM, **kw):
+    return CameraBlur().apply(rt, CameraBlur.params(**kw), src, depth=depth, quality=quality,
+                              camera=camera)
+
+
+def check_levels(rt, src, want, tol_ref, **kw):
+    errs = [np.abs(run(rt, src, q, **kw) - want).max() for q in QUALITIES]
+    assert errs[-1] < tol_ref, errs
+    assert all(b <= a + 1e-6 for a, b in zip(errs, errs[1:])), errs   # monotone
+    return errs
+
+
+def test_pan_is_line_blur(rt, rng):
+    src = smooth_texture(rng, 41, 60)
+    diag = math.hypot(60, 41)
+    a = math.radians(30.0)
+    v = (0.1 * diag * math.cos(a), 0.1 * diag * math.sin(a))
+    want = line_blur(src, v, t0=-0.25, t1=0.25)
+    # midpoint rule, <= 0.25 px spacing, ~4 px features: < 2e-3 of the [0, 1] range
+    check_levels(rt, src, want, 2e-3, length=0.1, direction=30.0)
+
+
+def test_spin_about_centre(rt, rng):
+    src = smooth_texture(rng, 41, 60)
+    want = similarity_blur(src, t0=-0.25, t1=0.25, center=(30.0, 20.5), roll_deg=20.0)
+    # the arc is sampled exactly (sincos per sample); same quadrature bound as the pan
+    check_levels(rt, src, want, 2e-3, roll=20.0)
+
+
+def test_zoom_is_radial(rt, rng):
+    src = smooth_texture(rng, 41, 60)
+    want = similarity_blur(src, t0=0.0, t1=0.5, center=(30.0 + 15.0, 20.5), zoom=0.2)
+    check_levels(rt, src, want, 2e-3, zoom=0.2, center=(0.5, 0.0),
+                 camera=Camera(shutter_angle=180.0, shutter_offset="opening"))
+
+
+def test_combined_similarity(rt, rng):
+    src = smooth_texture(rng, 36, 52)
+    diag = math.hypot(52, 36)
+    want = similarity_blur(src, t0=-0.25, t1=0.25, center=(26.0, 18.0),
+                           shift=(-0.05 * diag, 0.0), roll_deg=-10.0, zoom=-0.1)
+    check_levels(rt, src, want, 2e-3, length=0.05, direction=180.0, roll=-10.0, zoom=-0.1)
+
+
+def test_trucking_constant_depth_is_line_blur(rt, rng):
+    src = smooth_texture(rng, 40, 64)
+    depth = np.full((40, 64), 2.0, np.float32)
+    f_px = 35.0 * 64 / 36.0
+    v = (-f_px * 0.2 / 2.0, 0.0)   # camera right by 0.2 m at 2 m: content moves left
+    want = line_blur(src, v, t0=-0.25, t1=0.25)
+    got = run(rt, src, "reference", depth=depth, truck=(0.2, 0.0), max_blur=0.25)
+    # motion_blur's reference level on a uniform field: midpoint quadrature, as above
+    assert np.abs(got - want).max() < 2e-3
+
+
+def test_trucking_near_moves_more(rt, rng):
+    h, w = 32, 96
+    src = np.zeros((h, w, 4), np.float32)
+    src[:, 48] = 1.0
+    depth = np.full((h, w), 100.0, np.float32)
+    depth[16:] = 1.0
+    got = run(rt, src, "final", depth=depth, truck=(0.1, 0.0), max_blur=0.25)
+    far_width = (got[8, :, 0] > 1e-3).sum()
+    near_width = (got[24, :, 0] > 1e-3).sum()
+    assert near_width > 4 * max(far_width, 1)
+    assert np.isfinite(got).all()
+
+
+def test_trucking_needs_depth(rt, rng):
+    src = rng.uniform(0, 1, (8, 8, 4)).astype(np.float32)
+    with pytest.raises(ClipError):
+        run(rt, src, truck=(0.1, 0.0))
+
+
+def test_identity_reasons(rt, rng):
+    src = rng.uniform(0, 1, (8, 8, 4)).astype(np.float32)
+    ctx = RenderContext(rt, rt.upload(src), camera=CAM)
+    assert CameraBlur().is_identity(CameraBlur.params(), ctx) == "no camera motion"
+    assert "below half a pixel" in CameraBlur().is_identity(CameraBlur.params(length=0.01), ctx)
+    assert np.array_equal(run(rt, src), src)
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_hard_shapes(rt, rng, shape):
+    src = np.full(shape + (4,), 0.25, np.float32)
+    src[0, 0] = np.nan
+    got = run(rt, src, length=0.3, roll=30.0, zoom=0.3)
+    assert got.shape == src.shape and np.isfinite(got).all()
+    far = np.ones(shape, bool)
+    far[0, 0] = False
+    assert (got[..., :3] <= 0.25 + 1e-6).all()
+
+
+def test_hdr_pan_keeps_energy_away_from_borders(rt):
+    src = np.zeros((16, 64, 4), np.float32)
+    src[8, 32, :3] = 1e5
+    src[..., 3] = 1.0
+    got = run(rt, src, "reference", length=0.2)
+    np.testing.assert_allclose(got[..., :3].sum(), 3e5, rtol=1e-5)
+    np.testing.assert_allclose(got[..., 3], 1.0, rtol=1e-6)   # alpha blurred, stays 1

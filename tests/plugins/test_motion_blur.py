@@ -1,0 +1,194 @@
+import math
+
+import numpy as np
+import pytest
+
+from clfx import metrics
+from clfx.camera import Camera
+from clfx.plugin import RenderContext
+from clfx.plugins.motion_blur import MAX_RADIUS_PX, MotionBlur, bench_case, tile_size
+from tests.conftest import hard_shapes
+from tests.reference.motion_blur import line_blur, naive_blur
+
+QUALITIES = ("draft", "preview", "final", "reference")
+CENTRED = Camera(shutter_angle=180.0, shutter_offset="centered")
+
+
+def smooth_texture(rng, h, w):
+    """Random texture with ~4 px features: the bilinear quadrature error stays small."""
+    coarse = rng.uniform(0.0, 1.0, (h // 4 + 3, w // 4 + 3, 4))
+    ys, xs = (np.mgrid[0:h, 0:w] + 0.5) / 4.0
+    y0, x0 = ys.astype(int), xs.astype(int)
+    fy, fx = (ys - y0)[..., None], (xs - x0)[..., None]
+    c = coarse
+    img = ((c[y0, x0] * (1 - fx) + c[y0, x0 + 1] * fx) * (1 - fy)
+           + (c[y0 + 1, x0] * (1 - fx) + c[y0 + 1, x0 + 1] * fx) * fy)
+    return img.astype(np.float32)
+
+
+def run(rt, src, vel, depth=None, quality="final", camera=CENTRED, **kw):
+    return MotionBlur().apply(rt, MotionBlur.params(**kw), src, velocity=vel, depth=depth,
+                              quality=quality, camera=camera)
+
+
+def uniform(shape, v):
+    vel = np.zeros(shape + (2,), np.float32)
+    vel[...] = v
+    return vel
+
+
+@pytest.mark.parametrize("offset,t", [("centered", (-0.25, 0.25)), ("opening", (0.0, 0.5)),
+                                      ("closing", (-0.5, 0.0))])
+def test_uniform_velocity_is_box_line_blur(rt, rng, offset, t):
+    src = smooth_texture(rng, 40, 57)
+    v = (9.0, -3.5)
+    want = line_blur(src, v, t0=t[0], t1=t[1])
+    errs = []
+    for q in QUALITIES:
+        got = run(rt, src, uniform(src.shape[:2], v), quality=q, max_blur=0.25,
+                  camera=Camera(shutter_angle=180.0, shutter_offset=offset))
+        errs.append(np.abs(got - want).max())
+    # reference: midpoint rule with <= 0.25 px spacing on a bilinear image with ~4 px
+    # features: quadrature error ~ spacing^2 x curvature < 1e-3 of the [0, 1] range
+    assert errs[-1] < 2e-3, errs
+    # final: jittered samples every <= 0.5 px: first-order error (spacing / length) ~1-2%
+    assert errs[2] < 0.05, errs
+    # error falls (or stays equal) draft -> preview -> final -> reference
+    assert all(b <= a + 1e-6 for a, b in zip(errs, errs[1:])), errs
+
+
+def test_constant_image_stays_constant(rt, rng):
+    src = np.full((33, 45, 4), 0.37, np.float32)
+    vel = rng.normal(0.0, 20.0, (33, 45, 2)).astype(np.float32)
+    depth = rng.uniform(0.5, 50.0, (33, 45)).astype(np.float32)
+    for q in QUALITIES:
+        got = run(rt, src, vel, depth, quality=q)
+        np.testing.assert_allclose(got, 0.37, rtol=1e-6, atol=0)   # normalised weights
+
+
+def test_zero_velocity_is_identity_with_reason(rt, rng):
+    src = rng.uniform(0.0, 1.0, (16, 16, 4)).astype(np.float32)
+    vel = np.zeros((16, 16, 2), np.float32)
+    vel[3, 3] = (0.6, 0.0)   # 0.3 px over a 180 degree shutter
+    got = run(rt, src, vel)
+    assert np.array_equal(got, src)
+    ctx = RenderContext(rt, rt.upload(src), velocity=rt.upload(vel), camera=CENTRED)
+    assert "below half a pixel" in MotionBlur().is_identity(MotionBlur.params(), ctx)
+    assert MotionBlur().is_identity(MotionBlur.params(shutter_angle=0.0), ctx) == "shutter angle is 0"
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_hard_shapes_finite_and_constant_preserved(rt, rng, shape):
+    src = np.full(shape + (4,), 2.5, np.float32)
+    vel = rng.normal(0.0, 30.0, shape + (2,)).astype(np.float32)
+    got = run(rt, src, vel, rng.uniform(1, 9, shape).astype(np.float32))
+    assert got.shape == src.shape
+    np.testing.assert_allclose(got, 2.5, rtol=1e-6)
+
+
+def test_nan_velocity_depth_and_pixels(rt, rng):
+    src = rng.uniform(0.0, 1.0, (40, 48, 4)).astype(np.float32)
+    vel = uniform((40, 48), (8.0, 0.0))
+    depth = np.full((40, 48), 3.0, np.float32)
+    vel[5, 5] = np.nan
+    vel[6, 6] = (np.inf, -np.inf)
+    depth[7, 7], depth[8, 8], depth[9, 9], depth[10, 10] = np.nan, 0.0, -1.0, np.inf
+    src[20, 20] = np.nan
+    src[30, 30, 1] = np.inf
+    got = run(rt, src, vel, depth)
+    assert np.isfinite(got).all()
+    clean = src.copy()
+    clean[20, 20] = 0.0
+    clean[30, 30, 1] = 0.0
+    ref = run(rt, clean, vel, depth)
+    np.testing.assert_array_equal(got, ref)   # non-finite pixels count as 0
+
+
+def test_huge_velocity_is_clamped(rt, rng):
+    src = rng.uniform(0.0, 1.0, (64, 80, 4)).astype(np.float32)
+    vel = uniform((64, 80), (1000.0, 0.0))
+    got = run(rt, src, vel, max_blur=0.05, quality="reference")
+    r = min(0.05 * math.hypot(80, 64), MAX_RADIUS_PX)   # reach clamped to the max radius
+    want = line_blur(src, (4 * r, 0.0), t0=-0.25, t1=0.25)   # centred: reach = |v| / 4
+    assert np.isfinite(got).all()
+    # the clamped velocity's box blur (float32 velocity scaling: ~1e-6 px of length)
+    assert np.abs(got - want).max() < 1e-2
+    assert tile_size(1e9) == MAX_RADIUS_PX
+
+
+def test_hdr_highlight_energy_and_alpha(rt):
+    src = np.zeros((32, 64, 4), np.float32)
+    src[..., 3] = 1.0
+    src[16, 32, :3] = 1e5
+    got = run(rt, src, uniform((32, 64), (16.0, 0.0)), quality="reference")
+    # energy kept (midpoint samples of a bilinear point: exact up to float64 rounding)
+    np.testing.assert_allclose(got[..., :3].sum(), 3e5, rtol=1e-5)
+    np.testing.assert_allclose(got[..., 3], 1.0, rtol=1e-6)
+    assert (got[16, 29:36, 0] > 1e3).all() and got[16, 45, 0] < 1.0
+
+
+def test_static_pixels_keep_their_colour_beside_moving_object(rt, rng):
+    h, w = 48, 96
+    src = rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32)
+    vel = np.zeros((h, w, 2), np.float32)
+    vel[10:20, 10:30] = (20.0, 0.0)
+    depth = np.full((h, w), 10.0, np.float32)
+    depth[10:20, 10:30] = 2.0
+    got = run(rt, src, vel, depth)
+    # rows the object never passes over are untouched
+    np.testing.assert_allclose(got[30:], src[30:], atol=1e-6)
+    np.testing.assert_allclose(got[:8], src[:8], atol=1e-6)
+
+
+def test_all_samples_rejected_falls_back_to_centre(rt):
+    # a far pixel surrounded by a near layer moving perpendicular: everything is rejected
+    src = np.zeros((24, 24, 4), np.float32)
+    src[12, 12] = (3.0, 2.0, 1.0, 1.0)
+    vel = uniform((24, 24), (0.0, 12.0))
+    vel[12, 12] = (12.0, 0.0)
+    depth = np.full((24, 24), 1.0, np.float32)
+    depth[12, 12] = 100.0
+    got = run(rt, src, vel, depth)
+    assert np.isfinite(got).all()
+
+
+def test_deterministic(rt, rng):
+    case = bench_case(96, 54, rng, truth=False)
+    a = run(rt, case["source"], case["velocity"], case["depth"])
+    b = run(rt, case["source"], case["velocity"], case["depth"])
+    assert np.array_equal(a, b)
+
+
+@pytest.fixture(scope="module")
+def truth_case():
+    return bench_case(256, 144, None, truth_samples=48)
+
+
+def test_beats_naive_baseline_in_edge_band_and_improves_with_quality(rt, truth_case):
+    c = truth_case
+    band = metrics.edge_band(c["depth"], c["velocity"], 4.0)
+    naive = naive_blur(c["source"], c["velocity"], t0=-0.25, t1=0.25, n=64)
+    base = metrics.rmse(naive, c["truth"], band)
+    errs = {}
+    for q in QUALITIES:
+        got = run(rt, c["source"], c["velocity"], c["depth"], quality=q, camera=c["camera"])
+        errs[q] = (metrics.rmse(got, c["truth"]), metrics.rmse(got, c["truth"], band))
+    assert errs["final"][1] < 0.9 * base, (errs, base)
+    assert errs["reference"][1] < 0.9 * base, (errs, base)
+    edge = [errs[q][1] for q in QUALITIES]
+    # jitter noise makes adjacent levels close: allow 3% slack, and final << draft
+    assert all(b <= a * 1.03 for a, b in zip(edge, edge[1:])), errs
+    assert errs["final"][0] <= errs["draft"][0], errs
+
+
+def test_static_tiles_are_skipped(rt, rng):
+    c = bench_case(320, 180, rng, truth=False, moving_fraction=0.1)
+    src, vel, dep = (rt.upload(c["source"]), rt.upload(c["velocity"]), rt.upload(c["depth"]))
+    ctx = RenderContext(rt, src, velocity=vel, depth=dep, camera=CENTRED)
+    out = MotionBlur().render(rt, MotionBlur.params(), ctx).download()
+    note = ctx.notes[-1]
+    moving, total = (int(x) for x in note.split(": ")[1].split(" tiles")[0].split("/"))
+    assert moving < 0.35 * total, note
+    far = np.abs(c["velocity"]).max(-1) == 0
+    far[:, 100:220] = False
+    np.testing.assert_array_equal(out[far], c["source"][far])
