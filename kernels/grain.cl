@@ -1,0 +1,219 @@
+/* grain.cl: band-limited, luminance-dependent film grain (clfx/plugins/grain.py).
+ *
+ * Pipeline (preview/final/reference):
+ *   grain_noise    white Gaussian noise N(0, 1) per (seed, frame, X, Y, channel) over the
+ *                  output window grown by RADIUS on every side (X, Y = frame coordinates, so
+ *                  a crop or an overscan render sees the same noise at the same pixel);
+ *   grain_blur_h   separable Gaussian along x, per-channel weights (float4 per tap);
+ *   grain_apply    the same along y, then out = in + sigma(L) * amount_c * n_c on RGB.
+ * Draft runs grain_apply_white only: unfiltered white noise in one pass.
+ *
+ * Each work-item handles 4 consecutive pixels as one 16-lane vector (rows are padded to 4
+ * pixels), so PoCL runs hashing, Box-Muller and the taps as vectors.  Lane 4k+3 (alpha)
+ * carries zero noise and alpha is copied bit for bit.
+ *
+ * USE_DOUBLE=1 (reference quality) generates the noise, stores the intermediate buffers and
+ * accumulates the taps in double precision.
+ */
+#include "common.h"
+
+#ifndef RADIUS
+#define RADIUS 0
+#endif
+#ifndef MONO
+#define MONO 0
+#endif
+#ifndef USE_DOUBLE
+#define USE_DOUBLE 0
+#endif
+
+#if USE_DOUBLE
+#define REAL double
+#define REAL4 double4
+#define REAL8 double8
+#define REAL16 double16
+#define TO_REAL16 convert_double16
+#else
+#define REAL float
+#define REAL4 float4
+#define REAL8 float8
+#define REAL16 float16
+#define TO_REAL16 convert_float16
+#endif
+
+/* Luminance is clamped to [FLOOR, CAP]: the cap keeps sigma * noise finite for inputs near
+ * FLT_MAX, the floor keeps log() finite (grain at black is then ~1e-15 * amount, not 0). */
+#define GRAIN_LUMINANCE_CAP 1e30
+#define GRAIN_LUMINANCE_FLOOR 1e-30
+#define GRAIN_MID_GREY 0.18
+
+/* Polynomial log, sin/cos(2 pi u) and exp2 in float32: pure arithmetic, so PoCL vectorises
+ * them (its libm calls run lane by lane, ~10x slower here).  Relative error <= ~2e-7 for
+ * the arguments used (normal positive floats; exp2 arguments in [-126, 126]). */
+#define GRAIN_DEFINE_POLYS(N)                                                                    \
+inline float##N grain_log##N(const float##N x)                                                   \
+{                                                                                              \
+  /* x = m 2^e, m in [sqrt(1/2), sqrt(2)); log m = 2 atanh(s), s = (m - 1) / (m + 1) */       \
+  const int##N bits = as_int##N(x);                                                            \
+  float##N m = as_float##N((bits & 0x007fffff) | 0x3f800000);                                 \
+  const int##N big = m > 1.41421356f;                                                          \
+  m = select(m, m * 0.5f, big);                                                                \
+  const int##N e = ((bits >> 23) & 0xff) - 127 - big;                                          \
+  const float##N s = (m - 1.0f) / (m + 1.0f), s2 = s * s;                                      \
+  const float##N p = s * (2.0f + s2 * (0.66666667f + s2 * (0.4f + s2 * (0.28571429f           \
+                     + s2 * 0.22222222f))));                                                   \
+  return convert_float##N(e) * 0.69314718f + p;                                                \
+}                                                                                              \
+inline float##N grain_sincos2pi##N(const float##N u, float##N *cosine)                           \
+{                                                                                              \
+  /* quadrant q = rint(4u); a = 2 pi (u - q/4) in [-pi/4, pi/4]; Taylor to a^9 / a^8 */       \
+  const float##N q = rint(4.0f * u);                                                           \
+  const float##N a = 6.28318531f * (u - 0.25f * q), a2 = a * a;                                \
+  const float##N sa = a * (1.0f + a2 * (-1.6666667e-1f + a2 * (8.3333333e-3f                  \
+                      + a2 * (-1.9841270e-4f + a2 * 2.7557319e-6f))));                         \
+  const float##N ca = 1.0f + a2 * (-0.5f + a2 * (4.1666667e-2f + a2 * (-1.3888889e-3f         \
+                      + a2 * 2.4801587e-5f)));                                                 \
+  const int##N qi = convert_int##N(q) & 3;                                                     \
+  const int##N odd = (qi & 1) != 0;                                                            \
+  const float##N s = select(sa, ca, odd), c = select(ca, sa, odd);                             \
+  *cosine = select(c, -c, (qi == 1) | (qi == 2));                                              \
+  return select(s, -s, qi >= 2);                                                               \
+}                                                                                              \
+inline float##N grain_exp2_##N(const float##N x)                                                  \
+{                                                                                              \
+  const float##N xc = clamp(x, -126.0f, 126.0f), k = rint(xc);                                 \
+  const float##N t = (xc - k) * 0.69314718f;                                                   \
+  const float##N p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f   \
+                     + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));      \
+  return p * as_float##N((convert_int##N(k) + 127) << 23);                                     \
+}
+GRAIN_DEFINE_POLYS(4)
+GRAIN_DEFINE_POLYS(8)
+
+/* clfx_hash (lowbias32) on 16 lanes at once. */
+inline uint16 grain_hash16(uint16 x)
+{
+  x ^= x >> 16; x *= 0x7feb352du;
+  x ^= x >> 15; x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+/* clfx_uniform(seed, frame, x + i, y, c0 + c) for pixels i = 0..3 and channels c = 0..3,
+ * lane 4 i + c; bit-identical to the scalar helper in common.h. */
+inline float16 grain_uniform16(uint seed, int frame, int x, int y, int c0)
+{
+  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
+  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
+  uint16 h = grain_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
+  h = grain_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
+  h = grain_hash16(h ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
+  return (convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
+}
+
+/* Unit Gaussian white noise for 4 pixels (Box-Muller): per pixel the uniforms of channels
+ * (0, 1) give R = r cos, G = r sin; channels (2, 3) give B = r cos.  MONO: R = G = B. */
+inline REAL16 grain_white16(uint seed, int frame, int x, int y)
+{
+  const REAL16 u = TO_REAL16(grain_uniform16(seed, frame, x, y, 0));
+  REAL8 co;
+#if USE_DOUBLE
+  const REAL8 r = sqrt((REAL)(-2) * log(u.even));
+  const REAL8 si = sincos((REAL)6.283185307179586 * u.odd, &co);
+#else
+  const REAL8 r = sqrt(-2.0f * grain_log8(u.even));
+  const REAL8 si = grain_sincos2pi8(u.odd, &co);
+#endif
+  const REAL8 a = r * co, b = r * si;
+  const REAL z = (REAL)0;
+#if MONO
+  return (REAL16)(a.s0, a.s0, a.s0, z, a.s2, a.s2, a.s2, z,
+                  a.s4, a.s4, a.s4, z, a.s6, a.s6, a.s6, z);
+#else
+  return (REAL16)(a.s0, b.s0, a.s1, z, a.s2, b.s2, a.s3, z,
+                  a.s4, b.s4, a.s5, z, a.s6, b.s6, a.s7, z);
+#endif
+}
+
+/* out = in + sigma(L) * amount_c * n_c on RGB, sigma(L) = (L / 0.18)^response (the 0.18 of
+ * "relative to mid-grey" is folded into amount_c on the host).  Non-finite RGB becomes 0
+ * before the grain (it must not spread into L); alpha is copied unchanged. */
+inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, const REAL response)
+{
+  const int16 finite = (as_uint16(c) & 0x7f800000u) != (uint16)0x7f800000u;
+  const REAL16 cs = TO_REAL16(select((float16)0.0f, c, finite));
+  const REAL4 lum = (REAL)0.2126 * (REAL4)(cs.s0, cs.s4, cs.s8, cs.sc)
+                  + (REAL)0.7152 * (REAL4)(cs.s1, cs.s5, cs.s9, cs.sd)
+                  + (REAL)0.0722 * (REAL4)(cs.s2, cs.s6, cs.sa, cs.se);
+  const REAL4 l = clamp(lum, (REAL)GRAIN_LUMINANCE_FLOOR, (REAL)GRAIN_LUMINANCE_CAP);
+#if USE_DOUBLE
+  const REAL4 s = pow(l * (REAL)(1.0 / GRAIN_MID_GREY), (REAL4)(response));
+#else
+  const REAL4 s = grain_exp2_4(response * 1.44269504f * grain_log4(l * (1.0f / 0.18f)));
+#endif
+  const REAL16 s16 = (REAL16)(s.x, s.x, s.x, s.x, s.y, s.y, s.y, s.y,
+                              s.z, s.z, s.z, s.z, s.w, s.w, s.w, s.w);
+  const float16 out = convert_float16(cs + s16 * (REAL16)(amt, amt, amt, amt) * n);
+  const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
+  return select(out, c, alpha);
+}
+
+kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
+                        const int fx0, const int fy0, const uint seed, const int frame)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= rows || qx * 4 >= npitch) return;
+  const int x = qx * 4;
+  vstore16(grain_white16(seed, frame, fx0 + x, fy0 + y), 0, noise + (size_t)(y * npitch + x) * 4);
+}
+
+/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x. */
+kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global const REAL *weights,
+                         const int npitch, const int pitch, const int rows)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= rows || qx * 4 >= pitch) return;
+  const int x = qx * 4;
+  global const REAL *row = noise + (size_t)(y * npitch + x) * 4;
+  REAL16 acc = (REAL16)(0);
+  for(int k = 0; k <= 2 * RADIUS; ++k)
+  {
+    const REAL4 w = vload4(k, weights);
+    acc += (REAL16)(w, w, w, w) * vload16(0, row + 4 * k);
+  }
+  vstore16(acc, 0, tmp + (size_t)(y * pitch + x) * 4);
+}
+
+/* Vertical taps (tmp is offset by R rows) and the mix with the source. */
+kernel void grain_apply(global const float *src, global float *dst, global const REAL *tmp,
+                        global const REAL *weights, const int pitch, const int height,
+                        const float ar, const float ag, const float ab, const float response)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int x = qx * 4;
+  global const REAL *col = tmp + (size_t)(y * pitch + x) * 4;
+  REAL16 acc = (REAL16)(0);
+  for(int k = 0; k <= 2 * RADIUS; ++k)
+  {
+    const REAL4 w = vload4(k, weights);
+    acc += (REAL16)(w, w, w, w) * vload16(0, col + (size_t)k * pitch * 4);
+  }
+  const size_t i = (size_t)(y * pitch + x) * 4;
+  vstore16(grain_mix16(vload16(0, src + i), acc, (REAL4)(ar, ag, ab, 0), response), 0, dst + i);
+}
+
+/* Draft: white noise generated in place, one pass. */
+kernel void grain_apply_white(global const float *src, global float *dst, const int pitch,
+                              const int height, const int fx0, const int fy0, const uint seed,
+                              const int frame, const float ar, const float ag, const float ab,
+                              const float response)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int x = qx * 4;
+  const size_t i = (size_t)(y * pitch + x) * 4;
+  const REAL16 n = grain_white16(seed, frame, fx0 + x, fy0 + y);
+  vstore16(grain_mix16(vload16(0, src + i), n, (REAL4)(ar, ag, ab, 0), response), 0, dst + i);
+}

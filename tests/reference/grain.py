@@ -1,0 +1,117 @@
+"""float64 NumPy oracle of clfx/plugins/grain.py: the plainest form of the model.
+
+The white noise is the same hash as kernels/common.h (``clfx_uniform``), re-implemented on
+uint32 arrays, so the oracle reproduces the device's noise exactly up to float rounding.
+"""
+import math
+
+import numpy as np
+
+from clfx.plugins.grain import STOCKS  # data only: the stocks' per-channel ratios
+
+M32 = 0xFFFFFFFF
+
+
+def hash32(x):
+    """lowbias32 on uint32 arrays (wrapping multiplication)."""
+    x = np.asarray(x, np.uint32)
+    with np.errstate(over="ignore"):  # uint32 multiplication wraps, as in C
+        x = x ^ (x >> np.uint32(16))
+        x = x * np.uint32(0x7FEB352D)
+        x = x ^ (x >> np.uint32(15))
+        x = x * np.uint32(0x846CA68B)
+        x = x ^ (x >> np.uint32(16))
+    return x
+
+
+def u32(v):
+    return np.asarray(np.asarray(v, np.int64) & M32, np.uint32)
+
+
+def uniform(seed, frame, x, y, c):
+    """clfx_uniform(seed, frame, x, y, c) as float64 in (0, 1); x, y arrays."""
+    with np.errstate(over="ignore"):
+        h = hash32(u32(seed) ^ np.uint32(0x9E3779B9))
+        h = hash32(h ^ u32(frame))
+        h = hash32(h ^ u32(x))
+        h = hash32(h ^ (u32(y) * np.uint32(0x85EBCA6B)))
+        h = hash32(h ^ (u32(c) * np.uint32(0xC2B2AE35)))
+    return ((h >> np.uint32(8)).astype(np.float64) + 0.5) / 16777216.0
+
+
+def effect_seed(param_seed, look_seed, salt):
+    s = hash32(u32(look_seed) ^ np.uint32(salt))
+    return int(hash32(u32(param_seed) ^ s))
+
+
+def white_noise(seed, frame, x0, y0, w, h, monochrome):
+    """(h, w, 3) unit Gaussian noise at frame pixels x0.., y0.. (Box-Muller)."""
+    y, x = np.mgrid[y0:y0 + h, x0:x0 + w]
+    u = [uniform(seed, frame, x, y, c) for c in range(4)]
+    r01 = np.sqrt(-2.0 * np.log(u[0]))
+    r23 = np.sqrt(-2.0 * np.log(u[2]))
+    n = np.stack([r01 * np.cos(2 * np.pi * u[1]), r01 * np.sin(2 * np.pi * u[1]),
+                  r23 * np.cos(2 * np.pi * u[3])], axis=-1)
+    if monochrome:
+        n = np.repeat(n[..., :1], 3, axis=-1)
+    return n
+
+
+def taps(sigma, radius):
+    """Pixel-integrated Gaussian taps -radius..radius, unit sum of squares."""
+    k = np.arange(-radius, radius + 1)
+    if sigma < 1e-6:
+        t = (k == 0).astype(np.float64)
+    else:
+        t = np.array([0.5 * (math.erf((i + 0.5) / (sigma * math.sqrt(2)))
+                             - math.erf((i - 0.5) / (sigma * math.sqrt(2)))) for i in k])
+    return t / np.sqrt(np.sum(t * t))
+
+
+def grain_noise(h, w, *, sigmas, seed, frame, monochrome, data_origin=(0, 0),
+                truncation=6.0):
+    """(h, w, 3) unit-variance grain: white noise filtered per channel (None: unfiltered)."""
+    x0, y0 = data_origin
+    if truncation is None:
+        return white_noise(seed, frame, x0, y0, w, h, monochrome)
+    radii = [int(math.ceil(truncation * s)) if s >= 1e-6 else 0 for s in sigmas]
+    big = max(radii)
+    white = white_noise(seed, frame, x0 - big, y0 - big, w + 2 * big, h + 2 * big, monochrome)
+    out = np.zeros((h, w, 3))
+    for c in range(3):
+        t = taps(sigmas[c], radii[c])
+        r = radii[c]
+        field = white[..., c]
+        horiz = np.zeros((h + 2 * big, w))
+        for i, wt in enumerate(t):
+            dx = big - r + i
+            horiz += wt * field[:, dx:dx + w]
+        for i, wt in enumerate(t):
+            dy = big - r + i
+            out[..., c] += wt * horiz[dy:dy + h]
+    return out
+
+
+def grain(src, *, stock, amount, size, response, channel_amount, channel_size, monochrome,
+          seed, frame=0, look_seed=0, data_origin=(0, 0), display_width=None, truncation=6.0):
+    """Film grain on ``src`` (h, w, 4) float64; same parameters as the plugin."""
+    src = np.asarray(src, np.float64)
+    h, w = src.shape[:2]
+    display_width = display_width or w
+    st = STOCKS[stock]
+    sizes = [a * b for a, b in zip(st.size, channel_size)]
+    amounts = [a * b for a, b in zip(st.amount, channel_amount)]
+    mono = monochrome or st.monochrome
+    if mono:
+        sizes = [sizes[1]] * 3
+    sigmas = [s * size * display_width / 2048 for s in sizes]
+    n = grain_noise(h, w, sigmas=sigmas, seed=effect_seed(seed, look_seed, 0x6772616E),
+                    frame=frame, monochrome=mono, data_origin=data_origin,
+                    truncation=truncation)
+    rgb = np.where(np.isfinite(src[..., :3]), src[..., :3], 0.0)
+    lum = np.clip(rgb @ np.array([0.2126, 0.7152, 0.0722]), 1e-30, 1e30)
+    sigma = (lum / 0.18) ** response
+    out = src.copy()
+    for c in range(3):
+        out[..., c] = rgb[..., c] + amount * amounts[c] * 0.18 * sigma * n[..., c]
+    return out
