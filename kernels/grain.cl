@@ -47,83 +47,22 @@
 #define GRAIN_LUMINANCE_FLOOR 1e-30
 #define GRAIN_MID_GREY 0.18
 
-/* Polynomial log, sin/cos(2 pi u) and exp2 in float32: pure arithmetic, so PoCL vectorises
- * them (its libm calls run lane by lane, ~10x slower here).  Relative error <= ~2e-7 for
- * the arguments used (normal positive floats; exp2 arguments in [-126, 126]). */
-#define GRAIN_DEFINE_POLYS(N)                                                                    \
-inline float##N grain_log##N(const float##N x)                                                   \
-{                                                                                              \
-  /* x = m 2^e, m in [sqrt(1/2), sqrt(2)); log m = 2 atanh(s), s = (m - 1) / (m + 1) */       \
-  const int##N bits = as_int##N(x);                                                            \
-  float##N m = as_float##N((bits & 0x007fffff) | 0x3f800000);                                 \
-  const int##N big = m > 1.41421356f;                                                          \
-  m = select(m, m * 0.5f, big);                                                                \
-  const int##N e = ((bits >> 23) & 0xff) - 127 - big;                                          \
-  const float##N s = (m - 1.0f) / (m + 1.0f), s2 = s * s;                                      \
-  const float##N p = s * (2.0f + s2 * (0.66666667f + s2 * (0.4f + s2 * (0.28571429f           \
-                     + s2 * 0.22222222f))));                                                   \
-  return convert_float##N(e) * 0.69314718f + p;                                                \
-}                                                                                              \
-inline float##N grain_sincos2pi##N(const float##N u, float##N *cosine)                           \
-{                                                                                              \
-  /* quadrant q = rint(4u); a = 2 pi (u - q/4) in [-pi/4, pi/4]; Taylor to a^9 / a^8 */       \
-  const float##N q = rint(4.0f * u);                                                           \
-  const float##N a = 6.28318531f * (u - 0.25f * q), a2 = a * a;                                \
-  const float##N sa = a * (1.0f + a2 * (-1.6666667e-1f + a2 * (8.3333333e-3f                  \
-                      + a2 * (-1.9841270e-4f + a2 * 2.7557319e-6f))));                         \
-  const float##N ca = 1.0f + a2 * (-0.5f + a2 * (4.1666667e-2f + a2 * (-1.3888889e-3f         \
-                      + a2 * 2.4801587e-5f)));                                                 \
-  const int##N qi = convert_int##N(q) & 3;                                                     \
-  const int##N odd = (qi & 1) != 0;                                                            \
-  const float##N s = select(sa, ca, odd), c = select(ca, sa, odd);                             \
-  *cosine = select(c, -c, (qi == 1) | (qi == 2));                                              \
-  return select(s, -s, qi >= 2);                                                               \
-}                                                                                              \
-inline float##N grain_exp2_##N(const float##N x)                                                  \
-{                                                                                              \
-  const float##N xc = clamp(x, -126.0f, 126.0f), k = rint(xc);                                 \
-  const float##N t = (xc - k) * 0.69314718f;                                                   \
-  const float##N p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f   \
-                     + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));      \
-  return p * as_float##N((convert_int##N(k) + 127) << 23);                                     \
-}
-GRAIN_DEFINE_POLYS(4)
-GRAIN_DEFINE_POLYS(8)
-
-/* clfx_hash (lowbias32) on 16 lanes at once. */
-inline uint16 grain_hash16(uint16 x)
-{
-  x ^= x >> 16; x *= 0x7feb352du;
-  x ^= x >> 15; x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
-
-/* clfx_uniform(seed, frame, x + i, y, c0 + c) for pixels i = 0..3 and channels c = 0..3,
- * lane 4 i + c; bit-identical to the scalar helper in common.h. */
-inline float16 grain_uniform16(uint seed, int frame, int x, int y, int c0)
-{
-  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
-  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
-  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
-  uint16 h = grain_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
-  h = grain_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
-  h = grain_hash16(h ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
-  return (convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
-}
+#include "fastmath.h"
+CLFX_DEFINE_FASTMATH(4)
+CLFX_DEFINE_FASTMATH(8)
 
 /* Unit Gaussian white noise for 4 pixels (Box-Muller): per pixel the uniforms of channels
  * (0, 1) give R = r cos, G = r sin; channels (2, 3) give B = r cos.  MONO: R = G = B. */
 inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 {
-  const REAL16 u = TO_REAL16(grain_uniform16(seed, frame, x, y, 0));
+  const REAL16 u = TO_REAL16(clfx_uniform16(seed, frame, x, y, 0));
   REAL8 co;
 #if USE_DOUBLE
   const REAL8 r = sqrt((REAL)(-2) * log(u.even));
   const REAL8 si = sincos((REAL)6.283185307179586 * u.odd, &co);
 #else
-  const REAL8 r = sqrt(-2.0f * grain_log8(u.even));
-  const REAL8 si = grain_sincos2pi8(u.odd, &co);
+  const REAL8 r = sqrt(-2.0f * clfx_log8(u.even));
+  const REAL8 si = clfx_sincos2pi8(u.odd, &co);
 #endif
   const REAL8 a = r * co, b = r * si;
   const REAL z = (REAL)0;
@@ -150,7 +89,7 @@ inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, con
 #if USE_DOUBLE
   const REAL4 s = pow(l * (REAL)(1.0 / GRAIN_MID_GREY), (REAL4)(response));
 #else
-  const REAL4 s = grain_exp2_4(response * 1.44269504f * grain_log4(l * (1.0f / 0.18f)));
+  const REAL4 s = clfx_exp2_4(response * 1.44269504f * clfx_log4(l * (1.0f / 0.18f)));
 #endif
   const REAL16 s16 = (REAL16)(s.x, s.x, s.x, s.x, s.y, s.y, s.y, s.y,
                               s.z, s.z, s.z, s.z, s.w, s.w, s.w, s.w);

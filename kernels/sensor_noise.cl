@@ -52,81 +52,27 @@
 #define REAL16 float16
 #define MASK16 int16
 #define TO_REAL16 convert_float16
-#define SN_LOG(x) sensor_noise_log16(x)
-#define SN_EXP(x) sensor_noise_exp2_16((x) * 1.44269504f)
-#define SN_SINCOS2PI(u, c) sensor_noise_sincos2pi16((u), (c))
+#define SN_LOG(x) clfx_log16(x)
+#define SN_EXP(x) clfx_exp2_16((x) * 1.44269504f)
+#define SN_SINCOS2PI(u, c) clfx_sincos2pi16((u), (c))
 #define SN_COS2PI(u) sensor_noise_cos2pi16(u)
 #endif
 
 #define SN_TWO_PI 6.283185307179586
 
-/* Polynomial log, sin/cos(2 pi u) and exp2 in float32: pure arithmetic, so PoCL vectorises
- * them (its libm calls run lane by lane, ~10x slower here).  Relative error <= ~2e-7 for
- * the arguments used (normal positive floats; exp2 arguments in [-126, 126]). */
-#define SENSOR_NOISE_DEFINE_POLYS(N)                                                                    \
-inline float##N sensor_noise_log##N(const float##N x)                                                   \
-{                                                                                              \
-  /* x = m 2^e, m in [sqrt(1/2), sqrt(2)); log m = 2 atanh(s), s = (m - 1) / (m + 1) */       \
-  const int##N bits = as_int##N(x);                                                            \
-  float##N m = as_float##N((bits & 0x007fffff) | 0x3f800000);                                 \
-  const int##N big = m > 1.41421356f;                                                          \
-  m = select(m, m * 0.5f, big);                                                                \
-  const int##N e = ((bits >> 23) & 0xff) - 127 - big;                                          \
-  const float##N s = (m - 1.0f) / (m + 1.0f), s2 = s * s;                                      \
-  const float##N p = s * (2.0f + s2 * (0.66666667f + s2 * (0.4f + s2 * (0.28571429f           \
-                     + s2 * 0.22222222f))));                                                   \
-  return convert_float##N(e) * 0.69314718f + p;                                                \
-}                                                                                              \
-inline float##N sensor_noise_sincos2pi##N(const float##N u, float##N *cosine)                           \
-{                                                                                              \
-  /* quadrant q = rint(4u); a = 2 pi (u - q/4) in [-pi/4, pi/4]; Taylor to a^9 / a^8 */       \
-  const float##N q = rint(4.0f * u);                                                           \
-  const float##N a = 6.28318531f * (u - 0.25f * q), a2 = a * a;                                \
-  const float##N sa = a * (1.0f + a2 * (-1.6666667e-1f + a2 * (8.3333333e-3f                  \
-                      + a2 * (-1.9841270e-4f + a2 * 2.7557319e-6f))));                         \
-  const float##N ca = 1.0f + a2 * (-0.5f + a2 * (4.1666667e-2f + a2 * (-1.3888889e-3f         \
-                      + a2 * 2.4801587e-5f)));                                                 \
-  const int##N qi = convert_int##N(q) & 3;                                                     \
-  const int##N odd = (qi & 1) != 0;                                                            \
-  const float##N s = select(sa, ca, odd), c = select(ca, sa, odd);                             \
-  *cosine = select(c, -c, (qi == 1) | (qi == 2));                                              \
-  return select(s, -s, qi >= 2);                                                               \
-}                                                                                              \
-inline float##N sensor_noise_exp2_##N(const float##N x)                                                  \
-{                                                                                              \
-  const float##N xc = clamp(x, -126.0f, 126.0f), k = rint(xc);                                 \
-  const float##N t = (xc - k) * 0.69314718f;                                                   \
-  const float##N p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f   \
-                     + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));      \
-  return p * as_float##N((convert_int##N(k) + 127) << 23);                                     \
-}
-SENSOR_NOISE_DEFINE_POLYS(16)
+#include "fastmath.h"
+CLFX_DEFINE_FASTMATH(16)
 inline float16 sensor_noise_cos2pi16(const float16 u)
 {
   float16 c;
-  sensor_noise_sincos2pi16(u, &c);
+  clfx_sincos2pi16(u, &c);
   return c;
 }
 
-/* clfx_hash (lowbias32) on 16 lanes. */
-inline uint16 sensor_noise_hash16(uint16 x)
-{
-  x ^= x >> 16; x *= 0x7feb352du;
-  x ^= x >> 15; x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
-
-/* clfx_uniform(seed, frame, x + i, y, c0 + c), lane 4 i + c: bit-identical to common.h. */
+/* clfx_uniform(seed, frame, x + i, y, c0 + c), lane 4 i + c, in REAL precision. */
 inline REAL16 sensor_noise_uniform16(uint seed, int frame, int x, int y, int c0)
 {
-  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
-  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
-  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
-  uint16 h = sensor_noise_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
-  h = sensor_noise_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
-  h = sensor_noise_hash16(h ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
-  return TO_REAL16((convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f));
+  return TO_REAL16(clfx_uniform16(seed, frame, x, y, c0));
 }
 
 kernel void sensor_noise_apply(global const float *src, global float *dst, const int pitch,
