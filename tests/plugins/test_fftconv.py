@@ -1,0 +1,147 @@
+import numpy as np
+import pytest
+
+from clfx import fftconv
+from clfx.rect import Rect
+from tests.reference.glare import convolve as reference
+
+CASES = [
+    ("fft", "float64", None), ("fft", "float32", 0.9),
+    ("direct", "float64", None), ("direct", "float32", None),
+]
+
+
+def run(rt, src, psf, window, out, **kw):
+    img = rt.upload(src, window)
+    return fftconv.convolve(rt, img, psf, out_window=out, **kw).download()
+
+
+@pytest.mark.parametrize("shape,kshape", [((1, 1), (9, 9)), ((1, 7), (3, 4)), ((7, 1), (5, 5)),
+                                          ((3, 5), (31, 30)), ((17, 31), (5, 7)),
+                                          ((40, 50), (64, 61))])
+@pytest.mark.parametrize("method,precision,split", CASES)
+def test_convolve_matches_reference(rt, rng, shape, kshape, method, precision, split):
+    src = rng.uniform(0.0, 1.0, shape + (4,)).astype(np.float32)
+    psf = rng.uniform(0.0, 1.0, kshape)
+    win = Rect(3, -2, 3 + shape[1], -2 + shape[0])
+    for out in (win, fftconv.full_region(win, *kshape), Rect(0, 0, 20, 9)):
+        got = run(rt, src, psf, win, out, method=method, precision=precision,
+                  threshold_split=split)
+        want = reference(src[..., :3], psf, (win.x0, win.y0), (out.x0, out.y0, out.x1, out.y1))
+        assert got.shape == (out.height, out.width, 4)
+        # float32 input/output and float32 FFT: ~1e-6 of the peak (sums of <= 4000 terms)
+        np.testing.assert_allclose(got[..., :3], want, rtol=0, atol=3e-6 * max(want.max(), 1e-30))
+        assert not got[..., 3].any()   # alpha of the spread light is 0
+
+
+def test_colour_psf_planes(rt, rng):
+    src = rng.uniform(0.0, 1.0, (20, 24, 4)).astype(np.float32)
+    psf = rng.uniform(0.0, 1.0, (25, 25, 3))
+    win = Rect.from_size(24, 20)
+    out = fftconv.full_region(win, 25, 25)
+    want = reference(src[..., :3], psf, (0, 0), (out.x0, out.y0, out.x1, out.y1))
+    for method in ("fft", "direct"):
+        got = run(rt, src, psf, win, out, method=method)
+        np.testing.assert_allclose(got[..., :3], want, atol=1e-6 * want.max())
+
+
+def hdr_scene(rng, h=96, w=128):
+    """A 1e5 light next to 1e-2 shadows (hard-cases.md case 1) and a power-law PSF."""
+    src = np.zeros((h, w, 4), np.float32)
+    src[..., :3] = rng.uniform(0.005, 0.02, (h, w, 3))
+    src[40:43, 50:53, :3] = 1e5
+    r = 60
+    y, x = np.mgrid[-r:r + 1, -r:r + 1]
+    psf = 1.0 / (np.hypot(x, y) + 0.5) ** 3
+    return src, psf / psf.sum()
+
+
+@pytest.mark.parametrize("kw", [dict(precision="float64"),
+                                dict(precision="float32", threshold_split=100.0),
+                                dict(method="direct", precision="float64")])
+def test_hdr_shadows_accurate_and_non_negative(rt, rng, kw):
+    src, psf = hdr_scene(rng)
+    win = Rect.from_size(src.shape[1], src.shape[0])
+    got = run(rt, src, psf, win, win, **kw)[..., :3].astype(np.float64)
+    want = reference(src[..., :3], psf, (0, 0), (0, 0, win.x1, win.y1))
+    m = want >= 1e-3
+    rel = np.abs(got - want)[m] / want[m]
+    assert rel.max() <= 1e-4          # hard-cases.md case 1 (float32 output rounding: ~1e-7)
+    assert got.min() >= -1e-6 * want.max()
+
+
+def test_split_falls_back_to_float64_with_many_bright_pixels(rt, rng):
+    src, psf = hdr_scene(rng)
+    win = Rect.from_size(src.shape[1], src.shape[0])
+    info = fftconv.ConvolveInfo()
+    run(rt, src, psf, win, win, precision="float32", threshold_split=1e-3, info=info)
+    assert info.fallback and info.precision == "float64"
+
+
+def test_nonfinite_input_does_not_spread(rt, rng):
+    src = rng.uniform(0.0, 1.0, (20, 30, 4)).astype(np.float32)
+    clean = src.copy()
+    src[5, 7, 0], src[9, 20, 2] = np.nan, np.inf
+    clean[5, 7, 0], clean[9, 20, 2] = 0.0, 0.0
+    psf = rng.uniform(0.0, 1.0, (31, 31))
+    win = Rect.from_size(30, 20)
+    for method in ("fft", "direct", "half"):
+        got = run(rt, src, psf, win, win, method=method)
+        want = run(rt, clean, psf, win, win, method=method)
+        assert np.isfinite(got).all()
+        np.testing.assert_array_equal(got, want)
+
+
+def test_half_resolution_conserves_energy_and_is_close(rt, rng):
+    src = np.zeros((64, 80, 4), np.float32)
+    src[30:34, 38:42, :3] = rng.uniform(1, 10, (4, 4, 3))
+    r = 20
+    y, x = np.mgrid[-r:r + 1, -r:r + 1]
+    psf = np.exp(-0.5 * (x * x + y * y) / 36.0)
+    psf /= psf.sum()
+    win = Rect.from_size(80, 64)
+    got = run(rt, src, psf, win, win, method="half")[..., :3]
+    want = reference(src[..., :3], psf, (0, 0), (0, 0, 80, 64))
+    np.testing.assert_allclose(got.sum(axis=(0, 1)), want.sum(axis=(0, 1)), rtol=1e-5)
+    assert np.abs(got - want).max() <= 0.05 * want.max()   # approximation: <= 0.5 px shift
+
+
+def test_tent_downsample_keeps_sum_and_centre():
+    k = np.random.default_rng(1).uniform(0, 1, (9, 12))
+    k2 = fftconv.tent_downsample(k)[..., 0]
+    assert abs(k2.sum() - k.sum()) < 1e-12
+    c, c2 = np.array(k.shape) // 2, np.array(k2.shape) // 2
+    yy, xx = np.mgrid[0:k.shape[0], 0:k.shape[1]]
+    y2, x2 = np.mgrid[0:k2.shape[0], 0:k2.shape[1]]
+    assert abs(((xx - c[1]) * k).sum() / k.sum() / 2 - ((x2 - c2[1]) * k2).sum() / k2.sum()) < 1e-12
+
+
+def test_fft_sizes_are_smooth_and_cover():
+    for n in (1, 2, 17, 1081, 1592, 2433, 4999):
+        m = fftconv.fft_size(n, even=True)
+        assert m >= n and m % 2 == 0 and fftconv.is_smooth(m)
+
+
+def test_spectrum_cache_reused(rt, rng):
+    src = rng.uniform(0.0, 1.0, (16, 16, 4)).astype(np.float32)
+    psf = rng.uniform(0.0, 1.0, (33, 33))
+    win = Rect.from_size(16, 16)
+    fftconv.clear_caches()
+    a = run(rt, src, psf, win, win)
+    n = len(fftconv._SPECTRA)
+    b = run(rt, src, psf, win, win)
+    assert len(fftconv._SPECTRA) == n == 1
+    assert np.array_equal(a, b)       # determinism: identical bytes
+
+
+def test_support_limits_the_input(rt, rng):
+    src = rng.uniform(0.0, 1.0, (20, 30, 4)).astype(np.float32)
+    psf = rng.uniform(0.0, 1.0, (11, 11))
+    win = Rect.from_size(30, 20)
+    sup = Rect(5, 4, 15, 12)
+    img = rt.upload(src, win)
+    got = fftconv.convolve(rt, img, psf, out_window=win, support=sup).download()[..., :3]
+    masked = np.zeros_like(src)
+    masked[4:12, 5:15] = src[4:12, 5:15]
+    want = reference(masked[..., :3], psf, (0, 0), (0, 0, 30, 20))
+    np.testing.assert_allclose(got, want, atol=1e-6 * want.max())

@@ -1,0 +1,190 @@
+import math
+
+import numpy as np
+import pytest
+
+from clfx.plugin import RenderContext
+from clfx.plugins.glare import Glare
+from clfx.rect import Rect
+from tests.conftest import hard_shapes
+from tests.reference.glare import glare as reference
+
+LEVELS = ("draft", "preview", "final", "reference")
+
+
+def psf_for(p, window, display=None):
+    """The PSF the plugin builds for a frame (host code under test in test_psf_*)."""
+    g = Glare()
+    src = None
+
+    class Ctx:  # the few attributes build_psf/radius_px read
+        pass
+    ctx = Ctx()
+    disp = display or window
+    ctx.diagonal_px, ctx.width_px = disp.diagonal, disp.width
+    from clfx.camera import Camera
+    ctx.camera = Camera()
+    return g.build_psf(p, ctx, g.radius_px(p, ctx))
+
+
+def oracle(src, p, window=None, out=None, display=None, boost=0.0):
+    window = window or Rect.from_size(src.shape[1], src.shape[0])
+    out = out or window
+    return reference(src, psf_for(p, window, display), strength=p.strength,
+                     threshold=p.threshold, knee=p.knee, tint=p.tint, boost=boost,
+                     data_window=(window.x0, window.y0, window.x1, window.y1),
+                     out_window=(out.x0, out.y0, out.x1, out.y1))
+
+
+def scene(rng, h=48, w=64, sun=1e5):
+    src = np.zeros((h, w, 4), np.float32)
+    src[..., :3] = rng.uniform(0.005, 0.02, (h, w, 3))
+    src[..., 3] = 1.0
+    src[20:22, 30:32, :3] = sun
+    src[8, 10, :3] = (3.0, 2.0, 1.0)
+    src[40, 50, :3] = 1.2
+    return src
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_glare_matches_reference_on_hard_shapes(rt, rng, shape):
+    src = rng.uniform(0.0, 4.0, shape + (4,)).astype(np.float32)
+    p = Glare.params(strength=0.3, size=0.5, threshold=1.0, tint=(1.0, 0.9, 0.8))
+    got = Glare().apply(rt, p, src, quality="final")
+    want = oracle(src, p)
+    # float32 image values ~4, float64 FFT: error is float32 rounding of the sums
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * max(want.max(), 1))
+
+
+@pytest.mark.parametrize("psf", ["spencer", "gaussians"])
+def test_glare_levels_error_falls_monotonically(rt, rng, psf):
+    src = scene(rng)
+    p = Glare.params(strength=0.1, size=0.4, psf=psf)
+    want = oracle(src, p)
+    errs = [np.abs(Glare().apply(rt, p, src, quality=q) - want).max() for q in LEVELS]
+    assert all(a >= b for a, b in zip(errs, errs[1:])), errs
+    assert errs[-1] <= 1e-6 * want.max()
+
+
+@pytest.mark.parametrize("quality", ["preview", "final", "reference"])
+def test_glare_hdr_shadows(rt, rng, quality):
+    src = scene(rng, 64, 96)
+    p = Glare.params(strength=0.1, size=0.5)
+    got = Glare().apply(rt, p, src, quality=quality).astype(np.float64)[..., :3]
+    want = oracle(src, p)[..., :3]
+    m = want >= 1e-3
+    assert (np.abs(got - want)[m] / want[m]).max() <= 1e-4   # hard-cases.md case 1
+    assert got.min() >= -1e-6 * want.max()
+
+
+def test_glare_nonfinite_sanitised_and_counted(rt, rng):
+    src = scene(rng)
+    clean = src.copy()
+    src[5, 5, 1], src[30, 60, :] = np.nan, np.inf
+    clean[5, 5], clean[30, 60] = 0.0, 0.0
+    p = Glare.params(strength=0.1, size=0.3)
+    ctx = RenderContext(rt, rt.upload(src))
+    out = Glare().render(rt, p, ctx).download()
+    assert np.isfinite(out).all()
+    assert any("2 non-finite" in n for n in ctx.notes), ctx.notes
+    np.testing.assert_array_equal(out, Glare().apply(rt, p, clean))
+
+
+def test_glare_conserves_energy_away_from_borders(rt):
+    src = np.zeros((64, 64, 4), np.float32)
+    src[30:34, 30:34, :3] = 1e4
+    p = Glare.params(strength=0.5, size=0.3)     # radius 27 px: stays inside
+    for q in LEVELS:
+        out = Glare().apply(rt, p, src, quality=q)
+        assert abs(out[..., :3].sum() / src[..., :3].sum() - 1) <= 1e-5, q  # case 15
+
+
+def test_glare_deterministic(rt, rng):
+    src = scene(rng)
+    p = Glare.params(strength=0.1, size=0.4)
+    for q in ("preview", "final"):
+        a = Glare().apply(rt, p, src, quality=q)
+        b = Glare().apply(rt, p, src, quality=q)
+        assert a.tobytes() == b.tobytes()
+
+
+def test_glare_identity_without_highlights(rt, rng):
+    src = rng.uniform(0.0, 0.4, (16, 20, 4)).astype(np.float32)
+    p = Glare.params()
+    ctx = RenderContext(rt, rt.upload(src))
+    assert Glare().is_identity(p, ctx) == "no pixel above threshold"
+    assert Glare().is_identity(Glare.params(strength=0.0), ctx) == "strength is 0"
+    assert np.array_equal(Glare().apply(rt, p, src), src)
+
+
+def test_glare_overscan_contributes(rt, rng):
+    # data window larger than the display window; the light sits in the overscan
+    data, display = Rect(-16, -16, 80, 64), Rect(0, 0, 64, 48)
+    src = np.full((data.height, data.width, 4), 0.01, np.float32)
+    src[4:6, 4:6, :3] = 1e4            # frame (-12, -12): outside the display window
+    p = Glare.params(strength=0.2, size=0.4)
+    got = Glare().apply(rt, p, src, data_window=data, display_window=display)
+    want = oracle(src, p, data, data, display)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
+    inside = got[16:, 16:, 0]
+    assert inside[0, 0] > 0.05          # light from the overscan reached the display window
+
+
+def test_glare_rod_grows(rt):
+    data, display = Rect(20, 10, 40, 30), Rect(0, 0, 64, 48)
+    src = np.zeros((20, 20, 4), np.float32)
+    src[10, 10, :3] = 1e3
+    p = Glare.params(strength=0.2, size=0.2)
+    ctx = RenderContext(rt, rt.upload(src, data), display_window=display)
+    r = math.floor(0.2 * display.diagonal + 0.5)
+    assert Glare().region_of_definition(p, ctx) == data.grown(r)
+    out, win = Glare().apply(rt, p, src, data_window=data, display_window=display, keep_rod=True)
+    assert win.contains(data) and win != data
+    want = oracle(src, p, data, win, display)
+    np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-6 * want.max())
+    assert out[20, 18, 0] > 1e-3        # light left of the source window (frame x = 18)
+    assert out.min() >= 0
+
+
+def test_glare_display_referred_isolates_and_boosts(rt, rng):
+    src = rng.uniform(0.0, 0.3, (32, 40, 4)).astype(np.float32)
+    src[16, 20, :3] = 1.0
+    p = Glare.params(strength=0.1, size=0.3)
+    ctx = RenderContext(rt, rt.upload(src), display_referred=True)
+    assert Glare().is_identity(p, ctx) is None
+    got = Glare().apply(rt, p, src, display_referred=True)
+    want = oracle(src, p, boost=p.display_boost)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    assert got[16, 24, 0] > src[16, 24, 0]          # glare reads as glare
+    linear = Glare().apply(rt, p, src)
+    assert got[16, 24, 0] - src[16, 24, 0] > 2 * (linear[16, 24, 0] - src[16, 24, 0])
+
+
+def test_glare_huge_size_and_extreme_params(rt, rng):
+    src = rng.uniform(0.0, 3.0, (12, 9, 4)).astype(np.float32)
+    src[5, 4, :3] = 1e5
+    p = Glare.params(strength=1.0, size=2.0, threshold=0.0, knee=0.0, psf="gaussians")
+    got = Glare().apply(rt, p, src)
+    want = oracle(src, p)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
+    np.testing.assert_array_equal(got[..., 3], src[..., 3])   # alpha preserved
+
+
+def test_psf_spencer_normalised_and_monotonic():
+    from clfx import psf
+    k = psf.spencer(40, 0.03)
+    assert k.shape == (81, 81) and abs(k.sum() - 1) < 1e-12
+    row = k[40, 40:]
+    assert (np.diff(row[:40]) < 0).all()
+    assert psf.spencer_value(0.0) > psf.spencer_value(1.0) > 0
+
+
+def test_psf_kernel_image_resample():
+    from clfx import psf
+    img = np.zeros((21, 31, 3))
+    img[10, 15] = (1, 2, 3)
+    img[10, 25] = (1, 1, 1)
+    k = psf.resample_kernel(img, 15)
+    assert k.shape == (31, 31, 3)
+    np.testing.assert_allclose(k.sum(axis=(0, 1)), 1.0)
+    assert k[15, 15, 2] > k[15, 15, 0] * 0.5    # centre of the image lands on the centre tap
