@@ -1,6 +1,7 @@
 """What a scene calls for: one cheap analysis pass per frame, shared by all effects.
 
-A single kernel reads the frame once and records per 32 x 32 tile: maximum and mean
+Two small kernels read the frame once (vectorised, 4 pixels per step) and record per
+32 x 32 tile: maximum and mean
 luminance, non-finite pixel count, maximum velocity, depth range.  Effects use it to skip a
 frame (an identity with a reason) or the tiles that need nothing: no highlight above a
 threshold, a circle of confusion below half a pixel, velocity below half a pixel, no light
@@ -170,12 +171,16 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
     if velocity is not None and velocity.window != source.window:
         velocity = None
     stats = rt.buffer(tx * ty * 8 * 4)
-    dummy = rt.buffer(16)
-    knl = rt.kernel("analysis.cl", "analysis_tiles", TILE=TILE)
-    rt.launch(knl, (tx, ty), source, np.int32(source.pitch), np.int32(w), np.int32(h),
+    rows = rt.buffer(max(h, 1) * tx * 8 * 4)
+    dummy = rt.buffer(64)
+    f = np.int32
+    rt.launch(rt.kernel("analysis.cl", "analysis_rows", TILE=TILE), (tx, max(h, 1)), source,
+              f(source.pitch), f(w), f(h),
               depth.buffer if depth is not None else dummy.buffer,
               velocity.buffer if velocity is not None else dummy.buffer,
-              np.int32(depth is not None), np.int32(velocity is not None), stats, np.int32(tx))
+              f(depth is not None), f(velocity is not None), rows, f(tx))
+    rt.launch(rt.kernel("analysis.cl", "analysis_tiles", TILE=TILE), (tx, ty), rows, f(w), f(h),
+              stats, f(tx), f(ty))
     s = rt.from_device(stats, np.float32, tx * ty * 8).reshape(ty, tx, 8)
     if w == 0 or h == 0:
         s[:] = 0
