@@ -1,0 +1,284 @@
+import math
+
+import numpy as np
+import pytest
+
+from clfx import metrics
+from clfx.camera import Camera
+from clfx.groundtruth import render_truth
+from clfx.plugin import QUALITY_LEVELS
+from clfx.plugins.dof import QUALITY, Dof, quantised_radius, tap_table
+from clfx.scene import demo_scene, render_sharp
+from tests.conftest import hard_shapes
+from tests.reference import dof as reference
+
+# 50 mm f/2 on a 36 mm sensor focused at 3 m: K (CoC at infinity) = 0.424 mm.
+CAM = Camera(focal_length=50.0, f_number=2.0, sensor_width=36.0, focus_distance=3.0)
+
+
+def lens(width, height, p=None, cam=CAM):
+    """(k_half, focus, clamp_r) as the plugin computes them."""
+    p = p or Dof.params()
+    f = cam.focal_length
+    k = (f / cam.f_number) * f / (cam.focus_distance * 1000 - f) * width / cam.sensor_width
+    return 0.5 * k, cam.focus_distance, 0.5 * p.max_coc * math.hypot(width, height)
+
+
+def oracle(src, depth, quality, cam=CAM, **params):
+    """The float64 oracle with the plugin's taps for one neighbourhood radius (images of up to
+    3 x 3 tiles, where the tile dilation makes the radius uniform)."""
+    h, w = depth.shape
+    p = Dof.params(**params)
+    k_half, focus, clamp_r = lens(w, h, p, cam)
+    r = reference.coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
+    radius = float(quantised_radius(np.abs(r).max()))
+    spacing, kmax = QUALITY[quality][:2]
+    blades = cam.blades if p.blades < 0 else p.blades
+    taps = tap_table(radius, spacing, kmax, 1.0, blades,
+                     -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
+                     p.roundness)
+    return reference.dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps)
+
+
+def run(rt, src, depth, quality="final", cam=CAM, **params):
+    return Dof().apply(rt, Dof.params(**params), src, depth=depth, camera=cam, quality=quality)
+
+
+def random_case(rng, shape, zmin=0.8, zmax=40.0):
+    src = rng.uniform(0.0, 2.0, shape + (4,)).astype(np.float32)
+    depth = np.exp(rng.uniform(math.log(zmin), math.log(zmax), shape)).astype(np.float32)
+    # blocky depth: layers with edges, like a real depth pass
+    depth = np.repeat(np.repeat(depth[::4, ::4], 4, 0), 4, 1)[:shape[0], :shape[1]]
+    return src, np.ascontiguousarray(depth)
+
+
+# -- oracle --------------------------------------------------------------------------------
+@pytest.mark.parametrize("quality", ["preview", "reference"])
+@pytest.mark.parametrize("shape", [(17, 31), (40, 52), (64, 48)])
+def test_dof_matches_reference(rt, rng, shape, quality):
+    src, depth = random_case(rng, shape)
+    cam = CAM.updated(sensor_width=8.0)      # CoCs up to ~20 px on these small frames
+    got = run(rt, src, depth, quality, cam)
+    want = oracle(src, depth, quality, cam)
+    # float32 taps and weights, normalised sums of <= 3169 terms: ~1e-5 relative; a pixel whose
+    # CoC sits within float32 rounding of a coverage edge can move one tap (one weight of
+    # many), hence the small absolute allowance
+    tol = 1e-9 if quality == "reference" else 1e-4
+    np.testing.assert_allclose(got, want, rtol=max(tol, 2e-6), atol=2e-3 * src.max())
+    assert np.abs(got - want).mean() < 1e-4 * src.max()
+
+
+def test_dof_polygon_and_rotation_match_reference(rt, rng):
+    src, depth = random_case(rng, (33, 45))
+    cam = CAM.updated(sensor_width=8.0, blades=6, blade_rotation=10.0)
+    got = run(rt, src, depth, "final", cam, roundness=0.3, blade_rotation=5.0)
+    want = oracle(src, depth, "final", cam, roundness=0.3, blade_rotation=5.0)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=2e-3 * src.max())  # as above
+    assert np.abs(got - want).mean() < 1e-4 * src.max()
+
+
+def test_uniform_plane_is_a_normalised_disk_blur_that_keeps_energy(rt, rng):
+    src = np.zeros((64, 64, 4), np.float32)
+    src[32, 32] = (1e4, 5e3, 1e3, 1.0)                   # a 1e4 HDR highlight
+    depth = np.full((64, 64), 30.0, np.float32)
+    cam = CAM.updated(sensor_width=8.0)
+    got = run(rt, src, depth, "reference", cam)
+    r = abs(reference.coc_radius(30.0, k_half=lens(64, 64, cam=cam)[0], focus=3.0, clamp_r=1e9))
+    # energy: the same normalised kernel everywhere (float64 accumulation)
+    assert abs(got[..., 0].sum() / 1e4 - 1) < 1e-5
+    # a disk of the CoC radius (coverage edge of +-0.5 px)
+    lit = np.nonzero(got[..., 0] > 1e-3)
+    extent = np.hypot(lit[0] - 32, lit[1] - 32).max()
+    assert r - 1 <= extent <= r + 1.5, (extent, r)
+    # weights are float32 even at the reference level (sums are float64): a few ulps
+    np.testing.assert_allclose(got, oracle(src, depth, "reference", cam), rtol=5e-6, atol=1e-6)
+
+
+def test_constant_image_stays_constant(rt, rng):
+    src = np.full((40, 70, 4), 0.37, np.float32)
+    _, depth = random_case(rng, (40, 70))
+    for q in QUALITY_LEVELS:
+        got = run(rt, src, depth, q, CAM.updated(sensor_width=8.0))
+        np.testing.assert_allclose(got, 0.37, rtol=2e-6)   # normalised float32 sums
+
+
+# -- edges ---------------------------------------------------------------------------------
+def test_in_focus_edge_does_not_bleed_and_stays_sharp(rt, rng):
+    # left: in focus; right: far behind; nothing in front of the focus plane
+    src = rng.uniform(0.0, 1.0, (32, 64, 4)).astype(np.float32)
+    src[:, 32:, :3] += 50.0                             # bright blurred background
+    depth = np.full((32, 64), 3.0, np.float32)
+    depth[:, 32:] = 1e4
+    got = run(rt, src, depth, "final", CAM.updated(sensor_width=8.0))
+    # every far tap is rejected for an in-focus pixel: it is exactly the input
+    np.testing.assert_array_equal(got[:, :32], src[:, :32])
+    # the background next to the edge does not take the sharp side's (dark) colour
+    assert got[:, 32:36, 0].min() > 40.0
+
+
+def test_blurred_foreground_spreads_over_the_sharp_background(rt):
+    src = np.zeros((32, 64, 4), np.float32)
+    src[..., 3] = 1.0
+    src[:, :32, 0] = 10.0                               # near red plane, left
+    src[:, 32:, 1] = 1.0                                # in-focus green, right
+    depth = np.full((32, 64), 3.0, np.float32)
+    depth[:, :32] = 1.0
+    cam = CAM.updated(sensor_width=3.0)
+    got = run(rt, src, depth, "final", cam, max_coc=0.25)
+    r = abs(reference.coc_radius(1.0, k_half=lens(64, 32, cam=cam)[0], focus=3.0, clamp_r=1e9))
+    assert r > 8
+    # the foreground's light reaches into the in-focus side, fading with distance
+    assert got[16, 33, 0] > 2.0 and got[16, 33, 0] > got[16, 36, 0] > got[16, 39, 0]
+    assert got[16, 32 + int(r) + 2, 0] == 0.0
+    # naive per-pixel-CoC blur keeps the sharp side clean: the defect this fixes
+    naive = reference.naive_dof(src, depth, k_half=lens(64, 32, cam=cam)[0], focus=3.0, clamp_r=1e9)
+    assert naive[16, 33, 0] == 0.0
+
+
+# -- against ground truth --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def gt_case():
+    cam = Camera(focal_length=50.0, f_number=1.4, sensor_width=36.0 / 3, focus_distance=3.0)
+    scene = demo_scene(12, 240, 136)
+    sharp = render_sharp(scene, ss=2)
+    truth = render_truth(scene, cam, samples=1024, ss=2)
+    return cam, sharp, truth
+
+
+def test_gather_beats_naive_in_the_edge_band(rt, gt_case):
+    cam, sharp, truth = gt_case
+    band = metrics.edge_band(sharp.depth, None, 4)
+    w, h = sharp.rgba.shape[1], sharp.rgba.shape[0]
+    k_half, focus, clamp_r = lens(w, h, cam=cam)
+    naive = reference.naive_dof(sharp.rgba, sharp.depth, k_half=k_half, focus=focus,
+                                clamp_r=clamp_r)
+    e_naive = metrics.psnr_log(naive, truth, band)
+    for q in ("preview", "final", "reference"):
+        got = run(rt, sharp.rgba, sharp.depth, q, cam)
+        assert metrics.psnr_log(got, truth, band) > e_naive + 0.5, q   # dB (measured 0.8-2.2)
+        assert metrics.psnr_log(got, truth) > metrics.psnr_log(naive, truth), q
+
+
+def test_error_falls_with_quality(rt, gt_case):
+    cam, sharp, truth = gt_case
+    err = {q: metrics.rmse(metrics.log_tonemap(run(rt, sharp.rgba, sharp.depth, q, cam)),
+                           metrics.log_tonemap(truth)) for q in QUALITY_LEVELS}
+    assert err["draft"] >= err["final"] and err["preview"] >= err["final"], err
+    assert err["reference"] <= err["final"] * 1.05, err      # ground truth noise ~ a few %
+
+
+# -- hard cases ------------------------------------------------------------------------------
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_dof_hard_shapes(rt, rng, shape):
+    src, depth = random_case(rng, shape)
+    got = run(rt, src, depth, "final", CAM.updated(sensor_width=4.0))
+    assert got.shape == src.shape and np.isfinite(got).all()
+    if max(shape) <= 48:   # one neighbourhood radius: the oracle applies
+        want = oracle(src, depth, "final", CAM.updated(sensor_width=4.0))
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=2e-3 * src.max())
+
+
+def test_bad_depths_and_colours(rt, rng):
+    src = rng.uniform(0.0, 1.0, (24, 40, 4)).astype(np.float32)
+    src[3, 5, 0] = np.nan
+    src[10, 20, 1] = np.inf
+    depth = np.full((24, 40), 20.0, np.float32)
+    depth[0:4, 0:8] = 0.0
+    depth[5:9, 0:8] = -3.0
+    depth[10:14, 0:8] = np.nan
+    depth[15:19, 0:8] = np.inf
+    got = run(rt, src, depth, "final", CAM.updated(sensor_width=8.0))
+    assert np.isfinite(got).all()
+    depth2 = depth.copy()
+    depth2[15:19, 0:8] = 1e30
+    got2 = run(rt, src, depth2, "final", CAM.updated(sensor_width=8.0))
+    np.testing.assert_array_equal(got, got2)          # z = inf equals z = 1e30
+    # the CoC never exceeds the clamp: a tiny max_coc leaves a blur of at most its radius
+    pt = np.zeros((32, 32, 4), np.float32)
+    pt[16, 16] = 1e5
+    small = run(rt, pt, np.full((32, 32), 1e3, np.float32), "final",
+                CAM.updated(sensor_width=1.0), max_coc=4.0 / math.hypot(32, 32))
+    assert np.ptp(np.nonzero(small[..., 0])[1]) <= 5
+
+
+def test_huge_coc_and_pixel_aspect(rt, rng):
+    src, depth = random_case(rng, (20, 30), zmin=0.06, zmax=0.1)   # CoC >> frame
+    got = run(rt, src, depth, "draft", CAM, max_coc=0.25)
+    assert np.isfinite(got).all()
+    pt = np.zeros((40, 40, 4), np.float32)
+    pt[20, 20] = 1e3
+    d = np.full((40, 40), 1e3, np.float32)
+    out = Dof().apply(rt, Dof.params(), pt, depth=d, camera=CAM.updated(sensor_width=6.0),
+                      pixel_aspect=2.0, quality="reference")
+    ys, xs = np.nonzero(out[..., 0] > 1e-3)
+    assert np.ptp(ys) > 1.5 * np.ptp(xs)      # wide pixels: the bokeh spans twice the rows
+
+
+def test_identity_cases(rt, rng):
+    src, depth = random_case(rng, (16, 16))
+    from clfx.plugin import RenderContext
+
+    p = Dof.params(coc_source="max_blur", max_blur=0.0)
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=CAM)
+    assert "is 0" in Dof().is_identity(p, ctx)
+    got = Dof().apply(rt, p, src, depth=depth, camera=CAM)
+    assert np.array_equal(got, src)
+    focus = np.full((16, 16), 3.0, np.float32)
+    got = Dof().apply(rt, Dof.params(), src, depth=focus, camera=CAM)
+    assert np.array_equal(got, src)
+    # small CoC everywhere: the reason names it
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(focus), camera=CAM)
+    assert "half a pixel" in Dof().is_identity(Dof.params(), ctx)
+
+
+def test_max_blur_mode(rt, rng):
+    src, depth = random_case(rng, (24, 24))
+    diag = math.hypot(24, 24)
+    got = run(rt, src, depth, "reference", CAM, coc_source="max_blur", max_blur=8.0 / diag)
+    # max_blur: K = max_blur * diagonal; same geometry as a camera with that K
+    h, w = depth.shape
+    r = reference.coc_radius(depth, k_half=4.0, focus=3.0, clamp_r=0.5 * 0.05 * diag)
+    taps = tap_table(float(quantised_radius(np.abs(r).max())), *QUALITY["reference"][:2])
+    want = reference.dof(src, depth, k_half=4.0, focus=3.0, clamp_r=0.5 * 0.05 * diag, taps=taps)
+    np.testing.assert_allclose(got, want, rtol=5e-6, atol=1e-6)   # float32 weights, float64 sums
+
+
+def test_tiles_in_focus_are_copied_and_far_tiles_blurred(rt, rng):
+    src = rng.uniform(0.0, 1.0, (96, 160, 4)).astype(np.float32)
+    depth = np.full((96, 160), 3.0, np.float32)
+    depth[:, 128:] = 100.0
+    got = run(rt, src, depth, "final", CAM.updated(sensor_width=8.0))
+    np.testing.assert_array_equal(got[:, :64], src[:, :64])   # beyond any reach: copied
+    assert not np.allclose(got[:, 140:], src[:, 140:])
+
+
+def test_deterministic(rt, rng):
+    src, depth = random_case(rng, (50, 70))
+    a = run(rt, src, depth, "final", CAM.updated(sensor_width=8.0))
+    b = run(rt, src, depth, "final", CAM.updated(sensor_width=8.0))
+    assert np.array_equal(a, b)
+
+
+def test_bench_case_shape():
+    from clfx.plugins.dof import bench_case
+
+    case = bench_case(64, 36, None)
+    assert case["truth"].shape == case["source"].shape == (36, 64, 4)
+    assert case["depth"].shape == (36, 64)
+
+
+def test_half_resolution_tiles_match_full_resolution_on_smooth_content(rt):
+    from clfx.plugin import RenderContext
+
+    ys, xs = np.mgrid[0:96, 0:128].astype(np.float32)
+    src = np.stack([xs / 128, ys / 96, 0.5 + 0.2 * np.sin(xs / 9.0), np.ones_like(xs)], axis=2)
+    depth = np.full((96, 128), 50.0, np.float32)        # CoC radius ~ 8 px everywhere
+    cam = CAM.updated(sensor_width=4.0)
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=cam, quality="final")
+    Dof().render(rt, Dof.params(max_coc=0.2), ctx)
+    assert "12 at half resolution" in ctx.notes[-1]
+    half = run(rt, src, depth, "final", cam, max_coc=0.2)
+    full = run(rt, src, depth, "reference", cam, max_coc=0.2)
+    inner = np.s_[16:-16, 16:-16]
+    # a disk blur of a smooth image is smooth: 2x2 box + bilinear upsampling costs ~1e-3
+    np.testing.assert_allclose(half[inner], full[inner], atol=5e-3)

@@ -1,0 +1,132 @@
+"""The layered scene model, the multisample ground truth and the metrics."""
+import math
+
+import numpy as np
+import pytest
+
+from clfx import metrics
+from clfx.camera import Camera
+from clfx.groundtruth import (aperture_samples, coc_signed_px, make_case, render_truth,
+                              shutter_interval, write_case)
+from clfx.scene import Layer, Light, Scene, Texture, demo_scene, render_sharp
+
+CAM = Camera(focal_length=50.0, f_number=1.4, sensor_width=36.0, focus_distance=3.0)
+
+
+def light_scene(depth, w=96, h=64, radius=1.0, lum=1000.0, velocity=(0.0, 0.0)):
+    light = Layer(depth=depth, shape="none", center=(w / 2 + 0.5, h / 2 + 0.5),
+                  lights=(Light((0.0, 0.0), (lum, lum, lum), radius),), velocity=velocity)
+    return Scene(w, h, (light,), background=((0, 0, 0), (0, 0, 0)))
+
+
+def test_demo_scene_passes_and_motion():
+    a = render_sharp(demo_scene(10, 160, 90))
+    b = render_sharp(demo_scene(11, 160, 90))
+    assert a.rgba.shape == (90, 160, 4) and a.depth.shape == (90, 160)
+    assert np.isfinite(a.rgba).all() and a.rgba.max() > 1000   # HDR lights
+    assert np.isinf(a.depth).any() and a.depth[np.isfinite(a.depth)].min() == 1.0
+    assert a.velocity[..., 0].max() > 1.0            # the fast ball
+    assert not np.array_equal(a.rgba, b.rgba)        # changes smoothly with the frame
+    assert np.abs(a.rgba - b.rgba).mean() < 0.5
+
+
+def test_render_sharp_is_the_over_composite():
+    layer = Layer(depth=2.0, texture=Texture("flat", (0.8, 0.4, 0.2)), shape="rect",
+                  center=(8, 8), size=(8, 8), opacity=0.5)
+    opaque = Layer(depth=4.0, shape="rect", center=(2, 14), size=(4, 4))
+    sc = Scene(16, 16, (layer, opaque), background=((0.1, 0.1, 0.1), (0.1, 0.1, 0.1)))
+    f = render_sharp(sc)
+    np.testing.assert_allclose(f.rgba[8, 8], [0.45, 0.25, 0.15, 1.0], rtol=1e-6)
+    np.testing.assert_allclose(f.rgba[0, 0], [0.1, 0.1, 0.1, 1.0], rtol=1e-6)
+    # depth is the nearest layer covering more than half the pixel: not a 50% veil
+    assert f.depth[0, 0] == math.inf and f.depth[8, 8] == math.inf and f.depth[14, 1] == 4.0
+    assert np.isinf(render_sharp(Scene(3, 2)).depth).all()
+
+
+def test_zero_aperture_and_shutter_reproduce_the_sharp_frame():
+    sc = demo_scene(3, 120, 68)
+    for ss in (1, 2):
+        sharp = render_sharp(sc, ss=ss).rgba
+        truth = render_truth(sc, CAM, samples=4, dof=False, motion=False, ss=ss)
+        np.testing.assert_array_equal(truth, sharp)
+
+
+def test_coc_of_ground_truth_matches_the_camera():
+    # A tiny light far behind the focus plane spreads into a disk of the camera's CoC.
+    depth = 30.0
+    sc = light_scene(depth, radius=0.3, lum=1e4)
+    truth = render_truth(sc, CAM, samples=2048, ss=2)
+    coc = CAM.coc_px(depth, sc.width)
+    lit = truth[..., 0] > 0
+    ys, xs = np.nonzero(lit)
+    width = xs.max() - xs.min() + 1
+    assert abs(width - coc) <= 2.0, (width, coc)       # within the light's size + a pixel
+    assert abs(abs(coc_signed_px(CAM, depth, sc.width)) - coc) < 1e-9
+    # energy is conserved by the average
+    sharp = render_sharp(sc, ss=2).rgba
+    assert abs(truth[..., 0].sum() / sharp[..., 0].sum() - 1) < 1e-4
+
+
+def test_near_and_far_bokeh_of_a_triangle_are_turned():
+    cam = CAM.updated(blades=3, sensor_width=6.0)     # CoCs of 5-9 px on 96 px
+    far = render_truth(light_scene(30.0, radius=0.3, lum=1e4), cam, samples=2048, ss=2)
+    near = render_truth(light_scene(1.9, radius=0.3, lum=1e4), cam, samples=2048, ss=2)
+    assert cam.coc_px(1.9, 96) > 5 and cam.coc_px(30, 96) > 8
+    # first vertex up: behind the focus plane the triangle's vertex reaches further up from
+    # the light (row 32) than its base reaches down; in front of it, the other way round
+    def reach(img):
+        ys = np.nonzero(img[..., 0] > 0)[0]
+        return 32 - ys.min(), ys.max() - 32
+
+    up, down = reach(far)
+    assert up > down
+    up, down = reach(near)
+    assert down > up
+
+
+def test_aperture_samples_are_uniform_and_weighted():
+    pts, w = aperture_samples(4096)
+    assert abs(w.sum() - 1) < 1e-12 and np.abs(pts @ np.ones(2) @ w) < 1e-2
+    assert np.hypot(*pts.T).max() <= 1.0
+    assert abs(np.sum(w * (pts ** 2).sum(1)) - 0.5) < 1e-3     # E|p|^2 = 1/2 on the unit disk
+    pts6, w6 = aperture_samples(4096, blades=6)
+    assert np.hypot(*pts6.T).max() <= 1.0 + 1e-12
+
+
+def test_motion_blur_truth_spreads_along_velocity():
+    cam = CAM.updated(shutter_angle=180.0)
+    assert shutter_interval(cam) == (-0.25, 0.25)
+    assert shutter_interval(cam.updated(shutter_offset="opening")) == (0.0, 0.5)
+    sc = light_scene(3.0, radius=0.5, velocity=(20.0, 0.0))
+    truth = render_truth(sc, cam, samples=256, dof=False, motion=True, ss=2)
+    lit = truth[..., 0] > 1.0
+    ys, xs = np.nonzero(lit)
+    assert 9 <= xs.max() - xs.min() + 1 <= 13           # 20 px/frame * 0.5 frame + the light
+    assert ys.max() - ys.min() + 1 <= 3
+
+
+def test_edge_band_and_metrics():
+    depth = np.full((20, 30), 5.0, np.float32)
+    depth[:, 15:] = np.inf
+    band = metrics.edge_band(depth, None, 3)
+    assert band[:, 11:19].all() and not band[:, :11].any() and not band[:, 20:].any()
+    depth[0, 0] = np.nan                                # invalid depth is an edge too
+    assert metrics.edge_band(depth, None, 0)[0, 0]
+    vel = np.zeros((20, 30, 2), np.float32)
+    vel[10:, :, 0] = 4.0
+    vband = metrics.edge_band(None, vel, 2)
+    assert vband[8:12].all() and not vband[:7].any()
+    a = np.ones((4, 4, 4))
+    b = a.copy()
+    b[0, 0, 0] = 3.0
+    assert metrics.rmse(a, a) == 0.0 and metrics.psnr_log(a, a) == math.inf
+    assert metrics.max_err(a, b) == 2.0
+    assert abs(metrics.rmse(a, b) - math.sqrt(4 / 48)) < 1e-12
+    assert metrics.psnr_log(b, a) < 60
+
+
+def test_write_case(tmp_path):
+    pytest.importorskip("OpenImageIO")
+    case = make_case(demo_scene(0, 48, 27), CAM, samples=8)
+    paths = write_case(case, tmp_path)
+    assert all(p.exists() for p in paths.values())
