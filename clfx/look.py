@@ -39,6 +39,7 @@ class Step:
     plugin: Plugin | None = None
     typical_ms: float | None = None   # running mean of this step's cost, for "time saved"
     runs: int = 0
+    skip_missing_passes: bool = False  # skip (with a reason) on frames without its passes
 
     def __post_init__(self):
         if self.plugin is None:
@@ -48,7 +49,14 @@ class Step:
         d = {"effect": self.effect, "params": self.params.as_dict()}
         if self.quality:
             d["quality"] = self.quality
+        if self.skip_missing_passes:
+            d["missing_passes"] = "skip"
         return d
+
+    def missing_passes(self, have: dict[str, bool]) -> list[str]:
+        """Required clips of this step that the frame does not have."""
+        return [c.name for c in self.plugin.descriptor.clips
+                if c.name != "source" and not c.optional and not have.get(c.name, False)]
 
 
 @dataclass
@@ -73,9 +81,12 @@ class Look:
         return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
     def required_clips(self) -> dict[str, list[str]]:
-        """Clip name -> effects that require it (optional clips are not listed)."""
+        """Clip name -> effects that cannot run without it (optional clips and steps that
+        skip when their passes are missing are not listed)."""
         need: dict[str, list[str]] = {}
         for s in self.steps:
+            if s.skip_missing_passes:
+                continue
             for clip in s.plugin.descriptor.clips:
                 if clip.name != "source" and not clip.optional:
                     need.setdefault(clip.name, []).append(s.effect)
@@ -200,11 +211,14 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     if look.steps:
         report.analysis_ms = ctx.analysis.seconds * 1e3
     saved = 0.0
+    have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
     for step in look.steps:
         level = step.quality or quality or DEFAULT_QUALITY
         step_ctx = ctx.with_quality(level)
         step_ctx.notes = []
-        reason = step.plugin.is_identity(step.params, step_ctx)
+        missing = step.missing_passes(have)
+        reason = (f"no {' or '.join(missing)} pass in the input" if missing
+                  else step.plugin.is_identity(step.params, step_ctx))
         if reason:
             report.steps.append(StepReport(step.effect, False, reason, quality=level))
             saved += step.typical_ms or 0.0

@@ -15,6 +15,8 @@ A look file::
         params: {amount: 0.02}
         quality: preview     # optional per-effect override
         enabled: true        # optional; false removes an inherited effect
+        missing_passes: skip # optional: skip (with a reason) on frames lacking the depth or
+                             # velocity pass this effect needs; default "error"
 
 Inheritance: the base's camera is updated key by key; an effect the base already has is
 updated in place (its params merged), a new one is appended, ``enabled: false`` drops it.
@@ -39,7 +41,7 @@ from clfx.plugin import QUALITY_LEVELS, get_plugin
 
 SCHEMA = 1
 TOP_KEYS = ("name", "description", "schema", "base", "camera", "seed", "effects")
-STEP_KEYS = ("effect", "params", "quality", "enabled", "version")
+STEP_KEYS = ("effect", "params", "quality", "enabled", "version", "missing_passes")
 DEFAULT_LOOK = "default"
 
 
@@ -163,7 +165,8 @@ def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
                 source=str(path), base=str(data["base"]) if data.get("base") else None)
     if base:
         look.camera, look.seed = base.camera, base.seed
-        look.steps = [Step(s.effect, s.params, s.quality) for s in base.steps]
+        look.steps = [Step(s.effect, s.params, s.quality, skip_missing_passes=s.skip_missing_passes)
+                      for s in base.steps]
         look.description = look.description or base.description
     look.camera = _camera(doc, data.get("camera"), look.camera)
     if "seed" in data:
@@ -225,6 +228,9 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
         params = entry.get("params") or {}
         if not isinstance(params, dict):
             doc.fail(at + ("params",), "must be a mapping of parameter names to values")
+        when_missing = entry.get("missing_passes", "error")
+        if when_missing not in ("error", "skip"):
+            doc.fail(at + ("missing_passes",), f"{when_missing!r} is not 'error' or 'skip'")
         quality = entry.get("quality")
         if quality is not None and quality not in QUALITY_LEVELS:
             doc.fail(at + ("quality",), f"{quality!r} is not a quality level{_suggest(quality, QUALITY_LEVELS)}")
@@ -240,7 +246,9 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
             except ClfxError as exc:
                 doc.fail(at + ("params", pname), str(exc))
         p = cls.params(**validated)
-        step = Step(name, p, quality or (existing.quality if existing else None))
+        step = Step(name, p, quality or (existing.quality if existing else None),
+                    skip_missing_passes=(when_missing == "skip") if "missing_passes" in entry
+                    else bool(existing and existing.skip_missing_passes))
         if existing:
             steps[steps.index(existing)] = step
         else:

@@ -109,3 +109,17 @@ def test_params_hash_changes_with_params_and_camera():
     b = Look("a", steps=[Step("vignette", cls.params(amount=0.4))])
     c = Look("a", camera=Camera(focal_length=50), steps=[Step("vignette", cls.params(amount=0.3))])
     assert len({a.params_hash(), b.params_hash(), c.params_hash()}) == 3
+
+
+def test_step_that_skips_missing_passes_reports_why(rt, rng):
+    from clfx.errors import ClipError
+
+    frame = Frame.from_array(rng.uniform(0, 1, (16, 16, 4)).astype(np.float32))
+    dof = get_plugin("dof")
+    strict = Look("strict", steps=[Step("dof", dof.params())])
+    with pytest.raises(ClipError, match="needs a depth pass"):
+        render_frame(rt, strict, frame)
+    lenient = Look("lenient", steps=[Step("dof", dof.params(), skip_missing_passes=True),
+                                     Step("vignette", get_plugin("vignette").params(amount=0.2))])
+    _, report = render_frame(rt, lenient, frame)
+    assert report.steps[0].reason == "no depth pass in the input" and report.steps[1].ran

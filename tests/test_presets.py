@@ -98,8 +98,9 @@ def test_unknown_look_name_suggests():
 def test_overrides():
     look = apply_overrides(load_look("default"), ["vignette.amount=0.5", "camera.focal_length=85",
                                                   "seed=3", "vignette.quality=draft"])
-    assert look.steps[0].params.amount == 0.5 and look.camera.focal_length == 85
-    assert look.seed == 3 and look.steps[0].quality == "draft"
+    vignette = next(s for s in look.steps if s.effect == "vignette")
+    assert vignette.params.amount == 0.5 and look.camera.focal_length == 85
+    assert look.seed == 3 and vignette.quality == "draft"
     with pytest.raises(PresetError, match="has no effect 'glaree'"):
         apply_overrides(load_look("default"), ["glaree.strength=1"])
     with pytest.raises(Exception, match="outside the allowed range"):
@@ -112,3 +113,14 @@ def test_single_effect_look():
     look = single_effect_look("vignette", ["amount=0.25", "center=0.1,0.2", "camera.focal_length=24"])
     assert look.steps[0].params.amount == 0.25 and look.steps[0].params.center == (0.1, 0.2)
     assert look.camera.focal_length == 24
+
+
+def test_missing_passes_skip_is_inherited_and_validated(tmp_path, monkeypatch):
+    monkeypatch.setenv("CLFX_PRESET_PATH", str(tmp_path))
+    write(tmp_path, "parent", "name: parent\neffects:\n  - {effect: dof, missing_passes: skip}\n")
+    child = load_look(str(write(tmp_path, "child", "name: child\nbase: parent\neffects:\n"
+                                                   "  - {effect: dof, params: {max_coc: 0.02}}\n")))
+    assert child.steps[0].skip_missing_passes and child.required_clips() == {}
+    bad = write(tmp_path, "bad", "name: bad\neffects:\n  - {effect: dof, missing_passes: maybe}\n")
+    with pytest.raises(PresetError, match=r"bad.yaml:3: effects\[0\]\.missing_passes"):
+        load_look(str(bad))
