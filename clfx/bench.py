@@ -45,7 +45,8 @@ def _rgb(a: np.ndarray) -> np.ndarray:
 
 
 def error_metrics(out: np.ndarray, ref: np.ndarray, edge: np.ndarray | None = None) -> dict:
-    """RMSE / max in linear light, relative RMSE, PSNR after log(1 + x), edge-band RMSE."""
+    """RMSE / max in linear light, relative RMSE, RMSE and PSNR after log(1 + x) (what an
+    eye sees of HDR errors: linear RMSE is dominated by the brightest pixels), edge-band RMSE."""
     o, r = _rgb(out), _rgb(ref)
     finite = np.isfinite(r)
     o = np.where(finite, np.nan_to_num(o, nan=1e30, posinf=1e30, neginf=-1e30), 0.0)
@@ -58,7 +59,8 @@ def error_metrics(out: np.ndarray, ref: np.ndarray, edge: np.ndarray | None = No
     mse_log = float(np.mean((lo - lr) ** 2)) if lo.size else 0.0
     psnr = float("inf") if mse_log == 0 else 10 * math.log10(peak ** 2 / mse_log)
     m = {"rmse": rmse, "max_err": float(np.abs(diff).max()) if diff.size else 0.0,
-         "rel_rmse": rmse / rms_ref if rms_ref > 0 else rmse, "psnr_log": psnr}
+         "rel_rmse": rmse / rms_ref if rms_ref > 0 else rmse, "psnr_log": psnr,
+         "log_rmse": math.sqrt(mse_log)}
     if edge is not None and edge.any():
         m["edge_rmse"] = float(np.sqrt(np.mean(diff[edge] ** 2)))
     return m
@@ -79,6 +81,48 @@ def _stats(times: list[float]) -> dict:
 
 
 # -- effects x levels --------------------------------------------------------------------
+EDGE_BAND_PX = 4.0
+"""Pixels within this distance of a depth or velocity discontinuity form the edge band."""
+
+CACHE_VERSION = 1
+
+
+def _case_cache_path(module, name: str, width: int, height: int, seed: int):
+    """A cache file for a case with a costly ground truth, keyed by the sources that make it."""
+    import hashlib
+    import inspect
+
+    from clfx import groundtruth, scene
+
+    h = hashlib.sha1(f"{CACHE_VERSION}:{name}:{width}x{height}:{seed}".encode())
+    for mod in (module, scene, groundtruth):
+        h.update(inspect.getsource(mod).encode())
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "clfx", "bench", f"{name}-{width}x{height}-{h.hexdigest()[:12]}.pickle")
+
+
+def load_case(module, name: str, width: int, height: int, seed: int = 1) -> dict:
+    """The effect's bench case; cases with a multisample ``truth`` are cached on disk
+    (minutes to render at 1080p) and reused while their sources are unchanged."""
+    import pickle
+
+    path = _case_cache_path(module, name, width, height, seed)
+    if os.path.exists(path):
+        try:
+            with open(path, "rb") as f:
+                return pickle.load(f)
+        except Exception:
+            pass  # a damaged cache entry is rebuilt
+    case = module.bench_case(width, height, np.random.default_rng(seed))
+    if case.get("truth") is not None:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        tmp = f"{path}.tmp-{os.getpid()}"
+        with open(tmp, "wb") as f:
+            pickle.dump(case, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+    return case
+
+
 @dataclass
 class EffectResult:
     effect: str
@@ -110,7 +154,7 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     if not hasattr(module, "bench_case"):
         res.note = "no bench_case"
         return res
-    case = module.bench_case(width, height, np.random.default_rng(rng_seed))
+    case = load_case(module, name, width, height, rng_seed)
     plugin = cls()
     params = cls.params(**case.get("params", {}))
     outputs = {}
@@ -134,6 +178,10 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     ref = np.asarray(truth, np.float64) if truth is not None else outputs["reference"].astype(np.float64)
     res.reference_kind = "ground truth" if truth is not None else "reference level"
     edge = case.get("edge_mask")
+    if edge is None and truth is not None and (case.get("depth") is not None or case.get("velocity") is not None):
+        from clfx.metrics import edge_band
+
+        edge = edge_band(case.get("depth"), case.get("velocity"), EDGE_BAND_PX)
     ref_ms = next(r["ms"] for r in res.rows if r["quality"] == "reference")
     # Noise-like effects compare statistics, not pixels: a module may supply its own metric.
     metric = getattr(module, "bench_metrics", None) or (lambda out, ref_, c: error_metrics(out, ref_, edge))
