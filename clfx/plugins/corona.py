@@ -1,0 +1,328 @@
+"""Corona: spectral diffraction rings around strong lights, from the aperture's shape.
+
+Model (Ritschel et al. 2009, "Temporal glare: real-time dynamic simulation of the scattering
+in the human eye", Eurographics)
+-----------------------------------------------------------------------------------------
+The Fraunhofer far field of an aperture ``A`` is its Fourier transform, so a point light
+images to ``I(u) = |FFT(A)|^2``.  The pattern scales with wavelength: at wavelength lambda a
+feature at radius r_550 moves to ``r_550 * lambda / 550 nm`` (the dark rings of a round
+aperture sit at 1.22, 2.23, 3.24 ... lambda / D), so white light gives rings that run
+through the rainbow, blue inside, red outside.  The RGB PSF is
+
+    PSF_c(x) = sum_lambda  w_c(lambda) * I(x / s_lambda) / s_lambda^2,   s_lambda ∝ lambda,
+
+with ``w(lambda) = M_709 * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
+``clfx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum.
+Spectral colours are outside Rec.709, so each PSF pixel is brought into gamut keeping its
+luminance (``clfx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
+spectrally flat (white) light keeps its colour and energy (white balance) and only the
+rings are coloured.  ``I`` is computed once per parameter set on the host (NumPy FFT of an
+anti-aliased N-gon or disk, sampled so the 380 nm pattern has about one FFT bin per pixel;
+bilinear resampling per wavelength, with pixel supersampling when the pattern is smaller than
+a pixel) and cached.
+
+Output = sanitised source + ``intensity`` * (highlights ⊛ PSF), highlights being
+``rgb * max(lum - threshold, 0) / lum``.  ``size`` is the radius of the first dark ring at
+550 nm for a round aperture (fraction of the frame diagonal; the same scale for polygons),
+``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its outer
+quarter, then renormalised).
+
+The convolution is ``clfx.fftconv.spread`` over the bounding box of the tiles with
+highlights only (scene analysis), so one light costs a small FFT.
+"""
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+
+import numpy as np
+
+from clfx import spectral
+from clfx.plugin import Descriptor, FloatParam, IntParam, Plugin, register
+from clfx.rect import Rect
+
+WAVELENGTHS = {"draft": 16, "preview": 24, "final": 40, "reference": 80}
+"""Spectral samples from 380 to 780 nm per quality level (80 = 5 nm bins)."""
+
+AIRY_FIRST_ZERO = 1.2196698912665045
+"""First zero of the Airy pattern, in units of lambda / D (= 3.8317 / pi)."""
+
+REFERENCE_NM = 550.0
+"""Wavelength at which ``size`` is the first dark ring's radius."""
+
+PSF_CACHE_SIZE = 6
+
+MAX_GRID = 2048
+"""Largest FFT grid for the far field (host NumPy); the sampling adapts to stay below it."""
+
+MAX_RADIUS_DIAGONALS = 1.5
+"""The PSF radius is capped at this many frame diagonals (farther light leaves the frame)."""
+
+
+# -- the aperture and its far field -----------------------------------------------------
+def aperture(m: int, diameter: float, blades: int, rotation_deg: float,
+             supersample: int = 4) -> np.ndarray:
+    """An anti-aliased aperture on an m x m grid: a disk (blades < 3) or a regular N-gon
+    inscribed in a circle of ``diameter`` samples, vertex 0 at ``rotation_deg`` (CCW)."""
+    r = diameter / 2.0
+    n = int(math.ceil(r)) + 1
+    sub = (np.arange(supersample) + 0.5) / supersample - 0.5
+    coords = (np.arange(-n, n + 1)[:, None] + sub[None, :]).ravel()
+    y, x = np.meshgrid(-coords, coords, indexing="ij")     # y up, as angles are CCW
+    if blades < 3:
+        inside = x * x + y * y <= r * r
+    else:
+        inside = np.ones_like(x, bool)
+        apothem = r * math.cos(math.pi / blades)
+        for i in range(blades):
+            t = math.radians(rotation_deg) + math.pi * (2 * i + 1) / blades
+            inside &= x * math.cos(t) + y * math.sin(t) <= apothem
+    k = 2 * n + 1
+    cov = inside.reshape(k, supersample, k, supersample).mean(axis=(1, 3))
+    out = np.zeros((m, m))
+    c = m // 2
+    out[c - n:c + n + 1, c - n:c + n + 1] = cov
+    return out
+
+
+def far_field(ap: np.ndarray) -> np.ndarray:
+    """|FFT(aperture)|^2, centred at (m // 2, m // 2), normalised to sum 1."""
+    f = np.fft.fftshift(np.abs(np.fft.fft2(np.fft.ifftshift(ap))) ** 2)
+    return f / f.sum()
+
+
+def _bilinear(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """img sampled at column u, row v (zero outside)."""
+    h, w = img.shape
+    u0, v0 = np.floor(u).astype(int), np.floor(v).astype(int)
+    fu, fv = u - u0, v - v0
+    out = np.zeros(u.shape)
+    for dx, dy, wt in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)),
+                       (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+        xi, yi = u0 + dx, v0 + dy
+        ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        out[ok] += wt[ok] * img[yi[ok], xi[ok]]
+    return out
+
+
+class PSFGeometry:
+    """Sampling of the far field for a first-ring radius ``r0_px`` and PSF radius ``radius``.
+
+    ``bins_per_ring`` FFT bins span r0 at 550 nm; at 380 nm that is about one bin per pixel
+    (at least 4 bins, at most 24); the grid is a power of two large enough that the pattern
+    out to ``radius`` pixels at 380 nm does not wrap around.
+    """
+
+    def __init__(self, r0_px: float, radius: int):
+        self.r0_px = r0_px
+        self.radius = radius
+        short = spectral.VISIBLE_NM[0] / REFERENCE_NM
+        # at most so many bins per ring that the pattern out to `radius` fits MAX_GRID
+        most = (MAX_GRID / 2 - 8) / 1.5 * short * r0_px / max(radius, 1)
+        self.bins_per_ring = float(np.clip(r0_px * short, 4, max(4.0, min(24.0, most))))
+        # the pattern out to `radius` px at 780 nm (largest) must not wrap around; the
+        # aperture (0.3 m wide at 4 bins per ring) keeps its autocorrelation inside the grid
+        px_per_bin_min = self.px_per_bin(spectral.VISIBLE_NM[0])
+        need = 2 * (1.5 * radius / px_per_bin_min + 8)
+        m = 64
+        while m < need:
+            m *= 2
+        self.m = m
+        self.diameter = AIRY_FIRST_ZERO * m / self.bins_per_ring
+
+    def px_per_bin(self, wavelength_nm: float) -> float:
+        return self.r0_px / self.bins_per_ring * wavelength_nm / REFERENCE_NM
+
+
+def monochromatic_psf(field: np.ndarray, geom: PSFGeometry, wavelength_nm: float) -> np.ndarray:
+    """The far field at one wavelength on the pixel grid (2R+1 square), energy per pixel.
+
+    Supersampled (up to 8 x 8) when a pixel covers more than one FFT bin, so thin rings do
+    not alias; a pattern smaller than a pixel is a near-delta either way.
+    """
+    s = geom.px_per_bin(wavelength_nm)
+    ss = min(8, max(1, math.ceil(1.0 / s - 1e-9)))
+    r = geom.radius
+    sub = (np.arange(ss) + 0.5) / ss - 0.5
+    offs = np.arange(-r, r + 1, dtype=np.float64)
+    c = geom.m // 2
+    acc = np.zeros((2 * r + 1, 2 * r + 1))
+    for sy in sub:
+        for sx in sub:
+            v, u = np.meshgrid((offs + sy) / s + c, (offs + sx) / s + c, indexing="ij")
+            acc += _bilinear(field, u, v)
+    return acc / (ss * ss) / (s * s)
+
+
+def psf_radius(r0_px: float, extent: float, max_radius: int | None = None) -> int:
+    """PSF radius in pixels: ``extent`` first-ring radii at the red end (780 nm), capped."""
+    r = max(1, int(math.ceil(extent * r0_px * spectral.VISIBLE_NM[1] / REFERENCE_NM)))
+    return r if max_radius is None else max(1, min(r, int(max_radius)))
+
+
+def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
+                 n_wavelengths: int, max_radius: int | None = None) -> np.ndarray:
+    """The white-balanced RGB corona PSF, shape (2R+1, 2R+1, 3), each channel summing to 1.
+
+    Parameters
+    ----------
+    r0_px : float
+        First dark ring radius at 550 nm (round aperture), pixels.
+    extent : float
+        PSF radius in units of r0 at 550 nm (the red end reaches further; R = extent r0 780/550).
+    blades, rotation_deg : int, float
+        Aperture polygon (blades < 3: disk) and its rotation, degrees CCW.
+    n_wavelengths : int
+        Spectral samples from 380 to 780 nm (bin centres).
+    max_radius : int, optional
+        Cap on the PSF radius in pixels (light beyond the frame is not kept anyway).
+    """
+    radius = psf_radius(r0_px, extent, max_radius)
+    geom = PSFGeometry(r0_px, radius)
+    field = far_field(aperture(geom.m, geom.diameter, blades, rotation_deg))
+    lams = spectral.wavelengths(n_wavelengths)
+    weights = spectral.spectral_rgb_weights(lams)
+    rgb = np.zeros((2 * radius + 1, 2 * radius + 1, 3))
+    for lam, w in zip(lams, weights):
+        rgb += monochromatic_psf(field, geom, lam)[..., None] * w
+    rgb = spectral.to_gamut(rgb) * radial_taper(radius)[..., None]
+    return rgb / rgb.sum(axis=(0, 1))
+
+
+def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
+    """1 inside ``start * radius``, a raised cosine to 0 at ``radius``: the PSF ends in a soft
+    circle instead of the (visible, on tone-mapped shadows) square of its array."""
+    o = np.arange(-radius, radius + 1, dtype=np.float64)
+    r = np.hypot(o[None, :], o[:, None]) / max(radius, 1)
+    t = np.clip((r - start) / (1.0 - start), 0.0, 1.0)
+    return 0.5 + 0.5 * np.cos(np.pi * t)
+
+
+@register
+class Corona(Plugin):
+    descriptor = Descriptor(
+        name="corona", label="Corona (spectral diffraction)", group="Glare",
+        kernel="corona.cl",
+        summary="Rainbow diffraction rings around strong lights: |FFT(aperture)|^2 per "
+                "wavelength, summed with the CIE 1931 colour matching functions.",
+        spreads_light=True,
+        params=(
+            FloatParam("threshold", 2.0, min=0.0, max=1e6,
+                       hint="Scene-linear luminance above which pixels diffract."),
+            FloatParam("intensity", 0.5, min=0.0, max=100.0,
+                       hint="Fraction of the highlights' energy added as the diffraction "
+                            "pattern (its core included)."),
+            FloatParam("size", 0.006, min=0.0002, max=0.2,
+                       hint="Radius of the first dark ring at 550 nm, as a fraction of the "
+                            "frame diagonal."),
+            FloatParam("extent", 8.0, min=1.5, max=40.0,
+                       hint="PSF radius in first-ring radii (more = more, fainter rings)."),
+            IntParam("blades", 0, min=0, max=32,
+                     hint="Aperture blades; 0 = the camera block's (a camera value of 0 means "
+                          "a round aperture), 1-2 = round.  Rotation: the camera block's."),
+        ),
+        quality={
+            "draft": "16 wavelengths; half-resolution float32 FFT (one pyramid level)",
+            "preview": "24 wavelengths; float32 FFT with the brightest pixels gathered exactly",
+            "final": "40 wavelengths (10 nm); float64 FFT",
+            "reference": "80 wavelengths (5 nm); float64 direct gather when small, else "
+                         "float64 FFT",
+        },
+    )
+
+    def __init__(self):
+        self._psfs: OrderedDict = OrderedDict()
+
+    # PSF ------------------------------------------------------------------------------
+    def psf(self, p, ctx) -> np.ndarray:
+        """The cached RGB PSF for these parameters, frame size, camera and quality."""
+        blades = p.blades or ctx.camera.blades
+        rotation = ctx.camera.blade_rotation
+        n = WAVELENGTHS.get(ctx.quality, WAVELENGTHS["final"])
+        cap = self.max_radius(ctx)
+        key = (round(ctx.size_px(p.size), 6), p.extent, blades, rotation, n, cap)
+        k = self._psfs.get(key)
+        if k is None:
+            k = spectral_psf(ctx.size_px(p.size), p.extent, blades, rotation, n, cap)
+            self._psfs[key] = k
+            while len(self._psfs) > PSF_CACHE_SIZE:
+                self._psfs.popitem(last=False)
+        else:
+            self._psfs.move_to_end(key)
+        return k
+
+    @staticmethod
+    def max_radius(ctx) -> int:
+        diag = max(ctx.diagonal_px, ctx.source.window.diagonal)
+        return int(math.ceil(MAX_RADIUS_DIAGONALS * diag)) + 1
+
+    def radius_px(self, p, ctx) -> int:
+        return psf_radius(ctx.size_px(p.size), p.extent, self.max_radius(ctx))
+
+    # cheap questions ------------------------------------------------------------------
+    def is_identity(self, p, ctx):
+        if p.intensity == 0.0:
+            return "intensity is 0"
+        if not ctx.analysis.any_above(p.threshold):
+            return "no pixel above threshold"
+        return None
+
+    def region_of_definition(self, p, ctx):
+        return ctx.source.window.grown(self.radius_px(p, ctx))
+
+    def region_of_interest(self, p, ctx, window):
+        return window.grown(self.radius_px(p, ctx))
+
+    def highlight_support(self, p, ctx) -> Rect:
+        """Bounding box (frame coordinates) of the analysis tiles with a pixel above threshold."""
+        a = ctx.analysis
+        win = ctx.source.window
+        if a.window != win:      # an earlier effect changed the window: the tiles do not fit
+            return win
+        ys, xs = np.nonzero(a.tiles_above(p.threshold))
+        if ys.size == 0:
+            return Rect(win.x0, win.y0, win.x0, win.y0)
+        return Rect(win.x0 + int(xs.min()) * a.tile, win.y0 + int(ys.min()) * a.tile,
+                    win.x0 + (int(xs.max()) + 1) * a.tile,
+                    win.y0 + (int(ys.max()) + 1) * a.tile).intersect(win)
+
+    # render ---------------------------------------------------------------------------
+    def render(self, rt, p, ctx):
+        from clfx import fftconv
+
+        src = ctx.source
+        i32, f32 = np.int32, np.float32
+        bright = src.like()
+        rt.launch(rt.kernel("corona.cl", "corona_bright"), (src.pitch // 4, src.height), src,
+                  bright, i32(src.pitch), i32(src.height), f32(p.threshold))
+        out_win = self.output_window(p, ctx)
+        info = fftconv.ConvolveInfo()
+        k = self.psf(p, ctx)
+        glow = fftconv.spread(rt, bright, k, ctx.quality, out_window=out_win,
+                              support=self.highlight_support(p, ctx),
+                              split_level=max(p.threshold, 1.0) * 64.0, info=info)
+        out = rt.image(out_win)
+        ox, oy = src.window.offset_in(out_win)
+        rt.launch(rt.kernel("corona.cl", "corona_compose"), (out.pitch, out.height), src,
+                  i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow, out,
+                  i32(out.pitch), i32(out.width), i32(out.height), f32(p.intensity))
+        bad = ctx.analysis.nonfinite_count
+        if bad:
+            ctx.notes.append(f"corona: {bad} non-finite pixels set to 0")
+        ctx.notes.extend(f"corona: {n}" for n in info.notes)
+        return out
+
+
+def bench_case(width, height, rng):
+    """A dim frame with a cluster of strong lights (a street scene at night)."""
+    from clfx.camera import Camera
+
+    src = rng.uniform(0.0, 0.2, (height, width, 4)).astype(np.float32)
+    src[..., 3] = 1.0
+    for _ in range(6):
+        x = int(rng.integers(width // 4, 3 * width // 4))
+        y = int(rng.integers(height // 4, 3 * height // 4))
+        src[y - 3:y + 4, x - 3:x + 4, :3] = rng.uniform(100, 20000)
+    return dict(source=src, depth=None, velocity=None,
+                params={"threshold": 2.0, "intensity": 0.5, "size": 0.006, "extent": 8.0},
+                camera=Camera(blades=0))

@@ -1,0 +1,172 @@
+/* streaks.cl: star-filter streaks and aperture diffraction spikes (clfx/plugins/streaks.py).
+ *
+ * Working buffers (bright, ping, pong, total) are RGBA float32 with a zero margin of MARGIN
+ * pixels on every side: interior pixel (x, y) lives at pixel index (y + M) * P + x + M, where
+ * P = interior pitch (a multiple of 4) + 2M.  Kernels receive the interior origin as `org`
+ * (= M * P + M).  When every tap fits in the margin (CHECKED = 0) taps need no bounds test;
+ * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
+ * interior's padding columns stay zero: they stand for "outside the image".
+ * Pipeline:
+ *   streaks_bright   sanitised, thresholded highlights, box-averaged over FACTOR x FACTOR
+ *                    source pixels (FACTOR = 1 at full resolution), placed in the output window
+ *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
+ *                    taps (or, with `snap`, taps rounded to whole pixels: one load instead of
+ *                    four), zero outside the buffer; ACCUM adds the result to `out`
+ *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
+ * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
+ * sum_{k=0}^{4^N-1} a^k delta(x + k d) exactly (each k has one base-4 expansion).
+ */
+#include "common.h"
+
+#ifndef FACTOR
+#define FACTOR 1
+#endif
+#ifndef CHECKED
+#define CHECKED 1
+#endif
+#ifndef REAL
+#define REAL float
+#define REAL16 float16
+#define CONVERT_REAL16 convert_float16
+#endif
+
+/* Bright-pass of one source pixel: RGB * max(lum - t, 0) / lum, non-finite -> 0. */
+inline float4 streaks_highlight(float4 c, float threshold)
+{
+  c = clfx_finite4_or_zero(c);
+  c = fmax(c, (float4)0.0f);
+  const float l = clfx_luminance(c);
+  const float k = l > threshold ? (l - threshold) / l : 0.0f;
+  return (float4)(c.x * k, c.y * k, c.z * k, 0.0f);
+}
+
+/* One work-item per low-resolution pixel; (ox, oy) = source window origin inside the output
+ * window, in full-resolution pixels. */
+kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
+                           const int src_h, global float *dst, const int org,
+                           const int dst_pitch, const int dst_wp, const int dst_h,
+                           const int ox, const int oy, const float threshold)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= dst_wp || y >= dst_h) return;
+  dst += 4 * org;
+  float4 acc = (float4)0.0f;
+  for(int j = 0; j < FACTOR; j++)
+  {
+    const int sy = y * FACTOR + j - oy;
+    if(sy < 0 || sy >= src_h) continue;
+    for(int i = 0; i < FACTOR; i++)
+    {
+      const int sx = x * FACTOR + i - ox;
+      if(sx < 0 || sx >= src_w) continue;
+      acc += streaks_highlight(clfx_load4(src, src_pitch, sx, sy), threshold);
+    }
+  }
+  clfx_store4(dst, dst_pitch, x, y, acc * (1.0f / (FACTOR * FACTOR)));
+}
+
+/* Reads relative to the interior origin; `wp` = interior pitch, `h` = interior rows.  With
+ * CHECKED = 0 every tap lies inside the margin (the host sized it), so no test is needed. */
+#if CHECKED
+inline float4 streaks_at(global const float *img, int pitch, int wp, int h, int x, int y)
+{
+  if(x < 0 || x >= wp || y < 0 || y >= h) return (float4)0.0f;
+  return vload4(y * pitch + x, img);
+}
+#endif
+
+inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, int x, int y)
+{
+#if CHECKED
+  if(y < 0 || y >= h || x < 0 || x + 4 > wp)
+    return (float16)(streaks_at(img, pitch, wp, h, x, y), streaks_at(img, pitch, wp, h, x + 1, y),
+                     streaks_at(img, pitch, wp, h, x + 2, y),
+                     streaks_at(img, pitch, wp, h, x + 3, y));
+#endif
+  return vload16(0, img + (y * pitch + x) * 4);
+}
+
+/* Bilinear sample of 4 consecutive pixels shifted by (dx, dy): the weights are the same for
+ * all four, so it is four float16 loads and four vector multiply-adds. */
+inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int x, int y,
+                           float dx, float dy, int snap)
+{
+  if(snap) { dx = rint(dx); dy = rint(dy); }  /* whole-pixel tap: one load, no blur */
+  const float fx0 = floor(dx), fy0 = floor(dy);
+  const int ix = x + (int)fx0, iy = y + (int)fy0;
+  const float fx = dx - fx0, fy = dy - fy0;
+  float16 top = streaks_at4(img, pitch, wp, h, ix, iy) * (1.0f - fx);
+  if(fx > 0.0f) top += streaks_at4(img, pitch, wp, h, ix + 1, iy) * fx;
+  if(fy <= 0.0f) return top;
+  float16 bot = streaks_at4(img, pitch, wp, h, ix, iy + 1) * (1.0f - fx);
+  if(fx > 0.0f) bot += streaks_at4(img, pitch, wp, h, ix + 1, iy + 1) * fx;
+  return top * (1.0f - fy) + bot * fy;
+}
+
+inline float16 streaks_rgba4(float4 w)
+{
+  return (float16)(w, w, w, w);
+}
+
+/* One pass of one direction.  w0..w3 are the per-channel tap weights (alpha weight 0).
+ * Each work-item produces 4 pixels of a row.  ACCUM = 1: out += result (last pass). */
+kernel void streaks_pass(global const float *in, global float *out, const int org,
+                         const int pitch, const int wp, const int w, const int h,
+                         const float step_x, const float step_y, const int snap,
+                         const float4 w0, const float4 w1, const float4 w2, const float4 w3)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(qx * 4 >= wp || y >= h) return;
+  const int x = qx * 4;
+  in += 4 * org;
+  out += 4 * org;
+  REAL16 sum = CONVERT_REAL16(vload16(0, in + (y * pitch + x) * 4) * streaks_rgba4(w0));
+  sum += CONVERT_REAL16(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y, snap)
+                        * streaks_rgba4(w1));
+  sum += CONVERT_REAL16(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y, snap)
+                        * streaks_rgba4(w2));
+  sum += CONVERT_REAL16(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y, snap)
+                        * streaks_rgba4(w3));
+  if(x + 4 > w)  /* padding stays zero: it stands for "outside the image" */
+  {
+    const float4 m = (float4)((float)(x < w), (float)(x + 1 < w), (float)(x + 2 < w),
+                              (float)(x + 3 < w));
+    sum *= CONVERT_REAL16((float16)(m.xxxx, m.yyyy, m.zzzz, m.wwww));
+  }
+#if ACCUM
+  sum += CONVERT_REAL16(vload16(0, out + (y * pitch + x) * 4));
+#endif
+  vstore16(convert_float16(sum), 0, out + (y * pitch + x) * 4);
+}
+
+/* out = sanitised source (zero outside its window) + streaks, where the streak buffer has
+ * FACTOR-times lower resolution (bilinear, pixel centres aligned, clamped at its edges). */
+kernel void streaks_compose(global const float *src, const int src_pitch, const int src_w,
+                            const int src_h, const int ox, const int oy,
+                            global const float *streak, const int org, const int lo_pitch,
+                            const int lo_w, const int lo_h, global float *dst,
+                            const int dst_pitch, const int dst_w, const int dst_h)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  streak += 4 * org;
+  if(x >= dst_pitch || y >= dst_h) return;
+  if(x >= dst_w) { clfx_store4(dst, dst_pitch, x, y, (float4)0.0f); return; }
+  const int sx = x - ox, sy = y - oy;
+  float4 c = (float4)0.0f;
+  if(sx >= 0 && sx < src_w && sy >= 0 && sy < src_h)
+    c = clfx_finite4_or_zero(clfx_load4(src, src_pitch, sx, sy));
+#if FACTOR == 1
+  const float4 s = clfx_load4(streak, lo_pitch, x, y);
+#else
+  const float u = ((float)x + 0.5f) / FACTOR - 0.5f, v = ((float)y + 0.5f) / FACTOR - 0.5f;
+  const float u0 = floor(u), v0 = floor(v);
+  const float fu = u - u0, fv = v - v0;
+  const int i0 = (int)u0, j0 = (int)v0;
+  const float4 a = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0, j0);
+  const float4 b = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0 + 1, j0);
+  const float4 d = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0, j0 + 1);
+  const float4 e = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0 + 1, j0 + 1);
+  const float4 s = (a * (1.0f - fu) + b * fu) * (1.0f - fv) + (d * (1.0f - fu) + e * fu) * fv;
+#endif
+  clfx_store4(dst, dst_pitch, x, y, (float4)(c.x + s.x, c.y + s.y, c.z + s.z, c.w));
+}

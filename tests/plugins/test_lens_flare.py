@@ -1,0 +1,148 @@
+import math
+
+import numpy as np
+import pytest
+
+from clfx.camera import Camera
+from clfx.errors import ParamError
+from clfx.plugins.lens_flare import LensFlare, parse_ghosts
+from clfx.rect import Rect
+from tests.conftest import hard_shapes
+from tests.reference.lens_flare import lens_flare as reference, sources
+
+PARAMS = dict(threshold=5.0, ghost_count=8, softness=0.2, roundness=0.3, halo_intensity=0.05)
+CAM = Camera(blades=6, blade_rotation=10.0)
+
+
+def scene(rng, shape):
+    src = rng.uniform(0.0, 0.5, shape + (4,)).astype(np.float32)
+    h, w = shape
+    src[h // 4, (3 * w) // 4, :3] = 1e3
+    src[(2 * h) // 3, w // 5, :3] = (50.0, 20.0, 5.0)
+    return src
+
+
+def expected(src, p, camera=CAM, origin=(0, 0), display=None, margin_px=0):
+    lights = sources(src, p.threshold, origin=origin, display=display, margin_px=margin_px,
+                     max_sources=p.max_sources)
+    table = parse_ghosts(p.ghosts, p.ghost_count)
+    kw = p.as_dict() | {"blades": p.blades or camera.blades,
+                        "rotation": camera.blade_rotation + p.rotation}
+    return reference(src, lights, table, **kw, origin=origin, display=display)
+
+
+@pytest.mark.parametrize("shape", hard_shapes() + [(90, 130)])
+def test_lens_flare_matches_reference(rt, rng, shape):
+    src = scene(rng, shape)
+    p = LensFlare.params(**PARAMS)
+    got = LensFlare().apply(rt, p, src, camera=CAM)
+    want = expected(src, p)
+    # float32 entries and shape evaluation: ~1e-6 of the brightest ghost, plus the source
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+
+
+def test_round_ghosts_and_custom_table(rt, rng):
+    src = scene(rng, (70, 100))
+    p = LensFlare.params(**{**PARAMS, "ghosts": "-0.5:0.05:0.2,0.4,0.1; 0.4:0.02:1,1,1"})
+    cam = Camera(blades=0)
+    got = LensFlare().apply(rt, p, src, camera=cam)
+    np.testing.assert_allclose(got, expected(src, p, cam), rtol=1e-5,
+                               atol=1e-5 * np.abs(got).max())
+
+
+def test_ghost_spec_errors():
+    with pytest.raises(ParamError):
+        parse_ghosts("0.5:abc", 3)
+    with pytest.raises(ParamError):
+        parse_ghosts("0.5:-1:1,1,1", 3)
+    assert len(parse_ghosts("", 3)) == 3
+
+
+def test_ghost_position_and_brightness_follow_the_light(rt):
+    h, w = 100, 160
+    p = LensFlare.params(threshold=1.0, ghosts="-1:0.05:1,1,1", halo_intensity=0.0, intensity=1.0,
+                         roundness=1.0, softness=0.1)
+    lx, ly = 120, 30
+    glow = []
+    for v in (101.0, 201.0):
+        src = np.zeros((h, w, 4), np.float32)
+        src[ly, lx, :3] = v
+        out = LensFlare().apply(rt, p, src, camera=Camera(blades=0)) - src
+        ys, xs = np.mgrid[0:h, 0:w] + 0.5
+        g = out[..., 1]
+        # ghost centre = c + k (L - c) with k = -1: mirrored through the centre
+        assert abs((g * xs).sum() / g.sum() - (w - (lx + 0.5))) < 0.05
+        assert abs((g * ys).sum() / g.sum() - (h - (ly + 0.5))) < 0.05
+        glow.append(g.sum())
+    # brightness follows the light's flux (v - threshold): 200 / 100
+    assert abs(glow[1] / glow[0] - 2.0) < 1e-5
+    # and the ghost carries intensity * flux (area-normalised radiance; pixel sampling of a
+    # 9 px disk: ~1 %)
+    assert abs(glow[1] / 200.0 - 1.0) < 0.02
+
+
+def test_hexagonal_ghost_shape(rt):
+    h, w = 200, 200
+    src = np.zeros((h, w, 4), np.float32)
+    src[100, 100, :3] = 1e4                               # light at the centre: ghost there
+    p = LensFlare.params(threshold=1.0, ghosts="1:0.2:1,1,1", halo_intensity=0.0,
+                         softness=0.02, roundness=0.0)
+    out = LensFlare().apply(rt, p, src, camera=Camera(blades=6, blade_rotation=0.0)) - src
+    r = 0.2 * math.hypot(w, h)                            # circumradius 56.6 px
+    c = 100.5
+    # vertex 0 at 0 deg (+x): inside at 0.95 r; along an edge normal (30 deg) the apothem is
+    # 0.866 r, so 0.93 r is outside
+    vx = int(c + 0.95 * r)
+    nx, ny = int(c + 0.93 * r * math.cos(math.pi / 6)), int(c - 0.93 * r * math.sin(math.pi / 6))
+    assert out[100, vx, 1] > 0.5 * out[100, 100, 1]
+    assert out[ny, nx, 1] < 1e-6 * out[100, 100, 1]
+
+
+def test_light_just_outside_the_frame_flares(rt, rng):
+    data = Rect(0, 0, 200, 100)                           # overscan around the display
+    display = Rect(20, 10, 140, 90)
+    src = rng.uniform(0.0, 0.2, (100, 200, 4)).astype(np.float32)
+    src[4:7, 170:173, :3] = 500.0                         # 30 px right of the display window
+    p = LensFlare.params(**{**PARAMS, "margin": 0.2})
+    got = LensFlare().apply(rt, p, src, camera=CAM, data_window=data, display_window=display)
+    want = expected(src, p, display=(20, 10, 140, 90), margin_px=math.ceil(0.2 * display.diagonal))
+    assert np.abs(got - src).max() > 1e-3
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+    # with no margin the light does not count: identity with a reason
+    p0 = LensFlare.params(**{**PARAMS, "margin": 0.0})
+    from clfx.plugin import RenderContext
+    ctx = RenderContext(rt, rt.upload(src, data), display_window=display, camera=CAM)
+    assert LensFlare().is_identity(p0, ctx) == "no light source in or near view"
+
+
+def test_identities(rt, rng):
+    src = rng.uniform(0.0, 0.9, (9, 13, 4)).astype(np.float32)
+    for kw in ({"intensity": 0.0, "halo_intensity": 0.0}, {}):
+        got = LensFlare().apply(rt, LensFlare.params(**{**PARAMS, **kw}), src)
+        assert np.array_equal(got, src)
+
+
+def test_nan_inf_determinism_alpha_no_negatives(rt, rng):
+    src = scene(rng, (60, 80))
+    src[..., 3] = rng.uniform(0, 1, (60, 80))
+    src[3, 3, 0], src[20, 40, 2], src[5, 30, :] = np.nan, np.inf, -np.inf
+    p = LensFlare.params(**PARAMS)
+    a = LensFlare().apply(rt, p, src, camera=CAM)
+    b = LensFlare().apply(rt, p, src, camera=CAM)
+    assert a.tobytes() == b.tobytes()
+    assert np.isfinite(a).all() and a.min() >= 0.0
+    ok = np.isfinite(src[..., 3])
+    np.testing.assert_array_equal(a[..., 3][ok], src[..., 3][ok])
+    want = expected(src, p)
+    np.testing.assert_allclose(a, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+
+
+def test_rod_covers_display(rt):
+    src = np.zeros((20, 20, 4), np.float32)
+    src[10, 10, :3] = 1e3
+    p = LensFlare.params(**PARAMS)
+    out, win = LensFlare().apply(rt, p, src, data_window=Rect(40, 30, 60, 50),
+                                 display_window=Rect(0, 0, 100, 80), keep_rod=True,
+                                 camera=CAM)
+    assert win == Rect(0, 0, 100, 80)
+    assert out[:30].max() > 0.0                           # ghosts land outside the data window

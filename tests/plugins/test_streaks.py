@@ -1,0 +1,166 @@
+import numpy as np
+import pytest
+
+from clfx.camera import Camera
+from clfx.plugins.streaks import Streaks, streak_angles
+from clfx.rect import Rect
+from tests.conftest import hard_shapes
+from tests.reference.streaks import line_kernel_streaks, streaks as reference
+
+PARAMS = dict(threshold=1.0, intensity=0.5, length=0.6, angle=30.0, color_shift=0.4,
+              tint=(1.0, 0.9, 0.8))
+
+
+def scene(rng, shape, hot=1e4):
+    src = rng.uniform(0.0, 0.5, shape + (4,)).astype(np.float32)
+    h, w = shape
+    src[h // 3, w // 2, :3] = hot
+    src[(2 * h) // 3, w // 5, :3] = (40.0, 20.0, 5.0)
+    return src
+
+
+def run(rt, src, quality="final", **kw):
+    p = Streaks.params(**{**PARAMS, **kw})
+    return Streaks().apply(rt, p, src, quality=quality), p
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_streaks_match_reference(rt, rng, shape):
+    src = scene(rng, shape)
+    got, p = run(rt, src, "reference")
+    want = reference(src, **p.as_dict())
+    # float32 buffers between at most 4 passes of 4 taps: ~20 roundings of the largest value
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+def test_final_matches_reference_with_snapped_taps(rt, rng):
+    src = scene(rng, (48, 64))
+    got, p = run(rt, src, "final", length=1.0)     # 80 px: passes step 1, 4, 16, 64
+    want = reference(src, **p.as_dict(), snap_from=16)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+def test_error_falls_with_quality(rt, rng):
+    src = scene(rng, (40, 56))
+    p = Streaks.params(**PARAMS)
+    want = reference(src, **p.as_dict())
+    errs = [np.abs(Streaks().apply(rt, p, src, quality=q) - want).max()
+            for q in ("draft", "preview", "final", "reference")]
+    assert errs[0] >= errs[1] >= errs[2] >= errs[3] - 1e-9 * want.max(), errs
+
+
+def test_axis_aligned_kawase_equals_exact_line_kernel():
+    # integer taps: the base-4 passes compose to the exponential line kernel exactly
+    src = np.zeros((20, 70, 4))
+    src[10, 60, :3] = 100.0
+    kw = dict(Streaks.params(**{**PARAMS, "angle": 0.0, "streaks": 2}).as_dict())
+    np.testing.assert_allclose(reference(src, **kw), line_kernel_streaks(src, **kw),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_diagonal_kawase_vs_line_kernel_same_energy_slightly_wider():
+    # stated error of the algorithm (module docstring): same energy, a little wider
+    src = np.zeros((160, 160, 4))
+    src[80, 80, :3] = 1e4                    # rays (64 px support) stay inside the frame
+    kw = dict(Streaks.params(**{**PARAMS, "angle": 30.0, "length": 0.265}).as_dict())
+    k = reference(src, **kw)[..., 1] - src[..., 1]
+    e = line_kernel_streaks(src, **kw)[..., 1] - src[..., 1]
+    assert abs(k.sum() / e.sum() - 1) < 1e-6
+    assert np.abs(k - e).sum() / e.sum() < 0.35   # measured 0.25 (docstring)
+
+
+def test_aperture_spike_counts():
+    assert len(streak_angles("aperture", 0, 0.0, 6, 0.0)) == 6     # even N: N spikes
+    assert len(streak_angles("aperture", 0, 0.0, 5, 0.0)) == 10    # odd N: 2N spikes
+    assert streak_angles("aperture", 0, 0.0, 0, 0.0) == []          # round: none
+
+
+def test_aperture_mode_uses_camera_blades(rt, rng):
+    src = scene(rng, (33, 41))
+    p = Streaks.params(**{**PARAMS, "mode": "aperture", "blades": 0})
+    got = Streaks().apply(rt, p, src, quality="reference", camera=Camera(blades=5,
+                                                                         blade_rotation=10.0))
+    want = reference(src, **p.as_dict() | {"blades": 5}, blade_rotation=10.0)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * want.max())
+    same = Streaks().apply(rt, p, src, camera=Camera(blades=0))       # round: identity
+    assert np.array_equal(same, src)
+
+
+def test_identities(rt, rng):
+    src = rng.uniform(0.0, 0.9, (9, 13, 4)).astype(np.float32)
+    for kw in ({"intensity": 0.0}, {}):
+        got, _ = run(rt, src, **kw)
+        assert np.array_equal(got, src)     # nothing above threshold 1.0 / intensity 0
+
+
+def test_nan_inf_do_not_spread_and_are_counted(rt, rng):
+    clean = scene(rng, (31, 45))
+    bad = clean.copy()
+    bad[3, 3, 0], bad[20, 40, 2], bad[5, 30, :] = np.nan, np.inf, -np.inf
+    p = Streaks.params(**PARAMS)
+    got = Streaks().apply(rt, p, bad)
+    assert np.isfinite(got).all()
+    ref = reference(bad, **p.as_dict(), snap_from=16)   # final quality snaps long steps
+    np.testing.assert_allclose(got, ref, rtol=1e-5, atol=2e-6 * ref.max())
+    from clfx.plugin import RenderContext
+    ctx = RenderContext(rt, rt.upload(bad))
+    Streaks().render(rt, p, ctx)
+    assert any("3 non-finite" in n for n in ctx.notes)
+
+
+def test_hdr_point_energy_and_no_negatives(rt):
+    src = np.zeros((64, 64, 4), np.float32)
+    src[32, 32, :3] = 1e5
+    p = Streaks.params(**{**PARAMS, "length": 0.1, "color_shift": 0.0, "tint": (1, 1, 1)})
+    got = Streaks().apply(rt, p, src)
+    assert got.min() >= 0.0
+    bright = 1e5 - 1.0                       # lum - threshold of a grey pixel
+    added = (got.astype(np.float64) - src)[..., :3].sum(axis=(0, 1))
+    # 9 px rays, 16 px support, stay inside the frame: energy = intensity * highlight
+    np.testing.assert_allclose(added, 0.5 * bright, rtol=1e-5)
+
+
+def test_deterministic(rt, rng):
+    src = scene(rng, (50, 70))
+    a, _ = run(rt, src)
+    b, _ = run(rt, src)
+    assert a.tobytes() == b.tobytes()
+
+
+def test_alpha_kept(rt, rng):
+    src = scene(rng, (17, 23))
+    src[..., 3] = rng.uniform(0, 1, (17, 23))
+    got, _ = run(rt, src)
+    np.testing.assert_array_equal(got[..., 3], src[..., 3])
+
+
+def test_rod_grows_and_light_reaches_overscan(rt):
+    src = np.zeros((16, 16, 4), np.float32)
+    src[8, 1, :3] = 1e3                          # near the left edge of the data window
+    data, display = Rect(20, 20, 36, 36), Rect(0, 0, 60, 60)
+    p = Streaks.params(**{**PARAMS, "angle": 0.0, "streaks": 2, "length": 0.2})
+    out, win = Streaks().apply(rt, p, src, data_window=data, display_window=display,
+                               keep_rod=True)
+    assert win == display                        # grown by the spread, clipped to the limit
+    row = out[8 + data.y0, :data.x0, 1]
+    assert row.max() > 0.0                       # the left-going ray continues outside
+    want = reference(src, **p.as_dict(), diagonal=display.diagonal, pad=20)  # frame [0, 56)
+    np.testing.assert_allclose(out[:56, :56, :3], want[..., :3], rtol=1e-5,
+                               atol=2e-6 * want.max())
+
+
+def test_huge_length_and_tiny_images(rt):
+    for shape in ((1, 1), (1, 9), (5, 3)):
+        src = np.full(shape + (4,), 50.0, np.float32)
+        got, _ = run(rt, src, length=2.0, intensity=100.0)
+        assert np.isfinite(got).all() and got.min() >= 0.0
+
+
+def test_bounds_tested_taps_match_reference(rt, rng, monkeypatch):
+    # very long rays skip the zero margin and test every tap's bounds instead
+    import clfx.plugins.streaks as mod
+    monkeypatch.setattr(mod, "MAX_MARGIN", 0)
+    src = scene(rng, (31, 45))
+    got, p = run(rt, src, "reference")
+    want = reference(src, **p.as_dict())
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())

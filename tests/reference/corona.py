@@ -1,0 +1,33 @@
+"""float64 NumPy oracle of clfx/plugins/corona.py: direct convolution of the highlights with
+the PSF (the PSF itself is checked separately against the Airy pattern and the physics)."""
+import numpy as np
+
+
+def highlights(src, threshold):
+    c = np.maximum(np.where(np.isfinite(src), src, 0.0).astype(np.float64), 0.0)
+    lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
+    k = np.where(lum > threshold, (lum - threshold) / np.where(lum > 0, lum, 1.0), 0.0)
+    out = c * k[..., None]
+    out[..., 3] = 0.0
+    return out, c
+
+
+def corona(src, psf, *, threshold, intensity, pad=0, **_):
+    """out = clean source + intensity * (highlights conv psf) over the source grown by pad."""
+    src = np.asarray(src, np.float64)
+    bright, clean = highlights(src, threshold)
+    h, w = src.shape[:2]
+    out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
+    r = psf.shape[0] // 2
+    ys, xs = np.nonzero(bright[..., :3].max(axis=2) > 0)
+    for y, x in zip(ys, xs):              # splat each highlight pixel (plainest form)
+        for c in range(3):
+            y0, x0 = y + pad - r, x + pad - r
+            # clip the PSF footprint to the output
+            oy0, ox0 = max(y0, 0), max(x0, 0)
+            oy1, ox1 = min(y0 + 2 * r + 1, h + 2 * pad), min(x0 + 2 * r + 1, w + 2 * pad)
+            if oy0 >= oy1 or ox0 >= ox1:
+                continue
+            out[oy0:oy1, ox0:ox1, c] += intensity * bright[y, x, c] * \
+                psf[oy0 - y0:oy1 - y0, ox0 - x0:ox1 - x0, c]
+    return out

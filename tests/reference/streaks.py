@@ -1,0 +1,108 @@
+"""float64 NumPy oracle of clfx/plugins/streaks.py.
+
+``streaks`` composes the Kawase passes in float64 (each pass: 4 interpolated taps at
+s * 4^n * d, d one whole pixel along the ray's major axis, zero outside the image), i.e.
+exactly the kernel the plugin converges to at full resolution.  ``line_kernel_streaks`` is the
+exact exponential line kernel (one interpolated tap per step k) that the passes approximate;
+the tests state the difference between the two.
+"""
+import math
+
+import numpy as np
+
+
+def highlights(src, threshold):
+    c = np.where(np.isfinite(src), src, 0.0).astype(np.float64)
+    c = np.maximum(c, 0.0)
+    lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
+    k = np.where(lum > threshold, (lum - threshold) / np.where(lum > 0, lum, 1.0), 0.0)
+    out = c * k[..., None]
+    out[..., 3] = 0.0
+    return out, c
+
+
+def shifted(img, dx, dy):
+    """img sampled at (x + dx, y + dy), bilinear, zero outside."""
+    h, w = img.shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    u, v = xs + dx, ys + dy
+    u0, v0 = np.floor(u), np.floor(v)
+    fu, fv = (u - u0)[..., None], (v - v0)[..., None]
+    out = np.zeros_like(img)
+    for ox, oy, wt in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)),
+                       (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+        xi, yi = (u0 + ox).astype(int), (v0 + oy).astype(int)
+        ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        out[ok] += wt[ok] * img[yi[ok], xi[ok]]
+    return out
+
+
+def angles_of(mode, streaks, angle, blades, blade_rotation):
+    if mode == "star":
+        return [angle + 360.0 * i / streaks for i in range(streaks)]
+    if blades < 3:
+        return []
+    n = blades if blades % 2 == 0 else 2 * blades
+    # even N: opposite edge normals coincide -> N rays; odd: normals and opposites -> 2N
+    step = 360.0 / n
+    return [blade_rotation + angle + 180.0 / blades + step * i for i in range(n)]
+
+
+def _setup(lengths_frac, diagonal, color_shift, step_len):
+    """Per-channel decay per step and pass count; a step is ``step_len`` px long."""
+    L = lengths_frac * diagonal * (1 + 0.5 * color_shift * np.array([1.0, 0.0, -1.0]))
+    L = L / step_len
+    a = 0.01 ** (1.0 / L)
+    n = max(1, math.ceil(math.log(max(L.max(), 1.0) + 1.0, 4)))
+    return a, n
+
+
+def _unit(angle):
+    """Step of one whole pixel along the ray's major axis: (dx, dy, length)."""
+    t = math.radians(angle)
+    dx, dy = math.cos(t), -math.sin(t)
+    dx, dy = (0.0 if abs(dx) < 1e-12 else dx, 0.0 if abs(dy) < 1e-12 else dy)
+    major = max(abs(dx), abs(dy))
+    return dx / major, dy / major, 1.0 / major
+
+
+def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, tint,
+            color_shift, diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False,
+            snap_from=None):
+    """Output over the source grown by ``pad`` pixels on every side (float64)."""
+    src = np.asarray(src, np.float64)
+    h, w = src.shape[:2]
+    diagonal = diagonal or math.hypot(w, h)
+    bright, clean = highlights(src, threshold)
+    bright = np.pad(bright, ((pad, pad), (pad, pad), (0, 0)))
+    out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
+    rays = angles_of(mode, streaks, angle, blades, blade_rotation)
+    gain = intensity * np.asarray(tint, np.float64) / len(rays)
+    for ang in rays:
+        dx, dy, step_len = _unit(ang)
+        a, n = _setup(length, diagonal, color_shift, step_len)
+        support = 4 ** n
+        total = (1 - a ** support) / (1 - a)
+        if line_kernel:
+            acc = np.zeros_like(bright)
+            for k in range(support):
+                acc[..., :3] += a ** k * shifted(bright, k * dx, k * dy)[..., :3]
+            cur = acc
+        else:
+            cur = bright
+            for p in range(n):
+                b = 4 ** p
+                nxt = np.zeros_like(cur)
+                for s in range(4):
+                    ox, oy = s * b * dx, s * b * dy
+                    if snap_from is not None and b >= snap_from:
+                        ox, oy = np.rint(ox), np.rint(oy)   # the plugin's whole-pixel taps
+                    nxt[..., :3] += a ** (s * b) * shifted(cur, ox, oy)[..., :3]
+                cur = nxt
+        out[..., :3] += cur[..., :3] * (gain / total)
+    return out
+
+
+def line_kernel_streaks(src, **kw):
+    """Same as ``streaks`` with the exact exponential line kernel (one bilinear tap per k)."""
+    return streaks(src, line_kernel=True, **kw)
