@@ -40,13 +40,17 @@ class Step:
     typical_ms: float | None = None   # running mean of this step's cost, for "time saved"
     runs: int = 0
     skip_missing_passes: bool = False  # skip (with a reason) on frames without its passes
+    id: str = ""                       # names the step; defaults to the effect's name
 
     def __post_init__(self):
         if self.plugin is None:
             self.plugin = get_plugin(self.effect)()
+        self.id = self.id or self.effect
 
     def describe(self) -> dict:
         d = {"effect": self.effect, "params": self.params.as_dict()}
+        if self.id != self.effect:
+            d["id"] = self.id
         if self.quality:
             d["quality"] = self.quality
         if self.skip_missing_passes:
@@ -219,8 +223,9 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         missing = step.missing_passes(have)
         reason = (f"no {' or '.join(missing)} pass in the input" if missing
                   else step.plugin.is_identity(step.params, step_ctx))
+        ctx._analysis = step_ctx._analysis  # share an analysis the step computed
         if reason:
-            report.steps.append(StepReport(step.effect, False, reason, quality=level))
+            report.steps.append(StepReport(step.id, False, reason, quality=level))
             saved += step.typical_ms or 0.0
             continue
         t0 = time.perf_counter()
@@ -229,11 +234,13 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         ms = (time.perf_counter() - t0) * 1e3
         step.runs += 1
         step.typical_ms = ms if step.typical_ms is None else step.typical_ms + (ms - step.typical_ms) / step.runs
-        report.steps.append(StepReport(step.effect, True, ms=ms, quality=level,
+        report.steps.append(StepReport(step.id, True, ms=ms, quality=level,
                                        notes=list(step_ctx.notes)))
+        ctx._analysis = step_ctx._analysis
         if out.window != ctx.source.window:
             ctx.depth = rt.reframe(ctx.depth, out.window, "clamp") if ctx.depth is not None else None
             ctx.velocity = rt.reframe(ctx.velocity, out.window, "clamp") if ctx.velocity is not None else None
+            ctx._analysis = None  # tiles no longer match the window: recomputed when next asked
         ctx.source = out
     t_dl = time.perf_counter()
     final = ctx.source

@@ -18,8 +18,10 @@ A look file::
         missing_passes: skip # optional: skip (with a reason) on frames lacking the depth or
                              # velocity pass this effect needs; default "error"
 
-Inheritance: the base's camera is updated key by key; an effect the base already has is
-updated in place (its params merged), a new one is appended, ``enabled: false`` drops it.
+Inheritance: the base's camera is updated key by key; a step the base already has (same
+``id``, which defaults to the effect's name) is updated in place (its params merged), a new
+one is appended, ``enabled: false`` drops it.  Give steps distinct ``id``s to use one effect
+twice (e.g. star streaks and aperture spikes); ``--set ID.param=value`` addresses a step.
 
 Search order for a name: a path to a file; each folder on ``CLFX_PRESET_PATH`` (os.pathsep
 separated); the user folder ``<config>/clfx/looks`` (XDG, ``click.get_app_dir``); the built-in
@@ -41,7 +43,7 @@ from clfx.plugin import QUALITY_LEVELS, get_plugin
 
 SCHEMA = 1
 TOP_KEYS = ("name", "description", "schema", "base", "camera", "seed", "effects")
-STEP_KEYS = ("effect", "params", "quality", "enabled", "version", "missing_passes")
+STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing_passes")
 DEFAULT_LOOK = "default"
 
 
@@ -165,8 +167,8 @@ def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
                 source=str(path), base=str(data["base"]) if data.get("base") else None)
     if base:
         look.camera, look.seed = base.camera, base.seed
-        look.steps = [Step(s.effect, s.params, s.quality, skip_missing_passes=s.skip_missing_passes)
-                      for s in base.steps]
+        look.steps = [Step(s.effect, s.params, s.quality, skip_missing_passes=s.skip_missing_passes,
+                           id=s.id) for s in base.steps]
         look.description = look.description or base.description
     look.camera = _camera(doc, data.get("camera"), look.camera)
     if "seed" in data:
@@ -234,7 +236,12 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
         quality = entry.get("quality")
         if quality is not None and quality not in QUALITY_LEVELS:
             doc.fail(at + ("quality",), f"{quality!r} is not a quality level{_suggest(quality, QUALITY_LEVELS)}")
-        existing = next((s for s in steps if s.effect == name), None)
+        sid = entry.get("id", name)
+        if not isinstance(sid, str) or not sid.replace("_", "").replace("-", "").isalnum():
+            doc.fail(at + ("id",), f"{sid!r} is not a name (letters, digits, - and _)")
+        existing = next((s for s in steps if s.id == sid), None)
+        if existing is not None and existing.effect != name:
+            doc.fail(at + ("effect",), f"step id {sid!r} already names a {existing.effect!r} step")
         if entry.get("enabled", True) is False:
             steps = [s for s in steps if s is not existing]
             continue
@@ -246,7 +253,7 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
             except ClfxError as exc:
                 doc.fail(at + ("params", pname), str(exc))
         p = cls.params(**validated)
-        step = Step(name, p, quality or (existing.quality if existing else None),
+        step = Step(name, p, quality or (existing.quality if existing else None), id=sid,
                     skip_missing_passes=(when_missing == "skip") if "missing_passes" in entry
                     else bool(existing and existing.skip_missing_passes))
         if existing:
@@ -275,9 +282,10 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
         if target == "camera":
             look.camera = _camera_override(look.camera, pname, value)
             continue
-        step = next((s for s in look.steps if s.effect == target), None)
+        step = next((s for s in look.steps if s.id == target), None) or \
+            next((s for s in look.steps if s.effect == target), None)
         if step is None:
-            names = [s.effect for s in look.steps]
+            names = [s.id for s in look.steps]
             raise PresetError(f"--set {text!r}: look {look.name!r} has no effect {target!r}"
                               f"{_suggest(target, names) if names else ''}")
         desc = step.plugin.descriptor

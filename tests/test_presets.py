@@ -124,3 +124,20 @@ def test_missing_passes_skip_is_inherited_and_validated(tmp_path, monkeypatch):
     bad = write(tmp_path, "bad", "name: bad\neffects:\n  - {effect: dof, missing_passes: maybe}\n")
     with pytest.raises(PresetError, match=r"bad.yaml:3: effects\[0\]\.missing_passes"):
         load_look(str(bad))
+
+
+def test_one_effect_twice_with_step_ids(tmp_path):
+    path = write(tmp_path, "twice", """
+        name: twice
+        effects:
+          - effect: vignette
+            params: {amount: 0.2}
+          - effect: vignette
+            id: corners
+            params: {amount: 0.5}
+    """)
+    look = apply_overrides(load_look(str(path)), ["corners.amount=0.7"])
+    assert [(s.id, s.params.amount) for s in look.steps] == [("vignette", 0.2), ("corners", 0.7)]
+    clash = write(tmp_path, "clash", "name: c\neffects:\n  - {effect: vignette, id: x}\n  - {effect: grain, id: x}\n")
+    with pytest.raises(PresetError, match=r"clash.yaml:4: .*step id 'x' already names a 'vignette' step"):
+        load_look(str(clash))

@@ -1,0 +1,262 @@
+"""Lens: the distortion, transverse chromatic aberration and vignetting of a real lens, from
+the lensfun database, applied in the simulating direction (adding the defects).
+
+Model (lensfun's, with lensfun's coordinates: see ``clfx.lensdb``)
+------------------------------------------------------------------
+Radii are normalised (r = 1 at half the short side of the calibration frame).  Each model
+maps an undistorted radius r_u to the radius r_d at which the lens images it:
+
+    poly3   r_d = r_u (1 - k1 + k1 r_u^2)
+    poly5   r_d = r_u (1 + k1 r_u^2 + k2 r_u^4)
+    ptlens  r_d = r_u (a r_u^3 + b r_u^2 + c r_u + 1 - a - b - c)
+    TCA linear  r_c = k_c r_g;   TCA poly3  r_c = r_g (b_c r_g^2 + c_c r_g + v_c)  (c = red, blue)
+    vignetting pa   I_d = I (1 + k1 r^2 + k2 r^4 + k3 r^6),  r = 1 at the calibration corner
+
+Simulating (lensfun's ``reverse=True``): the output pixel u reads green (and alpha) at the
+undistorted point u_g = D^-1(u) and red/blue at T_c^-1(u_g) (the TCA model inverted about the
+same centre), then RGB is multiplied by the vignetting polynomial at u.  Inverses are found
+by float64 bisection on the increasing branch (maps that fold inside the frame are refused),
+once per parameter set: the green map is a displacement map, the TCA inverses radial tables.
+
+The calibration is interpolated by lensfun itself (``lensfunpy.Lens.interpolate_*``) at the
+focal length, aperture and distance (0 = from the camera block); the crop factor comes from
+the camera block's sensor size.  The tests check the coordinates against lensfunpy's
+``Modifier`` (reverse mode) and the vignetting against its colour modification.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from clfx import lensdb
+from clfx.errors import ParamError
+from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, Plugin, StringParam,
+                         register)
+from clfx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
+                           kernel_defines, pixel_centres, radial_inverse, radial_inverse_fast,
+                           radial_lut,
+                           rect_boundary, upload_map)
+
+LUT_SIZE = 1024
+
+
+def distortion_model(name, terms):
+    """(forward, derivative) of a lensfun distortion model in normalised radius."""
+    if name == "poly3":
+        k1 = terms[0]
+        return (lambda r: r * (1 - k1 + k1 * r * r), lambda r: 1 - k1 + 3 * k1 * r * r)
+    if name == "poly5":
+        k1, k2 = terms[:2]
+        return (lambda r: r * (1 + k1 * r * r + k2 * r ** 4),
+                lambda r: 1 + 3 * k1 * r * r + 5 * k2 * r ** 4)
+    a, b, c = terms[:3]
+    d = 1 - a - b - c
+    return (lambda r: r * (a * r ** 3 + b * r * r + c * r + d),
+            lambda r: 4 * a * r ** 3 + 3 * b * r * r + 2 * c * r + d)
+
+
+def tca_models(name, terms):
+    """[(forward, derivative)] for red and blue."""
+    if name == "linear":
+        return [(lambda r, k=k: k * r, lambda r, k=k: k + 0 * r) for k in terms[:2]]
+    vr, vb, cr, cb, br, bb = terms[:6]
+    return [(lambda r, v=v, c=c, b=b: r * (b * r * r + c * r + v),
+             lambda r, v=v, c=c, b=b: 3 * b * r * r + 2 * c * r + v)
+            for v, c, b in ((vr, cr, br), (vb, cb, bb))]
+
+
+def settings(p, camera):
+    """(focal mm, f-number, distance m) with 0 taken from the camera block."""
+    focal = p.focal_length or camera.focal_length
+    aperture = p.aperture or camera.f_number
+    distance = p.distance or camera.focus_distance
+    return focal, aperture, distance
+
+
+def simulation_geometry(cal, norm, display_window, window, fit="none", distortion=True):
+    """Green source points (frame coordinates) for ``window``'s pixel centres, and info.
+
+    lensfun works in pixel-index coordinates of the display window (centres at integers):
+    p = u - 0.5 - origin.  Returns ``(sx, sy, info)`` with sx = NaN where no source exists;
+    ``info`` has the fold radius, fit scale and the largest normalised radius read.
+    """
+    ox0, oy0 = display_window.x0 + 0.5, display_window.y0 + 0.5
+    ccx, ccy = norm.center_x + ox0, norm.center_y + oy0          # centre, frame coordinates
+    ux, uy = pixel_centres(window)
+    corners = [(x, y) for x in (display_window.x0, display_window.x1)
+               for y in (display_window.y0, display_window.y1)]
+    r_corner = max(math.hypot(x - ccx, y - ccy) for x, y in corners) * norm.scale
+    info = dict(fit_scale=1.0, r_fold=math.inf, center=(ccx, ccy))
+    if not (distortion and cal.distortion):
+        return ux, uy, info
+    fwd, der = distortion_model(*cal.distortion)
+    r_fold = fold_radius(der, 4.0 * r_corner + 1e-6)
+    name, terms = cal.distortion
+    check_fold("lens", f"{name} distortion {tuple(round(t, 6) for t in terms)}", r_fold,
+               r_corner, "lensfun: 1 = half the short side")
+    bx, by = rect_boundary(display_window)
+    br = np.hypot(bx - ccx, by - ccy) * norm.scale
+    with np.errstate(invalid="ignore", divide="ignore"):
+        bs = np.where(br > 0, fwd(br) / np.where(br > 0, br, 1), 1.0)
+    s_fit = fit_scale(fit, display_window, ccx, ccy, ccx + (bx - ccx) * bs, ccy + (by - ccy) * bs)
+    dx, dy = (ux - ccx) * s_fit, (uy - ccy) * s_fit
+    r_d = np.hypot(dx, dy) * norm.scale
+    r_hi = r_fold if math.isfinite(r_fold) else 4.0 * r_corner + 1.0
+    r_u = radial_inverse_fast(fwd, der, r_d, r_hi)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(r_d > 0, r_u / np.where(r_d > 0, r_d, 1.0), 1.0 / der(np.float64(0)))
+    info.update(fit_scale=s_fit, r_fold=r_fold)
+    return ccx + dx * s, ccy + dy * s, info
+
+
+def tca_luts(cal, r_max):
+    """Inverse radial scale tables for red and blue (normalised radius of the green point)."""
+    luts = []
+    for fwd, der in tca_models(*cal.tca):
+        r_hi = 2.0 * r_max + 0.1
+        r_fold = fold_radius(der, r_hi)
+        check_fold("lens", f"{cal.tca[0]} TCA {tuple(round(t, 7) for t in cal.tca[1])}",
+                   r_fold, r_max, "lensfun: 1 = half the short side")
+        luts.append(radial_lut(fwd, min(r_hi, r_fold), r_max, LUT_SIZE))
+    return np.stack(luts)
+
+
+def channel_points(cal, norm, display_window, window, fit="none", distortion=True, tca=True):
+    """Host twin of the kernel's coordinates: {'red','green','blue'} -> (sx, sy) in frame
+    coordinates, by direct bisection (no table).  Used by the tests against lensfunpy."""
+    gx, gy, info = simulation_geometry(cal, norm, display_window, window, fit, distortion)
+    out = {"green": (gx, gy)}
+    ccx, ccy = info["center"]
+    for name, model in zip(("red", "blue"), tca_models(*cal.tca) if (tca and cal.tca) else []):
+        fwd, der = model
+        r_g = np.hypot(gx - ccx, gy - ccy) * norm.scale
+        r_c = radial_inverse(fwd, r_g, 2.0 * float(np.nanmax(r_g)) + 0.1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.where(r_g > 0, r_c / np.where(r_g > 0, r_g, 1.0), 1.0 / der(np.float64(0)))
+        out[name] = (ccx + (gx - ccx) * s, ccy + (gy - ccy) * s)
+    for name in ("red", "blue"):
+        out.setdefault(name, (gx, gy))
+    return out, info
+
+
+@register
+class Lens(Plugin):
+    descriptor = Descriptor(
+        name="lens", label="Real lens (lensfun)", group="Lens", kernel="lens.cl",
+        summary="Distortion, transverse CA and vignetting of a real lens from the lensfun "
+                "database, added as the lens would (simulating direction).",
+        params=(
+            StringParam("maker", "", hint="Lens maker as in lensfun (optional; disambiguates)."),
+            StringParam("model", "", hint="Lens model as in lensfun; search with `clfx lenses WORDS`."),
+            FloatParam("focal_length", 0.0, min=0.0, max=5000.0,
+                       hint="Focal length in mm for the calibration; 0 = the camera block's."),
+            FloatParam("aperture", 0.0, min=0.0, max=128.0,
+                       hint="f-number for the vignetting calibration; 0 = the camera block's."),
+            FloatParam("distance", 0.0, min=0.0, max=1e9,
+                       hint="Focus distance in metres for the vignetting calibration; 0 = the "
+                            "camera block's."),
+            BoolParam("distortion", True, hint="Apply the lens's geometric distortion."),
+            BoolParam("tca", True, hint="Apply its transverse chromatic aberration."),
+            BoolParam("vignetting", True, hint="Apply its vignetting."),
+            ChoiceParam("fit", "none", choices=("none", "fit-all", "fill"),
+                        hint="none (lensfun scale 1); fit-all = whole source visible; fill = "
+                             "no undefined border."),
+            ChoiceParam("border", "edge", choices=BORDERS,
+                        hint="What reads outside the source return: black, edge (clamp), mirror."),
+        ),
+        quality={
+            "draft": "bilinear from a float32 displacement map and TCA tables, float32",
+            "preview": "bicubic (Keys a=-0.5) with the 2x2 anti-ringing clamp, float32",
+            "final": "Lanczos-3 with the 2x2 anti-ringing clamp, float32",
+            "reference": "Lanczos-3 with the anti-ringing clamp, float64 map, tables and sums",
+        },
+    )
+
+    def __init__(self):
+        self._cache: dict = {}
+
+    def is_identity(self, p, ctx):
+        if not p.model.strip():
+            raise ParamError("lens: no lens chosen; set model (search with `clfx lenses WORDS`)")
+        if not (p.distortion or p.tca or p.vignetting):
+            return "distortion, tca and vignetting are all off"
+        return None
+
+    def prepare(self, rt, p, ctx, double):
+        src = ctx.source
+        key = (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
+               ctx.camera, double)
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        dw = ctx.display_window
+        crop = lensdb.crop_factor(ctx.camera, dw.width, dw.height, ctx.pixel_aspect)
+        lens = lensdb.get_lens(p.maker, p.model, crop)
+        focal, aperture, distance = settings(p, ctx.camera)
+        cal = lensdb.calibration(lens, focal, aperture, distance)
+        norm = lensdb.Normalisation.for_image(cal, crop, dw.width, dw.height)
+        notes = []
+        use_map = bool(p.distortion and cal.distortion)
+        use_tca = bool(p.tca and cal.tca)
+        use_vig = bool(p.vignetting and cal.vignetting)
+        for want, have, what in ((p.distortion, cal.distortion, "distortion"),
+                                 (p.tca, cal.tca, "TCA"), (p.vignetting, cal.vignetting, "vignetting")):
+            if want and not have:
+                notes.append(f"lens: {lens.model} has no {what} calibration at {focal:g} mm")
+        if not (lens.min_focal <= focal <= (lens.max_focal or lens.min_focal)):
+            notes.append(f"lens: {focal:g} mm is outside {lens.model}'s range "
+                         f"{lens.min_focal:g}-{lens.max_focal:g} mm (lensfun extrapolates)")
+        gx, gy, info = simulation_geometry(cal, norm, dw, src.window, p.fit, use_map)
+        dt = np.float64 if double else np.float32
+        ux, uy = pixel_centres(src.window)
+        map_buf = upload_map(rt, gx - ux, gy - uy, src.pitch, double) if use_map else \
+            rt.to_device(np.zeros(2, dt))
+        ccx, ccy = info["center"]
+        ccx_w, ccy_w = ccx - src.window.x0, ccy - src.window.y0
+        lut_scale = 0.0
+        lut_buf = rt.to_device(np.zeros(2, dt))
+        if use_tca:
+            r_g = np.hypot(gx - ccx, gy - ccy) * norm.scale
+            r_max = max(float(np.nanmax(r_g)) if r_g.size else 0.0, 1e-9) * 1.0001
+            lut_buf = rt.to_device(tca_luts(cal, r_max).astype(dt))
+            lut_scale = (norm.scale / r_max) ** 2
+        vk = cal.vignetting[1][:3] if use_vig else (0.0, 0.0, 0.0)
+        consts = (ccx_w, ccy_w, lut_scale, norm.scale / norm.vignetting_unit) + tuple(vk)
+        hit = (map_buf, lut_buf, consts, (use_map, use_tca, use_vig), notes)
+        if len(self._cache) >= 4:
+            self._cache.pop(next(iter(self._cache)))
+        self._cache[key] = hit
+        return hit
+
+    def render(self, rt, p, ctx):
+        src = ctx.source
+        double = ctx.quality == "reference" and rt.has_fp64
+        map_buf, lut_buf, consts, (use_map, use_tca, use_vig), notes = \
+            self.prepare(rt, p, ctx, double)
+        ctx.notes.extend(notes)
+        defines = kernel_defines(FILTER_BY_QUALITY[ctx.quality], p.border, double,
+                                        needs_sanitising(ctx, "lens"))
+        defines.update(HAS_MAP=int(use_map), HAS_TCA=int(use_tca), HAS_VIG=int(use_vig),
+                       LUTN=LUT_SIZE)
+        knl = rt.kernel("lens.cl", "lens_apply", **defines)
+        real = np.float64 if double else np.float32
+        dst = src.like()
+        i32 = np.int32
+        rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, map_buf, lut_buf,
+                  i32(src.pitch), i32(src.width), i32(src.height), i32(src.window.x0),
+                  i32(src.window.y0), *[real(c) for c in consts])
+        return dst
+
+
+def bench_case(width, height, rng):
+    """Canon EF 24-70mm f/2.8L II at 24 mm f/2.8: ptlens distortion, poly3 TCA, vignetting."""
+    from clfx.camera import Camera
+
+    src = rng.uniform(0.0, 1.0, (height, width, 4)).astype(np.float32)
+    src[::max(height // 10, 1), :, :3] = 20.0
+    src[..., 3] = 1.0
+    return dict(source=src, depth=None, velocity=None,
+                params=dict(maker="Canon", model="Canon EF 24-70mm f/2.8L II USM"),
+                camera=Camera(focal_length=24.0, f_number=2.8, sensor_width=36.0,
+                              focus_distance=3.0))

@@ -1,0 +1,225 @@
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from clfx.camera import Camera
+from clfx.errors import ParamError
+from clfx.plugins.distortion import Distortion, build_map, coefficients, intrinsics
+from clfx.rect import Rect
+from tests.conftest import hard_shapes
+from tests.reference import distortion as ref
+
+CAM = Camera(focal_length=24.0, sensor_width=36.0)
+QUALITY_FILTER = {"draft": "bilinear", "preview": "bicubic", "final": "lanczos3",
+                  "reference": "lanczos3"}
+
+
+def smooth_image(rng, h, w):
+    """Band-limited RGBA (sums of low-frequency cosines) so filter errors rank cleanly."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    out = np.empty((h, w, 4))
+    for c in range(4):
+        a, b, ph = rng.uniform(0.05, 0.35, 3)
+        out[..., c] = 1.0 + 0.5 * np.cos(a * xs + b * ys + 6 * ph)
+    return out.astype(np.float32)
+
+
+def oracle_args(p, w, h, pixel_aspect=1.0, camera=CAM):
+    win = Rect(0, 0, w, h)
+    fx, fy, cx, cy = intrinsics(p, camera, win, pixel_aspect)
+    k1, k2, k3, p1, p2 = coefficients(p, camera, win, pixel_aspect)
+    _, _, info = build_map(p, camera, win, win, pixel_aspect)
+    return dict(k1=k1, k2=k2, k3=k3, p1=p1, p2=p2, fx=fx, fy=fy, cx=cx, cy=cy,
+                fit_scale=info["fit_scale"])
+
+
+# -- the map against OpenCV ----------------------------------------------------------------
+@pytest.mark.parametrize("coeffs", [
+    dict(k1=-0.25, k2=0.08, k3=-0.01),                               # wide-angle barrel
+    dict(k1=0.15, k2=-0.02),                                          # pincushion tele
+    dict(k1=-0.28, k2=0.09, k3=-0.012, p1=0.0015, p2=-0.0008),       # typical calibration
+    dict(k1=0.05, p1=-0.004, p2=0.003, fx=700.0, fy=690.0, cx=330.2, cy=172.9),
+])
+def test_map_agrees_with_opencv(coeffs):
+    w, h = 640, 360
+    p = Distortion.params(**coeffs)
+    win = Rect(0, 0, w, h)
+    sx, sy, info = build_map(p, CAM, win, win, 1.0)
+    fx, fy, cx, cy = info["fx"], info["fy"], info["cx"], info["cy"]
+    K = np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1]])   # OpenCV: centres at ints
+    k1, k2, k3, p1, p2 = info["k"]
+    dist = np.array([k1, k2, p1, p2, k3])
+    ok = np.isfinite(sx)
+    assert ok.all()
+    pts = np.stack([(sx - cx) / fx, (sy - cy) / fy, np.ones_like(sx)], -1).reshape(-1, 1, 3)
+    proj, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, dist)
+    ox, oy = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    err = np.hypot(proj[:, 0, 0] - ox.ravel(), proj[:, 0, 1] - oy.ravel())
+    assert err.max() < 1e-3   # brief: 1e-3 px over the frame (measured ~1e-12)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 500, 1e-15)
+    und = cv2.undistortPoints(np.stack([ox.ravel(), oy.ravel()], -1)[:, None, :], K, dist,
+                              R=None, P=K, criteria=crit)
+    err2 = np.hypot(und[:, 0, 0] - (sx.ravel() - 0.5), und[:, 0, 1] - (sy.ravel() - 0.5))
+    assert err2.max() < 1e-3
+
+
+def test_pixel_aspect_uses_fy_equal_fx_times_aspect():
+    p = Distortion.params(k1=-0.1)
+    fx, fy, cx, cy = intrinsics(p, CAM, Rect(0, 0, 100, 50), 2.0)
+    assert fy == pytest.approx(2.0 * fx) and (cx, cy) == (50.0, 25.0)
+
+
+# -- fold-over ----------------------------------------------------------------------------
+def test_fold_over_is_refused_with_a_clear_message(rt):
+    # 16:9 with fx = half the width: corner at r = 1.147, k1 = -0.3 folds at r = 1.054
+    p = Distortion.params(k1=-0.3, fx=96.0, fy=96.0)
+    with pytest.raises(ParamError, match=r"k1=-0\.3.*r=1\.054.*r=1\.147"):
+        Distortion().apply(rt, p, np.zeros((108, 192, 4), np.float32))
+
+
+def test_fold_outside_frame_is_accepted(rt):
+    p = Distortion.params(amount=-0.3)            # corner moves 30% inwards: fold beyond it
+    out = Distortion().apply(rt, p, np.ones((18, 32, 4), np.float32), quality="draft")
+    assert np.isfinite(out).all()
+
+
+# -- rendering against the oracle ---------------------------------------------------------
+@pytest.mark.parametrize("shape", hard_shapes())
+@pytest.mark.parametrize("border", ["black", "edge", "mirror"])
+def test_matches_reference_hard_shapes(rt, rng, shape, border):
+    h, w = shape
+    src = rng.uniform(0.0, 2.0, shape + (4,)).astype(np.float32)
+    p = Distortion.params(k1=-0.2, k2=0.05, p1=0.002, border=border, fx=max(w, h) * 0.8)
+    got = Distortion().apply(rt, p, src, quality="final", camera=CAM)
+    want = ref.distortion(src, filter_name="lanczos3", border=border, **oracle_args(p, w, h))
+    # float32 weights/sums over 36 taps of values <= 2: a few 1e-6
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-5)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+def test_each_quality_matches_its_own_filter(rt, rng, quality):
+    src = rng.uniform(0.0, 1.0, (23, 41, 4)).astype(np.float32)
+    p = Distortion.params(amount=0.15, fit="fit-all", border="edge")
+    got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    want = ref.distortion(src, filter_name=QUALITY_FILTER[quality], border="edge",
+                          **oracle_args(p, 41, 23))
+    tol = 1e-7 if quality == "reference" else 1e-5   # float64 sums, float32 output (ulp 6e-8)
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+
+
+def test_error_falls_monotonically_with_quality(rt, rng):
+    src = smooth_image(rng, 40, 64)
+    p = Distortion.params(k1=-0.15, k2=0.02, fit="fill", border="edge")
+    want = ref.distortion(src, filter_name="lanczos3", border="edge", **oracle_args(p, 64, 40))
+    errs = [np.abs(Distortion().apply(rt, p, src, quality=q, camera=CAM) - want).max()
+            for q in ("draft", "preview", "final", "reference")]
+    assert all(a >= b for a, b in zip(errs, errs[1:])), errs
+    assert errs[-1] < 1e-7   # float32 storage of a float64 result
+
+
+def test_pixel_aspect_and_principal_point(rt, rng):
+    src = rng.uniform(0.0, 1.0, (30, 40, 4)).astype(np.float32)
+    p = Distortion.params(k1=0.1, p2=0.003, cx=17.0, cy=12.5, border="mirror")
+    got = Distortion().apply(rt, p, src, quality="preview", camera=CAM, pixel_aspect=1.5)
+    want = ref.distortion(src, filter_name="bicubic", border="mirror",
+                          **oracle_args(p, 40, 30, pixel_aspect=1.5))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+
+
+# -- identity, fit, hard values ------------------------------------------------------------
+def test_zero_coefficients_are_identity(rt, rng):
+    src = rng.uniform(0.0, 1.0, (9, 13, 4)).astype(np.float32)
+    p = Distortion.params()
+    assert Distortion().is_identity(p, None) == \
+        "amount and all coefficients (k1, k2, k3, p1, p2) are 0"
+    assert np.array_equal(Distortion().apply(rt, p, src), src)
+
+
+def test_tiny_coefficient_renders_as_near_identity(rt, rng):
+    src = rng.uniform(0.0, 1.0, (16, 24, 4)).astype(np.float32)
+    p = Distortion.params(k1=1e-12)
+    for q in ("draft", "preview", "final", "reference"):
+        got = Distortion().apply(rt, p, src, quality=q)
+        np.testing.assert_allclose(got, src, atol=1e-5)   # interpolating filters at integer shift
+
+
+def test_fill_leaves_no_undefined_border_and_fit_all_keeps_everything(rt):
+    w, h = 96, 54
+    src = np.ones((h, w, 4), np.float32)
+    fill = Distortion().apply(rt, Distortion.params(amount=-0.2, fit="fill"), src, quality="draft")
+    assert fill.min() > 0.999                        # every pixel reads inside the source
+    win = Rect(0, 0, w, h)
+    sx, sy, _ = build_map(Distortion.params(amount=0.2, fit="fit-all"), Camera(), win, win, 1.0)
+    # the whole source is visible: the sampled area reaches every source edge
+    assert sx.min() <= 0.5 + 1e-6 or sx.max() >= w - 0.5 - 1e-6
+    none = Distortion().apply(rt, Distortion.params(amount=-0.2), src, quality="draft")
+    assert none[0, 0, 0] < 0.5                       # barrel without fit: black corners
+
+
+def test_hdr_edge_does_not_ring(rt):
+    src = np.full((32, 48, 4), 0.01, np.float32)
+    src[:, 24:] = 1e5
+    src[..., 3] = 1.0
+    for q in ("preview", "final", "reference"):
+        got = Distortion().apply(rt, Distortion.params(k1=-0.1, p1=0.003, border="edge"), src,
+                                 quality=q)
+        assert got.min() >= 0.0 and got.max() <= 1e5 * (1 + 1e-6)
+        # each output within the min/max of its footprint: far from the edge nothing moves
+        np.testing.assert_allclose(got[:, :8, :3], 0.01, rtol=1e-4)
+
+
+def test_nan_and_inf_do_not_spread(rt, rng):
+    src = rng.uniform(0.0, 1.0, (24, 24, 4)).astype(np.float32)
+    src[12, 12] = np.nan
+    src[3, 20] = np.inf
+    got = Distortion().apply(rt, Distortion.params(k1=-0.1), src, quality="final")
+    assert np.isfinite(got).all()
+    clean = src.copy()
+    clean[12, 12] = 0.0
+    clean[3, 20] = 0.0
+    want = Distortion().apply(rt, Distortion.params(k1=-0.1), clean, quality="final")
+    np.testing.assert_array_equal(got, want)
+
+
+def test_map_is_cached_across_frames(rt, rng):
+    plugin = Distortion()
+    src = rng.uniform(0.0, 1.0, (10, 10, 4)).astype(np.float32)
+    p = Distortion.params(k1=0.1)
+    a = plugin.apply(rt, p, src, frame=1)
+    b = plugin.apply(rt, p, src, frame=2)
+    assert len(plugin._maps) == 1 and np.array_equal(a, b)
+
+
+def test_amount_moves_the_corner_by_that_fraction_of_its_radius():
+    from clfx.plugins.distortion import corner_radius, project
+    win = Rect(0, 0, 160, 90)
+    for amount in (-0.1, 0.2):
+        p = Distortion.params(amount=amount)
+        fx, fy, cx, cy = intrinsics(p, CAM, win, 1.0)
+        k = coefficients(p, CAM, win, 1.0)
+        xc, yc = (win.x1 - cx) / fx, (win.y1 - cy) / fy
+        xd, yd = project(xc, yc, k)
+        assert np.hypot(xd, yd) / np.hypot(xc, yc) == pytest.approx(1 + amount, rel=1e-12)
+        assert corner_radius(win, fx, fy, cx, cy) == pytest.approx(np.hypot(xc, yc))
+
+
+def test_data_window_map_is_the_display_map_cropped():
+    display, data = Rect(0, 0, 64, 40), Rect(10, 5, 50, 33)
+    p = Distortion.params(k1=-0.2, p1=0.002, fit="fill")
+    full_x, full_y, _ = build_map(p, CAM, display, display, 1.0)
+    sub_x, sub_y, _ = build_map(p, CAM, display, data, 1.0)
+    np.testing.assert_allclose(sub_x, full_x[5:33, 10:50], atol=1e-9)
+    np.testing.assert_allclose(sub_y, full_y[5:33, 10:50], atol=1e-9)
+
+
+def test_data_window_render_matches_oracle_in_frame_coordinates(rt, rng):
+    display, data = Rect(0, 0, 48, 32), Rect(6, 4, 38, 26)
+    src = rng.uniform(0.0, 1.0, (data.height, data.width, 4)).astype(np.float32)
+    p = Distortion.params(k1=0.12, border="edge")
+    got = Distortion().apply(rt, p, src, quality="draft", camera=CAM, data_window=data,
+                             display_window=display)
+    sx, sy, _ = build_map(p, CAM, display, data, 1.0)
+    want = ref.sample(src, sx - data.x0, sy - data.y0, "bilinear", "edge")
+    np.testing.assert_allclose(got, want, atol=1e-5)
