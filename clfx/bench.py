@@ -276,7 +276,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int) -> 
 def analysis_frames(width: int, height: int, camera: Camera) -> dict[str, Frame]:
     """Frames (a) needs everything, (b) static dim all-in-focus, (c) (b) with a moving patch."""
     a = _demo_frame(width, height)
-    base = np.clip(a.rgba * 0.3, 0.0, 0.6).astype(np.float32)
+    base = np.clip(a.rgba * 0.3, 0.0, 0.4).astype(np.float32)  # below every highlight knee
     base[..., 3] = 1.0
     depth = np.full((height, width), camera.focus_distance, np.float32)
     still = np.zeros((height, width, 2), np.float32)

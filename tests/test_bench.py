@@ -12,7 +12,7 @@ from clfx.bench import analysis_frames, bench_effect, error_metrics
 from clfx.cli import cli
 from clfx.plugin import QUALITY_LEVELS, discover
 
-SIZE = (96, 64)
+SIZE = (192, 108)  # large enough that each effect differs between levels (CoC, rings)
 # Relative slack when comparing errors of neighbouring levels: two levels may be equally
 # accurate (e.g. exact closed forms), and float32 round-off differs between code paths.
 SLACK = 1.05

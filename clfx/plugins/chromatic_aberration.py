@@ -56,7 +56,7 @@ XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],
 
 QUALITY = {  # (spectral samples, filter, float64)
     "draft": (3, "bilinear", False),
-    "preview": (8, "bilinear", False),
+    "preview": (8, "bicubic", False),
     "final": (16, "bicubic", False),
     "reference": (32, "bicubic", True),
 }
@@ -185,7 +185,7 @@ class ChromaticAberration(Plugin):
         ),
         quality={
             "draft": "three channels (per-channel CMF-weighted scale), bilinear, float32",
-            "preview": "8 wavelengths (380-720 nm bins), bilinear, float32",
+            "preview": "8 wavelengths (380-720 nm bins), bicubic with anti-ringing clamp, float32",
             "final": "16 wavelengths, bicubic with anti-ringing clamp, float32",
             "reference": "32 wavelengths, bicubic with anti-ringing clamp, float64 tables, "
                          "coordinates and sums",
