@@ -15,6 +15,7 @@ import os
 import sys
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -112,6 +113,18 @@ class Batch:
                                        f"or --skip-existing to resume)")
 
     # -- running ------------------------------------------------------------------------
+    @contextmanager
+    def reading(self):
+        """Start reading the first frame now (on an I/O thread); ``run`` picks it up."""
+        self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io")
+        try:
+            if self.jobs and self.input_path != RAW:
+                self._first_read = self._pool.submit(self._read, self.jobs[0])
+            yield self
+        finally:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
     def run(self, rt) -> dict:
         """Render every job; return a summary.  The first failing frame stops the batch
         (its output is not written; frames already written stay, so --skip-existing resumes)."""
@@ -122,8 +135,11 @@ class Batch:
         total = len(self.jobs)
         if self.skipped_existing and self.verbosity > 0:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
-        with ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io") as pool:
-            next_read: Future | None = pool.submit(self._read, self.jobs[0]) if self.jobs else None
+        own_pool = getattr(self, "_pool", None) is None
+        pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io") if own_pool else self._pool
+        first, self._first_read = getattr(self, "_first_read", None), None
+        with (pool if own_pool else nullcontext()):
+            next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
                 frame_in, read_ms = next_read.result()

@@ -62,6 +62,15 @@ def _runtime(ctx: click.Context):
     return Runtime.get(ctx.obj.get("device") if ctx.obj else None)
 
 
+def _runtime_soon(ctx: click.Context):
+    """Start creating the runtime on a thread (OpenCL releases the GIL), so device set-up
+    overlaps loading the look and reading the first frame; call ``.result()`` for it."""
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-device")
+    future = pool.submit(_runtime, ctx)
+    pool.shutdown(wait=False)
+    return future
+
+
 def _log(ctx, msg: str, level: int = 1):
     if (ctx.obj or {}).get("verbosity", 1) >= level:
         click.echo(msg, err=True)
@@ -313,10 +322,11 @@ for _cmd in (probe,):
 @click.pass_context
 def render(ctx, input_path, output_path, look_name, assignments, **kw):
     """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
+    runtime = _runtime_soon(ctx)
     from clfx.presets import apply_overrides, load_look
 
     lk = apply_overrides(load_look(look_name), list(assignments))
-    _run_batch(ctx, lk, input_path, output_path, kw)
+    _run_batch(ctx, lk, input_path, output_path, kw, runtime)
 
 
 @cli.command()
@@ -328,13 +338,14 @@ def render(ctx, input_path, output_path, look_name, assignments, **kw):
 @click.pass_context
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
+    runtime = _runtime_soon(ctx)
     from clfx.presets import single_effect_look
 
     lk = single_effect_look(effect, list(assignments))
-    _run_batch(ctx, lk, input_path, output_path, kw)
+    _run_batch(ctx, lk, input_path, output_path, kw, runtime)
 
 
-def _run_batch(ctx, lk, input_path, output_path, kw):
+def _run_batch(ctx, lk, input_path, output_path, kw, runtime):
     from clfx.batch import Batch
 
     verbosity = ctx.obj.get("verbosity", 1)
@@ -342,8 +353,8 @@ def _run_batch(ctx, lk, input_path, output_path, kw):
                   passes=_pass_spec(kw), verbosity=verbosity,
                   progress=verbosity > 0 and sys.stderr.isatty() and not kw.get("as_json"))
     batch.prepare()  # everything checked before the first frame is read
-    rt = _runtime(ctx)
-    batch.run(rt)
+    with batch.reading():  # the first frame is read while the device finishes setting up
+        batch.run(runtime.result())
 
 
 @cli.command()
