@@ -262,6 +262,9 @@ def _io_options(f):
         click.option("--depth-mode", type=click.Choice(["auto", "z", "inverse", "distance", "normalized"]),
                      default="auto", help="How depth is stored: planar z, 1/z, radial distance, 0-1."),
         click.option("--depth-scale", type=float, default=1.0, help="Multiply depth (e.g. 0.01 for cm to m)."),
+        click.option("--focal-length-px", type=float, default=None,
+                     help="For --depth-mode distance: focal length in pixels (default: from the "
+                          "look's camera block and the frame width)."),
         click.option("--velocity-channels", default=None, metavar="U,V", help="Velocity channel names."),
         click.option("--velocity-y-up/--velocity-y-down", default=None,
                      help="Direction of +v in the velocity pass (overrides detection)."),
@@ -284,7 +287,9 @@ def _io_options(f):
     return f
 
 
-def _pass_spec(kw):
+def _pass_spec(kw, focal_length_px: float | None = None):
+    """The pass overrides given on the command line (focal length for radial depth given
+    by --focal-length-px or derived by the caller)."""
     from clfx.io import PassSpec
 
     vc = kw.get("velocity_channels")
@@ -297,7 +302,8 @@ def _pass_spec(kw):
                     depth_scale=kw.get("depth_scale", 1.0),
                     velocity_channels=tuple(vc.split(",")) if vc else None,
                     velocity_y_up=kw.get("velocity_y_up"),
-                    velocity_scale=kw.get("velocity_scale", 1.0))
+                    velocity_scale=kw.get("velocity_scale", 1.0),
+                    focal_length_px=kw.get("focal_length_px") or focal_length_px)
 
 
 for _cmd in (probe,):
@@ -305,6 +311,7 @@ for _cmd in (probe,):
         click.option("--depth-channel", default=None), click.option("--depth-mode", default="auto",
             type=click.Choice(["auto", "z", "inverse", "distance", "normalized"])),
         click.option("--depth-scale", type=float, default=1.0),
+        click.option("--focal-length-px", type=float, default=None),
         click.option("--velocity-channels", default=None, metavar="U,V"),
         click.option("--velocity-y-up/--velocity-y-down", default=None),
         click.option("--velocity-scale", type=float, default=1.0)]):
@@ -345,14 +352,27 @@ def apply(ctx, effect, input_path, output_path, assignments, **kw):
     _run_batch(ctx, lk, input_path, output_path, kw, runtime)
 
 
+def _radial_depth_focal_px(kw, lk, batch) -> float | None:
+    """Focal length in pixels for --depth-mode distance, from the look's camera block and the
+    first input's display width (square pixels assumed, as the camera block does)."""
+    if kw.get("depth_mode") != "distance" or kw.get("focal_length_px") or not batch.jobs:
+        return None
+    from clfx.io import probe as probe_file
+
+    info = probe_file(batch.jobs[0].input)
+    width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
+    return lk.camera.focal_length_px(width)
+
+
 def _run_batch(ctx, lk, input_path, output_path, kw, runtime):
     from clfx.batch import Batch
 
     verbosity = ctx.obj.get("verbosity", 1)
     batch = Batch(look=lk, input_path=input_path, output_path=output_path, options=kw,
-                  passes=_pass_spec(kw), verbosity=verbosity,
+                  passes=None, verbosity=verbosity,
                   progress=verbosity > 0 and sys.stderr.isatty() and not kw.get("as_json"))
     batch.prepare()  # everything checked before the first frame is read
+    batch.passes = _pass_spec(kw, _radial_depth_focal_px(kw, lk, batch))
     with batch.reading():  # the first frame is read while the device finishes setting up
         batch.run(runtime.result())
 

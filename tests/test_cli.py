@@ -215,3 +215,23 @@ def test_demo_writes_frames_previews_and_contact_sheet(rt, tmp_path):
 
     scene = read_frame(tmp_path / "demo" / "scene.0002.exr")
     assert scene.depth is not None and scene.velocity is not None
+
+
+def test_radial_depth_uses_the_look_camera_focal_length(rt, tmp_path):
+    """--depth-mode distance converts radial distance to planar z with f_px from the look."""
+    from clfx.frame import Frame
+    from clfx.io import read_frame, write_frame
+
+    h, w = 20, 40
+    cam_f_px = 50.0 * w / 36.0  # the default look's 50 mm on a 36 mm sensor
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    planar = np.full((h, w), 4.0, np.float32)
+    radial = planar * np.sqrt(1 + ((xs - w / 2) ** 2 + (ys - h / 2) ** 2) / cam_f_px ** 2)
+    write_frame(Frame.from_array(np.ones((h, w, 4), np.float32), depth=radial.astype(np.float32)),
+                tmp_path / "in.exr", bit_depth="float")
+    run("render", tmp_path / "in.exr", tmp_path / "out.exr", "--depth-mode", "distance",
+        "--float", "--set", "glare.strength=0")
+    np.testing.assert_allclose(read_frame(tmp_path / "out.exr").depth, planar, rtol=1e-5)
+    info = json.loads(run("probe", tmp_path / "in.exr", "--depth-mode", "distance",
+                          "--focal-length-px", str(cam_f_px), "--json").stdout)
+    assert info["depth"]["mode"] == "distance"
