@@ -65,6 +65,16 @@ class SceneAnalysis:
         """Boolean (tiles_y, tiles_x) mask of tiles with a pixel above ``threshold``."""
         return self.max_lum > threshold
 
+    def highlight_bounds(self, threshold: float) -> Rect:
+        """Bounding box (frame coordinates) of the tiles with a pixel above ``threshold``;
+        an empty rectangle when there is none.  Large-kernel effects transform only this."""
+        ys, xs = np.nonzero(self.tiles_above(threshold))
+        win, t = self.window, self.tile
+        if ys.size == 0:
+            return Rect(win.x0, win.y0, win.x0, win.y0)
+        return Rect(win.x0 + int(xs.min()) * t, win.y0 + int(ys.min()) * t,
+                    win.x0 + (int(xs.max()) + 1) * t, win.y0 + (int(ys.max()) + 1) * t).intersect(win)
+
     def light_sources(self, threshold: float, *, margin_px: int = 0) -> list[LightSource]:
         """Connected regions of tiles brighter than ``threshold`` (8-connectivity).
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clfx.errors import ClfxError, ImageIOError, SequenceError
+from clfx.errors import ImageIOError, SequenceError
 from clfx.frame import Frame
 from clfx.look import Look, render_frame
 from clfx.rect import Rect

@@ -22,10 +22,8 @@ Three parts, all measured in one run so ratios compare like with like:
 from __future__ import annotations
 
 import importlib
-import json
 import math
 import os
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, field

@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
 import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
 
 import click

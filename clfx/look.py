@@ -15,7 +15,6 @@ import json
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
 
 from clfx import __version__
 from clfx.camera import Camera

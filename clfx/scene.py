@@ -30,7 +30,7 @@ This is a generator for tests and demos, not an effect: vectorised NumPy on the 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 

@@ -423,7 +423,6 @@ def test_absurd_size_refused_before_allocating(tmp_path):
 @pytest.mark.parametrize("bit_depth, levels", [("uint8", 255), ("uint16", 65535)])
 def test_png_linearise_encode_round_trip(tmp_path, bit_depth, levels):
     codes = np.arange(0, levels + 1, max(1, levels // 255), dtype=np.float64)
-    w = len(codes)
     enc = np.repeat((codes / levels)[None, :, None], 4, axis=2).astype(np.float32)
     enc[..., 3] = 1.0
     src = tmp_path / f"src_{bit_depth}.png"

@@ -38,7 +38,7 @@ from clfx.errors import ClipError
 from clfx.plugin import (ChoiceParam, Clip, Descriptor, FloatParam, Plugin, Vec2Param,
                          register)
 from clfx.plugins.motion_blur import (LEVELS, MAX_RADIUS_PX, SHUTTER_OFFSETS,
-                                      accumulation_defines, reach_factor, reconstruct,
+                                      accumulation_defines, reconstruct,
                                       sanitized_copy, shutter_from)
 
 KERNEL = "camera_blur.cl"

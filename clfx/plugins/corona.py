@@ -276,15 +276,9 @@ class Corona(Plugin):
     def highlight_support(self, p, ctx) -> Rect:
         """Bounding box (frame coordinates) of the analysis tiles with a pixel above threshold."""
         a = ctx.analysis
-        win = ctx.source.window
-        if a.window != win:      # an earlier effect changed the window: the tiles do not fit
-            return win
-        ys, xs = np.nonzero(a.tiles_above(p.threshold))
-        if ys.size == 0:
-            return Rect(win.x0, win.y0, win.x0, win.y0)
-        return Rect(win.x0 + int(xs.min()) * a.tile, win.y0 + int(ys.min()) * a.tile,
-                    win.x0 + (int(xs.max()) + 1) * a.tile,
-                    win.y0 + (int(ys.max()) + 1) * a.tile).intersect(win)
+        if a.window != ctx.source.window:  # tiles of another window do not apply
+            return ctx.source.window
+        return a.highlight_bounds(p.threshold)
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):

@@ -45,7 +45,6 @@ import math
 
 import numpy as np
 
-from clfx.errors import ParamError
 from clfx.plugin import ChoiceParam, Descriptor, FloatParam, Plugin, register
 from clfx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
                            kernel_defines, pixel_centres, rect_boundary, upload_map)

@@ -37,7 +37,7 @@ import numpy as np
 
 from clfx import fftconv, psf as psflib
 from clfx.camera import Camera
-from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, Plugin, RGBParam,
+from clfx.plugin import (ChoiceParam, Descriptor, FloatParam, Plugin, RGBParam,
                          StringParam, register)
 from clfx.rect import Rect
 
@@ -123,18 +123,10 @@ class ScatterPlugin(Plugin):
 
     def highlight_support(self, p, ctx) -> Rect:
         """Bounding box of the analysis tiles that hold a contributing pixel."""
-        src = ctx.source.window
         a = ctx.analysis
-        if a.window != src:
-            return src
-        mask = a.tiles_above(self.raw_level(p, ctx))
-        if not mask.any():
-            return Rect(src.x0, src.y0, src.x0, src.y0)
-        ys, xs = np.nonzero(mask)
-        t = a.tile
-        box = Rect(src.x0 + int(xs.min()) * t, src.y0 + int(ys.min()) * t,
-                   src.x0 + (int(xs.max()) + 1) * t, src.y0 + (int(ys.max()) + 1) * t)
-        return box.intersect(src)
+        if a.window != ctx.source.window:  # tiles of another window do not apply
+            return ctx.source.window
+        return a.highlight_bounds(self.raw_level(p, ctx))
 
     # -- render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):

@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
 
-from clfx.errors import ParamError
 from clfx.plugins.chromatic_aberration import (QUALITY, ChromaticAberration as CA,
                                                cie1931_xyz, spectral_bins)
 from clfx.resample import lut_lookup, radial_lut

@@ -15,7 +15,6 @@ LEVELS = ("draft", "preview", "final", "reference")
 def psf_for(p, window, display=None):
     """The PSF the plugin builds for a frame (host code under test in test_psf_*)."""
     g = Glare()
-    src = None
 
     class Ctx:  # the few attributes build_psf/radius_px read
         pass

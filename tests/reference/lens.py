@@ -50,7 +50,6 @@ def lens_points(w, h, *, crop, cal_crop, cal_aspect=1.5, center=(0.0, 0.0), dist
 
 
 def vignetting_factor(w, h, *, crop, cal_crop, cal_aspect=1.5, center=(0.0, 0.0), terms):
-    pts = lens_points(w, h, crop=crop, cal_crop=cal_crop, cal_aspect=cal_aspect, center=center)
     wp, hp = w - 1.0, h - 1.0
     size = min(wp, hp)
     c = cal_crop / crop * math.sqrt(cal_aspect ** 2 + 1) / math.sqrt((max(wp, hp) / size) ** 2 + 1)
