@@ -12,7 +12,8 @@ Three parts, all measured in one run so ratios compare like with like:
    (``edge_mask``).  Noise effects, whose levels draw different samples, supply
    ``bench_metrics(out, ref, case)`` comparing statistics with their model instead.  Peers
    (OpenCV, SciPy) doing the same operation are timed beside it where a module declares
-   them with ``bench_peers(case, params)``.
+   them with ``bench_peers(case, params, ctx)``: host callables returning RGBA arrays, or
+   ``(callable, level)`` to compare with the clfx level doing the same work (else final).
 2. Whole looks: each built-in look at the bench size, ms per frame with a per-effect
    breakdown, and sequence throughput with EXR reading and writing included.
 3. Scene analysis: the cinema look on (a) a frame that needs everything, (b) a static, dim,
@@ -190,16 +191,21 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     ref_err = next(r for r in res.rows if r["quality"] == "reference")["rel_rmse"]
     for row in res.rows:
         row["error_ratio_vs_reference"] = (row["rel_rmse"] / ref_err) if ref_err > 0 else None
-    for label, fn in (getattr(module, "bench_peers", lambda c, p: {})(case, params) or {}).items():
+    peer_ctx = _case_context(rt, case, "final")
+    peers = getattr(module, "bench_peers", None)
+    for label, spec in ((peers(case, params, peer_ctx) if peers else None) or {}).items():
+        fn, level = spec if isinstance(spec, tuple) else (spec, "final")
         try:
             out, times = _timed(fn, repeat)
         except Exception as exc:  # a peer missing on this machine is reported, not fatal
             res.peers.append({"effect": name, "peer": label, "error": str(exc)})
             continue
         peer = {"effect": name, "peer": label, **_stats(times), **error_metrics(out, ref, edge)}
-        final = next(r for r in res.rows if r["quality"] == "final")
-        peer["clfx_final_ms"] = final["ms"]
-        peer["clfx_time_ratio"] = final["ms"] / peer["ms"] if peer["ms"] > 0 else None
+        mine = next(r for r in res.rows if r["quality"] == level)
+        peer["clfx_level"] = level
+        peer["clfx_ms"] = mine["ms"]
+        peer["clfx_rel_rmse"] = mine["rel_rmse"]
+        peer["clfx_time_ratio"] = mine["ms"] / peer["ms"] if peer["ms"] > 0 else None
         res.peers.append(peer)
     return res
 
@@ -319,14 +325,16 @@ def markdown(results: dict) -> str:
                     if sp else f"| {r['effect']} | {r['quality']} | identity | | | | | | | |")
         peers = [p for e in results["effects"] for p in e["peers"]]
         if peers:
-            lines += ["", "| effect | peer | peer ms | clfx final ms | clfx / peer time | peer rel. RMSE | peer max err |",
-                      "|---|---|---|---|---|---|---|"]
+            lines += ["", "| effect | peer | peer ms | clfx level | clfx ms | clfx / peer time | "
+                          "peer rel. RMSE | clfx rel. RMSE | peer max err |",
+                      "|---|---|---|---|---|---|---|---|---|"]
             for p in peers:
                 if "error" in p:
-                    lines.append(f"| {p['effect']} | {p['peer']} | failed: {p['error']} | | | | |")
+                    lines.append(f"| {p['effect']} | {p['peer']} | failed: {p['error']} | | | | | | |")
                 else:
-                    lines.append(f"| {p['effect']} | {p['peer']} | {p['ms']:.1f} | {p['clfx_final_ms']:.1f} | "
-                                 f"{p['clfx_time_ratio']:.2f} | {p['rel_rmse']:.3g} | {p['max_err']:.3g} |")
+                    lines.append(f"| {p['effect']} | {p['peer']} | {p['ms']:.1f} | {p['clfx_level']} | "
+                                 f"{p['clfx_ms']:.1f} | {p['clfx_time_ratio']:.2f} | {p['rel_rmse']:.3g} | "
+                                 f"{p['clfx_rel_rmse']:.3g} | {p['max_err']:.3g} |")
     if results.get("looks"):
         lines += ["", "| look | ms/frame (min-max) | per effect (ms) |", "|---|---|---|"]
         for lk in results["looks"]:

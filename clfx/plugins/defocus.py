@@ -129,3 +129,20 @@ def bench_case(width, height, rng):
     return dict(source=src, depth=None, velocity=None,
                 params={"size": 50.0 / math.hypot(1920, 1080), "aspect": 1.0, "edges": "clamp"},
                 camera=Camera())
+
+
+def bench_peers(case, params, ctx):
+    """OpenCV's Gaussian blur of the same sigma and edge mode (what a user reaches for)."""
+    import numpy as np
+
+    try:
+        import cv2
+    except ImportError:
+        return {}
+    src = np.ascontiguousarray(case["source"], np.float32)
+    sx, sy = defocus_sigmas(params, ctx)
+    border = {"clamp": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101,
+              "black": cv2.BORDER_CONSTANT}[params.edges]
+    cv2.setNumThreads(2)
+    return {"cv2.GaussianBlur": lambda: cv2.GaussianBlur(src, (0, 0), sx, sigmaY=sy,
+                                                         borderType=border)}

@@ -289,3 +289,25 @@ def bench_case(width, height, rng):
     return dict(source=src, depth=None, velocity=None,
                 params=dict(k1=-0.12, k2=0.03, p1=0.001, p2=-0.0005, fit="fill", border="edge"),
                 camera=Camera(focal_length=24.0, sensor_width=36.0))
+
+
+def bench_peers(case, params, ctx):
+    """cv2.remap with the same (float64-inverted) map: bilinear, bicubic and Lanczos-4."""
+    try:
+        import cv2
+    except ImportError:
+        return {}
+    src = np.ascontiguousarray(case["source"], np.float32)
+    win = ctx.source.window
+    sx, sy, _ = build_map(params, ctx.camera, ctx.display_window, win, ctx.pixel_aspect)
+    # cv2's maps address pixel centres at integers; points without a source read the border
+    map_x = np.where(np.isfinite(sx), sx - 0.5 - win.x0, -1e6).astype(np.float32)
+    map_y = np.where(np.isfinite(sy), sy - 0.5 - win.y0, -1e6).astype(np.float32)
+    border = {"edge": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101}.get(
+        params.border, cv2.BORDER_CONSTANT)
+    cv2.setNumThreads(2)
+    return {f"cv2.remap {name}": ((lambda flag=flag: cv2.remap(src, map_x, map_y, flag,
+                                                               borderMode=border)), level)
+            for name, flag, level in (("bilinear", cv2.INTER_LINEAR, "draft"),
+                                      ("cubic", cv2.INTER_CUBIC, "preview"),
+                                      ("lanczos4", cv2.INTER_LANCZOS4, "final"))}

@@ -232,3 +232,47 @@ def bench_case(width, height, rng):
     return dict(source=src, depth=None, velocity=None,
                 params={"strength": 0.05, "threshold": 1.0, "size": 512.0 / math.hypot(1920, 1080)},
                 camera=Camera())
+
+
+def _soft_knee_highlight(rgb: np.ndarray, threshold: float, knee: float) -> np.ndarray:
+    """Host copy of the soft-knee highlight (module docstring), for the benchmark's peers."""
+    lum = rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    x = np.clip(lum - threshold + knee, 0.0, 2.0 * knee)
+    soft = x * x / (4.0 * knee) if knee > 0 else np.zeros_like(lum)
+    safe = np.where(lum > 0, lum, 1.0)
+    w = np.where(lum > 0, np.clip(np.maximum(soft, lum - threshold) / safe, 0.0, 1.0), 0.0)
+    return (rgb * w[..., None]).astype(np.float32)
+
+
+def bench_peers(case, params, ctx):
+    """The same glare (same highlights, PSF and mix) with SciPy's float32 FFT convolution and
+    with OpenCV's filter2D (DFT-based for large kernels, float64 inside)."""
+    plugin = Glare()
+    kernel = plugin.psf(params, ctx).astype(np.float32)
+    src = np.nan_to_num(np.asarray(case["source"], np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    rgb = np.maximum(src[..., :3], 0.0)
+    hl = _soft_knee_highlight(rgb, params.threshold, params.knee)
+    tint = np.asarray(params.tint, np.float32)
+
+    def mix(spread):
+        out = src.copy()
+        out[..., :3] = src[..., :3] - params.strength * hl + params.strength * tint * spread
+        return out
+
+    peers = {}
+    try:
+        from scipy.signal import fftconvolve
+
+        peers["scipy.signal.fftconvolve float32"] = lambda: mix(np.stack(
+            [fftconvolve(hl[..., c], kernel, mode="same") for c in range(3)], axis=-1))
+    except ImportError:
+        pass
+    try:
+        import cv2
+
+        cv2.setNumThreads(2)
+        peers["cv2.filter2D"] = lambda: mix(cv2.filter2D(
+            hl, -1, kernel, borderType=cv2.BORDER_CONSTANT))  # PSF symmetric: correlation = convolution
+    except ImportError:
+        pass
+    return peers

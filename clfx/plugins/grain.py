@@ -295,7 +295,7 @@ def bench_case(width, height, rng):
                 camera=Camera())
 
 
-def bench_peers(case, params):
+def bench_peers(case, params, ctx=None):
     """OpenCV doing the same operation (its own random samples: compare times, not pixels)."""
     try:
         import cv2

@@ -154,7 +154,7 @@ def bench_case(width, height, rng):
                 camera=Camera(iso=6400.0))
 
 
-def bench_peers(case, params):
+def bench_peers(case, params, ctx=None):
     """NumPy's Poisson and normal generators on the host (own samples: compare times)."""
     src = np.asarray(case["source"], np.float32)
     k = electrons_per_unit(params, case["camera"])
