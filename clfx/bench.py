@@ -308,9 +308,31 @@ def bench_analysis(rt, look_name: str, width: int, height: int, repeat: int) -> 
 
 
 # -- reporting ---------------------------------------------------------------------------
+def summary_markdown(results: dict) -> str:
+    """One row per effect: median ms and relative RMSE (vs the reference level or the ground
+    truth) at each quality level."""
+    lines = ["| effect | " + " | ".join(QUALITY_LEVELS) + " | error measured against |",
+             "|---|" + "---|" * len(QUALITY_LEVELS) + "---|"]
+    for e in results.get("effects", []):
+        rows = {r["quality"]: r for r in e["rows"]}
+        if not rows:
+            lines.append(f"| {e['effect']} | {e['note']} |" + " |" * len(QUALITY_LEVELS))
+            continue
+        cells = []
+        for q in QUALITY_LEVELS:
+            r = rows[q]
+            err = r["rel_rmse"]
+            cells.append(f"{r['ms']:.0f} ms, {'exact' if err == 0 else f'{err:.1e}'}")
+        lines.append(f"| {e['effect']} | " + " | ".join(cells) + f" | {e['reference']} |")
+    return "\n".join(lines) + "\n"
+
+
 def markdown(results: dict) -> str:
     lines = [f"clfx bench at {results['size'][0]}x{results['size'][1]}, {results['repeat']} warm "
              f"runs, device: {results['device']}", ""]
+    if results.get("effects"):
+        lines += ["Time per frame and relative RMSE of each quality level:", "",
+                  summary_markdown(results), "Details:", ""]
     if results.get("effects"):
         lines += ["| effect | level | ms (min-max) | speed-up vs ref | RMSE | max err | rel. RMSE | "
                   "PSNR log (dB) | edge RMSE | reference |",
@@ -387,7 +409,7 @@ def pareto_plot(results: dict, path: str) -> None:
 def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5,
               sequence_frames=8, analysis=True, log=print) -> dict:
     reg = discover()
-    effect_names = list(reg) if not effects else list(effects)
+    effect_names = list(reg) if effects is None else list(effects)
     results = {"size": [width, height], "repeat": repeat, "device": rt.description,
                "effects": [], "looks": []}
     for name in effect_names:

@@ -397,7 +397,8 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 
 
 @cli.command()
-@click.option("--effects", default=None, metavar="A,B", help="Effects to measure (default: all).")
+@click.option("--effects", default=None, metavar="A,B",
+              help="Effects to measure (default: all; 'none' to skip).")
 @click.option("--looks", default=None, metavar="A,B",
               help="Looks to measure (default: every built-in look; 'none' to skip).")
 @click.option("--size", default="1920x1080", show_default=True, help="WxH of the bench frames.")
@@ -416,7 +417,8 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
     w, h = _parse_size(size)
     look_list = None if looks is None else ([] if looks == "none" else looks.split(","))
     verbose = ctx.obj.get("verbosity", 1) > 0
-    results = run_bench(_runtime(ctx), effects=effects.split(",") if effects else None,
+    effect_list = None if effects is None else ([] if effects == "none" else effects.split(","))
+    results = run_bench(_runtime(ctx), effects=effect_list,
                         looks=look_list, width=w, height=h, repeat=max(1, repeat),
                         sequence_frames=sequence_frames,
                         log=(lambda m: click.echo(m, err=True)) if verbose else (lambda m: None))
