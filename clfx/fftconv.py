@@ -61,9 +61,13 @@ from clfx.rect import Rect
 PRECISIONS = ("float64", "float32")
 METHODS = ("fft", "direct", "half")
 SPECTRUM_CACHE_SIZE = 4
-"""PSF spectra kept per process (each up to a few hundred MB at 4K)."""
-MAX_BATCH_BYTES = 400 * 2 ** 20
-"""Above this work-buffer size, colour channels are transformed one at a time."""
+"""PSF spectra kept per process at most ..."""
+SPECTRUM_CACHE_BYTES = 384 * 2 ** 20
+"""... and at most this many bytes of them (a 4K float64 RGB spectrum alone is ~400 MB:
+such a spectrum is recomputed per frame rather than held, keeping 4K within 2 GB)."""
+MAX_BATCH_BYTES = 160 * 2 ** 20
+"""Above this work-buffer size, colour channels are transformed one at a time (1080p
+glare batches its three channels; 4K transforms them one by one to bound memory)."""
 KERNEL_FILE = "fftconv.cl"
 
 _PLANS: OrderedDict = OrderedDict()
@@ -199,20 +203,26 @@ def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
         return hit
     kh, kw, planes = k.shape
     cy, cx = kh // 2, kw // 2
-    host = np.zeros((planes, n1, n2 + 2), np.float64)
     ys = (np.arange(kh) - cy) % n1
     xs = (np.arange(kw) - cx) % n2
-    for p in range(planes):
+    real = _real(precision)
+    plane_bytes = n1 * (n2 + 2) * np.dtype(real).itemsize
+    holder = rt.buffer(planes * plane_bytes)
+    for p in range(planes):  # one plane on the host at a time (a 4K plane is ~130 MB)
         # taps that coincide modulo the grid add up: the grid can be smaller than the PSF
         # when only a small output is kept (fft_grid proves the result exact there)
-        np.add.at(host[p], (ys[:, None], xs[None, :]), k[..., p])
-    host = host.astype(_real(precision))
-    holder = rt.to_device(host)
-    app = _plan(rt, host.shape, precision)
-    app.fft(_array(rt, holder, host.shape, host.dtype))
+        plane = np.zeros((n1, n2 + 2), np.float64)
+        np.add.at(plane, (ys[:, None], xs[None, :]), k[..., p])
+        rt.cl.enqueue_copy(rt.queue, holder.buffer, plane.astype(real), dst_offset=p * plane_bytes)
+    shape = (planes, n1, n2 + 2)
+    app = _plan(rt, shape, precision)
+    app.fft(_array(rt, holder, shape, real))
     _SPECTRA[key] = (holder, planes)
-    while len(_SPECTRA) > SPECTRUM_CACHE_SIZE:
+    while len(_SPECTRA) > SPECTRUM_CACHE_SIZE or (
+            len(_SPECTRA) > 1 and sum(h.nbytes for h, _ in _SPECTRA.values()) > SPECTRUM_CACHE_BYTES):
         _SPECTRA.popitem(last=False)
+    if holder.nbytes > SPECTRUM_CACHE_BYTES:
+        _SPECTRA.pop(key, None)  # too big to keep: used for this frame only
     return holder, planes
 
 

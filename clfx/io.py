@@ -979,7 +979,24 @@ def _make_spec(frame: Frame, fmt: _OutFormat, bit_depth: str, compression: str |
     return spec
 
 
-def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, pixels: np.ndarray) -> None:
+WRITE_BLOCK_ROWS = 256
+"""Rows assembled and written per call: a 4K frame is never held twice in full."""
+
+
+def _write_blocks(out, spec, planes: list[np.ndarray]) -> bool:
+    """Write ``planes`` (each (h, w, k), concatenated along channels) in row blocks."""
+    h = planes[0].shape[0]
+    for y0 in range(0, max(h, 1), WRITE_BLOCK_ROWS):
+        y1 = min(h, y0 + WRITE_BLOCK_ROWS)
+        block = np.concatenate([p[y0:y1] for p in planes], axis=-1) if len(planes) > 1 \
+            else planes[0][y0:y1]
+        if not out.write_scanlines(spec.y + y0, spec.y + y1, 0,
+                                   np.ascontiguousarray(block, np.float32)):
+            return False
+    return True
+
+
+def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, planes: list[np.ndarray]) -> None:
     name = os.path.basename(path)
     ext = os.path.splitext(name)[1]
     tmp = os.path.join(folder, f".{name}.tmp-{os.getpid()}-{secrets.token_hex(4)}{ext}")
@@ -995,7 +1012,7 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, pixels: np.ndar
             raise _fail(path, "cannot write", _geterror() or f"no {fmt.oiio_name} writer")
         if not out.open(tmp, spec):
             raise _fail(path, "cannot write", _geterror(out))
-        ok = out.write_image(np.ascontiguousarray(pixels, np.float32))
+        ok = _write_blocks(out, spec, planes)
         err = _geterror(out)
         closed = out.close()
         err = err or _geterror(out)
@@ -1077,11 +1094,10 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
             planes.append(np.stack([vel[..., 0], -vel[..., 1]], axis=-1))   # Nuke: y-up
             names += ["forward.u", "forward.v"]
             pass_count += 2
-    pixels = np.concatenate(planes, axis=-1) if len(planes) > 1 else planes[0]
     extra = dict(attributes or {})
     if pass_count:
         extra.setdefault("clfx:passes", "Z: planar z, scene units, inf background; "
                                         "forward.u/v: forward px/frame, y-up (Nuke)")
     spec = _make_spec(frame, fmt, bit_depth, compression or fmt.default_compression, data,
                       display_win, names, pass_count, target, extra)
-    _atomic_write(path, folder, fmt, spec, pixels)
+    _atomic_write(path, folder, fmt, spec, planes)

@@ -189,12 +189,23 @@ def survey_devices(selector: str | None = None) -> tuple[list[DeviceReport], obj
     return reports, chosen
 
 
-class BufferPool:
-    """Reuses device buffers by size: creating one costs tens of ms on PoCL."""
+POOL_MAX_IDLE_BYTES = int(os.environ.get("CLFX_POOL_MB", "512")) * 2 ** 20
+"""Idle pooled buffers are kept up to this many bytes (``CLFX_POOL_MB``); beyond it a freed
+buffer is released.  A 1080p look's buffers all fit, so a sequence allocates nothing after
+its first frame; at 4K the largest FFT work buffers are released, bounding memory."""
 
-    def __init__(self, ctx):
+
+class BufferPool:
+    """Reuses device buffers by size: creating one costs tens of ms on PoCL.
+
+    On a CPU device buffers are host memory, so idle ones are capped
+    (``POOL_MAX_IDLE_BYTES``)."""
+
+    def __init__(self, ctx, max_idle_bytes: int = POOL_MAX_IDLE_BYTES):
         self._ctx = ctx
         self._free: dict[int, list] = {}
+        self._idle_bytes = 0
+        self.max_idle_bytes = max_idle_bytes
         self._lock = threading.Lock()
 
     def take(self, nbytes: int):
@@ -204,16 +215,30 @@ class BufferPool:
         with self._lock:
             bucket = self._free.get(nbytes)
             if bucket:
+                self._idle_bytes -= nbytes
                 return bucket.pop()
         return cl.Buffer(self._ctx, cl.mem_flags.READ_WRITE, nbytes)
 
     def give(self, nbytes: int, buf) -> None:
+        nbytes = max(int(nbytes), 16)
         with self._lock:
-            self._free.setdefault(max(int(nbytes), 16), []).append(buf)
+            if self._idle_bytes + nbytes > self.max_idle_bytes:
+                buf.release()  # over the cap: give the memory back
+                return
+            self._free.setdefault(nbytes, []).append(buf)
+            self._idle_bytes += nbytes
+
+    @property
+    def idle_bytes(self) -> int:
+        return self._idle_bytes
 
     def clear(self) -> None:
         with self._lock:
+            for bucket in self._free.values():
+                for buf in bucket:
+                    buf.release()
             self._free.clear()
+            self._idle_bytes = 0
 
 
 @dataclass(eq=False)
@@ -385,9 +410,12 @@ class Runtime:
         if window.shape != (h, w):
             raise ValueError(f"array shape {a.shape} does not match window {window}")
         img = self.image(window, channels)
-        padded = np.zeros((max(h, 1), img.pitch, channels), np.float32)
-        padded[:h, :w] = a.reshape(h, w, channels)
-        self.cl.enqueue_copy(self.queue, img.buffer, padded)
+        if img.pitch == w and h > 0 and a.flags.c_contiguous:
+            self.cl.enqueue_copy(self.queue, img.buffer, a)  # no padding: copy as is
+        else:
+            padded = np.zeros((max(h, 1), img.pitch, channels), np.float32)
+            padded[:h, :w] = a.reshape(h, w, channels)
+            self.cl.enqueue_copy(self.queue, img.buffer, padded)
         return img
 
     def download(self, img: DeviceImage) -> np.ndarray:
@@ -395,7 +423,7 @@ class Runtime:
         h, w = img.window.shape
         host = np.empty((max(h, 1), img.pitch, img.channels), np.float32)
         self.cl.enqueue_copy(self.queue, host, img.buffer)
-        out = np.ascontiguousarray(host[:h, :w])
+        out = host if (img.pitch == w and h > 0) else np.ascontiguousarray(host[:h, :w])
         return out[..., 0] if img.channels == 1 else out
 
     def fill(self, img: DeviceImage, value: float = 0.0) -> DeviceImage:
