@@ -6,12 +6,19 @@
  * Random numbers: clfx_uniform(seed, frame, X, Y, c) of common.h for frame coordinates
  * X = fx0 + x, Y = fy0 + y, with streams c = 0..3 and 4..7 (Box-Muller pair: shot and read
  * Gaussians) and 8..11 (the uniform of the Poisson inversion).  PRNU uses its own seed and
- * frame 0, so the pattern is the same on every frame.
+ * frame 0, so the pattern is the same on every frame: sensor_noise_prnu writes it once per
+ * parameter set and window (the plugin caches it) and sensor_noise_apply reads it.
  *
  * Defines: SHOT, READ, PRNU (0/1) drop unused terms at compile time; INVERT=1 samples the
- * Poisson count exactly by inversion when lambda <= SWITCH electrons (bounded loop of
- * MAX_COUNT steps; u capped at 1 - 4e-6), else the normal approximation
- * lambda + sqrt(lambda) z.  USE_DOUBLE=1 (reference) does all arithmetic in double.
+ * Poisson count exactly by inversion when lambda <= SWITCH electrons (a search over the
+ * summed CDF, four terms per step, bounded by MAX_COUNT terms; u capped at 1 - 4e-6), else
+ * the normal approximation lambda + sqrt(lambda) z.  USE_DOUBLE=1 (reference) does all
+ * arithmetic in double.
+ *
+ * Speed notes (PoCL on AVX-512, where the inversion dominated): any() is reduced by vector
+ * ORs (PoCL's any() branches per lane), the CDF terms of a step are independent products
+ * (no latency chain), coefficients are compile-time constants, and the count is kept in
+ * masked increments; the loop runs to the largest count among the 12 colour lanes.
  */
 #include "common.h"
 
@@ -42,7 +49,11 @@
 #define REAL double
 #define REAL16 double16
 #define MASK16 long16
+#define MASK8 long8
+#define MASK4 long4
+#define MASK2 long2
 #define TO_REAL16 convert_double16
+#define CONVERT_REAL16 convert_double16
 #define SN_LOG(x) log(x)
 #define SN_EXP(x) exp(x)
 #define SN_SINCOS2PI(u, c) sincos((REAL)SN_TWO_PI * (u), (c))
@@ -51,9 +62,13 @@
 #define REAL float
 #define REAL16 float16
 #define MASK16 int16
+#define MASK8 int8
+#define MASK4 int4
+#define MASK2 int2
 #define TO_REAL16 convert_float16
+#define CONVERT_REAL16 convert_float16
 #define SN_LOG(x) clfx_log16(x)
-#define SN_EXP(x) clfx_exp2_16((x) * 1.44269504f)
+#define SN_EXP(x) sensor_noise_exp16(x)
 #define SN_SINCOS2PI(u, c) clfx_sincos2pi16((u), (c))
 #define SN_COS2PI(u) sensor_noise_cos2pi16(u)
 #endif
@@ -61,7 +76,45 @@
 #define SN_TWO_PI 6.283185307179586
 
 #include "fastmath.h"
+
+/* 1 / (j (j + 1) ... (j + m - 1)) for m = 1..4 and j = 4 b + 1: the coefficients of the
+ * inversion's step b (constant-folded; up to j = 256). */
+#if MAX_COUNT > 256
+#error "MAX_COUNT > 256: extend sn_coef"
+#endif
+#define SN_STEPS (((MAX_COUNT + 7) / 8) * 2)      /* steps of 4 terms, tested in pairs */
+#define SN_COEF(j) {(REAL)1 / (REAL)(j), (REAL)1 / ((REAL)(j) * (REAL)((j) + 1)),              \
+                    (REAL)1 / ((REAL)(j) * (REAL)((j) + 1) * (REAL)((j) + 2)),                  \
+                    (REAL)1 / ((REAL)(j) * (REAL)((j) + 1) * (REAL)((j) + 2) * (REAL)((j) + 3))}
+#define SN_COEF4(j) SN_COEF(j), SN_COEF((j) + 4), SN_COEF((j) + 8), SN_COEF((j) + 12)
+#define SN_COEF16(j) SN_COEF4(j), SN_COEF4((j) + 16), SN_COEF4((j) + 32), SN_COEF4((j) + 48)
+constant REAL sn_coef[64][4] = {SN_COEF16(1), SN_COEF16(65), SN_COEF16(129), SN_COEF16(193)};
+
+/* any() of a 16-lane mask by halving ORs: PoCL expands any() into 16 extract-and-branch
+ * steps (data-dependent branches, mispredicted), this is four vector ORs and one test. */
+inline int sensor_noise_any16(const MASK16 m)
+{
+  const MASK8 a = m.lo | m.hi;
+  const MASK4 b = a.lo | a.hi;
+  const MASK2 c = b.lo | b.hi;
+  return (c.x | c.y) < 0;
+}
 CLFX_DEFINE_FASTMATH(16)
+
+/* exp(x) for x in [-126 ln 2, 0]: clfx_exp2_16's polynomial, with the rounding to the
+ * nearest integer done by the 1.5 * 2^23 trick (PoCL expands rint() into a dozen
+ * instructions); bit for bit clfx_exp2_16(x * log2 e) there. */
+inline float16 sensor_noise_exp16(const float16 x)
+{
+  const float16 xc = max(x * 1.44269504f, -126.0f);
+  const float16 big = xc + 12582912.0f;                /* 1.5 * 2^23: k in the low bits */
+  const float16 k = big - 12582912.0f;
+  const float16 t = (xc - k) * 0.69314718f;
+  const float16 p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f
+                    + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));
+  return p * as_float16((as_int16(big) - 0x4B400000 + 127) << 23);
+}
+
 inline float16 sensor_noise_cos2pi16(const float16 u)
 {
   float16 c;
@@ -69,17 +122,51 @@ inline float16 sensor_noise_cos2pi16(const float16 u)
   return c;
 }
 
-/* clfx_uniform(seed, frame, x + i, y, c0 + c), lane 4 i + c, in REAL precision. */
-inline REAL16 sensor_noise_uniform16(uint seed, int frame, int x, int y, int c0)
+/* clfx_uniform(seed, frame, x + i, y, c) (common.h) in two parts, lane 4 i + c.  The first
+ * four of its five hashes depend on (seed, frame, x, y) only, so the streams of one pixel
+ * share them: sensor_noise_hash_xy16 once per pixel and seed, then one hash per stream.
+ * Bit for bit clfx_uniform16 of fastmath.h. */
+inline uint16 sensor_noise_hash_xy16(const uint seed, const int frame, const int x, const int y)
 {
-  return TO_REAL16(clfx_uniform16(seed, frame, x, y, c0));
+  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
+  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+  const uint16 h = clfx_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
+  return clfx_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
 }
 
-kernel void sensor_noise_apply(global const float *src, global float *dst, const int pitch,
+/* The uniform of streams c0 + c (lane 4 i + c) from sensor_noise_hash_xy16, in REAL. */
+inline REAL16 sensor_noise_stream16(const uint16 hxy, const int c0)
+{
+  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
+  const uint16 h = clfx_hash16(hxy ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
+  return TO_REAL16((convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f));
+}
+
+/* The fixed pattern's relative gain error prnu z per pixel and channel (alpha lanes 0):
+ * a Gaussian z by Box-Muller from streams 0 and 4 of prnu_seed at frame 0, in REAL, stored
+ * as float.  Computed once per parameter set and window; sensor_noise_apply multiplies
+ * by 1 + pattern. */
+kernel void sensor_noise_prnu(global float *pattern, const int pitch, const int height,
+                              const int fx0, const int fy0, const uint prnu_seed,
+                              const float prnu)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int x = qx * 4;
+  const uint16 hp = sensor_noise_hash_xy16(prnu_seed, 0, fx0 + x, fy0 + y);
+  const REAL16 fa = sensor_noise_stream16(hp, 0), fb = sensor_noise_stream16(hp, 4);
+  const REAL16 z = sqrt((REAL)(-2) * SN_LOG(fa)) * SN_COS2PI(fb);
+  const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
+  vstore16(select(convert_float16((REAL)prnu * z), (float16)0.0f, alpha), 0,
+           pattern + (size_t)(y * pitch + x) * 4);
+}
+
+kernel void sensor_noise_apply(global const float *src, global float *dst,
+                               global const float *pattern, const int pitch,
                                const int height, const int fx0, const int fy0,
-                               const uint seed, const uint prnu_seed, const int frame,
+                               const uint seed, const int frame,
                                const float kr, const float kg, const float kb,
-                               const float read_e, const float prnu)
+                               const float read_e)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
@@ -97,18 +184,14 @@ kernel void sensor_noise_apply(global const float *src, global float *dst, const
   const REAL16 g16 = select((REAL16)zero, (REAL)1 / k16, k16 > zero);
 
 #if PRNU
-  {
-    /* photo-response non-uniformity: a fixed per-pixel, per-channel gain 1 + prnu z */
-    const REAL16 fa = sensor_noise_uniform16(prnu_seed, 0, fx, fy, 0);
-    const REAL16 fb = sensor_noise_uniform16(prnu_seed, 0, fx, fy, 4);
-    v *= (REAL)1 + (REAL)prnu * sqrt((REAL)(-2) * SN_LOG(fa)) * SN_COS2PI(fb);
-  }
+  /* photo-response non-uniformity: a fixed per-pixel, per-channel gain 1 + prnu z */
+  v *= (REAL)1 + TO_REAL16(vload16(0, pattern + i));
 #endif
 
   REAL16 out = v;
 #if SHOT || READ
-  const REAL16 ua = sensor_noise_uniform16(seed, frame, fx, fy, 0);
-  const REAL16 ub = sensor_noise_uniform16(seed, frame, fx, fy, 4);
+  const uint16 hxy = sensor_noise_hash_xy16(seed, frame, fx, fy);
+  const REAL16 ua = sensor_noise_stream16(hxy, 0), ub = sensor_noise_stream16(hxy, 4);
   const REAL16 r = sqrt((REAL)(-2) * SN_LOG(ua));
   REAL16 co;
   const REAL16 si = SN_SINCOS2PI(ub, &co);
@@ -124,29 +207,43 @@ kernel void sensor_noise_apply(global const float *src, global float *dst, const
 #if INVERT
     const REAL16 lam = vpos * k16;                     /* inf for huge v: normal branch */
     const MASK16 small = lam <= (REAL)SWITCH;
-    if(any(small))
+    if(sensor_noise_any16(small))
     {
-      /* exact inversion of the Poisson CDF: the smallest n with u <= F(n).  u is capped at
-       * 1 - U_CAP so rounding in the summed CDF (measured <= 2e-7 for lambda <= 30) can never
-       * leave F below u: the top U_CAP quantile maps to its lower edge. */
-      const REAL16 u = min(sensor_noise_uniform16(seed, frame, fx, fy, 8), (REAL)1 - (REAL)U_CAP);
-      const REAL16 ls = select((REAL16)zero, lam, small);
-      REAL16 p = SN_EXP(-ls), cdf = p, n = (REAL16)zero;
-      MASK16 active = small & (u > cdf);
-      /* Lanes stay active from the first step on, so every active lane holds n = it: one
-       * scalar reciprocal per step instead of a division per lane.  p and cdf run on in
-       * finished lanes too (unused there): only n must be frozen.  Two steps per loop test. */
-      for(int it = 1; it < MAX_COUNT && any(active); it += 2)
+      /* exact inversion of the Poisson CDF: the smallest n with u <= F(n), i.e. the number of
+       * j >= 0 with F(j) < u (F rises with j).  u is capped at 1 - U_CAP so rounding in the
+       * summed CDF (float32: |F - F_exact| <= 1.2e-6 for lambda <= 30, measured over a fine
+       * lambda grid; double: ~1e-15) can never leave F below u: the top U_CAP quantile maps
+       * to its lower edge. */
+      const REAL16 u = min(sensor_noise_stream16(hxy, 8), (REAL)1 - (REAL)U_CAP);
+      const REAL16 ls = select((REAL16)zero, lam, small), one = (REAL16)((REAL)1);
+      REAL16 p = SN_EXP(-ls);                          /* pmf(j - 1) */
+      REAL16 d = u - p;                                /* u - F(j - 1) */
+      /* the count n in four partial sums, each a masked increment (no add chain) */
+      REAL16 n0 = select((REAL16)zero, one, d > zero), n1 = (REAL16)zero;
+      REAL16 n2 = (REAL16)zero, n3 = (REAL16)zero;
+      /* Four terms per step, each from pmf(j - 1) by lambda^m / (j ... j + m - 1): products
+       * and prefix sums are independent, so the loop-carried chain is one multiply and one
+       * subtraction per four terms (the one-term recurrence is latency-bound).  A lane counts
+       * term j while d = u - F(j) > 0; once d <= 0 it stays so (IEEE: d > s iff d - s > 0),
+       * so finished lanes run on without masks.  The any() test comes every eight terms. */
+      const REAL16 l2 = ls * ls, l3 = l2 * ls, l4 = l2 * l2;
+      for(int b = 0; b < SN_STEPS && sensor_noise_any16(d > zero); )
       {
-        p = p * ls * ((REAL)1 / (REAL)it);
-        cdf += p;
-        n = select(n, (REAL16)((REAL)it), active);
-        active = active & (u > cdf);
-        p = p * ls * ((REAL)1 / (REAL)(it + 1));
-        cdf += p;
-        n = select(n, (REAL16)((REAL)(it + 1)), active);
-        active = active & (u > cdf);
+#pragma unroll
+        for(int h = 0; h < 2; h++, b++)
+        {
+          const REAL16 p1 = p * (ls * sn_coef[b][0]), p2 = p * (l2 * sn_coef[b][1]);
+          const REAL16 p3 = p * (l3 * sn_coef[b][2]), p4 = p * (l4 * sn_coef[b][3]);
+          const REAL16 s2 = p1 + p2, s3 = s2 + p3, s4 = s3 + p4;
+          n0 = select(n0, n0 + one, d > p1);
+          n1 = select(n1, n1 + one, d > s2);
+          n2 = select(n2, n2 + one, d > s3);
+          n3 = select(n3, n3 + one, d > s4);
+          d -= s4;
+          p = p4;
+        }
       }
+      const REAL16 n = (n0 + n1) + (n2 + n3);
       dev = select(dev, (n - ls) * g16, small);
     }
 #endif

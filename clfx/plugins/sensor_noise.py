@@ -23,14 +23,16 @@ i.e. in linear units, variance = gain * signal + read^2 with gain ``g_c`` and re
 ``g_c * read`` (read noise is given in electrons at the sensor, so its linear size grows
 with ISO, as in a real camera's output).  The Poisson count is sampled exactly by CDF
 inversion while ``lambda <= 30`` electrons (final/reference; 10 in preview; the uniform is
-capped at 1 - 4e-6 so float32 rounding of the summed CDF, <= ~2e-7 here, can never stall
+capped at 1 - 4e-6 so float32 rounding of the summed CDF, <= ~1.2e-6 here, can never stall
 the search: only the top 4e-6 quantile is moved to its lower edge), and by the
 normal approximation ``lambda + sqrt(lambda) z`` above (same mean and variance; the skew
 of a Poisson at 30 counts is 0.18).  Draft uses the normal approximation at every count.
 
 Random numbers come from ``clfx_uniform(seed, frame, X, Y, c)`` at frame coordinates, so
 the noise is identical for a frame rendered alone, in a batch, cropped, or on any thread
-count; the PRNU pattern uses frame 0 and its own seed, so it stays fixed over a sequence.
+count; the PRNU pattern uses frame 0 and its own seed, so it stays fixed over a sequence
+(it is computed once per parameter set and data window and cached on the plugin instance:
+one frame-sized float buffer).
 Non-finite inputs become 0 (then get read noise) and values are clamped to +-1e38 so
 nothing overflows; alpha is kept bit for bit.
 
@@ -52,8 +54,8 @@ POISSON_SWITCH = {"draft": None, "preview": 10.0, "final": 30.0, "reference": 30
 """Largest expected electron count sampled exactly (None: normal approximation everywhere)."""
 
 MAX_COUNT = 200
-"""Bound of the inversion loop (never reached: with u <= 1 - 4e-6 and lambda <= 30 the
-search ends by n ~ 60)."""
+"""Bound of the inversion loop, in CDF terms (never reached: with u <= 1 - 4e-6 and
+lambda <= 30 the search ends by n ~ 60)."""
 
 
 def sensor_gain(p, camera) -> float:
@@ -109,7 +111,8 @@ class SensorNoise(Plugin):
             "draft": "normal approximation of the shot noise at every count, float32",
             "preview": "exact Poisson inversion up to 10 expected electrons, normal above; float32",
             "final": "exact Poisson inversion up to 30 expected electrons, normal above; float32",
-            "reference": "as final, with all arithmetic (Box-Muller, CDF sums) in float64",
+            "reference": "as final, with all arithmetic (Box-Muller, CDF sums, the PRNU "
+                         "pattern's Gaussian) in float64",
         },
     )
 
@@ -117,6 +120,46 @@ class SensorNoise(Plugin):
         if not p.shot_noise and p.read_noise == 0.0 and p.prnu == 0.0:
             return "shot noise is off, read noise and prnu are 0"
         return None
+
+    def __init__(self):
+        super().__init__()
+        self._pattern = None   # (key, DeviceImage): the PRNU pattern of the last window
+
+    def prnu_pattern(self, rt, p, ctx, use64):
+        """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, cached per parameter set.
+
+        The pattern is the same on every frame, so a sequence computes it once: its
+        Box-Muller pair per value (~40 % of a draft render at 1080p) becomes one read.
+
+        Parameters
+        ----------
+        rt : Runtime
+        p : Params
+            Uses ``prnu`` and ``seed`` (with the look's seed, ``ctx.seed``).
+        ctx : RenderContext
+            Its source's window and pitch place the pattern in frame coordinates.
+        use64 : bool
+            Compute ``z`` in float64 (reference level); stored as float32 either way.
+
+        Returns
+        -------
+        DeviceImage
+            Same layout as ``ctx.source``; colour lanes hold ``prnu * z`` (the relative gain
+            error), alpha lanes 0.  Held by this instance until the key changes.
+        """
+        src = ctx.source
+        seed = effect_seed(p.seed, ctx.seed, PRNU_SALT)
+        key = (rt, seed, float(p.prnu), src.window, src.pitch, use64)
+        if self._pattern is not None and self._pattern[0] == key:
+            return self._pattern[1]
+        self._pattern = None  # release the old pattern before allocating the new one
+        pattern = src.like()
+        knl = rt.kernel("sensor_noise.cl", "sensor_noise_prnu", USE_DOUBLE=int(use64))
+        rt.launch(knl, (src.pitch // 4, src.height), pattern, np.int32(src.pitch),
+                  np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
+                  np.uint32(seed), np.float32(p.prnu))
+        self._pattern = (key, pattern)
+        return pattern
 
     def render(self, rt, p, ctx):
         src = ctx.source
@@ -126,14 +169,14 @@ class SensorNoise(Plugin):
                    "PRNU": int(p.prnu > 0), "INVERT": int(switch is not None),
                    "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT,
                    "USE_DOUBLE": int(use64)}
+        pattern = self.prnu_pattern(rt, p, ctx, use64) if p.prnu > 0 else src  # src: unread
         kr, kg, kb = (np.float32(k) for k in electrons_per_unit(p, ctx.camera))
         dst = src.like()
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", **defines)
-        rt.launch(knl, (src.pitch // 4, src.height), src, dst, np.int32(src.pitch),
+        rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
                   np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
-                  np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT)),
-                  np.uint32(effect_seed(p.seed, ctx.seed, PRNU_SALT)), np.int32(ctx.frame),
-                  kr, kg, kb, np.float32(p.read_noise), np.float32(p.prnu))
+                  np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT)), np.int32(ctx.frame),
+                  kr, kg, kb, np.float32(p.read_noise))
         return dst
 
 

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from clfx.camera import Camera
+from clfx.plugin import RenderContext
 from clfx.plugins.grain import effect_seed
-from clfx.plugins.sensor_noise import (MAX_COUNT, PRNU_SALT, SENSOR_SALT, SensorNoise, bench_case,
+from clfx.plugins.sensor_noise import (MAX_COUNT, SENSOR_SALT, SensorNoise, bench_case,
                                        electrons_per_unit, noise_variance)
 from clfx.rect import Rect
 from tests.conftest import ROOT, hard_shapes
@@ -115,6 +116,21 @@ def test_low_counts_are_integer_electrons_with_poisson_probabilities(rt):
         assert abs(np.mean(counts == j) - pmf) <= 4 * se, j
 
 
+@pytest.mark.parametrize("quality, lam", [("final", 25.0), ("preview", 9.5)])
+def test_counts_over_many_inversion_steps_have_poisson_probabilities(rt, quality, lam):
+    # the inversion sums the CDF four terms per step: counts up to ~50 cross many steps
+    k = electrons_per_unit(SensorNoise.params(), CAMERA)[1]
+    out, _ = run(rt, flat(128, 128, lam / k), quality, read_noise=0.0, seed=8)
+    counts = out[..., :3].astype(np.float64) * k
+    np.testing.assert_allclose(counts, np.round(counts), atol=1e-3)  # whole electrons
+    counts = np.round(counts).astype(int).ravel()
+    n = counts.size
+    for j in range(int(lam - 2 * math.sqrt(lam)), int(lam + 3 * math.sqrt(lam)) + 1):
+        pmf = math.exp(-lam + j * math.log(lam) - math.lgamma(j + 1))
+        se = math.sqrt(pmf * (1 - pmf) / n)
+        assert abs(np.mean(counts == j) - pmf) <= 4.5 * se, j  # 4.5 sigma over ~20 bins
+
+
 def test_draft_uses_the_normal_approximation_with_the_same_variance(rt):
     k = electrons_per_unit(SensorNoise.params(), CAMERA)[1]
     out, _ = run(rt, flat(128, 128, 5.0 / k), "draft", read_noise=0.0)
@@ -172,6 +188,29 @@ def test_same_frame_gives_identical_bytes_and_crops_agree(rt, rng, quality):
     assert not np.array_equal(a, c)
 
 
+def test_cached_prnu_pattern_follows_params_and_window(rt, rng):
+    """One instance across a 'sequence' whose params and data window change: every render
+    equals a fresh instance's (the cached pattern is rebuilt when its key changes)."""
+    src = rng.uniform(0.0, 0.1, (24, 36, 4)).astype(np.float32)
+    plugin = SensorNoise()
+    cases = [(dict(prnu=0.01, seed=1), None, "final"), (dict(prnu=0.01, seed=1), None, "final"),
+             (dict(prnu=0.03, seed=1), None, "final"), (dict(prnu=0.03, seed=2), None, "draft"),
+             (dict(prnu=0.03, seed=2), Rect(5, -3, 41, 21), "draft"),
+             (dict(prnu=0.03, seed=2), Rect(5, -3, 41, 21), "reference"),
+             (dict(prnu=0.0, seed=2), None, "final")]
+    for i, (kw, window, quality) in enumerate(cases):
+        p = SensorNoise.params(**kw)
+        got = plugin.apply(rt, p, src, quality=quality, frame=i, data_window=window,
+                           camera=CAMERA)
+        want = SensorNoise().apply(rt, p, src, quality=quality, frame=i, data_window=window,
+                                   camera=CAMERA)
+        assert got.tobytes() == want.tobytes(), (i, kw, window, quality)
+    # unchanged params and window: the pattern is reused, not rebuilt
+    p = SensorNoise.params(prnu=0.02)
+    ctx = RenderContext(rt, rt.upload(src), camera=CAMERA)
+    assert plugin.prnu_pattern(rt, p, ctx, False) is plugin.prnu_pattern(rt, p, ctx, False)
+
+
 # -- hard cases -------------------------------------------------------------------------------
 @pytest.mark.parametrize("quality", LEVELS)
 def test_hard_values_stay_finite_and_alpha_is_kept(rt, quality):
@@ -217,14 +256,15 @@ def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
     base, p = run(rt, src, frame=4, **kw)
     up = rt.upload(src)
     k = electrons_per_unit(p, CAMERA)
+    ctx = RenderContext(rt, up, camera=CAMERA, frame=4, display_window=up.window)
+    pattern = SensorNoise().prnu_pattern(rt, p, ctx, use64=False)
     knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", SHOT=1, READ=1, PRNU=1, INVERT=1,
                     SWITCH=repr(30.0), MAX_COUNT=MAX_COUNT, USE_DOUBLE=0)
     for local in ((1, 1), (2, 3), (7, 1)):
         dst = up.like()
-        rt.launch(knl, (up.pitch // 4, 19), up, dst, np.int32(up.pitch), np.int32(19),
+        rt.launch(knl, (up.pitch // 4, 19), up, dst, pattern, np.int32(up.pitch), np.int32(19),
                   np.int32(0), np.int32(0), np.uint32(effect_seed(3, 0, SENSOR_SALT)),
-                  np.uint32(effect_seed(3, 0, PRNU_SALT)), np.int32(4),
-                  *(np.float32(v) for v in k), np.float32(p.read_noise), np.float32(p.prnu),
+                  np.int32(4), *(np.float32(v) for v in k), np.float32(p.read_noise),
                   local=local)
         assert rt.download(dst).tobytes() == base.tobytes(), local
     np.save(tmp_path / "src.npy", src)
