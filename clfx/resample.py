@@ -200,6 +200,106 @@ def upload_map(rt, dx, dy, pitch: int, double: bool):
     return rt.to_device(host)
 
 
+def _split(p):
+    """floor(p - 0.5) as an integer and the float32 fraction in [0, 1) (carried, not 1.0)."""
+    f = p - 0.5
+    i = np.floor(f)
+    t = (f - i).astype(np.float32)
+    carry = t >= 1.0                      # float32 rounding of 1 - 1e-9
+    return i + carry, np.where(carry, np.float32(0.0), t)
+
+
+def _padded(a, pitch: int, fill: float):
+    """(rows, pitch) copy of ``a`` whose padding columns repeat each row's last pixel."""
+    h, w = a.shape
+    out = np.full((max(h, 1), pitch), fill)
+    if h and w:
+        out[:h, :w] = a
+        out[:h, w:] = a[:, -1:]
+    return out
+
+
+class PackedMap:
+    """One or more maps of source points in the load-efficient form of kernels/resample.h.
+
+    ``points`` is a list of ``(sx, sy)`` pairs (float64, shape (h, w)): continuous
+    source-window coordinates (texel centres at +0.5) for the output pixels, NaN = no
+    source.  Output rows share ``pitch`` (a multiple of 4) with the source.
+
+    ``entries`` (int32, (h, pitch // 4, 12 * maps)): per quad of 4 output pixels (a
+    work-item) and map, the float indices ``(iy * pitch + ix) * 4`` of the 4 texels
+    (ix, iy) = floor(point - 0.5), clipped into the image, then the 4 x fractions and the 4 y
+    fractions as float32 bits (exact to ~6e-8 px).  The fast kernel reads them for every
+    quad: no floor, no conversion, no border rule, nothing but vector loads.
+
+    ``fixups[filter code]``: the quads where some footprint of that filter (2x2, 4x4, 6x6)
+    leaves the source or some point is undefined, as int32 records of ``4 + 8 * maps``:
+    the quad's index, 3 unused, then per map the 4 points' x and y as float32 bits.  A
+    second, small kernel re-renders just those quads through the checked path (border
+    rule, NaN -> 0) over the fast kernel's output (which clamps their texel indices so it
+    never reads outside the buffer).  Padding pixels repeat the row's last pixel.
+    """
+
+    TAPS = {0: 2, 1: 4, 2: 6}
+
+    def __init__(self, points, width: int, height: int, pitch: int):
+        rows, quads = max(points[0][0].shape[0], 1), pitch // 4
+        entries, coords = [], []
+        bad = {code: np.zeros((rows, quads), bool) for code in self.TAPS}
+        for sx, sy in points:
+            px, py = _padded(sx, pitch, 0.5), _padded(sy, pitch, 0.5)
+            finite = np.isfinite(px) & np.isfinite(py) & (np.abs(px) < 1e7) & (np.abs(py) < 1e7)
+            ix, tx = _split(np.where(finite, px, 0.5))
+            iy, ty = _split(np.where(finite, py, 0.5))
+            for code, taps in self.TAPS.items():
+                off = taps // 2 - 1
+                inside = finite & (ix - off >= 0) & (ix - off + taps <= width) \
+                    & (iy - off >= 0) & (iy - off + taps <= height)
+                bad[code] |= ~inside.reshape(rows, quads, 4).all(axis=2)
+            base = (np.clip(iy, 0, max(height - 1, 0)) * pitch
+                    + np.clip(ix, 0, max(width - 1, 0))) * 4
+            e = np.empty((rows, quads, 3, 4), np.int32)
+            e[:, :, 0] = base.astype(np.int32).reshape(rows, quads, 4)
+            e[:, :, 1] = np.where(finite, tx, 0).astype(np.float32).view(np.int32).reshape(rows, quads, 4)
+            e[:, :, 2] = np.where(finite, ty, 0).astype(np.float32).view(np.int32).reshape(rows, quads, 4)
+            entries.append(e.reshape(rows, quads, 12))
+            c = np.empty((rows, quads, 2, 4), np.int32)
+            c[:, :, 0] = px.astype(np.float32).view(np.int32).reshape(rows, quads, 4)
+            c[:, :, 1] = py.astype(np.float32).view(np.int32).reshape(rows, quads, 4)
+            coords.append(c.reshape(rows * quads, 8))
+        self.entries = np.concatenate(entries, axis=2)
+        self.fixups = {}
+        for code, mask in bad.items():
+            idx = np.flatnonzero(mask)
+            rec = np.zeros((idx.size, 4 + 8 * len(points)), np.int32)
+            rec[:, 0] = idx
+            for m, c in enumerate(coords):
+                rec[:, 4 + 8 * m: 12 + 8 * m] = c[idx]
+            self.fixups[code] = rec
+        self.interior_fraction = {code: 1.0 - m.mean() for code, m in bad.items()}
+        # the fast kernel needs one footprint that fits in the source to clamp into
+        self.fast_possible = {code: width >= taps and height >= taps
+                              for code, taps in self.TAPS.items()}
+
+    def upload(self, rt):
+        """Device buffers: ``(entries, {code: (records or None, count)})``."""
+        fix = {code: (rt.to_device(r) if len(r) else None, len(r))
+               for code, r in self.fixups.items()}
+        return rt.to_device(self.entries), fix
+
+
+def launch_packed(rt, fast, fix, entries, fixups, code: int, quads_x: int, rows: int,
+                  head: tuple, tail: tuple, fast_possible: bool = True):
+    """Enqueue a packed-map warp: ``fast`` over every quad, then ``fix`` over the border
+    quads of filter ``code``.  Kernel arguments: ``fast(*head, entries, *tail)`` and
+    ``fix(*head, records, count, *tail)``."""
+    if fast_possible:
+        rt.launch(fast, (quads_x, max(rows, 1)), *head, entries, *tail)
+    buf, count = fixups[code]
+    if count:
+        rt.launch(fix, (count,), *head, buf, np.int32(count), *tail)
+
+
 def needs_sanitising(ctx, effect: str) -> bool:
     """True if the frame has non-finite pixels (from the shared per-frame analysis).
 

@@ -247,4 +247,148 @@ inline void rs_sample4(global const float *src, int pitch, int w, int h, float4 
   *o3 = rs_sample(src, pitch, w, h, sx.s3, sy.s3);
 }
 
+/* ---- Packed maps: a pure gather from a map precomputed once per parameter set ----------
+ *
+ * clfx.resample.PackedMap turns a float64 map of source points into 12 ints per quad of 4
+ * output pixels (a work-item): the float indices (iy * pitch + ix) * 4 of the texels
+ * (ix, iy) = floor(source point - 0.5), the 4 x fractions and the 4 y fractions (float).
+ * The fast kernel (rs_fast_quad) reads them for every quad: no floor, no conversion, no
+ * border rule, no branch, one vector load per footprint row and float16 / float8
+ * arithmetic.  Quads with a footprint leaving the source (or no source) are listed per
+ * filter and re-rendered afterwards by a small kernel through rs_sample (rs_fix_quad);
+ * the fast kernel clamps their texel indices so it never reads outside the buffer.
+ * (A branch between the two paths inside one kernel cost 25%: PoCL's work-item loops.)
+ */
+
+/* Keys cubic (a = -0.5) weights of 4 pixels at once */
+inline void rs_cubic_w4(float4 t, float4 *w0, float4 *w1, float4 *w2, float4 *w3)
+{
+  const float4 t2 = t * t;
+  *w0 = ((-0.5f * t + 1.0f) * t - 0.5f) * t;
+  *w1 = (1.5f * t - 2.5f) * t2 + 1.0f;
+  *w2 = ((-1.5f * t + 2.0f) * t + 0.5f) * t;
+  *w3 = (0.5f * t - 0.5f) * t2;
+}
+
+/* Lanczos-3 weights of 4 pixels at once: the same formula as rs_weights (one sin/cos pair
+ * by Taylor polynomials, angle addition for the 6 taps, normalised to sum 1). */
+inline void rs_lanczos_w4(float4 t, float4 *w0, float4 *w1, float4 *w2, float4 *w3,
+                          float4 *w4, float4 *w5)
+{
+  const float pi = 3.14159265358979323846f;
+  const float4 e = pi * (t - 0.5f);
+  const float4 e2 = e * e;
+  const float4 s1 = 1.0f + e2 * (-1.0f / 2 + e2 * (1.0f / 24 + e2 * (-1.0f / 720 + e2 * (1.0f / 40320
+                    + e2 * (-1.0f / 3628800 + e2 * (1.0f / 479001600))))));
+  const float4 a = pi * t / 3.0f;
+  const float4 a2 = a * a;
+  const float4 sa = a * (1.0f + a2 * (-1.0f / 6 + a2 * (1.0f / 120 + a2 * (-1.0f / 5040
+                    + a2 * (1.0f / 362880 + a2 * (-1.0f / 39916800))))));
+  const float4 ca = 1.0f + a2 * (-1.0f / 2 + a2 * (1.0f / 24 + a2 * (-1.0f / 720 + a2 * (1.0f / 40320
+                    + a2 * (-1.0f / 3628800)))));
+  const float s3 = 0.86602540378443864676f;
+  const float4 hs = 0.5f * sa, cs = s3 * ca;
+  const float pp = pi * pi;
+  /* tap k = i - 2 at distance d = t - k: 3 sin(pi d) sin(pi d / 3) / (pi d)^2 */
+#define RS_LZ(d, sin_d, sin_d3) \
+  select(3.0f * (sin_d) * (sin_d3) / (pp * (d) * (d)), (float4)1.0f, fabs(d) < 1e-7f)
+  const float4 v0 = RS_LZ(t + 2.0f, s1, cs - hs);
+  const float4 v1 = RS_LZ(t + 1.0f, -s1, cs + hs);
+  const float4 v2 = RS_LZ(t, s1, sa);
+  const float4 v3 = RS_LZ(t - 1.0f, -s1, hs - cs);
+  const float4 v4 = RS_LZ(t - 2.0f, s1, -hs - cs);
+  const float4 v5 = RS_LZ(t - 3.0f, -s1, -sa);
+#undef RS_LZ
+  const float4 inv = 1.0f / (((v0 + v1) + (v2 + v3)) + (v4 + v5));
+  *w0 = v0 * inv; *w1 = v1 * inv; *w2 = v2 * inv; *w3 = v3 * inv; *w4 = v4 * inv; *w5 = v5 * inv;
+}
+
+/* Broadcast lane k of four float4 weight vectors into a float16 (4 texels x RGBA) */
+#define RS_W16(a, b, c, d, k) \
+  (float16)((float4)((a).s##k), (float4)((b).s##k), (float4)((c).s##k), (float4)((d).s##k))
+#define RS_HSUM16(v) (((v).lo.lo + (v).lo.hi) + ((v).hi.lo + (v).hi.hi))
+
+/* The fast path: 4 outputs from texel bases (float indices of the footprint's (ix, iy)
+ * texel) and fractions, every footprint inside the source. */
+inline void rs_fast4(global const float *src, int pitch, int4 base, float4 tx, float4 ty,
+                     float4 *o0, float4 *o1, float4 *o2, float4 *o3)
+{
+  const int row = pitch * 4;
+#if RS_FILTER == 0
+  /* 2x2, pixel by pixel: two vload8 (the top and bottom texel pairs) and three mixes
+   * (gathering the 4 pixels into float16s first was 15% slower: the shuffles) */
+#define RS_BILERP(k, o) {                                                                    \
+    const float8 a = rs_sanitise8(vload8(0, src + base.s##k));                               \
+    const float8 b = rs_sanitise8(vload8(0, src + base.s##k + row));                         \
+    *o = mix(mix(a.lo, a.hi, tx.s##k), mix(b.lo, b.hi, tx.s##k), ty.s##k); }
+  RS_BILERP(0, o0) RS_BILERP(1, o1) RS_BILERP(2, o2) RS_BILERP(3, o3)
+#undef RS_BILERP
+#elif RS_FILTER == 1
+  float4 x0, x1, x2, x3, y0, y1, y2, y3;
+  rs_cubic_w4(tx, &x0, &x1, &x2, &x3);
+  rs_cubic_w4(ty, &y0, &y1, &y2, &y3);
+  /* per pixel: the 4 rows (vload16 = 4 texels each) summed vertically with wy on 16 lanes,
+   * then weighted horizontally; clamped to the central 2x2 texels (anti-ringing) */
+#define RS_CUBIC(k, o) {                                                                     \
+    global const float *p = src + base.s##k - row - 4;                                      \
+    const float16 r0 = rs_sanitise16(vload16(0, p)), r1 = rs_sanitise16(vload16(0, p + row)); \
+    const float16 r2 = rs_sanitise16(vload16(0, p + 2 * row));                               \
+    const float16 r3 = rs_sanitise16(vload16(0, p + 3 * row));                               \
+    const float16 v = fma(r3, (float16)y3.s##k, fma(r2, (float16)y2.s##k,                    \
+                      fma(r1, (float16)y1.s##k, r0 * y0.s##k)));                             \
+    const float16 hsum = v * RS_W16(x0, x1, x2, x3, k);                                      \
+    const float4 lo = fmin(fmin(r1.s4567, r1.s89ab), fmin(r2.s4567, r2.s89ab));             \
+    const float4 hi = fmax(fmax(r1.s4567, r1.s89ab), fmax(r2.s4567, r2.s89ab));             \
+    *o = clamp(RS_HSUM16(hsum), lo, hi); }
+  RS_CUBIC(0, o0) RS_CUBIC(1, o1) RS_CUBIC(2, o2) RS_CUBIC(3, o3)
+#undef RS_CUBIC
+#else
+  float4 x0, x1, x2, x3, x4, x5, y0, y1, y2, y3, y4, y5;
+  rs_lanczos_w4(tx, &x0, &x1, &x2, &x3, &x4, &x5);
+  rs_lanczos_w4(ty, &y0, &y1, &y2, &y3, &y4, &y5);
+#define RS_LROW(j, wy)                                                                        \
+    { const float16 a = rs_sanitise16(vload16(0, p + j * row));                              \
+      const float8 b = rs_sanitise8(vload8(0, p + j * row + 16));                            \
+      va = fma(a, (float16)(wy), va); vb = fma(b, (float8)(wy), vb);                         \
+      if(j == 2 || j == 3) { lo = fmin(lo, fmin(a.s89ab, a.scdef));                           \
+                             hi = fmax(hi, fmax(a.s89ab, a.scdef)); } }
+#define RS_LANCZOS(k, o) {                                                                   \
+    global const float *p = src + base.s##k - 2 * row - 8;                                  \
+    float16 va = (float16)0.0f; float8 vb = (float8)0.0f;                                    \
+    float4 lo = (float4)INFINITY, hi = (float4)-INFINITY;                                    \
+    RS_LROW(0, y0.s##k) RS_LROW(1, y1.s##k) RS_LROW(2, y2.s##k)                              \
+    RS_LROW(3, y3.s##k) RS_LROW(4, y4.s##k) RS_LROW(5, y5.s##k)                              \
+    const float16 ha = va * RS_W16(x0, x1, x2, x3, k);                                       \
+    const float8 hb = vb * (float8)((float4)x4.s##k, (float4)x5.s##k);                       \
+    *o = clamp(RS_HSUM16(ha) + (hb.lo + hb.hi), lo, hi); }
+  RS_LANCZOS(0, o0) RS_LANCZOS(1, o1) RS_LANCZOS(2, o2) RS_LANCZOS(3, o3)
+#undef RS_LANCZOS
+#undef RS_LROW
+#endif
+}
+
+#ifndef RS_EXACT_TRIG
+/* 4 outputs of a quad from its 12 packed entries q (fast path, no border rule). */
+inline void rs_fast_quad(global const float *src, int pitch, int w, int h, global const int *q,
+                         float4 *o0, float4 *o1, float4 *o2, float4 *o3)
+{
+  const int off = RS_TAPS / 2 - 1;
+  /* the footprints of border quads (re-rendered later) are pulled inside the image */
+  const int4 base = clamp(vload4(0, q), (int4)(off * (pitch + 1) * 4),
+                          (int4)(((h - RS_TAPS + off) * pitch + (w - RS_TAPS + off)) * 4));
+  rs_fast4(src, pitch, base, as_float4(vload4(1, q)), as_float4(vload4(2, q)), o0, o1, o2, o3);
+}
+
+/* 4 outputs of a border quad from its points (4 x then 4 y, float) with the border rule. */
+inline void rs_fix_quad(global const float *src, int pitch, int w, int h, global const int *c,
+                        float4 *o0, float4 *o1, float4 *o2, float4 *o3)
+{
+  const float4 sx = as_float4(vload4(0, c)), sy = as_float4(vload4(1, c));
+  *o0 = rs_sample(src, pitch, w, h, sx.s0, sy.s0);
+  *o1 = rs_sample(src, pitch, w, h, sx.s1, sy.s1);
+  *o2 = rs_sample(src, pitch, w, h, sx.s2, sy.s2);
+  *o3 = rs_sample(src, pitch, w, h, sx.s3, sy.s3);
+}
+#endif
+
 #endif

@@ -43,8 +43,9 @@ import numpy as np
 
 from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, Plugin, Vec2Param,
                          register)
-from clfx.resample import (BORDERS, check_fold, fold_radius, kernel_defines,
-                           needs_sanitising, radial_lut)
+from clfx.resample import (BORDERS, FILTER_CODE, PackedMap, check_fold, fold_radius,
+                           kernel_defines, launch_packed, lut_lookup, needs_sanitising,
+                           pixel_centres, radial_lut)
 
 LAMBDA_MIN, LAMBDA_MAX = 380.0, 720.0
 LAMBDA_B, LAMBDA_R = 450.0, 650.0
@@ -184,7 +185,8 @@ class ChromaticAberration(Plugin):
                         hint="What reads outside the source return: black, edge (clamp), mirror."),
         ),
         quality={
-            "draft": "three channels (per-channel CMF-weighted scale), bilinear, float32",
+            "draft": "three channels (per-channel CMF-weighted scale), bilinear from a packed "
+                     "map of the red and blue source points (green in place), float32",
             "preview": "8 wavelengths (380-720 nm bins), bicubic with anti-ringing clamp, float32",
             "final": "16 wavelengths, bicubic with anti-ringing clamp, float32",
             "reference": "32 wavelengths, bicubic with anti-ringing clamp, float64 tables, "
@@ -194,6 +196,34 @@ class ChromaticAberration(Plugin):
 
     def __init__(self):
         self._tables: dict = {}
+        self._packed: dict = {}
+
+    def packed_maps(self, rt, p, ctx, n):
+        """Three-bin float levels: the red and blue bins' source points as a PackedMap
+        (device buffers), from the same float64 tables the kernel would interpolate."""
+        src = ctx.source
+        key = (p.hash_hex(), n, src.window, src.pitch, ctx.display_window, ctx.pixel_aspect)
+        hit = self._packed.get(key)
+        if hit is None:
+            cx, cy, unit, r_max = geometry(p, ctx.display_window, src.window, ctx.pixel_aspect)
+            deltas, weights = channel_bins(p.amount)      # as tables(): n == 3
+            luts = build_luts(deltas, p.cubic, r_max)
+            scale = 1.0 / (unit * r_max)
+            ox, oy = pixel_centres(src.window)
+            dx, dy = ox - cx, oy - cy
+            rho = np.clip((dx * ctx.pixel_aspect * scale) ** 2 + (dy * scale) ** 2, 0.0, 1.0)
+            points = []
+            for i in (0, 2):
+                s = lut_lookup(luts[i], rho)
+                points.append((cx + dx * s - src.window.x0, cy + dy * s - src.window.y0))
+            pm = PackedMap(points, src.width, src.height, src.pitch)
+            entries, fixups = pm.upload(rt)
+            hit = (entries, fixups, pm.fast_possible,
+                   rt.to_device(weights.astype(np.float32)))
+            if len(self._packed) >= 4:
+                self._packed.pop(next(iter(self._packed)))
+            self._packed[key] = hit
+        return hit
 
     def is_identity(self, p, ctx):
         if p.amount == 0.0:
@@ -216,7 +246,8 @@ class ChromaticAberration(Plugin):
             dt = np.float64 if double else np.float32
             scale = 1.0 / (unit * r_max)
             consts = (cx, cy, ctx.pixel_aspect * scale, scale)
-            hit = (rt.to_device(luts.astype(dt)), rt.to_device(weights.astype(dt)), consts)
+            hit = (rt.to_device(interleave(luts).astype(dt)), rt.to_device(weights.astype(dt)), consts,
+                   max_shift(luts, cx, cy, src.window))
             if len(self._tables) >= 8:
                 self._tables.pop(next(iter(self._tables)))
             self._tables[key] = hit
@@ -226,18 +257,97 @@ class ChromaticAberration(Plugin):
         src = ctx.source
         n, filt, double = self.plan(p, ctx.quality)
         double = double and rt.has_fp64
-        luts, weights, (cx, cy, ax, ay) = self.tables(rt, p, ctx, n, double)
+        luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, ctx, n, double)
         defines = kernel_defines(filt, p.border, double,
-                                        needs_sanitising(ctx, "chromatic_aberration"))
-        defines.update(NWAVE=n, LUTN=LUT_SIZE, GREEN_IN_PLACE=int(n == 3))
-        knl = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply", **defines)
+                                 needs_sanitising(ctx, "chromatic_aberration"))
+        defines.update(NWAVE=n, NWP=padded_count(n), LUTN=LUT_SIZE, GREEN_IN_PLACE=int(n == 3))
         real = np.float64 if double else np.float32
         dst = src.like()
         i32 = np.int32
-        rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, luts, weights,
-                  i32(src.pitch), i32(src.width), i32(src.height), i32(src.window.x0),
-                  i32(src.window.y0), real(cx), real(cy), real(ax), real(ay))
+        if n == 3 and not double:
+            entries, fixups, fast_possible, wbuf = self.packed_maps(rt, p, ctx, n)
+            code = FILTER_CODE[filt]
+            launch_packed(rt, rt.kernel("chromatic_aberration.cl", "chromatic_aberration_packed",
+                                        CA_FAST=1, **defines),
+                          rt.kernel("chromatic_aberration.cl", "chromatic_aberration_packed_fix",
+                                    CA_FAST=1, **defines),
+                          entries, fixups, code, src.pitch // 4, src.height, (src, dst),
+                          (wbuf, i32(src.pitch), i32(src.width), i32(src.height)),
+                          fast_possible[code])
+            return dst
+        args = (src, dst, luts, weights, i32(src.pitch), i32(src.width), i32(src.height),
+                i32(src.window.x0), i32(src.window.y0), real(cx), real(cy), real(ax), real(ay))
+        quads, rows = src.pitch // 4, max(src.height, 1)
+        inner = None if double else interior_quads(shift, TAPS[filt], src.width, src.height)
+        checked = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
+                            CA_FAST=0, **defines)
+        for qx0, y0, nq, nr in ring(quads, rows, inner):
+            rt.launch(checked, (nq, nr), *args, i32(qx0), i32(y0), i32(nq), i32(nr))
+        if inner is not None:
+            fast = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
+                             CA_FAST=1, **defines)
+            qx0, y0, nq, nr = inner
+            rt.launch(fast, (nq, nr), *args, i32(qx0), i32(y0), i32(nq), i32(nr))
         return dst
+
+
+TAPS = {"bilinear": 2, "bicubic": 4, "lanczos3": 6}
+
+
+def padded_count(n: int) -> int:
+    """Wavelengths per table entry: n padded to an OpenCL vector width (4, 8, 16) if any."""
+    return next((v for v in (4, 8, 16) if n <= v), n)
+
+
+def interleave(luts):
+    """(n, LUTN + 1) tables -> (LUTN + 1, padded n): entry j holds every wavelength's scale,
+    so the kernel reads them with one vector load per pixel; padding repeats the last."""
+    n, m = luts.shape
+    out = np.empty((m, padded_count(n)), luts.dtype)
+    out[:, :n] = luts.T
+    out[:, n:] = luts[-1:].T
+    return out
+
+
+def max_shift(luts, cx, cy, window):
+    """Bound (x, y) in px on how far any wavelength moves any pixel of ``window``.
+
+    A pixel at (dx, dy) from the optical centre reads c + (dx, dy) S(rho), so it moves by
+    |(dx, dy)| |S - 1|; the linear interpolation of the tables stays within their values.
+    inf when some radius has no preimage (NaN in a table).
+    """
+    dev = np.abs(np.asarray(luts, np.float64) - 1.0)
+    if not np.isfinite(dev).all():
+        return math.inf, math.inf
+    d = float(dev.max())
+    return (d * max(abs(window.x0 - cx), abs(window.x1 - cx)),
+            d * max(abs(window.y0 - cy), abs(window.y1 - cy)))
+
+
+def interior_quads(shift, taps: int, width: int, height: int):
+    """The rectangle of quads (qx0, y0, quads, rows) whose footprints stay inside the source
+    for every wavelength (so the kernel may skip the checks), or None."""
+    sx, sy = shift
+    if not (math.isfinite(sx) and math.isfinite(sy)):
+        return None
+    off = taps // 2 - 1
+    # pixel x reads texels floor(x + 0.5 +- shift - 0.5) - off ... + taps - 1 (+1 for rounding)
+    x_lo, x_hi = math.ceil(sx) + off + 1, width - taps + off - math.ceil(sx) - 1
+    y_lo, y_hi = math.ceil(sy) + off + 1, height - taps + off - math.ceil(sy) - 1
+    q_lo, q_hi = -(-x_lo // 4), (x_hi - 3) // 4
+    if q_hi < q_lo or y_hi < y_lo:
+        return None
+    return q_lo, y_lo, q_hi - q_lo + 1, y_hi - y_lo + 1
+
+
+def ring(quads: int, rows: int, inner):
+    """Rectangles (qx0, y0, quads, rows) covering the quads outside ``inner`` (all if None)."""
+    if inner is None:
+        return [(0, 0, quads, rows)]
+    q0, y0, nq, nr = inner
+    parts = [(0, 0, quads, y0), (0, y0 + nr, quads, rows - y0 - nr),
+             (0, y0, q0, nr), (q0 + nq, y0, quads - q0 - nq, nr)]
+    return [r for r in parts if r[2] > 0 and r[3] > 0]
 
 
 def bench_case(width, height, rng):

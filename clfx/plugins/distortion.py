@@ -47,7 +47,8 @@ import numpy as np
 
 from clfx.plugin import ChoiceParam, Descriptor, FloatParam, Plugin, register
 from clfx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
-                           kernel_defines, pixel_centres, rect_boundary, upload_map)
+                           kernel_defines, pixel_centres, rect_boundary, upload_map,
+                           FILTER_CODE, PackedMap, launch_packed)
 
 NEWTON_STEPS = 8
 RESIDUAL_TOL_PX = 1e-6
@@ -222,10 +223,12 @@ class Distortion(Plugin):
                              "(clamp), mirror."),
         ),
         quality={
-            "draft": "bilinear (2x2) from a float32 displacement map, float32 sums",
-            "preview": "bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, float32 map",
-            "final": "Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, float32 displacement "
-                     "map (positions to ~1e-4 px at 4K), float32 sums",
+            "draft": "bilinear (2x2) from a packed map (texel indices + float32 fractions), "
+                     "float32 sums",
+            "preview": "bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, packed map, "
+                       "float32 sums",
+            "final": "Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, packed map (positions "
+                     "to ~1e-7 px; border tiles ~1e-4 px at 4K), float32 sums",
             "reference": "Lanczos-3 with the anti-ringing clamp, float64 map and float64 sums",
         },
     )
@@ -241,41 +244,56 @@ class Distortion(Plugin):
         return None
 
     def device_map(self, rt, p, ctx, double):
-        """The cached displacement map for this parameter set and frame geometry."""
+        """The cached device map for this parameter set and frame geometry.
+
+        float levels: ``(entries, fixups, fast_possible)`` of a :class:`clfx.resample.PackedMap`
+        (one serves bilinear, bicubic and Lanczos-3); reference: a float64 displacement map.
+        """
         src = ctx.source
         key = (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
                ctx.camera, double)
         hit = self._maps.get(key)
         if hit is None:
-            # the float64 host map is shared by the float32 and float64 device maps
+            # the float64 host map is shared by the packed and the float64 device maps
             host_key = key[:-1]
             if self._host_key != host_key:
                 sx, sy, info = build_map(p, ctx.camera, ctx.display_window, src.window,
                                          ctx.pixel_aspect)
-                ox, oy = pixel_centres(src.window)
-                self._host_key, self._host = host_key, (sx - ox, sy - oy, info)
-            dx, dy, info = self._host
-            buf = upload_map(rt, dx, dy, src.pitch, double)
+                self._host_key, self._host = host_key, (sx - src.window.x0,
+                                                        sy - src.window.y0, info)
+            sx, sy, info = self._host
+            if double:
+                ox, oy = pixel_centres(src.window, frame_origin=False)
+                bufs = (upload_map(rt, sx - ox, sy - oy, src.pitch, True),)
+            else:
+                pm = PackedMap([(sx, sy)], src.width, src.height, src.pitch)
+                bufs = pm.upload(rt) + (pm.fast_possible,)
             if len(self._maps) >= 4:
                 self._maps.pop(next(iter(self._maps)))
-            hit = self._maps[key] = (buf, info)
+            hit = self._maps[key] = (bufs, info)
         return hit
 
     def render(self, rt, p, ctx):
         src = ctx.source
         double = ctx.quality == "reference" and rt.has_fp64
-        buf, info = self.device_map(rt, p, ctx, double)
+        bufs, info = self.device_map(rt, p, ctx, double)
         if info["no_source"]:
             ctx.notes.append(f"distortion: {info['no_source']} px beyond the lens's reach "
                              f"left transparent")
-        knl = rt.kernel("distortion.cl", "distortion_warp",
-                        **kernel_defines(FILTER_BY_QUALITY[ctx.quality], p.border, double,
-                                        needs_sanitising(ctx, "distortion")))
+        defines = kernel_defines(FILTER_BY_QUALITY[ctx.quality], p.border, double,
+                                 needs_sanitising(ctx, "distortion"))
         dst = src.like()
         i32 = np.int32
-        rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, buf,
-                  i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch),
-                  i32(dst.height), i32(0), i32(0))
+        tail = (i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch), i32(dst.height))
+        if double:
+            knl = rt.kernel("distortion.cl", "distortion_warp_f64", **defines)
+            rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, bufs[0], *tail)
+            return dst
+        entries, fixups, fast_possible = bufs
+        code = FILTER_CODE[FILTER_BY_QUALITY[ctx.quality]]
+        launch_packed(rt, rt.kernel("distortion.cl", "distortion_warp", **defines),
+                      rt.kernel("distortion.cl", "distortion_fix", **defines), entries, fixups,
+                      code, src.pitch // 4, src.height, (src, dst), tail, fast_possible[code])
         return dst
 
 
