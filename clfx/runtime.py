@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 import threading
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -199,11 +200,12 @@ class BufferPool:
     """Reuses device buffers by size: creating one costs tens of ms on PoCL.
 
     On a CPU device buffers are host memory, so idle ones are capped
-    (``POOL_MAX_IDLE_BYTES``)."""
+    (``POOL_MAX_IDLE_BYTES``): past the cap the least recently freed idle buffers are
+    released, so the sizes a look uses every frame stay pooled."""
 
     def __init__(self, ctx, max_idle_bytes: int = POOL_MAX_IDLE_BYTES):
         self._ctx = ctx
-        self._free: dict[int, list] = {}
+        self._idle: OrderedDict[int, tuple[int, object]] = OrderedDict()  # id -> (nbytes, buf)
         self._idle_bytes = 0
         self.max_idle_bytes = max_idle_bytes
         self._lock = threading.Lock()
@@ -213,19 +215,24 @@ class BufferPool:
 
         nbytes = max(int(nbytes), 16)
         with self._lock:
-            bucket = self._free.get(nbytes)
-            if bucket:
-                self._idle_bytes -= nbytes
-                return bucket.pop()
+            for key, (size, buf) in reversed(self._idle.items()):  # most recent first
+                if size == nbytes:
+                    del self._idle[key]
+                    self._idle_bytes -= size
+                    return buf
         return cl.Buffer(self._ctx, cl.mem_flags.READ_WRITE, nbytes)
 
     def give(self, nbytes: int, buf) -> None:
         nbytes = max(int(nbytes), 16)
         with self._lock:
-            if self._idle_bytes + nbytes > self.max_idle_bytes:
-                buf.release()  # over the cap: give the memory back
+            if nbytes > self.max_idle_bytes:
+                buf.release()
                 return
-            self._free.setdefault(nbytes, []).append(buf)
+            while self._idle and self._idle_bytes + nbytes > self.max_idle_bytes:
+                _, (size, old) = self._idle.popitem(last=False)  # least recently freed
+                self._idle_bytes -= size
+                old.release()
+            self._idle[id(buf)] = (nbytes, buf)
             self._idle_bytes += nbytes
 
     @property
@@ -234,10 +241,9 @@ class BufferPool:
 
     def clear(self) -> None:
         with self._lock:
-            for bucket in self._free.values():
-                for buf in bucket:
-                    buf.release()
-            self._free.clear()
+            for _, buf in self._idle.values():
+                buf.release()
+            self._idle.clear()
             self._idle_bytes = 0
 
 

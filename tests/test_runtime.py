@@ -105,16 +105,23 @@ def test_reframe_zero_and_clamp(rt):
     assert c[0, 0] == a[0, 0] and c[-1, -1] == a[-1, -1] and np.array_equal(c[1:4, 1:5], a)
 
 
-def test_buffers_return_to_the_pool(rt):
+def test_buffers_return_to_the_pool_and_idle_memory_is_capped(rt):
     import gc
 
-    nbytes = rt.image((7, 9), 4).nbytes
-    gc.collect()
-    before = len(rt.pool._free.get(nbytes, []))
+    from clfx.runtime import BufferPool
+
     img = rt.image((7, 9), 4)
+    buf = img.buffer
     del img
     gc.collect()
-    assert len(rt.pool._free.get(nbytes, [])) >= before
+    assert rt.image((7, 9), 4).buffer is buf  # reused, not re-created
+    pool = BufferPool(rt.ctx, max_idle_bytes=1000)
+    a, b, c = pool.take(400), pool.take(400), pool.take(300)
+    pool.give(400, a)
+    pool.give(400, b)
+    pool.give(300, c)  # over the cap: the least recently freed (a) is released
+    assert pool.idle_bytes == 700
+    assert pool.take(300) is c and pool.take(400) is b
 
 
 def test_pocl_cache_dir_is_persistent_by_default():
