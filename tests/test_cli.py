@@ -234,3 +234,22 @@ def test_radial_depth_uses_the_look_camera_focal_length(rt, tmp_path):
     info = json.loads(run("probe", tmp_path / "in.exr", "--depth-mode", "distance",
                           "--focal-length-px", str(cam_f_px), "--json").stdout)
     assert info["depth"]["mode"] == "distance"
+
+
+def test_raw_pipe_round_trip(rt):
+    """`clfx render - - --raw WxH` reads ffmpeg gbrpf32le frames (planes G, B, R) from stdin
+    and writes them to stdout: 3 frames in, 3 out, centre nearly unchanged by a vignette."""
+    w, h = 64, 36
+    frames = [np.stack([np.full((h, w), v, np.float32) for v in (0.2 * i, 0.1, 0.5)]) for i in range(3)]
+    proc = subprocess.run([sys.executable, "-m", "clfx.cli", "-q", "render", "-", "-", "--look",
+                           "wide-angle", "--raw", f"{w}x{h}"], input=b"".join(f.tobytes() for f in frames),
+                          capture_output=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    out = np.frombuffer(proc.stdout, np.float32).reshape(3, 3, h, w)
+    np.testing.assert_allclose(out[:, :, h // 2, w // 2], np.stack(frames)[:, :, h // 2, w // 2], rtol=3e-3)
+    assert (out[:, 2, 0, 0] < out[:, 2, h // 2, w // 2]).all()  # corners darker (red plane)
+
+
+def test_raw_pipe_needs_a_size():
+    r = run("render", "-", "-", code=1)
+    one_line_error(r, "--raw WxH")
