@@ -1,12 +1,21 @@
 /* lens.cl: a real lens's distortion, transverse CA and vignetting (clfx/plugins/lens.py).
  *
- * Green (and alpha) read the source at the distortion map's point u_g (output pixel centre +
- * displacement, source-window coordinates; HAS_MAP = 0 means no distortion: u_g = u).  With
- * HAS_TCA, red and blue read at C + (u_g - C) T_c(rho), rho = |u_g - C|^2 scaled so the LUT
- * covers [0, 1] (C = lensfun's optical centre, lensfun assumes square pixels): the inverse of
- * the lens's TCA model, tabulated per parameter set.  With HAS_VIG the result is multiplied
- * by lensfun's pa polynomial 1 + k1 r^2 + k2 r^4 + k3 r^6 at the output pixel (r = 1 at the
- * calibration frame's corner), clamped to >= 0.  4 output pixels per work-item.
+ * Green (and alpha) read the source at the distortion map's point u_g; with HAS_TCA, red and
+ * blue read at C + (u_g - C) T_c(rho), rho = |u_g - C|^2 scaled to [0, 1] (C = lensfun's
+ * optical centre, lensfun assumes square pixels): the inverse of the lens's TCA model.  With
+ * HAS_VIG the result is multiplied by lensfun's pa polynomial 1 + k1 r^2 + k2 r^4 + k3 r^6
+ * at the output pixel (r = 1 at the calibration frame's corner), clamped to >= 0.  4 output
+ * pixels per work-item.
+ *
+ * lens_packed (draft / preview / final): the source points of every channel are computed
+ * once per parameter set on the host in float64 and packed (clfx.resample.PackedMap,
+ * LENS_MAPS maps = green, then red and blue with TCA: 12 ints per map and quad): a pure
+ * gather, no table reads, floor or border rule per pixel; lens_packed_fix then re-renders
+ * the quads whose footprints leave the source through the checked path.  LENS_MAPS = 0
+ * (vignetting only) reads the source pixels in place.
+ *
+ * lens_apply (reference): a float64 displacement map for green (HAS_MAP = 0: u_g = u) and
+ * float64 TCA tables, float64 coordinates, weights and sums.
  */
 #include "resample.h"
 
@@ -14,6 +23,77 @@
 #define MAP_REAL float
 #endif
 
+#ifndef RS_EXACT_TRIG
+/* multiply RGB of the 4 pixels of quad (qx, y) by the vignetting (no-op without HAS_VIG) */
+inline void lens_vignette(int qx, int y, float ccx, float ccy, float vig_scale, float vk1,
+                          float vk2, float vk3, float4 *c0, float4 *c1, float4 *c2, float4 *c3)
+{
+#if HAS_VIG
+  const float4 ux = (float4)(qx * 4, qx * 4 + 1, qx * 4 + 2, qx * 4 + 3) + 0.5f;
+  const float uy = (float)y + 0.5f;
+  const float4 vx = (ux - ccx) * vig_scale;
+  const float vy = (uy - ccy) * vig_scale;
+  const float4 r2 = vx * vx + vy * vy;
+  const float4 v = fmax(1.0f + r2 * (vk1 + r2 * (vk2 + r2 * vk3)), 0.0f);
+  (*c0).xyz *= v.s0; (*c1).xyz *= v.s1; (*c2).xyz *= v.s2; (*c3).xyz *= v.s3;
+#endif
+}
+
+kernel void lens_packed(global const float *src, global float *dst, global const int *map,
+                        const int pitch, const int w, const int h, const float ccx,
+                        const float ccy, const float vig_scale, const float vk1,
+                        const float vk2, const float vk3)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= h || qx * 4 >= pitch) return;
+  const int quad = y * (pitch / 4) + qx;
+  float4 c0, c1, c2, c3;
+#if LENS_MAPS == 0
+  const float16 s = rs_sanitise16(vload16(0, src + quad * 16));
+  c0 = s.lo.lo; c1 = s.lo.hi; c2 = s.hi.lo; c3 = s.hi.hi;
+#else
+  global const int *q = map + 12 * LENS_MAPS * quad;
+  rs_fast_quad(src, pitch, w, h, q, &c0, &c1, &c2, &c3);
+#if LENS_MAPS == 3
+  float4 r0, r1, r2, r3;
+  rs_fast_quad(src, pitch, w, h, q + 12, &r0, &r1, &r2, &r3);
+  c0.x = r0.x; c1.x = r1.x; c2.x = r2.x; c3.x = r3.x;
+  rs_fast_quad(src, pitch, w, h, q + 24, &r0, &r1, &r2, &r3);
+  c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z;
+#endif
+#endif
+  lens_vignette(qx, y, ccx, ccy, vig_scale, vk1, vk2, vk3, &c0, &c1, &c2, &c3);
+  vstore16((float16)(c0, c1, c2, c3), 0, dst + quad * 16);
+}
+
+#if LENS_MAPS > 0
+/* the border quads, after lens_packed: records of 4 + 8 LENS_MAPS ints (quad index,
+ * 3 unused, then per map the 4 x and 4 y of the source points) */
+kernel void lens_packed_fix(global const float *src, global float *dst,
+                            global const int *records, const int count, const int pitch,
+                            const int w, const int h, const float ccx, const float ccy,
+                            const float vig_scale, const float vk1, const float vk2,
+                            const float vk3)
+{
+  const int n = get_global_id(0);
+  if(n >= count) return;
+  global const int *rec = records + (4 + 8 * LENS_MAPS) * n;
+  const int quad = rec[0];
+  float4 c0, c1, c2, c3;
+  rs_fix_quad(src, pitch, w, h, rec + 4, &c0, &c1, &c2, &c3);
+#if LENS_MAPS == 3
+  float4 r0, r1, r2, r3;
+  rs_fix_quad(src, pitch, w, h, rec + 12, &r0, &r1, &r2, &r3);
+  c0.x = r0.x; c1.x = r1.x; c2.x = r2.x; c3.x = r3.x;
+  rs_fix_quad(src, pitch, w, h, rec + 20, &r0, &r1, &r2, &r3);
+  c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z;
+#endif
+  lens_vignette(quad % (pitch / 4), quad / (pitch / 4), ccx, ccy, vig_scale, vk1, vk2, vk3,
+                &c0, &c1, &c2, &c3);
+  vstore16((float16)(c0, c1, c2, c3), 0, dst + quad * 16);
+}
+#endif
+#else
 kernel void lens_apply(global const float *src, global float *dst, global const MAP_REAL *map,
                        global const MAP_REAL *luts, const int pitch, const int w, const int h,
                        const int x0, const int y0,
@@ -24,46 +104,6 @@ kernel void lens_apply(global const float *src, global float *dst, global const 
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= h || qx * 4 >= pitch) return;
   const int idx = y * pitch + qx * 4;
-#ifndef RS_EXACT_TRIG
-  /* float levels: 4 pixels at once, coordinates as float4 vectors */
-  const float4 ux = (float4)(qx * 4, qx * 4 + 1, qx * 4 + 2, qx * 4 + 3) + 0.5f;
-  const float uy = (float)y + 0.5f;
-#if HAS_MAP
-  const float8 m = vload8(0, map + 2 * idx);
-  const float4 gx = ux + m.even, gy = uy + m.odd;
-#else
-  const float4 gx = ux, gy = (float4)uy;
-#endif
-  float4 c0, c1, c2, c3;
-  rs_sample4(src, pitch, w, h, gx, gy, &c0, &c1, &c2, &c3);
-#if HAS_TCA
-  {
-    const float4 dx = gx - ccx, dy = gy - ccy;
-    const float4 t = clamp((dx * dx + dy * dy) * lut_scale, 0.0f, 1.0f) * (float)LUTN;
-    const int4 j = min(convert_int4(t), LUTN - 1);
-    const float4 f = t - convert_float4(j);
-    float4 r0, r1, r2, r3;
-#define LENS_LUT(off) (float4)(luts[(off) + j.s0], luts[(off) + j.s1], luts[(off) + j.s2], luts[(off) + j.s3])
-    const float4 sr = LENS_LUT(0) + f * (LENS_LUT(1) - LENS_LUT(0));
-    rs_sample4(src, pitch, w, h, ccx + dx * sr, ccy + dy * sr, &r0, &r1, &r2, &r3);
-    c0.x = r0.x; c1.x = r1.x; c2.x = r2.x; c3.x = r3.x;
-    const float4 sb = LENS_LUT(LUTN + 1) + f * (LENS_LUT(LUTN + 2) - LENS_LUT(LUTN + 1));
-#undef LENS_LUT
-    rs_sample4(src, pitch, w, h, ccx + dx * sb, ccy + dy * sb, &r0, &r1, &r2, &r3);
-    c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z;
-  }
-#endif
-#if HAS_VIG
-  {
-    const float4 vx = (ux - ccx) * vig_scale;
-    const float vy = (uy - ccy) * vig_scale;
-    const float4 r2 = vx * vx + vy * vy;
-    const float4 v = fmax(1.0f + r2 * (vk1 + r2 * (vk2 + r2 * vk3)), 0.0f);
-    c0.xyz *= v.s0; c1.xyz *= v.s1; c2.xyz *= v.s2; c3.xyz *= v.s3;
-  }
-#endif
-  vstore16((float16)(c0, c1, c2, c3), 0, dst + idx * 4);
-#else
   float4 o[4];
   for(int k = 0; k < 4; k++) {
     /* output pixel centre in source-window coordinates */
@@ -97,5 +137,5 @@ kernel void lens_apply(global const float *src, global float *dst, global const 
     o[k] = convert_float4(c);
   }
   vstore16((float16)(o[0], o[1], o[2], o[3]), 0, dst + idx * 4);
-#endif
 }
+#endif

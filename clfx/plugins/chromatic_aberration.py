@@ -361,3 +361,41 @@ def bench_case(width, height, rng):
     src[..., 3] = 1.0
     return dict(source=src, depth=None, velocity=None,
                 params=dict(amount=0.004, cubic=0.3, spectral=True), camera=Camera())
+
+
+def bench_peers(case, params, ctx):
+    """cv2.remap of red and blue with the float64 source points of the three-channel mode
+    (the ``draft`` level's operation: green and alpha stay in place), bilinear."""
+    try:
+        import cv2
+    except ImportError:
+        return {}
+    src = np.ascontiguousarray(case["source"], np.float32)
+    win = ctx.source.window
+    # the same points as ChromaticAberration.packed_maps (float64 tables, float64 lookup)
+    cx, cy, unit, r_max = geometry(params, ctx.display_window, win, ctx.pixel_aspect)
+    deltas, _ = channel_bins(params.amount)
+    luts = build_luts(deltas, params.cubic, r_max)
+    scale = 1.0 / (unit * r_max)
+    ox, oy = pixel_centres(win)
+    dx, dy = ox - cx, oy - cy
+    rho = np.clip((dx * ctx.pixel_aspect * scale) ** 2 + (dy * scale) ** 2, 0.0, 1.0)
+    maps = []
+    for i in (0, 2):
+        s = lut_lookup(luts[i], rho)
+        # cv2's maps address pixel centres at integers; points without a source read the border
+        sx, sy = cx + dx * s - win.x0 - 0.5, cy + dy * s - win.y0 - 0.5
+        maps.append((np.where(np.isfinite(sx), sx, -1e6).astype(np.float32),
+                     np.where(np.isfinite(sy), sy, -1e6).astype(np.float32)))
+    border = {"edge": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101}.get(
+        params.border, cv2.BORDER_CONSTANT)
+    cv2.setNumThreads(2)
+
+    def remap_red_blue():
+        out = src.copy()
+        for c, (mx, my) in zip((0, 2), maps):
+            out[..., c] = cv2.remap(np.ascontiguousarray(src[..., c]), mx, my, cv2.INTER_LINEAR,
+                                    borderMode=border)
+        return out
+
+    return {"cv2.remap bilinear (R, B)": (remap_red_blue, "draft")}

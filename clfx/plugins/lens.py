@@ -16,7 +16,12 @@ Simulating (lensfun's ``reverse=True``): the output pixel u reads green (and alp
 undistorted point u_g = D^-1(u) and red/blue at T_c^-1(u_g) (the TCA model inverted about the
 same centre), then RGB is multiplied by the vignetting polynomial at u.  Inverses are found
 by float64 bisection on the increasing branch (maps that fold inside the frame are refused),
-once per parameter set: the green map is a displacement map, the TCA inverses radial tables.
+once per parameter set: the green map point by point, the TCA inverses as radial tables.
+The float levels then look the tables up on the host (float64) and pack every channel's
+source points (green, red, blue) into a :class:`clfx.resample.PackedMap` (a pure gather on
+the device, border quads through a second, checked kernel); the reference level reads a
+float64 displacement map and float64 tables in the kernel.  Vignetting is evaluated in the
+kernels (a short polynomial per pixel).
 
 The calibration is interpolated by lensfun itself (``lensfunpy.Lens.interpolate_*``) at the
 focal length, aperture and distance (0 = from the camera block); the crop factor comes from
@@ -33,10 +38,10 @@ from clfx import lensdb
 from clfx.errors import ParamError
 from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, Plugin, StringParam,
                          register)
-from clfx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
-                           kernel_defines, pixel_centres, radial_inverse, radial_inverse_fast,
-                           radial_lut,
-                           rect_boundary, upload_map)
+from clfx.resample import (BORDERS, FILTER_BY_QUALITY, FILTER_CODE, PackedMap, check_fold,
+                           fit_scale, fold_radius, kernel_defines, launch_packed, lut_lookup,
+                           needs_sanitising, pixel_centres, radial_inverse, radial_inverse_fast,
+                           radial_lut, rect_boundary, upload_map)
 
 LUT_SIZE = 1024
 
@@ -166,15 +171,20 @@ class Lens(Plugin):
                         hint="What reads outside the source return: black, edge (clamp), mirror."),
         ),
         quality={
-            "draft": "bilinear from a float32 displacement map and TCA tables, float32",
-            "preview": "bicubic (Keys a=-0.5) with the 2x2 anti-ringing clamp, float32",
-            "final": "Lanczos-3 with the 2x2 anti-ringing clamp, float32",
+            "draft": "bilinear (2x2) from a packed map of the green, red and blue source "
+                     "points (texel indices + float32 fractions, from float64 geometry), "
+                     "float32 sums",
+            "preview": "bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, packed map, "
+                       "float32 sums",
+            "final": "Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, packed map, float32 sums",
             "reference": "Lanczos-3 with the anti-ringing clamp, float64 map, tables and sums",
         },
     )
 
     def __init__(self):
         self._cache: dict = {}
+        self._host_key = None
+        self._host = None
 
     def is_identity(self, p, ctx):
         if not p.model.strip():
@@ -183,13 +193,19 @@ class Lens(Plugin):
             return "distortion, tca and vignetting are all off"
         return None
 
-    def prepare(self, rt, p, ctx, double):
+    def host_geometry(self, p, ctx):
+        """Float64 geometry of this parameter set and frame (cached): every channel's source
+        points, the TCA tables and the kernel constants.
+
+        Returns a dict with ``green`` (gx, gy) and, with TCA, ``red``/``blue`` source points
+        (source-window coordinates, texel centres at +0.5, NaN = no source), ``luts``,
+        ``consts`` (ccx, ccy, lut_scale, vig_scale, vk1, vk2, vk3; centre in source-window
+        coordinates), ``flags`` (use_map, use_tca, use_vig) and ``notes``.
+        """
         src = ctx.source
-        key = (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
-               ctx.camera, double)
-        hit = self._cache.get(key)
-        if hit is not None:
-            return hit
+        key = (p.hash_hex(), src.window, ctx.display_window, ctx.pixel_aspect, ctx.camera)
+        if self._host_key == key:
+            return self._host
         dw = ctx.display_window
         crop = lensdb.crop_factor(ctx.camera, dw.width, dw.height, ctx.pixel_aspect)
         lens = lensdb.get_lens(p.maker, p.model, crop)
@@ -208,22 +224,54 @@ class Lens(Plugin):
             notes.append(f"lens: {focal:g} mm is outside {lens.model}'s range "
                          f"{lens.min_focal:g}-{lens.max_focal:g} mm (lensfun extrapolates)")
         gx, gy, info = simulation_geometry(cal, norm, dw, src.window, p.fit, use_map)
-        dt = np.float64 if double else np.float32
-        ux, uy = pixel_centres(src.window)
-        map_buf = upload_map(rt, gx - ux, gy - uy, src.pitch, double) if use_map else \
-            rt.to_device(np.zeros(2, dt))
         ccx, ccy = info["center"]
-        ccx_w, ccy_w = ccx - src.window.x0, ccy - src.window.y0
-        lut_scale = 0.0
-        lut_buf = rt.to_device(np.zeros(2, dt))
+        x0, y0 = src.window.x0, src.window.y0
+        geo = dict(green=(gx - x0, gy - y0), luts=None, lut_scale=0.0)
         if use_tca:
             r_g = np.hypot(gx - ccx, gy - ccy) * norm.scale
             r_max = max(float(np.nanmax(r_g)) if r_g.size else 0.0, 1e-9) * 1.0001
-            lut_buf = rt.to_device(tca_luts(cal, r_max).astype(dt))
+            luts = tca_luts(cal, r_max)
             lut_scale = (norm.scale / r_max) ** 2
+            geo.update(luts=luts, lut_scale=lut_scale)
+            # the kernel's table read, in float64, once: rho = |u_g - C|^2 scaled to [0, 1]
+            dx, dy = gx - ccx, gy - ccy
+            rho = (dx * dx + dy * dy) * lut_scale
+            defined = np.isfinite(rho)
+            for name, lut in (("red", luts[0]), ("blue", luts[1])):
+                s = np.where(defined, lut_lookup(lut, np.where(defined, rho, 0.0)), np.nan)
+                geo[name] = (ccx + dx * s - x0, ccy + dy * s - y0)
         vk = cal.vignetting[1][:3] if use_vig else (0.0, 0.0, 0.0)
-        consts = (ccx_w, ccy_w, lut_scale, norm.scale / norm.vignetting_unit) + tuple(vk)
-        hit = (map_buf, lut_buf, consts, (use_map, use_tca, use_vig), notes)
+        geo.update(consts=(ccx - x0, ccy - y0, geo["lut_scale"],
+                           norm.scale / norm.vignetting_unit) + tuple(vk),
+                   flags=(use_map, use_tca, use_vig), notes=notes)
+        self._host_key, self._host = key, geo
+        return geo
+
+    def device_buffers(self, rt, p, ctx, double):
+        """Cached device data: reference (float64) ``("f64", map, luts)``; float levels
+        ``("packed", entries, fixups, fast_possible, maps)`` of a PackedMap of green (and
+        red, blue with TCA); ``maps`` = 0 when nothing moves (vignetting only)."""
+        src = ctx.source
+        key = (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
+               ctx.camera, double)
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        geo = self.host_geometry(p, ctx)
+        use_map, use_tca, _ = geo["flags"]
+        if double:
+            ux, uy = pixel_centres(src.window, frame_origin=False)
+            gx, gy = geo["green"]
+            map_buf = upload_map(rt, gx - ux, gy - uy, src.pitch, True) if use_map else \
+                rt.to_device(np.zeros(2))
+            lut_buf = rt.to_device(geo["luts"] if use_tca else np.zeros(2))
+            hit = ("f64", map_buf, lut_buf)
+        elif use_map or use_tca:
+            points = [geo["green"]] + ([geo["red"], geo["blue"]] if use_tca else [])
+            pm = PackedMap(points, src.width, src.height, src.pitch)
+            hit = ("packed",) + pm.upload(rt) + (pm.fast_possible, len(points))
+        else:
+            hit = ("packed", rt.to_device(np.zeros(4, np.int32)), None, None, 0)
         if len(self._cache) >= 4:
             self._cache.pop(next(iter(self._cache)))
         self._cache[key] = hit
@@ -232,20 +280,36 @@ class Lens(Plugin):
     def render(self, rt, p, ctx):
         src = ctx.source
         double = ctx.quality == "reference" and rt.has_fp64
-        map_buf, lut_buf, consts, (use_map, use_tca, use_vig), notes = \
-            self.prepare(rt, p, ctx, double)
-        ctx.notes.extend(notes)
-        defines = kernel_defines(FILTER_BY_QUALITY[ctx.quality], p.border, double,
-                                        needs_sanitising(ctx, "lens"))
+        bufs = self.device_buffers(rt, p, ctx, double)
+        geo = self.host_geometry(p, ctx)
+        use_map, use_tca, use_vig = geo["flags"]
+        ctx.notes.extend(geo["notes"])
+        filt = FILTER_BY_QUALITY[ctx.quality]
+        defines = kernel_defines(filt, p.border, double, needs_sanitising(ctx, "lens"))
         defines.update(HAS_MAP=int(use_map), HAS_TCA=int(use_tca), HAS_VIG=int(use_vig),
                        LUTN=LUT_SIZE)
-        knl = rt.kernel("lens.cl", "lens_apply", **defines)
-        real = np.float64 if double else np.float32
         dst = src.like()
         i32 = np.int32
-        rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, map_buf, lut_buf,
-                  i32(src.pitch), i32(src.width), i32(src.height), i32(src.window.x0),
-                  i32(src.window.y0), *[real(c) for c in consts])
+        if double:
+            _, map_buf, lut_buf = bufs
+            knl = rt.kernel("lens.cl", "lens_apply", **defines)
+            rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, map_buf, lut_buf,
+                      i32(src.pitch), i32(src.width), i32(src.height), i32(src.window.x0),
+                      i32(src.window.y0), *[np.float64(c) for c in geo["consts"]])
+            return dst
+        _, entries, fixups, fast_possible, maps = bufs
+        defines.update(LENS_MAPS=maps)
+        ccx, ccy, _, vig_scale, vk1, vk2, vk3 = geo["consts"]
+        tail = (i32(src.pitch), i32(src.width), i32(src.height)) + tuple(
+            np.float32(c) for c in (ccx, ccy, vig_scale, vk1, vk2, vk3))
+        fast = rt.kernel("lens.cl", "lens_packed", **defines)
+        if maps == 0:
+            rt.launch(fast, (src.pitch // 4, max(src.height, 1)), src, dst, entries, *tail)
+            return dst
+        code = FILTER_CODE[filt]
+        launch_packed(rt, fast, rt.kernel("lens.cl", "lens_packed_fix", **defines), entries,
+                      fixups, code, src.pitch // 4, src.height, (src, dst), tail,
+                      fast_possible[code])
         return dst
 
 
