@@ -239,7 +239,6 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         if out.window != ctx.source.window:
             ctx.depth = rt.reframe(ctx.depth, out.window, "clamp") if ctx.depth is not None else None
             ctx.velocity = rt.reframe(ctx.velocity, out.window, "clamp") if ctx.velocity is not None else None
-            ctx._analysis = None  # tiles no longer match the window: recomputed when next asked
         ctx.source = out
     t_dl = time.perf_counter()
     final = ctx.source

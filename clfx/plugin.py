@@ -369,8 +369,10 @@ class RenderContext:
 
     @property
     def analysis(self):
-        """The frame's shared scene analysis (computed once, on first use)."""
-        if self._analysis is None:
+        """The frame's shared scene analysis of the current source: computed on first use,
+        and again only if an effect has since changed the source's window (its tiles are
+        always those of ``source.window``)."""
+        if self._analysis is None or self._analysis.window != self.source.window:
             from clfx.analysis import analyse
 
             self._analysis = analyse(self.runtime, self.source, depth=self.depth,

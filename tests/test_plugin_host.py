@@ -123,3 +123,16 @@ def test_step_that_skips_missing_passes_reports_why(rt, rng):
                                      Step("vignette", get_plugin("vignette").params(amount=0.2))])
     _, report = render_frame(rt, lenient, frame)
     assert report.steps[0].reason == "no depth pass in the input" and report.steps[1].ran
+
+
+def test_analysis_always_covers_the_current_source_window(rt):
+    from clfx.plugin import RenderContext
+
+    src = rt.upload(np.zeros((8, 8, 4), np.float32))
+    ctx = RenderContext(rt, src)
+    first = ctx.analysis
+    assert ctx.analysis is first  # computed once
+    grown = np.zeros((12, 16, 4), np.float32)
+    grown[0, 0, :3] = 50.0
+    ctx.source = rt.upload(grown, Rect(-4, -2, 12, 10))  # an effect grew the window
+    assert ctx.analysis.window == Rect(-4, -2, 12, 10) and ctx.analysis.peak_luminance == 50.0

@@ -275,10 +275,7 @@ class Corona(Plugin):
 
     def highlight_support(self, p, ctx) -> Rect:
         """Bounding box (frame coordinates) of the analysis tiles with a pixel above threshold."""
-        a = ctx.analysis
-        if a.window != ctx.source.window:  # tiles of another window do not apply
-            return ctx.source.window
-        return a.highlight_bounds(p.threshold)
+        return ctx.analysis.highlight_bounds(p.threshold)
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):

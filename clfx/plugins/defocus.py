@@ -97,8 +97,7 @@ class Defocus(Plugin):
 
     def render(self, rt, p, ctx):
         src = ctx.source
-        n_bad = self._nonfinite_count(ctx)
-        if n_bad:
+        if ctx.analysis.nonfinite_count:
             src, n_bad = sanitize_nonfinite(rt, src)
             if n_bad:
                 ctx.notes.append(f"defocus: {n_bad} pixels with NaN/Inf set to 0")
@@ -106,15 +105,6 @@ class Defocus(Plugin):
         out = rt.image(self.output_window(p, ctx), src.channels)
         return gaussian_blur(rt, src, sx, sy, quality=ctx.quality, border=EDGES[p.edges],
                              out=out)
-
-    @staticmethod
-    def _nonfinite_count(ctx) -> int:
-        """Non-finite pixels per the shared analysis, or -1 if it does not cover the source
-        (then the sanitising pass runs and counts them itself)."""
-        a = ctx.analysis
-        if a is None or a.window != ctx.source.window:
-            return -1
-        return a.nonfinite_count
 
 
 def bench_case(width, height, rng):

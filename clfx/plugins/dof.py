@@ -45,9 +45,9 @@ import math
 
 import numpy as np
 
+from clfx.analysis import TILE  # dof's tiles are the shared analysis's
 from clfx.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Plugin, register
 
-TILE = 32           # the analysis tile
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
 QUALITY = {  # ring spacing (px), max rings, float64 accumulation, min tile radius for half res
     "draft": (2.0, 4, False, 2.0),
@@ -201,7 +201,7 @@ class Dof(Plugin):
         src = ctx.source
         ty, tx = max(1, -(-src.height // TILE)), max(1, -(-src.width // TILE))
         an = ctx.analysis
-        if an.min_depth is None or an.window != src.window or an.min_depth.shape != (ty, tx):
+        if an.min_depth is None:
             full = np.full((ty, tx), clamp_r, np.float32)  # no tile statistics: no skipping
             return (full, np.zeros_like(full)) if with_min else full
         # the CoC is monotonic in 1/z, so a tile's extremes come from its depth range

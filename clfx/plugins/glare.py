@@ -123,10 +123,7 @@ class ScatterPlugin(Plugin):
 
     def highlight_support(self, p, ctx) -> Rect:
         """Bounding box of the analysis tiles that hold a contributing pixel."""
-        a = ctx.analysis
-        if a.window != ctx.source.window:  # tiles of another window do not apply
-            return ctx.source.window
-        return a.highlight_bounds(self.raw_level(p, ctx))
+        return ctx.analysis.highlight_bounds(self.raw_level(p, ctx))
 
     # -- render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
