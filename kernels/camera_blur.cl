@@ -9,7 +9,7 @@
  *                           for motion_blur's reconstruction: near things move more (f / z)
  * Each work-item handles 4 pixels of a row.
  */
-#include "common.h"
+#include "motion_gather.h"
 
 #ifndef ACC
 #define ACC float
@@ -17,46 +17,6 @@
 #define CONVERT_ACC16 convert_float16
 #define CONVERT_FROM_ACC16 convert_float16
 #endif
-#ifndef BILINEAR
-#define BILINEAR 1
-#endif
-#ifndef JITTER
-#define JITTER 1
-#endif
-
-inline float4 cb_fetch(global const float *col, const int pitch, const int w, const int h,
-                       const float px, const float py)
-{
-#if BILINEAR
-  const float u = px - 0.5f, v = py - 0.5f;
-  const float fu = floor(u), fv = floor(v);
-  const float ax = u - fu, ay = v - fv;
-  const int iu = (int)clamp(fu, -1.0f, (float)w), iv = (int)clamp(fv, -1.0f, (float)h);
-  const int xa = clfx_clampi(iu, 0, w - 1), xb = clfx_clampi(iu + 1, 0, w - 1);
-  const int ya = clfx_clampi(iv, 0, h - 1), yb = clfx_clampi(iv + 1, 0, h - 1);
-  const float4 c00 = vload4(ya * pitch + xa, col), c10 = vload4(ya * pitch + xb, col);
-  const float4 c01 = vload4(yb * pitch + xa, col), c11 = vload4(yb * pitch + xb, col);
-  const float4 top = c00 + (c10 - c00) * ax, bot = c01 + (c11 - c01) * ax;
-  return top + (bot - top) * ay;
-#else
-  const int x = (int)clamp(floor(px), 0.0f, (float)(w - 1));
-  const int y = (int)clamp(floor(py), 0.0f, (float)(h - 1));
-  return vload4(y * pitch + x, col);
-#endif
-}
-
-/* Interleaved gradient noise (Jimenez 2014), shifted per frame; 0.5 without jitter. */
-inline float4 cb_jitter(const float4 x, const float y, const int frame)
-{
-#if !JITTER
-  return (float4)(0.5f);
-#endif
-  const float o = 5.588238f * (float)(frame & 63);
-  const float4 a = 0.06711056f * (x + o) + 0.00583715f * (y + o);
-  const float4 b = 52.9829189f * (a - floor(a));
-  return b - floor(b);
-}
-
 /* (x0, y0): the window's origin in the frame; (cx, cy): the motion's centre in the frame;
  * roll in radians per frame (+ turns +x towards +y); zoom: scale growth per frame. */
 kernel void camera_blur_similarity(global const float *col, global float *dst, const int pitch,
@@ -73,7 +33,7 @@ kernel void camera_blur_similarity(global const float *col, global float *dst, c
   const float4 qx0 = lane + 0.5f + (float)x0 - cx;         /* relative to the centre */
   const float qy0 = fy + 0.5f + (float)y0 - cy;
   const float dt = (t1 - t0) / (float)n;
-  const float4 jit = cb_jitter(lane, fy, frame);
+  const float4 jit = mg_jitter(lane, fy, frame);
   ACC16 acc = (ACC16)(0);
   for(int i = 0; i < n; i++)
   {
@@ -85,10 +45,10 @@ kernel void camera_blur_similarity(global const float *col, global float *dst, c
     /* inverse rotation, then inverse scale, back to window coordinates */
     const float4 rx = (c * qx + s * qy) * inv_k + cx - (float)x0;
     const float4 ry = (-s * qx + c * qy) * inv_k + cy - (float)y0;
-    const float16 v = (float16)(cb_fetch(col, pitch, width, height, rx.x, ry.x),
-                                cb_fetch(col, pitch, width, height, rx.y, ry.y),
-                                cb_fetch(col, pitch, width, height, rx.z, ry.z),
-                                cb_fetch(col, pitch, width, height, rx.w, ry.w));
+    const float16 v = (float16)(mg_fetch(col, pitch, width, height, rx.x, ry.x),
+                                mg_fetch(col, pitch, width, height, rx.y, ry.y),
+                                mg_fetch(col, pitch, width, height, rx.z, ry.z),
+                                mg_fetch(col, pitch, width, height, rx.w, ry.w));
     acc += CONVERT_ACC16(v);
   }
   vstore16(CONVERT_FROM_ACC16(acc / (ACC)n), 0, dst + (y * pitch + qx * 4) * 4);

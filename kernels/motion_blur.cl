@@ -11,7 +11,6 @@
  *   motion_blur_gather       per 4 pixels of the *moving* tiles only (a compact tile list built
  *                            on the host): N samples along the neighbourhood's dominant
  *                            velocity, depth-aware scatter-as-gather weights
- *   motion_blur_linear       direct gather along one constant velocity (camera pan)
  *
  * Sample model of the gather (see the plugin's Notes): the output pixel x collects the
  * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] with one
@@ -20,7 +19,7 @@
  * Samples in front of x (soft depth test) occlude x; samples at x's depth or behind it form
  * the layer seen through the gaps (Jimenez's foreground / background split).
  */
-#include "common.h"
+#include "motion_gather.h"
 
 #ifndef ACC
 #define ACC float
@@ -31,12 +30,6 @@
 #define CONVERT_FROM_ACC4 convert_float4
 #define CONVERT_FROM_ACC16 convert_float16
 #define MASK4 int4
-#endif
-#ifndef BILINEAR
-#define BILINEAR 1
-#endif
-#ifndef JITTER
-#define JITTER 1
 #endif
 #ifndef HAS_DEPTH
 #define HAS_DEPTH 1
@@ -122,40 +115,6 @@ kernel void motion_blur_neighbormax(global const float *tiles, global float *nma
 }
 
 /* --- gather ----------------------------------------------------------------------------- */
-/* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge. */
-inline float4 mb_fetch(global const float *col, const int pitch, const int w, const int h,
-                       const float px, const float py)
-{
-#if BILINEAR
-  const float u = px - 0.5f, v = py - 0.5f;
-  const float fu = floor(u), fv = floor(v);
-  const float ax = u - fu, ay = v - fv;
-  const int iu = (int)fu, iv = (int)fv;
-  const int xa = clfx_clampi(iu, 0, w - 1), xb = clfx_clampi(iu + 1, 0, w - 1);
-  const int ya = clfx_clampi(iv, 0, h - 1), yb = clfx_clampi(iv + 1, 0, h - 1);
-  const float4 c00 = vload4(ya * pitch + xa, col), c10 = vload4(ya * pitch + xb, col);
-  const float4 c01 = vload4(yb * pitch + xa, col), c11 = vload4(yb * pitch + xb, col);
-  const float4 top = c00 + (c10 - c00) * ax, bot = c01 + (c11 - c01) * ax;
-  return top + (bot - top) * ay;
-#else
-  const int x = clfx_clampi((int)floor(px), 0, w - 1), y = clfx_clampi((int)floor(py), 0, h - 1);
-  return vload4(y * pitch + x, col);
-#endif
-}
-
-/* Interleaved gradient noise (Jimenez 2014): a jitter in [0, 1) whose pattern has no low
- * frequencies, so banding between samples turns into fine, even grain; shifted per frame. */
-inline float4 mb_jitter(const float4 x, const float y, const int frame)
-{
-#if !JITTER
-  return (float4)(0.5f);   /* the midpoint rule: deterministic, O(spacing^2) error */
-#endif
-  const float o = 5.588238f * (float)(frame & 63);
-  const float4 a = 0.06711056f * (x + o) + 0.00583715f * (y + o);
-  const float4 b = 52.9829189f * (a - floor(a));
-  return b - floor(b);
-}
-
 #define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
 
 /* Load the aux records of 4 sample positions (nearest pixel) as vectors. */
@@ -166,10 +125,10 @@ inline float4 mb_jitter(const float4 x, const float y, const int frame)
     VX = (float4)(a0_.x, a1_.x, a2_.x, a3_.x); VY = (float4)(a0_.y, a1_.y, a2_.y, a3_.y); \
     Z = (float4)(a0_.z, a1_.z, a2_.z, a3_.z); S = (float4)(a0_.w, a1_.w, a2_.w, a3_.w); }
 
-#define MB_FETCH4(px, py) (float16)(mb_fetch(col, pitch, width, height, (px).x, (py).x), \
-                                    mb_fetch(col, pitch, width, height, (px).y, (py).y), \
-                                    mb_fetch(col, pitch, width, height, (px).z, (py).z), \
-                                    mb_fetch(col, pitch, width, height, (px).w, (py).w))
+#define MB_FETCH4(px, py) (float16)(mg_fetch(col, pitch, width, height, (px).x, (py).x), \
+                                    mg_fetch(col, pitch, width, height, (px).y, (py).y), \
+                                    mg_fetch(col, pitch, width, height, (px).z, (py).z), \
+                                    mg_fetch(col, pitch, width, height, (px).w, (py).w))
 
 /* tiles: (tx, ty, samples) per moving tile; k: tile size (multiple of 4); qpt = k * k / 4.
  *
@@ -208,7 +167,7 @@ kernel void motion_blur_gather(global const float *col, global const float *aux,
   const float dt = (t1 - t0) / (float)n;
   const float ell = vn.z * dt;                 /* source length per occluder sample, px */
   const float hell = fmax(ell, 1e-3f);
-  const float4 jit = mb_jitter(lane, fy, frame);
+  const float4 jit = mg_jitter(lane, fy, frame);
   const int any_moving = any(sx * (t1 - t0) >= 0.25f);
 
   ACC16 F = (ACC16)(0), S = (ACC16)(0);
@@ -268,31 +227,4 @@ kernel void motion_blur_gather(global const float *col, global const float *aux,
                   + S * (ACC16)(sscale.xxxx, sscale.yyyy, sscale.zzzz, sscale.wwww)
                   + CONVERT_ACC16(cc) * (ACC16)(ccov.xxxx, ccov.yyyy, ccov.zzzz, ccov.wwww);
   vstore16(CONVERT_FROM_ACC16(out), 0, dst + base * 4);
-}
-
-/* Direct line gather: every pixel averages n bilinear samples at x - v t, t over [t0, t1]
- * (exact for one constant image-plane velocity, e.g. a camera pan: no occlusion changes). */
-kernel void motion_blur_linear(global const float *col, global float *dst, const int pitch,
-                               const int width, const int height, const float vx,
-                               const float vy, const float t0, const float t1, const int n,
-                               const int frame)
-{
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= height || qx * 4 >= pitch) return;
-  const float4 lane = (float4)(qx * 4) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
-  const float fy = (float)y;
-  const float dt = (t1 - t0) / (float)n;
-  const float4 jit = mb_jitter(lane, fy, frame);
-  ACC16 acc = (ACC16)(0);
-  for(int i = 0; i < n; i++)
-  {
-    const float4 t = t0 + ((float)i + jit) * dt;
-    const float4 px = lane + 0.5f - vx * t, py = fy + 0.5f - vy * t;
-    const float16 c = (float16)(mb_fetch(col, pitch, width, height, px.x, py.x),
-                                mb_fetch(col, pitch, width, height, px.y, py.y),
-                                mb_fetch(col, pitch, width, height, px.z, py.z),
-                                mb_fetch(col, pitch, width, height, px.w, py.w));
-    acc += CONVERT_ACC16(c);
-  }
-  vstore16(CONVERT_FROM_ACC16(acc / (ACC)n), 0, dst + (y * pitch + qx * 4) * 4);
 }

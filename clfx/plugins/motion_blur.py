@@ -227,26 +227,6 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     return dst, BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()))
 
 
-def linear_blur(rt, src, vx: float, vy: float, *, t0: float, t1: float, quality: str = "final",
-                frame: int = 0, nonfinite: int = 0):
-    """Direct gather along one constant velocity (px/frame) over the shutter (exact for a
-    uniform image-plane motion such as a camera pan).  Returns a new DeviceImage."""
-    level = LEVELS[quality]
-    col = sanitized_copy(rt, src) if nonfinite else src
-    length = math.hypot(vx, vy) * (t1 - t0)
-    if length < 0.5 or src.width == 0 or src.height == 0:
-        return rt.copy(col)
-    n = int(np.clip(math.ceil(length / level.spacing), 2, level.max_samples))
-    defines = dict(BILINEAR=int(level.bilinear), JITTER=int(level.jitter),
-                   **accumulation_defines(rt, level.double))
-    dst = src.like()
-    rt.launch(rt.kernel(KERNEL, "motion_blur_linear", **defines), (src.pitch // 4, src.height),
-              col, dst, np.int32(src.pitch), np.int32(src.width), np.int32(src.height),
-              np.float32(vx), np.float32(vy), np.float32(t0), np.float32(t1), np.int32(n),
-              np.int32(frame))
-    return dst
-
-
 QUALITY_TEXT = {
     lvl: (f"up to {L.max_samples} samples per pixel (one per {L.spacing:g} px of the tile's "
           f"blur length), {'bilinear' if L.bilinear else 'nearest'} colour fetches, "
