@@ -433,11 +433,6 @@ def _gather_v(rt, key, make_table, ch, double, cols):
     return _Pass(rows, cols, run)
 
 
-def _pyramid_geometry(plan, n_in, offset, n_out, border):
-    """Cached decimation table plus (coarse count, margin)."""
-    return _decimation_table(plan, n_in, offset, n_out, border)
-
-
 def _build_passes(rt, img, window, px: AxisPlan, py: AxisPlan, border, double):
     ch = img.channels
     wi, wo = img.window, window

@@ -28,19 +28,6 @@ class Camera:
         "blades": (0, 32), "blade_rotation": (-360.0, 360.0), "sensor_height": (0.5, 200.0),
     }
     CHOICES = {"shutter_offset": ("centered", "opening", "closing")}
-    HINTS = {
-        "focal_length": "Lens focal length in mm.",
-        "f_number": "Aperture f-number (focal length / entrance pupil diameter).",
-        "sensor_width": "Sensor (film back) width in mm; 36 = full frame, 24.89 = Super 35.",
-        "focus_distance": "Distance to the plane in focus, in scene units (metres).",
-        "shutter_angle": "Shutter angle in degrees; 180 = open half the frame interval.",
-        "shutter_offset": "Where the shutter interval sits relative to the frame time.",
-        "iso": "Sensor sensitivity; drives shot and read noise.",
-        "blades": "Number of aperture blades (0 = perfectly round).",
-        "blade_rotation": "Rotation of the aperture polygon in degrees.",
-        "sensor_height": "Sensor height in mm; by default width / frame aspect.",
-    }
-
     def as_dict(self) -> dict:
         d = asdict(self)
         return {k: v for k, v in d.items() if v is not None}
@@ -55,9 +42,6 @@ class Camera:
     def focal_length_px(self, image_width_px: float) -> float:
         """Focal length in pixels for an image ``image_width_px`` wide (square pixels)."""
         return self.focal_length * image_width_px / self.sensor_width
-
-    def horizontal_fov_deg(self) -> float:
-        return math.degrees(2.0 * math.atan(self.sensor_width / (2.0 * self.focal_length)))
 
     def coc_px(self, depth: float, image_width_px: float) -> float:
         """Circle-of-confusion diameter in pixels for a point at planar ``depth`` (thin lens).

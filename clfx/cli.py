@@ -69,11 +69,6 @@ def _runtime_soon(ctx: click.Context):
     return future
 
 
-def _log(ctx, msg: str, level: int = 1):
-    if (ctx.obj or {}).get("verbosity", 1) >= level:
-        click.echo(msg, err=True)
-
-
 @click.group(cls=ClfxGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="clfx")
 @click.option("-v", "--verbose", count=True, help="More messages on stderr.")

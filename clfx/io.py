@@ -107,7 +107,6 @@ MAX_PARTS = 4096
 
 EXR_COMPRESSIONS = ("none", "zip", "zips", "piz", "dwaa", "dwab", "pxr24", "b44", "rle")
 TIFF_COMPRESSIONS = ("none", "zip", "lzw", "packbits")
-BIT_DEPTHS = ("half", "float", "uint8", "uint10", "uint16")
 
 # Attributes that describe the old file's layout or that writers reject: never carried over.
 _SKIP_NAMES = {

@@ -149,19 +149,3 @@ def compare(result, truth, depth=None, velocity=None, radius_px: float = 4.0) ->
         d.update(edge_rmse=rmse(result, truth, band), edge_max_err=max_err(result, truth, band),
                  edge_psnr_log=psnr_log(result, truth, band), edge_fraction=float(band.mean()))
     return d
-
-
-def write_comparison(path_prefix, result, truth, *, overwrite: bool = True) -> list:
-    """Write ``<prefix>.result.exr``, ``.truth.exr`` and ``.diff.exr`` (|result - truth|)."""
-    from clfx.frame import Frame
-    from clfx.io import write_frame
-
-    paths = []
-    diff = np.abs(np.asarray(result, np.float32) - np.asarray(truth, np.float32))
-    diff[..., 3] = 1.0
-    for tag, img in (("result", result), ("truth", truth), ("diff", diff)):
-        p = f"{path_prefix}.{tag}.exr"
-        write_frame(Frame.from_array(np.asarray(img, np.float32)), p, bit_depth="float",
-                    overwrite=overwrite, write_passes=False)
-        paths.append(p)
-    return paths

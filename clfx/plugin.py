@@ -331,7 +331,7 @@ class RenderContext:
         The current RGBA image (the previous effect's output), scene-linear.
     depth, velocity : DeviceImage or None
         Passes in clfx's conventions (planar z in scene units; forward px/frame, +y down),
-        covering ``pass_window``.
+        covering ``source.window`` (the look re-frames them when an effect grows the window).
     display_window : Rect
         The frame's display window; resolution-independent sizes refer to its diagonal.
     pixel_aspect : float
@@ -354,8 +354,6 @@ class RenderContext:
         self.source = source
         self.depth = depth
         self.velocity = velocity
-        self.pass_window = depth.window if depth is not None else (
-            velocity.window if velocity is not None else source.window)
         self.display_window = display_window or source.window
         self.pixel_aspect = float(pixel_aspect)
         self.frame = int(frame)

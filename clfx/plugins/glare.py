@@ -66,8 +66,6 @@ class ScatterPlugin(Plugin):
     ``<name>_highlights`` and ``<name>_mix`` (glare.cl's helpers).
     """
 
-    additive_for_display = False
-
     def __init__(self):
         self._psf_cache: OrderedDict = OrderedDict()
 
