@@ -68,11 +68,11 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     t0 = time.perf_counter()
     previews, reports = [], []
 
-    def write_all(frame_no, sharp, out):
+    def write_all(frame_no, sharp, out, preview):
         base = os.path.join(outdir, f"%s.{frame_no:04d}.%s")
         write_frame(sharp, base % ("scene", "exr"), overwrite=overwrite, bit_depth="float")
         write_frame(out, base % ("demo", "exr"), overwrite=overwrite, attributes=look.stamp())
-        write_frame(Frame.from_array(preview_of(out)), base % ("demo", "png"), overwrite=overwrite)
+        write_frame(Frame.from_array(preview), base % ("demo", "png"), overwrite=overwrite)
 
     def preview_of(out):
         from clfx.plugin import crop_to
@@ -91,7 +91,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
             report.output = os.path.join(outdir, f"demo.{frame_no:04d}.exr")
             reports.append(report)
             previews.append(preview_of(out))
-            writes.append(pool.submit(write_all, frame_no, sharp, out))
+            writes.append(pool.submit(write_all, frame_no, sharp, out, previews[-1]))
             if explain:
                 print(report.explain(), file=sys.stderr)
             if as_json:

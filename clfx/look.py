@@ -95,6 +95,10 @@ class Look:
                     need.setdefault(clip.name, []).append(s.effect)
         return need
 
+    def clips_used(self) -> set[str]:
+        """Every clip any step reads, required or optional."""
+        return {c.name for s in self.steps for c in s.plugin.descriptor.clips}
+
     def check_clips(self, frame: Frame) -> None:
         """Raise ClipError if the frame lacks a pass a step requires."""
         have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
@@ -199,9 +203,11 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     t_start = time.perf_counter()
     look.check_clips(frame)
     window = frame.data_window
+    used = look.clips_used()  # passes no step reads stay on the host
     src = rt.upload(frame.rgba, window)
-    depth = rt.upload(frame.depth, window) if frame.depth is not None else None
-    velocity = rt.upload(frame.velocity, window) if frame.velocity is not None else None
+    depth = rt.upload(frame.depth, window) if frame.depth is not None and "depth" in used else None
+    velocity = (rt.upload(frame.velocity, window)
+                if frame.velocity is not None and "velocity" in used else None)
     rt.finish()
     t_up = time.perf_counter()
     report.upload_ms = (t_up - t_start) * 1e3
@@ -211,8 +217,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
                         quality=quality or DEFAULT_QUALITY,
                         display_referred=frame.display_referred,
                         output_limit=output_limit(frame, keep_overscan))
-    if look.steps:
-        report.analysis_ms = ctx.analysis.seconds * 1e3
+    analyses = {}  # the analysis is computed on first use (again if the window changes)
     saved = 0.0
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
     for step in look.steps:
@@ -223,6 +228,8 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         reason = (f"no {' or '.join(missing)} pass in the input" if missing
                   else step.plugin.is_identity(step.params, step_ctx))
         ctx._analysis = step_ctx._analysis  # share an analysis the step computed
+        if ctx._analysis is not None:
+            analyses[id(ctx._analysis)] = ctx._analysis.seconds
         if reason:
             report.steps.append(StepReport(step.id, False, reason, quality=level))
             saved += step.typical_ms or 0.0
@@ -236,6 +243,8 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         report.steps.append(StepReport(step.id, True, ms=ms, quality=level,
                                        notes=list(step_ctx.notes)))
         ctx._analysis = step_ctx._analysis
+        if ctx._analysis is not None:
+            analyses[id(ctx._analysis)] = ctx._analysis.seconds
         if out.window != ctx.source.window:
             ctx.depth = rt.reframe(ctx.depth, out.window, "clamp") if ctx.depth is not None else None
             ctx.velocity = rt.reframe(ctx.velocity, out.window, "clamp") if ctx.velocity is not None else None
@@ -249,6 +258,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     report.download_ms = (time.perf_counter() - t_dl) * 1e3
     report.total_ms = (time.perf_counter() - t_start) * 1e3
     report.saved_ms = saved if any(not s.ran for s in report.steps) else None
+    report.analysis_ms = sum(analyses.values()) * 1e3
     if analysis_summary and look.steps:
         report.analysis = ctx.analysis.summary()
     out_frame = frame.with_rgba(rgba, final.window)

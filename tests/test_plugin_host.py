@@ -137,3 +137,16 @@ def test_analysis_always_covers_the_current_source_window(rt):
     ctx.source = rt.upload(grown, Rect(-4, -2, 12, 10))  # an effect grew the window
     assert ctx.analysis.window == Rect(-4, -2, 12, 10)
     assert ctx.analysis.peak_luminance == pytest.approx(50.0, rel=4e-7)  # float32 luminance
+
+
+def test_passes_no_step_reads_are_not_uploaded(rt, rng, monkeypatch):
+    src = rng.uniform(0, 1, (8, 12, 4)).astype(np.float32)
+    frame = Frame.from_array(src, depth=np.ones((8, 12), np.float32),
+                             velocity=np.zeros((8, 12, 2), np.float32))
+    look = Look("v", steps=[Step("vignette", get_plugin("vignette").params(amount=0.2))])
+    uploads = []
+    up = rt.upload
+    monkeypatch.setattr(rt, "upload", lambda a, *k, **kw: uploads.append(a.shape) or up(a, *k, **kw))
+    out, _ = render_frame(rt, look, frame)
+    assert uploads == [(8, 12, 4)]
+    assert out.depth is not None and out.velocity is not None  # still written with the output
