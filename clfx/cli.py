@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import click
 
 from clfx import __version__
-from clfx.errors import ClfxError
+from clfx.core.errors import ClfxError
 
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
@@ -55,7 +55,7 @@ class ClfxGroup(click.Group):
 
 
 def _runtime(ctx: click.Context):
-    from clfx.runtime import Runtime
+    from clfx.device.runtime import Runtime
 
     return Runtime.get(ctx.obj.get("device") if ctx.obj else None)
 
@@ -90,7 +90,7 @@ def cli(ctx, verbose, quiet, device):
 @click.pass_context
 def devices(ctx, as_json):
     """List every OpenCL platform and device, mark the one in use, say why others are not."""
-    from clfx.runtime import INSTALL_HINT, survey_devices
+    from clfx.device.runtime import INSTALL_HINT, survey_devices
 
     reports, chosen = survey_devices(ctx.obj.get("device"))
     if as_json:
@@ -108,7 +108,7 @@ def devices(ctx, as_json):
 @click.option("--json", "as_json", is_flag=True)
 def plugins(as_json):
     """List the effects."""
-    from clfx.plugin import discover
+    from clfx.plugins import discover
 
     reg = discover()
     if as_json:
@@ -124,7 +124,7 @@ def plugins(as_json):
 @click.option("--json", "as_json", is_flag=True)
 def describe(effect, as_json):
     """Print an effect's full descriptor: parameters, clips, quality levels."""
-    from clfx.plugin import get_plugin
+    from clfx.plugins import get_plugin
 
     d = get_plugin(effect).descriptor.describe()
     if as_json:
@@ -152,13 +152,16 @@ def describe(effect, as_json):
     click.echo("quality levels:")
     for lvl, text in d["quality"].items():
         click.echo(f"  {lvl:<10} {text}")
+        settings = ", ".join(f"{k}={v}" for k, v in d["quality_settings"][lvl].items())
+        if settings:
+            click.echo(f"  {'':<10} ({settings})")
 
 
 @cli.command()
 @click.option("--json", "as_json", is_flag=True)
 def looks(as_json):
     """List the looks (built-in, user and CLFX_PRESET_PATH)."""
-    from clfx.presets import available_looks, load_look
+    from clfx.pipeline.presets import available_looks, load_look
 
     rows = []
     for name, (origin, path) in available_looks().items():
@@ -191,7 +194,7 @@ def look():
 @click.option("--json", "as_json", is_flag=True)
 def look_show(name, assignments, as_json):
     """Print the resolved look (inheritance applied, defaults filled in)."""
-    from clfx.presets import apply_overrides, load_look
+    from clfx.pipeline.presets import apply_overrides, load_look
 
     lk = apply_overrides(load_look(name), list(assignments))
     d = lk.describe()
@@ -216,7 +219,7 @@ def look_show(name, assignments, as_json):
 @click.pass_context
 def probe(ctx, file, as_json, **kw):
     """Print the channels, windows and passes found in FILE and how they will be read."""
-    from clfx.io import format_probe, probe as probe_file
+    from clfx.io.files import format_probe, probe as probe_file
 
     info = probe_file(file, passes=_pass_spec(ctx.params))
     click.echo(json.dumps(info, indent=2, default=str) if as_json else format_probe(info))
@@ -228,7 +231,7 @@ def probe(ctx, file, as_json, **kw):
 @click.option("--json", "as_json", is_flag=True)
 def lenses(query, limit, as_json):
     """Find real lenses in the lensfun database (for the `lens` effect)."""
-    from clfx.lensdb import find_lenses
+    from clfx.fx.lensdb import find_lenses
 
     rows = find_lenses(query, limit=limit)
     if as_json:
@@ -283,7 +286,7 @@ def _io_options(f):
 def _pass_spec(kw, focal_length_px: float | None = None):
     """The pass overrides given on the command line (focal length for radial depth given
     by --focal-length-px or derived by the caller)."""
-    from clfx.io import PassSpec
+    from clfx.io.files import PassSpec
 
     vc = kw.get("velocity_channels")
     for name in ("depth_scale", "velocity_scale"):
@@ -323,7 +326,7 @@ for _cmd in (probe,):
 def render(ctx, input_path, output_path, look_name, assignments, **kw):
     """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
     runtime = _runtime_soon(ctx)
-    from clfx.presets import apply_overrides, load_look
+    from clfx.pipeline.presets import apply_overrides, load_look
 
     lk = apply_overrides(load_look(look_name), list(assignments))
     _run_batch(ctx, lk, input_path, output_path, kw, runtime)
@@ -339,7 +342,7 @@ def render(ctx, input_path, output_path, look_name, assignments, **kw):
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
     runtime = _runtime_soon(ctx)
-    from clfx.presets import single_effect_look
+    from clfx.pipeline.presets import single_effect_look
 
     lk = single_effect_look(effect, list(assignments))
     _run_batch(ctx, lk, input_path, output_path, kw, runtime)
@@ -350,7 +353,7 @@ def _radial_depth_focal_px(kw, lk, batch) -> float | None:
     first input's display width (square pixels assumed, as the camera block does)."""
     if kw.get("depth_mode") != "distance" or kw.get("focal_length_px") or not batch.jobs:
         return None
-    from clfx.io import probe as probe_file
+    from clfx.io.files import probe as probe_file
 
     info = probe_file(batch.jobs[0].input)
     width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
@@ -358,7 +361,7 @@ def _radial_depth_focal_px(kw, lk, batch) -> float | None:
 
 
 def _run_batch(ctx, lk, input_path, output_path, kw, runtime):
-    from clfx.batch import Batch
+    from clfx.pipeline.batch import Batch
 
     verbosity = ctx.obj.get("verbosity", 1)
     batch = Batch(look=lk, input_path=input_path, output_path=output_path, options=kw,
@@ -407,7 +410,7 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path, md_path):
     """What accuracy costs in time: every effect at every quality level against its reference
     (with OpenCV/SciPy peers), whole looks, sequence throughput, and scene-analysis skipping."""
-    from clfx.bench import markdown, pareto_plot, run_bench
+    from clfx.bench.runner import markdown, pareto_plot, run_bench
 
     w, h = _parse_size(size)
     look_list = None if looks is None else ([] if looks == "none" else looks.split(","))

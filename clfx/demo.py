@@ -1,6 +1,6 @@
 """`clfx demo`: the built-in procedural scene rendered through a look, no input files needed.
 
-For each frame the layered HDR scene of :func:`clfx.scene.demo_scene` (bright lights,
+For each frame the layered HDR scene of :func:`clfx.bench.scene.demo_scene` (bright lights,
 textured surfaces at several depths, moving objects) is rendered sharp with exact depth and
 velocity passes, then through the look.  Written to OUTDIR:
 
@@ -21,8 +21,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from clfx.frame import Frame
-from clfx.look import render_frame
+from clfx.core.frame import Frame
+from clfx.pipeline.look import render_frame
 
 PREVIEW_EXPOSURE = 1.0
 
@@ -59,9 +59,9 @@ def contact_sheet(previews: list[np.ndarray], columns: int = 6, thumb_width: int
 def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int = 360,
              look_name: str = "default", quality: str | None = None, overwrite: bool = True,
              explain: bool = False, as_json: bool = False, verbosity: int = 1) -> dict:
-    from clfx.io import write_frame
-    from clfx.presets import load_look
-    from clfx.scene import demo_scene, render_sharp
+    from clfx.io.files import write_frame
+    from clfx.pipeline.presets import load_look
+    from clfx.bench.scene import demo_scene, render_sharp
 
     look = load_look(look_name)
     os.makedirs(outdir, exist_ok=True)
@@ -75,7 +75,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
         write_frame(Frame.from_array(preview), base % ("demo", "png"), overwrite=overwrite)
 
     def preview_of(out):
-        from clfx.plugin import crop_to
+        from clfx.core.frame import crop_to
 
         rgba = crop_to(out.rgba, out.data_window, out.display_window)
         return tonemap_preview(rgba)

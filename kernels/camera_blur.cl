@@ -9,7 +9,7 @@
  *                           for motion_blur's reconstruction: near things move more (f / z)
  * Each work-item handles 4 pixels of a row.
  */
-#include "motion_gather.h"
+#include "lib/motion_gather.h"
 
 #ifndef ACC
 #define ACC float

@@ -17,7 +17,7 @@
  * gather, kernels/resample.h rs_fast4), and with CA_FAST = 0 over the border ring (border
  * rule and checks).  The launched rectangle is [qx0, qx0 + nqx) x [row0, row0 + nrows).
  */
-#include "resample.h"
+#include "lib/resample.h"
 
 #ifndef MAP_REAL
 #define MAP_REAL float

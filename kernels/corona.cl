@@ -6,7 +6,7 @@
  *                 glow (the highlights convolved with the spectral PSF, clfx.fftconv) covers
  *                 the output window; alpha is the source's.
  */
-#include "common.h"
+#include "lib/common.h"
 
 inline float4 corona_highlight(float4 c, float threshold)
 {

@@ -2,4 +2,4 @@
  * are the shared blur library's (blur.cl, driven by clfx/blur.py: direct separable passes,
  * pyramid decimation / coarse blur / B-spline upsampling gathers, NaN/Inf sanitising).
  * Building this file builds them. */
-#include "blur.cl"
+#include "lib/blur.cl"

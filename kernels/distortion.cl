@@ -14,7 +14,7 @@
  * distortion_warp_f64 (reference): a float64 displacement map (source point = output pixel
  * centre + (dx, dy)), float64 coordinates, weights and sums.
  */
-#include "resample.h"
+#include "lib/resample.h"
 
 #ifndef MAP_REAL
 #define MAP_REAL float

@@ -10,7 +10,7 @@
  * The tap pattern (rings, aperture shape, pixel aspect) comes from a host table per tile.
  * Defines: USE_DOUBLE (float64 accumulation: the reference level).
  */
-#include "common.h"
+#include "lib/common.h"
 
 #if defined(USE_DOUBLE) && defined(CLFX_HAS_FP64)
 #define ACC double

@@ -13,7 +13,7 @@
  *   display-referred: out = c + strength tint (PSF * h)            (classic additive glow).
  * Non-finite input pixels become 0 (black, alpha 0) and do not spread.
  */
-#include "common.h"
+#include "lib/common.h"
 
 inline int glare_pixel_finite(float4 c)
 {

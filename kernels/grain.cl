@@ -15,7 +15,7 @@
  * USE_DOUBLE=1 (reference quality) generates the noise, stores the intermediate buffers and
  * accumulates the taps in double precision.
  */
-#include "common.h"
+#include "lib/common.h"
 
 #ifndef RADIUS
 #define RADIUS 0
@@ -47,7 +47,7 @@
 #define GRAIN_LUMINANCE_FLOOR 1e-30
 #define GRAIN_MID_GREY 0.18
 
-#include "fastmath.h"
+#include "lib/fastmath.h"
 CLFX_DEFINE_FASTMATH(4)
 CLFX_DEFINE_FASTMATH(8)
 

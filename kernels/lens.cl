@@ -17,7 +17,7 @@
  * lens_apply (reference): a float64 displacement map for green (HAS_MAP = 0: u_g = u) and
  * float64 TCA tables, float64 coordinates, weights and sums.
  */
-#include "resample.h"
+#include "lib/resample.h"
 
 #ifndef MAP_REAL
 #define MAP_REAL float

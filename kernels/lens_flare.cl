@@ -11,7 +11,7 @@
  * Entry layout (ENTRY floats): x, y (frame px, centre), radius px, 1/edge width (in units
  * of the normalised radius), R, G, B radiance, kind (0 ghost, 1 halo), dir x, dir y, 0, 0.
  */
-#include "common.h"
+#include "lib/common.h"
 
 #define ENTRY 12
 #ifndef TILE

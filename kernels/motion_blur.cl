@@ -19,7 +19,7 @@
  * Samples in front of x (soft depth test) occlude x; samples at x's depth or behind it form
  * the layer seen through the gaps (Jimenez's foreground / background split).
  */
-#include "motion_gather.h"
+#include "lib/motion_gather.h"
 
 #ifndef ACC
 #define ACC float

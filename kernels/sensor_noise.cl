@@ -20,7 +20,7 @@
  * (no latency chain), coefficients are compile-time constants, and the count is kept in
  * masked increments; the loop runs to the largest count among the 12 colour lanes.
  */
-#include "common.h"
+#include "lib/common.h"
 
 #ifndef SHOT
 #define SHOT 1
@@ -75,7 +75,7 @@
 
 #define SN_TWO_PI 6.283185307179586
 
-#include "fastmath.h"
+#include "lib/fastmath.h"
 
 /* 1 / (j (j + 1) ... (j + m - 1)) for m = 1..4 and j = 4 b + 1: the coefficients of the
  * inversion's step b (constant-folded; up to j = 256). */

@@ -16,7 +16,7 @@
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{4^N-1} a^k delta(x + k d) exactly (each k has one base-4 expansion).
  */
-#include "common.h"
+#include "lib/common.h"
 
 #ifndef FACTOR
 #define FACTOR 1

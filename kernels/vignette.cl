@@ -6,7 +6,7 @@
  * the frame; (cx, cy) is the optical centre.  sx, sy convert pixels to millimetres on the
  * sensor (sy = sx / pixel_aspect), so tan(theta) = |r_mm| / focal_mm.
  */
-#include "common.h"
+#include "lib/common.h"
 
 #ifndef REAL
 #define REAL float

@@ -15,8 +15,8 @@ EXR_IMAGES = SHARED_DATA / "openexr-images"
 
 @pytest.fixture(scope="session")
 def rt():
-    from clfx.errors import DeviceError
-    from clfx.runtime import Runtime
+    from clfx.core.errors import DeviceError
+    from clfx.device.runtime import Runtime
 
     try:
         return Runtime.get()

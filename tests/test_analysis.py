@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from clfx.analysis import TILE, analyse
-from clfx.camera import Camera
-from clfx.rect import Rect
+from clfx.fx.analysis import TILE, analyse
+from clfx.core.camera import Camera
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.analysis import tile_stats
 

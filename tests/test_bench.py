@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from clfx.bench import analysis_frames, bench_effect, error_metrics
+from clfx.bench.runner import analysis_frames, bench_effect, error_metrics
 from clfx.cli import cli
-from clfx.plugin import QUALITY_LEVELS, discover
+from clfx.core.plugin import QUALITY_LEVELS
+from clfx.plugins import discover
 
 SIZE = (192, 108)  # large enough that each effect differs between levels (CoC, rings)
 # Relative slack when comparing errors of neighbouring levels: two levels may be equally
@@ -64,8 +65,8 @@ def test_bench_cli_json_small(rt, tmp_path):
 def test_scene_analysis_skips_what_frames_a_b_c_do_not_need(rt):
     """Frame (a) needs everything; (b) static, dim, in focus needs nothing spatial;
     (c) needs only motion blur, and only in the moving tiles."""
-    from clfx.look import render_frame
-    from clfx.presets import load_look
+    from clfx.pipeline.look import render_frame
+    from clfx.pipeline.presets import load_look
 
     look = load_look("cinema")
     frames = analysis_frames(256, 144, look.camera)

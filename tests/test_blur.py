@@ -1,17 +1,17 @@
-"""clfx.blur: the device Gaussian blur library against its float64 oracle."""
+"""clfx.fx.blur: the device Gaussian blur library against its float64 oracle."""
 import math
 
 import numpy as np
 import pytest
 
-import clfx.blur as B
-from clfx.rect import Rect
+import clfx.fx.blur as B
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.defocus import gaussian_blur as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
 
-# Max |error| for inputs in [0, 1], from the measured impulse/step errors (clfx/blur.py
+# Max |error| for inputs in [0, 1], from the measured impulse/step errors (clfx/fx/blur.py
 # docstring) with a 2-3x margin; two axes add.  reference: float32 output rounding (6e-8 of
 # the value) plus float32 intermediate between the passes.
 TOL = {"draft": 6e-3, "preview": 1e-3, "final": 2e-4, "reference": 3e-7}

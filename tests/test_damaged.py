@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from clfx.errors import ImageIOError
-from clfx.io import probe, read_frame
+from clfx.core.errors import ImageIOError
+from clfx.io.files import probe, read_frame
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "openexr-images"
 DAMAGED = DATA / "Damaged"

@@ -9,22 +9,22 @@ import textwrap
 import numpy as np
 import pytest
 
-from clfx.plugin import discover
+from clfx.plugins import discover
 
 SIZE = (72, 40)
 
 RENDER_ALL = textwrap.dedent("""
-    import importlib, sys
+    import sys
     import numpy as np
-    from clfx.plugin import discover
-    from clfx.runtime import Runtime
+    from clfx.bench import cases
+    from clfx.plugins import discover
+    from clfx.device.runtime import Runtime
 
     def render_all(width, height):
         rt = Runtime.get()
         out = {}
         for name, cls in discover().items():
-            module = importlib.import_module(cls.__module__)
-            case = module.bench_case(width, height, np.random.default_rng(3))
+            case = cases.for_effect(name).make(width, height, np.random.default_rng(3))
             p = cls.params(**case.get("params", {}))
             out[name] = cls().apply(rt, p, case["source"], depth=case.get("depth"),
                                     velocity=case.get("velocity"), camera=case.get("camera"),

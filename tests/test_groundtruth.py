@@ -4,11 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from clfx import metrics
-from clfx.camera import Camera
-from clfx.groundtruth import (aperture_samples, coc_signed_px, make_case, render_truth,
+from clfx.bench import metrics
+from clfx.core.camera import Camera
+from clfx.bench.groundtruth import (aperture_samples, coc_signed_px, make_case, render_truth,
                               shutter_interval, write_case)
-from clfx.scene import Layer, Light, Scene, Texture, demo_scene, render_sharp
+from clfx.bench.scene import Layer, Light, Scene, Texture, demo_scene, render_sharp
 
 CAM = Camera(focal_length=50.0, f_number=1.4, sensor_width=36.0, focus_distance=3.0)
 

@@ -1,7 +1,7 @@
-"""clfx.io: read/write round trips, pass detection and conventions, colour, atomic writes.
+"""clfx.io.files: read/write round trips, pass detection and conventions, colour, atomic writes.
 
 OpenImageIO is imported here only to author odd test files (Nuke/Blender channel layouts,
-oversized headers) that clfx.io deliberately cannot write.
+oversized headers) that clfx.io.files deliberately cannot write.
 """
 import json
 import os
@@ -11,11 +11,11 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from clfx import io
-from clfx.errors import ClipError, ImageIOError
-from clfx.frame import Frame
-from clfx.io import PassSpec, encoding_for, format_probe, probe, read_frame, write_frame
-from clfx.rect import Rect
+from clfx.io import files as io
+from clfx.core.errors import ClipError, ImageIOError
+from clfx.core.frame import Frame
+from clfx.io.files import PassSpec, encoding_for, format_probe, probe, read_frame, write_frame
+from clfx.core.rect import Rect
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "openexr-images"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="openexr-images test data not found")

@@ -7,8 +7,8 @@ import pytest
 from click.testing import CliRunner
 
 from clfx.cli import cli
-from clfx.plugin import discover
-from clfx.presets import available_looks
+from clfx.plugins import discover
+from clfx.pipeline.presets import available_looks
 
 BUILTIN = sorted(n for n, (origin, _) in available_looks().items() if origin == "built-in")
 
@@ -21,7 +21,7 @@ def run(*args):
 
 @pytest.mark.parametrize("look", BUILTIN)
 def test_builtin_look_renders_beachball(rt, exr_images, tmp_path, look):
-    from clfx.io import read_frame
+    from clfx.io.files import read_frame
 
     src = exr_images / "Beachball" / "singlepart.0004.exr"
     r = run("render", src, tmp_path / "o.exr", "--look", look, "--quality", "preview", "--json")
@@ -35,10 +35,10 @@ def test_builtin_look_renders_beachball(rt, exr_images, tmp_path, look):
 
 @pytest.mark.parametrize("effect", ["dof", "motion_blur", "camera_blur"])
 def test_pass_effects_apply_to_beachball_demo_and_ground_truth(rt, exr_images, tmp_path, effect):
-    from clfx.camera import Camera
-    from clfx.groundtruth import make_case, write_case
-    from clfx.io import read_frame, write_frame
-    from clfx.scene import demo_scene, render_sharp
+    from clfx.core.camera import Camera
+    from clfx.bench.groundtruth import make_case, write_case
+    from clfx.io.files import read_frame, write_frame
+    from clfx.bench.scene import demo_scene, render_sharp
 
     demo = tmp_path / "demo.exr"
     write_frame(render_sharp(demo_scene(5, 160, 90)), demo, bit_depth="float")
@@ -58,9 +58,9 @@ def test_pass_effects_apply_to_beachball_demo_and_ground_truth(rt, exr_images, t
 @pytest.fixture(scope="module")
 def small_inputs(tmp_path_factory):
     """A demo-scene EXR (with depth and velocity) and the same frame as an 8-bit PNG."""
-    from clfx.frame import Frame
-    from clfx.io import write_frame
-    from clfx.scene import demo_scene, render_sharp
+    from clfx.core.frame import Frame
+    from clfx.io.files import write_frame
+    from clfx.bench.scene import demo_scene, render_sharp
 
     folder = tmp_path_factory.mktemp("apply")
     sharp = render_sharp(demo_scene(3, 128, 72))
@@ -72,8 +72,8 @@ def small_inputs(tmp_path_factory):
 @pytest.mark.parametrize("fmt", ["exr", "png"])
 @pytest.mark.parametrize("effect", sorted(discover()))
 def test_every_effect_applies_to_exr_and_png(rt, small_inputs, effect, fmt):
-    from clfx.io import read_frame
-    from clfx.plugin import get_plugin
+    from clfx.io.files import read_frame
+    from clfx.plugins import get_plugin
 
     src = small_inputs / f"in.{fmt}"
     needs = [c.name for c in get_plugin(effect).descriptor.clips
@@ -81,7 +81,7 @@ def test_every_effect_applies_to_exr_and_png(rt, small_inputs, effect, fmt):
     out = small_inputs / f"{effect}.{fmt}"
     args = ["apply", effect, src, out, "--overwrite"]
     if effect == "lens":  # a real lens must be named; the real-lens look's one
-        from clfx.presets import load_look
+        from clfx.pipeline.presets import load_look
 
         lens = next(s for s in load_look("real-lens").steps if s.effect == "lens").params
         args += [f"maker={lens.maker}", f"model={lens.model}"]

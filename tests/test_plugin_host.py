@@ -2,13 +2,14 @@
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
-from clfx.errors import ClipError, ParamError
-from clfx.frame import Frame
-from clfx.look import Look, Step, render_frame
-from clfx.plugin import (QUALITY_LEVELS, BoolParam, ChoiceParam, FloatParam, IntParam, RGBParam,
-                         Vec2Param, discover, get_plugin)
-from clfx.rect import Rect
+from clfx.core.camera import Camera
+from clfx.core.errors import ClipError, ParamError
+from clfx.core.frame import Frame
+from clfx.pipeline.look import Look, Step, render_frame
+from clfx.core.plugin import (QUALITY_LEVELS, BoolParam, ChoiceParam, FloatParam, IntParam, RGBParam,
+                         Vec2Param)
+from clfx.plugins import discover, get_plugin
+from clfx.core.rect import Rect
 
 
 def test_every_plugin_descriptor_is_complete():
@@ -23,7 +24,7 @@ def test_every_plugin_descriptor_is_complete():
 
 
 def test_every_plugin_has_its_kernel_file_shipped():
-    from clfx.runtime import kernel_dir
+    from clfx.device.runtime import kernel_dir
 
     for cls in discover().values():
         assert (kernel_dir() / cls.descriptor.kernel).is_file()
@@ -89,11 +90,12 @@ def test_look_keeps_windows(rt, rng):
 
 
 def test_missing_required_pass_is_reported_before_rendering(rt):
-    from clfx.plugin import Clip, Descriptor, Plugin
+    from clfx.core.plugin import Clip, Descriptor
+    from clfx.host import Plugin
 
     class NeedsDepth(Plugin):
         descriptor = Descriptor(name="needs_depth", label="x", group="t", summary="x",
-                                kernel="image.cl", clips=(Clip("source"), Clip("depth")),
+                                kernel="lib/image.cl", clips=(Clip("source"), Clip("depth")),
                                 quality={q: "x" for q in QUALITY_LEVELS})
 
     look = Look("d", steps=[Step("needs_depth", NeedsDepth.params(), plugin=NeedsDepth())])
@@ -112,7 +114,7 @@ def test_params_hash_changes_with_params_and_camera():
 
 
 def test_step_that_skips_missing_passes_reports_why(rt, rng):
-    from clfx.errors import ClipError
+    from clfx.core.errors import ClipError
 
     frame = Frame.from_array(rng.uniform(0, 1, (16, 16, 4)).astype(np.float32))
     dof = get_plugin("dof")
@@ -126,7 +128,7 @@ def test_step_that_skips_missing_passes_reports_why(rt, rng):
 
 
 def test_analysis_always_covers_the_current_source_window(rt):
-    from clfx.plugin import RenderContext
+    from clfx.host import RenderContext
 
     src = rt.upload(np.zeros((8, 8, 4), np.float32))
     ctx = RenderContext(rt, src)

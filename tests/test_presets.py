@@ -3,8 +3,8 @@ import textwrap
 
 import pytest
 
-from clfx.errors import PresetError
-from clfx.presets import apply_overrides, available_looks, load_look, single_effect_look
+from clfx.core.errors import PresetError
+from clfx.pipeline.presets import apply_overrides, available_looks, load_look, single_effect_look
 
 
 def write(tmp_path, name, text):

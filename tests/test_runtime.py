@@ -3,9 +3,9 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from clfx import runtime
-from clfx.errors import DeviceError, KernelBuildError
-from clfx.rect import Rect
+from clfx.device import runtime
+from clfx.core.errors import DeviceError, KernelBuildError
+from clfx.core.rect import Rect
 
 
 class _FakeDevice:
@@ -108,14 +108,14 @@ def test_reframe_zero_and_clamp(rt):
 def test_buffers_return_to_the_pool_and_idle_memory_is_capped(rt):
     import gc
 
-    from clfx.runtime import BufferPool
+    from clfx.device.cache import DeviceCache
 
     img = rt.image((7, 9), 4)
     buf = img.buffer
     del img
     gc.collect()
     assert rt.image((7, 9), 4).buffer is buf  # reused, not re-created
-    pool = BufferPool(rt.ctx, max_idle_bytes=1000)
+    pool = DeviceCache(rt.ctx, max_bytes=1000)
     a, b, c = pool.take(400), pool.take(400), pool.take(300)
     pool.give(400, a)
     pool.give(400, b)
@@ -128,3 +128,37 @@ def test_pocl_cache_dir_is_persistent_by_default():
     import os
 
     assert os.environ.get("POCL_CACHE_DIR")
+
+
+def test_one_cache_evicts_values_and_buffers_least_recently_used_first(rt):
+    import numpy as np
+
+    from clfx.device.cache import DeviceCache
+
+    cache = DeviceCache(rt.ctx, max_bytes=1000)
+    built = []
+
+    def make(n):
+        def build():
+            built.append(n)
+            return np.zeros(n, np.uint8)
+        return build
+
+    a = cache.get(("fx.a", 1), make(400))
+    assert cache.get(("fx.a", 1), make(400)) is a and built == [400]  # a hit builds nothing
+    cache.get(("fx.b", 1), make(300))
+    buf = cache.take(200)
+    cache.give(200, buf)  # idle buffer: 400 + 300 + 200 held
+    cache.get(("fx.a", 1), make(400))  # a is now the most recently used
+    cache.get(("fx.c", 1), make(250))  # 1150 > 1000: the least recently used (b) goes
+    assert cache.peek(("fx.b", 1)) is None and cache.idle_bytes == 200
+    assert cache.peek(("fx.a", 1)) is a and cache.nbytes == 850
+    cache.get(("fx.d", 1), make(500))  # next in line: the idle buffer, then a
+    assert cache.idle_bytes == 0 and cache.peek(("fx.a", 1)) is None
+    assert cache.stats()["owners"] == {"fx.c": 250, "fx.d": 500}
+    a = cache.get(("fx.a", 1), make(400))
+    big = cache.get(("fx.big", 1), make(5000))  # larger than the cap: returned, not kept
+    assert big.nbytes == 5000 and cache.peek(("fx.big", 1)) is None
+    cache.get(("fx.prog", 1), lambda: "program", nbytes=0)
+    cache.clear("fx.a")
+    assert cache.peek(("fx.a", 1)) is None and cache.peek(("fx.prog", 1)) == "program"

@@ -1,8 +1,8 @@
-"""clfx.sequence: frame patterns, ranges, missing frames."""
+"""clfx.io.sequence: frame patterns, ranges, missing frames."""
 import pytest
 
-from clfx.errors import SequenceError
-from clfx.sequence import FrameSpec, Pattern, output_path, parse_frames, resolve_inputs
+from clfx.core.errors import SequenceError
+from clfx.io.sequence import FrameSpec, Pattern, output_path, parse_frames, resolve_inputs
 
 
 @pytest.mark.parametrize("text, frame, want", [

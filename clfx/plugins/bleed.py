@@ -29,7 +29,7 @@ fused path in ``kernels/bleed.cl``:
      light misplaced, :func:`separable_psf_error`) is 0 / 0.074 at r = 1, 0.025 / 0.24 at
      r = 2, 0.047 / 0.18 at r = 4, 0.059 / 0.14 at r = 7 (rank 2 / rank 1).
 
-Larger PSFs use glare's machinery (``ScatterPlugin``, ``clfx.fftconv.spread``).
+Larger PSFs use glare's machinery (``ScatterPlugin``, ``clfx.fx.fftconv.spread``).
 """
 from __future__ import annotations
 
@@ -38,9 +38,10 @@ from collections import OrderedDict
 
 import numpy as np
 
-from clfx import psf as psflib
-from clfx.camera import Camera
-from clfx.plugin import Descriptor, FloatParam, RGBParam, register
+from clfx.fx import psf as psflib
+from clfx.core.camera import Camera
+from clfx.core.plugin import Descriptor, FloatParam, RGBParam
+from clfx.host import register
 from clfx.plugins.glare import QUALITY, ScatterPlugin
 
 MAX_FUSED_RADIUS = 10

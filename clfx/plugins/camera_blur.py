@@ -34,9 +34,9 @@ import math
 
 import numpy as np
 
-from clfx.errors import ClipError
-from clfx.plugin import (ChoiceParam, Clip, Descriptor, FloatParam, Plugin, Vec2Param,
-                         register)
+from clfx.core.errors import ClipError
+from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Vec2Param
+from clfx.host import Plugin, register
 from clfx.plugins.motion_blur import (LEVELS, MAX_RADIUS_PX, SHUTTER_OFFSETS,
                                       accumulation_defines, reconstruct,
                                       sanitized_copy, shutter_from)
@@ -188,9 +188,9 @@ class CameraBlur(Plugin):
 
 def bench_case(width: int, height: int, rng):
     """A handheld-style pan with a slight roll and trucking over the layered test scene."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
     from clfx.plugins.motion_blur import moving_scene
-    from clfx.scene import render_sharp
+    from clfx.bench.scene import render_sharp
 
     scene = moving_scene(width, height, 0.0)
     sharp = render_sharp(scene, 0.0, ss=2)

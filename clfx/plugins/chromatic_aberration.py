@@ -41,9 +41,9 @@ import math
 
 import numpy as np
 
-from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, Plugin, Vec2Param,
-                         register)
-from clfx.resample import (BORDERS, FILTER_CODE, PackedMap, check_fold, fold_radius,
+from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
+from clfx.host import Plugin, register
+from clfx.fx.resample import (BORDERS, FILTER_CODE, PackedMap, check_fold, fold_radius,
                            kernel_defines, launch_packed, lut_lookup, needs_sanitising,
                            pixel_centres, radial_lut)
 
@@ -352,7 +352,7 @@ def ring(quads: int, rows: int, inner):
 
 def bench_case(width, height, rng):
     """Strong spectral CA over a high-contrast HDR grid (white lines at 50 on grey)."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = np.full((height, width, 4), 0.18, np.float32)
     src[::max(height // 12, 1), :, :3] = 50.0

@@ -12,9 +12,9 @@ through the rainbow, blue inside, red outside.  The RGB PSF is
     PSF_c(x) = sum_lambda  w_c(lambda) * I(x / s_lambda) / s_lambda^2,   s_lambda ∝ lambda,
 
 with ``w(lambda) = M_709 * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
-``clfx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum.
+``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum.
 Spectral colours are outside Rec.709, so each PSF pixel is brought into gamut keeping its
-luminance (``clfx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
+luminance (``clfx.fx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
 spectrally flat (white) light keeps its colour and energy (white balance) and only the
 rings are coloured.  ``I`` is computed once per parameter set on the host (NumPy FFT of an
 anti-aliased N-gon or disk, sampled so the 380 nm pattern has about one FFT bin per pixel;
@@ -27,7 +27,7 @@ Output = sanitised source + ``intensity`` * (highlights ⊛ PSF), highlights bei
 ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its outer
 quarter, then renormalised).
 
-The convolution is ``clfx.fftconv.spread`` over the bounding box of the tiles with
+The convolution is ``clfx.fx.fftconv.spread`` over the bounding box of the tiles with
 highlights only (scene analysis), so one light costs a small FFT.
 """
 from __future__ import annotations
@@ -37,9 +37,10 @@ from collections import OrderedDict
 
 import numpy as np
 
-from clfx import spectral
-from clfx.plugin import Descriptor, FloatParam, IntParam, Plugin, register
-from clfx.rect import Rect
+from clfx.fx import spectral
+from clfx.core.plugin import Descriptor, FloatParam, IntParam
+from clfx.host import Plugin, register
+from clfx.core.rect import Rect
 
 WAVELENGTHS = {"draft": 16, "preview": 24, "final": 40, "reference": 80}
 """Spectral samples from 380 to 780 nm per quality level (80 = 5 nm bins)."""
@@ -279,7 +280,7 @@ class Corona(Plugin):
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
-        from clfx import fftconv
+        from clfx.fx import fftconv
 
         src = ctx.source
         i32, f32 = np.int32, np.float32
@@ -306,7 +307,7 @@ class Corona(Plugin):
 
 def bench_case(width, height, rng):
     """A dim frame with a cluster of strong lights (a street scene at night)."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = rng.uniform(0.0, 0.2, (height, width, 4)).astype(np.float32)
     src[..., 3] = 1.0

@@ -19,7 +19,7 @@ NaN/Inf pixels would spread over the whole footprint: they are set to 0 first an
 ``ctx.notes`` (the shared scene analysis tells whether any exist, so a clean frame costs
 nothing extra).
 
-Algorithm and accuracy: :mod:`clfx.blur` (direct separable passes below ~4 px, a Gaussian
+Algorithm and accuracy: :mod:`clfx.fx.blur` (direct separable passes below ~4 px, a Gaussian
 pyramid with B-spline reconstruction above, cost flat in sigma).  Max error against the
 exact discrete Gaussian, relative to the peak of a blurred impulse (per axis; a 2-D impulse
 adds both axes): draft <= 7e-3, preview <= 1e-3, final <= 1.5e-4, reference <= 1e-7; on a
@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import math
 
-from clfx.blur import MIN_SIGMA, gaussian_blur, sanitize_nonfinite
-from clfx.camera import Camera
-from clfx.plugin import ChoiceParam, Descriptor, FloatParam, Plugin, register
+from clfx.fx.blur import MIN_SIGMA, gaussian_blur, sanitize_nonfinite
+from clfx.core.camera import Camera
+from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
+from clfx.host import Plugin, register
 
 EDGES = {"clamp": "clamp", "mirror": "mirror", "black": "zero"}
-"""``edges`` choice -> clfx.blur border mode."""
+"""``edges`` choice -> clfx.fx.blur border mode."""
 
 SPREAD_SIGMAS = 3.0
 """The region of definition grows by this many sigma (1% of the peak is left beyond)."""

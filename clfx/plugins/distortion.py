@@ -45,8 +45,9 @@ import math
 
 import numpy as np
 
-from clfx.plugin import ChoiceParam, Descriptor, FloatParam, Plugin, register
-from clfx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
+from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
+from clfx.host import Plugin, register
+from clfx.fx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
                            kernel_defines, pixel_centres, rect_boundary, upload_map,
                            FILTER_CODE, PackedMap, launch_packed)
 
@@ -246,7 +247,7 @@ class Distortion(Plugin):
     def device_map(self, rt, p, ctx, double):
         """The cached device map for this parameter set and frame geometry.
 
-        float levels: ``(entries, fixups, fast_possible)`` of a :class:`clfx.resample.PackedMap`
+        float levels: ``(entries, fixups, fast_possible)`` of a :class:`clfx.fx.resample.PackedMap`
         (one serves bilinear, bicubic and Lanczos-3); reference: a float64 displacement map.
         """
         src = ctx.source
@@ -299,7 +300,7 @@ class Distortion(Plugin):
 
 def bench_case(width, height, rng):
     """A calibrated-looking wide lens with tangential terms over an HDR image with edges."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = rng.uniform(0.0, 1.0, (height, width, 4)).astype(np.float32)
     src[height // 3: height // 2, width // 3: width // 2, :3] = 1e4   # HDR block: ringing test

@@ -13,7 +13,7 @@ infinity, in px), negative in front of the focus plane, which is finite at ``z =
 Pixel aspect stretches the aperture vertically (radii are in x pixels).  The bokeh is the
 aperture: a disk, or a polygon of ``blades`` blades inscribed in the CoC circle, first vertex
 up, turned by the rotation, blended toward the disk by ``roundness``; behind the focus plane
-it is upright, in front turned by 180 degrees (the geometry of :mod:`clfx.groundtruth`).
+it is upright, in front turned by 180 degrees (the geometry of :mod:`clfx.bench.groundtruth`).
 
 Algorithm (after Jimenez 2014, "Next generation post processing in Call of Duty: Advanced
 Warfare", simplified for offline use)
@@ -45,8 +45,9 @@ import math
 
 import numpy as np
 
-from clfx.analysis import TILE  # dof's tiles are the shared analysis's
-from clfx.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Plugin, register
+from clfx.fx.analysis import TILE  # dof's tiles are the shared analysis's
+from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam
+from clfx.host import Plugin, register
 
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
 QUALITY = {  # ring spacing (px), max rings, float64 accumulation, min tile radius for half res
@@ -321,7 +322,7 @@ _BENCH_CACHE: dict = {}
 
 def bench_camera(width: int):
     """A 50 mm f/2.2 lens focused on the demo subject at 3 m: CoC up to ~40 px at 1920 wide."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     return Camera(focal_length=50.0, f_number=2.2, sensor_width=36.0, focus_distance=3.0,
                   shutter_angle=180.0)
@@ -332,8 +333,8 @@ def bench_case(width, height, rng=None):
 
     The truth render takes tens of seconds at 1080p; it is cached per size in the process.
     """
-    from clfx.groundtruth import make_case
-    from clfx.scene import demo_scene
+    from clfx.bench.groundtruth import make_case
+    from clfx.bench.scene import demo_scene
 
     key = (int(width), int(height))
     if key not in _BENCH_CACHE:

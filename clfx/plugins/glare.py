@@ -5,7 +5,7 @@ Model
 Per pixel (scene-linear RGB, luminance ``L`` Rec.709) the light that scatters is the soft-knee
 highlight ``h = max(rgb, 0) * clamp(max(s, L - t) / L, 0, 1)``, ``s = clamp(L - t + k, 0,
 2k)^2 / 4k`` (threshold ``t``, knee ``k``).  It is convolved with a normalised PSF
-(``clfx.psf``): Spencer et al. 1995's eye PSF (power-law falloff), a sum of Gaussians (bloom)
+(``clfx.fx.psf``): Spencer et al. 1995's eye PSF (power-law falloff), a sum of Gaussians (bloom)
 or a user kernel image, truncated at ``size`` x the frame diagonal.  Scene-linear frames keep
 their energy: ``out = c - strength h + strength tint (PSF * h)``; with a white tint the total
 light is unchanged away from the borders.
@@ -20,7 +20,7 @@ the analysis tiles with highlights is transformed (``ctx.analysis.tiles_above``)
 without any is an identity ("no pixel above threshold").  Non-finite input pixels are set
 to 0 before the convolution and counted in ``ctx.notes``.
 
-Quality levels: see ``clfx.fftconv.spread`` (draft one pyramid level, preview float32 FFT
+Quality levels: see ``clfx.fx.fftconv.spread`` (draft one pyramid level, preview float32 FFT
 with bright pixels gathered exactly, final float64 FFT, reference float64 direct/FFT).
 
 References
@@ -35,11 +35,12 @@ from collections import OrderedDict
 
 import numpy as np
 
-from clfx import fftconv, psf as psflib
-from clfx.camera import Camera
-from clfx.plugin import (ChoiceParam, Descriptor, FloatParam, Plugin, RGBParam,
-                         StringParam, register)
-from clfx.rect import Rect
+from clfx.fx import fftconv
+from clfx.fx import psf as psflib
+from clfx.core.camera import Camera
+from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, RGBParam, StringParam
+from clfx.host import Plugin, register
+from clfx.core.rect import Rect
 
 SPLIT_RATIO = 1e-3
 """preview: pixels above this fraction of the peak (and above 4 x threshold) are gathered
@@ -169,7 +170,7 @@ def spencer_or_other_psf(p, ctx, radius: int) -> np.ndarray:
         sig, w = psflib.bloom_sigmas(radius)
         return psflib.gaussians(radius, sig, w)
     if not p.kernel_path:
-        from clfx.errors import ParamError
+        from clfx.core.errors import ParamError
 
         raise ParamError("glare.kernel_path: psf 'image' needs a kernel image path")
     return psflib.from_image(p.kernel_path, radius)

@@ -9,7 +9,7 @@ For every pixel at frame coordinates (X, Y) and channel c in R, G, B::
     out_c = in_c + amount * a_c * 0.18 * (L / 0.18)^response * n_c
 
 * ``w`` is white Gaussian noise N(0, 1) from a hash of (seed, frame, X, Y, channel)
-  (``clfx_uniform`` in kernels/common.h, Box-Muller), so a frame rendered alone, in a batch,
+  (``clfx_uniform`` in kernels/lib/common.h, Box-Muller), so a frame rendered alone, in a batch,
   cropped or with overscan gives the same value at the same frame pixel, and every frame
   differs.  Alpha is kept bit for bit; noise goes on RGB only.
 * ``g_c`` is a separable pixel-integrated Gaussian of standard deviation
@@ -52,8 +52,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, IntParam, Plugin,
-                         RGBParam, register)
+from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, IntParam, RGBParam
+from clfx.host import Plugin, register
 
 MID_GREY = 0.18
 """Grain ``amount`` is relative to the signal at this scene-linear luminance."""
@@ -101,7 +101,7 @@ STOCKS = {
 
 # -- deterministic seeds ------------------------------------------------------------------
 def lowbias32(x: int) -> int:
-    """The 32-bit integer hash of kernels/common.h (``clfx_hash``), on a Python int."""
+    """The 32-bit integer hash of kernels/lib/common.h (``clfx_hash``), on a Python int."""
     x &= 0xFFFFFFFF
     x ^= x >> 16
     x = (x * 0x7FEB352D) & 0xFFFFFFFF
@@ -279,7 +279,7 @@ class Grain(Plugin):
 
 def bench_case(width, height, rng):
     """A representative hard case: an HDR gradient with highlights, 500T-like colour grain."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     y, x = np.mgrid[0:height, 0:width].astype(np.float32)
     base = 0.02 + 1.5 * (x / max(width - 1, 1)) * (y / max(height - 1, 1))

@@ -1,7 +1,7 @@
 """Lens: the distortion, transverse chromatic aberration and vignetting of a real lens, from
 the lensfun database, applied in the simulating direction (adding the defects).
 
-Model (lensfun's, with lensfun's coordinates: see ``clfx.lensdb``)
+Model (lensfun's, with lensfun's coordinates: see ``clfx.fx.lensdb``)
 ------------------------------------------------------------------
 Radii are normalised (r = 1 at half the short side of the calibration frame).  Each model
 maps an undistorted radius r_u to the radius r_d at which the lens images it:
@@ -18,7 +18,7 @@ same centre), then RGB is multiplied by the vignetting polynomial at u.  Inverse
 by float64 bisection on the increasing branch (maps that fold inside the frame are refused),
 once per parameter set: the green map point by point, the TCA inverses as radial tables.
 The float levels then look the tables up on the host (float64) and pack every channel's
-source points (green, red, blue) into a :class:`clfx.resample.PackedMap` (a pure gather on
+source points (green, red, blue) into a :class:`clfx.fx.resample.PackedMap` (a pure gather on
 the device, border quads through a second, checked kernel); the reference level reads a
 float64 displacement map and float64 tables in the kernel.  Vignetting is evaluated in the
 kernels (a short polynomial per pixel).
@@ -34,11 +34,11 @@ import math
 
 import numpy as np
 
-from clfx import lensdb
-from clfx.errors import ParamError
-from clfx.plugin import (BoolParam, ChoiceParam, Descriptor, FloatParam, Plugin, StringParam,
-                         register)
-from clfx.resample import (BORDERS, FILTER_BY_QUALITY, FILTER_CODE, PackedMap, check_fold,
+from clfx.fx import lensdb
+from clfx.core.errors import ParamError
+from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
+from clfx.host import Plugin, register
+from clfx.fx.resample import (BORDERS, FILTER_BY_QUALITY, FILTER_CODE, PackedMap, check_fold,
                            fit_scale, fold_radius, kernel_defines, launch_packed, lut_lookup,
                            needs_sanitising, pixel_centres, radial_inverse, radial_inverse_fast,
                            radial_lut, rect_boundary, upload_map)
@@ -315,7 +315,7 @@ class Lens(Plugin):
 
 def bench_case(width, height, rng):
     """Canon EF 24-70mm f/2.8L II at 24 mm f/2.8: ptlens distortion, poly3 TCA, vignetting."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = rng.uniform(0.0, 1.0, (height, width, 4)).astype(np.float32)
     src[::max(height // 10, 1), :, :3] = 20.0

@@ -42,9 +42,10 @@ import math
 
 import numpy as np
 
-from clfx.errors import ParamError
-from clfx.plugin import Descriptor, FloatParam, IntParam, Plugin, StringParam, register
-from clfx.rect import Rect
+from clfx.core.errors import ParamError
+from clfx.core.plugin import Descriptor, FloatParam, IntParam, StringParam
+from clfx.host import Plugin, register
+from clfx.core.rect import Rect
 
 DEFAULT_GHOSTS = (
     # k (position), size (fraction of diagonal), tint (RGB)
@@ -298,7 +299,7 @@ class LensFlare(Plugin):
 
 def bench_case(width, height, rng):
     """A dim frame with a sun-like light near a corner and two street lamps."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = rng.uniform(0.0, 0.2, (height, width, 4)).astype(np.float32)
     src[..., 3] = 1.0

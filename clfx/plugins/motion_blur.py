@@ -4,9 +4,9 @@ Model
 -----
 During the open shutter ``[t0, t1]`` (frames, relative to the frame time) a surface point seen
 at pixel ``y`` at the frame time sits at ``y + v_y t``, with ``v_y`` the velocity pass (forward
-px/frame, +x right, +y down; :mod:`clfx.frame`).  The shutter interval comes from the camera
+px/frame, +x right, +y down; :mod:`clfx.core.frame`).  The shutter interval comes from the camera
 block (``shutter_angle / 360`` of a frame, ``shutter_offset`` centred / opening / closing, as in
-:func:`clfx.groundtruth.shutter_interval`) or from this effect's overrides.  The blurred pixel
+:func:`clfx.bench.groundtruth.shutter_interval`) or from this effect's overrides.  The blurred pixel
 ``x`` is the time average of whatever surface covers ``x``; a post-process only knows the
 surfaces visible at the frame time, so it reconstructs that average by gathering.
 
@@ -57,8 +57,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clfx.errors import ClipError
-from clfx.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Plugin, register
+from clfx.core.errors import ClipError
+from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam
+from clfx.host import Plugin, register
 
 KERNEL = "motion_blur.cl"
 
@@ -95,7 +96,7 @@ def shutter_interval(angle_deg: float, offset: str) -> tuple[float, float]:
     """(t0, t1): the open shutter in frames relative to the frame time.
 
     ``centered``: ``[-s/2, s/2]``; ``opening``: ``[0, s]``; ``closing``: ``[-s, 0]``, with
-    ``s = angle / 360`` (same convention as :func:`clfx.groundtruth.shutter_interval`).
+    ``s = angle / 360`` (same convention as :func:`clfx.bench.groundtruth.shutter_interval`).
     """
     s = angle_deg / 360.0
     if offset == "opening":
@@ -312,7 +313,7 @@ def moving_scene(width: int, height: int, max_speed_px: float = 60.0, moving_fra
     Speeds scale with ``max_speed_px``; with ``moving_fraction`` (e.g. 0.1) only a small
     ball moves, covering about that fraction of the frame's tiles, over a static wall.
     """
-    from clfx.scene import Layer, Light, Scene, Texture
+    from clfx.bench.scene import Layer, Light, Scene, Texture
 
     s = width / 640.0
     v = max_speed_px
@@ -352,9 +353,9 @@ def bench_case(width: int, height: int, rng, *, truth: bool = True, truth_sample
                moving_fraction=None):
     """A representative hard case: layers at several depths moving up to 60 px/frame at
     1920 px wide (scaled with the width), with the multisample ground truth (``truth``)."""
-    from clfx.camera import Camera
-    from clfx.groundtruth import render_truth
-    from clfx.scene import render_sharp
+    from clfx.core.camera import Camera
+    from clfx.bench.groundtruth import render_truth
+    from clfx.bench.scene import render_sharp
 
     scene = moving_scene(width, height, 60.0 * width / 1920.0, moving_fraction)
     camera = Camera(shutter_angle=180.0, shutter_offset="centered")

@@ -44,7 +44,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from clfx.plugin import BoolParam, Descriptor, FloatParam, IntParam, Plugin, RGBParam, register
+from clfx.core.plugin import BoolParam, Descriptor, FloatParam, IntParam, RGBParam
+from clfx.host import Plugin, register
 from clfx.plugins.grain import effect_seed
 
 SENSOR_SALT = 0x73656E73  # "sens"
@@ -182,7 +183,7 @@ class SensorNoise(Plugin):
 
 def bench_case(width, height, rng):
     """A dark, high-ISO frame: most pixels below 30 electrons, so the exact Poisson path runs."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     y, x = np.mgrid[0:height, 0:width].astype(np.float32)
     base = 0.002 + 0.3 * (x / max(width - 1, 1)) ** 2 * (y / max(height - 1, 1))

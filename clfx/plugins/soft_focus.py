@@ -5,19 +5,20 @@ Model
 -----
 Every pixel above a low ``threshold`` (soft knee, as glare) gives ``amount`` of its light to a
 wide bloom PSF, a sum of three Gaussians (Kawase-style, widest sigma = radius / 3,
-``clfx.psf.bloom_sigmas``), truncated at ``size`` x the frame diagonal:
+``clfx.fx.psf.bloom_sigmas``), truncated at ``size`` x the frame diagonal:
 ``out = c - amount h + amount tint (PSF * h)``.  Energy is kept; highlights get a halo, mid
 tones a glow, shadows pick up light from nearby brights (the lifted, low-contrast look).
 The default threshold is below 1, so display-referred (8-bit) frames need no expansion.
-Uses glare's machinery (``ScatterPlugin``, glare.cl helpers, ``clfx.fftconv``).
+Uses glare's machinery (``ScatterPlugin``, glare.cl helpers, ``clfx.fx.fftconv``).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from clfx import psf as psflib
-from clfx.camera import Camera
-from clfx.plugin import Descriptor, FloatParam, RGBParam, register
+from clfx.fx import psf as psflib
+from clfx.core.camera import Camera
+from clfx.core.plugin import Descriptor, FloatParam, RGBParam
+from clfx.host import register
 from clfx.plugins.glare import QUALITY, ScatterPlugin
 
 

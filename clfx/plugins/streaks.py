@@ -58,8 +58,8 @@ import math
 
 import numpy as np
 
-from clfx.plugin import (ChoiceParam, Descriptor, FloatParam, IntParam, Plugin, RGBParam,
-                         register)
+from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, RGBParam
+from clfx.host import Plugin, register
 
 FACTORS = {"draft": 4, "preview": 2, "final": 1, "reference": 1}
 """Resolution divisor of the streak passes per quality level."""
@@ -292,7 +292,7 @@ class Streaks(Plugin):
 
 def bench_case(width, height, rng):
     """A dim noisy frame with a few strong lights: 4 rays at 1080p-typical length."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = rng.uniform(0.0, 0.3, (height, width, 4)).astype(np.float32)
     src[..., 3] = 1.0

@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-from clfx.plugin import Descriptor, FloatParam, Plugin, Vec2Param, register
+from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
+from clfx.host import Plugin, register
 
 
 def vignette_geometry(p, camera, display_window, pixel_aspect):
@@ -43,7 +44,7 @@ def vignette_geometry(p, camera, display_window, pixel_aspect):
 
 def bench_case(width, height, rng):
     """A textured HDR frame under a wide lens with a strong artistic falloff."""
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
 
     src = rng.uniform(0.0, 4.0, (height, width, 4)).astype(np.float32)
     src[..., 3] = 1.0

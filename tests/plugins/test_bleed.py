@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from clfx.plugin import RenderContext
+from clfx.host import RenderContext
 from clfx.plugins.bleed import Bleed
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.bleed import bleed as reference
 
@@ -72,7 +72,7 @@ def test_bleed_rod_grows_into_display(rt):
 
 
 def test_separable_psf_errors_as_documented():
-    from clfx import psf as psflib
+    from clfx.fx import psf as psflib
     from clfx.plugins.bleed import separable_psf, separable_psf_error
 
     # the module docstring's table: L1 error (fraction of the leaked light misplaced)
@@ -88,7 +88,7 @@ def test_separable_psf_errors_as_documented():
 
 @pytest.mark.parametrize("quality", ["draft", "preview"])
 def test_bleed_separable_levels_within_psf_error(rt, rng, quality):
-    from clfx import psf as psflib
+    from clfx.fx import psf as psflib
     from clfx.plugins.bleed import SEPARABLE_RANK, separable_psf_error
 
     src = rng.uniform(0.0, 3.0, (37, 45, 4)).astype(np.float32)

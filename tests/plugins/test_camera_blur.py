@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
-from clfx.errors import ClipError
-from clfx.plugin import RenderContext
+from clfx.core.camera import Camera
+from clfx.core.errors import ClipError
+from clfx.host import RenderContext
 from clfx.plugins.camera_blur import CameraBlur
 from tests.conftest import hard_shapes
 from tests.plugins.test_motion_blur import smooth_texture

@@ -3,7 +3,7 @@ import pytest
 
 from clfx.plugins.chromatic_aberration import (QUALITY, ChromaticAberration as CA,
                                                cie1931_xyz, spectral_bins)
-from clfx.resample import lut_lookup, radial_lut
+from clfx.fx.resample import lut_lookup, radial_lut
 from clfx.plugins.chromatic_aberration import radial_model
 from tests.conftest import hard_shapes
 from tests.reference.chromatic_aberration import chromatic_aberration as reference

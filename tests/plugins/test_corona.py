@@ -3,12 +3,12 @@ import math
 import numpy as np
 import pytest
 
-from clfx import spectral
-from clfx.camera import Camera
-from clfx.plugin import RenderContext
+from clfx.fx import spectral
+from clfx.core.camera import Camera
+from clfx.host import RenderContext
 from clfx.plugins.corona import (Corona, PSFGeometry, aperture, far_field,
                                  monochromatic_psf, spectral_psf)
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.corona import corona as reference
 

@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from clfx.plugin import RenderContext
+from clfx.host import RenderContext
 from clfx.plugins.defocus import Defocus, bench_case, defocus_sigmas
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.defocus import defocus as reference
 
@@ -156,7 +156,7 @@ def test_bench_case_is_renderable(rt, rng):
 
 
 def test_soft_camera_preset_loads():
-    from clfx.presets import load_look
+    from clfx.pipeline.presets import load_look
 
     look = load_look("soft-camera")
     assert [s.effect for s in look.steps] == ["defocus", "vignette"]

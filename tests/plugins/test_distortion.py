@@ -3,10 +3,10 @@ import cv2
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
-from clfx.errors import ParamError
+from clfx.core.camera import Camera
+from clfx.core.errors import ParamError
 from clfx.plugins.distortion import Distortion, build_map, coefficients, intrinsics
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference import distortion as ref
 

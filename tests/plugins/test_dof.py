@@ -3,12 +3,12 @@ import math
 import numpy as np
 import pytest
 
-from clfx import metrics
-from clfx.camera import Camera
-from clfx.groundtruth import render_truth
-from clfx.plugin import QUALITY_LEVELS
+from clfx.bench import metrics
+from clfx.core.camera import Camera
+from clfx.bench.groundtruth import render_truth
+from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins.dof import QUALITY, Dof, quantised_radius, tap_table
-from clfx.scene import demo_scene, render_sharp
+from clfx.bench.scene import demo_scene, render_sharp
 from tests.conftest import hard_shapes
 from tests.reference import dof as reference
 
@@ -216,7 +216,7 @@ def test_huge_coc_and_pixel_aspect(rt, rng):
 
 def test_identity_cases(rt, rng):
     src, depth = random_case(rng, (16, 16))
-    from clfx.plugin import RenderContext
+    from clfx.host import RenderContext
 
     p = Dof.params(coc_source="max_blur", max_blur=0.0)
     ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=CAM)
@@ -268,7 +268,7 @@ def test_bench_case_shape():
 
 
 def test_half_resolution_tiles_match_full_resolution_on_smooth_content(rt):
-    from clfx.plugin import RenderContext
+    from clfx.host import RenderContext
 
     ys, xs = np.mgrid[0:96, 0:128].astype(np.float32)
     src = np.stack([xs / 128, ys / 96, 0.5 + 0.2 * np.sin(xs / 9.0), np.ones_like(xs)], axis=2)

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from clfx import fftconv
-from clfx.rect import Rect
+from clfx.fx import fftconv
+from clfx.core.rect import Rect
 from tests.reference.glare import convolve as reference
 
 CASES = [

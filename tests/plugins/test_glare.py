@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from clfx.plugin import RenderContext
+from clfx.host import RenderContext
 from clfx.plugins.glare import Glare
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.glare import glare as reference
 
@@ -21,7 +21,7 @@ def psf_for(p, window, display=None):
     ctx = Ctx()
     disp = display or window
     ctx.diagonal_px, ctx.width_px = disp.diagonal, disp.width
-    from clfx.camera import Camera
+    from clfx.core.camera import Camera
     ctx.camera = Camera()
     return g.build_psf(p, ctx, g.radius_px(p, ctx))
 
@@ -170,7 +170,7 @@ def test_glare_huge_size_and_extreme_params(rt, rng):
 
 
 def test_psf_spencer_normalised_and_monotonic():
-    from clfx import psf
+    from clfx.fx import psf
     k = psf.spencer(40, 0.03)
     assert k.shape == (81, 81) and abs(k.sum() - 1) < 1e-12
     row = k[40, 40:]
@@ -179,7 +179,7 @@ def test_psf_spencer_normalised_and_monotonic():
 
 
 def test_psf_kernel_image_resample():
-    from clfx import psf
+    from clfx.fx import psf
     img = np.zeros((21, 31, 3))
     img[10, 15] = (1, 2, 3)
     img[10, 25] = (1, 1, 1)

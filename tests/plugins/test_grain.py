@@ -8,10 +8,10 @@ import sys
 import numpy as np
 import pytest
 
-from clfx.errors import ParamError
-from clfx.plugin import RenderContext
+from clfx.core.errors import ParamError
+from clfx.host import RenderContext
 from clfx.plugins.grain import GRAIN_SALT, STOCKS, Grain, bench_case, effect_seed, grain_weights
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import ROOT, hard_shapes
 from tests.reference.grain import grain as reference
 from tests.reference.grain import uniform as reference_uniform
@@ -302,9 +302,9 @@ def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
     # one PoCL thread in a fresh process gives the same bytes (final: all three kernels)
     np.save(tmp_path / "src.npy", src)
     final = run(rt, src, "final", frame=3, amount=0.1, size=2.0)[0]
-    code = ("import numpy as np; from clfx.runtime import Runtime;"
+    code = ("import numpy as np; from clfx.device.runtime import Runtime;"
             "from clfx.plugins.grain import Grain;"
-            "from clfx.rect import Rect;"
+            "from clfx.core.rect import Rect;"
             f"src = np.load({str(tmp_path / 'src.npy')!r});"
             "out = Grain().apply(Runtime.get(), Grain.params(amount=0.1, size=2.0), src, frame=3,"
             " display_window=Rect(0, 0, 2048, 1080));"

@@ -2,11 +2,11 @@ import lensfunpy
 import numpy as np
 import pytest
 
-from clfx import lensdb
-from clfx.camera import Camera
-from clfx.errors import ParamError
+from clfx.fx import lensdb
+from clfx.core.camera import Camera
+from clfx.core.errors import ParamError
 from clfx.plugins.lens import Lens, channel_points
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference import lens as ref
 from tests.plugins.test_distortion import smooth_image

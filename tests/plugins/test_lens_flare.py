@@ -3,10 +3,10 @@ import math
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
-from clfx.errors import ParamError
+from clfx.core.camera import Camera
+from clfx.core.errors import ParamError
 from clfx.plugins.lens_flare import LensFlare, parse_ghosts
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.lens_flare import lens_flare as reference, sources
 
@@ -110,7 +110,7 @@ def test_light_just_outside_the_frame_flares(rt, rng):
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
     # with no margin the light does not count: identity with a reason
     p0 = LensFlare.params(**{**PARAMS, "margin": 0.0})
-    from clfx.plugin import RenderContext
+    from clfx.host import RenderContext
     ctx = RenderContext(rt, rt.upload(src, data), display_window=display, camera=CAM)
     assert LensFlare().is_identity(p0, ctx) == "no light source in or near view"
 

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from clfx import metrics
-from clfx.camera import Camera
-from clfx.plugin import RenderContext
+from clfx.bench import metrics
+from clfx.core.camera import Camera
+from clfx.host import RenderContext
 from clfx.plugins.motion_blur import MAX_RADIUS_PX, MotionBlur, bench_case, tile_size
 from tests.conftest import hard_shapes
 from tests.reference.motion_blur import line_blur, naive_blur

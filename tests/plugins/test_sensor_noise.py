@@ -8,12 +8,12 @@ import sys
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
-from clfx.plugin import RenderContext
+from clfx.core.camera import Camera
+from clfx.host import RenderContext
 from clfx.plugins.grain import effect_seed
 from clfx.plugins.sensor_noise import (MAX_COUNT, SENSOR_SALT, SensorNoise, bench_case,
                                        electrons_per_unit, noise_variance)
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import ROOT, hard_shapes
 from tests.reference.sensor_noise import sensor_noise as reference
 
@@ -268,7 +268,7 @@ def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
                   local=local)
         assert rt.download(dst).tobytes() == base.tobytes(), local
     np.save(tmp_path / "src.npy", src)
-    code = ("import numpy as np; from clfx.runtime import Runtime; from clfx.camera import Camera;"
+    code = ("import numpy as np; from clfx.device.runtime import Runtime; from clfx.core.camera import Camera;"
             "from clfx.plugins.sensor_noise import SensorNoise;"
             f"src = np.load({str(tmp_path / 'src.npy')!r});"
             "out = SensorNoise().apply(Runtime.get(), SensorNoise.params(prnu=0.01, seed=3), src,"

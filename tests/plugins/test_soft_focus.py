@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from clfx.plugin import RenderContext
+from clfx.host import RenderContext
 from clfx.plugins.soft_focus import SoftFocus
 from tests.conftest import hard_shapes
 from tests.reference.soft_focus import soft_focus as reference

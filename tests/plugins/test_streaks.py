@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
+from clfx.core.camera import Camera
 from clfx.plugins.streaks import Streaks, streak_angles
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.streaks import line_kernel_streaks, streaks as reference
 
@@ -102,7 +102,7 @@ def test_nan_inf_do_not_spread_and_are_counted(rt, rng):
     assert np.isfinite(got).all()
     ref = reference(bad, **p.as_dict(), snap_from=16)   # final quality snaps long steps
     np.testing.assert_allclose(got, ref, rtol=1e-5, atol=2e-6 * ref.max())
-    from clfx.plugin import RenderContext
+    from clfx.host import RenderContext
     ctx = RenderContext(rt, rt.upload(bad))
     Streaks().render(rt, p, ctx)
     assert any("3 non-finite" in n for n in ctx.notes)

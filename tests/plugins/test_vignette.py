@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from clfx.camera import Camera
+from clfx.core.camera import Camera
 from clfx.plugins.vignette import Vignette
-from clfx.rect import Rect
+from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference.vignette import vignette as reference
 

@@ -1,4 +1,4 @@
-"""float64 NumPy oracle of the per-tile scene statistics (clfx/analysis.py)."""
+"""float64 NumPy oracle of the per-tile scene statistics (clfx/fx/analysis.py)."""
 import numpy as np
 
 

@@ -1,4 +1,4 @@
-"""float64 NumPy oracle of clfx/blur.py and clfx/plugins/defocus.py: the plainest formula.
+"""float64 NumPy oracle of clfx/fx/blur.py and clfx/plugins/defocus.py: the plainest formula.
 
 The blur is the exact discrete Gaussian ``exp(-k^2 / 2 sigma^2)``, truncated at 10 sigma (the
 tail beyond is < 1e-22) and normalised, applied separably as dense matrices whose rows sum

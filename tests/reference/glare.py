@@ -1,4 +1,4 @@
-"""float64 NumPy oracle of clfx/plugins/glare.py (and the convolution of clfx/fftconv.py)."""
+"""float64 NumPy oracle of clfx/plugins/glare.py (and the convolution of clfx/fx/fftconv.py)."""
 import numpy as np
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])

@@ -1,6 +1,6 @@
 """float64 NumPy oracle of clfx/plugins/grain.py: the plainest form of the model.
 
-The white noise is the same hash as kernels/common.h (``clfx_uniform``), re-implemented on
+The white noise is the same hash as kernels/lib/common.h (``clfx_uniform``), re-implemented on
 uint32 arrays, so the oracle reproduces the device's noise exactly up to float rounding.
 """
 import math

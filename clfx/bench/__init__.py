@@ -1,0 +1,1 @@
+"""`clfx bench`: the runner, one case module per effect, layered scenes, ground truth, metrics."""

@@ -1,0 +1,5 @@
+"""Bench case of defocus (moving here from the plugin module)."""
+from clfx.bench.cases import Case
+from clfx.plugins.defocus import bench_case, bench_peers
+
+CASE = Case(make=bench_case, peers=bench_peers)

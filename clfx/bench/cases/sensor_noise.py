@@ -1,0 +1,5 @@
+"""Bench case of sensor_noise (moving here from the plugin module)."""
+from clfx.bench.cases import Case
+from clfx.plugins.sensor_noise import bench_case, bench_peers
+
+CASE = Case(make=bench_case, peers=bench_peers)

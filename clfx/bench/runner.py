@@ -1,0 +1,455 @@
+"""`clfx bench`: what accuracy costs in time, and what a scene calls for.
+
+Three parts, all measured in one run so ratios compare like with like:
+
+1. Effects x quality levels.  Each effect has a case module, ``clfx.bench.cases.<effect>``
+   (see that package for the protocol): its representative hard case.  Every level is timed on the device (median, min and max
+   of ``repeat`` warm runs after a warm-up), and its output is compared with a reference:
+   the case's ``truth`` when it has one (the multisample ground truth for depth of field and
+   motion blur), else the effect's own ``reference`` level (float64 / direct evaluation).
+   Errors: RMSE and max in linear light, relative RMSE (RMSE / RMS of the reference), PSNR
+   after a log tone map, and edge-band RMSE where the case marks an edge band
+   (``edge_mask``).  Noise effects, whose levels draw different samples, supply
+   ``metrics(out, ref, case)`` comparing statistics with their model instead.  Peers
+   (OpenCV, SciPy, naive methods) doing the same operation are timed beside it where a case
+   declares them with ``peers(case, params, ctx)``: host callables returning RGBA arrays, or
+   ``(callable, level)`` to compare with the clfx level doing the same work (else final).
+2. Whole looks: each built-in look at the bench size, ms per frame with a per-effect
+   breakdown, and sequence throughput with EXR reading and writing included.
+3. Scene analysis: the cinema look on (a) a frame that needs everything, (b) a static, dim,
+   all-in-focus frame, (c) the same with a small moving region, next to the cost of reading
+   and writing the frame.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from clfx.bench import cases
+from clfx.core.camera import Camera
+from clfx.core.frame import Frame
+from clfx.core.plugin import QUALITY_LEVELS
+from clfx.core.frame import crop_to
+from clfx.host import RenderContext
+from clfx.plugins import discover
+from clfx.core.rect import Rect
+
+
+# -- metrics -----------------------------------------------------------------------------
+def _rgb(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, np.float64)
+    return a[..., :3] if a.ndim == 3 else a
+
+
+def error_metrics(out: np.ndarray, ref: np.ndarray, edge: np.ndarray | None = None) -> dict:
+    """RMSE / max in linear light, relative RMSE, RMSE and PSNR after log(1 + x) (what an
+    eye sees of HDR errors: linear RMSE is dominated by the brightest pixels), edge-band RMSE."""
+    o, r = _rgb(out), _rgb(ref)
+    finite = np.isfinite(r)
+    o = np.where(finite, np.nan_to_num(o, nan=1e30, posinf=1e30, neginf=-1e30), 0.0)
+    r = np.where(finite, r, 0.0)
+    diff = o - r
+    rmse = float(np.sqrt(np.mean(diff ** 2))) if diff.size else 0.0
+    rms_ref = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+    lo, lr = np.log1p(np.maximum(o, 0)), np.log1p(np.maximum(r, 0))
+    peak = max(float(lr.max()) if lr.size else 0.0, 1e-12)
+    mse_log = float(np.mean((lo - lr) ** 2)) if lo.size else 0.0
+    psnr = float("inf") if mse_log == 0 else 10 * math.log10(peak ** 2 / mse_log)
+    m = {"rmse": rmse, "max_err": float(np.abs(diff).max()) if diff.size else 0.0,
+         "rel_rmse": rmse / rms_ref if rms_ref > 0 else rmse, "psnr_log": psnr,
+         "log_rmse": math.sqrt(mse_log)}
+    if edge is not None and edge.any():
+        m["edge_rmse"] = float(np.sqrt(np.mean(diff[edge] ** 2)))
+    return m
+
+
+def _timed(fn, repeat: int) -> tuple[object, list[float]]:
+    result = fn()  # warm-up: compiles kernels, builds plans and caches
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append((time.perf_counter() - t0) * 1e3)
+    return result, times
+
+
+def _stats(times: list[float]) -> dict:
+    return {"ms": float(np.median(times)), "ms_min": float(min(times)), "ms_max": float(max(times))}
+
+
+# -- effects x levels --------------------------------------------------------------------
+EDGE_BAND_PX = 4.0
+"""Pixels within this distance of a depth or velocity discontinuity form the edge band."""
+
+CACHE_VERSION = 1
+
+
+def _case_cache_path(module, name: str, width: int, height: int, seed: int):
+    """A cache file for a case with a costly ground truth, keyed by the sources that make it."""
+    import hashlib
+    import inspect
+
+    from clfx.bench import groundtruth
+    from clfx.bench import scene
+
+    h = hashlib.sha1(f"{CACHE_VERSION}:{name}:{width}x{height}:{seed}".encode())
+    for mod in (module, scene, groundtruth):
+        h.update(inspect.getsource(mod).encode())
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "clfx", "bench", f"{name}-{width}x{height}-{h.hexdigest()[:12]}.pickle")
+
+
+def load_case(module, spec: "cases.Case", name: str, width: int, height: int, seed: int = 1) -> dict:
+    """The effect's bench case; cases with a multisample ``truth`` are cached on disk
+    (minutes to render at 1080p) and reused while their sources are unchanged."""
+    import pickle
+
+    path = _case_cache_path(module, name, width, height, seed)
+    if os.path.exists(path):
+        try:
+            with open(path, "rb") as f:
+                return pickle.load(f)
+        except Exception:
+            pass  # a damaged cache entry is rebuilt
+    case = spec.make(width, height, np.random.default_rng(seed))
+    if case.get("truth") is not None:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        tmp = f"{path}.tmp-{os.getpid()}"
+        with open(tmp, "wb") as f:
+            pickle.dump(case, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+    return case
+
+
+@dataclass
+class EffectResult:
+    effect: str
+    rows: list[dict] = field(default_factory=list)
+    peers: list[dict] = field(default_factory=list)
+    reference_kind: str = "reference level"
+    note: str = ""
+
+
+def _case_context(rt, case: dict, quality: str):
+    src = np.asarray(case["source"], np.float32)
+    window = case.get("data_window") or Rect.from_size(src.shape[1], src.shape[0])
+    up = rt.upload(src, window)
+    depth = rt.upload(np.asarray(case["depth"], np.float32), window) if case.get("depth") is not None else None
+    vel = rt.upload(np.asarray(case["velocity"], np.float32), window) if case.get("velocity") is not None else None
+    return RenderContext(rt, up, depth=depth, velocity=vel,
+                         display_window=case.get("display_window") or window,
+                         pixel_aspect=case.get("pixel_aspect", 1.0), frame=case.get("frame", 1),
+                         seed=case.get("seed", 0), camera=case.get("camera") or Camera(),
+                         quality=quality, display_referred=case.get("display_referred", False))
+
+
+def bench_effect(rt, name: str, width: int, height: int, repeat: int,
+                 rng_seed: int = 1) -> EffectResult:
+    """Time every quality level of one effect on its bench case and measure its error."""
+    cls = discover()[name]
+    spec, module = cases.for_effect(name), cases.module_for(name)
+    res = EffectResult(name)
+    if spec is None:
+        res.note = "no bench case"
+        return res
+    case = load_case(module, spec, name, width, height, rng_seed)
+    plugin = cls()
+    params = cls.params(**case.get("params", {}))
+    outputs = {}
+    for level in QUALITY_LEVELS:
+        ctx = _case_context(rt, case, level)
+        window = ctx.source.window
+        reason = plugin.is_identity(params, ctx)
+
+        def run():
+            if reason:
+                return ctx.source
+            img = plugin.render(rt, params, ctx)
+            rt.finish()
+            return img
+
+        img, times = _timed(run, repeat)
+        outputs[level] = crop_to(rt.download(img), img.window, window)
+        res.rows.append({"effect": name, "quality": level, **_stats(times),
+                         "identity": reason or None})
+    truth = case.get("truth")
+    ref = np.asarray(truth, np.float64) if truth is not None else outputs["reference"].astype(np.float64)
+    res.reference_kind = "ground truth" if truth is not None else "reference level"
+    edge = case.get("edge_mask")
+    if edge is None and truth is not None and (case.get("depth") is not None or case.get("velocity") is not None):
+        from clfx.bench.metrics import edge_band
+
+        edge = edge_band(case.get("depth"), case.get("velocity"), EDGE_BAND_PX)
+    ref_ms = next(r["ms"] for r in res.rows if r["quality"] == "reference")
+    # Noise-like effects compare statistics, not pixels: a module may supply its own metric.
+    metric = spec.metrics or (lambda out, ref_, c: error_metrics(out, ref_, edge))
+    for row in res.rows:
+        row.update(metric(outputs[row["quality"]], ref, case))
+        row["speedup_vs_reference"] = ref_ms / row["ms"] if row["ms"] > 0 else None
+        row["reference"] = res.reference_kind
+    ref_err = next(r for r in res.rows if r["quality"] == "reference")["rel_rmse"]
+    for row in res.rows:
+        row["error_ratio_vs_reference"] = (row["rel_rmse"] / ref_err) if ref_err > 0 else None
+    peer_ctx = _case_context(rt, case, "final")
+    peers = spec.peers
+    for label, spec in ((peers(case, params, peer_ctx) if peers else None) or {}).items():
+        fn, level = spec if isinstance(spec, tuple) else (spec, "final")
+        try:
+            out, times = _timed(fn, repeat)
+        except Exception as exc:  # a peer missing on this machine is reported, not fatal
+            res.peers.append({"effect": name, "peer": label, "error": str(exc)})
+            continue
+        peer = {"effect": name, "peer": label, **_stats(times), **error_metrics(out, ref, edge)}
+        mine = next(r for r in res.rows if r["quality"] == level)
+        peer["clfx_level"] = level
+        peer["clfx_ms"] = mine["ms"]
+        peer["clfx_rel_rmse"] = mine["rel_rmse"]
+        peer["clfx_time_ratio"] = mine["ms"] / peer["ms"] if peer["ms"] > 0 else None
+        res.peers.append(peer)
+    return res
+
+
+# -- looks -------------------------------------------------------------------------------
+def _demo_frame(width: int, height: int, frame: int = 12) -> Frame:
+    from clfx.bench.scene import demo_scene, render_sharp
+
+    return render_sharp(demo_scene(frame, width, height))
+
+
+def bench_look(rt, look_name: str, frame: Frame, repeat: int, quality: str | None = None) -> dict:
+    """Milliseconds per frame of a look with a per-effect breakdown (median of runs)."""
+    from clfx.pipeline.look import render_frame
+    from clfx.pipeline.presets import load_look
+
+    look = load_look(look_name)
+    render_frame(rt, look, frame, frame_number=1, quality=quality)  # warm-up
+    totals, per_effect = [], {}
+    report = None
+    for _ in range(repeat):
+        _, report = render_frame(rt, look, frame, frame_number=1, quality=quality)
+        totals.append(report.total_ms)
+        for s in report.steps:
+            per_effect.setdefault(s.effect, []).append(s.ms if s.ran else 0.0)
+    return {"look": look_name, "quality": quality or "final", **_stats(totals),
+            "effects": {k: round(float(np.median(v)), 2) for k, v in per_effect.items()},
+            "skipped": {s.effect: s.reason for s in report.steps if not s.ran}}
+
+
+def bench_io(frame: Frame, repeat: int) -> dict:
+    """Reading and writing one frame as half-float EXR (zip), the floor of a frame's cost."""
+    from clfx.io.files import read_frame, write_frame
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "io.exr")
+        write_frame(frame, path, overwrite=True)
+        w, r = [], []
+        for _ in range(max(repeat, 1)):
+            t0 = time.perf_counter()
+            write_frame(frame, path, overwrite=True)
+            w.append((time.perf_counter() - t0) * 1e3)
+            t0 = time.perf_counter()
+            read_frame(path)
+            r.append((time.perf_counter() - t0) * 1e3)
+    return {"write_ms": float(np.median(w)), "read_ms": float(np.median(r)),
+            "io_ms": float(np.median(w) + np.median(r))}
+
+
+def bench_sequence(rt, look_name: str, width: int, height: int, frames: int) -> dict:
+    """Sequence throughput through `clfx render`'s batch pipeline, reading and writing EXRs."""
+    from clfx.pipeline.batch import Batch
+    from clfx.io.files import PassSpec, write_frame
+    from clfx.pipeline.presets import load_look
+    from clfx.bench.scene import demo_scene, render_sharp
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(1, frames + 1):
+            write_frame(render_sharp(demo_scene(i, width, height)),
+                        os.path.join(tmp, f"in.{i:04d}.exr"), bit_depth="float")
+        opts = {"overwrite": True}
+        batch = Batch(look=load_look(look_name), input_path=os.path.join(tmp, "in.####.exr"),
+                      output_path=os.path.join(tmp, "out.####.exr"), options=opts,
+                      passes=PassSpec(), verbosity=0)
+        batch.prepare()
+        summary = batch.run(rt)
+    return {"look": look_name, "frames": frames, "fps": summary["fps"],
+            "ms_per_frame": 1e3 * summary["wall_s"] / max(frames, 1),
+            "device_ms_mean": summary["device_ms_mean"]}
+
+
+def analysis_frames(width: int, height: int, camera: Camera) -> dict[str, Frame]:
+    """Frames (a) needs everything, (b) static dim all-in-focus, (c) (b) with a moving patch."""
+    a = _demo_frame(width, height)
+    base = np.clip(a.rgba * 0.3, 0.0, 0.4).astype(np.float32)  # below every highlight knee
+    base[..., 3] = 1.0
+    depth = np.full((height, width), camera.focus_distance, np.float32)
+    still = np.zeros((height, width, 2), np.float32)
+    b = Frame.from_array(base, depth=depth, velocity=still)
+    vel = still.copy()
+    ph, pw = max(1, height // 5), max(1, width // 5)
+    y0, x0 = height // 3, width // 3
+    vel[y0:y0 + ph, x0:x0 + pw] = (12.0 * width / 1920 + 2.0, 0.0)
+    c = Frame.from_array(base.copy(), depth=depth, velocity=vel)
+    return {"a_needs_everything": a, "b_static_dim_in_focus": b, "c_small_region_moves": c}
+
+
+def bench_analysis(rt, look_name: str, width: int, height: int, repeat: int) -> dict:
+    from clfx.pipeline.presets import load_look
+
+    look = load_look(look_name)
+    frames = analysis_frames(width, height, look.camera)
+    io = bench_io(frames["a_needs_everything"], repeat)
+    out = {"look": look_name, **io, "frames": {}}
+    for key, frame in frames.items():
+        r = bench_look(rt, look_name, frame, repeat)
+        r["vs_io"] = (r["ms"] + io["io_ms"]) / io["io_ms"] if io["io_ms"] > 0 else None
+        out["frames"][key] = r
+    return out
+
+
+# -- reporting ---------------------------------------------------------------------------
+def summary_markdown(results: dict) -> str:
+    """One row per effect: median ms and relative RMSE (vs the reference level or the ground
+    truth) at each quality level."""
+    lines = ["| effect | " + " | ".join(QUALITY_LEVELS) + " | error measured against |",
+             "|---|" + "---|" * len(QUALITY_LEVELS) + "---|"]
+    for e in results.get("effects", []):
+        rows = {r["quality"]: r for r in e["rows"]}
+        if not rows:
+            lines.append(f"| {e['effect']} | {e['note']} |" + " |" * len(QUALITY_LEVELS))
+            continue
+        cells = []
+        for q in QUALITY_LEVELS:
+            r = rows[q]
+            err = r["rel_rmse"]
+            baseline = q == "reference" and e["reference"] == "reference level"
+            cells.append(f"{r['ms']:.0f} ms, " + ("baseline" if baseline else
+                                                   "0" if err == 0 else f"{err:.1e}"))
+        lines.append(f"| {e['effect']} | " + " | ".join(cells) + f" | {e['reference']} |")
+    return "\n".join(lines) + "\n"
+
+
+def markdown(results: dict) -> str:
+    lines = [f"clfx bench at {results['size'][0]}x{results['size'][1]}, {results['repeat']} warm "
+             f"runs, device: {results['device']}", ""]
+    if results.get("effects"):
+        lines += ["Time per frame and relative RMSE of each quality level:", "",
+                  summary_markdown(results), "Details:", ""]
+    if results.get("effects"):
+        lines += ["| effect | level | ms (min-max) | speed-up vs ref | RMSE | max err | rel. RMSE | "
+                  "PSNR log (dB) | edge RMSE | reference |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for e in results["effects"]:
+            for r in e["rows"]:
+                sp = r.get("speedup_vs_reference")
+                lines.append(
+                    f"| {r['effect']} | {r['quality']} | {r['ms']:.1f} ({r['ms_min']:.1f}-{r['ms_max']:.1f}) | "
+                    f"{sp:.2f}x | {r['rmse']:.3g} | {r['max_err']:.3g} | {r['rel_rmse']:.3g} | "
+                    f"{r['psnr_log']:.1f} | {r.get('edge_rmse', float('nan')):.3g} | {r['reference']} |"
+                    if sp else f"| {r['effect']} | {r['quality']} | identity | | | | | | | |")
+        peers = [p for e in results["effects"] for p in e["peers"]]
+        if peers:
+            lines += ["", "| effect | peer | peer ms | clfx level | clfx ms | clfx / peer time | "
+                          "peer rel. RMSE | clfx rel. RMSE | peer max err |",
+                      "|---|---|---|---|---|---|---|---|---|"]
+            for p in peers:
+                if "error" in p:
+                    lines.append(f"| {p['effect']} | {p['peer']} | failed: {p['error']} | | | | | | |")
+                else:
+                    lines.append(f"| {p['effect']} | {p['peer']} | {p['ms']:.1f} | {p['clfx_level']} | "
+                                 f"{p['clfx_ms']:.1f} | {p['clfx_time_ratio']:.2f} | {p['rel_rmse']:.3g} | "
+                                 f"{p['clfx_rel_rmse']:.3g} | {p['max_err']:.3g} |")
+    if results.get("looks"):
+        lines += ["", "| look | ms/frame (min-max) | per effect (ms) |", "|---|---|---|"]
+        for lk in results["looks"]:
+            per = ", ".join(f"{k} {v:.0f}" for k, v in lk["effects"].items())
+            lines.append(f"| {lk['look']} | {lk['ms']:.0f} ({lk['ms_min']:.0f}-{lk['ms_max']:.0f}) | {per} |")
+    if results.get("sequence"):
+        s = results["sequence"]
+        lines += ["", f"Sequence throughput (look {s['look']}, {s['frames']} frames, EXR read+write "
+                      f"included): {s['ms_per_frame']:.0f} ms/frame ({s['fps']} fps); device alone "
+                      f"{s['device_ms_mean']:.0f} ms/frame."]
+    if results.get("analysis"):
+        a = results["analysis"]
+        lines += ["", f"What a scene calls for (look {a['look']}; EXR read {a['read_ms']:.0f} ms + "
+                      f"write {a['write_ms']:.0f} ms = {a['io_ms']:.0f} ms):", "",
+                  "| frame | device ms | (device + I/O) / I/O | skipped |", "|---|---|---|---|"]
+        for k, r in a["frames"].items():
+            skipped = "; ".join(f"{e}: {why}" for e, why in r["skipped"].items()) or "-"
+            lines.append(f"| {k} | {r['ms']:.0f} | {r['vs_io']:.2f} | {skipped} |")
+    return "\n".join(lines) + "\n"
+
+
+def pareto_plot(results: dict, path: str) -> None:
+    """Time vs relative error, one line per effect (needs matplotlib: the [plot] extra)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as exc:
+        from clfx.core.errors import ClfxError
+
+        raise ClfxError("--plot needs matplotlib: pip install 'clfx[plot]'") from exc
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    styles = [(ls, m) for ls in ("-", "--", ":") for m in ("o", "s", "^", "D", "v", "P")]
+    for i, e in enumerate(results["effects"]):
+        # error 0 (a level identical to the reference, or the reference itself) has no place
+        # on a log axis: such points are left out
+        pts = [(r["ms"], r["rel_rmse"]) for r in e["rows"]
+               if not r.get("identity") and r["rel_rmse"] > 0]
+        if pts:
+            xs, ys = zip(*pts)
+            ls, m = styles[i % len(styles)]
+            ax.plot(xs, ys, linestyle=ls, marker=m, label=e["effect"])
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("time per frame (ms)")
+    ax.set_ylabel("relative RMSE vs reference level / ground truth\n(levels with error 0 not shown)")
+    ax.set_title(f"clfx: what accuracy costs ({results['size'][0]}x{results['size'][1]})")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5,
+              sequence_frames=8, analysis=True, log=print) -> dict:
+    reg = discover()
+    effect_names = list(reg) if effects is None else list(effects)
+    results = {"size": [width, height], "repeat": repeat, "device": rt.description,
+               "effects": [], "looks": []}
+    for name in effect_names:
+        if name not in reg:
+            from clfx.plugins import get_plugin
+
+            get_plugin(name)  # raises with a suggestion
+        t0 = time.perf_counter()
+        try:
+            res = bench_effect(rt, name, width, height, repeat)
+        except Exception as exc:  # one broken effect must not hide the others' figures
+            results["effects"].append({"effect": name, "rows": [], "peers": [],
+                                       "reference": "", "note": f"failed: {exc!r}"})
+            log(f"clfx bench: {name} FAILED: {exc!r}")
+            continue
+        results["effects"].append({"effect": name, "rows": res.rows, "peers": res.peers,
+                                   "reference": res.reference_kind, "note": res.note})
+        log(f"clfx bench: {name} done in {time.perf_counter() - t0:.1f} s")
+    if looks is None or looks:
+        from clfx.pipeline.presets import available_looks
+
+        names = list(looks) if looks else [n for n, (o, _) in available_looks().items() if o == "built-in"]
+        frame = _demo_frame(width, height)
+        for n in names:
+            results["looks"].append(bench_look(rt, n, frame, repeat))
+            log(f"clfx bench: look {n} done")
+        if sequence_frames:
+            results["sequence"] = bench_sequence(rt, "cinema" if "cinema" in names else names[0],
+                                                 width, height, sequence_frames)
+        if analysis and ("cinema" in names):
+            results["analysis"] = bench_analysis(rt, "cinema", width, height, repeat)
+    return results

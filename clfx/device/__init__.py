@@ -1,0 +1,1 @@
+"""The OpenCL device: runtime, program cache, pooled buffers and the one cache the runtime owns."""

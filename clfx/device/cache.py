@@ -1,0 +1,167 @@
+"""The runtime's one memory budget: idle device buffers and every cached derived object.
+
+Effects keep things between frames (PSF spectra, resampling maps, noise tables, FFT plans,
+weights on the device).  They never hold them in attributes or module globals: they ask the
+runtime's cache, ``rt.cache.get(key, build)``, which builds on a miss and keeps the value
+under one byte cap shared with the idle pooled buffers (``CLFX_POOL_MB``, default 512).
+
+One eviction rule for everything: when the bytes held (idle buffers plus cached values)
+exceed the cap, the least recently used entry goes first, whatever its kind.  A released
+idle buffer is freed; an evicted value is dropped, and the pooled buffers it held come back
+as idle buffers (and may be evicted in turn).  Entries of size 0 (compiled programs, small
+host tables) free nothing and are never evicted.  A value larger than the cap on its own is
+returned but not kept.
+
+Keys are tuples whose first element names the owner (``("glare.psf", params_hash, radius)``),
+so ``clear(owner)`` drops one effect's entries and ``stats()`` reports bytes per owner.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from collections import OrderedDict
+from typing import Callable, Hashable, TypeVar
+
+import numpy as np
+
+T = TypeVar("T")
+
+DEFAULT_BUDGET_BYTES = int(os.environ.get("CLFX_POOL_MB", "512")) * 2 ** 20
+"""Bytes kept by idle pooled buffers and cached values together (``CLFX_POOL_MB``).  A 1080p
+look's buffers and spectra all fit, so a sequence allocates nothing after its first frame; at
+4K the largest FFT work buffers and spectra are released, bounding memory."""
+
+_BUFFER = "buffer"
+
+
+def sizeof(value) -> int:
+    """Bytes a cached value keeps alive: arrays, device images and buffers, and containers of
+    them; objects with an integer ``nbytes``; 0 for anything else."""
+    if value is None:
+        return 0
+    if isinstance(value, np.ndarray):
+        return int(value.nbytes)
+    if isinstance(value, (tuple, list)):
+        return sum(sizeof(v) for v in value)
+    if isinstance(value, dict):
+        return sum(sizeof(v) for v in value.values())
+    n = getattr(value, "nbytes", None)
+    if isinstance(n, (int, np.integer)):
+        return int(n)
+    n = getattr(value, "size", None)  # a raw cl.Buffer
+    if isinstance(n, (int, np.integer)) and type(value).__name__ == "Buffer":
+        return int(n)
+    return 0
+
+
+class DeviceCache:
+    """Idle buffers by size, and derived values by key, in one LRU under one byte cap."""
+
+    def __init__(self, ctx, max_bytes: int = DEFAULT_BUDGET_BYTES):
+        self._ctx = ctx
+        self.max_bytes = int(max_bytes)
+        # key -> (nbytes, value); idle buffers are keyed (_BUFFER, id(buf)) with value
+        # (size, buf).  Order = recency, least recently used first.
+        self._lru: OrderedDict[Hashable, tuple[int, object]] = OrderedDict()
+        self._bytes = 0
+        self._idle_bytes = 0
+        self._lock = threading.RLock()
+        self.hits = 0
+        self.misses = 0
+
+    # -- derived values -------------------------------------------------------------------
+    def get(self, key: tuple, build: Callable[[], T], nbytes: int | None = None) -> T:
+        """The value cached under ``key``, built by ``build()`` on a miss and kept (``nbytes``:
+        its size when :func:`sizeof` cannot tell, e.g. an FFT plan's work memory)."""
+        with self._lock:
+            hit = self._lru.get(key)
+            if hit is not None:
+                self._lru.move_to_end(key)
+                self.hits += 1
+                return hit[1]
+        value = build()  # outside the lock: builds enqueue kernels and may take buffers
+        size = sizeof(value) if nbytes is None else int(nbytes)
+        with self._lock:
+            self.misses += 1
+            if key in self._lru or size > self.max_bytes:
+                return value
+            self._lru[key] = (size, value)
+            self._bytes += size
+            self._evict()
+        return value
+
+    def peek(self, key: tuple):
+        """The value under ``key`` or None; does not count as a use."""
+        with self._lock:
+            hit = self._lru.get(key)
+            return None if hit is None else hit[1]
+
+    def clear(self, owner: str | None = None) -> None:
+        """Drop every cached value (of one owner: keys starting with ``owner``) and, without an
+        owner, every idle buffer too."""
+        with self._lock:
+            keys = [k for k in self._lru
+                    if (owner is None or (k[0] == owner and k[0] != _BUFFER))]
+            for k in keys:
+                self._drop(k)
+
+    def stats(self) -> dict:
+        """Bytes held per owner (``buffer`` for idle pooled buffers), hits and misses."""
+        with self._lock:
+            per: dict[str, int] = {}
+            for k, (size, _) in self._lru.items():
+                per[str(k[0])] = per.get(str(k[0]), 0) + size
+            return {"bytes": self._bytes, "max_bytes": self.max_bytes, "owners": per,
+                    "entries": len(self._lru), "hits": self.hits, "misses": self.misses}
+
+    @property
+    def nbytes(self) -> int:
+        return self._bytes
+
+    # -- idle buffers ---------------------------------------------------------------------
+    def take(self, nbytes: int):
+        """A buffer of ``nbytes``: the most recently freed idle one of that size, or new."""
+        import pyopencl as cl
+
+        nbytes = max(int(nbytes), 16)
+        with self._lock:
+            for key in reversed(self._lru):
+                if key[0] == _BUFFER and self._lru[key][0] == nbytes:
+                    _, (size, buf) = self._lru.pop(key)
+                    self._bytes -= size
+                    self._idle_bytes -= size
+                    return buf
+        return cl.Buffer(self._ctx, cl.mem_flags.READ_WRITE, nbytes)
+
+    def give(self, nbytes: int, buf) -> None:
+        """Return a buffer nobody uses any more: kept idle for reuse, within the budget."""
+        nbytes = max(int(nbytes), 16)
+        with self._lock:
+            if nbytes > self.max_bytes:
+                buf.release()
+                return
+            self._lru[(_BUFFER, id(buf))] = (nbytes, (nbytes, buf))
+            self._bytes += nbytes
+            self._idle_bytes += nbytes
+            self._evict()
+
+    @property
+    def idle_bytes(self) -> int:
+        return self._idle_bytes
+
+    # -- eviction -------------------------------------------------------------------------
+    def _evict(self) -> None:
+        while self._bytes > self.max_bytes:
+            victim = next((k for k, (size, _) in self._lru.items() if size > 0), None)
+            if victim is None:
+                return
+            self._drop(victim)
+
+    def _drop(self, key) -> None:
+        size, value = self._lru.pop(key)
+        self._bytes -= size
+        if key[0] == _BUFFER:
+            self._idle_bytes -= size
+            value[1].release()
+        # a dropped value's pooled buffers come back through their finalisers (give())
+        del value

@@ -1,0 +1,444 @@
+"""The OpenCL runtime: device choice, programs, device images, and the one cache
+(``clfx.device.cache``: pooled buffers and every cached value under one byte cap).
+
+Only this module creates OpenCL contexts.  Effects receive a :class:`Runtime` and work on
+:class:`DeviceImage` objects, so a frame is uploaded once, stays on the device across a
+look's chain of effects, and is downloaded once.
+
+Device choice: every platform and device is tried in turn; a device is usable only if a tiny
+kernel builds and runs on it and returns the right answer.  A CPU PoCL device is preferred
+(it is what these machines have, and it supports double precision).  ``CLFX_DEVICE`` (or the
+CLI's ``--device``) selects explicitly, as ``P:D`` (platform and device index) or a
+case-insensitive substring of "platform name / device name".
+
+Build options are pinned (``BUILD_OPTIONS``): no fast-math, because ``-cl-finite-math-only``
+may fold the NaN guards away (notes/hard-cases.md case 4) and ``-cl-fast-relaxed-math``
+relaxes ``pow``.  Kernels that can afford it opt into ``-cl-mad-enable`` via their own
+defines.  PoCL caches compiled binaries under ``POCL_CACHE_DIR``; clfx points it at a
+persistent folder (``$XDG_CACHE_HOME/clfx/pocl``) unless the user set it.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import weakref
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from clfx.core.errors import DeviceError, KernelBuildError
+from clfx.core.rect import Rect
+from clfx.device.cache import DeviceCache
+
+BUILD_OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
+"""Pinned for every program.  ``-cl-mad-enable`` only allows fused multiply-add (more
+accurate, not less, on CPUs with FMA); nothing here allows finite-math or relaxed maths."""
+
+ALIGN_PX = 4
+"""Rows of device images are padded to a multiple of this many pixels, so a work-item can
+process 4 RGBA pixels (one ``float16``) without tail code."""
+
+INSTALL_HINT = ("install PoCL, the CPU OpenCL driver: `sudo apt-get install pocl-opencl-icd "
+                "ocl-icd-opencl-dev` (or run `make setup`); do not use PyPI's "
+                "pocl-binary-distribution, which fails on these CPUs")
+
+_PROBE_SRC = """
+kernel void clfx_probe(global float *x) {
+    const int i = get_global_id(0);
+    x[i] = x[i] * 2.0f + 1.0f;
+}
+"""
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "clfx" / "pocl"
+
+
+def _ensure_pocl_cache() -> None:
+    if "POCL_CACHE_DIR" not in os.environ:
+        path = default_cache_dir()
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            os.environ["POCL_CACHE_DIR"] = str(path)
+        except OSError:
+            pass  # PoCL falls back to its own default
+
+
+def kernel_dir() -> Path:
+    """Folder holding the ``.cl`` files: ``clfx/kernels`` in an installed wheel, or the
+    repository's top-level ``kernels/`` in a source checkout (editable install)."""
+    here = Path(__file__).resolve().parent.parent  # the clfx package
+    for path in (here / "kernels", here.parent / "kernels"):
+        if (path / "lib" / "common.h").is_file():
+            return path
+    raise KernelBuildError(f"cannot find clfx's kernels folder next to {here} "
+                           f"(is the package installed correctly?)")
+
+
+@dataclass
+class DeviceReport:
+    """One platform/device pair and why it was chosen or rejected."""
+
+    index: str
+    platform: str
+    device: str
+    kind: str
+    version: str
+    usable: bool
+    reason: str
+    chosen: bool = False
+    fp64: bool = False
+
+    @property
+    def label(self) -> str:
+        return f"{self.platform} / {self.device}"
+
+
+def _device_kind(dev) -> str:
+    import pyopencl as cl
+
+    t = dev.type
+    if t & cl.device_type.CPU:
+        return "CPU"
+    if t & cl.device_type.GPU:
+        return "GPU"
+    if t & cl.device_type.ACCELERATOR:
+        return "accelerator"
+    return "other"
+
+
+def _test_device(dev) -> str | None:
+    """None if a tiny kernel builds and computes correctly on ``dev``, else the reason."""
+    import pyopencl as cl
+
+    try:
+        ctx = cl.Context([dev])
+        queue = cl.CommandQueue(ctx)
+        prg = cl.Program(ctx, _PROBE_SRC).build(options=list(BUILD_OPTIONS))
+        host = np.arange(16, dtype=np.float32)
+        buf = cl.Buffer(ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=host)
+        prg.clfx_probe(queue, (16,), None, buf)
+        out = np.empty_like(host)
+        cl.enqueue_copy(queue, out, buf)
+        queue.finish()
+        if not np.array_equal(out, host * 2 + 1):
+            return "test kernel returned wrong values"
+    except Exception as exc:  # any driver failure means: not usable
+        msg = " ".join(str(exc).split())
+        return f"test kernel failed: {msg[:200]}"
+    return None
+
+
+def _matches(selector: str, index: str, label: str) -> bool:
+    s = selector.strip().lower()
+    return s == index or s in label.lower()
+
+
+def survey_devices(selector: str | None = None) -> tuple[list[DeviceReport], object | None]:
+    """Try every platform and device; return the reports and the chosen ``cl.Device``.
+
+    Preference without a selector: usable CPU devices of a PoCL platform, then other usable
+    CPU devices, then anything usable.  With a selector only matching devices are eligible.
+    """
+    _ensure_pocl_cache()
+    try:
+        import pyopencl as cl
+    except ImportError as exc:  # pragma: no cover - dependency missing
+        raise DeviceError(f"pyopencl is not installed ({exc}); run `make setup`") from exc
+    reports: list[DeviceReport] = []
+    devices = {}
+    try:
+        platforms = cl.get_platforms()
+    except Exception as exc:  # no ICD at all
+        platforms = []
+        reports.append(DeviceReport("-", "(none)", "(none)", "-", "-", False,
+                                    f"no OpenCL platform: {' '.join(str(exc).split())[:160]}"))
+    for pi, plat in enumerate(platforms):
+        try:
+            devs = plat.get_devices()
+        except Exception as exc:
+            reports.append(DeviceReport(f"{pi}:-", plat.name.strip(), "(no devices)", "-",
+                                        plat.version, False, f"cannot list devices: {exc}"))
+            continue
+        for di, dev in enumerate(devs):
+            index = f"{pi}:{di}"
+            rep = DeviceReport(index, plat.name.strip(), dev.name.strip(), _device_kind(dev),
+                               dev.version.strip(), False, "",
+                               fp64="cl_khr_fp64" in dev.extensions)
+            if selector and not _matches(selector, index, rep.label):
+                rep.reason = f"not selected by CLFX_DEVICE/--device={selector!r}"
+            else:
+                failure = _test_device(dev)
+                rep.usable = failure is None
+                rep.reason = failure or "usable"
+                devices[index] = dev
+            reports.append(rep)
+
+    def rank(r: DeviceReport):
+        pocl = "portable computing language" in r.platform.lower() or "pocl" in r.platform.lower()
+        return (0 if r.kind == "CPU" and pocl else 1 if r.kind == "CPU" else 2, r.index)
+
+    usable = sorted((r for r in reports if r.usable), key=rank)
+    chosen = None
+    if usable:
+        usable[0].chosen = True
+        usable[0].reason = "in use"
+        chosen = devices[usable[0].index]
+        for r in usable[1:]:
+            r.reason = f"usable, but {usable[0].label} is preferred (PoCL CPU first)"
+    return reports, chosen
+
+
+@dataclass(eq=False)
+class DeviceImage:
+    """An image on the device: float32, ``channels`` per pixel, rows padded to ``pitch``.
+
+    Layout: pixel (x, y) channel c of the window lives at float index
+    ``(y * pitch + x) * channels + c``.  ``window`` places the image in the frame's full
+    coordinate system (a data window).  Padding pixels (``x >= width``) hold finite values and
+    are never meaningful.  The buffer returns to the runtime's pool when the image is dropped.
+    """
+
+    buffer: object
+    window: Rect
+    channels: int
+    pitch: int
+    runtime: "Runtime" = field(repr=False)
+
+    @property
+    def width(self) -> int:
+        return self.window.width
+
+    @property
+    def height(self) -> int:
+        return self.window.height
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        h, w = self.window.shape
+        return (h, w) if self.channels == 1 else (h, w, self.channels)
+
+    @property
+    def nbytes(self) -> int:
+        return max(self.window.height, 1) * self.pitch * self.channels * 4
+
+    def download(self) -> np.ndarray:
+        return self.runtime.download(self)
+
+    def like(self, window: Rect | None = None, channels: int | None = None) -> "DeviceImage":
+        """A new, uninitialised image with this one's window and channels unless given."""
+        return self.runtime.image(window or self.window, channels or self.channels)
+
+
+class Runtime:
+    """An OpenCL context, queue, program cache and buffer pool for one process.
+
+    Use :meth:`Runtime.get` for the process-wide instance.  Programs are built once per
+    (file, defines) and ``Kernel`` objects are reused.
+    """
+
+    _instance: "Runtime | None" = None
+    _instance_lock = threading.Lock()
+
+    def __init__(self, device=None, selector: str | None = None):
+        import pyopencl as cl
+
+        if device is None:
+            reports, device = survey_devices(selector)
+            if device is None:
+                raise DeviceError(no_device_message(reports, selector))
+        self.cl = cl
+        self.device = device
+        self.ctx = cl.Context([device])
+        self.queue = cl.CommandQueue(self.ctx)
+        self.has_fp64 = "cl_khr_fp64" in device.extensions
+        self.cache = DeviceCache(self.ctx)
+        self._programs: dict = {}
+        self._kernels: dict = {}
+        self._lock = threading.RLock()
+        self.kernel_dir = kernel_dir()
+
+    @classmethod
+    def get(cls, selector: str | None = None) -> "Runtime":
+        """The process-wide runtime (created on first use)."""
+        with cls._instance_lock:
+            if cls._instance is None:
+                cls._instance = cls(selector=selector or os.environ.get("CLFX_DEVICE"))
+            return cls._instance
+
+    @property
+    def description(self) -> str:
+        return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
+
+    @property
+    def compute_units(self) -> int:
+        return int(self.device.max_compute_units)
+
+    # -- programs -------------------------------------------------------------------------
+    def use_fp64(self, wanted: bool) -> bool:
+        """Whether a program asked for float64 (a quality Level's ``fp64``) gets it here."""
+        return bool(wanted) and self.has_fp64
+
+    def program(self, file: str, fp64: bool = False, **defines):
+        """The built program for ``kernels/<file>`` with ``-D`` defines (cached per process).
+        ``fp64``: build with ``CLFX_FP64=1`` (``kernels/lib/precision.h``) where supported."""
+        if self.use_fp64(fp64):
+            defines["CLFX_FP64"] = 1
+        key = (file, tuple(sorted((k, str(v)) for k, v in defines.items())))
+        with self._lock:
+            prg = self._programs.get(key)
+            if prg is None:
+                prg = self._build(file, key[1])
+                self._programs[key] = prg
+            return prg
+
+    def _build(self, file: str, defines):
+        cl = self.cl
+        path = self.kernel_dir / file
+        try:
+            src = path.read_text()
+        except OSError as exc:
+            raise KernelBuildError(f"cannot read kernel file {path}: {exc}") from exc
+        opts = list(BUILD_OPTIONS) + [f"-I{self.kernel_dir}"] + [f"-D{k}={v}" for k, v in defines]
+        if self.has_fp64:
+            opts.append("-DCLFX_HAS_FP64=1")
+        try:
+            return cl.Program(self.ctx, src).build(options=opts)
+        except cl.Error as exc:
+            log = str(exc)
+            raise KernelBuildError(f"building kernels/{file} with {' '.join(opts)} failed:\n{log}") from exc
+
+    def kernel(self, file: str, name: str, fp64: bool = False, **defines):
+        """A reusable ``cl.Kernel`` named ``name`` from ``kernels/<file>`` (``fp64``: see
+        :meth:`program`)."""
+        if self.use_fp64(fp64):
+            defines["CLFX_FP64"] = 1
+        key = (file, name, tuple(sorted((k, str(v)) for k, v in defines.items())))
+        with self._lock:
+            knl = self._kernels.get(key)
+            if knl is None:
+                knl = self.cl.Kernel(self.program(file, **defines), name)
+                self._kernels[key] = knl
+            return knl
+
+    def launch(self, knl, global_size, *args, local=None, wait: bool = False):
+        """Enqueue ``knl`` over ``global_size`` (x first), rounded up to ``local`` if given.
+
+        Python ints and floats must already be wrapped as ``np.int32`` / ``np.float32``;
+        DeviceImages may be passed directly (their buffer is used).
+        """
+        gsize = tuple(max(1, int(n)) for n in global_size)
+        if local is not None:
+            gsize = tuple(-(-g // l) * l for g, l in zip(gsize, local))
+        cargs = [a.buffer if isinstance(a, (DeviceImage, _PooledBuffer)) else a for a in args]
+        ev = knl(self.queue, gsize, local, *cargs)
+        if wait:
+            ev.wait()
+        return ev
+
+    def finish(self) -> None:
+        self.queue.finish()
+
+    # -- memory ---------------------------------------------------------------------------
+    def buffer(self, nbytes: int):
+        """A pooled raw buffer; returned to the pool when the returned handle is dropped."""
+        buf = self.cache.take(nbytes)
+        holder = _PooledBuffer(buf, nbytes)
+        weakref.finalize(holder, self.cache.give, max(int(nbytes), 16), buf)
+        return holder
+
+    def image(self, window: Rect | tuple[int, int], channels: int = 4) -> DeviceImage:
+        """An uninitialised pooled image covering ``window`` ((h, w) means origin 0, 0)."""
+        if not isinstance(window, Rect):
+            h, w = window
+            window = Rect.from_size(w, h)
+        pitch = max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX)
+        nbytes = max(window.height, 1) * pitch * channels * 4
+        buf = self.cache.take(nbytes)
+        img = DeviceImage(buf, window, channels, pitch, self)
+        weakref.finalize(img, self.cache.give, nbytes, buf)
+        return img
+
+    def upload(self, array: np.ndarray, window: Rect | None = None) -> DeviceImage:
+        """Copy a host array (h, w) or (h, w, c) into a new device image."""
+        a = np.asarray(array, dtype=np.float32)
+        channels = 1 if a.ndim == 2 else a.shape[2]
+        h, w = a.shape[:2]
+        window = window or Rect.from_size(w, h)
+        if window.shape != (h, w):
+            raise ValueError(f"array shape {a.shape} does not match window {window}")
+        img = self.image(window, channels)
+        if img.pitch == w and h > 0 and a.flags.c_contiguous:
+            self.cl.enqueue_copy(self.queue, img.buffer, a)  # no padding: copy as is
+        else:
+            padded = np.zeros((max(h, 1), img.pitch, channels), np.float32)
+            padded[:h, :w] = a.reshape(h, w, channels)
+            self.cl.enqueue_copy(self.queue, img.buffer, padded)
+        return img
+
+    def download(self, img: DeviceImage) -> np.ndarray:
+        """Copy a device image to a new host array (h, w) or (h, w, c), padding removed."""
+        h, w = img.window.shape
+        host = np.empty((max(h, 1), img.pitch, img.channels), np.float32)
+        self.cl.enqueue_copy(self.queue, host, img.buffer)
+        out = host if (img.pitch == w and h > 0) else np.ascontiguousarray(host[:h, :w])
+        return out[..., 0] if img.channels == 1 else out
+
+    def fill(self, img: DeviceImage, value: float = 0.0) -> DeviceImage:
+        """Set every float of ``img`` (padding included) to ``value``."""
+        self.cl.enqueue_fill_buffer(self.queue, img.buffer, np.float32(value), 0, img.nbytes)
+        return img
+
+    def copy(self, src: DeviceImage) -> DeviceImage:
+        """A device-side copy of ``src`` (same window, channels and pitch)."""
+        dst = self.image(src.window, src.channels)
+        self.cl.enqueue_copy(self.queue, dst.buffer, src.buffer, byte_count=src.nbytes)
+        return dst
+
+    def reframe(self, img: DeviceImage, window: Rect, border: str = "zero") -> DeviceImage:
+        """``img`` moved into ``window``: covered pixels copied, the rest ``border``-filled.
+
+        ``border``: ``"zero"`` (transparent black) or ``"clamp"`` (nearest edge pixel, used to
+        extend depth and velocity passes when an effect grows the beauty's window).
+        """
+        if window == img.window:
+            return img
+        dst = self.image(window, img.channels)
+        knl = self.kernel("lib/image.cl", "image_reframe", CH=img.channels,
+                          BORDER={"zero": 0, "clamp": 1}[border])
+        dx, dy = window.x0 - img.window.x0, window.y0 - img.window.y0
+        self.launch(knl, (window.width, window.height), img, np.int32(img.pitch),
+                    np.int32(img.width), np.int32(img.height), dst, np.int32(dst.pitch),
+                    np.int32(window.width), np.int32(window.height), np.int32(dx), np.int32(dy),
+                    local=None)
+        return dst
+
+    def to_device(self, array: np.ndarray):
+        """A pooled raw buffer holding a copy of a small host array (weights, tables)."""
+        a = np.ascontiguousarray(array)
+        holder = self.buffer(a.nbytes)
+        self.cl.enqueue_copy(self.queue, holder.buffer, a)
+        return holder
+
+    def from_device(self, holder, dtype, count: int) -> np.ndarray:
+        out = np.empty(count, dtype)
+        self.cl.enqueue_copy(self.queue, out, holder.buffer)
+        return out
+
+
+class _PooledBuffer:
+    """Keeps a pooled ``cl.Buffer`` alive; its finaliser returns the buffer to the pool."""
+
+    __slots__ = ("buffer", "nbytes", "__weakref__")
+
+    def __init__(self, buffer, nbytes):
+        self.buffer = buffer
+        self.nbytes = nbytes
+
+
+def no_device_message(reports: list[DeviceReport], selector: str | None) -> str:
+    found = "; ".join(f"{r.label}: {r.reason}" for r in reports) or "no OpenCL platforms"
+    head = ("no OpenCL device matches " + repr(selector)) if selector else "no usable OpenCL device"
+    return f"{head} ({found}); {INSTALL_HINT}"

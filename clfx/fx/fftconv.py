@@ -1,0 +1,512 @@
+"""HDR-safe large-kernel convolution on the device (pyvkfft's OpenCL backend).
+
+The stable entry point is :func:`convolve`; ``glare``, ``bleed``, ``soft_focus`` and
+``corona`` call it.  :func:`spread` maps a quality level to an algorithm.
+
+Model
+-----
+Linear (not circular) convolution with zero outside the input::
+
+    out(o) = sum_i in(i) * psf(o - i + c),     c = (kh // 2, kw // 2)
+
+``o`` and ``i`` are pixel coordinates of the frame (``Rect`` convention: +x right, +y down),
+so the input window may be larger than the display window (EXR overscan: all of it
+contributes) and the output window may be larger than the input (light spreads past the
+frame; the region of definition grows).  The PSF is applied as given (not normalised here).
+
+Algorithms
+----------
+``"fft"``
+    In-place real-to-complex FFTs (``VkFFTApp(..., r2c=True)``), batched over the colour
+    channels.  Each axis is padded to the smallest size with prime factors 2, 3, 5, 7 that
+    keeps wrap-around out of the pixels kept (see :func:`fft_grid`); the PSF spectrum is
+    computed once per (PSF, grid, precision) and cached (:data:`SPECTRUM_CACHE_SIZE` entries).
+``precision="float64"``
+    Double-precision transforms.  On PoCL they cost 1.0-1.3x float32 and remove the float32
+    error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
+    shadows next to a 1e5 light, notes/hard-cases.md case 1).
+``threshold_split`` (float32 only)
+    Pixels whose largest channel exceeds the split level are left out of the FFT and added
+    exactly by a gather over their list (deterministic, no atomics), so the float32 error
+    floor scales with the remaining, moderate energy only.  If more than ``split_max_points``
+    pixels exceed the level, the call falls back to float64 (reported in ``info``).
+``"direct"``
+    A direct gather (small kernels; float64 accumulation is the reference).
+``"half"``
+    One pyramid level: 2x2 box-summed input, PSF resampled with a tent filter (energy and
+    centroid kept), float32 FFT at half resolution, bilinear upsampling.  Error: light moves by
+    up to half a pixel and the PSF core is blurred by ~1 px; energy is kept.
+
+Non-finite input values are treated as 0 (the caller counts them; ``SceneAnalysis`` does).
+
+Notes
+-----
+Memory: the work buffer holds ``B x N1 x (N2 + 2)`` reals (B = channels per batch); channels
+are processed one at a time when a batch would exceed :data:`MAX_BATCH_BYTES`.  At 3840x2160
+with a PSF radius of a quarter diagonal the float64 grid is ~3300 x 4950: ~130 MB per plane.
+
+References: Spencer et al. 1995 (glare PSF, see ``clfx.fx.psf``); VkFFT (Tolmachev 2023).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from clfx.core.rect import Rect
+
+PRECISIONS = ("float64", "float32")
+METHODS = ("fft", "direct", "half")
+SPECTRUM_CACHE_SIZE = 4
+"""PSF spectra kept per process at most ..."""
+SPECTRUM_CACHE_BYTES = 384 * 2 ** 20
+"""... and at most this many bytes of them (a 4K float64 RGB spectrum alone is ~400 MB:
+such a spectrum is recomputed per frame rather than held, keeping 4K within 2 GB)."""
+MAX_BATCH_BYTES = 160 * 2 ** 20
+"""Above this work-buffer size, colour channels are transformed one at a time (1080p
+glare batches its three channels; 4K transforms them one by one to bound memory)."""
+KERNEL_FILE = "lib/fftconv.cl"
+
+_PLANS: OrderedDict = OrderedDict()
+_SPECTRA: OrderedDict = OrderedDict()
+
+
+@dataclass
+class ConvolveInfo:
+    """What :func:`convolve` did (for ``ctx.notes`` and tests)."""
+
+    method: str = "fft"
+    precision: str = "float64"
+    grid: tuple[int, int] | None = None
+    bright_pixels: int = 0
+    fallback: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+# -- sizes ---------------------------------------------------------------------------------
+def is_smooth(n: int, primes=(2, 3, 5, 7)) -> bool:
+    """True if ``n`` has no prime factor outside ``primes`` (fast FFT sizes)."""
+    for p in primes:
+        while n % p == 0 and n > 1:
+            n //= p
+    return n == 1
+
+
+def fft_size(n: int, *, even: bool = False) -> int:
+    """The smallest size >= ``n`` with prime factors 2, 3, 5, 7 (even if asked)."""
+    m = max(int(n), 2 if even else 1)
+    while not (is_smooth(m) and (not even or m % 2 == 0)):
+        m += 1
+    return m
+
+
+def _axis_size(support_len: int, kernel_len: int, centre: int, out_lo: int, out_hi: int) -> int:
+    """Circular length that makes the circular result exact on output range [out_lo, out_hi)
+    (coordinates relative to the support origin).
+
+    Output o reads inputs o - k for k in [-centre, kernel_len - 1 - centre], i.e. the range
+    A = [out_lo - (kernel_len - 1 - centre), out_hi - 1 + centre].  Positions of A outside
+    the support [0, L) must not alias into it: negatives map to a + N >= L, positions >= L map
+    to a - N < 0.
+    """
+    a_min = out_lo - (kernel_len - 1 - centre)
+    a_max = out_hi - 1 + centre
+    need = support_len
+    if a_min < 0:
+        need = max(need, support_len - a_min)
+    if a_max >= support_len:
+        need = max(need, a_max + 1)
+    return need
+
+
+def full_region(support: Rect, kh: int, kw: int) -> Rect:
+    """Where the linear convolution of ``support`` with a (kh, kw) PSF can be non-zero."""
+    cx, cy = kw // 2, kh // 2
+    # input i reaches outputs o = i + (j - c) for taps j in [0, k)
+    return Rect(support.x0 - cx, support.y0 - cy,
+                support.x1 + kw - 1 - cx, support.y1 + kh - 1 - cy)
+
+
+def fft_grid(support: Rect, effective: Rect, kh: int, kw: int) -> tuple[int, int]:
+    """(N1, N2) FFT grid for an input ``support`` and the output rectangle kept."""
+    n1 = _axis_size(support.height, kh, kh // 2, effective.y0 - support.y0,
+                    effective.y1 - support.y0)
+    n2 = _axis_size(support.width, kw, kw // 2, effective.x0 - support.x0,
+                    effective.x1 - support.x0)
+    return fft_size(n1), fft_size(n2, even=True)
+
+
+# -- PSF handling --------------------------------------------------------------------------
+def _as_psf(psf) -> np.ndarray:
+    k = np.asarray(psf, np.float64)
+    if k.ndim == 2:
+        k = k[..., None]
+    if k.ndim != 3 or k.shape[2] not in (1, 3) or k.shape[0] < 1 or k.shape[1] < 1:
+        raise ValueError(f"psf must have shape (kh, kw) or (kh, kw, 3), got {np.shape(psf)}")
+    if not np.isfinite(k).all():
+        raise ValueError("psf contains non-finite values")
+    return np.ascontiguousarray(k)
+
+
+def psf_digest(psf: np.ndarray) -> str:
+    """Content hash of a PSF (cache key)."""
+    k = np.ascontiguousarray(psf, np.float64)
+    return hashlib.sha1(k.tobytes() + repr(k.shape).encode()).hexdigest()
+
+
+def _real(precision: str):
+    return np.float64 if precision == "float64" else np.float32
+
+
+def _defines(rt, precision: str, acc: str | None = None) -> dict:
+    d = {}
+    if precision == "float64":
+        d.update(REAL="double", REAL2="double2")
+    if (acc or precision) == "float64":
+        d.update(ACC="double", ACC4="double4", CONVERT_ACC4="convert_double4")
+    return d
+
+
+def _plan(rt, shape: tuple[int, int, int], precision: str):
+    """A cached in-place r2c plan for ``shape`` = (batch, N1, N2 + 2)."""
+    from pyvkfft.opencl import VkFFTApp
+
+    key = (id(rt), shape, precision)
+    app = _PLANS.get(key)
+    if app is None:
+        app = VkFFTApp(shape, _real(precision), rt.queue, ndim=2, inplace=True, r2c=True)
+        _PLANS[key] = app
+        while len(_PLANS) > 8:
+            _PLANS.popitem(last=False)
+    else:
+        _PLANS.move_to_end(key)
+    return app
+
+
+def _array(rt, holder, shape, dtype):
+    import pyopencl.array as cla
+
+    return cla.Array(rt.queue, shape, dtype, data=holder.buffer)
+
+
+def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
+    """Device buffer with the r2c spectrum of ``psf`` placed with its centre at (0, 0)
+    (planes: 1 or 3), cached by (PSF hash, grid, precision)."""
+    k = _as_psf(psf)
+    key = (id(rt), psf_digest(k), n1, n2, precision)
+    hit = _SPECTRA.get(key)
+    if hit is not None:
+        _SPECTRA.move_to_end(key)
+        return hit
+    kh, kw, planes = k.shape
+    cy, cx = kh // 2, kw // 2
+    ys = (np.arange(kh) - cy) % n1
+    xs = (np.arange(kw) - cx) % n2
+    real = _real(precision)
+    plane_bytes = n1 * (n2 + 2) * np.dtype(real).itemsize
+    holder = rt.buffer(planes * plane_bytes)
+    for p in range(planes):  # one plane on the host at a time (a 4K plane is ~130 MB)
+        # taps that coincide modulo the grid add up: the grid can be smaller than the PSF
+        # when only a small output is kept (fft_grid proves the result exact there)
+        plane = np.zeros((n1, n2 + 2), np.float64)
+        np.add.at(plane, (ys[:, None], xs[None, :]), k[..., p])
+        rt.cl.enqueue_copy(rt.queue, holder.buffer, plane.astype(real), dst_offset=p * plane_bytes)
+    shape = (planes, n1, n2 + 2)
+    app = _plan(rt, shape, precision)
+    app.fft(_array(rt, holder, shape, real))
+    _SPECTRA[key] = (holder, planes)
+    while len(_SPECTRA) > SPECTRUM_CACHE_SIZE or (
+            len(_SPECTRA) > 1 and sum(h.nbytes for h, _ in _SPECTRA.values()) > SPECTRUM_CACHE_BYTES):
+        _SPECTRA.popitem(last=False)
+    if holder.nbytes > SPECTRUM_CACHE_BYTES:
+        _SPECTRA.pop(key, None)  # too big to keep: used for this frame only
+    return holder, planes
+
+
+def clear_caches() -> None:
+    """Drop cached plans and PSF spectra (frees device memory)."""
+    _PLANS.clear()
+    _SPECTRA.clear()
+
+
+# -- public API ----------------------------------------------------------------------------
+def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | None = None,
+             precision: str = "float64", threshold_split: float | None = None,
+             split_max_points: int = 256, method: str = "fft", info: ConvolveInfo | None = None):
+    """Convolve the colour channels of a device image with a PSF.
+
+    Parameters
+    ----------
+    rt : Runtime
+    img : DeviceImage
+        1 or 4 channels (RGBA: R, G, B are convolved; alpha of the result is 0).  Its window may
+        be larger than the display window (overscan): all of it contributes.
+    psf : ndarray, shape (kh, kw) or (kh, kw, 3)
+        Kernel weights, centre at ``(kh // 2, kw // 2)``; one plane for all channels or one per
+        R, G, B.  Used as given (normalise it for energy conservation).
+    out_window : Rect, optional
+        Output window in frame coordinates (default: everything the light reaches,
+        :func:`full_region`).  Pixels it shares with nothing get 0.
+    support : Rect, optional
+        The part of ``img.window`` that may be non-zero (e.g. tiles with highlights); the rest
+        is treated as 0, which shrinks the FFT grid.  Default: ``img.window``.
+    precision : {"float64", "float32"}
+        FFT precision (``method="fft"``) or accumulation precision (``"direct"``).
+    threshold_split : float, optional
+        float32 only: pixels whose largest channel exceeds this level are convolved exactly
+        by a gather and the rest by the FFT (HDR-safe float32, see the module notes).
+    split_max_points : int
+        Above this many bright pixels the split falls back to float64 (``info.fallback``).
+    method : {"fft", "direct", "half"}
+        FFT, direct gather, or one pyramid level at half resolution (approximate).
+    info : ConvolveInfo, optional
+        Filled with what was done.
+
+    Returns
+    -------
+    DeviceImage
+        ``img.channels`` channels covering ``out_window``.
+
+    Raises
+    ------
+    ValueError
+        Bad PSF shape or non-finite PSF, unknown precision/method.
+
+    Examples
+    --------
+    >>> out = convolve(rt, highlights, psf, out_window=rod, precision="float64")  # doctest: +SKIP
+    """
+    k = _as_psf(psf)
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r} is not one of {PRECISIONS}")
+    if method not in METHODS:
+        raise ValueError(f"method {method!r} is not one of {METHODS}")
+    if precision == "float64" and not rt.has_fp64:
+        precision = "float32"
+    info = info if info is not None else ConvolveInfo()
+    info.method, info.precision = method, precision
+    kh, kw = k.shape[:2]
+    support = img.window if support is None else support.intersect(img.window)
+    out_window = out_window or full_region(support, kh, kw)
+    dst = rt.image(out_window, img.channels)
+    effective = out_window.intersect(full_region(support, kh, kw))
+    if support.empty or effective.empty:
+        return rt.fill(dst, 0.0)
+    if method == "direct":
+        _direct(rt, img, k, support, effective, dst, precision)
+    elif method == "half":
+        _half(rt, img, k, support, effective, dst, info)
+    else:
+        _fft(rt, img, k, support, effective, dst, precision, threshold_split,
+             split_max_points, info)
+    return dst
+
+
+def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info):
+    kh, kw, planes = k.shape
+    if split is not None and precision == "float32":
+        bright = _bright_pixels(rt, img, support, float(split), max_points)
+        if bright is None:
+            info.fallback = (f"more than {max_points} pixels above the split level "
+                             f"{split:g}: float64 FFT instead")
+            info.notes.append(info.fallback)
+            precision = "float64" if rt.has_fp64 else "float32"
+            split = None
+        else:
+            info.bright_pixels = bright[2]
+    else:
+        split, bright = None, None
+    info.precision = precision
+    n1, n2 = fft_grid(support, effective, kh, kw)
+    info.grid = (n1, n2)
+    nch = 1 if img.channels == 1 else 3
+    real = _real(precision)
+    itemsize = np.dtype(real).itemsize
+    batch = nch if nch * n1 * (n2 + 2) * itemsize <= MAX_BATCH_BYTES else 1
+    spec, spec_planes = psf_spectrum(rt, k, n1, n2, precision)
+    work = rt.buffer(batch * n1 * (n2 + 2) * itemsize)
+    shape = (batch, n1, n2 + 2)
+    app = _plan(rt, shape, precision)
+    arr = _array(rt, work, shape, real)
+    defs = _defines(rt, precision)
+    pack = rt.kernel(KERNEL_FILE, "fftconv_pack", **defs)
+    mul = rt.kernel(KERNEL_FILE, "fftconv_multiply", **defs)
+    unpack = rt.kernel(KERNEL_FILE, "fftconv_unpack", **defs)
+    i32 = np.int32
+    sx, sy = support.offset_in(img.window)
+    dx, dy = dst.window.x0 - support.x0, dst.window.y0 - support.y0
+    ex0, ey0 = effective.offset_in(dst.window)
+    count = n1 * (n2 // 2 + 1)
+    for c0 in range(0, nch, batch):
+        rt.launch(pack, (n2 + 2, n1), img, i32(img.pitch), i32(img.channels), i32(sx),
+                  i32(sy), i32(support.width), i32(support.height), work, i32(n1),
+                  i32(n2 + 2), i32(c0), i32(batch),
+                  np.float32(np.inf if split is None else split), local=None)
+        app.fft(arr)
+        rt.launch(mul, (count,), work, spec, i32(count), i32(batch), i32(spec_planes),
+                  i32(c0 if spec_planes > 1 else 0))
+        app.ifft(arr)
+        rt.launch(unpack, (dst.pitch, dst.height), work, i32(n1), i32(n2 + 2), i32(n2), dst,
+                  i32(dst.pitch), i32(dst.channels), i32(dst.width), i32(dst.height),
+                  i32(dx), i32(dy), i32(ex0), i32(ey0), i32(ex0 + effective.width),
+                  i32(ey0 + effective.height), i32(c0), i32(batch))
+    if bright is not None and bright[2]:
+        _gather(rt, dst, support, k, bright, precision="float32")
+
+
+def _bright_pixels(rt, img, support, split, max_points):
+    """Positions and values of the support's pixels above ``split`` (row order), or None if
+    there are more than ``max_points``."""
+    i32 = np.int32
+    sx, sy = support.offset_in(img.window)
+    sh = support.height
+    counts = rt.buffer(4 * sh)
+    args = (img, i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
+            i32(sh), np.float32(split))
+    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_count_bright"), (sh,), *args, counts)
+    n = rt.from_device(counts, np.int32, sh)
+    total = int(n.sum())
+    if total > max_points:
+        return None
+    if total == 0:
+        return (None, None, 0)
+    offsets = rt.to_device(np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int32))
+    pos = rt.buffer(8 * total)
+    val = rt.buffer(16 * total)
+    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_compact_bright"), (sh,), *args, offsets, pos, val)
+    return (pos, val, total)
+
+
+def _psf_planes_padded(k: np.ndarray, pad: int) -> np.ndarray:
+    """float32 PSF planes (planes, kh, kw + 2 pad), zero columns on both sides."""
+    kh, kw, planes = k.shape
+    out = np.zeros((planes, kh, kw + 2 * pad), np.float32)
+    out[:, :, pad:pad + kw] = np.moveaxis(k, 2, 0)
+    return out
+
+
+def _gather(rt, dst, support, k, bright, precision):
+    pos, val, total = bright
+    kh, kw, planes = k.shape
+    table = rt.to_device(_psf_planes_padded(k, 4))
+    i32 = np.int32
+    knl = rt.kernel(KERNEL_FILE, "fftconv_gather", **_defines(rt, "float32", precision))
+    rt.launch(knl, (dst.pitch // 4, dst.height), dst, i32(dst.pitch), i32(dst.channels),
+              i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
+              pos, val, i32(total), table, i32(kw), i32(kh), i32(kw // 2), i32(kh // 2),
+              i32(planes))
+
+
+def _direct(rt, img, k, support, effective, dst, precision):
+    kh, kw, planes = k.shape
+    i32 = np.int32
+    ppitch = dst.pitch + kw - 1 + 4
+    pheight = dst.height + kh - 1
+    pad = rt.buffer(ppitch * pheight * 16)
+    # padded buffer origin = output origin - (kw - 1 - cx, kh - 1 - cy), in frame coords
+    ox = dst.window.x0 - (kw - 1 - kw // 2)
+    oy = dst.window.y0 - (kh - 1 - kh // 2)
+    sx, sy = support.offset_in(img.window)
+    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_pad"), (ppitch, pheight), img, i32(img.pitch),
+              i32(img.channels), i32(sx), i32(sy), i32(support.width), i32(support.height),
+              pad, i32(ppitch), i32(pheight), i32(support.x0 - ox), i32(support.y0 - oy))
+    wtype = np.float64 if precision == "float64" else np.float32
+    weights = rt.to_device(np.ascontiguousarray(np.moveaxis(k, 2, 0), wtype))
+    ex0, ey0 = effective.offset_in(dst.window)
+    knl = rt.kernel(KERNEL_FILE, "fftconv_direct", **_defines(rt, "float32", precision))
+    rt.launch(knl, (dst.pitch // 4, dst.height), pad, i32(ppitch), dst, i32(dst.pitch),
+              i32(dst.channels), i32(dst.width), i32(dst.height), i32(ex0), i32(ey0),
+              i32(ex0 + effective.width), i32(ey0 + effective.height), weights, i32(kw),
+              i32(kh), i32(planes))
+
+
+def tent_downsample(k: np.ndarray) -> np.ndarray:
+    """A PSF for half resolution: each tap at offset d moves to offset d / 2, split between
+    the two nearest half-res taps (weights 1/2) when d is odd.  Sum and centroid are kept."""
+    k = _as_psf(k)
+
+    def matrix(n):
+        c = n // 2
+        half = -(-max(c, n - 1 - c) // 2)      # symmetric half-res radius: centre at half
+        a = np.zeros((2 * half + 1, n))
+        for j, d in enumerate(range(-c, n - c)):
+            if d % 2 == 0:
+                a[d // 2 + half, j] = 1.0
+            else:
+                a[(d - 1) // 2 + half, j] = 0.5
+                a[(d + 1) // 2 + half, j] = 0.5
+        return a
+
+    ay, ax = matrix(k.shape[0]), matrix(k.shape[1])
+    return np.stack([ay @ k[..., p] @ ax.T for p in range(k.shape[2])], axis=2)
+
+
+def _half(rt, img, k, support, effective, dst, info):
+    i32 = np.int32
+    hw, hh = -(-support.width // 2), -(-support.height // 2)
+    half_in = rt.image(Rect(0, 0, hw, hh), 4)
+    sx, sy = support.offset_in(img.window)
+    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_down2"), (half_in.pitch, hh), img,
+              i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
+              i32(support.height), half_in, i32(half_in.pitch), i32(hw), i32(hh))
+    # output pixel x (support coords) samples half-res u = (x - 0.5) / 2 and u + 1
+    ax0, ay0 = effective.x0 - support.x0, effective.y0 - support.y0
+    ax1, ay1 = effective.x1 - support.x0, effective.y1 - support.y0
+    hout = Rect(math.floor((ax0 - 0.5) / 2), math.floor((ay0 - 0.5) / 2),
+                math.floor((ax1 - 1.5) / 2) + 2, math.floor((ay1 - 1.5) / 2) + 2)
+    kh2 = tent_downsample(k)
+    sub = ConvolveInfo()
+    half_out = convolve(rt, half_in, kh2, out_window=hout, precision="float32", info=sub)
+    info.grid = sub.grid
+    ex0, ey0 = effective.offset_in(dst.window)
+    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_up2"), (dst.pitch, dst.height), half_out,
+              i32(half_out.pitch), i32(half_out.width), i32(half_out.height), i32(hout.x0),
+              i32(hout.y0), dst, i32(dst.pitch), i32(dst.channels), i32(dst.width),
+              i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
+              i32(ex0), i32(ey0), i32(ex0 + effective.width), i32(ey0 + effective.height))
+
+
+# -- quality levels ------------------------------------------------------------------------
+PREVIEW_SPLIT_MAX_POINTS = 64
+"""preview: most bright pixels gathered exactly before falling back to float64."""
+DIRECT_MAX_TAPS = 441
+"""PSFs with at most this many taps (21 x 21) are convolved directly at every level."""
+DIRECT_REFERENCE_MAX_TAPS = 4e7
+"""The reference level gathers directly (float64) when output pixels x PSF taps is below this."""
+
+
+def spread(rt, img, psf, quality: str, *, out_window: Rect, support: Rect | None = None,
+           split_level: float | None = None, info: ConvolveInfo | None = None):
+    """Convolve with the algorithm a quality level calls for.
+
+    PSFs of at most 21 x 21 taps: direct gather (float32; float64 for reference).
+    draft: one pyramid level (half-resolution float32 FFT; approximate).
+    preview: float32 FFT with bright pixels (largest channel > ``split_level``) gathered
+    exactly; falls back to float64 when there are more than 64.
+    final: float64 FFT.
+    reference: float64 direct gather when small (output px x taps <= 4e7), else float64 FFT.
+    """
+    k = _as_psf(psf)
+    if k.shape[0] * k.shape[1] <= DIRECT_MAX_TAPS:
+        # small kernels: a direct gather beats any transform; float64 sums for reference
+        return convolve(rt, img, k, out_window=out_window, support=support, method="direct",
+                        precision="float64" if quality == "reference" else "float32",
+                        info=info)
+    if quality == "draft":
+        return convolve(rt, img, k, out_window=out_window, support=support, method="half",
+                        precision="float32", info=info)
+    if quality == "preview":
+        # the exact gather costs (output px x bright px): beyond 64 bright pixels the
+        # float64 FFT (1.0-1.3x float32 on PoCL) is cheaper
+        return convolve(rt, img, k, out_window=out_window, support=support,
+                        precision="float32", threshold_split=split_level,
+                        split_max_points=PREVIEW_SPLIT_MAX_POINTS, info=info)
+    if quality == "reference" and out_window.width * out_window.height * k.shape[0] \
+            * k.shape[1] <= DIRECT_REFERENCE_MAX_TAPS:
+        return convolve(rt, img, k, out_window=out_window, support=support, method="direct",
+                        precision="float64", info=info)
+    return convolve(rt, img, k, out_window=out_window, support=support, precision="float64",
+                    info=info)

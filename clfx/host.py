@@ -1,0 +1,201 @@
+"""The plugin host (OpenFX's host side): the render context, the Plugin base class, the
+registry decorator.
+
+Effects subclass :class:`Plugin` (``clfx/plugins/<effect>.py``) and describe themselves
+with ``clfx.core.plugin`` descriptors; the context gives them the frame on the device, its
+passes, the camera and the shared scene analysis (``clfx.fx.analysis``), computed on first
+use.  Files an effect reads (kernel images) come through ``ctx.read_image``, which the
+pipeline supplies: effects never open files themselves.
+"""
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from clfx.core.camera import Camera
+from clfx.core.errors import ClipError
+from clfx.core.frame import crop_to
+from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Descriptor, Level, Params
+from clfx.core.rect import Rect
+from clfx.fx.analysis import analyse
+
+
+# -- render context ------------------------------------------------------------------------
+class RenderContext:
+    """Everything an effect may read while rendering one frame.
+
+    Attributes
+    ----------
+    runtime : Runtime
+    source : DeviceImage
+        The current RGBA image (the previous effect's output), scene-linear.
+    depth, velocity : DeviceImage or None
+        Passes in clfx's conventions (planar z in scene units; forward px/frame, +y down),
+        covering ``source.window`` (the look re-frames them when an effect grows the window).
+    display_window : Rect
+        The frame's display window; resolution-independent sizes refer to its diagonal.
+    pixel_aspect : float
+        Pixel width / height.
+    frame : int
+        Frame number (drives noise; effects are deterministic per frame).
+    seed : int
+        The look's seed.
+    camera : Camera
+    quality : str
+        One of ``QUALITY_LEVELS``.
+    display_referred : bool
+        The input was an 8/16-bit display-referred file (linearised on read).
+    """
+
+    def __init__(self, runtime, source, *, depth=None, velocity=None, display_window=None,
+                 pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
+                 display_referred=False, analysis=None, output_limit=None):
+        self.runtime = runtime
+        self.source = source
+        self.depth = depth
+        self.velocity = velocity
+        self.display_window = display_window or source.window
+        self.pixel_aspect = float(pixel_aspect)
+        self.frame = int(frame)
+        self.seed = int(seed)
+        self.camera = camera or Camera()
+        self.quality = quality
+        self.display_referred = display_referred
+        self._analysis = analysis
+        self.output_limit = output_limit or source.window.union(self.display_window)
+        self.notes: list[str] = []
+
+    @property
+    def analysis(self):
+        """The frame's shared scene analysis of the current source: computed on first use,
+        and again only if an effect has since changed the source's window (its tiles are
+        always those of ``source.window``)."""
+        if self._analysis is None or self._analysis.window != self.source.window:
+            self._analysis = analyse(self.runtime, self.source, depth=self.depth,
+                                     velocity=self.velocity, camera=self.camera,
+                                     display_window=self.display_window)
+        return self._analysis
+
+    @property
+    def diagonal_px(self) -> float:
+        return self.display_window.diagonal
+
+    @property
+    def width_px(self) -> int:
+        return self.display_window.width
+
+    def size_px(self, fraction_of_diagonal: float) -> float:
+        """A resolution-independent size (fraction of the frame diagonal) in pixels."""
+        return fraction_of_diagonal * self.diagonal_px
+
+    def with_quality(self, quality: str) -> "RenderContext":
+        ctx = RenderContext.__new__(RenderContext)
+        ctx.__dict__.update(self.__dict__)
+        ctx.quality = quality
+        return ctx
+
+
+# -- plugins -------------------------------------------------------------------------------
+class Plugin:
+    """Base of every effect.  Subclasses set ``descriptor`` and implement ``render``."""
+
+    descriptor: ClassVar[Descriptor]
+
+    @classmethod
+    def params(cls, _where: str = "", **values) -> Params:
+        """Validated parameters: defaults overridden by ``values``; raises ParamError."""
+        d = cls.descriptor
+        out = {p.name: p.default for p in d.params}
+        for name, value in values.items():
+            where = f"{_where or d.name}.{name}"
+            out[name] = d.param(name, _where or d.name).validate(value, where)
+        return Params(d.name, out)
+
+    def level(self, ctx: "RenderContext") -> Level:
+        """This effect's declared settings for ``ctx.quality``."""
+        return self.descriptor.level(ctx.quality)
+
+    # cheap questions ------------------------------------------------------------------
+    def is_identity(self, p: Params, ctx: RenderContext) -> str | None:
+        """A reason (e.g. "amount is 0") if this frame needs nothing from the effect."""
+        return None
+
+    def region_of_definition(self, p: Params, ctx: RenderContext) -> Rect:
+        """Where the output can be non-zero: the source window grown by the light spread."""
+        return ctx.source.window
+
+    def region_of_interest(self, p: Params, ctx: RenderContext, window: Rect) -> Rect:
+        """The input area needed to render ``window``."""
+        return window
+
+    def output_window(self, p: Params, ctx: RenderContext) -> Rect:
+        """The window to render: the source window, grown to the region of definition as far
+        as anything will be kept (``ctx.output_limit``: display and data windows, or more with
+        --keep-overscan)."""
+        rod = self.region_of_definition(p, ctx).intersect(ctx.output_limit)
+        return ctx.source.window.union(rod)
+
+    def render(self, rt, p: Params, ctx: RenderContext):
+        """Enqueue the effect; return a DeviceImage (the source itself must not be changed)."""
+        raise NotImplementedError
+
+    # conveniences ---------------------------------------------------------------------
+    def check_clips(self, ctx: RenderContext) -> None:
+        for clip in self.descriptor.clips:
+            if clip.name != "source" and not clip.optional and getattr(ctx, clip.name) is None:
+                raise ClipError(f"effect {self.descriptor.name!r} needs a {clip.name} pass "
+                                f"and the frame has none (see `clfx probe`, --depth/--velocity)")
+
+    def apply(self, rt, p: Params, source: np.ndarray, *, depth=None, velocity=None,
+              quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
+              data_window: Rect | None = None, display_window: Rect | None = None,
+              pixel_aspect: float = 1.0, display_referred: bool = False,
+              keep_rod: bool = False):
+        """Run the effect on host arrays: upload, identity check, render, download.
+
+        Returns the output cropped to the source window, or ``(array, window)`` with
+        ``keep_rod=True``.  An identity returns a copy of ``source``.
+        """
+        src = np.asarray(source, np.float32)
+        if src.ndim == 2:
+            src = np.stack([src, src, src, np.ones_like(src)], axis=2)
+        window = data_window or Rect.from_size(src.shape[1], src.shape[0])
+        ctx = RenderContext(
+            rt, rt.upload(src, window),
+            depth=None if depth is None else rt.upload(np.asarray(depth, np.float32), window),
+            velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
+            display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
+            seed=seed, camera=camera, quality=quality, display_referred=display_referred)
+        self.check_clips(ctx)
+        if self.is_identity(p, ctx):
+            out, out_window = src.copy(), window
+        else:
+            img = self.render(rt, p, ctx)
+            out, out_window = rt.download(img), img.window
+        if keep_rod:
+            return out, out_window
+        return crop_to(out, out_window, window)
+
+
+_REGISTRY: dict[str, type[Plugin]] = {}
+
+
+def register(cls: type[Plugin]) -> type[Plugin]:
+    """Class decorator: add a plugin to the registry (checks its descriptor)."""
+    d = cls.descriptor
+    missing = [lvl for lvl in QUALITY_LEVELS if lvl not in d.quality]
+    if missing:
+        raise TypeError(f"plugin {d.name} does not say what quality levels {missing} mean")
+    names = [p.name for p in d.params]
+    if len(set(names)) != len(names):
+        raise TypeError(f"plugin {d.name} has duplicate parameter names")
+    for p in d.params:
+        p.validate(p.default, f"{d.name}.{p.name} (default)")
+    _REGISTRY[d.name] = cls
+    return cls
+
+
+def registry() -> dict[str, type[Plugin]]:
+    """The plugins registered so far (``clfx.plugins.discover`` imports them all)."""
+    return dict(sorted(_REGISTRY.items()))

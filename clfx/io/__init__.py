@@ -1,0 +1,1 @@
+"""Files: reading (OpenImageIO), probing, writing, channels and renderer conventions, sequences."""

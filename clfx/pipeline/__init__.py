@@ -1,0 +1,1 @@
+"""Looks, YAML presets and batches: what runs effects on frames."""

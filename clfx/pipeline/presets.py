@@ -1,0 +1,323 @@
+"""Looks as YAML presets: finding, parsing, inheriting and validating them.
+
+A look file::
+
+    name: cinema
+    description: 35 mm, f/2, 180-degree shutter, subtle glare and grain.
+    schema: 1
+    base: default            # optional: inherit camera, seed and effects from another look
+    camera: {focal_length: 35, f_number: 2, focus_distance: 3}
+    seed: 0
+    effects:
+      - effect: dof
+        params: {quality_bias: 0}
+      - effect: grain
+        params: {amount: 0.02}
+        quality: preview     # optional per-effect override
+        enabled: true        # optional; false removes an inherited effect
+        missing_passes: skip # optional: skip (with a reason) on frames lacking the depth or
+                             # velocity pass this effect needs; default "error"
+
+Inheritance: the base's camera is updated key by key; a step the base already has (same
+``id``, which defaults to the effect's name) is updated in place (its params merged), a new
+one is appended, ``enabled: false`` drops it.  Give steps distinct ``id``s to use one effect
+twice (e.g. star streaks and aperture spikes); ``--set ID.param=value`` addresses a step.
+
+Search order for a name: a path to a file; each folder on ``CLFX_PRESET_PATH`` (os.pathsep
+separated); the user folder ``<config>/clfx/looks`` (XDG, ``click.get_app_dir``); the built-in
+``presets/`` shipped with clfx.  Every problem is reported before any frame is read, as one
+line naming the file, the line and the key, with the closest valid name where one exists.
+"""
+from __future__ import annotations
+
+import difflib
+import os
+from pathlib import Path
+
+import yaml
+
+from clfx.core.camera import Camera
+from clfx.core.errors import ClfxError, PresetError
+from clfx.pipeline.look import Look, Step, validate_quality
+from clfx.core.plugin import QUALITY_LEVELS
+from clfx.plugins import get_plugin
+
+SCHEMA = 1
+TOP_KEYS = ("name", "description", "schema", "base", "camera", "seed", "effects")
+STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing_passes")
+DEFAULT_LOOK = "default"
+
+
+def builtin_dir() -> Path:
+    """The built-in looks: ``clfx/presets`` in a wheel, or the repository's ``presets/``."""
+    here = Path(__file__).resolve().parent.parent  # the clfx package
+    for path in (here / "presets", here.parent / "presets"):
+        if path.is_dir() and any(path.glob("*.yaml")):
+            return path
+    return here.parent / "presets"
+
+
+def user_dir() -> Path:
+    import click
+
+    return Path(click.get_app_dir("clfx")) / "looks"
+
+
+def search_dirs() -> list[tuple[str, Path]]:
+    dirs = [("CLFX_PRESET_PATH", Path(p)) for p in
+            os.environ.get("CLFX_PRESET_PATH", "").split(os.pathsep) if p]
+    dirs.append(("user", user_dir()))
+    dirs.append(("built-in", builtin_dir()))
+    return dirs
+
+
+def available_looks() -> dict[str, tuple[str, Path]]:
+    """Look name -> (origin, path); earlier search folders win."""
+    found: dict[str, tuple[str, Path]] = {}
+    for origin, folder in search_dirs():
+        if folder.is_dir():
+            for path in sorted(folder.glob("*.y*ml")):
+                found.setdefault(path.stem, (origin, path))
+    return found
+
+
+def find_look(name_or_path: str) -> Path:
+    p = Path(name_or_path)
+    if p.suffix.lower() in (".yaml", ".yml") or os.sep in name_or_path:
+        if p.is_file():
+            return p
+        raise PresetError(f"look file {name_or_path} does not exist")
+    looks = available_looks()
+    if name_or_path in looks:
+        return looks[name_or_path][1]
+    close = difflib.get_close_matches(name_or_path, list(looks), n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(looks)})"
+    raise PresetError(f"unknown look {name_or_path!r}{hint}")
+
+
+class _Located:
+    """YAML data with the line of every key path, for error messages."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise PresetError(f"{path}: cannot read look file: {exc.strerror}") from exc
+        try:
+            self.data = yaml.safe_load(text)
+            node = yaml.compose(text, Loader=yaml.SafeLoader)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f"{path}:{mark.line + 1}" if mark else str(path)
+            problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+            raise PresetError(f"{where}: malformed YAML: {problem}") from exc
+        self.lines: dict[tuple, int] = {}
+        if node is not None:
+            self._index(node, ())
+
+    def _index(self, node, path):
+        self.lines.setdefault(path, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                key = k.value
+                self.lines[path + (key,)] = k.start_mark.line + 1
+                self._index(v, path + (key,))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, v in enumerate(node.value):
+                self._index(v, path + (i,))
+
+    def where(self, *path) -> str:
+        for n in range(len(path), -1, -1):
+            if path[:n] in self.lines:
+                return f"{self.path}:{self.lines[path[:n]]}"
+        return str(self.path)
+
+    def fail(self, path: tuple, message: str):
+        key = ".".join(f"[{p}]" if isinstance(p, int) else str(p) for p in path).replace(".[", "[")
+        raise PresetError(f"{self.where(*path)}: {key + ': ' if key else ''}{message}")
+
+
+def _suggest(name, options) -> str:
+    close = difflib.get_close_matches(str(name), list(options), n=1)
+    return f"; did you mean {close[0]!r}?" if close else f" (expected one of: {', '.join(options)})"
+
+
+def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
+    """Find, parse, inherit and validate a look; raise PresetError naming file and line."""
+    path = find_look(name_or_path)
+    key = str(path.resolve())
+    if key in _chain:
+        raise PresetError(f"{path}: base looks form a cycle: {' -> '.join(_chain + (key,))}")
+    doc = _Located(path)
+    data = doc.data
+    if not isinstance(data, dict):
+        doc.fail((), "a look file must be a mapping with name, description and effects")
+    for k in data:
+        if k not in TOP_KEYS:
+            doc.fail((k,), f"unknown key{_suggest(k, TOP_KEYS)}")
+    if data.get("schema", SCHEMA) != SCHEMA:
+        doc.fail(("schema",), f"unsupported schema {data.get('schema')!r} (this clfx reads {SCHEMA})")
+    base = None
+    if data.get("base"):
+        try:
+            base = load_look(str(data["base"]), _chain + (key,))
+        except PresetError as exc:
+            doc.fail(("base",), str(exc))
+    look = Look(name=str(data.get("name") or path.stem), description=str(data.get("description") or ""),
+                source=str(path), base=str(data["base"]) if data.get("base") else None)
+    if base:
+        look.camera, look.seed = base.camera, base.seed
+        look.steps = [Step(s.effect, s.params, s.quality, skip_missing_passes=s.skip_missing_passes,
+                           id=s.id) for s in base.steps]
+        look.description = look.description or base.description
+    look.camera = _camera(doc, data.get("camera"), look.camera)
+    if "seed" in data:
+        if isinstance(data["seed"], bool) or not isinstance(data["seed"], int):
+            doc.fail(("seed",), f"{data['seed']!r} is not an integer")
+        look.seed = data["seed"]
+    look.steps = _steps(doc, data.get("effects"), look.steps)
+    return look
+
+
+def _camera(doc: _Located, block, camera: Camera) -> Camera:
+    if block is None:
+        return camera
+    if not isinstance(block, dict):
+        doc.fail(("camera",), "must be a mapping of camera values")
+    names = Camera.field_names()
+    values = {}
+    for k, v in block.items():
+        if k not in names:
+            doc.fail(("camera", k), f"unknown camera value{_suggest(k, names)}")
+        if k in Camera.CHOICES:
+            if v not in Camera.CHOICES[k]:
+                doc.fail(("camera", k), f"{v!r} is not one of {', '.join(Camera.CHOICES[k])}")
+        else:
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                doc.fail(("camera", k), f"{v!r} is not a number")
+            lo, hi = Camera.RANGES[k]
+            if not lo <= v <= hi:
+                doc.fail(("camera", k), f"{v!r} is outside the allowed range [{lo:g}, {hi:g}]")
+            v = int(v) if k == "blades" else float(v)
+        values[k] = v
+    try:
+        return camera.updated(**values)
+    except (TypeError, ValueError) as exc:
+        doc.fail(("camera",), str(exc))
+
+
+def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
+    steps = list(inherited)
+    if effects is None:
+        return steps
+    if not isinstance(effects, list):
+        doc.fail(("effects",), "must be a list of {effect: NAME, params: {...}} entries")
+    for i, entry in enumerate(effects):
+        at = ("effects", i)
+        if not isinstance(entry, dict) or "effect" not in entry:
+            doc.fail(at, "each entry needs an 'effect' key naming the effect")
+        for k in entry:
+            if k not in STEP_KEYS:
+                doc.fail(at + (k,), f"unknown key{_suggest(k, STEP_KEYS)}")
+        name = entry["effect"]
+        try:
+            cls = get_plugin(str(name))
+        except ClfxError as exc:
+            doc.fail(at + ("effect",), str(exc))
+        if "version" in entry and int(str(entry["version"]).split(".")[0]) != cls.descriptor.version[0]:
+            doc.fail(at + ("version",), f"look pins major version {entry['version']} of {name!r}; "
+                     f"this clfx has {cls.descriptor.version[0]}")
+        params = entry.get("params") or {}
+        if not isinstance(params, dict):
+            doc.fail(at + ("params",), "must be a mapping of parameter names to values")
+        when_missing = entry.get("missing_passes", "error")
+        if when_missing not in ("error", "skip"):
+            doc.fail(at + ("missing_passes",), f"{when_missing!r} is not 'error' or 'skip'")
+        quality = entry.get("quality")
+        if quality is not None and quality not in QUALITY_LEVELS:
+            doc.fail(at + ("quality",), f"{quality!r} is not a quality level{_suggest(quality, QUALITY_LEVELS)}")
+        sid = entry.get("id", name)
+        if not isinstance(sid, str) or not sid.replace("_", "").replace("-", "").isalnum():
+            doc.fail(at + ("id",), f"{sid!r} is not a name (letters, digits, - and _)")
+        existing = next((s for s in steps if s.id == sid), None)
+        if existing is not None and existing.effect != name:
+            doc.fail(at + ("effect",), f"step id {sid!r} already names a {existing.effect!r} step")
+        if entry.get("enabled", True) is False:
+            steps = [s for s in steps if s is not existing]
+            continue
+        merged = {**(existing.params.as_dict() if existing else {}), **params}
+        validated = {}
+        for pname, value in merged.items():
+            try:
+                validated[pname] = cls.descriptor.param(pname, name).validate(value, f"{name}.{pname}")
+            except ClfxError as exc:
+                doc.fail(at + ("params", pname), str(exc))
+        p = cls.params(**validated)
+        step = Step(name, p, quality or (existing.quality if existing else None), id=sid,
+                    skip_missing_passes=(when_missing == "skip") if "missing_passes" in entry
+                    else bool(existing and existing.skip_missing_passes))
+        if existing:
+            steps[steps.index(existing)] = step
+        else:
+            steps.append(step)
+    return steps
+
+
+def apply_overrides(look: Look, assignments: list[str]) -> Look:
+    """Apply ``--set effect.param=value`` / ``camera.key=value`` / ``seed=N`` (CLI strings)."""
+    for text in assignments:
+        if "=" not in text:
+            raise PresetError(f"--set {text!r}: expected KEY=VALUE, e.g. glare.strength=0.2")
+        key, value = text.split("=", 1)
+        key = key.strip()
+        if key == "seed":
+            try:
+                look.seed = int(value)
+            except ValueError:
+                raise PresetError(f"--set seed={value!r}: not an integer") from None
+            continue
+        if "." not in key:
+            raise PresetError(f"--set {text!r}: expected EFFECT.PARAM=VALUE or camera.KEY=VALUE")
+        target, pname = key.split(".", 1)
+        if target == "camera":
+            look.camera = _camera_override(look.camera, pname, value)
+            continue
+        step = next((s for s in look.steps if s.id == target), None) or \
+            next((s for s in look.steps if s.effect == target), None)
+        if step is None:
+            names = [s.id for s in look.steps]
+            raise PresetError(f"--set {text!r}: look {look.name!r} has no effect {target!r}"
+                              f"{_suggest(target, names) if names else ''}")
+        desc = step.plugin.descriptor
+        if pname == "quality":
+            step.quality = validate_quality(value, f"--set {key}")
+            continue
+        parsed = desc.param(pname, f"--set {key}").parse(value, f"--set {key}")
+        step.params = step.plugin.params(**{**step.params.as_dict(), pname: parsed})
+    return look
+
+
+def _camera_override(camera: Camera, name: str, value: str) -> Camera:
+    if name not in Camera.field_names():
+        raise PresetError(f"--set camera.{name}: unknown camera value{_suggest(name, Camera.field_names())}")
+    if name in Camera.CHOICES:
+        if value not in Camera.CHOICES[name]:
+            raise PresetError(f"--set camera.{name}: {value!r} is not one of {', '.join(Camera.CHOICES[name])}")
+        return camera.updated(**{name: value})
+    try:
+        v = float(value)
+    except ValueError:
+        raise PresetError(f"--set camera.{name}: {value!r} is not a number") from None
+    lo, hi = Camera.RANGES[name]
+    if not lo <= v <= hi:
+        raise PresetError(f"--set camera.{name}: {v:g} is outside the allowed range [{lo:g}, {hi:g}]")
+    return camera.updated(**{name: int(v) if name == "blades" else v})
+
+
+def single_effect_look(effect: str, assignments: list[str]) -> Look:
+    """A one-step look for ``clfx apply EFFECT ... param=value``."""
+    cls = get_plugin(effect)
+    look = Look(name=f"apply:{effect}", steps=[Step(effect, cls.params())])
+    return apply_overrides(look, [f"{effect}.{a}" if not a.startswith(("camera.", "seed=")) else a
+                                  for a in assignments])

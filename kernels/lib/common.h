@@ -1,0 +1,93 @@
+/* common.h: helpers shared by every clfx kernel.
+ *
+ * Image layout (clfx/device/runtime.py DeviceImage): float32, CH channels per pixel, rows padded to
+ * `pitch` pixels (a multiple of 4), pixel (x, y) at float index (y * pitch + x) * CH + c.
+ * Coordinates are pixel indices inside the image's window; pixel centres sit at +0.5.
+ *
+ * Non-finite tests use the exponent bits, not isnan/isinf, so they survive any build flags
+ * (notes/hard-cases.md case 4).
+ */
+#ifndef CLFX_COMMON_H
+#define CLFX_COMMON_H
+
+#ifdef CLFX_HAS_FP64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#endif
+
+#define CLFX_PI 3.14159265358979323846f
+
+inline int clfx_is_finite(float v)
+{
+  return (as_uint(v) & 0x7f800000u) != 0x7f800000u;
+}
+
+inline float clfx_finite_or(float v, float fallback)
+{
+  return clfx_is_finite(v) ? v : fallback;
+}
+
+inline float4 clfx_finite4_or_zero(float4 v)
+{
+  return (float4)(clfx_finite_or(v.x, 0.0f), clfx_finite_or(v.y, 0.0f),
+                  clfx_finite_or(v.z, 0.0f), clfx_finite_or(v.w, 0.0f));
+}
+
+/* Rec.709 luminance of scene-linear RGB. */
+inline float clfx_luminance(float4 c)
+{
+  return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+}
+
+inline int clfx_clampi(int v, int lo, int hi)
+{
+  return min(max(v, lo), hi);
+}
+
+/* Periodic mirror ("reflect-101" repeated) index: valid for any i, even far outside [0, n);
+ * a kernel larger than the image stays in bounds (hard-cases.md case 11). */
+inline int clfx_mirror(int i, int n)
+{
+  if(n <= 1) return 0;
+  const int period = 2 * (n - 1);
+  int m = i % period;
+  if(m < 0) m += period;
+  return m < n ? m : period - m;
+}
+
+inline float4 clfx_load4(global const float *img, int pitch, int x, int y)
+{
+  return vload4(y * pitch + x, img);
+}
+
+inline void clfx_store4(global float *img, int pitch, int x, int y, float4 v)
+{
+  vstore4(v, y * pitch + x, img);
+}
+
+/* Clamp-to-edge read of an RGBA image of size w x h. */
+inline float4 clfx_load4_clamped(global const float *img, int pitch, int w, int h, int x, int y)
+{
+  return vload4(clfx_clampi(y, 0, h - 1) * pitch + clfx_clampi(x, 0, w - 1), img);
+}
+
+/* Integer hash (lowbias32, Chris Wellons): uniform, cheap, stateless. */
+inline uint clfx_hash(uint x)
+{
+  x ^= x >> 16; x *= 0x7feb352du;
+  x ^= x >> 15; x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+/* Hash of (seed, frame, x, y, channel) -> uniform float in (0, 1). */
+inline float clfx_uniform(uint seed, int frame, int x, int y, int c)
+{
+  uint h = clfx_hash(seed ^ 0x9e3779b9u);
+  h = clfx_hash(h ^ (uint)frame);
+  h = clfx_hash(h ^ (uint)x);
+  h = clfx_hash(h ^ ((uint)y * 0x85ebca6bu));
+  h = clfx_hash(h ^ ((uint)c * 0xc2b2ae35u));
+  return ((float)(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
+}
+
+#endif

@@ -1,0 +1,26 @@
+/* image.cl: generic image plumbing used by the host (clfx/runtime.py).
+ *
+ * image_reframe copies an image into a different window: pixels of the destination that the
+ * source covers are copied, the others are filled by the border mode (BORDER 0 = zero,
+ * 1 = clamp to the nearest source pixel).  dx, dy = origin of dst minus origin of src.
+ * One work-item per destination pixel: this runs rarely (window changes), not per effect.
+ */
+#include "lib/common.h"
+
+kernel void image_reframe(global const float *src, const int src_pitch, const int src_w,
+                          const int src_h, global float *dst, const int dst_pitch,
+                          const int dst_w, const int dst_h, const int dx, const int dy)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= dst_w || y >= dst_h) return;
+  int sx = x + dx, sy = y + dy;
+  const int inside = sx >= 0 && sy >= 0 && sx < src_w && sy < src_h;
+  sx = clfx_clampi(sx, 0, max(src_w - 1, 0));
+  sy = clfx_clampi(sy, 0, max(src_h - 1, 0));
+  for(int c = 0; c < CH; c++)
+  {
+    float v = (src_w > 0 && src_h > 0) ? src[(sy * src_pitch + sx) * CH + c] : 0.0f;
+    if(BORDER == 0 && !inside) v = 0.0f;
+    dst[(y * dst_pitch + x) * CH + c] = v;
+  }
+}

@@ -1,0 +1,54 @@
+/* motion_gather.h: sampling helpers shared by motion_blur.cl and camera_blur.cl.
+ *
+ * BILINEAR (define, default 1) selects bilinear or nearest fetches; JITTER (default 1)
+ * selects interleaved-gradient jitter or the midpoint rule.
+ */
+#ifndef CLFX_MOTION_GATHER_H
+#define CLFX_MOTION_GATHER_H
+#include "lib/common.h"
+
+#ifndef BILINEAR
+#define BILINEAR 1
+#endif
+#ifndef JITTER
+#define JITTER 1
+#endif
+
+/* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge.  The float
+ * index is clamped before the int conversion so far-off positions cannot overflow. */
+inline float4 mg_fetch(global const float *col, const int pitch, const int w, const int h,
+                       const float px, const float py)
+{
+#if BILINEAR
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v);
+  const float ax = u - fu, ay = v - fv;
+  const int iu = (int)clamp(fu, -1.0f, (float)w), iv = (int)clamp(fv, -1.0f, (float)h);
+  const int xa = clfx_clampi(iu, 0, w - 1), xb = clfx_clampi(iu + 1, 0, w - 1);
+  const int ya = clfx_clampi(iv, 0, h - 1), yb = clfx_clampi(iv + 1, 0, h - 1);
+  const float4 c00 = vload4(ya * pitch + xa, col), c10 = vload4(ya * pitch + xb, col);
+  const float4 c01 = vload4(yb * pitch + xa, col), c11 = vload4(yb * pitch + xb, col);
+  const float4 top = c00 + (c10 - c00) * ax, bot = c01 + (c11 - c01) * ax;
+  return top + (bot - top) * ay;
+#else
+  const int x = (int)clamp(floor(px), 0.0f, (float)(w - 1));
+  const int y = (int)clamp(floor(py), 0.0f, (float)(h - 1));
+  return vload4(y * pitch + x, col);
+#endif
+}
+
+/* Interleaved gradient noise (Jimenez 2014): a jitter in [0, 1) whose pattern has no low
+ * frequencies, so banding between samples turns into fine, even grain; shifted per frame.
+ * Without JITTER: 0.5, the midpoint rule (deterministic, O(spacing^2) error). */
+inline float4 mg_jitter(const float4 x, const float y, const int frame)
+{
+#if !JITTER
+  return (float4)(0.5f);
+#endif
+  const float o = 5.588238f * (float)(frame & 63);
+  const float4 a = 0.06711056f * (x + o) + 0.00583715f * (y + o);
+  const float4 b = 52.9829189f * (a - floor(a));
+  return b - floor(b);
+}
+
+#endif
