@@ -14,7 +14,7 @@ from typing import ClassVar
 import numpy as np
 
 from clfx.core.camera import Camera
-from clfx.core.errors import ClipError
+from clfx.core.errors import ClipError, ParamError
 from clfx.core.frame import crop_to
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Descriptor, Level, Params
 from clfx.core.rect import Rect
@@ -46,11 +46,13 @@ class RenderContext:
         One of ``QUALITY_LEVELS``.
     display_referred : bool
         The input was an 8/16-bit display-referred file (linearised on read).
+    read_image : callable(path) -> ndarray
+        Reads a file a :class:`~clfx.core.plugin.PathParam` names (supplied by the pipeline).
     """
 
     def __init__(self, runtime, source, *, depth=None, velocity=None, display_window=None,
                  pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
-                 display_referred=False, analysis=None, output_limit=None):
+                 display_referred=False, analysis=None, output_limit=None, read_image=None):
         self.runtime = runtime
         self.source = source
         self.depth = depth
@@ -65,6 +67,15 @@ class RenderContext:
         self._analysis = analysis
         self.output_limit = output_limit or source.window.union(self.display_window)
         self.notes: list[str] = []
+        self._read_image = read_image
+
+    def read_image(self, path: str) -> np.ndarray:
+        """The RGB(A) pixels of an image file a parameter names (a :class:`PathParam`), read
+        by the pipeline's reader (effects never open files)."""
+        if self._read_image is None:
+            raise ParamError(f"no image reader in this context to read {path!r} "
+                             f"(pass read_image= to the render context)")
+        return self._read_image(path)
 
     @property
     def analysis(self):
@@ -151,7 +162,7 @@ class Plugin:
               quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
               data_window: Rect | None = None, display_window: Rect | None = None,
               pixel_aspect: float = 1.0, display_referred: bool = False,
-              keep_rod: bool = False):
+              keep_rod: bool = False, read_image=None):
         """Run the effect on host arrays: upload, identity check, render, download.
 
         Returns the output cropped to the source window, or ``(array, window)`` with
@@ -166,7 +177,8 @@ class Plugin:
             depth=None if depth is None else rt.upload(np.asarray(depth, np.float32), window),
             velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
             display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
-            seed=seed, camera=camera, quality=quality, display_referred=display_referred)
+            seed=seed, camera=camera, quality=quality, display_referred=display_referred,
+            read_image=read_image)
         self.check_clips(ctx)
         if self.is_identity(p, ctx):
             out, out_window = src.copy(), window

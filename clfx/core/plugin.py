@@ -252,6 +252,15 @@ class StringParam(Param):
         return value
 
 
+@dataclass(frozen=True)
+class PathParam(StringParam):
+    """A file the effect reads (a kernel image, a mask): an input of the render like the
+    frames themselves, so the pipeline protects it from being overwritten, requires a regular
+    file, and hands its pixels to the effect through ``ctx.read_image``; "" means none."""
+
+    kind: ClassVar[str] = "path"
+
+
 class Params:
     """Validated, immutable parameter values with attribute access (``p.strength``)."""
 

@@ -182,6 +182,14 @@ class FrameReport:
         return "\n".join(lines)
 
 
+def read_image_rgba(path: str):
+    """An image file a parameter names (a kernel image), as float32 RGBA: the reader the
+    pipeline hands effects through their render context."""
+    from clfx.io.files import read_frame  # lazy: io pulls in OpenImageIO
+
+    return read_frame(path).rgba
+
+
 def output_limit(frame: Frame, keep_overscan: bool) -> Rect:
     """The window effects may write to and the result is cropped to."""
     limit = frame.data_window.union(frame.display_window)
@@ -217,7 +225,8 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
                         frame=frame_number, seed=look.seed, camera=look.camera,
                         quality=quality or DEFAULT_QUALITY,
                         display_referred=frame.display_referred,
-                        output_limit=output_limit(frame, keep_overscan))
+                        output_limit=output_limit(frame, keep_overscan),
+                        read_image=read_image_rgba)
     analyses = {}  # the analysis is computed on first use (again if the window changes)
     saved = 0.0
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
