@@ -1,0 +1,23 @@
+"""Limits every layer checks before allocating: a small hostile file must not take gigabytes.
+
+``MAX_PIXELS`` bounds any frame, data or display window, or buffer derived from them (a
+light-spreading effect's grown window, an FFT grid); ``CLFX_MAX_PIXELS`` overrides it.
+"""
+from __future__ import annotations
+
+import os
+
+from clfx.core.errors import ClfxError
+
+MAX_SIDE = 65536
+"""Largest width or height of any window, in pixels."""
+
+MAX_PIXELS = int(os.environ.get("CLFX_MAX_PIXELS", str(16384 * 16384)))
+"""Largest area of any window or derived buffer, in pixels (``CLFX_MAX_PIXELS``)."""
+
+
+def check_pixels(width: int, height: int, what: str, exc: type[ClfxError] = ClfxError) -> None:
+    """Raise ``exc`` naming ``what`` when a ``width`` x ``height`` area exceeds the limits."""
+    if width > MAX_SIDE or height > MAX_SIDE or width * height > MAX_PIXELS:
+        raise exc(f"{what} is {width}x{height}; the limit is {MAX_PIXELS} pixels and "
+                  f"{MAX_SIDE} a side (CLFX_MAX_PIXELS)")
