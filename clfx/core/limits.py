@@ -12,8 +12,9 @@ from clfx.core.errors import ClfxError
 MAX_SIDE = 65536
 """Largest width or height of any window, in pixels."""
 
-MAX_PIXELS = int(os.environ.get("CLFX_MAX_PIXELS", str(16384 * 16384)))
-"""Largest area of any window or derived buffer, in pixels (``CLFX_MAX_PIXELS``)."""
+MAX_PIXELS = int(os.environ.get("CLFX_MAX_PIXELS", str(8192 * 8192)))
+"""Largest area of any window or derived buffer, in pixels (``CLFX_MAX_PIXELS``; default
+8192 x 8192, a 1 GiB float RGBA frame: 8K DCI fits, a claimed 16384^2 does not)."""
 
 
 def check_pixels(width: int, height: int, what: str, exc: type[ClfxError] = ClfxError) -> None:
