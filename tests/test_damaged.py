@@ -1,14 +1,14 @@
 """Fuzzed OpenEXR files (openexr-images/Damaged): each is rejected with ImageIOError, fast."""
 import threading
-from pathlib import Path
 
 import pytest
 
 from clfx.core.errors import ImageIOError
-from clfx.io.files import probe, read_frame
+from clfx.io.probe import probe
+from clfx.io.read import read_frame
+from tests.conftest import EXR_IMAGES
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "openexr-images"
-DAMAGED = DATA / "Damaged"
+DAMAGED = EXR_IMAGES / "Damaged"
 FILES = sorted(p for p in DAMAGED.iterdir() if p.is_file() and not p.name.endswith(".rst")) \
     if DAMAGED.is_dir() else []
 TIMEOUT_S = 30.0   # each file takes < 0.2 s; a hang fails the test instead of the run
