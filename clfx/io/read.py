@@ -40,10 +40,11 @@ converted to ``"linear"``.  Trap: OpenImageIO's ``"linear"`` is Linear Rec.709, 
 Robustness
 ----------
 Every OpenImageIO failure becomes `ImageIOError` naming the file, with OpenImageIO's message on
-one line.  Inputs must be regular files (`check_input_file`): a FIFO, device or socket is
-refused before it is opened, so nothing blocks.  Data and display windows are checked against
-`clfx.core.limits` (``CLFX_MAX_PIXELS``) from the header, before any pixel is allocated (a
-1x1 data window in a 60000x60000 display window, a tiled file claiming 16384^2).  All 186
+one line.  Inputs must be regular files (`clfx.io.sequence.check_input_file`): a FIFO,
+device or socket is refused before it is opened, so nothing blocks.  Data and display
+windows are checked against `clfx.core.limits` (``CLFX_MAX_PIXELS``) from the header, before
+any pixel is allocated (a 1x1 data window in a 60000x60000 display window, a tiled file
+claiming 16384^2).  All 186
 fuzzed files of the OpenEXR ``Damaged`` set are rejected in-process (measured with
 OpenImageIO 3.2 / OpenEXR 3.5: no crash, no hang, < 0.2 s each), so no subprocess guard is
 used; a read that returns pixels but leaves an error message is an error.  Non-finite pixel
@@ -54,7 +55,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import stat
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,38 +66,9 @@ from clfx.core.rect import Rect
 from clfx.io import channels as ch
 from clfx.io._oiio import (check_window, colorconvert, fail, geterror, metadata,
                            spec_data_window, spec_display_window, type_name)
+from clfx.io.sequence import check_input_file
 
 MAX_PARTS = 4096
-
-_NOT_REGULAR = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
-                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
-
-
-def check_input_file(path, what: str = "input") -> str:
-    """Refuse anything but an existing regular file (without opening it, so a FIFO never
-    blocks); return the path as a string.
-
-    Raises
-    ------
-    ImageIOError
-        ``cannot read <path>: no such file`` / ``it is a folder`` / ``not a regular file (a
-        FIFO)``; ``what`` names the role (``"kernel_path of glare"``) when it is not a frame.
-    """
-    path = os.fspath(path)
-    role = "" if what == "input" else f" ({what})"
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise ImageIOError(f"cannot read {path}{role}: no such file") from None
-    except OSError as e:
-        raise ImageIOError(f"cannot read {path}{role}: {e.strerror}") from None
-    if stat.S_ISDIR(mode):
-        raise ImageIOError(f"cannot read {path}{role}: it is a folder")
-    if not stat.S_ISREG(mode):
-        kind = next((name for test, name in _NOT_REGULAR if test(mode)), "special file")
-        raise ImageIOError(f"cannot read {path}{role}: not a regular file ({kind})")
-    return path
-
 
 # ============================================================================================
 # Pass overrides

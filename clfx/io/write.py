@@ -390,6 +390,10 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, planes: list[np
         _publish(tmp, path, overwrite)
     except OSError as e:
         raise fail(path, "cannot write", e.strerror or str(e)) from None
+    except ImageIOError as e:
+        if tmp not in str(e):
+            raise
+        raise type(e)(str(e).replace(tmp, path)) from None    # name the output, not the temp
     finally:
         with contextlib.suppress(OSError):
             os.remove(tmp)

@@ -88,7 +88,7 @@ class Batch:
             for name, (pat, found) in aux.items():
                 setattr(job, name, found[frame] if pat.is_sequence else next(iter(found.values())))
             jobs.append(job)
-        from clfx.io.read import check_input_file
+        from clfx.io.sequence import check_input_file
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_outputs(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
@@ -218,7 +218,8 @@ class Batch:
             if not o.get("skip_existing"):
                 raise
             self.skipped_existing.append(job.frame)
-            self._err(f"clfx: frame {job.frame}: {job.output} appeared meanwhile; skipped")
+            if self.verbosity > 0:
+                self._err(f"clfx: frame {job.frame}: {job.output} appeared meanwhile; skipped")
         report.write_ms = (time.perf_counter() - t0) * 1e3
 
     def _err(self, msg: str, end: str = "\n") -> None:
