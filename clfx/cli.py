@@ -219,7 +219,7 @@ def look_show(name, assignments, as_json):
 @click.pass_context
 def probe(ctx, file, as_json, **kw):
     """Print the channels, windows and passes found in FILE and how they will be read."""
-    from clfx.io.files import format_probe, probe as probe_file
+    from clfx.io.probe import format_probe, probe as probe_file
 
     info = probe_file(file, passes=_pass_spec(ctx.params))
     click.echo(json.dumps(info, indent=2, default=str) if as_json else format_probe(info))
@@ -286,7 +286,7 @@ def _io_options(f):
 def _pass_spec(kw, focal_length_px: float | None = None):
     """The pass overrides given on the command line (focal length for radial depth given
     by --focal-length-px or derived by the caller)."""
-    from clfx.io.files import PassSpec
+    from clfx.io.read import PassSpec
 
     vc = kw.get("velocity_channels")
     for name in ("depth_scale", "velocity_scale"):
@@ -353,7 +353,7 @@ def _radial_depth_focal_px(kw, lk, batch) -> float | None:
     first input's display width (square pixels assumed, as the camera block does)."""
     if kw.get("depth_mode") != "distance" or kw.get("focal_length_px") or not batch.jobs:
         return None
-    from clfx.io.files import probe as probe_file
+    from clfx.io.probe import probe as probe_file
 
     info = probe_file(batch.jobs[0].input)
     width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]

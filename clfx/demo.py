@@ -59,7 +59,7 @@ def contact_sheet(previews: list[np.ndarray], columns: int = 6, thumb_width: int
 def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int = 360,
              look_name: str = "default", quality: str | None = None, overwrite: bool = True,
              explain: bool = False, as_json: bool = False, verbosity: int = 1) -> dict:
-    from clfx.io.files import write_frame
+    from clfx.io.write import write_frame
     from clfx.pipeline.presets import load_look
     from clfx.bench.scene import demo_scene, render_sharp
 

@@ -62,7 +62,7 @@ def test_probe_beachball(exr_images):
 
 # -- render / apply on real files ------------------------------------------------------------
 def test_render_beachball_sequence_keeps_windows_and_resumes(rt, exr_images, tmp_path):
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
     out = tmp_path / "out.####.exr"
@@ -85,7 +85,7 @@ def test_render_beachball_sequence_keeps_windows_and_resumes(rt, exr_images, tmp
 
 
 def test_frame_alone_equals_frame_in_batch(rt, exr_images, tmp_path):
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
     run("render", pattern, tmp_path / "batch.####.exr", "--frames", "1-4", "--float")
@@ -96,7 +96,7 @@ def test_frame_alone_equals_frame_in_batch(rt, exr_images, tmp_path):
 
 
 def test_apply_one_effect_on_exr_and_png(rt, exr_images, tmp_path):
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     run("apply", "vignette", exr_images / BEACH.format(1), tmp_path / "v.exr", "amount=0.5")
     run("apply", "vignette", tmp_path / "v.exr", tmp_path / "v.png", "amount=0.2", "roundness=0")
@@ -195,7 +195,7 @@ def test_sigterm_leaves_no_partial_file(rt, exr_images, tmp_path):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode in (143, 0), err  # 0 only if it finished before the signal
     assert not no_temp_files(tmp_path), err
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     for p in tmp_path.glob("o.*.exr"):
         read_frame(p)  # every file present is complete
@@ -210,7 +210,7 @@ def test_demo_writes_frames_previews_and_contact_sheet(rt, tmp_path):
         assert f"demo.{f:04d}.exr" in names and f"demo.{f:04d}.png" in names
         assert f"scene.{f:04d}.exr" in names
     assert "contact_sheet.png" in names
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     scene = read_frame(tmp_path / "demo" / "scene.0002.exr")
     assert scene.depth is not None and scene.velocity is not None
@@ -219,7 +219,8 @@ def test_demo_writes_frames_previews_and_contact_sheet(rt, tmp_path):
 def test_radial_depth_uses_the_look_camera_focal_length(rt, tmp_path):
     """--depth-mode distance converts radial distance to planar z with f_px from the look."""
     from clfx.core.frame import Frame
-    from clfx.io.files import read_frame, write_frame
+    from clfx.io.read import read_frame
+    from clfx.io.write import write_frame
 
     h, w = 20, 40
     cam_f_px = 50.0 * w / 36.0  # the default look's 50 mm on a 36 mm sensor

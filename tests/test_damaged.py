@@ -1,21 +1,22 @@
 """Fuzzed OpenEXR files (openexr-images/Damaged): each is rejected with ImageIOError, fast."""
 import threading
-from pathlib import Path
 
 import pytest
 
 from clfx.core.errors import ImageIOError
-from clfx.io.files import probe, read_frame
+from clfx.io.probe import probe
+from clfx.io.read import read_frame
+from tests.conftest import EXR_IMAGES
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "openexr-images"
-DAMAGED = DATA / "Damaged"
+DAMAGED = EXR_IMAGES / "Damaged"
 FILES = sorted(p for p in DAMAGED.iterdir() if p.is_file() and not p.name.endswith(".rst")) \
     if DAMAGED.is_dir() else []
 TIMEOUT_S = 30.0   # each file takes < 0.2 s; a hang fails the test instead of the run
 
 
-def _run_with_timeout(fn, *args):
-    """Run ``fn(*args)`` in a thread; return the exception it raised (or None)."""
+def run_with_timeout(fn, *args, timeout=TIMEOUT_S):
+    """Run ``fn(*args)`` in a thread; return the exception it raised (or None); fail the test
+    if it has not finished after ``timeout`` seconds (a hang, a blocked open)."""
     result = {}
 
     def target():
@@ -26,15 +27,15 @@ def _run_with_timeout(fn, *args):
 
     t = threading.Thread(target=target, daemon=True)
     t.start()
-    t.join(TIMEOUT_S)
-    assert not t.is_alive(), f"reading {args[0]} did not finish within {TIMEOUT_S} s"
+    t.join(timeout)
+    assert not t.is_alive(), f"{getattr(fn, '__name__', fn)}{args} did not finish within {timeout} s"
     return result.get("error")
 
 
 @pytest.mark.skipif(not FILES, reason="openexr-images/Damaged not found")
 @pytest.mark.parametrize("path", FILES, ids=[p.name[:60] for p in FILES])
 def test_damaged_file_raises_image_io_error(path):
-    err = _run_with_timeout(read_frame, path)
+    err = run_with_timeout(read_frame, path)
     assert isinstance(err, ImageIOError), f"{path.name}: expected ImageIOError, got {err!r}"
     msg = str(err)
     assert path.name in msg
@@ -46,7 +47,7 @@ def test_damaged_files_probe_never_crashes():
     # probe reads headers only, so a file with a valid header may probe fine;
     # anything else must be an ImageIOError.
     for path in FILES:
-        err = _run_with_timeout(probe, path)
+        err = run_with_timeout(probe, path)
         assert err is None or isinstance(err, ImageIOError), f"{path.name}: {err!r}"
 
 

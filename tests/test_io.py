@@ -1,7 +1,7 @@
-"""clfx.io.files: read/write round trips, pass detection and conventions, colour, atomic writes.
+"""clfx.io.read / probe / write: round trips, pass detection and conventions, colour, atomic writes.
 
 OpenImageIO is imported here only to author odd test files (Nuke/Blender channel layouts,
-oversized headers) that clfx.io.files deliberately cannot write.
+oversized headers) that clfx.io.write deliberately cannot write.
 """
 import json
 import os
@@ -11,13 +11,15 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from clfx.io import files as io
+from clfx.io import write as io_write
 from clfx.core.errors import ClipError, ImageIOError
 from clfx.core.frame import Frame
-from clfx.io.files import PassSpec, encoding_for, format_probe, probe, read_frame, write_frame
+from clfx.io.read import PassSpec, read_frame
+from clfx.io.write import encoding_for, write_frame
+from clfx.io.probe import format_probe, probe
 from clfx.core.rect import Rect
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "openexr-images"
+from tests.conftest import EXR_IMAGES as DATA
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="openexr-images test data not found")
 
 HALF_EPS = 2.0 ** -10          # half has a 10-bit mantissa: relative rounding <= 2**-11
@@ -115,7 +117,7 @@ def test_exr_float_round_trip_is_exact(tmp_path, rng):
     assert back.metadata["compression"] == "piz"
 
 
-@pytest.mark.parametrize("compression", io.EXR_COMPRESSIONS)
+@pytest.mark.parametrize("compression", io_write.EXR_COMPRESSIONS)
 def test_exr_compressions(tmp_path, compression):
     y, x = np.mgrid[0:16, 0:16].astype(np.float32)
     smooth = np.stack([x / 15, y / 15, (x + y) / 30, np.ones_like(x)], -1) * 2.0
@@ -555,12 +557,15 @@ def test_atomic_write_leaves_no_temp_files(tmp_path, rng, monkeypatch):
     write_frame(fr, tmp_path / "ok.0001.exr")
     assert [p.name for p in tmp_path.iterdir()] == ["ok.0001.exr"]
 
-    def broken_replace(src, dst):
+    def broken(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(io.os, "replace", broken_replace)
-    with pytest.raises(OSError):
-        write_frame(fr, tmp_path / "fail.0001.exr")
+    monkeypatch.setattr(io_write.os, "link", broken)       # publish without overwrite
+    monkeypatch.setattr(io_write.os, "replace", broken)    # publish with overwrite
+    for overwrite in (False, True):
+        with pytest.raises(ImageIOError, match="fail.0001.exr: No space left") as info:
+            write_frame(fr, tmp_path / "fail.0001.exr", overwrite=overwrite)
+        assert "\n" not in str(info.value)
     monkeypatch.undo()
     assert not leftovers(tmp_path) and not (tmp_path / "fail.0001.exr").exists()
 

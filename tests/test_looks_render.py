@@ -21,7 +21,7 @@ def run(*args):
 
 @pytest.mark.parametrize("look", BUILTIN)
 def test_builtin_look_renders_beachball(rt, exr_images, tmp_path, look):
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     src = exr_images / "Beachball" / "singlepart.0004.exr"
     r = run("render", src, tmp_path / "o.exr", "--look", look, "--quality", "preview", "--json")
@@ -37,7 +37,8 @@ def test_builtin_look_renders_beachball(rt, exr_images, tmp_path, look):
 def test_pass_effects_apply_to_beachball_demo_and_ground_truth(rt, exr_images, tmp_path, effect):
     from clfx.core.camera import Camera
     from clfx.bench.groundtruth import make_case, write_case
-    from clfx.io.files import read_frame, write_frame
+    from clfx.io.read import read_frame
+    from clfx.io.write import write_frame
     from clfx.bench.scene import demo_scene, render_sharp
 
     demo = tmp_path / "demo.exr"
@@ -59,7 +60,7 @@ def test_pass_effects_apply_to_beachball_demo_and_ground_truth(rt, exr_images, t
 def small_inputs(tmp_path_factory):
     """A demo-scene EXR (with depth and velocity) and the same frame as an 8-bit PNG."""
     from clfx.core.frame import Frame
-    from clfx.io.files import write_frame
+    from clfx.io.write import write_frame
     from clfx.bench.scene import demo_scene, render_sharp
 
     folder = tmp_path_factory.mktemp("apply")
@@ -72,7 +73,7 @@ def small_inputs(tmp_path_factory):
 @pytest.mark.parametrize("fmt", ["exr", "png"])
 @pytest.mark.parametrize("effect", sorted(discover()))
 def test_every_effect_applies_to_exr_and_png(rt, small_inputs, effect, fmt):
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
     from clfx.plugins import get_plugin
 
     src = small_inputs / f"in.{fmt}"

@@ -1,8 +1,11 @@
-"""clfx.io.sequence: frame patterns, ranges, missing frames."""
+"""clfx.io.sequence: frame patterns, ranges, missing frames, input files."""
+import os
+
 import pytest
 
-from clfx.core.errors import SequenceError
-from clfx.io.sequence import FrameSpec, Pattern, output_path, parse_frames, resolve_inputs
+from clfx.core.errors import ImageIOError, SequenceError
+from clfx.io.sequence import (FrameSpec, Pattern, check_input_file, output_path, parse_frames,
+                              resolve_inputs)
 
 
 @pytest.mark.parametrize("text, frame, want", [
@@ -40,7 +43,7 @@ def test_plain_file_frame_number():
     ("1-5", [1, 2, 3, 4, 5]),
     ("1-10x2", [1, 3, 5, 7, 9]),
     ("1,5,10-12", [1, 5, 10, 11, 12]),
-    ("10-7", [10, 9, 8, 7]),
+    ("1-5,3,2-4", [1, 2, 3, 4, 5]),                 # duplicates dropped, order kept
     ("1-10:3", [1, 4, 7, 10]),                     # farm step, not fileseq's stagger
     ("1-10:3,20", [1, 4, 7, 10, 20]),
     (" 1 - 3 ", [1, 2, 3]),
@@ -56,12 +59,39 @@ def test_parse_frames_long_range():
     assert parse_frames("1-100x2")[:3] == [1, 3, 5] and len(parse_frames("1-100x2")) == 50
 
 
-@pytest.mark.parametrize("spec", ["", "abc", "1-", "1,,2", "1-10x0", "1.5", "1-1000000000"])
+@pytest.mark.parametrize("spec", [
+    "", " ", "abc", "1-", "1,,2", "1-10x0", "1.5", "1-1000000000",
+    "5-1", "10-7",                   # backwards: refused, not reversed (issue 10, item 9)
+    "1-8y2", "1-10:0",               # fileseq's inverse step; a zero farm step
+    "\uff11-\uff15", "1-\u0665",           # full-width and Arabic-Indic digits
+    "1-5,\uff19", "1x2", "--1", "0x10-20",
+])
 def test_bad_ranges_name_the_spec(spec):
     with pytest.raises(SequenceError) as info:
         parse_frames(spec)
     assert repr(spec) in str(info.value)
     assert "\n" not in str(info.value)
+
+
+def test_bad_range_says_why():
+    with pytest.raises(SequenceError, match="runs backwards"):
+        parse_frames("5-1")
+    with pytest.raises(SequenceError, match="non-ASCII digits"):
+        parse_frames("\uff11-\uff15")
+    with pytest.raises(SequenceError, match="subframes"):
+        parse_frames("1.5")
+    with pytest.raises(SequenceError, match="more than"):
+        parse_frames("1-9000000,1-9000000")       # counted before any list is built
+
+
+@pytest.mark.parametrize("text", ["o.$F999999999.exr", "o.%0999999999d.exr", "o.%17d.exr",
+                                  "o." + "#" * 17 + ".exr", "o.@@@@@@@@@@@@@@@@@.exr"])
+def test_absurd_padding_refused_at_once(text):
+    with pytest.raises(SequenceError, match="at most 16") as info:
+        Pattern.parse(text)
+    assert "\n" not in str(info.value)
+    assert Pattern.parse(text.replace("999999999", "16").replace("17", "16")
+                         .replace("#" * 17, "#" * 16).replace("@" * 17, "@" * 16)).is_sequence
 
 
 def test_frame_spec():
@@ -115,6 +145,21 @@ def test_resolve_single_file(shots):
     with pytest.raises(SequenceError, match="gone.exr"):
         resolve_inputs(gone, None, skip_missing=False)
     assert resolve_inputs(gone, None, skip_missing=True) == []
+
+
+def test_fifo_input_refused_not_opened(tmp_path):
+    """Issue 10 item 5: a FIFO as an input frame is refused by name; nothing opens it."""
+    fifo = tmp_path / "pipe.0001.exr"
+    os.mkfifo(fifo)
+    for pattern, frames in ((fifo, None), (tmp_path / "pipe.####.exr", None),
+                            (tmp_path / "pipe.####.exr", [1])):
+        with pytest.raises(ImageIOError, match="not a regular file \\(a FIFO\\)") as info:
+            resolve_inputs(Pattern.parse(str(pattern)), frames, skip_missing=False)
+        assert "pipe.0001.exr" in str(info.value) and "\n" not in str(info.value)
+    with pytest.raises(ImageIOError, match="kernel_path of x.*a FIFO"):
+        check_input_file(fifo, "kernel_path of x")
+    with pytest.raises(ImageIOError, match="folder"):
+        check_input_file(tmp_path)
 
 
 def test_no_frames_on_disk(tmp_path):

@@ -262,10 +262,10 @@ def write_case(case: GroundTruthCase, directory, *, name: str = "case",
                overwrite: bool = True) -> dict:
     """Write ``<name>.sharp.exr`` (beauty + Z + forward.u/v) and ``<name>.truth.exr`` (float).
 
-    Returns the paths written.  Uses :func:`clfx.io.files.write_frame` (imported lazily).
+    Returns the paths written.  Uses :func:`clfx.io.write.write_frame` (imported lazily).
     """
     from clfx.core.frame import Frame
-    from clfx.io.files import write_frame
+    from clfx.io.write import write_frame
 
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)

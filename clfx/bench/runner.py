@@ -242,7 +242,8 @@ def bench_look(rt, look_name: str, frame: Frame, repeat: int, quality: str | Non
 
 def bench_io(frame: Frame, repeat: int) -> dict:
     """Reading and writing one frame as half-float EXR (zip), the floor of a frame's cost."""
-    from clfx.io.files import read_frame, write_frame
+    from clfx.io.read import read_frame
+    from clfx.io.write import write_frame
 
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "io.exr")
@@ -262,7 +263,8 @@ def bench_io(frame: Frame, repeat: int) -> dict:
 def bench_sequence(rt, look_name: str, width: int, height: int, frames: int) -> dict:
     """Sequence throughput through `clfx render`'s batch pipeline, reading and writing EXRs."""
     from clfx.pipeline.batch import Batch
-    from clfx.io.files import PassSpec, write_frame
+    from clfx.io.read import PassSpec
+    from clfx.io.write import write_frame
     from clfx.pipeline.presets import load_look
     from clfx.bench.scene import demo_scene, render_sharp
 

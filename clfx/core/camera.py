@@ -1,7 +1,7 @@
 """The look's camera block: one set of physical values that every effect reads.
 
 Lengths on the sensor are in millimetres; distances in the scene are in scene units, metres
-by default (the depth pass is read in the same units, see ``clfx.io.files``).
+by default (the depth pass is read in the same units, see ``clfx.io.read``).
 """
 from __future__ import annotations
 

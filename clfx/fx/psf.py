@@ -19,7 +19,7 @@ Models
 ``gaussians``
     Bloom as a sum of Gaussians (Kawase-style), sigmas in pixels and relative weights.
 ``image``
-    A user-supplied kernel image, read through ``clfx.io.files.read_frame`` (RGB), resampled so its
+    A user-supplied kernel image, read through ``clfx.io.read.read_frame`` (RGB), resampled so its
     larger side spans 2r + 1 pixels; each colour plane normalised separately.
 """
 from __future__ import annotations
@@ -98,8 +98,8 @@ def bloom_sigmas(radius_px: float, count: int = 4, ratio: float = 2.0, falloff: 
 
 
 def from_image(path: str, radius_px: int) -> np.ndarray:
-    """A kernel image (any format clfx.io.files reads) as a normalised (2r+1, 2r+1, 3) PSF."""
-    from clfx.io.files import read_frame  # lazy: io pulls in OpenImageIO
+    """A kernel image (any format clfx.io.read reads) as a normalised (2r+1, 2r+1, 3) PSF."""
+    from clfx.io.read import read_frame  # lazy: io pulls in OpenImageIO
 
     rgb = np.asarray(read_frame(path).rgba, np.float64)[..., :3]
     rgb = np.where(np.isfinite(rgb), np.maximum(rgb, 0.0), 0.0)

@@ -1,6 +1,6 @@
 """Finding beauty, depth and velocity channels, and converting renderers' conventions to clfx's.
 
-This module knows channel *names* and *conventions*; it never touches OpenImageIO (``clfx.io.files``
+This module knows channel *names* and *conventions*; it never touches OpenImageIO (``clfx.io.read``
 does the reading and calls the functions here with plain lists of channel names).
 
 Internal conventions (see ``clfx.core.frame``)
@@ -29,7 +29,8 @@ Beauty search order
 2. a layer named ``Combined``, ``rgba``, ``RGBA``, ``beauty`` or ``Beauty`` with ``R, G, B``
    (Blender ``ViewLayer.Combined.R``);
 3. the first layer with ``R, G, B`` (parts in order, channels in file order);
-4. grey: an unlayered ``Y`` (``A`` optional), or a part with a single channel.
+4. grey: an unlayered ``Y`` (``A`` optional), or a part with a single channel that is not a
+   depth channel (a file holding only ``Z`` has no beauty: it is refused, not read as grey).
 
 Depth search order (first match wins; the mode is what ``depth_mode="auto"`` uses)
 ----------------------------------------------------------------------------------
@@ -155,7 +156,7 @@ def search_order() -> dict:
     """The documented search orders as JSON-able lists (printed by ``probe``)."""
     return {
         "beauty": ["R,G,B(,A) unlayered", "layer " + "|".join(BEAUTY_LAYER_NAMES) + " with R,G,B",
-                   "first layer with R,G,B", "Y(,A) or a single channel (grey)"],
+                   "first layer with R,G,B", "Y(,A) or a single non-depth channel (grey)"],
         "depth": [f"{r.pattern} ({r.mode})" for r in DEPTH_RULES],
         "velocity": [f"{r.label()} ({r.direction}, {'y-up' if r.y_up else 'y-down'})"
                      for r in VELOCITY_RULES],
@@ -306,6 +307,8 @@ def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice |
     for p, info in enumerate(parts):
         if (part is None or p == part) and len(info["channels"]) == 1:
             name = info["channels"][0]
+            if depth_rule_for(name, tuple(info.get("views") or ())):
+                continue       # a lone Z is a depth pass, not a grey picture
             view = next(c.view for c in chans if c.part == p)
             return BeautyChoice(p, (name,), None, view, f"grey: the only channel {name!r}")
     return None

@@ -1,4 +1,5 @@
-"""Frame patterns (``shot.####.exr``) and frame ranges (``1001-1100x2``), parsed with fileseq.
+"""Frame patterns (``shot.####.exr``, parsed with fileseq), frame ranges (``1001-1100x2``) and
+the input files on disk.
 
 Padding tokens
 --------------
@@ -21,38 +22,67 @@ A path without a token is a plain file (``is_sequence`` False).  Its frame numbe
 fileseq finds before the extension (``shot.0042.exr`` -> 42), else 1.  ``-`` (stdin/stdout) is
 a plain file and is never checked on disk.
 
+Padding is at most ``MAX_PADDING`` digits (``o.$F999999999.exr`` is refused at once instead of
+building a billion-character name).
+
 Frame ranges
 ------------
-fileseq's syntax: ``1-100``, ``1-100x2`` (step 2), ``1,5,10-20``, ``10-1`` (descending),
-``1-10y3`` (fileseq's inverse step).  ``a-b:n`` means *step n* as on render farms (Slurm,
-OpenJD), not fileseq's "staggered" meaning, so it is normalised to ``a-bxn`` first
-(``1-10:3`` -> 1, 4, 7, 10).  Subframes are refused.
+Comma-separated chunks, each ``N``, ``A-B`` or ``A-BxN`` (step N), ``1-100``, ``1-100x2``,
+``1,5,10-20``, ``-3--1``; ``A-B:N`` means *step N* as on render farms (Slurm, OpenJD), not
+fileseq's "staggered" meaning (``1-10:3`` -> 1, 4, 7, 10).  Frames keep the order written,
+without duplicates.  Strict: ASCII digits only (no full-width ``１-５``), ``A <= B`` (``5-1`` is
+refused, not reversed), step >= 1, no fileseq extras (``1-10y3``), no subframes, at most
+``MAX_FRAMES`` frames; every refusal is a `SequenceError` naming the text.
+
+Input files
+-----------
+Inputs must be regular files (`check_input_file`): a FIFO, socket or device as a frame is
+refused by its name before anything opens it (opening a FIFO would block).
 """
 from __future__ import annotations
 
 import os
 import re
+import stat
 from dataclasses import dataclass, field
 
 import fileseq
 
-from clfx.core.errors import SequenceError
+from clfx.core.errors import ImageIOError, SequenceError
 
 #: Refuse ranges longer than this (a typo like 1-1000000000 would allocate gigabytes).
 MAX_FRAMES = 10_000_000
+#: Refuse frame tokens wider than this (``$F999999999`` would build a 1 GB file name).
+MAX_PADDING = 16
 
-_FARM_STEP = re.compile(r"(-?\d+)-(-?\d+):(\d+)")
+_INT = r"-?[0-9]{1,9}"
+_CHUNK = re.compile(rf"(?P<a>{_INT})(?:-(?P<b>{_INT})(?:[x:](?P<step>[0-9]{{1,9}}))?)?")
 _RANGE_HELP = "expected e.g. '1-100', '1-100x2', '1,5,10-20' or farm step '1-10:3'"
 
+_NOT_REGULAR = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
 
-def _normalise_range(spec: str) -> str:
-    """Remove blanks and turn farm steps ``a-b:n`` into fileseq's ``a-bxn``."""
-    chunks = [c for c in re.sub(r"\s+", "", spec).split(",")]
-    out = []
-    for c in chunks:
-        m = _FARM_STEP.fullmatch(c)
-        out.append(f"{m.group(1)}-{m.group(2)}x{m.group(3)}" if m else c)
-    return ",".join(out)
+
+def _range_error(text: str, why: str) -> SequenceError:
+    return SequenceError(f"invalid frame range {text!r}: {why}; {_RANGE_HELP}")
+
+
+def _chunk_frames(text: str, chunk: str) -> range:
+    m = _CHUNK.fullmatch(chunk)
+    if m is None:
+        if any(c.isdigit() and not c.isascii() for c in chunk):
+            raise _range_error(text, f"{chunk!r} has non-ASCII digits")
+        if "." in chunk:
+            raise _range_error(text, "subframes are not supported")
+        raise _range_error(text, f"{chunk!r} is not a frame range")
+    a = int(m["a"])
+    b = int(m["b"]) if m["b"] is not None else a
+    step = int(m["step"]) if m["step"] is not None else 1
+    if b < a:
+        raise _range_error(text, f"{chunk!r} runs backwards (write {b}-{a})")
+    if step < 1:
+        raise _range_error(text, f"step in {chunk!r} must be at least 1")
+    return range(a, b + 1, step)
 
 
 def parse_frames(spec: str) -> list[int]:
@@ -61,7 +91,7 @@ def parse_frames(spec: str) -> list[int]:
     Parameters
     ----------
     spec : str
-        ``"1-100"``, ``"1-100x2"``, ``"1,5,10-20"``, ``"10-1"``, ``"1-10:3"`` (farm step).
+        ``"1-100"``, ``"1-100x2"``, ``"1,5,10-20"``, ``"-3--1"``, ``"1-10:3"`` (farm step).
 
     Returns
     -------
@@ -71,29 +101,54 @@ def parse_frames(spec: str) -> list[int]:
     Raises
     ------
     SequenceError
-        Malformed, empty, subframe or over-long range; the message names ``spec``.
+        Empty, malformed, backwards (``5-1``), non-ASCII, subframe or over-long range; the
+        message names ``spec``.
     """
     text = str(spec)
-    norm = _normalise_range(text)
-    if not norm or any(not c for c in norm.split(",")):
-        raise SequenceError(f"invalid frame range {text!r}: {_RANGE_HELP}")
+    norm = re.sub(r"[ \t]+", "", text)
+    if not norm:
+        raise _range_error(text, "no frames")
+    ranges = [_chunk_frames(text, c) for c in norm.split(",")]
+    count = sum(len(r) for r in ranges)
+    if count > MAX_FRAMES:
+        raise SequenceError(f"frame range {text!r} has {count} frames; more than {MAX_FRAMES}")
+    return list(dict.fromkeys(f for r in ranges for f in r))
+
+
+def check_input_file(path, what: str = "input") -> str:
+    """Refuse anything but an existing regular file, without opening it (a FIFO would block);
+    return the path as a string.
+
+    Raises
+    ------
+    ImageIOError
+        ``cannot read <path>: no such file`` / ``it is a folder`` / ``not a regular file (a
+        FIFO)``; ``what`` names the role (``"glare.kernel_path"``) when it is not a frame.
+    """
+    path = os.fspath(path)
+    role = "" if what == "input" else f" ({what})"
     try:
-        fs = fileseq.FrameSet(norm)
-        if len(fs) > MAX_FRAMES:
-            raise SequenceError(f"frame range {text!r} has {len(fs)} frames; "
-                                f"more than {MAX_FRAMES}")
-        frames = list(fs)
-    except SequenceError:
-        raise
-    except Exception as e:      # fileseq raises ParseException, ValueError, MaxSizeException
-        reason = " ".join(str(e).split())
-        reason = reason if len(reason) < 80 else "not a frame range"
-        raise SequenceError(f"invalid frame range {text!r} ({reason}): {_RANGE_HELP}") from None
-    if not frames:
-        raise SequenceError(f"invalid frame range {text!r}: no frames; {_RANGE_HELP}")
-    if any(int(f) != f for f in frames):
-        raise SequenceError(f"invalid frame range {text!r}: subframes are not supported")
-    return [int(f) for f in frames]
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise ImageIOError(f"cannot read {path}{role}: no such file") from None
+    except OSError as e:
+        raise ImageIOError(f"cannot read {path}{role}: {e.strerror}") from None
+    if stat.S_ISDIR(mode):
+        raise ImageIOError(f"cannot read {path}{role}: it is a folder")
+    if not stat.S_ISREG(mode):
+        kind = next((name for test, name in _NOT_REGULAR if test(mode)), "special file")
+        raise ImageIOError(f"cannot read {path}{role}: not a regular file ({kind})")
+    return path
+
+
+def _present(path: str) -> bool:
+    """An input frame is there: a regular file (True), missing (False), else ImageIOError."""
+    if not os.path.lexists(path):
+        return False
+    if not os.path.exists(path):       # dangling symlink: missing
+        return False
+    check_input_file(path)
+    return True
 
 
 @dataclass(frozen=True)
@@ -175,6 +230,9 @@ class Pattern:
             raise SequenceError(f"invalid frame pattern {text!r}: {' '.join(str(e).split())}") \
                 from None
         is_seq = bool(seq.padding()) and seq.frameSet() is None
+        if is_seq and seq.zfill() > MAX_PADDING:
+            raise SequenceError(f"invalid frame pattern {text!r}: {seq.zfill()} digits of "
+                                f"padding; at most {MAX_PADDING}")
         return cls(text, is_seq, seq, style)
 
     def path(self, frame: int) -> str:
@@ -233,9 +291,11 @@ def resolve_inputs(pattern: Pattern, frames: list[int] | None, *,
     ------
     SequenceError
         ``"missing frames 3-5,9 of shot.####.exr"``; no frames on disk; missing plain file.
+    ImageIOError
+        An input is there but is not a regular file (a FIFO, a folder).
     """
     if not pattern.is_sequence:
-        if pattern.text != "-" and not os.path.isfile(pattern.text):
+        if pattern.text != "-" and not _present(pattern.text):
             if skip_missing:
                 return []
             raise SequenceError(f"missing file {pattern.text}")
@@ -245,9 +305,9 @@ def resolve_inputs(pattern: Pattern, frames: list[int] | None, *,
         on_disk = pattern.existing_frames()
         if not on_disk and not skip_missing:
             raise SequenceError(f"no frames of {pattern.text} on disk")
-        return [(f, pattern.path(f)) for f in on_disk]
+        return [(f, check_input_file(pattern.path(f))) for f in on_disk]
     pairs = [(int(f), pattern.path(f)) for f in frames]
-    missing = [f for f, p in pairs if not os.path.isfile(p)]
+    missing = [f for f, p in pairs if not _present(p)]
     if missing and not skip_missing:
         raise SequenceError(f"missing frames {compact(missing)} of {pattern.text}")
     gone = set(missing)

@@ -23,9 +23,14 @@ import numpy as np
 from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame
 from clfx.pipeline.look import Look, render_frame
-from clfx.core.rect import Rect
 
 RAW = "-"
+
+
+def look_files(look: Look) -> list[tuple[str, str]]:
+    """(``effect.param``, path) of every file a step reads (a PathParam): inputs of the render."""
+    return [(f"{s.id}.{p.name}", getattr(s.params, p.name)) for s in look.steps
+            for p in s.plugin.descriptor.params if p.kind == "path" and getattr(s.params, p.name)]
 
 
 @dataclass
@@ -48,6 +53,7 @@ class Batch:
     progress: bool = False
     jobs: list[Job] = field(default_factory=list)
     skipped_existing: list[int] = field(default_factory=list)
+    look_files: list[str] = field(default_factory=list)   # files effects read (PathParam)
 
     # -- checks -------------------------------------------------------------------------
     def prepare(self) -> None:
@@ -82,12 +88,15 @@ class Batch:
             for name, (pat, found) in aux.items():
                 setattr(job, name, found[frame] if pat.is_sequence else next(iter(found.values())))
             jobs.append(job)
+        from clfx.io.sequence import check_input_file
+        self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_outputs(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
 
     def _check_outputs(self, jobs: list[Job]) -> None:
         o = self.options
         inputs = {os.path.realpath(p) for j in jobs for p in (j.input, j.depth, j.velocity) if p}
+        inputs |= {os.path.realpath(p) for p in self.look_files}
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
@@ -100,12 +109,15 @@ class Batch:
                 raise ImageIOError(f"cannot create output folder {folder}: {exc.strerror}") from exc
         if not os.access(folder, os.W_OK | os.X_OK):
             raise ImageIOError(f"output folder {folder} is not writable")
+        if o.get("skip_existing"):
+            from clfx.io.write import sweep_stale_temps
+            sweep_stale_temps(outs)   # temp files of killed runs (their process is gone)
         for j in jobs:
             real = os.path.realpath(j.output)
             if real in inputs:
                 raise ImageIOError(f"output {j.output} is an input of this render; clfx never "
                                    f"overwrites its inputs")
-            if os.path.exists(j.output):
+            if os.path.lexists(j.output):   # a dangling symlink counts
                 if o.get("skip_existing"):
                     self.skipped_existing.append(j.frame)
                 elif not o.get("overwrite"):
@@ -185,7 +197,7 @@ class Batch:
 
     def _read(self, job: Job) -> tuple[Frame, float]:
         """The job's frame and the milliseconds it took to read."""
-        from clfx.io.files import read_frame
+        from clfx.io.read import read_frame
 
         t0 = time.perf_counter()
         frame = read_frame(job.input, passes=self.passes, colorspace=self.options.get("colorspace"),
@@ -193,14 +205,21 @@ class Batch:
         return frame, (time.perf_counter() - t0) * 1e3
 
     def _write(self, frame: Frame, job: Job, report) -> None:
-        from clfx.io.files import write_frame
+        from clfx.io.write import OutputExistsError, write_frame
 
         t0 = time.perf_counter()
         o = self.options
-        write_frame(frame, job.output, bit_depth="float" if o.get("as_float") else None,
-                    compression=o.get("compression"), colorspace=o.get("out_colorspace"),
-                    overwrite=True, attributes=self.look.stamp(),
-                    protect=[p for p in (job.input, job.depth, job.velocity) if p])
+        try:   # not overwrite: an output another writer published meanwhile is never replaced
+            write_frame(frame, job.output, bit_depth="float" if o.get("as_float") else None,
+                        compression=o.get("compression"), colorspace=o.get("out_colorspace"),
+                        overwrite=bool(o.get("overwrite")), attributes=self.look.stamp(),
+                        protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files)
+        except OutputExistsError:
+            if not o.get("skip_existing"):
+                raise
+            self.skipped_existing.append(job.frame)
+            if self.verbosity > 0:
+                self._err(f"clfx: frame {job.frame}: {job.output} appeared meanwhile; skipped")
         report.write_ms = (time.perf_counter() - t0) * 1e3
 
     def _err(self, msg: str, end: str = "\n") -> None:
@@ -212,11 +231,9 @@ class Batch:
         if not size:
             raise SequenceError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le frames, "
                                 "as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
-        try:
-            w, h = (int(v) for v in size.lower().split("x"))
-        except ValueError:
-            raise SequenceError(f"--raw {size!r} is not WxH") from None
-        self.raw_size = (w, h)
+        from clfx.io.raw import parse_size
+
+        self.raw_size = parse_size(size)
         if self.input_path != RAW or self.output_path != RAW:
             raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
         for clip, effects in self.look.required_clips().items():
@@ -224,29 +241,15 @@ class Batch:
 
     def _run_raw(self, rt) -> dict:
         """Read gbrpf32le frames from stdin until EOF; write them to stdout."""
-        w, h = self.raw_size
-        nbytes = w * h * 3 * 4
+        from clfx.io.raw import read_raw, write_raw
+
         stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
         count = 0
         t0 = time.perf_counter()
-        while True:
-            data = stdin.read(nbytes)
-            if not data:
-                break
-            if len(data) != nbytes:
-                raise ImageIOError(f"stdin: truncated raw frame {count} ({len(data)} of {nbytes} bytes)")
-            planes = np.frombuffer(data, np.float32).reshape(3, h, w)  # G, B, R
-            rgba = np.empty((h, w, 4), np.float32)
-            rgba[..., 0], rgba[..., 1], rgba[..., 2], rgba[..., 3] = planes[2], planes[0], planes[1], 1.0
-            frame = Frame(rgba, Rect.from_size(w, h), Rect.from_size(w, h), source="stdin")
+        while (frame := read_raw(stdin, self.raw_size, count)) is not None:
             out, report = render_frame(rt, self.look, frame, frame_number=count,
                                        quality=self.options.get("quality"))
-            o = out.rgba
-            if out.data_window != frame.data_window:
-                from clfx.core.frame import crop_to
-                o = crop_to(o, out.data_window, frame.data_window)
-            stdout.write(np.ascontiguousarray(np.stack([o[..., 1], o[..., 2], o[..., 0]])).tobytes())
-            stdout.flush()
+            write_raw(stdout, out, frame.data_window)
             if self.options.get("explain"):
                 self._err(report.explain())
             count += 1

@@ -185,7 +185,7 @@ class FrameReport:
 def read_image_rgba(path: str):
     """An image file a parameter names (a kernel image), as float32 RGBA: the reader the
     pipeline hands effects through their render context."""
-    from clfx.io.files import read_frame  # lazy: io pulls in OpenImageIO
+    from clfx.io.read import read_frame  # lazy: io pulls in OpenImageIO
 
     return read_frame(path).rgba
 

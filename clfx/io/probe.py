@@ -1,0 +1,101 @@
+"""Describing a file without reading its pixels: its parts, channels and windows, and how
+`clfx.io.read.read_frame` would read it (``clfx probe``)."""
+from __future__ import annotations
+
+from clfx.io import channels as ch
+from clfx.io._oiio import win_json
+from clfx.io.read import PassSpec, plan_read
+
+_CONVENTION = {True: "y-up", False: "y-down"}
+
+
+def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
+          depth_path=None, velocity_path=None, part: int | str | None = None) -> dict:
+    """Describe a file and how `read_frame` would read it (no pixels read).
+
+    Returns
+    -------
+    dict
+        JSON-able: ``file``, ``format``, ``parts`` (name, view, channels, windows, pixel
+        aspect), ``view``, ``beauty``, ``depth`` and ``velocity`` (channel, part, mode or
+        convention, ``why``) or None, ``ignored_other_views``, ``encoding``, ``colorspace``,
+        ``search_order``.
+    """
+    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part)
+    f = plan.file
+    info = {
+        "file": f.path,
+        "format": f.format,
+        "parts": [{"index": p.index, "name": p.name, "view": p.view,
+                   "views": list(p.views), "channels": list(p.channels),
+                   "formats": list(p.formats),
+                   "data_window": win_json(p.data_window),
+                   "display_window": win_json(p.display_window),
+                   "pixel_aspect": p.pixel_aspect, "deep": p.deep} for p in f.parts],
+        "view": plan.view,
+        "beauty": {"part": plan.beauty.part, "channels": plan.beauty.channels,
+                   "grey": plan.beauty.grey, "why": plan.beauty.why},
+        "depth": None,
+        "velocity": None,
+        "ignored_other_views": ch.other_view_channels(f.dicts(), plan.view),
+        "encoding": plan.encoding,
+        "colorspace": {"from": plan.source_colorspace or "linear (no conversion)",
+                       "to": "linear" if plan.source_colorspace else "linear (as stored)"},
+        "search_order": ch.search_order(),
+    }
+    if plan.depth:
+        d = plan.depth
+        info["depth"] = {"file": d.path, "part": d.part.index, "channel": d.channels[0],
+                         "rule": d.rule, "mode": d.mode, "scale": passes.depth_scale,
+                         "data_window": win_json(d.part.data_window), "why": d.why}
+        if d.mode == "normalized":
+            info["depth"]["near_far"] = [passes.depth_near, passes.depth_far]
+    if plan.velocity:
+        v = plan.velocity
+        info["velocity"] = {"file": v.path, "part": v.part.index, "channels": list(v.channels),
+                            "rule": v.rule, "direction": v.direction, "y_up": v.y_up,
+                            "scale": passes.velocity_scale,
+                            "convention": f"{v.direction}, pixels, {_CONVENTION[v.y_up]}"
+                                          " -> clfx forward px/frame, +y down",
+                            "data_window": win_json(v.part.data_window), "why": v.why}
+    return info
+
+
+def _pass_line(kind: str, p: dict | None, info: dict, channels: str, convention: str) -> str:
+    if not p:
+        return f"{kind}: none found"
+    where = f" of {p['file']}" if p["file"] != info["file"] else ""
+    return (f"{kind}: {channels} (part {p['part']}{where}), {convention}, "
+            f"scale {p['scale']:g}  ({p['why']})")
+
+
+def format_probe(info: dict) -> str:
+    """Human-readable lines for a `probe` result."""
+    def win(w):
+        return f"({w['x']},{w['y']}) {w['width']}x{w['height']}"
+
+    lines = [f"{info['file']}  [{info['format']}]"]
+    for p in info["parts"]:
+        name = f" {p['name']!r}" if p["name"] else ""
+        view = f" view={p['view']}" if p["view"] else ""
+        views = f" views={','.join(p['views'])}" if p["views"] else ""
+        lines.append(f"  part {p['index']}{name}{view}{views}: data {win(p['data_window'])}, "
+                     f"display {win(p['display_window'])}, pixel aspect {p['pixel_aspect']:g}"
+                     + (" DEEP" if p["deep"] else ""))
+        lines.append(f"    channels: {', '.join(p['channels'])}")
+    b = info["beauty"]
+    lines.append(f"beauty: part {b['part']} {', '.join(b['channels'])}  ({b['why']})")
+    if info.get("view"):
+        lines.append(f"view: {info['view']}")
+    d, v = info["depth"], info["velocity"]
+    lines.append(_pass_line("depth", d, info, d and d["channel"], d and f"mode {d['mode']}"))
+    lines.append(_pass_line("velocity", v, info, v and "/".join(v["channels"]),
+                            v and v["convention"]))
+    if info["ignored_other_views"]:
+        lines.append(f"ignored (other views): {', '.join(info['ignored_other_views'])}")
+    cs = info["colorspace"]
+    lines.append(f"encoding: {info['encoding']}  (colour: {cs['from']} -> {cs['to']})")
+    lines.append("search order:")
+    for kind, order in info["search_order"].items():
+        lines.append(f"  {kind}: " + " > ".join(order))
+    return "\n".join(lines)

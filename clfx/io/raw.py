@@ -1,0 +1,73 @@
+"""Raw frames on a pipe, as ffmpeg's ``-f rawvideo -pix_fmt gbrpf32le`` writes and reads them.
+
+A frame is three planes of little-endian float32, in the order G, B, R, each ``height`` rows
+of ``width`` values, no header; frames follow each other until end of file.  Read frames are
+scene-linear RGBA with alpha 1 and no passes; written frames drop alpha (premultiplied colour).
+
+Examples
+--------
+::
+
+    ffmpeg -i in.mov -f rawvideo -pix_fmt gbrpf32le - \\
+      | clfx render - - --look default --raw 1920x1080 \\
+      | ffmpeg -f rawvideo -pix_fmt gbrpf32le -s 1920x1080 -i - out.mov
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from clfx.core.errors import ImageIOError, SequenceError
+from clfx.core.frame import Frame, crop_to
+from clfx.core.limits import check_pixels
+from clfx.core.rect import Rect
+
+PIX_FMT = "gbrpf32le"
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"1920x1080"`` -> ``(1920, 1080)``.
+
+    Raises
+    ------
+    SequenceError
+        Not ``WxH`` with positive integers, or over `clfx.core.limits` (checked before any
+        buffer is allocated).
+    """
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise SequenceError(f"--raw {text!r} is not WxH") from None
+    if w < 1 or h < 1:
+        raise SequenceError(f"--raw {text!r}: width and height must be at least 1")
+    check_pixels(w, h, f"--raw frame {text}", SequenceError)
+    return w, h
+
+
+def read_raw(stream, size: tuple[int, int], index: int = 0) -> Frame | None:
+    """The next ``gbrpf32le`` frame of ``stream`` (a binary file), or None at end of file.
+
+    Raises
+    ------
+    ImageIOError
+        The stream ends inside a frame.
+    """
+    w, h = size
+    nbytes = w * h * 3 * 4
+    data = stream.read(nbytes)
+    if not data:
+        return None
+    if len(data) != nbytes:
+        raise ImageIOError(f"stdin: truncated raw frame {index} ({len(data)} of {nbytes} bytes)")
+    planes = np.frombuffer(data, np.float32).reshape(3, h, w)  # G, B, R
+    rgba = np.empty((h, w, 4), np.float32)
+    rgba[..., 0], rgba[..., 1], rgba[..., 2], rgba[..., 3] = planes[2], planes[0], planes[1], 1.0
+    return Frame(rgba, Rect.from_size(w, h), Rect.from_size(w, h), source="stdin")
+
+
+def write_raw(stream, frame: Frame, window: Rect) -> None:
+    """Write ``frame`` cut or padded to ``window`` (the input's) as one ``gbrpf32le`` frame."""
+    o = frame.rgba
+    if frame.data_window != window:
+        o = crop_to(o, frame.data_window, window)
+    stream.write(np.ascontiguousarray(np.stack([o[..., 1], o[..., 2], o[..., 0]])).tobytes())
+    stream.flush()

@@ -1,0 +1,528 @@
+"""Reading frames with OpenImageIO: scanning a file's parts, planning which channels hold the
+beauty, depth and velocity, and reading them (`read_frame`).
+
+Reading
+-------
+- Formats: OpenEXR (single- and multipart, scanline or tiled, half/float), PNG, JPEG, TIFF,
+  DPX, Radiance HDR, and whatever else OpenImageIO reads.  Deep EXRs are refused.
+- Pixels are returned as float32; grey becomes RGB and a missing alpha becomes 1.
+- Multipart EXR: every part is scanned (``seek_subimage``).  The beauty, depth and velocity
+  may live in different parts; a pass whose part has another data window is placed into the
+  beauty's data window (depth outside the pass's window = +inf, velocity = 0).
+- Windows: ``Frame.data_window`` is the data window (``spec.x, y, width, height``),
+  ``Frame.display_window`` the display window (``spec.full_*``); ``PixelAspectRatio`` becomes
+  ``Frame.pixel_aspect``; all attributes of the beauty's part become ``Frame.metadata`` (plain
+  JSON-able values; binary blobs, ICC profiles and values over 64 elements / 4096 characters
+  are skipped).
+- Channels are always looked up by name (``spec.channelindex``); a missing channel is an
+  error, never zeros.
+- The beauty, depth and velocity search orders and the renderers' conventions are in
+  `clfx.io.channels` (``probe`` prints them).  `PassSpec` overrides any of them.  A file that
+  holds only passes (a lone ``Z``) has no beauty and is refused, naming its channels.
+- Depth or velocity in separate files (``depth_path``, ``velocity_path``): same search order in
+  that file; if nothing matches and the file holds a single channel (or R/Y), that channel is
+  the depth, or R, G are the velocity (forward, y-up unless `PassSpec` says otherwise).  The
+  pass's data window must equal the beauty's, else `ClipError` naming both.
+
+Colour
+------
+Integer-typed files other than EXR (8/16-bit PNG, JPEG, TIFF, and DPX/Cineon of any bit depth)
+are display-referred: they are linearised from sRGB with OpenImageIO's colour management
+(``colorconvert(buf, "sRGB", "linear")``, alpha divided out around the transfer function) and
+``Frame.encoding = "sRGB"``.  EXR, HDR and float TIFF are scene-linear (``"linear"``).  DPX is
+often log (Cineon printing density): clfx treats it as sRGB-like display data unless
+``colorspace=`` says otherwise (e.g. ``"ACEScct"`` or ``"raw"``).  ``colorspace=`` names the
+input colour space: ``"linear"`` (no conversion), ``"sRGB"``, ``"raw"`` (no conversion, pixels
+as stored) or any OCIO name OpenImageIO knows (``"ACEScg"``, ``"Linear Rec.2020"``...),
+converted to ``"linear"``.  Trap: OpenImageIO's ``"linear"`` is Linear Rec.709, while the
+``scene_linear`` role of its built-in config is ACEScg; clfx works in Linear Rec.709.
+
+Robustness
+----------
+Every OpenImageIO failure becomes `ImageIOError` naming the file, with OpenImageIO's message on
+one line.  Inputs must be regular files (`clfx.io.sequence.check_input_file`): a FIFO,
+device or socket is refused before it is opened, so nothing blocks.  Data and display
+windows are checked against `clfx.core.limits` (``CLFX_MAX_PIXELS``) from the header, before
+any pixel is allocated (a 1x1 data window in a 60000x60000 display window, a tiled file
+claiming 16384^2).  All 186
+fuzzed files of the OpenEXR ``Damaged`` set are rejected in-process (measured with
+OpenImageIO 3.2 / OpenEXR 3.5: no crash, no hang, < 0.2 s each), so no subprocess guard is
+used; a read that returns pixels but leaves an error message is an error.  Non-finite pixel
+values are not errors (effects sanitise them).
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+import OpenImageIO as oiio
+
+from clfx.core.errors import ClipError, ImageIOError
+from clfx.core.frame import Frame, crop_to
+from clfx.core.rect import Rect
+from clfx.io import channels as ch
+from clfx.io._oiio import (check_window, colorconvert, fail, geterror, metadata,
+                           spec_data_window, spec_display_window, type_name)
+from clfx.io.sequence import check_input_file
+
+MAX_PARTS = 4096
+
+# ============================================================================================
+# Pass overrides
+
+@dataclass(frozen=True)
+class PassSpec:
+    """Overrides for finding and interpreting depth and velocity.
+
+    Parameters
+    ----------
+    depth_channel : str, optional
+        Exact channel name of the depth, e.g. ``"depth.Z"``; default: the search order.
+    depth_mode : {"auto", "z", "inverse", "distance", "normalized"}
+        ``auto``: from the matched rule (see `clfx.io.channels`).  ``z``: planar z.  ``inverse``:
+        1/z with far = 0 (Nuke).  ``distance``: radial distance from the camera, converted to
+        planar z with ``focal_length_px``.  ``normalized``: 0..1 between ``depth_near`` and
+        ``depth_far``.
+    depth_scale : float
+        Multiplies the converted depth (scene-unit conversion, e.g. cm -> m = 0.01).
+    depth_near, depth_far : float
+        Scene-unit depths of 0 and 1 for ``normalized``.
+    velocity_channels : (str, str), optional
+        Exact (u, v) channel names; default: the search order.
+    velocity_y_up : bool, optional
+        True if stored +v points up; None = from the detected convention (y-up when the names
+        match no rule).
+    velocity_scale : float
+        Multiplies both components after conversion (e.g. shutter-interval -> per frame).
+    velocity_direction : {"auto", "forward", "backward"}
+        ``backward`` vectors are negated; ``auto`` = from the detected convention.
+    focal_length_px : float, optional
+        Focal length in pixels (pixel heights), required for ``depth_mode="distance"``.
+    """
+
+    depth_channel: str | None = None
+    depth_mode: str = "auto"
+    depth_scale: float = 1.0
+    depth_near: float = 0.0
+    depth_far: float = 1.0
+    velocity_channels: tuple[str, str] | None = None
+    velocity_y_up: bool | None = None
+    velocity_scale: float = 1.0
+    velocity_direction: str = "auto"
+    focal_length_px: float | None = None
+
+    def __post_init__(self):
+        if self.depth_mode not in ch.DEPTH_MODES:
+            raise ClipError(f"depth_mode {self.depth_mode!r} is not one of {ch.DEPTH_MODES}")
+        if self.velocity_direction not in ch.VELOCITY_DIRECTIONS:
+            raise ClipError(f"velocity_direction {self.velocity_direction!r} is not one of "
+                            f"{ch.VELOCITY_DIRECTIONS}")
+        if self.velocity_channels is not None and len(self.velocity_channels) != 2:
+            raise ClipError(f"velocity_channels {self.velocity_channels!r} must be two names "
+                            "(u, v)")
+        if self.depth_mode == "distance" and not (self.focal_length_px or 0) > 0:
+            raise ClipError("depth_mode='distance' needs focal_length_px > 0 "
+                            "(focal length in pixels)")
+
+
+
+# ============================================================================================
+# Scanning a file
+
+@dataclass
+class _Part:
+    index: int
+    name: str
+    channels: tuple[str, ...]
+    formats: tuple[str, ...]
+    view: str | None
+    views: tuple[str, ...]
+    data_window: Rect
+    display_window: Rect
+    pixel_aspect: float
+    deep: bool
+    spec: object = field(repr=False, default=None)
+
+    def as_dict(self) -> dict:
+        """What `clfx.io.channels` needs."""
+        return {"channels": list(self.channels), "view": self.view, "views": self.views}
+
+
+@dataclass
+class _File:
+    path: str
+    format: str
+    parts: list[_Part]
+
+    def dicts(self) -> list[dict]:
+        return [p.as_dict() for p in self.parts]
+
+
+@contextlib.contextmanager
+def _open(path):
+    """Open ``path`` with OpenImageIO; ImageIOError if missing or unreadable."""
+    path = check_input_file(path)
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise fail(path, "cannot read", geterror() or "unknown format or damaged file")
+    try:
+        yield inp
+    finally:
+        inp.close()
+
+
+def _part_from_spec(i: int, spec) -> _Part:
+    views = spec.getattribute("multiView")
+    views = tuple(views) if isinstance(views, (tuple, list)) else ((views,) if views else ())
+    names = tuple(spec.channelnames)
+    fmts = tuple(type_name(t) for t in spec.channelformats) if spec.channelformats else \
+        (type_name(spec.format),) * len(names)
+    aspect = spec.get_float_attribute("PixelAspectRatio", 1.0)
+    if not (math.isfinite(aspect) and aspect > 0):
+        aspect = 1.0
+    return _Part(i, spec.get_string_attribute("name", ""), names, fmts,
+                 spec.get_string_attribute("view", "") or None, views,
+                 spec_data_window(spec), spec_display_window(spec), float(aspect), bool(spec.deep), spec)
+
+
+def _scan(path) -> _File:
+    """Headers of every part (no pixels)."""
+    with _open(path) as inp:
+        parts = []
+        i = 0
+        try:
+            while i < MAX_PARTS and inp.seek_subimage(i, 0):
+                parts.append(_part_from_spec(i, inp.spec()))
+                i += 1
+        except UnicodeDecodeError:
+            raise fail(path, "cannot read", "undecodable channel or attribute names "
+                        "(damaged file)") from None
+        geterror(inp)      # clear "no such subimage" left by the last seek
+        if not parts:
+            raise fail(path, "cannot read", "no image in file")
+        return _File(os.fspath(path), inp.format_name(), parts)
+
+
+def _runs(indices: list[int]) -> list[tuple[int, int]]:
+    """Contiguous [begin, end) runs of sorted channel indices."""
+    runs: list[tuple[int, int]] = []
+    for i in sorted(set(indices)):
+        if runs and runs[-1][1] == i:
+            runs[-1] = (runs[-1][0], i + 1)
+        else:
+            runs.append((i, i + 1))
+    return runs
+
+
+def _read_channels(path, part: _Part, names) -> dict[str, np.ndarray]:
+    """Read named channels of one part as float32 (h, w) arrays covering its data window."""
+    if part.deep:
+        raise fail(path, "cannot read deep image", "deep EXR is not supported")
+    check_window(path, part.data_window)
+    idx = {}
+    for n in names:
+        if n not in part.channels:
+            raise fail(path, f"channel {n!r} not found in part {part.index} of",
+                        f"channels are {', '.join(part.channels)}")
+        idx[n] = part.channels.index(n)
+    out: dict[str, np.ndarray] = {}
+    with _open(path) as inp:
+        for begin, end in _runs(list(idx.values())):
+            px = inp.read_image(part.index, 0, begin, end, "float")
+            err = geterror(inp)
+            if px is None or err:
+                raise fail(path, "cannot read", err or "read failed")
+            px = np.asarray(px, np.float32).reshape(part.data_window.height,
+                                                    part.data_window.width, end - begin)
+            for n, i in idx.items():
+                if begin <= i < end:
+                    out[n] = np.ascontiguousarray(px[..., i - begin])
+    return out
+
+
+
+# ============================================================================================
+# Planning: which channels, which conventions
+
+@dataclass
+class _PassPlan:
+    path: str
+    part: _Part
+    channels: tuple[str, ...]
+    rule: str
+    why: str
+    separate: bool
+    mode: str | None = None
+    direction: str | None = None
+    y_up: bool | None = None
+
+
+@dataclass
+class ReadPlan:
+    file: _File
+    beauty: ch.BeautyChoice
+    view: str | None
+    depth: _PassPlan | None
+    velocity: _PassPlan | None
+    source_colorspace: str | None     # None: no conversion
+    encoding: str
+
+
+def _select_part(f: _File, part) -> int | None:
+    if part is None:
+        return None
+    if isinstance(part, int):
+        if not 0 <= part < len(f.parts):
+            raise ImageIOError(f"part {part} not in {f.path} ({len(f.parts)} parts)")
+        return part
+    for p in f.parts:
+        if p.name == part:
+            return p.index
+    names = ", ".join(repr(p.name) for p in f.parts)
+    raise ImageIOError(f"part {part!r} not in {f.path}; parts are {names}")
+
+
+def _available(f: _File) -> str:
+    names = [n for p in f.parts for n in p.channels]
+    more = f" (+{len(names) - 30} more)" if len(names) > 30 else ""
+    return ", ".join(names[:30]) + more
+
+
+def _plan_depth(f: _File, spec: PassSpec, view, prefer_part, separate: bool) -> _PassPlan | None:
+    parts = f.dicts()
+    if spec.depth_channel:
+        p = ch.explicit_choice(parts, (spec.depth_channel,), view, prefer_part)
+        if p is None:
+            raise ClipError(f"depth channel {spec.depth_channel!r} not in {f.path}; "
+                            f"channels: {_available(f)}")
+        rule = ch.depth_rule_for(spec.depth_channel, f.parts[p].views)
+        mode = rule.mode if rule else "z"
+        why = f"explicit channel; {rule.source if rule else 'no known convention: planar z'}"
+        choice = _PassPlan(f.path, f.parts[p], (spec.depth_channel,),
+                           rule.pattern if rule else "explicit", why, separate, mode=mode)
+    else:
+        choice = _searched(f, ch.find_depth(parts, view), 1, separate)
+        if choice is None:
+            return None
+    if spec.depth_mode != "auto":
+        choice.mode = spec.depth_mode
+        choice.why += f"; mode {spec.depth_mode!r} from PassSpec"
+    return choice
+
+
+def _searched(f: _File, found: ch.PassChoice | None, n: int, separate: bool) -> _PassPlan | None:
+    """The plan for a pass the search order found (or, in a separate file, the fallback)."""
+    if found is None and separate:
+        found = _single_channel_fallback(f, n)
+    if found is None:
+        return None
+    return _PassPlan(f.path, f.parts[found.part], found.channels, found.rule, found.why,
+                     separate, mode=found.mode, direction=found.direction, y_up=found.y_up)
+
+
+def _single_channel_fallback(f: _File, n: int) -> ch.PassChoice | None:
+    """For separate pass files: the only channel, or R/Y (depth); R, G (velocity)."""
+    p = f.parts[0]
+    if n == 1:
+        for name in (("R", "Y") if len(p.channels) > 1 else p.channels):
+            if name in p.channels:
+                return ch.PassChoice(0, (name,), "file fallback",
+                                     f"separate depth file: channel {name!r}, planar z",
+                                     mode="z")
+        return None
+    if "R" in p.channels and "G" in p.channels:
+        return ch.PassChoice(0, ("R", "G"), "file fallback",
+                             "separate velocity file: R, G as forward u, v, y-up",
+                             direction="forward", y_up=True)
+    return None
+
+
+def _plan_velocity(f: _File, spec: PassSpec, view, prefer_part, separate: bool) -> _PassPlan | None:
+    parts = f.dicts()
+    if spec.velocity_channels:
+        names = tuple(spec.velocity_channels)
+        p = ch.explicit_choice(parts, names, view, prefer_part)
+        if p is None:
+            raise ClipError(f"velocity channels {names!r} not (both) in one part of {f.path}; "
+                            f"channels: {_available(f)}")
+        rule = ch.velocity_rule_for(names[0], f.parts[p].views)
+        choice = _PassPlan(f.path, f.parts[p], names, rule.label() if rule else "explicit",
+                           "explicit channels; " + (rule.source if rule else
+                                                    "no known convention: forward, y-up"),
+                           separate, direction=rule.direction if rule else "forward",
+                           y_up=rule.y_up if rule else True)
+    else:
+        choice = _searched(f, ch.find_velocity(parts, view), 2, separate)
+        if choice is None:
+            return None
+    if spec.velocity_direction != "auto":
+        choice.direction = spec.velocity_direction
+        choice.why += f"; direction {spec.velocity_direction!r} from PassSpec"
+    if spec.velocity_y_up is not None:
+        choice.y_up = bool(spec.velocity_y_up)
+        choice.why += f"; y_up={choice.y_up} from PassSpec"
+    return choice
+
+
+def _is_display_referred(f: _File, beauty: ch.BeautyChoice) -> bool:
+    """Integer-typed non-EXR/HDR files are display-referred (sRGB)."""
+    if f.format in ("openexr", "hdr"):
+        return False
+    part = f.parts[beauty.part]
+    fmt = part.formats[part.channels.index(beauty.rgb[0])]
+    return fmt not in ("half", "float")
+
+
+def _input_colorspace(colorspace: str | None, display: bool) -> tuple[str | None, str]:
+    """(source OCIO name or None for no conversion, Frame.encoding)."""
+    if colorspace is None:
+        return ("sRGB", "sRGB") if display else (None, "linear")
+    low = colorspace.lower()
+    if low in ("linear", "raw"):
+        return None, "linear"
+    if low == "srgb":
+        return "sRGB", "sRGB"
+    return colorspace, ("sRGB" if display else "linear")
+
+
+def plan_read(path, passes: PassSpec, colorspace, depth_path, velocity_path, part) -> ReadPlan:
+    f = _scan(path)
+    only = _select_part(f, part)
+    beauty = ch.find_beauty(f.dicts(), part=only)
+    if beauty is None:
+        where = f"part {only} of " if only is not None else ""
+        passes_only = ""
+        if ch.find_depth(f.dicts(), None) is not None:
+            passes_only = " (a depth pass only: use it as a depth file)"
+        raise ImageIOError(f"no beauty channels (R,G,B or grey) in {where}{f.path}; "
+                           f"channels: {_available(f)}{passes_only}")
+    if f.parts[beauty.part].deep:
+        raise ImageIOError(f"cannot read deep image {f.path}: deep EXR is not supported")
+    view = beauty.view
+    if depth_path is not None:
+        df = _scan(depth_path)
+        depth = _plan_depth(df, passes, ch.hero_view(df.dicts()), None, True)
+        if depth is None:
+            raise ClipError(f"no depth channel in depth file {df.path}; channels: {_available(df)}")
+    else:
+        depth = _plan_depth(f, passes, view, beauty.part, False)
+    if velocity_path is not None:
+        vf = _scan(velocity_path)
+        velocity = _plan_velocity(vf, passes, ch.hero_view(vf.dicts()), None, True)
+        if velocity is None:
+            raise ClipError(f"no velocity channels in velocity file {vf.path}; "
+                            f"channels: {_available(vf)}")
+    else:
+        velocity = _plan_velocity(f, passes, view, beauty.part, False)
+    source, encoding = _input_colorspace(colorspace, _is_display_referred(f, beauty))
+    return ReadPlan(f, beauty, view, depth, velocity, source, encoding)
+
+
+# ============================================================================================
+# Reading
+
+
+def _check_same_window(kind: str, pp: _PassPlan, beauty_path: str, beauty_win: Rect) -> None:
+    if pp.part.data_window != beauty_win:
+        raise ClipError(f"{kind} file {pp.path} data window {pp.part.data_window} does not "
+                        f"match beauty {beauty_path} data window {beauty_win}")
+
+
+def _read_beauty(plan: ReadPlan) -> np.ndarray:
+    f, b = plan.file, plan.beauty
+    part = f.parts[b.part]
+    got = _read_channels(f.path, part, b.channels)
+    h, w = part.data_window.shape
+    rgba = np.empty((h, w, 4), np.float32)
+    for i in range(3):
+        rgba[..., i] = got[b.rgb[0 if b.grey else i]]
+    rgba[..., 3] = got[b.alpha] if b.alpha else 1.0
+    if plan.source_colorspace is not None:
+        rgba = colorconvert(rgba, plan.source_colorspace, "linear", f.path)
+    return rgba
+
+
+def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect,
+                aspect: float) -> np.ndarray | None:
+    pp = plan.depth
+    if pp is None:
+        return None
+    if pp.separate:
+        _check_same_window("depth", pp, plan.file.path, frame_win)
+    raw = _read_channels(pp.path, pp.part, pp.channels)[pp.channels[0]]
+    win = pp.part.data_window
+    centres = None
+    if pp.mode == "distance":
+        cx, cy = display.center
+        xs = np.arange(win.x0, win.x1, dtype=np.float64) + 0.5 - cx
+        ys = np.arange(win.y0, win.y1, dtype=np.float64) + 0.5 - cy
+        centres = (xs[None, :], ys[:, None])
+    try:
+        z = ch.depth_to_planar(raw, pp.mode, scale=passes.depth_scale, near=passes.depth_near,
+                               far=passes.depth_far, focal_length_px=passes.focal_length_px,
+                               pixel_centres=centres, pixel_aspect=aspect)
+    except ValueError as e:
+        raise ClipError(f"depth of {pp.path}: {e}") from None
+    return crop_to(z, win, frame_win, np.inf)
+
+
+def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect) -> np.ndarray | None:
+    pp = plan.velocity
+    if pp is None:
+        return None
+    if pp.separate:
+        _check_same_window("velocity", pp, plan.file.path, frame_win)
+    got = _read_channels(pp.path, pp.part, pp.channels)
+    vel = ch.velocity_to_forward(got[pp.channels[0]], got[pp.channels[1]],
+                                 direction=pp.direction, y_up=pp.y_up,
+                                 scale=passes.velocity_scale)
+    return crop_to(vel, pp.part.data_window, frame_win, 0.0)
+
+
+def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
+               depth_path=None, velocity_path=None, part: int | str | None = None) -> Frame:
+    """Read one frame: beauty RGBA plus depth and velocity if found.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Image file (EXR single/multipart, PNG, JPEG, TIFF, DPX, HDR...).
+    passes : PassSpec
+        Overrides for finding and interpreting depth and velocity.
+    colorspace : str, optional
+        Input colour space: ``"linear"``, ``"sRGB"``, ``"raw"`` or an OCIO name; default:
+        sRGB for integer non-EXR files, linear otherwise.
+    depth_path, velocity_path : str or os.PathLike, optional
+        Separate files holding the depth / velocity (same data window as the beauty).
+    part : int or str, optional
+        Take the beauty from this part (index or name) instead of searching.
+
+    Returns
+    -------
+    Frame
+        float32 ``rgba`` (h, w, 4) in linear Rec.709, premultiplied; ``depth`` planar z in
+        scene units (+inf background) or None; ``velocity`` forward px/frame, +y down, or None.
+
+    Raises
+    ------
+    ImageIOError
+        Missing, unreadable, damaged or absurdly large file; no beauty channels.
+    ClipError
+        Explicit pass channels missing; pass file without a pass or with another data window.
+    """
+    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part)
+    bpart = plan.file.parts[plan.beauty.part]
+    win, display, aspect = bpart.data_window, bpart.display_window, bpart.pixel_aspect
+    check_window(path, win)
+    check_window(path, display, "display window")   # effects size buffers from it
+    rgba = _read_beauty(plan)
+    depth = _read_depth(plan, passes, win, display, aspect)
+    velocity = _read_velocity(plan, passes, win)
+    bit_depth = bpart.formats[bpart.channels.index(plan.beauty.rgb[0])]
+    return Frame(rgba, win, display, aspect, depth, velocity, metadata(bpart.spec),
+                 plan.encoding, os.fspath(path), bit_depth)
+
+

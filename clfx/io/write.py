@@ -1,0 +1,524 @@
+"""Writing frames with OpenImageIO: formats and encodings, and an atomic, checked publish.
+
+================  ==================  =========  =======  ==========================
+extension         bit depths          default    alpha    windows
+================  ==================  =========  =======  ==========================
+.exr              half, float         half       yes      data + display kept
+.tif .tiff        uint8/16, half,     uint16     yes      kept when TIFF can store them
+                  float                                   exactly, else display window
+.png              uint8, uint16       uint8      yes      display window
+.jpg .jpeg        uint8               uint8      no       display window
+.dpx              uint8, uint10,      uint10     no       display window
+                  uint16
+.hdr              float               float      no       display window
+================  ==================  =========  =======  ==========================
+
+- "display window" outputs hold the display window; pixels outside the data window are
+  black with alpha 0, data outside the display window is cropped.  TIFF keeps the windows
+  when the display window starts at (0, 0), the data window lies inside it and pixels are
+  square (OpenImageIO's TIFF positions are in resolution units), else it writes the display
+  window like PNG.
+- Half outputs are clamped to +-65504 first (1e5 -> 65504, not inf); NaN stays NaN.
+- Display-referred outputs (integer TIFF, PNG, JPEG, DPX) are sRGB-encoded (whatever
+  ``frame.encoding``), then clipped to 0..1 (NaN -> 0).  Formats without alpha drop it, which
+  shows the premultiplied colour over black.
+- EXR compression: none, zip (default), zips, piz, dwaa, dwab, pxr24, b44, rle.  TIFF: none,
+  zip (default), lzw, packbits.
+- Passes (``write_passes``, EXR only): ``Z`` = planar z in scene units, background +inf (the
+  EXR/deep convention, read back as ``Z`` mode z); ``forward.u``, ``forward.v`` = forward
+  pixels per frame in Nuke's y-up convention (``forward.v = -velocity[..., 1]``), so Nuke and
+  clfx both read them back correctly.  Passes are always float, the beauty half or float.
+- Metadata: ``frame.metadata`` is carried through, except attributes that describe the old
+  file's layout or that OpenImageIO/EXR would reject (compression, tiling, channel formats,
+  part names and views, resolutions, ``oiio:*``, ``openexr:*`` and other format-specific
+  prefixes); ``attributes`` are added last (e.g. ``clfx:look``, ``clfx:paramsHash``).
+- Deterministic bytes: the same frame and attributes give the same file.  OpenImageIO would
+  stamp the write time as ``DateTime`` (EXR, TIFF): clfx writes no ``DateTime`` unless the
+  input carried one (then it is kept).  DPX headers name the file: the output's name is
+  written there, not the temp file's.
+
+Atomic, checked, exclusive
+--------------------------
+1. The file is written to ``.<name>.tmp-<pid>-<8 hex><ext>`` in the output folder (created
+   exclusively).  JPEG is encoded in memory first and copied (libjpeg ends the process on a
+   write error), so a full disk is an error, never an exit.
+2. Every result is checked: OpenImageIO's write and close return values; the temp file is not
+   empty, its header reads back with the size and channels written, and PNG / JPEG end with
+   their end-of-image marker (their writers do not report a short write).
+3. Publish: without ``overwrite`` the temp file is hard-linked to ``path`` (``link`` fails if
+   anything, even a dangling symlink, appeared there meanwhile: `OutputExistsError`), then
+   unlinked; with ``overwrite`` it is renamed over ``path`` (``os.replace``).  File systems
+   without hard links claim ``path`` with ``O_CREAT | O_EXCL`` and rename over the claim.
+4. On any failure the temp file is removed and nothing is left at ``path``; the error is one
+   line naming the output.  An output that resolves to one of the ``protect`` paths (the
+   inputs) is refused even with ``overwrite``.
+
+A process killed mid-write leaves its temp file; `sweep_stale_temps` removes those whose
+process is gone (``clfx render --skip-existing`` calls it).
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import re
+import secrets
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+import OpenImageIO as oiio
+
+from clfx.core.errors import ImageIOError
+from clfx.core.frame import Frame, crop_to
+from clfx.core.rect import Rect
+from clfx.io._oiio import carry, check_window, colorconvert, fail, geterror, set_attribute
+
+HALF_MAX = 65504.0
+
+EXR_COMPRESSIONS = ("none", "zip", "zips", "piz", "dwaa", "dwab", "pxr24", "b44", "rle")
+TIFF_COMPRESSIONS = ("none", "zip", "lzw", "packbits")
+
+
+class OutputExistsError(ImageIOError):
+    """The output exists (or appeared while it was being written) and ``overwrite`` is off."""
+
+
+@dataclass(frozen=True)
+class _OutFormat:
+    oiio_name: str
+    bit_depths: tuple[str, ...]
+    default_bit_depth: str
+    alpha: bool
+    windows: str                  # "full", "tiff" (when representable) or "display"
+    compressions: tuple[str, ...] = ()
+    default_compression: str | None = None
+    passes: bool = False
+
+
+_OUT_FORMATS = {
+    ".exr": _OutFormat("openexr", ("half", "float"), "half", True, "full",
+                       EXR_COMPRESSIONS, "zip", True),
+    ".tif": _OutFormat("tiff", ("uint8", "uint16", "half", "float"), "uint16", True, "tiff",
+                       TIFF_COMPRESSIONS, "zip"),
+    ".png": _OutFormat("png", ("uint8", "uint16"), "uint8", True, "display"),
+    ".jpg": _OutFormat("jpeg", ("uint8",), "uint8", False, "display"),
+    ".dpx": _OutFormat("dpx", ("uint8", "uint10", "uint16"), "uint10", False, "display"),
+    ".hdr": _OutFormat("hdr", ("float",), "float", False, "display"),
+}
+_OUT_FORMATS[".tiff"] = _OUT_FORMATS[".tif"]
+_OUT_FORMATS[".jpeg"] = _OUT_FORMATS[".jpg"]
+
+_DISPLAY_EXTS = {".png", ".jpg", ".jpeg", ".dpx", ".cin", ".tga", ".bmp", ".gif", ".webp"}
+
+
+def encoding_for(path, bit_depth: str | None = None) -> str:
+    """Guess an output's encoding from its extension (and bit depth for TIFF).
+
+    Returns
+    -------
+    str
+        ``"linear"`` for EXR, HDR, PFM and float/half TIFF; ``"sRGB"`` for PNG, JPEG, DPX,
+        Cineon, TGA, BMP, GIF, WebP and integer TIFF (the TIFF default is uint16); ``"linear"``
+        for anything else.
+    """
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    if ext in (".tif", ".tiff"):
+        return "linear" if bit_depth in ("half", "float") else "sRGB"
+    if ext in _DISPLAY_EXTS:
+        return "sRGB"
+    return "linear"
+
+
+def _out_format(path: str) -> _OutFormat:
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in _OUT_FORMATS:
+        raise ImageIOError(f"cannot write {path}: unsupported extension {ext or '(none)'!r}; "
+                           f"expected one of {', '.join(sorted(_OUT_FORMATS))}")
+    return _OUT_FORMATS[ext]
+
+
+def _check_destination(path: str, overwrite: bool, protect: Iterable) -> str:
+    """Refuse inputs, existing files (unless overwrite) and missing folders; return folder."""
+    real = os.path.realpath(path)
+    for p in protect:
+        p = os.fspath(p)
+        if p in ("", "-"):
+            continue
+        same = os.path.realpath(p) == real
+        if not same and os.path.exists(p) and os.path.exists(path):
+            with contextlib.suppress(OSError):
+                same = os.path.samefile(p, path)
+        if same:
+            raise ImageIOError(f"refusing to write {path}: it is the input {p}")
+    if os.path.isdir(path):
+        raise ImageIOError(f"cannot write {path}: it is a folder")
+    if os.path.lexists(path) and not overwrite:
+        raise OutputExistsError(f"cannot write {path}: file exists (use overwrite)")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise ImageIOError(f"cannot write {path}: folder {folder} does not exist "
+                           "or is not a folder")
+    return folder
+
+
+def _output_colorspace(colorspace: str | None, encoding: str) -> str | None:
+    """OCIO name to encode linear pixels to, or None to write them as they are."""
+    if colorspace is None:
+        return "sRGB" if encoding == "sRGB" else None
+    low = colorspace.lower()
+    if low in ("linear", "raw"):
+        return None
+    return "sRGB" if low == "srgb" else colorspace
+
+
+def _tiff_keeps_windows(frame: Frame) -> bool:
+    d, w = frame.display_window, frame.data_window
+    return d == w or (d.x0 == 0 and d.y0 == 0 and w.x0 >= 0 and w.y0 >= 0
+                      and d.contains(w) and frame.pixel_aspect == 1.0)
+
+
+def _beauty_pixels(frame: Frame, fmt: _OutFormat, path: str) -> tuple[np.ndarray, Rect, Rect]:
+    """(rgba, data window, display window) to write: windows kept or flattened to display."""
+    keep = fmt.windows == "full" or (fmt.windows == "tiff" and _tiff_keeps_windows(frame))
+    if keep:
+        return frame.rgba, frame.data_window, frame.display_window
+    check_window(path, frame.display_window, "display window", "cannot write")
+    rgba = crop_to(np.asarray(frame.rgba, np.float32), frame.data_window, frame.display_window)
+    return rgba, frame.display_window, frame.display_window
+
+
+def _encode(rgba: np.ndarray, target: str | None, display: bool, bit_depth: str,
+            path: str) -> np.ndarray:
+    rgba = np.asarray(rgba, np.float32)
+    if target is not None:
+        rgba = colorconvert(rgba, "linear", target, path)
+    if display:
+        rgba = np.clip(np.nan_to_num(rgba, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    elif bit_depth == "half":
+        rgba = np.clip(rgba, -HALF_MAX, HALF_MAX)     # 1e5 -> 65504, not inf; NaN stays
+    return rgba
+
+
+def _make_spec(frame: Frame, fmt: _OutFormat, bit_depth: str, compression: str | None,
+               data: Rect, display: Rect, names: list[str], pass_count: int,
+               target: str | None, attributes: dict | None):
+    oiio_type = "uint16" if bit_depth == "uint10" else bit_depth
+    spec = oiio.ImageSpec(data.width, data.height, len(names), oiio_type)
+    spec.x, spec.y = data.x0, data.y0
+    spec.full_x, spec.full_y = display.x0, display.y0
+    spec.full_width, spec.full_height = display.width, display.height
+    spec.channelnames = tuple(names)
+    spec.alpha_channel = 3 if "A" in names else -1
+    if pass_count:
+        beauty = oiio.TypeDesc(oiio_type)
+        spec.channelformats = (beauty,) * (len(names) - pass_count) + (oiio.TypeFloat,) * pass_count
+    if bit_depth == "uint10":
+        spec.attribute("oiio:BitsPerSample", 10)
+    for name, value in (frame.metadata or {}).items():
+        if carry(name):
+            set_attribute(spec, name, value)
+    for name, value in (attributes or {}).items():
+        set_attribute(spec, name, value)
+    if not spec.get_string_attribute("DateTime"):
+        spec.attribute("DateTime", "")     # else OpenImageIO stamps the time: bytes would vary
+    spec.attribute("PixelAspectRatio", float(frame.pixel_aspect))
+    if compression:
+        spec.attribute("compression", compression)
+    if target == "sRGB" and fmt.oiio_name != "openexr":
+        spec.attribute("oiio:ColorSpace", "sRGB")
+    return spec
+
+
+WRITE_BLOCK_ROWS = 256
+"""Rows assembled and written per call: a 4K frame is never held twice in full."""
+
+
+def _write_blocks(out, spec, planes: list[np.ndarray]) -> bool:
+    """Write ``planes`` (each (h, w, k), concatenated along channels) in row blocks."""
+    h = planes[0].shape[0]
+    for y0 in range(0, max(h, 1), WRITE_BLOCK_ROWS):
+        y1 = min(h, y0 + WRITE_BLOCK_ROWS)
+        block = np.concatenate([p[y0:y1] for p in planes], axis=-1) if len(planes) > 1 \
+            else planes[0][y0:y1]
+        if not out.write_scanlines(spec.y + y0, spec.y + y1, 0,
+                                   np.ascontiguousarray(block, np.float32)):
+            return False
+    return True
+
+
+_TEMP_NAME = re.compile(r"\.(?P<name>.+)\.tmp-(?P<pid>[0-9]+)-[0-9a-f]{8}(?P<ext>\.[^.]*)?")
+_TRAILERS = {"png": b"\x00\x00\x00\x00IEND\xaeB`\x82", "jpeg": b"\xff\xd9"}
+_IN_MEMORY = {"jpeg"}    # libjpeg calls exit() on a write error: encode in memory, then copy
+_NO_HARD_LINKS = {errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS}
+_COPY_CHUNK = 1 << 20
+
+
+def _temp_path(path: str, folder: str) -> str:
+    name = os.path.basename(path)
+    ext = os.path.splitext(name)[1]
+    return os.path.join(folder, f".{name}.tmp-{os.getpid()}-{secrets.token_hex(4)}{ext}")
+
+
+def _memory_file() -> int | None:
+    """An anonymous in-memory file OpenImageIO can open by name, or None where there is none."""
+    if not hasattr(os, "memfd_create") or not os.path.isdir("/proc/self/fd"):
+        return None
+    return os.memfd_create("clfx-encode", getattr(os, "MFD_CLOEXEC", 0))
+
+
+def _copy_into(src_fd: int, dst: str, path: str) -> None:
+    """Copy an in-memory file into ``dst``, every write checked (a full disk raises)."""
+    fd = os.open(dst, os.O_WRONLY | os.O_TRUNC)
+    try:
+        offset = 0
+        while chunk := os.pread(src_fd, _COPY_CHUNK, offset):
+            view = memoryview(chunk)
+            while view:
+                view = view[os.write(fd, view):]
+            offset += len(chunk)
+    except OSError as e:
+        raise fail(path, "cannot write", e.strerror or str(e)) from None
+    finally:
+        os.close(fd)
+
+
+def _name_dpx(target: str, path: str) -> None:
+    """DPX headers carry a file name (100 bytes at offset 36): the output's, not the temp's."""
+    with open(target, "r+b") as f:
+        if f.read(4) in (b"SDPX", b"XPDS"):
+            f.seek(36)
+            f.write(os.path.basename(path).encode("utf-8", "replace")[:99].ljust(100, b"\0"))
+
+
+def _encode_file(tmp: str, path: str, fmt: _OutFormat, spec, planes: list[np.ndarray]) -> None:
+    """Encode into ``tmp`` (JPEG through memory), checking every OpenImageIO result."""
+    mem = _memory_file() if fmt.oiio_name in _IN_MEMORY else None
+    target = tmp if mem is None else f"/proc/self/fd/{mem}"
+    try:
+        out = oiio.ImageOutput.create(fmt.oiio_name)
+        if out is None:
+            raise fail(path, "cannot write", geterror() or f"no {fmt.oiio_name} writer")
+        if not out.open(target, spec):
+            raise fail(path, "cannot write", geterror(out))
+        ok = _write_blocks(out, spec, planes)
+        err = geterror(out)
+        closed = out.close()
+        err = err or geterror(out)
+        # Only a False return is a failure: OIIO 3.2's TIFF writer reports "failed
+        # TIFFWriteCustomDirectory() of the Exif data" on every close, yet the file is whole.
+        if not ok or not closed:
+            raise fail(path, "cannot write", err or "write failed")
+        if fmt.oiio_name == "dpx":
+            _name_dpx(target, path)
+        if mem is not None:
+            _copy_into(mem, tmp, path)
+    finally:
+        if mem is not None:
+            os.close(mem)
+
+
+def _verify(tmp: str, path: str, fmt: _OutFormat, spec) -> None:
+    """The written file is whole: not empty, its header reads back as written, and formats
+    whose writers ignore short writes end with their end-of-image marker."""
+    size = os.stat(tmp).st_size
+    if size == 0:
+        raise fail(path, "cannot write", "the file written is empty (disk full?)")
+    inp = oiio.ImageInput.open(tmp)
+    if inp is None:
+        raise fail(path, "cannot write", "the file written does not read back: "
+                   + (geterror() or "unreadable header"))
+    try:
+        got = inp.spec()
+        if (got.width, got.height, got.nchannels) != (spec.width, spec.height, spec.nchannels):
+            raise fail(path, "cannot write", f"the file written reads back as {got.width}x"
+                       f"{got.height}x{got.nchannels}, not {spec.width}x{spec.height}x"
+                       f"{spec.nchannels}")
+    finally:
+        inp.close()
+    trailer = _TRAILERS.get(fmt.oiio_name)
+    if trailer:
+        with open(tmp, "rb") as f:
+            f.seek(max(size - len(trailer), 0))
+            if f.read() != trailer:
+                raise fail(path, "cannot write", f"the file written is truncated ({size} "
+                           "bytes, no end-of-image marker; disk full?)")
+
+
+def _publish(tmp: str, path: str, overwrite: bool) -> None:
+    """Move the finished temp file to ``path``; never replace what appeared there meanwhile
+    unless ``overwrite`` (hard link, which fails if ``path`` exists, even as a dangling link)."""
+    if overwrite:
+        os.replace(tmp, path)
+        return
+    exists = OutputExistsError(f"cannot write {path}: the file appeared while it was being "
+                               "written (another writer?); not replaced without overwrite")
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise exists from None
+    except OSError as e:
+        if e.errno not in _NO_HARD_LINKS:
+            raise
+        try:   # no hard links here: claim the name exclusively, then rename over the claim
+            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
+        except FileExistsError:
+            raise exists from None
+        try:
+            os.replace(tmp, path)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.unlink(path)           # our empty claim
+            raise
+        return
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)
+
+
+def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, planes: list[np.ndarray],
+                  overwrite: bool) -> None:
+    tmp = _temp_path(path, folder)
+    try:
+        fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+        os.close(fd)
+    except OSError as e:
+        raise ImageIOError(f"cannot write {path}: folder {folder} is not writable "
+                           f"({e.strerror})") from None
+    try:
+        _encode_file(tmp, path, fmt, spec, planes)
+        _verify(tmp, path, fmt, spec)
+        _publish(tmp, path, overwrite)
+    except OSError as e:
+        raise fail(path, "cannot write", e.strerror or str(e)) from None
+    except ImageIOError as e:
+        if tmp not in str(e):
+            raise
+        raise type(e)(str(e).replace(tmp, path)) from None    # name the output, not the temp
+    finally:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, OverflowError):
+        return False
+    except OSError:            # EPERM: someone else's live process
+        return True
+    return True
+
+
+def sweep_stale_temps(outputs: Iterable) -> list[str]:
+    """Remove temp files that a killed clfx left next to ``outputs``.
+
+    A temp file ``.<name>.tmp-<pid>-<8 hex><ext>`` is removed when ``<name>`` is one of the
+    outputs' names and process ``<pid>`` no longer exists (a live writer's file is kept).
+
+    Returns
+    -------
+    list of str
+        The paths removed.
+    """
+    names: dict[str, set[str]] = {}
+    for p in outputs:
+        folder, name = os.path.split(os.path.abspath(os.fspath(p)))
+        names.setdefault(folder, set()).add(name)
+    removed = []
+    for folder, wanted in names.items():
+        try:
+            entries = list(os.scandir(folder))
+        except OSError:
+            continue
+        for entry in entries:
+            m = _TEMP_NAME.fullmatch(entry.name)
+            if (m is None or m["name"] not in wanted
+                    or (m["ext"] or "") != os.path.splitext(m["name"])[1]
+                    or not entry.is_file(follow_symlinks=False) or _alive(int(m["pid"]))):
+                continue
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(entry.path)
+                removed.append(entry.path)
+    return removed
+
+
+def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
+                compression: str | None = None, colorspace: str | None = None,
+                overwrite: bool = False, attributes: dict | None = None,
+                write_passes: bool = True, protect: Iterable = ()) -> None:
+    """Write a frame atomically: a temp file in the same folder, checked, then published
+    (hard link without ``overwrite``, ``os.replace`` with it; see the module docstring).
+
+    Parameters
+    ----------
+    frame : Frame
+        Linear premultiplied RGBA plus optional passes (internal conventions).
+    path : str or os.PathLike
+        Output file; the extension picks the format (see the module docstring's table).
+    bit_depth : {"half", "float", "uint8", "uint10", "uint16"}, optional
+        Beauty bit depth; default per format (EXR half, TIFF uint16, PNG/JPEG uint8, DPX
+        10-bit, HDR float).
+    compression : str, optional
+        EXR: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle (default zip).  TIFF: none,
+        zip, lzw, packbits (default zip).  Other formats take none.
+    colorspace : str, optional
+        Output colour space: ``"linear"``/``"raw"`` (write the values), ``"sRGB"`` or an OCIO
+        name; default `encoding_for` the output (sRGB for display-referred formats).
+    overwrite : bool
+        Replace an existing file.
+    attributes : dict, optional
+        Extra header attributes, e.g. ``{"clfx:look": "...", "clfx:paramsHash": "..."}``.
+    write_passes : bool
+        EXR only: also write depth as ``Z`` and velocity as ``forward.u/v`` (float).
+    protect : iterable of paths
+        Inputs that must never be overwritten, even with ``overwrite``.
+
+    Raises
+    ------
+    OutputExistsError
+        The output exists, or appeared while writing, and ``overwrite`` is off.
+    ImageIOError
+        Unsupported extension, bit depth or compression; output is an input; folder missing
+        or unwritable; any OpenImageIO failure, short write or full disk (temp file removed,
+        nothing at ``path``).
+    """
+    path = os.fspath(path)
+    fmt = _out_format(path)
+    bit_depth = bit_depth or fmt.default_bit_depth
+    if bit_depth not in fmt.bit_depths:
+        raise ImageIOError(f"cannot write {path}: bit depth {bit_depth!r} not supported; "
+                           f"expected one of {', '.join(fmt.bit_depths)}")
+    if compression is not None and compression not in fmt.compressions:
+        allowed = ", ".join(fmt.compressions) or "none (no choice for this format)"
+        raise ImageIOError(f"cannot write {path}: compression {compression!r} not supported; "
+                           f"expected one of {allowed}")
+    folder = _check_destination(path, overwrite, protect)
+
+    display = encoding_for(path, bit_depth) == "sRGB"
+    target = _output_colorspace(colorspace, "sRGB" if display else "linear")
+    rgba, data, display_win = _beauty_pixels(frame, fmt, path)
+    if not fmt.alpha:          # composite over black: encode the premultiplied colour as is
+        rgba = np.concatenate([rgba[..., :3], np.ones(rgba.shape[:2] + (1,), np.float32)], -1)
+    rgba = _encode(rgba, target, display, bit_depth, path)
+    planes = [rgba if fmt.alpha else rgba[..., :3]]
+    names = ["R", "G", "B"] + (["A"] if fmt.alpha else [])
+    pass_count = 0
+    if write_passes and fmt.passes and data == frame.data_window:
+        if frame.depth is not None:
+            planes.append(np.asarray(frame.depth, np.float32)[..., None])
+            names.append("Z")
+            pass_count += 1
+        if frame.velocity is not None:
+            vel = np.asarray(frame.velocity, np.float32)
+            planes.append(np.stack([vel[..., 0], -vel[..., 1]], axis=-1))   # Nuke: y-up
+            names += ["forward.u", "forward.v"]
+            pass_count += 2
+    extra = dict(attributes or {})
+    if pass_count:
+        extra.setdefault("clfx:passes", "Z: planar z, scene units, inf background; "
+                                        "forward.u/v: forward px/frame, y-up (Nuke)")
+    spec = _make_spec(frame, fmt, bit_depth, compression or fmt.default_compression, data,
+                      display_win, names, pass_count, target, extra)
+    _atomic_write(path, folder, fmt, spec, planes, overwrite)
