@@ -236,10 +236,11 @@ def render_distributed(batch: Batch, *, workers: int | None = None, scheduler: s
     Raises
     ------
     ClusterError
-        The cluster cannot be started or reached, or a task failed for a reason other than
-        its data (e.g. a worker died more than ``allowed-failures`` times).
+        The cluster cannot be started or reached.
     ClfxError
-        Some frames failed (all of them rendered first unless ``fail_fast``).
+        Some frames failed, each reported first (JSON line, stderr): a data error, or a task
+        that could not complete (e.g. its workers died ``allowed-failures`` times).  The other
+        frames are rendered unless ``fail_fast``.
     """
     if batch.input_path == RAW or batch.output_path == RAW:
         raise SequenceError("raw pipes ('-') render in one process; --workers and "
