@@ -322,14 +322,59 @@ for _cmd in (probe,):
 @click.option("--set", "assignments", multiple=True, metavar="K=V",
               help="Override: effect.param=value, camera.key=value, seed=N.")
 @_io_options
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Render on a local Dask cluster of N processes (one OpenCL device each).")
+@click.option("--scheduler", envvar="CLFX_SCHEDULER", default=None, metavar="ADDRESS",
+              help="Render on an existing Dask cluster, e.g. tcp://host:8786 (env CLFX_SCHEDULER).")
+@click.option("--chunk", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Frames per task with --workers/--scheduler.")
+@click.option("--fail-fast", is_flag=True,
+              help="With --workers/--scheduler: stop at the first failed frame.")
 @click.pass_context
-def render(ctx, input_path, output_path, look_name, assignments, **kw):
+def render(ctx, input_path, output_path, look_name, assignments, workers, scheduler, chunk,
+           fail_fast, **kw):
     """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
-    runtime = _runtime_soon(ctx)
+    if workers and ctx.get_parameter_source("scheduler") == click.core.ParameterSource.ENVIRONMENT:
+        scheduler = None  # an explicit --workers wins over CLFX_SCHEDULER
+    scale = {"workers": workers, "scheduler": scheduler, "chunk": chunk, "fail_fast": fail_fast}
+    runtime = None if workers or scheduler else _runtime_soon(ctx)
     from clfx.pipeline.presets import apply_overrides, load_look
 
     lk = apply_overrides(load_look(look_name), list(assignments))
-    _run_batch(ctx, lk, input_path, output_path, kw, runtime)
+    _run_batch(ctx, lk, input_path, output_path, kw, runtime, scale if runtime is None else None)
+
+
+@cli.group(cls=ClfxGroup)
+def farm():
+    """Job descriptions for render farms (docs/scaling.md)."""
+
+
+@farm.command("openjd")
+@click.argument("input_path", metavar="INPUT")
+@click.argument("output_path", metavar="OUTPUT")
+@click.argument("render_args", nargs=-1, metavar="[-- RENDER_OPTION...]")
+@click.option("--look", "look_name", default="default", show_default=True)
+@click.option("--set", "assignments", multiple=True, metavar="K=V")
+@click.option("--frames", default=None, metavar="SPEC", help="Default: every input frame on disk.")
+@click.option("--chunk", type=click.IntRange(min=1), default=10, show_default=True,
+              help="Frames per task.")
+@click.option("--quality", type=click.Choice(["draft", "preview", "final", "reference"]), default=None)
+@click.option("--name", default=None, help="Job name.")
+@click.option("--clfx", "clfx_command", default="clfx", show_default=True,
+              help="The clfx command on the farm's workers.")
+@click.option("--task-chunking/--explicit-chunks", default=True, show_default=True,
+              help="CHUNK[INT] (TASK_CHUNKING extension) or a list of chunk ranges.")
+@click.option("--path-params", is_flag=True,
+              help="Folders as PATH parameters (path mapping, job attachments), given at submission.")
+def farm_openjd(input_path, output_path, render_args, look_name, assignments, frames, chunk,
+                quality, name, clfx_command, task_chunking, path_params):
+    """Print an Open Job Description template whose tasks run `clfx render` on chunks."""
+    from clfx.farm import openjd_template, openjd_yaml
+
+    click.echo(openjd_yaml(openjd_template(
+        input_path, output_path, look=look_name, assignments=assignments, frames=frames,
+        chunk=chunk, quality=quality, render_args=render_args, name=name, clfx=clfx_command,
+        task_chunking=task_chunking, path_params=path_params)), nl=False)
 
 
 @cli.command()
@@ -360,7 +405,7 @@ def _radial_depth_focal_px(kw, lk, batch) -> float | None:
     return lk.camera.focal_length_px(width)
 
 
-def _run_batch(ctx, lk, input_path, output_path, kw, runtime):
+def _run_batch(ctx, lk, input_path, output_path, kw, runtime, scale=None):
     from clfx.pipeline.batch import Batch
 
     verbosity = ctx.obj.get("verbosity", 1)
@@ -369,6 +414,11 @@ def _run_batch(ctx, lk, input_path, output_path, kw, runtime):
                   progress=verbosity > 0 and sys.stderr.isatty() and not kw.get("as_json"))
     batch.prepare()  # everything checked before the first frame is read
     batch.passes = _pass_spec(kw, _radial_depth_focal_px(kw, lk, batch))
+    if scale:  # on a Dask cluster (--workers / --scheduler)
+        from clfx.pipeline.distributed import render_distributed
+
+        render_distributed(batch, device=ctx.obj.get("device"), **scale)
+        return
     with batch.reading():  # the first frame is read while the device finishes setting up
         batch.run(runtime.result())
 

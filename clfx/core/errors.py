@@ -33,3 +33,7 @@ class ImageIOError(ClfxError):
 
 class SequenceError(ClfxError):
     """A frame pattern or range is malformed, or frames are missing."""
+
+
+class ClusterError(ClfxError):
+    """A Dask cluster could not be started or reached, or its workers kept dying."""

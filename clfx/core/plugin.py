@@ -289,6 +289,9 @@ class Params:
         inner = ", ".join(f"{k}={v!r}" for k, v in self._values.items())
         return f"Params[{self._plugin}]({inner})"
 
+    def __reduce__(self):  # pickle by value (looks travel to distributed workers)
+        return (Params, (self._plugin, self._values))
+
     def as_dict(self) -> dict:
         return dict(self._values)
 

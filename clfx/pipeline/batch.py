@@ -156,13 +156,7 @@ class Batch:
             for i, job in enumerate(self.jobs):
                 frame_in, read_ms = next_read.result()
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
-                frame_out, report = render_frame(
-                    rt, self.look, frame_in, frame_number=job.frame,
-                    quality=self.options.get("quality"),
-                    keep_overscan=self.options.get("keep_overscan", False),
-                    analysis_summary=bool(self.options.get("as_json")))
-                report.input, report.output = job.input, job.output
-                report.read_ms = read_ms
+                frame_out, report = self.render(rt, job, frame_in, read_ms)
                 writes.append((pool.submit(self._write, frame_out, job, report), report))
                 writes = self._drain(writes, block=False)
                 reports.append(report)
@@ -183,6 +177,18 @@ class Batch:
             self._err(f"clfx: {len(reports)} frame(s) rendered with look {self.look.name!r} in "
                       f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
         return summary
+
+    def render(self, rt, job: Job, frame_in: Frame, read_ms: float = 0.0):
+        """Render one job's frame (already read) through the look: the output frame and its
+        report.  The one place a batch renders, in this process or in a distributed task."""
+        frame_out, report = render_frame(
+            rt, self.look, frame_in, frame_number=job.frame,
+            quality=self.options.get("quality"),
+            keep_overscan=self.options.get("keep_overscan", False),
+            analysis_summary=bool(self.options.get("as_json")))
+        report.input, report.output = job.input, job.output
+        report.read_ms = read_ms
+        return frame_out, report
 
     def _drain(self, writes, *, block: bool):
         """Report finished writes in frame order (re-raising a write's error)."""

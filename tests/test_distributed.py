@@ -1,0 +1,128 @@
+"""Rendering on Dask: a real scheduler and workers on 127.0.0.1 (or a local cluster) give the
+same pixels as one process, survive a worker killed mid-frame, and report bad frames."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.cluster import assert_same_outputs, clfx, clfx_popen, dask_cluster
+
+pytest.importorskip("distributed")
+
+
+@pytest.fixture(scope="module")
+def beachball(exr_images):
+    pattern = exr_images / "Beachball" / "multipart.####.exr"
+    if not (exr_images / "Beachball" / "multipart.0008.exr").is_file():
+        pytest.skip("Beachball sequence not found")
+    return str(pattern)
+
+
+@pytest.fixture(scope="module")
+def reference(beachball, tmp_path_factory):
+    """Single-process renders (no flag), made once per (look, frames, options)."""
+    made = {}
+
+    def render(look, frames, *options):
+        key = (look, frames, options)
+        if key not in made:
+            out = tmp_path_factory.mktemp("reference")
+            clfx("-q", "render", beachball, out / "out.####.exr", "--look", look,
+                 "--frames", frames, *options)
+            made[key] = out
+        return made[key]
+    return render
+
+
+def json_lines(stdout: str) -> list[dict]:
+    return [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+
+
+def test_scheduler_cinema_matches_single_process(beachball, reference, tmp_path):
+    want = reference("cinema", "1-3", "--quality", "draft")
+    out = tmp_path / "out"
+    with dask_cluster(tmp_path / "logs") as (address, _):
+        proc = clfx("render", beachball, out / "out.####.exr", "--look", "cinema",
+                    "--quality", "draft", "--frames", "1-3", "--scheduler", address, "--json")
+    lines = json_lines(proc.stdout)
+    assert [d["frame"] for d in lines[:-1]] == [1, 2, 3]   # in frame order
+    assert lines[-1]["summary"] and lines[-1]["frames"] == 3 and lines[-1]["workers"] == 2
+    assert len({d["worker"] for d in lines[:-1]}) == 2        # both workers rendered
+    assert_same_outputs(out, want)
+
+
+def test_worker_killed_mid_frame_batch_completes(beachball, reference, tmp_path):
+    want = reference("wide-angle", "1-8")
+    out = tmp_path / "out"
+    with dask_cluster(tmp_path / "logs") as (address, workers):
+        by_pid = {w.pid: w for w in workers}
+        proc = clfx_popen("render", beachball, out / "out.####.exr", "--look", "wide-angle",
+                          "--frames", "1-8", "--chunk", "2", "--scheduler", address, "--json")
+        victim, deadline = None, time.monotonic() + 40
+        while victim is None and proc.poll() is None and time.monotonic() < deadline:
+            # a worker writing a frame: its temp file .<name>.tmp-<pid>-... is in the folder
+            for name in os.listdir(out) if out.is_dir() else ():
+                m = re.match(r"\..+\.tmp-(\d+)-", name)
+                if m and int(m.group(1)) in by_pid:
+                    victim = by_pid[int(m.group(1))]
+                    victim.send_signal(signal.SIGKILL)
+                    break
+            time.sleep(0.002)
+        stdout, stderr = proc.communicate(timeout=50)
+        assert victim is not None, "no worker was caught writing a frame"
+        assert victim.wait(timeout=5) == -signal.SIGKILL
+    assert proc.returncode == 0, stderr[-3000:]
+    lines = json_lines(stdout)
+    assert [d["frame"] for d in lines[:-1]] == list(range(1, 9))
+    assert lines[-1]["frames"] == 8 and lines[-1]["failed"] == []
+    assert_same_outputs(out, want)   # no partial or temp file either
+
+
+def test_local_workers_match_no_flag(beachball, reference, tmp_path):
+    want = reference("film-35mm", "1-4")
+    out = tmp_path / "out"
+    proc = clfx("render", beachball, out / "out.####.exr", "--look", "film-35mm",
+                "--frames", "1-4", "--workers", "2", "--json")
+    assert json_lines(proc.stdout)[-1]["workers"] == 2
+    assert_same_outputs(out, want)
+
+
+def test_bad_frame_fails_once_and_others_render(exr_images, beachball, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    for f in (1, 3):
+        shutil.copy(beachball.replace("####", f"{f:04d}"), src / f"bb.{f:04d}.exr")
+    (src / "bb.0002.exr").write_bytes(b"not an exr" * 100)
+    with dask_cluster(tmp_path / "logs", workers=1) as (address, _):
+        proc = clfx("render", src / "bb.####.exr", tmp_path / "a" / "o.####.exr", "--look",
+                    "wide-angle", "--scheduler", address, "--json", check=False)
+        assert proc.returncode == 1
+        assert "frame 2 failed" in proc.stderr and "bb.0002.exr" in proc.stderr
+        lines = json_lines(proc.stdout)
+        assert [d["frame"] for d in lines[:-1]] == [1, 2, 3]
+        assert "error" in lines[1] and lines[-1]["failed"] == [2]
+        assert sorted(os.listdir(tmp_path / "a")) == ["o.0001.exr", "o.0003.exr"]
+        # --fail-fast: the chunk stops at the bad frame, frame 3 is never rendered
+        proc = clfx("render", src / "bb.####.exr", tmp_path / "b" / "o.####.exr", "--look",
+                    "wide-angle", "--scheduler", address, "--chunk", "3", "--fail-fast",
+                    check=False)
+        assert proc.returncode == 1 and "frame 2 failed" in proc.stderr
+        assert sorted(os.listdir(tmp_path / "b")) == ["o.0001.exr"]
+
+
+def test_unreachable_scheduler_is_one_line_error(beachball, tmp_path):
+    from tests.cluster import free_port
+
+    proc = clfx("render", beachball, tmp_path / "o.####.exr", "--frames", "1",
+                "--scheduler", f"tcp://127.0.0.1:{free_port()}", check=False,
+                DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="2s")
+    assert proc.returncode == 1
+    assert proc.stderr.startswith("clfx: error: cannot reach scheduler"), proc.stderr[-2000:]
+    assert not Path(tmp_path / "o.0001.exr").exists()
