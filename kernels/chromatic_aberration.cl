@@ -1,5 +1,5 @@
 /* chromatic_aberration.cl: lateral CA as NWAVE radially scaled reads of the source
- * (clfx/plugins/chromatic_aberration.py has the model; kernels/resample.h the filters).
+ * (clfx/plugins/chromatic_aberration.py has the model; kernels/lib/resample.h the filters).
  *
  * For wavelength (or channel) i the source point of output pixel u is c + (u - c) S_i(rho),
  * rho = |u - c|^2 normalised so the farthest output corner is 1 (pixel aspect applied);
@@ -14,14 +14,10 @@
  * Float levels launch this kernel twice (clfx/plugins/chromatic_aberration.py): with
  * CA_FAST = 1 over the interior rectangle of quads, where the host's bound on the largest
  * shift of any wavelength keeps every footprint inside the source (an unchecked vector
- * gather, kernels/resample.h rs_fast4), and with CA_FAST = 0 over the border ring (border
+ * gather, kernels/lib/resample.h rs_fast4), and with CA_FAST = 0 over the border ring (border
  * rule and checks).  The launched rectangle is [qx0, qx0 + nqx) x [row0, row0 + nrows).
  */
 #include "lib/resample.h"
-
-#ifndef MAP_REAL
-#define MAP_REAL float
-#endif
 
 #ifndef NWP
 #define NWP NWAVE       /* table row stride: NWAVE padded to a vector width */
@@ -33,11 +29,11 @@
 #define LUT_STORE(v, j, p) CA_CAT(vstore, NWP)(v, j, p)
 
 kernel void chromatic_aberration_apply(global const float *src, global float *dst,
-                                       global const MAP_REAL *luts,
-                                       global const MAP_REAL *weights, const int pitch,
+                                       global const REAL *luts,
+                                       global const REAL *weights, const int pitch,
                                        const int w, const int h, const int x0, const int y0,
-                                       const MAP_REAL cx, const MAP_REAL cy,
-                                       const MAP_REAL ax, const MAP_REAL ay,
+                                       const REAL cx, const REAL cy,
+                                       const REAL ax, const REAL ay,
                                        const int qx0, const int row0, const int nqx,
                                        const int nrows)
 {
@@ -45,7 +41,7 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
   if(get_global_id(0) >= nqx || get_global_id(1) >= nrows) return;
   const int qx = get_global_id(0) + qx0, y = get_global_id(1) + row0;
   const int idx = y * pitch + qx * 4;
-#ifndef RS_EXACT_TRIG
+#if !REAL_IS_DOUBLE
   /* float levels: the 4 pixels' radii, table reads and coordinates as float4 vectors */
   const float4 dx4 = (float4)(x0 + qx * 4, x0 + qx * 4 + 1, x0 + qx * 4 + 2, x0 + qx * 4 + 3)
                      + 0.5f - cx;
@@ -121,18 +117,27 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
     }
     o[k] = acc;
   }
-  const float16 v = (float16)(convert_float4(o[0]), convert_float4(o[1]),
-                              convert_float4(o[2]), convert_float4(o[3]));
-  vstore16(v, 0, dst + idx * 4);
+  rs_store_quad(dst, idx, o);
 #endif
 }
 
-#ifndef RS_EXACT_TRIG
+#if !REAL_IS_DOUBLE
 /* Three-bin mode (NWAVE = 3, GREEN_IN_PLACE) at float levels: the two moving bins' source
- * points precomputed per parameter set as a packed map (clfx.resample.PackedMap, 2 maps =
+ * points precomputed per parameter set as a packed map (clfx.fx.resample.PackedMap, 2 maps =
  * 24 ints per quad): a pure gather with no table reads, floor or checks per pixel; the
  * quads whose footprints leave the source follow in chromatic_aberration_packed_fix. */
-#define CA_MIX(o, r, g, b) o = wr * (r) + wg * (g) + wb * (b)
+
+/* out = wr * red read + wg * green in place + wb * blue read, for the quad's 4 pixels */
+inline void ca_mix_store(global const float *src, global float *dst, global const float *weights,
+                         const int quad, float4 r0, float4 r1, float4 r2, float4 r3, float4 b0,
+                         float4 b1, float4 b2, float4 b3)
+{
+  const float16 g = rs_sanitise16(vload16(0, src + quad * 16));
+  const float4 wr = vload4(0, weights), wg = vload4(1, weights), wb = vload4(2, weights);
+  vstore16((float16)(wr * r0 + wg * g.lo.lo + wb * b0, wr * r1 + wg * g.lo.hi + wb * b1,
+                     wr * r2 + wg * g.hi.lo + wb * b2, wr * r3 + wg * g.hi.hi + wb * b3),
+           0, dst + quad * 16);
+}
 
 kernel void chromatic_aberration_packed(global const float *src, global float *dst,
                                         global const int *map, global const float *weights,
@@ -144,12 +149,7 @@ kernel void chromatic_aberration_packed(global const float *src, global float *d
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fast_quad(src, pitch, w, h, map + 24 * quad, &r0, &r1, &r2, &r3);
   rs_fast_quad(src, pitch, w, h, map + 24 * quad + 12, &b0, &b1, &b2, &b3);
-  const float16 g = rs_sanitise16(vload16(0, src + quad * 16));
-  const float4 wr = vload4(0, weights), wg = vload4(1, weights), wb = vload4(2, weights);
-  float4 o0, o1, o2, o3;
-  CA_MIX(o0, r0, g.lo.lo, b0); CA_MIX(o1, r1, g.lo.hi, b1);
-  CA_MIX(o2, r2, g.hi.lo, b2); CA_MIX(o3, r3, g.hi.hi, b3);
-  vstore16((float16)(o0, o1, o2, o3), 0, dst + quad * 16);
+  ca_mix_store(src, dst, weights, quad, r0, r1, r2, r3, b0, b1, b2, b3);
 }
 
 /* records of 20 ints: quad index, 3 unused, then each map's 4 x and 4 y */
@@ -161,16 +161,9 @@ kernel void chromatic_aberration_packed_fix(global const float *src, global floa
   const int n = get_global_id(0);
   if(n >= count) return;
   global const int *rec = records + 20 * n;
-  const int quad = rec[0];
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fix_quad(src, pitch, w, h, rec + 4, &r0, &r1, &r2, &r3);
   rs_fix_quad(src, pitch, w, h, rec + 12, &b0, &b1, &b2, &b3);
-  const float16 g = rs_sanitise16(vload16(0, src + quad * 16));
-  const float4 wr = vload4(0, weights), wg = vload4(1, weights), wb = vload4(2, weights);
-  float4 o0, o1, o2, o3;
-  CA_MIX(o0, r0, g.lo.lo, b0); CA_MIX(o1, r1, g.lo.hi, b1);
-  CA_MIX(o2, r2, g.hi.lo, b2); CA_MIX(o3, r3, g.hi.hi, b3);
-  vstore16((float16)(o0, o1, o2, o3), 0, dst + quad * 16);
+  ca_mix_store(src, dst, weights, rec[0], r0, r1, r2, r3, b0, b1, b2, b3);
 }
-#undef CA_MIX
 #endif

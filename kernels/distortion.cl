@@ -1,26 +1,23 @@
 /* distortion.cl: Brown-Conrady lens distortion as a gather through a precomputed map
- * (clfx/plugins/distortion.py has the model; kernels/resample.h the filters).
+ * (clfx/plugins/distortion.py has the model; kernels/lib/resample.h the filters).
  *
  * The inverse mapping (for each output pixel, the undistorted source point) is computed once
  * per parameter set on the host in float64.  Each work-item renders 4 consecutive output
  * pixels (rows are padded to 4).
  *
- * distortion_warp (draft / preview / final): the map is packed (clfx.resample.PackedMap):
+ * distortion_warp (draft / preview / final): the map is packed (clfx.fx.resample.PackedMap):
  * per quad of 4 pixels their texel indices and float fractions (12 ints): a pure gather
  * (three vload4 of the map, one vector load per footprint row, no border rule, no branch);
  * then distortion_fix re-renders the quads whose footprints leave the source (listed per
  * filter on the host) through the checked path.
  *
- * distortion_warp_f64 (reference): a float64 displacement map (source point = output pixel
- * centre + (dx, dy)), float64 coordinates, weights and sums.
+ * distortion_warp_f64 (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64
+ * displacement map (source point = output pixel centre + (dx, dy)), float64 coordinates,
+ * weights and sums.
  */
 #include "lib/resample.h"
 
-#ifndef MAP_REAL
-#define MAP_REAL float
-#endif
-
-#ifndef RS_EXACT_TRIG
+#if !REAL_IS_DOUBLE
 kernel void distortion_warp(global const float *src, global float *dst,
                             global const int *map, const int src_pitch, const int src_w,
                             const int src_h, const int dst_pitch, const int dst_h)
@@ -49,21 +46,17 @@ kernel void distortion_fix(global const float *src, global float *dst,
 }
 #else
 kernel void distortion_warp_f64(global const float *src, global float *dst,
-                                global const MAP_REAL *map, const int src_pitch,
+                                global const REAL *map, const int src_pitch,
                                 const int src_w, const int src_h, const int dst_pitch,
                                 const int dst_h)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= dst_h || qx * 4 >= dst_pitch) return;
-  const int i = y * dst_pitch + qx * 4;
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {
-    const REAL sx = (REAL)(qx * 4 + k) + (REAL)0.5 + (REAL)map[2 * (i + k)];
-    const REAL sy = (REAL)y + (REAL)0.5 + (REAL)map[2 * (i + k) + 1];
-    o[k] = rs_sample(src, src_pitch, src_w, src_h, sx, sy);
+    const REAL2 s = rs_map_point(map, dst_pitch, qx * 4 + k, y);
+    o[k] = rs_sample(src, src_pitch, src_w, src_h, s.x, s.y);
   }
-  const float16 v = (float16)(convert_float4(o[0]), convert_float4(o[1]),
-                              convert_float4(o[2]), convert_float4(o[3]));
-  vstore16(v, 0, dst + i * 4);
+  rs_store_quad(dst, y * dst_pitch + qx * 4, o);
 }
 #endif

@@ -12,10 +12,11 @@
  * pixels), so PoCL runs hashing, Box-Muller and the taps as vectors.  Lane 4k+3 (alpha)
  * carries zero noise and alpha is copied bit for bit.
  *
- * USE_DOUBLE=1 (reference quality) generates the noise, stores the intermediate buffers and
- * accumulates the taps in double precision.
+ * A build with CLFX_FP64 (the reference level, kernels/lib/precision.h) generates the noise,
+ * stores the intermediate buffers and accumulates the taps in double precision.
  */
 #include "lib/common.h"
+#include "lib/precision.h"
 
 #ifndef RADIUS
 #define RADIUS 0
@@ -23,24 +24,6 @@
 #ifndef MONO
 #define MONO 0
 #endif
-#ifndef USE_DOUBLE
-#define USE_DOUBLE 0
-#endif
-
-#if USE_DOUBLE
-#define REAL double
-#define REAL4 double4
-#define REAL8 double8
-#define REAL16 double16
-#define TO_REAL16 convert_double16
-#else
-#define REAL float
-#define REAL4 float4
-#define REAL8 float8
-#define REAL16 float16
-#define TO_REAL16 convert_float16
-#endif
-
 /* Luminance is clamped to [FLOOR, CAP]: the cap keeps sigma * noise finite for inputs near
  * FLT_MAX, the floor keeps log() finite (grain at black is then ~1e-15 * amount, not 0). */
 #define GRAIN_LUMINANCE_CAP 1e30
@@ -57,7 +40,7 @@ inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 {
   const REAL16 u = TO_REAL16(clfx_uniform16(seed, frame, x, y, 0));
   REAL8 co;
-#if USE_DOUBLE
+#if REAL_IS_DOUBLE
   const REAL8 r = sqrt((REAL)(-2) * log(u.even));
   const REAL8 si = sincos((REAL)6.283185307179586 * u.odd, &co);
 #else
@@ -76,26 +59,27 @@ inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 }
 
 /* out = in + sigma(L) * amount_c * n_c on RGB, sigma(L) = (L / 0.18)^response (the 0.18 of
- * "relative to mid-grey" is folded into amount_c on the host).  Non-finite RGB becomes 0
- * before the grain (it must not spread into L); alpha is copied unchanged. */
+ * "relative to mid-grey" is folded into amount_c on the host).  Non-finite values become 0
+ * before the grain (they must not spread into L); alpha is copied unchanged (0 if it was
+ * not finite). */
 inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, const REAL response)
 {
-  const int16 finite = (as_uint16(c) & 0x7f800000u) != (uint16)0x7f800000u;
-  const REAL16 cs = TO_REAL16(select((float16)0.0f, c, finite));
+  const float16 c0 = clfx_finite16_or_zero(c);
+  const REAL16 cs = TO_REAL16(c0);
   const REAL4 lum = (REAL)0.2126 * (REAL4)(cs.s0, cs.s4, cs.s8, cs.sc)
                   + (REAL)0.7152 * (REAL4)(cs.s1, cs.s5, cs.s9, cs.sd)
                   + (REAL)0.0722 * (REAL4)(cs.s2, cs.s6, cs.sa, cs.se);
   const REAL4 l = clamp(lum, (REAL)GRAIN_LUMINANCE_FLOOR, (REAL)GRAIN_LUMINANCE_CAP);
-#if USE_DOUBLE
+#if REAL_IS_DOUBLE
   const REAL4 s = pow(l * (REAL)(1.0 / GRAIN_MID_GREY), (REAL4)(response));
 #else
   const REAL4 s = clfx_exp2_4(response * 1.44269504f * clfx_log4(l * (1.0f / 0.18f)));
 #endif
   const REAL16 s16 = (REAL16)(s.x, s.x, s.x, s.x, s.y, s.y, s.y, s.y,
                               s.z, s.z, s.z, s.z, s.w, s.w, s.w, s.w);
-  const float16 out = convert_float16(cs + s16 * (REAL16)(amt, amt, amt, amt) * n);
+  const float16 out = TO_FLOAT16(cs + s16 * (REAL16)(amt, amt, amt, amt) * n);
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  return select(out, c, alpha);
+  return select(out, c0, alpha);
 }
 
 kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
@@ -107,6 +91,19 @@ kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
   vstore16(grain_white16(seed, frame, fx0 + x, fy0 + y), 0, noise + (size_t)(y * npitch + x) * 4);
 }
 
+/* sum_k w_k * v_k, k = 0..2R, for 4 pixels (16 lanes): v_k = vload16 at p + k * step
+ * (step = one pixel for the horizontal pass, one row for the vertical one). */
+inline REAL16 grain_taps16(global const REAL *p, const size_t step, global const REAL *weights)
+{
+  REAL16 acc = (REAL16)(0);
+  for(int k = 0; k <= 2 * RADIUS; ++k)
+  {
+    const REAL4 w = vload4(k, weights);
+    acc += (REAL16)(w, w, w, w) * vload16(0, p + (size_t)k * step);
+  }
+  return acc;
+}
+
 /* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x. */
 kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global const REAL *weights,
                          const int npitch, const int pitch, const int rows)
@@ -114,14 +111,8 @@ kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global cons
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= rows || qx * 4 >= pitch) return;
   const int x = qx * 4;
-  global const REAL *row = noise + (size_t)(y * npitch + x) * 4;
-  REAL16 acc = (REAL16)(0);
-  for(int k = 0; k <= 2 * RADIUS; ++k)
-  {
-    const REAL4 w = vload4(k, weights);
-    acc += (REAL16)(w, w, w, w) * vload16(0, row + 4 * k);
-  }
-  vstore16(acc, 0, tmp + (size_t)(y * pitch + x) * 4);
+  vstore16(grain_taps16(noise + (size_t)(y * npitch + x) * 4, 4, weights), 0,
+           tmp + (size_t)(y * pitch + x) * 4);
 }
 
 /* Vertical taps (tmp is offset by R rows) and the mix with the source. */
@@ -132,14 +123,8 @@ kernel void grain_apply(global const float *src, global float *dst, global const
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
   const int x = qx * 4;
-  global const REAL *col = tmp + (size_t)(y * pitch + x) * 4;
-  REAL16 acc = (REAL16)(0);
-  for(int k = 0; k <= 2 * RADIUS; ++k)
-  {
-    const REAL4 w = vload4(k, weights);
-    acc += (REAL16)(w, w, w, w) * vload16(0, col + (size_t)k * pitch * 4);
-  }
   const size_t i = (size_t)(y * pitch + x) * 4;
+  const REAL16 acc = grain_taps16(tmp + i, (size_t)pitch * 4, weights);
   vstore16(grain_mix16(vload16(0, src + i), acc, (REAL4)(ar, ag, ab, 0), response), 0, dst + i);
 }
 

@@ -8,22 +8,19 @@
  * pixels per work-item.
  *
  * lens_packed (draft / preview / final): the source points of every channel are computed
- * once per parameter set on the host in float64 and packed (clfx.resample.PackedMap,
+ * once per parameter set on the host in float64 and packed (clfx.fx.resample.PackedMap,
  * LENS_MAPS maps = green, then red and blue with TCA: 12 ints per map and quad): a pure
  * gather, no table reads, floor or border rule per pixel; lens_packed_fix then re-renders
  * the quads whose footprints leave the source through the checked path.  LENS_MAPS = 0
  * (vignetting only) reads the source pixels in place.
  *
- * lens_apply (reference): a float64 displacement map for green (HAS_MAP = 0: u_g = u) and
- * float64 TCA tables, float64 coordinates, weights and sums.
+ * lens_apply (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64
+ * displacement map for green (HAS_MAP = 0: u_g = u) and float64 TCA tables, float64
+ * coordinates, weights and sums.
  */
 #include "lib/resample.h"
 
-#ifndef MAP_REAL
-#define MAP_REAL float
-#endif
-
-#ifndef RS_EXACT_TRIG
+#if !REAL_IS_DOUBLE
 /* multiply RGB of the 4 pixels of quad (qx, y) by the vignetting (no-op without HAS_VIG) */
 inline void lens_vignette(int qx, int y, float ccx, float ccy, float vig_scale, float vk1,
                           float vk2, float vk3, float4 *c0, float4 *c1, float4 *c2, float4 *c3)
@@ -38,6 +35,15 @@ inline void lens_vignette(int qx, int y, float ccx, float ccy, float vig_scale, 
   (*c0).xyz *= v.s0; (*c1).xyz *= v.s1; (*c2).xyz *= v.s2; (*c3).xyz *= v.s3;
 #endif
 }
+
+/* LENS_MAPS == 3: red from the quad's second map and blue from its third (q_red, q_blue),
+ * read by `read` (rs_fast_quad or rs_fix_quad) over c0..c3's red and blue. */
+#define LENS_RED_BLUE(read, q_red, q_blue) {                                                 \
+    float4 r0, r1, r2, r3;                                                                   \
+    read(src, pitch, w, h, q_red, &r0, &r1, &r2, &r3);                                       \
+    c0.x = r0.x; c1.x = r1.x; c2.x = r2.x; c3.x = r3.x;                                      \
+    read(src, pitch, w, h, q_blue, &r0, &r1, &r2, &r3);                                      \
+    c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z; }
 
 kernel void lens_packed(global const float *src, global float *dst, global const int *map,
                         const int pitch, const int w, const int h, const float ccx,
@@ -55,11 +61,7 @@ kernel void lens_packed(global const float *src, global float *dst, global const
   global const int *q = map + 12 * LENS_MAPS * quad;
   rs_fast_quad(src, pitch, w, h, q, &c0, &c1, &c2, &c3);
 #if LENS_MAPS == 3
-  float4 r0, r1, r2, r3;
-  rs_fast_quad(src, pitch, w, h, q + 12, &r0, &r1, &r2, &r3);
-  c0.x = r0.x; c1.x = r1.x; c2.x = r2.x; c3.x = r3.x;
-  rs_fast_quad(src, pitch, w, h, q + 24, &r0, &r1, &r2, &r3);
-  c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z;
+  LENS_RED_BLUE(rs_fast_quad, q + 12, q + 24)
 #endif
 #endif
   lens_vignette(qx, y, ccx, ccy, vig_scale, vk1, vk2, vk3, &c0, &c1, &c2, &c3);
@@ -82,11 +84,7 @@ kernel void lens_packed_fix(global const float *src, global float *dst,
   float4 c0, c1, c2, c3;
   rs_fix_quad(src, pitch, w, h, rec + 4, &c0, &c1, &c2, &c3);
 #if LENS_MAPS == 3
-  float4 r0, r1, r2, r3;
-  rs_fix_quad(src, pitch, w, h, rec + 12, &r0, &r1, &r2, &r3);
-  c0.x = r0.x; c1.x = r1.x; c2.x = r2.x; c3.x = r3.x;
-  rs_fix_quad(src, pitch, w, h, rec + 20, &r0, &r1, &r2, &r3);
-  c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z;
+  LENS_RED_BLUE(rs_fix_quad, rec + 12, rec + 20)
 #endif
   lens_vignette(quad % (pitch / 4), quad / (pitch / 4), ccx, ccy, vig_scale, vk1, vk2, vk3,
                 &c0, &c1, &c2, &c3);
@@ -94,48 +92,44 @@ kernel void lens_packed_fix(global const float *src, global float *dst,
 }
 #endif
 #else
-kernel void lens_apply(global const float *src, global float *dst, global const MAP_REAL *map,
-                       global const MAP_REAL *luts, const int pitch, const int w, const int h,
-                       const int x0, const int y0,
-                       const MAP_REAL ccx, const MAP_REAL ccy, const MAP_REAL lut_scale,
-                       const MAP_REAL vig_scale, const MAP_REAL vk1, const MAP_REAL vk2,
-                       const MAP_REAL vk3)
+kernel void lens_apply(global const float *src, global float *dst, global const REAL *map,
+                       global const REAL *luts, const int pitch, const int w, const int h,
+                       const int x0, const int y0, const REAL ccx, const REAL ccy,
+                       const REAL lut_scale, const REAL vig_scale, const REAL vk1,
+                       const REAL vk2, const REAL vk3)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= h || qx * 4 >= pitch) return;
-  const int idx = y * pitch + qx * 4;
-  float4 o[4];
+  REAL4 o[4];
   for(int k = 0; k < 4; k++) {
-    /* output pixel centre in source-window coordinates */
-    const REAL ux = (REAL)(qx * 4 + k) + (REAL)0.5;
-    const REAL uy = (REAL)y + (REAL)0.5;
 #if HAS_MAP
-    const REAL gx = ux + (REAL)map[2 * (idx + k)];
-    const REAL gy = uy + (REAL)map[2 * (idx + k) + 1];
+    const REAL2 gp = rs_map_point(map, pitch, qx * 4 + k, y);
+    const REAL gx = gp.x, gy = gp.y;
 #else
-    const REAL gx = ux, gy = uy;
+    const REAL gx = (REAL)(qx * 4 + k) + (REAL)0.5, gy = (REAL)y + (REAL)0.5;
 #endif
-    const REAL4 g = rs_sample(src, pitch, w, h, gx, gy);
-    REAL4 c = g;
+    REAL4 c = rs_sample(src, pitch, w, h, gx, gy);
 #if HAS_TCA
     /* ccx, ccy: optical centre in source-window coordinates */
-    const REAL dx = gx - (REAL)ccx, dy = gy - (REAL)ccy;
-    const REAL t = clamp((dx * dx + dy * dy) * (REAL)lut_scale, (REAL)0, (REAL)1) * (REAL)LUTN;
+    const REAL dx = gx - ccx, dy = gy - ccy;
+    const REAL t = clamp((dx * dx + dy * dy) * lut_scale, (REAL)0, (REAL)1) * (REAL)LUTN;
     const int j = min((int)t, LUTN - 1);
     const REAL f = t - (REAL)j;
-    const REAL sr = (REAL)luts[j] + f * ((REAL)luts[j + 1] - (REAL)luts[j]);
-    const REAL sb = (REAL)luts[LUTN + 1 + j] + f * ((REAL)luts[LUTN + 2 + j] - (REAL)luts[LUTN + 1 + j]);
-    c.x = rs_sample(src, pitch, w, h, (REAL)ccx + dx * sr, (REAL)ccy + dy * sr).x;
-    c.z = rs_sample(src, pitch, w, h, (REAL)ccx + dx * sb, (REAL)ccy + dy * sb).z;
+    const REAL sr = luts[j] + f * (luts[j + 1] - luts[j]);
+    const REAL sb = luts[LUTN + 1 + j] + f * (luts[LUTN + 2 + j] - luts[LUTN + 1 + j]);
+    c.x = rs_sample(src, pitch, w, h, ccx + dx * sr, ccy + dy * sr).x;
+    c.z = rs_sample(src, pitch, w, h, ccx + dx * sb, ccy + dy * sb).z;
 #endif
 #if HAS_VIG
-    const REAL vx = (ux - (REAL)ccx) * (REAL)vig_scale, vy = (uy - (REAL)ccy) * (REAL)vig_scale;
+    /* vignetting at the output pixel's centre */
+    const REAL vx = ((REAL)(qx * 4 + k) + (REAL)0.5 - ccx) * vig_scale;
+    const REAL vy = ((REAL)y + (REAL)0.5 - ccy) * vig_scale;
     const REAL r2 = vx * vx + vy * vy;
-    const REAL v = fmax((REAL)1 + r2 * ((REAL)vk1 + r2 * ((REAL)vk2 + r2 * (REAL)vk3)), (REAL)0);
+    const REAL v = fmax((REAL)1 + r2 * (vk1 + r2 * (vk2 + r2 * vk3)), (REAL)0);
     c.x *= v; c.y *= v; c.z *= v;
 #endif
-    o[k] = convert_float4(c);
+    o[k] = c;
   }
-  vstore16((float16)(o[0], o[1], o[2], o[3]), 0, dst + idx * 4);
+  rs_store_quad(dst, y * pitch + qx * 4, o);
 }
 #endif

@@ -2,18 +2,19 @@
  * (clfx/plugins/sensor_noise.py has the model).
  *
  * One work-item handles 4 pixels x 4 channels as 16 lanes (rows are padded to 4 pixels);
- * the alpha lanes get zero electrons per unit and are copied bit for bit at the end.
+ * the alpha lanes get zero electrons per unit and are copied bit for bit at the end (a
+ * non-finite value, colour or alpha, becomes 0 first).
  * Random numbers: clfx_uniform(seed, frame, X, Y, c) of common.h for frame coordinates
  * X = fx0 + x, Y = fy0 + y, with streams c = 0..3 and 4..7 (Box-Muller pair: shot and read
  * Gaussians) and 8..11 (the uniform of the Poisson inversion).  PRNU uses its own seed and
  * frame 0, so the pattern is the same on every frame: sensor_noise_prnu writes it once per
- * parameter set and window (the plugin caches it) and sensor_noise_apply reads it.
+ * parameter set and window (cached in the runtime's cache) and sensor_noise_apply reads it.
  *
  * Defines: SHOT, READ, PRNU (0/1) drop unused terms at compile time; INVERT=1 samples the
  * Poisson count exactly by inversion when lambda <= SWITCH electrons (a search over the
  * summed CDF, four terms per step, bounded by MAX_COUNT terms; u capped at 1 - 4e-6), else
- * the normal approximation lambda + sqrt(lambda) z.  USE_DOUBLE=1 (reference) does all
- * arithmetic in double.
+ * the normal approximation lambda + sqrt(lambda) z.  A build with CLFX_FP64 (the reference
+ * level, kernels/lib/precision.h) does all arithmetic in double.
  *
  * Speed notes (PoCL on AVX-512, where the inversion dominated): any() is reduced by vector
  * ORs (PoCL's any() branches per lane), the CDF terms of a step are independent products
@@ -40,33 +41,23 @@
 #ifndef MAX_COUNT
 #define MAX_COUNT 200
 #endif
-#ifndef USE_DOUBLE
-#define USE_DOUBLE 0
-#endif
 #define U_CAP 4e-6
 
-#if USE_DOUBLE
-#define REAL double
-#define REAL16 double16
+#include "lib/precision.h"
+#if REAL_IS_DOUBLE
 #define MASK16 long16
 #define MASK8 long8
 #define MASK4 long4
 #define MASK2 long2
-#define TO_REAL16 convert_double16
-#define CONVERT_REAL16 convert_double16
 #define SN_LOG(x) log(x)
 #define SN_EXP(x) exp(x)
 #define SN_SINCOS2PI(u, c) sincos((REAL)SN_TWO_PI * (u), (c))
 #define SN_COS2PI(u) cos((REAL)SN_TWO_PI * (u))
 #else
-#define REAL float
-#define REAL16 float16
 #define MASK16 int16
 #define MASK8 int8
 #define MASK4 int4
 #define MASK2 int2
-#define TO_REAL16 convert_float16
-#define CONVERT_REAL16 convert_float16
 #define SN_LOG(x) clfx_log16(x)
 #define SN_EXP(x) sensor_noise_exp16(x)
 #define SN_SINCOS2PI(u, c) clfx_sincos2pi16((u), (c))
@@ -122,24 +113,11 @@ inline float16 sensor_noise_cos2pi16(const float16 u)
   return c;
 }
 
-/* clfx_uniform(seed, frame, x + i, y, c) (common.h) in two parts, lane 4 i + c.  The first
- * four of its five hashes depend on (seed, frame, x, y) only, so the streams of one pixel
- * share them: sensor_noise_hash_xy16 once per pixel and seed, then one hash per stream.
- * Bit for bit clfx_uniform16 of fastmath.h. */
-inline uint16 sensor_noise_hash_xy16(const uint seed, const int frame, const int x, const int y)
-{
-  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
-  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
-  const uint16 h = clfx_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
-  return clfx_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
-}
-
-/* The uniform of streams c0 + c (lane 4 i + c) from sensor_noise_hash_xy16, in REAL. */
+/* The uniform of streams c0 + c (lane 4 i + c) from clfx_hash_xy16 (fastmath.h), in REAL:
+ * the per-pixel hashes are shared by the pixel's streams. */
 inline REAL16 sensor_noise_stream16(const uint16 hxy, const int c0)
 {
-  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
-  const uint16 h = clfx_hash16(hxy ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
-  return TO_REAL16((convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f));
+  return TO_REAL16(clfx_stream16(hxy, c0));
 }
 
 /* The fixed pattern's relative gain error prnu z per pixel and channel (alpha lanes 0):
@@ -153,11 +131,11 @@ kernel void sensor_noise_prnu(global float *pattern, const int pitch, const int 
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
   const int x = qx * 4;
-  const uint16 hp = sensor_noise_hash_xy16(prnu_seed, 0, fx0 + x, fy0 + y);
+  const uint16 hp = clfx_hash_xy16(prnu_seed, 0, fx0 + x, fy0 + y);
   const REAL16 fa = sensor_noise_stream16(hp, 0), fb = sensor_noise_stream16(hp, 4);
   const REAL16 z = sqrt((REAL)(-2) * SN_LOG(fa)) * SN_COS2PI(fb);
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  vstore16(select(convert_float16((REAL)prnu * z), (float16)0.0f, alpha), 0,
+  vstore16(select(TO_FLOAT16((REAL)prnu * z), (float16)0.0f, alpha), 0,
            pattern + (size_t)(y * pitch + x) * 4);
 }
 
@@ -173,9 +151,9 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   const int x = qx * 4, fx = fx0 + x, fy = fy0 + y;
   const size_t i = (size_t)(y * pitch + x) * 4;
   const float16 c = vload16(0, src + i);
-  const int16 finite = (as_uint16(c) & 0x7f800000u) != (uint16)0x7f800000u;
-  /* non-finite -> 0; |v| <= 1e38 so the PRNU gain (<= 1.6) cannot overflow float */
-  REAL16 v = TO_REAL16(clamp(select((float16)0.0f, c, finite), -1e38f, 1e38f));
+  const float16 cs = clfx_finite16_or_zero(c);                /* non-finite -> 0, alpha too */
+  /* |v| <= 1e38 so the PRNU gain (<= 1.6) cannot overflow float */
+  REAL16 v = TO_REAL16(clamp(cs, -1e38f, 1e38f));
 
   /* electrons per unit of linear value (k) and linear value per electron (g); alpha: 0 */
   const REAL zero = (REAL)0;
@@ -190,7 +168,7 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
 
   REAL16 out = v;
 #if SHOT || READ
-  const uint16 hxy = sensor_noise_hash_xy16(seed, frame, fx, fy);
+  const uint16 hxy = clfx_hash_xy16(seed, frame, fx, fy);
   const REAL16 ua = sensor_noise_stream16(hxy, 0), ub = sensor_noise_stream16(hxy, 4);
   const REAL16 r = sqrt((REAL)(-2) * SN_LOG(ua));
   REAL16 co;
@@ -256,5 +234,5 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
 #endif
 
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  vstore16(select(convert_float16(out), c, alpha), 0, dst + i);
+  vstore16(select(TO_FLOAT16(out), cs, alpha), 0, dst + i);
 }

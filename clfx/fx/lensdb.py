@@ -20,6 +20,10 @@ pixel centres at integers (0 .. W-1):
 so r = 1 is half the short side of the calibration sensor's frame (``crop_cal`` and aspect
 ``a_cal``, default 3:2), mapped onto this image by the ratio of crop factors (diagonals).
 Vignetting uses r / sqrt(a_cal^2 + 1) (1 = the calibration frame's corner).
+
+The database and the table of calibration aspect ratios are host data read once per process
+(``functools.lru_cache``: lensfunpy's bundled files, no device memory); the maps and tables
+derived from them live in the runtime's cache (``clfx.plugins.lens``).
 """
 from __future__ import annotations
 

@@ -2,8 +2,8 @@
 
 Shared by ``distortion``, ``chromatic_aberration`` and ``lens`` (device side:
 ``kernels/lib/resample.h``).  Everything here runs once per parameter set and frame geometry, in
-float64 NumPy, and the result (a displacement map or a radial look-up table) is cached on
-the plugin instance and reused across frames.
+float64 NumPy, and the result (a displacement map or a radial look-up table) is kept in the
+runtime's cache (``rt.cache``) and reused across frames.
 
 Conventions
 -----------
@@ -20,30 +20,33 @@ by bracketed bisection / Newton, never by fixed-point iteration (hard-cases.md c
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from clfx.core.errors import ParamError
+from clfx.core.plugin import Level
 
 FILTERS = ("bilinear", "bicubic", "lanczos3")
 FILTER_CODE = {"bilinear": 0, "bicubic": 1, "lanczos3": 2}
+FILTER_TAPS = {"bilinear": 2, "bicubic": 4, "lanczos3": 6}
 BORDERS = ("black", "edge", "mirror")
 BORDER_CODE = {"black": 0, "edge": 1, "mirror": 2}
 
-FILTER_BY_QUALITY = {"draft": "bilinear", "preview": "bicubic", "final": "lanczos3",
-                     "reference": "lanczos3"}
-"""Resampling filter of each quality level; ``reference`` also uses a float64 map and
-float64 accumulation."""
+
+@dataclass(frozen=True)
+class ResampleLevel(Level):
+    """A warping effect's quality level: its resampling ``filter`` (one of ``FILTERS``);
+    ``fp64`` reads a float64 map and accumulates in float64 (``kernels/lib/precision.h``)."""
+
+    filter: str = "lanczos3"
 
 
-def kernel_defines(filter_name: str, border: str, double: bool, sanitise: bool = True) -> dict:
-    """``-D`` defines selecting the filter, border rule, precision and NaN/Inf handling."""
-    d = {"RS_FILTER": FILTER_CODE[filter_name], "RS_BORDER": BORDER_CODE[border],
-         "RS_SANITISE": int(bool(sanitise))}
-    if double:
-        d.update(REAL="double", REAL4="double4", CONVERT_REAL4="convert_double4",
-                 MAP_REAL="double", RS_EXACT_TRIG=1)
-    return d
+def kernel_defines(filter_name: str, border: str, sanitise: bool = True) -> dict:
+    """``-D`` defines selecting the filter, border rule and NaN/Inf handling (the precision
+    comes from the level: ``rt.kernel(..., fp64=level.fp64, **defines)``)."""
+    return {"RS_FILTER": FILTER_CODE[filter_name], "RS_BORDER": BORDER_CODE[border],
+            "RS_SANITISE": int(bool(sanitise))}
 
 
 def pixel_centres(window, frame_origin=True):
@@ -240,7 +243,7 @@ class PackedMap:
     never reads outside the buffer).  Padding pixels repeat the row's last pixel.
     """
 
-    TAPS = {0: 2, 1: 4, 2: 6}
+    TAPS = {FILTER_CODE[f]: taps for f, taps in FILTER_TAPS.items()}
 
     def __init__(self, points, width: int, height: int, pitch: int):
         rows, quads = max(points[0][0].shape[0], 1), pitch // 4
@@ -281,23 +284,51 @@ class PackedMap:
         self.fast_possible = {code: width >= taps and height >= taps
                               for code, taps in self.TAPS.items()}
 
-    def upload(self, rt):
-        """Device buffers: ``(entries, {code: (records or None, count)})``."""
+    def upload(self, rt) -> "DevicePackedMap":
+        """The map's device buffers (a value for ``rt.cache``)."""
         fix = {code: (rt.to_device(r) if len(r) else None, len(r))
                for code, r in self.fixups.items()}
-        return rt.to_device(self.entries), fix
+        return DevicePackedMap(rt.to_device(self.entries), fix, self.fast_possible,
+                               self.entries.shape[2] // 12)
 
 
-def launch_packed(rt, fast, fix, entries, fixups, code: int, quads_x: int, rows: int,
-                  head: tuple, tail: tuple, fast_possible: bool = True):
+@dataclass(frozen=True)
+class DevicePackedMap:
+    """A :class:`PackedMap` on the device: ``entries`` (pooled buffer), ``fixups`` (filter
+    code -> (records buffer or None, count)), ``fast_possible`` (filter code -> bool) and
+    the number of ``maps`` per quad.  ``nbytes`` counts its buffers for the cache's cap."""
+
+    entries: object
+    fixups: dict
+    fast_possible: dict
+    maps: int
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.entries.nbytes) + sum(int(b.nbytes) for b, _ in self.fixups.values()
+                                              if b is not None)
+
+
+def launch_packed(rt, fast, fix, dmap: DevicePackedMap, filter_name: str, quads_x: int,
+                  rows: int, head: tuple, tail: tuple):
     """Enqueue a packed-map warp: ``fast`` over every quad, then ``fix`` over the border
-    quads of filter ``code``.  Kernel arguments: ``fast(*head, entries, *tail)`` and
+    quads of ``filter_name``.  Kernel arguments: ``fast(*head, entries, *tail)`` and
     ``fix(*head, records, count, *tail)``."""
-    if fast_possible:
-        rt.launch(fast, (quads_x, max(rows, 1)), *head, entries, *tail)
-    buf, count = fixups[code]
+    code = FILTER_CODE[filter_name]
+    if dmap.fast_possible[code]:
+        rt.launch(fast, (quads_x, max(rows, 1)), *head, dmap.entries, *tail)
+    buf, count = dmap.fixups[code]
     if count:
         rt.launch(fix, (count,), *head, buf, np.int32(count), *tail)
+
+
+def frame_key(p, ctx) -> tuple:
+    """What a warp's maps depend on besides the effect and level (part of its ``rt.cache``
+    keys): the parameters, the source's window and row pitch, the display window, pixel
+    aspect and camera."""
+    src = ctx.source
+    return (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
+            ctx.camera)
 
 
 def needs_sanitising(ctx, effect: str) -> bool:

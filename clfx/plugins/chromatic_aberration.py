@@ -38,14 +38,15 @@ XYZ color matching functions", JCGT 2013; IEC 61966-2-1 (sRGB/Rec.709 primaries)
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
+from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, check_fold,
+                              fold_radius, frame_key, kernel_defines, launch_packed,
+                              lut_lookup, needs_sanitising, pixel_centres, radial_lut)
 from clfx.host import Plugin, register
-from clfx.fx.resample import (BORDERS, FILTER_CODE, PackedMap, check_fold, fold_radius,
-                           kernel_defines, launch_packed, lut_lookup, needs_sanitising,
-                           pixel_centres, radial_lut)
 
 LAMBDA_MIN, LAMBDA_MAX = 380.0, 720.0
 LAMBDA_B, LAMBDA_R = 450.0, 650.0
@@ -55,11 +56,26 @@ XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],
                           [-0.9692660, 1.8760108, 0.0415560],
                           [0.0556434, -0.2040259, 1.0572252]])
 
-QUALITY = {  # (spectral samples, filter, float64)
-    "draft": (3, "bilinear", False),
-    "preview": (8, "bicubic", False),
-    "final": (16, "bicubic", False),
-    "reference": (32, "bicubic", True),
+
+@dataclass(frozen=True)
+class SpectralLevel(ResampleLevel):
+    """A quality level of chromatic aberration: ``wavelengths`` spectral bins (3 = the
+    three-channel mode, which ``spectral=False`` uses at every level) read with ``filter``."""
+
+    wavelengths: int = 16
+
+
+LEVELS = {
+    "draft": SpectralLevel("three channels (per-channel CMF-weighted scale), bilinear from a "
+                           "packed map of the red and blue source points (green in place), "
+                           "float32", wavelengths=3, filter="bilinear"),
+    "preview": SpectralLevel("8 wavelengths (380-720 nm bins), bicubic with anti-ringing "
+                             "clamp, float32", wavelengths=8, filter="bicubic"),
+    "final": SpectralLevel("16 wavelengths, bicubic with anti-ringing clamp, float32",
+                           wavelengths=16, filter="bicubic"),
+    "reference": SpectralLevel("32 wavelengths, bicubic with anti-ringing clamp, float64 "
+                               "tables, coordinates and sums", fp64=True, wavelengths=32,
+                               filter="bicubic"),
 }
 
 
@@ -161,6 +177,21 @@ def build_luts(deltas, cubic, r_max):
     return np.stack(luts)
 
 
+def channel_points(p, display_window, window, pixel_aspect):
+    """Three-channel mode: the red and blue source points of ``window``'s pixels
+    (source-window coordinates, texel centres at +0.5, float64), looked up in float64 in the
+    same tables the kernel would interpolate (green and alpha stay in place)."""
+    cx, cy, unit, r_max = geometry(p, display_window, window, pixel_aspect)
+    deltas, _ = channel_bins(p.amount)
+    luts = build_luts(deltas, p.cubic, r_max)
+    scale = 1.0 / (unit * r_max)
+    ox, oy = pixel_centres(window)
+    dx, dy = ox - cx, oy - cy
+    rho = np.clip((dx * pixel_aspect * scale) ** 2 + (dy * scale) ** 2, 0.0, 1.0)
+    return [(cx + dx * s - window.x0, cy + dy * s - window.y0)
+            for s in (lut_lookup(luts[i], rho) for i in (0, 2))]
+
+
 @register
 class ChromaticAberration(Plugin):
     descriptor = Descriptor(
@@ -184,114 +215,83 @@ class ChromaticAberration(Plugin):
             ChoiceParam("border", "edge", choices=BORDERS,
                         hint="What reads outside the source return: black, edge (clamp), mirror."),
         ),
-        quality={
-            "draft": "three channels (per-channel CMF-weighted scale), bilinear from a packed "
-                     "map of the red and blue source points (green in place), float32",
-            "preview": "8 wavelengths (380-720 nm bins), bicubic with anti-ringing clamp, float32",
-            "final": "16 wavelengths, bicubic with anti-ringing clamp, float32",
-            "reference": "32 wavelengths, bicubic with anti-ringing clamp, float64 tables, "
-                         "coordinates and sums",
-        },
+        quality=LEVELS,
     )
 
-    def __init__(self):
-        self._tables: dict = {}
-        self._packed: dict = {}
-
-    def packed_maps(self, rt, p, ctx, n):
-        """Three-bin float levels: the red and blue bins' source points as a PackedMap
-        (device buffers), from the same float64 tables the kernel would interpolate."""
+    def packed_maps(self, rt, p, ctx):
+        """Three-bin float levels: the red and blue bins' source points as a packed map on
+        the device, and the bins' weights, kept in ``rt.cache``."""
         src = ctx.source
-        key = (p.hash_hex(), n, src.window, src.pitch, ctx.display_window, ctx.pixel_aspect)
-        hit = self._packed.get(key)
-        if hit is None:
-            cx, cy, unit, r_max = geometry(p, ctx.display_window, src.window, ctx.pixel_aspect)
-            deltas, weights = channel_bins(p.amount)      # as tables(): n == 3
-            luts = build_luts(deltas, p.cubic, r_max)
-            scale = 1.0 / (unit * r_max)
-            ox, oy = pixel_centres(src.window)
-            dx, dy = ox - cx, oy - cy
-            rho = np.clip((dx * ctx.pixel_aspect * scale) ** 2 + (dy * scale) ** 2, 0.0, 1.0)
-            points = []
-            for i in (0, 2):
-                s = lut_lookup(luts[i], rho)
-                points.append((cx + dx * s - src.window.x0, cy + dy * s - src.window.y0))
-            pm = PackedMap(points, src.width, src.height, src.pitch)
-            entries, fixups = pm.upload(rt)
-            hit = (entries, fixups, pm.fast_possible,
-                   rt.to_device(weights.astype(np.float32)))
-            if len(self._packed) >= 4:
-                self._packed.pop(next(iter(self._packed)))
-            self._packed[key] = hit
-        return hit
+
+        def build():
+            points = channel_points(p, ctx.display_window, src.window, ctx.pixel_aspect)
+            _, weights = channel_bins(p.amount)
+            return (PackedMap(points, src.width, src.height, src.pitch).upload(rt),
+                    rt.to_device(weights.astype(np.float32)))
+
+        return rt.cache.get(("chromatic_aberration.packed",) + frame_key(p, ctx), build)
 
     def is_identity(self, p, ctx):
         if p.amount == 0.0:
             return "amount is 0"
         return None
 
-    def plan(self, p, quality):
-        """(bins, filter, double) for a quality level and the ``spectral`` switch."""
-        n, filt, double = QUALITY[quality]
-        return (n if p.spectral else 3), filt, double
-
     def tables(self, rt, p, ctx, n, double):
+        """The ``n`` bins' interleaved radial tables and weights on the device (float64 if
+        ``double``), the kernel's constants (cx, cy, ax, ay) and the largest shift, kept in
+        ``rt.cache``."""
         src = ctx.source
-        key = (p.hash_hex(), n, double, src.window, ctx.display_window, ctx.pixel_aspect)
-        hit = self._tables.get(key)
-        if hit is None:
+
+        def build():
             cx, cy, unit, r_max = geometry(p, ctx.display_window, src.window, ctx.pixel_aspect)
             deltas, weights = channel_bins(p.amount) if n == 3 else spectral_bins(n, p.amount)
             luts = build_luts(deltas, p.cubic, r_max)
             dt = np.float64 if double else np.float32
             scale = 1.0 / (unit * r_max)
             consts = (cx, cy, ctx.pixel_aspect * scale, scale)
-            hit = (rt.to_device(interleave(luts).astype(dt)), rt.to_device(weights.astype(dt)), consts,
-                   max_shift(luts, cx, cy, src.window))
-            if len(self._tables) >= 8:
-                self._tables.pop(next(iter(self._tables)))
-            self._tables[key] = hit
-        return hit
+            return (rt.to_device(interleave(luts).astype(dt)), rt.to_device(weights.astype(dt)),
+                    consts, max_shift(luts, cx, cy, src.window))
+
+        return rt.cache.get(("chromatic_aberration.tables",) + frame_key(p, ctx) + (n, double),
+                            build)
 
     def render(self, rt, p, ctx):
         src = ctx.source
-        n, filt, double = self.plan(p, ctx.quality)
-        double = double and rt.has_fp64
-        luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, ctx, n, double)
-        defines = kernel_defines(filt, p.border, double,
+        lvl = self.level(ctx)
+        n = lvl.wavelengths if p.spectral else 3
+        double = rt.use_fp64(lvl.fp64)
+        defines = kernel_defines(lvl.filter, p.border,
                                  needs_sanitising(ctx, "chromatic_aberration"))
         defines.update(NWAVE=n, NWP=padded_count(n), LUTN=LUT_SIZE, GREEN_IN_PLACE=int(n == 3))
-        real = np.float64 if double else np.float32
         dst = src.like()
         i32 = np.int32
         if n == 3 and not double:
-            entries, fixups, fast_possible, wbuf = self.packed_maps(rt, p, ctx, n)
-            code = FILTER_CODE[filt]
-            launch_packed(rt, rt.kernel("chromatic_aberration.cl", "chromatic_aberration_packed",
+            dmap, wbuf = self.packed_maps(rt, p, ctx)
+            name = "chromatic_aberration_packed"
+            launch_packed(rt, rt.kernel("chromatic_aberration.cl", name, fp64=lvl.fp64,
                                         CA_FAST=1, **defines),
-                          rt.kernel("chromatic_aberration.cl", "chromatic_aberration_packed_fix",
+                          rt.kernel("chromatic_aberration.cl", name + "_fix", fp64=lvl.fp64,
                                     CA_FAST=1, **defines),
-                          entries, fixups, code, src.pitch // 4, src.height, (src, dst),
-                          (wbuf, i32(src.pitch), i32(src.width), i32(src.height)),
-                          fast_possible[code])
+                          dmap, lvl.filter, src.pitch // 4, src.height, (src, dst),
+                          (wbuf, i32(src.pitch), i32(src.width), i32(src.height)))
             return dst
+        luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, ctx, n, double)
+        real = np.float64 if double else np.float32
         args = (src, dst, luts, weights, i32(src.pitch), i32(src.width), i32(src.height),
                 i32(src.window.x0), i32(src.window.y0), real(cx), real(cy), real(ax), real(ay))
         quads, rows = src.pitch // 4, max(src.height, 1)
-        inner = None if double else interior_quads(shift, TAPS[filt], src.width, src.height)
+        inner = None if double else interior_quads(shift, FILTER_TAPS[lvl.filter], src.width,
+                                                   src.height)
         checked = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
-                            CA_FAST=0, **defines)
+                            fp64=lvl.fp64, CA_FAST=0, **defines)
         for qx0, y0, nq, nr in ring(quads, rows, inner):
             rt.launch(checked, (nq, nr), *args, i32(qx0), i32(y0), i32(nq), i32(nr))
         if inner is not None:
             fast = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
-                             CA_FAST=1, **defines)
+                             fp64=lvl.fp64, CA_FAST=1, **defines)
             qx0, y0, nq, nr = inner
             rt.launch(fast, (nq, nr), *args, i32(qx0), i32(y0), i32(nq), i32(nr))
         return dst
-
-
-TAPS = {"bilinear": 2, "bicubic": 4, "lanczos3": 6}
 
 
 def padded_count(n: int) -> int:
@@ -348,54 +348,3 @@ def ring(quads: int, rows: int, inner):
     parts = [(0, 0, quads, y0), (0, y0 + nr, quads, rows - y0 - nr),
              (0, y0, q0, nr), (q0 + nq, y0, quads - q0 - nq, nr)]
     return [r for r in parts if r[2] > 0 and r[3] > 0]
-
-
-def bench_case(width, height, rng):
-    """Strong spectral CA over a high-contrast HDR grid (white lines at 50 on grey)."""
-    from clfx.core.camera import Camera
-
-    src = np.full((height, width, 4), 0.18, np.float32)
-    src[::max(height // 12, 1), :, :3] = 50.0
-    src[:, ::max(width // 20, 1), :3] = 50.0
-    src[..., :3] += rng.uniform(0.0, 0.05, (height, width, 3)).astype(np.float32)
-    src[..., 3] = 1.0
-    return dict(source=src, depth=None, velocity=None,
-                params=dict(amount=0.004, cubic=0.3, spectral=True), camera=Camera())
-
-
-def bench_peers(case, params, ctx):
-    """cv2.remap of red and blue with the float64 source points of the three-channel mode
-    (the ``draft`` level's operation: green and alpha stay in place), bilinear."""
-    try:
-        import cv2
-    except ImportError:
-        return {}
-    src = np.ascontiguousarray(case["source"], np.float32)
-    win = ctx.source.window
-    # the same points as ChromaticAberration.packed_maps (float64 tables, float64 lookup)
-    cx, cy, unit, r_max = geometry(params, ctx.display_window, win, ctx.pixel_aspect)
-    deltas, _ = channel_bins(params.amount)
-    luts = build_luts(deltas, params.cubic, r_max)
-    scale = 1.0 / (unit * r_max)
-    ox, oy = pixel_centres(win)
-    dx, dy = ox - cx, oy - cy
-    rho = np.clip((dx * ctx.pixel_aspect * scale) ** 2 + (dy * scale) ** 2, 0.0, 1.0)
-    maps = []
-    for i in (0, 2):
-        s = lut_lookup(luts[i], rho)
-        # cv2's maps address pixel centres at integers; points without a source read the border
-        sx, sy = cx + dx * s - win.x0 - 0.5, cy + dy * s - win.y0 - 0.5
-        maps.append((np.where(np.isfinite(sx), sx, -1e6).astype(np.float32),
-                     np.where(np.isfinite(sy), sy, -1e6).astype(np.float32)))
-    border = {"edge": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101}.get(
-        params.border, cv2.BORDER_CONSTANT)
-    cv2.setNumThreads(2)
-
-    def remap_red_blue():
-        out = src.copy()
-        for c, (mx, my) in zip((0, 2), maps):
-            out[..., c] = cv2.remap(np.ascontiguousarray(src[..., c]), mx, my, cv2.INTER_LINEAR,
-                                    borderMode=border)
-        return out
-
-    return {"cv2.remap bilinear (R, B)": (remap_red_blue, "draft")}

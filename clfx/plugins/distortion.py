@@ -19,7 +19,7 @@ pixel shows the undistorted point whose OpenCV projection lands on it.  The inve
 per parameter set on the host in float64: a radial start from a monotonic 1D table of the
 radial map (bracketed: only the branch before the fold), then 2D Newton on the full model
 including the tangential terms, and a residual check (points that do not converge to 1e-6 px
-get no source).  The map is cached on the instance and reused for every frame.
+get no source).  The map is kept in the runtime's cache and reused for every frame.
 
 Defaults: fx = the camera block's focal length in pixels (``camera.focal_length_px``), fy =
 fx * pixel_aspect (pixels taller than wide need fewer of them per mm vertically), principal
@@ -46,13 +46,25 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
+from clfx.fx.resample import (BORDERS, PackedMap, ResampleLevel, check_fold, fit_scale,
+                              fold_radius, frame_key, kernel_defines, launch_packed,
+                              needs_sanitising, pixel_centres, rect_boundary, upload_map)
 from clfx.host import Plugin, register
-from clfx.fx.resample import (needs_sanitising, BORDERS, FILTER_BY_QUALITY, check_fold, fit_scale, fold_radius,
-                           kernel_defines, pixel_centres, rect_boundary, upload_map,
-                           FILTER_CODE, PackedMap, launch_packed)
 
 NEWTON_STEPS = 8
 RESIDUAL_TOL_PX = 1e-6
+
+LEVELS = {
+    "draft": ResampleLevel("bilinear (2x2) from a packed map (texel indices + float32 "
+                           "fractions), float32 sums", filter="bilinear"),
+    "preview": ResampleLevel("bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, "
+                             "packed map, float32 sums", filter="bicubic"),
+    "final": ResampleLevel("Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, packed map "
+                           "(positions to ~1e-7 px; border tiles ~1e-4 px at 4K), float32 sums",
+                           filter="lanczos3"),
+    "reference": ResampleLevel("Lanczos-3 with the anti-ringing clamp, float64 map and float64 "
+                               "sums", fp64=True, filter="lanczos3"),
+}
 
 
 def intrinsics(p, camera, display_window, pixel_aspect):
@@ -223,110 +235,60 @@ class Distortion(Plugin):
                         hint="What points outside the source read: black (transparent), edge "
                              "(clamp), mirror."),
         ),
-        quality={
-            "draft": "bilinear (2x2) from a packed map (texel indices + float32 fractions), "
-                     "float32 sums",
-            "preview": "bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, packed map, "
-                       "float32 sums",
-            "final": "Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, packed map (positions "
-                     "to ~1e-7 px; border tiles ~1e-4 px at 4K), float32 sums",
-            "reference": "Lanczos-3 with the anti-ringing clamp, float64 map and float64 sums",
-        },
+        quality=LEVELS,
     )
-
-    def __init__(self):
-        self._maps: dict = {}
-        self._host_key = None
-        self._host = None
 
     def is_identity(self, p, ctx):
         if p.amount == 0.0 and p.k1 == p.k2 == p.k3 == p.p1 == p.p2 == 0.0:
             return "amount and all coefficients (k1, k2, k3, p1, p2) are 0"
         return None
 
-    def device_map(self, rt, p, ctx, double):
-        """The cached device map for this parameter set and frame geometry.
+    def host_map(self, rt, p, ctx):
+        """The float64 source points of ``ctx.source``'s pixels (source-window coordinates,
+        NaN = no source) and the map's info, kept in ``rt.cache`` (shared by the packed and
+        the float64 device maps)."""
+        src = ctx.source
 
-        float levels: ``(entries, fixups, fast_possible)`` of a :class:`clfx.fx.resample.PackedMap`
-        (one serves bilinear, bicubic and Lanczos-3); reference: a float64 displacement map.
+        def build():
+            sx, sy, info = build_map(p, ctx.camera, ctx.display_window, src.window,
+                                     ctx.pixel_aspect)
+            return sx - src.window.x0, sy - src.window.y0, info
+
+        return rt.cache.get(("distortion.host_map",) + frame_key(p, ctx), build)
+
+    def device_map(self, rt, p, ctx, double):
+        """The device map for this parameter set and frame geometry, kept in ``rt.cache``:
+        ``(map, info)``; float levels: a :class:`clfx.fx.resample.DevicePackedMap` (one serves
+        bilinear, bicubic and Lanczos-3); ``double`` (reference): a float64 displacement map.
         """
         src = ctx.source
-        key = (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
-               ctx.camera, double)
-        hit = self._maps.get(key)
-        if hit is None:
-            # the float64 host map is shared by the packed and the float64 device maps
-            host_key = key[:-1]
-            if self._host_key != host_key:
-                sx, sy, info = build_map(p, ctx.camera, ctx.display_window, src.window,
-                                         ctx.pixel_aspect)
-                self._host_key, self._host = host_key, (sx - src.window.x0,
-                                                        sy - src.window.y0, info)
-            sx, sy, info = self._host
+
+        def build():
+            sx, sy, info = self.host_map(rt, p, ctx)
             if double:
                 ox, oy = pixel_centres(src.window, frame_origin=False)
-                bufs = (upload_map(rt, sx - ox, sy - oy, src.pitch, True),)
-            else:
-                pm = PackedMap([(sx, sy)], src.width, src.height, src.pitch)
-                bufs = pm.upload(rt) + (pm.fast_possible,)
-            if len(self._maps) >= 4:
-                self._maps.pop(next(iter(self._maps)))
-            hit = self._maps[key] = (bufs, info)
-        return hit
+                return upload_map(rt, sx - ox, sy - oy, src.pitch, True), info
+            return PackedMap([(sx, sy)], src.width, src.height, src.pitch).upload(rt), info
+
+        return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (double,), build)
 
     def render(self, rt, p, ctx):
         src = ctx.source
-        double = ctx.quality == "reference" and rt.has_fp64
-        bufs, info = self.device_map(rt, p, ctx, double)
+        lvl = self.level(ctx)
+        double = rt.use_fp64(lvl.fp64)
+        dmap, info = self.device_map(rt, p, ctx, double)
         if info["no_source"]:
             ctx.notes.append(f"distortion: {info['no_source']} px beyond the lens's reach "
                              f"left transparent")
-        defines = kernel_defines(FILTER_BY_QUALITY[ctx.quality], p.border, double,
-                                 needs_sanitising(ctx, "distortion"))
+        defines = kernel_defines(lvl.filter, p.border, needs_sanitising(ctx, "distortion"))
         dst = src.like()
         i32 = np.int32
         tail = (i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch), i32(dst.height))
         if double:
-            knl = rt.kernel("distortion.cl", "distortion_warp_f64", **defines)
-            rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, bufs[0], *tail)
+            knl = rt.kernel("distortion.cl", "distortion_warp_f64", fp64=lvl.fp64, **defines)
+            rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, dmap, *tail)
             return dst
-        entries, fixups, fast_possible = bufs
-        code = FILTER_CODE[FILTER_BY_QUALITY[ctx.quality]]
-        launch_packed(rt, rt.kernel("distortion.cl", "distortion_warp", **defines),
-                      rt.kernel("distortion.cl", "distortion_fix", **defines), entries, fixups,
-                      code, src.pitch // 4, src.height, (src, dst), tail, fast_possible[code])
+        launch_packed(rt, rt.kernel("distortion.cl", "distortion_warp", fp64=lvl.fp64, **defines),
+                      rt.kernel("distortion.cl", "distortion_fix", fp64=lvl.fp64, **defines),
+                      dmap, lvl.filter, src.pitch // 4, src.height, (src, dst), tail)
         return dst
-
-
-def bench_case(width, height, rng):
-    """A calibrated-looking wide lens with tangential terms over an HDR image with edges."""
-    from clfx.core.camera import Camera
-
-    src = rng.uniform(0.0, 1.0, (height, width, 4)).astype(np.float32)
-    src[height // 3: height // 2, width // 3: width // 2, :3] = 1e4   # HDR block: ringing test
-    src[..., 3] = 1.0
-    return dict(source=src, depth=None, velocity=None,
-                params=dict(k1=-0.12, k2=0.03, p1=0.001, p2=-0.0005, fit="fill", border="edge"),
-                camera=Camera(focal_length=24.0, sensor_width=36.0))
-
-
-def bench_peers(case, params, ctx):
-    """cv2.remap with the same (float64-inverted) map: bilinear, bicubic and Lanczos-4."""
-    try:
-        import cv2
-    except ImportError:
-        return {}
-    src = np.ascontiguousarray(case["source"], np.float32)
-    win = ctx.source.window
-    sx, sy, _ = build_map(params, ctx.camera, ctx.display_window, win, ctx.pixel_aspect)
-    # cv2's maps address pixel centres at integers; points without a source read the border
-    map_x = np.where(np.isfinite(sx), sx - 0.5 - win.x0, -1e6).astype(np.float32)
-    map_y = np.where(np.isfinite(sy), sy - 0.5 - win.y0, -1e6).astype(np.float32)
-    border = {"edge": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101}.get(
-        params.border, cv2.BORDER_CONSTANT)
-    cv2.setNumThreads(2)
-    return {f"cv2.remap {name}": ((lambda flag=flag: cv2.remap(src, map_x, map_y, flag,
-                                                               borderMode=border)), level)
-            for name, flag, level in (("bilinear", cv2.INTER_LINEAR, "draft"),
-                                      ("cubic", cv2.INTER_CUBIC, "preview"),
-                                      ("lanczos4", cv2.INTER_LANCZOS4, "final"))}

@@ -31,7 +31,8 @@ For every pixel at frame coordinates (X, Y) and channel c in R, G, B::
 
 The grain is zero-mean: the expected value of every pixel is unchanged, and nothing is
 clamped (dark pixels with large grain may go slightly negative, as with any additive noise).
-Non-finite RGB inputs are replaced by 0 before the grain is added.
+Non-finite inputs are replaced by 0 before the grain is added (alpha too: alpha is otherwise
+kept bit for bit).
 
 Implementation and quality levels: every level draws the same white noise (so levels can be
 compared pixel by pixel) and differs only in the filter: draft none (white noise, one pass),
@@ -52,7 +53,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, IntParam, RGBParam
+from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
+from clfx.fx.noise import SEED_PARAM, effect_seed
 from clfx.host import Plugin, register
 
 MID_GREY = 0.18
@@ -61,8 +63,24 @@ MID_GREY = 0.18
 REFERENCE_WIDTH = 2048
 """Grain sizes are in pixels at this display width (a 2K scan)."""
 
-TRUNCATION = {"draft": None, "preview": 2.0, "final": 4.0, "reference": 6.0}
-"""Gaussian filter radius in standard deviations per quality level (None: no filter)."""
+
+
+@dataclass(frozen=True)
+class GrainLevel(Level):
+    """A quality level of grain: the Gaussian filter's radius in standard deviations
+    (``truncation``; None: white noise, no filter)."""
+
+    truncation: float | None = 4.0
+
+
+LEVELS = {
+    "draft": GrainLevel("white noise without the size filter (one pass, float32)",
+                        truncation=None),
+    "preview": GrainLevel("separable Gaussian truncated at 2 sigma, float32", truncation=2.0),
+    "final": GrainLevel("separable Gaussian truncated at 4 sigma, float32", truncation=4.0),
+    "reference": GrainLevel("separable Gaussian truncated at 6 sigma; noise, intermediate "
+                            "buffers and tap sums in float64", fp64=True, truncation=6.0),
+}
 
 GRAIN_SALT = 0x6772616E  # "gran": keeps grain independent of other noise with the same seed
 
@@ -97,24 +115,6 @@ STOCKS = {
     "mono-400": FilmStock((1.0, 1.0, 1.0), (1.0, 1.0, 1.0), monochrome=True, nominal_size=1.1,
                           nominal_amount=0.05),
 }
-
-
-# -- deterministic seeds ------------------------------------------------------------------
-def lowbias32(x: int) -> int:
-    """The 32-bit integer hash of kernels/lib/common.h (``clfx_hash``), on a Python int."""
-    x &= 0xFFFFFFFF
-    x ^= x >> 16
-    x = (x * 0x7FEB352D) & 0xFFFFFFFF
-    x ^= x >> 15
-    x = (x * 0x846CA68B) & 0xFFFFFFFF
-    x ^= x >> 16
-    return x
-
-
-def effect_seed(param_seed: int, look_seed: int, salt: int) -> int:
-    """The kernel's 32-bit seed from the effect's ``seed`` param, the look's seed and a salt
-    naming the noise stream (different effects with equal seeds stay uncorrelated)."""
-    return lowbias32((param_seed & 0xFFFFFFFF) ^ lowbias32((look_seed & 0xFFFFFFFF) ^ salt))
 
 
 # -- filter ---------------------------------------------------------------------------------
@@ -203,20 +203,10 @@ class Grain(Plugin):
             BoolParam("monochrome", False,
                       hint="One grain field for R, G and B (black-and-white film); else "
                            "independent colour grain per channel."),
-            IntParam("seed", 0, min=0, max=2 ** 31 - 1,
-                     hint="Noise seed, combined with the look's seed."),
+            SEED_PARAM,
         ),
-        quality={
-            "draft": "white noise without the size filter (one pass, float32)",
-            "preview": "separable Gaussian truncated at 2 sigma, float32",
-            "final": "separable Gaussian truncated at 4 sigma, float32",
-            "reference": "separable Gaussian truncated at 6 sigma; noise, intermediate buffers "
-                         "and tap sums in float64",
-        },
+        quality=LEVELS,
     )
-
-    def __init__(self):
-        self._weights_cache: dict = {}
 
     # cheap questions ---------------------------------------------------------------------
     def is_identity(self, p, ctx):
@@ -228,22 +218,21 @@ class Grain(Plugin):
 
     # render ------------------------------------------------------------------------------
     def _device_weights(self, rt, sigmas, truncation, use64):
-        """(radius, device buffer) of the tap table, cached per size and quality."""
-        key = (tuple(round(s, 12) for s in sigmas), truncation, use64)
-        hit = self._weights_cache.get(key)
-        if hit is None:
+        """(radius, device buffer) of the tap table, kept in ``rt.cache`` per size and
+        level."""
+        def build():
             radius, weights = grain_weights(sigmas, truncation)
-            buf = rt.to_device(weights.astype(np.float64 if use64 else np.float32))
-            if len(self._weights_cache) > 32:
-                self._weights_cache.clear()
-            hit = self._weights_cache[key] = (radius, buf)
-        return hit
+            return radius, rt.to_device(weights.astype(np.float64 if use64 else np.float32))
+
+        key = ("grain.weights", tuple(round(s, 12) for s in sigmas), truncation, use64)
+        return rt.cache.get(key, build)
 
     def render(self, rt, p, ctx):
         src = ctx.source
         _, _, mono = channel_ratios(p)
-        use64 = ctx.quality == "reference" and rt.has_fp64
-        defines = {"MONO": int(mono), "USE_DOUBLE": int(use64)}
+        lvl = self.level(ctx)
+        use64 = rt.use_fp64(lvl.fp64)
+        defines = {"MONO": int(mono)}
         seed = np.uint32(effect_seed(p.seed, ctx.seed, GRAIN_SALT))
         frame = np.int32(ctx.frame)
         ar, ag, ab = (np.float32(a) for a in grain_amounts(p))
@@ -252,11 +241,11 @@ class Grain(Plugin):
         dst = src.like()
         pitch, height = src.pitch, src.height
         x0, y0 = src.window.x0, src.window.y0
-        truncation = TRUNCATION[ctx.quality]
+        truncation = lvl.truncation
         sigmas = grain_sigmas_px(p, ctx.width_px)
         if truncation is None or max(sigmas) < 1e-6:
             # draft, or size 0: the filter is the single tap 1, so skip the two passes
-            knl = rt.kernel("grain.cl", "grain_apply_white", **defines)
+            knl = rt.kernel("grain.cl", "grain_apply_white", fp64=lvl.fp64, **defines)
             rt.launch(knl, (pitch // 4, height), src, dst, i32(pitch), i32(height), i32(x0),
                       i32(y0), seed, frame, ar, ag, ab, response)
             return dst
@@ -268,55 +257,13 @@ class Grain(Plugin):
         npitch = -(-(pitch + 2 * radius) // 4) * 4   # every vload16 of the taps stays inside
         noise = rt.buffer(rows * npitch * 4 * real_bytes)
         tmp = rt.buffer(rows * pitch * 4 * real_bytes)
-        rt.launch(rt.kernel("grain.cl", "grain_noise", **defines), (npitch // 4, rows),
-                  noise, i32(npitch), i32(rows), i32(x0 - radius), i32(y0 - radius), seed, frame)
-        rt.launch(rt.kernel("grain.cl", "grain_blur_h", **defines), (pitch // 4, rows),
-                  noise, tmp, weights, i32(npitch), i32(pitch), i32(rows))
-        rt.launch(rt.kernel("grain.cl", "grain_apply", **defines), (pitch // 4, height),
-                  src, dst, tmp, weights, i32(pitch), i32(height), ar, ag, ab, response)
+        def knl(name):
+            return rt.kernel("grain.cl", name, fp64=lvl.fp64, **defines)
+
+        rt.launch(knl("grain_noise"), (npitch // 4, rows), noise, i32(npitch), i32(rows),
+                  i32(x0 - radius), i32(y0 - radius), seed, frame)
+        rt.launch(knl("grain_blur_h"), (pitch // 4, rows), noise, tmp, weights, i32(npitch),
+                  i32(pitch), i32(rows))
+        rt.launch(knl("grain_apply"), (pitch // 4, height), src, dst, tmp, weights, i32(pitch),
+                  i32(height), ar, ag, ab, response)
         return dst
-
-
-def bench_case(width, height, rng):
-    """A representative hard case: an HDR gradient with highlights, 500T-like colour grain."""
-    from clfx.core.camera import Camera
-
-    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
-    base = 0.02 + 1.5 * (x / max(width - 1, 1)) * (y / max(height - 1, 1))
-    src = np.empty((height, width, 4), np.float32)
-    src[..., 0], src[..., 1], src[..., 2] = base * 1.1, base, base * 0.8
-    src[..., 3] = 1.0
-    hot = rng.integers(0, height * width, size=max(1, height * width // 50000))
-    src.reshape(-1, 4)[hot, :3] = 1e4
-    stock = STOCKS["fast-500t"]
-    return dict(source=src, depth=None, velocity=None,
-                params={"stock": "fast-500t", "amount": stock.nominal_amount,
-                        "size": stock.nominal_size, "seed": 7},
-                camera=Camera())
-
-
-def bench_peers(case, params, ctx=None):
-    """OpenCV doing the same operation (its own random samples: compare times, not pixels)."""
-    try:
-        import cv2
-    except ImportError:
-        return {}
-    src = np.asarray(case["source"], np.float32)
-    sigmas = grain_sigmas_px(params, src.shape[1])
-    amounts = grain_amounts(params)
-
-    def opencv_grain():
-        rgb = src[..., :3]
-        noise = np.empty(rgb.shape, np.float32)
-        cv2.randn(noise, 0.0, 1.0)
-        lum = np.clip(rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32), 1e-30, 1e30)
-        scale = (lum / MID_GREY) ** params.response
-        out = src.copy()
-        for c in range(3):
-            # continuous-limit normalisation of Gaussian-filtered white noise: 2 sqrt(pi) sigma
-            field = cv2.GaussianBlur(np.ascontiguousarray(noise[..., c]), (0, 0), sigmas[c])
-            norm = 2 * math.sqrt(math.pi) * sigmas[c]
-            out[..., c] = rgb[..., c] + amounts[c] * scale * field * norm
-        return out
-
-    return {"opencv randn + GaussianBlur + mix": opencv_grain}

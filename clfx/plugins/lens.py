@@ -34,16 +34,29 @@ import math
 
 import numpy as np
 
-from clfx.fx import lensdb
 from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
+from clfx.fx import lensdb
+from clfx.fx.resample import (BORDERS, DevicePackedMap, PackedMap, ResampleLevel, check_fold,
+                              fit_scale, fold_radius, frame_key, kernel_defines,
+                              launch_packed, lut_lookup, needs_sanitising, pixel_centres,
+                              radial_inverse, radial_inverse_fast, radial_lut, rect_boundary,
+                              upload_map)
 from clfx.host import Plugin, register
-from clfx.fx.resample import (BORDERS, FILTER_BY_QUALITY, FILTER_CODE, PackedMap, check_fold,
-                           fit_scale, fold_radius, kernel_defines, launch_packed, lut_lookup,
-                           needs_sanitising, pixel_centres, radial_inverse, radial_inverse_fast,
-                           radial_lut, rect_boundary, upload_map)
 
 LUT_SIZE = 1024
+
+LEVELS = {
+    "draft": ResampleLevel("bilinear (2x2) from a packed map of the green, red and blue source "
+                           "points (texel indices + float32 fractions, from float64 geometry), "
+                           "float32 sums", filter="bilinear"),
+    "preview": ResampleLevel("bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, "
+                             "packed map, float32 sums", filter="bicubic"),
+    "final": ResampleLevel("Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, packed map, "
+                           "float32 sums", filter="lanczos3"),
+    "reference": ResampleLevel("Lanczos-3 with the anti-ringing clamp, float64 map, tables and "
+                               "sums", fp64=True, filter="lanczos3"),
+}
 
 
 def distortion_model(name, terms):
@@ -170,21 +183,8 @@ class Lens(Plugin):
             ChoiceParam("border", "edge", choices=BORDERS,
                         hint="What reads outside the source return: black, edge (clamp), mirror."),
         ),
-        quality={
-            "draft": "bilinear (2x2) from a packed map of the green, red and blue source "
-                     "points (texel indices + float32 fractions, from float64 geometry), "
-                     "float32 sums",
-            "preview": "bicubic (Keys a=-0.5, 4x4) with the 2x2 anti-ringing clamp, packed map, "
-                       "float32 sums",
-            "final": "Lanczos-3 (6x6) with the 2x2 anti-ringing clamp, packed map, float32 sums",
-            "reference": "Lanczos-3 with the anti-ringing clamp, float64 map, tables and sums",
-        },
+        quality=LEVELS,
     )
-
-    def __init__(self):
-        self._cache: dict = {}
-        self._host_key = None
-        self._host = None
 
     def is_identity(self, p, ctx):
         if not p.model.strip():
@@ -193,19 +193,20 @@ class Lens(Plugin):
             return "distortion, tca and vignetting are all off"
         return None
 
-    def host_geometry(self, p, ctx):
-        """Float64 geometry of this parameter set and frame (cached): every channel's source
-        points, the TCA tables and the kernel constants.
+    def host_geometry(self, rt, p, ctx):
+        """Float64 geometry of this parameter set and frame (kept in ``rt.cache``): every
+        channel's source points, the TCA tables and the kernel constants.
 
         Returns a dict with ``green`` (gx, gy) and, with TCA, ``red``/``blue`` source points
         (source-window coordinates, texel centres at +0.5, NaN = no source), ``luts``,
         ``consts`` (ccx, ccy, lut_scale, vig_scale, vk1, vk2, vk3; centre in source-window
         coordinates), ``flags`` (use_map, use_tca, use_vig) and ``notes``.
         """
+        return rt.cache.get(("lens.geometry",) + frame_key(p, ctx),
+                            lambda: self._geometry(p, ctx))
+
+    def _geometry(self, p, ctx):
         src = ctx.source
-        key = (p.hash_hex(), src.window, ctx.display_window, ctx.pixel_aspect, ctx.camera)
-        if self._host_key == key:
-            return self._host
         dw = ctx.display_window
         crop = lensdb.crop_factor(ctx.camera, dw.width, dw.height, ctx.pixel_aspect)
         lens = lensdb.get_lens(p.maker, p.model, crop)
@@ -244,83 +245,58 @@ class Lens(Plugin):
         geo.update(consts=(ccx - x0, ccy - y0, geo["lut_scale"],
                            norm.scale / norm.vignetting_unit) + tuple(vk),
                    flags=(use_map, use_tca, use_vig), notes=notes)
-        self._host_key, self._host = key, geo
         return geo
 
     def device_buffers(self, rt, p, ctx, double):
-        """Cached device data: reference (float64) ``("f64", map, luts)``; float levels
-        ``("packed", entries, fixups, fast_possible, maps)`` of a PackedMap of green (and
-        red, blue with TCA); ``maps`` = 0 when nothing moves (vignetting only)."""
+        """Device data, kept in ``rt.cache``: reference (``double``) ``(map, luts)``, float64
+        buffers; float levels a :class:`clfx.fx.resample.DevicePackedMap` of green (and red,
+        blue with TCA), with ``maps`` = 0 when nothing moves (vignetting only)."""
         src = ctx.source
-        key = (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
-               ctx.camera, double)
-        hit = self._cache.get(key)
-        if hit is not None:
-            return hit
-        geo = self.host_geometry(p, ctx)
-        use_map, use_tca, _ = geo["flags"]
-        if double:
-            ux, uy = pixel_centres(src.window, frame_origin=False)
-            gx, gy = geo["green"]
-            map_buf = upload_map(rt, gx - ux, gy - uy, src.pitch, True) if use_map else \
-                rt.to_device(np.zeros(2))
-            lut_buf = rt.to_device(geo["luts"] if use_tca else np.zeros(2))
-            hit = ("f64", map_buf, lut_buf)
-        elif use_map or use_tca:
+
+        def build():
+            geo = self.host_geometry(rt, p, ctx)
+            use_map, use_tca, _ = geo["flags"]
+            if double:
+                ux, uy = pixel_centres(src.window, frame_origin=False)
+                gx, gy = geo["green"]
+                map_buf = upload_map(rt, gx - ux, gy - uy, src.pitch, True) if use_map else \
+                    rt.to_device(np.zeros(2))
+                return map_buf, rt.to_device(geo["luts"] if use_tca else np.zeros(2))
+            if not (use_map or use_tca):      # vignetting only: the source is read in place
+                return DevicePackedMap(rt.to_device(np.zeros(4, np.int32)), {}, {}, 0)
             points = [geo["green"]] + ([geo["red"], geo["blue"]] if use_tca else [])
-            pm = PackedMap(points, src.width, src.height, src.pitch)
-            hit = ("packed",) + pm.upload(rt) + (pm.fast_possible, len(points))
-        else:
-            hit = ("packed", rt.to_device(np.zeros(4, np.int32)), None, None, 0)
-        if len(self._cache) >= 4:
-            self._cache.pop(next(iter(self._cache)))
-        self._cache[key] = hit
-        return hit
+            return PackedMap(points, src.width, src.height, src.pitch).upload(rt)
+
+        return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (double,), build)
 
     def render(self, rt, p, ctx):
         src = ctx.source
-        double = ctx.quality == "reference" and rt.has_fp64
+        lvl = self.level(ctx)
+        double = rt.use_fp64(lvl.fp64)
         bufs = self.device_buffers(rt, p, ctx, double)
-        geo = self.host_geometry(p, ctx)
+        geo = self.host_geometry(rt, p, ctx)
         use_map, use_tca, use_vig = geo["flags"]
         ctx.notes.extend(geo["notes"])
-        filt = FILTER_BY_QUALITY[ctx.quality]
-        defines = kernel_defines(filt, p.border, double, needs_sanitising(ctx, "lens"))
+        defines = kernel_defines(lvl.filter, p.border, needs_sanitising(ctx, "lens"))
         defines.update(HAS_MAP=int(use_map), HAS_TCA=int(use_tca), HAS_VIG=int(use_vig),
                        LUTN=LUT_SIZE)
         dst = src.like()
         i32 = np.int32
         if double:
-            _, map_buf, lut_buf = bufs
-            knl = rt.kernel("lens.cl", "lens_apply", **defines)
+            map_buf, lut_buf = bufs
+            knl = rt.kernel("lens.cl", "lens_apply", fp64=lvl.fp64, **defines)
             rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, map_buf, lut_buf,
                       i32(src.pitch), i32(src.width), i32(src.height), i32(src.window.x0),
                       i32(src.window.y0), *[np.float64(c) for c in geo["consts"]])
             return dst
-        _, entries, fixups, fast_possible, maps = bufs
-        defines.update(LENS_MAPS=maps)
+        defines.update(LENS_MAPS=bufs.maps)
         ccx, ccy, _, vig_scale, vk1, vk2, vk3 = geo["consts"]
         tail = (i32(src.pitch), i32(src.width), i32(src.height)) + tuple(
             np.float32(c) for c in (ccx, ccy, vig_scale, vk1, vk2, vk3))
-        fast = rt.kernel("lens.cl", "lens_packed", **defines)
-        if maps == 0:
-            rt.launch(fast, (src.pitch // 4, max(src.height, 1)), src, dst, entries, *tail)
+        fast = rt.kernel("lens.cl", "lens_packed", fp64=lvl.fp64, **defines)
+        if bufs.maps == 0:
+            rt.launch(fast, (src.pitch // 4, max(src.height, 1)), src, dst, bufs.entries, *tail)
             return dst
-        code = FILTER_CODE[filt]
-        launch_packed(rt, fast, rt.kernel("lens.cl", "lens_packed_fix", **defines), entries,
-                      fixups, code, src.pitch // 4, src.height, (src, dst), tail,
-                      fast_possible[code])
+        launch_packed(rt, fast, rt.kernel("lens.cl", "lens_packed_fix", fp64=lvl.fp64, **defines),
+                      bufs, lvl.filter, src.pitch // 4, src.height, (src, dst), tail)
         return dst
-
-
-def bench_case(width, height, rng):
-    """Canon EF 24-70mm f/2.8L II at 24 mm f/2.8: ptlens distortion, poly3 TCA, vignetting."""
-    from clfx.core.camera import Camera
-
-    src = rng.uniform(0.0, 1.0, (height, width, 4)).astype(np.float32)
-    src[::max(height // 10, 1), :, :3] = 20.0
-    src[..., 3] = 1.0
-    return dict(source=src, depth=None, velocity=None,
-                params=dict(maker="Canon", model="Canon EF 24-70mm f/2.8L II USM"),
-                camera=Camera(focal_length=24.0, f_number=2.8, sensor_width=36.0,
-                              focus_distance=3.0))

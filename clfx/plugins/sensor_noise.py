@@ -31,10 +31,10 @@ of a Poisson at 30 counts is 0.18).  Draft uses the normal approximation at ever
 Random numbers come from ``clfx_uniform(seed, frame, X, Y, c)`` at frame coordinates, so
 the noise is identical for a frame rendered alone, in a batch, cropped, or on any thread
 count; the PRNU pattern uses frame 0 and its own seed, so it stays fixed over a sequence
-(it is computed once per parameter set and data window and cached on the plugin instance:
+(it is computed once per parameter set and data window and kept in the runtime's cache:
 one frame-sized float buffer).
 Non-finite inputs become 0 (then get read noise) and values are clamped to +-1e38 so
-nothing overflows; alpha is kept bit for bit.
+nothing overflows; alpha is kept bit for bit (0 where it was not finite).
 
 References: EMVA Standard 1288 (linear photon-transfer model: variance = K (mu - mu_dark)
 + sigma_read^2, PRNU); Foi et al. 2008, "Practical Poissonian-Gaussian noise modeling and
@@ -42,17 +42,37 @@ fitting for single-image raw-data".
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from clfx.core.plugin import BoolParam, Descriptor, FloatParam, IntParam, RGBParam
+from clfx.core.plugin import BoolParam, Descriptor, FloatParam, Level, RGBParam
+from clfx.fx.noise import SEED_PARAM, effect_seed
 from clfx.host import Plugin, register
-from clfx.plugins.grain import effect_seed
 
 SENSOR_SALT = 0x73656E73  # "sens"
 PRNU_SALT = 0x70726E75    # "prnu"
 
-POISSON_SWITCH = {"draft": None, "preview": 10.0, "final": 30.0, "reference": 30.0}
-"""Largest expected electron count sampled exactly (None: normal approximation everywhere)."""
+
+@dataclass(frozen=True)
+class SensorNoiseLevel(Level):
+    """A quality level of sensor noise: the largest expected electron count whose Poisson
+    count is sampled exactly (``poisson_switch``; None: normal approximation everywhere)."""
+
+    poisson_switch: float | None = 30.0
+
+
+LEVELS = {
+    "draft": SensorNoiseLevel("normal approximation of the shot noise at every count, float32",
+                              poisson_switch=None),
+    "preview": SensorNoiseLevel("exact Poisson inversion up to 10 expected electrons, normal "
+                                "above; float32", poisson_switch=10.0),
+    "final": SensorNoiseLevel("exact Poisson inversion up to 30 expected electrons, normal "
+                              "above; float32", poisson_switch=30.0),
+    "reference": SensorNoiseLevel("as final, with all arithmetic (Box-Muller, CDF sums, the "
+                                  "PRNU pattern's Gaussian) in float64", fp64=True,
+                                  poisson_switch=30.0),
+}
 
 MAX_COUNT = 200
 """Bound of the inversion loop, in CDF terms (never reached: with u <= 1 - 4e-6 and
@@ -105,16 +125,9 @@ class SensorNoise(Plugin):
             RGBParam("channel_sensitivity", (1.0, 1.0, 1.0), min=0.01, max=100.0,
                      hint="Relative electrons per unit per channel (e.g. 0.5 = that channel "
                           "needs twice the white-balance gain and is noisier)."),
-            IntParam("seed", 0, min=0, max=2 ** 31 - 1,
-                     hint="Noise seed, combined with the look's seed."),
+            SEED_PARAM,
         ),
-        quality={
-            "draft": "normal approximation of the shot noise at every count, float32",
-            "preview": "exact Poisson inversion up to 10 expected electrons, normal above; float32",
-            "final": "exact Poisson inversion up to 30 expected electrons, normal above; float32",
-            "reference": "as final, with all arithmetic (Box-Muller, CDF sums, the PRNU "
-                         "pattern's Gaussian) in float64",
-        },
+        quality=LEVELS,
     )
 
     def is_identity(self, p, ctx):
@@ -122,12 +135,9 @@ class SensorNoise(Plugin):
             return "shot noise is off, read noise and prnu are 0"
         return None
 
-    def __init__(self):
-        super().__init__()
-        self._pattern = None   # (key, DeviceImage): the PRNU pattern of the last window
-
-    def prnu_pattern(self, rt, p, ctx, use64):
-        """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, cached per parameter set.
+    def prnu_pattern(self, rt, p, ctx, fp64):
+        """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, kept in ``rt.cache`` per
+        parameter set, window and precision.
 
         The pattern is the same on every frame, so a sequence computes it once: its
         Box-Muller pair per value (~40 % of a draft render at 1080p) becomes one read.
@@ -139,76 +149,44 @@ class SensorNoise(Plugin):
             Uses ``prnu`` and ``seed`` (with the look's seed, ``ctx.seed``).
         ctx : RenderContext
             Its source's window and pitch place the pattern in frame coordinates.
-        use64 : bool
-            Compute ``z`` in float64 (reference level); stored as float32 either way.
+        fp64 : bool
+            Compute ``z`` in float64 where the device can (the level's ``fp64``); stored as
+            float32 either way.
 
         Returns
         -------
         DeviceImage
             Same layout as ``ctx.source``; colour lanes hold ``prnu * z`` (the relative gain
-            error), alpha lanes 0.  Held by this instance until the key changes.
+            error), alpha lanes 0.
         """
         src = ctx.source
         seed = effect_seed(p.seed, ctx.seed, PRNU_SALT)
-        key = (rt, seed, float(p.prnu), src.window, src.pitch, use64)
-        if self._pattern is not None and self._pattern[0] == key:
-            return self._pattern[1]
-        self._pattern = None  # release the old pattern before allocating the new one
-        pattern = src.like()
-        knl = rt.kernel("sensor_noise.cl", "sensor_noise_prnu", USE_DOUBLE=int(use64))
-        rt.launch(knl, (src.pitch // 4, src.height), pattern, np.int32(src.pitch),
-                  np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
-                  np.uint32(seed), np.float32(p.prnu))
-        self._pattern = (key, pattern)
-        return pattern
+
+        def build():
+            pattern = src.like()
+            knl = rt.kernel("sensor_noise.cl", "sensor_noise_prnu", fp64=fp64)
+            rt.launch(knl, (src.pitch // 4, src.height), pattern, np.int32(src.pitch),
+                      np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
+                      np.uint32(seed), np.float32(p.prnu))
+            return pattern
+
+        key = ("sensor_noise.prnu", seed, float(p.prnu), src.window, src.pitch,
+               rt.use_fp64(fp64))
+        return rt.cache.get(key, build)
 
     def render(self, rt, p, ctx):
         src = ctx.source
-        switch = POISSON_SWITCH[ctx.quality]
-        use64 = ctx.quality == "reference" and rt.has_fp64
+        lvl = self.level(ctx)
+        switch = lvl.poisson_switch
         defines = {"SHOT": int(p.shot_noise), "READ": int(p.read_noise > 0),
                    "PRNU": int(p.prnu > 0), "INVERT": int(switch is not None),
-                   "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT,
-                   "USE_DOUBLE": int(use64)}
-        pattern = self.prnu_pattern(rt, p, ctx, use64) if p.prnu > 0 else src  # src: unread
+                   "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT}
+        pattern = self.prnu_pattern(rt, p, ctx, lvl.fp64) if p.prnu > 0 else src  # src: unread
         kr, kg, kb = (np.float32(k) for k in electrons_per_unit(p, ctx.camera))
         dst = src.like()
-        knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", **defines)
+        knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64, **defines)
         rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
                   np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
                   np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT)), np.int32(ctx.frame),
                   kr, kg, kb, np.float32(p.read_noise))
         return dst
-
-
-def bench_case(width, height, rng):
-    """A dark, high-ISO frame: most pixels below 30 electrons, so the exact Poisson path runs."""
-    from clfx.core.camera import Camera
-
-    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
-    base = 0.002 + 0.3 * (x / max(width - 1, 1)) ** 2 * (y / max(height - 1, 1))
-    src = np.empty((height, width, 4), np.float32)
-    src[..., 0], src[..., 1], src[..., 2] = base * 1.2, base, base * 0.7
-    src[..., 3] = 1.0
-    hot = rng.integers(0, height * width, size=max(1, height * width // 50000))
-    src.reshape(-1, 4)[hot, :3] = 1e4
-    return dict(source=src, depth=None, velocity=None,
-                params={"read_noise": 3.0, "prnu": 0.005,
-                        "channel_sensitivity": (0.6, 1.0, 0.45), "seed": 3},
-                camera=Camera(iso=6400.0))
-
-
-def bench_peers(case, params, ctx=None):
-    """NumPy's Poisson and normal generators on the host (own samples: compare times)."""
-    src = np.asarray(case["source"], np.float32)
-    k = electrons_per_unit(params, case["camera"])
-
-    def numpy_poisson():
-        gen = np.random.default_rng(0)
-        out = src.copy()
-        for c in range(3):
-            lam = np.minimum(np.maximum(src[..., c], 0.0) * k[c], 1e15)
-            out[..., c] = (gen.poisson(lam) + gen.normal(0.0, params.read_noise, lam.shape)) / k[c]
-        return out
-
-    return {"numpy Generator.poisson + normal": numpy_poisson}

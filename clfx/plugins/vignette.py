@@ -11,7 +11,9 @@ window; pixel aspect stretches x).  ``natural`` blends it in (1 = physical).
 Artistic falloff: ``1 - amount * smoothstep(radius, radius + softness, r)``, where ``r`` is
 the distance to the centre normalised so the frame corner is at 1; ``roundness`` = 1 gives
 a circle, 0 an ellipse following the frame's aspect.  Both factors multiply RGB; alpha is
-kept.  Values are clamped to [0, 1] so far-off-frame coordinates stay finite.
+kept.  Values are clamped to [0, 1] so far-off-frame coordinates stay finite.  Non-finite
+input values (colour or alpha) become 0, counted in ``ctx.notes`` from the frame's shared
+analysis.
 """
 from __future__ import annotations
 
@@ -19,8 +21,15 @@ import math
 
 import numpy as np
 
-from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
+from clfx.core.plugin import Descriptor, FloatParam, Level, Vec2Param
 from clfx.host import Plugin, register
+
+LEVELS = {
+    "draft": Level("float32 per pixel (exact closed form; all levels cost the same)"),
+    "preview": Level("float32 per pixel (exact closed form)"),
+    "final": Level("float32 per pixel (exact closed form)"),
+    "reference": Level("float64 evaluation of the falloff", fp64=True),
+}
 
 
 def vignette_geometry(p, camera, display_window, pixel_aspect):
@@ -40,16 +49,6 @@ def vignette_geometry(p, camera, display_window, pixel_aspect):
     ax = p.roundness * ax_circle + (1 - p.roundness) * ax_ellipse
     ay = p.roundness * ay_circle + (1 - p.roundness) * ay_ellipse
     return cx, cy, sx, sy, ax, ay
-
-
-def bench_case(width, height, rng):
-    """A textured HDR frame under a wide lens with a strong artistic falloff."""
-    from clfx.core.camera import Camera
-
-    src = rng.uniform(0.0, 4.0, (height, width, 4)).astype(np.float32)
-    src[..., 3] = 1.0
-    return {"source": src, "camera": Camera(focal_length=18.0),
-            "params": {"natural": 1.0, "amount": 0.4, "radius": 0.3, "softness": 0.6}}
 
 
 @register
@@ -72,12 +71,7 @@ class Vignette(Plugin):
             Vec2Param("center", (0.0, 0.0), min=-2.0, max=2.0,
                       hint="Optical centre offset as a fraction of half the frame (x right, y down)."),
         ),
-        quality={
-            "draft": "float32 per pixel (exact closed form; all levels cost the same)",
-            "preview": "float32 per pixel (exact closed form)",
-            "final": "float32 per pixel (exact closed form)",
-            "reference": "float64 evaluation of the falloff",
-        },
+        quality=LEVELS,
     )
 
     def is_identity(self, p, ctx):
@@ -89,9 +83,10 @@ class Vignette(Plugin):
         src = ctx.source
         cx, cy, sx, sy, ax, ay = vignette_geometry(p, ctx.camera, ctx.display_window,
                                                    ctx.pixel_aspect)
-        defines = {"REAL": "double", "REAL4": "double4"} if (
-            ctx.quality == "reference" and rt.has_fp64) else {}
-        knl = rt.kernel("vignette.cl", "vignette_apply", **defines)
+        nonfinite = ctx.analysis.nonfinite_count
+        if nonfinite:
+            ctx.notes.append(f"vignette: {nonfinite} non-finite pixel(s) set to 0")
+        knl = rt.kernel("vignette.cl", "vignette_apply", fp64=self.level(ctx).fp64)
         dst = src.like()
         f32 = np.float32
         rt.launch(knl, (src.pitch // 4, src.height), src, dst, np.int32(src.pitch),

@@ -32,6 +32,12 @@ inline float4 clfx_finite4_or_zero(float4 v)
                   clfx_finite_or(v.z, 0.0f), clfx_finite_or(v.w, 0.0f));
 }
 
+/* 4 RGBA pixels at once (one vector select): non-finite lanes become 0. */
+inline float16 clfx_finite16_or_zero(float16 v)
+{
+  return select((float16)0.0f, v, (as_uint16(v) & 0x7f800000u) != (uint16)0x7f800000u);
+}
+
 /* Rec.709 luminance of scene-linear RGB. */
 inline float clfx_luminance(float4 c)
 {
@@ -70,14 +76,11 @@ inline float4 clfx_load4_clamped(global const float *img, int pitch, int w, int 
   return vload4(clfx_clampi(y, 0, h - 1) * pitch + clfx_clampi(x, 0, w - 1), img);
 }
 
-/* Integer hash (lowbias32, Chris Wellons): uniform, cheap, stateless. */
-inline uint clfx_hash(uint x)
-{
-  x ^= x >> 16; x *= 0x7feb352du;
-  x ^= x >> 15; x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
+/* Integer hash (lowbias32, Chris Wellons): uniform, cheap, stateless.  CLFX_LOWBIAS32
+ * updates a uint or a uintN in place (fastmath.h's clfx_hash16 is the 16-lane form). */
+#define CLFX_LOWBIAS32(x) ((x) ^= (x) >> 16, (x) *= 0x7feb352du, (x) ^= (x) >> 15, \
+                           (x) *= 0x846ca68bu, (x) ^= (x) >> 16)
+inline uint clfx_hash(uint x) { CLFX_LOWBIAS32(x); return x; }
 
 /* Hash of (seed, frame, x, y, channel) -> uniform float in (0, 1). */
 inline float clfx_uniform(uint seed, int frame, int x, int y, int c)

@@ -3,8 +3,9 @@
  * PoCL's libm calls (log, sincos, pow, exp) run lane by lane; these polynomial versions are
  * pure arithmetic, so a work-item handling 16 lanes runs them as SIMD (3-10x faster here).
  * CLFX_DEFINE_FASTMATH(N) defines clfx_logN, clfx_sincos2piN and clfx_exp2_N for floatN;
- * a kernel file instantiates the widths it needs.  clfx_uniform16 is the 16-lane form of
- * common.h's clfx_uniform, bit for bit.
+ * a kernel file instantiates the widths it needs.  clfx_uniform16 (and its two halves,
+ * clfx_hash_xy16 and clfx_stream16) is the 16-lane form of common.h's clfx_uniform, bit
+ * for bit.
  */
 #ifndef CLFX_FASTMATH_H
 #define CLFX_FASTMATH_H
@@ -52,25 +53,33 @@ inline float##N clfx_exp2_##N(const float##N x)                                 
 }
 
 /* clfx_hash (lowbias32) on 16 lanes at once. */
-inline uint16 clfx_hash16(uint16 x)
+inline uint16 clfx_hash16(uint16 x) { CLFX_LOWBIAS32(x); return x; }
+
+/* clfx_uniform(seed, frame, x + i, y, c) in two parts, lane 4 i + c (pixels i = 0..3).  The
+ * first four of its five hashes depend on (seed, frame, x, y) only, so the streams of one
+ * pixel can share them: clfx_hash_xy16 once per pixel and seed, then clfx_stream16 once
+ * per group of four streams. */
+inline uint16 clfx_hash_xy16(uint seed, int frame, int x, int y)
 {
-  x ^= x >> 16; x *= 0x7feb352du;
-  x ^= x >> 15; x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
+  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
+  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+  const uint16 h = clfx_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
+  return clfx_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
+}
+
+/* The uniforms in (0, 1) of streams c0 + c (lane 4 i + c) from clfx_hash_xy16. */
+inline float16 clfx_stream16(uint16 hxy, int c0)
+{
+  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
+  const uint16 h = clfx_hash16(hxy ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
+  return (convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
 }
 
 /* clfx_uniform(seed, frame, x + i, y, c0 + c) for pixels i = 0..3 and channels c = 0..3,
  * lane 4 i + c; bit-identical to the scalar helper in common.h. */
 inline float16 clfx_uniform16(uint seed, int frame, int x, int y, int c0)
 {
-  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
-  const uint16 lane_px = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
-  const uint16 lane_c = (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
-  uint16 h = clfx_hash16((uint16)(prefix) ^ ((uint16)((uint)x) + lane_px));
-  h = clfx_hash16(h ^ (uint16)((uint)y * 0x85ebca6bu));
-  h = clfx_hash16(h ^ (((uint16)((uint)c0) + lane_c) * 0xc2b2ae35u));
-  return (convert_float16(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
+  return clfx_stream16(clfx_hash_xy16(seed, frame, x, y), c0);
 }
 
 #endif

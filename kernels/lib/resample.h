@@ -1,10 +1,12 @@
-/* resample.h: filtered reads of an RGBA image at continuous coordinates (clfx/resample.py).
+/* resample.h: filtered reads of an RGBA image at continuous coordinates (clfx/fx/resample.py).
  *
  * Shared by distortion.cl, chromatic_aberration.cl and lens.cl.  Compile-time choices:
  *   RS_FILTER  0 = bilinear (2x2), 1 = bicubic (Keys, a = -0.5, 4x4), 2 = Lanczos-3 (6x6)
  *   RS_BORDER  0 = black (transparent: texels outside the image are 0),
  *              1 = edge (clamp to the nearest edge texel), 2 = mirror (periodic reflect-101)
- *   REAL / REAL4  float (default) or double: the type of coordinates, weights and sums
+ *   REAL / REAL4  (kernels/lib/precision.h) float, or double in a CLFX_FP64 build (the
+ *                 reference levels): the type of coordinates, weights and sums; double
+ *                 builds also evaluate Lanczos with libm sin/cos and have no packed path
  *
  * Coordinates are continuous pixel coordinates inside the source window: the centre of texel
  * (i, j) is (i + 0.5, j + 0.5).  Non-finite texels read as 0, so a NaN/Inf pixel never
@@ -21,12 +23,7 @@
 #define CLFX_RESAMPLE_H
 
 #include "lib/common.h"
-
-#ifndef REAL
-#define REAL float
-#define REAL4 float4
-#define CONVERT_REAL4 convert_float4
-#endif
+#include "lib/precision.h"
 #ifndef RS_FILTER
 #define RS_FILTER 0
 #endif
@@ -89,7 +86,7 @@ inline void rs_weights(REAL t, REAL *wt)
    * (-1)^k sin(pi t) and sin(pi (t - k) / 3) follows from the angle-addition formula, so
    * only one sin/cos pair per axis is evaluated.  Weights are normalised to sum 1. */
   const REAL pi = (REAL)3.14159265358979323846;
-#ifdef RS_EXACT_TRIG
+#if REAL_IS_DOUBLE
   const REAL s1 = sin(pi * t);
   const REAL a = pi * t / (REAL)3;
   const REAL sa = sin(a), ca = cos(a);
@@ -144,7 +141,7 @@ inline float16 rs_sanitise16(float16 v)
 #if !RS_SANITISE
   return v;
 #endif
-  return select(v, (float16)0.0f, (as_int16(v) & (int16)0x7f800000) == (int16)0x7f800000);
+  return clfx_finite16_or_zero(v);
 }
 
 #define RS_MINMAX(t) do { lo = fmin(lo, (t)); hi = fmax(hi, (t)); } while(0)
@@ -167,8 +164,8 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
     global const float *base = src + (by * pitch + bx) * 4;
     const float8 a = rs_sanitise8(vload8(0, base));
     const float8 b = rs_sanitise8(vload8(0, base + pitch * 4));
-    const REAL4 top = CONVERT_REAL4(a.lo) + tx * (CONVERT_REAL4(a.hi) - CONVERT_REAL4(a.lo));
-    const REAL4 bot = CONVERT_REAL4(b.lo) + tx * (CONVERT_REAL4(b.hi) - CONVERT_REAL4(b.lo));
+    const REAL4 top = TO_REAL4(a.lo) + tx * (TO_REAL4(a.hi) - TO_REAL4(a.lo));
+    const REAL4 bot = TO_REAL4(b.lo) + tx * (TO_REAL4(b.hi) - TO_REAL4(b.lo));
     return top + ty * (bot - top);
   }
 #endif
@@ -184,26 +181,26 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
     for(int j = 0; j < RS_TAPS; j++) {
       const float16 r = rs_sanitise16(vload16(0, base + j * pitch * 4));
 #if RS_FILTER == 1
-      const REAL4 row = wx[0] * CONVERT_REAL4(r.lo.lo) + wx[1] * CONVERT_REAL4(r.lo.hi)
-                      + wx[2] * CONVERT_REAL4(r.hi.lo) + wx[3] * CONVERT_REAL4(r.hi.hi);
+      const REAL4 row = wx[0] * TO_REAL4(r.lo.lo) + wx[1] * TO_REAL4(r.lo.hi)
+                      + wx[2] * TO_REAL4(r.hi.lo) + wx[3] * TO_REAL4(r.hi.hi);
       if(j == 1 || j == 2) { RS_MINMAX(r.lo.hi); RS_MINMAX(r.hi.lo); }
 #else
       const float8 r2 = rs_sanitise8(vload8(0, base + j * pitch * 4 + 16));
-      const REAL4 row = wx[0] * CONVERT_REAL4(r.lo.lo) + wx[1] * CONVERT_REAL4(r.lo.hi)
-                      + wx[2] * CONVERT_REAL4(r.hi.lo) + wx[3] * CONVERT_REAL4(r.hi.hi)
-                      + wx[4] * CONVERT_REAL4(r2.lo) + wx[5] * CONVERT_REAL4(r2.hi);
+      const REAL4 row = wx[0] * TO_REAL4(r.lo.lo) + wx[1] * TO_REAL4(r.lo.hi)
+                      + wx[2] * TO_REAL4(r.hi.lo) + wx[3] * TO_REAL4(r.hi.hi)
+                      + wx[4] * TO_REAL4(r2.lo) + wx[5] * TO_REAL4(r2.hi);
       if(j == 2 || j == 3) { RS_MINMAX(r.hi.lo); RS_MINMAX(r.hi.hi); }
 #endif
       acc += wy[j] * row;
     }
-    return clamp(acc, CONVERT_REAL4(lo), CONVERT_REAL4(hi));
+    return clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
   }
 #endif
   for(int j = 0; j < RS_TAPS; j++) {
     REAL4 row = (REAL4)0;
     for(int i = 0; i < RS_TAPS; i++) {
       const float4 t = rs_texel(src, pitch, w, h, bx + i, by + j);
-      row += wx[i] * CONVERT_REAL4(t);
+      row += wx[i] * TO_REAL4(t);
 #if RS_FILTER > 0
       if((i == off || i == off + 1) && (j == off || j == off + 1)) RS_MINMAX(t);
 #endif
@@ -211,7 +208,7 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
     acc += wy[j] * row;
   }
 #if RS_FILTER > 0
-  acc = clamp(acc, CONVERT_REAL4(lo), CONVERT_REAL4(hi));
+  acc = clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
 #endif
   return acc;
 }
@@ -223,7 +220,7 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
 inline void rs_sample4(global const float *src, int pitch, int w, int h, float4 sx, float4 sy,
                        REAL4 *o0, REAL4 *o1, REAL4 *o2, REAL4 *o3)
 {
-#if RS_FILTER == 0 && !defined(RS_EXACT_TRIG)
+#if RS_FILTER == 0 && !REAL_IS_DOUBLE
   const float4 fx = sx - 0.5f, fy = sy - 0.5f;
   const float4 flx = floor(fx), fly = floor(fy);
   const float4 tx = fx - flx, ty = fy - fly;
@@ -249,7 +246,7 @@ inline void rs_sample4(global const float *src, int pitch, int w, int h, float4 
 
 /* ---- Packed maps: a pure gather from a map precomputed once per parameter set ----------
  *
- * clfx.resample.PackedMap turns a float64 map of source points into 12 ints per quad of 4
+ * clfx.fx.resample.PackedMap turns a float64 map of source points into 12 ints per quad of 4
  * output pixels (a work-item): the float indices (iy * pitch + ix) * 4 of the texels
  * (ix, iy) = floor(source point - 0.5), the 4 x fractions and the 4 y fractions (float).
  * The fast kernel (rs_fast_quad) reads them for every quad: no floor, no conversion, no
@@ -367,7 +364,7 @@ inline void rs_fast4(global const float *src, int pitch, int4 base, float4 tx, f
 #endif
 }
 
-#ifndef RS_EXACT_TRIG
+#if !REAL_IS_DOUBLE
 /* 4 outputs of a quad from its 12 packed entries q (fast path, no border rule). */
 inline void rs_fast_quad(global const float *src, int pitch, int w, int h, global const int *q,
                          float4 *o0, float4 *o1, float4 *o2, float4 *o3)
@@ -389,6 +386,22 @@ inline void rs_fix_quad(global const float *src, int pitch, int w, int h, global
   *o2 = rs_sample(src, pitch, w, h, sx.s2, sy.s2);
   *o3 = rs_sample(src, pitch, w, h, sx.s3, sy.s3);
 }
+#else
+/* Reference (double) builds read a float64 displacement map (clfx.fx.resample.upload_map:
+ * rows of `pitch` pixels, (dx, dy) each): the source point of output pixel (x, y) is its
+ * centre plus the displacement. */
+inline REAL2 rs_map_point(global const REAL *map, int pitch, int x, int y)
+{
+  const int i = y * pitch + x;
+  return (REAL2)((REAL)x + (REAL)0.5 + map[2 * i], (REAL)y + (REAL)0.5 + map[2 * i + 1]);
+}
 #endif
+
+/* The 4 results of a quad, as float, to pixels i .. i + 3 of dst. */
+inline void rs_store_quad(global float *dst, int i, const REAL4 *o)
+{
+  vstore16((float16)(TO_FLOAT4(o[0]), TO_FLOAT4(o[1]), TO_FLOAT4(o[2]), TO_FLOAT4(o[3])), 0,
+           dst + i * 4);
+}
 
 #endif

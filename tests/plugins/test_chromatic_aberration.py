@@ -1,13 +1,13 @@
 import numpy as np
 import pytest
 
-from clfx.plugins.chromatic_aberration import (QUALITY, ChromaticAberration as CA,
-                                               cie1931_xyz, spectral_bins)
 from clfx.fx.resample import lut_lookup, radial_lut
-from clfx.plugins.chromatic_aberration import radial_model
+from clfx.plugins.chromatic_aberration import ChromaticAberration as CA
+from clfx.plugins.chromatic_aberration import cie1931_xyz, radial_model, spectral_bins
 from tests.conftest import hard_shapes
+from tests.plugins.test_distortion import (nonfinite_image, render_with_notes, smooth_image,
+                                           wide_range_image)
 from tests.reference.chromatic_aberration import chromatic_aberration as reference
-from tests.plugins.test_distortion import smooth_image
 
 PARAMS = dict(amount=0.01, cubic=0.4, center=(0.1, -0.2))
 
@@ -18,8 +18,9 @@ def run(rt, src, quality="final", **kw):
 
 
 def want(src, p, quality, **kw):
-    n, filt, _ = QUALITY[quality]
-    return reference(src, **p.as_dict(), n=n if p.spectral else 3, filter_name=filt, **kw)
+    lvl = CA.descriptor.quality[quality]
+    return reference(src, **p.as_dict(), n=lvl.wavelengths if p.spectral else 3,
+                     filter_name=lvl.filter, **kw)
 
 
 @pytest.mark.parametrize("shape", hard_shapes())
@@ -105,3 +106,16 @@ def test_three_channel_switch_and_pixel_aspect(rt, rng):
     p = CA.params(**PARAMS, spectral=False)
     got = CA().apply(rt, p, src, quality="preview", pixel_aspect=2.0)
     np.testing.assert_allclose(got, want(src, p, "preview", pixel_aspect=2.0), atol=1e-5)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+@pytest.mark.parametrize("spectral", [True, False])
+def test_nan_and_inf_become_zero_and_finite_input_stays_finite(rt, rng, quality, spectral):
+    p = CA.params(**PARAMS, spectral=spectral)
+    src = nonfinite_image(rng)
+    got, notes = render_with_notes(rt, CA(), p, src, quality=quality)
+    assert np.isfinite(got).all()
+    assert "chromatic_aberration: 4 non-finite pixel(s) read as 0" in notes
+    clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
+    np.testing.assert_array_equal(got, CA().apply(rt, p, clean, quality=quality))
+    assert np.isfinite(CA().apply(rt, p, wide_range_image(rng), quality=quality)).all()

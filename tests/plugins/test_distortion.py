@@ -25,6 +25,35 @@ def smooth_image(rng, h, w):
     return out.astype(np.float32)
 
 
+WIDE_VALUES = np.array([-1e38, 1e38, 1.7e38, 65504.0, -65504.0, 1e-30, 0.0, 1.0, -1.0],
+                       np.float32)
+"""Finite values across float32's range (half's largest, 2^127, 1e38) for the finite-in,
+finite-out checks (issue 10: WideFloatRange.exr and AllHalfValues.exr hold such values)."""
+
+
+def wide_range_image(rng, h=13, w=22):
+    """Every channel drawn from WIDE_VALUES: neighbours jump across the whole range."""
+    return rng.choice(WIDE_VALUES, size=(h, w, 4)).astype(np.float32)
+
+
+def nonfinite_image(rng, h=12, w=18):
+    """Values in [0, 1] with NaN, +Inf and -Inf in colour and alpha (4 pixels affected)."""
+    src = rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32)
+    src[2, 3] = np.nan
+    src[5, 9, 1] = np.inf
+    src[8, 4, 3] = -np.inf
+    src[h - 1, w - 1, 0] = np.nan
+    return src
+
+
+def render_with_notes(rt, plugin, p, src, **kw):
+    """(output, ctx.notes) of one render of ``src`` (frame analysis computed on demand)."""
+    from clfx.host import RenderContext
+
+    ctx = RenderContext(rt, rt.upload(src), **kw)
+    return rt.download(plugin.render(rt, p, ctx)), ctx.notes
+
+
 def oracle_args(p, w, h, pixel_aspect=1.0, camera=CAM):
     win = Rect(0, 0, w, h)
     fx, fy, cx, cy = intrinsics(p, camera, win, pixel_aspect)
@@ -182,13 +211,41 @@ def test_nan_and_inf_do_not_spread(rt, rng):
     np.testing.assert_array_equal(got, want)
 
 
-def test_map_is_cached_across_frames(rt, rng):
-    plugin = Distortion()
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+def test_nan_and_inf_become_zero_and_are_noted(rt, rng, quality):
+    src = nonfinite_image(rng)
+    p = Distortion.params(k1=-0.1, border="edge")
+    got, notes = render_with_notes(rt, Distortion(), p, src, quality=quality, camera=CAM)
+    assert np.isfinite(got).all()
+    assert "distortion: 4 non-finite pixel(s) read as 0" in notes
+    want = Distortion().apply(rt, p, np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0),
+                              quality=quality, camera=CAM)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+@pytest.mark.parametrize("border", ["black", "edge"])
+def test_finite_input_across_float_range_stays_finite(rt, rng, quality, border):
+    src = wide_range_image(rng)
+    for p in (Distortion.params(k1=-0.2, p1=0.002, border=border),
+              Distortion.params(amount=0.3, fit="fit-all", border=border)):
+        got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+        assert np.isfinite(got).all(), p
+
+
+def test_map_is_built_once_and_kept_in_the_runtime_cache(rt, rng, monkeypatch):
+    import clfx.plugins.distortion as module
+
+    builds = []
+    monkeypatch.setattr(module, "build_map",
+                        lambda *a, **kw: builds.append(a) or build_map(*a, **kw))
     src = rng.uniform(0.0, 1.0, (10, 10, 4)).astype(np.float32)
-    p = Distortion.params(k1=0.1)
-    a = plugin.apply(rt, p, src, frame=1)
-    b = plugin.apply(rt, p, src, frame=2)
-    assert len(plugin._maps) == 1 and np.array_equal(a, b)
+    p = Distortion.params(k1=0.1 + rng.uniform(0, 1e-6))     # a key no other test used
+    a = Distortion().apply(rt, p, src, frame=1)
+    b = Distortion().apply(rt, p, src, frame=2, quality="draft")   # another level, same map
+    c = Distortion().apply(rt, p, src, frame=3)
+    assert len(builds) == 1 and np.array_equal(a, c) and not np.array_equal(a, b)
+    assert rt.cache.stats()["owners"]["distortion.map"] > 0
 
 
 def test_amount_moves_the_corner_by_that_fraction_of_its_radius():

@@ -10,9 +10,12 @@ import pytest
 
 from clfx.core.errors import ParamError
 from clfx.host import RenderContext
-from clfx.plugins.grain import GRAIN_SALT, STOCKS, Grain, bench_case, effect_seed, grain_weights
+from clfx.bench.cases.grain import CASE
+from clfx.fx.noise import effect_seed
+from clfx.plugins.grain import GRAIN_SALT, STOCKS, Grain, grain_weights
 from clfx.core.rect import Rect
 from tests.conftest import ROOT, hard_shapes
+from tests.plugins.test_distortion import wide_range_image
 from tests.reference.grain import grain as reference
 from tests.reference.grain import uniform as reference_uniform
 
@@ -93,7 +96,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
 
 def test_device_hash_equals_reference_hash(rt):
     """The oracle's uint32 re-implementation is common.h's clfx_uniform, bit for bit."""
-    src = """#include "common.h"
+    src = """#include "lib/common.h"
     kernel void k(global float *o, const uint seed, const int frame) {
       const int i = get_global_id(0);
       o[i] = clfx_uniform(seed, frame, i - 37, 3 * i - 100, i % 7);
@@ -237,8 +240,12 @@ def test_hard_values_stay_finite_and_alpha_is_kept(rt, quality):
     src = np.repeat(src, 3, axis=0)
     out, _ = run(rt, src, quality, amount=1.0, size=3.0, response=1.0,
                  channel_amount=(4.0, 4.0, 4.0))
-    assert np.isfinite(out[..., :3]).all()
-    assert out[..., 3].tobytes() == src[..., 3].tobytes()  # alpha bit for bit, NaN included
+    assert np.isfinite(out).all()
+    # alpha bit for bit where finite; NaN / Inf (colour or alpha) become 0 first
+    assert out[:, :6, 3].tobytes() == src[:, :6, 3].tobytes()
+    np.testing.assert_array_equal(out[:, 6:, 3], 0.0)
+    assert np.isfinite(run(rt, wide_range_image(np.random.default_rng(1)), quality,
+                           amount=1.0, size=3.0, response=1.0)[0]).all()
 
 
 def test_huge_grain_on_tiny_image(rt, rng):
@@ -278,7 +285,7 @@ def test_descriptor_and_params():
 
 
 def test_bench_case_renders(rt, rng):
-    case = bench_case(64, 36, rng)
+    case = CASE.make(64, 36, rng)
     p = Grain.params(**case["params"])
     out = Grain().apply(rt, p, case["source"], camera=case["camera"])
     assert out.shape == (36, 64, 4) and np.isfinite(out).all()
@@ -290,7 +297,7 @@ def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
     p = Grain.params(amount=0.1, size=2.0)
     ctx = RenderContext(rt, rt.upload(src), display_window=DISPLAY_2K, frame=3, quality="draft")
     base = rt.download(Grain().render(rt, p, ctx))
-    knl = rt.kernel("grain.cl", "grain_apply_white", MONO=0, USE_DOUBLE=0)
+    knl = rt.kernel("grain.cl", "grain_apply_white", MONO=0)
     for local in ((1, 1), (2, 3), (7, 1)):
         dst = ctx.source.like()
         rt.launch(knl, (ctx.source.pitch // 4, 19), ctx.source, dst, np.int32(ctx.source.pitch),
@@ -300,15 +307,20 @@ def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
                   local=local)
         assert rt.download(dst).tobytes() == base.tobytes(), local
     # one PoCL thread in a fresh process gives the same bytes (final: all three kernels)
-    np.save(tmp_path / "src.npy", src)
     final = run(rt, src, "final", frame=3, amount=0.1, size=2.0)[0]
-    code = ("import numpy as np; from clfx.device.runtime import Runtime;"
-            "from clfx.plugins.grain import Grain;"
-            "from clfx.core.rect import Rect;"
-            f"src = np.load({str(tmp_path / 'src.npy')!r});"
-            "out = Grain().apply(Runtime.get(), Grain.params(amount=0.1, size=2.0), src, frame=3,"
-            " display_window=Rect(0, 0, 2048, 1080));"
-            f"np.save({str(tmp_path / 'out.npy')!r}, out)")
+    assert final.tobytes() == rendered_in_one_thread(
+        tmp_path, src, "from clfx.plugins.grain import Grain; from clfx.core.rect import Rect",
+        "Grain().apply(rt, Grain.params(amount=0.1, size=2.0), src, frame=3,"
+        " display_window=Rect(0, 0, 2048, 1080))")
+
+
+def rendered_in_one_thread(tmp_path, src, imports: str, call: str) -> bytes:
+    """The bytes of ``call`` (an expression of ``rt`` and ``src``, after ``imports``) in a
+    fresh process whose PoCL runs one thread."""
+    np.save(tmp_path / "src.npy", src)
+    code = (f"import numpy as np; from clfx.device.runtime import Runtime; {imports}; "
+            f"rt = Runtime.get(); src = np.load({str(tmp_path / 'src.npy')!r}); "
+            f"np.save({str(tmp_path / 'out.npy')!r}, {call})")
     env = {**os.environ, "POCL_MAX_PTHREAD_COUNT": "1", "POCL_CPU_MAX_CU_COUNT": "1"}
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, env=env, timeout=120)
-    assert np.load(tmp_path / "out.npy").tobytes() == final.tobytes()
+    return np.load(tmp_path / "out.npy").tobytes()

@@ -9,7 +9,8 @@ from clfx.plugins.lens import Lens, channel_points
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.reference import lens as ref
-from tests.plugins.test_distortion import smooth_image
+from tests.plugins.test_distortion import (nonfinite_image, render_with_notes, smooth_image,
+                                           wide_range_image)
 
 CANON = ("Canon", "Canon EF 24-70mm f/2.8L II USM")       # ptlens + poly3 TCA + pa vignetting
 LENSES = [  # (maker, model, focal mm, camera crop): one per model family
@@ -188,3 +189,19 @@ def test_packed_nan_stays_local(rt, rng):
     for q in ("draft", "preview", "final", "reference"):
         got = Lens().apply(rt, p, src, camera=Camera(focal_length=24.0), quality=q)
         assert np.isfinite(got).all(), q
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+@pytest.mark.parametrize("distortion,tca", [(True, True), (False, False)])
+def test_nan_and_inf_become_zero_and_finite_input_stays_finite(rt, rng, quality, distortion,
+                                                               tca):
+    cam = Camera(focal_length=24.0, f_number=2.8, focus_distance=2.0)
+    p = Lens.params(maker=CANON[0], model=CANON[1], distortion=distortion, tca=tca)
+    src = nonfinite_image(rng)
+    got, notes = render_with_notes(rt, Lens(), p, src, quality=quality, camera=cam)
+    assert np.isfinite(got).all()
+    assert "lens: 4 non-finite pixel(s) read as 0" in notes
+    clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
+    np.testing.assert_array_equal(got, Lens().apply(rt, p, clean, quality=quality, camera=cam))
+    got = Lens().apply(rt, p, wide_range_image(rng), quality=quality, camera=cam)
+    assert np.isfinite(got).all()

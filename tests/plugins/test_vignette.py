@@ -5,6 +5,7 @@ from clfx.core.camera import Camera
 from clfx.plugins.vignette import Vignette
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
+from tests.plugins.test_distortion import nonfinite_image, render_with_notes, wide_range_image
 from tests.reference.vignette import vignette as reference
 
 PARAMS = dict(natural=1.0, amount=0.4, radius=0.3, softness=0.5, roundness=0.5, center=(0.1, -0.2))
@@ -63,9 +64,29 @@ def test_vignette_hard_values_stay_finite_where_input_is(rt):
     vals = np.array([-1.0, 0.0, 1e-30, 65504.0, 1e5, np.nan, np.inf], np.float32)
     src = np.repeat(vals[None, :, None], 4, axis=2)
     got, _ = run(rt, src, amount=1.0)
-    assert np.isfinite(got[0, :5]).all()
+    assert np.isfinite(got).all()
     assert (got[0, 1:5, :3] >= 0).all()
-    np.testing.assert_array_equal(got[..., 3], src[..., 3])  # alpha kept, NaN included
+    np.testing.assert_array_equal(got[0, :5, 3], src[0, :5, 3])  # alpha kept bit for bit
+    np.testing.assert_array_equal(got[0, 5:], 0.0)                # NaN / Inf became 0
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+def test_nan_and_inf_become_zero_and_are_noted(rt, rng, quality):
+    src = nonfinite_image(rng)
+    p = Vignette.params(**PARAMS)
+    got, notes = render_with_notes(rt, Vignette(), p, src, quality=quality)
+    assert np.isfinite(got).all()
+    assert "vignette: 4 non-finite pixel(s) set to 0" in notes
+    clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
+    np.testing.assert_array_equal(got, Vignette().apply(rt, p, clean, quality=quality))
+    _, clean_notes = render_with_notes(rt, Vignette(), p, clean, quality=quality)
+    assert clean_notes == []
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+def test_finite_input_across_float_range_stays_finite(rt, rng, quality):
+    got, _ = run(rt, wide_range_image(rng), quality, amount=-1.0)   # brightening: factor 1
+    assert np.isfinite(got).all()
 
 
 def test_vignette_factor_far_outside_frame_is_in_unit_range(rt):

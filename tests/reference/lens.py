@@ -22,15 +22,23 @@ def tca_fwd(model, t, ch):
     return lambda r: r * (t[4 + ch] * r * r + t[2 + ch] * r + t[ch])
 
 
-def lens_points(w, h, *, crop, cal_crop, cal_aspect=1.5, center=(0.0, 0.0), distortion=None,
-                tca=None):
-    """{'red','green','blue'}: source points (centres at +0.5) of every output pixel."""
+def lensfun_frame(w, h, *, crop, cal_crop, cal_aspect, center):
+    """lensfun's normalisation of a w x h image: (scale, ccx, ccy, px, py) with normalised
+    = (pixel - centre) * scale, and the pixel index grids (centres at integers)."""
     wp, hp = w - 1.0, h - 1.0
     size = min(wp, hp)
     c = cal_crop / crop * math.sqrt(cal_aspect ** 2 + 1) / math.sqrt((max(wp, hp) / size) ** 2 + 1)
     scale = 2 * c / size
     ccx, ccy = (wp / size * c + center[0]) / scale, (hp / size * c + center[1]) / scale
     px, py = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    return scale, ccx, ccy, px, py
+
+
+def lens_points(w, h, *, crop, cal_crop, cal_aspect=1.5, center=(0.0, 0.0), distortion=None,
+                tca=None):
+    """{'red','green','blue'}: source points (centres at +0.5) of every output pixel."""
+    scale, ccx, ccy, px, py = lensfun_frame(w, h, crop=crop, cal_crop=cal_crop,
+                                            cal_aspect=cal_aspect, center=center)
     x, y = (px - ccx) * scale, (py - ccy) * scale
     if distortion:
         rd = np.hypot(x, y)
@@ -50,12 +58,8 @@ def lens_points(w, h, *, crop, cal_crop, cal_aspect=1.5, center=(0.0, 0.0), dist
 
 
 def vignetting_factor(w, h, *, crop, cal_crop, cal_aspect=1.5, center=(0.0, 0.0), terms):
-    wp, hp = w - 1.0, h - 1.0
-    size = min(wp, hp)
-    c = cal_crop / crop * math.sqrt(cal_aspect ** 2 + 1) / math.sqrt((max(wp, hp) / size) ** 2 + 1)
-    scale = 2 * c / size
-    ccx, ccy = (wp / size * c + center[0]) / scale, (hp / size * c + center[1]) / scale
-    px, py = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    scale, ccx, ccy, px, py = lensfun_frame(w, h, crop=crop, cal_crop=cal_crop,
+                                            cal_aspect=cal_aspect, center=center)
     r = np.hypot(px - ccx, py - ccy) * scale / math.sqrt(cal_aspect ** 2 + 1)
     k1, k2, k3 = terms
     return np.maximum(1 + k1 * r ** 2 + k2 * r ** 4 + k3 * r ** 6, 0.0)
