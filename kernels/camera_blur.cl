@@ -6,19 +6,45 @@
  *                           in one; exact because a rotating/zooming camera changes no
  *                           occlusion)
  *   camera_blur_velocity    the same motion plus trucking/dolly as a velocity field (px/frame)
- *                           for motion_blur's reconstruction: near things move more (f / z)
+ *                           for the motion reconstruction (lib/motion.cl): near things move
+ *                           more (f / z)
  * Each work-item handles 4 pixels of a row.
  */
 #include "lib/motion_gather.h"
+#include "lib/precision.h"
 
-#ifndef ACC
-#define ACC float
-#define ACC16 float16
-#define CONVERT_ACC16 convert_float16
-#define CONVERT_FROM_ACC16 convert_float16
-#endif
+/* Sum over the n instants t0 + (i + jit) dt of the sharp image at the 4 lanes' positions at
+ * time t (relative to the centre: qx0, qy0), each sample times `scale`. */
+inline REAL16 cb_path_sum(global const float *col, const int pitch, const int width,
+                          const int height, const int x0, const int y0, const float cx,
+                          const float cy, const float4 qx0, const float qy0, const float sx,
+                          const float sy, const float roll, const float zoom, const float t0,
+                          const float dt, const float4 jit, const int n, const float scale)
+{
+  REAL16 acc = (REAL16)(0);
+  for(int i = 0; i < n; i++)
+  {
+    const float4 t = t0 + ((float)i + jit) * dt;
+    const float4 qx = qx0 - sx * t, qy = qy0 - sy * t;
+    float4 c;
+    const float4 s = sincos(roll * t, &c);
+    const float4 inv_k = 1.0f / fmax(1.0f + zoom * t, 1e-3f);
+    /* inverse rotation, then inverse scale, back to window coordinates */
+    const float4 rx = (c * qx + s * qy) * inv_k + cx - (float)x0;
+    const float4 ry = (-s * qx + c * qy) * inv_k + cy - (float)y0;
+    const float16 v = (float16)(mg_fetch_scaled(col, pitch, width, height, rx.x, ry.x, scale),
+                                mg_fetch_scaled(col, pitch, width, height, rx.y, ry.y, scale),
+                                mg_fetch_scaled(col, pitch, width, height, rx.z, ry.z, scale),
+                                mg_fetch_scaled(col, pitch, width, height, rx.w, ry.w, scale));
+    acc += TO_REAL16(v);
+  }
+  return acc;
+}
+
 /* (x0, y0): the window's origin in the frame; (cx, cy): the motion's centre in the frame;
- * roll in radians per frame (+ turns +x towards +y); zoom: scale growth per frame. */
+ * roll in radians per frame (+ turns +x towards +y); zoom: scale growth per frame.  `col` holds
+ * finite colours (the host sanitises NaN/Inf first); a float32 sum of huge ones that overflows
+ * is taken again with every sample halved and divided by n first, so the output stays finite. */
 kernel void camera_blur_similarity(global const float *col, global float *dst, const int pitch,
                                    const int width, const int height, const int x0,
                                    const int y0, const float cx, const float cy,
@@ -34,24 +60,16 @@ kernel void camera_blur_similarity(global const float *col, global float *dst, c
   const float qy0 = fy + 0.5f + (float)y0 - cy;
   const float dt = (t1 - t0) / (float)n;
   const float4 jit = mg_jitter(lane, fy, frame);
-  ACC16 acc = (ACC16)(0);
-  for(int i = 0; i < n; i++)
+  float16 out = TO_FLOAT16(cb_path_sum(col, pitch, width, height, x0, y0, cx, cy, qx0, qy0,
+                                       sx, sy, roll, zoom, t0, dt, jit, n, 1.0f) / (REAL)n);
+  if(any((as_int16(out) & 0x7f800000) == 0x7f800000))
   {
-    const float4 t = t0 + ((float)i + jit) * dt;
-    const float4 qx = qx0 - sx * t, qy = qy0 - sy * t;
-    float4 c;
-    const float4 s = sincos(roll * t, &c);
-    const float4 inv_k = 1.0f / fmax(1.0f + zoom * t, 1e-3f);
-    /* inverse rotation, then inverse scale, back to window coordinates */
-    const float4 rx = (c * qx + s * qy) * inv_k + cx - (float)x0;
-    const float4 ry = (-s * qx + c * qy) * inv_k + cy - (float)y0;
-    const float16 v = (float16)(mg_fetch(col, pitch, width, height, rx.x, ry.x),
-                                mg_fetch(col, pitch, width, height, rx.y, ry.y),
-                                mg_fetch(col, pitch, width, height, rx.z, ry.z),
-                                mg_fetch(col, pitch, width, height, rx.w, ry.w));
-    acc += CONVERT_ACC16(v);
+    const float16 half_mean = TO_FLOAT16(cb_path_sum(col, pitch, width, height, x0, y0, cx,
+                                                     cy, qx0, qy0, sx, sy, roll, zoom, t0, dt,
+                                                     jit, n, 0.5f / (float)n));
+    out = clamp(2.0f * half_mean, -FLT_MAX, FLT_MAX);
   }
-  vstore16(CONVERT_FROM_ACC16(acc / (ACC)n), 0, dst + (y * pitch + qx * 4) * 4);
+  vstore16(out, 0, dst + (y * pitch + qx * 4) * 4);
 }
 
 /* Velocity (px/frame) of the camera motion at each pixel; depth (if HAS_DEPTH) scales the

@@ -7,24 +7,14 @@
  *   same pattern of integer tap offsets, so every tap is a vload16 + vload4 and the weights
  *   are float4 vectors (PoCL does not vectorise one-pixel work-items).
  *
+ * dof_upsample: bilinear upsampling of the half-resolution gather into the tiles marked half
+ *   (the half-resolution input is the shared 2 x 2 box of lib/blur.cl, blur_box_down2).
+ *
  * The tap pattern (rings, aperture shape, pixel aspect) comes from a host table per tile.
- * Defines: USE_DOUBLE (float64 accumulation: the reference level).
+ * The gather accumulates in REAL (lib/precision.h: double at the reference level).
  */
 #include "lib/common.h"
-
-#if defined(USE_DOUBLE) && defined(CLFX_HAS_FP64)
-#define ACC double
-#define ACC4 double4
-#define ACC16 double16
-#define CONVERT_ACC16(v) convert_double16(v)
-#define CONVERT_ACC4(v) convert_double4(v)
-#else
-#define ACC float
-#define ACC4 float4
-#define ACC16 float16
-#define CONVERT_ACC16(v) (v)
-#define CONVERT_ACC4(v) (v)
-#endif
+#include "lib/precision.h"
 
 #define NEAR_EPS 0.25f   /* |radius| below this is in focus: never a near-field pixel */
 
@@ -83,8 +73,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float4 ar0 = fabs(r0);
   const float4 r0_far = fmax(r0, 0.0f);
 
-  ACC16 fn = (ACC16)(0), ff = (ACC16)(0);
-  ACC4 wn_sum = (ACC4)(0), wf_sum = (ACC4)(0), alpha = (ACC4)(0);
+  REAL16 fn = (REAL16)(0), ff = (REAL16)(0);
+  REAL4 wn_sum = (REAL4)(0), wf_sum = (REAL4)(0), alpha = (REAL4)(0);
   for(int i = first; i < first + count; i++)
   {
     const float8 tp = vload8(i, taps);
@@ -103,41 +93,24 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     const float4 rf = select(select(arq, fmin(arq, r0_far), rq > r0), fmax(arq, ar0), p_near);
     const float4 cov_f = clamp(rf - d_far + 0.5f, 0.0f, 1.0f);
     const float4 wf = select(cov_f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near);
-    fn += CONVERT_ACC16(c * LANES(wn));
-    ff += CONVERT_ACC16(c * LANES(wf));
-    wn_sum += CONVERT_ACC4(wn);
-    wf_sum += CONVERT_ACC4(wf);
-    alpha += CONVERT_ACC4(wn * area);
+    fn += TO_REAL16(c * LANES(wn));
+    ff += TO_REAL16(c * LANES(wf));
+    wn_sum += TO_REAL4(wn);
+    wf_sum += TO_REAL4(wf);
+    alpha += TO_REAL4(wn * area);
   }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
-  const ACC4 tiny = (ACC4)(1e-20);
-  const ACC4 a = clamp(alpha, (ACC4)(0), (ACC4)(1));
-  const ACC4 inv_n = select((ACC4)(0), (ACC4)(1) / wn_sum, wn_sum > tiny);
-  const ACC4 inv_f = select((ACC4)(0), (ACC4)(1) / wf_sum, wf_sum > tiny);
-  const ACC16 centre = CONVERT_ACC16(c0);
-  const ACC16 near = select(centre, fn * LANES(inv_n), LANES(wn_sum > tiny));
-  ACC16 far = select(near, ff * LANES(inv_f), LANES(wf_sum > tiny));
-  const ACC16 mix_a = LANES(select(a, (ACC4)(1), wf_sum <= tiny));
-  const ACC16 out = far + (near - far) * mix_a;
+  const REAL4 tiny = (REAL4)(1e-20);
+  const REAL4 a = clamp(alpha, (REAL4)(0), (REAL4)(1));
+  const REAL4 inv_n = select((REAL4)(0), (REAL4)(1) / wn_sum, wn_sum > tiny);
+  const REAL4 inv_f = select((REAL4)(0), (REAL4)(1) / wf_sum, wf_sum > tiny);
+  const REAL16 centre = TO_REAL16(c0);
+  const REAL16 near = select(centre, fn * LANES(inv_n), LANES(wn_sum > tiny));
+  REAL16 far = select(near, ff * LANES(inv_f), LANES(wf_sum > tiny));
+  const REAL16 mix_a = LANES(select(a, (REAL4)(1), wf_sum <= tiny));
+  const REAL16 out = far + (near - far) * mix_a;
   /* rows are padded to 4 pixels: the lanes past the width land in the padding */
-  vstore16(convert_float16(out), 0, dst + (y * pitch + x) * 4);
-}
-
-/* Half resolution for tiles where every pixel is well out of focus: 2 x 2 box of the
- * prepared colour, mean radius halved (half-resolution pixels).  Padded like the full-res
- * buffers (hpad = pad / 2). */
-kernel void dof_downsample(global const float *col, global const float *coc, const int ppitch,
-                           const int pheight, global float *colh, global float *coch,
-                           const int hpitch, const int hheight)
-{
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= hpitch || y >= hheight) return;
-  const int fx = min(2 * x, ppitch - 2), fy = min(2 * y, pheight - 2);
-  const int i = fy * ppitch + fx;
-  const float4 c = vload4(i, col) + vload4(i + 1, col) + vload4(i + ppitch, col)
-                   + vload4(i + ppitch + 1, col);
-  vstore4(0.25f * c, y * hpitch + x, colh);
-  coch[y * hpitch + x] = 0.125f * (coc[i] + coc[i + 1] + coc[i + ppitch] + coc[i + ppitch + 1]);
+  vstore16(TO_FLOAT16(out), 0, dst + (y * pitch + x) * 4);
 }
 
 /* Bilinear upsampling of the half-resolution result into the tiles marked half (flag 1). */

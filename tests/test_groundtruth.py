@@ -5,10 +5,9 @@ import numpy as np
 import pytest
 
 from clfx.bench import metrics
-from clfx.core.camera import Camera
-from clfx.bench.groundtruth import (aperture_samples, coc_signed_px, make_case, render_truth,
-                              shutter_interval, write_case)
+from clfx.bench.groundtruth import aperture_samples, make_case, render_truth, write_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, demo_scene, render_sharp
+from clfx.core.camera import Camera
 
 CAM = Camera(focal_length=50.0, f_number=1.4, sensor_width=36.0, focus_distance=3.0)
 
@@ -61,7 +60,7 @@ def test_coc_of_ground_truth_matches_the_camera():
     ys, xs = np.nonzero(lit)
     width = xs.max() - xs.min() + 1
     assert abs(width - coc) <= 2.0, (width, coc)       # within the light's size + a pixel
-    assert abs(abs(coc_signed_px(CAM, depth, sc.width)) - coc) < 1e-9
+    assert abs(abs(float(CAM.coc_signed_px(depth, sc.width))) - coc) < 1e-9
     # energy is conserved by the average
     sharp = render_sharp(sc, ss=2).rgba
     assert abs(truth[..., 0].sum() / sharp[..., 0].sum() - 1) < 1e-4
@@ -95,8 +94,8 @@ def test_aperture_samples_are_uniform_and_weighted():
 
 def test_motion_blur_truth_spreads_along_velocity():
     cam = CAM.updated(shutter_angle=180.0)
-    assert shutter_interval(cam) == (-0.25, 0.25)
-    assert shutter_interval(cam.updated(shutter_offset="opening")) == (0.0, 0.5)
+    assert cam.shutter_interval() == (-0.25, 0.25)
+    assert cam.updated(shutter_offset="opening").shutter_interval() == (0.0, 0.5)
     sc = light_scene(3.0, radius=0.5, velocity=(20.0, 0.0))
     truth = render_truth(sc, cam, samples=256, dof=False, motion=True, ss=2)
     lit = truth[..., 0] > 1.0
@@ -130,3 +129,33 @@ def test_write_case(tmp_path):
     case = make_case(demo_scene(0, 48, 27), CAM, samples=8)
     paths = write_case(case, tmp_path)
     assert all(p.exists() for p in paths.values())
+
+
+def test_effects_and_ground_truth_share_one_copy_of_the_physics():
+    """The thin-lens CoC and the shutter interval live in clfx.core.camera only: the ground
+    truth and the effects read the same functions, so they cannot drift apart."""
+    from clfx.bench import groundtruth
+    from clfx.core import camera as core
+    from clfx.fx import motion
+    from clfx.plugins import dof
+
+    for mod in (groundtruth, dof, motion):
+        for name in ("coc_scale_px", "coc_signed_px", "shutter_interval", "aperture_radius"):
+            fn = getattr(mod, name, None)
+            assert fn is None or fn is getattr(core, name, None), (mod.__name__, name)
+    # dof's lens with the camera's own values is the camera's K
+    p = dof.Dof.params()
+    assert dof.lens_scale_px(p, CAM, 0.0, 1920) == CAM.coc_scale_px(1920)
+    # signed CoC: K (1 - S/z), K at infinity, 0 for invalid depths
+    z = np.array([1.5, 3.0, 30.0, np.inf, 0.0, -1.0, np.nan])
+    k = CAM.coc_scale_px(96)
+    want = [k * (1 - 3.0 / 1.5), 0.0, k * (1 - 3.0 / 30.0), k, 0.0, 0.0, 0.0]
+    np.testing.assert_allclose(CAM.coc_signed_px(z, 96), want, rtol=1e-15)
+    assert CAM.coc_px(1.5, 96) == pytest.approx(abs(want[0]), rel=1e-15)
+    # the effects' shutter: 'camera' defers to the camera block, overrides win
+    params = type("P", (), {"shutter_angle": -1.0, "shutter_offset": "camera"})
+    for off in core.SHUTTER_OFFSETS:
+        cam = CAM.updated(shutter_angle=270.0, shutter_offset=off)
+        assert motion.shutter_from(params, cam) == cam.shutter_interval()
+    params.shutter_angle, params.shutter_offset = 90.0, "closing"
+    assert motion.shutter_from(params, CAM) == (-0.25, 0.0)

@@ -22,16 +22,19 @@ coordinates after the usual flip of the sensor image, and writes the shift of a 
     shift_px = p * coc_signed_px(z) / 2,     coc_signed_px(z) = K (1 - S / z)
 
 with ``p`` the lens point in units of the aperture radius (|p| <= 1 on a round aperture) and
-``K = A f / (S - f) * width_px / sensor_width``.  Behind the focus plane (z > S) a point's
-bokeh is the aperture shape ``p``; in front of it, the shape turned by 180 degrees.  A
-polygonal aperture of ``blades`` blades is inscribed in the unit circle (the CoC is the
-circumscribed circle's diameter), its first vertex pointing up (-y) turned by
-``blade_rotation`` degrees clockwise on screen.  The magnification change with the lens
-point (``v`` instead of ``f``) is ignored: the layers are described in screen space.
+``K = A f / (S - f) * width_px / sensor_width`` (:meth:`clfx.core.camera.Camera.coc_scale_px`
+and ``coc_signed_px``, the one copy of the formula the effects use too).  Behind the focus
+plane (z > S) a point's bokeh is the aperture shape ``p``; in front of it, the shape turned
+by 180 degrees.  A polygonal aperture of ``blades`` blades is inscribed in the unit circle
+(the CoC is the circumscribed circle's diameter), its first vertex pointing up (-y) turned by
+``blade_rotation`` degrees clockwise on screen (:func:`clfx.core.camera.aperture_radius`).
+The magnification change with the lens point (``v`` instead of ``f``) is ignored: the layers
+are described in screen space.
 
 Motion: at time ``t`` (frames) a layer is translated by ``velocity * t``.  The shutter is
 open for ``shutter_angle / 360`` of a frame, centred on the frame time, starting at it
-("opening") or ending at it ("closing") per ``Camera.shutter_offset``.
+("opening") or ending at it ("closing") per ``Camera.shutter_offset``
+(:meth:`clfx.core.camera.Camera.shutter_interval`, as the effects read it).
 
 Sampling: ``samples`` lens points on a golden-angle spiral (uniform in the disk; mapped to
 the polygon radially with Jacobian weights ``R(phi)^2``) paired with stratified shutter
@@ -50,45 +53,20 @@ from pathlib import Path
 
 import numpy as np
 
-from clfx.core.camera import Camera
-from clfx.bench.scene import Scene, background_rgba, box_downsample, rasterise_layer, render_sharp
+from clfx.bench.scene import (
+    Scene,
+    background_rgba,
+    box_downsample,
+    rasterise_layer,
+    render_sharp,
+)
+from clfx.core.camera import Camera, aperture_radius, first_blade_angle
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 PLASTIC_INV = 0.7548776662466927  # 1 / plastic number: a second, independent Weyl sequence
 
 
-# -- thin lens -------------------------------------------------------------------------------
-def coc_scale_px(camera: Camera, width_px: float) -> float:
-    """``K``: the CoC diameter in pixels of a point at infinity (``A f / (S - f)`` in px)."""
-    f = camera.focal_length
-    s = camera.focus_distance * 1000.0
-    return (f / camera.f_number) * f / max(s - f, 1e-6) * width_px / camera.sensor_width
-
-
-def coc_signed_px(camera: Camera, depth, width_px: float):
-    """Signed CoC diameter in pixels: ``K (1 - S / z)``; > 0 behind focus, < 0 in front.
-
-    ``z = inf`` gives ``K``.  Its absolute value equals :meth:`Camera.coc_px`.
-    """
-    z = np.asarray(depth, np.float64)
-    k = coc_scale_px(camera, width_px)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return k * (1.0 - camera.focus_distance / z)
-
-
-def aperture_radius(phi, blades: int, rotation_deg: float = 0.0, roundness: float = 0.0):
-    """Boundary radius (circumradius 1) of the aperture in direction ``phi`` (radians, image
-    coordinates: x right, y down).  ``blades`` < 3 is a disk; ``roundness`` blends to it."""
-    phi = np.asarray(phi, np.float64)
-    if blades < 3:
-        return np.ones_like(phi)
-    sector = 2.0 * math.pi / blades
-    first = -0.5 * math.pi + math.radians(rotation_deg)   # first vertex points up
-    rel = np.mod(phi - first, sector) - 0.5 * sector
-    poly = math.cos(0.5 * sector) / np.cos(rel)
-    return poly + (1.0 - poly) * roundness
-
-
+# -- sampling --------------------------------------------------------------------------------
 def aperture_samples(n: int, blades: int = 0, rotation_deg: float = 0.0, roundness: float = 0.0):
     """``n`` points over the aperture (unit circumradius) and their weights (sum 1).
 
@@ -99,26 +77,16 @@ def aperture_samples(n: int, blades: int = 0, rotation_deg: float = 0.0, roundne
     i = np.arange(n, dtype=np.float64)
     r = np.sqrt((i + 0.5) / n)
     phi = i * GOLDEN_ANGLE
-    rad = aperture_radius(phi, blades, rotation_deg, roundness)
+    rad = aperture_radius(phi, blades, first_blade_angle(rotation_deg), roundness)
     pts = np.stack([r * rad * np.cos(phi), r * rad * np.sin(phi)], axis=1)
     w = rad ** 2
     return pts, w / w.sum()
 
 
-def shutter_interval(camera: Camera) -> tuple[float, float]:
-    """(start, end) of the open shutter in frames relative to the frame time."""
-    d = camera.shutter_fraction()
-    if camera.shutter_offset == "opening":
-        return 0.0, d
-    if camera.shutter_offset == "closing":
-        return -d, 0.0
-    return -0.5 * d, 0.5 * d
-
-
 def shutter_times(n: int, camera: Camera) -> np.ndarray:
     """``n`` stratified instants over the shutter interval (a Weyl sequence, shuffled
     against the lens spiral so lens position and time are uncorrelated)."""
-    t0, t1 = shutter_interval(camera)
+    t0, t1 = camera.shutter_interval()
     u = np.mod(0.5 + np.arange(n) * PLASTIC_INV, 1.0)
     return t0 + (t1 - t0) * u
 
@@ -198,7 +166,6 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
         (height, width, 4) float32 premultiplied RGBA.
     """
     w, h = scene.width, scene.height
-    k = coc_scale_px(camera, w) if dof else 0.0
     n = max(1, int(samples)) if (dof or motion) else 1
     lens, weights = aperture_samples(n, camera.blades, camera.blade_rotation)
     if not dof:
@@ -207,7 +174,7 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     t_extent = float(np.abs(times).max()) if n else 0.0
 
     def half_coc(z):
-        return 0.0 if not dof else 0.5 * k * (1.0 - camera.focus_distance / z)
+        return 0.0 if not dof else 0.5 * float(camera.coc_signed_px(z, w))
 
     bg_half = half_coc(math.inf)
     sprites = []

@@ -15,6 +15,23 @@ import math
 import numpy as np
 
 
+def _edges(values: np.ndarray, is_jump) -> np.ndarray:
+    """Both pixels of every 4-neighbour pair (along rows and columns) where
+    ``is_jump(a, b)`` holds for their values."""
+    out = np.zeros(values.shape[:2], bool)
+    for axis in (0, 1):
+        n = values.shape[axis]
+        a = np.take(values, np.arange(0, n - 1), axis=axis)
+        b = np.take(values, np.arange(1, n), axis=axis)
+        with np.errstate(invalid="ignore"):
+            jump = is_jump(a, b)
+        lo, hi = [slice(None)] * 2, [slice(None)] * 2
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        out[tuple(lo)] |= jump
+        out[tuple(hi)] |= jump
+    return out
+
+
 def depth_edges(depth: np.ndarray, rel_tol: float = 0.02) -> np.ndarray:
     """Pixels next to a depth discontinuity (4-neighbourhood).
 
@@ -26,36 +43,13 @@ def depth_edges(depth: np.ndarray, rel_tol: float = 0.02) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.where(z > 0, 1.0 / z, np.nan)
     d = np.where(np.isposinf(z), 0.0, d)
-    out = np.zeros(z.shape, bool)
-    for axis in (0, 1):
-        a = np.take(d, np.arange(0, z.shape[axis] - 1), axis=axis)
-        b = np.take(d, np.arange(1, z.shape[axis]), axis=axis)
-        with np.errstate(invalid="ignore"):
-            jump = ~(np.abs(a - b) <= rel_tol * np.maximum(np.abs(a), np.abs(b)))
-        sl_a = [slice(None)] * 2
-        sl_b = [slice(None)] * 2
-        sl_a[axis] = slice(0, -1)
-        sl_b[axis] = slice(1, None)
-        out[tuple(sl_a)] |= jump
-        out[tuple(sl_b)] |= jump
-    return out
+    return _edges(d, lambda a, b: ~(np.abs(a - b) <= rel_tol * np.maximum(np.abs(a), np.abs(b))))
 
 
 def velocity_edges(velocity: np.ndarray, tol_px: float = 0.5) -> np.ndarray:
     """Pixels next to a jump of more than ``tol_px`` px/frame in the velocity pass."""
     v = np.asarray(velocity, np.float64)
-    out = np.zeros(v.shape[:2], bool)
-    for axis in (0, 1):
-        diff = np.diff(v, axis=axis)
-        with np.errstate(invalid="ignore"):
-            jump = ~(np.hypot(diff[..., 0], diff[..., 1]) <= tol_px)
-        sl_a = [slice(None)] * 2
-        sl_b = [slice(None)] * 2
-        sl_a[axis] = slice(0, -1)
-        sl_b[axis] = slice(1, None)
-        out[tuple(sl_a)] |= jump
-        out[tuple(sl_b)] |= jump
-    return out
+    return _edges(v, lambda a, b: ~(np.hypot(*np.moveaxis(a - b, -1, 0)) <= tol_px))
 
 
 def dilate(mask: np.ndarray, radius_px: float) -> np.ndarray:

@@ -432,3 +432,46 @@ def demo_scene(frame: int, width: int = 640, height: int = 360) -> Scene:
                         shape="disk", center=(0.08 * width, ny), size=(0.34 * width, 0.5 * height),
                         opacity=0.9, velocity=(0.0, nvy), name="leaf"))
     return Scene(width, height, tuple(layers), name=f"demo frame {frame}")
+
+
+# -- the motion blur test scene --------------------------------------------------------------
+def moving_scene(width: int, height: int, max_speed_px: float = 60.0,
+                 moving_fraction: float | None = None) -> Scene:
+    """A layered test scene for motion blur: a slowly drifting textured wall, a fast striped
+    ball (``max_speed_px`` px/frame), a card moving diagonally and a near leaf.
+
+    Speeds scale with ``max_speed_px``; with ``moving_fraction`` (e.g. 0.1) only a small
+    ball moves, covering about that fraction of the frame's tiles, over a static wall.
+    """
+    s = width / 640.0
+    v = max_speed_px
+    wall = Layer(depth=20.0, texture=Texture("blocks", (0.5, 0.45, 0.4), (0.05, 0.05, 0.06),
+                                             period=12.0 * s, seed=3),
+                 shape="full", name="wall",
+                 lights=(Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0), 2.0 * s),),
+                 velocity=(0.0, 0.0) if moving_fraction else (0.05 * v, 0.0))
+    if moving_fraction:
+        r = 0.5 * math.sqrt(moving_fraction * width * height / math.pi) * 0.8
+        ball = Layer(depth=5.0, texture=Texture("stripes", (0.9, 0.25, 0.1), (0.95, 0.9, 0.8),
+                                                period=14.0 * s, angle=30.0),
+                     shape="disk", center=(0.5 * width, 0.5 * height), size=(2 * r, 2 * r),
+                     velocity=(v, 0.0), name="ball")
+        return Scene(width, height, (wall, ball), name="motion blur, 10% moving")
+    r = 0.12 * height
+    layers = (
+        wall,
+        Layer(depth=5.0, texture=Texture("stripes", (0.9, 0.25, 0.1), (0.95, 0.9, 0.8),
+                                         period=14.0 * s, angle=30.0),
+              shape="disk", center=(0.3 * width, 0.45 * height), size=(2 * r, 2 * r),
+              velocity=(v, 0.0), name="ball"),
+        Layer(depth=3.0, texture=Texture("checker", (0.7, 0.7, 0.65), (0.05, 0.05, 0.06),
+                                         period=12.0 * s, angle=8.0),
+              shape="rounded", center=(0.68 * width, 0.55 * height),
+              size=(0.22 * width, 0.32 * height), corner=8.0 * s,
+              velocity=(-0.4 * v, 0.3 * v), name="card"),
+        Layer(depth=1.0, texture=Texture("noise", (0.05, 0.25, 0.06), (0.15, 0.45, 0.1),
+                                         period=9.0 * s, seed=5),
+              shape="disk", center=(0.1 * width, 0.9 * height), size=(0.3 * width, 0.45 * height),
+              opacity=0.9, velocity=(0.0, -0.2 * v), name="leaf"),
+    )
+    return Scene(width, height, layers, name="motion blur test scene")

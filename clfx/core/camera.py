@@ -1,4 +1,6 @@
-"""The look's camera block: one set of physical values that every effect reads.
+"""The look's camera block: one set of physical values that every effect reads, and the
+camera physics every layer shares (one copy each): the thin-lens circle of confusion and the
+open shutter interval.
 
 Lengths on the sensor are in millimetres; distances in the scene are in scene units, metres
 by default (the depth pass is read in the same units, see ``clfx.io.read``).
@@ -7,6 +9,75 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+
+SHUTTER_OFFSETS = ("centered", "opening", "closing")
+"""Where the open shutter sits relative to the frame time."""
+
+
+# -- thin lens -------------------------------------------------------------------------------
+def coc_signed(depth, scale_px: float, focus: float):
+    """Signed thin-lens circle of confusion of planar depths (float64 NumPy).
+
+    Thin lens (Potmesil & Chakravarty 1981): a point at planar depth ``z`` seen through a lens
+    focused at ``S`` blurs into ``scale_px * (1 - S / z)``, where ``scale_px`` is the CoC at
+    infinity (:meth:`Camera.coc_scale_px` for a diameter; half of it gives a radius).  The
+    sign tells the side of the focus plane: > 0 behind it, < 0 in front.
+
+    Parameters
+    ----------
+    depth : array_like
+        Planar depths in scene units; ``+inf`` gives ``scale_px``.
+    scale_px : float
+        The CoC at infinity in pixels.
+    focus : float
+        Focus distance ``S``, same units as ``depth``.
+
+    Returns
+    -------
+    np.ndarray
+        float64, same shape; invalid depths (NaN, 0, negative) give 0 (in focus).
+    """
+    z = np.asarray(depth, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.where(np.isposinf(z), scale_px, scale_px * (1.0 - focus / z))
+    return np.where(z > 0, c, 0.0)
+
+
+def first_blade_angle(rotation_deg: float = 0.0) -> float:
+    """Direction (radians, image coordinates: x right, y down) of the aperture polygon's first
+    vertex: up (-y), turned ``rotation_deg`` degrees clockwise on screen."""
+    return -0.5 * math.pi + math.radians(rotation_deg)
+
+
+def aperture_radius(phi, blades: int, first: float = -0.5 * math.pi, roundness: float = 0.0):
+    """Boundary radius (circumradius 1) of the aperture in direction ``phi`` (radians, image
+    coordinates), i.e. the shape of the bokeh: ``blades`` < 3 is a disk; otherwise a regular
+    polygon inscribed in the unit circle with its first vertex at angle ``first``
+    (:func:`first_blade_angle`), blended toward the disk by ``roundness``."""
+    phi = np.asarray(phi, np.float64)
+    if blades < 3:
+        return np.ones_like(phi)
+    sector = 2.0 * math.pi / blades
+    rel = np.mod(phi - first, sector) - 0.5 * sector
+    poly = math.cos(0.5 * sector) / np.cos(rel)
+    return poly + (1.0 - poly) * roundness
+
+
+# -- shutter ---------------------------------------------------------------------------------
+def shutter_interval(angle_deg: float, offset: str) -> tuple[float, float]:
+    """(t0, t1): the open shutter in frames relative to the frame time.
+
+    With ``s = angle / 360`` of a frame: ``centered`` is ``[-s/2, s/2]``, ``opening``
+    ``[0, s]`` (the shutter opens at the frame time), ``closing`` ``[-s, 0]``.
+    """
+    s = angle_deg / 360.0
+    if offset == "opening":
+        return 0.0, s
+    if offset == "closing":
+        return -s, 0.0
+    return -0.5 * s, 0.5 * s
 
 
 @dataclass(frozen=True)
@@ -27,7 +98,8 @@ class Camera:
         "focus_distance": (1e-4, 1e9), "shutter_angle": (0.0, 720.0), "iso": (1.0, 1e6),
         "blades": (0, 32), "blade_rotation": (-360.0, 360.0), "sensor_height": (0.5, 200.0),
     }
-    CHOICES = {"shutter_offset": ("centered", "opening", "closing")}
+    CHOICES = {"shutter_offset": SHUTTER_OFFSETS}
+
     def as_dict(self) -> dict:
         d = asdict(self)
         return {k: v for k, v in d.items() if v is not None}
@@ -43,22 +115,35 @@ class Camera:
         """Focal length in pixels for an image ``image_width_px`` wide (square pixels)."""
         return self.focal_length * image_width_px / self.sensor_width
 
+    # -- thin lens ---------------------------------------------------------------------
+    def coc_scale_px(self, image_width_px: float) -> float:
+        """``K``: the CoC diameter in pixels of a point at infinity.
+
+        ``K = A f / (S - f)`` on the sensor (mm; aperture ``A = f / N``, focus ``S``), times
+        pixels per mm.  A point at planar depth ``z`` blurs into ``|K (1 - S / z)|``.
+        """
+        f = self.focal_length
+        s = self.focus_distance * 1000.0  # scene metres -> mm
+        return (f / self.f_number) * f / max(s - f, 1e-6) * image_width_px / self.sensor_width
+
+    def coc_signed_px(self, depth, image_width_px: float):
+        """Signed CoC diameters in pixels of planar depths (:func:`coc_signed` with ``K``)."""
+        return coc_signed(depth, self.coc_scale_px(image_width_px), self.focus_distance)
+
     def coc_px(self, depth: float, image_width_px: float) -> float:
         """Circle-of-confusion diameter in pixels for a point at planar ``depth`` (thin lens).
 
         ``c = (f/N) * f/(S - f) * |1 - S/z|`` on the sensor (mm), times px per mm.  Finite
-        at z = inf (it tends to the background CoC).
+        at z = inf (it tends to the background CoC); 0 for an invalid depth.
         """
-        f = self.focal_length
-        s = self.focus_distance * 1000.0  # scene metres -> mm
-        z = depth * 1000.0
-        if not (z > 0.0):
-            return 0.0
-        aperture = f / self.f_number
-        scale = aperture * f / max(s - f, 1e-6)
-        c_mm = scale * abs(1.0 - s / z) if math.isfinite(z) else scale
-        return c_mm * image_width_px / self.sensor_width
+        return abs(float(self.coc_signed_px(depth, image_width_px)))
 
+    # -- shutter -----------------------------------------------------------------------
     def shutter_fraction(self) -> float:
         """Fraction of the frame interval the shutter is open."""
         return self.shutter_angle / 360.0
+
+    def shutter_interval(self) -> tuple[float, float]:
+        """(t0, t1): the open shutter in frames relative to the frame time
+        (:func:`shutter_interval` of this camera's angle and offset)."""
+        return shutter_interval(self.shutter_angle, self.shutter_offset)

@@ -1,15 +1,22 @@
-"""Device Gaussian blur: a reusable, cost-flat separable blur for every clfx effect.
+"""Device Gaussian blur and pyramid steps: a reusable, cost-flat separable blur.
 
-Public API (stable; other effects call it)
-------------------------------------------
+Public API (``defocus`` blurs with it, ``dof`` halves its resolution with it)
+-----------------------------------------------------------------------------
 ``gaussian_blur(rt, img, sigma_x, sigma_y=None, *, quality="final", border="clamp", out=None)``
     Blur a :class:`~clfx.device.runtime.DeviceImage` (1, 2 or 4 channels) by a Gaussian with standard
     deviations ``sigma_x``, ``sigma_y`` in pixels.  Returns a new DeviceImage, or ``out``.
+``LEVELS``
+    The blur's quality levels as :class:`BlurLevel` data (an effect that is this blur
+    declares them as its own).
 ``sanitize_nonfinite(rt, img)``
     A copy with NaN/Inf set to 0, and the number of pixels that had one.
+``box_downsample2x(rt, img, out, *, scale)``
+    The 2 x 2 box to half resolution (energy kept with ``scale`` 1/4 of the sum = the mean):
+    the pyramid step of effects that gather at half resolution (dof).
 ``downsample(rt, img, factor, ...)``, ``upsample(rt, coarse, factor, out)``,
 ``downsample2x``, ``upsample2x``
-    The pyramid steps the blur uses, for effects that work at low resolution (glare, bloom).
+    Gaussian-prefiltered decimation and B-spline reconstruction (the blur's own pyramid
+    steps, for effects that work at low resolution).
 ``blur_plan(sigma, quality)``
     Which method and pyramid factor a sigma gets (for reports and tests).
 
@@ -42,7 +49,7 @@ past the frame renders into a window grown by ~3 sigma.  Each axis is handled in
             the output window plus a margin, and the decimation reads the input through the
             border mode, so borders are as exact as in the direct method.
 
-Quality levels (``QUALITIES``; measured errors in ``notes`` of the report and tests/test_blur.py)
+Quality levels (``LEVELS``; measured errors in ``notes`` of the report and tests/test_blur.py)
 
 =========  ========  ====  ======  =======================================================
 level      truncate  c     s_min   accumulation
@@ -64,12 +71,11 @@ M. Unser, A. Aldroubi, M. Eden, "B-spline signal processing", IEEE TSP 41(2), 19
 from __future__ import annotations
 
 import math
-import weakref
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core.plugin import Level
 from clfx.core.rect import Rect
 
 MIN_SIGMA = 0.3
@@ -85,8 +91,8 @@ _MIXTURE_HALF_SPREAD = math.sqrt(-_BSPLINE_KAPPA4 / 3.0)   # d with 3 d^2 = 1/30
 
 
 @dataclass(frozen=True)
-class BlurQuality:
-    """Concrete choices of one quality level.
+class BlurLevel(Level):
+    """Concrete choices of one quality level (``fp64``: accumulate and hold weights in float64).
 
     Attributes
     ----------
@@ -99,24 +105,31 @@ class BlurQuality:
         Decimation prefilter sigma in coarse pixels (``c``); aliasing ~ ``exp(-2 pi^2 c^2)``.
     min_coarse_sigma : float
         Smallest coarse-level sigma ``s_min`` (coarse pixels); inf = never use the pyramid.
-    double : bool
-        Accumulate and hold weights in float64.
     """
 
-    name: str
-    truncate: float
-    pyramid_truncate: float
-    prefilter: float
-    min_coarse_sigma: float
-    double: bool
+    truncate: float = 4.0
+    pyramid_truncate: float = 5.5
+    prefilter: float = 0.8
+    min_coarse_sigma: float = 2.0
 
 
-QUALITIES = {
-    "draft": BlurQuality("draft", 3.0, 3.5, 0.6, 1.0, False),
-    "preview": BlurQuality("preview", 3.5, 4.5, 0.7, 1.5, False),
-    "final": BlurQuality("final", 4.0, 5.5, 0.8, 2.0, False),
-    "reference": BlurQuality("reference", 6.0, 6.0, 0.0, math.inf, True),
+LEVELS = {
+    "draft": BlurLevel("direct Gaussian truncated at 3 sigma below ~2 px; above, pyramid with "
+                       "prefilter 0.6 coarse px, coarse sigma >= 1, B-spline upsampling; float32 "
+                       "(impulse error <= 7e-3 of peak)",
+                       truncate=3.0, pyramid_truncate=3.5, prefilter=0.6, min_coarse_sigma=1.0),
+    "preview": BlurLevel("direct at 3.5 sigma below ~3.5 px; pyramid with prefilter 0.7, coarse "
+                         "sigma >= 1.5; float32 (<= 1e-3)",
+                         truncate=3.5, pyramid_truncate=4.5, prefilter=0.7, min_coarse_sigma=1.5),
+    "final": BlurLevel("direct at 4 sigma below ~4.5 px; pyramid with prefilter 0.8, coarse "
+                       "sigma >= 2; float32 (<= 1.5e-4)",
+                       truncate=4.0, pyramid_truncate=5.5, prefilter=0.8, min_coarse_sigma=2.0),
+    "reference": BlurLevel("direct separable Gaussian truncated at 6 sigma, float64 accumulation "
+                           "and weights, at any size (slow for large sizes; <= 1e-7)",
+                           fp64=True, truncate=6.0, pyramid_truncate=6.0, prefilter=0.0,
+                           min_coarse_sigma=math.inf),
 }
+"""The blur's quality levels, declared once (defocus's levels are these)."""
 
 
 @dataclass(frozen=True)
@@ -136,7 +149,7 @@ class AxisPlan:
         return max(1, math.ceil(self.truncate * self.sigma))
 
 
-def blur_plan(sigma: float, quality: str = "final") -> AxisPlan:
+def blur_plan(sigma: float, quality: "str | BlurLevel" = "final") -> AxisPlan:
     """The method for blurring one axis by ``sigma`` pixels at ``quality``.
 
     The pyramid is used from the first factor ``F = 2`` that keeps the coarse sigma at or
@@ -159,12 +172,14 @@ def blur_plan(sigma: float, quality: str = "final") -> AxisPlan:
     return best or AxisPlan("direct", sigma, q.truncate)
 
 
-def _quality(quality: str) -> BlurQuality:
+def _quality(quality: "str | BlurLevel") -> BlurLevel:
+    if isinstance(quality, BlurLevel):
+        return quality
     try:
-        return QUALITIES[quality]
+        return LEVELS[quality]
     except KeyError:
         raise ValueError(f"gaussian_blur: quality {quality!r} is not one of "
-                         f"{', '.join(QUALITIES)}") from None
+                         f"{', '.join(LEVELS)}") from None
 
 
 # -- host-side weight and index tables ------------------------------------------------------
@@ -287,28 +302,10 @@ def _copy_table(n_in: int, offset: int, n_out: int, border: str) -> _Table:
     return _Table(idx.astype(np.int32), np.ones(pos.shape), n_out, inside)
 
 
-# -- device-side caches ---------------------------------------------------------------------
-_CACHES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_CACHE_SIZE = 64
-
-
-def _cache(rt) -> OrderedDict:
-    c = _CACHES.get(rt)
-    if c is None:
-        c = _CACHES[rt] = OrderedDict()
-    return c
-
-
+# -- device-side tables ----------------------------------------------------------------------
 def _cached(rt, key, make):
-    c = _cache(rt)
-    if key in c:
-        c.move_to_end(key)
-        return c[key]
-    value = make()
-    c[key] = value
-    while len(c) > _CACHE_SIZE:
-        c.popitem(last=False)
-    return value
+    """Weight and index tables on the device, kept in the runtime's cache (owner "blur")."""
+    return rt.cache.get(("blur",) + key, make)
 
 
 def _wdtype(double: bool):
@@ -355,11 +352,8 @@ class _Pass:
     run: object
 
 
-def _defines(channels, taps, double):
-    d = {"CH": channels, "TAPS": taps}
-    if double:
-        d["ACC_DOUBLE"] = 1
-    return d
+def _kernel(rt, name, channels, taps, double):
+    return rt.kernel(KERNEL_FILE, name, fp64=double, CH=channels, TAPS=taps)
 
 
 def _direct_weights(rt, plan, taps, double):
@@ -370,28 +364,19 @@ def _direct_weights(rt, plan, taps, double):
     return _cached(rt, ("wdirect", plan.sigma, plan.truncate, taps, double), make)
 
 
-def _direct_h(rt, plan, ch, double, border, n_in, offset, cols, rows):
-    r = plan.radius
-    taps = _bucket_odd(2 * r + 1)
+def _direct(rt, axis, plan, ch, double, border, n_in, offset, rows, cols):
+    """A direct Gaussian pass along x (``axis`` "h": ``n_in`` input columns) or y ("v":
+    ``n_in`` input rows) into ``rows`` x ``cols`` pixels, output index j reading input
+    j + ``offset``."""
+    taps = _bucket_odd(2 * plan.radius + 1)
     wbuf = _direct_weights(rt, plan, taps, double)
-    knl = rt.kernel(KERNEL_FILE, "blur_direct_h", **_defines(ch, taps, double))
+    knl = _kernel(rt, f"blur_direct_{axis}", ch, taps, double)
+    i32 = np.int32
 
     def run(src, dst):
-        rt.launch(knl, (dst.pitch // 4, rows), src, np.int32(src.pitch), np.int32(n_in), dst,
-                  np.int32(dst.pitch), np.int32(rows), np.int32(offset), wbuf,
-                  np.int32(BORDERS[border]))
-    return _Pass(rows, cols, run)
-
-
-def _direct_v(rt, plan, ch, double, border, n_in, offset, rows, cols):
-    r = plan.radius
-    taps = _bucket_odd(2 * r + 1)
-    wbuf = _direct_weights(rt, plan, taps, double)
-    knl = rt.kernel(KERNEL_FILE, "blur_direct_v", **_defines(ch, taps, double))
-
-    def run(src, dst):
-        rt.launch(knl, (dst.pitch // 4, rows), src, np.int32(n_in), dst, np.int32(rows),
-                  np.int32(dst.pitch), np.int32(offset), wbuf, np.int32(BORDERS[border]))
+        head = ((src, i32(src.pitch), i32(n_in), dst, i32(dst.pitch), i32(rows)) if axis == "h"
+                else (src, i32(n_in), dst, i32(rows), i32(dst.pitch)))
+        rt.launch(knl, (dst.pitch // 4, rows), *head, i32(offset), wbuf, i32(BORDERS[border]))
     return _Pass(rows, cols, run)
 
 
@@ -401,8 +386,7 @@ LONG_SUM_TAPS = 64
 
 
 def _table_buffers(rt, t: _Table, rows: int, double: bool):
-    dbl = double or (_bucket_taps(t.idx.shape[1]) > LONG_SUM_TAPS
-                     and bool(getattr(rt, "has_fp64", False)))
+    dbl = double or rt.use_fp64(_bucket_taps(t.idx.shape[1]) > LONG_SUM_TAPS)
     return (t.n_out, dbl) + _device_table(rt, t, rows, dbl)
 
 
@@ -412,7 +396,7 @@ def _gather_h(rt, key, make_table, ch, double, rows):
         t = make_table()
         return _table_buffers(rt, t, _pitch(t.n_out), double)
     cols, dbl, taps, ibuf, wbuf = _cached(rt, ("h",) + key + (double,), make)
-    knl = rt.kernel(KERNEL_FILE, "blur_gather_h", **_defines(ch, taps, dbl))
+    knl = _kernel(rt, "blur_gather_h", ch, taps, dbl)
 
     def run(src, dst):
         rt.launch(knl, (dst.pitch // 4, rows), src, np.int32(src.pitch), dst,
@@ -425,7 +409,7 @@ def _gather_v(rt, key, make_table, ch, double, cols):
         t = make_table()
         return _table_buffers(rt, t, t.n_out, double)
     rows, dbl, taps, ibuf, wbuf = _cached(rt, ("v",) + key + (double,), make)
-    knl = rt.kernel(KERNEL_FILE, "blur_gather_v", **_defines(ch, taps, dbl))
+    knl = _kernel(rt, "blur_gather_v", ch, taps, dbl)
 
     def run(src, dst):
         rt.launch(knl, (dst.pitch // 4, rows), src, dst, np.int32(dst.pitch), np.int32(rows),
@@ -442,7 +426,7 @@ def _build_passes(rt, img, window, px: AxisPlan, py: AxisPlan, border, double):
 
     # x, first half: to the output columns (direct / copy) or to the coarse columns
     if px.method == "direct":
-        passes.append(_direct_h(rt, px, ch, double, border, wi.width, ox, wo.width, rows))
+        passes.append(_direct(rt, "h", px, ch, double, border, wi.width, ox, rows, wo.width))
         cols = wo.width
     elif px.method == "pyramid":
         gx = ("dec", px, wi.width, ox, wo.width, border)
@@ -462,7 +446,7 @@ def _build_passes(rt, img, window, px: AxisPlan, py: AxisPlan, border, double):
     # y, completely (blurring x at the coarse level while y is coarse too)
     x_blurred = px.method != "pyramid"
     if py.method == "direct":
-        passes.append(_direct_v(rt, py, ch, double, border, wi.height, oy, wo.height, cols))
+        passes.append(_direct(rt, "v", py, ch, double, border, wi.height, oy, wo.height, cols))
         rows = wo.height
     elif py.method == "pyramid":
         dec_y, ncy, my = _decimation_table(py, wi.height, oy, wo.height, border)
@@ -506,8 +490,8 @@ def gaussian_blur(rt, img, sigma_x: float, sigma_y: float | None = None, *,
     sigma_x, sigma_y : float
         Standard deviations in pixels along x and y; ``sigma_y`` defaults to ``sigma_x``.
         An axis with sigma < 0.3 px is copied.
-    quality : {"draft", "preview", "final", "reference"}
-        See the module docstring (``QUALITIES``): pyramid settings, or the direct float64
+    quality : {"draft", "preview", "final", "reference"} or BlurLevel
+        See the module docstring (``LEVELS``): pyramid settings, or the direct float64
         Gaussian truncated at 6 sigma for ``reference``.
     border : {"clamp", "mirror", "zero"}
         How the image continues past its window.
@@ -534,8 +518,8 @@ def gaussian_blur(rt, img, sigma_x: float, sigma_y: float | None = None, *,
         raise ValueError(f"gaussian_blur: {img.channels} channels; expected 1, 2 or 4")
     sigma_y = sigma_x if sigma_y is None else sigma_y
     q = _quality(quality)
-    px, py = blur_plan(sigma_x, quality), blur_plan(sigma_y, quality)
-    double = q.double and bool(getattr(rt, "has_fp64", False))
+    px, py = blur_plan(sigma_x, q), blur_plan(sigma_y, q)
+    double = rt.use_fp64(q.fp64)
     if out is None:
         out = rt.image(img.window, img.channels)
     elif out.channels != img.channels:
@@ -573,6 +557,22 @@ def sanitize_nonfinite(rt, img):
 
 
 # -- pyramid helpers ------------------------------------------------------------------------
+def box_downsample2x(rt, img, out, *, scale: float = 0.25):
+    """``out`` = ``scale`` times the 2 x 2 box sums of ``img`` (``scale`` 1/4: the mean).
+
+    Pixel ``(x, y)`` of ``out`` (every pixel of its rows, padding included) sums ``img``'s
+    pixels ``2x .. 2x + 1``, ``2y .. 2y + 1`` (window-relative, padding included); blocks past
+    the last full one read it (odd sizes).  Same channels; ``img`` at least 2 x 2 pixels of
+    pitch and rows.  Returns ``out``, enqueued.
+    """
+    if out.channels != img.channels:
+        raise ValueError(f"box_downsample2x: out has {out.channels} channels, img {img.channels}")
+    knl = rt.kernel(KERNEL_FILE, "blur_box_down2", CH=img.channels)
+    rt.launch(knl, (out.pitch, out.height), img, np.int32(img.pitch), np.int32(img.height), out,
+              np.int32(out.pitch), np.int32(out.height), np.float32(scale))
+    return out
+
+
 def downsample(rt, img, factor: int, *, prefilter: float = 0.8, border: str = "clamp",
                truncate: float = 5.5):
     """Decimate by an integer ``factor`` with a Gaussian prefilter.

@@ -22,24 +22,33 @@ Without trucking the image at time t is the sharp image under the similarity map
 ``p -> c + (1 + zoom t) R(roll t) (p - c) + shift t``: nothing is occluded or revealed, so
 the exact result is the average of the inverse look-ups along each pixel's path (linear,
 spin and radial gathers in one kernel; arcs for roll, not tangents).  With trucking, the
-motion is turned into a velocity field and rendered by :mod:`clfx.plugins.motion_blur`'s
-depth-aware reconstruction (its Python helpers are reused), which handles the parallax's
-occlusions; there the roll is linearised (the tangent of the arc).
+motion is turned into a velocity field and rendered by the depth-aware reconstruction of
+:mod:`clfx.fx.motion` (the gather motion_blur uses), which handles the parallax's occlusions;
+there the roll is linearised (the tangent of the arc).
 
 Reads outside the source window clamp to its edge (the blur does not grow the frame).
+Non-finite input pixels are set to 0 before they are spread (counted in ``ctx.notes``); finite
+input stays finite, however large (a sum that overflows float32 is taken again with each
+sample scaled first).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Vec2Param
+from clfx.fx.motion import (
+    LEVELS,
+    MAX_RADIUS_PX,
+    SHUTTER_OFFSETS,
+    reconstruct,
+    sanitized_copy,
+    shutter_from,
+)
 from clfx.host import Plugin, register
-from clfx.plugins.motion_blur import (LEVELS, MAX_RADIUS_PX, SHUTTER_OFFSETS,
-                                      accumulation_defines, reconstruct,
-                                      sanitized_copy, shutter_from)
 
 KERNEL = "camera_blur.cl"
 
@@ -82,13 +91,16 @@ def peak_speed_bound(m, window, min_depth) -> float:
     return v
 
 
-QUALITY_TEXT = {
-    lvl: (f"pan/roll/zoom: exact path gather, up to {L.max_samples} samples (one per "
-          f"{L.spacing:g} px of the longest path), {'bilinear' if L.bilinear else 'nearest'}, "
-          f"{'float64' if L.double else 'float32'} accumulation"
-          f"{'' if L.jitter else ', midpoint rule'}; trucking: motion_blur's {lvl} level")
-    for lvl, L in LEVELS.items()
+QUALITY = {
+    name: replace(lvl, summary=(
+        f"pan/roll/zoom: exact path gather, up to {lvl.max_samples} samples (one per "
+        f"{lvl.spacing:g} px of the longest path), {'bilinear' if lvl.bilinear else 'nearest'}, "
+        f"{'float64' if lvl.fp64 else 'float32'} accumulation"
+        f"{'' if lvl.jitter else ', midpoint rule'}; trucking: motion_blur's {name} level"))
+    for name, lvl in LEVELS.items()
 }
+"""The motion gather's levels (one declaration, :data:`clfx.fx.motion.LEVELS`), described
+for the path gather."""
 
 
 @register
@@ -126,7 +138,7 @@ class CameraBlur(Plugin):
                        hint="Largest blur radius with trucking, as a fraction of the frame "
                             f"diagonal (at most {MAX_RADIUS_PX} px)."),
         ),
-        quality=QUALITY_TEXT,
+        quality=QUALITY,
     )
 
     def is_identity(self, p, ctx):
@@ -146,17 +158,18 @@ class CameraBlur(Plugin):
         src = ctx.source
         t0, t1 = shutter_from(p, ctx.camera)
         m = camera_motion(p, ctx)
-        level = LEVELS[ctx.quality]
+        level = self.level(ctx)
         i32, f32 = np.int32, np.float32
         nonfinite = ctx.analysis.nonfinite_count
+        if nonfinite:
+            ctx.notes.append(f"camera_blur: {nonfinite} non-finite pixels set to 0")
         if not needs_depth(p):
             col = sanitized_copy(rt, src) if nonfinite else src
             length = peak_speed_bound(m, src.window, None) * (t1 - t0)
             n = int(np.clip(math.ceil(length / level.spacing), 2, level.max_samples))
-            defines = dict(BILINEAR=int(level.bilinear), JITTER=int(level.jitter),
-                           **accumulation_defines(rt, level.double))
             dst = src.like()
-            rt.launch(rt.kernel(KERNEL, "camera_blur_similarity", **defines),
+            rt.launch(rt.kernel(KERNEL, "camera_blur_similarity", BILINEAR=int(level.bilinear),
+                                JITTER=int(level.jitter), fp64=level.fp64),
                       (src.pitch // 4, src.height), col, dst, i32(src.pitch), i32(src.width),
                       i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
                       f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]), f32(m["zoom"]),
@@ -179,21 +192,9 @@ class CameraBlur(Plugin):
         peak = peak_speed_bound(m, src.window, zmin)
         out, stats = reconstruct(rt, src, vel, depth, t0=t0, t1=t1,
                                  max_radius_px=min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX),
-                                 peak_speed=peak, quality=ctx.quality, frame=ctx.frame,
+                                 peak_speed=peak, level=level, frame=ctx.frame,
                                  nonfinite=nonfinite)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px")
         return out
 
-
-def bench_case(width: int, height: int, rng):
-    """A handheld-style pan with a slight roll and trucking over the layered test scene."""
-    from clfx.core.camera import Camera
-    from clfx.plugins.motion_blur import moving_scene
-    from clfx.bench.scene import render_sharp
-
-    scene = moving_scene(width, height, 0.0)
-    sharp = render_sharp(scene, 0.0, ss=2)
-    return dict(source=sharp.rgba, depth=sharp.depth, velocity=None,
-                params=dict(length=0.01, direction=200.0, roll=0.3, truck=(0.02, 0.0)),
-                camera=Camera(shutter_angle=180.0))

@@ -29,9 +29,8 @@ from __future__ import annotations
 
 import math
 
-from clfx.fx.blur import MIN_SIGMA, gaussian_blur, sanitize_nonfinite
-from clfx.core.camera import Camera
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
+from clfx.fx.blur import LEVELS, MIN_SIGMA, gaussian_blur, sanitize_nonfinite
 from clfx.host import Plugin, register
 
 EDGES = {"clamp": "clamp", "mirror": "mirror", "black": "zero"}
@@ -64,17 +63,7 @@ class Defocus(Plugin):
                         hint="Past the data window: clamp repeats edge pixels, mirror reflects "
                              "them, black lets light spread into empty surroundings."),
         ),
-        quality={
-            "draft": "direct Gaussian truncated at 3 sigma below ~2 px; above, pyramid with "
-                     "prefilter 0.6 coarse px, coarse sigma >= 1, B-spline upsampling; float32 "
-                     "(impulse error <= 7e-3 of peak)",
-            "preview": "direct at 3.5 sigma below ~3.5 px; pyramid with prefilter 0.7, coarse "
-                       "sigma >= 1.5; float32 (<= 1e-3)",
-            "final": "direct at 4 sigma below ~4.5 px; pyramid with prefilter 0.8, coarse "
-                     "sigma >= 2; float32 (<= 1.5e-4)",
-            "reference": "direct separable Gaussian truncated at 6 sigma, float64 accumulation "
-                         "and weights, at any size (slow for large sizes; <= 1e-7)",
-        },
+        quality=LEVELS,
         spreads_light=True,
     )
 
@@ -104,36 +93,6 @@ class Defocus(Plugin):
                 ctx.notes.append(f"defocus: {n_bad} pixels with NaN/Inf set to 0")
         sx, sy = defocus_sigmas(p, ctx)
         out = rt.image(self.output_window(p, ctx), src.channels)
-        return gaussian_blur(rt, src, sx, sy, quality=ctx.quality, border=EDGES[p.edges],
+        return gaussian_blur(rt, src, sx, sy, quality=self.level(ctx), border=EDGES[p.edges],
                              out=out)
 
-
-def bench_case(width, height, rng):
-    """A representative hard case: noisy texture with HDR highlights, sigma ~50 px at 1080p."""
-    import numpy as np
-
-    src = rng.uniform(0.0, 1.0, (height, width, 4)).astype(np.float32)
-    src[..., 3] = 1.0
-    n = max(1, width * height // 20000)
-    ys, xs = rng.integers(0, height, n), rng.integers(0, width, n)
-    src[ys, xs, :3] = 1e4  # highlights: blur must stay positive, energy conserved
-    return dict(source=src, depth=None, velocity=None,
-                params={"size": 50.0 / math.hypot(1920, 1080), "aspect": 1.0, "edges": "clamp"},
-                camera=Camera())
-
-
-def bench_peers(case, params, ctx):
-    """OpenCV's Gaussian blur of the same sigma and edge mode (what a user reaches for)."""
-    import numpy as np
-
-    try:
-        import cv2
-    except ImportError:
-        return {}
-    src = np.ascontiguousarray(case["source"], np.float32)
-    sx, sy = defocus_sigmas(params, ctx)
-    border = {"clamp": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101,
-              "black": cv2.BORDER_CONSTANT}[params.edges]
-    cv2.setNumThreads(2)
-    return {"cv2.GaussianBlur": lambda: cv2.GaussianBlur(src, (0, 0), sx, sigmaY=sy,
-                                                         borderType=border)}

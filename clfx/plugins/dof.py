@@ -8,7 +8,8 @@ diameter ``c = (f/N) * f/(S - f) * |1 - S/z|`` on the sensor, ``c * width_px / s
 in pixels; clfx works with the signed radius ``r = K/2 (1 - S/z)`` (``K`` = the CoC at
 infinity, in px), negative in front of the focus plane, which is finite at ``z = inf``.  With
 ``coc_source = max_blur`` the CoC at infinity is given directly, ``K = max_blur * diagonal``
-(still linear in ``1/z``).  Radii are clamped to ``max_coc / 2 * diagonal``.  Invalid depths
+(still linear in ``1/z``); the formula is :func:`clfx.core.camera.coc_signed`, the one copy
+every layer uses.  Radii are clamped to ``max_coc / 2 * diagonal``.  Invalid depths
 (NaN, 0, negative) count as in focus; non-finite colours become 0 (counted in the notes).
 Pixel aspect stretches the aperture vertically (radii are in x pixels).  The bokeh is the
 aperture: a disk, or a polygon of ``blades`` blades inscribed in the CoC circle, first vertex
@@ -33,39 +34,68 @@ Warfare", simplified for offline use)
      is the background hidden behind it, estimated from the visible background around.
    ``out = far + alpha * (near - far)``.  Every tap rejected falls back to the centre pixel.
 4. Tiles whose every pixel is far out of focus (CoC radius above a threshold per quality
-   level) are gathered at half resolution (2 x 2 box of colour, mean radius halved, the same
-   gather with half the radius) and upsampled bilinearly into those tiles only, so in-focus
-   edges always come from the full-resolution gather.
+   level) are gathered at half resolution (2 x 2 box of colour, mean radius halved: the
+   shared ``blur_box_down2`` of :mod:`clfx.fx.blur`; the same gather with half the radius)
+   and upsampled bilinearly into those tiles only, so in-focus edges always come from the
+   full-resolution gather.
 
 Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors).
+
+Light leaves the data window: the region of definition grows by the largest CoC radius the
+frame's depth range can produce (the tiles of the shared scene analysis; the ``max_coc``
+clamp without them).  When the output window is larger than the source window (a data window
+tighter than the display window), the beauty is extended with transparent black and the
+depth by its edge values, and the tiles are taken over the grown window.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core.camera import aperture_radius, coc_signed, first_blade_angle
+from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
+from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE  # dof's tiles are the shared analysis's
-from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam
+from clfx.fx.blur import box_downsample2x
 from clfx.host import Plugin, register
 
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
-QUALITY = {  # ring spacing (px), max rings, float64 accumulation, min tile radius for half res
-    "draft": (2.0, 4, False, 2.0),
-    "preview": (1.0, 6, False, 3.0),
-    "final": (1.0, 12, False, 6.0),
-    "reference": (1.0, 32, True, math.inf),
+
+
+@dataclass(frozen=True)
+class DofLevel(Level):
+    """What one quality level of the gather does."""
+
+    spacing: float = 1.0              # ring spacing, px
+    max_rings: int = 12               # rings at most (3 K (K + 1) + 1 taps)
+    half_res_radius: float = 6.0      # tiles whose every CoC radius is >= this: half resolution
+
+
+LEVELS = {
+    "draft": DofLevel("rings every 2 px, at most 4 rings (61 taps); tiles whose every pixel has "
+                      "a CoC radius >= 2 px gathered at half resolution; float32 sums",
+                      spacing=2.0, max_rings=4, half_res_radius=2.0),
+    "preview": DofLevel("rings every 1 px, at most 6 rings (127 taps); half resolution where "
+                        "every CoC radius >= 3 px; float32 sums",
+                        spacing=1.0, max_rings=6, half_res_radius=3.0),
+    "final": DofLevel("rings every 1 px, at most 12 rings (469 taps); half resolution where "
+                      "every CoC radius >= 6 px; float32 sums",
+                      spacing=1.0, max_rings=12, half_res_radius=6.0),
+    "reference": DofLevel("rings every 1 px, at most 32 rings (3169 taps), all at full "
+                          "resolution, float64 sums",
+                          fp64=True, spacing=1.0, max_rings=32, half_res_radius=math.inf),
 }
 
 
 def lens_scale_px(p, camera, ctx_diag: float, width_px: float) -> float:
-    """``K``: the CoC diameter in pixels at infinity, from the camera or ``max_blur``."""
+    """``K``: the CoC diameter in pixels at infinity, from the camera (with this effect's
+    f-number and focus overrides) or ``max_blur``."""
     if p.coc_source == "max_blur":
         return p.max_blur * ctx_diag
-    f = camera.focal_length
-    n = p.f_number or camera.f_number
-    s = focus_distance(p, camera) * 1000.0
-    return (f / n) * f / max(s - f, 1e-6) * width_px / camera.sensor_width
+    return camera.updated(f_number=p.f_number or camera.f_number,
+                          focus_distance=focus_distance(p, camera)).coc_scale_px(width_px)
 
 
 def focus_distance(p, camera) -> float:
@@ -74,23 +104,7 @@ def focus_distance(p, camera) -> float:
 
 def coc_radius(depth, k_half: float, focus: float, clamp_r: float):
     """Signed CoC radius in px for planar depths (float64 NumPy; same rules as the kernel)."""
-    z = np.asarray(depth, np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(np.isposinf(z), k_half, k_half * (1.0 - focus / z))
-    r = np.where(z > 0, r, 0.0)          # NaN, 0 and negatives: in focus
-    return np.clip(r, -clamp_r, clamp_r)
-
-
-def aperture_radius(phi, blades: int, first: float, roundness: float):
-    """Boundary radius (circumradius 1) of the aperture in direction ``phi`` (radians, image
-    coordinates); ``first`` is the angle of the first vertex.  < 3 blades: a disk."""
-    phi = np.asarray(phi, np.float64)
-    if blades < 3:
-        return np.ones_like(phi)
-    sector = 2.0 * math.pi / blades
-    rel = np.mod(phi - first, sector) - 0.5 * sector
-    poly = math.cos(0.5 * sector) / np.cos(rel)
-    return poly + (1.0 - poly) * roundness
+    return np.clip(coc_signed(depth, k_half, focus), -clamp_r, clamp_r)
 
 
 def tap_table(radius: float, spacing: float, kmax: int, aspect: float = 1.0, blades: int = 0,
@@ -172,16 +186,7 @@ class Dof(Plugin):
             FloatParam("roundness", 0.0, min=0.0, max=1.0,
                        hint="0 = straight blades, 1 = round bokeh."),
         ),
-        quality={
-            "draft": "rings every 2 px, at most 4 rings (61 taps); tiles whose every pixel has "
-                     "a CoC radius >= 2 px gathered at half resolution; float32 sums",
-            "preview": "rings every 1 px, at most 6 rings (127 taps); half resolution where "
-                       "every CoC radius >= 3 px; float32 sums",
-            "final": "rings every 1 px, at most 12 rings (469 taps); half resolution where "
-                     "every CoC radius >= 6 px; float32 sums",
-            "reference": "rings every 1 px, at most 32 rings (3169 taps), all at full "
-                         "resolution, float64 sums",
-        },
+        quality=LEVELS,
         spreads_light=True,
     )
 
@@ -192,8 +197,7 @@ class Dof(Plugin):
         clamp_r = 0.5 * p.max_coc * ctx.diagonal_px
         blades = ctx.camera.blades if p.blades < 0 else p.blades
         rot = ctx.camera.blade_rotation + p.blade_rotation
-        return k_half, focus_distance(p, ctx.camera), clamp_r, blades, \
-            -0.5 * math.pi + math.radians(rot)
+        return k_half, focus_distance(p, ctx.camera), clamp_r, blades, first_blade_angle(rot)
 
     def tile_radii(self, p, ctx, *, with_min: bool = False):
         """Per 32 px tile: the largest CoC radius any pixel within reach can have (px); with
@@ -218,31 +222,42 @@ class Dof(Plugin):
                          np.minimum(np.abs(r0), np.abs(r1)))
         return r_max, r_min.astype(np.float32)
 
-    def tap_tables(self, levels, spacing, kmax, aspect, blades, first, roundness):
+    def spread_px(self, p, ctx) -> tuple[int, int]:
+        """How far (x, y px) light can land from its pixel: the largest CoC radius of the
+        frame (whole pixels, as the gather's), stretched by the pixel aspect in y, plus the
+        coverage ramp's pixel."""
+        radii = self.tile_radii(p, ctx)
+        r = float(quantised_radius(radii.max())) if radii.size else 0.0
+        if r == 0.0:
+            return 0, 0
+        return int(math.ceil(r)) + 1, int(math.ceil(r * ctx.pixel_aspect)) + 1
+
+    def tap_tables(self, rt, levels, spacing, kmax, aspect, blades, first, roundness):
         """One concatenated tap table for the frame's radius levels and per-tile (first,
-        count) pairs; tables are cached on the instance per parameter set."""
-        cache = self.__dict__.setdefault("_tap_cache", {})
+        count) pairs; each radius's table is kept in the runtime's cache."""
         parts, offsets, n = [], {}, 0
         for r in sorted(set(levels.ravel().tolist()) - {0.0}):
-            key = (r, spacing, kmax, aspect, blades, first, roundness)
-            if key not in cache:
-                cache[key] = tap_table(r, spacing, kmax, aspect, blades, first, roundness)
-            offsets[r] = (n, len(cache[key]))
-            parts.append(cache[key])
-            n += len(cache[key])
+            taps = rt.cache.get(("dof.taps", r, spacing, kmax, aspect, blades, first, roundness),
+                                lambda r=r: tap_table(r, spacing, kmax, aspect, blades, first,
+                                                      roundness))
+            offsets[r] = (n, len(taps))
+            parts.append(taps)
+            n += len(taps)
         table = np.concatenate(parts) if parts else np.zeros((1, 8), np.float32)
         info = np.zeros(levels.shape + (2,), np.int32)
         for r, (first_tap, count) in offsets.items():
             info[levels == r] = (first_tap, count)
         return np.ascontiguousarray(table), np.ascontiguousarray(info)
 
-    def _gather(self, rt, knl, col, coc, ppitch, pad, dst, w, h, levels, spacing, kmax,
-                aspect, blades, first, roundness, tile=TILE):
-        table, info = self.tap_tables(levels, spacing, kmax, aspect, blades, first, roundness)
+    def _gather(self, rt, knl, col, coc, pad, dst, levels, lvl, aspect, blades, first,
+                roundness, tile=TILE):
+        table, info = self.tap_tables(rt, levels, lvl.spacing, lvl.max_rings, aspect, blades,
+                                      first, roundness)
         taps, tiles = rt.to_device(table), rt.to_device(info)
         i32 = np.int32
-        rt.launch(knl, (-(-w // 4), h), col, coc, i32(ppitch), i32(pad), dst, i32(dst.pitch),
-                  i32(w), i32(h), taps, tiles, i32(levels.shape[1]), i32(tile), local=LOCAL)
+        rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, i32(col.pitch), i32(pad),
+                  dst, i32(dst.pitch), i32(dst.width), i32(dst.height), taps, tiles,
+                  i32(levels.shape[1]), i32(tile), local=LOCAL)
         # (the pooled tables may be dropped now: the in-order queue uses them before any
         # later command could overwrite a reused buffer)
 
@@ -255,52 +270,55 @@ class Dof(Plugin):
         return None
 
     def region_of_definition(self, p, ctx):
-        # Taps are clamped to the frame edge: light is not spread outside the data window.
-        return ctx.source.window
+        return ctx.source.window.grown(*self.spread_px(p, ctx))
+
+    def region_of_interest(self, p, ctx, window):
+        return window.grown(*self.spread_px(p, ctx))
 
     # -- render ----------------------------------------------------------------------------
     def render(self, rt, p, ctx):
+        window = self.output_window(p, ctx)
+        if window != ctx.source.window:
+            # Light leaves the data window: render over the grown window, outside it nothing
+            # (transparent black) at the edge's depth.  A copy of the context, so the scene
+            # analysis (the tiles) is taken over the grown window; notes stay shared.
+            ctx = ctx.with_quality(ctx.quality)
+            ctx.source = rt.reframe(ctx.source, window, "zero")
+            ctx.depth = rt.reframe(ctx.depth, window, "clamp")
+            ctx.notes.append(f"dof: grown to {window}")
         src, depth = ctx.source, ctx.depth
-        spacing, kmax, use_double, half_min = QUALITY[ctx.quality]
+        lvl = self.level(ctx)
         k_half, focus, clamp_r, blades, first = self._lens(p, ctx)
         radii, r_min = self.tile_radii(p, ctx, with_min=True)
         # Tiles whose every pixel is far out of focus are gathered at half resolution.
-        half = r_min >= half_min
+        half = r_min >= lvl.half_res_radius
         levels = quantised_radius(np.where(half, 0.0, radii))
         r_max = float(quantised_radius(radii).max())
         # pad by the largest reach (+2 for rounding), quantised so buffers get reused
         pad = int(math.ceil((r_max * max(1.0, ctx.pixel_aspect) + 2) / 8.0) * 8)
         w, h = src.width, src.height
-        ppitch = -(-(w + 2 * pad + 4) // 4) * 4
-        pheight = h + 2 * pad
-        col = rt.buffer(ppitch * pheight * 16)
-        coc = rt.buffer(ppitch * pheight * 4)
+        padded = Rect.from_size(-(-(w + 2 * pad + 4) // 4) * 4, h + 2 * pad)
+        col, coc = rt.image(padded, 4), rt.image(padded, 1)
         f32, i32 = np.float32, np.int32
-        defines = {"USE_DOUBLE": 1} if (use_double and rt.has_fp64) else {}
-        prep = rt.kernel("dof.cl", "dof_prepare", **defines)
-        rt.launch(prep, (ppitch // 4, pheight), src, depth, i32(src.pitch), i32(w), i32(h),
-                  col, coc, i32(ppitch), i32(pheight), i32(pad), f32(k_half), f32(focus),
-                  f32(clamp_r))
-        gather = rt.kernel("dof.cl", "dof_gather", **defines)
+        prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64)
+        rt.launch(prep, (col.pitch // 4, col.height), src, depth, i32(src.pitch), i32(w),
+                  i32(h), col, coc, i32(col.pitch), i32(col.height), i32(pad), f32(k_half),
+                  f32(focus), f32(clamp_r))
+        gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64)
         dst = src.like()
-        self._gather(rt, gather, col, coc, ppitch, pad, dst, w, h, levels, spacing, kmax,
-                     ctx.pixel_aspect, blades, first, p.roundness)
+        self._gather(rt, gather, col, coc, pad, dst, levels, lvl, ctx.pixel_aspect, blades,
+                     first, p.roundness)
         if half.any():
             hw, hh, hpad = -(-w // 2), -(-h // 2), pad // 2
-            hppitch = -(-(hw + 2 * hpad + 4) // 4) * 4
-            hheight = hh + 2 * hpad
-            colh = rt.buffer(hppitch * hheight * 16)
-            coch = rt.buffer(hppitch * hheight * 4)
-            rt.launch(rt.kernel("dof.cl", "dof_downsample", **defines), (hppitch, hheight),
-                      col, coc, i32(ppitch), i32(pheight), colh, coch, i32(hppitch),
-                      i32(hheight))
+            hpadded = Rect.from_size(-(-(hw + 2 * hpad + 4) // 4) * 4, hh + 2 * hpad)
+            colh = box_downsample2x(rt, col, rt.image(hpadded, 4), scale=0.25)
+            coch = box_downsample2x(rt, coc, rt.image(hpadded, 1), scale=0.125)  # radii halved
             hdst = rt.image((hh, hw), 4)
             hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))
-            self._gather(rt, gather, colh, coch, hppitch, hpad, hdst, hw, hh, hlevels,
-                         spacing, kmax, ctx.pixel_aspect, blades, first, p.roundness,
-                         tile=TILE // 2)
+            self._gather(rt, gather, colh, coch, hpad, hdst, hlevels, lvl, ctx.pixel_aspect,
+                         blades, first, p.roundness, tile=TILE // 2)
             flags = rt.to_device(np.ascontiguousarray(half, np.int32))
-            rt.launch(rt.kernel("dof.cl", "dof_upsample", **defines), (w, h), hdst,
+            rt.launch(rt.kernel("dof.cl", "dof_upsample", fp64=lvl.fp64), (w, h), hdst,
                       i32(hdst.pitch), i32(hw), i32(hh), dst, i32(dst.pitch), i32(w), i32(h),
                       flags, i32(half.shape[1]), i32(TILE), local=(32, 4))
         an = ctx.analysis
@@ -314,35 +332,3 @@ class Dof(Plugin):
                      f"{int(half.sum())} at half resolution")
         ctx.notes.append("dof: " + "; ".join(notes))
         return dst
-
-
-# -- benchmark -------------------------------------------------------------------------------
-_BENCH_CACHE: dict = {}
-
-
-def bench_camera(width: int):
-    """A 50 mm f/2.2 lens focused on the demo subject at 3 m: CoC up to ~40 px at 1920 wide."""
-    from clfx.core.camera import Camera
-
-    return Camera(focal_length=50.0, f_number=2.2, sensor_width=36.0, focus_distance=3.0,
-                  shutter_angle=180.0)
-
-
-def bench_case(width, height, rng=None):
-    """The demo scene through a shallow lens, with its multisample ground truth (``truth``).
-
-    The truth render takes tens of seconds at 1080p; it is cached per size in the process.
-    """
-    from clfx.bench.groundtruth import make_case
-    from clfx.bench.scene import demo_scene
-
-    key = (int(width), int(height))
-    if key not in _BENCH_CACHE:
-        cam = bench_camera(width)
-        scene = demo_scene(12, int(width), int(height))
-        case = make_case(scene, cam, samples=1024, dof=True, motion=False, ss=1)
-        _BENCH_CACHE[key] = case
-    case = _BENCH_CACHE[key]
-    return dict(source=case.sharp.rgba, depth=case.sharp.depth, velocity=None,
-                params={}, camera=case.camera, truth=case.truth,
-                truth_seconds=case.seconds)

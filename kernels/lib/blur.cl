@@ -11,7 +11,8 @@
  *   (border mode: a runtime argument of the direct kernels, only read near the borders:
  *    0 = zero (black outside), 1 = clamp to edge, 2 = mirror (reflect-101, periodic: any
  *    index stays in bounds); the gathers get mapped indices from the host)
- *   ACC_DOUBLE  accumulate (and hold weights) in double: the `reference` quality
+ *   CLFX_FP64   accumulate (and hold weights) in REAL = double (lib/precision.h): the
+ *               `reference` level, and gathers with many taps
  *
  * Kernels
  *   blur_direct_h  Gaussian along rows with shared weights; interior quads read 4*CH
@@ -21,9 +22,12 @@
  *   blur_gather_h  out[y][j] = sum_t w[j][t] * in[y][idx[j][t]]  (tables from the host:
  *                  pyramid decimation, coarse blur, B-spline upsampling, window changes)
  *   blur_gather_v  out[j][x] = sum_t w[j][t] * in[idx[j][t]][x]  (4 pixels share taps)
+ *   blur_box_down2 2 x 2 box (times a scale) to half resolution: the energy-keeping pyramid
+ *                  step of effects that gather at half resolution (dof).
  *   blur_sanitize  copy with non-finite values set to 0; counts bad pixels per row.
  */
 #include "lib/common.h"
+#include "lib/precision.h"
 
 #ifndef CH
 #define CH 4
@@ -39,68 +43,46 @@
 #endif
 #define RADIUS ((TAPS - 1) / 2)
 
-#if defined(ACC_DOUBLE) && defined(CLFX_HAS_FP64)
-typedef double wtype;
-#define ACC_IS_DOUBLE 1
-#else
-typedef float wtype;
-#endif
+typedef REAL wtype;
 
-/* QUAD: the 4 pixels of a work-item; PIX: one pixel. */
+/* QUAD: the 4 pixels of a work-item; PIX: one pixel; realq_t / realp_t: their accumulators
+ * (REAL vectors of the same width) and TO_REALQ / TO_REALP / TO_FLOATQ their conversions. */
 #if CH == 4
 typedef float16 quad_t;
 typedef float4 pix_t;
+typedef REAL16 realq_t;
+typedef REAL4 realp_t;
 #define LOADQ(i, p) vload16(0, (p) + (size_t)(i) * 4)
 #define STOREQ(v, i, p) vstore16((v), 0, (p) + (size_t)(i) * 4)
 #define LOADP(i, p) vload4(0, (p) + (size_t)(i) * 4)
-#ifdef ACC_IS_DOUBLE
-typedef double16 accq_t;
-typedef double4 accp_t;
-#define TOACCQ convert_double16
-#define TOACCP convert_double4
-#define FROMACCQ convert_float16
-#else
-typedef float16 accq_t;
-typedef float4 accp_t;
-#endif
+#define STOREP(v, i, p) vstore4((v), 0, (p) + (size_t)(i) * 4)
+#define TO_REALQ TO_REAL16
+#define TO_REALP TO_REAL4
+#define TO_FLOATQ TO_FLOAT16
 #elif CH == 2
 typedef float8 quad_t;
 typedef float2 pix_t;
+typedef REAL8 realq_t;
+typedef REAL2 realp_t;
 #define LOADQ(i, p) vload8(0, (p) + (size_t)(i) * 2)
 #define STOREQ(v, i, p) vstore8((v), 0, (p) + (size_t)(i) * 2)
 #define LOADP(i, p) vload2(0, (p) + (size_t)(i) * 2)
-#ifdef ACC_IS_DOUBLE
-typedef double8 accq_t;
-typedef double2 accp_t;
-#define TOACCQ convert_double8
-#define TOACCP convert_double2
-#define FROMACCQ convert_float8
-#else
-typedef float8 accq_t;
-typedef float2 accp_t;
-#endif
+#define STOREP(v, i, p) vstore2((v), 0, (p) + (size_t)(i) * 2)
+#define TO_REALQ TO_REAL8
+#define TO_REALP TO_REAL2
+#define TO_FLOATQ TO_FLOAT8
 #else /* CH == 1 */
 typedef float4 quad_t;
 typedef float pix_t;
+typedef REAL4 realq_t;
+typedef REAL realp_t;
 #define LOADQ(i, p) vload4(0, (p) + (size_t)(i))
 #define STOREQ(v, i, p) vstore4((v), 0, (p) + (size_t)(i))
 #define LOADP(i, p) ((p)[(size_t)(i)])
-#ifdef ACC_IS_DOUBLE
-typedef double4 accq_t;
-typedef double accp_t;
-#define TOACCQ convert_double4
-#define TOACCP (double)
-#define FROMACCQ convert_float4
-#else
-typedef float4 accq_t;
-typedef float accp_t;
-#endif
-#endif
-
-#ifndef TOACCQ
-#define TOACCQ
-#define TOACCP
-#define FROMACCQ
+#define STOREP(v, i, p) ((p)[(size_t)(i)] = (v))
+#define TO_REALQ TO_REAL4
+#define TO_REALP TO_REAL
+#define TO_FLOATQ TO_FLOAT4
 #endif
 
 /* Index of the pixel that stands for index i of a line of n pixels under the border mode.
@@ -124,29 +106,29 @@ kernel void blur_direct_h(global const float *src, const int src_pitch, const in
   if(y >= rows || q * 4 >= dst_pitch) return;
   global const float *row = src + (size_t)y * src_pitch * CH;
   const int first = q * 4 + offset - RADIUS;   /* input index of tap 0 of lane 0 */
-  accq_t acc = (accq_t)(0);
+  realq_t acc = (realq_t)(0);
   if(first >= 0 && first + 3 + 2 * RADIUS < src_width)
   {
     /* interior: every tap is a contiguous load of the 4 pixels, no index arithmetic */
 BLUR_UNROLL
     for(int t = 0; t < TAPS; ++t)
-      acc += weights[t] * TOACCQ(LOADQ(first + t, row));
+      acc += weights[t] * TO_REALQ(LOADQ(first + t, row));
   }
   else
   {
-    accp_t a0 = (accp_t)(0), a1 = (accp_t)(0), a2 = (accp_t)(0), a3 = (accp_t)(0);
+    realp_t a0 = (realp_t)(0), a1 = (realp_t)(0), a2 = (realp_t)(0), a3 = (realp_t)(0);
     for(int t = 0; t < TAPS; ++t)
     {
       const wtype w = weights[t];
       const int i = first + t;
-      a0 += w * blur_inside(i, src_width, border) * TOACCP(LOADP(blur_map(i, src_width, border), row));
-      a1 += w * blur_inside(i + 1, src_width, border) * TOACCP(LOADP(blur_map(i + 1, src_width, border), row));
-      a2 += w * blur_inside(i + 2, src_width, border) * TOACCP(LOADP(blur_map(i + 2, src_width, border), row));
-      a3 += w * blur_inside(i + 3, src_width, border) * TOACCP(LOADP(blur_map(i + 3, src_width, border), row));
+      a0 += w * blur_inside(i, src_width, border) * TO_REALP(LOADP(blur_map(i, src_width, border), row));
+      a1 += w * blur_inside(i + 1, src_width, border) * TO_REALP(LOADP(blur_map(i + 1, src_width, border), row));
+      a2 += w * blur_inside(i + 2, src_width, border) * TO_REALP(LOADP(blur_map(i + 2, src_width, border), row));
+      a3 += w * blur_inside(i + 3, src_width, border) * TO_REALP(LOADP(blur_map(i + 3, src_width, border), row));
     }
-    acc = (accq_t)(a0, a1, a2, a3);
+    acc = (realq_t)(a0, a1, a2, a3);
   }
-  STOREQ(FROMACCQ(acc), (size_t)y * dst_pitch + q * 4, dst);
+  STOREQ(TO_FLOATQ(acc), (size_t)y * dst_pitch + q * 4, dst);
 }
 
 /* Gaussian along columns.  dst row j is src row j + offset; both have `pitch` pixels. */
@@ -158,12 +140,12 @@ kernel void blur_direct_v(global const float *src, const int src_rows, global fl
   if(j >= dst_rows || q * 4 >= pitch) return;
   const int first = j + offset - RADIUS;
   global const float *col = src + (size_t)q * 4 * CH;
-  accq_t acc = (accq_t)(0);
+  realq_t acc = (realq_t)(0);
   if(first >= 0 && first + 2 * RADIUS < src_rows)
   {
 BLUR_UNROLL
     for(int t = 0; t < TAPS; ++t)
-      acc += weights[t] * TOACCQ(LOADQ((size_t)(first + t) * pitch, col));
+      acc += weights[t] * TO_REALQ(LOADQ((size_t)(first + t) * pitch, col));
   }
   else
   {
@@ -171,10 +153,10 @@ BLUR_UNROLL
     {
       const int i = first + t;
       const wtype w = weights[t] * blur_inside(i, src_rows, border);
-      acc += w * TOACCQ(LOADQ((size_t)blur_map(i, src_rows, border) * pitch, col));
+      acc += w * TO_REALQ(LOADQ((size_t)blur_map(i, src_rows, border) * pitch, col));
     }
   }
-  STOREQ(FROMACCQ(acc), (size_t)j * pitch + q * 4, dst);
+  STOREQ(TO_FLOATQ(acc), (size_t)j * pitch + q * 4, dst);
 }
 
 /* Table-driven gather along rows: out[y][j] = sum_t w[j*TAPS+t] * in[y][idx[j*TAPS+t]].
@@ -189,16 +171,16 @@ kernel void blur_gather_h(global const float *src, const int src_pitch, global f
   const int j = q * 4;
   global const int *i0 = idx + (size_t)j * TAPS;
   global const wtype *w0 = wtab + (size_t)j * TAPS;
-  accp_t a0 = (accp_t)(0), a1 = (accp_t)(0), a2 = (accp_t)(0), a3 = (accp_t)(0);
+  realp_t a0 = (realp_t)(0), a1 = (realp_t)(0), a2 = (realp_t)(0), a3 = (realp_t)(0);
 BLUR_UNROLL
   for(int t = 0; t < TAPS; ++t)
   {
-    a0 += w0[t] * TOACCP(LOADP(i0[t], row));
-    a1 += w0[TAPS + t] * TOACCP(LOADP(i0[TAPS + t], row));
-    a2 += w0[2 * TAPS + t] * TOACCP(LOADP(i0[2 * TAPS + t], row));
-    a3 += w0[3 * TAPS + t] * TOACCP(LOADP(i0[3 * TAPS + t], row));
+    a0 += w0[t] * TO_REALP(LOADP(i0[t], row));
+    a1 += w0[TAPS + t] * TO_REALP(LOADP(i0[TAPS + t], row));
+    a2 += w0[2 * TAPS + t] * TO_REALP(LOADP(i0[2 * TAPS + t], row));
+    a3 += w0[3 * TAPS + t] * TO_REALP(LOADP(i0[3 * TAPS + t], row));
   }
-  STOREQ(FROMACCQ(((accq_t)(a0, a1, a2, a3))), (size_t)y * dst_pitch + j, dst);
+  STOREQ(TO_FLOATQ(((realq_t)(a0, a1, a2, a3))), (size_t)y * dst_pitch + j, dst);
 }
 
 /* Table-driven gather along columns: out[j][x] = sum_t w[j*TAPS+t] * in[idx[j*TAPS+t]][x]. */
@@ -210,11 +192,27 @@ kernel void blur_gather_v(global const float *src, global float *dst, const int 
   global const float *col = src + (size_t)q * 4 * CH;
   global const int *i0 = idx + (size_t)j * TAPS;
   global const wtype *w0 = wtab + (size_t)j * TAPS;
-  accq_t acc = (accq_t)(0);
+  realq_t acc = (realq_t)(0);
 BLUR_UNROLL
   for(int t = 0; t < TAPS; ++t)
-    acc += w0[t] * TOACCQ(LOADQ((size_t)i0[t] * pitch, col));
-  STOREQ(FROMACCQ(acc), (size_t)j * pitch + q * 4, dst);
+    acc += w0[t] * TO_REALQ(LOADQ((size_t)i0[t] * pitch, col));
+  STOREQ(TO_FLOATQ(acc), (size_t)j * pitch + q * 4, dst);
+}
+
+/* 2 x 2 box to half resolution: dst(x, y) = scale * the sum of src's pixels (2x, 2y) ..
+ * (2x + 1, 2y + 1), over every pixel of dst's rows (padding included); blocks past src's
+ * last full block read its last one (src_pitch, src_rows >= 2).  scale 1/4: the mean. */
+kernel void blur_box_down2(global const float *src, const int src_pitch, const int src_rows,
+                           global float *dst, const int dst_pitch, const int dst_rows,
+                           const float scale)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= dst_pitch || y >= dst_rows) return;
+  const int fx = min(2 * x, src_pitch - 2), fy = min(2 * y, src_rows - 2);
+  const size_t i = (size_t)fy * src_pitch + fx;
+  const pix_t sum = LOADP(i, src) + LOADP(i + 1, src) + LOADP(i + src_pitch, src)
+                    + LOADP(i + src_pitch + 1, src);
+  STOREP(scale * sum, (size_t)y * dst_pitch + x, dst);
 }
 
 /* One work-item per row: copy with every non-finite float set to 0 (exponent-bit test, so it

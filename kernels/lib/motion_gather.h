@@ -1,4 +1,4 @@
-/* motion_gather.h: sampling helpers shared by motion_blur.cl and camera_blur.cl.
+/* motion_gather.h: sampling helpers shared by lib/motion.cl and camera_blur.cl.
  *
  * BILINEAR (define, default 1) selects bilinear or nearest fetches; JITTER (default 1)
  * selects interleaved-gradient jitter or the midpoint rule.
@@ -14,10 +14,12 @@
 #define JITTER 1
 #endif
 
-/* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge.  The float
- * index is clamped before the int conversion so far-off positions cannot overflow. */
-inline float4 mg_fetch(global const float *col, const int pitch, const int w, const int h,
-                       const float px, const float py)
+/* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge, times
+ * `scale`.  The float index is clamped before the int conversion so far-off positions cannot
+ * overflow; the corners are scaled before they are interpolated, so with scale <= 1/2 no
+ * difference of finite colours can overflow either. */
+inline float4 mg_fetch_scaled(global const float *col, const int pitch, const int w,
+                              const int h, const float px, const float py, const float scale)
 {
 #if BILINEAR
   const float u = px - 0.5f, v = py - 0.5f;
@@ -26,15 +28,24 @@ inline float4 mg_fetch(global const float *col, const int pitch, const int w, co
   const int iu = (int)clamp(fu, -1.0f, (float)w), iv = (int)clamp(fv, -1.0f, (float)h);
   const int xa = clfx_clampi(iu, 0, w - 1), xb = clfx_clampi(iu + 1, 0, w - 1);
   const int ya = clfx_clampi(iv, 0, h - 1), yb = clfx_clampi(iv + 1, 0, h - 1);
-  const float4 c00 = vload4(ya * pitch + xa, col), c10 = vload4(ya * pitch + xb, col);
-  const float4 c01 = vload4(yb * pitch + xa, col), c11 = vload4(yb * pitch + xb, col);
+  const float4 c00 = vload4(ya * pitch + xa, col) * scale;
+  const float4 c10 = vload4(ya * pitch + xb, col) * scale;
+  const float4 c01 = vload4(yb * pitch + xa, col) * scale;
+  const float4 c11 = vload4(yb * pitch + xb, col) * scale;
   const float4 top = c00 + (c10 - c00) * ax, bot = c01 + (c11 - c01) * ax;
   return top + (bot - top) * ay;
 #else
   const int x = (int)clamp(floor(px), 0.0f, (float)(w - 1));
   const int y = (int)clamp(floor(py), 0.0f, (float)(h - 1));
-  return vload4(y * pitch + x, col);
+  return vload4(y * pitch + x, col) * scale;
 #endif
+}
+
+/* Colour at continuous position (px, py): mg_fetch_scaled unscaled. */
+inline float4 mg_fetch(global const float *col, const int pitch, const int w, const int h,
+                       const float px, const float py)
+{
+  return mg_fetch_scaled(col, pitch, w, h, px, py, 1.0f);
 }
 
 /* Interleaved gradient noise (Jimenez 2014): a jitter in [0, 1) whose pattern has no low

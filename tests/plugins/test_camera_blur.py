@@ -115,3 +115,37 @@ def test_hdr_pan_keeps_energy_away_from_borders(rt):
     got = run(rt, src, "reference", length=0.2)
     np.testing.assert_allclose(got[..., :3].sum(), 3e5, rtol=1e-5)
     np.testing.assert_allclose(got[..., 3], 1.0, rtol=1e-6)   # alpha blurred, stays 1
+
+
+@pytest.mark.parametrize("truck", [(0.0, 0.0), (0.05, 0.0)])
+def test_nonfinite_input_is_zeroed_and_noted(rt, rng, truck):
+    """Issue 10 item 6: NaN/Inf pixels are set to 0 before they spread, and counted."""
+    src = rng.uniform(0.0, 1.0, (24, 40, 4)).astype(np.float32)
+    src[5, 7, 0] = np.nan
+    src[10, 20] = np.inf
+    src[12, 3, 2] = -np.inf
+    depth = np.full((24, 40), 2.0, np.float32)
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=CAM)
+    p = CameraBlur.params(length=0.05, roll=5.0, truck=truck)
+    got = CameraBlur().render(rt, p, ctx).download()
+    assert np.isfinite(got).all()
+    assert any("3 non-finite pixels set to 0" in n for n in ctx.notes), ctx.notes
+    clean = np.where(np.isfinite(src), src, 0.0).astype(np.float32)
+    want = CameraBlur().apply(rt, p, clean, depth=depth, camera=CAM)
+    np.testing.assert_array_equal(got, want)      # exactly the blur of the zeroed image
+
+
+@pytest.mark.parametrize("quality", QUALITIES)
+@pytest.mark.parametrize("truck", [(0.0, 0.0), (0.05, 0.0)])
+def test_finite_extremes_stay_finite(rt, quality, truck):
+    """Colours near the float32 limit (OpenEXR's WideFloatRange: +-2^127) overflow a float32
+    sum of samples; the output must still be finite, and the mean of equal values kept."""
+    src = np.full((16, 40, 4), 3.0e38, np.float32)
+    src[:, ::2, :3] = -3.0e38                      # neighbours of opposite signs
+    src[8:, :] = 2.0 ** 127
+    depth = np.full((16, 40), 2.0, np.float32)
+    got = run(rt, src, quality, depth=depth, length=0.05, roll=3.0, zoom=0.02, truck=truck,
+              max_blur=0.25)
+    assert np.isfinite(got).all()
+    assert np.allclose(got[12:, 8:32], 2.0 ** 127, rtol=1e-5)   # a flat field stays flat
+    assert np.abs(got).max() <= 3.0e38 * (1 + 1e-6)        # an average, to float rounding

@@ -4,9 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from clfx.host import RenderContext
-from clfx.plugins.defocus import Defocus, bench_case, defocus_sigmas
+from clfx.bench.cases.defocus import CASE
 from clfx.core.rect import Rect
+from clfx.host import RenderContext
+from clfx.plugins.defocus import Defocus, defocus_sigmas
 from tests.conftest import hard_shapes
 from tests.reference.defocus import defocus as reference
 
@@ -148,7 +149,7 @@ def test_alpha_is_blurred_like_color(rt, rng):
 
 
 def test_bench_case_is_renderable(rt, rng):
-    case = bench_case(64, 36, rng)
+    case = CASE.make(64, 36, rng)
     assert case["source"].shape == (36, 64, 4) and case["depth"] is None
     p = Defocus.params(**case["params"])
     got = Defocus().apply(rt, p, case["source"], camera=case["camera"])

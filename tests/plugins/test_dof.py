@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from clfx.bench import metrics
-from clfx.core.camera import Camera
 from clfx.bench.groundtruth import render_truth
-from clfx.core.plugin import QUALITY_LEVELS
-from clfx.plugins.dof import QUALITY, Dof, quantised_radius, tap_table
 from clfx.bench.scene import demo_scene, render_sharp
+from clfx.core.camera import Camera
+from clfx.core.plugin import QUALITY_LEVELS
+from clfx.plugins.dof import LEVELS, Dof, quantised_radius, tap_table
 from tests.conftest import hard_shapes
 from tests.reference import dof as reference
 
@@ -32,7 +32,7 @@ def oracle(src, depth, quality, cam=CAM, **params):
     k_half, focus, clamp_r = lens(w, h, p, cam)
     r = reference.coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
     radius = float(quantised_radius(np.abs(r).max()))
-    spacing, kmax = QUALITY[quality][:2]
+    spacing, kmax = LEVELS[quality].spacing, LEVELS[quality].max_rings
     blades = cam.blades if p.blades < 0 else p.blades
     taps = tap_table(radius, spacing, kmax, 1.0, blades,
                      -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
@@ -238,7 +238,8 @@ def test_max_blur_mode(rt, rng):
     # max_blur: K = max_blur * diagonal; same geometry as a camera with that K
     h, w = depth.shape
     r = reference.coc_radius(depth, k_half=4.0, focus=3.0, clamp_r=0.5 * 0.05 * diag)
-    taps = tap_table(float(quantised_radius(np.abs(r).max())), *QUALITY["reference"][:2])
+    taps = tap_table(float(quantised_radius(np.abs(r).max())), LEVELS["reference"].spacing,
+                     LEVELS["reference"].max_rings)
     want = reference.dof(src, depth, k_half=4.0, focus=3.0, clamp_r=0.5 * 0.05 * diag, taps=taps)
     np.testing.assert_allclose(got, want, rtol=5e-6, atol=1e-6)   # float32 weights, float64 sums
 
@@ -260,9 +261,9 @@ def test_deterministic(rt, rng):
 
 
 def test_bench_case_shape():
-    from clfx.plugins.dof import bench_case
+    from clfx.bench.cases.dof import CASE
 
-    case = bench_case(64, 36, None)
+    case = CASE.make(64, 36, None)
     assert case["truth"].shape == case["source"].shape == (36, 64, 4)
     assert case["depth"].shape == (36, 64)
 
@@ -282,3 +283,39 @@ def test_half_resolution_tiles_match_full_resolution_on_smooth_content(rt):
     inner = np.s_[16:-16, 16:-16]
     # a disk blur of a smooth image is smooth: 2x2 box + bilinear upsampling costs ~1e-3
     np.testing.assert_allclose(half[inner], full[inner], atol=5e-3)
+
+
+def test_bokeh_leaves_a_tight_data_window(rt):
+    """dof spreads light: a far-out-of-focus light near the edge of a data window tighter
+    than the display window lands past it (the region of definition grows by the largest
+    CoC radius), with its energy kept."""
+    from clfx.core.rect import Rect
+
+    display, data = Rect(0, 0, 96, 64), Rect(32, 16, 64, 48)
+    src = np.zeros((32, 32, 4), np.float32)
+    src[16, 29] = 1e3
+    depth = np.full((32, 32), 100.0, np.float32)
+    cam = CAM.updated(sensor_width=3.0)            # CoC radius ~6.6 px at 100 m
+    p = Dof.params(max_coc=0.25)
+    k_half, focus, clamp_r = lens(display.width, display.height, p, cam)
+    r = abs(reference.coc_radius(100.0, k_half=k_half, focus=focus, clamp_r=clamp_r))
+    for q in ("draft", "reference"):
+        out, window = Dof().apply(rt, p, src, depth=depth, camera=cam, quality=q,
+                                  data_window=data, display_window=display, keep_rod=True)
+        assert window == data.grown(math.ceil(r) + 1), (window, r)
+        right = out[:, data.x1 - window.x0:, 0]
+        assert right.sum() > 0.15 * 1e3, q         # a good part of the disk is outside
+        np.testing.assert_allclose(out[..., 0].sum(), 1e3, rtol=0.05)   # energy kept
+        assert np.isfinite(out).all()
+    # data window = display window: nothing to grow into
+    out, window = Dof().apply(rt, p, src, depth=depth, camera=cam, keep_rod=True)
+    assert window == Rect(0, 0, 32, 32)
+
+
+def test_tap_tables_live_in_the_runtime_cache(rt, rng):
+    src, depth = random_case(rng, (24, 24))
+    plugin, cam = Dof(), CAM.updated(sensor_width=4.0)
+    got = plugin.apply(rt, Dof.params(), src, depth=depth, camera=cam, quality="preview")
+    assert not np.array_equal(got, src)
+    assert not vars(plugin)                          # no state on the instance
+    assert rt.cache.stats()["owners"].get("dof.taps", 0) > 0

@@ -4,9 +4,12 @@ import numpy as np
 import pytest
 
 from clfx.bench import metrics
+from clfx.bench.cases.motion_blur import CASE
 from clfx.core.camera import Camera
+from clfx.core.rect import Rect
+from clfx.fx.motion import MAX_RADIUS_PX, tile_size
 from clfx.host import RenderContext
-from clfx.plugins.motion_blur import MAX_RADIUS_PX, MotionBlur, bench_case, tile_size
+from clfx.plugins.motion_blur import MotionBlur
 from tests.conftest import hard_shapes
 from tests.reference.motion_blur import line_blur, naive_blur
 
@@ -153,7 +156,7 @@ def test_all_samples_rejected_falls_back_to_centre(rt):
 
 
 def test_deterministic(rt, rng):
-    case = bench_case(96, 54, rng, truth=False)
+    case = CASE.make(96, 54, rng, truth=False)
     a = run(rt, case["source"], case["velocity"], case["depth"])
     b = run(rt, case["source"], case["velocity"], case["depth"])
     assert np.array_equal(a, b)
@@ -161,7 +164,7 @@ def test_deterministic(rt, rng):
 
 @pytest.fixture(scope="module")
 def truth_case():
-    return bench_case(256, 144, None, truth_samples=48)
+    return CASE.make(256, 144, None, truth_samples=48)
 
 
 def test_beats_naive_baseline_in_edge_band_and_improves_with_quality(rt, truth_case):
@@ -182,7 +185,7 @@ def test_beats_naive_baseline_in_edge_band_and_improves_with_quality(rt, truth_c
 
 
 def test_static_tiles_are_skipped(rt, rng):
-    c = bench_case(320, 180, rng, truth=False, moving_fraction=0.1)
+    c = CASE.make(320, 180, rng, truth=False, moving_fraction=0.1)
     src, vel, dep = (rt.upload(c["source"]), rt.upload(c["velocity"]), rt.upload(c["depth"]))
     ctx = RenderContext(rt, src, velocity=vel, depth=dep, camera=CENTRED)
     out = MotionBlur().render(rt, MotionBlur.params(), ctx).download()
@@ -192,3 +195,40 @@ def test_static_tiles_are_skipped(rt, rng):
     far = np.abs(c["velocity"]).max(-1) == 0
     far[:, 100:220] = False
     np.testing.assert_array_equal(out[far], c["source"][far])
+
+
+@pytest.mark.parametrize("with_depth", [True, False])
+def test_object_crossing_a_tight_data_window_is_not_cut(rt, with_depth):
+    """Issue 11 item 5: a bar moving right out of a data window tighter than the display
+    window.  The region of definition grows by the smear's reach, light lands past the data
+    window, and the profile falls off like the line blur instead of stopping at a hard edge."""
+    display, data = Rect(0, 0, 96, 48), Rect(24, 12, 64, 36)
+    h, w = data.height, data.width
+    src = np.zeros((h, w, 4), np.float32)
+    src[6:18, 20:] = 1.0                          # touches the data window's right edge
+    vel = np.zeros((h, w, 2), np.float32)
+    vel[6:18, 20:] = (16.0, 0.0)                  # 16 px/frame, 180 deg centred: +-4 px
+    depth = np.full((h, w), 10.0, np.float32)
+    depth[6:18, 20:] = 2.0
+    out, window = MotionBlur().apply(rt, MotionBlur.params(), src, velocity=vel,
+                                     depth=depth if with_depth else None, data_window=data,
+                                     display_window=display, camera=CENTRED, quality="reference",
+                                     keep_rod=True)
+    assert window.contains(data) and window != data and display.contains(window)
+    assert window.x1 >= data.x1 + 4                # the whole smear fits
+    row = out[12 + data.y0 - window.y0, :, 0]      # a row through the bar
+    edge = data.x1 - window.x0                     # first column past the data window
+    assert row[edge] > 0.3 and row[edge + 2] > 0.1     # light outside the data window
+    # line blur of the bar against the black outside: ~1/8 per pixel, no step at the edge
+    assert np.abs(np.diff(row[edge - 6:edge + 6])).max() < 0.2, row[edge - 6:edge + 6]
+    want = line_blur(src, (16.0, 0.0), t0=-0.25, t1=0.25)   # clamps at the window edge
+    assert row[edge - 1] < want[12, -1, 0] - 0.3              # ... which the output must not
+    assert np.isfinite(out).all()
+
+
+def test_rod_is_the_source_window_when_data_equals_display(rt, rng):
+    src = smooth_texture(rng, 24, 40)
+    out, window = MotionBlur().apply(rt, MotionBlur.params(), src,
+                                     velocity=uniform((24, 40), (9.0, 0.0)), camera=CENTRED,
+                                     keep_rod=True)
+    assert window == Rect(0, 0, 40, 24) and out.shape == src.shape

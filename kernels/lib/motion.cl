@@ -1,0 +1,253 @@
+/* motion.cl: motion blur reconstructed from a velocity pass (clfx/fx/motion.py; used by
+ * clfx/plugins/motion_blur.py and the trucking of clfx/plugins/camera_blur.py).
+ *
+ * Passes (McGuire et al. 2012, with the tile classification of Jimenez 2014):
+ *   motion_prepare           per 4 pixels: velocity sanitised (non-finite -> 0) and clamped to
+ *                            the maximum speed VMAX, depth sanitised (invalid -> BIG_DEPTH);
+ *                            writes aux = (vx, vy, z, |v|) per pixel
+ *   motion_sanitize          per 4 pixels: non-finite colour components -> 0 (only when the
+ *                            analysis counted some)
+ *   motion_tilemax           per K x K tile: the velocity of largest magnitude
+ *   motion_neighbormax       per tile: the largest over the 3 x 3 neighbouring tiles
+ *   motion_gather            per 4 pixels of the *moving* tiles only (a compact tile list built
+ *                            on the host): N samples along the neighbourhood's dominant
+ *                            velocity, depth-aware scatter-as-gather weights
+ *
+ * Sample model of the gather (see clfx/fx/motion.py): the output pixel x collects the
+ * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] with one
+ * per-pixel jitter (interleaved gradient noise).  Sample y covers x if x lies on y's smear
+ * y + v_y [t0, t1]; its weight is (source length per sample) x (y's smear density at x).
+ * Samples in front of x (soft depth test) occlude x; samples at x's depth or behind it form
+ * the layer seen through the gaps (Jimenez's foreground / background split).
+ * The gather accumulates in REAL (lib/precision.h: double where the level asks for fp64).
+ */
+#include "lib/motion_gather.h"
+#include "lib/precision.h"
+#ifndef HAS_DEPTH
+#define HAS_DEPTH 1
+#endif
+
+#define BIG_DEPTH 1e30f     /* sanitised "no surface / invalid depth": behind everything */
+#define SOFT_Z 0.02f        /* relative depth difference over which "in front" fades in */
+#define MIN_SPEED 1e-3f     /* below this (px/frame) a pixel counts as static */
+
+/* --- preparation ------------------------------------------------------------------------ */
+kernel void motion_prepare(global const float *vel, global const float *depth,
+                           global float *aux, const int pitch, const int height,
+                           const float vmax)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int i = y * pitch + qx * 4;
+  const float8 v8 = vload8(0, vel + 2 * i);
+  float4 vx = v8.even, vy = v8.odd;
+  const int4 ok = ((as_int4(vx) & 0x7f800000) != 0x7f800000) &
+                  ((as_int4(vy) & 0x7f800000) != 0x7f800000);
+  /* clamp components first so the squares cannot overflow (1e30 px/frame stays finite) */
+  vx = select((float4)(0.0f), clamp(vx, -1e6f, 1e6f), ok);
+  vy = select((float4)(0.0f), clamp(vy, -1e6f, 1e6f), ok);
+  float4 s = sqrt(vx * vx + vy * vy);
+  const float4 scale = select((float4)(1.0f), vmax / s, s > vmax);  /* reach <= tile radius */
+  vx *= scale; vy *= scale; s = fmin(s, vmax);
+#if HAS_DEPTH
+  float4 z = vload4(0, depth + i);
+  z = select((float4)(BIG_DEPTH), z, (z > 0.0f) & (z < BIG_DEPTH));  /* NaN, <= 0, +inf */
+#else
+  const float4 z = (float4)(1.0f);
+#endif
+  vstore16((float16)(vx.x, vy.x, z.x, s.x, vx.y, vy.y, z.y, s.y,
+                     vx.z, vy.z, z.z, s.z, vx.w, vy.w, z.w, s.w), 0, aux + 4 * i);
+}
+
+kernel void motion_sanitize(global const float *src, global float *dst, const int pitch,
+                            const int height)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int i = (y * pitch + qx * 4) * 4;
+  float16 c = vload16(0, src + i);
+  const int16 bad = (as_int16(c) & 0x7f800000) == 0x7f800000;
+  vstore16(select(c, (float16)(0.0f), bad), 0, dst + i);
+}
+
+/* --- tile classification ---------------------------------------------------------------- */
+kernel void motion_tilemax(global const float *aux, global float *tiles, const int pitch,
+                           const int width, const int height, const int tiles_x,
+                           const int tiles_y, const int k)
+{
+  const int tx = get_global_id(0), ty = get_global_id(1);
+  if(tx >= tiles_x || ty >= tiles_y) return;
+  const int x0 = tx * k, y0 = ty * k;
+  const int x1 = min(x0 + k, width), y1 = min(y0 + k, height);
+  float4 best = (float4)(0.0f);
+  for(int y = y0; y < y1; y++)
+    for(int x = x0; x < x1; x++)
+    {
+      const float4 a = vload4(y * pitch + x, aux);
+      if(a.w > best.z) best = (float4)(a.x, a.y, a.w, 0.0f);
+    }
+  vstore4(best, ty * tiles_x + tx, tiles);
+}
+
+kernel void motion_neighbormax(global const float *tiles, global float *nmax,
+                               const int tiles_x, const int tiles_y)
+{
+  const int tx = get_global_id(0), ty = get_global_id(1);
+  if(tx >= tiles_x || ty >= tiles_y) return;
+  float4 best = (float4)(0.0f);
+  for(int dy = -1; dy <= 1; dy++)
+    for(int dx = -1; dx <= 1; dx++)
+    {
+      const int x = tx + dx, y = ty + dy;
+      if(x < 0 || y < 0 || x >= tiles_x || y >= tiles_y) continue;
+      const float4 t = vload4(y * tiles_x + x, tiles);
+      if(t.z > best.z) best = t;
+    }
+  vstore4(best, ty * tiles_x + tx, nmax);
+}
+
+/* --- gather ----------------------------------------------------------------------------- */
+#define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
+
+/* Load the aux records of 4 sample positions (nearest pixel) as vectors. */
+#define MB_LOAD_AUX(ix, iy, VX, VY, Z, S) \
+  { const int4 idx_ = (iy) * pitch + (ix); \
+    const float4 a0_ = vload4(idx_.x, aux), a1_ = vload4(idx_.y, aux); \
+    const float4 a2_ = vload4(idx_.z, aux), a3_ = vload4(idx_.w, aux); \
+    VX = (float4)(a0_.x, a1_.x, a2_.x, a3_.x); VY = (float4)(a0_.y, a1_.y, a2_.y, a3_.y); \
+    Z = (float4)(a0_.z, a1_.z, a2_.z, a3_.z); S = (float4)(a0_.w, a1_.w, a2_.w, a3_.w); }
+
+/* Colours at 4 positions, times `scale` (in scope). */
+#define MB_FETCH4(px, py) \
+  (float16)(mg_fetch_scaled(col, pitch, width, height, (px).x, (py).x, scale), \
+            mg_fetch_scaled(col, pitch, width, height, (px).y, (py).y, scale), \
+            mg_fetch_scaled(col, pitch, width, height, (px).z, (py).z, scale), \
+            mg_fetch_scaled(col, pitch, width, height, (px).w, (py).w, scale))
+
+/* The gather of the 4 pixels of one work-item (lanes `lane`, row fy; centre colours cc, own
+ * velocities (vxx, vxy), depths zx), every colour sample times `scale` (the result too).
+ *
+ * Two interleaved sample sets per pixel x (McGuire et al. 2013 sample both the
+ * neighbourhood's and the pixel's own velocity):
+ *  - along x's own velocity v_x: the surface x belongs to and what its motion reveals behind
+ *    it; a sample at y = x - v_x t shows what covers x at time t unless y is in front of x
+ *    (then it is left to the occluder set).  Exact for any uniform motion; static pixels
+ *    stay sharp.
+ *  - along the tile's dominant velocity v_n: occluders, i.e. samples in front of x whose
+ *    smear y + v_y [t0, t1] passes over x; weight = source length per sample / smear length
+ *    (scatter as gather), so their summed weight is the fraction of the shutter they cover x.
+ * out = occluders (normalised if they overlap) + (1 - their coverage) x own-velocity layer. */
+inline REAL16 motion_gather_quad(global const float *col, global const float *aux,
+                                 const int pitch, const int width, const int height,
+                                 const float4 vn, const float4 lane, const float fy,
+                                 const float16 cc, const float4 vxx, const float4 vxy,
+                                 const float4 zx, const int any_moving, const float t0,
+                                 const float t1, const float dt, const int n, const float ell,
+                                 const float hell, const float4 jit, const float scale)
+{
+  REAL16 F = (REAL16)(0), S = (REAL16)(0);
+  REAL4 aF = (REAL4)(0), aS = (REAL4)(0);
+  for(int i = 0; i < n; i++)
+  {
+    const float4 t = t0 + ((float)i + jit) * dt;
+    float4 vyx, vyy, zy, sy;
+
+    /* occluders, along v_n */
+    {
+      const float4 dx = vn.x * t, dy = vn.y * t;             /* d = x - y */
+      const float4 px = lane + 0.5f - dx, py = fy + 0.5f - dy;
+      const int4 ix = clamp(convert_int4(floor(px)), 0, width - 1);
+      const int4 iy = clamp(convert_int4(floor(py)), 0, height - 1);
+      MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
+      const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
+      const float4 f = clamp(rel, 0.0f, 1.0f);
+      const float4 len = (t1 - t0) * sy;                     /* y's smear length */
+      /* distance along y's motion and across it; ramps of one sample spacing centred on
+       * the smear's ends make the weights of a regular sample grid sum to its length */
+      const float4 inv_sy = 1.0f / fmax(sy, MIN_SPEED);
+      const float4 ay = (dx * vyx + dy * vyy) * inv_sy;
+      const float4 perp = fabs(dx * vyy - dy * vyx) * inv_sy;
+      const float4 rho = clamp(0.5f + fmin(ay - t0 * sy, t1 * sy - ay) / hell, 0.0f, 1.0f)
+                       * clamp(1.5f - perp, 0.0f, 1.0f)
+                       * clamp(2.0f * len - 0.5f, 0.0f, 1.0f);  /* static pixels never occlude */
+      const float4 wf = f * rho * (ell / fmax(len, hell));
+      if(any(wf > 0.0f))
+      {
+        const float16 c = SPLAT16(wf) * MB_FETCH4(px, py);  /* rounded to float, then summed */
+        aF += TO_REAL4(wf);
+        F += TO_REAL16(c);
+      }
+    }
+    /* x's own surface and what it reveals, along v_x */
+    if(any_moving)
+    {
+      const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
+      const int4 ix = clamp(convert_int4(floor(px)), 0, width - 1);
+      const int4 iy = clamp(convert_int4(floor(py)), 0, height - 1);
+      MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
+      const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
+      const float4 ws = 1.0f - clamp(rel, 0.0f, 1.0f);
+      const float16 c = SPLAT16(ws) * MB_FETCH4(px, py);
+      aS += TO_REAL4(ws);
+      S += TO_REAL16(c);
+    }
+  }
+  const REAL4 one = (REAL4)(1);
+  const REAL4 cov = fmin(aF, one);
+  const REAL4 fscale = one / fmax(aF, one);
+  /* the layer behind the occluders: the own-velocity average, or the centre pixel if no
+   * sample belongs to it (all rejected) or nothing moves in this quad */
+  const REAL4 sscale = select((REAL4)(0), (one - cov) / fmax(aS, (REAL4)(1e-6)),
+                              aS > (REAL4)(1e-6));
+  const REAL4 ccov = select(one - cov, (REAL4)(0), aS > (REAL4)(1e-6));
+  return F * (REAL16)(fscale.xxxx, fscale.yyyy, fscale.zzzz, fscale.wwww)
+         + S * (REAL16)(sscale.xxxx, sscale.yyyy, sscale.zzzz, sscale.wwww)
+         + TO_REAL16(cc * scale) * (REAL16)(ccov.xxxx, ccov.yyyy, ccov.zzzz, ccov.wwww);
+}
+
+/* tiles: (tx, ty, samples) per moving tile; k: tile size (multiple of 4); qpt = k * k / 4.
+ * `col` holds finite colours (the host sanitises NaN/Inf first); a float32 sum of huge ones
+ * that overflows is taken again with every colour halved and divided by n first, so finite
+ * input gives finite output. */
+kernel void motion_gather(global const float *col, global const float *aux,
+                          global const float *nmax, global const int *tiles,
+                          const int ntiles, global float *dst, const int pitch,
+                          const int width, const int height, const int tiles_x,
+                          const int k, const float t0, const float t1, const int frame)
+{
+  const int gid = get_global_id(0);
+  const int qpt = k * k / 4;
+  const int tile = gid / qpt;
+  if(tile >= ntiles) return;
+  const int r = gid - tile * qpt, qrow = k / 4;
+  const int tx = tiles[3 * tile], ty = tiles[3 * tile + 1], n = tiles[3 * tile + 2];
+  const int x = tx * k + (r % qrow) * 4, y = ty * k + r / qrow;
+  if(y >= height || x >= pitch) return;
+
+  const float4 vn = vload4(ty * tiles_x + tx, nmax);   /* dominant velocity, |v| in .z */
+  const float4 lane = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
+  const float fy = (float)y;
+  const int base = y * pitch + x;
+  const float16 cc = vload16(0, col + base * 4);
+  const float16 ac = vload16(0, aux + base * 4);
+  const float4 vxx = ac.s048c, vxy = ac.s159d, zx = ac.s26ae, sx = ac.s37bf;
+  const float dt = (t1 - t0) / (float)n;
+  const float ell = vn.z * dt;                 /* source length per occluder sample, px */
+  const float hell = fmax(ell, 1e-3f);
+  const float4 jit = mg_jitter(lane, fy, frame);
+  const int any_moving = any(sx * (t1 - t0) >= 0.25f);
+
+  float scale = 1.0f;
+  float16 out;
+  for(int pass = 0; pass < 2; pass++)   /* the second pass only after an overflow */
+  {
+    out = TO_FLOAT16(motion_gather_quad(col, aux, pitch, width, height, vn, lane, fy, cc, vxx,
+                                        vxy, zx, any_moving, t0, t1, dt, n, ell, hell, jit,
+                                        scale));
+    if(!any((as_int16(out) & 0x7f800000) == 0x7f800000)) break;
+    scale = 0.5f / (float)n;
+  }
+  if(scale != 1.0f)
+    out = clamp(out / scale, -FLT_MAX, FLT_MAX);
+  vstore16(out, 0, dst + base * 4);
+}
