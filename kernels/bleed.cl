@@ -1,5 +1,6 @@
-/* bleed.cl: sensor crosstalk (clfx/plugins/bleed.py): glare's soft-knee threshold and
- * energy-conserving mix (glare.cl) with a small exponential PSF.
+/* bleed.cl: sensor crosstalk (clfx/plugins/bleed.py): the glare family's soft-knee threshold
+ * and energy-conserving mix (lib/scatter.h) with a small exponential PSF.  Large PSFs take
+ * bleed_highlights -> lib/fftconv.cl -> bleed_mix (SCATTER_KERNELS).
  *
  * Small PSFs (radius <= 10 px) take a fused, block-skipping path:
  *   1. bleed_pad_highlights: the highlight image h on a zero-padded grid `hp` around the
@@ -15,8 +16,8 @@
  * with RANK defined holds the separable kernel, one without it the direct kernel.
  * No atomics: identical bytes across runs and thread counts.
  */
-#define GLARE_HELPERS_ONLY 1
-#include "glare.cl"
+#include "lib/scatter.h"
+#include "lib/precision.h"
 
 #ifndef RADIUS
 #define RADIUS 1
@@ -29,45 +30,20 @@
 #define TAPS (2 * RADIUS + 1)
 #define IN_ROWS (ROWS + 2 * RADIUS)
 
-#ifdef BLEED_DOUBLE
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-typedef double acc_t;
-typedef double16 acc16_t;
-#define TO_ACC16 convert_double16
-#else
-typedef float acc_t;
-typedef float16 acc16_t;
-#define TO_ACC16(v) (v)
-#endif
-
-/* Tap (dy, dx) lies inside the PSF's support disc d <= RADIUS + 0.5 (clfx.psf.exponential). */
+/* Tap (dy, dx) lies inside the PSF's support disc d <= RADIUS + 0.5 (clfx.fx.psf.exponential). */
 #define IN_DISC(dy, dx) (4 * ((dy) * (dy) + (dx) * (dx)) <= (2 * RADIUS + 1) * (2 * RADIUS + 1))
 
-kernel void bleed_highlights(global const float *src, global float *dst, const int pitch,
-                             const int height, const float threshold, const float knee)
-{
-  glare_highlights_body(src, dst, pitch, height, threshold, knee, 0.0f);
-}
-
-kernel void bleed_mix(global const float *src, const int spitch, const int swidth,
-                      const int sheight, global const float *g, global float *dst,
-                      const int pitch, const int height, const int dx, const int dy,
-                      const float strength, const float4 tint, const float threshold,
-                      const float knee)
-{
-  glare_mix_body(src, spitch, swidth, sheight, g, dst, pitch, height, dx, dy, strength, tint,
-                 threshold, knee, 0.0f, 0);
-}
+SCATTER_KERNELS(bleed)
 
 /* Sanitised source pixel at source coordinates (sx, sy); 0 outside the source. */
 inline float4 bleed_source(global const float *src, int spitch, int swidth, int sheight,
                            int sx, int sy)
 {
   if(sx < 0 || sx >= swidth || sy < 0 || sy >= sheight) return (float4)(0.0f);
-  return glare_sanitise(vload4((size_t)sy * spitch + sx, src));
+  return scatter_sanitise(vload4((size_t)sy * spitch + sx, src));
 }
 
-/* glare_sanitise of 4 RGBA pixels: a pixel with any non-finite channel becomes 0. */
+/* scatter_sanitise of 4 RGBA pixels: a pixel with any non-finite channel becomes 0. */
 inline float16 bleed_sanitise16(float16 c)
 {
   const int16 bad = (as_int16(c) & 0x7f800000) == 0x7f800000;
@@ -89,7 +65,7 @@ inline float16 bleed_source16(global const float *src, int spitch, int swidth, i
                    bleed_source(src, spitch, swidth, sheight, sx + 3, sy));
 }
 
-/* glare_highlight (scene-linear, boost 0) of 4 sanitised RGBA pixels, lanes = pixels. */
+/* scatter_highlight (scene-linear, boost 0) of 4 sanitised RGBA pixels, lanes = pixels. */
 inline float16 bleed_highlight16(float16 c, float threshold, float knee)
 {
   const float4 r = fmax(c.s048c, 0.0f), g = fmax(c.s159d, 0.0f), b = fmax(c.s26ae, 0.0f);
@@ -147,45 +123,46 @@ kernel void bleed_active(global const uchar *flags, const int fpitch, const int 
   active[(size_t)by * (pitch / 4) + qx] = hit ? 1 : 0;
 }
 
-/* One output quad: out = c - strength h + strength tint max(g, 0), alpha from c (glare.cl's
- * model).  h is the centre highlight (bit-identical to glare_highlight(c)) and has alpha 0;
- * tint16 has alpha 0, so alpha is c's exactly. */
+/* One output quad: out = c - strength h + strength tint max(g, 0), alpha from c (lib/scatter.h's
+ * model), saturated at +-FLT_MAX (finite input, finite output).  h is the centre highlight
+ * (bit-identical to scatter_highlight(c)) and has alpha 0; the tint has alpha 0, so alpha is
+ * c's exactly. */
 inline void bleed_store_mixed(global const float *src, int spitch, int swidth, int sheight,
                               global float *dst, int pitch, int x, int y, int dx, int dy,
-                              float16 g, float16 h, float strength, float16 tint16)
+                              float16 g, float16 h, float strength, float4 tint)
 {
+  const float16 tint16 = (float16)(tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f);
   const float16 c = bleed_source16(src, spitch, swidth, sheight, x + dx, y + dy);
   const float16 o = c + strength * tint16 * fmax(g, 0.0f) - strength * h;
-  vstore16(o, 0, dst + ((size_t)y * pitch + x) * 4);
+  vstore16(clamp(o, -SCATTER_FLT_MAX, SCATTER_FLT_MAX), 0, dst + ((size_t)y * pitch + x) * 4);
 }
 
-/* Inactive block: no light arrives and none leaves, out = sanitised source. */
-inline void bleed_copy_block(global const float *src, int spitch, int swidth, int sheight,
-                             global float *dst, int pitch, int height, int x, int y0, int dx,
-                             int dy)
+/* Inactive rows y0 .. y1 - 1 of a block: no light arrives and none leaves, out = sanitised
+ * source. */
+inline void bleed_copy_rows(global const float *src, int spitch, int swidth, int sheight,
+                            global float *dst, int pitch, int x, int y0, int y1, int dx, int dy)
 {
-  for(int r = 0; r < ROWS; r++)
-  {
-    const int y = y0 + r;
-    if(y >= height) return;
+  for(int y = y0; y < y1; y++)
     vstore16(bleed_source16(src, spitch, swidth, sheight, x + dx, y + dy), 0,
              dst + ((size_t)y * pitch + x) * 4);
-  }
 }
 
 #define HP_QUAD(row, col) vload16(0, hp + ((size_t)(row) * hpitch + (col)) * 4)
 
+/* The arguments both fused mixes share, before their weights: the padded highlights, the
+ * active-block flags, the source and the output; (dx, dy): output origin minus source
+ * origin. */
+#define BLEED_MIX_ARGS                                                                        \
+  global const float *hp, const int hpitch, global const uchar *active,                      \
+  global const float *src, const int spitch, const int swidth, const int sheight,            \
+  global float *dst, const int pitch, const int height, const int dx, const int dy,          \
+  const float strength, const float4 tint
+
 #ifndef RANK
 /* Exact PSF (`psf`: TAPS x TAPS, centre at (RADIUS, RADIUS)), direct gather:
- * g(y, x) = sum_{a, b} h(y + a, x - b) psf(RADIUS - a, RADIUS + b), accumulated in acc_t
- * (float64 with BLEED_DOUBLE).  (dx, dy): output origin minus source origin. */
-kernel void bleed_direct_mix(global const float *hp, const int hpitch,
-                             global const uchar *active,
-                             global const float *src, const int spitch, const int swidth,
-                             const int sheight, global float *dst, const int pitch,
-                             const int height, const int dx, const int dy,
-                             const float strength, const float4 tint,
-                             constant acc_t *psf)
+ * g(y, x) = sum_{a, b} h(y + a, x - b) psf(RADIUS - a, RADIUS + b), weights and sums in REAL
+ * (lib/precision.h: float64 for the reference level). */
+kernel void bleed_direct_mix(BLEED_MIX_ARGS, constant REAL *psf)
 {
   /* one output row per work-item: holding several rows' sums per work-item spills on PoCL */
   const int qx = get_global_id(0), y = get_global_id(1);
@@ -193,12 +170,10 @@ kernel void bleed_direct_mix(global const float *hp, const int hpitch,
   if(x >= pitch || y >= height) return;
   if(!active[(size_t)(y / ROWS) * (pitch / 4) + qx])
   {
-    vstore16(bleed_source16(src, spitch, swidth, sheight, x + dx, y + dy), 0,
-             dst + ((size_t)y * pitch + x) * 4);
+    bleed_copy_rows(src, spitch, swidth, sheight, dst, pitch, x, y, y + 1, dx, dy);
     return;
   }
-  const float16 tint16 = (float16)(tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f);
-  acc16_t acc = (acc16_t)(0);
+  REAL16 acc = (REAL16)(0);
   /* tap (a, b): input pixel (y + a, x - b) = hp pixel (y + RADIUS + a, x + PADX - b), PSF
    * entry (RADIUS - a, RADIUS + b); taps outside the disc vanish at compile time */
 #pragma unroll
@@ -206,9 +181,9 @@ kernel void bleed_direct_mix(global const float *hp, const int hpitch,
 #pragma unroll
     for(int b = -RADIUS; b <= RADIUS; b++)
       if(IN_DISC(a, b))
-        acc += psf[(RADIUS - a) * TAPS + RADIUS + b] * TO_ACC16(HP_QUAD(y + RADIUS + a, x + PADX - b));
+        acc += psf[(RADIUS - a) * TAPS + RADIUS + b] * TO_REAL16(HP_QUAD(y + RADIUS + a, x + PADX - b));
   bleed_store_mixed(src, spitch, swidth, sheight, dst, pitch, x, y, dx, dy, convert_float16(acc),
-                    HP_QUAD(y + RADIUS, x + PADX), strength, tint16);
+                    HP_QUAD(y + RADIUS, x + PADX), strength, tint);
 }
 #endif /* !RANK */
 
@@ -216,21 +191,15 @@ kernel void bleed_direct_mix(global const float *hp, const int hpitch,
 /* Rank-RANK separable approximation psf ~ sum_k s_k u_k u_k^T: for every input row, RANK
  * horizontal TAPS-tap sums; each is added to the output rows within reach with the vertical
  * weights.  `hvec`: RANK x TAPS (u_k), `vvec`: RANK x TAPS (s_k u_k).  float32. */
-kernel void bleed_separable_mix(global const float *hp, const int hpitch,
-                                global const uchar *active,
-                                global const float *src, const int spitch, const int swidth,
-                                const int sheight, global float *dst, const int pitch,
-                                const int height, const int dx, const int dy,
-                                const float strength, const float4 tint,
-                                constant float *hvec, constant float *vvec)
+kernel void bleed_separable_mix(BLEED_MIX_ARGS, constant float *hvec, constant float *vvec)
 {
   const int qx = get_global_id(0), by = get_global_id(1);
   const int x = qx * 4, y0 = by * ROWS;
   if(x >= pitch || y0 >= height) return;
-  const float16 tint16 = (float16)(tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f);
   if(!active[(size_t)by * (pitch / 4) + qx])
   {
-    bleed_copy_block(src, spitch, swidth, sheight, dst, pitch, height, x, y0, dx, dy);
+    bleed_copy_rows(src, spitch, swidth, sheight, dst, pitch, x, y0, min(y0 + ROWS, height),
+                    dx, dy);
     return;
   }
   float16 acc[ROWS];
@@ -266,7 +235,7 @@ kernel void bleed_separable_mix(global const float *hp, const int hpitch,
     const int y = y0 + o;
     if(y < height)
       bleed_store_mixed(src, spitch, swidth, sheight, dst, pitch, x, y, dx, dy, acc[o],
-                        HP_QUAD(y + RADIUS, x + PADX), strength, tint16);
+                        HP_QUAD(y + RADIUS, x + PADX), strength, tint);
   }
 }
 #endif /* RANK */

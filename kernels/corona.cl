@@ -3,18 +3,10 @@
  * corona_bright   RGB * max(lum - t, 0) / lum of the sanitised source (non-finite -> 0,
  *                 negatives -> 0), alpha 0; 4 pixels per work-item (one float16).
  * corona_compose  out = sanitised source (zero outside its window) + intensity * glow, where
- *                 glow (the highlights convolved with the spectral PSF, clfx.fftconv) covers
- *                 the output window; alpha is the source's.
+ *                 glow (the highlights convolved with the spectral PSF, clfx.fx.fftconv)
+ *                 covers the output window; alpha is the source's.
  */
-#include "lib/common.h"
-
-inline float4 corona_highlight(float4 c, float threshold)
-{
-  c = fmax(clfx_finite4_or_zero(c), (float4)0.0f);
-  const float l = clfx_luminance(c);
-  const float k = l > threshold ? (l - threshold) / l : 0.0f;
-  return (float4)(c.x * k, c.y * k, c.z * k, 0.0f);
-}
+#include "lib/scatter.h"
 
 kernel void corona_bright(global const float *src, global float *dst, const int pitch,
                           const int height, const float threshold)
@@ -23,8 +15,8 @@ kernel void corona_bright(global const float *src, global float *dst, const int 
   if(qx * 4 >= pitch || y >= height) return;
   const int i = (y * pitch + qx * 4) * 4;
   const float16 c = vload16(0, src + i);
-  vstore16((float16)(corona_highlight(c.s0123, threshold), corona_highlight(c.s4567, threshold),
-                     corona_highlight(c.s89ab, threshold), corona_highlight(c.scdef, threshold)),
+  vstore16((float16)(scatter_bright(c.s0123, threshold), scatter_bright(c.s4567, threshold),
+                     scatter_bright(c.s89ab, threshold), scatter_bright(c.scdef, threshold)),
            0, dst + i);
 }
 
@@ -36,11 +28,7 @@ kernel void corona_compose(global const float *src, const int src_pitch, const i
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= pitch || y >= height) return;
   if(x >= width) { clfx_store4(dst, pitch, x, y, (float4)0.0f); return; }
-  const int sx = x - ox, sy = y - oy;
-  float4 c = (float4)0.0f;
-  if(sx >= 0 && sx < src_w && sy >= 0 && sy < src_h)
-    c = clfx_finite4_or_zero(clfx_load4(src, src_pitch, sx, sy));
+  const float4 c = scatter_source(src, src_pitch, src_w, src_h, x - ox, y - oy);
   const float4 g = fmax(clfx_finite4_or_zero(clfx_load4(glow, pitch, x, y)), (float4)0.0f);
-  clfx_store4(dst, pitch, x, y, (float4)(c.x + intensity * g.x, c.y + intensity * g.y,
-                                         c.z + intensity * g.z, c.w));
+  clfx_store4(dst, pitch, x, y, scatter_add(c, intensity * g));
 }

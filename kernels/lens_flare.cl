@@ -3,7 +3,9 @@
  *
  * lens_flare_measure  one work-item per light source: sums the highlight (RGB * max(lum - t,
  *                     0) / lum) over the source's bounding box and its luminance-weighted
- *                     centroid, serially in double when available (deterministic).
+ *                     centroid, serially in REAL (lib/precision.h; the host builds it with
+ *                     float64 where the device has it), deterministic; a flux beyond the
+ *                     float range saturates at FLT_MAX.
  * lens_flare_render   each work-item shades 4 pixels of a row (float4 lanes); it loops over
  *                     the entries (ghosts and halos) listed for its TILE x TILE tile, so the
  *                     cost is pixels x overlapping entries, and the sum order is fixed: no
@@ -11,7 +13,8 @@
  * Entry layout (ENTRY floats): x, y (frame px, centre), radius px, 1/edge width (in units
  * of the normalised radius), R, G, B radiance, kind (0 ghost, 1 halo), dir x, dir y, 0, 0.
  */
-#include "lib/common.h"
+#include "lib/scatter.h"
+#include "lib/precision.h"
 
 #define ENTRY 12
 #ifndef TILE
@@ -21,18 +24,17 @@
 #define BLADES 0
 #endif
 
-#ifdef CLFX_HAS_FP64
-typedef double acc_t;
-#else
-typedef float acc_t;
-#endif
-
+/* scatter_bright's highlight, with the centroid weight max(lum - t, 0) in alpha. */
 inline float4 lens_flare_highlight(float4 c, float threshold)
 {
-  c = fmax(clfx_finite4_or_zero(c), (float4)0.0f);
-  const float l = clfx_luminance(c);
-  const float k = l > threshold ? (l - threshold) / l : 0.0f;
-  return (float4)(c.x * k, c.y * k, c.z * k, l > threshold ? l - threshold : 0.0f);
+  const float l = clfx_luminance(fmax(clfx_finite4_or_zero(c), (float4)0.0f));
+  const float4 h = scatter_bright(c, threshold);
+  return (float4)(h.xyz, l > threshold ? fmin(l - threshold, SCATTER_FLT_MAX) : 0.0f);
+}
+
+inline float lens_flare_saturate(REAL v)
+{
+  return TO_FLOAT(fmin(v, (REAL)SCATTER_FLT_MAX));
 }
 
 /* boxes: per source x0, y0, x1, y1 in source-window pixels.  out: per source 8 floats:
@@ -44,18 +46,23 @@ kernel void lens_flare_measure(global const float *src, const int pitch,
   const int i = get_global_id(0);
   if(i >= count) return;
   const int x0 = boxes[4 * i], y0 = boxes[4 * i + 1], x1 = boxes[4 * i + 2], y1 = boxes[4 * i + 3];
-  acc_t r = 0, g = 0, b = 0, w = 0, wx = 0, wy = 0, n = 0;
+  REAL r = 0, g = 0, b = 0, w = 0, wx = 0, wy = 0, n = 0;
   for(int y = y0; y < y1; y++)
     for(int x = x0; x < x1; x++)
     {
       const float4 h = lens_flare_highlight(clfx_load4(src, pitch, x, y), threshold);
       if(h.w <= 0.0f) continue;
       r += h.x; g += h.y; b += h.z; w += h.w;
-      wx += (acc_t)h.w * ((acc_t)x + 0.5); wy += (acc_t)h.w * ((acc_t)y + 0.5); n += 1;
+      wx += (REAL)h.w * ((REAL)x + 0.5); wy += (REAL)h.w * ((REAL)y + 0.5); n += 1;
     }
   global float *o = out + 8 * i;
-  o[0] = (float)r; o[1] = (float)g; o[2] = (float)b; o[3] = (float)w;
+  o[0] = lens_flare_saturate(r); o[1] = lens_flare_saturate(g); o[2] = lens_flare_saturate(b);
+  o[3] = lens_flare_saturate(w);
   o[4] = (float)(w > 0 ? wx / w : 0); o[5] = (float)(w > 0 ? wy / w : 0); o[6] = (float)n;
+  if(!(clfx_is_finite(o[4]) & clfx_is_finite(o[5])))  /* float sums overflowed: box centre */
+  {
+    o[4] = 0.5f * (float)(x0 + x1); o[5] = 0.5f * (float)(y0 + y1);
+  }
   o[7] = 0.0f;
 }
 
@@ -122,11 +129,8 @@ kernel void lens_flare_render(global const float *src, const int src_pitch, cons
   for(int j = 0; j < 4; j++)
   {
     const int xx = x + j;
-    float4 c = (float4)0.0f;
-    const int sx = xx - ox, sy = y - oy;
-    if(xx < width && sx >= 0 && sx < src_w && sy >= 0 && sy < src_h)
-      c = clfx_finite4_or_zero(clfx_load4(src, src_pitch, sx, sy));
-    const float4 o = xx < width ? (float4)(c.x + rr[j], c.y + gg[j], c.z + bb[j], c.w)
+    const float4 c = scatter_source(src, src_pitch, src_w, src_h, xx - ox, y - oy);
+    const float4 o = xx < width ? scatter_add(c, (float4)(rr[j], gg[j], bb[j], 0.0f))
                                 : (float4)0.0f;
     clfx_store4(dst, pitch, xx, y, o);
   }

@@ -16,7 +16,8 @@
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{4^N-1} a^k delta(x + k d) exactly (each k has one base-4 expansion).
  */
-#include "lib/common.h"
+#include "lib/scatter.h"
+#include "lib/precision.h"
 
 #ifndef FACTOR
 #define FACTOR 1
@@ -24,32 +25,13 @@
 #ifndef CHECKED
 #define CHECKED 1
 #endif
-#ifndef REAL
-#define REAL float
-#define REAL16 float16
-#define CONVERT_REAL16 convert_float16
-#endif
 
-/* Bright-pass of one source pixel: RGB * max(lum - t, 0) / lum, non-finite -> 0. */
-inline float4 streaks_highlight(float4 c, float threshold)
+/* scale x the sum of the highlights of the FACTOR x FACTOR source pixels under low-resolution
+ * pixel (x, y); (ox, oy) = source window origin inside the output window, full-resolution
+ * pixels. */
+inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
+                          int y, int ox, int oy, float threshold, float scale)
 {
-  c = clfx_finite4_or_zero(c);
-  c = fmax(c, (float4)0.0f);
-  const float l = clfx_luminance(c);
-  const float k = l > threshold ? (l - threshold) / l : 0.0f;
-  return (float4)(c.x * k, c.y * k, c.z * k, 0.0f);
-}
-
-/* One work-item per low-resolution pixel; (ox, oy) = source window origin inside the output
- * window, in full-resolution pixels. */
-kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
-                           const int src_h, global float *dst, const int org,
-                           const int dst_pitch, const int dst_wp, const int dst_h,
-                           const int ox, const int oy, const float threshold)
-{
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= dst_wp || y >= dst_h) return;
-  dst += 4 * org;
   float4 acc = (float4)0.0f;
   for(int j = 0; j < FACTOR; j++)
   {
@@ -59,10 +41,27 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
     {
       const int sx = x * FACTOR + i - ox;
       if(sx < 0 || sx >= src_w) continue;
-      acc += streaks_highlight(clfx_load4(src, src_pitch, sx, sy), threshold);
+      acc += scatter_bright(clfx_load4(src, src_pitch, sx, sy), threshold) * scale;
     }
   }
-  clfx_store4(dst, dst_pitch, x, y, acc * (1.0f / (FACTOR * FACTOR)));
+  return acc;
+}
+
+/* One work-item per low-resolution pixel: the box average of the highlights. */
+kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
+                           const int src_h, global float *dst, const int org,
+                           const int dst_pitch, const int dst_wp, const int dst_h,
+                           const int ox, const int oy, const float threshold)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= dst_wp || y >= dst_h) return;
+  dst += 4 * org;
+  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f)
+               * (1.0f / (FACTOR * FACTOR));
+  if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
+    acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
+                      1.0f / (FACTOR * FACTOR));
+  clfx_store4(dst, dst_pitch, x, y, acc);
 }
 
 /* Reads relative to the interior origin; `wp` = interior pitch, `h` = interior rows.  With
@@ -108,6 +107,13 @@ inline float16 streaks_rgba4(float4 w)
   return (float16)(w, w, w, w);
 }
 
+/* One tap's share of a pass: the float product, rounded to float before it is summed in REAL
+ * (convert_float16 keeps the compiler from fusing it into the sum: the oracle's order). */
+inline REAL16 streaks_term(float16 v, float4 w)
+{
+  return TO_REAL16(convert_float16(v * streaks_rgba4(w)));
+}
+
 /* One pass of one direction.  w0..w3 are the per-channel tap weights (alpha weight 0).
  * Each work-item produces 4 pixels of a row.  ACCUM = 1: out += result (last pass). */
 kernel void streaks_pass(global const float *in, global float *out, const int org,
@@ -120,23 +126,21 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
   const int x = qx * 4;
   in += 4 * org;
   out += 4 * org;
-  REAL16 sum = CONVERT_REAL16(vload16(0, in + (y * pitch + x) * 4) * streaks_rgba4(w0));
-  sum += CONVERT_REAL16(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y, snap)
-                        * streaks_rgba4(w1));
-  sum += CONVERT_REAL16(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y, snap)
-                        * streaks_rgba4(w2));
-  sum += CONVERT_REAL16(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y, snap)
-                        * streaks_rgba4(w3));
+  REAL16 sum = streaks_term(vload16(0, in + (y * pitch + x) * 4), w0);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y, snap), w1);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y, snap), w2);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y, snap), w3);
+  sum = fmin(sum, (REAL)SCATTER_FLT_MAX);  /* saturate: finite input, finite output */
   if(x + 4 > w)  /* padding stays zero: it stands for "outside the image" */
   {
     const float4 m = (float4)((float)(x < w), (float)(x + 1 < w), (float)(x + 2 < w),
                               (float)(x + 3 < w));
-    sum *= CONVERT_REAL16((float16)(m.xxxx, m.yyyy, m.zzzz, m.wwww));
+    sum *= TO_REAL16((float16)(m.xxxx, m.yyyy, m.zzzz, m.wwww));
   }
 #if ACCUM
-  sum += CONVERT_REAL16(vload16(0, out + (y * pitch + x) * 4));
+  sum += TO_REAL16(vload16(0, out + (y * pitch + x) * 4));
 #endif
-  vstore16(convert_float16(sum), 0, out + (y * pitch + x) * 4);
+  vstore16(fmin(TO_FLOAT16(sum), SCATTER_FLT_MAX), 0, out + (y * pitch + x) * 4);
 }
 
 /* out = sanitised source (zero outside its window) + streaks, where the streak buffer has
@@ -151,10 +155,7 @@ kernel void streaks_compose(global const float *src, const int src_pitch, const 
   streak += 4 * org;
   if(x >= dst_pitch || y >= dst_h) return;
   if(x >= dst_w) { clfx_store4(dst, dst_pitch, x, y, (float4)0.0f); return; }
-  const int sx = x - ox, sy = y - oy;
-  float4 c = (float4)0.0f;
-  if(sx >= 0 && sx < src_w && sy >= 0 && sy < src_h)
-    c = clfx_finite4_or_zero(clfx_load4(src, src_pitch, sx, sy));
+  const float4 c = scatter_source(src, src_pitch, src_w, src_h, x - ox, y - oy);
 #if FACTOR == 1
   const float4 s = clfx_load4(streak, lo_pitch, x, y);
 #else
@@ -168,5 +169,5 @@ kernel void streaks_compose(global const float *src, const int src_pitch, const 
   const float4 e = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0 + 1, j0 + 1);
   const float4 s = (a * (1.0f - fu) + b * fu) * (1.0f - fv) + (d * (1.0f - fu) + e * fu) * fv;
 #endif
-  clfx_store4(dst, dst_pitch, x, y, (float4)(c.x + s.x, c.y + s.y, c.z + s.z, c.w));
+  clfx_store4(dst, dst_pitch, x, y, scatter_add(c, s));
 }

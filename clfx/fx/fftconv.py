@@ -1,7 +1,8 @@
 """HDR-safe large-kernel convolution on the device (pyvkfft's OpenCL backend).
 
 The stable entry point is :func:`convolve`; ``glare``, ``bleed``, ``soft_focus`` and
-``corona`` call it.  :func:`spread` maps a quality level to an algorithm.
+``corona`` call it through :func:`spread`, which maps a quality level (a :class:`SpreadLevel`,
+declared once in :data:`LEVELS`) to an algorithm.
 
 Model
 -----
@@ -20,7 +21,9 @@ Algorithms
     In-place real-to-complex FFTs (``VkFFTApp(..., r2c=True)``), batched over the colour
     channels.  Each axis is padded to the smallest size with prime factors 2, 3, 5, 7 that
     keeps wrap-around out of the pixels kept (see :func:`fft_grid`); the PSF spectrum is
-    computed once per (PSF, grid, precision) and cached (:data:`SPECTRUM_CACHE_SIZE` entries).
+    computed once per (PSF, grid, precision) and kept in the runtime's cache (``rt.cache``,
+    owner ``fftconv.spectrum``; plans: ``fftconv.plan``), unless larger than
+    :data:`SPECTRUM_CACHE_BYTES`.
 ``precision="float64"``
     Double-precision transforms.  On PoCL they cost 1.0-1.3x float32 and remove the float32
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
@@ -51,27 +54,28 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from clfx.core.plugin import Level
 from clfx.core.rect import Rect
 
 PRECISIONS = ("float64", "float32")
 METHODS = ("fft", "direct", "half")
-SPECTRUM_CACHE_SIZE = 4
-"""PSF spectra kept per process at most ..."""
 SPECTRUM_CACHE_BYTES = 384 * 2 ** 20
-"""... and at most this many bytes of them (a 4K float64 RGB spectrum alone is ~400 MB:
+"""A PSF spectrum larger than this is not cached (a 4K float64 RGB spectrum alone is ~400 MB:
 such a spectrum is recomputed per frame rather than held, keeping 4K within 2 GB)."""
+PLAN_NOMINAL_BYTES = 2 ** 20
+"""What a cached FFT plan counts for in the cache beyond its VkFFT temporary buffer (its
+compiled kernels and tables), so that the cache's LRU can evict plans of sizes not seen
+again."""
 MAX_BATCH_BYTES = 160 * 2 ** 20
 """Above this work-buffer size, colour channels are transformed one at a time (1080p
 glare batches its three channels; 4K transforms them one by one to bound memory)."""
 KERNEL_FILE = "lib/fftconv.cl"
-
-_PLANS: OrderedDict = OrderedDict()
-_SPECTRA: OrderedDict = OrderedDict()
+CACHE_OWNERS = ("fftconv.plan", "fftconv.spectrum")
+"""Owners of fftconv's entries in the runtime's cache (``rt.cache.clear(owner)``)."""
 
 
 @dataclass
@@ -161,29 +165,28 @@ def _real(precision: str):
     return np.float64 if precision == "float64" else np.float32
 
 
-def _defines(rt, precision: str, acc: str | None = None) -> dict:
-    d = {}
-    if precision == "float64":
-        d.update(REAL="double", REAL2="double2")
-    if (acc or precision) == "float64":
-        d.update(ACC="double", ACC4="double4", CONVERT_ACC4="convert_double4")
-    return d
+def _kernel(rt, name: str, precision: str = "float32"):
+    """A kernel of ``lib/fftconv.cl`` whose REAL is ``precision`` (lib/precision.h)."""
+    return rt.kernel(KERNEL_FILE, name, fp64=precision == "float64")
+
+
+@dataclass(frozen=True, eq=False)
+class _Plan:
+    """A VkFFT plan and what it holds (for the cache's byte count)."""
+
+    app: object
+    nbytes: int
 
 
 def _plan(rt, shape: tuple[int, int, int], precision: str):
-    """A cached in-place r2c plan for ``shape`` = (batch, N1, N2 + 2)."""
-    from pyvkfft.opencl import VkFFTApp
+    """The cached in-place r2c plan for ``shape`` = (batch, N1, N2 + 2)."""
+    def build():
+        from pyvkfft.opencl import VkFFTApp
 
-    key = (id(rt), shape, precision)
-    app = _PLANS.get(key)
-    if app is None:
         app = VkFFTApp(shape, _real(precision), rt.queue, ndim=2, inplace=True, r2c=True)
-        _PLANS[key] = app
-        while len(_PLANS) > 8:
-            _PLANS.popitem(last=False)
-    else:
-        _PLANS.move_to_end(key)
-    return app
+        return _Plan(app, int(getattr(app, "tmp_buffer_nbytes", 0)) + PLAN_NOMINAL_BYTES)
+
+    return rt.cache.get(("fftconv.plan", shape, precision), build).app
 
 
 def _array(rt, holder, shape, dtype):
@@ -193,14 +196,18 @@ def _array(rt, holder, shape, dtype):
 
 
 def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
-    """Device buffer with the r2c spectrum of ``psf`` placed with its centre at (0, 0)
-    (planes: 1 or 3), cached by (PSF hash, grid, precision)."""
+    """``(buffer, planes)``: a device buffer with the r2c spectrum of ``psf`` placed with its
+    centre at (0, 0) (planes: 1 or 3), cached by (PSF hash, grid, precision) in ``rt.cache``
+    unless larger than :data:`SPECTRUM_CACHE_BYTES`."""
     k = _as_psf(psf)
-    key = (id(rt), psf_digest(k), n1, n2, precision)
-    hit = _SPECTRA.get(key)
-    if hit is not None:
-        _SPECTRA.move_to_end(key)
-        return hit
+    nbytes = k.shape[2] * n1 * (n2 + 2) * np.dtype(_real(precision)).itemsize
+    if nbytes > SPECTRUM_CACHE_BYTES:
+        return _spectrum(rt, k, n1, n2, precision)   # too big to keep: this frame only
+    return rt.cache.get(("fftconv.spectrum", psf_digest(k), n1, n2, precision),
+                        lambda: _spectrum(rt, k, n1, n2, precision))
+
+
+def _spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
     kh, kw, planes = k.shape
     cy, cx = kh // 2, kw // 2
     ys = (np.arange(kh) - cy) % n1
@@ -217,19 +224,13 @@ def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
     shape = (planes, n1, n2 + 2)
     app = _plan(rt, shape, precision)
     app.fft(_array(rt, holder, shape, real))
-    _SPECTRA[key] = (holder, planes)
-    while len(_SPECTRA) > SPECTRUM_CACHE_SIZE or (
-            len(_SPECTRA) > 1 and sum(h.nbytes for h, _ in _SPECTRA.values()) > SPECTRUM_CACHE_BYTES):
-        _SPECTRA.popitem(last=False)
-    if holder.nbytes > SPECTRUM_CACHE_BYTES:
-        _SPECTRA.pop(key, None)  # too big to keep: used for this frame only
     return holder, planes
 
 
-def clear_caches() -> None:
-    """Drop cached plans and PSF spectra (frees device memory)."""
-    _PLANS.clear()
-    _SPECTRA.clear()
+def clear_caches(rt) -> None:
+    """Drop the cached plans and PSF spectra from ``rt.cache`` (frees device memory)."""
+    for owner in CACHE_OWNERS:
+        rt.cache.clear(owner)
 
 
 # -- public API ----------------------------------------------------------------------------
@@ -331,10 +332,9 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
     shape = (batch, n1, n2 + 2)
     app = _plan(rt, shape, precision)
     arr = _array(rt, work, shape, real)
-    defs = _defines(rt, precision)
-    pack = rt.kernel(KERNEL_FILE, "fftconv_pack", **defs)
-    mul = rt.kernel(KERNEL_FILE, "fftconv_multiply", **defs)
-    unpack = rt.kernel(KERNEL_FILE, "fftconv_unpack", **defs)
+    pack = _kernel(rt, "fftconv_pack", precision)
+    mul = _kernel(rt, "fftconv_multiply", precision)
+    unpack = _kernel(rt, "fftconv_unpack", precision)
     i32 = np.int32
     sx, sy = support.offset_in(img.window)
     dx, dy = dst.window.x0 - support.x0, dst.window.y0 - support.y0
@@ -366,7 +366,7 @@ def _bright_pixels(rt, img, support, split, max_points):
     counts = rt.buffer(4 * sh)
     args = (img, i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
             i32(sh), np.float32(split))
-    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_count_bright"), (sh,), *args, counts)
+    rt.launch(_kernel(rt, "fftconv_count_bright"), (sh,), *args, counts)
     n = rt.from_device(counts, np.int32, sh)
     total = int(n.sum())
     if total > max_points:
@@ -376,7 +376,7 @@ def _bright_pixels(rt, img, support, split, max_points):
     offsets = rt.to_device(np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int32))
     pos = rt.buffer(8 * total)
     val = rt.buffer(16 * total)
-    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_compact_bright"), (sh,), *args, offsets, pos, val)
+    rt.launch(_kernel(rt, "fftconv_compact_bright"), (sh,), *args, offsets, pos, val)
     return (pos, val, total)
 
 
@@ -393,7 +393,7 @@ def _gather(rt, dst, support, k, bright, precision):
     kh, kw, planes = k.shape
     table = rt.to_device(_psf_planes_padded(k, 4))
     i32 = np.int32
-    knl = rt.kernel(KERNEL_FILE, "fftconv_gather", **_defines(rt, "float32", precision))
+    knl = _kernel(rt, "fftconv_gather", precision)
     rt.launch(knl, (dst.pitch // 4, dst.height), dst, i32(dst.pitch), i32(dst.channels),
               i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
               pos, val, i32(total), table, i32(kw), i32(kh), i32(kw // 2), i32(kh // 2),
@@ -410,13 +410,13 @@ def _direct(rt, img, k, support, effective, dst, precision):
     ox = dst.window.x0 - (kw - 1 - kw // 2)
     oy = dst.window.y0 - (kh - 1 - kh // 2)
     sx, sy = support.offset_in(img.window)
-    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_pad"), (ppitch, pheight), img, i32(img.pitch),
+    rt.launch(_kernel(rt, "fftconv_pad"), (ppitch, pheight), img, i32(img.pitch),
               i32(img.channels), i32(sx), i32(sy), i32(support.width), i32(support.height),
               pad, i32(ppitch), i32(pheight), i32(support.x0 - ox), i32(support.y0 - oy))
     wtype = np.float64 if precision == "float64" else np.float32
     weights = rt.to_device(np.ascontiguousarray(np.moveaxis(k, 2, 0), wtype))
     ex0, ey0 = effective.offset_in(dst.window)
-    knl = rt.kernel(KERNEL_FILE, "fftconv_direct", **_defines(rt, "float32", precision))
+    knl = _kernel(rt, "fftconv_direct", precision)
     rt.launch(knl, (dst.pitch // 4, dst.height), pad, i32(ppitch), dst, i32(dst.pitch),
               i32(dst.channels), i32(dst.width), i32(dst.height), i32(ex0), i32(ey0),
               i32(ex0 + effective.width), i32(ey0 + effective.height), weights, i32(kw),
@@ -449,7 +449,7 @@ def _half(rt, img, k, support, effective, dst, info):
     hw, hh = -(-support.width // 2), -(-support.height // 2)
     half_in = rt.image(Rect(0, 0, hw, hh), 4)
     sx, sy = support.offset_in(img.window)
-    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_down2"), (half_in.pitch, hh), img,
+    rt.launch(_kernel(rt, "fftconv_down2"), (half_in.pitch, hh), img,
               i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
               i32(support.height), half_in, i32(half_in.pitch), i32(hw), i32(hh))
     # output pixel x (support coords) samples half-res u = (x - 0.5) / 2 and u + 1
@@ -462,7 +462,7 @@ def _half(rt, img, k, support, effective, dst, info):
     half_out = convolve(rt, half_in, kh2, out_window=hout, precision="float32", info=sub)
     info.grid = sub.grid
     ex0, ey0 = effective.offset_in(dst.window)
-    rt.launch(rt.kernel(KERNEL_FILE, "fftconv_up2"), (dst.pitch, dst.height), half_out,
+    rt.launch(_kernel(rt, "fftconv_up2"), (dst.pitch, dst.height), half_out,
               i32(half_out.pitch), i32(half_out.width), i32(half_out.height), i32(hout.x0),
               i32(hout.y0), dst, i32(dst.pitch), i32(dst.channels), i32(dst.width),
               i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
@@ -474,39 +474,78 @@ PREVIEW_SPLIT_MAX_POINTS = 64
 """preview: most bright pixels gathered exactly before falling back to float64."""
 DIRECT_MAX_TAPS = 441
 """PSFs with at most this many taps (21 x 21) are convolved directly at every level."""
-DIRECT_REFERENCE_MAX_TAPS = 4e7
-"""The reference level gathers directly (float64) when output pixels x PSF taps is below this."""
 
 
-def spread(rt, img, psf, quality: str, *, out_window: Rect, support: Rect | None = None,
+@dataclass(frozen=True)
+class SpreadLevel(Level):
+    """How :func:`spread` convolves at one quality level.
+
+    ``method`` (PSFs above :data:`DIRECT_MAX_TAPS` taps): ``"half"`` one pyramid level
+    (float32, approximate), ``"split"`` float32 FFT with the bright pixels gathered exactly
+    (float64 past :data:`PREVIEW_SPLIT_MAX_POINTS` of them), ``"fft"`` an FFT in float64 when
+    ``fp64`` else float32.  ``direct_max_work``: a direct gather (float64 with ``fp64``)
+    replaces the FFT when output pixels x PSF taps is at most this.  ``small_fp64``: float64
+    sums for the PSFs of at most 21 x 21 taps, which are always gathered directly.
+    """
+
+    method: str = "fft"
+    direct_max_work: float = 0.0
+    small_fp64: bool = False
+
+
+LEVELS = {
+    "draft": SpreadLevel(
+        "one pyramid level: 2x2-summed highlights, tent-resampled PSF, float32 FFT at half "
+        "resolution, bilinear upsampling (light moves <= 0.5 px, core blurred ~1 px; "
+        "PSFs <= 21x21 taps: direct float32)", method="half"),
+    "preview": SpreadLevel(
+        "float32 r2c FFT with the HDR split: pixels above max(4 x threshold, 1e-3 x peak) "
+        "(at most 64) are gathered exactly, the rest transformed; more than 64 falls "
+        "back to float64 (PSFs <= 21x21 taps: direct float32)", method="split"),
+    "final": SpreadLevel(
+        "float64 r2c FFT (1.0-1.3x the cost of float32 on PoCL, no float32 error floor; "
+        "PSFs <= 21x21 taps: direct float32)", fp64=True),
+    "reference": SpreadLevel(
+        "float64: direct gather with float64 accumulation when output px x taps <= 4e7, "
+        "else float64 r2c FFT", fp64=True, direct_max_work=4e7, small_fp64=True),
+}
+"""What each quality level of :func:`spread` does (glare's and soft focus's levels)."""
+
+
+def spread_level(cls: type, quality: str, summary: str, **settings) -> SpreadLevel:
+    """A ``cls`` level (a :class:`SpreadLevel` subclass) with :data:`LEVELS`' convolution
+    settings for ``quality``, its own ``summary`` and extra ``settings``."""
+    base = {f.name: getattr(LEVELS[quality], f.name) for f in fields(SpreadLevel)}
+    return cls(**{**base, "summary": summary, **settings})
+
+
+def _fp(wanted: bool) -> str:
+    return "float64" if wanted else "float32"
+
+
+def spread(rt, img, psf, level: SpreadLevel, *, out_window: Rect, support: Rect | None = None,
            split_level: float | None = None, info: ConvolveInfo | None = None):
-    """Convolve with the algorithm a quality level calls for.
+    """Convolve with the algorithm a quality ``level`` (:data:`LEVELS`) calls for.
 
-    PSFs of at most 21 x 21 taps: direct gather (float32; float64 for reference).
-    draft: one pyramid level (half-resolution float32 FFT; approximate).
-    preview: float32 FFT with bright pixels (largest channel > ``split_level``) gathered
-    exactly; falls back to float64 when there are more than 64.
-    final: float64 FFT.
-    reference: float64 direct gather when small (output px x taps <= 4e7), else float64 FFT.
+    PSFs of at most 21 x 21 taps: direct gather (float32; float64 with ``small_fp64``).
+    Larger: ``method`` "half" (half-resolution float32 FFT; approximate), "split" (float32
+    FFT with bright pixels, largest channel > ``split_level``, gathered exactly; falls back to
+    float64 when there are more than 64), "fft" (float64 with ``fp64``), or a direct gather
+    when output px x taps <= ``direct_max_work``.
     """
     k = _as_psf(psf)
-    if k.shape[0] * k.shape[1] <= DIRECT_MAX_TAPS:
-        # small kernels: a direct gather beats any transform; float64 sums for reference
-        return convolve(rt, img, k, out_window=out_window, support=support, method="direct",
-                        precision="float64" if quality == "reference" else "float32",
-                        info=info)
-    if quality == "draft":
-        return convolve(rt, img, k, out_window=out_window, support=support, method="half",
-                        precision="float32", info=info)
-    if quality == "preview":
+    taps = k.shape[0] * k.shape[1]
+    common = dict(out_window=out_window, support=support, info=info)
+    if taps <= DIRECT_MAX_TAPS:
+        # small kernels: a direct gather beats any transform
+        return convolve(rt, img, k, method="direct", precision=_fp(level.small_fp64), **common)
+    if level.method == "half":
+        return convolve(rt, img, k, method="half", precision="float32", **common)
+    if level.method == "split":
         # the exact gather costs (output px x bright px): beyond 64 bright pixels the
         # float64 FFT (1.0-1.3x float32 on PoCL) is cheaper
-        return convolve(rt, img, k, out_window=out_window, support=support,
-                        precision="float32", threshold_split=split_level,
-                        split_max_points=PREVIEW_SPLIT_MAX_POINTS, info=info)
-    if quality == "reference" and out_window.width * out_window.height * k.shape[0] \
-            * k.shape[1] <= DIRECT_REFERENCE_MAX_TAPS:
-        return convolve(rt, img, k, out_window=out_window, support=support, method="direct",
-                        precision="float64", info=info)
-    return convolve(rt, img, k, out_window=out_window, support=support, precision="float64",
-                    info=info)
+        return convolve(rt, img, k, precision="float32", threshold_split=split_level,
+                        split_max_points=PREVIEW_SPLIT_MAX_POINTS, **common)
+    if out_window.width * out_window.height * taps <= level.direct_max_work:
+        return convolve(rt, img, k, method="direct", precision=_fp(level.fp64), **common)
+    return convolve(rt, img, k, precision=_fp(level.fp64), **common)

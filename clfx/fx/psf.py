@@ -19,8 +19,11 @@ Models
 ``gaussians``
     Bloom as a sum of Gaussians (Kawase-style), sigmas in pixels and relative weights.
 ``image``
-    A user-supplied kernel image, read through ``clfx.io.read.read_frame`` (RGB), resampled so its
-    larger side spans 2r + 1 pixels; each colour plane normalised separately.
+    A user-supplied kernel image (its pixels: the caller reads the file, e.g. glare through
+    ``ctx.read_image``), resampled so its larger side spans 2r + 1 pixels; each colour plane
+    normalised separately.
+
+Host maths only: nothing here reads files.
 """
 from __future__ import annotations
 
@@ -97,11 +100,13 @@ def bloom_sigmas(radius_px: float, count: int = 4, ratio: float = 2.0, falloff: 
     return sig, w
 
 
-def from_image(path: str, radius_px: int) -> np.ndarray:
-    """A kernel image (any format clfx.io.read reads) as a normalised (2r+1, 2r+1, 3) PSF."""
-    from clfx.io.read import read_frame  # lazy: io pulls in OpenImageIO
-
-    rgb = np.asarray(read_frame(path).rgba, np.float64)[..., :3]
+def from_image(pixels: np.ndarray, radius_px: int) -> np.ndarray:
+    """A kernel image's pixels (h, w): grey, or (h, w, 3 or 4): RGB(A), alpha ignored, as a
+    normalised (2r+1, 2r+1, 3) PSF; negative and non-finite values count as 0."""
+    rgb = np.asarray(pixels, np.float64)
+    if rgb.ndim == 2:
+        rgb = np.repeat(rgb[..., None], 3, axis=2)
+    rgb = rgb[..., :3]
     rgb = np.where(np.isfinite(rgb), np.maximum(rgb, 0.0), 0.0)
     return resample_kernel(rgb, radius_px)
 

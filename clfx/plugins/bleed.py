@@ -29,27 +29,51 @@ fused path in ``kernels/bleed.cl``:
      light misplaced, :func:`separable_psf_error`) is 0 / 0.074 at r = 1, 0.025 / 0.24 at
      r = 2, 0.047 / 0.18 at r = 4, 0.059 / 0.14 at r = 7 (rank 2 / rank 1).
 
-Larger PSFs use glare's machinery (``ScatterPlugin``, ``clfx.fx.fftconv.spread``).
+Larger PSFs use the glare family's machinery (``clfx.fx.scatter.ScatterPlugin``,
+``clfx.fx.fftconv.spread``).  The quality levels (:data:`LEVELS`) are ``BleedLevel`` data: the
+separable rank of the fused path, and ``clfx.fx.fftconv.LEVELS``' settings for larger PSFs.
 """
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
+from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core.plugin import Descriptor, FloatParam
+from clfx.fx import fftconv
 from clfx.fx import psf as psflib
-from clfx.core.camera import Camera
-from clfx.core.plugin import Descriptor, FloatParam, RGBParam
-from clfx.host import register
-from clfx.plugins.glare import QUALITY, ScatterPlugin
+from clfx.fx.scatter import ScatterPlugin, knee_param, tint_param
+from clfx.host import Plugin, register
 
 MAX_FUSED_RADIUS = 10
 """PSF radii (px) up to this (21 x 21 taps) take the fused direct/separable path."""
 BLOCK_ROWS = 8
 """Output rows per work-item of the fused gather (and rows per skip block)."""
-SEPARABLE_RANK = {"draft": 1, "preview": 2}
-"""Rank of the separable PSF approximation per quality level (others: exact PSF)."""
+
+
+@dataclass(frozen=True)
+class BleedLevel(fftconv.SpreadLevel):
+    """A bleed quality level: ``rank`` of the separable PSF approximation on the fused path
+    (0: the exact PSF, float64 weights and sums with ``small_fp64``); PSFs larger than
+    :data:`MAX_FUSED_RADIUS` go through :func:`clfx.fx.fftconv.spread` with the inherited
+    settings."""
+
+    rank: int = 0
+
+
+LEVELS = {
+    q: fftconv.spread_level(BleedLevel, q, f"radius <= 10 px: {fused}; larger: "
+                            + fftconv.LEVELS[q].summary, rank=rank)
+    for q, (fused, rank) in {
+        "draft": ("rank-1 separable PSF (L1 error 0.07-0.24 of the leaked light), float32, "
+                  "only blocks near highlights", 1),
+        "preview": ("rank-2 separable PSF (L1 error 0-0.06 of the leaked light), float32, "
+                    "only blocks near highlights", 2),
+        "final": ("exact PSF, direct float32 gather, only blocks near highlights", 0),
+        "reference": ("exact PSF, direct gather with float64 weights and sums", 0),
+    }.items()
+}
 
 
 def separable_psf(k: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray]:
@@ -77,7 +101,7 @@ def separable_psf_error(k: np.ndarray, rank: int) -> float:
 
 
 @register
-class Bleed(ScatterPlugin):
+class Bleed(ScatterPlugin, Plugin):
     descriptor = Descriptor(
         name="bleed", label="Bleed", group="Sensor", kernel="bleed.cl",
         summary="Sensor crosstalk: bright pixels leak a little light into their neighbours.",
@@ -87,71 +111,45 @@ class Bleed(ScatterPlugin):
                        hint="Fraction of a bright pixel's light that leaks to its neighbours."),
             FloatParam("threshold", 1.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance where leaking starts (sensor saturation)."),
-            FloatParam("knee", 0.25, min=0.0, max=1e6,
-                       hint="Width of the soft knee below the threshold, in luminance."),
+            knee_param(0.25),
             FloatParam("size", 0.002, min=0.0, max=0.1,
                        hint="Leak radius as a fraction of the frame diagonal (0.002 = ~4 px at 1080p)."),
-            RGBParam("tint", (1.0, 1.0, 1.0), max=100.0,
-                     hint="Colour of the leaked light (white keeps energy)."),
+            tint_param("leaked"),
         ),
-        quality={
-            "draft": "radius <= 10 px: rank-1 separable PSF (L1 error 0.07-0.24 of the leaked "
-                     "light), float32, only blocks near highlights; larger: " + QUALITY["draft"],
-            "preview": "radius <= 10 px: rank-2 separable PSF (L1 error 0-0.06 of the leaked "
-                       "light), float32, only blocks near highlights; larger: "
-                       + QUALITY["preview"],
-            "final": "radius <= 10 px: exact PSF, direct float32 gather, only blocks near "
-                     "highlights; larger: " + QUALITY["final"],
-            "reference": "radius <= 10 px: exact PSF, direct gather with float64 weights and "
-                         "sums; larger: " + QUALITY["reference"],
-        },
+        quality=LEVELS,
     )
-
-    def __init__(self):
-        super().__init__()
-        self._weight_cache: OrderedDict = OrderedDict()
 
     def build_psf(self, p, ctx, radius):
         return psflib.exponential(radius, radius / 3.0)
 
     # -- fused small-PSF path ---------------------------------------------------------------
-    def _weights(self, rt, p, ctx, quality: str):
-        """Device weights for ``quality`` (cached with the PSF): the exact PSF (float32, or
-        float64 for reference) or the separable factors (h, v)."""
-        k = self.psf(p, ctx)
-        key = ("weights", id(rt), p.hash_hex(), k.shape, ctx.width_px, quality)
-        hit = self._weight_cache.get(key)
-        if hit is None:
-            rank = SEPARABLE_RANK.get(quality)
-            if rank is not None:
-                h, v = separable_psf(k, rank)
-                hit = (rt.to_device(h.astype(np.float32)), rt.to_device(v.astype(np.float32)))
-            else:
-                dtype = np.float64 if quality == "reference" and rt.has_fp64 else np.float32
-                hit = (rt.to_device(np.ascontiguousarray(k, dtype)),)
-            self._weight_cache[key] = hit
-            while len(self._weight_cache) > 8:
-                self._weight_cache.popitem(last=False)
-        return hit
+    def _weights(self, rt, p, ctx, lvl: BleedLevel):
+        """Device weights for ``lvl`` (kept in the runtime's cache): the separable factors
+        (h, v), or the exact PSF (float64 where ``small_fp64`` is granted, else float32)."""
+        r = self.radius_px(p, ctx)
+        fp64 = rt.use_fp64(lvl.small_fp64)
+
+        def build():
+            k = self.psf(p, ctx)
+            if lvl.rank:
+                h, v = separable_psf(k, lvl.rank)
+                return rt.to_device(h.astype(np.float32)), rt.to_device(v.astype(np.float32))
+            return (rt.to_device(np.ascontiguousarray(k, np.float64 if fp64 else np.float32)),)
+
+        return rt.cache.get(("bleed.weights", r, lvl.rank, fp64), build)
 
     def render(self, rt, p, ctx):
         r = self.radius_px(p, ctx)
         if r > MAX_FUSED_RADIUS:
             return super().render(rt, p, ctx)
         src = ctx.source
-        nonfinite = ctx.analysis.nonfinite_count
         taps = 2 * r + 1
-        if nonfinite:
-            ctx.notes.append(f"bleed: {nonfinite} non-finite pixel(s) set to 0 before the "
-                             f"{taps}x{taps} PSF")
-        quality = ctx.quality
-        rank = SEPARABLE_RANK.get(quality)
-        defines = dict(RADIUS=r, ROWS=BLOCK_ROWS)
-        if rank is not None:
-            defines["RANK"] = rank
-        elif quality == "reference" and rt.has_fp64:
-            defines["BLEED_DOUBLE"] = 1
-        weights = self._weights(rt, p, ctx, quality)
+        self.note_nonfinite(ctx, (taps, taps))
+        lvl = self.level(ctx)
+        defines = dict(RADIUS=r, ROWS=BLOCK_ROWS, fp64=lvl.small_fp64)
+        if lvl.rank:
+            defines["RANK"] = lvl.rank
+        weights = self._weights(rt, p, ctx, lvl)
         out_window = self.output_window(p, ctx)
         dst = rt.image(out_window, 4)
         # padded highlight grid: output pixel (x, y) <-> hp pixel (x + padx, y + r)
@@ -174,22 +172,10 @@ class Bleed(ScatterPlugin):
         from pyopencl import cltypes
 
         tint = cltypes.make_float4(*p.tint, 0.0)
-        name = "bleed_separable_mix" if rank is not None else "bleed_direct_mix"
-        rows = blocks_y if rank is not None else dst.height   # direct: one row per work-item
+        name = "bleed_separable_mix" if lvl.rank else "bleed_direct_mix"
+        rows = blocks_y if lvl.rank else dst.height   # direct: one row per work-item
         rt.launch(rt.kernel(kfile, name, **defines), (blocks_x, rows), hp, i32(hpitch),
                   active, src, i32(src.pitch), i32(src.width), i32(src.height), dst,
                   i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(p.strength), tint,
                   *weights)
         return dst
-
-
-def bench_case(width, height, rng):
-    """Bright specks (saturated and 1e3) on a textured mid-grey frame."""
-    src = np.empty((height, width, 4), np.float32)
-    src[..., :3] = rng.uniform(0.05, 0.5, (height, width, 3))
-    src[..., 3] = 1.0
-    n = max(1, width * height // 2000)
-    ys, xs = rng.integers(0, height, n), rng.integers(0, width, n)
-    src[ys, xs, :3] = rng.choice([2.0, 8.0, 1e3], n)[:, None]
-    return dict(source=src, depth=None, velocity=None, params={"strength": 0.2, "size": 0.003},
-                camera=Camera())

@@ -28,30 +28,49 @@ Output = sanitised source + ``intensity`` * (highlights ⊛ PSF), highlights bei
 quarter, then renormalised).
 
 The convolution is ``clfx.fx.fftconv.spread`` over the bounding box of the tiles with
-highlights only (scene analysis), so one light costs a small FFT.
+highlights only (scene analysis), so one light costs a small FFT; identity and regions are
+the glare family's (``clfx.fx.scatter.SpreadRegions``).
 """
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
+from dataclasses import dataclass
 
 import numpy as np
 
-from clfx.fx import spectral
 from clfx.core.plugin import Descriptor, FloatParam, IntParam
+from clfx.fx import fftconv, spectral
+from clfx.fx.scatter import SpreadRegions
 from clfx.host import Plugin, register
-from clfx.core.rect import Rect
 
-WAVELENGTHS = {"draft": 16, "preview": 24, "final": 40, "reference": 80}
-"""Spectral samples from 380 to 780 nm per quality level (80 = 5 nm bins)."""
+
+@dataclass(frozen=True)
+class CoronaLevel(fftconv.SpreadLevel):
+    """A corona quality level: ``wavelengths`` spectral samples from 380 to 780 nm (80 = 5 nm
+    bins), and the convolution settings of ``clfx.fx.fftconv.spread``."""
+
+    wavelengths: int = 40
+
+
+LEVELS = {
+    "draft": fftconv.spread_level(
+        CoronaLevel, "draft", "16 wavelengths; half-resolution float32 FFT (one pyramid level)",
+        wavelengths=16),
+    "preview": fftconv.spread_level(
+        CoronaLevel, "preview", "24 wavelengths; float32 FFT with the brightest pixels "
+        "gathered exactly", wavelengths=24),
+    "final": fftconv.spread_level(
+        CoronaLevel, "final", "40 wavelengths (10 nm); float64 FFT", wavelengths=40),
+    "reference": fftconv.spread_level(
+        CoronaLevel, "reference", "80 wavelengths (5 nm); float64 direct gather when small, "
+        "else float64 FFT", wavelengths=80),
+}
 
 AIRY_FIRST_ZERO = 1.2196698912665045
 """First zero of the Airy pattern, in units of lambda / D (= 3.8317 / pi)."""
 
 REFERENCE_NM = 550.0
 """Wavelength at which ``size`` is the first dark ring's radius."""
-
-PSF_CACHE_SIZE = 6
 
 MAX_GRID = 2048
 """Largest FFT grid for the far field (host NumPy); the sampling adapts to stay below it."""
@@ -200,7 +219,7 @@ def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
 
 
 @register
-class Corona(Plugin):
+class Corona(SpreadRegions, Plugin):
     descriptor = Descriptor(
         name="corona", label="Corona (spectral diffraction)", group="Glare",
         kernel="corona.cl",
@@ -222,35 +241,21 @@ class Corona(Plugin):
                      hint="Aperture blades; 0 = the camera block's (a camera value of 0 means "
                           "a round aperture), 1-2 = round.  Rotation: the camera block's."),
         ),
-        quality={
-            "draft": "16 wavelengths; half-resolution float32 FFT (one pyramid level)",
-            "preview": "24 wavelengths; float32 FFT with the brightest pixels gathered exactly",
-            "final": "40 wavelengths (10 nm); float64 FFT",
-            "reference": "80 wavelengths (5 nm); float64 direct gather when small, else "
-                         "float64 FFT",
-        },
+        quality=LEVELS,
     )
-
-    def __init__(self):
-        self._psfs: OrderedDict = OrderedDict()
+    strength_param = "intensity"
 
     # PSF ------------------------------------------------------------------------------
     def psf(self, p, ctx) -> np.ndarray:
-        """The cached RGB PSF for these parameters, frame size, camera and quality."""
+        """The RGB PSF for these parameters, frame size, camera and quality (kept in the
+        runtime's cache)."""
         blades = p.blades or ctx.camera.blades
         rotation = ctx.camera.blade_rotation
-        n = WAVELENGTHS.get(ctx.quality, WAVELENGTHS["final"])
+        n = self.level(ctx).wavelengths
         cap = self.max_radius(ctx)
-        key = (round(ctx.size_px(p.size), 6), p.extent, blades, rotation, n, cap)
-        k = self._psfs.get(key)
-        if k is None:
-            k = spectral_psf(ctx.size_px(p.size), p.extent, blades, rotation, n, cap)
-            self._psfs[key] = k
-            while len(self._psfs) > PSF_CACHE_SIZE:
-                self._psfs.popitem(last=False)
-        else:
-            self._psfs.move_to_end(key)
-        return k
+        key = ("corona.psf", round(ctx.size_px(p.size), 6), p.extent, blades, rotation, n, cap)
+        return ctx.runtime.cache.get(
+            key, lambda: spectral_psf(ctx.size_px(p.size), p.extent, blades, rotation, n, cap))
 
     @staticmethod
     def max_radius(ctx) -> int:
@@ -260,28 +265,8 @@ class Corona(Plugin):
     def radius_px(self, p, ctx) -> int:
         return psf_radius(ctx.size_px(p.size), p.extent, self.max_radius(ctx))
 
-    # cheap questions ------------------------------------------------------------------
-    def is_identity(self, p, ctx):
-        if p.intensity == 0.0:
-            return "intensity is 0"
-        if not ctx.analysis.any_above(p.threshold):
-            return "no pixel above threshold"
-        return None
-
-    def region_of_definition(self, p, ctx):
-        return ctx.source.window.grown(self.radius_px(p, ctx))
-
-    def region_of_interest(self, p, ctx, window):
-        return window.grown(self.radius_px(p, ctx))
-
-    def highlight_support(self, p, ctx) -> Rect:
-        """Bounding box (frame coordinates) of the analysis tiles with a pixel above threshold."""
-        return ctx.analysis.highlight_bounds(p.threshold)
-
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
-        from clfx.fx import fftconv
-
         src = ctx.source
         i32, f32 = np.int32, np.float32
         bright = src.like()
@@ -290,7 +275,7 @@ class Corona(Plugin):
         out_win = self.output_window(p, ctx)
         info = fftconv.ConvolveInfo()
         k = self.psf(p, ctx)
-        glow = fftconv.spread(rt, bright, k, ctx.quality, out_window=out_win,
+        glow = fftconv.spread(rt, bright, k, self.level(ctx), out_window=out_win,
                               support=self.highlight_support(p, ctx),
                               split_level=max(p.threshold, 1.0) * 64.0, info=info)
         out = rt.image(out_win)
@@ -303,18 +288,3 @@ class Corona(Plugin):
             ctx.notes.append(f"corona: {bad} non-finite pixels set to 0")
         ctx.notes.extend(f"corona: {n}" for n in info.notes)
         return out
-
-
-def bench_case(width, height, rng):
-    """A dim frame with a cluster of strong lights (a street scene at night)."""
-    from clfx.core.camera import Camera
-
-    src = rng.uniform(0.0, 0.2, (height, width, 4)).astype(np.float32)
-    src[..., 3] = 1.0
-    for _ in range(6):
-        x = int(rng.integers(width // 4, 3 * width // 4))
-        y = int(rng.integers(height // 4, 3 * height // 4))
-        src[y - 3:y + 4, x - 3:x + 4, :3] = rng.uniform(100, 20000)
-    return dict(source=src, depth=None, velocity=None,
-                params={"threshold": 2.0, "intensity": 0.5, "size": 0.006, "extent": 8.0},
-                camera=Camera(blades=0))

@@ -43,7 +43,7 @@ import math
 import numpy as np
 
 from clfx.core.errors import ParamError
-from clfx.core.plugin import Descriptor, FloatParam, IntParam, StringParam
+from clfx.core.plugin import Descriptor, FloatParam, IntParam, Level, StringParam
 from clfx.host import Plugin, register
 from clfx.core.rect import Rect
 
@@ -63,6 +63,16 @@ its light's flux (coated zooms show ghosts of ~1e-3..1e-2; a stronger look is th
 
 TILE = 32
 ENTRY = 12
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+LEVELS = {  # one closed form at every level; fp64: the sources' flux and centroid sums
+    "draft": Level("analytic ghosts, float32 per pixel (exact closed form; all levels equal)",
+                   fp64=True),
+    "preview": Level("analytic ghosts, float32 per pixel", fp64=True),
+    "final": Level("analytic ghosts, float32 per pixel", fp64=True),
+    "reference": Level("analytic ghosts, float32 per pixel; source measurement in float64 at "
+                       "every level", fp64=True),
+}
 
 
 def parse_ghosts(spec: str, count: int) -> list[tuple[float, float, tuple[float, float, float]]]:
@@ -125,7 +135,9 @@ def ghost_area(blades: int, rotation_deg: float, roundness: float, edge: float,
 def flare_entries(sources, p, centre, diagonal, blades=0, rotation_deg=0.0) -> np.ndarray:
     """Entries (ghosts then halo per source), shape (n, ENTRY), from measured sources.
 
-    ``sources``: list of (x, y, (F_r, F_g, F_b)) in frame pixels.
+    ``sources``: list of (x, y, (F_r, F_g, F_b)) in frame pixels.  A radiance beyond the
+    float32 range saturates at its largest value (the kernel saturates its sums too), so a
+    finite frame gives a finite flare.
     """
     cx, cy = centre
     rows = []
@@ -136,12 +148,12 @@ def flare_entries(sources, p, centre, diagonal, blades=0, rotation_deg=0.0) -> n
             r = size * diagonal
             edge = max(p.softness, 1.5 / max(r, 1e-6))
             area = ghost_area(blades, rotation_deg, p.roundness, edge, p.rim) * r * r
-            e = p.intensity * np.asarray(tint) * flux / area
+            e = np.minimum(p.intensity * np.asarray(tint) * flux / area, FLOAT32_MAX)
             rows.append([cx + k * (lx - cx), cy + k * (ly - cy), r, 1.0 / edge, *e, 0, 0, 0, 0, 0])
         if p.halo_intensity > 0:
             rh, sigma = p.halo_radius * diagonal, max(p.halo_width * diagonal, 0.5)
             norm = 2 * math.pi * rh * sigma * math.sqrt(2 * math.pi) * 0.375 + 1e-300
-            e = p.halo_intensity * flux / norm
+            e = np.minimum(p.halo_intensity * flux / norm, FLOAT32_MAX)
             d = math.hypot(lx - cx, ly - cy)
             ux, uy = ((lx - cx) / d, (ly - cy) / d) if d > 1e-6 else (0.0, 0.0)
             rows.append([cx, cy, rh, 1.0 / sigma, *e, 1, ux, uy, 0, 0])
@@ -223,13 +235,7 @@ class LensFlare(Plugin):
                        hint="Lights up to this far outside the display window (fraction of the "
                             "diagonal, where the data window has overscan) still flare."),
         ),
-        quality={
-            "draft": "analytic ghosts, float32 per pixel (exact closed form; all levels equal)",
-            "preview": "analytic ghosts, float32 per pixel",
-            "final": "analytic ghosts, float32 per pixel",
-            "reference": "analytic ghosts, float32 per pixel; source measurement in float64 "
-                         "at every level",
-        },
+        quality=LEVELS,
     )
 
     # sources --------------------------------------------------------------------------
@@ -247,9 +253,10 @@ class LensFlare(Plugin):
                           b.x1 - src.window.x0, b.y1 - src.window.y0])
         n = len(boxes)
         out = rt.buffer(8 * 4 * n)
-        rt.launch(rt.kernel("lens_flare.cl", "lens_flare_measure"), (n,), src,
-                  np.int32(src.pitch), rt.to_device(np.asarray(boxes, np.int32).ravel()),
-                  np.int32(n), np.float32(p.threshold), out)
+        knl = rt.kernel("lens_flare.cl", "lens_flare_measure", fp64=self.level(ctx).fp64)
+        rt.launch(knl, (n,), src, np.int32(src.pitch),
+                  rt.to_device(np.asarray(boxes, np.int32).ravel()), np.int32(n),
+                  np.float32(p.threshold), out)
         m = rt.from_device(out, np.float32, 8 * n).reshape(n, 8).astype(np.float64)
         return [(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3])) for r in m if r[3] > 0]
 
@@ -295,17 +302,3 @@ class LensFlare(Plugin):
         if bad:
             ctx.notes.append(f"lens_flare: {bad} non-finite pixels set to 0")
         return out
-
-
-def bench_case(width, height, rng):
-    """A dim frame with a sun-like light near a corner and two street lamps."""
-    from clfx.core.camera import Camera
-
-    src = rng.uniform(0.0, 0.2, (height, width, 4)).astype(np.float32)
-    src[..., 3] = 1.0
-    for fx, fy, r, v in ((0.8, 0.2, 12, 5000.0), (0.3, 0.6, 4, 300.0), (0.55, 0.7, 3, 150.0)):
-        x, y = int(fx * width), int(fy * height)
-        src[y - r:y + r, x - r:x + r, :3] = v
-    return dict(source=src, depth=None, velocity=None,
-                params={"threshold": 5.0, "intensity": 0.05, "ghost_count": 8},
-                camera=Camera(blades=6, blade_rotation=15.0))

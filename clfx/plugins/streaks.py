@@ -55,22 +55,39 @@ References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurograph
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, RGBParam
+from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, RGBParam
 from clfx.host import Plugin, register
-
-FACTORS = {"draft": 4, "preview": 2, "final": 1, "reference": 1}
-"""Resolution divisor of the streak passes per quality level."""
 
 TAPS = 4
 """Taps per pass; pass n steps 4^n pixels, so N passes cover 4^N - 1 pixels."""
 
-SNAP_FROM = {"draft": 16, "preview": 16, "final": 16, "reference": None}
-"""Passes whose step is at least this many (working-resolution) pixels round each tap to a
-whole pixel (one load instead of an interpolated two; the ray wanders by at most half a
-pixel per snapped pass); None = always interpolate."""
+
+@dataclass(frozen=True)
+class StreaksLevel(Level):
+    """A streaks quality level: the passes run at 1 / ``factor`` resolution; passes whose step
+    is at least ``snap_from`` (working-resolution) pixels round each tap to a whole pixel (one
+    load instead of an interpolated two; the ray wanders by at most half a pixel per snapped
+    pass), 0 = always interpolate; ``fp64``: float64 tap sums."""
+
+    factor: int = 1
+    snap_from: int = 16
+
+
+LEVELS = {
+    "draft": StreaksLevel("Kawase passes at 1/4 resolution (box-averaged bright-pass, bilinear "
+                          "upsample), taps of passes stepping >= 16 px snapped to whole pixels, "
+                          "float32", factor=4),
+    "preview": StreaksLevel("Kawase passes at 1/2 resolution, long-step taps snapped, float32",
+                            factor=2),
+    "final": StreaksLevel("Kawase passes at full resolution, long-step taps snapped, float32"),
+    "reference": StreaksLevel("Kawase passes at full resolution, every tap interpolated, "
+                              "float64 tap sums (exactly the oracle's composed kernel)",
+                              fp64=True, snap_from=0),
+}
 
 MAX_MARGIN = 512
 """Largest zero margin (working-resolution pixels) given to the pass buffers; longer rays use
@@ -178,15 +195,7 @@ class Streaks(Plugin):
                        hint="Colour change along the streak: > 0 red reaches further (x1.5 at 1) "
                             "and blue less far (x0.5); < 0 the reverse."),
         ),
-        quality={
-            "draft": "Kawase passes at 1/4 resolution (box-averaged bright-pass, bilinear "
-                     "upsample), taps of passes stepping >= 16 px snapped to whole pixels, "
-                     "float32",
-            "preview": "Kawase passes at 1/2 resolution, long-step taps snapped, float32",
-            "final": "Kawase passes at full resolution, long-step taps snapped, float32",
-            "reference": "Kawase passes at full resolution, every tap interpolated, float64 "
-                         "tap sums (exactly the oracle's composed kernel)",
-        },
+        quality=LEVELS,
     )
 
     # geometry -------------------------------------------------------------------------
@@ -218,23 +227,21 @@ class Streaks(Plugin):
         return None
 
     def region_of_definition(self, p, ctx):
-        return ctx.source.window.grown(self.spread_px(p, ctx, FACTORS["final"]))
+        return ctx.source.window.grown(self.spread_px(p, ctx, LEVELS["final"].factor))
 
     def region_of_interest(self, p, ctx, window):
-        return window.grown(self.spread_px(p, ctx, FACTORS["final"]))
+        return window.grown(self.spread_px(p, ctx, LEVELS["final"].factor))
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
         src = ctx.source
-        factor = FACTORS.get(ctx.quality, 1)
-        snap_from = SNAP_FROM.get(ctx.quality)
+        lvl = self.level(ctx)
+        factor, snap_from = lvl.factor, lvl.snap_from
         out_win = self.output_window(p, ctx)
         ox, oy = src.window.offset_in(out_win)
         lo_w, lo_h = -(-out_win.width // factor), -(-out_win.height // factor)
         i32, f32 = np.int32, np.float32
-        defines = {"FACTOR": factor}
-        if ctx.quality == "reference" and rt.has_fp64:
-            defines.update(REAL="double", REAL16="double16", CONVERT_REAL16="convert_double16")
+        defines = {"FACTOR": factor, "fp64": lvl.fp64}
 
         angles = self.angles(p, ctx)
         lengths = channel_lengths(self.length_px(p, ctx), p.color_shift) / factor
@@ -272,7 +279,7 @@ class Streaks(Plugin):
                 last = n == passes - 1
                 dst = total if last else (ping if cur is not ping else pong)
                 b = TAPS ** n
-                snap = snap_from is not None and b >= snap_from
+                snap = snap_from > 0 and b >= snap_from
                 w = [w4.astype(np.float32) for w4 in weights[n]]
                 rt.launch(accum_knl if last else step_knl, (wp // 4, lo_h), cur, dst, i32(org),
                           i32(pitch), i32(wp), i32(lo_w), i32(lo_h), f32(sx * b), f32(sy * b),
@@ -288,64 +295,3 @@ class Streaks(Plugin):
         if bad:
             ctx.notes.append(f"streaks: {bad} non-finite pixels set to 0")
         return out
-
-
-def bench_case(width, height, rng):
-    """A dim noisy frame with a few strong lights: 4 rays at 1080p-typical length."""
-    from clfx.core.camera import Camera
-
-    src = rng.uniform(0.0, 0.3, (height, width, 4)).astype(np.float32)
-    src[..., 3] = 1.0
-    for _ in range(12):
-        x, y = int(rng.integers(0, width)), int(rng.integers(0, height))
-        src[max(0, y - 2):y + 3, max(0, x - 2):x + 3, :3] = rng.uniform(50, 5000)
-    return dict(source=src, depth=None, velocity=None,
-                params={"threshold": 2.0, "intensity": 0.3, "streaks": 4, "length": 0.1,
-                        "color_shift": 0.3},
-                camera=Camera(blades=6))
-
-
-def bench_peers(case, params, ctx):
-    """OpenCV's filter2D with each ray's exact exponential line kernel (one bilinear tap per
-    step), the operation the Kawase passes approximate: its error against clfx's reference
-    includes that kernel difference."""
-    try:
-        import cv2
-    except ImportError:
-        return {}
-    plugin = Streaks()
-    src = np.nan_to_num(np.asarray(case["source"], np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    clean = np.maximum(src, 0.0)
-    lum = clean[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    k = np.where(lum > params.threshold, (lum - params.threshold) / np.where(lum > 0, lum, 1.0), 0.0)
-    bright = np.ascontiguousarray(clean[..., :3] * k[..., None], np.float32)
-    angles = plugin.angles(params, ctx)
-    gain = params.intensity * np.asarray(params.tint) / max(len(angles), 1)
-    kernels = []
-    for ang in angles:
-        sx, sy, step_len = grid_step(ang)
-        lengths = channel_lengths(plugin.length_px(params, ctx), params.color_shift) / step_len
-        a = 0.01 ** (1.0 / np.maximum(lengths, 1e-3))
-        support = TAPS ** pass_count(float(lengths.max()))
-        radius = int(math.ceil(support * max(abs(sx), abs(sy)))) + 1
-        kern = np.zeros((3, 2 * radius + 1, 2 * radius + 1), np.float64)
-        for step in range(support):
-            x, y = radius + step * sx, radius + step * sy
-            x0, y0 = int(math.floor(x)), int(math.floor(y))
-            fx, fy = x - x0, y - y0
-            for dy_, wy in ((0, 1 - fy), (1, fy)):
-                for dx_, wx in ((0, 1 - fx), (1, fx)):
-                    if wx * wy > 0:
-                        kern[:, y0 + dy_, x0 + dx_] += wx * wy * a ** step
-        total = (1 - a ** support) / (1 - a)
-        kernels.append((kern * (gain / total)[:, None, None]).astype(np.float32))
-
-    def line_kernels():
-        out = clean.copy()
-        for kern in kernels:
-            for c in range(3):
-                out[..., c] += cv2.filter2D(bright[..., c], -1, kern[c], borderType=cv2.BORDER_CONSTANT)
-        return out
-
-    cv2.setNumThreads(2)
-    return {f"cv2.filter2D exact line kernels ({len(angles)} rays x 3 channels)": line_kernels}

@@ -1,27 +1,19 @@
-/* fftconv.cl: device helpers of clfx/fftconv.py (large-kernel convolution).
+/* fftconv.cl: device helpers of clfx/fx/fftconv.py (large-kernel convolution).
  *
- * REAL is the FFT precision (double for float64 transforms, float otherwise).
+ * REAL (lib/precision.h) is the FFT precision of the transform kernels (pack, multiply,
+ * unpack) and the accumulator precision of the gathers (gather, direct): double in a program
+ * built with fp64 (float64 transforms, the reference level's direct sums), float otherwise.
  * Work buffer of the in-place real-to-complex FFT: B planes of N1 rows x N2P reals
  * (N2P = N2 + 2, as pyvkfft's in-place r2c wants); after the forward transform each plane
  * holds N1 x (N2/2 + 1) complex values.
  *
  * Frame placement: grid (0, 0) holds the support origin (sx, sy) of the input; the PSF
  * spectrum was built with psf(c) at grid (0, 0), so the circular result at
- * ((o - s) mod N) is the linear convolution at output pixel o (clfx/fftconv.py proves when
+ * ((o - s) mod N) is the linear convolution at output pixel o (clfx/fx/fftconv.py proves when
  * no wrap-around reaches the pixels we keep).
  */
 #include "lib/common.h"
-
-#ifndef REAL
-#define REAL float
-#define REAL2 float2
-#endif
-
-#ifndef ACC
-#define ACC float
-#define ACC4 float4
-#define CONVERT_ACC4 convert_float4
-#endif
+#include "lib/precision.h"
 
 /* Largest colour channel of a pixel: the split test (bright pixels go to the exact gather). */
 inline float fftconv_peak(float4 c)
@@ -53,7 +45,7 @@ kernel void fftconv_pack(global const float *src, const int pitch, const int cha
       v[0] = c.x; v[1] = c.y; v[2] = c.z; v[3] = c.w;
     }
   }
-  for(int b = 0; b < nb; b++) work[b * plane + o] = (REAL)v[c0 + b];
+  for(int b = 0; b < nb; b++) work[b * plane + o] = TO_REAL(v[c0 + b]);
 }
 
 /* Pointwise product of the image spectra with the PSF spectrum (one plane shared by all
@@ -98,7 +90,7 @@ kernel void fftconv_unpack(global const REAL *work, const int n1, const int n2p,
   if(c0 == 0)
     for(int c = nb; c < channels; c++) d[c] = 0.0f;
   for(int b = 0; b < nb; b++)
-    d[c0 + b] = inside ? (float)work[b * plane + r] : 0.0f;
+    d[c0 + b] = inside ? TO_FLOAT(work[b * plane + r]) : 0.0f;
 }
 
 /* -- the exact part of the split: a few bright pixels, gathered ----------------------------- */
@@ -160,7 +152,7 @@ kernel void fftconv_gather(global float *dst, const int pitch, const int channel
   const int ox = qx * 4 + dx, oy = y + dy;   /* support coordinates of lane 0 */
   const int row = kw + 8;
   const size_t plane = (size_t)row * kh;
-  ACC4 r = (ACC4)(0), g = (ACC4)(0), b = (ACC4)(0);
+  REAL4 r = (REAL4)(0), g = (REAL4)(0), b = (REAL4)(0);
   for(int k = 0; k < count; k++)
   {
     const int2 p = pos[k];
@@ -169,20 +161,20 @@ kernel void fftconv_gather(global float *dst, const int pitch, const int channel
     if(ky < 0 || ky >= kh || kx < -3 || kx >= kw) continue;
     const float4 v = val[k];
     const size_t base = (size_t)ky * row + (kx + 4);
-    const ACC4 w0 = CONVERT_ACC4(vload4(0, psf + base));
-    r += (ACC)v.x * w0;
+    const REAL4 w0 = TO_REAL4(vload4(0, psf + base));
+    r += TO_REAL(v.x) * w0;
     if(planes == 1)
     {
-      g += (ACC)v.y * w0;
-      b += (ACC)v.z * w0;
+      g += TO_REAL(v.y) * w0;
+      b += TO_REAL(v.z) * w0;
     }
     else
     {
-      g += (ACC)v.y * CONVERT_ACC4(vload4(0, psf + plane + base));
-      b += (ACC)v.z * CONVERT_ACC4(vload4(0, psf + 2 * plane + base));
+      g += TO_REAL(v.y) * TO_REAL4(vload4(0, psf + plane + base));
+      b += TO_REAL(v.z) * TO_REAL4(vload4(0, psf + 2 * plane + base));
     }
   }
-  const float4 rf = convert_float4(r), gf = convert_float4(g), bf = convert_float4(b);
+  const float4 rf = TO_FLOAT4(r), gf = TO_FLOAT4(g), bf = TO_FLOAT4(b);
   const float rr[4] = {rf.x, rf.y, rf.z, rf.w}, gg[4] = {gf.x, gf.y, gf.z, gf.w},
               bb[4] = {bf.x, bf.y, bf.z, bf.w};
   for(int l = 0; l < 4; l++)
@@ -215,20 +207,20 @@ kernel void fftconv_pad(global const float *src, const int pitch, const int chan
   vstore4(c, (size_t)y * dpitch + x, dst);
 }
 
-/* out(o) = sum_k in(o - k) psf(k + c), 4 output pixels per work-item, accumulated in ACC.
+/* out(o) = sum_k in(o - k) psf(k + c), 4 output pixels per work-item, accumulated in REAL.
  * `pad` is fftconv_pad's buffer, whose origin sits at output origin - (kw - 1 - kcx, kh - 1
  * - kcy), so output pixel (x, y) reads padded pixel (x + kw - 1 - j, y + kh - 1 - i) for PSF
- * tap (i, j).  Weights are ACC (float64 for the reference).  Alpha is set to 0. */
+ * tap (i, j).  Weights are REAL (float64 for the reference).  Alpha is set to 0. */
 kernel void fftconv_direct(global const float *pad, const int ppitch,
                            global float *dst, const int pitch, const int channels,
                            const int width, const int height,
                            const int ex0, const int ey0, const int ex1, const int ey1,
-                           global const ACC *psf, const int kw, const int kh, const int planes)
+                           global const REAL *psf, const int kw, const int kh, const int planes)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(qx * 4 >= pitch || y >= height) return;
   const size_t plane = (size_t)kw * kh;
-  ACC4 r = (ACC4)(0), g = (ACC4)(0), b = (ACC4)(0);
+  REAL4 r = (REAL4)(0), g = (REAL4)(0), b = (REAL4)(0);
   for(int i = 0; i < kh; i++)
   {
     global const float *prow = pad + (size_t)(y + kh - 1 - i) * ppitch * 4;
@@ -236,15 +228,15 @@ kernel void fftconv_direct(global const float *pad, const int ppitch,
     {
       const float16 c = vload16(0, prow + (size_t)(qx * 4 + kw - 1 - j) * 4);
       const size_t t = (size_t)i * kw + j;
-      const ACC wr = psf[t];
-      const ACC wg = planes == 1 ? wr : psf[plane + t];
-      const ACC wb = planes == 1 ? wr : psf[2 * plane + t];
-      r += wr * CONVERT_ACC4((float4)(c.s0, c.s4, c.s8, c.sc));
-      g += wg * CONVERT_ACC4((float4)(c.s1, c.s5, c.s9, c.sd));
-      b += wb * CONVERT_ACC4((float4)(c.s2, c.s6, c.sa, c.se));
+      const REAL wr = psf[t];
+      const REAL wg = planes == 1 ? wr : psf[plane + t];
+      const REAL wb = planes == 1 ? wr : psf[2 * plane + t];
+      r += wr * TO_REAL4((float4)(c.s0, c.s4, c.s8, c.sc));
+      g += wg * TO_REAL4((float4)(c.s1, c.s5, c.s9, c.sd));
+      b += wb * TO_REAL4((float4)(c.s2, c.s6, c.sa, c.se));
     }
   }
-  const float4 rf = convert_float4(r), gf = convert_float4(g), bf = convert_float4(b);
+  const float4 rf = TO_FLOAT4(r), gf = TO_FLOAT4(g), bf = TO_FLOAT4(b);
   const float rr[4] = {rf.x, rf.y, rf.z, rf.w}, gg[4] = {gf.x, gf.y, gf.z, gf.w},
               bb[4] = {bf.x, bf.y, bf.z, bf.w};
   for(int l = 0; l < 4; l++)

@@ -89,7 +89,7 @@ def test_separable_psf_errors_as_documented():
 @pytest.mark.parametrize("quality", ["draft", "preview"])
 def test_bleed_separable_levels_within_psf_error(rt, rng, quality):
     from clfx.fx import psf as psflib
-    from clfx.plugins.bleed import SEPARABLE_RANK, separable_psf_error
+    from clfx.plugins.bleed import LEVELS, separable_psf_error
 
     src = rng.uniform(0.0, 3.0, (37, 45, 4)).astype(np.float32)
     p = Bleed.params(strength=0.4, size=0.08)          # radius 5 px: the fused path
@@ -98,7 +98,7 @@ def test_bleed_separable_levels_within_psf_error(rt, rng, quality):
     got = Bleed().apply(rt, p, src, quality=quality)
     # |PSF_m * h - PSF * h| <= L1(PSF_m - PSF) max(h) (h <= max rgb), times strength; plus
     # float32 round-off of a <= 441-tap sum
-    l1 = separable_psf_error(psflib.exponential(r, r / 3.0), SEPARABLE_RANK[quality])
+    l1 = separable_psf_error(psflib.exponential(r, r / 3.0), LEVELS[quality].rank)
     bound = p.strength * l1 * src[..., :3].max() + 1e-5 * want.max()
     assert np.abs(got - want).max() <= bound
     np.testing.assert_array_equal(got[..., 3], src[..., 3])   # alpha kept

@@ -122,16 +122,38 @@ def test_fft_sizes_are_smooth_and_cover():
         assert m >= n and m % 2 == 0 and fftconv.is_smooth(m)
 
 
-def test_spectrum_cache_reused(rt, rng):
+def spectra(rt) -> int:
+    """PSF spectra held in the runtime's cache."""
+    return rt.cache.stats()["owners"].get("fftconv.spectrum", 0)
+
+
+def test_spectrum_and_plans_live_in_the_runtime_cache(rt, rng):
     src = rng.uniform(0.0, 1.0, (16, 16, 4)).astype(np.float32)
     psf = rng.uniform(0.0, 1.0, (33, 33))
     win = Rect.from_size(16, 16)
-    fftconv.clear_caches()
+    fftconv.clear_caches(rt)
+    assert spectra(rt) == 0
     a = run(rt, src, psf, win, win)
-    n = len(fftconv._SPECTRA)
+    held = spectra(rt)
+    hits = rt.cache.hits
     b = run(rt, src, psf, win, win)
-    assert len(fftconv._SPECTRA) == n == 1
+    assert spectra(rt) == held > 0 and rt.cache.hits > hits   # reused, not rebuilt
+    assert rt.cache.stats()["owners"].get("fftconv.plan", 0) > 0   # plans count bytes
     assert np.array_equal(a, b)       # determinism: identical bytes
+    fftconv.clear_caches(rt)
+    assert spectra(rt) == 0 and "fftconv.plan" not in rt.cache.stats()["owners"]
+
+
+def test_spectrum_over_the_byte_bound_is_not_kept(rt, rng, monkeypatch):
+    monkeypatch.setattr(fftconv, "SPECTRUM_CACHE_BYTES", 1024)
+    src = rng.uniform(0.0, 1.0, (16, 16, 4)).astype(np.float32)
+    psf = rng.uniform(0.0, 1.0, (33, 33))
+    win = Rect.from_size(16, 16)
+    fftconv.clear_caches(rt)
+    got = run(rt, src, psf, win, win)
+    assert spectra(rt) == 0                                    # used for this call only
+    want = reference(src[..., :3], psf, (0, 0), (0, 0, 16, 16))
+    np.testing.assert_allclose(got[..., :3], want, atol=1e-6 * want.max())
 
 
 def test_support_limits_the_input(rt, rng):

@@ -187,3 +187,31 @@ def test_psf_kernel_image_resample():
     assert k.shape == (31, 31, 3)
     np.testing.assert_allclose(k.sum(axis=(0, 1)), 1.0)
     assert k[15, 15, 2] > k[15, 15, 0] * 0.5    # centre of the image lands on the centre tap
+
+
+def test_glare_kernel_image_comes_from_the_context_reader(rt, rng):
+    from clfx.core.errors import ParamError
+    from clfx.fx import psf
+
+    assert Glare.descriptor.param("kernel_path").kind == "path"   # an input of the render
+    src = scene(rng)
+    kimg = np.zeros((21, 31, 4), np.float32)
+    kimg[10, 15], kimg[4, 25] = (1.0, 2.0, 3.0, 1.0), (1.0, 1.0, 1.0, 1.0)
+    reads = []
+
+    def read_image(path):
+        reads.append(path)
+        return kimg
+
+    p = Glare.params(strength=0.2, size=0.3, psf="image",
+                     kernel_path="test_glare_kernel_image.exr")
+    got = Glare().apply(rt, p, src, read_image=read_image)
+    assert reads == ["test_glare_kernel_image.exr"]     # effects never open files
+    window = Rect.from_size(src.shape[1], src.shape[0])
+    k = psf.from_image(kimg, int(round(0.3 * window.diagonal)))
+    want = reference(src, k, strength=p.strength, threshold=p.threshold, knee=p.knee,
+                     tint=p.tint, boost=0.0, data_window=(0, 0, window.x1, window.y1),
+                     out_window=(0, 0, window.x1, window.y1))
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
+    with pytest.raises(ParamError, match="glare.kernel_path: psf 'image' needs a kernel image"):
+        Glare().apply(rt, Glare.params(psf="image", size=0.3), src, read_image=read_image)

@@ -146,3 +146,54 @@ def test_rod_covers_display(rt):
                                  camera=CAM)
     assert win == Rect(0, 0, 100, 80)
     assert out[:30].max() > 0.0                           # ghosts land outside the data window
+
+
+def wide_range_frame(h=64, w=96):
+    """Finite values across the float range (issue 10 item 6, WideFloatRange.exr): +-1e38
+    lights and blocks, FLT_MAX, half's 65504, tiny and denormal values; a few NaN/Inf pixels."""
+    big = float(np.finfo(np.float32).max)
+    src = np.full((h, w, 4), 1e-38, np.float32)
+    src[::3, ::2, :3] = 1e-45                        # denormals
+    src[1::4, 1::3, :3] = -1e-30
+    src[..., 3] = 1.0
+    src[5:9, 30:36, :3] = 1e38
+    src[20:24, 4:10, :3] = -1e38
+    src[30:33, 40:44, :3] = (1e38, -1e38, 1e38)
+    src[12, 12, :3] = big
+    src[14, 50, :3] = (big, 0.0, big)
+    src[25:28, 20:30, :3] = 65504.0
+    src[35, 10, :] = 1e38                            # alpha too
+    src[2, 2, 0], src[37, 50, 1], src[18, 40, :] = np.nan, np.inf, -np.inf
+    return src
+
+
+@pytest.mark.parametrize("effect,params", [
+    ("lens_flare", {}),
+    ("glare", {"size": 0.5}), ("glare", {"size": 0.1}),
+    ("bleed", {"size": 0.05}), ("bleed", {"size": 0.1}),
+    ("soft_focus", {"size": 0.5}),
+    ("corona", {"size": 0.05}),
+    ("streaks", {}), ("streaks", {"length": 1.0, "intensity": 100.0}),
+])
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+def test_finite_input_gives_finite_output(rt, effect, params, quality):
+    # the light-spreading effects saturate at +-FLT_MAX instead of overflowing to inf (and
+    # inf - inf to NaN): finite input, finite output, at every level
+    from clfx.plugins import get_plugin
+
+    cls = get_plugin(effect)
+    src = wide_range_frame()
+    got = cls().apply(rt, cls.params(**params), src, quality=quality, camera=CAM)
+    finite = np.isfinite(src)
+    assert np.isfinite(got[finite]).all(), np.argwhere(~np.isfinite(got) & finite)[:5]
+
+
+def test_wide_float_range_exr_flares_finite(rt, exr_images):
+    from clfx.io.files import read_frame
+
+    f = read_frame(exr_images / "TestImages" / "WideFloatRange.exr")
+    assert np.isfinite(f.rgba).all()
+    for quality in ("draft", "reference"):
+        got = LensFlare().apply(rt, LensFlare.params(), f.rgba, quality=quality,
+                                data_window=f.data_window, display_window=f.display_window)
+        assert np.isfinite(got).all()

@@ -1,0 +1,158 @@
+"""The glare family's shared base: highlights -> PSF spread -> mix (glare, bleed, soft focus),
+and the cheap questions of every effect that spreads its highlights by a PSF (corona).
+
+Effects combine these mixins with ``clfx.host.Plugin`` (this layer sits below the host):
+``class Glare(ScatterPlugin, Plugin)``.  What differs between effects is declared, not
+tested for: the name of the strength parameter (:attr:`SpreadRegions.strength_param`), the
+PSF (:meth:`ScatterPlugin.build_psf`), the display-referred boost (:meth:`ScatterPlugin.boost`).
+
+Model (``kernels/lib/scatter.h``; each effect's ``kernels/<effect>.cl`` instantiates
+``<effect>_highlights`` and ``<effect>_mix`` from it): per pixel the soft-knee highlight
+``h = max(rgb, 0) * clamp(max(s, L - t) / L, 0, 1)``, ``s = clamp(L - t + k, 0, 2k)^2 / 4k``
+(luminance ``L``, threshold ``t``, knee ``k``) is convolved with a normalised PSF
+(``clfx.fx.fftconv.spread`` at the context's quality level) and mixed back:
+``out = c - strength h + strength tint (PSF * h)`` (energy kept); display-referred input is
+first expanded by the inverse tone curve of gain ``boost`` and mixed additively
+(``out = c + strength tint (PSF * h)``).  Non-finite pixels are set to 0 before the spread and
+counted in ``ctx.notes``.
+"""
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from clfx.core.plugin import FloatParam, RGBParam
+from clfx.core.rect import Rect
+from clfx.fx import fftconv
+from clfx.fx import psf as psflib
+
+SPLIT_RATIO = 1e-3
+"""preview: pixels above this fraction of the peak (and above 4 x threshold) are gathered
+exactly instead of going through the float32 FFT."""
+
+
+# -- shared parameter declarations ------------------------------------------------------
+def knee_param(default: float) -> FloatParam:
+    """The soft knee's width below the threshold."""
+    return FloatParam("knee", default, min=0.0, max=1e6,
+                      hint="Width of the soft knee below the threshold, in luminance.")
+
+
+def tint_param(light: str) -> RGBParam:
+    """The colour of the spread light (``light``: "scattered", "leaked", ...)."""
+    return RGBParam("tint", (1.0, 1.0, 1.0), max=100.0,
+                    hint=f"Colour of the {light} light (white keeps energy).")
+
+
+# -- the cheap questions ----------------------------------------------------------------
+class SpreadRegions:
+    """Identity and regions of an effect spreading the light above a level by up to
+    :meth:`radius_px` pixels (a Plugin mixin).
+
+    Subclasses implement :meth:`radius_px`, and set :attr:`strength_param` when their
+    strength parameter is not called ``strength``; :meth:`raw_level` is the source luminance
+    above which a pixel contributes (``p.threshold`` unless overridden).
+    """
+
+    strength_param: ClassVar[str] = "strength"
+
+    def strength(self, p) -> float:
+        return getattr(p, self.strength_param)
+
+    def radius_px(self, p, ctx) -> int:
+        raise NotImplementedError
+
+    def raw_level(self, p, ctx) -> float:
+        return p.threshold
+
+    def is_identity(self, p, ctx):
+        if self.strength(p) == 0.0:
+            return f"{self.strength_param} is 0"
+        if self.radius_px(p, ctx) < 1:
+            return "size is below one pixel"
+        if not ctx.analysis.any_above(self.raw_level(p, ctx)):
+            return "no pixel above threshold"
+        return None
+
+    def region_of_definition(self, p, ctx) -> Rect:
+        return ctx.source.window.grown(self.radius_px(p, ctx))
+
+    def region_of_interest(self, p, ctx, window) -> Rect:
+        return window.grown(self.radius_px(p, ctx))
+
+    def highlight_support(self, p, ctx) -> Rect:
+        """Bounding box of the analysis tiles that hold a contributing pixel."""
+        return ctx.analysis.highlight_bounds(self.raw_level(p, ctx))
+
+
+# -- the glare family ------------------------------------------------------------------
+class ScatterPlugin(SpreadRegions):
+    """Shared machinery of glare, bleed and soft_focus: threshold -> PSF spread -> mix (a
+    Plugin mixin).
+
+    Subclasses set ``descriptor`` (its ``kernel`` instantiates ``SCATTER_KERNELS``, its
+    quality levels are :class:`clfx.fx.fftconv.SpreadLevel`), implement :meth:`build_psf`,
+    and override :meth:`boost` if display-referred input is expanded before spreading.
+    """
+
+    # -- parameters -> physics ------------------------------------------------------------
+    def boost(self, p, ctx) -> float:
+        """Inverse tone curve gain for display-referred input (0: scene-linear)."""
+        return 0.0
+
+    def radius_px(self, p, ctx) -> int:
+        return psflib.psf_radius_px(p.size, ctx.diagonal_px)
+
+    def build_psf(self, p, ctx, radius: int) -> np.ndarray:
+        raise NotImplementedError
+
+    def psf(self, p, ctx) -> np.ndarray:
+        """The PSF for this parameter set and frame size (kept in the runtime's cache)."""
+        r = self.radius_px(p, ctx)
+        key = (f"{self.descriptor.name}.psf", p.hash_hex(), r, ctx.width_px, ctx.camera)
+        return ctx.runtime.cache.get(key, lambda: self.build_psf(p, ctx, r))
+
+    def raw_level(self, p, ctx) -> float:
+        """Source luminance above which a pixel contributes (threshold - knee, in input units)."""
+        level = max(p.threshold - p.knee, 0.0)
+        b = self.boost(p, ctx)
+        if b > 0.0:  # invert e(L) = L / (1 - L (1 - 1/B)) on [0, 1)
+            level = level / (1.0 + level * (1.0 - 1.0 / b))
+        return level
+
+    def note_nonfinite(self, ctx, taps: tuple[int, int]) -> None:
+        """Count the frame's non-finite pixels in ``ctx.notes`` (they do not spread)."""
+        nonfinite = ctx.analysis.nonfinite_count
+        if nonfinite:
+            ctx.notes.append(f"{self.descriptor.name}: {nonfinite} non-finite pixel(s) set "
+                             f"to 0 before the {taps[1]}x{taps[0]} PSF")
+
+    # -- render ---------------------------------------------------------------------------
+    def render(self, rt, p, ctx):
+        name, kfile = self.descriptor.name, self.descriptor.kernel
+        src = ctx.source
+        k = self.psf(p, ctx)
+        boost = self.boost(p, ctx)
+        self.note_nonfinite(ctx, k.shape[:2])
+        h = rt.image(src.window, 4)
+        f32, i32 = np.float32, np.int32
+        rt.launch(rt.kernel(kfile, f"{name}_highlights"), (src.pitch // 4, max(src.height, 1)),
+                  src, h, i32(src.pitch), i32(src.height), f32(p.threshold), f32(p.knee),
+                  f32(boost))
+        out_window = self.output_window(p, ctx)
+        split = max(4.0 * p.threshold, SPLIT_RATIO * ctx.analysis.peak_luminance)
+        info = fftconv.ConvolveInfo()
+        g = fftconv.spread(rt, h, k, self.level(ctx), out_window=out_window,
+                           support=self.highlight_support(p, ctx), split_level=split, info=info)
+        ctx.notes.extend(f"{name}: {note}" for note in info.notes)
+        dst = rt.image(out_window, 4)
+        from pyopencl import cltypes
+
+        tint = cltypes.make_float4(*p.tint, 0.0)
+        dx, dy = out_window.offset_in(src.window)
+        rt.launch(rt.kernel(kfile, f"{name}_mix"), (dst.pitch // 4, max(dst.height, 1)),
+                  src, i32(src.pitch), i32(src.width), i32(src.height), g, dst,
+                  i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(self.strength(p)),
+                  tint, f32(p.threshold), f32(p.knee), f32(boost), i32(boost > 0.0))
+        return dst

@@ -1,0 +1,153 @@
+/* scatter.h: the light-spreading effects' shared per-pixel maths (clfx/fx/scatter.py).
+ *
+ * The glare family (glare.cl, bleed.cl, soft_focus.cl) thresholds with a soft knee, spreads
+ * the highlights with a PSF (lib/fftconv.cl, or bleed's fused gather) and mixes back:
+ *   display-referred input (boost > 0): inverse tone curve on luminance,
+ *     e(L) = L / max(1 - L (1 - 1/B), 1/B)   (e(0) = 0, e'(0) = 1, e(1) = B), hue kept;
+ *   soft knee (Unity/Kawase bloom): s = clamp(L - t + k, 0, 2k)^2 / (4k),
+ *     weight = clamp(max(s, L - t) / L, 0, 1);  highlight h = max(rgb, 0) * weight.
+ *   scene-linear: out = c - strength h + strength tint (PSF * h)  (energy moves, kept);
+ *   display-referred: out = c + strength tint (PSF * h)            (classic additive glow).
+ * Non-finite input pixels become 0 (black, alpha 0) and do not spread.
+ * SCATTER_KERNELS(effect) defines the family's two kernels, <effect>_highlights and
+ * <effect>_mix, with the same arguments for every effect.
+ *
+ * Corona, streaks and lens flare threshold hard (scatter_bright) and compose
+ * source + light with scatter_source (non-finite channels set to 0).
+ */
+#ifndef CLFX_SCATTER_H
+#define CLFX_SCATTER_H
+
+#include "lib/common.h"
+
+#define SCATTER_FLT_MAX 3.402823466e+38f
+
+inline int scatter_pixel_finite(float4 c)
+{
+  return clfx_is_finite(c.x) & clfx_is_finite(c.y) & clfx_is_finite(c.z) & clfx_is_finite(c.w);
+}
+
+/* A pixel with any non-finite channel becomes 0 (the glare family's sanitising). */
+inline float4 scatter_sanitise(float4 c)
+{
+  return scatter_pixel_finite(c) ? c : (float4)(0.0f);
+}
+
+inline float scatter_knee_weight(float lum, float threshold, float knee)
+{
+  if(!(lum > 0.0f)) return 0.0f;
+  float soft = 0.0f;
+  if(knee > 0.0f)
+  {
+    const float x = clamp(lum - threshold + knee, 0.0f, 2.0f * knee);
+    soft = x * x / (4.0f * knee);
+  }
+  return clamp(fmax(soft, lum - threshold) / lum, 0.0f, 1.0f);
+}
+
+/* The light that scatters from one (sanitised) pixel; alpha 0. boost <= 0: scene-linear. */
+inline float4 scatter_highlight(float4 c, float threshold, float knee, float boost)
+{
+  float4 rgb = (float4)(fmax(c.x, 0.0f), fmax(c.y, 0.0f), fmax(c.z, 0.0f), 0.0f);
+  float lum = clfx_luminance(rgb);
+  if(boost > 0.0f && lum > 0.0f)
+  {
+    const float e = lum / fmax(1.0f - lum * (1.0f - 1.0f / boost), 1.0f / boost);
+    rgb *= e / lum;
+    lum = e;
+  }
+  return rgb * scatter_knee_weight(lum, threshold, knee);
+}
+
+/* src window -> highlight image of the same window, 4 pixels per work-item. */
+inline void scatter_highlights_body(global const float *src, global float *dst, const int pitch,
+                                    const int height, const float threshold, const float knee,
+                                    const float boost)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(qx * 4 >= pitch || y >= height) return;
+  const size_t i = ((size_t)y * pitch + qx * 4) * 4;
+  const float16 c = vload16(0, src + i);
+  const float4 h0 = scatter_highlight(scatter_sanitise(c.s0123), threshold, knee, boost);
+  const float4 h1 = scatter_highlight(scatter_sanitise(c.s4567), threshold, knee, boost);
+  const float4 h2 = scatter_highlight(scatter_sanitise(c.s89ab), threshold, knee, boost);
+  const float4 h3 = scatter_highlight(scatter_sanitise(c.scdef), threshold, knee, boost);
+  vstore16((float16)(h0, h1, h2, h3), 0, dst + i);
+}
+
+/* out window (>= src window): out = c - strength h (unless additive) + strength tint g.
+ * (dx, dy): out origin minus src origin; g shares the out window and pitch.  Sums beyond the
+ * float range saturate at +-FLT_MAX: finite input gives finite output. */
+inline void scatter_mix_body(global const float *src, const int spitch, const int swidth,
+                             const int sheight, global const float *g, global float *dst,
+                             const int pitch, const int height, const int dx, const int dy,
+                             const float strength, const float4 tint, const float threshold,
+                             const float knee, const float boost, const int additive)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(qx * 4 >= pitch || y >= height) return;
+  const size_t i = ((size_t)y * pitch + qx * 4) * 4;
+  const float16 gl = vload16(0, g + i);
+  const float4 gg[4] = {gl.s0123, gl.s4567, gl.s89ab, gl.scdef};
+  float4 o[4];
+  const int sy = y + dy;
+  for(int l = 0; l < 4; l++)
+  {
+    const int sx = qx * 4 + l + dx;
+    float4 c = (float4)(0.0f);
+    if(sx >= 0 && sx < swidth && sy >= 0 && sy < sheight)
+      c = scatter_sanitise(vload4((size_t)sy * spitch + sx, src));
+    /* PSF >= 0 and h >= 0: clamp the FFT's round-off (~1e-16 x energy) at 0 */
+    float4 r = c + strength * tint * (float4)(fmax(gg[l].xyz, 0.0f), 0.0f);
+    if(!additive) r -= strength * scatter_highlight(c, threshold, knee, boost);
+    r = clamp(r, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
+    r.w = c.w;
+    o[l] = r;
+  }
+  vstore16((float16)(o[0], o[1], o[2], o[3]), 0, dst + i);
+}
+
+#define SCATTER_KERNELS(effect)                                                               \
+kernel void effect##_highlights(global const float *src, global float *dst, const int pitch,  \
+                                const int height, const float threshold, const float knee,    \
+                                const float boost)                                            \
+{                                                                                             \
+  scatter_highlights_body(src, dst, pitch, height, threshold, knee, boost);                   \
+}                                                                                             \
+kernel void effect##_mix(global const float *src, const int spitch, const int swidth,         \
+                         const int sheight, global const float *g, global float *dst,         \
+                         const int pitch, const int height, const int dx, const int dy,       \
+                         const float strength, const float4 tint, const float threshold,      \
+                         const float knee, const float boost, const int additive)             \
+{                                                                                             \
+  scatter_mix_body(src, spitch, swidth, sheight, g, dst, pitch, height, dx, dy, strength,     \
+                   tint, threshold, knee, boost, additive);                                   \
+}
+
+/* Hard-threshold bright-pass of one source pixel: RGB * max(lum - t, 0) / lum, non-finite
+ * channels and negatives -> 0, alpha 0. */
+inline float4 scatter_bright(float4 c, float threshold)
+{
+  c = fmax(clfx_finite4_or_zero(c), (float4)0.0f);
+  const float l = clfx_luminance(c);
+  /* k <= 1; fmin only turns the NaN of a luminance rounded up to inf into 1 */
+  const float k = l > threshold ? fmin((l - threshold) / l, 1.0f) : 0.0f;
+  return (float4)(c.x * k, c.y * k, c.z * k, 0.0f);
+}
+
+/* Source pixel (sx, sy) with non-finite channels set to 0; 0 outside the source. */
+inline float4 scatter_source(global const float *src, int pitch, int width, int height,
+                             int sx, int sy)
+{
+  if(sx < 0 || sx >= width || sy < 0 || sy >= height) return (float4)0.0f;
+  return clfx_finite4_or_zero(clfx_load4(src, pitch, sx, sy));
+}
+
+/* source + added light, saturated at +-FLT_MAX (finite input, finite output); alpha c's. */
+inline float4 scatter_add(float4 c, float4 light)
+{
+  const float4 r = clamp(c + light, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
+  return (float4)(r.xyz, c.w);
+}
+
+#endif /* CLFX_SCATTER_H */
