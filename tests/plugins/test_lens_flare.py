@@ -189,7 +189,7 @@ def test_finite_input_gives_finite_output(rt, effect, params, quality):
 
 
 def test_wide_float_range_exr_flares_finite(rt, exr_images):
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     f = read_frame(exr_images / "TestImages" / "WideFloatRange.exr")
     assert np.isfinite(f.rgba).all()
