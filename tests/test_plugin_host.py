@@ -121,7 +121,7 @@ def test_step_that_skips_missing_passes_reports_why(rt, rng):
     strict = Look("strict", steps=[Step("dof", dof.params())])
     with pytest.raises(ClipError, match="needs a depth pass"):
         render_frame(rt, strict, frame)
-    lenient = Look("lenient", steps=[Step("dof", dof.params(), skip_missing_passes=True),
+    lenient = Look("lenient", steps=[Step("dof", dof.params(), missing_passes="skip"),
                                      Step("vignette", get_plugin("vignette").params(amount=0.2))])
     _, report = render_frame(rt, lenient, frame)
     assert report.steps[0].reason == "no depth pass in the input" and report.steps[1].ran

@@ -16,16 +16,123 @@ import sys
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame
-from clfx.pipeline.look import Look, render_frame
+from clfx.core.limits import check_pixels
+from clfx.pipeline.look import Look, RunStats, render_frame
 from clfx.core.rect import Rect
 
+if TYPE_CHECKING:
+    from clfx.io.files import PassSpec
+
 RAW = "-"
+
+
+@dataclass(frozen=True)
+class PassOptions:
+    """How depth and velocity passes are found and read (``--depth-channel`` ...).
+
+    The fields of :class:`clfx.io.files.PassSpec` that the command line sets; ``spec`` makes
+    the PassSpec once the focal length for radial depth is known.
+
+    Attributes
+    ----------
+    depth_channel : str or None
+        Exact depth channel name; None: the documented search order.
+    depth_mode : {"auto", "z", "inverse", "distance", "normalized"}
+        How depth is stored.
+    depth_scale : float
+        Multiplies depth (scene-unit conversion, e.g. 0.01 for cm to m).
+    focal_length_px : float or None
+        Focal length in pixels for ``depth_mode="distance"``; None: from the look's camera
+        block and the first frame's width.
+    velocity_channels : (str, str) or None
+        Exact (u, v) channel names; None: the search order.
+    velocity_y_up : bool or None
+        Whether stored +v points up; None: from the detected convention.
+    velocity_scale : float
+        Multiplies velocity.
+    """
+
+    depth_channel: str | None = None
+    depth_mode: str = "auto"
+    depth_scale: float = 1.0
+    focal_length_px: float | None = None
+    velocity_channels: tuple[str, ...] | None = None
+    velocity_y_up: bool | None = None
+    velocity_scale: float = 1.0
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+    def spec(self, focal_length_px: float | None = None):
+        """The :class:`~clfx.io.files.PassSpec` (``focal_length_px`` fills in a missing one)."""
+        from clfx.io.files import PassSpec
+
+        return PassSpec(depth_channel=self.depth_channel, depth_mode=self.depth_mode,
+                        depth_scale=self.depth_scale, velocity_channels=self.velocity_channels,
+                        velocity_y_up=self.velocity_y_up, velocity_scale=self.velocity_scale,
+                        focal_length_px=self.focal_length_px or focal_length_px)
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """Everything ``clfx render`` and ``clfx apply`` set besides the look (the CLI builds it).
+
+    Attributes
+    ----------
+    frames : str or None
+        Frame spec (``1-100``, ``1-100x2``, ``1,5,10-20``, ``a-b:n``); None: all on disk.
+    quality : str or None
+        Quality level of every step without its own; None: ``final``.
+    depth_path, velocity_path : str or None
+        Passes from separate files (a pattern like the input, or one file for all frames).
+    passes : PassOptions
+        How the passes are found and read.
+    colorspace, out_colorspace : str or None
+        Colour space of the input / to encode the output in; None: from the file type.
+    as_float : bool
+        Write EXR beauty as 32-bit float (default half).
+    compression : str or None
+        EXR compression; None: zip.
+    overwrite : bool
+        Replace existing outputs.
+    skip_existing : bool
+        Skip frames whose output exists (resume a batch).
+    skip_missing : bool
+        Skip missing input frames instead of failing.
+    keep_overscan : bool
+        Keep light spread past the display window.
+    raw_size : str or None
+        ``WxH`` of raw gbrpf32le frames when INPUT and OUTPUT are ``-``.
+    explain : bool
+        Per frame, say on stderr which effects ran and why others were skipped.
+    as_json : bool
+        One JSON line per frame and a summary on stdout.
+    """
+
+    frames: str | None = None
+    quality: str | None = None
+    depth_path: str | None = None
+    velocity_path: str | None = None
+    passes: PassOptions = field(default_factory=PassOptions)
+    colorspace: str | None = None
+    out_colorspace: str | None = None
+    as_float: bool = False
+    compression: str | None = None
+    overwrite: bool = False
+    skip_existing: bool = False
+    skip_missing: bool = False
+    keep_overscan: bool = False
+    raw_size: str | None = None
+    explain: bool = False
+    as_json: bool = False
 
 
 @dataclass
@@ -39,15 +146,25 @@ class Job:
 
 @dataclass
 class Batch:
+    """A look over INPUT to OUTPUT: ``prepare`` checks everything, ``run`` renders.
+
+    ``jobs``, ``skipped_existing``, ``passes`` and ``raw_size`` are filled by ``prepare``;
+    ``stats`` holds the steps' running costs over this batch's frames.
+    """
+
     look: Look
     input_path: str
     output_path: str
-    options: dict
-    passes: object
+    options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
     progress: bool = False
-    jobs: list[Job] = field(default_factory=list)
-    skipped_existing: list[int] = field(default_factory=list)
+    jobs: list[Job] = field(default_factory=list, init=False)
+    skipped_existing: list[int] = field(default_factory=list, init=False)
+    passes: PassSpec | None = field(default=None, init=False)  # what frames are read with
+    raw_size: tuple[int, int] | None = field(default=None, init=False)
+    stats: RunStats = field(default_factory=RunStats, init=False)
+    _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
+    _first_read: Future | None = field(default=None, init=False, repr=False)
 
     # -- checks -------------------------------------------------------------------------
     def prepare(self) -> None:
@@ -58,18 +175,18 @@ class Batch:
         if self.input_path == RAW or self.output_path == RAW:
             self._prepare_raw()
             return
-        frames = parse_frames(o["frames"]) if o.get("frames") else None
+        frames = parse_frames(o.frames) if o.frames else None
         pin = Pattern.parse(self.input_path)
         pout = Pattern.parse(self.output_path)
         if pin.is_sequence and not pout.is_sequence:
             raise SequenceError(f"input {self.input_path} is a sequence but output "
                                 f"{self.output_path} has no frame token (use e.g. out.####.exr)")
-        inputs = resolve_inputs(pin, frames, skip_missing=o.get("skip_missing", False))
+        inputs = resolve_inputs(pin, frames, skip_missing=o.skip_missing)
         if not inputs:
             raise SequenceError(f"no input frames found for {self.input_path}")
         aux = {}
         for name in ("depth", "velocity"):
-            path = o.get(f"{name}_path")
+            path = getattr(o, f"{name}_path")
             if path:
                 pat = Pattern.parse(path)
                 found = dict(resolve_inputs(pat, [f for f, _ in inputs] if pat.is_sequence else None,
@@ -84,9 +201,21 @@ class Batch:
             jobs.append(job)
         self._check_outputs(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
+        self.passes = o.passes.spec(self._radial_depth_focal_px())
+
+    def _radial_depth_focal_px(self) -> float | None:
+        """Focal length in pixels for --depth-mode distance, from the look's camera block and
+        the first input's display width (square pixels assumed, as the camera block does)."""
+        p = self.options.passes
+        if p.depth_mode != "distance" or p.focal_length_px or not self.jobs:
+            return None
+        from clfx.io.files import probe as probe_file
+
+        info = probe_file(self.jobs[0].input)
+        width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
+        return self.look.camera.focal_length_px(width)
 
     def _check_outputs(self, jobs: list[Job]) -> None:
-        o = self.options
         inputs = {os.path.realpath(p) for j in jobs for p in (j.input, j.depth, j.velocity) if p}
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
@@ -106,9 +235,9 @@ class Batch:
                 raise ImageIOError(f"output {j.output} is an input of this render; clfx never "
                                    f"overwrites its inputs")
             if os.path.exists(j.output):
-                if o.get("skip_existing"):
+                if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
-                elif not o.get("overwrite"):
+                elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
 
@@ -135,9 +264,9 @@ class Batch:
         total = len(self.jobs)
         if self.skipped_existing and self.verbosity > 0:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
-        own_pool = getattr(self, "_pool", None) is None
+        own_pool = self._pool is None
         pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io") if own_pool else self._pool
-        first, self._first_read = getattr(self, "_first_read", None), None
+        first, self._first_read = self._first_read, None
         with (pool if own_pool else nullcontext()):
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
@@ -145,10 +274,9 @@ class Batch:
                 frame_in, read_ms = next_read.result()
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
                 frame_out, report = render_frame(
-                    rt, self.look, frame_in, frame_number=job.frame,
-                    quality=self.options.get("quality"),
-                    keep_overscan=self.options.get("keep_overscan", False),
-                    analysis_summary=bool(self.options.get("as_json")))
+                    rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
+                    keep_overscan=self.options.keep_overscan,
+                    analysis_summary=self.options.as_json, stats=self.stats)
                 report.input, report.output = job.input, job.output
                 report.read_ms = read_ms
                 writes.append((pool.submit(self._write, frame_out, job, report), report))
@@ -165,7 +293,7 @@ class Batch:
                    "fps": round(len(reports) / wall, 3) if wall > 0 and reports else None,
                    "device_ms_mean": round(float(np.mean([r.total_ms for r in reports])), 2) if reports else None,
                    "saved_ms_estimate": round(sum(r.saved_ms or 0.0 for r in reports), 1)}
-        if self.options.get("as_json"):
+        if self.options.as_json:
             print(json.dumps(summary), flush=True)
         elif self.verbosity > 0:
             self._err(f"clfx: {len(reports)} frame(s) rendered with look {self.look.name!r} in "
@@ -177,9 +305,9 @@ class Batch:
         while writes and (block or writes[0][0].done()):
             future, report = writes.pop(0)
             future.result()
-            if self.options.get("as_json"):
+            if self.options.as_json:
                 print(json.dumps(report.as_dict()), flush=True)
-            if self.options.get("explain"):
+            if self.options.explain:
                 self._err(report.explain())
         return writes
 
@@ -188,7 +316,7 @@ class Batch:
         from clfx.io.files import read_frame
 
         t0 = time.perf_counter()
-        frame = read_frame(job.input, passes=self.passes, colorspace=self.options.get("colorspace"),
+        frame = read_frame(job.input, passes=self.passes, colorspace=self.options.colorspace,
                            depth_path=job.depth, velocity_path=job.velocity)
         return frame, (time.perf_counter() - t0) * 1e3
 
@@ -197,8 +325,8 @@ class Batch:
 
         t0 = time.perf_counter()
         o = self.options
-        write_frame(frame, job.output, bit_depth="float" if o.get("as_float") else None,
-                    compression=o.get("compression"), colorspace=o.get("out_colorspace"),
+        write_frame(frame, job.output, bit_depth="float" if o.as_float else None,
+                    compression=o.compression, colorspace=o.out_colorspace,
                     overwrite=True, attributes=self.look.stamp(),
                     protect=[p for p in (job.input, job.depth, job.velocity) if p])
         report.write_ms = (time.perf_counter() - t0) * 1e3
@@ -208,14 +336,15 @@ class Batch:
 
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:
-        size = self.options.get("raw_size")
+        size = self.options.raw_size
         if not size:
             raise SequenceError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le frames, "
                                 "as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
-        try:
-            w, h = (int(v) for v in size.lower().split("x"))
-        except ValueError:
-            raise SequenceError(f"--raw {size!r} is not WxH") from None
+        parts = size.lower().split("x")
+        if len(parts) != 2 or not all(v.isascii() and v.isdigit() and int(v) > 0 for v in parts):
+            raise SequenceError(f"--raw {size!r} is not WxH (two positive whole numbers)")
+        w, h = int(parts[0]), int(parts[1])
+        check_pixels(w, h, "--raw frame", SequenceError)  # before a frame's bytes are read
         self.raw_size = (w, h)
         if self.input_path != RAW or self.output_path != RAW:
             raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
@@ -240,14 +369,14 @@ class Batch:
             rgba[..., 0], rgba[..., 1], rgba[..., 2], rgba[..., 3] = planes[2], planes[0], planes[1], 1.0
             frame = Frame(rgba, Rect.from_size(w, h), Rect.from_size(w, h), source="stdin")
             out, report = render_frame(rt, self.look, frame, frame_number=count,
-                                       quality=self.options.get("quality"))
+                                       quality=self.options.quality, stats=self.stats)
             o = out.rgba
             if out.data_window != frame.data_window:
                 from clfx.core.frame import crop_to
                 o = crop_to(o, out.data_window, frame.data_window)
             stdout.write(np.ascontiguousarray(np.stack([o[..., 1], o[..., 2], o[..., 0]])).tobytes())
             stdout.flush()
-            if self.options.get("explain"):
+            if self.options.explain:
                 self._err(report.explain())
             count += 1
         wall = time.perf_counter() - t0
