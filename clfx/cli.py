@@ -3,7 +3,8 @@
 Exit codes: 0 success; 1 processing error (bad input file, failed frame, bad look, no
 device); 2 usage error (unknown option, bad argument); 130 interrupted (Ctrl-C), 143
 terminated (SIGTERM).  Interruptions leave no partial output: every write goes to a temp file
-in the output folder and is renamed into place only when complete.
+in the output folder and is renamed into place only when complete.  A closed stdin or stdout,
+or a write to stdout that fails (a full disk), is one error line and exit code 1.
 
 stdout carries only data (``--json`` lines, listings); progress and logs go to stderr, and
 progress is shown only when stderr is a terminal and ``-q`` is not given.
@@ -54,10 +55,12 @@ def _to_devnull(stream) -> None:
 class _GuardedStream:
     """sys.stdin / sys.stdout while the CLI runs: a closed descriptor (the stream is None)
     or a failed write is a :class:`StdioError` (one line, exit code 1), not a traceback.
-    A broken pipe passes through (the reader went away: exit quietly)."""
+    A broken pipe passes through (the reader went away: exit quietly).  A failure sticks:
+    later writes fail the same way (click probes streams and swallows what they raise)."""
 
     def __init__(self, stream, name: str):
         self._stream, self._name = stream, name
+        self._failed: str | None = None
 
     def __getattr__(self, attr):
         if self._stream is None:
@@ -86,6 +89,8 @@ class _GuardedStream:
     def _do(self, op: str, *args):
         if self._stream is None:
             raise StdioError(f"{self._name} is closed")
+        if self._failed:
+            raise StdioError(self._failed)
         try:
             return getattr(self._stream, op)(*args)
         except BrokenPipeError:
@@ -93,7 +98,8 @@ class _GuardedStream:
         except OSError as exc:
             _to_devnull(self._stream)
             verb = "read" if op == "read" else "write to"
-            raise StdioError(f"cannot {verb} {self._name}: {exc.strerror or exc}") from None
+            self._failed = f"cannot {verb} {self._name}: {exc.strerror or exc}"
+            raise StdioError(self._failed) from None
 
 
 class ClfxClickError(click.ClickException):
@@ -319,7 +325,8 @@ def _render_options(kw: dict):
     from clfx.pipeline.batch import PassOptions, RenderOptions
 
     passes = set(PassOptions.names())
-    return RenderOptions(passes=_pass_options(kw), **{k: v for k, v in kw.items() if k not in passes})
+    rest = {k: v for k, v in kw.items() if k not in passes}
+    return RenderOptions(passes=_pass_options(kw), **rest)
 
 
 @cli.command()
@@ -443,7 +450,8 @@ def main(argv=None):
     saved = sys.stdin, sys.stdout, sys.stderr
     sys.stdin = sys.stdin if sys.stdin is not None else _GuardedStream(None, "stdin")
     sys.stdout = _GuardedStream(sys.stdout, "stdout")
-    sys.stderr = sys.stderr if sys.stderr is not None else open(os.devnull, "w")
+    if sys.stderr is None:  # messages to a closed stderr go nowhere, not to stdout
+        sys.stderr = open(os.devnull, "w")  # noqa: SIM115 (kept open for the process)
     try:
         _main(argv)
     finally:

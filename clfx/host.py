@@ -26,7 +26,7 @@ class _SharedAnalysis:
     """The frame's scene analysis, shared by a look's context and every per-step context
     made from it (:meth:`RenderContext.for_step`), with the seconds spent computing it."""
 
-    __slots__ = ("value", "seconds")
+    __slots__ = ("seconds", "value")
 
     def __init__(self, value=None):
         self.value = value
@@ -119,7 +119,7 @@ class RenderContext:
         """A resolution-independent size (fraction of the frame diagonal) in pixels."""
         return fraction_of_diagonal * self.diagonal_px
 
-    def for_step(self, quality: str) -> "RenderContext":
+    def for_step(self, quality: str) -> RenderContext:
         """A context for one effect of a look: this one at ``quality``, with its own
         ``notes`` and the same scene analysis (one the step computes is this frame's)."""
         ctx = RenderContext.__new__(RenderContext)

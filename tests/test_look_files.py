@@ -83,7 +83,8 @@ def test_long_base_chain_is_refused_without_recursion(tmp_path, monkeypatch):
 
 def test_hostile_looks_from_the_cli_exit_1_with_one_line(tmp_path):
     bad = tmp_path / "bad.yaml"
-    for content in ("name: caf\xe9\n".encode("latin-1"), ("effects: " + "[" * 3000).encode()):
+    for content in ("name: caf\xe9\n".encode("latin-1"), ("effects: " + "[" * 3000).encode(),
+                    b"name: x\x01\n"):
         bad.write_bytes(content)
         r = CliRunner().invoke(cli, ["look", "show", str(bad)])
         assert r.exit_code == 1, r.output

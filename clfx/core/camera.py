@@ -35,14 +35,15 @@ class Camera:
         """``value`` checked for the field ``name``: one of its CHOICES, or a number within
         its RANGES (a whole number for INTEGERS; 6.0 is 6, 3.5 is refused).
 
-        Raises ValueError saying what was expected (the caller names the file or option).
+        Raises TypeError or ValueError saying what was expected (the caller names the file
+        or option).
         """
         if name in cls.CHOICES:
             if value not in cls.CHOICES[name]:
                 raise ValueError(f"{value!r} is not one of {', '.join(cls.CHOICES[name])}")
             return value
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{value!r} is not a number")
+            raise TypeError(f"{value!r} is not a number")
         shown = f"{value:g}" if isinstance(value, float) else repr(value)
         if name in cls.INTEGERS and not float(value).is_integer():
             raise ValueError(f"{shown} is not a whole number")

@@ -180,8 +180,10 @@ class _Located:
 
     def __init__(self, path: Path):
         self.path = path
-        loader = _LookLoader(_read_text(path))
+        text = _read_text(path)
+        loader = None
         try:
+            loader = _LookLoader(text)  # the reader refuses control characters at once
             node = loader.get_single_node()
             self.data = loader.construct_document(node) if node is not None else None
         except _Refused as exc:
@@ -192,7 +194,8 @@ class _Located:
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
             raise PresetError(f"{where}: malformed YAML: {problem}") from exc
         finally:
-            loader.dispose()
+            if loader is not None:
+                loader.dispose()
         self.lines: dict[tuple, int] = {}
         if node is not None:
             self._index(node, ())
@@ -281,7 +284,7 @@ def _camera(doc: _Located, block, camera: Camera) -> Camera:
             doc.fail(("camera", k), f"unknown camera value{_suggest(k, names)}")
         try:
             values[k] = Camera.validate(k, v)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             doc.fail(("camera", k), str(exc))
     try:
         return camera.updated(**values)
@@ -410,7 +413,7 @@ def _camera_override(camera: Camera, name: str, value: str) -> Camera:
             raise PresetError(f"--set camera.{name}: {value!r} is not a number") from None
     try:
         return camera.updated(**{name: Camera.validate(name, value)})
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise PresetError(f"--set camera.{name}: {exc}") from None
 
 
