@@ -3,7 +3,8 @@
 Exit codes: 0 success; 1 processing error (bad input file, failed frame, bad look, no
 device); 2 usage error (unknown option, bad argument); 130 interrupted (Ctrl-C), 143
 terminated (SIGTERM).  Interruptions leave no partial output: every write goes to a temp file
-in the output folder and is renamed into place only when complete.
+in the output folder and is renamed into place only when complete.  A closed stdin or stdout,
+or a write to stdout that fails (a full disk), is one error line and exit code 1.
 
 stdout carries only data (``--json`` lines, listings); progress and logs go to stderr, and
 progress is shown only when stderr is a terminal and ``-q`` is not given.
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -19,6 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 import click
 
 from clfx import __version__
+from clfx.cli_options import pass_options, quality_option, render_options
 from clfx.core.errors import ClfxError
 
 EXIT_INTERRUPTED = 130
@@ -31,6 +34,72 @@ class _Terminated(BaseException):
 
 def _on_sigterm(signum, frame):
     raise _Terminated()
+
+
+class StdioError(ClfxError):
+    """stdin or stdout is closed, or writing to stdout failed (a full disk, /dev/full)."""
+
+
+def _to_devnull(stream) -> None:
+    """Point ``stream``'s descriptor at /dev/null: what is still buffered for it (the
+    interpreter flushes it at exit) then goes nowhere instead of failing a second time."""
+    try:
+        fd = stream.fileno()
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
+    except (AttributeError, OSError, ValueError):
+        pass
+
+
+class _GuardedStream:
+    """sys.stdin / sys.stdout while the CLI runs: a closed descriptor (the stream is None)
+    or a failed write is a :class:`StdioError` (one line, exit code 1), not a traceback.
+    A broken pipe passes through (the reader went away: exit quietly).  A failure sticks:
+    later writes fail the same way (click probes streams and swallows what they raise)."""
+
+    def __init__(self, stream, name: str):
+        self._stream, self._name = stream, name
+        self._failed: str | None = None
+
+    def __getattr__(self, attr):
+        if self._stream is None:
+            if attr in ("encoding", "errors"):
+                return "utf-8" if attr == "encoding" else "strict"
+            raise AttributeError(attr)
+        return getattr(self._stream, attr)
+
+    @property
+    def buffer(self):
+        return _GuardedStream(getattr(self._stream, "buffer", None), self._name)
+
+    def isatty(self) -> bool:
+        return self._stream is not None and self._stream.isatty()
+
+    def write(self, data):
+        return self._do("write", data)
+
+    def read(self, *args):
+        return self._do("read", *args)
+
+    def flush(self):
+        if self._stream is not None:
+            self._do("flush")
+
+    def _do(self, op: str, *args):
+        if self._stream is None:
+            raise StdioError(f"{self._name} is closed")
+        if self._failed:
+            raise StdioError(self._failed)
+        try:
+            return getattr(self._stream, op)(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            _to_devnull(self._stream)
+            verb = "read" if op == "read" else "write to"
+            self._failed = f"cannot {verb} {self._name}: {exc.strerror or exc}"
+            raise StdioError(self._failed) from None
 
 
 class ClfxClickError(click.ClickException):
@@ -216,12 +285,12 @@ def look_show(name, assignments, as_json):
 @cli.command()
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True)
-@click.pass_context
-def probe(ctx, file, as_json, **kw):
+@pass_options
+def probe(file, as_json, **kw):
     """Print the channels, windows and passes found in FILE and how they will be read."""
     from clfx.io.probe import format_probe, probe as probe_file
 
-    info = probe_file(file, passes=_pass_spec(ctx.params))
+    info = probe_file(file, passes=_pass_options(kw).spec())
     click.echo(json.dumps(info, indent=2, default=str) if as_json else format_probe(info))
 
 
@@ -243,75 +312,21 @@ def lenses(query, limit, as_json):
         click.echo("  ".join(f"{v}" for v in r.values()))
 
 
-# -- shared options for render / apply -----------------------------------------------------
-def _io_options(f):
-    opts = [
-        click.option("--frames", default=None, metavar="SPEC",
-                     help="Frames to render: 1-100, 1-100x2, 1,5,10-20, farm a-b:n. Default: all on disk."),
-        click.option("--quality", type=click.Choice(["draft", "preview", "final", "reference"]),
-                     default=None, help="Quality level of every effect without its own override."),
-        click.option("--depth", "depth_path", default=None, metavar="PATTERN",
-                     help="Depth pass from separate files (pattern like the input)."),
-        click.option("--velocity", "velocity_path", default=None, metavar="PATTERN",
-                     help="Velocity pass from separate files."),
-        click.option("--depth-channel", default=None, help="Depth channel name (overrides detection)."),
-        click.option("--depth-mode", type=click.Choice(["auto", "z", "inverse", "distance", "normalized"]),
-                     default="auto", help="How depth is stored: planar z, 1/z, radial distance, 0-1."),
-        click.option("--depth-scale", type=float, default=1.0, help="Multiply depth (e.g. 0.01 for cm to m)."),
-        click.option("--focal-length-px", type=float, default=None,
-                     help="For --depth-mode distance: focal length in pixels (default: from the "
-                          "look's camera block and the frame width)."),
-        click.option("--velocity-channels", default=None, metavar="U,V", help="Velocity channel names."),
-        click.option("--velocity-y-up/--velocity-y-down", default=None,
-                     help="Direction of +v in the velocity pass (overrides detection)."),
-        click.option("--velocity-scale", type=float, default=1.0, help="Multiply velocity."),
-        click.option("--colorspace", default=None, help="Colour space of the input (OCIO name, 'linear', 'sRGB')."),
-        click.option("--out-colorspace", default=None, help="Colour space to encode the output in."),
-        click.option("--float", "as_float", is_flag=True, help="Write EXR beauty as 32-bit float (default half)."),
-        click.option("--compression", default=None, help="EXR compression: zip (default), piz, dwaa, none, ..."),
-        click.option("--overwrite", is_flag=True, help="Replace existing outputs."),
-        click.option("--skip-existing", is_flag=True, help="Skip frames whose output exists (resume a batch)."),
-        click.option("--skip-missing", is_flag=True, help="Skip missing input frames instead of failing."),
-        click.option("--keep-overscan", is_flag=True, help="Keep light spread past the display window."),
-        click.option("--raw", "raw_size", default=None, metavar="WxH",
-                     help="With '-' as INPUT/OUTPUT: raw gbrpf32le frames on stdin/stdout (ffmpeg)."),
-        click.option("--explain", is_flag=True, help="Per frame: which effects ran, which were skipped and why."),
-        click.option("--json", "as_json", is_flag=True, help="One JSON line per frame and a summary on stdout."),
-    ]
-    for o in reversed(opts):
-        f = o(f)
-    return f
+# -- render / apply ------------------------------------------------------------------------
+def _pass_options(kw: dict):
+    """The pass options of a command's keyword arguments (see ``cli_options.pass_options``)."""
+    from clfx.pipeline.batch import PassOptions
+
+    return PassOptions(**{name: kw[name] for name in PassOptions.names()})
 
 
-def _pass_spec(kw, focal_length_px: float | None = None):
-    """The pass overrides given on the command line (focal length for radial depth given
-    by --focal-length-px or derived by the caller)."""
-    from clfx.io.read import PassSpec
+def _render_options(kw: dict):
+    """The typed options of ``render`` / ``apply`` from their keyword arguments."""
+    from clfx.pipeline.batch import PassOptions, RenderOptions
 
-    vc = kw.get("velocity_channels")
-    for name in ("depth_scale", "velocity_scale"):
-        value = kw.get(name, 1.0)
-        if not (value > 0 and math.isfinite(value)):
-            raise click.BadParameter(f"{value} must be a positive number",
-                                     param_hint=f"--{name.replace('_', '-')}")
-    return PassSpec(depth_channel=kw.get("depth_channel"), depth_mode=kw.get("depth_mode") or "auto",
-                    depth_scale=kw.get("depth_scale", 1.0),
-                    velocity_channels=tuple(vc.split(",")) if vc else None,
-                    velocity_y_up=kw.get("velocity_y_up"),
-                    velocity_scale=kw.get("velocity_scale", 1.0),
-                    focal_length_px=kw.get("focal_length_px") or focal_length_px)
-
-
-for _cmd in (probe,):
-    for _o in reversed([
-        click.option("--depth-channel", default=None), click.option("--depth-mode", default="auto",
-            type=click.Choice(["auto", "z", "inverse", "distance", "normalized"])),
-        click.option("--depth-scale", type=float, default=1.0),
-        click.option("--focal-length-px", type=float, default=None),
-        click.option("--velocity-channels", default=None, metavar="U,V"),
-        click.option("--velocity-y-up/--velocity-y-down", default=None),
-        click.option("--velocity-scale", type=float, default=1.0)]):
-        _o(_cmd)
+    passes = set(PassOptions.names())
+    rest = {k: v for k, v in kw.items() if k not in passes}
+    return RenderOptions(passes=_pass_options(kw), **rest)
 
 
 @cli.command()
@@ -321,7 +336,7 @@ for _cmd in (probe,):
               help="Look name or YAML file.")
 @click.option("--set", "assignments", multiple=True, metavar="K=V",
               help="Override: effect.param=value, camera.key=value, seed=N.")
-@_io_options
+@render_options
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="Render on a local Dask cluster of N processes (one OpenCL device each).")
 @click.option("--scheduler", envvar="CLFX_SCHEDULER", default=None, metavar="ADDRESS",
@@ -341,7 +356,8 @@ def render(ctx, input_path, output_path, look_name, assignments, workers, schedu
     from clfx.pipeline.presets import apply_overrides, load_look
 
     lk = apply_overrides(load_look(look_name), list(assignments))
-    _run_batch(ctx, lk, input_path, output_path, kw, runtime, scale if runtime is None else None)
+    _run_batch(ctx, lk, input_path, output_path, _render_options(kw), runtime,
+               scale if runtime is None else None)
 
 
 @cli.group(cls=ClfxGroup)
@@ -382,7 +398,7 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
 @click.argument("input_path", metavar="INPUT")
 @click.argument("output_path", metavar="OUTPUT")
 @click.argument("assignments", nargs=-1, metavar="[PARAM=VALUE]...")
-@_io_options
+@render_options
 @click.pass_context
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
@@ -390,30 +406,17 @@ def apply(ctx, effect, input_path, output_path, assignments, **kw):
     from clfx.pipeline.presets import single_effect_look
 
     lk = single_effect_look(effect, list(assignments))
-    _run_batch(ctx, lk, input_path, output_path, kw, runtime)
+    _run_batch(ctx, lk, input_path, output_path, _render_options(kw), runtime)
 
 
-def _radial_depth_focal_px(kw, lk, batch) -> float | None:
-    """Focal length in pixels for --depth-mode distance, from the look's camera block and the
-    first input's display width (square pixels assumed, as the camera block does)."""
-    if kw.get("depth_mode") != "distance" or kw.get("focal_length_px") or not batch.jobs:
-        return None
-    from clfx.io.probe import probe as probe_file
-
-    info = probe_file(batch.jobs[0].input)
-    width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
-    return lk.camera.focal_length_px(width)
-
-
-def _run_batch(ctx, lk, input_path, output_path, kw, runtime, scale=None):
+def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
     from clfx.pipeline.batch import Batch
 
     verbosity = ctx.obj.get("verbosity", 1)
-    batch = Batch(look=lk, input_path=input_path, output_path=output_path, options=kw,
-                  passes=None, verbosity=verbosity,
-                  progress=verbosity > 0 and sys.stderr.isatty() and not kw.get("as_json"))
+    batch = Batch(look=lk, input_path=input_path, output_path=output_path, options=options,
+                  verbosity=verbosity,
+                  progress=verbosity > 0 and sys.stderr.isatty() and not options.as_json)
     batch.prepare()  # everything checked before the first frame is read
-    batch.passes = _pass_spec(kw, _radial_depth_focal_px(kw, lk, batch))
     if scale:  # on a Dask cluster (--workers / --scheduler)
         from clfx.pipeline.distributed import render_distributed
 
@@ -428,7 +431,7 @@ def _run_batch(ctx, lk, input_path, output_path, kw, runtime, scale=None):
 @click.option("--frames", "count", default=24, show_default=True, help="Number of frames.")
 @click.option("--size", default="640x360", show_default=True, help="WxH.")
 @click.option("--look", "look_name", default="default", show_default=True)
-@click.option("--quality", type=click.Choice(["draft", "preview", "final", "reference"]), default=None)
+@quality_option
 @click.option("--overwrite/--no-overwrite", default=True, show_default=True)
 @click.option("--explain", is_flag=True)
 @click.option("--json", "as_json", is_flag=True)
@@ -495,8 +498,21 @@ def _parse_size(text: str) -> tuple[int, int]:
 def main(argv=None):
     """Entry point: ClfxError -> one line and exit 1; interrupts -> no partial files."""
     signal.signal(signal.SIGTERM, _on_sigterm)
+    saved = sys.stdin, sys.stdout, sys.stderr
+    sys.stdin = sys.stdin if sys.stdin is not None else _GuardedStream(None, "stdin")
+    sys.stdout = _GuardedStream(sys.stdout, "stdout")
+    if sys.stderr is None:  # messages to a closed stderr go nowhere, not to stdout
+        sys.stderr = open(os.devnull, "w")  # noqa: SIM115 (kept open for the process)
+    try:
+        _main(argv)
+    finally:
+        sys.stdin, sys.stdout, sys.stderr = saved
+
+
+def _main(argv):
     try:
         cli.main(args=argv, prog_name="clfx", standalone_mode=False)
+        sys.stdout.flush()  # a failed write still buffered is an error too
     except click.exceptions.Abort:
         click.echo("clfx: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
@@ -513,6 +529,7 @@ def main(argv=None):
         click.echo("clfx: terminated", err=True)
         sys.exit(EXIT_TERMINATED)
     except BrokenPipeError:
+        _to_devnull(sys.stdout)
         sys.exit(1)
     sys.exit(0)
 

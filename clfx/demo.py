@@ -22,7 +22,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from clfx.core.frame import Frame
-from clfx.pipeline.look import render_frame
+from clfx.pipeline.look import RunStats, render_frame
 
 PREVIEW_EXPOSURE = 1.0
 
@@ -67,6 +67,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     os.makedirs(outdir, exist_ok=True)
     t0 = time.perf_counter()
     previews, reports = [], []
+    stats = RunStats()
 
     def write_all(frame_no, sharp, out, preview):
         base = os.path.join(outdir, f"%s.{frame_no:04d}.%s")
@@ -87,7 +88,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
             sharp = render_sharp(demo_scene(frame_no, width, height))
             sharp.source = f"demo scene frame {frame_no}"
             out, report = render_frame(rt, look, sharp, frame_number=frame_no, quality=quality,
-                                       analysis_summary=as_json)
+                                       analysis_summary=as_json, stats=stats)
             report.output = os.path.join(outdir, f"demo.{frame_no:04d}.exr")
             reports.append(report)
             previews.append(preview_of(out))

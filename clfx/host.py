@@ -22,6 +22,17 @@ from clfx.fx.analysis import analyse
 
 
 # -- render context ------------------------------------------------------------------------
+class _SharedAnalysis:
+    """The frame's scene analysis, shared by a look's context and every per-step context
+    made from it (:meth:`RenderContext.for_step`), with the seconds spent computing it."""
+
+    __slots__ = ("seconds", "value")
+
+    def __init__(self, value=None):
+        self.value = value
+        self.seconds = 0.0
+
+
 class RenderContext:
     """Everything an effect may read while rendering one frame.
 
@@ -64,7 +75,7 @@ class RenderContext:
         self.camera = camera or Camera()
         self.quality = quality
         self.display_referred = display_referred
-        self._analysis = analysis
+        self._analysis = _SharedAnalysis(analysis)
         self.output_limit = output_limit or source.window.union(self.display_window)
         self.notes: list[str] = []
         self._read_image = read_image
@@ -82,11 +93,19 @@ class RenderContext:
         """The frame's shared scene analysis of the current source: computed on first use,
         and again only if an effect has since changed the source's window (its tiles are
         always those of ``source.window``)."""
-        if self._analysis is None or self._analysis.window != self.source.window:
-            self._analysis = analyse(self.runtime, self.source, depth=self.depth,
-                                     velocity=self.velocity, camera=self.camera,
-                                     display_window=self.display_window)
-        return self._analysis
+        shared = self._analysis
+        if shared.value is None or shared.value.window != self.source.window:
+            shared.value = analyse(self.runtime, self.source, depth=self.depth,
+                                   velocity=self.velocity, camera=self.camera,
+                                   display_window=self.display_window)
+            shared.seconds += shared.value.seconds
+        return shared.value
+
+    @property
+    def analysis_seconds(self) -> float:
+        """Seconds spent computing this frame's analyses so far (this context and every
+        per-step context made from it)."""
+        return self._analysis.seconds
 
     @property
     def diagonal_px(self) -> float:
@@ -100,10 +119,13 @@ class RenderContext:
         """A resolution-independent size (fraction of the frame diagonal) in pixels."""
         return fraction_of_diagonal * self.diagonal_px
 
-    def with_quality(self, quality: str) -> "RenderContext":
+    def for_step(self, quality: str) -> RenderContext:
+        """A context for one effect of a look: this one at ``quality``, with its own
+        ``notes`` and the same scene analysis (one the step computes is this frame's)."""
         ctx = RenderContext.__new__(RenderContext)
-        ctx.__dict__.update(self.__dict__)
+        ctx.__dict__.update(self.__dict__)  # shares the analysis
         ctx.quality = quality
+        ctx.notes = []
         return ctx
 
 

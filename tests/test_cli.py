@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from clfx.cli import cli
@@ -254,3 +255,35 @@ def test_raw_pipe_round_trip(rt):
 def test_raw_pipe_needs_a_size():
     r = run("render", "-", "-", code=1)
     one_line_error(r, "--raw WxH")
+
+
+def test_pass_options_are_declared_once_for_every_command():
+    """render, apply and probe take the same pass options, with the same help (issue 9)."""
+    from clfx.cli import apply, probe, render
+    from clfx.pipeline.batch import PassOptions
+
+    def options(cmd):
+        return {p.name: (p.opts, p.help, p.default) for p in cmd.params if p.name in PassOptions.names()}
+
+    assert set(options(probe)) == set(PassOptions.names())
+    assert options(render) == options(apply) == options(probe)
+    run("render", "-", "-", "--depth-scale", "-1", code=2)
+    run("probe", "x.exr", "--velocity-scale", "nan", code=2)
+
+
+def test_batch_options_are_typed_and_its_state_declared(tmp_path):
+    """RenderOptions is a frozen dataclass built by the CLI; Batch holds no attribute its
+    dataclass does not declare, before or after prepare (issue 9)."""
+    import dataclasses
+
+    from clfx.pipeline.batch import Batch, RenderOptions
+    from clfx.pipeline.presets import load_look
+
+    opts = RenderOptions(raw_size="8x4", quality="draft")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        opts.overwrite = True
+    batch = Batch(load_look("wide-angle"), "-", "-", options=opts)
+    declared = {f.name for f in dataclasses.fields(Batch)}
+    assert set(vars(batch)) <= declared
+    batch.prepare()
+    assert set(vars(batch)) <= declared and batch.raw_size == (8, 4)

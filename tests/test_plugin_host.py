@@ -121,7 +121,7 @@ def test_step_that_skips_missing_passes_reports_why(rt, rng):
     strict = Look("strict", steps=[Step("dof", dof.params())])
     with pytest.raises(ClipError, match="needs a depth pass"):
         render_frame(rt, strict, frame)
-    lenient = Look("lenient", steps=[Step("dof", dof.params(), skip_missing_passes=True),
+    lenient = Look("lenient", steps=[Step("dof", dof.params(), missing_passes="skip"),
                                      Step("vignette", get_plugin("vignette").params(amount=0.2))])
     _, report = render_frame(rt, lenient, frame)
     assert report.steps[0].reason == "no depth pass in the input" and report.steps[1].ran
@@ -152,3 +152,52 @@ def test_passes_no_step_reads_are_not_uploaded(rt, rng, monkeypatch):
     out, _ = render_frame(rt, look, frame)
     assert uploads == [(8, 12, 4)]
     assert out.depth is not None and out.velocity is not None  # still written with the output
+
+
+def test_steps_are_configuration_and_runs_keep_their_own_stats(rt):
+    """A Step is frozen configuration; the running costs that estimate what skipping saved
+    live in the RunStats the caller owns (issue 9)."""
+    import dataclasses
+
+    from clfx.pipeline.look import RunStats
+
+    glare = Step("glare", get_plugin("glare").params())
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        glare.quality = "draft"
+    look = Look("g", steps=[glare])
+    hot = np.zeros((24, 24, 4), np.float32)
+    hot[..., 3] = 1.0
+    hot[12, 12, :3] = 1e4
+    dark = np.full((24, 24, 4), 0.1, np.float32)
+    stats = RunStats()
+    _, first = render_frame(rt, look, Frame.from_array(hot), stats=stats)
+    _, second = render_frame(rt, look, Frame.from_array(dark), stats=stats)
+    assert first.steps[0].ran and not second.steps[0].ran
+    assert stats.timing(0).runs == 1 and second.saved_ms == pytest.approx(first.steps[0].ms)
+    assert look.steps == [glare]  # rendering changed nothing in the look
+    _, alone = render_frame(rt, look, Frame.from_array(dark))  # no stats: nothing to estimate
+    assert alone.saved_ms == 0.0
+
+
+def test_disabled_steps_never_run_nor_require_passes(rt, rng):
+    frame = Frame.from_array(rng.uniform(0, 1, (8, 8, 4)).astype(np.float32))
+    look = Look("d", steps=[Step("dof", get_plugin("dof").params(), enabled=False),
+                            Step("vignette", get_plugin("vignette").params(amount=0.2))])
+    assert look.required_clips() == {} and "depth" not in look.clips_used()
+    _, report = render_frame(rt, look, frame)
+    assert [s.effect for s in report.steps] == ["vignette"]
+
+
+def test_per_step_contexts_share_the_frame_analysis(rt):
+    """RenderContext.for_step: a step's context with its own quality and notes; an analysis
+    it computes is the frame's (no reaching into another context's private state)."""
+    from clfx.host import RenderContext
+
+    ctx = RenderContext(rt, rt.upload(np.ones((8, 8, 4), np.float32)))
+    step = ctx.for_step("draft")
+    assert step.quality == "draft" and ctx.quality != "draft"
+    step.notes.append("x")
+    assert ctx.notes == []
+    computed = step.analysis
+    assert ctx.analysis is computed and ctx.for_step("final").analysis is computed
+    assert ctx.analysis_seconds == pytest.approx(computed.seconds)

@@ -120,7 +120,7 @@ def test_missing_passes_skip_is_inherited_and_validated(tmp_path, monkeypatch):
     write(tmp_path, "parent", "name: parent\neffects:\n  - {effect: dof, missing_passes: skip}\n")
     child = load_look(str(write(tmp_path, "child", "name: child\nbase: parent\neffects:\n"
                                                    "  - {effect: dof, params: {max_coc: 0.02}}\n")))
-    assert child.steps[0].skip_missing_passes and child.required_clips() == {}
+    assert child.steps[0].missing_passes == "skip" and child.required_clips() == {}
     bad = write(tmp_path, "bad", "name: bad\neffects:\n  - {effect: dof, missing_passes: maybe}\n")
     with pytest.raises(PresetError, match=r"bad.yaml:3: effects\[0\]\.missing_passes"):
         load_look(str(bad))

@@ -262,8 +262,7 @@ def bench_io(frame: Frame, repeat: int) -> dict:
 
 def bench_sequence(rt, look_name: str, width: int, height: int, frames: int) -> dict:
     """Sequence throughput through `clfx render`'s batch pipeline, reading and writing EXRs."""
-    from clfx.pipeline.batch import Batch
-    from clfx.io.read import PassSpec
+    from clfx.pipeline.batch import Batch, RenderOptions
     from clfx.io.write import write_frame
     from clfx.pipeline.presets import load_look
     from clfx.bench.scene import demo_scene, render_sharp
@@ -272,10 +271,9 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int) -> 
         for i in range(1, frames + 1):
             write_frame(render_sharp(demo_scene(i, width, height)),
                         os.path.join(tmp, f"in.{i:04d}.exr"), bit_depth="float")
-        opts = {"overwrite": True}
         batch = Batch(look=load_look(look_name), input_path=os.path.join(tmp, "in.####.exr"),
-                      output_path=os.path.join(tmp, "out.####.exr"), options=opts,
-                      passes=PassSpec(), verbosity=0)
+                      output_path=os.path.join(tmp, "out.####.exr"),
+                      options=RenderOptions(overwrite=True), verbosity=0)
         batch.prepare()
         summary = batch.run(rt)
     return {"look": look_name, "frames": frames, "fps": summary["fps"],

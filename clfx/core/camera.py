@@ -99,6 +99,29 @@ class Camera:
         "blades": (0, 32), "blade_rotation": (-360.0, 360.0), "sensor_height": (0.5, 200.0),
     }
     CHOICES = {"shutter_offset": SHUTTER_OFFSETS}
+    INTEGERS = ("blades",)
+
+    @classmethod
+    def validate(cls, name: str, value):
+        """``value`` checked for the field ``name``: one of its CHOICES, or a number within
+        its RANGES (a whole number for INTEGERS; 6.0 is 6, 3.5 is refused).
+
+        Raises TypeError or ValueError saying what was expected (the caller names the file
+        or option).
+        """
+        if name in cls.CHOICES:
+            if value not in cls.CHOICES[name]:
+                raise ValueError(f"{value!r} is not one of {', '.join(cls.CHOICES[name])}")
+            return value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise TypeError(f"{value!r} is not a number")
+        shown = f"{value:g}" if isinstance(value, float) else repr(value)
+        if name in cls.INTEGERS and not float(value).is_integer():
+            raise ValueError(f"{shown} is not a whole number")
+        lo, hi = cls.RANGES[name]
+        if not lo <= value <= hi:
+            raise ValueError(f"{shown} is outside the allowed range [{lo:g}, {hi:g}]")
+        return int(value) if name in cls.INTEGERS else float(value)
 
     def as_dict(self) -> dict:
         d = asdict(self)

@@ -16,15 +16,121 @@ import sys
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame
-from clfx.pipeline.look import Look, render_frame
+from clfx.pipeline.look import Look, RunStats, render_frame
+
+if TYPE_CHECKING:
+    from clfx.io.read import PassSpec
 
 RAW = "-"
+
+
+@dataclass(frozen=True)
+class PassOptions:
+    """How depth and velocity passes are found and read (``--depth-channel`` ...).
+
+    The fields of :class:`clfx.io.read.PassSpec` that the command line sets; ``spec`` makes
+    the PassSpec once the focal length for radial depth is known.
+
+    Attributes
+    ----------
+    depth_channel : str or None
+        Exact depth channel name; None: the documented search order.
+    depth_mode : {"auto", "z", "inverse", "distance", "normalized"}
+        How depth is stored.
+    depth_scale : float
+        Multiplies depth (scene-unit conversion, e.g. 0.01 for cm to m).
+    focal_length_px : float or None
+        Focal length in pixels for ``depth_mode="distance"``; None: from the look's camera
+        block and the first frame's width.
+    velocity_channels : (str, str) or None
+        Exact (u, v) channel names; None: the search order.
+    velocity_y_up : bool or None
+        Whether stored +v points up; None: from the detected convention.
+    velocity_scale : float
+        Multiplies velocity.
+    """
+
+    depth_channel: str | None = None
+    depth_mode: str = "auto"
+    depth_scale: float = 1.0
+    focal_length_px: float | None = None
+    velocity_channels: tuple[str, ...] | None = None
+    velocity_y_up: bool | None = None
+    velocity_scale: float = 1.0
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+    def spec(self, focal_length_px: float | None = None):
+        """The :class:`~clfx.io.read.PassSpec` (``focal_length_px`` fills in a missing one)."""
+        from clfx.io.read import PassSpec
+
+        return PassSpec(depth_channel=self.depth_channel, depth_mode=self.depth_mode,
+                        depth_scale=self.depth_scale, velocity_channels=self.velocity_channels,
+                        velocity_y_up=self.velocity_y_up, velocity_scale=self.velocity_scale,
+                        focal_length_px=self.focal_length_px or focal_length_px)
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """Everything ``clfx render`` and ``clfx apply`` set besides the look (the CLI builds it).
+
+    Attributes
+    ----------
+    frames : str or None
+        Frame spec (``1-100``, ``1-100x2``, ``1,5,10-20``, ``a-b:n``); None: all on disk.
+    quality : str or None
+        Quality level of every step without its own; None: ``final``.
+    depth_path, velocity_path : str or None
+        Passes from separate files (a pattern like the input, or one file for all frames).
+    passes : PassOptions
+        How the passes are found and read.
+    colorspace, out_colorspace : str or None
+        Colour space of the input / to encode the output in; None: from the file type.
+    as_float : bool
+        Write EXR beauty as 32-bit float (default half).
+    compression : str or None
+        EXR compression; None: zip.
+    overwrite : bool
+        Replace existing outputs.
+    skip_existing : bool
+        Skip frames whose output exists (resume a batch).
+    skip_missing : bool
+        Skip missing input frames instead of failing.
+    keep_overscan : bool
+        Keep light spread past the display window.
+    raw_size : str or None
+        ``WxH`` of raw gbrpf32le frames when INPUT and OUTPUT are ``-``.
+    explain : bool
+        Per frame, say on stderr which effects ran and why others were skipped.
+    as_json : bool
+        One JSON line per frame and a summary on stdout.
+    """
+
+    frames: str | None = None
+    quality: str | None = None
+    depth_path: str | None = None
+    velocity_path: str | None = None
+    passes: PassOptions = field(default_factory=PassOptions)
+    colorspace: str | None = None
+    out_colorspace: str | None = None
+    as_float: bool = False
+    compression: str | None = None
+    overwrite: bool = False
+    skip_existing: bool = False
+    skip_missing: bool = False
+    keep_overscan: bool = False
+    raw_size: str | None = None
+    explain: bool = False
+    as_json: bool = False
 
 
 def look_files(look: Look) -> list[tuple[str, str]]:
@@ -44,16 +150,26 @@ class Job:
 
 @dataclass
 class Batch:
+    """A look over INPUT to OUTPUT: ``prepare`` checks everything, ``run`` renders.
+
+    ``jobs``, ``skipped_existing``, ``passes`` and ``raw_size`` are filled by ``prepare``;
+    ``stats`` holds the steps' running costs over this batch's frames.
+    """
+
     look: Look
     input_path: str
     output_path: str
-    options: dict
-    passes: object
+    options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
     progress: bool = False
-    jobs: list[Job] = field(default_factory=list)
-    skipped_existing: list[int] = field(default_factory=list)
-    look_files: list[str] = field(default_factory=list)   # files effects read (PathParam)
+    jobs: list[Job] = field(default_factory=list, init=False)
+    skipped_existing: list[int] = field(default_factory=list, init=False)
+    passes: PassSpec | None = field(default=None, init=False)  # what frames are read with
+    raw_size: tuple[int, int] | None = field(default=None, init=False)
+    stats: RunStats = field(default_factory=RunStats, init=False)
+    look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
+    _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
+    _first_read: Future | None = field(default=None, init=False, repr=False)
 
     # -- checks -------------------------------------------------------------------------
     def prepare(self) -> None:
@@ -64,18 +180,18 @@ class Batch:
         if self.input_path == RAW or self.output_path == RAW:
             self._prepare_raw()
             return
-        frames = parse_frames(o["frames"]) if o.get("frames") else None
+        frames = parse_frames(o.frames) if o.frames else None
         pin = Pattern.parse(self.input_path)
         pout = Pattern.parse(self.output_path)
         if pin.is_sequence and not pout.is_sequence:
             raise SequenceError(f"input {self.input_path} is a sequence but output "
                                 f"{self.output_path} has no frame token (use e.g. out.####.exr)")
-        inputs = resolve_inputs(pin, frames, skip_missing=o.get("skip_missing", False))
+        inputs = resolve_inputs(pin, frames, skip_missing=o.skip_missing)
         if not inputs:
             raise SequenceError(f"no input frames found for {self.input_path}")
         aux = {}
         for name in ("depth", "velocity"):
-            path = o.get(f"{name}_path")
+            path = getattr(o, f"{name}_path")
             if path:
                 pat = Pattern.parse(path)
                 found = dict(resolve_inputs(pat, [f for f, _ in inputs] if pat.is_sequence else None,
@@ -92,9 +208,21 @@ class Batch:
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_outputs(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
+        self.passes = o.passes.spec(self._radial_depth_focal_px())
+
+    def _radial_depth_focal_px(self) -> float | None:
+        """Focal length in pixels for --depth-mode distance, from the look's camera block and
+        the first input's display width (square pixels assumed, as the camera block does)."""
+        p = self.options.passes
+        if p.depth_mode != "distance" or p.focal_length_px or not self.jobs:
+            return None
+        from clfx.io.probe import probe as probe_file
+
+        info = probe_file(self.jobs[0].input)
+        width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
+        return self.look.camera.focal_length_px(width)
 
     def _check_outputs(self, jobs: list[Job]) -> None:
-        o = self.options
         inputs = {os.path.realpath(p) for j in jobs for p in (j.input, j.depth, j.velocity) if p}
         inputs |= {os.path.realpath(p) for p in self.look_files}
         outs = [j.output for j in jobs]
@@ -109,7 +237,7 @@ class Batch:
                 raise ImageIOError(f"cannot create output folder {folder}: {exc.strerror}") from exc
         if not os.access(folder, os.W_OK | os.X_OK):
             raise ImageIOError(f"output folder {folder} is not writable")
-        if o.get("skip_existing"):
+        if self.options.skip_existing:
             from clfx.io.write import sweep_stale_temps
             sweep_stale_temps(outs)   # temp files of killed runs (their process is gone)
         for j in jobs:
@@ -118,9 +246,9 @@ class Batch:
                 raise ImageIOError(f"output {j.output} is an input of this render; clfx never "
                                    f"overwrites its inputs")
             if os.path.lexists(j.output):   # a dangling symlink counts
-                if o.get("skip_existing"):
+                if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
-                elif not o.get("overwrite"):
+                elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
 
@@ -147,9 +275,9 @@ class Batch:
         total = len(self.jobs)
         if self.skipped_existing and self.verbosity > 0:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
-        own_pool = getattr(self, "_pool", None) is None
+        own_pool = self._pool is None
         pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io") if own_pool else self._pool
-        first, self._first_read = getattr(self, "_first_read", None), None
+        first, self._first_read = self._first_read, None
         with (pool if own_pool else nullcontext()):
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
@@ -171,7 +299,7 @@ class Batch:
                    "fps": round(len(reports) / wall, 3) if wall > 0 and reports else None,
                    "device_ms_mean": round(float(np.mean([r.total_ms for r in reports])), 2) if reports else None,
                    "saved_ms_estimate": round(sum(r.saved_ms or 0.0 for r in reports), 1)}
-        if self.options.get("as_json"):
+        if self.options.as_json:
             print(json.dumps(summary), flush=True)
         elif self.verbosity > 0:
             self._err(f"clfx: {len(reports)} frame(s) rendered with look {self.look.name!r} in "
@@ -182,10 +310,9 @@ class Batch:
         """Render one job's frame (already read) through the look: the output frame and its
         report.  The one place a batch renders, in this process or in a distributed task."""
         frame_out, report = render_frame(
-            rt, self.look, frame_in, frame_number=job.frame,
-            quality=self.options.get("quality"),
-            keep_overscan=self.options.get("keep_overscan", False),
-            analysis_summary=bool(self.options.get("as_json")))
+            rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
+            keep_overscan=self.options.keep_overscan,
+            analysis_summary=self.options.as_json, stats=self.stats)
         report.input, report.output = job.input, job.output
         report.read_ms = read_ms
         return frame_out, report
@@ -195,9 +322,9 @@ class Batch:
         while writes and (block or writes[0][0].done()):
             future, report = writes.pop(0)
             future.result()
-            if self.options.get("as_json"):
+            if self.options.as_json:
                 print(json.dumps(report.as_dict()), flush=True)
-            if self.options.get("explain"):
+            if self.options.explain:
                 self._err(report.explain())
         return writes
 
@@ -206,7 +333,7 @@ class Batch:
         from clfx.io.read import read_frame
 
         t0 = time.perf_counter()
-        frame = read_frame(job.input, passes=self.passes, colorspace=self.options.get("colorspace"),
+        frame = read_frame(job.input, passes=self.passes, colorspace=self.options.colorspace,
                            depth_path=job.depth, velocity_path=job.velocity)
         return frame, (time.perf_counter() - t0) * 1e3
 
@@ -216,12 +343,12 @@ class Batch:
         t0 = time.perf_counter()
         o = self.options
         try:   # not overwrite: an output another writer published meanwhile is never replaced
-            write_frame(frame, job.output, bit_depth="float" if o.get("as_float") else None,
-                        compression=o.get("compression"), colorspace=o.get("out_colorspace"),
-                        overwrite=bool(o.get("overwrite")), attributes=self.look.stamp(),
+            write_frame(frame, job.output, bit_depth="float" if o.as_float else None,
+                        compression=o.compression, colorspace=o.out_colorspace,
+                        overwrite=o.overwrite, attributes=self.look.stamp(),
                         protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files)
         except OutputExistsError:
-            if not o.get("skip_existing"):
+            if not o.skip_existing:
                 raise
             self.skipped_existing.append(job.frame)
             if self.verbosity > 0:
@@ -233,13 +360,13 @@ class Batch:
 
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:
-        size = self.options.get("raw_size")
+        size = self.options.raw_size
         if not size:
             raise SequenceError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le frames, "
                                 "as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
         from clfx.io.raw import parse_size
 
-        self.raw_size = parse_size(size)
+        self.raw_size = parse_size(size)  # two positive whole numbers within the pixel limit
         if self.input_path != RAW or self.output_path != RAW:
             raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
         for clip, effects in self.look.required_clips().items():
@@ -254,9 +381,9 @@ class Batch:
         t0 = time.perf_counter()
         while (frame := read_raw(stdin, self.raw_size, count)) is not None:
             out, report = render_frame(rt, self.look, frame, frame_number=count,
-                                       quality=self.options.get("quality"))
+                                       quality=self.options.quality, stats=self.stats)
             write_raw(stdout, out, frame.data_window)
-            if self.options.get("explain"):
+            if self.options.explain:
                 self._err(report.explain())
             count += 1
         wall = time.perf_counter() - t0

@@ -6,7 +6,11 @@ effect on the device, and downloads the result once.  Before each effect the hos
 grows the beauty's window (light spreading past the frame), the passes are extended to the
 new window by edge clamping so later effects always see aligned passes.  The result is
 cropped to the display window united with the input's data window (more with
-``keep_overscan``).
+``keep_overscan``).  The frame's windows, and each window an effect would grow it to, are
+checked against the pixel limit (``clfx.core.limits``) before anything that size exists.
+
+A :class:`Step` is configuration only; the running costs a sequence accumulates (to estimate
+what skipping saved) live in a :class:`RunStats` owned by whoever renders the sequence.
 """
 from __future__ import annotations
 
@@ -15,11 +19,11 @@ import json
 import time
 from dataclasses import dataclass, field
 
-
 from clfx import __version__
 from clfx.core.camera import Camera
-from clfx.core.errors import ClipError
+from clfx.core.errors import ClfxError, ClipError
 from clfx.core.frame import Frame
+from clfx.core.limits import check_pixels
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
 from clfx.host import Plugin, RenderContext
 from clfx.plugins import get_plugin
@@ -29,23 +33,47 @@ OVERSCAN_KEEP_FRACTION = 0.25
 """With keep_overscan, effects may write up to this fraction of the diagonal past the frame."""
 
 
-@dataclass
+MISSING_PASSES = ("error", "skip")
+"""What a step does on a frame without a pass it requires: fail the look, or skip the step."""
+
+
+@dataclass(frozen=True)
 class Step:
-    """One effect of a look with its validated parameters."""
+    """One effect of a look, as configured: no running state (see :class:`RunStats`).
+
+    Attributes
+    ----------
+    effect : str
+        The registered effect's name.
+    params : Params
+        Its validated parameters.
+    quality : str or None
+        This step's quality level; None takes the render's.
+    id : str
+        Names the step for inheritance and ``--set ID.param=...``; defaults to ``effect``.
+    missing_passes : {"error", "skip"}
+        On frames without a pass the effect requires: fail before rendering, or skip the step
+        (with a reason in the report).
+    enabled : bool
+        False keeps the step in the look without ever running it.
+    plugin : Plugin
+        The effect (made from ``effect`` unless given, e.g. an unregistered test plugin).
+    """
 
     effect: str
     params: Params
     quality: str | None = None
-    plugin: Plugin | None = None
-    typical_ms: float | None = None   # running mean of this step's cost, for "time saved"
-    runs: int = 0
-    skip_missing_passes: bool = False  # skip (with a reason) on frames without its passes
-    id: str = ""                       # names the step; defaults to the effect's name
+    id: str = ""
+    missing_passes: str = "error"
+    enabled: bool = True
+    plugin: Plugin | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        if self.missing_passes not in MISSING_PASSES:
+            raise ValueError(f"missing_passes {self.missing_passes!r} is not one of {MISSING_PASSES}")
         if self.plugin is None:
-            self.plugin = get_plugin(self.effect)()
-        self.id = self.id or self.effect
+            object.__setattr__(self, "plugin", get_plugin(self.effect)())
+        object.__setattr__(self, "id", self.id or self.effect)
 
     def describe(self) -> dict:
         d = {"effect": self.effect, "params": self.params.as_dict()}
@@ -53,14 +81,44 @@ class Step:
             d["id"] = self.id
         if self.quality:
             d["quality"] = self.quality
-        if self.skip_missing_passes:
-            d["missing_passes"] = "skip"
+        if self.missing_passes != "error":
+            d["missing_passes"] = self.missing_passes
+        if not self.enabled:
+            d["enabled"] = False
         return d
 
-    def missing_passes(self, have: dict[str, bool]) -> list[str]:
-        """Required clips of this step that the frame does not have."""
+    def required_clips(self) -> list[str]:
+        """Clips (other than the source) the effect cannot run without."""
         return [c.name for c in self.plugin.descriptor.clips
-                if c.name != "source" and not c.optional and not have.get(c.name, False)]
+                if c.name != "source" and not c.optional]
+
+    def absent_passes(self, have: dict[str, bool]) -> list[str]:
+        """Required clips of this step that the frame does not have."""
+        return [name for name in self.required_clips() if not have.get(name, False)]
+
+
+@dataclass
+class StepTiming:
+    """A step's running mean cost over the frames it ran on."""
+
+    runs: int = 0
+    mean_ms: float | None = None
+
+    def add(self, ms: float) -> None:
+        self.runs += 1
+        self.mean_ms = ms if self.mean_ms is None else self.mean_ms + (ms - self.mean_ms) / self.runs
+
+
+@dataclass
+class RunStats:
+    """Statistics of one run of a look over frames (a batch, a demo), owned by that run:
+    each step's mean cost (by its index in ``look.steps``), from which a skipped step's
+    saving is estimated."""
+
+    steps: dict[int, StepTiming] = field(default_factory=dict)
+
+    def timing(self, index: int) -> StepTiming:
+        return self.steps.setdefault(index, StepTiming())
 
 
 @dataclass
@@ -84,21 +142,24 @@ class Look:
                           sort_keys=True, default=str)
         return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
+    def active_steps(self) -> list[tuple[int, Step]]:
+        """(index, step) of every enabled step, in order."""
+        return [(i, s) for i, s in enumerate(self.steps) if s.enabled]
+
     def required_clips(self) -> dict[str, list[str]]:
         """Clip name -> effects that cannot run without it (optional clips and steps that
         skip when their passes are missing are not listed)."""
         need: dict[str, list[str]] = {}
-        for s in self.steps:
-            if s.skip_missing_passes:
+        for _, s in self.active_steps():
+            if s.missing_passes == "skip":
                 continue
-            for clip in s.plugin.descriptor.clips:
-                if clip.name != "source" and not clip.optional:
-                    need.setdefault(clip.name, []).append(s.effect)
+            for clip in s.required_clips():
+                need.setdefault(clip, []).append(s.effect)
         return need
 
     def clips_used(self) -> set[str]:
         """Every clip any step reads, required or optional."""
-        return {c.name for s in self.steps for c in s.plugin.descriptor.clips}
+        return {c.name for _, s in self.active_steps() for c in s.plugin.descriptor.clips}
 
     def check_clips(self, frame: Frame) -> None:
         """Raise ClipError if the frame lacks a pass a step requires."""
@@ -199,81 +260,118 @@ def output_limit(frame: Frame, keep_overscan: bool) -> Rect:
     return limit
 
 
+class FrameTooLarge(ClfxError):
+    """A frame, or the window an effect grows it to, exceeds the pixel limit
+    (``CLFX_MAX_PIXELS``): checked before anything that size is allocated."""
+
+
 def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
                  quality: str | None = None, keep_overscan: bool = False,
-                 analysis_summary: bool = False) -> tuple[Frame, FrameReport]:
+                 analysis_summary: bool = False,
+                 stats: RunStats | None = None) -> tuple[Frame, FrameReport]:
     """Render one frame through ``look``; returns the output frame and a report.
 
     ``quality`` sets the level of every step without its own override.  The frame is
     uploaded once and downloaded once; the device queue is synchronised after each effect
-    only to time it.
+    only to time it.  ``stats`` carries the steps' running costs across the frames of one
+    run (they estimate what skipping saved); without it each frame starts afresh.
+
+    Raises
+    ------
+    ClipError
+        The frame lacks a pass a step requires.
+    FrameTooLarge
+        The frame's windows, or a window an effect would grow it to, exceed the pixel limit.
     """
+    stats = RunStats() if stats is None else stats
     report = FrameReport(frame=frame_number, input=frame.source)
     t_start = time.perf_counter()
     look.check_clips(frame)
+    for what, win in (("display window", frame.display_window), ("data window", frame.data_window)):
+        check_pixels(win.width, win.height, f"{frame.source or 'frame'}: {what}", FrameTooLarge)
+    ctx = _upload(rt, look, frame, frame_number=frame_number, quality=quality,
+                  keep_overscan=keep_overscan)
+    report.upload_ms = (time.perf_counter() - t_start) * 1e3
+    have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
+    saved = 0.0
+    for index, step in look.active_steps():
+        timing = stats.timing(index)
+        step_report, out = _run_step(rt, step, ctx, step.quality or quality or DEFAULT_QUALITY,
+                                     have, timing)
+        report.steps.append(step_report)
+        if out is None:
+            saved += timing.mean_ms or 0.0
+        else:
+            _advance(rt, ctx, out)
+    t_dl = time.perf_counter()
+    rgba, window = _download(rt, ctx)
+    report.download_ms = (time.perf_counter() - t_dl) * 1e3
+    report.total_ms = (time.perf_counter() - t_start) * 1e3
+    report.saved_ms = saved if any(not s.ran for s in report.steps) else None
+    report.analysis_ms = ctx.analysis_seconds * 1e3
+    if analysis_summary and look.steps:
+        report.analysis = ctx.analysis.summary()
+    out_frame = frame.with_rgba(rgba, window)
+    out_frame.metadata.update(look.stamp())
+    return out_frame, report
+
+
+def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | None,
+            keep_overscan: bool) -> RenderContext:
+    """The frame on the device (passes no step reads stay on the host) in a new context."""
     window = frame.data_window
-    used = look.clips_used()  # passes no step reads stay on the host
+    used = look.clips_used()
     src = rt.upload(frame.rgba, window)
     depth = rt.upload(frame.depth, window) if frame.depth is not None and "depth" in used else None
     velocity = (rt.upload(frame.velocity, window)
                 if frame.velocity is not None and "velocity" in used else None)
     rt.finish()
-    t_up = time.perf_counter()
-    report.upload_ms = (t_up - t_start) * 1e3
-    ctx = RenderContext(rt, src, depth=depth, velocity=velocity,
-                        display_window=frame.display_window, pixel_aspect=frame.pixel_aspect,
-                        frame=frame_number, seed=look.seed, camera=look.camera,
-                        quality=quality or DEFAULT_QUALITY,
-                        display_referred=frame.display_referred,
-                        output_limit=output_limit(frame, keep_overscan),
-                        read_image=read_image_rgba)
-    analyses = {}  # the analysis is computed on first use (again if the window changes)
-    saved = 0.0
-    have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
-    for step in look.steps:
-        level = step.quality or quality or DEFAULT_QUALITY
-        step_ctx = ctx.with_quality(level)
-        step_ctx.notes = []
-        missing = step.missing_passes(have)
-        reason = (f"no {' or '.join(missing)} pass in the input" if missing
-                  else step.plugin.is_identity(step.params, step_ctx))
-        ctx._analysis = step_ctx._analysis  # share an analysis the step computed
-        if ctx._analysis is not None:
-            analyses[id(ctx._analysis)] = ctx._analysis.seconds
-        if reason:
-            report.steps.append(StepReport(step.id, False, reason, quality=level))
-            saved += step.typical_ms or 0.0
-            continue
-        t0 = time.perf_counter()
-        out = step.plugin.render(rt, step.params, step_ctx)
-        rt.finish()
-        ms = (time.perf_counter() - t0) * 1e3
-        step.runs += 1
-        step.typical_ms = ms if step.typical_ms is None else step.typical_ms + (ms - step.typical_ms) / step.runs
-        report.steps.append(StepReport(step.id, True, ms=ms, quality=level,
-                                       notes=list(step_ctx.notes)))
-        ctx._analysis = step_ctx._analysis
-        if ctx._analysis is not None:
-            analyses[id(ctx._analysis)] = ctx._analysis.seconds
-        if out.window != ctx.source.window:
-            ctx.depth = rt.reframe(ctx.depth, out.window, "clamp") if ctx.depth is not None else None
-            ctx.velocity = rt.reframe(ctx.velocity, out.window, "clamp") if ctx.velocity is not None else None
-        ctx.source = out
-    t_dl = time.perf_counter()
+    return RenderContext(rt, src, depth=depth, velocity=velocity,
+                         display_window=frame.display_window, pixel_aspect=frame.pixel_aspect,
+                         frame=frame_number, seed=look.seed, camera=look.camera,
+                         quality=quality or DEFAULT_QUALITY,
+                         display_referred=frame.display_referred,
+                         output_limit=output_limit(frame, keep_overscan),
+                         read_image=read_image_rgba)
+
+
+def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bool],
+              timing: StepTiming):
+    """Run one step at ``level`` unless it has nothing to do; returns its report and its
+    output (None when skipped)."""
+    step_ctx = ctx.for_step(level)
+    missing = step.absent_passes(have)
+    reason = (f"no {' or '.join(missing)} pass in the input" if missing
+              else step.plugin.is_identity(step.params, step_ctx))
+    if reason:
+        return StepReport(step.id, False, reason, quality=level), None
+    grown = step.plugin.output_window(step.params, step_ctx)
+    check_pixels(grown.width, grown.height, f"frame grown by {step.id}", FrameTooLarge)
+    t0 = time.perf_counter()
+    out = step.plugin.render(rt, step.params, step_ctx)
+    rt.finish()
+    ms = (time.perf_counter() - t0) * 1e3
+    timing.add(ms)
+    return StepReport(step.id, True, ms=ms, quality=level, notes=list(step_ctx.notes)), out
+
+
+def _advance(rt, ctx: RenderContext, out) -> None:
+    """Make a step's output the current source; when its window grew, extend the passes to
+    it by edge clamping so later effects see aligned passes."""
+    if out.window != ctx.source.window:
+        if ctx.depth is not None:
+            ctx.depth = rt.reframe(ctx.depth, out.window, "clamp")
+        if ctx.velocity is not None:
+            ctx.velocity = rt.reframe(ctx.velocity, out.window, "clamp")
+    ctx.source = out
+
+
+def _download(rt, ctx: RenderContext):
+    """The current source cropped to the output limit, on the host: (rgba, window)."""
     final = ctx.source
-    keep = ctx.output_limit
-    if not keep.contains(final.window):
-        final = rt.reframe(final, final.window.intersect(keep))
-    rgba = rt.download(final)
-    report.download_ms = (time.perf_counter() - t_dl) * 1e3
-    report.total_ms = (time.perf_counter() - t_start) * 1e3
-    report.saved_ms = saved if any(not s.ran for s in report.steps) else None
-    report.analysis_ms = sum(analyses.values()) * 1e3
-    if analysis_summary and look.steps:
-        report.analysis = ctx.analysis.summary()
-    out_frame = frame.with_rgba(rgba, final.window)
-    out_frame.metadata.update(look.stamp())
-    return out_frame, report
+    if not ctx.output_limit.contains(final.window):
+        final = rt.reframe(final, final.window.intersect(ctx.output_limit))
+    return rt.download(final), final.window
 
 
 def validate_quality(level: str | None, where: str = "--quality") -> str | None:

@@ -27,25 +27,35 @@ Search order for a name: a path to a file; each folder on ``CLFX_PRESET_PATH`` (
 separated); the user folder ``<config>/clfx/looks`` (XDG, ``click.get_app_dir``); the built-in
 ``presets/`` shipped with clfx.  Every problem is reported before any frame is read, as one
 line naming the file, the line and the key, with the closest valid name where one exists.
+A look file is at most 1 MiB of UTF-8; YAML aliases, duplicate keys, nesting deeper than 32
+levels and chains of more than 16 ``base:`` looks are refused the same way.
 """
 from __future__ import annotations
 
 import difflib
 import os
+import stat
+from dataclasses import replace
 from pathlib import Path
 
 import yaml
 
 from clfx.core.camera import Camera
 from clfx.core.errors import ClfxError, PresetError
-from clfx.pipeline.look import Look, Step, validate_quality
-from clfx.core.plugin import QUALITY_LEVELS
+from clfx.pipeline.look import MISSING_PASSES, Look, Step, validate_quality
+from clfx.core.plugin import QUALITY_LEVELS, StringParam
 from clfx.plugins import get_plugin
 
 SCHEMA = 1
 TOP_KEYS = ("name", "description", "schema", "base", "camera", "seed", "effects")
 STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing_passes")
 DEFAULT_LOOK = "default"
+MAX_LOOK_BYTES = 1 << 20
+"""A look file is a page of YAML; anything bigger is refused before it is parsed."""
+MAX_NESTING = 32
+"""Deepest nesting of YAML mappings and lists a look may use (a look needs 4)."""
+MAX_BASE_DEPTH = 16
+"""Longest chain of ``base:`` looks."""
 
 
 def builtin_dir() -> Path:
@@ -95,23 +105,97 @@ def find_look(name_or_path: str) -> Path:
     raise PresetError(f"unknown look {name_or_path!r}{hint}")
 
 
+class _Refused(yaml.YAMLError):
+    """YAML a look may not use (aliases, duplicate keys, deep nesting), at a mark."""
+
+    def __init__(self, problem: str, mark):
+        super().__init__(problem)
+        self.problem, self.problem_mark = problem, mark
+
+
+class _LookLoader(yaml.SafeLoader):
+    """SafeLoader refusing what a look never needs: aliases (an alias bomb expands without
+    bound), duplicate keys (YAML would keep the last one silently) and nesting deeper than
+    ``MAX_NESTING`` (the composer recurses once per level)."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise _Refused(f"YAML aliases (*{event.anchor}) are not allowed in a look",
+                           event.start_mark)
+        if self._depth >= MAX_NESTING:
+            raise _Refused(f"nested deeper than {MAX_NESTING} levels", self.peek_event().start_mark)
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            first: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    seen = first.setdefault(key, key_node)
+                except TypeError:  # an unhashable key: the base class reports it
+                    continue
+                if seen is not key_node:
+                    raise _Refused(f"duplicate key {key!r} (first on line "
+                                   f"{seen.start_mark.line + 1})", key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _read_text(path: Path) -> str:
+    """A look file's text: a regular file of at most MAX_LOOK_BYTES of UTF-8."""
+    try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            raise PresetError(f"{path}: a look must be a regular file")
+        if st.st_size > MAX_LOOK_BYTES:
+            raise PresetError(f"{path}: look file is {st.st_size} bytes; the limit is "
+                              f"{MAX_LOOK_BYTES} (1 MiB)")
+        with open(path, "rb") as f:
+            data = f.read(MAX_LOOK_BYTES + 1)
+    except OSError as exc:
+        raise PresetError(f"{path}: cannot read look file: {exc.strerror}") from exc
+    if len(data) > MAX_LOOK_BYTES:
+        raise PresetError(f"{path}: look file is over the limit of {MAX_LOOK_BYTES} bytes (1 MiB)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise PresetError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
+                          f"save the look as UTF-8") from None
+
+
 class _Located:
     """YAML data with the line of every key path, for error messages."""
 
     def __init__(self, path: Path):
         self.path = path
+        text = _read_text(path)
+        loader = None
         try:
-            text = path.read_text()
-        except OSError as exc:
-            raise PresetError(f"{path}: cannot read look file: {exc.strerror}") from exc
-        try:
-            self.data = yaml.safe_load(text)
-            node = yaml.compose(text, Loader=yaml.SafeLoader)
+            loader = _LookLoader(text)  # the reader refuses control characters at once
+            node = loader.get_single_node()
+            self.data = loader.construct_document(node) if node is not None else None
+        except _Refused as exc:
+            raise PresetError(f"{path}:{exc.problem_mark.line + 1}: {exc.problem}") from None
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             where = f"{path}:{mark.line + 1}" if mark else str(path)
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
             raise PresetError(f"{where}: malformed YAML: {problem}") from exc
+        finally:
+            if loader is not None:
+                loader.dispose()
         self.lines: dict[tuple, int] = {}
         if node is not None:
             self._index(node, ())
@@ -143,12 +227,19 @@ def _suggest(name, options) -> str:
     return f"; did you mean {close[0]!r}?" if close else f" (expected one of: {', '.join(options)})"
 
 
+class _BaseChainTooLong(PresetError):
+    """Reported once, as raised at the bottom of the chain (not wrapped at every level)."""
+
+
 def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
     """Find, parse, inherit and validate a look; raise PresetError naming file and line."""
     path = find_look(name_or_path)
     key = str(path.resolve())
     if key in _chain:
         raise PresetError(f"{path}: base looks form a cycle: {' -> '.join(_chain + (key,))}")
+    if len(_chain) >= MAX_BASE_DEPTH:
+        raise _BaseChainTooLong(f"{_chain[0]}: base looks nest more than {MAX_BASE_DEPTH} deep "
+                                f"(reached {path})")
     doc = _Located(path)
     data = doc.data
     if not isinstance(data, dict):
@@ -162,14 +253,15 @@ def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
     if data.get("base"):
         try:
             base = load_look(str(data["base"]), _chain + (key,))
+        except _BaseChainTooLong:
+            raise
         except PresetError as exc:
             doc.fail(("base",), str(exc))
     look = Look(name=str(data.get("name") or path.stem), description=str(data.get("description") or ""),
                 source=str(path), base=str(data["base"]) if data.get("base") else None)
     if base:
         look.camera, look.seed = base.camera, base.seed
-        look.steps = [Step(s.effect, s.params, s.quality, skip_missing_passes=s.skip_missing_passes,
-                           id=s.id) for s in base.steps]
+        look.steps = list(base.steps)  # steps are frozen: shared, replaced when updated
         look.description = look.description or base.description
     look.camera = _camera(doc, data.get("camera"), look.camera)
     if "seed" in data:
@@ -190,17 +282,10 @@ def _camera(doc: _Located, block, camera: Camera) -> Camera:
     for k, v in block.items():
         if k not in names:
             doc.fail(("camera", k), f"unknown camera value{_suggest(k, names)}")
-        if k in Camera.CHOICES:
-            if v not in Camera.CHOICES[k]:
-                doc.fail(("camera", k), f"{v!r} is not one of {', '.join(Camera.CHOICES[k])}")
-        else:
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                doc.fail(("camera", k), f"{v!r} is not a number")
-            lo, hi = Camera.RANGES[k]
-            if not lo <= v <= hi:
-                doc.fail(("camera", k), f"{v!r} is outside the allowed range [{lo:g}, {hi:g}]")
-            v = int(v) if k == "blades" else float(v)
-        values[k] = v
+        try:
+            values[k] = Camera.validate(k, v)
+        except (TypeError, ValueError) as exc:
+            doc.fail(("camera", k), str(exc))
     try:
         return camera.updated(**values)
     except (TypeError, ValueError) as exc:
@@ -225,14 +310,18 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
             cls = get_plugin(str(name))
         except ClfxError as exc:
             doc.fail(at + ("effect",), str(exc))
-        if "version" in entry and int(str(entry["version"]).split(".")[0]) != cls.descriptor.version[0]:
-            doc.fail(at + ("version",), f"look pins major version {entry['version']} of {name!r}; "
-                     f"this clfx has {cls.descriptor.version[0]}")
+        if "version" in entry:
+            major = str(entry["version"]).split(".")[0]
+            if not (major.isascii() and major.isdigit()):
+                doc.fail(at + ("version",), f"{entry['version']!r} is not a version (e.g. 1 or 1.2)")
+            if int(major) != cls.descriptor.version[0]:
+                doc.fail(at + ("version",), f"look pins major version {entry['version']} of "
+                         f"{name!r}; this clfx has {cls.descriptor.version[0]}")
         params = entry.get("params") or {}
         if not isinstance(params, dict):
             doc.fail(at + ("params",), "must be a mapping of parameter names to values")
         when_missing = entry.get("missing_passes", "error")
-        if when_missing not in ("error", "skip"):
+        if when_missing not in MISSING_PASSES:
             doc.fail(at + ("missing_passes",), f"{when_missing!r} is not 'error' or 'skip'")
         quality = entry.get("quality")
         if quality is not None and quality not in QUALITY_LEVELS:
@@ -254,9 +343,10 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
             except ClfxError as exc:
                 doc.fail(at + ("params", pname), str(exc))
         p = cls.params(**validated)
+        if "missing_passes" not in entry and existing:
+            when_missing = existing.missing_passes
         step = Step(name, p, quality or (existing.quality if existing else None), id=sid,
-                    skip_missing_passes=(when_missing == "skip") if "missing_passes" in entry
-                    else bool(existing and existing.skip_missing_passes))
+                    missing_passes=when_missing)
         if existing:
             steps[steps.index(existing)] = step
         else:
@@ -272,6 +362,7 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
         key, value = text.split("=", 1)
         key = key.strip()
         if key == "seed":
+            _ascii_digits(key, value)
             try:
                 look.seed = int(value)
             except ValueError:
@@ -281,6 +372,7 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
             raise PresetError(f"--set {text!r}: expected EFFECT.PARAM=VALUE or camera.KEY=VALUE")
         target, pname = key.split(".", 1)
         if target == "camera":
+            _ascii_digits(key, value)
             look.camera = _camera_override(look.camera, pname, value)
             continue
         step = next((s for s in look.steps if s.id == target), None) or \
@@ -289,30 +381,40 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
             names = [s.id for s in look.steps]
             raise PresetError(f"--set {text!r}: look {look.name!r} has no effect {target!r}"
                               f"{_suggest(target, names) if names else ''}")
-        desc = step.plugin.descriptor
+        index = look.steps.index(step)
         if pname == "quality":
-            step.quality = validate_quality(value, f"--set {key}")
+            look.steps[index] = replace(step, quality=validate_quality(value, f"--set {key}"))
             continue
-        parsed = desc.param(pname, f"--set {key}").parse(value, f"--set {key}")
-        step.params = step.plugin.params(**{**step.params.as_dict(), pname: parsed})
+        param = step.plugin.descriptor.param(pname, f"--set {key}")
+        if not isinstance(param, StringParam):
+            _ascii_digits(key, value)
+        parsed = param.parse(value, f"--set {key}")
+        look.steps[index] = replace(step, params=step.plugin.params(
+            **{**step.params.as_dict(), pname: parsed}))
     return look
+
+
+def _ascii_digits(key: str, value: str) -> None:
+    """Numbers on the command line are written with 0-9: Python's int() and float() would
+    also read full-width or other scripts' digits ('３' as 3), which no look file means."""
+    bad = next((c for c in value if c.isdecimal() and not c.isascii()), None)
+    if bad is not None:
+        raise PresetError(f"--set {key}={value!r}: {bad!r} is not an ASCII digit (write numbers "
+                          f"with 0-9)")
 
 
 def _camera_override(camera: Camera, name: str, value: str) -> Camera:
     if name not in Camera.field_names():
         raise PresetError(f"--set camera.{name}: unknown camera value{_suggest(name, Camera.field_names())}")
-    if name in Camera.CHOICES:
-        if value not in Camera.CHOICES[name]:
-            raise PresetError(f"--set camera.{name}: {value!r} is not one of {', '.join(Camera.CHOICES[name])}")
-        return camera.updated(**{name: value})
+    if name not in Camera.CHOICES:
+        try:
+            value = float(value)
+        except ValueError:
+            raise PresetError(f"--set camera.{name}: {value!r} is not a number") from None
     try:
-        v = float(value)
-    except ValueError:
-        raise PresetError(f"--set camera.{name}: {value!r} is not a number") from None
-    lo, hi = Camera.RANGES[name]
-    if not lo <= v <= hi:
-        raise PresetError(f"--set camera.{name}: {v:g} is outside the allowed range [{lo:g}, {hi:g}]")
-    return camera.updated(**{name: int(v) if name == "blades" else v})
+        return camera.updated(**{name: Camera.validate(name, value)})
+    except (TypeError, ValueError) as exc:
+        raise PresetError(f"--set camera.{name}: {exc}") from None
 
 
 def single_effect_look(effect: str, assignments: list[str]) -> Look:

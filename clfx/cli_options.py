@@ -1,0 +1,86 @@
+"""Options several ``clfx`` commands share, declared once (as rasterio's ``rio.options``).
+
+Each name here is a decorator: ``@pass_options`` adds the options that say how depth and
+velocity passes are found and read (``render``, ``apply``, ``probe``), ``@render_options``
+everything ``render`` and ``apply`` take besides the look, ``@quality_option`` the quality
+level (also ``demo``).
+"""
+from __future__ import annotations
+
+import math
+
+import click
+
+from clfx.core.plugin import QUALITY_LEVELS
+
+DEPTH_MODES = ("auto", "z", "inverse", "distance", "normalized")  # clfx.io.channels.DEPTH_MODES
+
+
+def stack(*decorators):
+    """One decorator applying ``decorators``; options are listed in the order given."""
+    def apply(f):
+        for decorate in reversed(decorators):
+            f = decorate(f)
+        return f
+    return apply
+
+
+def _positive(ctx, param, value):
+    if not (value > 0 and math.isfinite(value)):
+        raise click.BadParameter(f"{value} must be a positive number")
+    return value
+
+
+def _names(ctx, param, value):
+    return tuple(value.split(",")) if value else None
+
+
+quality_option = click.option(
+    "--quality", type=click.Choice(QUALITY_LEVELS), default=None,
+    help="Quality level of every effect without its own override.")
+
+pass_options = stack(
+    click.option("--depth-channel", default=None, help="Depth channel name (overrides detection)."),
+    click.option("--depth-mode", type=click.Choice(DEPTH_MODES), default="auto",
+                 help="How depth is stored: planar z, 1/z, radial distance, 0-1."),
+    click.option("--depth-scale", type=float, default=1.0, callback=_positive,
+                 help="Multiply depth (e.g. 0.01 for cm to m)."),
+    click.option("--focal-length-px", type=float, default=None,
+                 help="For --depth-mode distance: focal length in pixels (default: from the "
+                      "look's camera block and the frame width)."),
+    click.option("--velocity-channels", default=None, metavar="U,V", callback=_names,
+                 help="Velocity channel names."),
+    click.option("--velocity-y-up/--velocity-y-down", default=None,
+                 help="Direction of +v in the velocity pass (overrides detection)."),
+    click.option("--velocity-scale", type=float, default=1.0, callback=_positive,
+                 help="Multiply velocity."),
+)
+
+render_options = stack(
+    click.option("--frames", default=None, metavar="SPEC",
+                 help="Frames to render: 1-100, 1-100x2, 1,5,10-20, farm a-b:n. Default: all on disk."),
+    quality_option,
+    click.option("--depth", "depth_path", default=None, metavar="PATTERN",
+                 help="Depth pass from separate files (pattern like the input)."),
+    click.option("--velocity", "velocity_path", default=None, metavar="PATTERN",
+                 help="Velocity pass from separate files."),
+    pass_options,
+    click.option("--colorspace", default=None,
+                 help="Colour space of the input (OCIO name, 'linear', 'sRGB')."),
+    click.option("--out-colorspace", default=None, help="Colour space to encode the output in."),
+    click.option("--float", "as_float", is_flag=True,
+                 help="Write EXR beauty as 32-bit float (default half)."),
+    click.option("--compression", default=None,
+                 help="EXR compression: zip (default), piz, dwaa, none, ..."),
+    click.option("--overwrite", is_flag=True, help="Replace existing outputs."),
+    click.option("--skip-existing", is_flag=True,
+                 help="Skip frames whose output exists (resume a batch)."),
+    click.option("--skip-missing", is_flag=True, help="Skip missing input frames instead of failing."),
+    click.option("--keep-overscan", is_flag=True, help="Keep light spread past the display window."),
+    click.option("--raw", "raw_size", default=None, metavar="WxH",
+                 help="With '-' as INPUT/OUTPUT: raw gbrpf32le frames on stdin/stdout (ffmpeg)."),
+    click.option("--explain", is_flag=True,
+                 help="Per frame: which effects ran, which were skipped and why."),
+    click.option("--json", "as_json", is_flag=True,
+                 help="One JSON line per frame and a summary on stdout."),
+)
