@@ -119,6 +119,19 @@ class RenderContext:
         """A resolution-independent size (fraction of the frame diagonal) in pixels."""
         return fraction_of_diagonal * self.diagonal_px
 
+    def grown_to(self, window: Rect) -> RenderContext:
+        """This context over a larger ``window`` (an effect whose light leaves the data
+        window): the source padded with transparent black, depth and velocity extended from
+        their edges; notes and the frame's analysis box shared (the analysis is recomputed
+        for the new window on first use)."""
+        ctx = RenderContext.__new__(RenderContext)
+        ctx.__dict__.update(self.__dict__)
+        rt = self.runtime
+        ctx.source = rt.reframe(self.source, window, "zero")
+        ctx.depth = None if self.depth is None else rt.reframe(self.depth, window, "clamp")
+        ctx.velocity = None if self.velocity is None else rt.reframe(self.velocity, window, "clamp")
+        return ctx
+
     def for_step(self, quality: str) -> RenderContext:
         """A context for one effect of a look: this one at ``quality``, with its own
         ``notes`` and the same scene analysis (one the step computes is this frame's)."""

@@ -15,7 +15,7 @@ from clfx.core.errors import ImageIOError
 from clfx.core.frame import Frame
 from clfx.core.plugin import Descriptor, PathParam
 from clfx.host import Plugin
-from clfx.io.read import PassSpec, read_frame
+from clfx.io.read import read_frame
 from clfx.io.write import write_frame
 from clfx.pipeline.batch import Batch, look_files
 from clfx.pipeline.look import Look, Step
@@ -47,8 +47,10 @@ def frames(folder: Path, count=4, w=48, h=32, name="in.{:04d}.exr"):
 
 
 def batch(look, inp, out, **options) -> Batch:
-    return Batch(look=look, input_path=str(inp), output_path=str(out), options=options,
-                 passes=PassSpec(), verbosity=0)
+    from clfx.pipeline.batch import RenderOptions
+
+    return Batch(look=look, input_path=str(inp), output_path=str(out),
+                 options=RenderOptions(**options), verbosity=0)
 
 
 def cli_run(*args):

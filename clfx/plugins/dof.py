@@ -282,9 +282,7 @@ class Dof(Plugin):
             # Light leaves the data window: render over the grown window, outside it nothing
             # (transparent black) at the edge's depth.  A copy of the context, so the scene
             # analysis (the tiles) is taken over the grown window; notes stay shared.
-            ctx = ctx.with_quality(ctx.quality)
-            ctx.source = rt.reframe(ctx.source, window, "zero")
-            ctx.depth = rt.reframe(ctx.depth, window, "clamp")
+            ctx = ctx.grown_to(window)
             ctx.notes.append(f"dof: grown to {window}")
         src, depth = ctx.source, ctx.depth
         lvl = self.level(ctx)
