@@ -1,0 +1,244 @@
+"""float64 sequential ray tracer: the oracle of the paraxial ghosts in clfx/fx/optics.py.
+
+Exact spherical surfaces, vector Snell's law, the stop and every clear aperture vignetting
+each ray at each crossing, and reflections at the two ghost surfaces.  A distant point light
+at ``field_deg`` off the axis (in the x-z plane) sends a parallel beam; rays start on a
+regular grid over the first surface's clear aperture, in two stages (a coarse grid finds the
+part of the beam that survives the path, a fine grid over its bounding box measures it), and
+land on the image plane (the last surface's thickness behind it).
+
+Fresnel factors come from the general single-film (Airy) formula with s and p averaged
+(unpolarised light), written here independently of ``clfx.fx.optics``: ``fresnel="normal"``
+evaluates it at normal incidence (the matrix model's assumption, so the comparison isolates
+geometry), ``fresnel="exact"`` at each ray's incidence angle (the physics the paraxial model
+leaves out).  Only the prescription's data (radii, thicknesses, semi-apertures, coatings and
+its dispersion formula ``media``) is shared with the code under test.
+
+A ghost of a real lens can have more than one part: far from the axis, aberrations can
+steer a zone of the beam through the stop by a route the paraxial rays do not take (a ring
+or crescent that the paraxial model cannot know).  The spot measured is the part whose rays
+enter the lens nearest the axis, the paraxial zone: the connected region (8-connected, on
+the coarse grid and again on the fine one) of surviving entrance points that holds the one
+closest to the axis.  The other parts' power is reported separately (``other_power_mm2``).
+
+A spot is summarised by the power-weighted centroid of the landed rays, its radius
+``sqrt(2) * rms distance`` from the centroid (exactly the edge radius of a uniformly filled
+disc, and robust to the few rays a caustic throws far out), its extent (the largest
+distance) and its power relative to the light entering the entrance pupil (the area of the
+entrance beam that survives the primary path).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+START_BACK_MM = 1000.0   # rays start this far before the first vertex plane
+
+
+@dataclass(frozen=True)
+class Spot:
+    n_rays: int
+    area_mm2: float          # entrance-beam area (perpendicular to the axis) that lands
+    power_mm2: float         # the same, weighted by each ray's Fresnel factors
+    centroid: tuple          # (x, y) on the image plane, mm
+    radius_mm: float         # sqrt(2) * rms distance from the centroid
+    extent_mm: float         # largest distance from the centroid
+    other_power_mm2: float = 0.0   # power of the parts not connected to the paraxial zone
+
+
+def _r_interface(na, ca, nb, cb):
+    """Amplitude reflection (s, p) from medium a into b, cosines ca, cb (complex)."""
+    rs = (na * ca - nb * cb) / (na * ca + nb * cb)
+    rp = (nb * ca - na * cb) / (nb * ca + na * cb)
+    return rs, rp
+
+
+def reflectance(n1, n2, cos1, coating, wavelength_nm):
+    """Unpolarised reflectance of a bare or single-film-coated interface at incidence cosine
+    ``cos1`` (from medium ``n1``); Born & Wolf sec. 1.5.2 and 1.6.4."""
+    cos1 = np.asarray(cos1, np.complex128)
+    sin2 = 1.0 - cos1 * cos1
+    cos2 = np.sqrt(1.0 - (n1 / n2) ** 2 * sin2 + 0j)
+    if coating is None:
+        rs, rp = _r_interface(n1, cos1, n2, cos2)
+    else:
+        nc = coating.index
+        cosc = np.sqrt(1.0 - (n1 / nc) ** 2 * sin2 + 0j)
+        thickness = coating.wavelength_nm / (4.0 * nc)
+        phase = np.exp(2j * (2.0 * np.pi * nc * thickness * cosc / wavelength_nm))
+        out = []
+        for r01, r12 in zip(_r_interface(n1, cos1, nc, cosc), _r_interface(nc, cosc, n2, cos2)):
+            out.append((r01 + r12 * phase) / (1.0 + r01 * r12 * phase))
+        rs, rp = out
+    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+
+
+def ghost_path(lens, i, j):
+    """[(surface, action)]: forward to ``i``, reflect, back to ``j``, reflect, forward."""
+    n = len(lens.surfaces)
+    return ([(k, "fwd") for k in range(i)] + [(i, "reflect")]
+            + [(k, "back") for k in range(i - 1, j, -1)] + [(j, "reflect")]
+            + [(k, "fwd") for k in range(j + 1, n)])
+
+
+def primary_path(lens):
+    return [(k, "fwd") for k in range(len(lens.surfaces))]
+
+
+def _trace(lens, path, p0, direction, wavelength_nm, fresnel):
+    """Trace rays starting at entrance-plane points ``p0`` (M, 2); return landed (x, y) and
+    weights, and the mask of surviving rays."""
+    with np.errstate(all="ignore"):   # lost rays run to inf/nan; ``alive`` drops them
+        return _trace_rays(lens, path, p0, direction, wavelength_nm, fresnel)
+
+
+def _trace_rays(lens, path, p0, direction, wavelength_nm, fresnel):
+    s = lens.surfaces
+    n = lens.media(wavelength_nm)[:, 0]
+    z_vertex = np.concatenate([[0.0], np.cumsum([x.thickness for x in s])])
+    m = len(p0)
+    d = np.broadcast_to(direction, (m, 3)).copy()
+    o = np.column_stack([p0, np.zeros(m)]) - START_BACK_MM * d
+    alive = np.ones(m, bool)
+    weight = np.ones(m)
+    going_forward = True
+    for k, action in path:
+        surf = s[k]
+        zk = z_vertex[k]
+        if np.isinf(surf.radius):
+            t = (zk - o[:, 2]) / d[:, 2]
+            hit = o + t[:, None] * d
+            normal = np.broadcast_to([0.0, 0.0, -1.0], (m, 3))
+            ok = np.isfinite(t) & (t > 1e-9)
+        else:
+            r = surf.radius
+            centre = np.array([0.0, 0.0, zk + r])
+            oc = o - centre
+            b = np.einsum("ij,ij->i", d, oc)
+            c = np.einsum("ij,ij->i", oc, oc) - r * r
+            disc = b * b - c
+            root = np.sqrt(np.maximum(disc, 0.0))
+            best = np.full(m, np.inf)
+            for t_try in (-b - root, -b + root):
+                z_hit = o[:, 2] + t_try * d[:, 2]
+                good = (disc >= 0.0) & (t_try > 1e-9) & ((z_hit - centre[2]) * r < 0.0)
+                best = np.where(good & (t_try < best), t_try, best)
+            ok = np.isfinite(best)
+            t = np.where(ok, best, 0.0)
+            hit = o + t[:, None] * d
+            normal = (hit - centre) / r          # unit; -z at the vertex
+        ok &= hit[:, 0] ** 2 + hit[:, 1] ** 2 <= surf.semi_aperture ** 2
+        alive &= ok
+        cos_i = np.abs(np.einsum("ij,ij->i", d, normal))
+        if action == "reflect":
+            n1, n2 = (n[k], n[k + 1]) if going_forward else (n[k + 1], n[k])
+            if fresnel == "exact":
+                weight = weight * reflectance(n1, n2, cos_i, surf.coating, wavelength_nm)
+            else:
+                weight = weight * reflectance(n1, n2, 1.0, surf.coating, wavelength_nm)
+            dn = np.einsum("ij,ij->i", d, normal)
+            d = d - 2.0 * dn[:, None] * normal
+            going_forward = not going_forward
+        else:
+            n1, n2 = (n[k], n[k + 1]) if action == "fwd" else (n[k + 1], n[k])
+            if n1 != n2:
+                cos_w = cos_i if fresnel == "exact" else 1.0
+                weight = weight * (1.0 - reflectance(n1, n2, cos_w, surf.coating,
+                                                     wavelength_nm))
+                # vector Snell's law with the normal facing the incoming ray
+                nn = np.where((np.einsum("ij,ij->i", d, normal) > 0.0)[:, None], -normal, normal)
+                eta = n1 / n2
+                ci = -np.einsum("ij,ij->i", d, nn)
+                k2 = 1.0 - eta * eta * (1.0 - ci * ci)
+                alive &= k2 >= 0.0                    # total internal reflection: lost
+                d = eta * d + (eta * ci - np.sqrt(np.maximum(k2, 0.0)))[:, None] * nn
+        o = np.where(alive[:, None], hit, o)
+    # the image plane
+    t = (z_vertex[-1] - o[:, 2]) / d[:, 2]
+    alive &= np.isfinite(t) & (t > 0.0)
+    land = o + np.where(alive, t, 0.0)[:, None] * d
+    return land[:, :2], weight, alive
+
+
+def trace(lens, path, field_deg, wavelength_nm, *, fresnel="normal", n_coarse=96,
+          n_fine=200) -> Spot:
+    """Shoot the beam of a distant light ``field_deg`` off the axis along ``path``.
+
+    The coarse grid (``n_coarse`` rays across the first surface) doubles up to 384 while
+    fewer than 16 rays survive (a ghost beam can be narrower than a coarse cell); the fine
+    grid has ``n_fine`` rays across the paraxial zone's bounding box.
+    """
+    theta = np.radians(field_deg)
+    direction = np.array([np.sin(theta), 0.0, np.cos(theta)])
+    a0 = lens.surfaces[0].semi_aperture * 1.02
+
+    def grid(x0, x1, y0, y1, nx):
+        ny = nx
+        xs = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
+        ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
+        gx, gy = np.meshgrid(xs, ys)
+        return np.column_stack([gx.ravel(), gy.ravel()]), (x1 - x0) / nx, (y1 - y0) / ny
+
+    def paraxial_zone(alive, n):
+        """The survivors connected to the one nearest the axis (8-connected)."""
+        labels, _ = ndimage.label(alive.reshape(n, n), structure=np.ones((3, 3)))
+        labels = labels.ravel()
+        r2 = np.where(alive, (pts ** 2).sum(axis=1), np.inf)
+        return labels == labels[np.argmin(r2)]
+
+    while True:
+        pts, dx, dy = grid(-a0, a0, -a0, a0, n_coarse)
+        _, weight, alive = _trace(lens, path, pts, direction, wavelength_nm, fresnel)
+        if alive.sum() >= 16 or n_coarse >= 384:
+            break
+        n_coarse *= 2
+    if not alive.any():
+        return Spot(0, 0.0, 0.0, (np.nan, np.nan), np.nan, np.nan)
+    zone = paraxial_zone(alive, n_coarse)
+    other = float(weight[alive & ~zone].sum() * dx * dy * np.cos(theta))
+    lo = pts[zone].min(axis=0) - 1.5 * np.array([dx, dy])
+    hi = pts[zone].max(axis=0) + 1.5 * np.array([dx, dy])
+    pts, dx, dy = grid(lo[0], hi[0], lo[1], hi[1], n_fine)
+    land, weight, alive = _trace(lens, path, pts, direction, wavelength_nm, fresnel)
+    if alive.any():
+        alive &= paraxial_zone(alive, n_fine)
+    cell = dx * dy * np.cos(theta)          # area perpendicular to the beam
+    xy, w = land[alive], weight[alive]
+    if not len(xy):
+        return Spot(0, 0.0, 0.0, (np.nan, np.nan), np.nan, np.nan)
+    centroid = (w[:, None] * xy).sum(axis=0) / w.sum()
+    r2 = ((xy - centroid) ** 2).sum(axis=1)
+    return Spot(n_rays=int(alive.sum()), area_mm2=float(alive.sum() * cell),
+                power_mm2=float(w.sum() * cell), centroid=(float(centroid[0]),
+                                                            float(centroid[1])),
+                radius_mm=float(np.sqrt(2.0 * (w * r2).sum() / w.sum())),
+                extent_mm=float(np.sqrt(r2.max())), other_power_mm2=other)
+
+
+@dataclass(frozen=True)
+class GhostReference:
+    centre: float            # ghost centroid / light's image centroid (x), as the kernel uses
+    radius_mm: float
+    energy: float            # ghost power / light entering the entrance pupil
+    spot: Spot
+    primary: Spot
+
+
+def ghost_reference(lens, i, j, field_deg, wavelength_nm, *, reference_nm=None,
+                    fresnel="normal", primary=None, pupil=None, **kw) -> GhostReference:
+    """The ghost ``(i, j)`` (reflect at ``i``, then ``j < i``) of a light ``field_deg`` off
+    the axis, measured like :func:`clfx.fx.optics.ghosts` reports it.  ``primary`` (the
+    light's own spot at ``reference_nm``) and ``pupil`` (at ``wavelength_nm``) may be
+    passed in to trace them once for many ghosts."""
+    ref = wavelength_nm if reference_nm is None else reference_nm
+    if primary is None:
+        primary = trace(lens, primary_path(lens), field_deg, ref, fresnel=fresnel, **kw)
+    if pupil is None:
+        pupil = primary if ref == wavelength_nm else trace(
+            lens, primary_path(lens), field_deg, wavelength_nm, fresnel=fresnel, **kw)
+    spot = trace(lens, ghost_path(lens, i, j), field_deg, wavelength_nm, fresnel=fresnel, **kw)
+    return GhostReference(centre=spot.centroid[0] / primary.centroid[0],
+                          radius_mm=spot.radius_mm, energy=spot.power_mm2 / pupil.area_mm2,
+                          spot=spot, primary=primary)
