@@ -78,6 +78,7 @@ class RenderContext:
         self._analysis = _SharedAnalysis(analysis)
         self.output_limit = output_limit or source.window.union(self.display_window)
         self.notes: list[str] = []
+        self.warnings: list[str] = []  # said on stderr: a clamp, a guess, a skipped request
         self._read_image = read_image
 
     def read_image(self, path: str) -> np.ndarray:
@@ -139,6 +140,7 @@ class RenderContext:
         ctx.__dict__.update(self.__dict__)  # shares the analysis
         ctx.quality = quality
         ctx.notes = []
+        ctx.warnings = []
         return ctx
 
 

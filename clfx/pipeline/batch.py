@@ -168,6 +168,7 @@ class Batch:
     raw_size: tuple[int, int] | None = field(default=None, init=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
+    _warned: set = field(default_factory=set, init=False, repr=False)
     _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
     _first_read: Future | None = field(default=None, init=False, repr=False)
 
@@ -322,6 +323,7 @@ class Batch:
         while writes and (block or writes[0][0].done()):
             future, report = writes.pop(0)
             future.result()
+            self._warn(report)
             if self.options.as_json:
                 print(json.dumps(report.as_dict()), flush=True)
             if self.options.explain:
@@ -355,6 +357,13 @@ class Batch:
                 self._err(f"clfx: frame {job.frame}: {job.output} appeared meanwhile; skipped")
         report.write_ms = (time.perf_counter() - t0) * 1e3
 
+    def _warn(self, report) -> None:
+        """Say a frame's warnings on stderr, each distinct line once per batch."""
+        for line in report.warnings():
+            if line not in self._warned:
+                self._warned.add(line)
+                self._err(line)
+
     def _err(self, msg: str, end: str = "\n") -> None:
         print(msg, end=end, file=sys.stderr, flush=True)
 
@@ -383,6 +392,7 @@ class Batch:
             out, report = render_frame(rt, self.look, frame, frame_number=count,
                                        quality=self.options.quality, stats=self.stats)
             write_raw(stdout, out, frame.data_window)
+            self._warn(report)
             if self.options.explain:
                 self._err(report.explain())
             count += 1

@@ -63,13 +63,15 @@ class RenderSpec:
     @classmethod
     def of(cls, batch: Batch) -> RenderSpec:
         blob = pickle.dumps((batch.look, batch.input_path, batch.output_path, batch.options,
-                             batch.passes), protocol=pickle.HIGHEST_PROTOCOL)
+                             batch.passes, batch.look_files), protocol=pickle.HIGHEST_PROTOCOL)
         return cls(f"{batch.look.params_hash()}-{hashlib.sha1(blob).hexdigest()[:12]}", blob)
 
     def batch(self) -> Batch:
-        look, input_path, output_path, options, passes = pickle.loads(self.blob)
-        return Batch(look=look, input_path=input_path, output_path=output_path,
-                     options=options, passes=passes, verbosity=0)
+        look, input_path, output_path, options, passes, look_files = pickle.loads(self.blob)
+        batch = Batch(look=look, input_path=input_path, output_path=output_path,
+                      options=options, verbosity=0)
+        batch.passes, batch.look_files = passes, look_files  # prepared on the client
+        return batch
 
 
 class ClfxWorker(WorkerPlugin):
@@ -248,7 +250,7 @@ def render_distributed(batch: Batch, *, workers: int | None = None, scheduler: s
     if chunk < 1:
         raise SequenceError(f"--chunk {chunk}: expected 1 or more frames per task")
     o = batch.options
-    as_json, explain = bool(o.get("as_json")), bool(o.get("explain"))
+    as_json, explain = o.as_json, o.explain
     jobs = batch.jobs
     if batch.skipped_existing and batch.verbosity > 0:
         batch._err(f"clfx: skipping {len(batch.skipped_existing)} frame(s) whose output exists")
@@ -355,6 +357,12 @@ def _emit(batch: Batch, result: dict, as_json: bool, explain: bool) -> None:
         return
     if as_json:
         print(json.dumps({**result["report"], "worker": result["worker"]}), flush=True)
+    for step in result["report"].get("steps", []):  # the same lines as a local render
+        for w in step.get("warnings", []):
+            line = f"clfx: warning: frame {result['frame']}: {w}"
+            if line not in batch._warned:
+                batch._warned.add(line)
+                batch._err(line)
     if explain:
         batch._err(result["explain"])
 

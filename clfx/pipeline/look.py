@@ -184,6 +184,7 @@ class StepReport:
     ms: float = 0.0
     quality: str = DEFAULT_QUALITY
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict:
         d = {"effect": self.effect, "ran": self.ran, "quality": self.quality}
@@ -193,6 +194,8 @@ class StepReport:
             d["reason"] = self.reason
         if self.notes:
             d["notes"] = self.notes
+        if self.warnings:
+            d["warnings"] = self.warnings
         return d
 
 
@@ -225,6 +228,11 @@ class FrameReport:
         if self.analysis:
             d["analysis"] = self.analysis
         return d
+
+    def warnings(self) -> list[str]:
+        """The lines this frame must say on stderr whatever the verbosity (a clamp that bit,
+        a convention guessed, a request that could not be honoured), each naming the frame."""
+        return [f"clfx: warning: frame {self.frame}: {w}" for s in self.steps for w in s.warnings]
 
     def explain(self) -> str:
         """Human-readable lines: what ran, what was skipped and why."""
@@ -352,7 +360,8 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     rt.finish()
     ms = (time.perf_counter() - t0) * 1e3
     timing.add(ms)
-    return StepReport(step.id, True, ms=ms, quality=level, notes=list(step_ctx.notes)), out
+    return StepReport(step.id, True, ms=ms, quality=level, notes=list(step_ctx.notes),
+                      warnings=list(step_ctx.warnings)), out
 
 
 def _advance(rt, ctx: RenderContext, out) -> None:
