@@ -1,0 +1,1 @@
+"""Tests of the shared algorithms in clfx/fx/ (blur, fftconv, analysis)."""

@@ -124,18 +124,6 @@ def test_identities(rt, rng):
         assert np.array_equal(got, src)
 
 
-def test_nan_inf_do_not_spread(rt, rng):
-    clean = scene(rng, (31, 45))
-    bad = clean.copy()
-    bad[3, 3, 0], bad[20, 40, 2], bad[5, 30, :] = np.nan, np.inf, -np.inf
-    p = Corona.params(**PARAMS)
-    plugin = Corona()
-    got = plugin.apply(rt, p, bad)
-    assert np.isfinite(got).all()
-    want = reference(bad, psf_for(plugin, rt, p, bad, "final"), **p.as_dict())
-    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
-
-
 def test_hdr_energy_no_negatives_and_shadows(rt):
     src = np.full((96, 96, 4), 0.01, np.float32)
     src[48, 48, :3] = 1e5

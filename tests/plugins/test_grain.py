@@ -9,10 +9,8 @@ import numpy as np
 import pytest
 
 from clfx.core.errors import ParamError
-from clfx.host import RenderContext
 from clfx.bench.cases.grain import CASE
-from clfx.fx.noise import effect_seed
-from clfx.plugins.grain import GRAIN_SALT, STOCKS, Grain, grain_weights
+from clfx.plugins.grain import STOCKS, Grain, grain_weights
 from clfx.core.rect import Rect
 from tests.conftest import ROOT, hard_shapes
 from tests.plugins.test_distortion import wide_range_image
@@ -289,29 +287,6 @@ def test_bench_case_renders(rt, rng):
     p = Grain.params(**case["params"])
     out = Grain().apply(rt, p, case["source"], camera=case["camera"])
     assert out.shape == (36, 64, 4) and np.isfinite(out).all()
-
-
-def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
-    """Every output value depends on its own coordinates only: no reductions, no atomics."""
-    src = rng.uniform(0.0, 1.0, (19, 26, 4)).astype(np.float32)
-    p = Grain.params(amount=0.1, size=2.0)
-    ctx = RenderContext(rt, rt.upload(src), display_window=DISPLAY_2K, frame=3, quality="draft")
-    base = rt.download(Grain().render(rt, p, ctx))
-    knl = rt.kernel("grain.cl", "grain_apply_white", MONO=0)
-    for local in ((1, 1), (2, 3), (7, 1)):
-        dst = ctx.source.like()
-        rt.launch(knl, (ctx.source.pitch // 4, 19), ctx.source, dst, np.int32(ctx.source.pitch),
-                  np.int32(19), np.int32(0), np.int32(0),
-                  np.uint32(effect_seed(0, 0, GRAIN_SALT)),
-                  np.int32(3), *(np.float32(a) for a in (0.1 * 0.18,) * 3), np.float32(0.5),
-                  local=local)
-        assert rt.download(dst).tobytes() == base.tobytes(), local
-    # one PoCL thread in a fresh process gives the same bytes (final: all three kernels)
-    final = run(rt, src, "final", frame=3, amount=0.1, size=2.0)[0]
-    assert final.tobytes() == rendered_in_one_thread(
-        tmp_path, src, "from clfx.plugins.grain import Grain; from clfx.core.rect import Rect",
-        "Grain().apply(rt, Grain.params(amount=0.1, size=2.0), src, frame=3,"
-        " display_window=Rect(0, 0, 2048, 1080))")
 
 
 def rendered_in_one_thread(tmp_path, src, imports: str, call: str) -> bytes:

@@ -7,14 +7,12 @@ import pytest
 
 from clfx.bench.cases.sensor_noise import CASE
 from clfx.core.camera import Camera
-from clfx.fx.noise import effect_seed
 from clfx.host import RenderContext
-from clfx.plugins.sensor_noise import (MAX_COUNT, SENSOR_SALT, SensorNoise, electrons_per_unit,
+from clfx.plugins.sensor_noise import (SensorNoise, electrons_per_unit,
                                        noise_variance)
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import wide_range_image
-from tests.plugins.test_grain import rendered_in_one_thread
 from tests.reference.sensor_noise import sensor_noise as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
@@ -237,14 +235,6 @@ def test_negative_values_keep_their_mean(rt):
     assert abs(x.std() / (2.0 * g) - 1) <= 0.05
 
 
-def test_identity_with_reason(rt, rng):
-    src = rng.uniform(0.0, 1.0, (9, 9, 4)).astype(np.float32)
-    p = SensorNoise.params(shot_noise=False, read_noise=0.0)
-    assert SensorNoise().is_identity(p, None) == "shot noise is off, read noise and prnu are 0"
-    assert SensorNoise().is_identity(SensorNoise.params(), None) is None
-    assert np.array_equal(SensorNoise().apply(rt, p, src), src)
-
-
 def test_descriptor_and_bench_case(rt, rng):
     d = SensorNoise.descriptor
     assert d.frame_varying and set(d.quality) == set(LEVELS)
@@ -254,26 +244,3 @@ def test_descriptor_and_bench_case(rt, rng):
     assert out.shape == (36, 64, 4) and np.isfinite(out).all()
 
 
-def test_bytes_do_not_depend_on_local_size_or_thread_count(rt, rng, tmp_path):
-    """Each value depends on its own coordinates only: no reductions, no atomics."""
-    src = rng.uniform(0.0, 0.2, (19, 26, 4)).astype(np.float32)
-    kw = dict(prnu=0.01, seed=3)
-    base, p = run(rt, src, frame=4, **kw)
-    up = rt.upload(src)
-    k = electrons_per_unit(p, CAMERA)
-    ctx = RenderContext(rt, up, camera=CAMERA, frame=4, display_window=up.window)
-    pattern = SensorNoise().prnu_pattern(rt, p, ctx, fp64=False)
-    knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", SHOT=1, READ=1, PRNU=1, INVERT=1,
-                    SWITCH=repr(30.0), MAX_COUNT=MAX_COUNT)
-    for local in ((1, 1), (2, 3), (7, 1)):
-        dst = up.like()
-        rt.launch(knl, (up.pitch // 4, 19), up, dst, pattern, np.int32(up.pitch), np.int32(19),
-                  np.int32(0), np.int32(0), np.uint32(effect_seed(3, 0, SENSOR_SALT)),
-                  np.int32(4), *(np.float32(v) for v in k), np.float32(p.read_noise),
-                  local=local)
-        assert rt.download(dst).tobytes() == base.tobytes(), local
-    assert base.tobytes() == rendered_in_one_thread(
-        tmp_path, src, "from clfx.core.camera import Camera; "
-        "from clfx.plugins.sensor_noise import SensorNoise",
-        "SensorNoise().apply(rt, SensorNoise.params(prnu=0.01, seed=3), src, frame=4,"
-        " camera=Camera(iso=3200.0))")

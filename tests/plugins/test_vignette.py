@@ -52,14 +52,6 @@ def test_vignette_data_window_inside_display_window(rt, rng):
     np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-6)
 
 
-def test_vignette_zero_is_bitwise_identity(rt, rng):
-    src = rng.uniform(0.0, 1.0, (9, 9, 4)).astype(np.float32)
-    p = Vignette.params(natural=0.0, amount=0.0)
-    ctx_reason = Vignette().is_identity(p, None)
-    assert ctx_reason == "natural and amount are 0"
-    assert np.array_equal(Vignette().apply(rt, p, src), src)
-
-
 def test_vignette_hard_values_stay_finite_where_input_is(rt):
     vals = np.array([-1.0, 0.0, 1e-30, 65504.0, 1e5, np.nan, np.inf], np.float32)
     src = np.repeat(vals[None, :, None], 4, axis=2)
