@@ -415,6 +415,17 @@ class Runtime:
                     local=None)
         return dst
 
+    def sanitize(self, img: DeviceImage) -> int:
+        """Set the non-finite floats of a 4-channel image to 0 in place; return how many
+        pixels had one (so a look can say so).  Waits for the count."""
+        if img.channels != 4 or img.height == 0:
+            return 0
+        counter = self.to_device(np.zeros(1, np.int32))
+        self.launch(self.kernel("lib/image.cl", "image_sanitize", CH=4, BORDER=0),
+                    (img.pitch // 4, img.height), img, np.int32(img.pitch),
+                    np.int32(img.height), counter)
+        return int(self.from_device(counter, np.int32, 1)[0])
+
     def to_device(self, array: np.ndarray):
         """A pooled raw buffer holding a copy of a small host array (weights, tables)."""
         a = np.ascontiguousarray(array)

@@ -357,12 +357,14 @@ def _emit(batch: Batch, result: dict, as_json: bool, explain: bool) -> None:
         return
     if as_json:
         print(json.dumps({**result["report"], "worker": result["worker"]}), flush=True)
-    for step in result["report"].get("steps", []):  # the same lines as a local render
-        for w in step.get("warnings", []):
-            line = f"clfx: warning: frame {result['frame']}: {w}"
-            if line not in batch._warned:
-                batch._warned.add(line)
-                batch._err(line)
+    rep = result["report"]  # the same lines as a local render
+    said = rep.get("warnings", []) + [f"{s['effect']}: {w}" for s in rep.get("steps", [])
+                                      for w in s.get("warnings", [])]
+    for w in said:
+        line = f"clfx: warning: frame {result['frame']}: {w}"
+        if line not in batch._warned:
+            batch._warned.add(line)
+            batch._err(line)
     if explain:
         batch._err(result["explain"])
 

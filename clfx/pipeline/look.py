@@ -213,6 +213,7 @@ class FrameReport:
     output: str = ""
     read_ms: float = 0.0
     write_ms: float = 0.0
+    frame_warnings: list[str] = field(default_factory=list)  # the frame's own (not a step's)
 
     def as_dict(self) -> dict:
         d = {"frame": self.frame, "input": self.input, "output": self.output,
@@ -227,12 +228,16 @@ class FrameReport:
             d["saved_ms_estimate"] = round(self.saved_ms, 2)
         if self.analysis:
             d["analysis"] = self.analysis
+        if self.frame_warnings:
+            d["warnings"] = self.frame_warnings
         return d
 
     def warnings(self) -> list[str]:
         """The lines this frame must say on stderr whatever the verbosity (a clamp that bit,
         a convention guessed, a request that could not be honoured), each naming the frame."""
-        return [f"clfx: warning: frame {self.frame}: {w}" for s in self.steps for w in s.warnings]
+        said = list(self.frame_warnings) + [f"{s.effect}: {w}" for s in self.steps
+                                            for w in s.warnings]
+        return [f"clfx: warning: frame {self.frame}: {w}" for w in said]
 
     def explain(self) -> str:
         """Human-readable lines: what ran, what was skipped and why."""
@@ -300,6 +305,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     ctx = _upload(rt, look, frame, frame_number=frame_number, quality=quality,
                   keep_overscan=keep_overscan)
     report.upload_ms = (time.perf_counter() - t_start) * 1e3
+    report.frame_warnings = list(ctx.warnings)
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
     saved = 0.0
     for index, step in look.active_steps():
@@ -330,17 +336,21 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
     window = frame.data_window
     used = look.clips_used()
     src = rt.upload(frame.rgba, window)
+    nonfinite = rt.sanitize(src)  # once for the chain: no effect, run or skipped, sees NaN/Inf
     depth = rt.upload(frame.depth, window) if frame.depth is not None and "depth" in used else None
     velocity = (rt.upload(frame.velocity, window)
                 if frame.velocity is not None and "velocity" in used else None)
     rt.finish()
-    return RenderContext(rt, src, depth=depth, velocity=velocity,
-                         display_window=frame.display_window, pixel_aspect=frame.pixel_aspect,
-                         frame=frame_number, seed=look.seed, camera=look.camera,
-                         quality=quality or DEFAULT_QUALITY,
-                         display_referred=frame.display_referred,
-                         output_limit=output_limit(frame, keep_overscan),
-                         read_image=read_image_rgba)
+    ctx = RenderContext(rt, src, depth=depth, velocity=velocity,
+                        display_window=frame.display_window, pixel_aspect=frame.pixel_aspect,
+                        frame=frame_number, seed=look.seed, camera=look.camera,
+                        quality=quality or DEFAULT_QUALITY,
+                        display_referred=frame.display_referred,
+                        output_limit=output_limit(frame, keep_overscan),
+                        read_image=read_image_rgba)
+    if nonfinite:
+        ctx.warnings.append(f"{nonfinite} pixel(s) with NaN or infinite values set to 0")
+    return ctx
 
 
 def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bool],

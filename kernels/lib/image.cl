@@ -24,3 +24,21 @@ kernel void image_reframe(global const float *src, const int src_pitch, const in
     dst[(y * dst_pitch + x) * CH + c] = v;
   }
 }
+
+/* image_sanitize: non-finite floats (NaN, +-Inf) of a 4-channel image set to 0, in place,
+ * and counted (pixels with any non-finite channel) into *count.  One work-item per 4 pixels
+ * (a float16 of the padded row); the atomic is touched only where something was found. */
+kernel void image_sanitize(global float *img, const int pitch, const int height,
+                           volatile global int *count)
+{
+  const int q = get_global_id(0), y = get_global_id(1);
+  if(y >= height || q * 4 >= pitch) return;
+  global float *p = img + ((size_t)y * pitch + q * 4) * 4;
+  const float16 v = vload16(0, p);
+  const int16 bad = (as_int16(v) & 0x7f800000) == 0x7f800000;
+  if(!any(bad)) return;
+  vstore16(select(v, (float16)(0.0f), bad), 0, p);
+  const int n = (any(bad.s0123) ? 1 : 0) + (any(bad.s4567) ? 1 : 0) +
+                (any(bad.s89ab) ? 1 : 0) + (any(bad.scdef) ? 1 : 0);
+  atomic_add(count, n);
+}

@@ -1,7 +1,7 @@
 """The unusual-value images of ``openexr-images/TestImages`` as small frames.
 
 The images are the ones its README lists (``Name.exr`` entries), read by
-``clfx.io.files.read_frame``.  ``AllHalfValues`` is used whole (every half value, 256 x 256);
+``clfx.io.read.read_frame``.  ``AllHalfValues`` is used whole (every half value, 256 x 256);
 every other image twice: a 64 x 64 crop around its most unusual pixels (the non-finite ones,
 else the largest magnitude) and a 64 x 64 nearest-neighbour sample of the whole frame (its
 full value range at a bounded cost).
@@ -51,7 +51,7 @@ def variants() -> list[str]:
 
 @functools.cache
 def _read(name: str) -> np.ndarray:
-    from clfx.io.files import read_frame
+    from clfx.io.read import read_frame
 
     return read_frame(FOLDER / f"{name}.exr").rgba
 

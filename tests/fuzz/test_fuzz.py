@@ -2,7 +2,7 @@
 and every built-in look over OpenEXR's unusual-value images: the output is finite wherever
 the input was, and sanitised (finite) where it was not (issue 10 item 6).
 
-Frames are read by ``clfx.io.files.read_frame`` and rendered by
+Frames are read by ``clfx.io.read.read_frame`` and rendered by
 ``clfx.pipeline.look.render_frame``, as ``clfx apply`` / ``clfx render`` do; effects and
 looks that read depth or velocity get the contract's synthetic passes.
 """
