@@ -258,6 +258,11 @@ def _io_options(f):
         click.option("--depth-mode", type=click.Choice(["auto", "z", "inverse", "distance", "normalized"]),
                      default="auto", help="How depth is stored: planar z, 1/z, radial distance, 0-1."),
         click.option("--depth-scale", type=float, default=1.0, help="Multiply depth (e.g. 0.01 for cm to m)."),
+        click.option("--depth-zero", type=click.Choice(["auto", "far", "invalid"]), default="auto",
+                     help="Depth 0: far = no hit (infinitely far), invalid = kept (in focus); "
+                          "auto decides from its share and alpha."),
+        click.option("--depth-far-threshold", type=float, default=1e9, metavar="Z",
+                     help="Depths of at least this magnitude are no hit (inf keeps them)."),
         click.option("--focal-length-px", type=float, default=None,
                      help="For --depth-mode distance: focal length in pixels (default: from the "
                           "look's camera block and the frame width)."),
@@ -299,7 +304,9 @@ def _pass_spec(kw, focal_length_px: float | None = None):
                     velocity_channels=tuple(vc.split(",")) if vc else None,
                     velocity_y_up=kw.get("velocity_y_up"),
                     velocity_scale=kw.get("velocity_scale", 1.0),
-                    focal_length_px=kw.get("focal_length_px") or focal_length_px)
+                    focal_length_px=kw.get("focal_length_px") or focal_length_px,
+                    depth_zero=kw.get("depth_zero") or "auto",
+                    depth_far_threshold=kw.get("depth_far_threshold") or 1e9)
 
 
 for _cmd in (probe,):
@@ -307,6 +314,8 @@ for _cmd in (probe,):
         click.option("--depth-channel", default=None), click.option("--depth-mode", default="auto",
             type=click.Choice(["auto", "z", "inverse", "distance", "normalized"])),
         click.option("--depth-scale", type=float, default=1.0),
+        click.option("--depth-zero", type=click.Choice(["auto", "far", "invalid"]), default="auto"),
+        click.option("--depth-far-threshold", type=float, default=1e9),
         click.option("--focal-length-px", type=float, default=None),
         click.option("--velocity-channels", default=None, metavar="U,V"),
         click.option("--velocity-y-up/--velocity-y-down", default=None),

@@ -17,7 +17,9 @@ Reading
 - Channels are always looked up by name (``spec.channelindex``); a missing channel is an
   error, never zeros.
 - The beauty, depth and velocity search orders and the renderers' conventions are in
-  `clfx.io.channels` (``probe`` prints them).  `PassSpec` overrides any of them.  A file that
+  `clfx.io.channels` (``probe`` prints them).  A depth pass's "no hit" sentinels (0, huge
+  values) are read as +inf per `clfx.io.channels.no_hit`; what was assumed is passed to
+  ``notify`` (a `DepthConventionWarning` by default).  `PassSpec` overrides any of them.  A file that
   holds only passes (a lone ``Z``) has no beauty and is refused, naming its channels.
 - Depth or velocity in separate files (``depth_path``, ``velocity_path``): same search order in
   that file; if nothing matches and the file holds a single channel (or R/Y), that channel is
@@ -55,6 +57,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -101,6 +104,13 @@ class PassSpec:
         ``backward`` vectors are negated; ``auto`` = from the detected convention.
     focal_length_px : float, optional
         Focal length in pixels (pixel heights), required for ``depth_mode="distance"``.
+    depth_zero : {"auto", "far", "invalid"}
+        How exact zeros in the depth are read: ``far`` = no hit (+inf), ``invalid`` = kept
+        as 0 (effects treat it as in focus), ``auto`` = decided per frame from the share of
+        zeros and the beauty's alpha there (`clfx.io.channels.no_hit`).
+    depth_far_threshold : float
+        Depths (before ``depth_scale``) of at least this magnitude are no hit (+inf); ``inf``
+        keeps them.
     """
 
     depth_channel: str | None = None
@@ -113,8 +123,15 @@ class PassSpec:
     velocity_scale: float = 1.0
     velocity_direction: str = "auto"
     focal_length_px: float | None = None
+    depth_zero: str = "auto"
+    depth_far_threshold: float = ch.DEPTH_FAR_AS_INF
 
     def __post_init__(self):
+        if self.depth_zero not in ch.DEPTH_ZERO:
+            raise ClipError(f"depth_zero {self.depth_zero!r} is not one of {ch.DEPTH_ZERO}")
+        if not self.depth_far_threshold > 0:
+            raise ClipError(f"depth_far_threshold {self.depth_far_threshold!r} must be > 0 "
+                            "(inf keeps every value)")
         if self.depth_mode not in ch.DEPTH_MODES:
             raise ClipError(f"depth_mode {self.depth_mode!r} is not one of {ch.DEPTH_MODES}")
         if self.velocity_direction not in ch.VELOCITY_DIRECTIONS:
@@ -446,10 +463,13 @@ def _read_beauty(plan: ReadPlan) -> np.ndarray:
 
 
 def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect,
-                aspect: float) -> np.ndarray | None:
+                aspect: float, alpha: np.ndarray | None
+                ) -> tuple[np.ndarray, ch.NoHit] | tuple[None, None]:
+    """Planar depth over ``frame_win`` (+inf outside the pass) and how its "no hit"
+    sentinels were read; ``alpha`` is the beauty's over ``frame_win`` (None: opaque)."""
     pp = plan.depth
     if pp is None:
-        return None
+        return None, None
     if pp.separate:
         _check_same_window("depth", pp, plan.file.path, frame_win)
     raw = _read_channels(pp.path, pp.part, pp.channels)[pp.channels[0]]
@@ -461,12 +481,50 @@ def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect
         ys = np.arange(win.y0, win.y1, dtype=np.float64) + 0.5 - cy
         centres = (xs[None, :], ys[:, None])
     try:
-        z = ch.depth_to_planar(raw, pp.mode, scale=passes.depth_scale, near=passes.depth_near,
-                               far=passes.depth_far, focal_length_px=passes.focal_length_px,
-                               pixel_centres=centres, pixel_aspect=aspect)
+        z = ch.depth_to_planar(raw, pp.mode, near=passes.depth_near, far=passes.depth_far,
+                               focal_length_px=passes.focal_length_px, pixel_centres=centres,
+                               pixel_aspect=aspect, far_threshold=math.inf)
     except ValueError as e:
         raise ClipError(f"depth of {pp.path}: {e}") from None
-    return crop_to(z, win, frame_win, np.inf)
+    if alpha is not None:
+        alpha = crop_to(alpha, frame_win, win, 0.0)     # outside the beauty: transparent
+    half = pp.part.formats[pp.part.channels.index(pp.channels[0])] == "half"
+    nohit = ch.no_hit(z, alpha, zero=passes.depth_zero, far_threshold=passes.depth_far_threshold,
+                      half=half)
+    z = nohit.apply(z, scale=passes.depth_scale)
+    return crop_to(z, win, frame_win, np.inf), nohit
+
+
+def depth_no_hit(plan: ReadPlan, passes: PassSpec) -> ch.NoHit | None:
+    """How ``plan``'s depth pass marks "no hit" (reads the depth and the beauty's alpha only;
+    for ``probe``)."""
+    if plan.depth is None:
+        return None
+    b = plan.beauty
+    bpart = plan.file.parts[b.part]
+    alpha = None
+    if b.alpha:
+        alpha = _read_channels(plan.file.path, bpart, [b.alpha])[b.alpha]
+    return _read_depth(plan, passes, bpart.data_window, bpart.display_window,
+                       bpart.pixel_aspect, alpha)[1]
+
+
+class DepthConventionWarning(UserWarning):
+    """A depth pass's "no hit" sentinels (0, huge values) were read as infinitely far."""
+
+
+def _announce(path, plan: ReadPlan, nohit: ch.NoHit | None, notify) -> None:
+    """Say once what a depth pass's sentinels were taken to mean (see `read_frame`)."""
+    if nohit is None or not nohit.assumed:
+        return
+    pp = plan.depth
+    where = f" in {pp.path}" if pp.separate else ""
+    msg = f"{os.fspath(path)}: depth {pp.channels[0]}{where}: {nohit.describe()}"
+    key = "depth:" + "+".join(nohit.assumed)
+    if notify is None:
+        warnings.warn(msg, DepthConventionWarning, stacklevel=3)
+    else:
+        notify(msg, key)
 
 
 def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect) -> np.ndarray | None:
@@ -483,7 +541,8 @@ def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect) -> np.ndar
 
 
 def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
-               depth_path=None, velocity_path=None, part: int | str | None = None) -> Frame:
+               depth_path=None, velocity_path=None, part: int | str | None = None,
+               notify=None) -> Frame:
     """Read one frame: beauty RGBA plus depth and velocity if found.
 
     Parameters
@@ -499,6 +558,11 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
         Separate files holding the depth / velocity (same data window as the beauty).
     part : int or str, optional
         Take the beauty from this part (index or name) instead of searching.
+    notify : callable(message, key), optional
+        Told what was assumed about the depth's "no hit" values (0 or huge values read as
+        +inf; `clfx.io.channels.no_hit`): one line naming the file, and a key that is the
+        same for the same assumption on every frame (so a batch says it once per sequence).
+        Default: a `DepthConventionWarning`.
 
     Returns
     -------
@@ -519,7 +583,9 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
     check_window(path, win)
     check_window(path, display, "display window")   # effects size buffers from it
     rgba = _read_beauty(plan)
-    depth = _read_depth(plan, passes, win, display, aspect)
+    alpha = rgba[..., 3] if plan.beauty.alpha else None
+    depth, nohit = _read_depth(plan, passes, win, display, aspect, alpha)
+    _announce(path, plan, nohit, notify)
     velocity = _read_velocity(plan, passes, win)
     bit_depth = bpart.formats[bpart.channels.index(plan.beauty.rgb[0])]
     return Frame(rgba, win, display, aspect, depth, velocity, metadata(bpart.spec),

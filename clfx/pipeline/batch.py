@@ -54,6 +54,7 @@ class Batch:
     jobs: list[Job] = field(default_factory=list)
     skipped_existing: list[int] = field(default_factory=list)
     look_files: list[str] = field(default_factory=list)   # files effects read (PathParam)
+    noticed: set[str] = field(default_factory=set)        # reader notices said (once each)
 
     # -- checks -------------------------------------------------------------------------
     def prepare(self) -> None:
@@ -201,8 +202,17 @@ class Batch:
 
         t0 = time.perf_counter()
         frame = read_frame(job.input, passes=self.passes, colorspace=self.options.get("colorspace"),
-                           depth_path=job.depth, velocity_path=job.velocity)
+                           depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
         return frame, (time.perf_counter() - t0) * 1e3
+
+    def _notice(self, message: str, key: str) -> None:
+        """What the reader assumed (e.g. depth 0 = no hit): one line per sequence and key."""
+        if key.startswith("depth") and "depth" not in self.look.clips_used():
+            return                       # no step reads the depth: its conventions are moot
+        if key not in self.noticed:
+            self.noticed.add(key)
+            if self.verbosity > 0:
+                self._err(f"clfx: {message}")
 
     def _write(self, frame: Frame, job: Job, report) -> None:
         from clfx.io.write import OutputExistsError, write_frame
