@@ -221,7 +221,8 @@ def probe(ctx, file, as_json, **kw):
     """Print the channels, windows and passes found in FILE and how they will be read."""
     from clfx.io.probe import format_probe, probe as probe_file
 
-    info = probe_file(file, passes=_pass_spec(ctx.params))
+    info = probe_file(file, passes=_pass_spec(ctx.params), colorspace=kw.get("colorspace"),
+                      working_space=kw.get("working_space"), view=kw.get("view"))
     click.echo(json.dumps(info, indent=2, default=str) if as_json else format_probe(info))
 
 
@@ -270,10 +271,22 @@ def _io_options(f):
         click.option("--velocity-y-up/--velocity-y-down", default=None,
                      help="Direction of +v in the velocity pass (overrides detection)."),
         click.option("--velocity-scale", type=float, default=1.0, help="Multiply velocity."),
-        click.option("--colorspace", default=None, help="Colour space of the input (OCIO name, 'linear', 'sRGB')."),
-        click.option("--out-colorspace", default=None, help="Colour space to encode the output in."),
-        click.option("--float", "as_float", is_flag=True, help="Write EXR beauty as 32-bit float (default half)."),
-        click.option("--compression", default=None, help="EXR compression: zip (default), piz, dwaa, none, ..."),
+        click.option("--colorspace", default=None,
+                     help="Colour space of the input (OCIO name or alias, 'raw'); default: the "
+                          "file's tag or chromaticities, else sRGB for 8/16-bit, linear Rec.709."),
+        click.option("--out-colorspace", default=None,
+                     help="Colour space to write the output in (default: the input's)."),
+        click.option("--working-space", default=None, metavar="SPACE",
+                     help="Linear space effects work in: lin_rec709 (default), ACEScg, ..."),
+        click.option("--passes", type=click.Choice(["keep", "drop"]), default="keep",
+                     help="keep: write every other channel and part of the input through "
+                          "unchanged (EXR); drop: the beauty only."),
+        click.option("--view", default=None, metavar="NAME",
+                     help="Multi-view input: render this view only (default: every view)."),
+        click.option("--float", "as_float", is_flag=True,
+                     help="Write the EXR beauty as 32-bit float (default: the input's type)."),
+        click.option("--compression", default=None,
+                     help="EXR compression: zip, piz, dwaa, none, ... (default: the input's)."),
         click.option("--overwrite", is_flag=True, help="Replace existing outputs."),
         click.option("--skip-existing", is_flag=True, help="Skip frames whose output exists (resume a batch)."),
         click.option("--skip-missing", is_flag=True, help="Skip missing input frames instead of failing."),
@@ -319,7 +332,9 @@ for _cmd in (probe,):
         click.option("--focal-length-px", type=float, default=None),
         click.option("--velocity-channels", default=None, metavar="U,V"),
         click.option("--velocity-y-up/--velocity-y-down", default=None),
-        click.option("--velocity-scale", type=float, default=1.0)]):
+        click.option("--velocity-scale", type=float, default=1.0),
+        click.option("--colorspace", default=None), click.option("--working-space", default=None),
+        click.option("--view", default=None)]):
         _o(_cmd)
 
 

@@ -199,15 +199,20 @@ def test_pixel_aspect_files(name, aspect):
 
 @needs_data
 def test_metadata_passthrough_drops_layout_attributes(tmp_path):
-    fr = read_frame(DATA / "Beachball" / "multipart.0001.exr")
+    fr = read_frame(DATA / "Beachball" / "multipart.0001.exr", notify=lambda m, k: None)
     assert fr.metadata["view"] == "right"
-    write_frame(fr, tmp_path / "m.exr", compression="zip")
+    write_frame(fr, tmp_path / "m.exr", compression="zip", write_passes=False)  # beauty only
     meta = read_frame(tmp_path / "m.exr").metadata
     assert meta["screenWindowWidth"] == pytest.approx(1.0)
     assert meta["screenWindowCenter"] == pytest.approx([0.0, 0.0])
     assert meta["compression"] == "zip"                 # not the source's zips
     assert "view" not in meta and "name" not in meta
     assert meta.get("openexr:chunkCount") != 876
+    # every part kept (the default): the beauty's part keeps its name and view
+    write_frame(fr, tmp_path / "k.exr")
+    meta = read_frame(tmp_path / "k.exr", notify=lambda m, k: None).metadata
+    assert meta["view"] == "right" and meta["name"] == "rgba_right"
+    assert meta["compression"] == "zips"                # the source's
 
 
 # --------------------------------------------------------------------------------------------

@@ -299,7 +299,28 @@ def _layer_groups(chans: list[Channel]) -> dict:
     return groups
 
 
-def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice | None:
+def file_views(parts: list[dict]) -> tuple[str, ...]:
+    """Every view a file names, hero first (``multiView`` order, then part ``view``s)."""
+    out: list[str] = []
+    for p in parts:
+        for v in tuple(p.get("views") or ()) + ((p["view"],) if p.get("view") else ()):
+            if v not in out:
+                out.append(v)
+    hero = hero_view(parts)
+    if hero in out:
+        out.remove(hero)
+        out.insert(0, hero)
+    return tuple(out)
+
+
+def beauty_views(parts: list[dict]) -> tuple[str, ...]:
+    """The views that have a beauty of their own, hero first (empty: not multi-view)."""
+    return tuple(v for v in file_views(parts)
+                 if (b := find_beauty(parts, view=v)) is not None and b.view == v)
+
+
+def find_beauty(parts: list[dict], *, part: int | None = None,
+                view: str | None = None) -> BeautyChoice | None:
     """Pick the beauty channels following the documented order (see module docstring).
 
     Parameters
@@ -308,9 +329,13 @@ def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice |
         As for `catalogue`.
     part : int, optional
         Restrict the search to this part index.
+    view : str, optional
+        The beauty of this view (channels of other views are not considered); default: the
+        hero view preferred.
     """
-    chans = [c for c in catalogue(parts) if part is None or c.part == part]
-    hero = hero_view(parts)
+    chans = [c for c in catalogue(parts) if (part is None or c.part == part)
+             and (view is None or c.view in (view, None))]
+    hero = view or hero_view(parts)
     groups = _layer_groups(chans)
 
     def has_rgb(comps):
@@ -335,7 +360,8 @@ def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice |
         if key[1] == "" and "Y" in g:
             return pick(key, g, "grey: Y channel")
     for p, info in enumerate(parts):
-        if (part is None or p == part) and len(info["channels"]) == 1:
+        if ((part is None or p == part) and len(info["channels"]) == 1
+                and any(c.part == p for c in chans)):
             name = info["channels"][0]
             if depth_rule_for(name, tuple(info.get("views") or ())):
                 continue       # a lone Z is a depth pass, not a grey picture

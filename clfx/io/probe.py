@@ -11,7 +11,8 @@ _CONVENTION = {True: "y-up", False: "y-down"}
 
 
 def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
-          depth_path=None, velocity_path=None, part: int | str | None = None) -> dict:
+          depth_path=None, velocity_path=None, part: int | str | None = None,
+          working_space: str | None = None, view: str | None = None) -> dict:
     """Describe a file and how `read_frame` would read it (of the pixels, only the depth
     and alpha are read: for ``depth.no_hit``).
 
@@ -20,10 +21,14 @@ def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
     dict
         JSON-able: ``file``, ``format``, ``parts`` (name, view, channels, windows, pixel
         aspect), ``view``, ``beauty``, ``depth`` and ``velocity`` (channel, part, mode or
-        convention, ``why``; depth also ``no_hit``: how 0 and huge values were read) or None, ``ignored_other_views``, ``encoding``, ``colorspace``,
+        convention, ``why``; depth also ``no_hit``: how 0 and huge values were read) or None,
+        ``ignored_other_views``, ``views`` (views with a beauty, hero first: all rendered by
+        default), ``encoding``, ``colorspace`` (``from`` the file's space, ``to`` the working
+        space, ``why``),
         ``search_order``.
     """
-    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part)
+    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part, working_space,
+                     view)
     f = plan.file
     info = {
         "file": f.path,
@@ -41,8 +46,9 @@ def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
         "velocity": None,
         "ignored_other_views": ch.other_view_channels(f.dicts(), plan.view),
         "encoding": plan.encoding,
-        "colorspace": {"from": plan.source_colorspace or "linear (no conversion)",
-                       "to": "linear" if plan.source_colorspace else "linear (as stored)"},
+        "colorspace": {"from": plan.source_colorspace, "to": plan.working,
+                       "why": plan.colour_why},
+        "views": list(ch.beauty_views(f.dicts())),
         "search_order": ch.search_order(),
     }
     if plan.depth:
@@ -89,7 +95,8 @@ def format_probe(info: dict) -> str:
     b = info["beauty"]
     lines.append(f"beauty: part {b['part']} {', '.join(b['channels'])}  ({b['why']})")
     if info.get("view"):
-        lines.append(f"view: {info['view']}")
+        lines.append(f"view: {info['view']}  (views with a beauty: "
+                     f"{', '.join(info['views']) or 'none'}; all are rendered unless --view)")
     d, v = info["depth"], info["velocity"]
     lines.append(_pass_line("depth", d, info, d and d["channel"], d and f"mode {d['mode']}"))
     if d:
@@ -99,7 +106,8 @@ def format_probe(info: dict) -> str:
     if info["ignored_other_views"]:
         lines.append(f"ignored (other views): {', '.join(info['ignored_other_views'])}")
     cs = info["colorspace"]
-    lines.append(f"encoding: {info['encoding']}  (colour: {cs['from']} -> {cs['to']})")
+    lines.append(f"encoding: {info['encoding']}  (colour: {cs['from']} -> working space "
+                 f"{cs['to']}; {cs['why']})")
     lines.append("search order:")
     for kind, order in info["search_order"].items():
         lines.append(f"  {kind}: " + " > ".join(order))

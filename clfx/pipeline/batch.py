@@ -155,16 +155,20 @@ class Batch:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
-                frame_in, read_ms = next_read.result()
+                views_in, read_ms = next_read.result()   # multi-view files: hero first
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
                 frame_out, report = render_frame(
-                    rt, self.look, frame_in, frame_number=job.frame,
+                    rt, self.look, views_in[0], frame_number=job.frame,
                     quality=self.options.get("quality"),
                     keep_overscan=self.options.get("keep_overscan", False),
                     analysis_summary=bool(self.options.get("as_json")))
+                views_out = [render_frame(rt, self.look, v, frame_number=job.frame,
+                                          quality=self.options.get("quality"),
+                                          keep_overscan=self.options.get("keep_overscan", False))[0]
+                             for v in views_in[1:]]
                 report.input, report.output = job.input, job.output
                 report.read_ms = read_ms
-                writes.append((pool.submit(self._write, frame_out, job, report), report))
+                writes.append((pool.submit(self._write, frame_out, job, report, views_out), report))
                 writes = self._drain(writes, block=False)
                 reports.append(report)
                 if self.progress:
@@ -196,14 +200,18 @@ class Batch:
                 self._err(report.explain())
         return writes
 
-    def _read(self, job: Job) -> tuple[Frame, float]:
-        """The job's frame and the milliseconds it took to read."""
-        from clfx.io.read import read_frame
+    def _read(self, job: Job) -> tuple[list[Frame], float]:
+        """The job's frame (every view of a multi-view file when the output can hold them,
+        hero first) and the milliseconds it took to read."""
+        from clfx.io.read import read_views
 
         t0 = time.perf_counter()
-        frame = read_frame(job.input, passes=self.passes, colorspace=self.options.get("colorspace"),
-                           depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
-        return frame, (time.perf_counter() - t0) * 1e3
+        o = self.options
+        frames = read_views(job.input, view=o.get("view"), passes=self.passes,
+                            all_views=job.output.lower().endswith(".exr") and o.get("passes") != "drop",
+                            colorspace=o.get("colorspace"), working_space=o.get("working_space"),
+                            depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
+        return frames, (time.perf_counter() - t0) * 1e3
 
     def _notice(self, message: str, key: str) -> None:
         """What the reader assumed (e.g. depth 0 = no hit): one line per sequence and key."""
@@ -214,7 +222,7 @@ class Batch:
             if self.verbosity > 0:
                 self._err(f"clfx: {message}")
 
-    def _write(self, frame: Frame, job: Job, report) -> None:
+    def _write(self, frame: Frame, job: Job, report, views=()) -> None:
         from clfx.io.write import OutputExistsError, write_frame
 
         t0 = time.perf_counter()
@@ -223,7 +231,8 @@ class Batch:
             write_frame(frame, job.output, bit_depth="float" if o.get("as_float") else None,
                         compression=o.get("compression"), colorspace=o.get("out_colorspace"),
                         overwrite=bool(o.get("overwrite")), attributes=self.look.stamp(),
-                        protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files)
+                        protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files,
+                        write_passes=o.get("passes") != "drop", views=views)
         except OutputExistsError:
             if not o.get("skip_existing"):
                 raise
@@ -256,10 +265,12 @@ class Batch:
         stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
         count = 0
         t0 = time.perf_counter()
-        while (frame := read_raw(stdin, self.raw_size, count)) is not None:
+        o = self.options
+        while (frame := read_raw(stdin, self.raw_size, count, colorspace=o.get("colorspace"),
+                                 working_space=o.get("working_space"))) is not None:
             out, report = render_frame(rt, self.look, frame, frame_number=count,
                                        quality=self.options.get("quality"))
-            write_raw(stdout, out, frame.data_window)
+            write_raw(stdout, out, frame.data_window, colorspace=o.get("out_colorspace"))
             if self.options.get("explain"):
                 self._err(report.explain())
             count += 1
