@@ -207,8 +207,8 @@ def convert(rgba: np.ndarray, src: str | None, dst: str | None, path) -> np.ndar
             m = np.linalg.solve(rgb_to_xyz(dst), rgb_to_xyz(src))
         else:
             m = _ocio_matrix(src, dst)
-        out = rgba.copy()
-        out[..., :3] = (rgba[..., :3].astype(np.float64) @ m.T).astype(np.float32)
+        out = rgba.copy()       # float32 products: 1e-7 relative, no float64 copy of a frame
+        out[..., :3] = rgba[..., :3] @ m.T.astype(np.float32)
         return out
     if src.startswith(CHROMA_PREFIX):         # via OCIO's XYZ: matrix in, OCIO out
         return convert(convert(rgba, src, XYZ_D65, path), XYZ_D65, dst, path)
