@@ -21,7 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 import click
 
 from clfx import __version__
-from clfx.cli_options import pass_options, quality_option, render_options
+from clfx.cli_options import colour_options, pass_options, quality_option, render_options
 from clfx.core.errors import ClfxError
 
 EXIT_INTERRUPTED = 130
@@ -286,11 +286,13 @@ def look_show(name, assignments, as_json):
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True)
 @pass_options
-def probe(file, as_json, **kw):
+@colour_options
+def probe(file, as_json, colorspace, working_space, view, **kw):
     """Print the channels, windows and passes found in FILE and how they will be read."""
     from clfx.io.probe import format_probe, probe as probe_file
 
-    info = probe_file(file, passes=_pass_options(kw).spec())
+    info = probe_file(file, passes=_pass_options(kw).spec(), colorspace=colorspace,
+                      working_space=working_space, view=view)
     click.echo(json.dumps(info, indent=2, default=str) if as_json else format_probe(info))
 
 

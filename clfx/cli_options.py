@@ -45,6 +45,11 @@ pass_options = stack(
                  help="How depth is stored: planar z, 1/z, radial distance, 0-1."),
     click.option("--depth-scale", type=float, default=1.0, callback=_positive,
                  help="Multiply depth (e.g. 0.01 for cm to m)."),
+    click.option("--depth-zero", type=click.Choice(["auto", "far", "invalid"]), default="auto",
+                 help="Depth 0: far = no hit (infinitely far), invalid = kept (in focus); "
+                      "auto decides from its share and alpha."),
+    click.option("--depth-far-threshold", type=float, default=1e9, metavar="Z",
+                 help="Depths of at least this magnitude are no hit (inf keeps them)."),
     click.option("--focal-length-px", type=float, default=None,
                  help="For --depth-mode distance: focal length in pixels (default: from the "
                       "look's camera block and the frame width)."),
@@ -56,6 +61,16 @@ pass_options = stack(
                  help="Multiply velocity."),
 )
 
+colour_options = stack(
+    click.option("--colorspace", default=None,
+                 help="Colour space of the input (OCIO name or alias, 'raw'); default: the "
+                      "file's tag or chromaticities, else sRGB for 8/16-bit, linear Rec.709."),
+    click.option("--working-space", default=None, metavar="SPACE",
+                 help="Linear space effects work in: lin_rec709 (default), ACEScg, ..."),
+    click.option("--view", default=None, metavar="NAME",
+                 help="Multi-view input: render this view only (default: every view)."),
+)
+
 render_options = stack(
     click.option("--frames", default=None, metavar="SPEC",
                  help="Frames to render: 1-100, 1-100x2, 1,5,10-20, farm a-b:n. Default: all on disk."),
@@ -65,13 +80,16 @@ render_options = stack(
     click.option("--velocity", "velocity_path", default=None, metavar="PATTERN",
                  help="Velocity pass from separate files."),
     pass_options,
-    click.option("--colorspace", default=None,
-                 help="Colour space of the input (OCIO name, 'linear', 'sRGB')."),
-    click.option("--out-colorspace", default=None, help="Colour space to encode the output in."),
+    colour_options,
+    click.option("--out-colorspace", default=None,
+                 help="Colour space to write the output in (default: the input's)."),
+    click.option("--passes", "passes_mode", type=click.Choice(["keep", "drop"]), default="keep",
+                 help="keep: write every other channel and part of the input through "
+                      "unchanged (EXR); drop: the beauty only."),
     click.option("--float", "as_float", is_flag=True,
-                 help="Write EXR beauty as 32-bit float (default half)."),
+                 help="Write the EXR beauty as 32-bit float (default: the input's type)."),
     click.option("--compression", default=None,
-                 help="EXR compression: zip (default), piz, dwaa, none, ..."),
+                 help="EXR compression: zip, piz, dwaa, none, ... (default: the input's)."),
     click.option("--overwrite", is_flag=True, help="Replace existing outputs."),
     click.option("--skip-existing", is_flag=True,
                  help="Skip frames whose output exists (resume a batch)."),

@@ -232,11 +232,27 @@ def test_radial_depth_uses_the_look_camera_focal_length(rt, tmp_path):
     ys, xs = np.mgrid[0:h, 0:w] + 0.5
     planar = np.full((h, w), 4.0, np.float32)
     radial = planar * np.sqrt(1 + ((xs - w / 2) ** 2 + (ys - h / 2) ** 2) / cam_f_px ** 2)
-    write_frame(Frame.from_array(np.ones((h, w, 4), np.float32), depth=radial.astype(np.float32)),
+    texture = np.random.default_rng(5).uniform(0, 1, (h, w, 4)).astype(np.float32)
+    texture[..., 3] = 1.0
+    write_frame(Frame.from_array(texture, depth=radial.astype(np.float32)),
                 tmp_path / "in.exr", bit_depth="float")
-    run("render", tmp_path / "in.exr", tmp_path / "out.exr", "--depth-mode", "distance",
-        "--float", "--set", "glare.strength=0")
-    np.testing.assert_allclose(read_frame(tmp_path / "out.exr").depth, planar, rtol=1e-5)
+
+    def render(name, *focal):
+        run("render", tmp_path / "in.exr", tmp_path / name, "--depth-mode", "distance",
+            *focal, "--float", "--set", "glare.strength=0", "--set", "camera.focus_distance=0.2",
+            "--set", "dof.max_coc=0.25")       # a CoC of a few px at 4 m on this tiny frame
+        return read_frame(tmp_path / name)
+
+    auto = render("out.exr")
+    # the input's depth is written through as stored (radial) and reads back the same way
+    np.testing.assert_array_equal(auto.depth, read_frame(tmp_path / "in.exr").depth)
+    from clfx.io.read import PassSpec
+    back = read_frame(tmp_path / "out.exr",
+                      passes=PassSpec(depth_mode="distance", focal_length_px=cam_f_px))
+    np.testing.assert_allclose(back.depth, planar, rtol=1e-5)
+    # dof saw the planar depth of the look's focal length: the same pixels as giving it
+    assert np.array_equal(auto.rgba, render("given.exr", "--focal-length-px", str(cam_f_px)).rgba)
+    assert not np.array_equal(auto.rgba, render("wrong.exr", "--focal-length-px", "5").rgba)
     info = json.loads(run("probe", tmp_path / "in.exr", "--depth-mode", "distance",
                           "--focal-length-px", str(cam_f_px), "--json").stdout)
     assert info["depth"]["mode"] == "distance"

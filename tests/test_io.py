@@ -14,7 +14,7 @@ import pytest
 from clfx.io import write as io_write
 from clfx.core.errors import ClipError, ImageIOError
 from clfx.core.frame import Frame
-from clfx.io.read import PassSpec, read_frame
+from clfx.io.read import DepthConventionWarning, PassSpec, read_frame
 from clfx.io.write import encoding_for, write_frame
 from clfx.io.probe import format_probe, probe
 from clfx.core.rect import Rect
@@ -199,15 +199,20 @@ def test_pixel_aspect_files(name, aspect):
 
 @needs_data
 def test_metadata_passthrough_drops_layout_attributes(tmp_path):
-    fr = read_frame(DATA / "Beachball" / "multipart.0001.exr")
+    fr = read_frame(DATA / "Beachball" / "multipart.0001.exr", notify=lambda m, k: None)
     assert fr.metadata["view"] == "right"
-    write_frame(fr, tmp_path / "m.exr", compression="zip")
+    write_frame(fr, tmp_path / "m.exr", compression="zip", write_passes=False)  # beauty only
     meta = read_frame(tmp_path / "m.exr").metadata
     assert meta["screenWindowWidth"] == pytest.approx(1.0)
     assert meta["screenWindowCenter"] == pytest.approx([0.0, 0.0])
     assert meta["compression"] == "zip"                 # not the source's zips
     assert "view" not in meta and "name" not in meta
     assert meta.get("openexr:chunkCount") != 876
+    # every part kept (the default): the beauty's part keeps its name and view
+    write_frame(fr, tmp_path / "k.exr")
+    meta = read_frame(tmp_path / "k.exr", notify=lambda m, k: None).metadata
+    assert meta["view"] == "right" and meta["name"] == "rgba_right"
+    assert meta["compression"] == "zips"                # the source's
 
 
 # --------------------------------------------------------------------------------------------
@@ -286,9 +291,10 @@ def test_nuke_inverse_depth_converted_to_planar_z(tmp_path):
     np.testing.assert_allclose(fr.depth[0, :3], [1.0, 2.0, 4.0], rtol=1e-6)
     assert fr.depth[0, 3] == np.inf
     np.testing.assert_array_equal(fr.velocity[0, 0], [3.0, -2.0])     # y-up -> y-down
-    # explicit override: read the same channel as planar z, in cm -> m
+    # explicit override: read the same channel as planar z, in cm -> m (its 0, a quarter of
+    # the pixels, would be read as no hit: keep it)
     raw = read_frame(path, passes=PassSpec(depth_channel="depth.Z", depth_mode="z",
-                                           depth_scale=0.01))
+                                           depth_scale=0.01, depth_zero="invalid"))
     np.testing.assert_allclose(raw.depth, inv * 0.01, rtol=1e-6)
 
 
@@ -308,14 +314,16 @@ def test_blender_multilayer_conventions(tmp_path):
     assert info["beauty"]["channels"][0] == "ViewLayer.Combined.R"     # not AO
     assert info["depth"]["channel"] == "ViewLayer.Depth.Z"
     assert info["velocity"]["channels"] == ["ViewLayer.Vector.Z", "ViewLayer.Vector.W"]
-    fr = read_frame(path)
+    with pytest.warns(DepthConventionWarning, match="1 pixel"):     # said, not silent
+        fr = read_frame(path)
     assert fr.depth[0, 0] == np.inf and fr.depth[1, 1] == 5.0
     # ZW = current - next, y-up: forward = -(Z, W); then y flipped -> (4, 6)
     np.testing.assert_array_equal(fr.velocity[0, 0], [4.0, 6.0])
     np.testing.assert_allclose(fr.rgba, 0.5)
     # XY only (previous - current): forward ~ -(X, Y), y flipped -> (-1, 2)
     fr_xy = read_frame(path, passes=PassSpec(velocity_channels=("ViewLayer.Vector.X",
-                                                                "ViewLayer.Vector.Y")))
+                                                                "ViewLayer.Vector.Y")),
+                       notify=lambda msg, key: None)
     np.testing.assert_array_equal(fr_xy.velocity[0, 0], [-1.0, 2.0])
 
 

@@ -125,9 +125,9 @@ def test_oiio_write_failure_midway_leaves_nothing(tmp_path, monkeypatch):
     calls = {"n": 0}
     blocks = io_write._write_blocks
 
-    def fail_midway(out, spec, planes):
+    def fail_midway(out, part):
         calls["n"] += 1
-        return False if calls["n"] == 1 else blocks(out, spec, planes)
+        return False if calls["n"] == 1 else blocks(out, part)
     monkeypatch.setattr(io_write, "_write_blocks", fail_midway)
     with pytest.raises(ImageIOError) as info:
         write_frame(noisy(), tmp_path / "x.exr")

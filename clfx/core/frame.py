@@ -13,6 +13,13 @@ Conventions inside clfx (the I/O layer converts every renderer's convention to t
 - ``pixel_aspect``: width / height of one pixel (EXR ``pixelAspectRatio``).
 - ``encoding``: ``"linear"`` for scene-linear files (EXR, HDR, float TIFF) or ``"sRGB"`` for
   display-referred 8/16-bit files that were linearised on read and are encoded back on write.
+- ``colorspace``: the OCIO name of the space ``rgba`` is in, the *working space* (default
+  scene-linear Rec.709, ``"lin_rec709"``; ``clfx.io.colour.rgb_to_xyz(frame.colorspace)`` gives
+  its RGB -> XYZ matrix); ``source_colorspace``: the space the file stored (outputs are
+  written back in it unless told otherwise), None when unknown or raw.
+- ``layout``: the parts and channels of the file the frame was read from, so that outputs
+  keep every channel the effects do not change (``clfx.io.write``); None for frames made in
+  memory.
 """
 from __future__ import annotations
 
@@ -21,6 +28,31 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from clfx.core.rect import Rect
+
+
+@dataclass(frozen=True)
+class SourcePart:
+    """One part (subimage) of the file a frame was read from: what to write back."""
+
+    index: int                       # subimage index in the source file
+    name: str                        # part name ("" for single-part files)
+    view: str | None                 # the part's ``view`` attribute
+    channels: tuple[str, ...]        # every channel, file order
+    formats: tuple[str, ...]         # per channel, as OpenImageIO names it: half, float, uint
+    data_window: Rect
+    attributes: dict = field(default_factory=dict, compare=False)   # header, plain values
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where a frame's beauty came from: the source file's parts, and which channels of which
+    part hold the beauty (the channels an output replaces; everything else is copied)."""
+
+    path: str
+    parts: tuple[SourcePart, ...]
+    beauty_part: int                 # index into ``parts``
+    beauty: tuple[str, ...]          # channel names as stored: R, G, B[, A] (or one grey)
+    view: str | None = None          # the beauty's view (multi-view files)
 
 
 @dataclass
@@ -35,6 +67,9 @@ class Frame:
     encoding: str = "linear"
     source: str = ""
     bit_depth: str = "half"
+    colorspace: str = "lin_rec709"
+    source_colorspace: str | None = None
+    layout: Layout | None = None
 
     def __post_init__(self):
         h, w = self.data_window.shape

@@ -1,5 +1,5 @@
 """What reading, probing and writing share: OpenImageIO errors as one line, windows and their
-limits, colour conversion, header attributes as plain values.  Private to `clfx.io`."""
+limits, header attributes as plain values.  Private to `clfx.io`."""
 from __future__ import annotations
 
 import os
@@ -17,6 +17,7 @@ _SKIP_NAMES = {
     "type", "version", "chunkCount", "dataWindow", "displayWindow", "lineOrder",
     "planarconfig", "XResolution", "YResolution", "ResolutionUnit", "ICCProfile",
     "Exif:MakerNote", "BitsPerSample", "Orientation",
+    "chromaticities", "colorInteropID",      # written from the output's colour space
 }
 _SKIP_PREFIXES = ("oiio:", "openexr:", "exr:", "tiff:", "png:", "jpeg:", "dpx:", "hdr:",
                   "cineon:", "targa:", "webp:", "heif:")
@@ -88,18 +89,6 @@ def type_name(t) -> str:
     if b in (oiio.UINT8, oiio.INT8):
         return "uint8"
     return "uint16"
-
-
-# ============================================================================================
-# Colour
-
-def colorconvert(rgba: np.ndarray, src: str, dst: str, path) -> np.ndarray:
-    """Convert premultiplied RGBA between OCIO colour spaces (alpha divided out around it)."""
-    buf = oiio.ImageBuf(np.ascontiguousarray(rgba, np.float32))
-    out = oiio.ImageBufAlgo.colorconvert(buf, src, dst, True)
-    if out.has_error or not out.initialized:
-        raise fail(path, f"cannot convert colour {src!r} -> {dst!r} for", geterror(out))
-    return np.asarray(out.get_pixels(oiio.FLOAT), np.float32).reshape(rgba.shape)
 
 
 # ============================================================================================

@@ -50,8 +50,28 @@ name                    auto mode     whose convention
 
 Names are case-sensitive (``depth.Z`` is Nuke's 1/z, ``Depth.Z`` is Blender's planar z).  A rule
 name ``N`` also matches ``N.Z``, ``N.R`` and ``N.Y`` for the single-channel names (V-Ray writes
-render elements as ``VRayZDepth.R/G/B``).  Whatever the mode, converted depths >= 1e9 (Blender's
-1e10 background) become +inf.
+render elements as ``VRayZDepth.R/G/B``).
+
+"No hit" (background) in depth passes
+-------------------------------------
+clfx's background is +inf.  Real files mark "no hit" in other ways; `no_hit` decides, per
+frame, from the converted depth (before ``depth_scale``) and the beauty's alpha:
+
+- **huge values**: converted depths whose magnitude is at least ``far_threshold`` (default
+  1e9: Blender writes 1e10, RenderMan 1e30, 3ds Max -1e30), -inf, and in a half-float channel
+  the largest half (65504, a saturated depth) are no hit -> +inf.
+- **zero**: planar z = 0 lies on the camera and is never a real hit.  With ``zero="auto"``
+  zeros are no hit (-> +inf) when they cover at least `ZERO_FAR_SHARE` of the pass's pixels
+  or when at least `ZERO_FAR_TRANSPARENT` of them are transparent in the beauty (alpha <=
+  1/1024), as in the OpenEXR Beachball sequence (22 % of Z is 0, all of it with alpha 0);
+  otherwise (a few opaque zeros) they stay 0, *invalid*, and effects treat them as in focus.
+  ``zero="far"`` / ``"invalid"`` force either reading (``--depth-zero``).  No renderer is
+  known to state its zero convention in the header, so no attribute is consulted.
+- inverse depth (Nuke ``depth.Z``) already maps 0 to +inf; ``normalized`` depth is 0 at
+  ``depth_near``, so zeros only arise there when ``depth_near`` is 0.
+
+What was assumed is reported by ``clfx probe`` (``depth.no_hit``) and, by the reader, as one
+stderr line per sequence.
 
 Velocity search order (first match wins)
 ----------------------------------------
@@ -83,6 +103,7 @@ forward vectors and does not rescale; treat them as test data, not truth.
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -90,6 +111,15 @@ import numpy as np
 
 #: Converted depths at or above this are background (Blender writes 1e10).
 DEPTH_FAR_AS_INF = 1e9
+#: ``zero="auto"``: zeros on at least this share of a depth pass's pixels are no hit.
+ZERO_FAR_SHARE = 0.05
+#: ``zero="auto"``: zeros of which at least this share is transparent are no hit.
+ZERO_FAR_TRANSPARENT = 0.9
+#: Alpha at or below this is transparent (one half-float step above 0 at 1/1024).
+TRANSPARENT_ALPHA = 1.0 / 1024
+HALF_MAX = 65504.0
+
+DEPTH_ZERO = ("auto", "far", "invalid")
 
 DEPTH_MODES = ("auto", "z", "inverse", "distance", "normalized")
 VELOCITY_DIRECTIONS = ("auto", "forward", "backward")
@@ -269,7 +299,28 @@ def _layer_groups(chans: list[Channel]) -> dict:
     return groups
 
 
-def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice | None:
+def file_views(parts: list[dict]) -> tuple[str, ...]:
+    """Every view a file names, hero first (``multiView`` order, then part ``view``s)."""
+    out: list[str] = []
+    for p in parts:
+        for v in tuple(p.get("views") or ()) + ((p["view"],) if p.get("view") else ()):
+            if v not in out:
+                out.append(v)
+    hero = hero_view(parts)
+    if hero in out:
+        out.remove(hero)
+        out.insert(0, hero)
+    return tuple(out)
+
+
+def beauty_views(parts: list[dict]) -> tuple[str, ...]:
+    """The views that have a beauty of their own, hero first (empty: not multi-view)."""
+    return tuple(v for v in file_views(parts)
+                 if (b := find_beauty(parts, view=v)) is not None and b.view == v)
+
+
+def find_beauty(parts: list[dict], *, part: int | None = None,
+                view: str | None = None) -> BeautyChoice | None:
     """Pick the beauty channels following the documented order (see module docstring).
 
     Parameters
@@ -278,9 +329,13 @@ def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice |
         As for `catalogue`.
     part : int, optional
         Restrict the search to this part index.
+    view : str, optional
+        The beauty of this view (channels of other views are not considered); default: the
+        hero view preferred.
     """
-    chans = [c for c in catalogue(parts) if part is None or c.part == part]
-    hero = hero_view(parts)
+    chans = [c for c in catalogue(parts) if (part is None or c.part == part)
+             and (view is None or c.view in (view, None))]
+    hero = view or hero_view(parts)
     groups = _layer_groups(chans)
 
     def has_rgb(comps):
@@ -305,7 +360,8 @@ def find_beauty(parts: list[dict], *, part: int | None = None) -> BeautyChoice |
         if key[1] == "" and "Y" in g:
             return pick(key, g, "grey: Y channel")
     for p, info in enumerate(parts):
-        if (part is None or p == part) and len(info["channels"]) == 1:
+        if ((part is None or p == part) and len(info["channels"]) == 1
+                and any(c.part == p for c in chans)):
             name = info["channels"][0]
             if depth_rule_for(name, tuple(info.get("views") or ())):
                 continue       # a lone Z is a depth pass, not a grey picture
@@ -431,7 +487,8 @@ def velocity_rule_for(u_name: str, views: tuple[str, ...] = ()) -> VelocityRule 
 def depth_to_planar(raw: np.ndarray, mode: str, *, scale: float = 1.0, near: float = 0.0,
                     far: float = 1.0, focal_length_px: float | None = None,
                     pixel_centres: tuple[np.ndarray, np.ndarray] | None = None,
-                    pixel_aspect: float = 1.0) -> np.ndarray:
+                    pixel_aspect: float = 1.0,
+                    far_threshold: float = DEPTH_FAR_AS_INF) -> np.ndarray:
     """Convert a stored depth channel to planar camera z in scene units, background +inf.
 
     Parameters
@@ -456,12 +513,14 @@ def depth_to_planar(raw: np.ndarray, mode: str, *, scale: float = 1.0, near: flo
         pixels; required for ``distance``.
     pixel_aspect : float
         Pixel width / height.
+    far_threshold : float
+        Converted values at or above this (before ``scale``) become +inf; ``inf`` keeps them.
+        (`read_frame` passes ``inf`` and handles every sentinel with `no_hit`.)
 
     Returns
     -------
     ndarray, float32 (h, w)
-        Planar z; converted values >= 1e9 (before ``scale``) become +inf.  NaN, 0 and
-        negatives pass through (effects sanitise them).
+        Planar z.  NaN, 0 and negatives pass through (effects sanitise them).
     """
     raw = np.asarray(raw, np.float32)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -482,7 +541,8 @@ def depth_to_planar(raw: np.ndarray, mode: str, *, scale: float = 1.0, near: flo
             z = (raw * cos).astype(np.float32)
         else:
             raise ValueError(f"unknown depth mode {mode!r}; expected one of {DEPTH_MODES[1:]}")
-        z = np.where(z >= DEPTH_FAR_AS_INF, np.float32(np.inf), z)
+        if math.isfinite(far_threshold):
+            z = np.where(z >= far_threshold, np.float32(np.inf), z)
         if scale != 1.0:
             z = z * np.float32(scale)
     return z.astype(np.float32, copy=False)
@@ -514,3 +574,122 @@ def velocity_to_forward(u: np.ndarray, v: np.ndarray, *, direction: str, y_up: b
     out[..., 0] = np.asarray(u, np.float32) * np.float32(sign_u * scale)
     out[..., 1] = np.asarray(v, np.float32) * np.float32(sign_v * scale)
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# "No hit" sentinels in depth passes
+
+@dataclass(frozen=True)
+class NoHit:
+    """How a depth pass marks "no hit", decided by `no_hit` (see the module docstring).
+
+    ``zero``: ``"far"`` (zeros become +inf), ``"invalid"`` (zeros stay 0) or None (no zeros);
+    ``zero_share``: zeros / pixels of the pass; ``zero_transparent``: share of the zeros
+    where the beauty is transparent (None without alpha); ``zero_why``: why ``zero`` was
+    chosen.  ``huge``: pixels taken as no hit because of their magnitude (or -inf, or half
+    max); ``far_threshold``: the magnitude used.
+    """
+
+    zero: str | None
+    zero_share: float
+    zero_transparent: float | None
+    zero_why: str
+    huge: int
+    far_threshold: float
+    half_max: bool = False
+
+    def apply(self, z: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
+        """``z`` with every no-hit pixel at +inf, then multiplied by ``scale``."""
+        z = np.asarray(z, np.float32)
+        with np.errstate(invalid="ignore", over="ignore"):
+            far = _huge(z, self.far_threshold, self.half_max)
+            if self.zero == "far":
+                far |= z == 0
+            z = np.where(far, np.float32(np.inf), z)
+            if scale != 1.0:
+                z = z * np.float32(scale)
+        return z.astype(np.float32, copy=False)
+
+    @property
+    def assumed(self) -> list[str]:
+        """Short keys of what was assumed: ``"zero-far"``, ``"huge"`` (for once-per-sequence
+        messages)."""
+        return (["zero-far"] if self.zero == "far" else []) + (["huge"] if self.huge else [])
+
+    def describe(self) -> str:
+        """One phrase: what the pass's sentinels were read as."""
+        parts = []
+        if self.zero == "far":
+            parts.append(f"0 on {self.zero_share:.1%} of the pixels ({self.zero_why}) read "
+                         "as no hit, infinitely far (--depth-zero invalid keeps 0 as invalid)")
+        elif self.zero == "invalid":
+            parts.append(f"0 on {self.zero_share:.1%} of the pixels ({self.zero_why}) kept "
+                         "as invalid depth, treated as in focus (--depth-zero far reads it as "
+                         "no hit)")
+        if self.huge:
+            what = "65504 (half-float maximum) or " if self.half_max else ""
+            parts.append(f"{self.huge} pixel(s) at {what}a magnitude >= {self.far_threshold:g} "
+                         "read as no hit, infinitely far (--depth-far-threshold to change)")
+        return "; ".join(parts) or "no 0 or huge sentinel values; +inf is no hit"
+
+    def as_dict(self) -> dict:
+        return {"zero": self.zero, "zero_share": round(self.zero_share, 6),
+                "zero_transparent": (None if self.zero_transparent is None
+                                     else round(self.zero_transparent, 6)),
+                "huge": self.huge, "far_threshold": self.far_threshold,
+                "assumed": self.describe()}
+
+
+def _huge(z: np.ndarray, threshold: float, half_max: bool) -> np.ndarray:
+    far = np.isinf(z) | (np.abs(z) >= np.float32(min(threshold, np.finfo(np.float32).max)))
+    if half_max:
+        far |= z == np.float32(HALF_MAX)
+    return far
+
+
+def no_hit(z: np.ndarray, alpha: np.ndarray | None = None, *, zero: str = "auto",
+           far_threshold: float = DEPTH_FAR_AS_INF, half: bool = False) -> NoHit:
+    """Decide how a depth pass marks "no hit" (see the module docstring).
+
+    Parameters
+    ----------
+    z : ndarray, float32 (h, w)
+        Converted planar depth, before ``depth_scale`` and before any sentinel handling.
+    alpha : ndarray, float32 (h, w), optional
+        The beauty's alpha over the same pixels (outside the beauty: 0).
+    zero : {"auto", "far", "invalid"}
+        How exact zeros are read; ``auto`` decides from their share and from alpha.
+    far_threshold : float
+        Magnitudes at or above this are no hit (``inf`` turns it off; +-inf always are).
+    half : bool
+        The stored channel is half float: its maximum, 65504, is no hit too.
+
+    Returns
+    -------
+    NoHit
+        Apply it with ``NoHit.apply(z, scale=...)``.
+    """
+    if zero not in DEPTH_ZERO:
+        raise ValueError(f"depth_zero {zero!r} is not one of {DEPTH_ZERO}")
+    z = np.asarray(z, np.float32)
+    zeros = z == 0
+    n_zero = int(np.count_nonzero(zeros))
+    share = n_zero / max(z.size, 1)
+    transparent = None
+    if alpha is not None and n_zero:
+        transparent = float(np.count_nonzero(np.asarray(alpha)[zeros] <= TRANSPARENT_ALPHA)) / n_zero
+    with np.errstate(invalid="ignore"):
+        huge = int(np.count_nonzero(_huge(z, far_threshold, half) & ~np.isposinf(z)))
+    if not n_zero:
+        mode, why = None, ""
+    elif zero != "auto":
+        mode, why = zero, f"--depth-zero {zero}"
+    elif transparent is not None and transparent >= ZERO_FAR_TRANSPARENT:
+        mode, why = "far", f"alpha 0 on {transparent:.0%} of them"
+    elif share >= ZERO_FAR_SHARE:
+        mode, why = "far", f"at least {ZERO_FAR_SHARE:.0%} of the pass"
+    else:
+        mode, why = "invalid", (f"under {ZERO_FAR_SHARE:.0%} of the pass" +
+                                ("" if transparent is None else
+                                 f", alpha 0 on only {transparent:.0%} of them"))
+    return NoHit(mode, share, transparent, why, huge, float(far_threshold), half)

@@ -1,27 +1,34 @@
-"""Describing a file without reading its pixels: its parts, channels and windows, and how
-`clfx.io.read.read_frame` would read it (``clfx probe``)."""
+"""Describing a file: its parts, channels and windows, and how `clfx.io.read.read_frame` would
+read it (``clfx probe``).  Only the depth pass and the beauty's alpha are read, to report how
+the depth marks "no hit" (`clfx.io.channels.no_hit`)."""
 from __future__ import annotations
 
 from clfx.io import channels as ch
 from clfx.io._oiio import win_json
-from clfx.io.read import PassSpec, plan_read
+from clfx.io.read import PassSpec, depth_no_hit, plan_read
 
 _CONVENTION = {True: "y-up", False: "y-down"}
 
 
 def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
-          depth_path=None, velocity_path=None, part: int | str | None = None) -> dict:
-    """Describe a file and how `read_frame` would read it (no pixels read).
+          depth_path=None, velocity_path=None, part: int | str | None = None,
+          working_space: str | None = None, view: str | None = None) -> dict:
+    """Describe a file and how `read_frame` would read it (of the pixels, only the depth
+    and alpha are read: for ``depth.no_hit``).
 
     Returns
     -------
     dict
         JSON-able: ``file``, ``format``, ``parts`` (name, view, channels, windows, pixel
         aspect), ``view``, ``beauty``, ``depth`` and ``velocity`` (channel, part, mode or
-        convention, ``why``) or None, ``ignored_other_views``, ``encoding``, ``colorspace``,
+        convention, ``why``; depth also ``no_hit``: how 0 and huge values were read) or None,
+        ``ignored_other_views``, ``views`` (views with a beauty, hero first: all rendered by
+        default), ``encoding``, ``colorspace`` (``from`` the file's space, ``to`` the working
+        space, ``why``),
         ``search_order``.
     """
-    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part)
+    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part, working_space,
+                     view)
     f = plan.file
     info = {
         "file": f.path,
@@ -39,8 +46,9 @@ def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
         "velocity": None,
         "ignored_other_views": ch.other_view_channels(f.dicts(), plan.view),
         "encoding": plan.encoding,
-        "colorspace": {"from": plan.source_colorspace or "linear (no conversion)",
-                       "to": "linear" if plan.source_colorspace else "linear (as stored)"},
+        "colorspace": {"from": plan.source_colorspace, "to": plan.working,
+                       "why": plan.colour_why},
+        "views": list(ch.beauty_views(f.dicts())),
         "search_order": ch.search_order(),
     }
     if plan.depth:
@@ -50,6 +58,7 @@ def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
                          "data_window": win_json(d.part.data_window), "why": d.why}
         if d.mode == "normalized":
             info["depth"]["near_far"] = [passes.depth_near, passes.depth_far]
+        info["depth"]["no_hit"] = depth_no_hit(plan, passes).as_dict()
     if plan.velocity:
         v = plan.velocity
         info["velocity"] = {"file": v.path, "part": v.part.index, "channels": list(v.channels),
@@ -86,15 +95,19 @@ def format_probe(info: dict) -> str:
     b = info["beauty"]
     lines.append(f"beauty: part {b['part']} {', '.join(b['channels'])}  ({b['why']})")
     if info.get("view"):
-        lines.append(f"view: {info['view']}")
+        lines.append(f"view: {info['view']}  (views with a beauty: "
+                     f"{', '.join(info['views']) or 'none'}; all are rendered unless --view)")
     d, v = info["depth"], info["velocity"]
     lines.append(_pass_line("depth", d, info, d and d["channel"], d and f"mode {d['mode']}"))
+    if d:
+        lines.append(f"  no hit: {d['no_hit']['assumed']}")
     lines.append(_pass_line("velocity", v, info, v and "/".join(v["channels"]),
                             v and v["convention"]))
     if info["ignored_other_views"]:
         lines.append(f"ignored (other views): {', '.join(info['ignored_other_views'])}")
     cs = info["colorspace"]
-    lines.append(f"encoding: {info['encoding']}  (colour: {cs['from']} -> {cs['to']})")
+    lines.append(f"encoding: {info['encoding']}  (colour: {cs['from']} -> working space "
+                 f"{cs['to']}; {cs['why']})")
     lines.append("search order:")
     for kind, order in info["search_order"].items():
         lines.append(f"  {kind}: " + " > ".join(order))

@@ -2,7 +2,11 @@
 
 A frame is three planes of little-endian float32, in the order G, B, R, each ``height`` rows
 of ``width`` values, no header; frames follow each other until end of file.  Read frames are
-scene-linear RGBA with alpha 1 and no passes; written frames drop alpha (premultiplied colour).
+RGBA with alpha 1 and no passes; written frames drop alpha (premultiplied colour).
+
+Colour: the stream's values are in ``colorspace`` (``--colorspace``; default scene-linear
+Rec.709, as an untagged EXR) and are converted into the working space (``--working-space``);
+frames are written back in ``--out-colorspace``, else in the input's space (`clfx.io.colour`).
 
 Examples
 --------
@@ -20,6 +24,7 @@ from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame, crop_to
 from clfx.core.limits import check_pixels
 from clfx.core.rect import Rect
+from clfx.io import colour
 
 PIX_FMT = "gbrpf32le"
 
@@ -43,8 +48,11 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def read_raw(stream, size: tuple[int, int], index: int = 0) -> Frame | None:
-    """The next ``gbrpf32le`` frame of ``stream`` (a binary file), or None at end of file.
+def read_raw(stream, size: tuple[int, int], index: int = 0, *, colorspace: str | None = None,
+             working_space: str | None = None) -> Frame | None:
+    """The next ``gbrpf32le`` frame of ``stream`` (a binary file), or None at end of file,
+    converted from ``colorspace`` (default linear Rec.709; ``"raw"``: as is) into
+    ``working_space`` (default linear Rec.709).
 
     Raises
     ------
@@ -61,12 +69,20 @@ def read_raw(stream, size: tuple[int, int], index: int = 0) -> Frame | None:
     planes = np.frombuffer(data, np.float32).reshape(3, h, w)  # G, B, R
     rgba = np.empty((h, w, 4), np.float32)
     rgba[..., 0], rgba[..., 1], rgba[..., 2], rgba[..., 3] = planes[2], planes[0], planes[1], 1.0
-    return Frame(rgba, Rect.from_size(w, h), Rect.from_size(w, h), source="stdin")
+    working = colour.resolve(working_space or colour.DEFAULT_WORKING, "--working-space")
+    source = colour.resolve(colorspace, "--colorspace") if colorspace else \
+        colour.resolve(colour.DEFAULT_WORKING)
+    rgba = colour.convert(rgba, source, working, "stdin")
+    return Frame(rgba, Rect.from_size(w, h), Rect.from_size(w, h), source="stdin",
+                 colorspace=working, source_colorspace=None if source == colour.RAW else source)
 
 
-def write_raw(stream, frame: Frame, window: Rect) -> None:
-    """Write ``frame`` cut or padded to ``window`` (the input's) as one ``gbrpf32le`` frame."""
-    o = frame.rgba
+def write_raw(stream, frame: Frame, window: Rect, *, colorspace: str | None = None) -> None:
+    """Write ``frame`` cut or padded to ``window`` (the input's) as one ``gbrpf32le`` frame,
+    in ``colorspace`` (default: the input's space, ``frame.source_colorspace``)."""
+    target = colour.resolve(colorspace, "--out-colorspace") if colorspace else \
+        (frame.source_colorspace or frame.colorspace)
+    o = colour.convert(frame.rgba, frame.colorspace, target, "stdout")
     if frame.data_window != window:
         o = crop_to(o, frame.data_window, window)
     stream.write(np.ascontiguousarray(np.stack([o[..., 1], o[..., 2], o[..., 0]])).tobytes())

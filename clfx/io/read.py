@@ -17,7 +17,9 @@ Reading
 - Channels are always looked up by name (``spec.channelindex``); a missing channel is an
   error, never zeros.
 - The beauty, depth and velocity search orders and the renderers' conventions are in
-  `clfx.io.channels` (``probe`` prints them).  `PassSpec` overrides any of them.  A file that
+  `clfx.io.channels` (``probe`` prints them).  A depth pass's "no hit" sentinels (0, huge
+  values) are read as +inf per `clfx.io.channels.no_hit`; what was assumed is passed to
+  ``notify`` (a `DepthConventionWarning` by default).  `PassSpec` overrides any of them.  A file that
   holds only passes (a lone ``Z``) has no beauty and is refused, naming its channels.
 - Depth or velocity in separate files (``depth_path``, ``velocity_path``): same search order in
   that file; if nothing matches and the file holds a single channel (or R/Y), that channel is
@@ -26,16 +28,18 @@ Reading
 
 Colour
 ------
-Integer-typed files other than EXR (8/16-bit PNG, JPEG, TIFF, and DPX/Cineon of any bit depth)
-are display-referred: they are linearised from sRGB with OpenImageIO's colour management
-(``colorconvert(buf, "sRGB", "linear")``, alpha divided out around the transfer function) and
-``Frame.encoding = "sRGB"``.  EXR, HDR and float TIFF are scene-linear (``"linear"``).  DPX is
-often log (Cineon printing density): clfx treats it as sRGB-like display data unless
-``colorspace=`` says otherwise (e.g. ``"ACEScct"`` or ``"raw"``).  ``colorspace=`` names the
-input colour space: ``"linear"`` (no conversion), ``"sRGB"``, ``"raw"`` (no conversion, pixels
-as stored) or any OCIO name OpenImageIO knows (``"ACEScg"``, ``"Linear Rec.2020"``...),
-converted to ``"linear"``.  Trap: OpenImageIO's ``"linear"`` is Linear Rec.709, while the
-``scene_linear`` role of its built-in config is ACEScg; clfx works in Linear Rec.709.
+The beauty is converted from the file's space into the *working space* (``working_space=``,
+default scene-linear Rec.709; see `clfx.io.colour`): the file's space is ``colorspace=``, else
+its ``oiio:ColorSpace`` (EXR ``colorInteropID``, PNG/JPEG/HDR tags), else an EXR's
+``chromaticities``, else the format's default.  Integer-typed files other than EXR (8/16-bit
+PNG, JPEG, TIFF, and DPX/Cineon of any bit depth) are display-referred, sRGB by default (alpha
+divided out around the transfer function), and ``Frame.encoding = "sRGB"``; EXR, HDR and float
+TIFF are scene-linear Rec.709 by default.  DPX is often log (Cineon printing density): clfx
+treats it as sRGB-like display data unless ``colorspace=`` says otherwise (e.g. ``"ACEScct"``).
+``colorspace="raw"`` keeps the pixels as stored.  ``Frame.colorspace`` names the working
+space, ``Frame.source_colorspace`` the file's (outputs go back to it).  Trap: OpenImageIO's
+``"linear"`` is Linear Rec.709, while the ``scene_linear`` role of its built-in config is
+ACEScg.
 
 Robustness
 ----------
@@ -55,17 +59,19 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import OpenImageIO as oiio
 
 from clfx.core.errors import ClipError, ImageIOError
-from clfx.core.frame import Frame, crop_to
+from clfx.core.frame import Frame, Layout, SourcePart, crop_to
 from clfx.core.rect import Rect
 from clfx.io import channels as ch
-from clfx.io._oiio import (check_window, colorconvert, fail, geterror, metadata,
-                           spec_data_window, spec_display_window, type_name)
+from clfx.io import colour
+from clfx.io._oiio import (check_window, fail, geterror, metadata, spec_data_window,
+                           spec_display_window, type_name)
 from clfx.io.sequence import check_input_file
 
 MAX_PARTS = 4096
@@ -101,6 +107,13 @@ class PassSpec:
         ``backward`` vectors are negated; ``auto`` = from the detected convention.
     focal_length_px : float, optional
         Focal length in pixels (pixel heights), required for ``depth_mode="distance"``.
+    depth_zero : {"auto", "far", "invalid"}
+        How exact zeros in the depth are read: ``far`` = no hit (+inf), ``invalid`` = kept
+        as 0 (effects treat it as in focus), ``auto`` = decided per frame from the share of
+        zeros and the beauty's alpha there (`clfx.io.channels.no_hit`).
+    depth_far_threshold : float
+        Depths (before ``depth_scale``) of at least this magnitude are no hit (+inf); ``inf``
+        keeps them.
     """
 
     depth_channel: str | None = None
@@ -113,8 +126,15 @@ class PassSpec:
     velocity_scale: float = 1.0
     velocity_direction: str = "auto"
     focal_length_px: float | None = None
+    depth_zero: str = "auto"
+    depth_far_threshold: float = ch.DEPTH_FAR_AS_INF
 
     def __post_init__(self):
+        if self.depth_zero not in ch.DEPTH_ZERO:
+            raise ClipError(f"depth_zero {self.depth_zero!r} is not one of {ch.DEPTH_ZERO}")
+        if not self.depth_far_threshold > 0:
+            raise ClipError(f"depth_far_threshold {self.depth_far_threshold!r} must be > 0 "
+                            "(inf keeps every value)")
         if self.depth_mode not in ch.DEPTH_MODES:
             raise ClipError(f"depth_mode {self.depth_mode!r} is not one of {ch.DEPTH_MODES}")
         if self.velocity_direction not in ch.VELOCITY_DIRECTIONS:
@@ -267,8 +287,10 @@ class ReadPlan:
     view: str | None
     depth: _PassPlan | None
     velocity: _PassPlan | None
-    source_colorspace: str | None     # None: no conversion
+    source_colorspace: str            # the file's space (``"raw"``: no conversion)
     encoding: str
+    working: str = colour.DEFAULT_WORKING
+    colour_why: str = ""
 
 
 def _select_part(f: _File, part) -> int | None:
@@ -376,22 +398,31 @@ def _is_display_referred(f: _File, beauty: ch.BeautyChoice) -> bool:
     return fmt not in ("half", "float")
 
 
-def _input_colorspace(colorspace: str | None, display: bool) -> tuple[str | None, str]:
-    """(source OCIO name or None for no conversion, Frame.encoding)."""
-    if colorspace is None:
-        return ("sRGB", "sRGB") if display else (None, "linear")
-    low = colorspace.lower()
-    if low in ("linear", "raw"):
-        return None, "linear"
-    if low == "srgb":
-        return "sRGB", "sRGB"
-    return colorspace, ("sRGB" if display else "linear")
+def _input_colorspace(f: _File, beauty: ch.BeautyChoice, colorspace: str | None
+                      ) -> tuple[str, str, str]:
+    """(the file's space, Frame.encoding, why)."""
+    display = _is_display_referred(f, beauty)
+    spec = f.parts[beauty.part].spec
+    chroma = spec.getattribute("chromaticities") if f.format == "openexr" else None
+    source, why = colour.input_space(colorspace, file_space=spec.get_string_attribute(
+        "oiio:ColorSpace") or None, chroma=chroma, display=display)
+    encoding = "sRGB" if display and not colour.is_linear(source) else "linear"
+    return source, encoding, why
 
 
-def plan_read(path, passes: PassSpec, colorspace, depth_path, velocity_path, part) -> ReadPlan:
+def plan_read(path, passes: PassSpec, colorspace, depth_path, velocity_path, part,
+              working_space: str | None = None, view: str | None = None) -> ReadPlan:
+    working = colour.resolve(working_space or colour.DEFAULT_WORKING, "working space")
+    if not colour.is_linear(working) or working == colour.RAW:
+        raise ImageIOError(f"working space {working_space!r} must be a linear colour space "
+                           "(e.g. lin_rec709, ACEScg)")
     f = _scan(path)
     only = _select_part(f, part)
-    beauty = ch.find_beauty(f.dicts(), part=only)
+    views = ch.beauty_views(f.dicts())
+    if view is not None and view not in views:
+        raise ImageIOError(f"view {view!r} not in {f.path}; views with a beauty: "
+                           f"{', '.join(v for v in views if v) or 'none (not multi-view)'}")
+    beauty = ch.find_beauty(f.dicts(), part=only, view=view)
     if beauty is None:
         where = f"part {only} of " if only is not None else ""
         passes_only = ""
@@ -417,8 +448,8 @@ def plan_read(path, passes: PassSpec, colorspace, depth_path, velocity_path, par
                             f"channels: {_available(vf)}")
     else:
         velocity = _plan_velocity(f, passes, view, beauty.part, False)
-    source, encoding = _input_colorspace(colorspace, _is_display_referred(f, beauty))
-    return ReadPlan(f, beauty, view, depth, velocity, source, encoding)
+    source, encoding, why = _input_colorspace(f, beauty, colorspace)
+    return ReadPlan(f, beauty, view, depth, velocity, source, encoding, working, why)
 
 
 # ============================================================================================
@@ -440,16 +471,17 @@ def _read_beauty(plan: ReadPlan) -> np.ndarray:
     for i in range(3):
         rgba[..., i] = got[b.rgb[0 if b.grey else i]]
     rgba[..., 3] = got[b.alpha] if b.alpha else 1.0
-    if plan.source_colorspace is not None:
-        rgba = colorconvert(rgba, plan.source_colorspace, "linear", f.path)
-    return rgba
+    return colour.convert(rgba, plan.source_colorspace, plan.working, f.path)
 
 
 def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect,
-                aspect: float) -> np.ndarray | None:
+                aspect: float, alpha: np.ndarray | None
+                ) -> tuple[np.ndarray, ch.NoHit] | tuple[None, None]:
+    """Planar depth over ``frame_win`` (+inf outside the pass) and how its "no hit"
+    sentinels were read; ``alpha`` is the beauty's over ``frame_win`` (None: opaque)."""
     pp = plan.depth
     if pp is None:
-        return None
+        return None, None
     if pp.separate:
         _check_same_window("depth", pp, plan.file.path, frame_win)
     raw = _read_channels(pp.path, pp.part, pp.channels)[pp.channels[0]]
@@ -461,12 +493,50 @@ def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect
         ys = np.arange(win.y0, win.y1, dtype=np.float64) + 0.5 - cy
         centres = (xs[None, :], ys[:, None])
     try:
-        z = ch.depth_to_planar(raw, pp.mode, scale=passes.depth_scale, near=passes.depth_near,
-                               far=passes.depth_far, focal_length_px=passes.focal_length_px,
-                               pixel_centres=centres, pixel_aspect=aspect)
+        z = ch.depth_to_planar(raw, pp.mode, near=passes.depth_near, far=passes.depth_far,
+                               focal_length_px=passes.focal_length_px, pixel_centres=centres,
+                               pixel_aspect=aspect, far_threshold=math.inf)
     except ValueError as e:
         raise ClipError(f"depth of {pp.path}: {e}") from None
-    return crop_to(z, win, frame_win, np.inf)
+    if alpha is not None:
+        alpha = crop_to(alpha, frame_win, win, 0.0)     # outside the beauty: transparent
+    half = pp.part.formats[pp.part.channels.index(pp.channels[0])] == "half"
+    nohit = ch.no_hit(z, alpha, zero=passes.depth_zero, far_threshold=passes.depth_far_threshold,
+                      half=half)
+    z = nohit.apply(z, scale=passes.depth_scale)
+    return crop_to(z, win, frame_win, np.inf), nohit
+
+
+def depth_no_hit(plan: ReadPlan, passes: PassSpec) -> ch.NoHit | None:
+    """How ``plan``'s depth pass marks "no hit" (reads the depth and the beauty's alpha only;
+    for ``probe``)."""
+    if plan.depth is None:
+        return None
+    b = plan.beauty
+    bpart = plan.file.parts[b.part]
+    alpha = None
+    if b.alpha:
+        alpha = _read_channels(plan.file.path, bpart, [b.alpha])[b.alpha]
+    return _read_depth(plan, passes, bpart.data_window, bpart.display_window,
+                       bpart.pixel_aspect, alpha)[1]
+
+
+class DepthConventionWarning(UserWarning):
+    """A depth pass's "no hit" sentinels (0, huge values) were read as infinitely far."""
+
+
+def _announce(path, plan: ReadPlan, nohit: ch.NoHit | None, notify) -> None:
+    """Say once what a depth pass's sentinels were taken to mean (see `read_frame`)."""
+    if nohit is None or not nohit.assumed:
+        return
+    pp = plan.depth
+    where = f" in {pp.path}" if pp.separate else ""
+    msg = f"{os.fspath(path)}: depth {pp.channels[0]}{where}: {nohit.describe()}"
+    key = "depth:" + "+".join(nohit.assumed)
+    if notify is None:
+        warnings.warn(msg, DepthConventionWarning, stacklevel=3)
+    else:
+        notify(msg, key)
 
 
 def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect) -> np.ndarray | None:
@@ -483,7 +553,9 @@ def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect) -> np.ndar
 
 
 def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
-               depth_path=None, velocity_path=None, part: int | str | None = None) -> Frame:
+               depth_path=None, velocity_path=None, part: int | str | None = None,
+               notify=None, working_space: str | None = None,
+               view: str | None = None) -> Frame:
     """Read one frame: beauty RGBA plus depth and velocity if found.
 
     Parameters
@@ -493,17 +565,29 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
     passes : PassSpec
         Overrides for finding and interpreting depth and velocity.
     colorspace : str, optional
-        Input colour space: ``"linear"``, ``"sRGB"``, ``"raw"`` or an OCIO name; default:
-        sRGB for integer non-EXR files, linear otherwise.
+        The file's colour space: an OCIO name or alias (``"sRGB"``, ``"ACEScg"``,
+        ``"linear"`` = linear Rec.709) or ``"raw"`` (no conversion); default: the file's
+        ``oiio:ColorSpace``, an EXR's ``chromaticities``, else sRGB for integer non-EXR files
+        and linear Rec.709 otherwise (`clfx.io.colour.input_space`).
     depth_path, velocity_path : str or os.PathLike, optional
         Separate files holding the depth / velocity (same data window as the beauty).
     part : int or str, optional
         Take the beauty from this part (index or name) instead of searching.
+    notify : callable(message, key), optional
+        Told what was assumed about the depth's "no hit" values (0 or huge values read as
+        +inf; `clfx.io.channels.no_hit`): one line naming the file, and a key that is the
+        same for the same assumption on every frame (so a batch says it once per sequence).
+        Default: a `DepthConventionWarning`.
+    working_space : str, optional
+        Linear OCIO space to convert the beauty into; default ``"lin_rec709"``.
+    view : str, optional
+        Multi-view files: the view whose beauty and passes are read; default the hero.
 
     Returns
     -------
     Frame
-        float32 ``rgba`` (h, w, 4) in linear Rec.709, premultiplied; ``depth`` planar z in
+        float32 ``rgba`` (h, w, 4) in the working space, premultiplied (``colorspace``;
+        ``source_colorspace`` is the file's; ``layout`` its parts); ``depth`` planar z in
         scene units (+inf background) or None; ``velocity`` forward px/frame, +y down, or None.
 
     Raises
@@ -513,16 +597,55 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
     ClipError
         Explicit pass channels missing; pass file without a pass or with another data window.
     """
-    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part)
+    plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part, working_space,
+                     view)
     bpart = plan.file.parts[plan.beauty.part]
     win, display, aspect = bpart.data_window, bpart.display_window, bpart.pixel_aspect
     check_window(path, win)
     check_window(path, display, "display window")   # effects size buffers from it
     rgba = _read_beauty(plan)
-    depth = _read_depth(plan, passes, win, display, aspect)
+    alpha = rgba[..., 3] if plan.beauty.alpha else None
+    depth, nohit = _read_depth(plan, passes, win, display, aspect, alpha)
+    _announce(path, plan, nohit, notify)
     velocity = _read_velocity(plan, passes, win)
     bit_depth = bpart.formats[bpart.channels.index(plan.beauty.rgb[0])]
+    source = None if plan.source_colorspace == colour.RAW else plan.source_colorspace
     return Frame(rgba, win, display, aspect, depth, velocity, metadata(bpart.spec),
-                 plan.encoding, os.fspath(path), bit_depth)
+                 plan.encoding, os.fspath(path), bit_depth, colorspace=plan.working,
+                 source_colorspace=source, layout=_layout(plan))
+
+
+def _layout(plan: ReadPlan) -> Layout:
+    """The source file's parts (deep ones left out: they cannot be copied) and the beauty."""
+    parts = [p for p in plan.file.parts if not p.deep]
+    keep = [SourcePart(p.index, p.name, p.view, p.channels,
+                       tuple(str(t) for t in (p.spec.channelformats or
+                                              (p.spec.format,) * len(p.channels))),
+                       p.data_window, metadata(p.spec)) for p in parts]
+    beauty = next(i for i, p in enumerate(parts) if p.index == plan.beauty.part)
+    return Layout(plan.file.path, tuple(keep), beauty, tuple(plan.beauty.channels), plan.view)
+
+
+def read_views(path, *, view: str | None = None, all_views: bool = True, **kw) -> list[Frame]:
+    """The frames of every view of a multi-view file (hero first), or of ``view`` only.
+
+    Each frame has its own beauty and passes (those of its view) and the same `Layout`, so
+    `clfx.io.write.write_frame(frames[0], ..., views=frames[1:])` writes every view back in
+    place.  A file without views, ``view=`` or ``all_views=False`` give one frame (``view``,
+    or the hero; with ``all_views=False`` and several views, ``notify`` is told once, key
+    ``"views"``).  Other keywords are `read_frame`'s.
+    """
+    if view is not None:
+        return [read_frame(path, view=view, **kw)]
+    f = _scan(path)
+    views = ch.beauty_views(f.dicts()) if kw.get("part") is None else ()
+    if not all_views and len(views) > 1:
+        msg = (f"{os.fspath(path)}: multi-view file ({', '.join(views)}): only the hero view "
+               f"{views[0]!r} is rendered (this output holds one view; an .exr output with "
+               "--passes keep renders and keeps every view)")
+        if kw.get("notify"):
+            kw["notify"](msg, "views")
+        views = views[:1]
+    return [read_frame(path, view=v, **kw) for v in views] or [read_frame(path, **kw)]
 
 

@@ -64,15 +64,17 @@ import os
 import re
 import secrets
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 import OpenImageIO as oiio
 
 from clfx.core.errors import ImageIOError
-from clfx.core.frame import Frame, crop_to
+from clfx.core.frame import Frame, Layout, SourcePart, crop_to
 from clfx.core.rect import Rect
-from clfx.io._oiio import carry, check_window, colorconvert, fail, geterror, set_attribute
+from clfx.io import colour
+from clfx.io._oiio import carry, check_window, fail, geterror, set_attribute
+from clfx.io.sequence import check_input_file
 
 HALF_MAX = 65504.0
 
@@ -162,16 +164,6 @@ def _check_destination(path: str, overwrite: bool, protect: Iterable) -> str:
     return folder
 
 
-def _output_colorspace(colorspace: str | None, encoding: str) -> str | None:
-    """OCIO name to encode linear pixels to, or None to write them as they are."""
-    if colorspace is None:
-        return "sRGB" if encoding == "sRGB" else None
-    low = colorspace.lower()
-    if low in ("linear", "raw"):
-        return None
-    return "sRGB" if low == "srgb" else colorspace
-
-
 def _tiff_keeps_windows(frame: Frame) -> bool:
     d, w = frame.display_window, frame.data_window
     return d == w or (d.x0 == 0 and d.y0 == 0 and w.x0 >= 0 and w.y0 >= 0
@@ -188,11 +180,9 @@ def _beauty_pixels(frame: Frame, fmt: _OutFormat, path: str) -> tuple[np.ndarray
     return rgba, frame.display_window, frame.display_window
 
 
-def _encode(rgba: np.ndarray, target: str | None, display: bool, bit_depth: str,
+def _encode(rgba: np.ndarray, source: str, target: str, display: bool, bit_depth: str,
             path: str) -> np.ndarray:
-    rgba = np.asarray(rgba, np.float32)
-    if target is not None:
-        rgba = colorconvert(rgba, "linear", target, path)
+    rgba = colour.convert(np.asarray(rgba, np.float32), source, target, path)
     if display:
         rgba = np.clip(np.nan_to_num(rgba, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
     elif bit_depth == "half":
@@ -200,33 +190,56 @@ def _encode(rgba: np.ndarray, target: str | None, display: bool, bit_depth: str,
     return rgba
 
 
-def _make_spec(frame: Frame, fmt: _OutFormat, bit_depth: str, compression: str | None,
-               data: Rect, display: Rect, names: list[str], pass_count: int,
-               target: str | None, attributes: dict | None):
-    oiio_type = "uint16" if bit_depth == "uint10" else bit_depth
-    spec = oiio.ImageSpec(data.width, data.height, len(names), oiio_type)
+def _colour_attributes(spec, fmt: _OutFormat, target: str) -> None:
+    """Tag the output's colour space: EXR ``chromaticities`` (linear spaces) and
+    ``colorInteropID`` (from ``oiio:ColorSpace``, named spaces); sRGB PNG/TIFF/JPEG tags."""
+    if target == colour.RAW:
+        return
+    if fmt.oiio_name == "openexr":
+        chroma = colour.chromaticities(target)
+        if chroma is not None:
+            spec.attribute("chromaticities", oiio.TypeDesc("float[8]"), chroma)
+        if not target.startswith(colour.CHROMA_PREFIX):
+            spec.attribute("oiio:ColorSpace", target)
+    elif colour.same(target, "sRGB"):
+        spec.attribute("oiio:ColorSpace", "sRGB")
+
+
+def _new_spec(data: Rect, display: Rect, names, formats, aspect: float):
+    spec = oiio.ImageSpec(data.width, data.height, len(names), formats[0])
     spec.x, spec.y = data.x0, data.y0
     spec.full_x, spec.full_y = display.x0, display.y0
     spec.full_width, spec.full_height = display.width, display.height
     spec.channelnames = tuple(names)
-    spec.alpha_channel = 3 if "A" in names else -1
-    if pass_count:
-        beauty = oiio.TypeDesc(oiio_type)
-        spec.channelformats = (beauty,) * (len(names) - pass_count) + (oiio.TypeFloat,) * pass_count
-    if bit_depth == "uint10":
-        spec.attribute("oiio:BitsPerSample", 10)
-    for name, value in (frame.metadata or {}).items():
+    spec.alpha_channel = list(names).index("A") if "A" in names else -1
+    if len(set(formats)) > 1:
+        spec.channelformats = tuple(oiio.TypeDesc(f) for f in formats)
+    spec.attribute("PixelAspectRatio", float(aspect))
+    return spec
+
+
+def _finish_spec(spec, metadata: dict, attributes: dict | None, compression: str | None):
+    for name, value in (metadata or {}).items():
         if carry(name):
             set_attribute(spec, name, value)
     for name, value in (attributes or {}).items():
         set_attribute(spec, name, value)
     if not spec.get_string_attribute("DateTime"):
         spec.attribute("DateTime", "")     # else OpenImageIO stamps the time: bytes would vary
-    spec.attribute("PixelAspectRatio", float(frame.pixel_aspect))
     if compression:
         spec.attribute("compression", compression)
-    if target == "sRGB" and fmt.oiio_name != "openexr":
-        spec.attribute("oiio:ColorSpace", "sRGB")
+
+
+def _make_spec(frame: Frame, fmt: _OutFormat, bit_depth: str, compression: str | None,
+               data: Rect, display: Rect, names: list[str], pass_count: int,
+               target: str, attributes: dict | None):
+    oiio_type = "uint16" if bit_depth == "uint10" else bit_depth
+    formats = [oiio_type] * (len(names) - pass_count) + ["float"] * pass_count
+    spec = _new_spec(data, display, names, formats, frame.pixel_aspect)
+    if bit_depth == "uint10":
+        spec.attribute("oiio:BitsPerSample", 10)
+    _finish_spec(spec, frame.metadata, attributes, compression)
+    _colour_attributes(spec, fmt, target)
     return spec
 
 
@@ -234,15 +247,32 @@ WRITE_BLOCK_ROWS = 256
 """Rows assembled and written per call: a 4K frame is never held twice in full."""
 
 
-def _write_blocks(out, spec, planes: list[np.ndarray]) -> bool:
-    """Write ``planes`` (each (h, w, k), concatenated along channels) in row blocks."""
-    h = planes[0].shape[0]
-    for y0 in range(0, max(h, 1), WRITE_BLOCK_ROWS):
-        y1 = min(h, y0 + WRITE_BLOCK_ROWS)
-        block = np.concatenate([p[y0:y1] for p in planes], axis=-1) if len(planes) > 1 \
-            else planes[0][y0:y1]
-        if not out.write_scanlines(spec.y + y0, spec.y + y1, 0,
-                                   np.ascontiguousarray(block, np.float32)):
+@dataclass
+class _OutPart:
+    """One part (subimage) to write: its spec and ``rows(y0, y1)``, the pixels of rows
+    ``y0 <= y < y1`` (file coordinates) as an (rows, width, channels) array."""
+
+    spec: object
+    rows: Callable[[int, int], np.ndarray]
+
+
+def _planes_part(spec, planes: list[np.ndarray]) -> _OutPart:
+    """A part whose pixels are ``planes`` (each (h, w, k), concatenated along channels)."""
+    def rows(y0, y1):
+        a, b = y0 - spec.y, y1 - spec.y
+        return np.concatenate([p[a:b] for p in planes], axis=-1) if len(planes) > 1 \
+            else planes[0][a:b]
+    return _OutPart(spec, rows)
+
+
+def _write_blocks(out, part: _OutPart) -> bool:
+    """Write a part in row blocks."""
+    spec = part.spec
+    for y0 in range(spec.y, spec.y + max(spec.height, 1), WRITE_BLOCK_ROWS):
+        y1 = min(spec.y + spec.height, y0 + WRITE_BLOCK_ROWS)
+        block = part.rows(y0, y1)
+        dtype = block.dtype if block.dtype in (np.float64, np.uint32) else np.float32
+        if not out.write_scanlines(y0, y1, 0, np.ascontiguousarray(block, dtype)):
             return False
     return True
 
@@ -291,7 +321,7 @@ def _name_dpx(target: str, path: str) -> None:
             f.write(os.path.basename(path).encode("utf-8", "replace")[:99].ljust(100, b"\0"))
 
 
-def _encode_file(tmp: str, path: str, fmt: _OutFormat, spec, planes: list[np.ndarray]) -> None:
+def _encode_file(tmp: str, path: str, fmt: _OutFormat, parts: list[_OutPart]) -> None:
     """Encode into ``tmp`` (JPEG through memory), checking every OpenImageIO result."""
     mem = _memory_file() if fmt.oiio_name in _IN_MEMORY else None
     target = tmp if mem is None else f"/proc/self/fd/{mem}"
@@ -299,9 +329,16 @@ def _encode_file(tmp: str, path: str, fmt: _OutFormat, spec, planes: list[np.nda
         out = oiio.ImageOutput.create(fmt.oiio_name)
         if out is None:
             raise fail(path, "cannot write", geterror() or f"no {fmt.oiio_name} writer")
-        if not out.open(target, spec):
+        specs = [p.spec for p in parts]
+        if not (out.open(target, specs) if len(parts) > 1 else out.open(target, specs[0])):
             raise fail(path, "cannot write", geterror(out))
-        ok = _write_blocks(out, spec, planes)
+        ok = True
+        for i, part in enumerate(parts):
+            if i and not out.open(target, part.spec, "AppendSubimage"):
+                raise fail(path, "cannot write", geterror(out))
+            if not _write_blocks(out, part):
+                ok = False
+                break
         err = geterror(out)
         closed = out.close()
         err = err or geterror(out)
@@ -318,9 +355,9 @@ def _encode_file(tmp: str, path: str, fmt: _OutFormat, spec, planes: list[np.nda
             os.close(mem)
 
 
-def _verify(tmp: str, path: str, fmt: _OutFormat, spec) -> None:
-    """The written file is whole: not empty, its header reads back as written, and formats
-    whose writers ignore short writes end with their end-of-image marker."""
+def _verify(tmp: str, path: str, fmt: _OutFormat, specs: list) -> None:
+    """The written file is whole: not empty, every part's header reads back as written, and
+    formats whose writers ignore short writes end with their end-of-image marker."""
     size = os.stat(tmp).st_size
     if size == 0:
         raise fail(path, "cannot write", "the file written is empty (disk full?)")
@@ -329,11 +366,16 @@ def _verify(tmp: str, path: str, fmt: _OutFormat, spec) -> None:
         raise fail(path, "cannot write", "the file written does not read back: "
                    + (geterror() or "unreadable header"))
     try:
-        got = inp.spec()
-        if (got.width, got.height, got.nchannels) != (spec.width, spec.height, spec.nchannels):
-            raise fail(path, "cannot write", f"the file written reads back as {got.width}x"
-                       f"{got.height}x{got.nchannels}, not {spec.width}x{spec.height}x"
-                       f"{spec.nchannels}")
+        for i, spec in enumerate(specs):
+            if i and not inp.seek_subimage(i, 0):
+                raise fail(path, "cannot write", f"the file written has no part {i}: "
+                           + geterror(inp))
+            got = inp.spec()
+            if (got.width, got.height, got.nchannels) != (spec.width, spec.height,
+                                                          spec.nchannels):
+                raise fail(path, "cannot write", f"the file written reads back as {got.width}x"
+                           f"{got.height}x{got.nchannels}, not {spec.width}x{spec.height}x"
+                           f"{spec.nchannels}" + (f" (part {i})" if i else ""))
     finally:
         inp.close()
     trailer = _TRAILERS.get(fmt.oiio_name)
@@ -375,7 +417,7 @@ def _publish(tmp: str, path: str, overwrite: bool) -> None:
         os.unlink(tmp)
 
 
-def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, planes: list[np.ndarray],
+def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart],
                   overwrite: bool) -> None:
     tmp = _temp_path(path, folder)
     try:
@@ -385,8 +427,8 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, spec, planes: list[np
         raise ImageIOError(f"cannot write {path}: folder {folder} is not writable "
                            f"({e.strerror})") from None
     try:
-        _encode_file(tmp, path, fmt, spec, planes)
-        _verify(tmp, path, fmt, spec)
+        _encode_file(tmp, path, fmt, parts)
+        _verify(tmp, path, fmt, [p.spec for p in parts])
         _publish(tmp, path, overwrite)
     except OSError as e:
         raise fail(path, "cannot write", e.strerror or str(e)) from None
@@ -444,10 +486,155 @@ def sweep_stale_temps(outputs: Iterable) -> list[str]:
     return removed
 
 
+# ============================================================================================
+# Defaults kept from the input; every channel and part written back
+
+def _default_bit_depth(frame: Frame, fmt: _OutFormat) -> str:
+    """EXR keeps the input's half or float; other formats have their own default."""
+    if fmt.oiio_name == "openexr" and frame.bit_depth in fmt.bit_depths:
+        return frame.bit_depth
+    return fmt.default_bit_depth
+
+
+def _default_compression(attributes: dict, fmt: _OutFormat) -> str | None:
+    """The input's compression when this format has it (``dwaa:45`` -> dwaa), else the
+    format's default."""
+    got = str((attributes or {}).get("compression", "")).split(":")[0].lower()
+    return got if got in fmt.compressions else fmt.default_compression
+
+
+_EXR_TYPES = {"half": "half", "float": "float", "double": "float", "uint": "uint",
+              "int": "uint"}
+
+
+def _beauty_names(layout: Layout) -> tuple[tuple[str, ...], set[str]]:
+    """(R, G, B, A names an output writes a view's beauty under, the names it replaces).
+
+    RGB beauties keep their names (``left.R``, ``ViewLayer.Combined.R``); a missing alpha is
+    added beside them (``<layer>.A``); a grey beauty (``Y``) becomes ``<layer>.R, G, B``."""
+    b = layout.beauty
+    first = b[0]
+    prefix = first[:first.rfind(".") + 1]
+    rgb = b[:3] if len(b) >= 3 and len(b) != 2 else tuple(prefix + c for c in "RGB")
+    alpha = b[-1] if len(b) in (2, 4) else prefix + "A"
+    return rgb + (alpha,), set(b)
+
+
+class _Source:
+    """The source file of a layout, open while its channels are copied."""
+
+    def __init__(self, path: str, out_path: str):
+        self.path, self.out_path, self.inp = path, out_path, None
+
+    def rows(self, part: SourcePart, y0: int, y1: int, dtype) -> np.ndarray:
+        """Every channel of rows ``y0..y1`` (inside the part's window) as stored."""
+        if self.inp is None:
+            check_input_file(self.path)
+            self.inp = oiio.ImageInput.open(self.path)
+            if self.inp is None:
+                raise fail(self.out_path, "cannot write",
+                           f"cannot copy channels from {self.path}: {geterror()}")
+        fmt = "double" if dtype == np.float64 else "float"
+        px = self.inp.read_scanlines(part.index, 0, y0, y1, 0, 0, len(part.channels), fmt)
+        err = geterror(self.inp)
+        if px is None or err:
+            raise fail(self.out_path, "cannot write",
+                       f"cannot copy channels from {self.path}: {err or 'read failed'}")
+        return np.asarray(px, dtype).reshape(y1 - y0, part.data_window.width, -1)
+
+    def close(self):
+        if self.inp is not None:
+            self.inp.close()
+
+
+def _layout_parts(frame: Frame, views: list[Frame], fmt: _OutFormat, bit_depth: str,
+                  compression: str | None, target: str, attributes: dict | None,
+                  path: str, source: _Source) -> list[_OutPart]:
+    """Every part of the frame's source file, in order: each rendered view's beauty in place
+    of its channels, every other channel copied from the source as stored (padded with 0
+    where a part's window grew with the beauty's)."""
+    lay = frame.layout
+    for v in views:
+        if v.layout is None or v.layout.path != lay.path or v.layout.parts != lay.parts:
+            raise ImageIOError(f"cannot write {path}: view {v.layout and v.layout.view!r} "
+                               f"does not come from {lay.path}")
+    rendered: dict[int, list] = {}
+    for fr in [frame] + views:
+        names, replaced = _beauty_names(fr.layout)
+        pixels = _encode(fr.rgba, fr.colorspace, target, False, bit_depth, path)
+        rendered.setdefault(fr.layout.beauty_part, []).append((fr, names, replaced, pixels))
+    out = []
+    for i, sp in enumerate(lay.parts):
+        subs = rendered.get(i, [])
+        replaced = set().union(*(r[2] for r in subs)) if subs else set()
+        carried = [(c, _EXR_TYPES.get(f, "float")) for c, f in zip(sp.channels, sp.formats)
+                   if c not in replaced]
+        window = sp.data_window if carried or not subs else subs[0][0].data_window
+        for fr, *_ in subs:
+            window = window.union(fr.data_window)
+        names = [n for _, ns, _, _ in subs for n in ns] + [c for c, _ in carried]
+        formats = [bit_depth] * (4 * len(subs)) + [f for _, f in carried]
+        if not names:
+            continue
+        spec = _new_spec(window, frame.display_window, names, formats, frame.pixel_aspect)
+        if subs and subs[0][0] is frame:
+            meta, extra = frame.metadata, attributes
+        else:
+            meta, extra = sp.attributes, None
+        own = sp.attributes.get("compression") if not (subs and subs[0][0] is frame) else \
+            frame.metadata.get("compression")
+        _finish_spec(spec, meta, extra, compression or _default_compression(
+            {"compression": own}, fmt))
+        if sp.name:
+            spec.attribute("name", sp.name)
+        if sp.view:
+            spec.attribute("view", sp.view)
+        if sp.attributes.get("multiView"):
+            set_attribute(spec, "multiView", sp.attributes["multiView"])
+        if subs:
+            _colour_attributes(spec, fmt, target)
+        elif sp.attributes.get("chromaticities"):
+            set_attribute(spec, "chromaticities", sp.attributes["chromaticities"])
+        out.append(_OutPart(spec, _part_rows(sp, window, subs, [c for c, _ in carried],
+                                             source)))
+    return out
+
+
+def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], source: _Source):
+    """``rows(y0, y1)`` of one output part (see `_layout_parts`)."""
+    dtype = np.float64 if any(f in ("uint", "int") for c, f in zip(sp.channels, sp.formats)
+                              if c in carried) else np.float32
+    col = {c: sp.channels.index(c) for c in carried}
+
+    def rows(y0, y1):
+        block = np.zeros((y1 - y0, window.width, 4 * len(subs) + len(carried)), dtype)
+        for k, (fr, _, _, pixels) in enumerate(subs):
+            _place(block, y0, window, pixels, fr.data_window, slice(4 * k, 4 * k + 4))
+        if carried:
+            w = sp.data_window
+            a, b = max(y0, w.y0), min(y1, w.y1)
+            if a < b:
+                got = source.rows(sp, a, b, dtype)
+                x = w.x0 - window.x0
+                for j, c in enumerate(carried):
+                    block[a - y0:b - y0, x:x + w.width, 4 * len(subs) + j] = got[..., col[c]]
+        return block
+    return rows
+
+
+def _place(block, y0, window: Rect, pixels, win: Rect, channels: slice) -> None:
+    """Copy the rows of ``pixels`` (covering ``win``) that fall in ``block``."""
+    a, b = max(y0, win.y0), min(y0 + block.shape[0], win.y1)
+    if a < b:
+        x = win.x0 - window.x0
+        block[a - y0:b - y0, x:x + win.width, channels] = pixels[a - win.y0:b - win.y0]
+
+
 def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
                 compression: str | None = None, colorspace: str | None = None,
                 overwrite: bool = False, attributes: dict | None = None,
-                write_passes: bool = True, protect: Iterable = ()) -> None:
+                write_passes: bool = True, protect: Iterable = (),
+                views: Sequence[Frame] = ()) -> None:
     """Write a frame atomically: a temp file in the same folder, checked, then published
     (hard link without ``overwrite``, ``os.replace`` with it; see the module docstring).
 
@@ -486,7 +673,7 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     """
     path = os.fspath(path)
     fmt = _out_format(path)
-    bit_depth = bit_depth or fmt.default_bit_depth
+    bit_depth = bit_depth or _default_bit_depth(frame, fmt)
     if bit_depth not in fmt.bit_depths:
         raise ImageIOError(f"cannot write {path}: bit depth {bit_depth!r} not supported; "
                            f"expected one of {', '.join(fmt.bit_depths)}")
@@ -497,11 +684,21 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     folder = _check_destination(path, overwrite, protect)
 
     display = encoding_for(path, bit_depth) == "sRGB"
-    target = _output_colorspace(colorspace, "sRGB" if display else "linear")
+    target = colour.output_space(colorspace, source=frame.source_colorspace,
+                                 working=frame.colorspace, display=display)
+    if write_passes and fmt.passes and frame.layout is not None:
+        source = _Source(frame.layout.path, path)
+        try:
+            parts = _layout_parts(frame, list(views), fmt, bit_depth, compression, target,
+                                  attributes, path, source)
+            _atomic_write(path, folder, fmt, parts, overwrite)
+        finally:
+            source.close()
+        return
     rgba, data, display_win = _beauty_pixels(frame, fmt, path)
     if not fmt.alpha:          # composite over black: encode the premultiplied colour as is
         rgba = np.concatenate([rgba[..., :3], np.ones(rgba.shape[:2] + (1,), np.float32)], -1)
-    rgba = _encode(rgba, target, display, bit_depth, path)
+    rgba = _encode(rgba, frame.colorspace, target, display, bit_depth, path)
     planes = [rgba if fmt.alpha else rgba[..., :3]]
     names = ["R", "G", "B"] + (["A"] if fmt.alpha else [])
     pass_count = 0
@@ -519,6 +716,7 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     if pass_count:
         extra.setdefault("clfx:passes", "Z: planar z, scene units, inf background; "
                                         "forward.u/v: forward px/frame, y-up (Nuke)")
-    spec = _make_spec(frame, fmt, bit_depth, compression or fmt.default_compression, data,
-                      display_win, names, pass_count, target, extra)
-    _atomic_write(path, folder, fmt, spec, planes, overwrite)
+    compression = compression or _default_compression(frame.metadata, fmt)
+    spec = _make_spec(frame, fmt, bit_depth, compression, data, display_win, names,
+                      pass_count, target, extra)
+    _atomic_write(path, folder, fmt, [_planes_part(spec, planes)], overwrite)

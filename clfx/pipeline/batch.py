@@ -55,6 +55,11 @@ class PassOptions:
         Whether stored +v points up; None: from the detected convention.
     velocity_scale : float
         Multiplies velocity.
+    depth_zero : {"auto", "far", "invalid"}
+        Depth 0: no hit (infinitely far), invalid (in focus), or decided from its share and
+        alpha (said on stderr once per sequence).
+    depth_far_threshold : float
+        Depths of at least this magnitude are no hit.
     """
 
     depth_channel: str | None = None
@@ -64,6 +69,8 @@ class PassOptions:
     velocity_channels: tuple[str, ...] | None = None
     velocity_y_up: bool | None = None
     velocity_scale: float = 1.0
+    depth_zero: str = "auto"
+    depth_far_threshold: float = 1e9
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
@@ -76,7 +83,8 @@ class PassOptions:
         return PassSpec(depth_channel=self.depth_channel, depth_mode=self.depth_mode,
                         depth_scale=self.depth_scale, velocity_channels=self.velocity_channels,
                         velocity_y_up=self.velocity_y_up, velocity_scale=self.velocity_scale,
-                        focal_length_px=self.focal_length_px or focal_length_px)
+                        focal_length_px=self.focal_length_px or focal_length_px,
+                        depth_zero=self.depth_zero, depth_far_threshold=self.depth_far_threshold)
 
 
 @dataclass(frozen=True)
@@ -94,9 +102,16 @@ class RenderOptions:
     passes : PassOptions
         How the passes are found and read.
     colorspace, out_colorspace : str or None
-        Colour space of the input / to encode the output in; None: from the file type.
+        Colour space of the input (None: the file's tag or chromaticities, else its type's
+        default) / to write the output in (None: the input's).
+    working_space : str or None
+        Linear space effects work in (None: lin_rec709).
+    view : str or None
+        Multi-view input: render this view only (None: every view an EXR output can hold).
+    passes_mode : {"keep", "drop"}
+        keep: every other channel and part of the input written through unchanged (EXR).
     as_float : bool
-        Write EXR beauty as 32-bit float (default half).
+        Write the EXR beauty as 32-bit float (default: the input's type).
     compression : str or None
         EXR compression; None: zip.
     overwrite : bool
@@ -122,6 +137,9 @@ class RenderOptions:
     passes: PassOptions = field(default_factory=PassOptions)
     colorspace: str | None = None
     out_colorspace: str | None = None
+    working_space: str | None = None
+    view: str | None = None
+    passes_mode: str = "keep"
     as_float: bool = False
     compression: str | None = None
     overwrite: bool = False
@@ -168,6 +186,7 @@ class Batch:
     raw_size: tuple[int, int] | None = field(default=None, init=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
+    noticed: set[str] = field(default_factory=set, init=False, repr=False)  # reader notices said
     _warned: set = field(default_factory=set, init=False, repr=False)
     _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
     _first_read: Future | None = field(default=None, init=False, repr=False)
@@ -283,10 +302,12 @@ class Batch:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
-                frame_in, read_ms = next_read.result()
+                views_in, read_ms = next_read.result()   # multi-view files: hero first
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
-                frame_out, report = self.render(rt, job, frame_in, read_ms)
-                writes.append((pool.submit(self._write, frame_out, job, report), report))
+                frame_out, report = self.render(rt, job, views_in[0], read_ms)
+                views_out = [self.render(rt, job, v)[0] for v in views_in[1:]]
+                writes.append((pool.submit(self._write, frame_out, job, report, views_out),
+                               report))
                 writes = self._drain(writes, block=False)
                 reports.append(report)
                 if self.progress:
@@ -330,16 +351,29 @@ class Batch:
                 self._err(report.explain())
         return writes
 
-    def _read(self, job: Job) -> tuple[Frame, float]:
-        """The job's frame and the milliseconds it took to read."""
-        from clfx.io.read import read_frame
+    def _read(self, job: Job) -> tuple[list[Frame], float]:
+        """The job's frame (every view of a multi-view file when the output can hold them,
+        hero first) and the milliseconds it took to read."""
+        from clfx.io.read import read_views
 
         t0 = time.perf_counter()
-        frame = read_frame(job.input, passes=self.passes, colorspace=self.options.colorspace,
-                           depth_path=job.depth, velocity_path=job.velocity)
-        return frame, (time.perf_counter() - t0) * 1e3
+        o = self.options
+        frames = read_views(job.input, view=o.view, passes=self.passes,
+                            all_views=job.output.lower().endswith(".exr") and o.passes_mode != "drop",
+                            colorspace=o.colorspace, working_space=o.working_space,
+                            depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
+        return frames, (time.perf_counter() - t0) * 1e3
 
-    def _write(self, frame: Frame, job: Job, report) -> None:
+    def _notice(self, message: str, key: str) -> None:
+        """What the reader assumed (e.g. depth 0 = no hit): one line per sequence and key."""
+        if key.startswith("depth") and "depth" not in self.look.clips_used():
+            return                       # no step reads the depth: its conventions are moot
+        if key not in self.noticed:
+            self.noticed.add(key)
+            if self.verbosity > 0:
+                self._err(f"clfx: {message}")
+
+    def _write(self, frame: Frame, job: Job, report, views=()) -> None:
         from clfx.io.write import OutputExistsError, write_frame
 
         t0 = time.perf_counter()
@@ -348,7 +382,8 @@ class Batch:
             write_frame(frame, job.output, bit_depth="float" if o.as_float else None,
                         compression=o.compression, colorspace=o.out_colorspace,
                         overwrite=o.overwrite, attributes=self.look.stamp(),
-                        protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files)
+                        protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files,
+                        write_passes=o.passes_mode != "drop", views=views)
         except OutputExistsError:
             if not o.skip_existing:
                 raise
@@ -388,10 +423,12 @@ class Batch:
         stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
         count = 0
         t0 = time.perf_counter()
-        while (frame := read_raw(stdin, self.raw_size, count)) is not None:
+        o = self.options
+        while (frame := read_raw(stdin, self.raw_size, count, colorspace=o.colorspace,
+                                 working_space=o.working_space)) is not None:
             out, report = render_frame(rt, self.look, frame, frame_number=count,
                                        quality=self.options.quality, stats=self.stats)
-            write_raw(stdout, out, frame.data_window)
+            write_raw(stdout, out, frame.data_window, colorspace=o.out_colorspace)
             self._warn(report)
             if self.options.explain:
                 self._err(report.explain())
