@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
 import OpenImageIO as oiio
 
 from clfx.core.errors import ImageIOError

@@ -38,13 +38,11 @@ def parse_size(text: str) -> tuple[int, int]:
         Not ``WxH`` with positive integers, or over `clfx.core.limits` (checked before any
         buffer is allocated).
     """
-    try:
-        w, h = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise SequenceError(f"--raw {text!r} is not WxH") from None
-    if w < 1 or h < 1:
-        raise SequenceError(f"--raw {text!r}: width and height must be at least 1")
-    check_pixels(w, h, f"--raw frame {text}", SequenceError)
+    parts = str(text).lower().split("x")
+    if len(parts) != 2 or not all(v.isascii() and v.isdigit() and int(v) > 0 for v in parts):
+        raise SequenceError(f"--raw {text!r} is not WxH (two positive whole numbers)")
+    w, h = int(parts[0]), int(parts[1])
+    check_pixels(w, h, "--raw frame", SequenceError)  # before a frame's bytes are read
     return w, h
 
 
