@@ -67,6 +67,7 @@ class RenderContext:
         self._analysis = analysis
         self.output_limit = output_limit or source.window.union(self.display_window)
         self.notes: list[str] = []
+        self.warnings: list[str] = []   # one line each, printed on stderr by the pipeline
         self._read_image = read_image
 
     def read_image(self, path: str) -> np.ndarray:
