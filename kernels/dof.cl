@@ -3,20 +3,29 @@
  * dof_prepare: per padded pixel, the sanitised premultiplied colour and the signed CoC
  *   radius in x pixels (< 0 in front of the focus plane), clamped to clamp_r.  The padded
  *   image (`pad` pixels each side, clamp-to-edge) lets the gather read without bounds tests.
+ * dof_edges: the radii made edge-aware (see there).
+ * dof_tile_cap: per tile, the mean of log(1 + luminance) over every 4th pixel and row: the
+ *   gather turns it into the cap of the colours that fill in the background hidden behind a
+ *   blurred foreground (dof_cap).
+ * dof_down2: the 2 x 2 box of the padded colour and radius (radius halved: half-res px),
+ *   each term scaled before the sum so that finite values stay finite.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
  *   same pattern of integer tap offsets, so every tap is a vload16 + vload4 and the weights
- *   are float4 vectors (PoCL does not vectorise one-pixel work-items).
+ *   are float4 vectors (PoCL does not vectorise one-pixel work-items).  Per tile (host
+ *   table): copy, gather, or (tiles far out of focus) bilinear upsampling of the
+ *   half-resolution gather, gathered again at full resolution where that is not smooth
+ *   (the rim of a bokeh disk, a sharp pixel).
  *
- * dof_upsample: bilinear upsampling of the half-resolution gather into the tiles marked half
- *   (the half-resolution input is the shared 2 x 2 box of lib/blur.cl, blur_box_down2).
- *
- * The tap pattern (rings, aperture shape, pixel aspect) comes from a host table per tile.
- * The gather accumulates in REAL (lib/precision.h: double at the reference level).
+ * The gather accumulates in REAL (lib/precision.h: double at the reference level); a sum
+ * that overflows float is taken again with every colour scaled by 2^-64.
  */
 #include "lib/common.h"
 #include "lib/precision.h"
 
 #define NEAR_EPS 0.25f   /* |radius| below this is in focus: never a near-field pixel */
+#define EDGE_PX 1.0f     /* radius range over 3 x 3 that makes a depth edge */
+#define EDGE_TAU 0.5f    /* log-luminance distance from its own layer that makes a pixel odd */
+#define OVERFLOW_SCALE 5.421010862427522e-20f   /* 2^-64 */
 
 inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r)
 {
@@ -24,6 +33,11 @@ inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r)
   if(!(z > 0.0f)) return 0.0f;
   const float r = clfx_is_finite(z) ? k_half * (1.0f - focus / z) : k_half;
   return clamp(r, -clamp_r, clamp_r);
+}
+
+inline float dof_log_lum(float4 c)
+{
+  return log1p(fmax(clfx_luminance(clfx_finite4_or_zero(c)), 0.0f));
 }
 
 kernel void dof_prepare(global const float *src, global const float *depth, const int pitch,
@@ -39,39 +53,160 @@ kernel void dof_prepare(global const float *src, global const float *depth, cons
   {
     const int px = qx * 4 + l;
     const int sx = clfx_clampi(px - pad, 0, width - 1);
-    const float4 c = clfx_finite4_or_zero(vload4(sy * pitch + sx, src));
-    vstore4(c, py * ppitch + px, col);
+    vstore4(clfx_finite4_or_zero(vload4(sy * pitch + sx, src)), py * ppitch + px, col);
     coc[py * ppitch + px] = dof_coc_radius(depth[sy * pitch + sx], k_half, focus, clamp_r);
   }
 }
 
-#define LANES(v) ((v).s0000111122223333)
+/* The edge-aware radius of image pixel (x, y) (see dof_edges); neighbours clamp to the
+ * image, `coc` and `col` are the padded buffers. */
+inline float dof_edge_radius(global const float *col, global const float *coc,
+                            const int ppitch, const int pad, const int width,
+                            const int height, const int x, const int y)
+{
+  float r[9], lg[9];
+  float rmin = INFINITY, rmax = -INFINITY;
+  for(int j = 0; j < 9; j++)
+  {
+    const int i = (clfx_clampi(y + j / 3 - 1, 0, height - 1) + pad) * ppitch
+                  + clfx_clampi(x + j % 3 - 1, 0, width - 1) + pad;
+    r[j] = coc[i];
+    lg[j] = dof_log_lum(vload4(i, col));
+    rmin = fmin(rmin, r[j]);
+    rmax = fmax(rmax, r[j]);
+  }
+  const float rp = r[4];
+  if(rmax - rmin < EDGE_PX) return rp;
+  const float mid = 0.5f * (rmin + rmax);
+  const int own_near = rp < mid;
+  float own[8], d_oth = INFINITY, r_oth = rp;
+  int n_own = 0;
+  for(int j = 0; j < 9; j++)
+  {
+    if(j == 4) continue;
+    if((r[j] < mid) == own_near)
+    {  /* insertion sort: the own layer's median, robust to the pixel's own light */
+      int k = n_own++;
+      for(; k > 0 && own[k - 1] > lg[j]; k--) own[k] = own[k - 1];
+      own[k] = lg[j];
+    }
+    else
+    {
+      const float d = fabs(lg[j] - lg[4]);
+      if(d < d_oth) { d_oth = d; r_oth = r[j]; }
+    }
+  }
+  const float d_own = n_own ? fabs(lg[4] - own[(n_own - 1) / 2]) : 0.0f;
+  return d_own > EDGE_TAU && fabs(r_oth) < fabs(rp) ? r_oth : rp;
+}
 
-/* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
- * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
- * aperture area the tap stands for (px^2).  tile_info[t] = (first tap, tap count); count 0
- * means nothing within reach has a CoC of half a pixel: the tile is copied. */
-kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
-                       const int pad, global float *dst, const int pitch,
-                       const int width, const int height, global const float *taps,
-                       global const int *tile_info, const int tiles_x, const int tile)
+/* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 4 image pixels per work-item (the
+ * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
+ * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
+ * between a near layer (r < mid-range) and a far one, its own being its centre sample's.
+ * A pixel unlike its own layer (log luminance more than EDGE_TAU from the lower median of
+ * its own layer's neighbours) takes the radius of the other layer's neighbour closest to it in log
+ * luminance when that one is sharper: a light beside a blurred bar, its pixels sampled on
+ * the bar, belongs to the sharp background (the antialiased beauty mixes the layers, the
+ * point-sampled depth does not). */
+kernel void dof_edges(global const float *col, global const float *coc, global float *out,
+                      const int ppitch, const int pheight, const int pad, const int width,
+                      const int height)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   const int x = qx * 4;
-  if(y >= height || x >= width) return;
-  const int t = (y / tile) * tiles_x + x / tile;
-  const int first = tile_info[2 * t], count = tile_info[2 * t + 1];
-  const int base = (y + pad) * ppitch + x + pad;
-  if(count == 0)
-  {  /* the sanitised source */
-    vstore16(vload16(0, col + base * 4), 0, dst + (y * pitch + x) * 4);
-    return;
+  if(x >= width || y >= height) return;
+  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY), centre = (float4)(0.0f);
+  for(int dy = -1; dy <= 1; dy++)
+  {
+    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
+    float v[6];
+    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
+    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
+    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
+    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
+    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
+    if(dy == 0) centre = m;
   }
-  const float16 c0 = vload16(0, col + base * 4);
+  const int4 edge = rmax - rmin >= EDGE_PX;
+  float res[4] = {centre.s0, centre.s1, centre.s2, centre.s3};
+  const int is_edge[4] = {edge.s0, edge.s1, edge.s2, edge.s3};
+  for(int l = 0; l < 4 && x + l < width; l++)
+  {
+    if(is_edge[l]) res[l] = dof_edge_radius(col, coc, ppitch, pad, width, height, x + l, y);
+    /* border pixels also fill their part of the padding */
+    const int xl = x + l;
+    const int x0 = xl == 0 ? 0 : xl + pad, x1 = xl == width - 1 ? ppitch - 1 : xl + pad;
+    const int y0 = y == 0 ? 0 : y + pad, y1 = y == height - 1 ? pheight - 1 : y + pad;
+    for(int py = y0; py <= y1; py++)
+      for(int px = x0; px <= x1; px++)
+        out[py * ppitch + px] = res[l];
+  }
+}
+
+kernel void dof_tile_cap(global const float *col, const int ppitch, const int pad,
+                         const int width, const int height, const int tile,
+                         const int tiles_x, const int tiles_y, global float *out)
+{
+  const int tx = get_global_id(0), ty = get_global_id(1);
+  if(tx >= tiles_x || ty >= tiles_y) return;
+  const int x0 = tx * tile, y0 = ty * tile;
+  const int x1 = min(x0 + tile, width), y1 = min(y0 + tile, height);
+  float sum = 0.0f;
+  int n = 0;
+  for(int y = y0; y < y1; y += 4)   /* every 4th pixel and row: an estimate suffices */
+  {
+    float row = 0.0f;
+    for(int x = x0; x < x1; x += 4)
+    {
+      const float4 c = vload4((y + pad) * ppitch + x + pad, col);
+      row += native_log(1.0f + fmax(clfx_luminance(c), 0.0f));
+      n++;
+    }
+    sum += row;
+  }
+  out[ty * tiles_x + tx] = sum / (float)max(n, 1);
+}
+
+kernel void dof_down2(global const float *col, global const float *coc, const int ppitch,
+                      const int pheight, global float *hcol, global float *hcoc,
+                      const int hpitch, const int hheight)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= hpitch || y >= hheight) return;
+  const int x0 = min(2 * x, ppitch - 1), x1 = min(2 * x + 1, ppitch - 1);
+  const int y0 = min(2 * y, pheight - 1), y1 = min(2 * y + 1, pheight - 1);
+  const float4 c = 0.25f * vload4(y0 * ppitch + x0, col) + 0.25f * vload4(y0 * ppitch + x1, col)
+                 + 0.25f * vload4(y1 * ppitch + x0, col) + 0.25f * vload4(y1 * ppitch + x1, col);
+  vstore4(c, y * hpitch + x, hcol);
+  hcoc[y * hpitch + x] = 0.125f * (coc[y0 * ppitch + x0] + coc[y0 * ppitch + x1]
+                                   + coc[y1 * ppitch + x0] + coc[y1 * ppitch + x1]);
+}
+
+#define LANES(v) ((v).s0000111122223333)
+
+/* Luminance of the 4 pixels of a float16. */
+inline float4 dof_lum4(float16 c)
+{
+  return 0.2126f * c.s048c + 0.7152f * c.s159d + 0.0722f * c.s26ae;
+}
+
+/* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
+ * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
+ * aperture area the tap stands for (px^2).  Returns the 4 pixels at `base` (padded index),
+ * colours times `scale`; `cap`: the largest luminance a colour may have where it fills in
+ * the background hidden behind a blurred foreground pixel (beyond its own CoC's reach). */
+inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
+                          const int base, global const float *taps, const int first,
+                          const int count, const float cap, const float scale)
+{
+  const float16 c0 = vload16(0, col + base * 4) * scale;
   const float4 r0 = vload4(0, coc + base);
   const int4 p_near = r0 < -NEAR_EPS;
+  const int any_near = any(p_near);
   const float4 ar0 = fabs(r0);
   const float4 r0_far = fmax(r0, 0.0f);
+  const float cap_s = cap * scale;
 
   REAL16 fn = (REAL16)(0), ff = (REAL16)(0);
   REAL4 wn_sum = (REAL4)(0), wf_sum = (REAL4)(0), alpha = (REAL4)(0);
@@ -80,7 +215,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
     const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
-    const float16 c = vload16(0, col + at * 4);
+    const float16 c = vload16(0, col + at * 4) * scale;
     const float4 rq = vload4(0, coc + at);
     const float4 arq = fabs(rq);
     const int4 q_near = rq < -NEAR_EPS;
@@ -92,9 +227,24 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
        visible background within p's radius */
     const float4 rf = select(select(arq, fmin(arq, r0_far), rq > r0), fmax(arq, ar0), p_near);
     const float4 cov_f = clamp(rf - d_far + 0.5f, 0.0f, 1.0f);
-    const float4 wf = select(cov_f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near);
+    const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near);
+    float4 wf = cov_f * norm;
     fn += TO_REAL16(c * LANES(wn));
-    ff += TO_REAL16(c * LANES(wf));
+    if(any_near && any(p_near & ~q_near))
+    {
+      /* behind a near p, the part of the coverage the tap's own CoC does not give is a
+         guess at hidden background: its highlights are capped (a light beside a blurred
+         bar must not shine through it) */
+      const float4 cov_q = fmin(clamp(arq - d_far + 0.5f, 0.0f, 1.0f), cov_f);
+      const float4 w_fill = select((float4)(0.0f), (cov_f - cov_q) * norm, p_near);
+      const float4 lum = dof_lum4(c);
+      const float4 k = fmin(1.0f, cap_s / fmax(lum, 1e-30f));
+      wf -= w_fill;
+      ff += TO_REAL16(c * LANES(wf + w_fill * k));
+      wf += w_fill;
+    }
+    else
+      ff += TO_REAL16(c * LANES(wf));
     wn_sum += TO_REAL4(wn);
     wf_sum += TO_REAL4(wf);
     alpha += TO_REAL4(wn * area);
@@ -106,28 +256,114 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const REAL4 inv_f = select((REAL4)(0), (REAL4)(1) / wf_sum, wf_sum > tiny);
   const REAL16 centre = TO_REAL16(c0);
   const REAL16 near = select(centre, fn * LANES(inv_n), LANES(wn_sum > tiny));
-  REAL16 far = select(near, ff * LANES(inv_f), LANES(wf_sum > tiny));
+  const REAL16 far = select(near, ff * LANES(inv_f), LANES(wf_sum > tiny));
   const REAL16 mix_a = LANES(select(a, (REAL4)(1), wf_sum <= tiny));
-  const REAL16 out = far + (near - far) * mix_a;
-  /* rows are padded to 4 pixels: the lanes past the width land in the padding */
-  vstore16(TO_FLOAT16(out), 0, dst + (y * pitch + x) * 4);
+  return far * ((REAL16)(1) - mix_a) + near * mix_a;   /* no difference: stays finite */
 }
 
-/* Bilinear upsampling of the half-resolution result into the tiles marked half (flag 1). */
-kernel void dof_upsample(global const float *hres, const int hpitch, const int hwidth,
-                         const int hheight, global float *dst, const int pitch,
-                         const int width, const int height, global const int *tile_half,
-                         const int tiles_x, const int tile)
+inline int dof_all_finite16(float16 v)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= width || y >= height) return;
-  if(!tile_half[(y / tile) * tiles_x + x / tile]) return;
+  return all((as_uint16(v) & 0x7f800000u) != (uint16)0x7f800000u);
+}
+
+/* The gather of 4 pixels, taken again with scaled colours if float sums overflowed. */
+inline float16 dof_gather_safe(global const float *col, global const float *coc,
+                               const int ppitch, const int base, global const float *taps,
+                               const int first, const int count, const float cap)
+{
+  const REAL16 out = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, 1.0f);
+  const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
+  if(dof_all_finite16(o)) return o;
+  const REAL16 s = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, OVERFLOW_SCALE);
+  return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
+}
+
+/* Bilinear sample of the half-resolution result at full-resolution pixel (x, y); `lmin`,
+ * `lmax`: the luminance range of the 4 half-resolution pixels it reads, widened. */
+inline float4 dof_upsample(global const float *hres, const int hpitch, const int hwidth,
+                           const int hheight, const int x, const int y, float *lmin,
+                           float *lmax)
+{
   const float hx = clamp(0.5f * ((float)x + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
   const float hy = clamp(0.5f * ((float)y + 0.5f) - 0.5f, 0.0f, (float)(hheight - 1));
   const int x0 = (int)hx, y0 = (int)hy;
   const int x1 = min(x0 + 1, hwidth - 1), y1 = min(y0 + 1, hheight - 1);
   const float fx = hx - (float)x0, fy = hy - (float)y0;
-  const float4 a = mix(vload4(y0 * hpitch + x0, hres), vload4(y0 * hpitch + x1, hres), fx);
-  const float4 b = mix(vload4(y1 * hpitch + x0, hres), vload4(y1 * hpitch + x1, hres), fx);
-  vstore4(mix(a, b, fy), y * pitch + x, dst);
+  const float4 c00 = vload4(y0 * hpitch + x0, hres), c01 = vload4(y0 * hpitch + x1, hres);
+  const float4 c10 = vload4(y1 * hpitch + x0, hres), c11 = vload4(y1 * hpitch + x1, hres);
+  const float4 l = (float4)(clfx_luminance(c00), clfx_luminance(c01), clfx_luminance(c10),
+                            clfx_luminance(c11));
+  *lmin = fmin(*lmin, fmin(fmin(l.x, l.y), fmin(l.z, l.w)));
+  *lmax = fmax(*lmax, fmax(fmax(l.x, l.y), fmax(l.z, l.w)));
+  /* weighted sums, no differences: finite values stay finite */
+  return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
+}
+
+/* The cap of hidden-background colours for tile (tx, ty): CAP_FACTOR times the geometric
+ * mean luminance (minus 1) of the brightest 3 x 3 tiles around (dof_tile_cap's means). */
+inline float dof_cap(global const float *log_mean, const int tx, const int ty,
+                     const int tiles_x, const int tiles_y, const float cap_factor)
+{
+  float g = 0.0f;
+  for(int dy = -1; dy <= 1; dy++)
+    for(int dx = -1; dx <= 1; dx++)
+      g = fmax(g, log_mean[clfx_clampi(ty + dy, 0, tiles_y - 1) * tiles_x
+                           + clfx_clampi(tx + dx, 0, tiles_x - 1)]);
+  return cap_factor * (exp(g) - 1.0f);
+}
+
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, 0, 0, 0): count 0 copies the
+ * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
+ * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
+ * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
+ * unless (mode bit 1: a dense table, a full-resolution gather there is worth it) its
+ * half-res pixels span more than `refine` in log luminance (a bokeh rim); every other
+ * group gathers at full resolution with (first, count). */
+kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
+                       const int pad, global float *dst, const int pitch,
+                       const int width, const int height, global const float *taps,
+                       global const int *tile_info, global const float *log_mean,
+                       const int tiles_x, const int tiles_y, const int tile,
+                       const float cap_factor, global const float *hres, const int hpitch,
+                       const int hwidth, const int hheight, const float refine,
+                       const float low_r)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  const int x = qx * 4;
+  if(y >= height || x >= width) return;
+  const int tx = x / tile, ty = y / tile;
+  const int8 info = vload8(ty * tiles_x + tx, tile_info);
+  const int base = (y + pad) * ppitch + x + pad;
+  global float *out = dst + (y * pitch + x) * 4;
+  if(info.s1 == 0)
+  {  /* the sanitised source */
+    vstore16(vload16(0, col + base * 4), 0, out);
+    return;
+  }
+  const float4 r = vload4(0, coc + base);
+  int first = info.s0, count = info.s1;
+  if(all(r >= -NEAR_EPS && r < low_r))
+  {
+    first = info.s2;
+    count = info.s3;
+  }
+  else if((info.s4 & 1) && all(fabs(r) >= low_r))
+  {
+    float lmin = INFINITY, lmax = -INFINITY;
+    float16 up;
+    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, x, y, &lmin, &lmax);
+    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, x + 1, y, &lmin, &lmax);
+    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, x + 2, y, &lmin, &lmax);
+    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, x + 3, y, &lmin, &lmax);
+    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
+    if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
+                         <= refine)
+    {
+      vstore16(up, 0, out);
+      return;
+    }
+  }
+  const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
+  /* rows are padded to 4 pixels: the lanes past the width land in the padding */
+  vstore16(dof_gather_safe(col, coc, ppitch, base, taps, first, count, cap), 0, out);
 }

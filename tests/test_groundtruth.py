@@ -159,3 +159,66 @@ def test_effects_and_ground_truth_share_one_copy_of_the_physics():
         assert motion.shutter_from(params, cam) == cam.shutter_interval()
     params.shutter_angle, params.shutter_offset = 90.0, "closing"
     assert motion.shutter_from(params, CAM) == (-0.25, 0.0)
+
+
+# -- renderer-like ground truth: supersampled beauty, depth and velocity at the pixel centre --
+@pytest.mark.parametrize("filt", ["box", "blackman-harris"])
+def test_renderer_like_truth_without_blur_is_the_supersampled_sharp_frame(filt):
+    from clfx.bench.groundtruth import RENDER_SS
+
+    sc = demo_scene(3, 120, 68)
+    sharp = render_sharp(sc, ss=RENDER_SS, pixel_filter=filt, passes="centre")
+    truth = render_truth(sc, CAM, samples=1, dof=False, motion=False, ss=RENDER_SS,
+                         pixel_filter=filt)
+    np.testing.assert_allclose(truth, sharp.rgba, rtol=1e-6, atol=1e-6)
+    # antialiased: edge pixels take intermediate values the single-sample frame lacks
+    single = render_sharp(sc, ss=1).rgba
+    assert not np.array_equal(sharp.rgba, single)
+
+
+def test_filter_taps():
+    from clfx.bench.scene import filter_margin, filter_taps, pixel_filter_weight
+
+    j, w = filter_taps(4)
+    assert list(j) == [0, 1, 2, 3] and np.allclose(w, 0.25) and filter_margin(4, j) == 0
+    j, w = filter_taps(4, "blackman-harris")            # 1.5 px wide: 6 taps, into neighbours
+    assert list(j) == [-1, 0, 1, 2, 3, 4] and abs(w.sum() - 1) < 1e-12
+    np.testing.assert_allclose(w, w[::-1])              # symmetric about the centre
+    assert filter_margin(4, j) == 1
+    assert pixel_filter_weight(0.0, "blackman-harris") == pytest.approx(1.0, abs=1e-12)
+    with pytest.raises(ValueError):
+        filter_taps(4, "gauss")
+
+
+def test_centre_passes_are_point_samples_not_coverage():
+    # a thin bar over a quarter of a pixel column and its centre: a renderer writes its
+    # depth there; the coverage rule does not
+    bar = Layer(depth=2.0, shape="rect", center=(10.575, 8.0), size=(0.25, 20.0),
+                velocity=(3.0, 0.0))
+    sc = Scene(20, 16, (bar,))
+    centre = render_sharp(sc, ss=4, passes="centre")
+    cover = render_sharp(sc, ss=4, passes="coverage")
+    assert centre.depth[8, 10] == 2.0 and tuple(centre.velocity[8, 10]) == (3.0, 0.0)
+    assert np.isinf(cover.depth[8, 10])
+    assert np.isinf(centre.depth[8, 9]) and np.isinf(centre.depth[8, 11])
+    # the beauty is the filtered mixture: a quarter of the bar's grey over the background
+    bg = centre.rgba[8, 3]
+    np.testing.assert_allclose(centre.rgba[8, 10, :3], 0.75 * bg[:3] + 0.25 * 0.5, rtol=1e-6)
+
+
+def test_spinning_layer_velocity_and_truth():
+    from clfx.bench.groundtruth import make_case
+
+    sp = Layer(depth=2.0, texture=Texture("checker", (1, 1, 1), (0, 0, 0), period=6),
+               shape="rect", center=(40.0, 30.0), size=(40.0, 8.0), spin=30.0)
+    sc = Scene(80, 60, (sp,), background=((0, 0, 0), (0, 0, 0)), background_alpha=0.0)
+    case = make_case(sc, CAM.updated(shutter_angle=180.0), samples=64, dof=False, motion=True,
+                     ss=4)
+    v = case.sharp.velocity
+    om = math.radians(30.0)
+    np.testing.assert_allclose(v[30, 55], (-om * 0.5, om * 15.5), rtol=1e-5)   # v = w x r
+    np.testing.assert_allclose(v[30, 25], (-om * 0.5, -om * 14.5), rtol=1e-5)
+    # the truth turns the bar by +-7.5 degrees: its tips sweep arcs, its centre stays sharp
+    tip = case.truth[30 - 3:30 + 4, 57:60, 3]
+    assert tip.min() < 0.9 and (case.truth[..., 3] > 0.01).sum() > (case.sharp.rgba[..., 3] > 0.01).sum()
+    np.testing.assert_allclose(case.truth[29:31, 38:42, 3], 1.0, atol=1e-6)

@@ -38,11 +38,24 @@ open for ``shutter_angle / 360`` of a frame, centred on the frame time, starting
 
 Sampling: ``samples`` lens points on a golden-angle spiral (uniform in the disk; mapped to
 the polygon radially with Jacobian weights ``R(phi)^2``) paired with stratified shutter
-times from a second low-discrepancy sequence.  Each layer is rasterised once at ``ss x ss``
-sub-samples per pixel over its padded extent; a sample render places it with an integer
-sub-sample offset (the shift rounded to ``1/ss`` px), composites "over" and accumulates in
-float64.  The rounding quantises the aperture to the sub-sample grid; with ``samples`` = 0
-aperture and 0 shutter it reproduces :func:`clfx.bench.scene.render_sharp` exactly.
+times from a second low-discrepancy sequence and with one sub-pixel position per render
+(the ``ss x ss`` positions of a pixel, or the taps of a wider pixel filter, cycled in a
+scrambled order and weighted by the filter: an accumulation buffer that antialiases).  Each
+layer is rasterised once at ``ss x ss`` sub-samples per pixel over its padded extent and
+kept phase-major; a sample render places each layer at an integer sub-sample offset (its
+shift rounded to ``1/ss`` px), composites "over" at pixel resolution and accumulates in
+float64.  A spinning layer (:attr:`clfx.bench.scene.Layer.spin`) is rasterised exactly
+for every render instead.  With ``samples`` = 0 aperture and 0 shutter it reproduces
+:func:`clfx.bench.scene.render_sharp` with the same ``ss`` and filter exactly.
+
+Renderer-like cases
+-------------------
+Renderers write a filtered beauty (many samples per pixel, box or Blackman-Harris filter)
+and depth / velocity from one sample at the pixel centre.  :func:`make_case` with ``ss >= 4``
+(:data:`RENDER_SS`) makes exactly that pair: the effects' input from
+:func:`clfx.bench.scene.render_sharp` (``passes="centre"``) and the truth from
+:func:`render_truth`, both through the same pixel filter.  ``ss = 1`` keeps the
+single-sample mode (beauty, depth and velocity from the one centre sample).
 """
 from __future__ import annotations
 
@@ -56,7 +69,8 @@ import numpy as np
 from clfx.bench.scene import (
     Scene,
     background_rgba,
-    box_downsample,
+    filter_margin,
+    filter_taps,
     rasterise_layer,
     render_sharp,
 )
@@ -94,13 +108,23 @@ def shutter_times(n: int, camera: Camera) -> np.ndarray:
 # -- renderer --------------------------------------------------------------------------------
 @dataclass
 class _Sprite:
-    """A layer rasterised once over its padded extent (sub-sample units)."""
+    """A layer rasterised once over its padded extent, stored phase-major: ``phases[a, b]``
+    is the pixel-resolution plane of sub-samples ``(r ss + a, c ss + b)``, so a sample render
+    at any sub-sample offset reads one contiguous plane.  A spinning layer (``layer`` set)
+    is rasterised again for every sample render instead."""
 
-    rgba: np.ndarray
-    x0: int                  # position of rgba[0, 0] in sub-samples of the frame
+    phases: np.ndarray | None
+    x0: int                  # frame pixel of phases[:, :, 0, 0]
     y0: int
     half_coc: float          # signed CoC / 2 in px: shift per unit lens position
     velocity: tuple
+    layer: object = None     # a spinning Layer, rasterised per sample render
+    box: tuple = ()          # its pixel box (x0, y0, x1, y1) in the frame
+
+
+def _phase_major(rgba: np.ndarray, ss: int) -> np.ndarray:
+    h, w = rgba.shape[0] // ss, rgba.shape[1] // ss
+    return np.ascontiguousarray(rgba.reshape(h, ss, w, ss, 4).transpose(1, 3, 0, 2, 4))
 
 
 def _sprite(scene: Scene, layer, t: float, pad_px: float, ss: int, half_coc: float) -> _Sprite:
@@ -114,22 +138,19 @@ def _sprite(scene: Scene, layer, t: float, pad_px: float, ss: int, half_coc: flo
                min(w + pad, math.ceil(b[2] + pad)), min(h + pad, math.ceil(b[3] + pad)))
     x0, y0, x1, y1 = (int(v) for v in box)
     x1, y1 = max(x1, x0), max(y1, y0)
-    if layer is None:
-        raise ValueError("layer is None")
     rgba = rasterise_layer(layer, x0, y0, x1 - x0, y1 - y0, ss, t)
-    return _Sprite(rgba, x0 * ss, y0 * ss, half_coc, tuple(layer.velocity))
+    return _Sprite(_phase_major(rgba, ss), x0, y0, half_coc, tuple(layer.velocity))
 
 
-def _place(out: np.ndarray, sp: _Sprite, dx: int, dy: int, first: bool) -> None:
-    """Composite sprite ``sp`` shifted by (dx, dy) sub-samples over ``out`` (or copy it)."""
+def _place(out: np.ndarray, src: np.ndarray, ox: int, oy: int, first: bool) -> None:
+    """Composite ``src`` with its top-left pixel at frame pixel (ox, oy) "over" ``out``."""
     H, W = out.shape[:2]
-    h, w = sp.rgba.shape[:2]
-    ox, oy = sp.x0 + dx, sp.y0 + dy
+    h, w = src.shape[:2]
     fx0, fy0 = max(0, ox), max(0, oy)
     fx1, fy1 = min(W, ox + w), min(H, oy + h)
     if fx1 <= fx0 or fy1 <= fy0:
         return
-    src = sp.rgba[fy0 - oy:fy1 - oy, fx0 - ox:fx1 - ox]
+    src = src[fy0 - oy:fy1 - oy, fx0 - ox:fx1 - ox]
     dst = out[fy0:fy1, fx0:fx1]
     if first:
         dst[...] = src
@@ -138,10 +159,33 @@ def _place(out: np.ndarray, sp: _Sprite, dx: int, dy: int, first: bool) -> None:
         dst += src
 
 
+def pixel_positions(ss: int, pixel_filter: str = "box", filter_width: float | None = None):
+    """The sub-pixel sample positions of a render and their weights.
+
+    Returns ``(jx, jy, w)``: sub-sample indices (position ``X + (j + 0.5) / ss`` in pixel
+    ``X``; :func:`clfx.bench.scene.filter_taps`) of the separable filter's 2D taps, flattened,
+    and their weights (sum 1).  ``ss = 1`` with a box: the pixel centre alone.
+    """
+    taps, w1 = filter_taps(ss, pixel_filter, filter_width)
+    jy, jx = np.meshgrid(taps, taps, indexing="ij")
+    return jx.ravel(), jy.ravel(), np.outer(w1, w1).ravel()
+
+
 def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
                  dof: bool = True, motion: bool = True, ss: int = 1,
+                 pixel_filter: str = "box", filter_width: float | None = None,
                  progress=None) -> np.ndarray:
     """Multisample render of ``scene`` through ``camera``: the ground truth.
+
+    Every sample render is the whole frame for one lens point, one shutter instant and one
+    sub-pixel position (shared by all pixels, as in an accumulation buffer): the
+    ``ss x ss`` positions of a pixel (or the taps of a wider ``pixel_filter``) are cycled
+    through the renders in a fixed scrambled order and weighted by the filter.  With
+    ``ss >= 4`` this is what a renderer writes: a beauty supersampled at least 4 x 4 per
+    pixel, whose lens and shutter samples are spread over the pixel's area; pair it with
+    :func:`clfx.bench.scene.render_sharp` ``(ss=ss, pixel_filter=..., passes="centre")``
+    for the effects' input (depth and velocity at the pixel centre, never averaged).
+    ``ss = 1`` is the single-sample mode (every render samples the pixel centre).
 
     Parameters
     ----------
@@ -152,11 +196,17 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     t : float
         Frame time in frames relative to the scene's frame.
     samples : int
-        Number of (lens point, shutter instant) pairs.
+        Number of (lens point, shutter instant, pixel position) renders; rounded up to a
+        multiple of the number of pixel positions (``ss * ss`` for a box).
     dof, motion : bool
         Integrate over the aperture / over the shutter interval.
     ss : int
-        Sub-samples per pixel and axis (antialiasing and shift resolution ``1/ss`` px).
+        Sub-pixel positions per pixel and axis, and the resolution ``1/ss`` px to which
+        lens and motion shifts are rounded (spinning layers are placed exactly).
+    pixel_filter : {"box", "blackman-harris"}
+        Pixel filter of the beauty (:func:`clfx.bench.scene.pixel_filter_weight`).
+    filter_width : float, optional
+        Its width in px (default: 1 for the box, 1.5 for Blackman-Harris).
     progress : callable, optional
         Called as ``progress(done, total)``.
 
@@ -164,44 +214,86 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     -------
     np.ndarray
         (height, width, 4) float32 premultiplied RGBA.
+
+    Notes
+    -----
+    Memory: each layer is kept at ``ss x ss`` sub-samples over its extent (float32 RGBA), e.g.
+    about 0.5 GB for a full-frame layer at 1920x1080 and ``ss = 4``.  Time: one composite of
+    every layer at pixel resolution per sample render.
     """
     w, h = scene.width, scene.height
-    n = max(1, int(samples)) if (dof or motion) else 1
-    lens, weights = aperture_samples(n, camera.blades, camera.blade_rotation)
+    jx, jy, fw = pixel_positions(ss, pixel_filter, filter_width)
+    k = len(fw)
+    n = -(-max(1, int(samples)) // k) * k if (dof or motion) else k
+    lens, lens_w = aperture_samples(n, camera.blades, camera.blade_rotation)
     if not dof:
         lens = np.zeros_like(lens)
     times = shutter_times(n, camera) if motion else np.zeros(n)
     t_extent = float(np.abs(times).max()) if n else 0.0
+    # pixel position of render i: every block of k renders visits each position once, in
+    # an order scrambled against the lens spiral and the shutter sequence
+    pos = np.random.default_rng(0x5EED).permutation(k)[np.arange(n) % k]
+    weights = (lens_w if dof else np.full(n, 1.0 / n)) * fw[pos]
+    if k > 1:
+        weights = weights / weights.sum()
+    reach = filter_margin(ss, jx) + 1   # pixels the filter's taps reach past a pixel
 
     def half_coc(z):
         return 0.0 if not dof else 0.5 * float(camera.coc_signed_px(z, w))
 
     bg_half = half_coc(math.inf)
-    sprites = []
-    bg = background_rgba(scene, -(int(abs(bg_half)) + 2), -(int(abs(bg_half)) + 2),
-                         w + 2 * (int(abs(bg_half)) + 2), h + 2 * (int(abs(bg_half)) + 2), ss)
-    sprites.append(_Sprite(bg, -(int(abs(bg_half)) + 2) * ss, -(int(abs(bg_half)) + 2) * ss,
-                           bg_half, (0.0, 0.0)))
+    bpad = int(abs(bg_half)) + 2 + reach
+    bg = background_rgba(scene, -bpad, -bpad, w + 2 * bpad, h + 2 * bpad, ss)
+    sprites = [_Sprite(_phase_major(bg, ss), -bpad, -bpad, bg_half, (0.0, 0.0))]
+    del bg
     for layer in scene.layers:
         hc = half_coc(layer.depth)
         speed = math.hypot(*layer.velocity) * t_extent
-        sprites.append(_sprite(scene, layer, t, abs(hc) + speed, ss, hc))
+        if motion and layer.spin != 0.0:
+            lo = layer.bounds(t + float(times.min()), margin=1.0)
+            hi = layer.bounds(t + float(times.max()), margin=1.0)
+            pad = abs(hc) + reach
+            box = (math.floor(min(lo[0], hi[0]) - pad), math.floor(min(lo[1], hi[1]) - pad),
+                   math.ceil(max(lo[2], hi[2]) + pad), math.ceil(max(lo[3], hi[3]) + pad))
+            box = (max(box[0], 0), max(box[1], 0), min(box[2], w), min(box[3], h))
+            sprites.append(_Sprite(None, box[0], box[1], hc, tuple(layer.velocity), layer, box))
+        else:
+            sprites.append(_sprite(scene, layer, t, abs(hc) + speed + reach, ss, hc))
 
-    acc = np.zeros((h * ss, w * ss, 4), np.float64)
-    out = np.empty((h * ss, w * ss, 4), np.float32)
+    acc = np.zeros((h, w, 4), np.float64)
+    out = np.empty((h, w, 4), np.float32)
     for i in range(n):
         (px, py), ts = lens[i], times[i]
+        ox, oy = int(jx[pos[i]]), int(jy[pos[i]])
         for j, sp in enumerate(sprites):
-            sx = px * sp.half_coc + sp.velocity[0] * ts
-            sy = py * sp.half_coc + sp.velocity[1] * ts
-            _place(out, sp, int(round(sx * ss)), int(round(sy * ss)), first=(j == 0))
-        acc += weights[i] * out if dof else out / n
+            sx = px * sp.half_coc
+            sy = py * sp.half_coc
+            if sp.layer is not None:
+                x0, y0, x1, y1 = sp.box
+                if x1 > x0 and y1 > y0:
+                    img = rasterise_layer(sp.layer, x0 + (ox + 0.5) / ss - 0.5 - sx,
+                                          y0 + (oy + 0.5) / ss - 0.5 - sy, x1 - x0, y1 - y0,
+                                          1, t + ts, rim_px=1.0 / ss)
+                    _place(out, img, x0, y0, first=(j == 0))
+                continue
+            sx += sp.velocity[0] * ts
+            sy += sp.velocity[1] * ts
+            offx = ox - int(round(sx * ss))
+            offy = oy - int(round(sy * ss))
+            qx, ax = divmod(offx, ss)
+            qy, ay = divmod(offy, ss)
+            _place(out, sp.phases[ay, ax], sp.x0 - qx, sp.y0 - qy, first=(j == 0))
+        acc += weights[i] * out
         if progress is not None:
             progress(i + 1, n)
-    return box_downsample(acc, ss).astype(np.float32)
+    return acc.astype(np.float32)
 
 
 # -- cases -----------------------------------------------------------------------------------
+RENDER_SS = 4
+"""Sub-samples per pixel and axis of renderer-like cases (4 x 4 = 16 positions per pixel)."""
+
+
 @dataclass
 class GroundTruthCase:
     """A scene, its sharp frame with passes (the effects' input) and the multisample truth."""
@@ -216,13 +308,48 @@ class GroundTruthCase:
 
 
 def make_case(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
-              dof: bool = True, motion: bool = False, ss: int = 1) -> GroundTruthCase:
-    """Render the sharp frame (same ``ss``) and the ground truth of ``scene``."""
-    sharp = render_sharp(scene, t, ss=ss)
+              dof: bool = True, motion: bool = False, ss: int = 1,
+              pixel_filter: str = "box", filter_width: float | None = None,
+              passes: str = "centre") -> GroundTruthCase:
+    """Render the sharp frame and the ground truth of ``scene`` through the same pixel filter.
+
+    Parameters
+    ----------
+    scene, camera, t, samples, dof, motion
+        As :func:`render_truth`.
+    ss : int
+        Sub-samples per pixel and axis of both renders: 1 = single sample (beauty and passes
+        from the pixel centre), :data:`RENDER_SS` (4) or more = renderer-like (beauty
+        supersampled, passes from the centre).
+    pixel_filter, filter_width
+        The beauty's pixel filter, ``"box"`` or ``"blackman-harris"``
+        (:func:`clfx.bench.scene.pixel_filter_weight`).
+    passes : {"centre", "coverage"}
+        How the sharp frame's depth and velocity are written (``centre``: as a renderer,
+        from the surface at the pixel centre; see :func:`clfx.bench.scene.render_sharp`).
+
+    Returns
+    -------
+    GroundTruthCase
+        ``sharp`` (a Frame with rgba, depth, velocity) is the effects' input, ``truth``
+        the (h, w, 4) float32 multisample render to compare with.
+    """
+    sharp = render_sharp(scene, t, ss=ss, pixel_filter=pixel_filter, filter_width=filter_width,
+                         passes=passes)
     t0 = time.perf_counter()
-    truth = render_truth(scene, camera, t=t, samples=samples, dof=dof, motion=motion, ss=ss)
+    truth = render_truth(scene, camera, t=t, samples=samples, dof=dof, motion=motion, ss=ss,
+                         pixel_filter=pixel_filter, filter_width=filter_width)
     return GroundTruthCase(scene, camera, sharp, truth, samples, time.perf_counter() - t0,
-                           dict(t=t, dof=dof, motion=motion, ss=ss))
+                           dict(t=t, dof=dof, motion=motion, ss=ss, pixel_filter=pixel_filter,
+                                filter_width=filter_width, passes=passes))
+
+
+def case_dict(case: GroundTruthCase, params: dict | None = None, **extra) -> dict:
+    """A bench case (:mod:`clfx.bench.cases`) from a ground-truth case: source, passes,
+    camera, truth and the truth's render time."""
+    f = case.sharp
+    return dict(source=f.rgba, depth=f.depth, velocity=f.velocity, params=dict(params or {}),
+                camera=case.camera, truth=case.truth, truth_seconds=case.seconds, **extra)
 
 
 def write_case(case: GroundTruthCase, directory, *, name: str = "case",

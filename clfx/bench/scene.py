@@ -92,7 +92,13 @@ class Layer:
         Alpha of the shape (lights are always opaque).
     lights : tuple of Light
     velocity : tuple of 2 floats
-        Forward screen-space velocity in pixels per frame (+x right, +y down).
+        Forward screen-space velocity of the centre in pixels per frame (+x right, +y down).
+    angle : float
+        Orientation in degrees (shape, texture and lights turned about ``center``; positive
+        turns +x towards +y, i.e. clockwise on screen).
+    spin : float
+        Angular velocity in degrees per frame (same sense as ``angle``): a point at ``r`` from
+        the centre moves with ``velocity + omega (-r_y, r_x)`` (omega in rad/frame).
     name : str
     """
 
@@ -106,6 +112,8 @@ class Layer:
     lights: tuple = ()
     velocity: tuple = (0.0, 0.0)
     name: str = ""
+    angle: float = 0.0
+    spin: float = 0.0
 
     def __post_init__(self):
         if self.shape not in SHAPES:
@@ -117,11 +125,28 @@ class Layer:
             raise ValueError(f"layer {self.name!r}: depth must be > 0, got {self.depth!r}")
 
     def moved(self, t: float) -> "Layer":
-        """This layer translated by ``velocity * t`` (t in frames)."""
+        """This layer translated by ``velocity * t`` and turned by ``spin * t`` (t in frames)."""
         if t == 0.0:
             return self
         return replace(self, center=(self.center[0] + self.velocity[0] * t,
-                                     self.center[1] + self.velocity[1] * t))
+                                     self.center[1] + self.velocity[1] * t),
+                       angle=self.angle + self.spin * t)
+
+    @property
+    def turned(self) -> bool:
+        """Whether the layer is (or becomes) rotated: its sprite cannot just be translated."""
+        return self.angle != 0.0 or self.spin != 0.0
+
+    def velocity_at(self, x, y):
+        """Forward velocity (px/frame) of the layer's points at screen positions ``x, y``
+        (arrays, time 0): the centre's translation plus the spin about the centre."""
+        vx = np.full(np.shape(x), self.velocity[0], np.float32)
+        vy = np.full(np.shape(y), self.velocity[1], np.float32)
+        if self.spin != 0.0:
+            om = math.radians(self.spin)
+            vx = vx - np.float32(om) * (np.asarray(y, np.float32) - np.float32(self.center[1]))
+            vy = vy + np.float32(om) * (np.asarray(x, np.float32) - np.float32(self.center[0]))
+        return vx, vy
 
     def bounds(self, t: float = 0.0, margin: float = 0.0):
         """(x0, y0, x1, y1) in pixels enclosing the layer at time ``t``, or None for ``full``."""
@@ -129,6 +154,11 @@ class Layer:
             return None
         cx = self.center[0] + self.velocity[0] * t
         cy = self.center[1] + self.velocity[1] * t
+        if self.turned:   # any orientation: the circle around every part
+            r = 0.5 * math.hypot(*self.size) if self.shape != "none" else 0.0
+            for lt in self.lights:
+                r = max(r, math.hypot(*lt.offset) + lt.radius + 1.0)
+            return (cx - r - margin, cy - r - margin, cx + r + margin, cy + r + margin)
         boxes = []
         if self.shape != "none":
             boxes.append((cx - self.size[0] / 2, cy - self.size[1] / 2,
@@ -228,12 +258,14 @@ def _shape_alpha(layer: Layer, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
-                    ss: int = 2, t: float = 0.0) -> np.ndarray:
+                    ss: int = 2, t: float = 0.0, *, rim_px: float | None = None) -> np.ndarray:
     """Premultiplied RGBA (height*ss, width*ss, 4) float32 of ``layer`` at time ``t``.
 
     Samples sit at ``x0 + (i + 0.5) / ss`` (and likewise in y): ``ss x ss`` per pixel of the
-    region whose top-left pixel corner is ``(x0, y0)``.
+    region whose top-left pixel corner is ``(x0, y0)``.  Lights' rims are antialiased over
+    ``rim_px`` (default one sample spacing, ``1 / ss``); shapes and textures are point-sampled.
     """
+    sharp = ss if rim_px is None else 1.0 / float(rim_px)   # 1 / rim width
     lay = layer.moved(t)
     out = np.zeros((height * ss, width * ss, 4), np.float32)
     if width <= 0 or height <= 0:
@@ -241,6 +273,10 @@ def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
     xs = (x0 + (np.arange(width * ss, dtype=np.float64) + 0.5) / ss - lay.center[0]).astype(np.float32)
     ys = (y0 + (np.arange(height * ss, dtype=np.float64) + 0.5) / ss - lay.center[1]).astype(np.float32)
     u, v = np.meshgrid(xs, ys)
+    if lay.angle != 0.0:   # into the layer's own (unturned) frame
+        a = math.radians(lay.angle)
+        ca, sa = np.float32(math.cos(a)), np.float32(math.sin(a))
+        u, v = ca * u + sa * v, -sa * u + ca * v
     alpha = _shape_alpha(lay, u, v) * np.float32(lay.opacity)
     if lay.shape != "none" and alpha.any():
         m = texture_mix(lay.texture, u, v)[..., None]
@@ -250,8 +286,12 @@ def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
         out[..., 3] = alpha
     for lt in lay.lights:
         # Evaluate each light only over its own few sub-samples (scenes hold many lights).
-        lx = lay.center[0] + lt.offset[0] - x0
-        ly = lay.center[1] + lt.offset[1] - y0
+        ox, oy = lt.offset
+        if lay.angle != 0.0:   # the light's offset turned with the layer, on screen
+            a = math.radians(lay.angle)
+            ox, oy = ox * math.cos(a) - oy * math.sin(a), ox * math.sin(a) + oy * math.cos(a)
+        lx = lay.center[0] + ox - x0
+        ly = lay.center[1] + oy - y0
         reach = lt.radius + 1.0
         i0, i1 = max(0, int((lx - reach) * ss)), min(width * ss, int(math.ceil((lx + reach) * ss)))
         j0, j1 = max(0, int((ly - reach) * ss)), min(height * ss, int(math.ceil((ly + reach) * ss)))
@@ -260,7 +300,7 @@ def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
         # Antialiased disk: coverage falls from 1 to 0 across one sample spacing at the rim.
         d = np.hypot(u[j0:j1, i0:i1] - np.float32(lt.offset[0]),
                      v[j0:j1, i0:i1] - np.float32(lt.offset[1]))
-        cov = np.clip((lt.radius - d) * ss + 0.5, 0.0, 1.0).astype(np.float32)[..., None]
+        cov = np.clip((lt.radius - d) * sharp + 0.5, 0.0, 1.0).astype(np.float32)[..., None]
         col = np.asarray(lt.color, np.float32)
         o = out[j0:j1, i0:i1]
         o[..., :3] = o[..., :3] * (1 - cov) + col * cov
@@ -283,6 +323,64 @@ def background_rgba(scene: Scene, x0: float, y0: float, width: int, height: int,
     return out
 
 
+PIXEL_FILTERS = ("box", "blackman-harris")
+"""Pixel reconstruction filters of the supersampled renders (:func:`filter_taps`)."""
+
+DEFAULT_FILTER_WIDTH = {"box": 1.0, "blackman-harris": 1.5}
+"""Filter widths (px) used when none is given: a one-pixel box; Blackman-Harris 1.5 px wide,
+Cycles' default pixel filter."""
+
+
+def pixel_filter_weight(d, pixel_filter: str = "box", width: float | None = None):
+    """Weight of a sample ``d`` px (array) from the pixel centre along one axis (unnormalised).
+
+    ``box``: 1 inside ``|d| < width / 2``.  ``blackman-harris``: the 4-term Blackman-Harris
+    window over ``[-width / 2, width / 2]`` (Cycles' ``filter_func_blackman_harris``); both
+    are applied separably in x and y.
+    """
+    if pixel_filter not in PIXEL_FILTERS:
+        raise ValueError(f"pixel filter {pixel_filter!r} is not one of {PIXEL_FILTERS}")
+    w = DEFAULT_FILTER_WIDTH[pixel_filter] if width is None else float(width)
+    if not w > 0:
+        raise ValueError(f"pixel filter width must be > 0, got {width!r}")
+    d = np.asarray(d, np.float64)
+    inside = np.abs(d) < 0.5 * w
+    if pixel_filter == "box":
+        return inside.astype(np.float64)
+    x = 2.0 * math.pi * (d / w + 0.5)
+    bh = 0.35875 - 0.48829 * np.cos(x) + 0.14128 * np.cos(2 * x) - 0.01168 * np.cos(3 * x)
+    return np.where(inside, bh, 0.0)
+
+
+def filter_taps(ss: int, pixel_filter: str = "box", width: float | None = None):
+    """Sub-sample taps of a pixel filter on an ``ss``-per-pixel grid, along one axis.
+
+    Returns ``(j, w)``: integer sub-sample indices relative to the pixel's first sub-sample
+    (tap ``j`` sits at ``X + (j + 0.5) / ss`` for pixel ``X``, i.e. ``(j + 0.5) / ss - 0.5`` px
+    from its centre; negative or >= ``ss`` reach into the neighbours) and their weights (sum
+    1).  A one-pixel box gives ``j = 0 .. ss-1`` with equal weights.
+    """
+    ss = int(ss)
+    if ss < 1:
+        raise ValueError(f"sub-samples per pixel must be >= 1, got {ss}")
+    w = DEFAULT_FILTER_WIDTH.get(pixel_filter, 1.0) if width is None else float(width)
+    reach = int(math.ceil(0.5 * w * ss)) + 1
+    j = np.arange(-reach, ss + reach)
+    wt = pixel_filter_weight((j + 0.5) / ss - 0.5, pixel_filter, width)
+    keep = wt > 0
+    if not keep.any():   # a filter narrower than the grid: the nearest sub-sample(s)
+        d = np.abs((j + 0.5) / ss - 0.5)
+        keep = d <= d.min() + 1e-12
+        wt = np.ones_like(wt)
+    return j[keep], wt[keep] / wt[keep].sum()
+
+
+def filter_margin(ss: int, taps) -> int:
+    """Pixels beyond the frame a filter with sub-sample ``taps`` reads on each side."""
+    taps = np.asarray(taps)
+    return int(max(0, -(-int(-taps.min()) // ss), -(-int(taps.max() - ss + 1) // ss)))
+
+
 def box_downsample(img: np.ndarray, ss: int) -> np.ndarray:
     """Mean over ``ss x ss`` blocks (the pixel box filter of the sub-samples)."""
     if ss == 1:
@@ -291,12 +389,34 @@ def box_downsample(img: np.ndarray, ss: int) -> np.ndarray:
     return img.reshape(h, ss, w, ss, *img.shape[2:]).mean(axis=(1, 3), dtype=np.float64)
 
 
-def _clip_box(bounds, width, height):
-    """Integer pixel box (x0, y0, x1, y1) of ``bounds`` inside the frame, or None if empty."""
+def filter_downsample(img: np.ndarray, ss: int, taps, weights, margin: int) -> np.ndarray:
+    """Pixels from sub-samples through a separable pixel filter (float64).
+
+    ``img`` holds ``ss`` sub-samples per pixel over the frame grown by ``margin`` pixels on
+    every side; the result is the frame: ``out[Y, X] = sum w_a w_b img[(Y + m) ss + a,
+    (X + m) ss + b]`` over the taps ``a, b`` (:func:`filter_taps`).
+    """
+    out = np.asarray(img)
+    for axis in (0, 1):
+        n = out.shape[axis] // ss - 2 * margin
+        acc = None
+        for j, w in zip(np.asarray(taps), np.asarray(weights)):
+            start = margin * ss + int(j)
+            sl = [slice(None)] * out.ndim
+            sl[axis] = slice(start, start + (n - 1) * ss + 1, ss)
+            term = w * out[tuple(sl)].astype(np.float64)
+            acc = term if acc is None else acc + term
+        out = acc
+    return out
+
+
+def _clip_box(bounds, width, height, x_lo=0, y_lo=0):
+    """Integer pixel box (x0, y0, x1, y1) of ``bounds`` inside ``[x_lo, width) x [y_lo,
+    height)``, or None if empty."""
     if bounds is None:
-        return 0, 0, width, height
-    x0 = max(0, int(math.floor(bounds[0])))
-    y0 = max(0, int(math.floor(bounds[1])))
+        return x_lo, y_lo, width, height
+    x0 = max(x_lo, int(math.floor(bounds[0])))
+    y0 = max(y_lo, int(math.floor(bounds[1])))
     x1 = min(width, int(math.ceil(bounds[2])))
     y1 = min(height, int(math.ceil(bounds[3])))
     if x1 <= x0 or y1 <= y0:
@@ -304,7 +424,15 @@ def _clip_box(bounds, width, height):
     return x0, y0, x1, y1
 
 
-def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2):
+PASS_MODES = ("coverage", "centre")
+"""How :func:`render_sharp` writes depth and velocity: from the nearest layer covering more
+than ``pass_alpha`` of the pixel's sub-samples, or (as renderers write them) from the nearest
+layer whose alpha at the pixel centre exceeds ``pass_alpha`` (one point: never averaged)."""
+
+
+def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str = "box",
+                 filter_width: float | None = None, passes: str = "coverage",
+                 pass_alpha: float = 0.5):
     """Render the pinhole (all-sharp, instantaneous) frame at time ``t`` with its passes.
 
     Parameters
@@ -314,33 +442,67 @@ def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2):
         Time in frames relative to the scene's frame.
     ss : int
         Sub-samples per pixel along each axis (antialiasing).
+    pixel_filter : {"box", "blackman-harris"}
+        Filter from sub-samples to pixels (:func:`pixel_filter_weight`); wider than a pixel,
+        it reads sub-samples of the neighbours (the scene is rendered past the frame).
+    filter_width : float, optional
+        Its width in px (default :data:`DEFAULT_FILTER_WIDTH`).
+    passes : {"coverage", "centre"}
+        How depth and velocity are written (:data:`PASS_MODES`); ``centre`` is what a
+        renderer writes beside a filtered beauty: the surface at the pixel centre.
+    pass_alpha : float
+        Alpha (coverage or at the centre) above which a layer owns the pixel's passes.
 
     Returns
     -------
     clfx.core.frame.Frame
         ``rgba`` premultiplied scene-linear; ``depth`` planar z in metres of the nearest layer
-        covering more than half the pixel (+inf = background); ``velocity`` that layer's
-        forward velocity in px/frame (0 for the background).
+        owning the pixel (+inf = background); ``velocity`` that layer's forward velocity at
+        the pixel centre in px/frame (0 for the background), in clfx's conventions
+        (:mod:`clfx.core.frame`).
     """
     from clfx.core.frame import Frame
 
+    if passes not in PASS_MODES:
+        raise ValueError(f"passes {passes!r} is not one of {PASS_MODES}")
     w, h = scene.width, scene.height
-    acc = background_rgba(scene, 0, 0, w, h, ss)
+    taps, weights = filter_taps(ss, pixel_filter, filter_width)
+    m = filter_margin(ss, taps)
+    plain_box = m == 0 and len(taps) == ss and np.all(taps == np.arange(ss))
+    acc = background_rgba(scene, -m, -m, w + 2 * m, h + 2 * m, ss)
     depth = np.full((h, w), np.inf, np.float32)
     velocity = np.zeros((h, w, 2), np.float32)
     for layer in scene.layers:   # far to near: nearer layers overwrite the passes
-        box = _clip_box(layer.bounds(t, margin=1.0), w, h)
+        bounds = layer.bounds(t, margin=1.0)
+        box = _clip_box(bounds, w + m, h + m, -m, -m)
         if box is None:
             continue
         x0, y0, x1, y1 = box
         rgba = rasterise_layer(layer, x0, y0, x1 - x0, y1 - y0, ss, t)
-        sl = np.s_[y0 * ss:y1 * ss, x0 * ss:x1 * ss]
+        sl = np.s_[(y0 + m) * ss:(y1 + m) * ss, (x0 + m) * ss:(x1 + m) * ss]
         acc[sl] = rgba + acc[sl] * (1 - rgba[..., 3:4])
-        cover = box_downsample(rgba[..., 3], ss) > 0.5
-        depth[y0:y1, x0:x1][cover] = layer.depth
-        velocity[y0:y1, x0:x1][cover] = layer.velocity
-    rgba = box_downsample(acc, ss).astype(np.float32)
-    return Frame.from_array(rgba, depth=depth, velocity=velocity)
+        fb = _clip_box(bounds, w, h)
+        if fb is None:
+            continue
+        fx0, fy0, fx1, fy1 = fb
+        if passes == "coverage":
+            sub = rgba[(fy0 - y0) * ss:(fy1 - y0) * ss, (fx0 - x0) * ss:(fx1 - x0) * ss, 3]
+            cover = box_downsample(sub, ss) > pass_alpha
+        else:
+            cover = rasterise_layer(layer, fx0, fy0, fx1 - fx0, fy1 - fy0, 1, t,
+                                    rim_px=1.0 / ss)[..., 3] > pass_alpha
+        depth[fy0:fy1, fx0:fx1][cover] = layer.depth
+        if layer.spin != 0.0:
+            gy, gx = np.mgrid[fy0:fy1, fx0:fx1] + 0.5
+            vx, vy = layer.moved(t).velocity_at(gx, gy)
+            velocity[fy0:fy1, fx0:fx1][cover] = np.stack([vx, vy], -1)[cover]
+        else:
+            velocity[fy0:fy1, fx0:fx1][cover] = layer.velocity
+    if plain_box:
+        rgba = box_downsample(acc, ss)
+    else:
+        rgba = filter_downsample(acc, ss, taps, weights, m)
+    return Frame.from_array(rgba.astype(np.float32), depth=depth, velocity=velocity)
 
 
 # -- the built-in demo -----------------------------------------------------------------------

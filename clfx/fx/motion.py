@@ -75,6 +75,22 @@ SHUTTER_OFFSETS = ("camera",) + CAMERA_SHUTTER_OFFSETS
 LOCAL = 64
 """Work-group size of the 1D gather launch (pinned: PoCL compiles one work-group function)."""
 
+MIN_BLUR_PX = 0.1
+"""Smears shorter than this (px over the shutter) count as no motion: such tiles are copied,
+such pixels occlude nothing.  A renderer blurs a 0.4 px smear visibly at a sharp edge (a
+tenth of the contrast), so the threshold sits well below half a pixel."""
+
+CUBIC_MAX_PX = 4.0
+"""Tiles whose blur is shorter than this (px) fetch colours through a clamped Catmull-Rom
+instead of bilinearly (or nearest): over a short smear the reconstruction filter's own blur is
+as large as the motion's, and only a sharper one brings the result closer to the truth than
+the unblurred input."""
+
+JITTER_SPACING_PX = 1.0
+"""Per-pixel jitter only where samples lie farther apart than this along the blur (the
+level's sample cap bites): denser samples use the midpoint rule, which is exact for a
+linear image and has no noise; jitter turns the ghost copies of sparse samples into grain."""
+
 
 @dataclass(frozen=True)
 class MotionLevel(Level):
@@ -185,12 +201,13 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     radius = reach_px(peak_speed, t0, t1, max_radius_px)
     col = sanitized_copy(rt, src) if nonfinite else src
     dst = rt.copy(col)
-    if w == 0 or h == 0 or reach_t <= 0.0 or radius * (t1 - t0) / reach_t < 0.5:
+    if w == 0 or h == 0 or reach_t <= 0.0 or radius * (t1 - t0) / reach_t < MIN_BLUR_PX:
         return dst, BlurStats(0, radius, 0, 0, 0)
     k = tile_size(radius)
     vmax = radius / reach_t
     defines = dict(BILINEAR=int(level.bilinear), JITTER=int(level.jitter),
-                   HAS_DEPTH=int(depth is not None), fp64=level.fp64)
+                   HAS_DEPTH=int(depth is not None), MIN_BLUR=f"{MIN_BLUR_PX!r}f",
+                   fp64=level.fp64)
     i32, f32 = np.int32, np.float32
 
     aux = rt.image(src.window, 4)
@@ -209,14 +226,21 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     # Classification on the host: a few thousand floats, the only read-back.
     nm = rt.from_device(nmax, np.float32, tx * ty * 4).reshape(ty, tx, 4)
     length = nm[..., 2].astype(np.float64) * (t1 - t0)     # blur length of the tile's v_n
-    ys, xs = np.nonzero(length >= 0.5)
+    ys, xs = np.nonzero(length >= MIN_BLUR_PX)
     if xs.size == 0:
         return dst, BlurStats(k, radius, tx * ty, 0, 0)
-    n = np.clip(np.ceil(length[ys, xs] / level.spacing), 2, level.max_samples).astype(np.int32)
-    table = rt.to_device(np.stack([xs, ys, n], axis=1).astype(np.int32).ravel())
+    length = length[ys, xs]
+    n = np.clip(np.ceil(length / level.spacing), 2, level.max_samples).astype(np.int32)
+    jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
+    short = length < CUBIC_MAX_PX
     qpt = k * k // 4
-    total = xs.size * qpt
-    rt.launch(rt.kernel(KERNEL, "motion_gather", **defines), (total,), col, aux, nmax,
-              table, i32(xs.size), dst, i32(pitch), i32(w), i32(h), i32(tx), i32(k), f32(t0),
-              f32(t1), i32(frame), local=(LOCAL,))
+    for sel, cubic in ((short, 1), (~short, 0)):   # one launch per fetch filter
+        if not sel.any():
+            continue
+        table = rt.to_device(np.stack([xs[sel], ys[sel], n[sel], jitter[sel]],
+                                      axis=1).astype(np.int32).ravel())
+        count = int(sel.sum())
+        rt.launch(rt.kernel(KERNEL, "motion_gather", CUBIC=cubic, **defines),
+                  (count * qpt,), col, aux, nmax, table, i32(count), dst, i32(pitch), i32(w),
+                  i32(h), i32(tx), i32(k), f32(t0), f32(t1), i32(frame), local=(LOCAL,))
     return dst, BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()))

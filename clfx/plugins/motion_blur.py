@@ -35,6 +35,7 @@ from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam
 from clfx.fx.motion import (
     LEVELS,
     MAX_RADIUS_PX,
+    MIN_BLUR_PX,
     SHUTTER_OFFSETS,
     reach_px,
     reconstruct,
@@ -89,9 +90,9 @@ class MotionBlur(Plugin):
         if ctx.velocity is None:
             return None
         peak = ctx.analysis.peak_speed
-        if peak * (t1 - t0) < 0.5:
-            return (f"velocity below half a pixel everywhere (peak {peak:.3g} px/frame over "
-                    f"a {t1 - t0:.3g}-frame shutter)")
+        if peak * (t1 - t0) < MIN_BLUR_PX:
+            return (f"velocity below {MIN_BLUR_PX:g} px over the shutter everywhere (peak "
+                    f"{peak:.3g} px/frame over a {t1 - t0:.3g}-frame shutter)")
         return None
 
     def region_of_definition(self, p, ctx):

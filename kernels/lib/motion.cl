@@ -27,6 +27,13 @@
 #define HAS_DEPTH 1
 #endif
 
+#ifndef CUBIC
+#define CUBIC 0             /* colour fetches: clamped Catmull-Rom (short blurs) or lib/motion_gather.h's */
+#endif
+#ifndef MIN_BLUR
+#define MIN_BLUR 0.1f       /* px: a smear shorter than this is no motion (clfx/fx/motion.py) */
+#endif
+
 #define BIG_DEPTH 1e30f     /* sanitised "no surface / invalid depth": behind everything */
 #define SOFT_Z 0.02f        /* relative depth difference over which "in front" fades in */
 #define MIN_SPEED 1e-3f     /* below this (px/frame) a pixel counts as static */
@@ -117,12 +124,57 @@ kernel void motion_neighbormax(global const float *tiles, global float *nmax,
     VX = (float4)(a0_.x, a1_.x, a2_.x, a3_.x); VY = (float4)(a0_.y, a1_.y, a2_.y, a3_.y); \
     Z = (float4)(a0_.z, a1_.z, a2_.z, a3_.z); S = (float4)(a0_.w, a1_.w, a2_.w, a3_.w); }
 
+/* Catmull-Rom weights of the 4 taps around a sample at fraction a in [0, 1). */
+inline float4 mb_catmull_rom(const float a)
+{
+  const float a2 = a * a, a3 = a2 * a;
+  return (float4)(-0.5f * a3 + a2 - 0.5f * a, 1.5f * a3 - 2.5f * a2 + 1.0f,
+                  -1.5f * a3 + 2.0f * a2 + 0.5f * a, 0.5f * a3 - 0.5f * a2);
+}
+
+/* Colour at continuous position (px, py), clamp-to-edge, times `scale`: Catmull-Rom (4 x 4
+ * taps) clamped per channel to the 2 x 2 pixels around the position.  Short blurs integrate
+ * the image over under a pixel or a few: bilinear reconstruction blurs every sample by up
+ * to a quarter pixel more (as much again as a one-pixel smear), the cubic keeps the detail;
+ * the clamp stops its negative lobes ringing around HDR lights. */
+inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int w,
+                             const int h, const float px, const float py, const float scale)
+{
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v);
+  const float4 wx = mb_catmull_rom(u - fu), wy = mb_catmull_rom(v - fv);
+  const int iu = (int)clamp(fu, -2.0f, (float)w), iv = (int)clamp(fv, -2.0f, (float)h);
+  const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
+  const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
+  float4 acc = (float4)(0.0f), lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+  for(int j = 0; j < 4; j++)
+  {
+    const int row = clfx_clampi(iv - 1 + j, 0, h - 1) * pitch;
+    const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
+    const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
+    if(j == 1 || j == 2)
+    {
+      lo = fmin(lo, fmin(c1, c2));
+      hi = fmax(hi, fmax(c1, c2));
+    }
+    const float wj = j == 0 ? wy.x : j == 1 ? wy.y : j == 2 ? wy.z : wy.w;
+    acc += wj * (wx.x * c0 + wx.y * c1 + wx.z * c2 + wx.w * c3);
+  }
+  return clamp(acc, lo, hi);
+}
+
+#if CUBIC
+#define MB_FETCH mb_fetch_cubic
+#else
+#define MB_FETCH mg_fetch_scaled
+#endif
+
 /* Colours at 4 positions, times `scale` (in scope). */
 #define MB_FETCH4(px, py) \
-  (float16)(mg_fetch_scaled(col, pitch, width, height, (px).x, (py).x, scale), \
-            mg_fetch_scaled(col, pitch, width, height, (px).y, (py).y, scale), \
-            mg_fetch_scaled(col, pitch, width, height, (px).z, (py).z, scale), \
-            mg_fetch_scaled(col, pitch, width, height, (px).w, (py).w, scale))
+  (float16)(MB_FETCH(col, pitch, width, height, (px).x, (py).x, scale), \
+            MB_FETCH(col, pitch, width, height, (px).y, (py).y, scale), \
+            MB_FETCH(col, pitch, width, height, (px).z, (py).z, scale), \
+            MB_FETCH(col, pitch, width, height, (px).w, (py).w, scale))
 
 /* The gather of the 4 pixels of one work-item (lanes `lane`, row fy; centre colours cc, own
  * velocities (vxx, vxy), depths zx), every colour sample times `scale` (the result too).
@@ -169,7 +221,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       const float4 perp = fabs(dx * vyy - dy * vyx) * inv_sy;
       const float4 rho = clamp(0.5f + fmin(ay - t0 * sy, t1 * sy - ay) / hell, 0.0f, 1.0f)
                        * clamp(1.5f - perp, 0.0f, 1.0f)
-                       * clamp(2.0f * len - 0.5f, 0.0f, 1.0f);  /* static pixels never occlude */
+                       * clamp(len / MIN_BLUR - 1.0f, 0.0f, 1.0f);  /* static pixels never occlude */
       const float4 wf = f * rho * (ell / fmax(len, hell));
       if(any(wf > 0.0f))
       {
@@ -205,7 +257,9 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
          + TO_REAL16(cc * scale) * (REAL16)(ccov.xxxx, ccov.yyyy, ccov.zzzz, ccov.wwww);
 }
 
-/* tiles: (tx, ty, samples) per moving tile; k: tile size (multiple of 4); qpt = k * k / 4.
+/* tiles: (tx, ty, samples, jitter) per moving tile (jitter 0: the midpoint rule, exact for the
+ * few, dense samples of a short blur; 1: per-pixel jitter where samples are sparse);
+ * k: tile size (multiple of 4); qpt = k * k / 4.
  * `col` holds finite colours (the host sanitises NaN/Inf first); a float32 sum of huge ones
  * that overflows is taken again with every colour halved and divided by n first, so finite
  * input gives finite output. */
@@ -220,7 +274,8 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const int tile = gid / qpt;
   if(tile >= ntiles) return;
   const int r = gid - tile * qpt, qrow = k / 4;
-  const int tx = tiles[3 * tile], ty = tiles[3 * tile + 1], n = tiles[3 * tile + 2];
+  const int tx = tiles[4 * tile], ty = tiles[4 * tile + 1], n = tiles[4 * tile + 2];
+  const int jittered = tiles[4 * tile + 3];
   const int x = tx * k + (r % qrow) * 4, y = ty * k + r / qrow;
   if(y >= height || x >= pitch) return;
 
@@ -234,8 +289,8 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const float dt = (t1 - t0) / (float)n;
   const float ell = vn.z * dt;                 /* source length per occluder sample, px */
   const float hell = fmax(ell, 1e-3f);
-  const float4 jit = mg_jitter(lane, fy, frame);
-  const int any_moving = any(sx * (t1 - t0) >= 0.25f);
+  const float4 jit = jittered ? mg_jitter(lane, fy, frame) : (float4)(0.5f);
+  const int any_moving = any(sx * (t1 - t0) >= MIN_BLUR);
 
   float scale = 1.0f;
   float16 out;

@@ -32,11 +32,11 @@ def oracle(src, depth, quality, cam=CAM, **params):
     k_half, focus, clamp_r = lens(w, h, p, cam)
     r = reference.coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
     radius = float(quantised_radius(np.abs(r).max()))
-    spacing, kmax = LEVELS[quality].spacing, LEVELS[quality].max_rings
+    lvl = LEVELS[quality]
     blades = cam.blades if p.blades < 0 else p.blades
-    taps = tap_table(radius, spacing, kmax, 1.0, blades,
+    taps = tap_table(radius, lvl.spacing, lvl.max_rings, 1.0, blades,
                      -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
-                     p.roundness)
+                     p.roundness, dense=lvl.dense_radius)
     return reference.dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps)
 
 
@@ -237,10 +237,11 @@ def test_max_blur_mode(rt, rng):
     got = run(rt, src, depth, "reference", CAM, coc_source="max_blur", max_blur=8.0 / diag)
     # max_blur: K = max_blur * diagonal; same geometry as a camera with that K
     h, w = depth.shape
-    r = reference.coc_radius(depth, k_half=4.0, focus=3.0, clamp_r=0.5 * 0.05 * diag)
-    taps = tap_table(float(quantised_radius(np.abs(r).max())), LEVELS["reference"].spacing,
-                     LEVELS["reference"].max_rings)
-    want = reference.dof(src, depth, k_half=4.0, focus=3.0, clamp_r=0.5 * 0.05 * diag, taps=taps)
+    r = reference.coc_radius(depth, k_half=4.0, focus=3.0, clamp_r=0.5 * Dof.params().max_coc * diag)
+    lvl = LEVELS["reference"]
+    taps = tap_table(float(quantised_radius(np.abs(r).max())), lvl.spacing, lvl.max_rings,
+                     dense=lvl.dense_radius)
+    want = reference.dof(src, depth, k_half=4.0, focus=3.0, clamp_r=0.5 * Dof.params().max_coc * diag, taps=taps)
     np.testing.assert_allclose(got, want, rtol=5e-6, atol=1e-6)   # float32 weights, float64 sums
 
 
@@ -312,3 +313,220 @@ def test_tap_tables_live_in_the_runtime_cache(rt, rng):
     assert not np.array_equal(got, src)
     assert not vars(plugin)                          # no state on the instance
     assert rt.cache.stats()["owners"].get("dof.taps", 0) > 0
+
+
+# -- renders: antialiased beauty, point-sampled depth ---------------------------------------
+def _bar_scene():
+    """A light 0.5 px beside a 7 px bar at 1 m (CoC 15 px) over a sharp wall at 3 m, another
+    one 0.2 px beside the other edge, a third well away from the bar."""
+    from clfx.bench.cases.dof import lens_for
+    from clfx.bench.scene import Layer, Light, Scene, Texture
+
+    lights = (Light((-4.0, -10.0), (1500.0, 1200.0, 900.0), 0.8),
+              Light((3.7, 12.0), (400.0, 320.0, 240.0), 0.8),
+              Light((20.0, 0.0), (900.0, 900.0, 900.0), 0.8))
+    wall = Layer(depth=3.0, texture=Texture("noise", (0.45, 0.4, 0.32), (0.08, 0.08, 0.1),
+                                            period=4.0, seed=9),
+                 center=(48.0, 32.0), lights=lights, name="wall")
+    bar = Layer(depth=1.0, texture=Texture("flat", (0.5, 0.45, 0.4)), shape="rect",
+                center=(48.0, 32.0), size=(7.0, 80.0), name="bar")
+    return Scene(96, 64, (wall, bar)), lens_for(7.5 * 320 / 96, 96)
+
+
+@pytest.fixture(scope="module")
+def bar_case():
+    from clfx.bench.cases.dof import render_case
+
+    scene, cam = _bar_scene()
+    return render_case(scene, cam, ss=4, samples=4096)
+
+
+def test_a_sharp_light_beside_a_blurred_bar_stays_a_sharp_light(rt, bar_case):
+    """The beauty is supersampled, the depth taken at pixel centres: the light's pixels
+    sampled on the bar carry the bar's depth.  They must not be spread with the bar's CoC
+    (a bright half-disk); the light stays sharp, partly covered by the bar's blur."""
+    c = bar_case
+    src, depth, truth = c["source"], c["depth"], c["truth"]
+    got = run(rt, src, depth, "final", c["camera"])
+    lum = lambda a: a[..., :3].mean(axis=-1)
+    for lx, ly in ((44, 22), (51, 44)):          # the lights beside the bar's edges
+        win = np.s_[ly - 1:ly + 2, lx - 1:lx + 2]
+        assert lum(got)[win].max() > 0.5 * lum(truth)[win].max()      # still a sharp light
+        # around it, 3-7 px away, no disk of its light (the truth holds the blurred bar)
+        yy, xx = np.mgrid[0:64, 0:96]
+        ring = (np.hypot(xx - lx, yy - ly) >= 3) & (np.hypot(xx - lx, yy - ly) <= 7)
+        excess = lum(got)[ring] - lum(truth)[ring]
+        assert excess.max() < 0.3, (lx, ly, excess.max())
+    band = metrics.edge_band(depth, None, 4)
+    assert metrics.psnr_log(got, truth) > metrics.psnr_log(src, truth) + 1.0
+    assert metrics.psnr_log(got, truth, band) > metrics.psnr_log(src, truth, band)
+
+
+def test_edge_pixels_take_the_sharper_layer_only_when_they_look_like_it(rng):
+    # the oracle's rule on a tiny case: a bright pixel on the blurred side of an edge whose
+    # sharp side holds the same light moves; an ordinary texture pixel does not
+    src = np.full((5, 6, 4), 0.3, np.float32)
+    src[:, 3:, :3] = 0.5                          # blurred bar on the right
+    src[2, 2, :3] = 600.0                         # light on the sharp side
+    src[2, 3, :3] = 450.0                         # its part sampled on the bar
+    r = np.zeros((5, 6))
+    r[:, 3:] = -7.5
+    out = reference.edge_radius(src, r)
+    assert out[2, 3] == 0.0                       # the light's pixel joins the sharp wall
+    changed = out != r
+    changed[2, 3] = False
+    assert not changed.any()
+
+
+# -- the clamp -------------------------------------------------------------------------------
+def test_a_clamp_warning_reaches_stderr_once_per_frame_naming_effect_frame_and_coc(tmp_path):
+    import subprocess
+    import sys
+
+    from clfx.core.frame import Frame
+    from clfx.core.rect import Rect
+    from clfx.io.write import write_frame
+
+    rgba = np.zeros((32, 48, 4), np.float32)
+    rgba[16, 24] = 1e3
+    frame = Frame(rgba, Rect.from_size(48, 32), Rect.from_size(48, 32),
+                  depth=np.full((32, 48), 1e3, np.float32))
+    write_frame(frame, tmp_path / "in.0001.exr", write_passes=True)
+    write_frame(frame, tmp_path / "in.0002.exr", write_passes=True)
+    r = subprocess.run([sys.executable, "-m", "clfx.cli", "-q", "render",
+                        str(tmp_path / "in.####.exr"), str(tmp_path / "out.####.exr"),
+                        "--look", "default", "--set", "dof.max_coc=0.1",
+                        "--set", "camera.sensor_width=1"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if "clamped" in ln]
+    assert [ln.split(": dof:")[0] for ln in lines] == ["clfx: warning: frame 1",
+                                                        "clfx: warning: frame 2"], r.stderr
+    assert all("a CoC of" in ln and "max_coc = 0.1" in ln for ln in lines)
+
+
+def test_a_clamp_that_bites_warns_once_naming_effect_frame_and_coc(rt):
+    from clfx.host import RenderContext
+
+    src = np.zeros((32, 48, 4), np.float32)
+    src[16, 24] = 1e3
+    depth = np.full((32, 48), 1e3, np.float32)
+    cam = CAM.updated(sensor_width=1.0)          # K = 70 px at 48 px wide: far past max_coc
+    p = Dof.params(max_coc=0.1)
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=cam, frame=17)
+    asked = abs(float(cam.coc_signed_px(1e3, 48)))
+    Dof().render(rt, p, ctx)
+    Dof().render(rt, p, ctx)                     # the same frame again: still one line
+    assert len(ctx.warnings) == 1
+    line = ctx.warnings[0]
+    assert line.startswith("a CoC of") and "\n" not in line
+    assert f"{asked:.1f} px" in line and f"{0.1 * math.hypot(48, 32):.1f} px" in line
+    assert any(line in n for n in ctx.notes)
+    # a lens inside max_coc: no warning
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=CAM, frame=17)
+    Dof().render(rt, Dof.params(), ctx)
+    assert ctx.warnings == []
+
+
+def test_the_default_max_coc_lets_a_physical_lens_through(rt):
+    """85 mm f/1.35 focused at 1.2 m: a 40 px CoC at 320 px wide, no clamp by default."""
+    from clfx.host import RenderContext
+
+    assert Dof.params().max_coc >= 0.25
+    cam = Camera(focal_length=85.0, f_number=1.35, sensor_width=36.0, focus_distance=1.2)
+    src = np.zeros((180, 320, 4), np.float32)
+    src[90, 160] = 1e4
+    depth = np.full((180, 320), 1e4, np.float32)
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=cam, frame=3)
+    out = rt.download(Dof().render(rt, Dof.params(), ctx))
+    assert ctx.warnings == []
+    coc = abs(float(cam.coc_signed_px(1e4, 320)))
+    assert coc > 40
+    ys, xs = np.nonzero(out[..., 0] > 1e-3)
+    assert np.ptp(xs) + 1 >= coc - 2              # the whole bokeh, not a clamped one
+
+
+# -- overflow, real files ------------------------------------------------------------------
+def test_wide_float_range_stays_finite_at_every_level(rt, exr_images):
+    from clfx.io.read import read_frame
+
+    fr = read_frame(exr_images / "TestImages" / "WideFloatRange.exr")   # +-1.7e38
+    src = fr.rgba
+    assert np.isfinite(src).all() and np.abs(src).max() > 1e38
+    h, w = src.shape[:2]
+    depth = np.repeat(np.linspace(1.0, 40.0, w, dtype=np.float32)[None], h, 0)
+    cam = Camera(focal_length=50.0, f_number=1.4, sensor_width=36.0 * w / 320, focus_distance=3.0)
+    for q in QUALITY_LEVELS:
+        out = run(rt, src, depth, q, cam)
+        assert np.isfinite(out).all(), q
+
+
+def test_beachball_edge_widens_without_a_dark_outline(rt, exr_images):
+    """The Beachball stores its background as Z = 0 (read as +inf by clfx.io; done here by
+    hand): through the cinema look's lens the ball's soft edge gets wider and nowhere
+    darker than the darker side, also over an opaque grey background."""
+    from clfx.io.read import read_frame
+
+    fr = read_frame(exr_images / "Beachball" / "multipart.0001.exr")
+    depth = np.where(fr.depth == 0, np.inf, fr.depth).astype(np.float32)
+    cam = Camera(focal_length=35.0, f_number=2.0, sensor_width=24.89, focus_distance=3.0,
+                 blades=9)
+    fg = np.isfinite(depth)
+    ys, xs = np.nonzero(fg)
+    cy, cx, R = ys.mean(), xs.mean(), math.sqrt(fg.sum() / math.pi)
+    lum = lambda a: 0.2126 * a[..., 0] + 0.7152 * a[..., 1] + 0.0722 * a[..., 2]
+    # the ball fills its data window but for the corners: profiles along the diagonals
+    angles = [math.radians(a + d) for a in (45, 135, 225, 315) for d in range(-20, 21, 10)]
+    t = np.arange(R - 20, R + 20)
+    for grey in (0.0, 0.2):
+        src = fr.rgba.copy()
+        src[..., :3] += (1 - src[..., 3:4]) * grey
+        if grey:
+            src[..., 3] = 1.0
+        out = Dof().apply(rt, Dof.params(roundness=0.6), src, depth=depth, camera=cam,
+                          data_window=fr.data_window, display_window=fr.display_window)
+        for ang in angles:
+            px = np.round(cx + t * math.cos(ang)).astype(int)
+            py = np.round(cy + t * math.sin(ang)).astype(int)
+            po = lum(out)[py, px]
+            darker = min(po[:3].min(), po[-3:].min())
+            assert po.min() >= darker - 2e-3, (grey, math.degrees(ang))
+        if not grey:
+            # wider: light lands outside the silhouette, where the source is black
+            ring = ~fg & (np.hypot(*np.mgrid[0:fg.shape[0], 0:fg.shape[1]][::-1]
+                                   - np.array([cx, cy])[:, None, None]) < R + 20)
+            assert lum(src)[ring].max() == 0.0
+            assert (lum(out)[ring] > 1e-3).sum() > 1000
+
+
+# -- ground truth: bokeh rims ------------------------------------------------------------
+@pytest.fixture(scope="module")
+def bokeh_case():
+    from clfx.bench.cases.dof import make_scene
+
+    return make_scene("bokeh", 160, 90, ss=4, samples=4096)
+
+
+def test_final_bokeh_is_as_crisp_as_the_reference_and_every_level_beats_naive(rt, bokeh_case):
+    from clfx.bench.cases.dof import naive
+    from clfx.host import RenderContext
+
+    c = bokeh_case
+    truth = c["truth"]
+    ctx = RenderContext(rt, rt.upload(c["source"]), depth=rt.upload(c["depth"]),
+                        camera=c["camera"])
+    base = max(metrics.psnr_log(naive(c, Dof.params(), ctx), truth),
+               metrics.psnr_log(c["source"], truth))
+    score = {q: metrics.psnr_log(run(rt, c["source"], c["depth"], q, c["camera"]), truth)
+             for q in QUALITY_LEVELS}
+    assert score["final"] > score["reference"] - 1.0, score
+    assert min(score.values()) > base, (score, base)
+
+
+def test_bench_naive_is_the_reference_naive_gather(rt, rng):
+    from clfx.bench.cases.dof import naive_dof
+
+    src, depth = random_case(rng, (30, 41))
+    k_half, focus, clamp_r = lens(41, 30, cam=CAM.updated(sensor_width=8.0))
+    got = naive_dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
+    want = reference.naive_dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)

@@ -1,7 +1,8 @@
 """float64 NumPy oracles for clfx/plugins/dof.py.
 
 ``dof``: the plainest float64 form of the plugin's full-resolution gather (same taps, same
-near/far weights), for images small enough that one neighbourhood radius covers them.
+edge-aware radii, same near/far weights and hidden-background caps), for images small enough
+that one neighbourhood radius covers them.
 ``naive_dof``: the classic post-process baseline the plugin must beat against ground truth:
 every pixel averages the source over its own CoC disk (no near/far layering, no occlusion).
 """
@@ -10,6 +11,10 @@ import math
 import numpy as np
 
 NEAR_EPS = 0.25
+EDGE_PX = 1.0
+EDGE_TAU = 0.5
+CAP_FACTOR = 4.0
+TILE = 32
 
 
 def coc_radius(depth, *, k_half, focus, clamp_r):
@@ -26,19 +31,71 @@ def _clamped(img, ys, xs):
     return img[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]
 
 
+def _log_lum(src):
+    lum = 0.2126 * src[..., 0] + 0.7152 * src[..., 1] + 0.0722 * src[..., 2]
+    return np.log1p(np.maximum(lum, 0.0))
+
+
+def edge_radius(src, r):
+    """Edge-aware radii: a pixel whose 3 x 3 radii span >= 1 px, whose log luminance is more
+    than 0.5 from the lower median of its own layer's neighbours (layers split at the mid-range
+    radius; its own is its centre's), takes the radius of the other layer's neighbour closest
+    in log luminance (first in row order on ties) when that one is sharper."""
+    h, w = r.shape
+    ys, xs = np.mgrid[0:h, 0:w]
+    lg = _log_lum(src)
+    offs = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    R = np.stack([_clamped(r, ys + dy, xs + dx) for dy, dx in offs])
+    L = np.stack([_clamped(lg, ys + dy, xs + dx) for dy, dx in offs])
+    out = r.copy()
+    for y, x in zip(*np.nonzero(R.max(0) - R.min(0) >= EDGE_PX)):
+        rr, ll = R[:, y, x], L[:, y, x]
+        mid = 0.5 * (rr.min() + rr.max())
+        own_near = rr[4] < mid
+        own = sorted(ll[j] for j in range(9) if j != 4 and (rr[j] < mid) == own_near)
+        d_own = abs(ll[4] - own[(len(own) - 1) // 2]) if own else 0.0
+        best, r_oth = math.inf, rr[4]
+        for j in range(9):
+            if j != 4 and (rr[j] < mid) != own_near and abs(ll[j] - ll[4]) < best:
+                best, r_oth = abs(ll[j] - ll[4]), rr[j]
+        if d_own > EDGE_TAU and abs(r_oth) < abs(rr[4]):
+            out[y, x] = r_oth
+    return out
+
+
+def hidden_caps(src):
+    """Per pixel, the cap of hidden-background colours: CAP_FACTOR x expm1 of the largest
+    mean log luminance (every 4th pixel and row of a 32 px tile) over the 3 x 3 tiles around
+    the pixel's tile."""
+    h, w = src.shape[:2]
+    lg = _log_lum(src)
+    ty, tx = -(-h // TILE), -(-w // TILE)
+    g = np.array([[lg[j * TILE:(j + 1) * TILE:4, i * TILE:(i + 1) * TILE:4].mean()
+                   for i in range(tx)] for j in range(ty)])
+    gp = np.pad(g, 1, mode="edge")
+    gd = np.max([gp[1 + dy:1 + dy + ty, 1 + dx:1 + dx + tx]
+                 for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    cap = CAP_FACTOR * np.expm1(gd)
+    return np.repeat(np.repeat(cap, TILE, 0), TILE, 1)[:h, :w]
+
+
 def dof(src, depth, *, k_half, focus, clamp_r, taps):
     """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area).
 
-    Per pixel p and tap q = p + o (clamp-to-edge), radii r (signed, px):
+    Per pixel p and tap q = p + o (clamp-to-edge), radii r (signed, px, :func:`edge_radius`):
     near taps (r_q < -0.25): w = clamp(|r_q| - d_near + 0.5, 0, 1) / max(pi r_q^2, 1),
     alpha += w * area; far taps: rf = max(|r_q|, |r_p|) if p is near, else min(|r_q|, max(r_p, 0))
-    if q is behind p (r_q > r_p), else |r_q|; w = clamp(rf - d_far + 0.5, 0, 1) / max(pi rf^2, 1).
-    out = far + clamp(alpha, 0, 1) (near - far), each field normalised; empty fields fall
-    back to the other field, then to the centre pixel.
+    if q is behind p (r_q > r_p), else |r_q|; w = clamp(rf - d_far + 0.5, 0, 1) / max(pi rf^2, 1),
+    where for a near p the part of w beyond q's own coverage clamp(|r_q| - d_far + 0.5, 0, 1)
+    takes q's colour capped at :func:`hidden_caps` in luminance.
+    out = far (1 - a) + near a, a = clamp(alpha, 0, 1), each field normalised; empty fields
+    fall back to the other field, then to the centre pixel.
     """
     src = np.asarray(src, np.float64)
     src = np.where(np.isfinite(src), src, 0.0)
-    r = coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
+    r = edge_radius(src, coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r))
+    lum = 0.2126 * src[..., 0] + 0.7152 * src[..., 1] + 0.0722 * src[..., 2]
+    cap = hidden_caps(src)
     h, w = r.shape
     ys, xs = np.mgrid[0:h, 0:w]
     p_near = r < -NEAR_EPS
@@ -55,9 +112,14 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps):
         wn = np.where(q_near, np.clip(arq - d_near + 0.5, 0, 1) / np.maximum(math.pi * arq ** 2, 1), 0)
         rf = np.where(p_near, np.maximum(arq, np.abs(r)),
                       np.where(rq > r, np.minimum(arq, np.maximum(r, 0)), arq))
-        wf = np.where(q_near, 0, np.clip(rf - d_far + 0.5, 0, 1) / np.maximum(math.pi * rf ** 2, 1))
+        cov_f = np.clip(rf - d_far + 0.5, 0, 1)
+        norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1))
+        wf = cov_f * norm
+        fill = np.where(p_near, cov_f - np.minimum(np.clip(arq - d_far + 0.5, 0, 1), cov_f), 0) * norm
+        lq = _clamped(lum, ys + int(oy), xs + int(ox))
+        k = np.minimum(1.0, cap / np.maximum(lq, 1e-30))   # pixel p's cap, tap q's luminance
         fn += c * wn[..., None]
-        ff += c * wf[..., None]
+        ff += c * (wf - fill + fill * k)[..., None]
         wn_sum += wn
         wf_sum += wf
         alpha += wn * area
@@ -65,7 +127,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps):
     near = np.where((wn_sum > tiny)[..., None], fn / np.maximum(wn_sum, tiny)[..., None], src)
     far = np.where((wf_sum > tiny)[..., None], ff / np.maximum(wf_sum, tiny)[..., None], near)
     a = np.where(wf_sum > tiny, np.clip(alpha, 0, 1), 1.0)[..., None]
-    return far + (near - far) * a
+    return far * (1 - a) + near * a
 
 
 def naive_dof(src, depth, *, k_half, focus, clamp_r):

@@ -1,26 +1,231 @@
-"""Bench case of motion_blur: layers at several depths moving up to 60 px/frame at 1920 px
-wide, against a multisample ground truth."""
+"""Bench cases of motion_blur: renderer-like frames against a multisample ground truth.
+
+Every case is a layered scene (:mod:`clfx.bench.scene`) rendered the way a renderer writes
+it (beauty supersampled 4 x 4 per pixel, depth and velocity from the surface at the pixel
+centre: :func:`clfx.bench.groundtruth.make_case` with ``ss = RENDER_SS``) and its truth,
+the average of many renders over the open shutter through the same pixel filter.
+
+``CASE`` is the representative hard case (``layers``).  ``CASES`` lists every case of the
+effect, ``{name: make}``, each ``make(width, height, rng, *, truth=True, truth_samples=...)``
+with the :class:`clfx.bench.cases.Case` ``make`` protocol:
+
+- ``layers``: a drifting wall with a light, a fast striped ball, a card moving diagonally and
+  a near leaf (moving up to 60 px/frame at 1920 px wide), 180 degree shutter;
+- ``crossing``: two objects at different depths crossing in opposite directions in front of a
+  textured wall, the near one over the far one at the frame time;
+- ``spin``: a spinning propeller-like bar and a wheel (velocity varies across each, the truth
+  follows arcs, the velocity pass gives tangents);
+- ``fast_light``: small HDR lights (1000-5000) streaking across a dark scene;
+- ``shutter_270``: ``layers`` through a 270 degree shutter;
+- ``slow_stripes``: a finely striped panel (stripes 2 px wide) moving 2 px/frame: blur lengths
+  of one pixel, where a reconstruction easily ends further from the truth than the input.
+
+Speeds and sizes scale with the width (the same shot at any size), except ``slow_stripes``,
+whose stripe width and speed are in pixels (the case is about sub-pixel detail).
+
+``naive(case, params, ctx)`` is the baseline (``NAIVE_LABEL``): every pixel averaged along its
+own velocity over the shutter (bilinear, midpoint rule, no depth, no tiles, no scatter).
+"""
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from clfx.bench.cases import Case
-from clfx.bench.groundtruth import render_truth
-from clfx.bench.scene import moving_scene, render_sharp
+from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.scene import Layer, Light, Scene, Texture, moving_scene, render_sharp
 from clfx.core.camera import Camera
+from clfx.fx.motion import shutter_from
+
+NAIVE_LABEL = "naive per-pixel line blur"
+
+TRUTH_SAMPLES = 256
+"""Sample renders of a truth (16 per sub-pixel position at ``RENDER_SS`` = 4)."""
+
+CENTRED_180 = Camera(shutter_angle=180.0, shutter_offset="centered")
 
 
-def make(width: int, height: int, rng, *, truth: bool = True, truth_samples: int = 64,
-         moving_fraction=None) -> dict:
-    """A representative hard case: layers at several depths moving up to 60 px/frame at
-    1920 px wide (scaled with the width), with the multisample ground truth (``truth``)."""
+def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int) -> dict:
+    if not truth:
+        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre")
+        return dict(source=f.rgba, depth=f.depth, velocity=f.velocity, params={},
+                    camera=camera)
+    gt = make_case(scene, camera, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS)
+    return case_dict(gt, scene=scene.name)
+
+
+def _wall(width: int, height: int, *, velocity=(0.0, 0.0), lights=True) -> Layer:
+    s = width / 640.0
+    lts = ((Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0), 2.0 * s),
+            Light((-0.3 * width, 0.25 * height), (60.0, 80.0, 120.0), 1.5 * s))
+           if lights else ())
+    return Layer(depth=20.0, texture=Texture("blocks", (0.5, 0.45, 0.4), (0.05, 0.05, 0.06),
+                                             period=12.0 * s, seed=3),
+                 shape="full", lights=lts, velocity=velocity, name="wall")
+
+
+# -- the cases -------------------------------------------------------------------------------
+def make_layers(width: int, height: int, rng=None, *, truth: bool = True,
+                truth_samples: int = TRUTH_SAMPLES, moving_fraction=None,
+                camera: Camera = CENTRED_180) -> dict:
+    """Layers at several depths moving up to 60 px/frame at 1920 px wide (scaled with the
+    width); with ``moving_fraction`` only a small ball moves (see
+    :func:`clfx.bench.scene.moving_scene`)."""
     scene = moving_scene(width, height, 60.0 * width / 1920.0, moving_fraction)
-    camera = Camera(shutter_angle=180.0, shutter_offset="centered")
-    sharp = render_sharp(scene, 0.0, ss=2)
-    case = dict(source=sharp.rgba, depth=sharp.depth, velocity=sharp.velocity,
-                params={}, camera=camera)
-    if truth:
-        case["truth"] = render_truth(scene, camera, samples=truth_samples, dof=False,
-                                     motion=True, ss=2)
-    return case
+    return _case(scene, camera, truth, truth_samples)
 
 
-CASE = Case(make=make)
+def crossing_scene(width: int, height: int) -> Scene:
+    """A near card (2 m) moving right over a far disk (6 m) moving left, crossing at the
+    frame time in front of a static textured wall (20 m)."""
+    s = width / 640.0
+    far = Layer(depth=6.0, texture=Texture("stripes", (0.9, 0.3, 0.1), (0.95, 0.85, 0.6),
+                                           period=10.0 * s, angle=60.0),
+                shape="disk", center=(0.52 * width, 0.50 * height),
+                size=(0.30 * height, 0.30 * height), velocity=(-0.015 * width, 0.0),
+                lights=(Light((0.0, -0.08 * height), (400.0, 300.0, 200.0), 1.5 * s),),
+                name="far disk")
+    near = Layer(depth=2.0, texture=Texture("checker", (0.75, 0.75, 0.7), (0.05, 0.06, 0.08),
+                                            period=8.0 * s, angle=-10.0),
+                 shape="rounded", center=(0.45 * width, 0.56 * height),
+                 size=(0.16 * width, 0.22 * height), corner=6.0 * s,
+                 velocity=(0.03 * width, -0.004 * width), name="near card")
+    return Scene(width, height, (_wall(width, height), far, near), name="crossing")
+
+
+def make_crossing(width: int, height: int, rng=None, *, truth: bool = True,
+                  truth_samples: int = TRUTH_SAMPLES) -> dict:
+    """Two objects at different depths crossing (58 and 29 px/frame at 1920 wide)."""
+    return _case(crossing_scene(width, height), CENTRED_180, truth, truth_samples)
+
+
+def spin_scene(width: int, height: int) -> Scene:
+    """A spinning bar with a light at its tip (10 deg/frame, tips ~38 px/frame at 1080 high)
+    and a slower striped wheel spinning the other way, over a static wall."""
+    s = width / 640.0
+    r = 0.22 * height
+    bar = Layer(depth=3.0, texture=Texture("stripes", (0.85, 0.85, 0.8), (0.1, 0.1, 0.12),
+                                           period=9.0 * s),
+                shape="rounded", center=(0.36 * width, 0.5 * height),
+                size=(2 * r, 0.07 * height), corner=3.0 * s, spin=10.0, angle=20.0,
+                lights=(Light((r * 0.9, 0.0), (2000.0, 1200.0, 600.0), 1.5 * s),),
+                name="propeller")
+    rw = 0.16 * height
+    wheel = Layer(depth=5.0, texture=Texture("checker", (0.2, 0.5, 0.8), (0.9, 0.9, 0.85),
+                                             period=7.0 * s),
+                  shape="disk", center=(0.72 * width, 0.45 * height), size=(2 * rw, 2 * rw),
+                  spin=-6.0, velocity=(0.004 * width, 0.0), name="wheel")
+    return Scene(width, height, (_wall(width, height), wheel, bar), name="spin")
+
+
+def make_spin(width: int, height: int, rng=None, *, truth: bool = True,
+              truth_samples: int = TRUTH_SAMPLES) -> dict:
+    """A spinning bar and wheel: velocity varies across each object."""
+    return _case(spin_scene(width, height), CENTRED_180, truth, truth_samples)
+
+
+def fast_light_scene(width: int, height: int) -> Scene:
+    """Small HDR lights streaking across a dim scene: a single bright one (5000) crossing at
+    80 px/frame at 1920 wide in front of a slower pair (1000), over a dark wall."""
+    s = width / 640.0
+    r = max(1.2 * s, 1.0)   # at least a pixel: the velocity pass sees a light's centre
+    dark = Layer(depth=30.0, texture=Texture("noise", (0.02, 0.02, 0.025), (0.06, 0.05, 0.04),
+                                             period=14.0 * s, seed=9),
+                 shape="full", name="dark wall")
+    light = Layer(depth=4.0, shape="none", center=(0.4 * width, 0.35 * height),
+                  lights=(Light((0.0, 0.0), (5000.0, 4500.0, 3500.0), r),),
+                  velocity=(0.042 * width, 0.012 * width), name="fast light")
+    pair = Layer(depth=8.0, shape="none", center=(0.6 * width, 0.65 * height),
+                 lights=(Light((0.0, 0.0), (300.0, 600.0, 1000.0), r),
+                         Light((0.05 * width, 0.02 * height), (1000.0, 500.0, 200.0), r)),
+                 velocity=(-0.02 * width, 0.005 * width), name="light pair")
+    post = Layer(depth=3.0, texture=Texture("flat", (0.15, 0.15, 0.15)), shape="rect",
+                 center=(0.55 * width, 0.5 * height), size=(0.02 * width, 1.2 * height),
+                 name="post")
+    return Scene(width, height, (dark, pair, light, post), name="fast light")
+
+
+def make_fast_light(width: int, height: int, rng=None, *, truth: bool = True,
+                    truth_samples: int = TRUTH_SAMPLES) -> dict:
+    """Small HDR lights streaking across (the bright one partly behind a static post)."""
+    return _case(fast_light_scene(width, height), CENTRED_180, truth, truth_samples)
+
+
+def make_shutter_270(width: int, height: int, rng=None, *, truth: bool = True,
+                     truth_samples: int = TRUTH_SAMPLES) -> dict:
+    """``layers`` through a 270 degree shutter (centred)."""
+    return make_layers(width, height, rng, truth=truth, truth_samples=truth_samples,
+                       camera=Camera(shutter_angle=270.0, shutter_offset="centered"))
+
+
+def slow_stripes_scene(width: int, height: int) -> Scene:
+    """A panel of stripes 2 px wide (4 px period, at 15 degrees) moving 2 px/frame in front of
+    a static wall, with a slower text-like card: blur lengths of about a pixel."""
+    panel = Layer(depth=4.0, texture=Texture("stripes", (0.8, 0.78, 0.7), (0.08, 0.08, 0.1),
+                                             period=4.0, angle=15.0),
+                  shape="rect", center=(0.45 * width, 0.5 * height),
+                  size=(0.5 * width, 0.6 * height), velocity=(2.0, 0.0), name="striped panel")
+    card = Layer(depth=3.0, texture=Texture("blocks", (0.85, 0.82, 0.7), (0.1, 0.1, 0.12),
+                                            period=5.0, seed=11),
+                 shape="rect", center=(0.78 * width, 0.3 * height),
+                 size=(0.18 * width, 0.2 * height), velocity=(0.0, 1.5), name="label")
+    return Scene(width, height, (_wall(width, height, lights=False), panel, card),
+                 name="slow stripes")
+
+
+def make_slow_stripes(width: int, height: int, rng=None, *, truth: bool = True,
+                      truth_samples: int = TRUTH_SAMPLES) -> dict:
+    """Fine stripes moving 2 px/frame (180 degree shutter: a one-pixel blur)."""
+    return _case(slow_stripes_scene(width, height), CENTRED_180, truth, truth_samples)
+
+
+CASES = {
+    "layers": make_layers,
+    "crossing": make_crossing,
+    "spin": make_spin,
+    "fast_light": make_fast_light,
+    "shutter_270": make_shutter_270,
+    "slow_stripes": make_slow_stripes,
+}
+"""Every motion_blur case, ``{name: make}`` (``CASE.make`` is ``layers``)."""
+
+
+# -- the naive baseline ----------------------------------------------------------------------
+def line_blur_per_pixel(src: np.ndarray, velocity: np.ndarray, t0: float, t1: float, *,
+                        spacing: float = 0.5, max_samples: int = 64) -> np.ndarray:
+    """Each pixel averaged along its *own* velocity over ``[t0, t1]`` (float32 NumPy).
+
+    Bilinear reads (clamp to edge) at midpoint-rule instants, one per ``spacing`` px of the
+    longest blur (at least 2, at most ``max_samples``); no depth, no tiles, no scatter: what a
+    per-pixel directional blur does.
+    """
+    src = np.where(np.isfinite(src), src, 0.0).astype(np.float32)
+    v = np.where(np.isfinite(velocity), velocity, 0.0).astype(np.float32)
+    h, w = src.shape[:2]
+    longest = float(np.hypot(v[..., 0], v[..., 1]).max()) * abs(t1 - t0) if v.size else 0.0
+    n = int(min(max(2, math.ceil(longest / spacing)), max_samples))
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    acc = np.zeros_like(src)
+    for i in range(n):
+        t = np.float32(t0 + (i + 0.5) / n * (t1 - t0))
+        u = xs - v[..., 0] * t
+        q = ys - v[..., 1] * t
+        u0, q0 = np.floor(u), np.floor(q)
+        fu, fq = (u - u0)[..., None], (q - q0)[..., None]
+        xa, xb = np.clip(u0, 0, w - 1).astype(np.intp), np.clip(u0 + 1, 0, w - 1).astype(np.intp)
+        ya, yb = np.clip(q0, 0, h - 1).astype(np.intp), np.clip(q0 + 1, 0, h - 1).astype(np.intp)
+        top = src[ya, xa] + (src[ya, xb] - src[ya, xa]) * fu
+        bot = src[yb, xa] + (src[yb, xb] - src[yb, xa]) * fu
+        acc += top + (bot - top) * fq
+    return acc / np.float32(n)
+
+
+def naive(case: dict, params, ctx) -> np.ndarray:
+    """The naive baseline of a case (:data:`NAIVE_LABEL`), RGBA like the effect's output."""
+    t0, t1 = shutter_from(params, ctx.camera)
+    return line_blur_per_pixel(np.asarray(case["source"], np.float32),
+                               np.asarray(case["velocity"], np.float32), t0, t1)
+
+
+CASE = Case(make=make_layers)
