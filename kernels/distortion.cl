@@ -17,7 +17,8 @@
  * distortion_ewa_f64 (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64 map
  * per pixel (displacement dx, dy; the footprint's extra extent J_c as two columns; the
  * samples per axis n): the mean of n x n Lanczos-3 samples at s + J_c (a_i, a_j),
- * a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)), each clamped to its 2x2, in float64.
+ * a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)), in float64, clamped to the min/max of
+ * the samples' nearest 2x2 texels together (one sample: today's 2x2 clamp).
  */
 #include "lib/resample.h"
 
@@ -82,15 +83,18 @@ kernel void distortion_ewa_f64(global const float *src, global float *dst,
     }
     const REAL scale = sqrt((REAL)(n * n) / (REAL)(n * n - 1)) / (REAL)n;
     REAL4 acc = (REAL4)0;
+    float4 lo = (float4)INFINITY, hi = (float4)-INFINITY, l, u;
     for(int b = 0; b < n; b++) {
       const REAL ob = ((REAL)b + (REAL)0.5 - (REAL)0.5 * n) * scale;
       for(int a = 0; a < n; a++) {
         const REAL oa = ((REAL)a + (REAL)0.5 - (REAL)0.5 * n) * scale;
-        acc += rs_sample(src, src_pitch, src_w, src_h, sx + m[2] * oa + m[4] * ob,
-                         sy + m[3] * oa + m[5] * ob);
+        acc += rs_sample_range(src, src_pitch, src_w, src_h, sx + m[2] * oa + m[4] * ob,
+                               sy + m[3] * oa + m[5] * ob, &l, &u);
+        lo = fmin(lo, l);
+        hi = fmax(hi, u);
       }
     }
-    o[k] = acc / (REAL)(n * n);
+    o[k] = clamp(acc / (REAL)(n * n), TO_REAL4(lo), TO_REAL4(hi));
   }
   rs_store_quad(dst, y * dst_pitch + qx * 4, o);
 }

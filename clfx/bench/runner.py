@@ -103,8 +103,11 @@ def _case_cache_path(module, name: str, width: int, height: int, seed: int):
     from clfx.bench import groundtruth
     from clfx.bench import scene
 
+    import importlib
+
     h = hashlib.sha1(f"{CACHE_VERSION}:{name}:{width}x{height}:{seed}".encode())
-    for mod in (module, scene, groundtruth):
+    depends = [importlib.import_module(m) for m in getattr(module, "TRUTH_DEPENDS", ())]
+    for mod in (module, scene, groundtruth, *depends):
         h.update(inspect.getsource(mod).encode())
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(base, "clfx", "bench", f"{name}-{width}x{height}-{h.hexdigest()[:12]}.pickle")

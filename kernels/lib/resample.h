@@ -152,13 +152,20 @@ inline float16 rs_sanitise16(float16 v)
 
 #define RS_MINMAX(t) do { lo = fmin(lo, (t)); hi = fmax(hi, (t)); } while(0)
 
-/* Filtered RGBA at (sx, sy) (source-window pixel coordinates, centres at +0.5).
- * Footprints inside the image take a fast path: each tap row is read with one or two
- * vector loads (vload8 / vload16: 2 / 4 adjacent RGBA texels) and no border rule. */
-inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx, REAL sy)
+/* Filtered RGBA at (sx, sy) (source-window pixel coordinates, centres at +0.5), before the
+ * anti-ringing clamp, whose bounds (the nearest 2x2 texels' min/max) go to *rlo, *rhi
+ * (+-inf for bilinear, which needs none).  Footprints inside the image take a fast path:
+ * each tap row is read with one or two vector loads (vload8 / vload16: 2 / 4 adjacent RGBA
+ * texels) and no border rule. */
+inline REAL4 rs_sample_range(global const float *src, int pitch, int w, int h, REAL sx,
+                             REAL sy, float4 *rlo, float4 *rhi)
 {
-  if(!(sx == sx) || !(sy == sy) || fabs(sx) > (REAL)1e7 || fabs(sy) > (REAL)1e7)
+  *rlo = (float4)-INFINITY;
+  *rhi = (float4)INFINITY;
+  if(!(sx == sx) || !(sy == sy) || fabs(sx) > (REAL)1e7 || fabs(sy) > (REAL)1e7) {
+    *rlo = *rhi = (float4)0.0f;
     return (REAL4)0;
+  }
   const REAL fx = sx - (REAL)0.5, fy = sy - (REAL)0.5;
   const REAL flx = floor(fx), fly = floor(fy);
   const int ix = (int)flx, iy = (int)fly;
@@ -199,7 +206,9 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
 #endif
       acc += wy[j] * row;
     }
-    return clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
+    *rlo = lo;
+    *rhi = hi;
+    return acc;
   }
 #endif
   for(int j = 0; j < RS_TAPS; j++) {
@@ -214,9 +223,22 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
     acc += wy[j] * row;
   }
 #if RS_FILTER > 0
-  acc = clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
+  *rlo = lo;
+  *rhi = hi;
 #endif
   return acc;
+}
+
+/* rs_sample_range, clamped (hard-cases.md case 5). */
+inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx, REAL sy)
+{
+  float4 lo, hi;
+  const REAL4 acc = rs_sample_range(src, pitch, w, h, sx, sy, &lo, &hi);
+#if RS_FILTER > 0
+  return clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
+#else
+  return acc;
+#endif
 }
 
 /* Four reads at once (the 4 pixels of a work-item): coordinates as float4 vectors so the

@@ -61,8 +61,10 @@ def weights(t, filter_name):
     return offs, wts / wts.sum(-1, keepdims=True)
 
 
-def sample(src, sx, sy, filter_name="bilinear", border="black"):
-    """Filtered RGBA of ``src`` (h, w, 4) at continuous points (centres at +0.5)."""
+def sample_range(src, sx, sy, filter_name="bilinear", border="black"):
+    """Filtered RGBA of ``src`` (h, w, 4) at continuous points (centres at +0.5) before the
+    anti-ringing clamp, and the clamp's bounds: the min/max of the nearest 2x2 texels (+-inf
+    for bilinear)."""
     src = np.asarray(src, np.float64)
     bad = ~(np.isfinite(sx) & np.isfinite(sy))
     sx = np.where(bad, 0.0, sx)
@@ -75,11 +77,18 @@ def sample(src, sx, sy, filter_name="bilinear", border="black"):
     for j, oj in enumerate(offs):
         for i, oi in enumerate(offs):
             out += (wx[..., i] * wy[..., j])[..., None] * texels(src, ix + oi, iy + oj, border)
+    lo, hi = np.full(out.shape, -np.inf), np.full(out.shape, np.inf)
     if filter_name != "bilinear":
         quad = [texels(src, ix + a, iy + b, border) for a in (0, 1) for b in (0, 1)]
-        out = np.clip(out, np.minimum.reduce(quad), np.maximum.reduce(quad))
-    out[bad] = 0.0
-    return out
+        lo, hi = np.minimum.reduce(quad), np.maximum.reduce(quad)
+    out[bad], lo[bad], hi[bad] = 0.0, 0.0, 0.0
+    return out, lo, hi
+
+
+def sample(src, sx, sy, filter_name="bilinear", border="black"):
+    """Filtered RGBA of ``src`` (h, w, 4) at continuous points (centres at +0.5)."""
+    out, lo, hi = sample_range(src, sx, sy, filter_name, border)
+    return np.clip(out, lo, hi)
 
 
 def project(x, y, k1, k2, k3, p1, p2):
@@ -274,9 +283,10 @@ def elliptical_spread(jac):
 
 
 def sample_elliptical(src, sx, sy, jac, border="black"):
-    """The reference footprint: the mean of n x n Lanczos-3 samples (each clamped to its
-    2x2) at s + J_c (a_i, a_j), a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)): the
-    samples' spread has exactly the covariance J_c J_c^T / 12 of a box over J_c."""
+    """The reference footprint: the mean of n x n Lanczos-3 samples at s + J_c (a_i, a_j),
+    a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)) (the samples' spread has exactly the
+    covariance J_c J_c^T / 12 of a box over J_c), clamped to the min/max of all the samples'
+    nearest 2x2 texels."""
     bad = ~(np.isfinite(sx) & np.isfinite(sy))
     jac = np.where(bad[..., None, None], np.eye(2), jac)
     jc, n = elliptical_spread(jac)
@@ -286,13 +296,14 @@ def sample_elliptical(src, sx, sy, jac, border="black"):
         sel = (n == nn) & ~bad
         offs = ((np.arange(nn) + 0.5) / nn - 0.5) * (math.sqrt(nn * nn / (nn * nn - 1.0))
                                                      if nn > 1 else 0.0)
-        acc = 0.0
+        acc, lo, hi = 0.0, np.inf, -np.inf
         for oa in offs:
             for ob in offs:
                 px = sx[sel] + jc[sel][:, 0, 0] * oa + jc[sel][:, 0, 1] * ob
                 py = sy[sel] + jc[sel][:, 1, 0] * oa + jc[sel][:, 1, 1] * ob
-                acc = acc + sample(src, px, py, "lanczos3", border)
-        out[sel] = acc / nn ** 2
+                one, l, u = sample_range(src, px, py, "lanczos3", border)
+                acc, lo, hi = acc + one, np.minimum(lo, l), np.maximum(hi, u)
+        out[sel] = np.clip(acc / nn ** 2, lo, hi)
     return out
 
 

@@ -46,6 +46,10 @@ with ``make``'s signature; ``clfx bench`` measures each like the main case, unde
 ``<effect>:<name>``, with the same peers, naive method and metrics.
 
 ``metrics(out, ref, case) -> dict``: replaces the pixel error metrics (noise effects).
+
+A module whose truth is computed with code outside ``clfx.bench.scene`` and
+``clfx.bench.groundtruth`` lists those modules in ``TRUTH_DEPENDS`` (names), so that the
+cached truth is rebuilt when they change.
 """
 from __future__ import annotations
 

@@ -31,6 +31,9 @@ from clfx.core.camera import Camera
 from clfx.core.rect import Rect
 from clfx.plugins.distortion import Distortion, build_map, map_points
 
+TRUTH_DEPENDS = ("clfx.plugins.distortion",)
+"""The truth sends points through the plugin's inverse map: a change there rebuilds it."""
+
 SUPERSAMPLE = 8
 """Points per axis and pixel of the source's and the truth's area averages."""
 
