@@ -1,61 +1,100 @@
 /* distortion.cl: Brown-Conrady lens distortion as a gather through a precomputed map
  * (clfx/plugins/distortion.py has the model; kernels/lib/resample.h the filters).
  *
- * The inverse mapping (for each output pixel, the undistorted source point) is computed once
- * per parameter set on the host in float64.  Each work-item renders 4 consecutive output
- * pixels (rows are padded to 4).
+ * The inverse mapping (for each output pixel, the undistorted source point) and its
+ * Jacobian are computed once per parameter set on the host in float64.  The filters' footprints
+ * follow the Jacobian (resample.h, "Footprint filters"), so where the lens compresses the
+ * source the output is area-averaged instead of aliased.  Each work-item renders 4
+ * consecutive output pixels (rows are padded to 4).
  *
- * distortion_warp (draft / preview / final): the map is packed (clfx.fx.resample.PackedMap):
- * per quad of 4 pixels their texel indices and float fractions (12 ints): a pure gather
- * (three vload4 of the map, one vector load per footprint row, no border rule, no branch);
- * then distortion_fix re-renders the quads whose footprints leave the source (listed per
- * filter on the host) through the checked path.
+ * distortion_footprint (draft / preview / final, FP_FILTER): the map is packed
+ * (clfx.fx.resample.FootprintMap): per quad of 4 pixels their windows' texel indices,
+ * fractions and spreads (16 ints): a pure gather; quads marked -2 are written as 0 (no
+ * source, black border), quads marked -1 are left to distortion_footprint_fix, which
+ * re-renders them from their records (points, spreads, Jacobians) through the checked path
+ * (border rule, sub-footprints).
  *
- * distortion_warp_f64 (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64
- * displacement map (source point = output pixel centre + (dx, dy)), float64 coordinates,
- * weights and sums.
+ * distortion_ewa_f64 (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64 map
+ * per pixel (displacement dx, dy; the footprint's extra extent J_c as two columns; the
+ * samples per axis n): the mean of n x n Lanczos-3 samples at s + J_c (a_i, a_j),
+ * a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)), in float64, clamped to the min/max of
+ * the samples' nearest 2x2 texels together (one sample: today's 2x2 clamp).
  */
 #include "lib/resample.h"
 
 #if !REAL_IS_DOUBLE
-kernel void distortion_warp(global const float *src, global float *dst,
-                            global const int *map, const int src_pitch, const int src_w,
-                            const int src_h, const int dst_pitch, const int dst_h)
+kernel void distortion_footprint(global const float *src, global float *dst,
+                                 global const int *map, const int src_pitch, const int src_w,
+                                 const int src_h, const int dst_pitch, const int dst_h)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= dst_h || qx * 4 >= dst_pitch) return;
   const int quad = y * (dst_pitch / 4) + qx;
+  global const int *q = map + 16 * quad;
+  const int mark = q[0];
+  if(mark < 0) {
+    if(mark == -2) vstore16((float16)0.0f, 0, dst + quad * 16);
+    return;
+  }
   float4 o0, o1, o2, o3;
-  rs_fast_quad(src, src_pitch, src_w, src_h, map + 12 * quad, &o0, &o1, &o2, &o3);
+  fp_fast_quad(src, src_pitch, q, &o0, &o1, &o2, &o3);
   vstore16((float16)(o0, o1, o2, o3), 0, dst + quad * 16);
 }
 
-/* the border quads, after distortion_warp: records of 12 ints (quad index, 3 unused,
- * 4 x and 4 y of the source points) */
-kernel void distortion_fix(global const float *src, global float *dst,
-                           global const int *records, const int count, const int src_pitch,
-                           const int src_w, const int src_h, const int dst_pitch,
-                           const int dst_h)
+/* the quads left by distortion_footprint: records of 56 ints (clfx.fx.resample.FootprintMap):
+ * the quad index, 3 unused, its 16 packed ints, a mode per pixel (0 fast path, 1 checked
+ * path, 2 zero) and the checked path's record */
+kernel void distortion_footprint_fix(global const float *src, global float *dst,
+                                     global const int *records, const int count,
+                                     const int src_pitch, const int src_w, const int src_h,
+                                     const int dst_pitch, const int dst_h)
 {
   const int n = get_global_id(0);
   if(n >= count) return;
-  global const int *rec = records + 12 * n;
-  float4 o0, o1, o2, o3;
-  rs_fix_quad(src, src_pitch, src_w, src_h, rec + 4, &o0, &o1, &o2, &o3);
-  vstore16((float16)(o0, o1, o2, o3), 0, dst + rec[0] * 16);
+  global const int *rec = records + 56 * n;
+  const int4 mode = vload4(5, rec);
+  float4 o0 = (float4)0.0f, o1 = (float4)0.0f, o2 = (float4)0.0f, o3 = (float4)0.0f;
+  if(any(mode == 0)) fp_fast_quad(src, src_pitch, rec + 4, &o0, &o1, &o2, &o3);
+  global const int *c = rec + 24;
+  if(mode.s0 == 1) o0 = fp_sample_n(src, src_pitch, src_w, src_h, c, 0);
+  if(mode.s1 == 1) o1 = fp_sample_n(src, src_pitch, src_w, src_h, c, 1);
+  if(mode.s2 == 1) o2 = fp_sample_n(src, src_pitch, src_w, src_h, c, 2);
+  if(mode.s3 == 1) o3 = fp_sample_n(src, src_pitch, src_w, src_h, c, 3);
+  vstore16((float16)(mode.s0 == 2 ? (float4)0.0f : o0, mode.s1 == 2 ? (float4)0.0f : o1,
+                     mode.s2 == 2 ? (float4)0.0f : o2, mode.s3 == 2 ? (float4)0.0f : o3),
+           0, dst + rec[0] * 16);
 }
 #else
-kernel void distortion_warp_f64(global const float *src, global float *dst,
-                                global const REAL *map, const int src_pitch,
-                                const int src_w, const int src_h, const int dst_pitch,
-                                const int dst_h)
+kernel void distortion_ewa_f64(global const float *src, global float *dst,
+                               global const REAL *map, const int src_pitch, const int src_w,
+                               const int src_h, const int dst_pitch, const int dst_h)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= dst_h || qx * 4 >= dst_pitch) return;
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {
-    const REAL2 s = rs_map_point(map, dst_pitch, qx * 4 + k, y);
-    o[k] = rs_sample(src, src_pitch, src_w, src_h, s.x, s.y);
+    const int x = qx * 4 + k;
+    global const REAL *m = map + 8 * (y * dst_pitch + x);
+    const REAL sx = (REAL)x + (REAL)0.5 + m[0], sy = (REAL)y + (REAL)0.5 + m[1];
+    const int n = (int)m[6];
+    if(n <= 1) {
+      o[k] = rs_sample(src, src_pitch, src_w, src_h, sx, sy);
+      continue;
+    }
+    const REAL scale = sqrt((REAL)(n * n) / (REAL)(n * n - 1)) / (REAL)n;
+    REAL4 acc = (REAL4)0;
+    float4 lo = (float4)INFINITY, hi = (float4)-INFINITY, l, u;
+    for(int b = 0; b < n; b++) {
+      const REAL ob = ((REAL)b + (REAL)0.5 - (REAL)0.5 * n) * scale;
+      for(int a = 0; a < n; a++) {
+        const REAL oa = ((REAL)a + (REAL)0.5 - (REAL)0.5 * n) * scale;
+        acc += rs_sample_range(src, src_pitch, src_w, src_h, sx + m[2] * oa + m[4] * ob,
+                               sy + m[3] * oa + m[5] * ob, &l, &u);
+        lo = fmin(lo, l);
+        hi = fmax(hi, u);
+      }
+    }
+    o[k] = clamp(acc / (REAL)(n * n), TO_REAL4(lo), TO_REAL4(hi));
   }
   rs_store_quad(dst, y * dst_pitch + qx * 4, o);
 }

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from clfx.bench.runner import analysis_frames, bench_effect, error_metrics
+from clfx.bench.runner import (EffectResult, _flag_levels, analysis_frames, bench_effect,
+                               error_metrics, losing_levels, markdown, summary_markdown)
 from clfx.cli import cli
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins import discover
@@ -83,3 +84,44 @@ def test_scene_analysis_skips_what_frames_a_b_c_do_not_need(rt):
     assert "velocity" in b["motion_blur"].reason and "threshold" in b["glare"].reason
     c = ran["c_small_region_moves"]
     assert c["motion_blur"].ran and not c["dof"].ran and not c["glare"].ran
+
+
+def test_every_effect_reports_the_unchanged_input(effect_results):
+    for name, res in effect_results.items():
+        rows = [b for b in res.baselines if b["baseline"] == "input"]
+        assert len(rows) == 1 and np.isfinite(rows[0]["rmse"]), name
+        assert all(r["beats_input"] in (True, False) for r in res.rows), name
+
+
+def test_distortion_levels_beat_its_naive_method_and_the_input(effect_results):
+    res = effect_results["distortion"]
+    assert [b["baseline"] for b in res.baselines] == ["naive", "input"]
+    assert "bilinear remap on the exact map" in res.baselines[0]["label"]
+    assert res.reference_kind == "ground truth"
+    for r in res.rows:
+        assert r["beats_naive"] is True and r["beats_input"] is True, r
+    text = markdown({"size": list(SIZE), "repeat": 1, "device": "test",
+                     "effects": [res.as_dict()], "looks": []})
+    assert "| distortion | naive: bilinear remap on the exact map" in text
+    assert "| distortion | input: unchanged input |" in text
+    assert "| distortion | final |" in text and "| yes / yes |" in text
+
+
+def test_case_variants_are_benchmarked_under_their_own_name(rt):
+    res = bench_effect(rt, "distortion", 96, 54, repeat=1, variant="moustache")
+    assert res.effect == "distortion:moustache" and len(res.rows) == len(QUALITY_LEVELS)
+    assert all(r["effect"] == "distortion:moustache" for r in res.rows)
+
+
+def test_a_level_that_loses_to_a_baseline_is_flagged():
+    res = EffectResult("demo", rows=[{"quality": q, "psnr_log": p, "ms": 1.0, "ms_min": 1.0,
+                                      "ms_max": 1.0, "rel_rmse": 0.1}
+                                     for q, p in zip(QUALITY_LEVELS, (20.0, 31.0, 32.0, 33.0))],
+                       baselines=[{"baseline": "naive", "label": "plain", "psnr_log": 30.0},
+                                  {"baseline": "input", "label": "unchanged input", "psnr_log": 25.0}])
+    _flag_levels(res)
+    assert [r["beats_naive"] for r in res.rows] == [False, True, True, True]
+    assert [r["beats_input"] for r in res.rows] == [False, True, True, True]
+    assert losing_levels(res.as_dict()) == ["draft loses to the naive and the input"]
+    summary = summary_markdown({"effects": [res.as_dict()]})
+    assert "30.0 / 25.0" in summary and "NO / NO (draft loses to the naive and the input)" in summary

@@ -14,6 +14,12 @@ Three parts, all measured in one run so ratios compare like with like:
    (OpenCV, SciPy, naive methods) doing the same operation are timed beside it where a case
    declares them with ``peers(case, params, ctx)``: host callables returning RGBA arrays, or
    ``(callable, level)`` to compare with the clfx level doing the same work (else final).
+   Beside the levels every effect gets two baselines scored against the same reference:
+   the unchanged input and, where the case declares one (``Case(naive=Naive(...))``), the
+   naive method the effect exists to beat; each level is flagged ``beats naive`` /
+   ``beats input`` (higher log-PSNR) in the JSON, the markdown and the summary.  A case's
+   ``variants`` (other scene classes) are measured like the main case, as
+   ``<effect>:<variant>``.
 2. Whole looks: each built-in look at the bench size, ms per frame with a per-effect
    breakdown, and sequence throughput with EXR reading and writing included.
 3. Scene analysis: the cinema look on (a) a frame that needs everything, (b) a static, dim,
@@ -97,26 +103,31 @@ def _case_cache_path(module, name: str, width: int, height: int, seed: int):
     from clfx.bench import groundtruth
     from clfx.bench import scene
 
+    import importlib
+
     h = hashlib.sha1(f"{CACHE_VERSION}:{name}:{width}x{height}:{seed}".encode())
-    for mod in (module, scene, groundtruth):
+    depends = [importlib.import_module(m) for m in getattr(module, "TRUTH_DEPENDS", ())]
+    for mod in (module, scene, groundtruth, *depends):
         h.update(inspect.getsource(mod).encode())
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(base, "clfx", "bench", f"{name}-{width}x{height}-{h.hexdigest()[:12]}.pickle")
 
 
-def load_case(module, spec: "cases.Case", name: str, width: int, height: int, seed: int = 1) -> dict:
-    """The effect's bench case; cases with a multisample ``truth`` are cached on disk
-    (minutes to render at 1080p) and reused while their sources are unchanged."""
+def load_case(module, spec: "cases.Case", name: str, width: int, height: int, seed: int = 1,
+              variant: str | None = None) -> dict:
+    """The effect's bench case (or one of its ``variants``); cases with a multisample
+    ``truth`` are cached on disk (minutes to render at 1080p) and reused while their sources
+    are unchanged."""
     import pickle
 
-    path = _case_cache_path(module, name, width, height, seed)
+    path = _case_cache_path(module, case_label(name, variant), width, height, seed)
     if os.path.exists(path):
         try:
             with open(path, "rb") as f:
                 return pickle.load(f)
         except Exception:
             pass  # a damaged cache entry is rebuilt
-    case = spec.make(width, height, np.random.default_rng(seed))
+    case = spec.maker(variant)(width, height, np.random.default_rng(seed))
     if case.get("truth") is not None:
         os.makedirs(os.path.dirname(path), exist_ok=True)
         tmp = f"{path}.tmp-{os.getpid()}"
@@ -126,13 +137,23 @@ def load_case(module, spec: "cases.Case", name: str, width: int, height: int, se
     return case
 
 
+def case_label(effect: str, variant: str | None = None) -> str:
+    """``effect`` for the main case, ``effect:variant`` for a variant."""
+    return effect if variant is None else f"{effect}:{variant}"
+
+
 @dataclass
 class EffectResult:
     effect: str
     rows: list[dict] = field(default_factory=list)
     peers: list[dict] = field(default_factory=list)
+    baselines: list[dict] = field(default_factory=list)
     reference_kind: str = "reference level"
     note: str = ""
+
+    def as_dict(self) -> dict:
+        return {"effect": self.effect, "rows": self.rows, "peers": self.peers,
+                "baselines": self.baselines, "reference": self.reference_kind, "note": self.note}
 
 
 def _case_context(rt, case: dict, quality: str):
@@ -149,15 +170,16 @@ def _case_context(rt, case: dict, quality: str):
 
 
 def bench_effect(rt, name: str, width: int, height: int, repeat: int,
-                 rng_seed: int = 1) -> EffectResult:
-    """Time every quality level of one effect on its bench case and measure its error."""
+                 rng_seed: int = 1, variant: str | None = None) -> EffectResult:
+    """Time every quality level of one effect on its bench case (or a variant) and measure
+    its error, beside the unchanged input and the case's naive method."""
     cls = discover()[name]
     spec, module = cases.for_effect(name), cases.module_for(name)
-    res = EffectResult(name)
+    res = EffectResult(case_label(name, variant))
     if spec is None:
         res.note = "no bench case"
         return res
-    case = load_case(module, spec, name, width, height, rng_seed)
+    case = load_case(module, spec, name, width, height, rng_seed, variant)
     plugin = cls()
     params = cls.params(**case.get("params", {}))
     outputs = {}
@@ -175,7 +197,7 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
 
         img, times = _timed(run, repeat)
         outputs[level] = crop_to(rt.download(img), img.window, window)
-        res.rows.append({"effect": name, "quality": level, **_stats(times),
+        res.rows.append({"effect": res.effect, "quality": level, **_stats(times),
                          "identity": reason or None})
     truth = case.get("truth")
     ref = np.asarray(truth, np.float64) if truth is not None else outputs["reference"].astype(np.float64)
@@ -196,22 +218,73 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     for row in res.rows:
         row["error_ratio_vs_reference"] = (row["rel_rmse"] / ref_err) if ref_err > 0 else None
     peer_ctx = _case_context(rt, case, "final")
+    res.baselines = _baselines(case, spec, params, peer_ctx, ref, edge, repeat, res.effect)
+    _flag_levels(res)
     peers = spec.peers
-    for label, spec in ((peers(case, params, peer_ctx) if peers else None) or {}).items():
-        fn, level = spec if isinstance(spec, tuple) else (spec, "final")
+    for label, peer_fn in ((peers(case, params, peer_ctx) if peers else None) or {}).items():
+        fn, level = peer_fn if isinstance(peer_fn, tuple) else (peer_fn, "final")
         try:
             out, times = _timed(fn, repeat)
         except Exception as exc:  # a peer missing on this machine is reported, not fatal
-            res.peers.append({"effect": name, "peer": label, "error": str(exc)})
+            res.peers.append({"effect": res.effect, "peer": label, "error": str(exc)})
             continue
-        peer = {"effect": name, "peer": label, **_stats(times), **error_metrics(out, ref, edge)}
+        peer = {"effect": res.effect, "peer": label, **_stats(times), **error_metrics(out, ref, edge)}
         mine = next(r for r in res.rows if r["quality"] == level)
         peer["clfx_level"] = level
         peer["clfx_ms"] = mine["ms"]
         peer["clfx_rel_rmse"] = mine["rel_rmse"]
+        peer["clfx_psnr_log"] = mine.get("psnr_log")
         peer["clfx_time_ratio"] = mine["ms"] / peer["ms"] if peer["ms"] > 0 else None
         res.peers.append(peer)
     return res
+
+
+def _baselines(case, spec, params, ctx, ref, edge, repeat: int, label: str) -> list[dict]:
+    """The unchanged input's row and the naive method's row (when the case declares one),
+    scored against ``ref`` like the levels."""
+    window = ctx.source.window
+    src = np.asarray(case["source"], np.float32)
+    rows = []
+    if spec.naive is not None:
+        row = {"effect": label, "baseline": "naive", "label": spec.naive.label}
+        try:
+            out, times = _timed(spec.naive.make(case, params, ctx), repeat)
+        except Exception as exc:  # reported in the table, not fatal
+            row["error"] = f"{type(exc).__name__}: {exc}"
+        else:
+            out = np.asarray(out)
+            if out.shape[:2] != (window.height, window.width):
+                row["error"] = f"naive output {out.shape} does not cover the window {window}"
+            else:
+                row.update(_stats(times), **error_metrics(out, ref, edge))
+        rows.append(row)
+    rows.append({"effect": label, "baseline": "input", "label": "unchanged input",
+                 **error_metrics(src, ref, edge)})
+    return rows
+
+
+def _flag_levels(res: EffectResult) -> None:
+    """``beats_naive`` / ``beats_input`` on every level row: True when its log-PSNR is
+    higher than the baseline's, None when there is nothing to compare."""
+    scores = {b["baseline"]: b.get("psnr_log") for b in res.baselines if "error" not in b}
+    for row in res.rows:
+        for key, base in (("beats_naive", "naive"), ("beats_input", "input")):
+            theirs, mine = scores.get(base), row.get("psnr_log")
+            row[key] = None if theirs is None or mine is None else bool(mine > theirs)
+
+
+def losing_levels(effect: dict) -> list[str]:
+    """``level: loses to naive/input`` for every flagged level of an effect's results."""
+    out = []
+    for r in effect.get("rows", []):
+        lost = [b for b, k in (("naive", "beats_naive"), ("input", "beats_input")) if r.get(k) is False]
+        if lost:
+            out.append(f"{r['quality']} loses to the {' and the '.join(lost)}")
+    return out
+
+
+def _yes_no(value) -> str:
+    return "-" if value is None else ("yes" if value else "NO")
 
 
 # -- looks -------------------------------------------------------------------------------
@@ -313,14 +386,16 @@ def bench_analysis(rt, look_name: str, width: int, height: int, repeat: int) -> 
 
 # -- reporting ---------------------------------------------------------------------------
 def summary_markdown(results: dict) -> str:
-    """One row per effect: median ms and relative RMSE (vs the reference level or the ground
-    truth) at each quality level."""
-    lines = ["| effect | " + " | ".join(QUALITY_LEVELS) + " | error measured against |",
-             "|---|" + "---|" * len(QUALITY_LEVELS) + "---|"]
+    """One row per effect (and case variant): median ms and relative RMSE (vs the reference
+    level or the ground truth) at each quality level, the log-PSNR of the naive method and of
+    the unchanged input, and the levels that lose to either."""
+    lines = ["| effect | " + " | ".join(QUALITY_LEVELS) + " | naive / input PSNR log (dB) | "
+             "every level beats naive / input | error measured against |",
+             "|---|" + "---|" * len(QUALITY_LEVELS) + "---|---|---|"]
     for e in results.get("effects", []):
         rows = {r["quality"]: r for r in e["rows"]}
         if not rows:
-            lines.append(f"| {e['effect']} | {e['note']} |" + " |" * len(QUALITY_LEVELS))
+            lines.append(f"| {e['effect']} | {e['note']} |" + " |" * (len(QUALITY_LEVELS) + 2))
             continue
         cells = []
         for q in QUALITY_LEVELS:
@@ -329,8 +404,28 @@ def summary_markdown(results: dict) -> str:
             baseline = q == "reference" and e["reference"] == "reference level"
             cells.append(f"{r['ms']:.0f} ms, " + ("baseline" if baseline else
                                                    "0" if err == 0 else f"{err:.1e}"))
-        lines.append(f"| {e['effect']} | " + " | ".join(cells) + f" | {e['reference']} |")
+        base = {b["baseline"]: b for b in e.get("baselines", [])}
+        psnr = " / ".join(_psnr_cell(base.get(k)) for k in ("naive", "input"))
+        flags = " / ".join(_all_yes(e["rows"], k) for k in ("beats_naive", "beats_input"))
+        lost = losing_levels(e)
+        lines.append(f"| {e['effect']} | " + " | ".join(cells) + f" | {psnr} | {flags}"
+                     + (f" ({'; '.join(lost)})" if lost else "") + f" | {e['reference']} |")
     return "\n".join(lines) + "\n"
+
+
+def _psnr_cell(row: dict | None) -> str:
+    if row is None:
+        return "-"
+    if "error" in row:
+        return "failed"
+    return f"{row['psnr_log']:.1f}"
+
+
+def _all_yes(rows: list[dict], key: str) -> str:
+    values = [r.get(key) for r in rows]
+    if all(v is None for v in values):
+        return "-"
+    return "NO" if any(v is False for v in values) else "yes"
 
 
 def markdown(results: dict) -> str:
@@ -338,31 +433,45 @@ def markdown(results: dict) -> str:
              f"runs, device: {results['device']}", ""]
     if results.get("effects"):
         lines += ["Time per frame and relative RMSE of each quality level:", "",
-                  summary_markdown(results), "Details:", ""]
+                  summary_markdown(results), "Details (each effect's levels, then its naive "
+                  "method and the unchanged input, scored against the same reference):", ""]
     if results.get("effects"):
         lines += ["| effect | level | ms (min-max) | speed-up vs ref | RMSE | max err | rel. RMSE | "
-                  "PSNR log (dB) | edge RMSE | reference |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+                  "PSNR log (dB) | edge RMSE | beats naive / beats input | reference |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for e in results["effects"]:
             for r in e["rows"]:
                 sp = r.get("speedup_vs_reference")
+                flags = f"{_yes_no(r.get('beats_naive'))} / {_yes_no(r.get('beats_input'))}"
                 lines.append(
                     f"| {r['effect']} | {r['quality']} | {r['ms']:.1f} ({r['ms_min']:.1f}-{r['ms_max']:.1f}) | "
                     f"{sp:.2f}x | {r['rmse']:.3g} | {r['max_err']:.3g} | {r['rel_rmse']:.3g} | "
-                    f"{r['psnr_log']:.1f} | {r.get('edge_rmse', float('nan')):.3g} | {r['reference']} |"
-                    if sp else f"| {r['effect']} | {r['quality']} | identity | | | | | | | |")
+                    f"{r['psnr_log']:.1f} | {r.get('edge_rmse', float('nan')):.3g} | {flags} | "
+                    f"{r['reference']} |"
+                    if sp else f"| {r['effect']} | {r['quality']} | identity | | | | | | | | |")
+            for b in e.get("baselines", []):
+                what = f"{b['baseline']}: {b['label']}"
+                if "error" in b:
+                    lines.append(f"| {b['effect']} | {what} | failed: {b['error']} | | | | | | | | |")
+                    continue
+                ms = f"{b['ms']:.1f} ({b['ms_min']:.1f}-{b['ms_max']:.1f})" if "ms" in b else "-"
+                lines.append(
+                    f"| {b['effect']} | {what} | {ms} | | {b['rmse']:.3g} | {b['max_err']:.3g} | "
+                    f"{b['rel_rmse']:.3g} | {b['psnr_log']:.1f} | {b.get('edge_rmse', float('nan')):.3g} "
+                    f"| | {e['reference']} |")
         peers = [p for e in results["effects"] for p in e["peers"]]
         if peers:
             lines += ["", "| effect | peer | peer ms | clfx level | clfx ms | clfx / peer time | "
-                          "peer rel. RMSE | clfx rel. RMSE | peer max err |",
-                      "|---|---|---|---|---|---|---|---|---|"]
+                          "peer rel. RMSE | clfx rel. RMSE | peer / clfx PSNR log (dB) | peer max err |",
+                      "|---|---|---|---|---|---|---|---|---|---|"]
             for p in peers:
                 if "error" in p:
-                    lines.append(f"| {p['effect']} | {p['peer']} | failed: {p['error']} | | | | | | |")
+                    lines.append(f"| {p['effect']} | {p['peer']} | failed: {p['error']} | | | | | | | |")
                 else:
                     lines.append(f"| {p['effect']} | {p['peer']} | {p['ms']:.1f} | {p['clfx_level']} | "
                                  f"{p['clfx_ms']:.1f} | {p['clfx_time_ratio']:.2f} | {p['rel_rmse']:.3g} | "
-                                 f"{p['clfx_rel_rmse']:.3g} | {p['max_err']:.3g} |")
+                                 f"{p['clfx_rel_rmse']:.3g} | {p['psnr_log']:.1f} / "
+                                 f"{p.get('clfx_psnr_log', float('nan')):.1f} | {p['max_err']:.3g} |")
     if results.get("looks"):
         lines += ["", "| look | ms/frame (min-max) | per effect (ms) |", "|---|---|---|"]
         for lk in results["looks"]:
@@ -428,17 +537,22 @@ def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5
             from clfx.plugins import get_plugin
 
             get_plugin(name)  # raises with a suggestion
-        t0 = time.perf_counter()
-        try:
-            res = bench_effect(rt, name, width, height, repeat)
-        except Exception as exc:  # one broken effect must not hide the others' figures
-            results["effects"].append({"effect": name, "rows": [], "peers": [],
-                                       "reference": "", "note": f"failed: {exc!r}"})
-            log(f"clfx bench: {name} FAILED: {exc!r}")
-            continue
-        results["effects"].append({"effect": name, "rows": res.rows, "peers": res.peers,
-                                   "reference": res.reference_kind, "note": res.note})
-        log(f"clfx bench: {name} done in {time.perf_counter() - t0:.1f} s")
+        spec = cases.for_effect(name)
+        for variant in [None, *(spec.variants if spec is not None else ())]:
+            label = case_label(name, variant)
+            t0 = time.perf_counter()
+            try:
+                res = bench_effect(rt, name, width, height, repeat, variant=variant)
+            except Exception as exc:  # one broken effect must not hide the others' figures
+                results["effects"].append({"effect": label, "rows": [], "peers": [],
+                                           "baselines": [], "reference": "",
+                                           "note": f"failed: {exc!r}"})
+                log(f"clfx bench: {label} FAILED: {exc!r}")
+                continue
+            results["effects"].append(res.as_dict())
+            log(f"clfx bench: {label} done in {time.perf_counter() - t0:.1f} s")
+            for lost in losing_levels(res.as_dict()):
+                log(f"clfx bench: {label}: {lost} in log-PSNR")
     if looks is None or looks:
         from clfx.pipeline.presets import available_looks
 

@@ -16,6 +16,11 @@ source image to read.  To *add* a lens defect (distortion, lateral CA) the map i
 of the lens model: the model sends an undistorted point to where the lens images it, so the
 output pixel u_d reads the undistorted point u_u with model(u_u) = u_d.  The inverse is found
 by bracketed bisection / Newton, never by fixed-point iteration (hard-cases.md case 10).
+
+Footprints (``FOOTPRINTS``, ``FootprintMap``, ``elliptical_map``): where a map compresses the
+source, a filter read at one point aliases; the footprint filters widen per output pixel by
+the variance the pixel's preimage (from the map's Jacobian) adds beyond a texel, packed once
+per parameter set like the point maps.
 """
 from __future__ import annotations
 
@@ -37,9 +42,38 @@ BORDER_CODE = {"black": 0, "edge": 1, "mirror": 2}
 @dataclass(frozen=True)
 class ResampleLevel(Level):
     """A warping effect's quality level: its resampling ``filter`` (one of ``FILTERS``);
-    ``fp64`` reads a float64 map and accumulates in float64 (``kernels/lib/precision.h``)."""
+    ``fp64`` reads a float64 map and accumulates in float64 (``kernels/lib/precision.h``).
+    ``footprint``: the filter's footprint follows the map's local Jacobian (one of
+    ``FOOTPRINTS``; the reference level's elliptical footprint when ``fp64``), so regions the
+    map compresses are area-averaged instead of aliased."""
 
     filter: str = "lanczos3"
+    footprint: bool = False
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A footprint filter of ``kernels/lib/resample.h`` (see :func:`footprint_spread`).
+
+    ``code`` (FP_FILTER), ``taps`` per axis of the fast kernel's window, ``kappa`` (scale of
+    the extra variance: the filter's own shape attenuates high frequencies less than the box
+    it stands for, so the draft's 3 taps need more), ``cap`` (the largest extra variance one
+    window holds; beyond it the footprint is split into n x n sub-footprints).
+    """
+
+    code: int
+    taps: int
+    kappa: float
+    cap: float
+
+
+FOOTPRINTS = {
+    "quadratic": Footprint(0, 3, 1.3, 0.75),
+    "bicubic": Footprint(1, 4, 1.0, 1.0 / 3.0),
+    "lanczos3": Footprint(2, 8, 1.0, 0.98),
+}
+"""Footprint filters (draft, preview, final): 3-tap quadratic with a variance term, Keys
+bicubic blended with the cubic B-spline, the mean of two Lanczos-3 samples at +-h."""
 
 
 def kernel_defines(filter_name: str, border: str, sanitise: bool = True) -> dict:
@@ -354,3 +388,195 @@ def check_fold(name: str, coeffs: str, r_fold: float, r_corner: float, unit: str
             f"{name}: {coeffs} fold over inside the frame: the radial map stops increasing "
             f"at r={r_fold:.3f} before the corner at r={r_corner:.3f} ({unit}); reduce the "
             f"coefficients (a real lens images each point once)")
+
+
+# -- footprint filters: resampling that follows the map's Jacobian --------------------------
+def footprint_defines(filter_name: str, border: str, sanitise: bool = True) -> dict:
+    """``-D`` defines of the footprint kernels: FP_FILTER (``FOOTPRINTS``), the border rule,
+    NaN/Inf handling, and Lanczos-3 for the reference's elliptical samples."""
+    return {"FP_FILTER": FOOTPRINTS[filter_name].code, "RS_FILTER": FILTER_CODE["lanczos3"],
+            "RS_BORDER": BORDER_CODE[border], "RS_SANITISE": int(bool(sanitise))}
+
+
+def footprint_spread(jac, filter_name: str):
+    """Per-pixel spreads ``(hx, hy)`` and sub-footprint counts ``n`` of a footprint filter.
+
+    ``jac`` (..., 2, 2) is d(source) / d(output) in pixels.  The output pixel's preimage has
+    the marginal widths W_x^2 = J11^2 + J12^2, W_y^2 = J21^2 + J22^2 (texels); a box of width
+    W adds the variance (W^2 - 1) / 12 to the texel's own box, so the filter gets the extra
+    variance v = kappa max(W^2 - 1, 0) / 12 per axis (0 where the map magnifies: the plain
+    filter).  Where v exceeds the filter's ``cap`` the footprint is split into n x n
+    sub-footprints of J / n (the smallest n that fits).  h = sqrt(v), rounded to float16 as
+    the kernels store it (returned as float64).
+    """
+    fp = FOOTPRINTS[filter_name]
+    jac = np.nan_to_num(np.asarray(jac, np.float64))
+    w2x = jac[..., 0, 0] ** 2 + jac[..., 0, 1] ** 2
+    w2y = jac[..., 1, 0] ** 2 + jac[..., 1, 1] ** 2
+    n = np.ones(w2x.shape, np.int64)
+
+    def var(w2):
+        return fp.kappa * np.maximum(w2 / n ** 2 - 1.0, 0.0) / 12.0
+
+    while True:
+        over = (var(w2x) > fp.cap) | (var(w2y) > fp.cap)
+        if not over.any():
+            break
+        n = np.where(over, n + 1, n)
+    hx = np.sqrt(var(w2x)).astype(np.float16)
+    hy = np.sqrt(var(w2y)).astype(np.float16)
+    return hx.astype(np.float64), hy.astype(np.float64), n
+
+
+def footprint_window(p, h, filter_name: str):
+    """The fast window's first texel (float64 integers) and the stored fraction along one
+    axis (kernels/lib/resample.h ``fp_window``): quadratic: round(u) - 1 and d in
+    [-0.5, 0.5); bicubic: floor(u) - 1 and frac(u); lanczos3: floor(u - h) - 2 and
+    frac(u - h), with u = p - 0.5.  Fractions in [0, 1) rounding to 1.0 in float32 carry."""
+    if filter_name == "quadratic":
+        m = np.floor(p)
+        return m - 1, (p - m - 0.5).astype(np.float32)
+    m = p - 0.5 - (h if filter_name == "lanczos3" else 0.0)
+    i, f = _split(m + 0.5)
+    return i - (2 if filter_name == "lanczos3" else 1), f
+
+
+class FootprintMap:
+    """Source points and Jacobians packed for the footprint kernels of one filter.
+
+    ``sx, sy`` (float64, (h, w)): source-window coordinates of the output pixels (NaN = no
+    source); ``jac`` (h, w, 2, 2) their Jacobians.  Output rows share ``pitch`` (a multiple
+    of 4) with the source; padding pixels repeat each row's last pixel.
+
+    ``entries`` (int32, (h, pitch // 4, 16)): per quad of 4 output pixels the float indices
+    ``(iy0 * pitch + ix0) * 4`` of their windows' top-left texels, the fractions f_x, f_y
+    (float32 bits) and (h_x, h_y) as two float16 (see ``footprint_spread`` and
+    ``footprint_window``), when every window lies inside the source and needs no
+    sub-footprints.  Otherwise the quad's indices are -2 when all four outputs are 0 (black
+    border: no source, or every window outside the source) and -1 when the second kernel
+    renders it from ``records`` (int32, (k, 56)): the quad index, 3 unused, the quad's 16
+    packed ints (a window that fits stands in for the others), a mode per pixel (0: the fast
+    path, 1: the checked path, 2: 0), then for the checked path the 4 points' x and y
+    (float32), their (h_x, h_y) (float16 pairs), sub-footprint counts n and the Jacobians'
+    J11, J12, J21, J22 (float32, 4 each).
+    """
+
+    def __init__(self, sx, sy, jac, filter_name: str, width: int, height: int, pitch: int,
+                 border: str = "black"):
+        taps = FOOTPRINTS[filter_name].taps
+        rows, quads = max(sx.shape[0], 1), pitch // 4
+        px, py = _padded(sx, pitch, 0.5), _padded(sy, pitch, 0.5)
+        jp = np.empty((rows, pitch, 2, 2))
+        for a in (0, 1):
+            for b in (0, 1):
+                jp[..., a, b] = _padded(jac[..., a, b], pitch, float(a == b))
+        finite = np.isfinite(px) & np.isfinite(py) & (np.abs(px) < 1e7) & (np.abs(py) < 1e7)
+        finite &= np.isfinite(jp).all(axis=(-2, -1))
+        px, py = np.where(finite, px, 0.5), np.where(finite, py, 0.5)
+        jp = np.where(finite[..., None, None], jp, np.eye(2))
+        hx, hy, n = footprint_spread(jp, filter_name)
+        ix, fx = footprint_window(px, hx, filter_name)
+        iy, fy = footprint_window(py, hy, filter_name)
+        inside = (ix >= 0) & (ix + taps <= width) & (iy >= 0) & (iy + taps <= height)
+        if filter_name == "quadratic":    # its rows are read as 4 texels: stay in the buffer
+            inside &= (ix + 4 <= pitch) | (iy + taps < height)
+        fast = finite & (n == 1) & inside
+        # the window's taps all outside the source: 0 with a black border
+        outside = (ix + taps <= 0) | (ix >= width) | (iy + taps <= 0) | (iy >= height)
+        zero = ~finite | ((n == 1) & outside & (border == "black"))
+        q_fast = fast.reshape(rows, quads, 4).all(axis=2)
+        q_zero = zero.reshape(rows, quads, 4).all(axis=2) & ~q_fast
+        base = (np.clip(iy, 0, None) * pitch + np.clip(ix, 0, None)) * 4
+        h2 = np.stack([hx, hy], -1).astype(np.float16).view(np.int32)[..., 0]
+        e = np.empty((rows, quads, 4, 4), np.int32)
+        e[:, :, 0] = np.where(fast, base, 0).reshape(rows, quads, 4)   # 0: a window that fits
+        e[:, :, 1] = fx.reshape(rows, quads, 4).view(np.int32)
+        e[:, :, 2] = fy.reshape(rows, quads, 4).view(np.int32)
+        e[:, :, 3] = h2.reshape(rows, quads, 4)
+        e = e.reshape(rows, quads, 16)
+        fix = np.flatnonzero(~(q_fast | q_zero))
+        qv = lambda a: a.reshape(rows * quads, 4)[fix]
+        rec = np.zeros((fix.size, 14, 4), np.int32)
+        rec[:, 0, 0] = fix
+        rec[:, 1:5] = e.reshape(rows * quads, 4, 4)[fix]
+        rec[:, 5] = qv(np.where(fast, 0, np.where(zero, 2, 1)))        # per pixel: mode
+        f32 = lambda a: qv(np.where(finite, a, np.nan).astype(np.float32)).view(np.int32)
+        rec[:, 6], rec[:, 7] = f32(px), f32(py)
+        rec[:, 8], rec[:, 9] = qv(h2), qv(n.astype(np.int32))
+        for k, (a, b) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+            rec[:, 10 + k] = qv(jp[..., a, b].astype(np.float32)).view(np.int32)
+        e[..., 0:4] = np.where(q_fast[..., None], e[..., 0:4], np.where(q_zero, -2, -1)[..., None])
+        self.entries = e
+        self.records = rec.reshape(fix.size, 56)
+        total = max(rows * quads, 1)
+        self.fractions = {"fast": float(q_fast.sum()) / total, "zero": float(q_zero.sum()) / total,
+                          "checked": fix.size / total}
+
+    def upload(self, rt) -> "DeviceFootprintMap":
+        """The map's device buffers (a value for ``rt.cache``)."""
+        count = len(self.records)
+        return DeviceFootprintMap(rt.to_device(self.entries),
+                                  rt.to_device(self.records) if count else None, count,
+                                  dict(self.fractions))
+
+
+@dataclass(frozen=True)
+class DeviceFootprintMap:
+    """A :class:`FootprintMap` on the device: ``entries``, ``records`` (or None), their
+    ``count`` and the ``fractions`` of fast, zero and checked quads."""
+
+    entries: object
+    records: object
+    count: int
+    fractions: dict
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.entries.nbytes) + (int(self.records.nbytes) if self.records is not None else 0)
+
+
+def launch_footprint(rt, fast, fix, dmap: DeviceFootprintMap, quads_x: int, rows: int,
+                     head: tuple, tail: tuple):
+    """Enqueue a footprint warp: ``fast(*head, entries, *tail)`` over every quad, then
+    ``fix(*head, records, count, *tail)`` over the checked quads."""
+    rt.launch(fast, (quads_x, max(rows, 1)), *head, dmap.entries, *tail)
+    if dmap.count:
+        rt.launch(fix, (dmap.count,), *head, dmap.records, np.int32(dmap.count), *tail)
+
+
+def elliptical_spread(jac):
+    """``(jc, n)`` of the reference's elliptical footprint.
+
+    ``jc`` = U sqrt(max(S^2 - 1, 0)) V^T from the SVD J = U S V^T: the part of the output
+    pixel's preimage (the parallelogram J [-1/2, 1/2]^2) wider than a texel, along its
+    principal axes (0 where the map magnifies).  ``n``: samples per axis, 1 where ``jc`` is 0,
+    else max(2, ceil(sqrt(1 + c^2))) for the longer column c of ``jc`` (neighbouring samples
+    at most one texel apart).
+    """
+    jac = np.nan_to_num(np.asarray(jac, np.float64))
+    u, s, vt = np.linalg.svd(jac)
+    e = np.sqrt(np.maximum(s * s - 1.0, 0.0))
+    jc = (u * e[..., None, :]) @ vt
+    c2 = np.maximum(jc[..., 0, 0] ** 2 + jc[..., 1, 0] ** 2, jc[..., 0, 1] ** 2 + jc[..., 1, 1] ** 2)
+    n = np.where(e.max(axis=-1) > 0.0, np.maximum(2.0, np.ceil(np.sqrt(1.0 + c2))), 1.0)
+    return jc, n
+
+
+def elliptical_map(rt, sx, sy, jac, pitch: int):
+    """The reference level's float64 map (kernels/distortion.cl ``distortion_ewa_f64``): per
+    pixel the displacement (dx, dy) from its centre, the columns of ``jc`` and ``n``
+    (:func:`elliptical_spread`), 8 doubles, rows of ``pitch`` pixels."""
+    h, w = sx.shape
+    ox, oy = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    jc, n = elliptical_spread(jac)
+    host = np.zeros((max(h, 1), pitch, 8))
+    host[:h, :w, 0] = sx - ox
+    host[:h, :w, 1] = sy - oy
+    host[:h, :w, 2] = jc[..., 0, 0]
+    host[:h, :w, 3] = jc[..., 1, 0]
+    host[:h, :w, 4] = jc[..., 0, 1]
+    host[:h, :w, 5] = jc[..., 1, 1]
+    host[:h, :w, 6] = n
+    host[h:, :, 6] = 1.0
+    host[:, w:, 6] = 1.0
+    return rt.to_device(host)

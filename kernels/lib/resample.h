@@ -67,24 +67,12 @@ inline float4 rs_texel(global const float *src, int pitch, int w, int h, int x, 
   return rs_sanitise(vload4(y * pitch + x, src));
 }
 
-/* Separable weights for fractional offset t in [0, 1): tap k sits at integer offset
- * k - (RS_TAPS / 2 - 1) from floor(coordinate - 0.5). */
-inline void rs_weights(REAL t, REAL *wt)
+/* Lanczos-3 weights of taps k = -2..3 (from floor(coordinate - 0.5)) at fractional offset t in
+ * [0, 1): L(d) = sinc(d) sinc(d/3) at d = t - k.  sin(pi (t - k)) = (-1)^k sin(pi t) and
+ * sin(pi (t - k) / 3) follows from the angle-addition formula, so only one sin/cos pair is
+ * evaluated.  Weights are normalised to sum 1. */
+inline void rs_lanczos3_weights(REAL t, REAL *wt)
 {
-#if RS_FILTER == 0
-  wt[0] = (REAL)1 - t;
-  wt[1] = t;
-#elif RS_FILTER == 1
-  /* Keys cubic convolution, a = -0.5 (Catmull-Rom): interpolating, exact for quadratics */
-  const REAL t2 = t * t, t3 = t2 * t;
-  wt[0] = (REAL)-0.5 * t3 + t2 - (REAL)0.5 * t;
-  wt[1] = (REAL)1.5 * t3 - (REAL)2.5 * t2 + (REAL)1;
-  wt[2] = (REAL)-1.5 * t3 + (REAL)2 * t2 + (REAL)0.5 * t;
-  wt[3] = (REAL)0.5 * t3 - (REAL)0.5 * t2;
-#else
-  /* Lanczos-3: L(d) = sinc(d) sinc(d/3) at d = t - k, k = -2..3.  sin(pi (t - k)) =
-   * (-1)^k sin(pi t) and sin(pi (t - k) / 3) follows from the angle-addition formula, so
-   * only one sin/cos pair per axis is evaluated.  Weights are normalised to sum 1. */
   const REAL pi = (REAL)3.14159265358979323846;
 #if REAL_IS_DOUBLE
   const REAL s1 = sin(pi * t);
@@ -124,6 +112,24 @@ inline void rs_weights(REAL t, REAL *wt)
   }
   const REAL inv = (REAL)1 / sum;
   for(int i = 0; i < 6; i++) wt[i] *= inv;
+}
+
+/* Separable weights for fractional offset t in [0, 1): tap k sits at integer offset
+ * k - (RS_TAPS / 2 - 1) from floor(coordinate - 0.5). */
+inline void rs_weights(REAL t, REAL *wt)
+{
+#if RS_FILTER == 0
+  wt[0] = (REAL)1 - t;
+  wt[1] = t;
+#elif RS_FILTER == 1
+  /* Keys cubic convolution, a = -0.5 (Catmull-Rom): interpolating, exact for quadratics */
+  const REAL t2 = t * t, t3 = t2 * t;
+  wt[0] = (REAL)-0.5 * t3 + t2 - (REAL)0.5 * t;
+  wt[1] = (REAL)1.5 * t3 - (REAL)2.5 * t2 + (REAL)1;
+  wt[2] = (REAL)-1.5 * t3 + (REAL)2 * t2 + (REAL)0.5 * t;
+  wt[3] = (REAL)0.5 * t3 - (REAL)0.5 * t2;
+#else
+  rs_lanczos3_weights(t, wt);
 #endif
 }
 
@@ -146,13 +152,20 @@ inline float16 rs_sanitise16(float16 v)
 
 #define RS_MINMAX(t) do { lo = fmin(lo, (t)); hi = fmax(hi, (t)); } while(0)
 
-/* Filtered RGBA at (sx, sy) (source-window pixel coordinates, centres at +0.5).
- * Footprints inside the image take a fast path: each tap row is read with one or two
- * vector loads (vload8 / vload16: 2 / 4 adjacent RGBA texels) and no border rule. */
-inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx, REAL sy)
+/* Filtered RGBA at (sx, sy) (source-window pixel coordinates, centres at +0.5), before the
+ * anti-ringing clamp, whose bounds (the nearest 2x2 texels' min/max) go to *rlo, *rhi
+ * (+-inf for bilinear, which needs none).  Footprints inside the image take a fast path:
+ * each tap row is read with one or two vector loads (vload8 / vload16: 2 / 4 adjacent RGBA
+ * texels) and no border rule. */
+inline REAL4 rs_sample_range(global const float *src, int pitch, int w, int h, REAL sx,
+                             REAL sy, float4 *rlo, float4 *rhi)
 {
-  if(!(sx == sx) || !(sy == sy) || fabs(sx) > (REAL)1e7 || fabs(sy) > (REAL)1e7)
+  *rlo = (float4)-INFINITY;
+  *rhi = (float4)INFINITY;
+  if(!(sx == sx) || !(sy == sy) || fabs(sx) > (REAL)1e7 || fabs(sy) > (REAL)1e7) {
+    *rlo = *rhi = (float4)0.0f;
     return (REAL4)0;
+  }
   const REAL fx = sx - (REAL)0.5, fy = sy - (REAL)0.5;
   const REAL flx = floor(fx), fly = floor(fy);
   const int ix = (int)flx, iy = (int)fly;
@@ -193,7 +206,9 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
 #endif
       acc += wy[j] * row;
     }
-    return clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
+    *rlo = lo;
+    *rhi = hi;
+    return acc;
   }
 #endif
   for(int j = 0; j < RS_TAPS; j++) {
@@ -208,9 +223,22 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
     acc += wy[j] * row;
   }
 #if RS_FILTER > 0
-  acc = clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
+  *rlo = lo;
+  *rhi = hi;
 #endif
   return acc;
+}
+
+/* rs_sample_range, clamped (hard-cases.md case 5). */
+inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx, REAL sy)
+{
+  float4 lo, hi;
+  const REAL4 acc = rs_sample_range(src, pitch, w, h, sx, sy, &lo, &hi);
+#if RS_FILTER > 0
+  return clamp(acc, TO_REAL4(lo), TO_REAL4(hi));
+#else
+  return acc;
+#endif
 }
 
 /* Four reads at once (the 4 pixels of a work-item): coordinates as float4 vectors so the
@@ -257,53 +285,70 @@ inline void rs_sample4(global const float *src, int pitch, int w, int h, float4 
  * (A branch between the two paths inside one kernel cost 25%: PoCL's work-item loops.)
  */
 
-/* Keys cubic (a = -0.5) weights of 4 pixels at once */
-inline void rs_cubic_w4(float4 t, float4 *w0, float4 *w1, float4 *w2, float4 *w3)
-{
-  const float4 t2 = t * t;
-  *w0 = ((-0.5f * t + 1.0f) * t - 0.5f) * t;
-  *w1 = (1.5f * t - 2.5f) * t2 + 1.0f;
-  *w2 = ((-1.5f * t + 2.0f) * t + 0.5f) * t;
-  *w3 = (0.5f * t - 0.5f) * t2;
+/* Keys cubic (a = -0.5) weights of 4 (rs_cubic_w4) or 8 (rs_cubic_w8: both axes of a quad)
+ * fractions at once */
+#define RS_CUBIC_WN(name, T)                                                                  \
+inline void name(T t, T *w0, T *w1, T *w2, T *w3)                                             \
+{                                                                                             \
+  const T t2 = t * t;                                                                         \
+  *w0 = ((-0.5f * t + 1.0f) * t - 0.5f) * t;                                                  \
+  *w1 = (1.5f * t - 2.5f) * t2 + 1.0f;                                                        \
+  *w2 = ((-1.5f * t + 2.0f) * t + 0.5f) * t;                                                  \
+  *w3 = (0.5f * t - 0.5f) * t2;                                                               \
 }
+RS_CUBIC_WN(rs_cubic_w4, float4)
+RS_CUBIC_WN(rs_cubic_w8, float8)
+#undef RS_CUBIC_WN
 
-/* Lanczos-3 weights of 4 pixels at once: the same formula as rs_weights (one sin/cos pair
- * by Taylor polynomials, angle addition for the 6 taps, normalised to sum 1). */
-inline void rs_lanczos_w4(float4 t, float4 *w0, float4 *w1, float4 *w2, float4 *w3,
-                          float4 *w4, float4 *w5)
-{
-  const float pi = 3.14159265358979323846f;
-  const float4 e = pi * (t - 0.5f);
-  const float4 e2 = e * e;
-  const float4 s1 = 1.0f + e2 * (-1.0f / 2 + e2 * (1.0f / 24 + e2 * (-1.0f / 720 + e2 * (1.0f / 40320
-                    + e2 * (-1.0f / 3628800 + e2 * (1.0f / 479001600))))));
-  const float4 a = pi * t / 3.0f;
-  const float4 a2 = a * a;
-  const float4 sa = a * (1.0f + a2 * (-1.0f / 6 + a2 * (1.0f / 120 + a2 * (-1.0f / 5040
-                    + a2 * (1.0f / 362880 + a2 * (-1.0f / 39916800))))));
-  const float4 ca = 1.0f + a2 * (-1.0f / 2 + a2 * (1.0f / 24 + a2 * (-1.0f / 720 + a2 * (1.0f / 40320
-                    + a2 * (-1.0f / 3628800)))));
-  const float s3 = 0.86602540378443864676f;
-  const float4 hs = 0.5f * sa, cs = s3 * ca;
-  const float pp = pi * pi;
-  /* tap k = i - 2 at distance d = t - k: 3 sin(pi d) sin(pi d / 3) / (pi d)^2 */
-#define RS_LZ(d, sin_d, sin_d3) \
-  select(3.0f * (sin_d) * (sin_d3) / (pp * (d) * (d)), (float4)1.0f, fabs(d) < 1e-7f)
-  const float4 v0 = RS_LZ(t + 2.0f, s1, cs - hs);
-  const float4 v1 = RS_LZ(t + 1.0f, -s1, cs + hs);
-  const float4 v2 = RS_LZ(t, s1, sa);
-  const float4 v3 = RS_LZ(t - 1.0f, -s1, hs - cs);
-  const float4 v4 = RS_LZ(t - 2.0f, s1, -hs - cs);
-  const float4 v5 = RS_LZ(t - 3.0f, -s1, -sa);
-#undef RS_LZ
-  const float4 inv = 1.0f / (((v0 + v1) + (v2 + v3)) + (v4 + v5));
-  *w0 = v0 * inv; *w1 = v1 * inv; *w2 = v2 * inv; *w3 = v3 * inv; *w4 = v4 * inv; *w5 = v5 * inv;
+/* Lanczos-3 weights of 4 (rs_lanczos_w4) or 16 (rs_lanczos_w16: several axes and sample sets
+ * of a quad in one zmm-wide evaluation) fractions at once: the same formula as rs_weights
+ * (one sin/cos pair by Taylor polynomials, angle addition for the 6 taps, normalised to
+ * sum 1). */
+#define RS_LANCZOS_WN(name, T)                                                                \
+inline void name(T t, T *w0, T *w1, T *w2, T *w3, T *w4, T *w5)                               \
+{                                                                                             \
+  const float pi = 3.14159265358979323846f;                                                   \
+  const T e = pi * (t - 0.5f);                                                                \
+  const T e2 = e * e;                                                                         \
+  const T s1 = 1.0f + e2 * (-1.0f / 2 + e2 * (1.0f / 24 + e2 * (-1.0f / 720 + e2 * (1.0f / 40320 \
+               + e2 * (-1.0f / 3628800 + e2 * (1.0f / 479001600))))));                        \
+  const T a = pi * t / 3.0f;                                                                  \
+  const T a2 = a * a;                                                                         \
+  const T sa = a * (1.0f + a2 * (-1.0f / 6 + a2 * (1.0f / 120 + a2 * (-1.0f / 5040            \
+               + a2 * (1.0f / 362880 + a2 * (-1.0f / 39916800))))));                          \
+  const T ca = 1.0f + a2 * (-1.0f / 2 + a2 * (1.0f / 24 + a2 * (-1.0f / 720 + a2 * (1.0f / 40320 \
+               + a2 * (-1.0f / 3628800)))));                                                  \
+  const float s3 = 0.86602540378443864676f;                                                   \
+  const T hs = 0.5f * sa, cs = s3 * ca;                                                       \
+  const float pp = pi * pi;                                                                   \
+  /* tap k = i - 2 at distance d = t - k: 3 sin(pi d) sin(pi d / 3) / (pi d)^2 */             \
+  const T d0 = t + 2.0f, d1 = t + 1.0f, d3 = t - 1.0f, d4 = t - 2.0f, d5 = t - 3.0f;          \
+  const T v0 = select(3.0f * s1 * (cs - hs) / (pp * d0 * d0), (T)1.0f, fabs(d0) < 1e-7f);     \
+  const T v1 = select(3.0f * -s1 * (cs + hs) / (pp * d1 * d1), (T)1.0f, fabs(d1) < 1e-7f);    \
+  const T v2 = select(3.0f * s1 * sa / (pp * t * t), (T)1.0f, fabs(t) < 1e-7f);               \
+  const T v3 = select(3.0f * -s1 * (hs - cs) / (pp * d3 * d3), (T)1.0f, fabs(d3) < 1e-7f);    \
+  const T v4 = select(3.0f * s1 * (-hs - cs) / (pp * d4 * d4), (T)1.0f, fabs(d4) < 1e-7f);    \
+  const T v5 = select(3.0f * -s1 * -sa / (pp * d5 * d5), (T)1.0f, fabs(d5) < 1e-7f);          \
+  const T inv = 1.0f / (((v0 + v1) + (v2 + v3)) + (v4 + v5));                                 \
+  *w0 = v0 * inv; *w1 = v1 * inv; *w2 = v2 * inv; *w3 = v3 * inv; *w4 = v4 * inv; *w5 = v5 * inv; \
 }
+RS_LANCZOS_WN(rs_lanczos_w4, float4)
+RS_LANCZOS_WN(rs_lanczos_w16, float16)
+#undef RS_LANCZOS_WN
 
 /* Broadcast lane k of four float4 weight vectors into a float16 (4 texels x RGBA) */
 #define RS_W16(a, b, c, d, k) \
   (float16)((float4)((a).s##k), (float4)((b).s##k), (float4)((c).s##k), (float4)((d).s##k))
 #define RS_HSUM16(v) (((v).lo.lo + (v).lo.hi) + ((v).hi.lo + (v).hi.hi))
+/* A 4x4 window from p (rows of `row` floats): the rows r0..r3 (4 texels each), summed
+ * vertically with y0..y3 on 16 lanes, then weighted horizontally with x0..x3: hs. */
+#define RS_ROWS4(k)                                                                           \
+    const float16 r0 = rs_sanitise16(vload16(0, p)), r1 = rs_sanitise16(vload16(0, p + row)); \
+    const float16 r2 = rs_sanitise16(vload16(0, p + 2 * row));                               \
+    const float16 r3 = rs_sanitise16(vload16(0, p + 3 * row));                               \
+    const float16 v = fma(r3, (float16)y3.s##k, fma(r2, (float16)y2.s##k,                    \
+                      fma(r1, (float16)y1.s##k, r0 * y0.s##k)));                             \
+    const float16 hs = v * RS_W16(x0, x1, x2, x3, k);
 
 /* The fast path: 4 outputs from texel bases (float indices of the footprint's (ix, iy)
  * texel) and fractions, every footprint inside the source. */
@@ -328,15 +373,10 @@ inline void rs_fast4(global const float *src, int pitch, int4 base, float4 tx, f
    * then weighted horizontally; clamped to the central 2x2 texels (anti-ringing) */
 #define RS_CUBIC(k, o) {                                                                     \
     global const float *p = src + base.s##k - row - 4;                                      \
-    const float16 r0 = rs_sanitise16(vload16(0, p)), r1 = rs_sanitise16(vload16(0, p + row)); \
-    const float16 r2 = rs_sanitise16(vload16(0, p + 2 * row));                               \
-    const float16 r3 = rs_sanitise16(vload16(0, p + 3 * row));                               \
-    const float16 v = fma(r3, (float16)y3.s##k, fma(r2, (float16)y2.s##k,                    \
-                      fma(r1, (float16)y1.s##k, r0 * y0.s##k)));                             \
-    const float16 hsum = v * RS_W16(x0, x1, x2, x3, k);                                      \
+    RS_ROWS4(k)                                                                              \
     const float4 lo = fmin(fmin(r1.s4567, r1.s89ab), fmin(r2.s4567, r2.s89ab));             \
     const float4 hi = fmax(fmax(r1.s4567, r1.s89ab), fmax(r2.s4567, r2.s89ab));             \
-    *o = clamp(RS_HSUM16(hsum), lo, hi); }
+    *o = clamp(RS_HSUM16(hs), lo, hi); }
   RS_CUBIC(0, o0) RS_CUBIC(1, o1) RS_CUBIC(2, o2) RS_CUBIC(3, o3)
 #undef RS_CUBIC
 #else
@@ -403,5 +443,322 @@ inline void rs_store_quad(global float *dst, int i, const REAL4 *o)
   vstore16((float16)(TO_FLOAT4(o[0]), TO_FLOAT4(o[1]), TO_FLOAT4(o[2]), TO_FLOAT4(o[3])), 0,
            dst + i * 4);
 }
+
+
+#if !REAL_IS_DOUBLE
+/* Cubic B-spline weights of 8 fractions at once (both axes of a quad; taps -1..2 of
+ * floor(u), fraction t) */
+inline void fp_bspline_w8(float8 t, float8 *w0, float8 *w1, float8 *w2, float8 *w3)
+{
+  const float8 t2 = t * t, t3 = t2 * t, u = 1.0f - t;
+  *w0 = u * u * u * (1.0f / 6.0f);
+  *w1 = (3.0f * t3 - 6.0f * t2 + 4.0f) * (1.0f / 6.0f);
+  *w2 = (-3.0f * t3 + 3.0f * t2 + 3.0f * t + 1.0f) * (1.0f / 6.0f);
+  *w3 = t3 * (1.0f / 6.0f);
+}
+#endif
+
+/* 8 taps: the mean of l0..l5 (taps 0..5) and r0..r5 shifted by o = off (0, 1 or 2) */
+#define FP_MERGE8(off, w) {                                                                   \
+    const int4 o1 = (off) == 1.0f, o2 = (off) == 2.0f;                                      \
+    const float4 z = (float4)0.0f;                                                           \
+    w##0 = 0.5f * (l0 + select(select(r0, z, o1), z, o2));                                  \
+    w##1 = 0.5f * (l1 + select(select(r1, r0, o1), z, o2));                                 \
+    w##2 = 0.5f * (l2 + select(select(r2, r1, o1), r0, o2));                                \
+    w##3 = 0.5f * (l3 + select(select(r3, r2, o1), r1, o2));                                \
+    w##4 = 0.5f * (l4 + select(select(r4, r3, o1), r2, o2));                                \
+    w##5 = 0.5f * (l5 + select(select(r5, r4, o1), r3, o2));                                \
+    w##6 = 0.5f * select(select(z, r5, o1), r4, o2);                                        \
+    w##7 = 0.5f * select(z, r5, o2); }
+
+/* ---- Footprint filters: resampling that follows the map's local Jacobian ----------------
+ *
+ * Where a warp compresses the source (the map minifies), a fixed kernel read at one point
+ * aliases: the output pixel's preimage covers several texels.  The footprint filters
+ * (clfx.fx.resample.FootprintMap, FOOTPRINTS) widen the kernel per output pixel.  From the
+ * map's Jacobian J = d(source) / d(output), the host takes the marginal widths of the
+ * preimage, W_x^2 = J11^2 + J12^2 and W_y^2 = J21^2 + J22^2 (texels), and the extra variance
+ * a box of that width has beyond the texel's own box, v = kappa max(W^2 - 1, 0) / 12; it
+ * stores h = sqrt(v) (half float) per axis.  Magnified pixels (W <= 1) get h = 0: exactly
+ * the plain filter.  FP_FILTER selects the filter (h sets the extra spread along each axis):
+ *
+ *   0  quadratic (draft, 3x3): the 3-point Lagrange interpolant about the nearest texel plus
+ *      a variance term, weights ((q - d) / 2, 1 - q, (q + d) / 2), q = h^2 + d^2, d = the
+ *      offset from the nearest texel's centre: the centroid is exact, the spread is h^2;
+ *   1  bicubic (preview, 4x4): Keys (a = -0.5) blended with the cubic B-spline (variance
+ *      1/3), alpha = 3 h^2, so the added variance is h^2;
+ *   2  lanczos3 (final, 8x8): the mean of two normalised Lanczos-3 samples at u - h and
+ *      u + h: exactly box_2 / box_1 = cos(pi f) at a 2x minification, variance h^2.
+ *
+ * Each output is clamped to the min/max of the texels within 1 + h of the point along both
+ * axes (the union of the 2x2 footprints at u +- h): today's 2x2 anti-ringing clamp where
+ * h = 0, and never tighter than the area the footprint averages.  The quadratic clamps to
+ * its whole 3x3 window: its negative lobes sit on the outer taps only, so that bounds its
+ * overshoot as tightly, for fewer instructions.
+ *
+ * Fast path (fp_fast_quad): per quad of 4 output pixels the packed map holds 16 ints: the
+ * float indices of the windows' top-left texels (-1: the quad is rendered by the checked
+ * path; -2: every output of the quad is 0, e.g. outside a black border), the fractions f_x,
+ * f_y and (h_x, h_y) as half2.  f is d in [-0.5, 0.5) (quadratic), t = frac(u) (bicubic), or
+ * frac(u - h) (lanczos3), u = the point in texel units (texel k at u = k); the window starts
+ * at round(u) - 1, floor(u) - 1 or floor(u - h) - 2.  Checked path (fp_sample): any point,
+ * the border rule per texel; footprints too wide for one window are split by the host into
+ * n x n sub-footprints (J / n each) and averaged (fp_sample_n).
+ */
+#ifndef FP_FILTER
+#define FP_FILTER 2
+#endif
+#if FP_FILTER == 0
+#define FP_TAPS 3
+#elif FP_FILTER == 1
+#define FP_TAPS 4
+#else
+#define FP_TAPS 8
+#endif
+
+#if !REAL_IS_DOUBLE
+/* One axis: the weights of the window's FP_TAPS taps from the fraction f and spread h. */
+inline void fp_weights(float f, float h, float *w)
+{
+#if FP_FILTER == 0
+  const float q = h * h + f * f;
+  w[0] = 0.5f * (q - f);
+  w[1] = 1.0f - q;
+  w[2] = 0.5f * (q + f);
+#elif FP_FILTER == 1
+  const float t = f, t2 = t * t, t3 = t2 * t, u = 1.0f - t;
+  const float a = fmin(3.0f * h * h, 1.0f);
+  const float k0 = -0.5f * t3 + t2 - 0.5f * t, k1 = 1.5f * t3 - 2.5f * t2 + 1.0f;
+  const float k2 = -1.5f * t3 + 2.0f * t2 + 0.5f * t, k3 = 0.5f * t3 - 0.5f * t2;
+  const float b0 = u * u * u / 6.0f, b1 = (3.0f * t3 - 6.0f * t2 + 4.0f) / 6.0f;
+  const float b2 = (-3.0f * t3 + 3.0f * t2 + 3.0f * t + 1.0f) / 6.0f, b3 = t3 / 6.0f;
+  w[0] = k0 + a * (b0 - k0);
+  w[1] = k1 + a * (b1 - k1);
+  w[2] = k2 + a * (b2 - k2);
+  w[3] = k3 + a * (b3 - k3);
+#else
+  float l[6], r[6];
+  rs_lanczos3_weights(f, l);
+  const float p = f + 2.0f * h, fl = floor(p);
+  const int o = (int)fl;                        /* 0, 1 or 2: h < 1 */
+  rs_lanczos3_weights(p - fl, r);
+  for(int k = 0; k < 8; k++) {
+    const int j = k - o;
+    w[k] = 0.5f * ((k < 6 ? l[k] : 0.0f) + ((j >= 0 && j < 6) ? r[j] : 0.0f));
+  }
+#endif
+}
+
+/* The clamp's taps [c0, c1] of the window: the texels within 1 + h of u (written from the
+ * fraction exactly as the fast path does); the quadratic's whole window. */
+inline void fp_clamp_range(float f, float h, int *c0, int *c1)
+{
+#if FP_FILTER == 0
+  *c0 = 0;                                      /* the whole 3x3 window */
+  *c1 = 2;
+#elif FP_FILTER == 2
+  *c0 = 2;                                      /* u - h = f + 2 */
+  *c1 = (int)ceil((f + 2.0f * h) + 2.0f);
+#else
+  *c0 = (int)floor(f + 1.0f - h);
+  *c1 = (int)ceil(f + 1.0f + h);
+#endif
+}
+
+/* The window's first texel and its fraction along one axis at continuous coordinate p
+ * (texel centres at +0.5) with spread h. */
+inline int fp_window(float p, float h, float *f)
+{
+#if FP_FILTER == 0
+  const float m = floor(p);
+  *f = p - m - 0.5f;
+  return (int)m - 1;
+#elif FP_FILTER == 1
+  const float u = p - 0.5f, i = floor(u);
+  *f = u - i;
+  return (int)i - 1;
+#else
+  const float m = p - h - 0.5f, i = floor(m);
+  *f = m - i;
+  return (int)i - 2;
+#endif
+}
+
+/* The footprint filter at (sx, sy) with spreads (hx, hy), texels through the border rule. */
+inline float4 fp_sample(global const float *src, int pitch, int w, int h, float sx, float sy,
+                        float hx, float hy)
+{
+  if(!(sx == sx) || !(sy == sy) || fabs(sx) > 1e7f || fabs(sy) > 1e7f) return (float4)0.0f;
+  float fx, fy, wx[FP_TAPS], wy[FP_TAPS];
+  int cx0, cx1, cy0, cy1;
+  const int x0 = fp_window(sx, hx, &fx), y0 = fp_window(sy, hy, &fy);
+  fp_weights(fx, hx, wx);
+  fp_weights(fy, hy, wy);
+  fp_clamp_range(fx, hx, &cx0, &cx1);
+  fp_clamp_range(fy, hy, &cy0, &cy1);
+  float4 acc = (float4)0.0f, lo = (float4)INFINITY, hi = (float4)-INFINITY;
+  const int cols_inside = x0 >= 0 && x0 + FP_TAPS <= w;
+  for(int j = 0; j < FP_TAPS; j++) {
+    const int yy = y0 + j, rin = j >= cy0 && j <= cy1;
+#if RS_BORDER == 0
+    if(yy < 0 || yy >= h) {                   /* a black row: adds 0, may bound the clamp */
+      if(rin) { lo = fmin(lo, (float4)0.0f); hi = fmax(hi, (float4)0.0f); }
+      continue;
+    }
+#endif
+    float4 row = (float4)0.0f;
+    if(cols_inside && yy >= 0 && yy < h) {     /* no border rule needed along this row */
+      global const float *p = src + (yy * pitch + x0) * 4;
+      for(int i = 0; i < FP_TAPS; i++) {
+        const float4 t = rs_sanitise(vload4(i, p));
+        row += wx[i] * t;
+        if(rin && i >= cx0 && i <= cx1) { lo = fmin(lo, t); hi = fmax(hi, t); }
+      }
+    } else {
+      for(int i = 0; i < FP_TAPS; i++) {
+        const float4 t = rs_texel(src, pitch, w, h, x0 + i, yy);
+        row += wx[i] * t;
+        if(rin && i >= cx0 && i <= cx1) { lo = fmin(lo, t); hi = fmax(hi, t); }
+      }
+    }
+    acc += wy[j] * row;
+  }
+  return clamp(acc, lo, hi);
+}
+
+/* Output k of a checked quad: record c = 4 x, 4 y (float), 4 (hx, hy) half2, 4 sub-footprint
+ * counts n, then J11, J12, J21, J22 (4 floats each); n x n sub-footprints centred at
+ * s + J ((a + 1/2) / n - 1/2, (b + 1/2) / n - 1/2), averaged. */
+inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
+                          global const int *c, int k)
+{
+  const float sx = as_float(c[k]), sy = as_float(c[4 + k]);
+  const float2 hh = vload_half2(k, (global const half *)(c + 8));
+  const int n = c[12 + k];
+  if(n <= 1) return fp_sample(src, pitch, w, h, sx, sy, hh.x, hh.y);
+  const float j11 = as_float(c[16 + k]), j12 = as_float(c[20 + k]);
+  const float j21 = as_float(c[24 + k]), j22 = as_float(c[28 + k]);
+  const float inv = 1.0f / (float)(n * n);    /* scaled before the sum: no overflow */
+  float4 acc = (float4)0.0f;
+  for(int b = 0; b < n; b++) {
+    const float ob = ((float)b + 0.5f) / (float)n - 0.5f;
+    for(int a = 0; a < n; a++) {
+      const float oa = ((float)a + 0.5f) / (float)n - 0.5f;
+      acc += inv * fp_sample(src, pitch, w, h, sx + j11 * oa + j12 * ob,
+                             sy + j21 * oa + j22 * ob, hh.x, hh.y);
+    }
+  }
+  return acc;
+}
+
+/* The fast path: 4 outputs of a quad from its 16 packed ints q (every window inside the
+ * source; the clamp reads the texels already loaded for the weighted sum).  Sums run
+ * vertically first on whole rows (float16 = 4 texels); min/max instead of fmin/fmax (the
+ * texels are finite: sanitised, or the frame has no NaN/Inf), the final clamp keeps
+ * fmin/fmax semantics so an overflowing sum of huge finite texels stays finite. */
+inline void fp_fast_quad(global const float *src, int pitch, global const int *q,
+                         float4 *o0, float4 *o1, float4 *o2, float4 *o3)
+{
+  const int row = pitch * 4;
+  const int4 base = vload4(0, q);
+  const float4 fx = as_float4(vload4(1, q)), fy = as_float4(vload4(2, q));
+  const float8 hh = vload_half8(0, (global const half *)(q + 12));
+  const float4 hx = hh.even, hy = hh.odd;
+#if FP_FILTER == 0
+  /* 3x3: rows read as float16 (the 4th texel unused); clamp to the whole window (the
+   * Lagrange lobes sit on the outer taps, so this bounds the overshoot as a 2x2 would) */
+  const float4 qx = hx * hx + fx * fx, qy = hy * hy + fy * fy;
+  const float4 x0 = 0.5f * (qx - fx), x1 = 1.0f - qx, x2 = 0.5f * (qx + fx);
+  const float4 y0 = 0.5f * (qy - fy), y1 = 1.0f - qy, y2 = 0.5f * (qy + fy);
+#define FP_PIXEL(k, o) {                                                                     \
+    global const float *p = src + base.s##k;                                                 \
+    const float16 a0 = rs_sanitise16(vload16(0, p)), a1 = rs_sanitise16(vload16(0, p + row)); \
+    const float16 a2 = rs_sanitise16(vload16(0, p + 2 * row));                               \
+    const float16 v = fma(a2, (float16)y2.s##k, fma(a1, (float16)y1.s##k, a0 * y0.s##k));     \
+    const float4 acc = fma(v.s89ab, (float4)x2.s##k, fma(v.s4567, (float4)x1.s##k,           \
+                                                          v.s0123 * x0.s##k));               \
+    const float16 l = min(min(a0, a1), a2), u = max(max(a0, a1), a2);                         \
+    *o = clamp(acc, min(min(l.s0123, l.s4567), l.s89ab), max(max(u.s0123, u.s4567), u.s89ab)); }
+  FP_PIXEL(0, o0) FP_PIXEL(1, o1) FP_PIXEL(2, o2) FP_PIXEL(3, o3)
+#undef FP_PIXEL
+#elif FP_FILTER == 1
+  /* both axes at once: lanes 0-3 x, 4-7 y */
+  float8 k0, k1, k2, k3, b0, b1, b2, b3;
+  const float8 t8 = (float8)(fx, fy), h8 = (float8)(hx, hy);
+  const float8 a8 = fmin(3.0f * h8 * h8, 1.0f);
+  rs_cubic_w8(t8, &k0, &k1, &k2, &k3);
+  fp_bspline_w8(t8, &b0, &b1, &b2, &b3);
+  const float8 m0 = k0 + a8 * (b0 - k0), m1 = k1 + a8 * (b1 - k1);
+  const float8 m2 = k2 + a8 * (b2 - k2), m3 = k3 + a8 * (b3 - k3);
+  const float4 x0 = m0.lo, x1 = m1.lo, x2 = m2.lo, x3 = m3.lo;
+  const float4 y0 = m0.hi, y1 = m1.hi, y2 = m2.hi, y3 = m3.hi;
+  /* clamp taps [floor(u - h), ceil(u + h)] with u = f + 1: columns as lane masks (a texel
+   * outside reads as its row's texel 1, always inside), rows 0 and 3 when included */
+  const int4 cx0 = convert_int4(floor(fx + 1.0f - hx)), cx1 = convert_int4(ceil(fx + 1.0f + hx));
+  const int4 cy0 = convert_int4(floor(fy + 1.0f - hy)), cy1 = convert_int4(ceil(fy + 1.0f + hy));
+  const int16 lane = (int16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+#define FP_CLAMPROW(r) { const float16 m = select((float16)(r.s4567, r.s4567, r.s4567, r.s4567), \
+                                                  r, cm); lo = min(lo, m); hi = max(hi, m); }
+#define FP_PIXEL(k, o) {                                                                     \
+    global const float *p = src + base.s##k;                                                 \
+    RS_ROWS4(k)                                                                              \
+    const int16 cm = (lane >= (int16)cx0.s##k) & (lane <= (int16)cx1.s##k);                  \
+    float16 lo = (float16)(r1.s4567, r1.s4567, r1.s4567, r1.s4567), hi = lo;                 \
+    FP_CLAMPROW(r1)                                                                          \
+    if(cy1.s##k >= 2) FP_CLAMPROW(r2)                                                        \
+    if(cy0.s##k <= 0) FP_CLAMPROW(r0)                                                        \
+    if(cy1.s##k >= 3) FP_CLAMPROW(r3)                                                        \
+    *o = clamp(RS_HSUM16(hs), min(min(lo.lo.lo, lo.lo.hi), min(lo.hi.lo, lo.hi.hi)),         \
+               max(max(hi.lo.lo, hi.lo.hi), max(hi.hi.lo, hi.hi.hi))); }
+  FP_PIXEL(0, o0) FP_PIXEL(1, o1) FP_PIXEL(2, o2) FP_PIXEL(3, o3)
+#undef FP_PIXEL
+#undef FP_CLAMPROW
+#else
+  /* two Lanczos-3 weight sets per axis: at f (taps 0..5) and at f + 2h (taps o..o+5) */
+  float4 l0, l1, l2, l3, l4, l5, r0, r1, r2, r3, r4, r5;
+  float4 x0, x1, x2, x3, x4, x5, x6, x7, y0, y1, y2, y3, y4, y5, y6, y7;
+  const float4 px = fx + 2.0f * hx, py = fy + 2.0f * hy;
+  const float4 flx = floor(px), fly = floor(py);
+  /* the four weight sets in one 16-wide evaluation: x at f, x at f + 2h, y, y */
+  float16 g0, g1, g2, g3, g4, g5;
+  rs_lanczos_w16((float16)(fx, px - flx, fy, py - fly), &g0, &g1, &g2, &g3, &g4, &g5);
+  l0 = g0.s0123; l1 = g1.s0123; l2 = g2.s0123; l3 = g3.s0123; l4 = g4.s0123; l5 = g5.s0123;
+  r0 = g0.s4567; r1 = g1.s4567; r2 = g2.s4567; r3 = g3.s4567; r4 = g4.s4567; r5 = g5.s4567;
+  FP_MERGE8(flx, x)
+  l0 = g0.s89ab; l1 = g1.s89ab; l2 = g2.s89ab; l3 = g3.s89ab; l4 = g4.s89ab; l5 = g5.s89ab;
+  r0 = g0.scdef; r1 = g1.scdef; r2 = g2.scdef; r3 = g3.scdef; r4 = g4.scdef; r5 = g5.scdef;
+  FP_MERGE8(fly, y)
+  /* the clamp: taps 2 .. ceil(u + h) = ceil(f + 2 + 2h) along each axis (u - h = f + 2):
+   * texels 2..5 of a row as one float16, those beyond the range read as texel 2 */
+  const int4 cx1 = convert_int4(ceil(px + 2.0f)), cy1 = convert_int4(ceil(py + 2.0f));
+  const int4 oy = convert_int4(fly);
+  const int16 lane = (int16)(2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5);
+#define FP_ROW(j, wy) { const float16 a = rs_sanitise16(vload16(0, p + j * row));            \
+    const float16 b = rs_sanitise16(vload16(0, p + j * row + 16));                           \
+    va = fma(a, (float16)(wy), va); vb = fma(b, (float16)(wy), vb);                          \
+    if(j >= 2 && j <= 5 && j <= yb) {                                                        \
+      const float16 c = (float16)(a.hi, b.lo);                                                \
+      const float16 m = select((float16)(a.s89ab, a.s89ab, a.s89ab, a.s89ab), c, cm);       \
+      lo = min(lo, m); hi = max(hi, m); } }
+#define FP_PIXEL(k, o) {                                                                     \
+    global const float *p = src + base.s##k;                                                 \
+    const int yb = cy1.s##k;                                                                 \
+    const int16 cm = lane <= (int16)cx1.s##k;                                                \
+    float16 va = (float16)0.0f, vb = (float16)0.0f;                                          \
+    float16 lo = (float16)INFINITY, hi = (float16)-INFINITY;                                 \
+    FP_ROW(0, y0.s##k) FP_ROW(1, y1.s##k) FP_ROW(2, y2.s##k) FP_ROW(3, y3.s##k)              \
+    FP_ROW(4, y4.s##k) FP_ROW(5, y5.s##k)                                                    \
+    if(oy.s##k >= 1) FP_ROW(6, y6.s##k)                                                      \
+    if(oy.s##k >= 2) FP_ROW(7, y7.s##k)                                                      \
+    const float16 ha = va * RS_W16(x0, x1, x2, x3, k), hb = vb * RS_W16(x4, x5, x6, x7, k);  \
+    *o = clamp(RS_HSUM16(ha) + RS_HSUM16(hb),                                                \
+               min(min(lo.lo.lo, lo.lo.hi), min(lo.hi.lo, lo.hi.hi)),                        \
+               max(max(hi.lo.lo, hi.lo.hi), max(hi.hi.lo, hi.hi.hi))); }
+  FP_PIXEL(0, o0) FP_PIXEL(1, o1) FP_PIXEL(2, o2) FP_PIXEL(3, o3)
+#undef FP_PIXEL
+#undef FP_ROW
+#endif
+}
+#endif
 
 #endif

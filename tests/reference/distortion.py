@@ -6,10 +6,18 @@ chromatic_aberration and lens): the plainest forms, no shortcuts.
 - Resampling: direct separable sums of the same filters (bilinear, Keys a=-0.5 bicubic,
   normalised Lanczos-3 with exact sines), texels read through the border rule, non-finite
   texels read as 0, outputs clamped to the min/max of their nearest 2x2 texels.
+- Footprints (distortion's levels, clfx.fx.resample.FOOTPRINTS): the map's Jacobian by
+  central differences of the forward model, the per-axis spread h and the sub-footprint count
+  n from the host's rule (``footprint_spread``: h rounded to float16, as the kernels store
+  it), then each tap's weight by its definition (no vector tricks) and the clamp to the
+  texels within 1 + h of the point (the quadratic: its 3x3 window); the reference's
+  elliptical footprint through an SVD of the Jacobian and n x n Lanczos-3 samples.
 """
 import math
 
 import numpy as np
+
+from clfx.fx.resample import footprint_spread
 
 
 def mirror_index(i, n):
@@ -53,8 +61,10 @@ def weights(t, filter_name):
     return offs, wts / wts.sum(-1, keepdims=True)
 
 
-def sample(src, sx, sy, filter_name="bilinear", border="black"):
-    """Filtered RGBA of ``src`` (h, w, 4) at continuous points (centres at +0.5)."""
+def sample_range(src, sx, sy, filter_name="bilinear", border="black"):
+    """Filtered RGBA of ``src`` (h, w, 4) at continuous points (centres at +0.5) before the
+    anti-ringing clamp, and the clamp's bounds: the min/max of the nearest 2x2 texels (+-inf
+    for bilinear)."""
     src = np.asarray(src, np.float64)
     bad = ~(np.isfinite(sx) & np.isfinite(sy))
     sx = np.where(bad, 0.0, sx)
@@ -67,11 +77,18 @@ def sample(src, sx, sy, filter_name="bilinear", border="black"):
     for j, oj in enumerate(offs):
         for i, oi in enumerate(offs):
             out += (wx[..., i] * wy[..., j])[..., None] * texels(src, ix + oi, iy + oj, border)
+    lo, hi = np.full(out.shape, -np.inf), np.full(out.shape, np.inf)
     if filter_name != "bilinear":
         quad = [texels(src, ix + a, iy + b, border) for a in (0, 1) for b in (0, 1)]
-        out = np.clip(out, np.minimum.reduce(quad), np.maximum.reduce(quad))
-    out[bad] = 0.0
-    return out
+        lo, hi = np.minimum.reduce(quad), np.maximum.reduce(quad)
+    out[bad], lo[bad], hi[bad] = 0.0, 0.0, 0.0
+    return out, lo, hi
+
+
+def sample(src, sx, sy, filter_name="bilinear", border="black"):
+    """Filtered RGBA of ``src`` (h, w, 4) at continuous points (centres at +0.5)."""
+    out, lo, hi = sample_range(src, sx, sy, filter_name, border)
+    return np.clip(out, lo, hi)
 
 
 def project(x, y, k1, k2, k3, p1, p2):
@@ -132,8 +149,173 @@ def distortion_map(width, height, *, k1=0.0, k2=0.0, k3=0.0, p1=0.0, p2=0.0, fx,
     return x * fx + cx, y * fy + cy
 
 
-def distortion(src, *, filter_name="lanczos3", border="black", **map_args):
+def map_jacobian(sx, sy, *, k1=0.0, k2=0.0, k3=0.0, p1=0.0, p2=0.0, fx, fy, cx, cy,
+                 fit_scale=1.0):
+    """d(source point) / d(output pixel) (..., 2, 2): the inverse of the forward model's
+    Jacobian, taken by central differences of :func:`project` at the source points."""
+    x, y = (sx - cx) / fx, (sy - cy) / fy
+    e = 1e-6
+    ax, ay = project(x + e, y, k1, k2, k3, p1, p2)
+    bx, by = project(x - e, y, k1, k2, k3, p1, p2)
+    cxp, cyp = project(x, y + e, k1, k2, k3, p1, p2)
+    dxp, dyp = project(x, y - e, k1, k2, k3, p1, p2)
+    # output pixels per source pixel: diag(fx, fy) Jp diag(1/fx, 1/fy) / fit_scale
+    fwd = np.empty(sx.shape + (2, 2))
+    fwd[..., 0, 0] = (ax - bx) / (2 * e)
+    fwd[..., 0, 1] = (cxp - dxp) / (2 * e) * fx / fy
+    fwd[..., 1, 0] = (ay - by) / (2 * e) * fy / fx
+    fwd[..., 1, 1] = (cyp - dyp) / (2 * e)
+    fwd /= fit_scale
+    ok = np.isfinite(fwd).all(axis=(-2, -1))
+    return np.where(ok[..., None, None], np.linalg.inv(np.where(ok[..., None, None], fwd, np.eye(2))),
+                    np.nan)
+
+
+def keys(x):
+    x = np.abs(x)
+    return np.where(x <= 1, 1.5 * x**3 - 2.5 * x**2 + 1,
+                    np.where(x < 2, -0.5 * x**3 + 2.5 * x**2 - 4 * x + 2, 0.0))
+
+
+def bspline3(x):
+    x = np.abs(x)
+    return np.where(x < 1, 2 / 3 - x**2 + x**3 / 2, np.where(x < 2, (2 - x)**3 / 6, 0.0))
+
+
+def lanczos3(x):
+    x = np.asarray(x, np.float64)
+    safe = np.where(np.abs(x) < 1e-12, 1.0, x)
+    return np.where(np.abs(x) < 1e-12, 1.0,
+                    np.where(np.abs(x) < 3, 3 * np.sin(np.pi * safe) * np.sin(np.pi * safe / 3)
+                             / (np.pi * safe) ** 2, 0.0))
+
+
+def spread(jac, name):
+    """(hx, hy, n): the per-axis spread of footprint filter ``name`` and the sub-footprint
+    count.  The rule itself (marginal widths, kappa, the cap, float16 storage) is the host's
+    definition, checked by hand-computed values in the tests; the oracle filters with it."""
+    return footprint_spread(jac, name)
+
+
+def footprint_taps(p, h, name):
+    """First tap (texel index) and the weights (..., taps) of a footprint filter along one
+    axis at continuous coordinate p (texel centres at +0.5) with spread h."""
+    u = p - 0.5                       # texel k sits at u = k
+    if name == "quadratic":           # nearest texel m and its two neighbours
+        m = np.floor(p)
+        d = p - (m + 0.5)
+        q = h * h + d * d
+        return m.astype(np.int64) - 1, np.stack([(q - d) / 2, 1 - q, (q + d) / 2], -1)
+    if name == "bicubic":             # Keys blended with the cubic B-spline, alpha = 3 h^2
+        i = np.floor(u)
+        t = (u - i)[..., None] - np.arange(-1, 3)
+        a = np.minimum(3 * h * h, 1.0)[..., None]
+        return i.astype(np.int64) - 1, (1 - a) * keys(t) + a * bspline3(t)
+    # lanczos3: the mean of two normalised Lanczos-3 samples at u - h and u + h
+    i = np.floor(u - h)
+    taps = i[..., None] + np.arange(-2, 6)
+
+    def one(c):
+        f = np.floor(c)[..., None]
+        w = np.where((taps >= f - 2) & (taps <= f + 3), lanczos3(taps - c[..., None]), 0.0)
+        return w / w.sum(-1, keepdims=True)
+
+    return i.astype(np.int64) - 2, 0.5 * (one(u - h) + one(u + h))
+
+
+def _footprint_one(src, px, py, hx, hy, name, border):
+    x0, wx = footprint_taps(px, hx, name)
+    y0, wy = footprint_taps(py, hy, name)
+    taps = wx.shape[-1]
+    # clamp: texels within 1 + h of the point (the union of the 2x2 footprints at u +- h);
+    # the quadratic: its whole window
+    cx0, cx1 = np.floor(px - 0.5 - hx), np.ceil(px - 0.5 + hx)
+    cy0, cy1 = np.floor(py - 0.5 - hy), np.ceil(py - 0.5 + hy)
+    if name == "quadratic":
+        cx0, cx1, cy0, cy1 = x0, x0 + 2, y0, y0 + 2
+    acc = np.zeros(px.shape + (src.shape[2],))
+    lo = np.full(acc.shape, np.inf)
+    hi = np.full(acc.shape, -np.inf)
+    for j in range(taps):
+        for i in range(taps):
+            tx, ty = x0 + i, y0 + j
+            t = texels(src, tx, ty, border)
+            acc += (wx[..., i] * wy[..., j])[..., None] * t
+            inside = ((tx >= cx0) & (tx <= cx1) & (ty >= cy0) & (ty <= cy1))[..., None]
+            lo = np.where(inside, np.minimum(lo, t), lo)
+            hi = np.where(inside, np.maximum(hi, t), hi)
+    return np.clip(acc, lo, hi)
+
+
+def sample_footprint(src, sx, sy, jac, name="lanczos3", border="black"):
+    """Footprint filter ``name`` at continuous points with Jacobians ``jac`` (..., 2, 2):
+    the mean of n x n sub-footprints (centres s + J ((a + 1/2) / n - 1/2, (b + 1/2) / n - 1/2),
+    Jacobian J / n), each filtered with its spread and clamped."""
+    src = np.asarray(src, np.float64)
+    bad = ~(np.isfinite(sx) & np.isfinite(sy))
+    jac = np.where(bad[..., None, None], np.eye(2), jac)
+    hx, hy, n = spread(jac, name)
+    out = np.zeros(sx.shape + (src.shape[2],))
+    for nn in np.unique(n[~bad]):
+        sel = (n == nn) & ~bad
+        acc = 0.0
+        offs = (np.arange(nn) + 0.5) / nn - 0.5
+        for oa in offs:
+            for ob in offs:
+                px = sx[sel] + jac[sel][:, 0, 0] * oa + jac[sel][:, 0, 1] * ob
+                py = sy[sel] + jac[sel][:, 1, 0] * oa + jac[sel][:, 1, 1] * ob
+                acc = acc + _footprint_one(src, px, py, hx[sel], hy[sel], name, border)
+        out[sel] = acc / nn ** 2
+    return out
+
+
+def elliptical_spread(jac):
+    """(Jc, n): the footprint's extra extent J_c = U sqrt(max(S^2 - 1, 0)) V^T (the part of
+    the output pixel's preimage wider than a texel, along its principal axes) and the
+    samples per axis: 1 where nothing is minified, else max(2, ceil(sqrt(1 + |c|^2))) for
+    the longer column c of J_c (neighbouring samples at most 1 texel apart)."""
+    u, s, vt = np.linalg.svd(jac)
+    e = np.sqrt(np.maximum(s ** 2 - 1.0, 0.0))
+    jc = (u * e[..., None, :]) @ vt
+    c2 = np.maximum((jc[..., :, 0] ** 2).sum(-1), (jc[..., :, 1] ** 2).sum(-1))
+    n = np.where(e.max(-1) > 0, np.maximum(2, np.ceil(np.sqrt(1.0 + c2))), 1).astype(np.int64)
+    return jc, n
+
+
+def sample_elliptical(src, sx, sy, jac, border="black"):
+    """The reference footprint: the mean of n x n Lanczos-3 samples at s + J_c (a_i, a_j),
+    a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)) (the samples' spread has exactly the
+    covariance J_c J_c^T / 12 of a box over J_c), clamped to the min/max of all the samples'
+    nearest 2x2 texels."""
+    bad = ~(np.isfinite(sx) & np.isfinite(sy))
+    jac = np.where(bad[..., None, None], np.eye(2), jac)
+    jc, n = elliptical_spread(jac)
+    src = np.asarray(src, np.float64)
+    out = np.zeros(sx.shape + (src.shape[2],))
+    for nn in np.unique(n[~bad]):
+        sel = (n == nn) & ~bad
+        offs = ((np.arange(nn) + 0.5) / nn - 0.5) * (math.sqrt(nn * nn / (nn * nn - 1.0))
+                                                     if nn > 1 else 0.0)
+        acc, lo, hi = 0.0, np.inf, -np.inf
+        for oa in offs:
+            for ob in offs:
+                px = sx[sel] + jc[sel][:, 0, 0] * oa + jc[sel][:, 0, 1] * ob
+                py = sy[sel] + jc[sel][:, 1, 0] * oa + jc[sel][:, 1, 1] * ob
+                one, l, u = sample_range(src, px, py, "lanczos3", border)
+                acc, lo, hi = acc + one, np.minimum(lo, l), np.maximum(hi, u)
+        out[sel] = np.clip(acc / nn ** 2, lo, hi)
+    return out
+
+
+def distortion(src, *, filter_name="lanczos3", border="black", footprint=None, **map_args):
+    """Distort ``src``: point sampling with ``filter_name``, or the footprint filter
+    ``footprint`` ("quadratic", "bicubic", "lanczos3" or "elliptical")."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     sx, sy = distortion_map(w, h, **map_args)
-    return sample(src, sx, sy, filter_name, border)
+    if footprint is None:
+        return sample(src, sx, sy, filter_name, border)
+    jac = map_jacobian(sx, sy, **map_args)
+    if footprint == "elliptical":
+        return sample_elliptical(src, sx, sy, jac, border)
+    return sample_footprint(src, sx, sy, jac, footprint, border)
