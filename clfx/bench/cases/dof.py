@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from clfx.bench.cases import Case
+from clfx.bench.cases import Case, Naive
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, demo_scene
 from clfx.core.camera import Camera, coc_signed
@@ -257,7 +257,21 @@ def naive(case: dict, params, ctx) -> np.ndarray:
                      clamp_r=lens.clamp_r)
 
 
-CASE = Case(make=make)
+SCENE_SIZE = (320, 180)
+"""The scene classes are measured at this size whatever the bench size: their truths take
+16384 renders (~45 s each here, then cached on disk)."""
+
+
+def _scene_maker(name: str):
+    def make_variant(width: int, height: int, rng=None) -> dict:
+        return make_scene(name, *SCENE_SIZE)
+    make_variant.__name__ = f"make_{name}"
+    return make_variant
+
+
+CASE = Case(make=make,
+            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: (lambda: naive(case, params, ctx))),
+            variants={name: _scene_maker(name) for name in SCENES})
 
 
 # -- the ground-truth table --------------------------------------------------------------------
