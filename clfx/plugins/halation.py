@@ -27,8 +27,9 @@ back surface's reflectance:
   scaled by ``strength``): a centre-peaked glow of the same reach.
 
 The PSF is truncated at ``radius`` = 4 H (keeping 89 % of the ring's light; the rest is
-renormalised in), area-integrated over each pixel (8 x 8 samples; the ring is a pixel or two
-wide at small sizes) and normalised to sum 1.
+renormalised in), area-integrated over each pixel (8 x 8 samples up to 16 px, fewer for
+larger PSFs: :func:`supersample`) and normalised to sum 1.  Its radius is at most half the
+frame diagonal (a stock on a tiny sensor is clamped to it).
 
 *Mix and energy.*  ``out = c + strength tint (PSF * h)`` per channel, alpha kept.  The PSF sums
 to 1 and the region of definition grows by its radius, so the spread itself neither creates
@@ -100,8 +101,9 @@ REFRACTIVE_INDEX = 1.5
 SUPPORT = 4.0
 """PSF support radius in units of the unfolded path H = 2 x base thickness."""
 
-SUPERSAMPLE = 8
-"""Samples per pixel and axis when integrating the PSF over each pixel."""
+MAX_RADIUS = 0.5
+"""Largest PSF radius as a fraction of the frame diagonal (the ``radius`` parameter's maximum,
+and the clamp of a stock's physical radius)."""
 
 FROM_STOCK = -1.0
 """Parameter value meaning "the stock's"."""
@@ -154,25 +156,29 @@ def halation_profile(d_over_h, bare_back: bool, n: float = REFRACTIVE_INDEX):
     return base_reflectance(np.arctan(x), n) * falloff if bare_back else falloff
 
 
-def halation_psf(radius_px: int, bare_back: bool, *, supersample: int = SUPERSAMPLE,
-                 n: float = REFRACTIVE_INDEX) -> np.ndarray:
+def supersample(radius_px: int) -> int:
+    """Samples per pixel and axis for a PSF of ``radius_px``: 8 up to 16 px (the ring is a
+    pixel or two wide), 4 up to 64 px, 2 up to 256 px, 1 beyond (a smooth profile)."""
+    return 8 if radius_px <= 16 else 4 if radius_px <= 64 else 2 if radius_px <= 256 else 1
+
+
+def halation_psf(radius_px: int, bare_back: bool, *, n: float = REFRACTIVE_INDEX) -> np.ndarray:
     """The normalised halation PSF on a (2r + 1)^2 grid (see the module notes).
 
-    Each pixel is the mean of ``supersample^2`` samples of :func:`halation_profile` at
+    Each pixel is the mean of ``supersample(r)^2`` samples of :func:`halation_profile` at
     ``d / H``, ``H = r / SUPPORT``; samples beyond ``r + 0.5`` px count 0.  ``r`` = 0 is the
-    single tap 1 (the light returns where it left).
+    single tap 1 (the light returns where it left).  Memory stays (2r + 1)^2 floats.
     """
     r = max(int(radius_px), 0)
     if r == 0:
         return np.ones((1, 1))
-    h = r / SUPPORT
-    off = (np.arange(supersample) + 0.5) / supersample - 0.5
+    h, ss = r / SUPPORT, supersample(r)
     c = np.arange(-r, r + 1, dtype=np.float64)
-    xs = (c[:, None] + off[None, :]).ravel()          # sample x of every (column, sub-sample)
-    d = np.hypot(xs[None, :], xs[:, None])            # (rows x sub, cols x sub)
-    k = np.where(d <= r + 0.5, halation_profile(d / h, bare_back, n), 0.0)
-    m = 2 * r + 1
-    k = k.reshape(m, supersample, m, supersample).mean(axis=(1, 3))
+    k = np.zeros((2 * r + 1, 2 * r + 1))
+    for oy in (np.arange(ss) + 0.5) / ss - 0.5:
+        for ox in (np.arange(ss) + 0.5) / ss - 0.5:
+            d = np.hypot(c[None, :] + ox, c[:, None] + oy)
+            k += np.where(d <= r + 0.5, halation_profile(d / h, bare_back, n), 0.0)
     return k / k.sum()
 
 
@@ -216,7 +222,7 @@ class Halation(ScatterPlugin, Plugin):
             FloatParam("threshold", 1.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance where halation starts to show."),
             knee_param(0.5),
-            FloatParam("radius", FROM_STOCK, min=FROM_STOCK, max=0.5,
+            FloatParam("radius", FROM_STOCK, min=FROM_STOCK, max=MAX_RADIUS,
                        hint="PSF radius as a fraction of the frame diagonal (the ring sits at "
                             "0.22 of it); -1 = from the stock's base thickness and the "
                             "camera's sensor width."),
@@ -237,7 +243,8 @@ class Halation(ScatterPlugin, Plugin):
             r = psflib.psf_radius_px(p.radius, ctx.diagonal_px)
         else:   # 4 H = 8 b on the film, in pixels of the display window's width
             px_per_mm = ctx.width_px / ctx.camera.sensor_width
-            r = int(min(round(SUPPORT * 2.0 * stock.base_mm * px_per_mm), 8192))
+            r = int(min(round(SUPPORT * 2.0 * stock.base_mm * px_per_mm),
+                        psflib.psf_radius_px(MAX_RADIUS, ctx.diagonal_px)))
         return Settings(strength=stock.strength if p.strength < 0.0 else p.strength,
                         tint=stock.tint if p.tint[0] < 0.0 else p.tint, radius_px=r,
                         bare_back=stock.bare_back)

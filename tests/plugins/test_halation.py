@@ -7,7 +7,7 @@ from clfx.core.camera import Camera
 from clfx.core.errors import ParamError
 from clfx.core.rect import Rect
 from clfx.host import RenderContext
-from clfx.plugins.halation import STOCKS, Halation, halation_profile, halation_psf
+from clfx.plugins.halation import STOCKS, Halation, halation_profile, halation_psf, supersample
 from tests.conftest import hard_shapes
 from tests.reference.halation import halation as reference
 from tests.reference.halation import psf as reference_psf
@@ -29,11 +29,11 @@ def radius(p, shape, display=None):
 
 
 @pytest.mark.parametrize("bare", [True, False])
-@pytest.mark.parametrize("r", [0, 1, 3, 8, 20])
+@pytest.mark.parametrize("r", [0, 1, 3, 8, 16, 20])
 def test_psf_matches_its_formula(r, bare):
     # the plugin's vectorised PSF against plain loops over the same formula (float64)
-    np.testing.assert_allclose(halation_psf(r, bare), reference_psf(r, bare), rtol=1e-12,
-                               atol=1e-15)
+    np.testing.assert_allclose(halation_psf(r, bare), reference_psf(r, bare, supersample(r)),
+                               rtol=1e-12, atol=1e-15)
     assert halation_psf(r, bare).sum() == pytest.approx(1.0, abs=1e-12)
 
 
@@ -148,6 +148,8 @@ def test_stock_radius_from_base_and_sensor(rt):
         assert (s.strength, s.tint) == (st.strength, st.tint)
     s = h.settings(Halation.params(strength=0.1, tint=(1, 0.5, 0), radius=0.05), ctx)
     assert (s.strength, s.tint, s.radius_px) == (0.1, (1.0, 0.5, 0.0), round(0.05 * ctx.diagonal_px))
+    tiny = RenderContext(rt, rt.upload(src), camera=Camera(sensor_width=0.5))
+    assert h.settings(Halation.params(), tiny).radius_px == round(0.5 * tiny.diagonal_px)
     with pytest.raises(ParamError, match="nor -1"):
         Halation.params(tint=(1.0, -1.0, 0.0))
     assert Halation.params(tint=-1).tint == (-1.0, -1.0, -1.0)

@@ -23,8 +23,8 @@ def fresnel_back(theta):
 
 
 def psf(radius, bare_back, ss=8):
-    """Pixel-integrated R(theta) cos^4(theta), theta = atan(d / H), H = radius / 4, zero
-    beyond radius + 0.5, normalised (plain loops)."""
+    """Pixel-integrated (ss x ss samples) R(theta) cos^4(theta), theta = atan(d / H),
+    H = radius / 4, zero beyond radius + 0.5, normalised (plain loops)."""
     r = int(radius)
     if r == 0:
         return np.ones((1, 1))
@@ -52,7 +52,8 @@ def halation(src, radius, bare_back, *, strength, threshold, knee, tint, conserv
     dw = data_window or (0, 0, w, h)
     ow = out_window or dw
     hl = highlight(s, threshold, knee)
-    g = convolve(hl, psf(radius, bare_back), dw[:2], ow)
+    ss = 8 if radius <= 16 else 4 if radius <= 64 else 2 if radius <= 256 else 1
+    g = convolve(hl, psf(radius, bare_back, ss), dw[:2], ow)
     out = np.zeros((ow[3] - ow[1], ow[2] - ow[0], 4))
     c = np.zeros_like(out)
     hh = np.zeros(out.shape[:2] + (3,))
