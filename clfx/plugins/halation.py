@@ -1,0 +1,301 @@
+"""Halation: light reflected off the film base re-exposes the emulsion, mostly its red layer.
+
+Model
+-----
+Light that crosses the emulsion (blue-, green-, then red-sensitive layer) reaches the base;
+what the anti-halation layer does not absorb is reflected at the base's back surface and
+re-enters the emulsion from behind, where it meets the red-sensitive layer first: a red-orange
+glow hugging bright edges and lights.
+
+*Highlights.*  The light that does this is the soft-knee highlight of the glare family
+(``clfx.fx.scatter``, ``kernels/lib/scatter.h``): ``h = max(rgb, 0) clamp(max(s, L - t) / L,
+0, 1)``, ``s = clamp(L - t + k, 0, 2k)^2 / 4k`` (Rec.709 luminance ``L``, ``threshold`` t,
+``knee`` k).  Halation is linear in exposure; the threshold keeps it to where it shows.
+
+*PSF* (:func:`halation_psf`, the geometry of the classical halation ring).  Light scattered in
+the emulsion enters a base of thickness ``b`` and index ``n`` (1.5) diffusely (Lambertian);
+a ray at angle ``theta`` comes back ``d = 2 b tan(theta)`` away.  Unfolding the path, the
+returning irradiance at ``d`` is that of a Lambertian source at distance ``H = 2 b``:
+``E(d) ~ R(theta) cos^4(theta) = R(theta) / (1 + (d / H)^2)^2``, where ``R`` is the
+back surface's reflectance:
+
+- a *bare* back (no rem-jet; an anti-halation dye layer under the emulsion, or none at all)
+  reflects by Fresnel's law, 4 % at normal incidence and totally beyond the critical angle
+  ``asin(1 / n)`` = 41.8 degrees: a bright ring at ``d = 0.89 H`` with a ``d^-4`` tail;
+- a back coated with an absorbing backing in optical contact (Kodak's carbon rem-jet) has no
+  total internal reflection; what little returns is taken as angle-independent (``R`` = 1,
+  scaled by ``strength``): a centre-peaked glow of the same reach.
+
+The PSF is truncated at ``radius`` = 4 H (keeping 89 % of the ring's light; the rest is
+renormalised in), area-integrated over each pixel (8 x 8 samples up to 16 px, fewer for
+larger PSFs: :func:`supersample`) and normalised to sum 1.  Its radius is at most half the
+frame diagonal (a stock on a tiny sensor is clamped to it).
+
+*Mix and energy.*  ``out = c + strength tint (PSF * h)`` per channel, alpha kept.  The PSF sums
+to 1 and the region of definition grows by its radius, so the spread itself neither creates
+nor loses light: the halo carries exactly ``strength tint_c sum(h_c)`` of each channel.  The
+highlight is *not* dimmed by default: on film the reflected light is extra exposure (it
+already exposed the layers on its way down; the reflection returns light that would otherwise
+leave through the back or be absorbed by the backing), so the total light grows by that
+amount.  ``conserve`` instead takes the halo's light from the highlight itself
+(``out = c - strength tint h + strength tint (PSF * h)``), so each channel's total is kept
+exactly (a redistribution, for footage that must not brighten).
+
+Stocks
+------
+``stock`` supplies ``strength``, ``tint`` and the physical ``radius`` (from the base
+thickness ``b``: 4 H = 8 b on the film, converted to pixels through the camera block's
+``sensor_width``); a parameter set explicitly (not -1) overrides the stock's value.
+Sources (what they state) and estimates (what they do not):
+
+``vision3-500t`` / ``vision3-250d``
+    Kodak VISION3 500T 5219 and 250D 5207 colour negative (Kodak technical data H-1-5219,
+    H-1-5207): "clear acetate safety base with rem-jet backing", i.e. an absorbing carbon
+    backing on the back of the base: no ring, faint glow.  Base 0.13 mm (acetate motion
+    picture bases are 0.12-0.14 mm; Kodak gives 120 micrometres for its ESTAR bases, e.g.
+    H-1-5242t): estimate.  Strength 0.02 / 0.015, tint: estimates.
+``cinestill-800t``
+    CineStill 800T: VISION3 500T with the rem-jet removed at the factory for C-41 processing
+    (CineStill's product description): a bare base, the strong red halo the stock is known
+    for.  Base 0.13 mm as 5219; strength 0.25 and the red tint: estimates.
+``portra-400``
+    Kodak Portra 400 (technical data E-4050): a still colour negative with an
+    anti-halation layer that processing removes, no rem-jet: a bare base behind a dye that
+    absorbs most of the light, a faint orange ring.  Base 0.125 mm, strength 0.03, tint:
+    estimates.
+``phoenix-200``
+    Harman Phoenix 200 colour negative, sold as having strong halation (no anti-halation
+    layer; users describe its halos as more orange than CineStill's red).  Base 0.125 mm,
+    strength 0.3, tint: estimates.
+
+Every strength and tint above is a by-eye estimate of the stocks' relative look, not a
+measurement; no manufacturer publishes halation PSFs.
+
+Implementation: the glare family's highlight kernel (``kernels/lib/scatter.h``), the PSF
+spread by ``clfx.fx.fftconv.spread`` at the quality level's settings (``fftconv.LEVELS``:
+PSFs up to 21 x 21 taps gathered directly, larger ones by FFT), and ``halation_mix``.
+Non-finite input pixels are set to 0 and do not spread (counted in ``ctx.notes``).
+
+References
+----------
+Kodak publications H-1-5219 (VISION3 500T), H-1-5207 (VISION3 250D), H-1-5242t (ESTAR base
+thickness), E-4050 (Portra 400); CineStill 800T product description (rem-jet removed);
+Wikipedia, "Anti-halation backing" (the red layer meets the reflected light first).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from clfx.core.errors import ParamError
+from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, RGBParam
+from clfx.fx import fftconv
+from clfx.fx import psf as psflib
+from clfx.fx.scatter import ScatterPlugin, knee_param
+from clfx.host import Plugin, register
+
+REFRACTIVE_INDEX = 1.5
+"""Refractive index of the film base (cellulose triacetate ~1.48, PET ~1.64): an estimate."""
+
+SUPPORT = 4.0
+"""PSF support radius in units of the unfolded path H = 2 x base thickness."""
+
+MAX_RADIUS = 0.5
+"""Largest PSF radius as a fraction of the frame diagonal (the ``radius`` parameter's maximum,
+and the clamp of a stock's physical radius)."""
+
+FROM_STOCK = -1.0
+"""Parameter value meaning "the stock's"."""
+
+
+@dataclass(frozen=True)
+class Stock:
+    """What a film stock's halation looks like (see the module notes for the sources).
+
+    ``base_mm``: base thickness; ``bare_back``: the base's back surface is bare (total
+    internal reflection: a ring) rather than coated with an absorbing backing; ``strength``:
+    fraction of the highlight light returned; ``tint``: per-channel share of it that reaches
+    the layers (red first).
+    """
+
+    base_mm: float
+    bare_back: bool
+    strength: float
+    tint: tuple[float, float, float]
+
+
+STOCKS = {
+    "cinestill-800t": Stock(0.13, True, 0.25, (1.0, 0.22, 0.05)),
+    "phoenix-200": Stock(0.125, True, 0.3, (1.0, 0.5, 0.15)),
+    "portra-400": Stock(0.125, True, 0.03, (1.0, 0.4, 0.1)),
+    "vision3-500t": Stock(0.13, False, 0.02, (1.0, 0.3, 0.06)),
+    "vision3-250d": Stock(0.13, False, 0.015, (1.0, 0.3, 0.06)),
+}
+
+
+# -- physics ---------------------------------------------------------------------------------
+def base_reflectance(theta, n: float = REFRACTIVE_INDEX):
+    """Unpolarised Fresnel reflectance inside a base of index ``n`` at its back surface to
+    air, for rays at ``theta`` (radians) from the normal: 1 beyond the critical angle."""
+    theta = np.asarray(theta, np.float64)
+    ci = np.cos(theta)
+    st = n * np.sin(theta)
+    ct = np.sqrt(np.clip(1.0 - st * st, 0.0, 1.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rs = ((n * ci - ct) / (n * ci + ct)) ** 2
+        rp = ((n * ct - ci) / (n * ct + ci)) ** 2
+    return np.where(st >= 1.0, 1.0, 0.5 * (rs + rp))
+
+
+def halation_profile(d_over_h, bare_back: bool, n: float = REFRACTIVE_INDEX):
+    """Returning irradiance (unnormalised) at ``d / H`` from the source point: ``R(theta)
+    cos^4(theta)``, ``theta = atan(d / H)``; ``R`` Fresnel's (bare back) or 1 (backing)."""
+    x = np.asarray(d_over_h, np.float64)
+    falloff = 1.0 / (1.0 + x * x) ** 2
+    return base_reflectance(np.arctan(x), n) * falloff if bare_back else falloff
+
+
+def supersample(radius_px: int) -> int:
+    """Samples per pixel and axis for a PSF of ``radius_px``: 8 up to 16 px (the ring is a
+    pixel or two wide), 4 up to 64 px, 2 up to 256 px, 1 beyond (a smooth profile)."""
+    return 8 if radius_px <= 16 else 4 if radius_px <= 64 else 2 if radius_px <= 256 else 1
+
+
+def halation_psf(radius_px: int, bare_back: bool, *, n: float = REFRACTIVE_INDEX) -> np.ndarray:
+    """The normalised halation PSF on a (2r + 1)^2 grid (see the module notes).
+
+    Each pixel is the mean of ``supersample(r)^2`` samples of :func:`halation_profile` at
+    ``d / H``, ``H = r / SUPPORT``; samples beyond ``r + 0.5`` px count 0.  ``r`` = 0 is the
+    single tap 1 (the light returns where it left).  Memory stays (2r + 1)^2 floats.
+    """
+    r = max(int(radius_px), 0)
+    if r == 0:
+        return np.ones((1, 1))
+    h, ss = r / SUPPORT, supersample(r)
+    c = np.arange(-r, r + 1, dtype=np.float64)
+    k = np.zeros((2 * r + 1, 2 * r + 1))
+    for oy in (np.arange(ss) + 0.5) / ss - 0.5:
+        for ox in (np.arange(ss) + 0.5) / ss - 0.5:
+            d = np.hypot(c[None, :] + ox, c[:, None] + oy)
+            k += np.where(d <= r + 0.5, halation_profile(d / h, bare_back, n), 0.0)
+    return k / k.sum()
+
+
+# -- parameters ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StockTintParam(RGBParam):
+    """An RGB tint in [0, 1] per channel, or -1 (every channel) for the stock's."""
+
+    def validate(self, value, where=""):
+        rgb = super().validate(value, where)
+        if any(v < 0.0 for v in rgb) and rgb != (FROM_STOCK,) * 3:
+            raise ParamError(f"{where or self.name}: {value!r} is not 3 values in [0, 1] "
+                             f"nor -1 (the stock's tint)")
+        return rgb
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The parameters with the stock's values filled in."""
+
+    strength: float
+    tint: tuple[float, float, float]
+    radius_px: int
+    bare_back: bool
+
+
+@register
+class Halation(ScatterPlugin, Plugin):
+    descriptor = Descriptor(
+        name="halation", label="Halation", group="Film", kernel="halation.cl",
+        summary="Film halation: light reflected off the base re-exposes the red layer, a "
+                "red-orange glow hugging bright edges (stock presets).",
+        spreads_light=True,
+        params=(
+            ChoiceParam("stock", "cinestill-800t", choices=tuple(sorted(STOCKS)),
+                        hint="Film stock: base thickness, backing (rem-jet: a glow; bare: a "
+                             "ring), strength and tint (strengths and tints are estimates)."),
+            FloatParam("strength", FROM_STOCK, min=FROM_STOCK, max=1.0,
+                       hint="Fraction of the highlight light that returns as halation; -1 = "
+                            "the stock's."),
+            FloatParam("threshold", 1.0, min=0.0, max=1e6,
+                       hint="Scene-linear luminance where halation starts to show."),
+            knee_param(0.5),
+            FloatParam("radius", FROM_STOCK, min=FROM_STOCK, max=MAX_RADIUS,
+                       hint="PSF radius as a fraction of the frame diagonal (the ring sits at "
+                            "0.22 of it); -1 = from the stock's base thickness and the "
+                            "camera's sensor width."),
+            StockTintParam("tint", (FROM_STOCK,) * 3, min=FROM_STOCK, max=1.0,
+                           hint="Per-channel share of the returned light (red first); -1 = "
+                                "the stock's."),
+            BoolParam("conserve", False,
+                      hint="Take the halo's light from the highlight (each channel's total "
+                           "kept) instead of adding it (film: extra exposure)."),
+        ),
+        quality=fftconv.LEVELS,
+    )
+
+    def settings(self, p, ctx) -> Settings:
+        """``p`` with the stock's values where a parameter says -1."""
+        stock = STOCKS[p.stock]
+        if p.radius >= 0.0:
+            r = psflib.psf_radius_px(p.radius, ctx.diagonal_px)
+        else:   # 4 H = 8 b on the film, in pixels of the display window's width
+            px_per_mm = ctx.width_px / ctx.camera.sensor_width
+            r = int(min(round(SUPPORT * 2.0 * stock.base_mm * px_per_mm),
+                        psflib.psf_radius_px(MAX_RADIUS, ctx.diagonal_px)))
+        return Settings(strength=stock.strength if p.strength < 0.0 else p.strength,
+                        tint=stock.tint if p.tint[0] < 0.0 else p.tint, radius_px=r,
+                        bare_back=stock.bare_back)
+
+    def strength(self, p) -> float:
+        return STOCKS[p.stock].strength if p.strength < 0.0 else p.strength
+
+    def radius_px(self, p, ctx) -> int:
+        return self.settings(p, ctx).radius_px
+
+    def build_psf(self, p, ctx, radius):
+        return halation_psf(radius, STOCKS[p.stock].bare_back)
+
+    def is_identity(self, p, ctx):
+        s = self.settings(p, ctx)
+        if s.strength == 0.0:
+            return "strength is 0"
+        if max(s.tint) == 0.0:
+            return "tint is black"
+        if p.conserve and s.radius_px < 1:
+            return "radius is below one pixel and the light is conserved (it returns where it left)"
+        if not ctx.analysis.any_above(self.raw_level(p, ctx)):
+            return "no pixel above threshold"
+        return None
+
+    def render(self, rt, p, ctx):
+        s = self.settings(p, ctx)
+        src, kfile = ctx.source, self.descriptor.kernel
+        k = self.psf(p, ctx)
+        self.note_nonfinite(ctx, k.shape[:2])
+        f32, i32 = np.float32, np.int32
+        h = rt.image(src.window, 4)
+        rt.launch(rt.kernel(kfile, "halation_highlights"), (src.pitch // 4, max(src.height, 1)),
+                  src, h, i32(src.pitch), i32(src.height), f32(p.threshold), f32(p.knee))
+        out_window = self.output_window(p, ctx)
+        info = fftconv.ConvolveInfo()
+        split = max(4.0 * p.threshold, 1e-3 * ctx.analysis.peak_luminance)
+        g = fftconv.spread(rt, h, k, self.level(ctx), out_window=out_window,
+                           support=self.highlight_support(p, ctx), split_level=split, info=info)
+        ctx.notes.extend(f"halation: {note}" for note in info.notes)
+        ctx.notes.append(f"halation: {p.stock}, strength {s.strength:g}, PSF radius "
+                         f"{s.radius_px} px ({'ring' if s.bare_back else 'glow'}), "
+                         f"{'conserved' if p.conserve else 'added'}")
+        from pyopencl import cltypes
+
+        dst = rt.image(out_window, 4)
+        dx, dy = out_window.offset_in(src.window)
+        rt.launch(rt.kernel(kfile, "halation_mix", CONSERVE=int(p.conserve)),
+                  (dst.pitch // 4, max(dst.height, 1)), src, i32(src.pitch), i32(src.width),
+                  i32(src.height), g, dst, i32(dst.pitch), i32(dst.height), i32(dx), i32(dy),
+                  f32(s.strength), cltypes.make_float4(*s.tint, 0.0), f32(p.threshold),
+                  f32(p.knee))
+        return dst
+

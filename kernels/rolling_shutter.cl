@@ -1,0 +1,218 @@
+/* rolling_shutter.cl: rows read at different times (clfx/plugins/rolling_shutter.py).
+ *
+ * Input: the source colours and the aux records of lib/motion.cl's motion_prepare
+ * (vx, vy, z, |v|) per pixel: velocity sanitised and clamped, depth sanitised (1 without a
+ * depth pass).
+ *
+ *   rolling_shutter_tiles      per K x K tile: the velocities of the fastest pixel, of the
+ *                              background (the farthest pixel with a depth pass, else the
+ *                              slowest) and of the nearest pixel (depth pass only)
+ *   rolling_shutter_neighbors  per tile: the same over its 3 x 3 neighbourhood
+ *   rolling_shutter_gather     per output pixel p at its row time t = tx (x - xr) + ty (y - yr)
+ *                              ((xr, yr) on the reference row): the surface at p at time t
+ *                              came from q with q + v(q) t = p; found by
+ *                              fixed-point iteration q <- p - v(q) t (nearest velocities) from
+ *                              the starts p's own velocity, the fastest, the background's and
+ *                              the nearest's; a start is valid when |q + v(q) t - p| <= TOL px;
+ *                              the nearest valid one wins (same depth within SOFT_Z: the faster);
+ *                              no valid one is a disocclusion, filled from the background: the
+ *                              nearest pixel moving with the background velocity, searched from
+ *                              p - v_bg t along the foreground's relative motion (up to
+ *                              MAX_SEARCH px).
+ * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
+ */
+#include "lib/common.h"
+#include "lib/precision.h"
+
+#ifndef HAS_DEPTH
+#define HAS_DEPTH 1
+#endif
+#ifndef ITERATIONS
+#define ITERATIONS 3
+#endif
+#ifndef MAX_SEARCH
+#define MAX_SEARCH 64
+#endif
+
+/* starts of the fixed-point iteration: own, fastest, background (, nearest with depth) */
+#define NSTARTS (3 + HAS_DEPTH)
+#define TOL 0.5f       /* px: a start converged when its forward map lands this close to p */
+#define SOFT_Z 0.02f   /* relative depth difference below which two surfaces count as one */
+
+/* --- tiles --------------------------------------------------------------------------------
+ * A tile record is 3 float4: the fastest pixel (vx, vy, speed, 0), the background
+ * (vx, vy, key, 0) with key = depth (HAS_DEPTH) or minus the speed, and the nearest pixel
+ * (vx, vy, -depth, 0) (HAS_DEPTH only).  Ties keep the first pixel in scan order (strict
+ * comparisons). */
+#define RS_NONE (float4)(0.0f, 0.0f, -INFINITY, 0.0f)
+
+inline float rs_bg_key(const float4 a)
+{
+#if HAS_DEPTH
+  return a.z;
+#else
+  return -a.w;
+#endif
+}
+
+/* Keep in *best the record (vx, vy, key) of largest key. */
+inline void rs_keep(float4 *best, const float2 v, const float key)
+{
+  if(key > best->z) *best = (float4)(v, key, 0.0f);
+}
+
+kernel void rolling_shutter_tiles(global const float *aux, global float *tiles, const int pitch,
+                                  const int width, const int height, const int tiles_x,
+                                  const int tiles_y, const int k)
+{
+  const int tx = get_global_id(0), ty = get_global_id(1);
+  if(tx >= tiles_x || ty >= tiles_y) return;
+  const int x1 = min(tx * k + k, width), y1 = min(ty * k + k, height);
+  float4 fast = RS_NONE, back = RS_NONE, near = RS_NONE;
+  for(int y = ty * k; y < y1; y++)
+    for(int x = tx * k; x < x1; x++)
+    {
+      const float4 a = vload4((size_t)y * pitch + x, aux);
+      rs_keep(&fast, a.xy, a.w);
+      rs_keep(&back, a.xy, rs_bg_key(a));
+      rs_keep(&near, a.xy, -a.z);
+    }
+  const size_t i = 3 * (size_t)(ty * tiles_x + tx);
+  vstore4(fast, i, tiles);
+  vstore4(back, i + 1, tiles);
+  vstore4(near, i + 2, tiles);
+}
+
+kernel void rolling_shutter_neighbors(global const float *tiles, global float *nbr,
+                                      const int tiles_x, const int tiles_y)
+{
+  const int tx = get_global_id(0), ty = get_global_id(1);
+  if(tx >= tiles_x || ty >= tiles_y) return;
+  float4 fast = RS_NONE, back = RS_NONE, near = RS_NONE;
+  for(int dy = -1; dy <= 1; dy++)
+    for(int dx = -1; dx <= 1; dx++)
+    {
+      const int x = tx + dx, y = ty + dy;
+      if(x < 0 || y < 0 || x >= tiles_x || y >= tiles_y) continue;
+      const size_t j = 3 * (size_t)(y * tiles_x + x);
+      const float4 f = vload4(j, tiles), b = vload4(j + 1, tiles), n = vload4(j + 2, tiles);
+      rs_keep(&fast, f.xy, f.z);
+      rs_keep(&back, b.xy, b.z);
+      rs_keep(&near, n.xy, n.z);
+    }
+  const size_t i = 3 * (size_t)(ty * tiles_x + tx);
+  vstore4(fast, i, nbr);
+  vstore4(back, i + 1, nbr);
+  vstore4(near, i + 2, nbr);
+}
+
+/* --- gather ------------------------------------------------------------------------------ */
+/* The aux record of the pixel containing q (clamped to the image). */
+inline float4 rs_aux(global const float *aux, const int pitch, const int w, const int h,
+                     const REAL2 q)
+{
+  const int x = clamp((int)floor(clamp(q.x, (REAL)(-1), (REAL)w)), 0, w - 1);
+  const int y = clamp((int)floor(clamp(q.y, (REAL)(-1), (REAL)h)), 0, h - 1);
+  return vload4((size_t)y * pitch + x, aux);
+}
+
+/* Colour at continuous position q (pixel centres at +0.5), bilinear, reads clamped to the
+ * image.  A weighted sum (no differences of colours: +-1e38 neighbours stay finite). */
+inline float4 rs_colour(global const float *col, const int pitch, const int w, const int h,
+                        const REAL2 q)
+{
+  const REAL u = clamp(q.x, (REAL)(-1), (REAL)(w + 1)) - (REAL)0.5;
+  const REAL v = clamp(q.y, (REAL)(-1), (REAL)(h + 1)) - (REAL)0.5;
+  const REAL fu = floor(u), fv = floor(v);
+  const REAL ax = u - fu, ay = v - fv;
+  const int xa = clamp((int)fu, 0, w - 1), xb = clamp((int)fu + 1, 0, w - 1);
+  const int ya = clamp((int)fv, 0, h - 1), yb = clamp((int)fv + 1, 0, h - 1);
+  const REAL4 c = TO_REAL4(vload4((size_t)ya * pitch + xa, col)) * ((1 - ax) * (1 - ay))
+                + TO_REAL4(vload4((size_t)ya * pitch + xb, col)) * (ax * (1 - ay))
+                + TO_REAL4(vload4((size_t)yb * pitch + xa, col)) * ((1 - ax) * ay)
+                + TO_REAL4(vload4((size_t)yb * pitch + xb, col)) * (ax * ay);
+  return TO_FLOAT4(c);
+}
+
+/* Fixed-point iteration from the start velocity v0: q <- p - v(q) t.  Returns whether it
+ * converged; *q, *a: the final position and its aux record. */
+inline int rs_solve(global const float *aux, const int pitch, const int w, const int h,
+                    const REAL2 p, const REAL t, const float2 v0, REAL2 *q, float4 *a)
+{
+  REAL2 s = p - TO_REAL2(v0) * t;
+  for(int i = 0; i < ITERATIONS; i++)
+    s = p - TO_REAL2(rs_aux(aux, pitch, w, h, s).xy) * t;
+  const float4 r = rs_aux(aux, pitch, w, h, s);
+  const REAL2 d = p - TO_REAL2(r.xy) * t - s;
+  *q = s;
+  *a = r;
+  return dot(d, d) <= (REAL)(TOL * TOL);
+}
+
+/* Surface (z, s) is in front of surface (zb, sb): clearly nearer, or at the same depth and
+ * faster (without a depth pass every z is 1: the faster wins). */
+inline int rs_in_front(const float z, const float s, const float zb, const float sb)
+{
+  const int same = fabs(z - zb) <= SOFT_Z * fmin(z, zb);
+  return same ? s > sb : z < zb;
+}
+
+kernel void rolling_shutter_gather(global const float *col, global const float *aux,
+                                   global const float *nbr, global float *dst, const int pitch,
+                                   const int width, const int height, const int tiles_x,
+                                   const int k, const float tx, const float ty, const float xr,
+                                   const float yr)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= width || y >= height) return;
+  const REAL t = (REAL)tx * ((REAL)x - (REAL)xr) + (REAL)ty * ((REAL)y - (REAL)yr);
+  const REAL2 p = (REAL2)((REAL)x + (REAL)0.5, (REAL)y + (REAL)0.5);
+  const size_t ti = 3 * (size_t)((y / k) * tiles_x + x / k);
+  const float2 vf = vload4(ti, nbr).xy, vb = vload4(ti + 1, nbr).xy;
+  const float2 starts[NSTARTS] = {vload4((size_t)y * pitch + x, aux).xy, vf, vb
+#if HAS_DEPTH
+                                  , vload4(ti + 2, nbr).xy
+#endif
+                                 };
+
+  int best = -1;
+  REAL2 qb = p;
+  float zb = 0.0f, sb = 0.0f;
+  for(int c = 0; c < NSTARTS; c++)
+  {
+    /* a start equal to an earlier one ends where it did and cannot win (strict test) */
+    int seen = 0;
+    for(int e = 0; e < c; e++)
+      seen |= all(starts[e] == starts[c]);
+    if(seen) continue;
+    REAL2 q;
+    float4 a;
+    if(rs_solve(aux, pitch, width, height, p, t, starts[c], &q, &a)
+       && (best < 0 || rs_in_front(a.z, a.w, zb, sb)))
+    {
+      best = c; qb = q; zb = a.z; sb = a.w;
+    }
+  }
+  if(best < 0)
+  {
+    /* disocclusion: the background, as near to p - v_bg t as it shows in the source */
+    const REAL2 q0 = p - TO_REAL2(vb) * t;
+    qb = q0;
+#if MAX_SEARCH > 0
+    const float2 dv = vf - vb;
+    const float len = length(dv);
+    const REAL2 dir = len > 1e-6f ? TO_REAL2(dv / len) : (REAL2)(1, 0);
+    const float tabs = (float)fabs(t);
+    const int reach = (int)min(ceil(len * tabs) + 1.0f, (float)MAX_SEARCH);
+    int found = 0;
+    for(int j = 0; j <= reach && !found; j++)
+      for(int sgn = 1; sgn >= (j ? -1 : 1) && !found; sgn -= 2)
+      {
+        const REAL2 q = q0 + dir * (REAL)(sgn * j);
+        const float2 d = rs_aux(aux, pitch, width, height, q).xy - vb;
+        if(length(d) * tabs <= TOL) { qb = q; found = 1; }
+      }
+#endif
+  }
+  vstore4(rs_colour(col, pitch, width, height, qb), (size_t)y * pitch + x, dst);
+}

@@ -1,0 +1,169 @@
+import math
+
+import numpy as np
+import pytest
+
+from clfx.core.camera import Camera
+from clfx.core.errors import ParamError
+from clfx.core.rect import Rect
+from clfx.host import RenderContext
+from clfx.plugins.halation import STOCKS, Halation, halation_profile, halation_psf, supersample
+from tests.conftest import hard_shapes
+from tests.reference.halation import halation as reference
+from tests.reference.halation import psf as reference_psf
+
+LEVELS = ("draft", "preview", "final", "reference")
+
+
+def oracle(src, p, radius, **kw):
+    st = STOCKS[p.stock]
+    return reference(src, radius, st.bare_back,
+                     strength=st.strength if p.strength < 0 else p.strength,
+                     threshold=p.threshold, knee=p.knee,
+                     tint=st.tint if p.tint[0] < 0 else p.tint, conserve=p.conserve, **kw)
+
+
+def radius(p, shape, display=None):
+    d = display.diagonal if display else math.hypot(shape[1], shape[0])
+    return int(round(p.radius * d))
+
+
+@pytest.mark.parametrize("bare", [True, False])
+@pytest.mark.parametrize("r", [0, 1, 3, 8, 16, 20])
+def test_psf_matches_its_formula(r, bare):
+    # the plugin's vectorised PSF against plain loops over the same formula (float64)
+    np.testing.assert_allclose(halation_psf(r, bare), reference_psf(r, bare, supersample(r)),
+                               rtol=1e-12, atol=1e-15)
+    assert halation_psf(r, bare).sum() == pytest.approx(1.0, abs=1e-12)
+
+
+def test_psf_shape_ring_versus_glow():
+    # bare base: total internal reflection beyond asin(1/1.5) -> a ring at 0.894 H
+    x = np.linspace(0.0, 4.0, 4001)
+    ring = halation_profile(x, True)
+    assert x[np.argmax(ring)] == pytest.approx(math.tan(math.asin(1 / 1.5)), abs=2e-3)
+    assert ring[0] == pytest.approx(0.04, abs=1e-12)           # Fresnel at normal incidence
+    glow = halation_profile(x, False)
+    assert np.all(np.diff(glow) <= 0) and glow[0] == 1.0       # rem-jet: centre-peaked
+    k = halation_psf(40, True)
+    row = k[40, 40:]
+    assert 8 <= int(np.argmax(row)) <= 10                      # 0.894 x 40 / 4 = 8.9 px
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+@pytest.mark.parametrize("stock", ["cinestill-800t", "vision3-500t"])
+def test_halation_matches_reference(rt, rng, shape, stock):
+    src = rng.uniform(0.0, 3.0, shape + (4,)).astype(np.float32)
+    p = Halation.params(stock=stock, radius=0.08)
+    got = Halation().apply(rt, p, src)
+    want = oracle(src, p, radius(p, shape))
+    # direct float32 gather of <= 441 taps (or the float64 FFT): ~1e-6 relative
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * max(want.max(), 1))
+
+
+@pytest.mark.parametrize("conserve", [False, True])
+def test_halation_fft_path_and_levels(rt, rng, conserve):
+    src = rng.uniform(0.005, 0.02, (60, 80, 4)).astype(np.float32)
+    src[25:28, 30:34, :3] = 1e4
+    src[50, 70, :3] = (40.0, 5.0, 1.0)
+    p = Halation.params(radius=0.15, strength=0.3, conserve=conserve)   # r = 15 px: FFT
+    want = oracle(src, p, radius(p, src.shape[:2]))
+    errs = {}
+    for q in LEVELS:
+        got = Halation().apply(rt, p, src, quality=q).astype(np.float64)
+        errs[q] = np.abs(got - want).max()
+    scale = 0.3 * 1e4
+    # float64 FFT / direct: float32 output rounding only (the 1e4 pixel: ~1e-3 absolute)
+    assert errs["reference"] <= 2e-7 * 1e4 and errs["final"] <= 2e-7 * 1e4, errs
+    # float32 FFT with the bright pixels gathered exactly: ~1e-7 of the spread light
+    assert errs["preview"] <= 1e-6 * scale, errs
+    # one pyramid level: light moves <= 0.5 px, the ring blurred ~1 px
+    assert errs["draft"] <= 0.05 * scale, errs
+    assert all(a >= b * 0.999 for a, b in zip([errs[q] for q in LEVELS],
+                                              [errs[q] for q in LEVELS[1:]])), errs
+
+
+def test_energy_added_or_conserved(rt):
+    src = np.zeros((80, 80, 4), np.float32)
+    src[..., 3] = 1.0
+    src[40, 40, :3] = (1e4, 2e3, 5e2)
+    for conserve in (False, True):
+        p = Halation.params(radius=0.12, conserve=conserve)       # 14 px, ring at 3 px
+        out = Halation().apply(rt, p, src).astype(np.float64)
+        st = STOCKS[p.stock]
+        c = src[40, 40, :3].astype(np.float64)
+        lum = c @ [0.2126, 0.7152, 0.0722]
+        h = c * (lum - p.threshold) / lum                         # above the knee: L - t
+        added = out[..., :3].sum(axis=(0, 1)) - c
+        want = 0.0 if conserve else st.strength * np.asarray(st.tint) * h
+        # float32 gather of <= 841 taps: ~1e-6 of the pixel's light per channel
+        np.testing.assert_allclose(added, want, atol=2e-6 * h.max())
+        np.testing.assert_array_equal(out[..., 3], 1.0)            # alpha kept
+    out = Halation().apply(rt, Halation.params(radius=0.12), src)
+    ring = out[40, 40:, 0]
+    assert np.argmax(ring[1:]) + 1 in (3, 4)            # the halo hugs the light (ring 3.1 px)
+    assert out[40, 44, 0] > 10 * out[40, 44, 2]                   # and it is red
+
+
+def test_identity_reasons(rt):
+    dim = np.full((16, 16, 4), 0.2, np.float32)
+    ctx = RenderContext(rt, rt.upload(dim))
+    h = Halation()
+    assert h.is_identity(Halation.params(), ctx) == "no pixel above threshold"
+    hot = dim.copy()
+    hot[8, 8, :3] = 100.0
+    ctx = RenderContext(rt, rt.upload(hot))
+    assert h.is_identity(Halation.params(strength=0.0), ctx) == "strength is 0"
+    assert h.is_identity(Halation.params(tint=(0, 0, 0)), ctx) == "tint is black"
+    assert h.is_identity(Halation.params(radius=0.0), ctx) is None   # added where it left
+    assert "conserved" in h.is_identity(Halation.params(radius=0.0, conserve=True), ctx)
+    out = h.apply(rt, Halation.params(radius=0.0), hot)
+    assert out[8, 8, 0] == pytest.approx(100 + 0.25 * 99.0, rel=1e-6)   # h = c (L - t) / L
+
+
+def test_rod_grows_by_the_psf_radius(rt):
+    data, display = Rect(10, 10, 30, 30), Rect(0, 0, 50, 40)
+    src = np.zeros((20, 20, 4), np.float32)
+    src[0, 0, :3] = 50.0
+    p = Halation.params(radius=0.1)
+    out, win = Halation().apply(rt, p, src, data_window=data, display_window=display,
+                                keep_rod=True)
+    r = radius(p, None, display)
+    assert win == data.grown(r)
+    want = oracle(src, p, r, data_window=(10, 10, 30, 30),
+                  out_window=(win.x0, win.y0, win.x1, win.y1))
+    np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-6 * want.max())
+    assert out[r - 2, r, 0] > 0                                    # light left the data window
+
+
+def test_stock_radius_from_base_and_sensor(rt):
+    src = np.zeros((90, 160, 4), np.float32)
+    src[45, 80, :3] = 100.0
+    ctx = RenderContext(rt, rt.upload(src), camera=Camera(sensor_width=24.89))
+    h = Halation()
+    for name, st in STOCKS.items():
+        s = h.settings(Halation.params(stock=name), ctx)
+        # 4 H = 8 x base thickness on the film, 160 px across 24.89 mm
+        assert s.radius_px == round(8 * st.base_mm * 160 / 24.89)
+        assert (s.strength, s.tint) == (st.strength, st.tint)
+    s = h.settings(Halation.params(strength=0.1, tint=(1, 0.5, 0), radius=0.05), ctx)
+    assert (s.strength, s.tint, s.radius_px) == (0.1, (1.0, 0.5, 0.0), round(0.05 * ctx.diagonal_px))
+    tiny = RenderContext(rt, rt.upload(src), camera=Camera(sensor_width=0.5))
+    assert h.settings(Halation.params(), tiny).radius_px == round(0.5 * tiny.diagonal_px)
+    with pytest.raises(ParamError, match="nor -1"):
+        Halation.params(tint=(1.0, -1.0, 0.0))
+    assert Halation.params(tint=-1).tint == (-1.0, -1.0, -1.0)
+
+
+def test_nonfinite_pixels_do_not_spread(rt):
+    src = np.full((24, 24, 4), 0.1, np.float32)
+    src[12, 12, :3] = 100.0
+    bad = src.copy()
+    bad[5, 5, 0] = np.nan
+    bad[18, 3, :] = np.inf
+    ctx = RenderContext(rt, rt.upload(bad))
+    p = Halation.params(radius=0.15)
+    out = Halation().render(rt, p, ctx).download()
+    assert np.isfinite(out).all() and any("2 non-finite" in n for n in ctx.notes)
+    zeroed = np.where(np.isfinite(bad).all(axis=2, keepdims=True), bad, 0.0)
+    np.testing.assert_allclose(out, Halation().apply(rt, p, zeroed), rtol=1e-6, atol=1e-7)

@@ -1,0 +1,157 @@
+"""float64 NumPy oracle of clfx/plugins/rolling_shutter.py: the same model written plainly
+(row times per row, velocities sanitised and clamped, tile candidates, fixed-point iteration,
+nearest-in-front selection, background search), vectorised over pixels."""
+import math
+
+import numpy as np
+
+BIG_DEPTH = 1e30
+TOL = 0.5
+SOFT_Z = 0.02
+MAX_RADIUS_PX = 512
+
+
+def row_times(shape, *, readout, direction="top-down", reference="first", data_window=None,
+              display_window=None):
+    """t (frames) of every pixel of the data window: readout x (index in reading order /
+    count - reference), rows or columns counted in the display window."""
+    h, w = shape
+    dx0, dy0 = (data_window or (0, 0, w, h))[:2]
+    x0, y0, x1, y1 = display_window or (dx0, dy0, dx0 + w, dy0 + h)
+    X = dx0 + np.arange(w)[None, :] * np.ones((h, 1))
+    Y = dy0 + np.arange(h)[:, None] * np.ones((1, w))
+    n = {"top-down": y1 - y0, "bottom-up": y1 - y0}.get(direction, x1 - x0)
+    index = {"top-down": Y - y0, "bottom-up": y1 - 1 - Y, "left-right": X - x0,
+             "right-left": x1 - 1 - X}[direction]
+    r0 = {"first": 0.0, "centre": 0.5, "last": 1.0}[reference] * (n - 1) / n
+    return readout * (index / n - r0)
+
+
+def prepare(velocity, depth, vmax):
+    """(vx, vy, z, speed): non-finite velocities -> 0, components clamped to 1e6, speed
+    clamped to vmax (direction kept); invalid depth (NaN, <= 0, >= 1e30) -> 1e30; 1 without."""
+    v = np.asarray(velocity, np.float64)
+    ok = np.isfinite(v).all(axis=2, keepdims=True)
+    v = np.where(ok, np.clip(np.nan_to_num(v), -1e6, 1e6), 0.0)
+    s = np.hypot(v[..., 0], v[..., 1])
+    scale = np.where(s > vmax, vmax / np.where(s > 0, s, 1), 1.0)
+    v = v * scale[..., None]
+    s = np.minimum(s, vmax)
+    if depth is None:
+        z = np.ones(s.shape)
+    else:
+        z = np.asarray(depth, np.float64)
+        z = np.where((z > 0) & (z < BIG_DEPTH), z, BIG_DEPTH)
+    return np.concatenate([v, z[..., None], s[..., None]], axis=2)
+
+
+def tile_candidates(aux, k, has_depth):
+    """Per tile of k x k px, over its 3 x 3 neighbourhood, the velocities of the fastest
+    pixel, of the background (farthest, or slowest without depth) and of the nearest pixel:
+    (h_tiles, w_tiles, 3, 2); the first pixel in scan order wins ties."""
+    h, w = aux.shape[:2]
+    ty, tx = -(-h // k), -(-w // k)
+    keys = np.zeros((ty, tx, 3))
+    vels = np.zeros((ty, tx, 3, 2))
+    for j in range(ty):
+        for i in range(tx):
+            block = aux[j * k:(j + 1) * k, i * k:(i + 1) * k].reshape(-1, 4)
+            for c, key in enumerate((block[:, 3], block[:, 2] if has_depth else -block[:, 3],
+                                     -block[:, 2])):
+                keys[j, i, c] = key.max()
+                vels[j, i, c] = block[np.argmax(key), :2]
+    nbr = np.zeros_like(vels)
+    for j in range(ty):
+        for i in range(tx):
+            best = np.full(3, -np.inf)
+            for dj in (-1, 0, 1):
+                for di in (-1, 0, 1):
+                    if 0 <= j + dj < ty and 0 <= i + di < tx:
+                        for c in range(3):
+                            if keys[j + dj, i + di, c] > best[c]:
+                                best[c] = keys[j + dj, i + di, c]
+                                nbr[j, i, c] = vels[j + dj, i + di, c]
+    return nbr
+
+
+def _nearest(img, q):
+    h, w = img.shape[:2]
+    ix = np.clip(np.floor(np.clip(q[..., 0], -1, w)).astype(int), 0, w - 1)
+    iy = np.clip(np.floor(np.clip(q[..., 1], -1, h)).astype(int), 0, h - 1)
+    return img[iy, ix]
+
+
+def _bilinear(img, q):
+    h, w = img.shape[:2]
+    u = np.clip(q[..., 0], -1, w + 1) - 0.5
+    v = np.clip(q[..., 1], -1, h + 1) - 0.5
+    fu, fv = np.floor(u), np.floor(v)
+    ax, ay = (u - fu)[..., None], (v - fv)[..., None]
+    xa, xb = np.clip(fu.astype(int), 0, w - 1), np.clip(fu.astype(int) + 1, 0, w - 1)
+    ya, yb = np.clip(fv.astype(int), 0, h - 1), np.clip(fv.astype(int) + 1, 0, h - 1)
+    return (img[ya, xa] * (1 - ax) * (1 - ay) + img[ya, xb] * ax * (1 - ay)
+            + img[yb, xa] * (1 - ax) * ay + img[yb, xb] * ax * ay)
+
+
+def tile_size(shift):
+    return int(max(8, 4 * math.ceil(min(shift, MAX_RADIUS_PX) / 4.0)))
+
+
+def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
+                    reference="first", max_shift=0.1, iterations=3, max_search=64,
+                    data_window=None, display_window=None):
+    """The rolling-shutter output over the data window (see the plugin's notes)."""
+    src = np.asarray(src, np.float64)
+    col = np.where(np.isfinite(src), src, 0.0)
+    h, w = src.shape[:2]
+    t = row_times((h, w), readout=readout, direction=direction, reference=reference,
+                  data_window=data_window, display_window=display_window)
+    dw = display_window or (0, 0, w, h)
+    diag = math.hypot(dw[2] - dw[0], dw[3] - dw[1])
+    v = np.asarray(velocity, np.float64)
+    peak = np.hypot(v[..., 0], v[..., 1])[np.isfinite(v).all(axis=2)].max(initial=0.0)
+    t_max = np.abs(t).max()
+    shift = min(peak * t_max, max_shift * diag, MAX_RADIUS_PX)
+    aux = prepare(velocity, depth, shift / t_max if t_max > 0 else 0.0)
+    k = tile_size(shift)
+    nbr = tile_candidates(aux, k, depth is not None)
+    yy, xx = np.mgrid[0:h, 0:w]
+    nb = nbr[yy // k, xx // k]
+    p = np.stack([xx + 0.5, yy + 0.5], axis=2)
+    tt = t[..., None]
+
+    best = np.full((h, w), -1)
+    qb, zb, sb = p.copy(), np.zeros((h, w)), np.zeros((h, w))
+    starts = [aux[..., :2], nb[..., 0, :], nb[..., 1, :]] + ([nb[..., 2, :]] if depth is not None else [])
+    for c, v0 in enumerate(starts):
+        q = p - v0 * tt
+        for _ in range(iterations):
+            q = p - _nearest(aux, q)[..., :2] * tt
+        a = _nearest(aux, q)
+        d = p - a[..., :2] * tt - q
+        valid = (d ** 2).sum(axis=2) <= TOL * TOL
+        same = np.abs(a[..., 2] - zb) <= SOFT_Z * np.minimum(a[..., 2], zb)
+        front = np.where(same, a[..., 3] > sb, a[..., 2] < zb)
+        take = valid & ((best < 0) | front)
+        best[take] = c
+        qb[take], zb[take], sb[take] = q[take], a[..., 2][take], a[..., 3][take]
+
+    hole = best < 0
+    vb = nb[..., 1, :]
+    q0 = p - vb * tt
+    qb[hole] = q0[hole]
+    if max_search > 0:
+        dv = nb[..., 0, :] - vb
+        ln = np.hypot(dv[..., 0], dv[..., 1])
+        direc = np.where((ln > 1e-6)[..., None], dv / np.where(ln > 1e-6, ln, 1)[..., None],
+                         np.array([1.0, 0.0]))
+        reach = np.minimum(np.ceil(ln * np.abs(t)) + 1, max_search)
+        todo = hole.copy()
+        for j in range(int(reach[hole].max(initial=-1)) + 1):
+            for sgn in ((1,) if j == 0 else (1, -1)):
+                q = q0 + direc * (sgn * j)
+                dd = _nearest(aux, q)[..., :2] - vb
+                ok = todo & (j <= reach) & (np.hypot(dd[..., 0], dd[..., 1]) * np.abs(t) <= TOL)
+                qb[ok] = q[ok]
+                todo &= ~ok
+    return _bilinear(col, qb)
