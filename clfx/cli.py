@@ -21,7 +21,8 @@ import sys
 import click
 
 from clfx._version import __version__
-from clfx.cli_options import colour_options, pass_options, quality_option, render_options
+from clfx.cli_options import (check_frames, colour_options, pass_options, quality_option,
+                               render_options)
 from clfx.core.errors import ClfxError
 
 EXIT_INTERRUPTED = 130
@@ -466,7 +467,8 @@ def farm():
 @click.argument("render_args", nargs=-1, metavar="[-- RENDER_OPTION...]")
 @click.option("--look", "look_name", default="default", show_default=True)
 @click.option("--set", "assignments", multiple=True, metavar="K=V")
-@click.option("--frames", default=None, metavar="SPEC", help="Default: every input frame on disk.")
+@click.option("--frames", default=None, metavar="SPEC", callback=check_frames,
+              help="Default: every input frame on disk.")
 @click.option("--chunk", type=click.IntRange(min=1), default=10, show_default=True,
               help="Frames per task.")
 @click.option("--quality", type=click.Choice(["draft", "preview", "final", "reference"]), default=None)

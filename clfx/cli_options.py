@@ -35,7 +35,7 @@ def _names(ctx, param, value):
     return tuple(value.split(",")) if value else None
 
 
-def _frames(ctx, param, value):
+def check_frames(ctx, param, value):
     """A bad frame range is a usage error (exit 2), said before anything is read."""
     if value is None:
         return None
@@ -86,7 +86,7 @@ colour_options = stack(
 )
 
 render_options = stack(
-    click.option("--frames", default=None, metavar="SPEC", callback=_frames,
+    click.option("--frames", default=None, metavar="SPEC", callback=check_frames,
                  help="Frames to render: 1-100, 1-100x2, 1,5,10-20, farm a-b:n. Default: all on disk."),
     quality_option,
     click.option("--depth", "depth_path", default=None, metavar="PATTERN",
