@@ -113,7 +113,15 @@ class ClfxClickError(click.ClickException):
 
 
 class ClfxGroup(click.Group):
-    """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1."""
+    """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1; the
+    root group keeps the arguments it was given (stamped into outputs)."""
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        argv = list(args)
+        ctx = super().make_context(info_name, args, parent=parent, **extra)
+        if parent is None:
+            ctx.meta["clfx.argv"] = argv
+        return ctx
 
     def invoke(self, ctx):
         try:
@@ -397,11 +405,12 @@ def _render_options(kw: dict):
 
 
 def _command_line() -> str:
-    """This process's command line as a shell would take it (stamped as clfx:commandLine)."""
+    """The command line as a shell would take it (stamped as clfx:commandLine)."""
     import shlex
 
-    args = list(sys.argv[1:]) if sys.argv else []
-    return shlex.join(["clfx", *args])
+    ctx = click.get_current_context(silent=True)
+    args = ctx.meta.get("clfx.argv", []) if ctx is not None else []
+    return shlex.join(["clfx", *map(str, args)])
 
 
 def _check_raw_usage(input_path: str, output_path: str, raw_size) -> None:
