@@ -247,14 +247,15 @@ class Look:
         """Attributes written into output headers: the look's name, clfx's version, the
         params hash, the whole resolved look as JSON (``clfx:lookJSON``: ``clfx render
         --look-from FILE`` renders it again), the keyframed values used on ``frame``
-        (``clfx:values``, JSON; ``{}`` when nothing is keyframed) and the command line."""
+        (``clfx:values``, JSON; ``{}`` when nothing is keyframed) and the command line
+        (``clfx:commandLine``; "" when not rendered from the command line).  Every key is
+        always written, so none is left over from an input clfx rendered before."""
         d = {"clfx:look": self.name, "clfx:version": __version__,
              "clfx:paramsHash": self.params_hash(),
              "clfx:lookJSON": json.dumps(self.document(), sort_keys=True, default=str),
              "clfx:values": json.dumps(self.values_at(frame) if frame is not None else {},
-                                       sort_keys=True)}
-        if command is not None:
-            d["clfx:commandLine"] = command
+                                       sort_keys=True),
+             "clfx:commandLine": command or ""}
         return d
 
 
