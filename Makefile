@@ -14,7 +14,7 @@ setup:
 	@bash scripts/setup.sh
 
 demo: setup
-	$(CLFX) demo $(DEMO_OUT)
+	$(CLFX) demo $(DEMO_OUT) --overwrite
 
 test: setup
 	$(PY) -m pytest -q $(PYTEST_ARGS)

@@ -11,17 +11,18 @@ progress is shown only when stderr is a terminal and ``-q`` is not given.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import signal
 import sys
-from concurrent.futures import ThreadPoolExecutor
 
 import click
 
-from clfx import __version__
-from clfx.cli_options import colour_options, pass_options, quality_option, render_options
+from clfx._version import __version__
+from clfx.cli_options import (check_frames, colour_options, pass_options, quality_option,
+                               render_options)
 from clfx.core.errors import ClfxError
 
 EXIT_INTERRUPTED = 130
@@ -112,7 +113,15 @@ class ClfxClickError(click.ClickException):
 
 
 class ClfxGroup(click.Group):
-    """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1."""
+    """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1; the
+    root group keeps the arguments it was given (stamped into outputs)."""
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        argv = list(args)
+        ctx = super().make_context(info_name, args, parent=parent, **extra)
+        if parent is None:
+            ctx.meta["clfx.argv"] = argv
+        return ctx
 
     def invoke(self, ctx):
         try:
@@ -130,12 +139,11 @@ def _runtime(ctx: click.Context):
 
 
 def _runtime_soon(ctx: click.Context):
-    """Start creating the runtime on a thread (OpenCL releases the GIL), so device set-up
+    """Start creating the runtime on a thread (`clfx.api.runtime_soon`), so device set-up
     overlaps loading the look and reading the first frame; call ``.result()`` for it."""
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-device")
-    future = pool.submit(_runtime, ctx)
-    pool.shutdown(wait=False)
-    return future
+    from clfx.api import runtime_soon
+
+    return runtime_soon(ctx.obj.get("device") if ctx.obj else None)
 
 
 @click.group(cls=ClfxGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -151,6 +159,25 @@ def cli(ctx, verbose, quiet, device):
     ctx.ensure_object(dict)
     ctx.obj["verbosity"] = 0 if quiet else 1 + verbose
     ctx.obj["device"] = device
+    _compiler_messages(ctx.obj["verbosity"])
+
+
+def _compiler_messages(verbosity: int) -> None:
+    """OpenCL compiler output (pyopencl's CompilerWarning, PoCL's "N warnings generated.",
+    caught by the runtime as a KernelBuildWarning) is shown only with -v: then with the
+    whole build log."""
+    import warnings
+
+    from clfx.device.runtime import KernelBuildWarning
+
+    if verbosity >= 2:
+        os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "1")
+        warnings.filterwarnings("always", category=KernelBuildWarning)
+    else:
+        warnings.filterwarnings("ignore", category=KernelBuildWarning)
+        # pyopencl's own category, without importing pyopencl (slow) before it is needed
+        warnings.filterwarnings("ignore", message=r"(?s).*(Non-empty compiler output|"
+                                r"From-source build succeeded|Built kernel retrieved)")
 
 
 # -- inspection ----------------------------------------------------------------------------
@@ -260,24 +287,41 @@ def look():
 @look.command("show")
 @click.argument("name")
 @click.option("--set", "assignments", multiple=True, metavar="K=V")
+@click.option("--frame", type=int, default=None, metavar="N",
+              help="Resolve keyframed values at frame N.")
 @click.option("--json", "as_json", is_flag=True)
-def look_show(name, assignments, as_json):
-    """Print the resolved look (inheritance applied, defaults filled in)."""
-    from clfx.pipeline.presets import apply_overrides, load_look
+def look_show(name, assignments, frame, as_json):
+    """Print the resolved look (inheritance applied, defaults filled in); NAME is a look, a
+    YAML file or an output clfx rendered (its stamped look)."""
+    from clfx.api import load_look
 
-    lk = apply_overrides(load_look(name), list(assignments))
+    full = load_look(name, set=assignments)
+    lk = full if frame is None else full.at(frame)
     d = lk.describe()
-    d["params_hash"] = lk.params_hash()
+    d["params_hash"] = full.params_hash()
+    if frame is not None:
+        d["frame"] = frame
+        d["values"] = full.values_at(frame)
     if as_json:
         click.echo(json.dumps(d, indent=2))
         return
     click.echo(f"{lk.name}: {lk.description}")
     click.echo(f"  file: {lk.source}" + (f"   base: {lk.base}" if lk.base else ""))
     click.echo(f"  seed: {lk.seed}   params hash: {d['params_hash']}")
+    if frame is not None:
+        click.echo(f"  at frame {frame}" + (": " + ", ".join(
+            f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}"
+            for k, v in d["values"].items()) if d["values"] else " (nothing is keyframed)"))
     click.echo("  camera: " + ", ".join(f"{k}={v}" for k, v in d["camera"].items()))
     for i, s in enumerate(d["effects"], 1):
         q = f" (quality {s['quality']})" if "quality" in s else ""
-        click.echo(f"  {i}. {s['effect']}{q}")
+        off = " (disabled)" if s.get("enabled") is False else ""
+        click.echo(f"  {i}. {s.get('id', s['effect'])}: {s['effect']}{q}{off}"
+                   if "id" in s else f"  {i}. {s['effect']}{q}{off}")
+        if "mask" in s:
+            click.echo(f"       mask: {s['mask']}")
+        if s.get("missing_passes") == "skip":
+            click.echo("       missing passes: skip")
         for k, v in s["params"].items():
             click.echo(f"       {k} = {v!r}")
 
@@ -310,8 +354,36 @@ def lenses(query, limit, as_json):
         return
     if not rows:
         raise ClfxError(f"no lens in the lensfun database matches {query!r}")
-    for r in rows:
-        click.echo("  ".join(f"{v}" for v in r.values()))
+    click.echo(lens_table(rows))
+
+
+LENS_COLUMNS = (("maker", "MAKER"), ("model", "MODEL"), ("focal_range", "FOCAL mm"),
+                ("max_aperture", "MAX f/"), ("crop_factor", "CROP"), ("type", "TYPE"),
+                ("mounts", "MOUNTS"), ("distortion", "DIST"), ("tca", "TCA"),
+                ("vignetting", "VIGN"))
+"""``clfx lenses`` columns: (key of `clfx.fx.lensdb.find_lenses`, header)."""
+
+
+def _lens_cell(key: str, value) -> str:
+    if isinstance(value, bool):
+        return "yes" if value else "-"
+    if key == "focal_range" and isinstance(value, (list, tuple)) and len(value) == 2:
+        a, b = value
+        return f"{a:g}" if a == b else f"{a:g}-{b:g}"
+    if isinstance(value, (list, tuple)):
+        return ", ".join(str(v) for v in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    return "" if value is None else str(value)
+
+
+def lens_table(rows: list[dict]) -> str:
+    """The lenses as a table: a header line, then one aligned row per lens."""
+    cols = [(k, h) for k, h in LENS_COLUMNS if any(k in r for r in rows)]
+    cells = [[_lens_cell(k, r.get(k)) for k, _ in cols] for r in rows]
+    widths = [max([len(h)] + [len(c[i]) for c in cells]) for i, (_, h) in enumerate(cols)]
+    fmt = lambda items: "  ".join(v.ljust(w) for v, w in zip(items, widths)).rstrip()  # noqa: E731
+    return "\n".join([fmt([h for _, h in cols])] + [fmt(c) for c in cells])
 
 
 # -- render / apply ------------------------------------------------------------------------
@@ -323,21 +395,48 @@ def _pass_options(kw: dict):
 
 
 def _render_options(kw: dict):
-    """The typed options of ``render`` / ``apply`` from their keyword arguments."""
+    """The typed options of ``render`` / ``apply`` from their keyword arguments, with the
+    command line (stamped into outputs)."""
     from clfx.pipeline.batch import PassOptions, RenderOptions
 
     passes = set(PassOptions.names())
     rest = {k: v for k, v in kw.items() if k not in passes}
-    return RenderOptions(passes=_pass_options(kw), **rest)
+    return RenderOptions(passes=_pass_options(kw), command=_command_line(), **rest)
+
+
+def _command_line() -> str:
+    """The command line as a shell would take it (stamped as clfx:commandLine)."""
+    import shlex
+
+    ctx = click.get_current_context(silent=True)
+    args = ctx.meta.get("clfx.argv", []) if ctx is not None else []
+    return shlex.join(["clfx", *map(str, args)])
+
+
+def _check_raw_usage(input_path: str, output_path: str, raw_size) -> None:
+    """'-' needs --raw WxH, and '-' on both sides: usage errors (exit 2) before anything."""
+    if RAW in (input_path, output_path):
+        if not raw_size:
+            raise click.UsageError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le "
+                                   "frames, as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
+        if input_path != output_path:
+            raise click.UsageError("raw pipes need '-' for both INPUT and OUTPUT")
+
+
+RAW = "-"
 
 
 @cli.command()
 @click.argument("input_path", metavar="INPUT")
 @click.argument("output_path", metavar="OUTPUT")
-@click.option("--look", "look_name", default="default", show_default=True,
-              help="Look name or YAML file.")
+@click.option("--look", "look_name", default=None,
+              help="Look name or YAML file  [default: default].")
+@click.option("--look-from", "look_from", default=None, metavar="FILE",
+              help="Render with the look stamped in FILE (an output of clfx), e.g. to "
+                   "re-render a shot from one of its frames.")
 @click.option("--set", "assignments", multiple=True, metavar="K=V",
-              help="Override: effect.param=value, camera.key=value, seed=N.")
+              help="Override: effect.param=value, effect.enabled=false, "
+                   "effect.missing_passes=skip, camera.key=value (F:V,F:V keyframes), seed=N.")
 @render_options
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="Render on a local Dask cluster of N processes (one OpenCL device each).")
@@ -348,16 +447,20 @@ def _render_options(kw: dict):
 @click.option("--fail-fast", is_flag=True,
               help="With --workers/--scheduler: stop at the first failed frame.")
 @click.pass_context
-def render(ctx, input_path, output_path, look_name, assignments, workers, scheduler, chunk,
-           fail_fast, **kw):
+def render(ctx, input_path, output_path, look_name, look_from, assignments, workers, scheduler,
+           chunk, fail_fast, **kw):
     """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
+    if look_name and look_from:
+        raise click.UsageError("give --look or --look-from, not both")
+    _check_raw_usage(input_path, output_path, kw.get("raw_size"))
     if workers and ctx.get_parameter_source("scheduler") == click.core.ParameterSource.ENVIRONMENT:
         scheduler = None  # an explicit --workers wins over CLFX_SCHEDULER
     scale = {"workers": workers, "scheduler": scheduler, "chunk": chunk, "fail_fast": fail_fast}
     runtime = None if workers or scheduler else _runtime_soon(ctx)
-    from clfx.pipeline.presets import apply_overrides, load_look
+    from clfx.api import load_look, look_from_stamp
 
-    lk = apply_overrides(load_look(look_name), list(assignments))
+    lk = look_from_stamp(look_from) if look_from else (look_name or "default")
+    lk = load_look(lk, set=assignments)
     _run_batch(ctx, lk, input_path, output_path, _render_options(kw), runtime,
                scale if runtime is None else None)
 
@@ -373,7 +476,8 @@ def farm():
 @click.argument("render_args", nargs=-1, metavar="[-- RENDER_OPTION...]")
 @click.option("--look", "look_name", default="default", show_default=True)
 @click.option("--set", "assignments", multiple=True, metavar="K=V")
-@click.option("--frames", default=None, metavar="SPEC", help="Default: every input frame on disk.")
+@click.option("--frames", default=None, metavar="SPEC", callback=check_frames,
+              help="Default: every input frame on disk.")
 @click.option("--chunk", type=click.IntRange(min=1), default=10, show_default=True,
               help="Frames per task.")
 @click.option("--quality", type=click.Choice(["draft", "preview", "final", "reference"]), default=None)
@@ -404,6 +508,7 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
 @click.pass_context
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
+    _check_raw_usage(input_path, output_path, kw.get("raw_size"))
     runtime = _runtime_soon(ctx)
     from clfx.pipeline.presets import single_effect_look
 
@@ -412,20 +517,59 @@ def apply(ctx, effect, input_path, output_path, assignments, **kw):
 
 
 def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
-    from clfx.pipeline.batch import Batch
+    """``clfx render`` / ``apply``: `clfx.api.render`, with progress on a terminal."""
+    from clfx.api import render as render_api
 
     verbosity = ctx.obj.get("verbosity", 1)
-    batch = Batch(look=lk, input_path=input_path, output_path=output_path, options=options,
-                  verbosity=verbosity,
-                  progress=verbosity > 0 and sys.stderr.isatty() and not options.as_json)
-    batch.prepare()  # everything checked before the first frame is read
-    if scale:  # on a Dask cluster (--workers / --scheduler)
-        from clfx.pipeline.distributed import render_distributed
+    show = verbosity > 0 and sys.stderr.isatty() and not options.as_json
+    with _progress(show) as on_frame:
+        render_api(input_path, output_path, lk, options=options, verbosity=verbosity,
+                   on_frame=on_frame, runtime=runtime, device=ctx.obj.get("device"),
+                   distributed=scale)
 
-        render_distributed(batch, device=ctx.obj.get("device"), **scale)
+
+class _Progress:
+    """Frames done/total, frames per second, elapsed time and ETA on stderr (rich), only
+    on a terminal and never with -q: `clfx.api.render`'s ``on_frame``."""
+
+    def __init__(self):
+        from rich.console import Console
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                   TimeElapsedColumn, TimeRemainingColumn)
+
+        self.bar = Progress(TextColumn("clfx"), BarColumn(), MofNCompleteColumn(),
+                            TextColumn("frames  {task.fields[fps]}"), TimeElapsedColumn(),
+                            TextColumn("ETA"), TimeRemainingColumn(),
+                            console=Console(file=sys.stderr), transient=True)
+        self.task = None
+        self.t0 = None
+
+    def __call__(self, done: int, total: int | None, report) -> None:
+        import time
+
+        now = time.perf_counter()
+        if self.task is None:
+            self.t0 = now - max(report.total_ms + report.read_ms, 1.0) / 1e3
+            self.bar.start()
+            self.task = self.bar.add_task("render", total=total, fps="")
+        fps = done / max(now - self.t0, 1e-9)
+        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps")
+
+    def close(self) -> None:
+        if self.task is not None:
+            self.bar.stop()
+
+
+@contextlib.contextmanager
+def _progress(show: bool):
+    if not show:
+        yield None
         return
-    with batch.reading():  # the first frame is read while the device finishes setting up
-        batch.run(runtime.result())
+    bar = _Progress()
+    try:
+        yield bar
+    finally:
+        bar.close()
 
 
 @cli.command()
@@ -434,7 +578,8 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
 @click.option("--size", default="640x360", show_default=True, help="WxH.")
 @click.option("--look", "look_name", default="default", show_default=True)
 @quality_option
-@click.option("--overwrite/--no-overwrite", default=True, show_default=True)
+@click.option("--overwrite", is_flag=True,
+              help="Replace files of an earlier demo in OUTDIR (default: refuse, like render).")
 @click.option("--explain", is_flag=True)
 @click.option("--json", "as_json", is_flag=True)
 @click.pass_context

@@ -1,6 +1,6 @@
 """Options several ``clfx`` commands share, declared once (as rasterio's ``rio.options``).
 
-Each name here is a decorator: ``@pass_options`` adds the options that say how depth and
+Each name here is a decorator (``frames_option`` too): ``@pass_options`` adds the options that say how depth and
 velocity passes are found and read (``render``, ``apply``, ``probe``), ``@render_options``
 everything ``render`` and ``apply`` take besides the look, ``@quality_option`` the quality
 level (also ``demo``).
@@ -33,6 +33,20 @@ def _positive(ctx, param, value):
 
 def _names(ctx, param, value):
     return tuple(value.split(",")) if value else None
+
+
+def check_frames(ctx, param, value):
+    """A bad frame range is a usage error (exit 2), said before anything is read."""
+    if value is None:
+        return None
+    from clfx.core.errors import SequenceError
+    from clfx.io.sequence import parse_frames
+
+    try:
+        parse_frames(value)
+    except SequenceError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return value
 
 
 quality_option = click.option(
@@ -72,7 +86,7 @@ colour_options = stack(
 )
 
 render_options = stack(
-    click.option("--frames", default=None, metavar="SPEC",
+    click.option("--frames", default=None, metavar="SPEC", callback=check_frames,
                  help="Frames to render: 1-100, 1-100x2, 1,5,10-20, farm a-b:n. Default: all on disk."),
     quality_option,
     click.option("--depth", "depth_path", default=None, metavar="PATTERN",
@@ -101,4 +115,7 @@ render_options = stack(
                  help="Per frame: which effects ran, which were skipped and why."),
     click.option("--json", "as_json", is_flag=True,
                  help="One JSON line per frame and a summary on stdout."),
+    click.option("--log", "log_path", default=None, metavar="FILE",
+                 help="Also write each frame's report, the warnings and the summary to FILE "
+                      "(JSON lines if it ends in .json/.jsonl)."),
 )

@@ -56,14 +56,30 @@ def contact_sheet(previews: list[np.ndarray], columns: int = 6, thumb_width: int
     return sheet
 
 
+def demo_files(outdir: str, count: int) -> list[str]:
+    """Every file a demo of ``count`` frames writes into ``outdir``."""
+    names = [f"{kind}.{i:04d}.{ext}" for i in range(1, count + 1)
+             for kind, ext in (("scene", "exr"), ("demo", "exr"), ("demo", "png"))]
+    return [os.path.join(outdir, n) for n in names + ["contact_sheet.png"]]
+
+
 def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int = 360,
-             look_name: str = "default", quality: str | None = None, overwrite: bool = True,
+             look_name: str = "default", quality: str | None = None, overwrite: bool = False,
              explain: bool = False, as_json: bool = False, verbosity: int = 1) -> dict:
+    """Render the demo scene into ``outdir``.  Without ``overwrite``, files of an earlier
+    demo there are an error before anything is rendered (like ``clfx render``)."""
+    from clfx.core.errors import ImageIOError
     from clfx.io.write import write_frame
     from clfx.pipeline.presets import load_look
     from clfx.bench.scene import demo_scene, render_sharp
 
     look = load_look(look_name)
+    if not overwrite:
+        there = [p for p in demo_files(outdir, count) if os.path.lexists(p)]
+        if there:
+            more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
+            raise ImageIOError(f"{there[0]} exists{more}; use --overwrite to replace the "
+                               f"demo in {outdir}, or another folder")
     os.makedirs(outdir, exist_ok=True)
     t0 = time.perf_counter()
     previews, reports = [], []
@@ -72,7 +88,8 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     def write_all(frame_no, sharp, out, preview):
         base = os.path.join(outdir, f"%s.{frame_no:04d}.%s")
         write_frame(sharp, base % ("scene", "exr"), overwrite=overwrite, bit_depth="float")
-        write_frame(out, base % ("demo", "exr"), overwrite=overwrite, attributes=look.stamp())
+        write_frame(out, base % ("demo", "exr"), overwrite=overwrite,
+                    attributes=look.stamp(frame_no))
         write_frame(Frame.from_array(preview), base % ("demo", "png"), overwrite=overwrite)
 
     def preview_of(out):
@@ -104,7 +121,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     if verbosity > 0 and sys.stderr.isatty() and not as_json:
         print("", file=sys.stderr)
     sheet_path = os.path.join(outdir, "contact_sheet.png")
-    write_frame(Frame.from_array(contact_sheet(previews)), sheet_path, overwrite=True)
+    write_frame(Frame.from_array(contact_sheet(previews)), sheet_path, overwrite=overwrite)
     wall = time.perf_counter() - t0
     summary = {"summary": True, "look": look.name, "frames": count, "size": [width, height],
                "outdir": outdir, "contact_sheet": sheet_path, "wall_s": round(wall, 2),

@@ -143,6 +143,15 @@ class RenderContext:
         ctx.warnings = []
         return ctx
 
+    def with_source(self, source) -> RenderContext:
+        """This context over another source image (a masked copy of the frame): same notes
+        and passes, its own scene analysis (the frame's does not describe ``source``)."""
+        ctx = RenderContext.__new__(RenderContext)
+        ctx.__dict__.update(self.__dict__)
+        ctx.source = source
+        ctx._analysis = _SharedAnalysis()
+        return ctx
+
 
 # -- plugins -------------------------------------------------------------------------------
 class Plugin:

@@ -273,8 +273,10 @@ def test_raw_pipe_round_trip(rt):
 
 
 def test_raw_pipe_needs_a_size():
-    r = run("render", "-", "-", code=1)
-    one_line_error(r, "--raw WxH")
+    """A usage error (exit 2, as the README says), before anything is read."""
+    r = run("render", "-", "-", code=2)
+    assert "--raw WxH" in r.stderr
+    assert "both INPUT and OUTPUT" in run("render", "-", "out.exr", "--raw", "4x4", code=2).stderr
 
 
 def test_pass_options_are_declared_once_for_every_command():

@@ -37,7 +37,7 @@ def test_output_cut_to_the_input_window():
 
 
 def test_truncated_frame_is_one_line():
-    with pytest.raises(ImageIOError, match="truncated raw frame 4 \\(7 of 180 bytes\\)"):
+    with pytest.raises(ImageIOError, match="truncated raw frame 4 \\(7 of 180 bytes; is --raw 5x3"):
         read_raw(io.BytesIO(b"x" * 7), (5, 3), 4)
 
 

@@ -19,8 +19,13 @@ persistent folder (``$XDG_CACHE_HOME/clfx/pocl``) unless the user set it.
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+import sys
+import tempfile
 import threading
+import warnings
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,6 +47,56 @@ process 4 RGBA pixels (one ``float16``) without tail code."""
 INSTALL_HINT = ("install PoCL, the CPU OpenCL driver: `sudo apt-get install pocl-opencl-icd "
                 "ocl-icd-opencl-dev` (or run `make setup`); do not use PyPI's "
                 "pocl-binary-distribution, which fails on these CPUs")
+
+class KernelBuildWarning(UserWarning):
+    """An OpenCL program built, and the compiler had something to say (its warnings, from the
+    build log).  The command line shows these only with ``-v``."""
+
+
+_COMPILER_SUMMARY = re.compile(r"^\s*\d+ (warning|error)s?( and \d+ (warning|error)s?)? generated\.\s*$")
+
+
+@contextlib.contextmanager
+def _compiler_quiet(caught: list):
+    """While a program builds, keep the compiler's own chatter off the terminal: PoCL's
+    clang writes "N warnings generated." straight to file descriptor 2, and pyopencl warns
+    (``CompilerWarning``).  Both land in ``caught``; anything else written to stderr
+    meanwhile (another thread's messages) is passed on afterwards, and other warnings are
+    re-issued."""
+    import pyopencl as cl
+
+    with contextlib.suppress(Exception):
+        sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:          # no descriptor 2 (a closed stderr): nothing to keep quiet
+        saved = None
+    with tempfile.TemporaryFile() as tmp, warnings.catch_warnings(record=True) as records:
+        warnings.simplefilter("always")
+        if saved is not None:
+            os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            with contextlib.suppress(Exception):
+                sys.stderr.flush()
+            if saved is not None:
+                os.dup2(saved, 2)
+                os.close(saved)
+        tmp.seek(0)
+        text = tmp.read().decode("utf-8", "replace")
+    other = []
+    for line in text.splitlines():
+        (caught if _COMPILER_SUMMARY.match(line) else other).append(line)
+    if other:
+        with contextlib.suppress(OSError):
+            os.write(2, ("\n".join(other) + "\n").encode())
+    for r in records:
+        if issubclass(r.category, cl.CompilerWarning):
+            caught.append(str(r.message))
+        else:
+            warnings.warn_explicit(r.message, r.category, r.filename, r.lineno)
+
 
 _PROBE_SRC = """
 kernel void clfx_probe(global float *x) {
@@ -304,11 +359,21 @@ class Runtime:
         opts = list(BUILD_OPTIONS) + [f"-I{self.kernel_dir}"] + [f"-D{k}={v}" for k, v in defines]
         if self.has_fp64:
             opts.append("-DCLFX_HAS_FP64=1")
+        caught: list[str] = []
         try:
-            return cl.Program(self.ctx, src).build(options=opts)
+            with _compiler_quiet(caught):
+                prg = cl.Program(self.ctx, src).build(options=opts)
         except cl.Error as exc:
             log = str(exc)
             raise KernelBuildError(f"building kernels/{file} with {' '.join(opts)} failed:\n{log}") from exc
+        if caught:
+            try:
+                log = prg.get_build_info(self.device, cl.program_build_info.LOG).strip()
+            except cl.Error:
+                log = ""
+            warnings.warn(f"kernels/{file} ({' '.join(opts)}): the OpenCL compiler said:\n"
+                          f"{log or chr(10).join(caught)}", KernelBuildWarning, stacklevel=2)
+        return prg
 
     def kernel(self, file: str, name: str, fp64: bool = False, **defines):
         """A reusable ``cl.Kernel`` named ``name`` from ``kernels/<file>`` (``fp64``: see

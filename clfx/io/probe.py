@@ -112,3 +112,15 @@ def format_probe(info: dict) -> str:
     for kind, order in info["search_order"].items():
         lines.append(f"  {kind}: " + " > ".join(order))
     return "\n".join(lines)
+
+
+def header_attribute(path, name: str):
+    """The value of header attribute ``name`` in the first part of ``path`` that has it
+    (whatever its length: `Frame.metadata` skips long strings), or None."""
+    from clfx.io.read import _scan
+
+    for part in _scan(path).parts:
+        value = part.spec.getattribute(name)
+        if value is not None:
+            return value
+    return None

@@ -63,7 +63,8 @@ def read_raw(stream, size: tuple[int, int], index: int = 0, *, colorspace: str |
     if not data:
         return None
     if len(data) != nbytes:
-        raise ImageIOError(f"stdin: truncated raw frame {index} ({len(data)} of {nbytes} bytes)")
+        raise ImageIOError(f"stdin: truncated raw frame {index} ({len(data)} of {nbytes} bytes; "
+                            f"is --raw {w}x{h} the size of the frames?)")
     planes = np.frombuffer(data, np.float32).reshape(3, h, w)  # G, B, R
     rgba = np.empty((h, w, 4), np.float32)
     rgba[..., 0], rgba[..., 1], rgba[..., 2], rgba[..., 3] = planes[2], planes[0], planes[1], 1.0
@@ -85,3 +86,34 @@ def write_raw(stream, frame: Frame, window: Rect, *, colorspace: str | None = No
         o = crop_to(o, frame.data_window, window)
     stream.write(np.ascontiguousarray(np.stack([o[..., 1], o[..., 2], o[..., 0]])).tobytes())
     stream.flush()
+
+
+def check_stream_size(stream, size: tuple[int, int]) -> None:
+    """Before anything is read: when ``stream`` is a regular file (``< frames.raw``), its
+    length must be a whole number of ``size`` frames.  Pipes cannot tell their length; their
+    frames are checked as they are read (`read_raw` raises on a short frame).
+
+    Raises
+    ------
+    SequenceError
+        The file's length is not a multiple of the frame size (the error says how many
+        frames of that size it would hold).
+    """
+    import os
+    import stat
+
+    try:
+        st = os.fstat(stream.fileno())
+    except (AttributeError, OSError, ValueError):
+        return
+    if not stat.S_ISREG(st.st_mode):
+        return
+    w, h = size
+    nbytes = w * h * 3 * 4
+    try:
+        remaining = st.st_size - stream.tell()
+    except (AttributeError, OSError, ValueError):
+        remaining = st.st_size
+    if remaining % nbytes:
+        raise SequenceError(f"--raw {w}x{h}: stdin holds {remaining} bytes, {remaining / nbytes:.3g} "
+                            f"frames of {nbytes} bytes ({w}x{h} {PIX_FMT}); is the size right?")

@@ -128,6 +128,11 @@ class RenderOptions:
         Per frame, say on stderr which effects ran and why others were skipped.
     as_json : bool
         One JSON line per frame and a summary on stdout.
+    log_path : str or None
+        Also write every frame's report, the warnings and notices and the summary to this
+        file (JSON lines when it ends in ``.json``/``.jsonl``, else the ``--explain`` text).
+    command : str or None
+        The command line, stamped into outputs as ``clfx:commandLine``.
     """
 
     frames: str | None = None
@@ -149,12 +154,24 @@ class RenderOptions:
     raw_size: str | None = None
     explain: bool = False
     as_json: bool = False
+    log_path: str | None = None
+    command: str | None = None
 
 
 def look_files(look: Look) -> list[tuple[str, str]]:
     """(``effect.param``, path) of every file a step reads (a PathParam): inputs of the render."""
     return [(f"{s.id}.{p.name}", getattr(s.params, p.name)) for s in look.steps
             for p in s.plugin.descriptor.params if p.kind == "path" and getattr(s.params, p.name)]
+
+
+@dataclass
+class FrameRead:
+    """One job's input, read (on an I/O thread): every view's frame (hero first), each
+    view's masks (`clfx.pipeline.masks.read_masks`), and the milliseconds reading took."""
+
+    views: list[Frame]
+    masks: list[dict]
+    read_ms: float
 
 
 @dataclass
@@ -186,6 +203,9 @@ class Batch:
     raw_size: tuple[int, int] | None = field(default=None, init=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
+    mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
+    on_frame: object = field(default=None, repr=False)  # callable(done, total, report): progress
+    _log: object = field(default=None, init=False, repr=False)   # the --log file, while running
     noticed: set[str] = field(default_factory=set, init=False, repr=False)  # reader notices said
     _warned: set = field(default_factory=set, init=False, repr=False)
     _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
@@ -226,8 +246,10 @@ class Batch:
             jobs.append(job)
         from clfx.io.sequence import check_input_file
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
+        self._check_masks(jobs)
         self._check_outputs(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
+        self._check_log()
         self.passes = o.passes.spec(self._radial_depth_focal_px())
 
     def _radial_depth_focal_px(self) -> float | None:
@@ -242,9 +264,34 @@ class Batch:
         width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
         return self.look.camera.focal_length_px(width)
 
+    def _check_masks(self, jobs: list[Job]) -> None:
+        """Every masked step's mask can be made: its files exist, its channel, layer and
+        names are in the first frame's header (`clfx.pipeline.masks.check_mask`)."""
+        from clfx.pipeline.masks import check_mask
+
+        files: set[str] = set()
+        for step, mask in self.look.masks():
+            files.update(check_mask(mask, jobs[0].input, [j.frame for j in jobs],
+                                    f"effect {step.id!r}"))
+        self.mask_files = sorted(files)
+
+    def _check_log(self) -> None:
+        """The --log file can be written (created now, empty)."""
+        path = self.options.log_path
+        if not path:
+            return
+        if os.path.realpath(path) in {os.path.realpath(j.output) for j in self.jobs} | \
+                {os.path.realpath(j.input) for j in self.jobs}:
+            raise ImageIOError(f"--log {path} is an input or output of this render")
+        try:
+            with open(path, "w", encoding="utf-8"):
+                pass
+        except OSError as exc:
+            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+
     def _check_outputs(self, jobs: list[Job]) -> None:
         inputs = {os.path.realpath(p) for j in jobs for p in (j.input, j.depth, j.velocity) if p}
-        inputs |= {os.path.realpath(p) for p in self.look_files}
+        inputs |= {os.path.realpath(p) for p in self.look_files + self.mask_files}
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
@@ -286,10 +333,15 @@ class Batch:
             self._pool = None
 
     def run(self, rt) -> dict:
-        """Render every job; return a summary.  The first failing frame stops the batch
-        (its output is not written; frames already written stay, so --skip-existing resumes)."""
-        if self.input_path == RAW or self.output_path == RAW:
-            return self._run_raw(rt)
+        """Render every job; return a summary (with ``reports``: each frame's
+        `FrameReport`).  The first failing frame stops the batch (its output is not
+        written; frames already written stay, so --skip-existing resumes)."""
+        with self._logging():
+            if self.input_path == RAW or self.output_path == RAW:
+                return self._run_raw(rt)
+            return self._run_files(rt)
+
+    def _run_files(self, rt) -> dict:
         t0 = time.perf_counter()
         reports = []
         total = len(self.jobs)
@@ -302,59 +354,72 @@ class Batch:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
-                views_in, read_ms = next_read.result()   # multi-view files: hero first
+                read = next_read.result()
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
-                frame_out, report = self.render(rt, job, views_in[0], read_ms)
-                views_out = [self.render(rt, job, v)[0] for v in views_in[1:]]
+                frame_out, report, views_out = self.render(rt, job, read)
                 writes.append((pool.submit(self._write, frame_out, job, report, views_out),
                                report))
                 writes = self._drain(writes, block=False)
                 reports.append(report)
-                if self.progress:
-                    self._err(f"\rclfx: frame {job.frame} ({i + 1}/{total})", end="")
+                if self.on_frame is not None:
+                    self.on_frame(i + 1, total, report)
             self._drain(writes, block=True)
-        if self.progress:
-            self._err("")
-        wall = time.perf_counter() - t0
+        return self._summary(reports, time.perf_counter() - t0)
+
+    def _summary(self, reports, wall: float) -> dict:
         summary = {"summary": True, "look": self.look.name, "frames": len(reports),
                    "skipped_existing": len(self.skipped_existing), "wall_s": round(wall, 3),
                    "fps": round(len(reports) / wall, 3) if wall > 0 and reports else None,
                    "device_ms_mean": round(float(np.mean([r.total_ms for r in reports])), 2) if reports else None,
                    "saved_ms_estimate": round(sum(r.saved_ms or 0.0 for r in reports), 1)}
+        line = (f"clfx: {len(reports)} frame(s) rendered with look {self.look.name!r} in "
+                f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
+        self._log_line(summary, line)
         if self.options.as_json:
             print(json.dumps(summary), flush=True)
         elif self.verbosity > 0:
-            self._err(f"clfx: {len(reports)} frame(s) rendered with look {self.look.name!r} in "
-                      f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
-        return summary
+            self._err(line)
+        return {**summary, "reports": reports}
 
-    def render(self, rt, job: Job, frame_in: Frame, read_ms: float = 0.0):
-        """Render one job's frame (already read) through the look: the output frame and its
-        report.  The one place a batch renders, in this process or in a distributed task."""
-        frame_out, report = render_frame(
-            rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
-            keep_overscan=self.options.keep_overscan,
-            analysis_summary=self.options.as_json, stats=self.stats)
+    def render(self, rt, job: Job, read: FrameRead):
+        """Render one job's frames (already read) through the look: the hero's output frame
+        and report, and the other views' output frames.  The one place a batch renders, in
+        this process or in a distributed task."""
+        outs = []
+        for frame_in, masks in zip(read.views, read.masks):
+            outs.append(render_frame(
+                rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
+                keep_overscan=self.options.keep_overscan,
+                analysis_summary=self.options.as_json, stats=self.stats, masks=masks))
+        frame_out, report = outs[0]
         report.input, report.output = job.input, job.output
-        report.read_ms = read_ms
-        return frame_out, report
+        report.read_ms = read.read_ms
+        return frame_out, report, [f for f, _ in outs[1:]]
 
     def _drain(self, writes, *, block: bool):
         """Report finished writes in frame order (re-raising a write's error)."""
         while writes and (block or writes[0][0].done()):
             future, report = writes.pop(0)
             future.result()
-            self._warn(report)
-            if self.options.as_json:
-                print(json.dumps(report.as_dict()), flush=True)
-            if self.options.explain:
-                self._err(report.explain())
+            self._report(report)
         return writes
 
-    def _read(self, job: Job) -> tuple[list[Frame], float]:
+    def _report(self, report, stdout: bool = True) -> None:
+        """A rendered (and written) frame's report: warnings on stderr (each once per
+        batch), ``--json`` on stdout (not when stdout carries frames), ``--explain`` on
+        stderr, everything to ``--log``."""
+        self._warn(report)
+        if self.options.as_json and stdout:
+            print(json.dumps(report.as_dict()), flush=True)
+        if self.options.explain:
+            self._err(report.explain())
+        self._log_line(report.as_dict(), report.explain())
+
+    def _read(self, job: Job) -> FrameRead:
         """The job's frame (every view of a multi-view file when the output can hold them,
-        hero first) and the milliseconds it took to read."""
+        hero first) with each view's masks, and the milliseconds it took to read."""
         from clfx.io.read import read_views
+        from clfx.pipeline.masks import read_masks
 
         t0 = time.perf_counter()
         o = self.options
@@ -362,7 +427,8 @@ class Batch:
                             all_views=job.output.lower().endswith(".exr") and o.passes_mode != "drop",
                             colorspace=o.colorspace, working_space=o.working_space,
                             depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
-        return frames, (time.perf_counter() - t0) * 1e3
+        masks = [read_masks(self.look, f, job.frame) for f in frames]
+        return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3)
 
     def _notice(self, message: str, key: str) -> None:
         """What the reader assumed (e.g. depth 0 = no hit): one line per sequence and key."""
@@ -370,8 +436,13 @@ class Batch:
             return                       # no step reads the depth: its conventions are moot
         if key not in self.noticed:
             self.noticed.add(key)
+            self._log_line({"notice": message}, f"clfx: {message}")
             if self.verbosity > 0:
                 self._err(f"clfx: {message}")
+
+    def stamp(self, frame: int) -> dict:
+        """The attributes an output of ``frame`` is stamped with (`Look.stamp`)."""
+        return self.look.stamp(frame, self.options.command)
 
     def _write(self, frame: Frame, job: Job, report, views=()) -> None:
         from clfx.io.write import OutputExistsError, write_frame
@@ -381,8 +452,9 @@ class Batch:
         try:   # not overwrite: an output another writer published meanwhile is never replaced
             write_frame(frame, job.output, bit_depth="float" if o.as_float else None,
                         compression=o.compression, colorspace=o.out_colorspace,
-                        overwrite=o.overwrite, attributes=self.look.stamp(),
-                        protect=[p for p in (job.input, job.depth, job.velocity) if p] + self.look_files,
+                        overwrite=o.overwrite, attributes=self.stamp(job.frame),
+                        protect=[p for p in (job.input, job.depth, job.velocity) if p]
+                        + self.look_files + self.mask_files,
                         write_passes=o.passes_mode != "drop", views=views)
         except OutputExistsError:
             if not o.skip_existing:
@@ -402,6 +474,28 @@ class Batch:
     def _err(self, msg: str, end: str = "\n") -> None:
         print(msg, end=end, file=sys.stderr, flush=True)
 
+    # -- the log file ---------------------------------------------------------------------
+    @contextmanager
+    def _logging(self):
+        path = self.options.log_path
+        if not path:
+            yield
+            return
+        with open(path, "a", encoding="utf-8") as f:
+            self._log = f
+            try:
+                yield
+            finally:
+                self._log = None
+
+    def _log_line(self, record: dict, text: str) -> None:
+        """One entry of the --log file: ``record`` as a JSON line, or ``text``."""
+        if self._log is None:
+            return
+        as_json = self.options.log_path.lower().endswith((".json", ".jsonl"))
+        self._log.write((json.dumps(record, default=str) if as_json else text) + "\n")
+        self._log.flush()
+
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:
         size = self.options.raw_size
@@ -414,24 +508,55 @@ class Batch:
         if self.input_path != RAW or self.output_path != RAW:
             raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
         for clip, effects in self.look.required_clips().items():
-            raise SequenceError(f"effect {effects[0]!r} needs a {clip} pass, which raw pipes do not carry")
+            raise SequenceError(f"effect {effects[0]!r} needs a {clip} pass, which raw pipes "
+                                f"do not carry (--set {effects[0]}.enabled=false drops it, "
+                                f"--set {effects[0]}.missing_passes=skip skips it)")
+        for step, mask in self.look.masks():
+            if not mask.file:
+                raise SequenceError(f"effect {step.id!r} is masked by a channel of the frame "
+                                    "and raw pipes carry RGB only (use a mask file:)")
+        from clfx.io.raw import check_stream_size
+
+        check_stream_size(sys.stdin.buffer, self.raw_size)
+        self._check_log()
 
     def _run_raw(self, rt) -> dict:
-        """Read gbrpf32le frames from stdin until EOF; write them to stdout."""
+        """Read gbrpf32le frames from stdin until EOF; write them to stdout.  A frame is
+        written only once the next one has been read whole (or the stream ended at a frame
+        boundary), so a stream of the wrong size fails before its first frame is written."""
         from clfx.io.raw import read_raw, write_raw
 
         stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
-        count = 0
-        t0 = time.perf_counter()
         o = self.options
-        while (frame := read_raw(stdin, self.raw_size, count, colorspace=o.colorspace,
-                                 working_space=o.working_space)) is not None:
-            out, report = render_frame(rt, self.look, frame, frame_number=count,
-                                       quality=self.options.quality, stats=self.stats)
-            write_raw(stdout, out, frame.data_window, colorspace=o.out_colorspace)
-            self._warn(report)
-            if self.options.explain:
-                self._err(report.explain())
-            count += 1
+        t0 = time.perf_counter()
+        reports = []
+
+        def read(index):
+            return read_raw(stdin, self.raw_size, index, colorspace=o.colorspace,
+                            working_space=o.working_space)
+
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-io") as pool:
+            frame = read(0)
+            count = 0
+            while frame is not None:
+                following = pool.submit(read, count + 1)
+                masks = None
+                if self.look.masks():
+                    from clfx.pipeline.masks import read_masks
+                    masks = read_masks(self.look, frame, count)
+                out, report = render_frame(rt, self.look, frame, frame_number=count,
+                                           quality=o.quality, stats=self.stats, masks=masks)
+                next_frame = following.result()   # raises on a short read: nothing written
+                write_raw(stdout, out, frame.data_window, colorspace=o.out_colorspace)
+                self._report(report, stdout=False)
+                reports.append(report)
+                count += 1
+                if self.on_frame is not None:
+                    self.on_frame(count, None, report)
+                frame = next_frame
         wall = time.perf_counter() - t0
-        return {"frames": count, "wall_s": wall}
+        summary = {"summary": True, "look": self.look.name, "frames": count,
+                   "wall_s": round(wall, 3),
+                   "fps": round(count / wall, 3) if wall > 0 and count else None}
+        self._log_line(summary, f"clfx: {count} raw frame(s) rendered in {wall:.2f} s")
+        return {**summary, "reports": reports}

@@ -152,13 +152,13 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
             read, next_read = next_read, (pool.submit(batch._read, jobs[i + 1])
                                           if i + 1 < len(jobs) else None)
             try:
-                frame_out, report = batch.render(rt, job, *read.result())
+                frame_out, report, views = batch.render(rt, job, read.result())
             except ClfxError as exc:
                 results[i] = _failed(job, exc)
                 if fail_fast:
                     break
                 continue
-            writes.append((i, report, pool.submit(batch._write, frame_out, job, report)))
+            writes.append((i, report, pool.submit(batch._write, frame_out, job, report, views)))
         for i, report, done in writes:
             try:
                 done.result()

@@ -17,17 +17,23 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Mapping
 
-from clfx import __version__
+import numpy as np
+
+from clfx._version import __version__
 from clfx.core.camera import Camera
 from clfx.core.errors import ClfxError, ClipError
 from clfx.core.frame import Frame
 from clfx.core.limits import check_pixels
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
-from clfx.host import Plugin, RenderContext
-from clfx.plugins import get_plugin
 from clfx.core.rect import Rect
+from clfx.fx import mask as mask_fx
+from clfx.host import Plugin, RenderContext
+from clfx.pipeline.animation import Animated
+from clfx.pipeline.masks import FrameMasks, MaskSpec
+from clfx.plugins import get_plugin
 
 OVERSCAN_KEEP_FRACTION = 0.25
 """With keep_overscan, effects may write up to this fraction of the diagonal past the frame."""
@@ -56,6 +62,11 @@ class Step:
         (with a reason in the report).
     enabled : bool
         False keeps the step in the look without ever running it.
+    mask : MaskSpec or None
+        Limits the effect to a mask (`clfx.pipeline.masks`).
+    animated : tuple of (str, Animated)
+        Keyframed parameters (`clfx.pipeline.animation`); ``params`` holds their value at
+        the first key, :meth:`at` the values of a frame.
     plugin : Plugin
         The effect (made from ``effect`` unless given, e.g. an unregistered test plugin).
     """
@@ -66,6 +77,8 @@ class Step:
     id: str = ""
     missing_passes: str = "error"
     enabled: bool = True
+    mask: MaskSpec | None = None
+    animated: tuple[tuple[str, Animated], ...] = ()
     plugin: Plugin | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
@@ -76,7 +89,8 @@ class Step:
         object.__setattr__(self, "id", self.id or self.effect)
 
     def describe(self) -> dict:
-        d = {"effect": self.effect, "params": self.params.as_dict()}
+        """The step as a look file writes it (keyframes included; every parameter given)."""
+        d = {"effect": self.effect, "params": self.param_values()}
         if self.id != self.effect:
             d["id"] = self.id
         if self.quality:
@@ -85,7 +99,20 @@ class Step:
             d["missing_passes"] = self.missing_passes
         if not self.enabled:
             d["enabled"] = False
+        if self.mask is not None:
+            d["mask"] = self.mask.describe()
         return d
+
+    def param_values(self) -> dict:
+        """Every parameter's value, keyframed ones as their keyframe mappings."""
+        return {**self.params.as_dict(), **{k: a.describe() for k, a in self.animated}}
+
+    def at(self, frame: float) -> "Step":
+        """This step with its keyframed parameters resolved at ``frame`` (itself if none)."""
+        if not self.animated:
+            return self
+        values = {**self.params.as_dict(), **{k: a.at(frame) for k, a in self.animated}}
+        return replace(self, params=self.plugin.params(**values), animated=())
 
     def required_clips(self) -> list[str]:
         """Clips (other than the source) the effect cannot run without."""
@@ -123,6 +150,12 @@ class RunStats:
 
 @dataclass
 class Look:
+    """A resolved look: camera, seed and ordered steps (inheritance applied).
+
+    ``camera_animated`` holds keyframed camera values (``camera`` their value at the first
+    key); :meth:`at` gives the look of one frame, with every keyframed value resolved.
+    """
+
     name: str
     description: str = ""
     camera: Camera = field(default_factory=Camera)
@@ -130,15 +163,51 @@ class Look:
     seed: int = 0
     source: str = ""
     base: str | None = None
+    camera_animated: tuple[tuple[str, Animated], ...] = ()
+
+    def camera_values(self) -> dict:
+        """Every camera value, keyframed ones as their keyframe mappings."""
+        return {**self.camera.as_dict(), **{k: a.describe() for k, a in self.camera_animated}}
 
     def describe(self) -> dict:
         return {"name": self.name, "description": self.description, "base": self.base,
-                "source": self.source, "seed": self.seed, "camera": self.camera.as_dict(),
+                "source": self.source, "seed": self.seed, "camera": self.camera_values(),
                 "effects": [s.describe() for s in self.steps]}
 
+    def document(self) -> dict:
+        """The look as a self-contained look file (schema 1; inheritance applied, every value
+        given, keyframes kept): what outputs stamp as ``clfx:lookJSON`` and
+        ``clfx.pipeline.presets.look_from_dict`` reads back."""
+        return {"name": self.name, "description": self.description, "schema": 1,
+                "seed": self.seed, "camera": self.camera_values(),
+                "effects": [s.describe() for s in self.steps if s.enabled]}
+
+    @property
+    def animated(self) -> bool:
+        """Whether any camera value or parameter is keyframed."""
+        return bool(self.camera_animated) or any(s.animated for s in self.steps)
+
+    def at(self, frame: float) -> "Look":
+        """This look with every keyframed value resolved at ``frame`` (itself if none)."""
+        if not self.animated:
+            return self
+        camera = self.camera.updated(**{k: a.at(frame) for k, a in self.camera_animated})
+        return replace(self, camera=camera, camera_animated=(),
+                       steps=[s.at(frame) for s in self.steps])
+
+    def values_at(self, frame: float) -> dict:
+        """The keyframed values at ``frame``, by ``camera.NAME`` / ``STEP.PARAM``."""
+        out = {f"camera.{k}": a.at(frame) for k, a in self.camera_animated}
+        for s in self.steps:
+            out.update({f"{s.id}.{k}": a.at(frame) for k, a in s.animated})
+        return out
+
     def params_hash(self) -> str:
-        """A short hash of everything that determines the output (stamped into files)."""
-        blob = json.dumps({k: v for k, v in self.describe().items() if k != "source"},
+        """A short hash of everything that determines the output (stamped into files): the
+        seed, the camera and the enabled steps, keyframes and masks included (not the name,
+        description or file, so a look read back from an output hashes the same)."""
+        doc = self.document()
+        blob = json.dumps({k: doc[k] for k in ("seed", "camera", "effects")},
                           sort_keys=True, default=str)
         return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
@@ -161,6 +230,10 @@ class Look:
         """Every clip any step reads, required or optional."""
         return {c.name for _, s in self.active_steps() for c in s.plugin.descriptor.clips}
 
+    def masks(self) -> list[tuple[Step, MaskSpec]]:
+        """(step, mask) of every enabled masked step."""
+        return [(s, s.mask) for _, s in self.active_steps() if s.mask is not None]
+
     def check_clips(self, frame: Frame) -> None:
         """Raise ClipError if the frame lacks a pass a step requires."""
         have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
@@ -170,10 +243,20 @@ class Look:
                                 f"{self.name!r} needs a {clip} pass and none was found "
                                 f"(see `clfx probe`, or pass --{clip} FILE)")
 
-    def stamp(self) -> dict:
-        """Attributes written into output headers."""
-        return {"clfx:look": self.name, "clfx:version": __version__,
-                "clfx:paramsHash": self.params_hash()}
+    def stamp(self, frame: float | None = None, command: str | None = None) -> dict:
+        """Attributes written into output headers: the look's name, clfx's version, the
+        params hash, the whole resolved look as JSON (``clfx:lookJSON``: ``clfx render
+        --look-from FILE`` renders it again), the keyframed values used on ``frame``
+        (``clfx:values``, JSON; ``{}`` when nothing is keyframed) and the command line
+        (``clfx:commandLine``; "" when not rendered from the command line).  Every key is
+        always written, so none is left over from an input clfx rendered before."""
+        d = {"clfx:look": self.name, "clfx:version": __version__,
+             "clfx:paramsHash": self.params_hash(),
+             "clfx:lookJSON": json.dumps(self.document(), sort_keys=True, default=str),
+             "clfx:values": json.dumps(self.values_at(frame) if frame is not None else {},
+                                       sort_keys=True),
+             "clfx:commandLine": command or ""}
+        return d
 
 
 @dataclass
@@ -214,6 +297,7 @@ class FrameReport:
     read_ms: float = 0.0
     write_ms: float = 0.0
     frame_warnings: list[str] = field(default_factory=list)  # the frame's own (not a step's)
+    values: dict = field(default_factory=dict)  # keyframed values used, by camera.K / STEP.P
 
     def as_dict(self) -> dict:
         d = {"frame": self.frame, "input": self.input, "output": self.output,
@@ -230,6 +314,8 @@ class FrameReport:
             d["analysis"] = self.analysis
         if self.frame_warnings:
             d["warnings"] = self.frame_warnings
+        if self.values:
+            d["values"] = self.values
         return d
 
     def warnings(self) -> list[str]:
@@ -244,6 +330,8 @@ class FrameReport:
         lines = [f"frame {self.frame}: {self.total_ms:.1f} ms on device "
                  f"(upload {self.upload_ms:.1f}, analysis {self.analysis_ms:.1f}, "
                  f"download {self.download_ms:.1f})"]
+        if self.values:
+            lines.append("  values  " + ", ".join(f"{k}={_short(v)}" for k, v in self.values.items()))
         for s in self.steps:
             if s.ran:
                 extra = f" [{'; '.join(s.notes)}]" if s.notes else ""
@@ -254,6 +342,14 @@ class FrameReport:
             lines.append(f"  skipping saved ~{self.saved_ms:.0f} ms (estimated from this "
                          f"sequence's runs of the skipped effects)")
         return "\n".join(lines)
+
+
+def _short(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, tuple):
+        return "(" + ", ".join(_short(x) for x in v) + ")"
+    return str(v)
 
 
 def read_image_rgba(path: str):
@@ -280,26 +376,37 @@ class FrameTooLarge(ClfxError):
 
 def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
                  quality: str | None = None, keep_overscan: bool = False,
-                 analysis_summary: bool = False,
-                 stats: RunStats | None = None) -> tuple[Frame, FrameReport]:
+                 analysis_summary: bool = False, stats: RunStats | None = None,
+                 masks: Mapping[MaskSpec, np.ndarray] | None = None
+                 ) -> tuple[Frame, FrameReport]:
     """Render one frame through ``look``; returns the output frame and a report.
 
-    ``quality`` sets the level of every step without its own override.  The frame is
-    uploaded once and downloaded once; the device queue is synchronised after each effect
-    only to time it.  ``stats`` carries the steps' running costs across the frames of one
-    run (they estimate what skipping saved); without it each frame starts afresh.
+    ``quality`` sets the level of every step without its own override.  Keyframed values
+    are resolved at ``frame_number``.  The frame is uploaded once and downloaded once; the
+    device queue is synchronised after each effect only to time it.  ``stats`` carries the
+    steps' running costs across the frames of one run (they estimate what skipping saved);
+    without it each frame starts afresh.  ``masks`` holds the frame's masks on the host
+    (`clfx.pipeline.masks.read_masks`; read here from the frame's files when None and a
+    step is masked), each uploaded once.
 
     Raises
     ------
     ClipError
-        The frame lacks a pass a step requires.
+        The frame lacks a pass a step requires, or a mask cannot be read.
     FrameTooLarge
         The frame's windows, or a window an effect would grow it to, exceed the pixel limit.
     """
     stats = RunStats() if stats is None else stats
-    report = FrameReport(frame=frame_number, input=frame.source)
+    report = FrameReport(frame=frame_number, input=frame.source,
+                         values=look.values_at(frame_number))
+    stamp = look.stamp(frame_number)
+    look = look.at(frame_number)
     t_start = time.perf_counter()
     look.check_clips(frame)
+    if masks is None and look.masks():
+        from clfx.pipeline.masks import read_masks
+
+        masks = read_masks(look, frame, frame_number)
     for what, win in (("display window", frame.display_window), ("data window", frame.data_window)):
         check_pixels(win.width, win.height, f"{frame.source or 'frame'}: {what}", FrameTooLarge)
     ctx = _upload(rt, look, frame, frame_number=frame_number, quality=quality,
@@ -307,11 +414,12 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     report.upload_ms = (time.perf_counter() - t_start) * 1e3
     report.frame_warnings = list(ctx.warnings)
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
+    frame_masks = FrameMasks(rt, masks or {}, frame.data_window, frame.display_window)
     saved = 0.0
     for index, step in look.active_steps():
         timing = stats.timing(index)
         step_report, out = _run_step(rt, step, ctx, step.quality or quality or DEFAULT_QUALITY,
-                                     have, timing)
+                                     have, timing, frame_masks)
         report.steps.append(step_report)
         if out is None:
             saved += timing.mean_ms or 0.0
@@ -326,7 +434,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     if analysis_summary and look.steps:
         report.analysis = ctx.analysis.summary()
     out_frame = frame.with_rgba(rgba, window)
-    out_frame.metadata.update(look.stamp())
+    out_frame.metadata.update(stamp)
     return out_frame, report
 
 
@@ -354,23 +462,42 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
 
 
 def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bool],
-              timing: StepTiming):
+              timing: StepTiming, masks: FrameMasks):
     """Run one step at ``level`` unless it has nothing to do; returns its report and its
-    output (None when skipped)."""
+    output (None when skipped).  A masked step blends its output with the source by its
+    mask, or renders from the masked source (`clfx.pipeline.masks`)."""
     step_ctx = ctx.for_step(level)
     missing = step.absent_passes(have)
-    reason = (f"no {' or '.join(missing)} pass in the input" if missing
-              else step.plugin.is_identity(step.params, step_ctx))
+    reason = f"no {' or '.join(missing)} pass in the input" if missing else None
+    mode = masked = mask = None
+    if not reason and step.mask is not None:
+        if masks.empty(step.mask):
+            reason = f"mask ({step.mask.label()}) selects nothing on this frame"
+        else:
+            mode = step.mask.mode_for(step.plugin.descriptor)
+            mask = masks.get(step.mask, ctx.source.window)
+            if mode == "sources":
+                masked = mask_fx.multiply(rt, ctx.source, mask)
+                step_ctx = step_ctx.with_source(masked)
+    if not reason:
+        reason = step.plugin.is_identity(step.params, step_ctx)
     if reason:
         return StepReport(step.id, False, reason, quality=level), None
     grown = step.plugin.output_window(step.params, step_ctx)
     check_pixels(grown.width, grown.height, f"frame grown by {step.id}", FrameTooLarge)
     t0 = time.perf_counter()
     out = step.plugin.render(rt, step.params, step_ctx)
+    if mode == "mix":
+        out = mask_fx.mix(rt, ctx.source, out, mask)
+    elif mode == "sources":
+        out = mask_fx.spread(rt, ctx.source, masked, out)
     rt.finish()
     ms = (time.perf_counter() - t0) * 1e3
     timing.add(ms)
-    return StepReport(step.id, True, ms=ms, quality=level, notes=list(step_ctx.notes),
+    notes = list(step_ctx.notes)
+    if mode:
+        notes.append(f"masked by {step.mask.label()} ({mode})")
+    return StepReport(step.id, True, ms=ms, quality=level, notes=notes,
                       warnings=list(step_ctx.warnings)), out
 
 

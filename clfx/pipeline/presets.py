@@ -41,14 +41,20 @@ from pathlib import Path
 import yaml
 
 from clfx.core.camera import Camera
-from clfx.core.errors import ClfxError, PresetError
+from clfx.core.errors import ClfxError, ParamError, PresetError
+from clfx.core.plugin import QUALITY_LEVELS, BoolParam, Params, StringParam
+from clfx.pipeline import animation
+from clfx.pipeline.animation import is_keyframed
 from clfx.pipeline.look import MISSING_PASSES, Look, Step, validate_quality
-from clfx.core.plugin import QUALITY_LEVELS, StringParam
+from clfx.pipeline.masks import parse_mask
 from clfx.plugins import get_plugin
 
 SCHEMA = 1
 TOP_KEYS = ("name", "description", "schema", "base", "camera", "seed", "effects")
-STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing_passes")
+STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing_passes",
+             "mask")
+ANIMATABLE = ("double", "int", "rgb", "double2d")
+"""Parameter kinds that may be keyframed (numbers and vectors of numbers)."""
 DEFAULT_LOOK = "default"
 MAX_LOOK_BYTES = 1 << 20
 """A look file is a page of YAML; anything bigger is refused before it is parsed."""
@@ -178,6 +184,14 @@ def _read_text(path: Path) -> str:
 class _Located:
     """YAML data with the line of every key path, for error messages."""
 
+    @classmethod
+    def from_data(cls, data, where: str) -> "_Located":
+        """A look given as data (a dict: the Python API, an output's ``clfx:lookJSON``):
+        errors name ``where`` and the key."""
+        doc = cls.__new__(cls)
+        doc.path, doc.data, doc.lines = where, data, {}
+        return doc
+
     def __init__(self, path: Path):
         self.path = path
         text = _read_text(path)
@@ -240,7 +254,17 @@ def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
     if len(_chain) >= MAX_BASE_DEPTH:
         raise _BaseChainTooLong(f"{_chain[0]}: base looks nest more than {MAX_BASE_DEPTH} deep "
                                 f"(reached {path})")
-    doc = _Located(path)
+    return _build(_Located(path), path.stem, str(path), _chain + (key,))
+
+
+def look_from_dict(data: dict, *, where: str = "look") -> Look:
+    """A look from data shaped like a look file (``name``, ``camera``, ``effects``, ...;
+    ``base`` names a look to inherit), validated like one; PresetError naming ``where`` and
+    the key.  Reads back :meth:`Look.document` (an output's ``clfx:lookJSON``)."""
+    return _build(_Located.from_data(data, where), "look", "", ())
+
+
+def _build(doc: _Located, default_name: str, source: str, chain: tuple) -> Look:
     data = doc.data
     if not isinstance(data, dict):
         doc.fail((), "a look file must be a mapping with name, description and effects")
@@ -252,18 +276,21 @@ def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
     base = None
     if data.get("base"):
         try:
-            base = load_look(str(data["base"]), _chain + (key,))
+            base = load_look(str(data["base"]), chain)
         except _BaseChainTooLong:
             raise
         except PresetError as exc:
             doc.fail(("base",), str(exc))
-    look = Look(name=str(data.get("name") or path.stem), description=str(data.get("description") or ""),
-                source=str(path), base=str(data["base"]) if data.get("base") else None)
+    look = Look(name=str(data.get("name") or default_name),
+                description=str(data.get("description") or ""),
+                source=source, base=str(data["base"]) if data.get("base") else None)
     if base:
         look.camera, look.seed = base.camera, base.seed
+        look.camera_animated = base.camera_animated
         look.steps = list(base.steps)  # steps are frozen: shared, replaced when updated
         look.description = look.description or base.description
-    look.camera = _camera(doc, data.get("camera"), look.camera)
+    look.camera, look.camera_animated = _camera(doc, data.get("camera"), look.camera,
+                                                look.camera_animated)
     if "seed" in data:
         if isinstance(data["seed"], bool) or not isinstance(data["seed"], int):
             doc.fail(("seed",), f"{data['seed']!r} is not an integer")
@@ -272,24 +299,62 @@ def load_look(name_or_path: str, _chain: tuple = ()) -> Look:
     return look
 
 
-def _camera(doc: _Located, block, camera: Camera) -> Camera:
+def _camera(doc: _Located, block, camera: Camera, animated=()):
+    """The camera block applied to ``camera``: (camera, keyframed values).  A keyframed value
+    is checked at every key; the camera holds its first key's value."""
     if block is None:
-        return camera
+        return camera, animated
     if not isinstance(block, dict):
         doc.fail(("camera",), "must be a mapping of camera values")
     names = Camera.field_names()
     values = {}
+    keyed = dict(animated)
     for k, v in block.items():
         if k not in names:
             doc.fail(("camera", k), f"unknown camera value{_suggest(k, names)}")
         try:
-            values[k] = Camera.validate(k, v)
+            if is_keyframed(v):
+                if k in Camera.CHOICES:
+                    raise ValueError(f"camera.{k} is not numeric; it cannot be keyframed")
+                keyed[k] = animation.parse(v, lambda x, w, k=k: _camera_value(k, x, w),
+                                           f"camera.{k}", integer=k in Camera.INTEGERS)
+                values[k] = keyed[k].keys[0][1]
+            else:
+                keyed.pop(k, None)
+                values[k] = Camera.validate(k, v)
         except (TypeError, ValueError) as exc:
             doc.fail(("camera", k), str(exc))
     try:
-        return camera.updated(**values)
+        return camera.updated(**values), tuple(keyed.items())
     except (TypeError, ValueError) as exc:
         doc.fail(("camera",), str(exc))
+
+
+def _camera_value(name: str, value, where: str):
+    try:
+        return Camera.validate(name, value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _step_params(cls, name: str, merged: dict, fail) -> tuple[Params, tuple]:
+    """Validated params and keyframed ones of a step; ``fail(pname, message)`` raises."""
+    validated, keyed = {}, {}
+    for pname, value in merged.items():
+        try:
+            param = cls.descriptor.param(pname, name)
+            if is_keyframed(value):
+                if param.kind not in ANIMATABLE:
+                    raise ParamError(f"{name}.{pname} is a {param.kind} parameter; only "
+                                     "numbers can be keyframed")
+                keyed[pname] = animation.parse(value, param.validate, f"{name}.{pname}",
+                                               integer=param.kind == "int")
+                validated[pname] = keyed[pname].keys[0][1]
+            else:
+                validated[pname] = param.validate(value, f"{name}.{pname}")
+        except (ClfxError, ValueError) as exc:
+            fail(pname, str(exc))
+    return cls.params(**validated), tuple(keyed.items())
 
 
 def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
@@ -335,18 +400,19 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
         if entry.get("enabled", True) is False:
             steps = [s for s in steps if s is not existing]
             continue
-        merged = {**(existing.params.as_dict() if existing else {}), **params}
-        validated = {}
-        for pname, value in merged.items():
-            try:
-                validated[pname] = cls.descriptor.param(pname, name).validate(value, f"{name}.{pname}")
-            except ClfxError as exc:
-                doc.fail(at + ("params", pname), str(exc))
-        p = cls.params(**validated)
+        merged = {**(existing.param_values() if existing else {}), **params}
+        p, keyed = _step_params(cls, name, merged,
+                                lambda pname, msg: doc.fail(at + ("params", pname), msg))
         if "missing_passes" not in entry and existing:
             when_missing = existing.missing_passes
+        mask = existing.mask if existing else None
+        if "mask" in entry:
+            try:
+                mask = None if entry["mask"] is None else parse_mask(entry["mask"], "mask")
+            except ValueError as exc:
+                doc.fail(at + ("mask",), str(exc))
         step = Step(name, p, quality or (existing.quality if existing else None), id=sid,
-                    missing_passes=when_missing)
+                    missing_passes=when_missing, mask=mask, animated=keyed)
         if existing:
             steps[steps.index(existing)] = step
         else:
@@ -354,8 +420,21 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
     return steps
 
 
+STEP_SETTINGS = ("quality", "enabled", "missing_passes")
+"""What ``--set STEP.KEY=VALUE`` may set on a step besides its parameters."""
+
+
 def apply_overrides(look: Look, assignments: list[str]) -> Look:
-    """Apply ``--set effect.param=value`` / ``camera.key=value`` / ``seed=N`` (CLI strings)."""
+    """Apply ``--set`` assignments (CLI strings) to ``look`` (changed in place, returned):
+
+    - ``effect.param=value``; ``effect.param=F:V,F:V`` keyframes it (``smooth:F:V,...``
+      eases), see `clfx.pipeline.animation`;
+    - ``effect.quality=LEVEL``, ``effect.enabled=false`` (drop the step),
+      ``effect.missing_passes=skip`` (skip it on frames without its pass);
+    - ``camera.key=value`` (keyframes too) and ``seed=N``.
+
+    ``effect`` is a step's id, or its effect's name.
+    """
     for text in assignments:
         if "=" not in text:
             raise PresetError(f"--set {text!r}: expected KEY=VALUE, e.g. glare.strength=0.2")
@@ -373,7 +452,7 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
         target, pname = key.split(".", 1)
         if target == "camera":
             _ascii_digits(key, value)
-            look.camera = _camera_override(look.camera, pname, value)
+            look.camera, look.camera_animated = _camera_override(look, pname, value)
             continue
         step = next((s for s in look.steps if s.id == target), None) or \
             next((s for s in look.steps if s.effect == target), None)
@@ -381,17 +460,42 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
             names = [s.id for s in look.steps]
             raise PresetError(f"--set {text!r}: look {look.name!r} has no effect {target!r}"
                               f"{_suggest(target, names) if names else ''}")
-        index = look.steps.index(step)
-        if pname == "quality":
-            look.steps[index] = replace(step, quality=validate_quality(value, f"--set {key}"))
-            continue
-        param = step.plugin.descriptor.param(pname, f"--set {key}")
-        if not isinstance(param, StringParam):
-            _ascii_digits(key, value)
-        parsed = param.parse(value, f"--set {key}")
-        look.steps[index] = replace(step, params=step.plugin.params(
-            **{**step.params.as_dict(), pname: parsed}))
+        look.steps[look.steps.index(step)] = _step_override(step, key, pname, value)
     return look
+
+
+def _step_override(step: Step, key: str, pname: str, value: str) -> Step:
+    where = f"--set {key}"
+    if pname == "quality":
+        return replace(step, quality=validate_quality(value, where))
+    if pname == "enabled":
+        return replace(step, enabled=BoolParam("enabled", True).parse(value, where))
+    if pname == "missing_passes":
+        if value not in MISSING_PASSES:
+            raise PresetError(f"{where}={value!r}: expected {' or '.join(MISSING_PASSES)}")
+        return replace(step, missing_passes=value)
+    try:
+        param = step.plugin.descriptor.param(pname, where)
+    except ParamError as exc:
+        raise ParamError(f"{exc} (a step also takes {', '.join(STEP_SETTINGS)})") from None
+    if not isinstance(param, StringParam):
+        _ascii_digits(key, value)
+    keyed = dict(step.animated)
+    if param.kind in ANIMATABLE and animation.looks_keyframed(value):
+        if param.kind in ("rgb", "double2d"):
+            raise PresetError(f"{where}: keyframe vector parameters in a look file "
+                              f"({pname}: {{1001: [..], 1040: [..]}})")
+        try:
+            keyed[pname] = animation.parse_cli(value, param.parse, where,
+                                               integer=param.kind == "int")
+        except ValueError as exc:
+            raise PresetError(str(exc)) from None
+        parsed = keyed[pname].keys[0][1]
+    else:
+        keyed.pop(pname, None)
+        parsed = param.parse(value, where)
+    return replace(step, params=step.plugin.params(**{**step.params.as_dict(), pname: parsed}),
+                   animated=tuple(keyed.items()))
 
 
 def _ascii_digits(key: str, value: str) -> None:
@@ -403,18 +507,33 @@ def _ascii_digits(key: str, value: str) -> None:
                           f"with 0-9)")
 
 
-def _camera_override(camera: Camera, name: str, value: str) -> Camera:
+def _camera_override(look: Look, name: str, value: str):
+    """``--set camera.NAME=value`` (or keyframes): (camera, keyframed camera values)."""
     if name not in Camera.field_names():
         raise PresetError(f"--set camera.{name}: unknown camera value{_suggest(name, Camera.field_names())}")
-    if name not in Camera.CHOICES:
+    keyed = dict(look.camera_animated)
+    if name not in Camera.CHOICES and animation.looks_keyframed(value):
         try:
-            value = float(value)
-        except ValueError:
-            raise PresetError(f"--set camera.{name}: {value!r} is not a number") from None
+            keyed[name] = animation.parse_cli(
+                value, lambda text, w: _camera_value(name, _number(name, text), w),
+                f"--set camera.{name}", integer=name in Camera.INTEGERS)
+        except ValueError as exc:
+            raise PresetError(str(exc)) from None
+        return look.camera.updated(**{name: keyed[name].keys[0][1]}), tuple(keyed.items())
+    keyed.pop(name, None)
+    if name not in Camera.CHOICES:
+        value = _number(name, value)
     try:
-        return camera.updated(**{name: Camera.validate(name, value)})
+        return look.camera.updated(**{name: Camera.validate(name, value)}), tuple(keyed.items())
     except (TypeError, ValueError) as exc:
         raise PresetError(f"--set camera.{name}: {exc}") from None
+
+
+def _number(name: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise PresetError(f"--set camera.{name}: {text!r} is not a number") from None
 
 
 def single_effect_look(effect: str, assignments: list[str]) -> Look:

@@ -1,0 +1,118 @@
+"""The Python API (issue 13): `import clfx` loads looks and renders arrays, files and
+sequences; the README's example runs as written; the CLI goes through the same functions."""
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clfx
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def readme_example() -> str:
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("## Python API"):]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+def test_readme_example_runs(rt, tmp_path, monkeypatch, capsys):
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    img = np.random.default_rng(2).uniform(0.05, 0.5, (36, 48, 4)).astype(np.float32)
+    img[..., 3] = 1.0
+    write_frame(Frame.from_array(img), tmp_path / "shot.exr")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(readme_example(), "README.md", "exec"), {})
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("(90, 160, 4) {'camera.focus_distance': ")
+    assert "dof" in out[1] and out[2].startswith("1 ")
+    assert (tmp_path / "out" / "shot.exr").is_file()
+
+
+def test_import_is_cheap_and_documented():
+    import subprocess
+    import sys
+
+    code = ("import sys, clfx; assert 'pyopencl' not in sys.modules and "
+            "'OpenImageIO' not in sys.modules, sorted(sys.modules); print(clfx.__version__)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 0, r.stderr
+    for name in ("load_look", "render_array", "render_file", "render_sequence", "runtime"):
+        doc = getattr(clfx, name).__doc__
+        assert doc and len(doc) > 40, name
+    assert "metres" in clfx.render_array.__doc__ and "pixels per frame" in clfx.render_array.__doc__
+    with pytest.raises(AttributeError):
+        clfx.no_such_name
+
+
+def test_load_look_by_name_dict_and_look():
+    by_name = clfx.load_look("cinema", set=["glare.strength=0.1"])
+    assert next(s for s in by_name.steps if s.effect == "glare").params.strength == 0.1
+    doc = by_name.document()
+    from_dict = clfx.load_look(doc)
+    assert from_dict.params_hash() == by_name.params_hash()
+    inherited = clfx.load_look({"base": "cinema", "effects": [{"effect": "grain",
+                                                               "enabled": False}]})
+    assert "grain" not in [s.effect for s in inherited.steps]
+    copy = clfx.load_look(by_name, set=["seed=5"])
+    assert copy.seed == 5 and by_name.seed != 5
+    from clfx.core.errors import PresetError
+    with pytest.raises(PresetError, match=r"look: effects\[0\].effect: unknown effect"):
+        clfx.load_look({"effects": [{"effect": "glair"}]})
+
+
+def test_render_array_with_passes_and_report(rt):
+    h, w = 40, 64
+    rgba = np.random.default_rng(4).uniform(0.1, 0.4, (h, w, 4)).astype(np.float32)
+    rgba[..., 3] = 1.0
+    rgba[10:20, 10:30, :3] = 1.0
+    depth = np.where(np.arange(w)[None, :] < 32, 1.0, 50.0).astype(np.float32).repeat(h, 0)
+    velocity = np.zeros((h, w, 2), np.float32)
+    velocity[10:20, 10:30, 0] = 5.0
+    look = {"camera": {"focus_distance": 1.0, "f_number": 1.4},
+            "effects": [{"effect": "dof"}, {"effect": "motion_blur"}]}
+    res = clfx.render_array(rgba, look, depth=depth, velocity=velocity, quality="draft")
+    assert res.rgba.shape == (h, w, 4) and res.window.width == w
+    assert [s.effect for s in res.report.steps if s.ran] == ["dof", "motion_blur"]
+    assert np.abs(res.rgba - rgba)[:, 40:].max() > 1e-3     # the far half is out of focus
+    from clfx.core.errors import ClipError, ParamError
+    with pytest.raises(ClipError, match="needs a depth pass"):
+        clfx.render_array(rgba, look)
+    with pytest.raises(ParamError, match="depth: shape"):
+        clfx.render_array(rgba, look, depth=depth[:5])
+
+
+def test_render_sequence_returns_reports_and_checks_first(rt, tmp_path):
+    from clfx.core.errors import ImageIOError
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    img = np.full((16, 24, 4), 0.3, np.float32)
+    for f in (1, 2, 3):
+        write_frame(Frame.from_array(img), tmp_path / f"in.{f:04d}.exr")
+    seen = []
+    res = clfx.render_sequence(tmp_path / "in.####.exr", tmp_path / "out.####.exr",
+                               "film-35mm", frames="1-2",
+                               on_frame=lambda done, total, rep: seen.append((done, total)))
+    assert res.summary["frames"] == 2 and seen == [(1, 2), (2, 2)]
+    assert [r.frame for r in res.reports] == [1, 2] and len(res.outputs) == 2
+    with pytest.raises(ImageIOError, match="exists"):
+        clfx.render_sequence(tmp_path / "in.####.exr", tmp_path / "out.####.exr", "film-35mm")
+    with pytest.raises(TypeError, match="RenderOptions"):
+        clfx.render_file(tmp_path / "in.0001.exr", tmp_path / "x.exr", no_such_option=1)
+
+
+def test_cli_is_a_thin_layer_over_the_api():
+    """The CLI renders and loads looks through clfx.api (no second implementation)."""
+    import inspect
+
+    from clfx import cli
+
+    src = inspect.getsource(cli)
+    assert "from clfx.api import render as render_api" in src
+    assert "Batch(" not in src and "render_frame" not in src
