@@ -6,7 +6,7 @@ from clfx.core.camera import Camera
 from clfx.core.errors import ClipError, ParamError
 from clfx.core.frame import Frame
 from clfx.pipeline.look import Look, Step, render_frame
-from clfx.core.plugin import (QUALITY_LEVELS, BoolParam, ChoiceParam, FloatParam, IntParam, RGBParam,
+from clfx.core.plugin import (QUALITY_LEVELS, BoolParam, Level, ChoiceParam, FloatParam, IntParam, RGBParam,
                          Vec2Param)
 from clfx.plugins import discover, get_plugin
 from clfx.core.rect import Rect
@@ -96,7 +96,7 @@ def test_missing_required_pass_is_reported_before_rendering(rt):
     class NeedsDepth(Plugin):
         descriptor = Descriptor(name="needs_depth", label="x", group="t", summary="x",
                                 kernel="lib/image.cl", clips=(Clip("source"), Clip("depth")),
-                                quality={q: "x" for q in QUALITY_LEVELS})
+                                quality={q: Level("x") for q in QUALITY_LEVELS})
 
     look = Look("d", steps=[Step("needs_depth", NeedsDepth.params(), plugin=NeedsDepth())])
     frame = Frame.from_array(np.zeros((4, 4, 4), np.float32))

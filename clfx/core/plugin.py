@@ -326,9 +326,11 @@ class Descriptor:
     frame_varying: bool = False
 
     def __post_init__(self):
-        # a bare sentence is a Level with nothing but a summary
-        levels = {k: v if isinstance(v, Level) else Level(str(v)) for k, v in self.quality.items()}
-        object.__setattr__(self, "quality", MappingProxyType(levels))
+        bad = [k for k, v in self.quality.items() if not isinstance(v, Level)]
+        if bad:
+            raise TypeError(f"effect {self.name}: quality levels {bad} must be Level data "
+                            f"(clfx.core.plugin.Level or a subclass), declared once")
+        object.__setattr__(self, "quality", MappingProxyType(dict(self.quality)))
 
     def level(self, quality: str) -> Level:
         """The declared meaning of ``quality`` (one of ``QUALITY_LEVELS``)."""
