@@ -13,7 +13,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
-RENDER_TIMEOUT_S = 50
+RENDER_TIMEOUT_S = 150  # a bound, not a speed target: 2 cores shared with Dask workers
 
 
 def env(**extra) -> dict:

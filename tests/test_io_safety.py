@@ -194,7 +194,10 @@ TILED_CHILD = """
         print("READ")
     except ImageIOError as e:
         print("ERROR", e)
-    print("RSS_MB", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
+    # VmHWM: this process's own peak (getrusage's ru_maxrss keeps the parent's across exec)
+    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")]
+    print("RSS_MB", int(hwm[0].split()[1]) // 1024 if hwm
+          else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
     print("SECONDS", time.perf_counter() - t0)
 """
 
