@@ -130,10 +130,10 @@ def test_pocl_cache_dir_is_persistent_by_default():
     assert os.environ.get("POCL_CACHE_DIR")
 
 
-def test_one_cache_evicts_values_and_buffers_least_recently_used_first(rt):
+def test_one_cache_evicts_what_is_worth_least_per_byte_then_least_recently_used(rt):
     import numpy as np
 
-    from clfx.device.cache import DeviceCache
+    from clfx.device.cache import BUFFER_COST_S, DeviceCache
 
     cache = DeviceCache(rt.ctx, max_bytes=1000)
     built = []
@@ -144,21 +144,28 @@ def test_one_cache_evicts_values_and_buffers_least_recently_used_first(rt):
             return np.zeros(n, np.uint8)
         return build
 
-    a = cache.get(("fx.a", 1), make(400))
+    # equal cost per byte: least recently used goes first
+    a = cache.get(("fx.a", 1), make(400), cost=4e-3)
     assert cache.get(("fx.a", 1), make(400)) is a and built == [400]  # a hit builds nothing
-    cache.get(("fx.b", 1), make(300))
+    cache.get(("fx.b", 1), make(300), cost=3e-3)
+    cache.get(("fx.a", 1), make(400))                  # a is now the most recently used
+    cache.get(("fx.c", 1), make(400), cost=4e-3)       # 1100 > 1000: b goes
+    assert cache.peek(("fx.b", 1)) is None and cache.peek(("fx.a", 1)) is a
+    # an expensive map outlives cheap entries used after it
+    cache.clear()
+    cache.get(("fx.map", 1), make(500), cost=1.0)
+    cache.get(("fx.spectrum", 1), make(400), cost=1e-3)
+    cache.get(("fx.spectrum", 2), make(400), cost=1e-3)  # over: the older spectrum goes
+    assert cache.peek(("fx.map", 1)) is not None and cache.peek(("fx.spectrum", 1)) is None
+    # idle buffers count in the same budget and are worth BUFFER_COST_S each
     buf = cache.take(200)
-    cache.give(200, buf)  # idle buffer: 400 + 300 + 200 held
-    cache.get(("fx.a", 1), make(400))  # a is now the most recently used
-    cache.get(("fx.c", 1), make(250))  # 1150 > 1000: the least recently used (b) goes
-    assert cache.peek(("fx.b", 1)) is None and cache.idle_bytes == 200
-    assert cache.peek(("fx.a", 1)) is a and cache.nbytes == 850
-    cache.get(("fx.d", 1), make(500))  # next in line: the idle buffer, then a
-    assert cache.idle_bytes == 0 and cache.peek(("fx.a", 1)) is None
-    assert cache.stats()["owners"] == {"fx.c": 250, "fx.d": 500}
-    a = cache.get(("fx.a", 1), make(400))
-    big = cache.get(("fx.big", 1), make(5000))  # larger than the cap: returned, not kept
+    cache.give(200, buf)
+    # 1100 > 1000: the spectrum (1e-3 s for 400 B) is worth less than the buffer
+    assert cache.idle_bytes == 200 and cache.nbytes == 700
+    assert cache.stats()["owners"] == {"fx.map": 500, "buffer": 200}
+    assert BUFFER_COST_S > 0
+    big = cache.get(("fx.big", 1), make(5000))          # larger than the cap: not kept
     assert big.nbytes == 5000 and cache.peek(("fx.big", 1)) is None
     cache.get(("fx.prog", 1), lambda: "program", nbytes=0)
-    cache.clear("fx.a")
-    assert cache.peek(("fx.a", 1)) is None and cache.peek(("fx.prog", 1)) == "program"
+    cache.clear("fx.map")
+    assert cache.peek(("fx.map", 1)) is None and cache.peek(("fx.prog", 1)) == "program"
