@@ -327,11 +327,14 @@ def _plan_depth(f: _File, spec: PassSpec, view, prefer_part, separate: bool) -> 
                            rule.pattern if rule else "explicit", why, separate, mode=mode)
     else:
         choice = _searched(f, ch.find_depth(parts, view), 1, separate)
-        if choice is None:
-            return None
-    if spec.depth_mode != "auto":
-        choice.mode = spec.depth_mode
-        choice.why += f"; mode {spec.depth_mode!r} from PassSpec"
+    return _overridden(choice, "mode", spec.depth_mode)
+
+
+def _overridden(choice: _PassPlan | None, field: str, value) -> _PassPlan | None:
+    """``choice`` with one convention set from the PassSpec (``"auto"``/None: kept)."""
+    if choice is not None and value not in ("auto", None):
+        setattr(choice, field, value)
+        choice.why += f"; {field} {value!r} from PassSpec"
     return choice
 
 
@@ -378,15 +381,9 @@ def _plan_velocity(f: _File, spec: PassSpec, view, prefer_part, separate: bool) 
                            y_up=rule.y_up if rule else True)
     else:
         choice = _searched(f, ch.find_velocity(parts, view), 2, separate)
-        if choice is None:
-            return None
-    if spec.velocity_direction != "auto":
-        choice.direction = spec.velocity_direction
-        choice.why += f"; direction {spec.velocity_direction!r} from PassSpec"
-    if spec.velocity_y_up is not None:
-        choice.y_up = bool(spec.velocity_y_up)
-        choice.why += f"; y_up={choice.y_up} from PassSpec"
-    return choice
+    choice = _overridden(choice, "direction", spec.velocity_direction)
+    return _overridden(choice, "y_up", None if spec.velocity_y_up is None
+                       else bool(spec.velocity_y_up))
 
 
 def _is_display_referred(f: _File, beauty: ch.BeautyChoice) -> bool:
