@@ -19,6 +19,7 @@ RENDER_ALL = textwrap.dedent("""
     from clfx.bench import cases
     from clfx.plugins import discover
     from clfx.device.runtime import Runtime
+    from clfx.pipeline.presets import read_lens
 
     def render_all(width, height):
         rt = Runtime.get()
@@ -28,7 +29,7 @@ RENDER_ALL = textwrap.dedent("""
             p = cls.params(**case.get("params", {}))
             out[name] = cls().apply(rt, p, case["source"], depth=case.get("depth"),
                                     velocity=case.get("velocity"), camera=case.get("camera"),
-                                    quality="final", frame=7, seed=11)
+                                    quality="final", frame=7, seed=11, read_lens=read_lens)
         return out
 
     if __name__ == "__main__":

@@ -8,9 +8,10 @@ from clfx.core.errors import ParamError
 from clfx.plugins.lens_flare import LensFlare, parse_ghosts
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
+from clfx.pipeline.presets import read_lens
 from tests.reference.lens_flare import lens_flare as reference, sources
 
-PARAMS = dict(threshold=5.0, ghost_count=8, softness=0.2, roundness=0.3, halo_intensity=0.05)
+PARAMS = dict(model="artistic", threshold=5.0, ghost_count=8, softness=0.2, roundness=0.3, halo_intensity=0.05)
 CAM = Camera(blades=6, blade_rotation=10.0)
 
 
@@ -60,7 +61,8 @@ def test_ghost_spec_errors():
 
 def test_ghost_position_and_brightness_follow_the_light(rt):
     h, w = 100, 160
-    p = LensFlare.params(threshold=1.0, ghosts="-1:0.05:1,1,1", halo_intensity=0.0, intensity=1.0,
+    p = LensFlare.params(model="artistic", threshold=1.0, ghosts="-1:0.05:1,1,1",
+                         halo_intensity=0.0, intensity=1.0,
                          roundness=1.0, softness=0.1)
     lx, ly = 120, 30
     glow = []
@@ -85,7 +87,8 @@ def test_hexagonal_ghost_shape(rt):
     h, w = 200, 200
     src = np.zeros((h, w, 4), np.float32)
     src[100, 100, :3] = 1e4                               # light at the centre: ghost there
-    p = LensFlare.params(threshold=1.0, ghosts="1:0.2:1,1,1", halo_intensity=0.0,
+    p = LensFlare.params(model="artistic", threshold=1.0, ghosts="1:0.2:1,1,1",
+                         halo_intensity=0.0,
                          softness=0.02, roundness=0.0)
     out = LensFlare().apply(rt, p, src, camera=Camera(blades=6, blade_rotation=0.0)) - src
     r = 0.2 * math.hypot(w, h)                            # circumradius 56.6 px
@@ -183,7 +186,8 @@ def test_finite_input_gives_finite_output(rt, effect, params, quality):
 
     cls = get_plugin(effect)
     src = wide_range_frame()
-    got = cls().apply(rt, cls.params(**params), src, quality=quality, camera=CAM)
+    got = cls().apply(rt, cls.params(**params), src, quality=quality, camera=CAM,
+                      read_lens=read_lens)
     finite = np.isfinite(src)
     assert np.isfinite(got[finite]).all(), np.argwhere(~np.isfinite(got) & finite)[:5]
 
@@ -195,5 +199,6 @@ def test_wide_float_range_exr_flares_finite(rt, exr_images):
     assert np.isfinite(f.rgba).all()
     for quality in ("draft", "reference"):
         got = LensFlare().apply(rt, LensFlare.params(), f.rgba, quality=quality,
-                                data_window=f.data_window, display_window=f.display_window)
+                                data_window=f.data_window, display_window=f.display_window,
+                                read_lens=read_lens)
         assert np.isfinite(got).all()
