@@ -408,20 +408,31 @@ class LensFlare(Plugin):
         return entries, levels, keep[rows], lights
 
     def render_physical(self, rt, p, ctx):
-        src = ctx.source
-        lvl = self.level(ctx)
-        out_win = self.output_window(p, ctx)
         entries, levels, _, lights = self.plan(rt, p, ctx)
-        top = int(levels.max(initial=0))
-        tiles = flare.tile_plan(entries, levels, out_win.x0, out_win.y0, out_win.width,
-                                out_win.height, PHYSICAL_TILE, min(top, lvl.max_level))
         blades = p.blades or ctx.camera.blades
-        normals = flare.aperture_normals(blades, ctx.camera.blade_rotation + p.rotation)
-        _, _, edge32 = self.edge_tables(ctx)
+        out = self.draw(rt, ctx, entries, levels, self.output_window(p, ctx), blades,
+                        ctx.camera.blade_rotation + p.rotation)
+        ctx.notes.append(f"lens_flare: {len(lights)} light source(s), {len(entries)} ghost(s) "
+                         f"drawn ({p.lens})")
+        bad = ctx.analysis.nonfinite_count
+        if bad:
+            ctx.notes.append(f"lens_flare: {bad} non-finite pixels set to 0")
+        return out
+
+    def draw(self, rt, ctx, entries, levels, out_win, blades: int, rotation_deg: float):
+        """The source plus the ghosts ``entries`` (``clfx.fx.flare.plan_entries``) over
+        ``out_win``: each resolution level from the coarsest, its tiles' constants and edge
+        lists, the coarser level upsampled into it; level 0 composes onto the source."""
+        src = ctx.source
+        top = min(int(levels.max(initial=0)), self.level(ctx).max_level)
+        tiles = flare.tile_plan(entries, levels, out_win.x0, out_win.y0, out_win.width,
+                                out_win.height, PHYSICAL_TILE, top)
+        normals = flare.aperture_normals(blades, rotation_deg)
         ent = rt.to_device(entries.astype(np.float32).ravel() if entries.size
                            else np.zeros(flare.ENTRY, np.float32))
         norm = rt.to_device(normals.astype(np.float32).ravel())
-        edge = rt.to_device(edge32)
+        edge = rt.to_device(self.edge_tables(ctx)[2])
+        ox, oy = src.window.offset_in(out_win)
         i32, f32 = np.int32, np.float32
         coarse = None
         for t in reversed(tiles):
@@ -430,7 +441,6 @@ class LensFlare(Plugin):
             knl = rt.kernel("lens_flare.cl", "lens_flare_ghosts", TILE=PHYSICAL_TILE,
                             BLADES=blades if blades >= 3 else 0, COMPOSE=int(final),
                             EDGE_SAMPLES=flare.EDGE_SAMPLES, EDGE_REACH=f"{flare.EDGE_REACH}f")
-            ox, oy = src.window.offset_in(out_win)
             c = coarse if coarse is not None else out
             rt.launch(knl, (out.pitch // 4, t.height), out, i32(out.pitch), i32(t.width),
                       i32(t.height), f32(out_win.x0 + 0.5 * t.factor),
@@ -440,11 +450,6 @@ class LensFlare(Plugin):
                       i32(c.width), i32(c.height), i32(coarse is not None), src,
                       i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy))
             coarse = out
-        ctx.notes.append(f"lens_flare: {len(lights)} light source(s), {len(entries)} ghost(s) "
-                         f"drawn ({p.lens})")
-        bad = ctx.analysis.nonfinite_count
-        if bad:
-            ctx.notes.append(f"lens_flare: {bad} non-finite pixels set to 0")
         return coarse
 
     # render ---------------------------------------------------------------------------
