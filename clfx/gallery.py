@@ -1,7 +1,8 @@
 """`clfx gallery`: every effect and every built-in look on a few test images, one labelled
 before/after contact sheet per image, so anyone can judge the looks at a glance.
 
-Images: the built-in demo scene (frame 1, with its depth and velocity passes) and, where
+Images: the built-in demo scene (frame 1, with its depth and velocity passes), a synthetic
+sunny day (:func:`sun_scene`: the light flare and corona are seen with) and, where
 the shared OpenEXR test images are found (``CLFX_SHARED_DATA``, else ``shared/data`` next to
 the repository or one folder further up), ``ScanLines/CandleGlass.exr`` and
 ``ScanLines/Desk.exr``; a missing image is skipped with one line on stderr.  Each input is
@@ -30,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clfx.core.errors import ClfxError
 from clfx.core.frame import Frame
 from clfx.demo import tonemap_preview as tonemap
 from clfx.pipeline.look import render_frame
@@ -75,18 +77,30 @@ def text_mask(text: str, scale: int = 2) -> np.ndarray:
     return np.kron(mask, np.ones((scale, scale), bool))
 
 
-def label(tile: np.ndarray, text: str, *, scale: int = 2) -> np.ndarray:
-    """``tile`` (display-linear RGB) with ``text`` written in white on a dark band at the top."""
+def label(tile: np.ndarray, lines, *, scale: int = 2) -> np.ndarray:
+    """``tile`` (display-linear RGB) with ``lines`` of text in white on a darkened band at the
+    top (text wider than the tile is cut)."""
     out = tile.copy()
-    mask = text_mask(text, scale)
-    h = mask.shape[0] + 2 * scale
-    w = min(mask.shape[1], out.shape[1] - 2 * scale)
-    band = out[:h]
+    lines = [lines] if isinstance(lines, str) else list(lines)
+    line_h = 9 * scale
+    band = out[:line_h * len(lines) + scale]
     band *= 0.25                                   # darken behind the text, keep the image
-    if w > 0:
-        region = band[scale:scale + mask.shape[0], scale:scale + w]
-        region[mask[:, :w]] = 1.0
+    for k, text in enumerate(lines):
+        mask = text_mask(text, scale)
+        w = min(mask.shape[1], out.shape[1] - 2 * scale)
+        if w > 0:
+            y = scale + k * line_h
+            out[y:y + mask.shape[0], scale:scale + w][mask[:, :w]] = 1.0
     return out
+
+
+def thumbnail(img: np.ndarray, width: int) -> np.ndarray:
+    """Box-downscale ``img`` by the integer factor that brings it to at most ``width``."""
+    step = max(1, int(math.ceil(img.shape[1] / width)))
+    if step == 1:
+        return img
+    h, w = img.shape[0] // step * step, img.shape[1] // step * step
+    return img[:h, :w].reshape(h // step, step, w // step, step, -1).mean(axis=(1, 3))
 
 
 # -- images ---------------------------------------------------------------------------------
@@ -123,6 +137,26 @@ def area_resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
     return np.einsum("xj,yjc->yxc", wx, out).astype(np.float32)
 
 
+def sun_scene(width: int, height: int) -> Frame:
+    """A sunny day: a blue sky over dark ground and a post, and the sun (a disc of radius
+    0.8 % of the width at 1e5, diffuse white being 1) high on the right: the light that lens
+    flare, corona and spikes are seen with."""
+    ys, xs = np.mgrid[0:height, 0:width] + 0.5
+    v = ys / height
+    rgba = np.ones((height, width, 4), np.float32)
+    sky = np.array([0.35, 0.55, 1.1]) + (np.array([0.9, 1.0, 1.15]) - [0.35, 0.55, 1.1]) * \
+        (v / 0.62)[..., None] ** 2
+    ground = np.array([0.12, 0.1, 0.06]) * (1.0 + 0.3 * np.sin(xs / width * 40.0) *
+                                             np.sin(ys / height * 25.0))[..., None]
+    rgba[..., :3] = np.where((v < 0.62)[..., None], sky, ground)
+    post = (np.abs(xs - 0.3 * width) < 0.012 * width) & (v > 0.25)
+    rgba[post, :3] = 0.05
+    r = 0.008 * width
+    sun = np.hypot(xs - 0.78 * width, ys - 0.2 * height)
+    rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0))[..., None]
+    return Frame.from_array(rgba.astype(np.float32))
+
+
 def gallery_inputs(width: int, log=print) -> list[tuple[str, Frame]]:
     """(name, frame) of every gallery image found, downscaled to ``width`` pixels."""
     from clfx.bench.scene import demo_scene, render_sharp
@@ -130,7 +164,9 @@ def gallery_inputs(width: int, log=print) -> list[tuple[str, Frame]]:
     height = int(round(width * 9 / 16))
     demo = render_sharp(demo_scene(1, width, height))
     demo.source = "demo scene frame 1"
-    out = [("demo", demo)]
+    sun = sun_scene(width, height)
+    sun.source = "a synthetic sunny day (clfx.gallery.sun_scene)"
+    out = [("demo", demo), ("sun", sun)]
     for name in SCANLINES:
         path = find_scanline_image(name)
         if path is None:
@@ -180,6 +216,7 @@ def _runnable(look, frame: Frame):
 
 
 def contact_sheet(tiles: list[np.ndarray], columns: int = 6, gap: int = 4) -> np.ndarray:
+    """Tiles (display-linear RGB, any sizes) on a dark sheet, row by row."""
     th = max(t.shape[0] for t in tiles)
     tw = max(t.shape[1] for t in tiles)
     cols = min(columns, len(tiles))
@@ -193,51 +230,62 @@ def contact_sheet(tiles: list[np.ndarray], columns: int = 6, gap: int = 4) -> np
 
 
 def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | None = None,
-                only=None, columns: int = 6, verbosity: int = 1) -> dict:
+                only=None, columns: int = 6, thumb_width: int = 320,
+                verbosity: int = 1) -> dict:
     """Render the gallery into ``outdir``; returns the index written to ``index.json``."""
+    from clfx.core.frame import crop_to
     from clfx.io.write import write_frame
 
     def log(msg):
         if verbosity > 0:
             print(msg, file=sys.stderr, flush=True)
 
+    def save(img, *parts):
+        path = os.path.join(outdir, *parts)
+        write_frame(Frame.from_array(np.ascontiguousarray(img, np.float32)), path,
+                    overwrite=True)
+        return path
+
     t0 = time.perf_counter()
     os.makedirs(outdir, exist_ok=True)
     items = gallery_looks(only)
     index = {"width": width, "quality": quality or "final", "images": []}
     for name, frame in gallery_inputs(width, log):
-        folder = os.path.join(outdir, name)
-        os.makedirs(folder, exist_ok=True)
-        from clfx.core.frame import crop_to
-
+        os.makedirs(os.path.join(outdir, name), exist_ok=True)
         exposure = exposure_for(frame.rgba)
-        tiles = [label(tonemap(frame.rgba, exposure), f"{name}: before")]
-        write_frame(Frame.from_array(tiles[0]), os.path.join(folder, "before.png"),
-                    overwrite=True)
-        entry = {"image": name, "source": frame.source, "size": [frame.rgba.shape[1],
-                 frame.rgba.shape[0]], "exposure": round(exposure, 4), "tiles": []}
+        before = tonemap(frame.rgba, exposure)
+        save(label(before, f"{name}: before"), name, "before.png")
+        thumbs = [label(thumbnail(before, thumb_width), [name, "before"])]
+        entry = {"image": name, "source": frame.source,
+                 "size": [frame.rgba.shape[1], frame.rgba.shape[0]],
+                 "exposure": round(exposure, 4), "tiles": []}
         for kind, item, look in items:
             runnable, missing = _runnable(look, frame)
-            t1 = time.perf_counter()
-            out, report = render_frame(rt, runnable, frame, frame_number=1, quality=quality)
-            ms = (time.perf_counter() - t1) * 1e3
-            rgba = crop_to(out.rgba, out.data_window, frame.display_window)
-            text = f"{kind[0]}: {item}"
+            lines = [f"{kind}: {item}"]
             if missing:
-                text += " (no passes: " + ",".join(missing) + " skipped)"
-            tile = label(tonemap(rgba, exposure), text)
-            tiles.append(tile)
-            write_frame(Frame.from_array(tile), os.path.join(folder, f"{kind}-{item}.png"),
-                        overwrite=True)
-            warnings = [w for s in report.steps for w in s.warnings]
+                lines.append("no pass: " + ",".join(missing) + " skipped")
+            t1 = time.perf_counter()
+            try:
+                out, report = render_frame(rt, runnable, frame, frame_number=1,
+                                           quality=quality)
+            except ClfxError as exc:      # e.g. `lens` needs a lens chosen: say so, go on
+                after, warnings, error = before, [], str(exc)
+                lines.append("not rendered: " + error[:60])
+            else:
+                error = None
+                after = tonemap(crop_to(out.rgba, out.data_window, frame.display_window),
+                                exposure)
+                warnings = [w for s in report.steps for w in s.warnings]
+            ms = (time.perf_counter() - t1) * 1e3
+            save(label(after, lines), name, f"{kind}-{item}.png")
+            thumbs.append(label(thumbnail(after, thumb_width), lines))
             entry["tiles"].append({"kind": kind, "name": item, "ms": round(ms, 1),
-                                   "skipped_steps": missing, "warnings": warnings})
+                                   "skipped_steps": missing, "warnings": warnings,
+                                   "error": error})
             log(f"clfx gallery: {name}: {kind} {item} ({ms:.0f} ms)")
-        sheet = os.path.join(folder, "sheet.png")
-        write_frame(Frame.from_array(contact_sheet(tiles, columns)), sheet, overwrite=True)
-        entry["sheet"] = sheet
+        entry["sheet"] = save(contact_sheet(thumbs, columns), name, "sheet.png")
         index["images"].append(entry)
-        log(f"clfx gallery: contact sheet {sheet}")
+        log(f"clfx gallery: contact sheet {entry['sheet']}")
     index["wall_s"] = round(time.perf_counter() - t0, 1)
     with open(os.path.join(outdir, "index.json"), "w") as f:
         json.dump(index, f, indent=1)

@@ -49,6 +49,7 @@ import numpy as np
 
 from clfx.core.plugin import Descriptor, FloatParam, IntParam
 from clfx.fx import fftconv, spectral
+from clfx.fx import psf as psflib
 from clfx.fx.scatter import SpreadRegions
 from clfx.core.rect import Rect
 from clfx.host import Plugin, register
@@ -221,17 +222,8 @@ def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
     rgb = np.zeros((2 * radius + 1, 2 * radius + 1, 3))
     for lam, w in zip(lams, weights):
         rgb += monochromatic_psf(field, geom, lam)[..., None] * w
-    rgb = spectral.to_gamut(rgb) * radial_taper(radius)[..., None]
+    rgb = spectral.to_gamut(rgb) * psflib.radial_taper(radius)[..., None]
     return rgb / rgb.sum(axis=(0, 1))
-
-
-def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
-    """1 inside ``start * radius``, a raised cosine to 0 at ``radius``: the PSF ends in a soft
-    circle instead of the (visible, on tone-mapped shadows) square of its array."""
-    o = np.arange(-radius, radius + 1, dtype=np.float64)
-    r = np.hypot(o[None, :], o[:, None]) / max(radius, 1)
-    t = np.clip((r - start) / (1.0 - start), 0.0, 1.0)
-    return 0.5 + 0.5 * np.cos(np.pi * t)
 
 
 @register
@@ -245,7 +237,7 @@ class Corona(SpreadRegions, Plugin):
         params=(
             FloatParam("threshold", 2.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance above which pixels diffract."),
-            FloatParam("intensity", 0.5, min=0.0, max=1.0,
+            FloatParam("intensity", 0.2, min=0.0, max=1.0,
                        hint="Fraction of the highlights' light that diffracts into the pattern "
                             "(its core included); the rest stays put: light is moved, never "
                             "added."),
