@@ -374,3 +374,14 @@ def test_physical_is_deterministic_and_keeps_alpha(rt, rng):
     assert np.array_equal(a, b)
     assert np.array_equal(a[..., 3], src[..., 3])
     assert (a[..., :3] >= src[..., :3]).all()
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_physical_hard_shapes(rt, rng, shape):
+    src = rng.uniform(0.0, 0.5, shape + (4,)).astype(np.float32)
+    src[0, -1, :3] = 1e6                                     # a light in the corner
+    for quality in ("draft", "reference"):
+        got = LensFlare().apply(rt, LensFlare.params(lens="zoom-80-200mm", gain=1e3), src,
+                                camera=CAM_P, quality=quality, read_lens=read_lens)
+        assert np.isfinite(got).all() and (got[..., :3] >= src[..., :3]).all()
+        assert np.array_equal(got[..., 3], src[..., 3])
