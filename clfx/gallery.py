@@ -152,7 +152,7 @@ def sun_scene(width: int, height: int) -> Frame:
     post = (np.abs(xs - 0.3 * width) < 0.012 * width) & (v > 0.25)
     rgba[post, :3] = 0.05
     r = 0.008 * width
-    sun = np.hypot(xs - 0.78 * width, ys - 0.2 * height)
+    sun = np.hypot(xs - 0.78 * width, ys - 0.3 * height)
     rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0))[..., None]
     return Frame.from_array(rgba.astype(np.float32))
 

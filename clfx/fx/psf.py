@@ -92,7 +92,8 @@ def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
 
 
 def gaussians(radius_px: int, sigmas_px, weights) -> np.ndarray:
-    """Normalised sum of Gaussians (bloom): sum_i w_i N(0, sigma_i^2), truncated at r."""
+    """Normalised sum of Gaussians (bloom): sum_i w_i N(0, sigma_i^2), truncated at r with
+    the round :func:`radial_taper` (a 1e5 sun would otherwise show the array's square)."""
     r = max(int(radius_px), 0)
     x, y = _radial_grid(r)
     d2 = x * x + y * y
@@ -101,7 +102,7 @@ def gaussians(radius_px: int, sigmas_px, weights) -> np.ndarray:
         s = max(float(s), 0.3)
         g = np.exp(-0.5 * d2 / (s * s))
         k += float(w) * g / g.sum()
-    return _normalise(k[..., None])[..., 0]
+    return _normalise((k * radial_taper(r))[..., None])[..., 0]
 
 
 def bloom_sigmas(radius_px: float, count: int = 4, ratio: float = 2.0, falloff: float = 0.5):

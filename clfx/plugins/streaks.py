@@ -184,7 +184,7 @@ class Streaks(Plugin):
         params=(
             FloatParam("threshold", 1.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance above which pixels streak."),
-            FloatParam("intensity", 0.2, min=0.0, max=100.0,
+            FloatParam("intensity", 0.1, min=0.0, max=100.0,
                        hint="Light added to the streaks as a fraction of the highlights' energy."),
             ChoiceParam("mode", "star", choices=("star", "aperture"),
                         hint="star: `streaks` rays at `angle`; aperture: diffraction spikes of "
@@ -198,7 +198,7 @@ class Streaks(Plugin):
             FloatParam("length", 0.08, min=0.0005, max=2.0,
                        hint="Distance at which a streak has faded to 1%, as a fraction of the "
                             "frame diagonal."),
-            FloatParam("core", 0.25, min=0.0, max=1.0,
+            FloatParam("core", 0.5, min=0.0, max=1.0,
                        hint="Only the light above this fraction of its light's peak luminance "
                             "streaks (a light: a connected region above threshold): the bright "
                             "core of a flame, not its glow or what it lights (0: all above "

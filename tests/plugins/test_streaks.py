@@ -116,7 +116,7 @@ def test_hdr_point_energy_and_no_negatives(rt):
     p = Streaks.params(**{**PARAMS, "length": 0.1, "color_shift": 0.0, "tint": (1, 1, 1)})
     got = Streaks().apply(rt, p, src)
     assert got.min() >= 0.0
-    bright = 1e5 * (1 - 0.25)                # lum - core x peak: the pixel is its own peak
+    bright = 1e5 * (1 - 0.5)                 # lum - core x peak: the pixel is its own peak
     added = (got.astype(np.float64) - src)[..., :3].sum(axis=(0, 1))
     # 9 px rays, 16 px support, stay inside the frame: energy = intensity * highlight
     np.testing.assert_allclose(added, 0.5 * bright, rtol=1e-5)
