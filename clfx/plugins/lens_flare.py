@@ -243,8 +243,10 @@ def tile_lists(entries: np.ndarray, window: Rect):
 class LensFlare(Plugin):
     descriptor = Descriptor(
         name="lens_flare", label="Lens flare", group="Lens", kernel="lens_flare.cl",
-        summary="Aperture-shaped ghosts along the line through each light and the image "
-                "centre, plus a halo; lights just outside the frame flare too.",
+        summary="Ghosts of the aperture along the line through each light and the image "
+                "centre: every two-reflection ghost of a lens prescription, coloured and "
+                "as dim as its coatings make it (physical), or a ghost table and a halo "
+                "(artistic); lights just outside the frame flare too.",
         spreads_light=True,
         params=(
             FloatParam("threshold", 5.0, min=0.0, max=1e6,
@@ -266,27 +268,27 @@ class LensFlare(Plugin):
                        hint="Artistic: ghost brightness, fraction of a light's flux times the "
                             "ghost tint, spread over the ghost's area."),
             IntParam("ghost_count", 6, min=0, max=len(DEFAULT_GHOSTS),
-                     hint="How many ghosts of the default table to use (when `ghosts` is empty)."),
+                     hint="Artistic: how many ghosts of the default table to use (when `ghosts` is empty)."),
             StringParam("ghosts", "",
-                        hint="Ghost table 'k:size:r,g,b;...': position factor along light-centre "
+                        hint="Artistic: ghost table 'k:size:r,g,b;...': position factor along light-centre "
                              "line (0 = centre, 1 = light), radius (fraction of diagonal), tint."),
             FloatParam("softness", 0.15, min=0.0, max=1.0,
-                       hint="Ghost edge width as a fraction of its radius."),
+                       hint="Artistic: ghost edge width as a fraction of its radius."),
             FloatParam("rim", 0.4, min=0.0, max=1.0,
-                       hint="Ghost brightness profile: 0 = flat, 1 = dark centre rising to a "
+                       hint="Artistic: ghost brightness profile, 0 = flat, 1 = dark centre rising to a "
                             "bright rim (1 - rim + rim * rho^2)."),
             FloatParam("roundness", 0.0, min=0.0, max=1.0,
-                       hint="0 = the aperture polygon, 1 = a disk."),
+                       hint="Artistic: 0 = the aperture polygon, 1 = a disk."),
             IntParam("blades", 0, min=0, max=32,
                      hint="Ghost polygon sides; 0 = the camera block's blades (0 there = round)."),
             FloatParam("rotation", 0.0, min=-360.0, max=360.0, units="deg",
                        hint="Added to the camera's blade rotation, degrees counter-clockwise."),
             FloatParam("halo_radius", 0.3, min=0.0, max=2.0,
-                       hint="Halo ring radius around the centre, fraction of the diagonal."),
+                       hint="Artistic: halo ring radius around the centre, fraction of the diagonal."),
             FloatParam("halo_width", 0.02, min=0.0005, max=1.0,
-                       hint="Halo ring Gaussian width (sigma), fraction of the diagonal."),
+                       hint="Artistic: halo ring Gaussian width (sigma), fraction of the diagonal."),
             FloatParam("halo_intensity", 0.005, min=0.0, max=100.0,
-                       hint="Fraction of a light's flux in its halo (0 = no halo)."),
+                       hint="Artistic: fraction of a light's flux in its halo (0 = no halo)."),
             IntParam("max_sources", 8, min=1, max=64,
                      hint="At most this many lights flare (the most energetic)."),
             FloatParam("margin", 0.1, min=0.0, max=2.0,
