@@ -595,6 +595,22 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 
 
 @cli.command()
+@click.argument("outdir", default="clfx-gallery", required=False)
+@click.option("--width", default=640, show_default=True, help="Width the images are scaled to.")
+@click.option("--only", default=None, metavar="A,B", help="Only these effects and looks.")
+@quality_option
+@click.pass_context
+def gallery(ctx, outdir, width, only, quality):
+    """Every effect and built-in look on the demo scene, CandleGlass.exr and Desk.exr: a
+    labelled before/after contact sheet per image in OUTDIR."""
+    from clfx.gallery import run_gallery
+
+    run_gallery(_runtime(ctx), outdir, width=width, quality=quality,
+                only=None if only is None else set(only.split(",")),
+                verbosity=ctx.obj.get("verbosity", 1))
+
+
+@cli.command()
 @click.option("--effects", default=None, metavar="A,B",
               help="Effects to measure (default: all; 'none' to skip).")
 @click.option("--looks", default=None, metavar="A,B",

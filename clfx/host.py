@@ -59,11 +59,15 @@ class RenderContext:
         The input was an 8/16-bit display-referred file (linearised on read).
     read_image : callable(path) -> ndarray
         Reads a file a :class:`~clfx.core.plugin.PathParam` names (supplied by the pipeline).
+    read_lens : callable(name) -> dict
+        Reads a lens prescription by name (``presets/lenses/<name>.yaml``) or path, as the
+        plain dict ``clfx.fx.optics.Prescription.from_dict`` takes (supplied by the pipeline).
     """
 
     def __init__(self, runtime, source, *, depth=None, velocity=None, display_window=None,
                  pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
-                 display_referred=False, analysis=None, output_limit=None, read_image=None):
+                 display_referred=False, analysis=None, output_limit=None, read_image=None,
+                 read_lens=None):
         self.runtime = runtime
         self.source = source
         self.depth = depth
@@ -80,6 +84,7 @@ class RenderContext:
         self.notes: list[str] = []
         self.warnings: list[str] = []  # said on stderr: a clamp, a guess, a skipped request
         self._read_image = read_image
+        self._read_lens = read_lens
 
     def read_image(self, path: str) -> np.ndarray:
         """The RGB(A) pixels of an image file a parameter names (a :class:`PathParam`), read
@@ -88,6 +93,14 @@ class RenderContext:
             raise ParamError(f"no image reader in this context to read {path!r} "
                              f"(pass read_image= to the render context)")
         return self._read_image(path)
+
+    def read_lens(self, name: str) -> dict:
+        """A lens prescription (a shipped name or a file) as a plain dict, read by the
+        pipeline's reader (effects never open files or parse YAML)."""
+        if self._read_lens is None:
+            raise ParamError(f"no lens reader in this context to read {name!r} "
+                             f"(pass read_lens= to the render context)")
+        return self._read_lens(name)
 
     @property
     def analysis(self):
@@ -208,7 +221,7 @@ class Plugin:
               quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
               data_window: Rect | None = None, display_window: Rect | None = None,
               pixel_aspect: float = 1.0, display_referred: bool = False,
-              keep_rod: bool = False, read_image=None):
+              keep_rod: bool = False, read_image=None, read_lens=None):
         """Run the effect on host arrays: upload, identity check, render, download.
 
         Returns the output cropped to the source window, or ``(array, window)`` with
@@ -224,7 +237,7 @@ class Plugin:
             velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
             display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
             seed=seed, camera=camera, quality=quality, display_referred=display_referred,
-            read_image=read_image)
+            read_image=read_image, read_lens=read_lens)
         self.check_clips(ctx)
         if self.is_identity(p, ctx):
             out, out_window = src.copy(), window

@@ -26,11 +26,38 @@
 #define CHECKED 1
 #endif
 
-/* scale x the sum of the highlights of the FACTOR x FACTOR source pixels under low-resolution
- * pixel (x, y); (ox, oy) = source window origin inside the output window, full-resolution
- * pixels. */
+#ifndef PEAK_TILE
+#define PEAK_TILE 32
+#endif
+
+/* The level a source pixel's light must pass: the threshold, or `core` times the peak of the
+ * light it belongs to (`peak`: per scene-analysis tile, tiles_x x tiles_y over the source
+ * window, the peak luminance of its connected bright region), whichever is higher. */
+inline float streaks_level(global const float *peak, int tiles_x, int tiles_y, int sx, int sy,
+                           float threshold, float core)
+{
+  if(core <= 0.0f) return threshold;
+  const int i = min(sx / PEAK_TILE, tiles_x - 1), j = min(sy / PEAK_TILE, tiles_y - 1);
+  return fmax(threshold, core * peak[j * tiles_x + i]);
+}
+
+/* The light that streaks: above its level (scatter_bright), its colour kept by
+ * `source_color` (0: its luminance, the streak's colour is then the tint). */
+inline float4 streaks_light(float4 c, float level, float source_color)
+{
+  const float4 h = scatter_bright(c, level);
+  if(source_color >= 1.0f) return h;
+  const float l = clfx_luminance(h);
+  return (float4)((float3)l + (h.xyz - (float3)l) * source_color, 0.0f);
+}
+
+/* scale x the sum of the streaking light of the FACTOR x FACTOR source pixels under
+ * low-resolution pixel (x, y); (ox, oy) = source window origin inside the output window,
+ * full-resolution pixels. */
 inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
-                          int y, int ox, int oy, float threshold, float scale)
+                          int y, int ox, int oy, float threshold, float scale,
+                          global const float *peak, int tiles_x, int tiles_y, float core,
+                          float source_color)
 {
   float4 acc = (float4)0.0f;
   for(int j = 0; j < FACTOR; j++)
@@ -41,7 +68,8 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
     {
       const int sx = x * FACTOR + i - ox;
       if(sx < 0 || sx >= src_w) continue;
-      acc += scatter_bright(clfx_load4(src, src_pitch, sx, sy), threshold) * scale;
+      const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
+      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color) * scale;
     }
   }
   return acc;
@@ -51,16 +79,18 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
 kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
                            const int src_h, global float *dst, const int org,
                            const int dst_pitch, const int dst_wp, const int dst_h,
-                           const int ox, const int oy, const float threshold)
+                           const int ox, const int oy, const float threshold,
+                           global const float *peak, const int tiles_x, const int tiles_y,
+                           const float core, const float source_color)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
-  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f)
-               * (1.0f / (FACTOR * FACTOR));
+  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
+                           tiles_x, tiles_y, core, source_color) * (1.0f / (FACTOR * FACTOR));
   if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
     acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
-                      1.0f / (FACTOR * FACTOR));
+                      1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color);
   clfx_store4(dst, dst_pitch, x, y, acc);
 }
 
@@ -159,15 +189,9 @@ kernel void streaks_compose(global const float *src, const int src_pitch, const 
 #if FACTOR == 1
   const float4 s = clfx_load4(streak, lo_pitch, x, y);
 #else
-  const float u = ((float)x + 0.5f) / FACTOR - 0.5f, v = ((float)y + 0.5f) / FACTOR - 0.5f;
-  const float u0 = floor(u), v0 = floor(v);
-  const float fu = u - u0, fv = v - v0;
-  const int i0 = (int)u0, j0 = (int)v0;
-  const float4 a = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0, j0);
-  const float4 b = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0 + 1, j0);
-  const float4 d = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0, j0 + 1);
-  const float4 e = clfx_load4_clamped(streak, lo_pitch, lo_w, lo_h, i0 + 1, j0 + 1);
-  const float4 s = (a * (1.0f - fu) + b * fu) * (1.0f - fv) + (d * (1.0f - fu) + e * fu) * fv;
+  const float4 s = scatter_bilinear(streak, lo_pitch, lo_w, lo_h,
+                                    ((float)x + 0.5f) / FACTOR - 0.5f,
+                                    ((float)y + 0.5f) / FACTOR - 0.5f);
 #endif
   clfx_store4(dst, dst_pitch, x, y, scatter_add(c, s));
 }

@@ -42,6 +42,7 @@ from clfx.core.frame import Frame
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.core.frame import crop_to
 from clfx.host import RenderContext
+from clfx.pipeline.look import read_image_rgba, read_lens_dict
 from clfx.plugins import discover
 from clfx.core.rect import Rect
 
@@ -166,7 +167,8 @@ def _case_context(rt, case: dict, quality: str):
                          display_window=case.get("display_window") or window,
                          pixel_aspect=case.get("pixel_aspect", 1.0), frame=case.get("frame", 1),
                          seed=case.get("seed", 0), camera=case.get("camera") or Camera(),
-                         quality=quality, display_referred=case.get("display_referred", False))
+                         quality=quality, display_referred=case.get("display_referred", False),
+                         read_image=read_image_rgba, read_lens=read_lens_dict)
 
 
 def bench_effect(rt, name: str, width: int, height: int, repeat: int,

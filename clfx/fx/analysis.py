@@ -104,6 +104,19 @@ class SceneAnalysis:
                                        not bbox.intersect(self.display_window).empty))
         return sorted(sources, key=lambda s: -s.energy)
 
+    def region_peaks(self, threshold: float) -> np.ndarray:
+        """Per tile, the peak luminance of the connected region of tiles brighter than
+        ``threshold`` it belongs to (the light of :meth:`light_sources`; 8-connectivity),
+        0 for tiles in none: what "the brightest part of this light" is."""
+        mask = self.tiles_above(threshold)
+        out = np.zeros(mask.shape)
+        if mask.any():
+            labels = _label(mask)
+            peaks = np.zeros(labels.max() + 1)
+            np.maximum.at(peaks, labels[mask], self.max_lum[mask])
+            out[mask] = peaks[labels[mask]]
+        return out
+
     # -- motion -------------------------------------------------------------------------
     def moving_tiles(self, min_px: float = 0.5) -> np.ndarray | None:
         """Mask of tiles where some pixel moves at least ``min_px`` (None: no velocity)."""

@@ -753,6 +753,13 @@ class GhostTable:
         a ghost's power relative to the imaged light is ``energy / primary_transmission``.
     entrance_pupil_mm : ndarray (W,)
         Entrance pupil radius of the primary path (mm).
+    edge_bm_mm : ndarray (G, W)
+        ``|B m|`` (mm) of the limiting aperture's rim imaged onto the sensor: ``B`` of the
+        ray-transfer matrix from that aperture to the sensor, ``m = A_s / A_L`` the rim's
+        magnification along the ghost beam (``B m = c_L h A_s``).  A rim diffracts into
+        Fresnel fringes ``sqrt(lambda |B m| / 2)`` wide on the sensor (the Collins integral
+        near a straight edge: Fresnel's ``xi = d / sqrt(lambda B m / 2)``; exact for an
+        aperture in air, such as the stop).
     image_height_per_slope_mm : float
         The light's paraxial image height per unit field slope ``tan(angle)`` (mm): the
         effective focal length for a lens focused at infinity.
@@ -774,10 +781,33 @@ class GhostTable:
     incidence_rad: np.ndarray
     primary_transmission: np.ndarray
     entrance_pupil_mm: np.ndarray
+    edge_bm_mm: np.ndarray
     image_height_per_slope_mm: float
+
+    PER_GHOST = ("pairs", "centre", "radius_mm", "orientation", "limiter", "disc_centre",
+                 "disc_radius_mm", "limiting_disc", "transmission", "energy", "intensity",
+                 "incidence_rad", "edge_bm_mm")
+    """The fields with one row per ghost (:meth:`subset` selects rows of these)."""
 
     def __len__(self) -> int:
         return len(self.pairs)
+
+    PER_WAVELENGTH = ("centre", "radius_mm", "orientation", "disc_centre", "disc_radius_mm",
+                      "limiting_disc", "transmission", "energy", "intensity", "incidence_rad",
+                      "edge_bm_mm")
+    """The per-ghost fields with a wavelength axis (the second)."""
+
+    def at_wavelength(self, index: int) -> GhostTable:
+        """The table at one of its wavelengths (its layouts cost 1 / W of the full one)."""
+        k = slice(index, index + 1)
+        return replace(self, wavelengths_nm=self.wavelengths_nm[k],
+                       primary_transmission=self.primary_transmission[k],
+                       entrance_pupil_mm=self.entrance_pupil_mm[k],
+                       **{f: getattr(self, f)[:, k] for f in self.PER_WAVELENGTH})
+
+    def subset(self, keep) -> GhostTable:
+        """The table of the ghosts ``keep`` selects (a boolean mask or indices)."""
+        return replace(self, **{k: getattr(self, k)[keep] for k in self.PER_GHOST})
 
     def for_light(self, x_mm) -> GhostLayout:
         """Where the ghosts of lights imaged ``x_mm`` from the optical centre fall.
@@ -888,11 +918,7 @@ def ghosts(lens: Prescription, wavelengths_nm=RGB_WAVELENGTHS_NM, *,
         disc_centre=disc_centre, disc_radius_mm=disc_radius, limiting_disc=lim_event,
         transmission=b.t, energy=energy, intensity=intensity, incidence_rad=angle,
         primary_transmission=primary_transmission, entrance_pupil_mm=r_ep,
-        image_height_per_slope_mm=float(h_per_u))
+        edge_bm_mm=np.abs(centre * h_per_u * a_s), image_height_per_slope_mm=float(h_per_u))
     if min_energy > 0.0 and g:
-        keep = table.energy.max(axis=1) >= min_energy
-        table = replace(table, **{k: getattr(table, k)[keep] for k in (
-            "pairs", "centre", "radius_mm", "orientation", "limiter", "disc_centre",
-            "disc_radius_mm", "limiting_disc", "transmission", "energy", "intensity",
-            "incidence_rad")})
+        table = table.subset(table.energy.max(axis=1) >= min_energy)
     return table

@@ -15,7 +15,8 @@ Models
     Angles come from the camera block (degrees per pixel at the optical centre,
     ``degrees(atan(sensor_width / (width_px * focal_length)))``) or from a given horizontal
     field of view.  Pixels within 4 px of the centre are integrated over their area (8 x 8
-    sub-samples): the core is narrower than a pixel at usual focal lengths.
+    sub-samples): the core is narrower than a pixel at usual focal lengths.  Truncated at
+    the radius with a raised-cosine taper over its outer quarter (no visible rim).
 ``gaussians``
     Bloom as a sum of Gaussians (Kawase-style), sigmas in pixels and relative weights.
 ``image``
@@ -74,12 +75,25 @@ def spencer(radius_px: int, deg_per_px: float, *, supersample: int = 8,
     for j in range(-c, c + 1):
         for i in range(-c, c + 1):
             k[r + j, r + i] = spencer_value(np.hypot(i + su, j + sv) * deg_per_px).mean()
-    k[np.hypot(x, y) > r + 0.5] = 0.0   # round support: no square corners in the glare
+    # round support fading out over its outer quarter: neither the square corners of the
+    # array nor the hard rim of a truncated power law show in exposed-up shadows
+    k *= radial_taper(r)
     return _normalise(k[..., None])[..., 0]
 
 
+def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
+    """1 inside ``start * radius``, a raised cosine to 0 at ``radius``: a PSF truncated at
+    ``radius`` ends in a soft circle instead of the (visible, on tone-mapped shadows) square
+    of its array or a hard rim."""
+    o = np.arange(-radius, radius + 1, dtype=np.float64)
+    r = np.hypot(o[None, :], o[:, None]) / max(radius, 1)
+    t = np.clip((r - start) / (1.0 - start), 0.0, 1.0)
+    return 0.5 + 0.5 * np.cos(np.pi * t)
+
+
 def gaussians(radius_px: int, sigmas_px, weights) -> np.ndarray:
-    """Normalised sum of Gaussians (bloom): sum_i w_i N(0, sigma_i^2), truncated at r."""
+    """Normalised sum of Gaussians (bloom): sum_i w_i N(0, sigma_i^2), truncated at r with
+    the round :func:`radial_taper` (a 1e5 sun would otherwise show the array's square)."""
     r = max(int(radius_px), 0)
     x, y = _radial_grid(r)
     d2 = x * x + y * y
@@ -88,7 +102,7 @@ def gaussians(radius_px: int, sigmas_px, weights) -> np.ndarray:
         s = max(float(s), 0.3)
         g = np.exp(-0.5 * d2 / (s * s))
         k += float(w) * g / g.sum()
-    return _normalise(k[..., None])[..., 0]
+    return _normalise((k * radial_taper(r))[..., None])[..., 0]
 
 
 def bloom_sigmas(radius_px: float, count: int = 4, ratio: float = 2.0, falloff: float = 0.5):

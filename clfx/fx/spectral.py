@@ -90,3 +90,21 @@ def to_gamut(rgb: np.ndarray) -> np.ndarray:
     out = rgb * (1 - t) + lum[..., None] * t
     out[lum <= 0] = 0.0
     return np.maximum(out, 0.0)
+
+
+def channel_weights(wavelength_nm) -> np.ndarray:
+    """How a camera's R, G and B channels spread over wavelength samples, shape (n, 3).
+
+    Each column is the channel's Rec.709 sensitivity (:func:`spectral_rgb_weights`) with
+    its negative lobes dropped, normalised to sum 1 over the samples: light of one channel
+    is carried by the wavelengths that channel sees, and a spectrally flat (white) light
+    keeps its RGB.  Three samples at the primaries' dominant wavelengths (610, 550, 465 nm)
+    give the identity; more samples spread each channel over its band (the coloured fringes
+    of lens flare ghosts are then graded, not three hard copies).
+    """
+    w = np.maximum(spectral_rgb_weights(wavelength_nm), 0.0)
+    s = w.sum(axis=0, keepdims=True)
+    if np.any(s <= 0.0):
+        raise ValueError(f"wavelengths {np.asarray(wavelength_nm).tolist()} leave a colour "
+                         f"channel without a sample it sees")
+    return w / s

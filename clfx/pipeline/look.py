@@ -360,6 +360,14 @@ def read_image_rgba(path: str):
     return read_frame(path).rgba
 
 
+def read_lens_dict(name: str) -> dict:
+    """A lens prescription by name or path (``presets/lenses``), as a plain dict: the reader
+    the pipeline hands effects through their render context."""
+    from clfx.pipeline.presets import read_lens  # lazy: presets imports this module
+
+    return read_lens(name)
+
+
 def output_limit(frame: Frame, keep_overscan: bool) -> Rect:
     """The window effects may write to and the result is cropped to."""
     limit = frame.data_window.union(frame.display_window)
@@ -455,7 +463,7 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
                         quality=quality or DEFAULT_QUALITY,
                         display_referred=frame.display_referred,
                         output_limit=output_limit(frame, keep_overscan),
-                        read_image=read_image_rgba)
+                        read_image=read_image_rgba, read_lens=read_lens_dict)
     if nonfinite:
         ctx.warnings.append(f"{nonfinite} pixel(s) with NaN or infinite values set to 0")
     return ctx
@@ -482,7 +490,8 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     if not reason:
         reason = step.plugin.is_identity(step.params, step_ctx)
     if reason:
-        return StepReport(step.id, False, reason, quality=level), None
+        return StepReport(step.id, False, reason, quality=level,
+                          warnings=list(step_ctx.warnings)), None
     grown = step.plugin.output_window(step.params, step_ctx)
     check_pixels(grown.width, grown.height, f"frame grown by {step.id}", FrameTooLarge)
     t0 = time.perf_counter()

@@ -536,6 +536,53 @@ def _number(name: str, text: str) -> float:
         raise PresetError(f"--set camera.{name}: {text!r} is not a number") from None
 
 
+# -- lens prescriptions (presets/lenses) ------------------------------------------------------
+LENS_FOLDER = "lenses"
+
+
+def lens_dirs() -> list[tuple[str, Path]]:
+    """Folders of lens prescriptions, searched in order: ``lenses/`` inside each
+    ``CLFX_PRESET_PATH`` folder, beside the user's looks, and the built-in ``presets/lenses``."""
+    dirs = [(origin, folder / LENS_FOLDER) for origin, folder in search_dirs()[:-2]]
+    dirs.append(("user", user_dir().parent / LENS_FOLDER))
+    dirs.append(("built-in", builtin_dir() / LENS_FOLDER))
+    return dirs
+
+
+def available_lenses() -> dict[str, Path]:
+    """Lens name -> prescription file; earlier folders win."""
+    found: dict[str, Path] = {}
+    for _, folder in lens_dirs():
+        if folder.is_dir():
+            for path in sorted(folder.glob("*.y*ml")):
+                found.setdefault(path.stem, path)
+    return found
+
+
+def find_lens(name_or_path: str) -> Path:
+    """The file of a lens prescription: a path (``.yaml`` or with a separator) or a name."""
+    p = Path(name_or_path)
+    if p.suffix.lower() in (".yaml", ".yml") or os.sep in name_or_path:
+        if p.is_file():
+            return p
+        raise PresetError(f"lens file {name_or_path} does not exist")
+    lenses = available_lenses()
+    if name_or_path in lenses:
+        return lenses[name_or_path]
+    raise PresetError(f"unknown lens {name_or_path!r}{_suggest(name_or_path, list(lenses))}")
+
+
+def read_lens(name_or_path: str) -> dict:
+    """A lens prescription as the plain dict ``clfx.fx.optics.Prescription.from_dict`` takes:
+    found by :func:`find_lens`, read with the same limits and YAML safety as a look (a regular
+    UTF-8 file of at most 1 MiB, no aliases, no duplicate keys); the optics validate it."""
+    path = find_lens(name_or_path)
+    data = _Located(path).data
+    if not isinstance(data, dict):
+        raise PresetError(f"{path}: a lens prescription is a mapping with name and surfaces")
+    return data
+
+
 def single_effect_look(effect: str, assignments: list[str]) -> Look:
     """A one-step look for ``clfx apply EFFECT ... param=value``."""
     cls = get_plugin(effect)

@@ -21,15 +21,24 @@ anti-aliased N-gon or disk, sampled so the 380 nm pattern has about one FFT bin 
 bilinear resampling per wavelength, with pixel supersampling when the pattern is smaller than
 a pixel) and cached.
 
-Output = sanitised source + ``intensity`` * (highlights ⊛ PSF), highlights being
-``rgb * max(lum - threshold, 0) / lum``.  ``size`` is the radius of the first dark ring at
-550 nm for a round aperture (fraction of the frame diagonal; the same scale for polygons),
-``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its outer
-quarter, then renormalised).
+Output = sanitised source - ``intensity`` * highlights + ``intensity`` * (highlights ⊛ PSF),
+highlights being ``rgb * max(lum - threshold, 0) / lum``: the part of the light that the
+droplets or the aperture diffract leaves its pixel and lands in the pattern (Babinet: the
+undiffracted rest goes straight on), so the corona moves light and never adds any (the
+frame's total is kept).  ``size`` is the radius of the first dark ring at 550 nm for a round
+aperture (fraction of the frame diagonal; the same scale for polygons; the default 0.03 is an
+atmospheric corona's few degrees, rings wide enough to show around a candle flame, not only
+a point), ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its
+outer quarter, then renormalised; the default 5 keeps three to four rings).
 
-The convolution is ``clfx.fx.fftconv.spread`` over the bounding box of the tiles with
-highlights only (scene analysis), so one light costs a small FFT; identity and regions are
-the glare family's (``clfx.fx.scatter.SpreadRegions``).
+The pattern is smooth at the scale of its rings, so below ``reference`` it is computed at a
+reduced resolution ``1 / f`` (f a power of two, at most 16) that still gives the first dark
+ring ``ring_px`` reduced pixels (final: 8): the highlights are splatted onto the coarse grid
+with tent weights (each pixel's light keeps its centroid), the PSF is sampled at ``r0 / f``,
+and the glow is upsampled bilinearly (energy per pixel divided by f^2): the pattern is blurred
+by about f pixels, never moved.  The convolution is ``clfx.fx.fftconv.spread`` over the
+bounding box of the tiles with highlights only (scene analysis), so one light costs a small
+FFT; identity and regions are the glare family's (``clfx.fx.scatter.SpreadRegions``).
 """
 from __future__ import annotations
 
@@ -40,30 +49,38 @@ import numpy as np
 
 from clfx.core.plugin import Descriptor, FloatParam, IntParam
 from clfx.fx import fftconv, spectral
+from clfx.fx import psf as psflib
 from clfx.fx.scatter import SpreadRegions
+from clfx.core.rect import Rect
 from clfx.host import Plugin, register
 
 
 @dataclass(frozen=True)
 class CoronaLevel(fftconv.SpreadLevel):
     """A corona quality level: ``wavelengths`` spectral samples from 380 to 780 nm (80 = 5 nm
-    bins), and the convolution settings of ``clfx.fx.fftconv.spread``."""
+    bins); the pattern is computed at ``1 / f`` resolution (f a power of two) while its first
+    dark ring spans at least ``ring_px`` reduced pixels (``inf``: full resolution), and the
+    convolution settings of ``clfx.fx.fftconv.spread``."""
 
     wavelengths: int = 40
+    ring_px: float = 8.0
 
 
 LEVELS = {
     "draft": fftconv.spread_level(
-        CoronaLevel, "draft", "16 wavelengths; half-resolution float32 FFT (one pyramid level)",
-        wavelengths=16),
+        CoronaLevel, "draft", "16 wavelengths; pattern at reduced resolution (>= 4 px per "
+        "first-ring radius); half-resolution float32 FFT (one pyramid level)",
+        wavelengths=16, ring_px=4.0),
     "preview": fftconv.spread_level(
-        CoronaLevel, "preview", "24 wavelengths; float32 FFT with the brightest pixels "
-        "gathered exactly", wavelengths=24),
+        CoronaLevel, "preview", "24 wavelengths; pattern at reduced resolution (>= 6 px per "
+        "first-ring radius); float32 FFT with the brightest pixels gathered exactly",
+        wavelengths=24, ring_px=6.0),
     "final": fftconv.spread_level(
-        CoronaLevel, "final", "40 wavelengths (10 nm); float64 FFT", wavelengths=40),
+        CoronaLevel, "final", "40 wavelengths (10 nm); pattern at reduced resolution (>= 8 px "
+        "per first-ring radius, bilinear upsampling); float64 FFT", wavelengths=40),
     "reference": fftconv.spread_level(
-        CoronaLevel, "reference", "80 wavelengths (5 nm); float64 direct gather when small, "
-        "else float64 FFT", wavelengths=80),
+        CoronaLevel, "reference", "80 wavelengths (5 nm); full resolution; float64 direct "
+        "gather when small, else float64 FFT", wavelengths=80, ring_px=math.inf),
 }
 
 AIRY_FIRST_ZERO = 1.2196698912665045
@@ -205,17 +222,8 @@ def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
     rgb = np.zeros((2 * radius + 1, 2 * radius + 1, 3))
     for lam, w in zip(lams, weights):
         rgb += monochromatic_psf(field, geom, lam)[..., None] * w
-    rgb = spectral.to_gamut(rgb) * radial_taper(radius)[..., None]
+    rgb = spectral.to_gamut(rgb) * psflib.radial_taper(radius)[..., None]
     return rgb / rgb.sum(axis=(0, 1))
-
-
-def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
-    """1 inside ``start * radius``, a raised cosine to 0 at ``radius``: the PSF ends in a soft
-    circle instead of the (visible, on tone-mapped shadows) square of its array."""
-    o = np.arange(-radius, radius + 1, dtype=np.float64)
-    r = np.hypot(o[None, :], o[:, None]) / max(radius, 1)
-    t = np.clip((r - start) / (1.0 - start), 0.0, 1.0)
-    return 0.5 + 0.5 * np.cos(np.pi * t)
 
 
 @register
@@ -229,13 +237,14 @@ class Corona(SpreadRegions, Plugin):
         params=(
             FloatParam("threshold", 2.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance above which pixels diffract."),
-            FloatParam("intensity", 0.5, min=0.0, max=100.0,
-                       hint="Fraction of the highlights' energy added as the diffraction "
-                            "pattern (its core included)."),
-            FloatParam("size", 0.006, min=0.0002, max=0.2,
+            FloatParam("intensity", 0.2, min=0.0, max=1.0,
+                       hint="Fraction of the highlights' light that diffracts into the pattern "
+                            "(its core included); the rest stays put: light is moved, never "
+                            "added."),
+            FloatParam("size", 0.03, min=0.0002, max=0.2,
                        hint="Radius of the first dark ring at 550 nm, as a fraction of the "
                             "frame diagonal."),
-            FloatParam("extent", 8.0, min=1.5, max=40.0,
+            FloatParam("extent", 5.0, min=1.5, max=40.0,
                        hint="PSF radius in first-ring radii (more = more, fainter rings)."),
             IntParam("blades", 0, min=0, max=32,
                      hint="Aperture blades; 0 = the camera block's (a camera value of 0 means "
@@ -246,16 +255,26 @@ class Corona(SpreadRegions, Plugin):
     strength_param = "intensity"
 
     # PSF ------------------------------------------------------------------------------
-    def psf(self, p, ctx) -> np.ndarray:
-        """The RGB PSF for these parameters, frame size, camera and quality (kept in the
-        runtime's cache)."""
+    def factor(self, p, ctx) -> int:
+        """The reduction of the pattern's resolution: the largest power of two leaving the
+        first dark ring ``ring_px`` reduced pixels (at most 16)."""
+        ring = ctx.size_px(p.size) / self.level(ctx).ring_px
+        f = 1
+        while f < 16 and 2 * f <= ring:
+            f *= 2
+        return f
+
+    def psf(self, p, ctx, factor: int = 1) -> np.ndarray:
+        """The RGB PSF for these parameters, frame size, camera and quality, sampled at
+        ``1 / factor`` resolution (kept in the runtime's cache)."""
         blades = p.blades or ctx.camera.blades
         rotation = ctx.camera.blade_rotation
         n = self.level(ctx).wavelengths
-        cap = self.max_radius(ctx)
-        key = ("corona.psf", round(ctx.size_px(p.size), 6), p.extent, blades, rotation, n, cap)
+        cap = -(-self.max_radius(ctx) // factor)
+        r0 = ctx.size_px(p.size) / factor
+        key = ("corona.psf", round(r0, 6), p.extent, blades, rotation, n, cap)
         return ctx.runtime.cache.get(
-            key, lambda: spectral_psf(ctx.size_px(p.size), p.extent, blades, rotation, n, cap))
+            key, lambda: spectral_psf(r0, p.extent, blades, rotation, n, cap))
 
     @staticmethod
     def max_radius(ctx) -> int:
@@ -269,20 +288,40 @@ class Corona(SpreadRegions, Plugin):
     def render(self, rt, p, ctx):
         src = ctx.source
         i32, f32 = np.int32, np.float32
-        bright = src.like()
-        rt.launch(rt.kernel("corona.cl", "corona_bright"), (src.pitch // 4, src.height), src,
-                  bright, i32(src.pitch), i32(src.height), f32(p.threshold))
         out_win = self.output_window(p, ctx)
-        info = fftconv.ConvolveInfo()
-        k = self.psf(p, ctx)
-        glow = fftconv.spread(rt, bright, k, self.level(ctx), out_window=out_win,
-                              support=self.highlight_support(p, ctx),
-                              split_level=max(p.threshold, 1.0) * 64.0, info=info)
-        out = rt.image(out_win)
         ox, oy = src.window.offset_in(out_win)
-        rt.launch(rt.kernel("corona.cl", "corona_compose"), (out.pitch, out.height), src,
-                  i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow, out,
-                  i32(out.pitch), i32(out.width), i32(out.height), f32(p.intensity))
+        f = self.factor(p, ctx)
+        support = self.highlight_support(p, ctx)
+        if f == 1:
+            bright = src.like()
+            rt.launch(rt.kernel("corona.cl", "corona_bright"), (src.pitch // 4, src.height),
+                      src, bright, i32(src.pitch), i32(src.height), f32(p.threshold))
+            glow_win = out_win
+        else:
+            # the pattern at 1 / f resolution: reduced pixel (i, j) is centred on output pixel
+            # coordinates (f (i - 1/2), f (j - 1/2)), one pixel of border on each side; the
+            # highlights are splatted onto it with tent weights (their centroids kept)
+            glow_win = Rect(0, 0, -(-out_win.width // f) + 2, -(-out_win.height // f) + 2)
+            bright = rt.image(glow_win)
+            rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f), (bright.pitch, bright.height),
+                      src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy),
+                      bright, i32(bright.pitch), i32(bright.width), i32(bright.height),
+                      f32(p.threshold))
+            if not support.empty:
+                sx, sy = support.x0 - out_win.x0, support.y0 - out_win.y0
+                support = Rect(sx // f, sy // f, -(-(sx + support.width) // f) + 2,
+                               -(-(sy + support.height) // f) + 2)
+        info = fftconv.ConvolveInfo()
+        glow = fftconv.spread(rt, bright, self.psf(p, ctx, f), self.level(ctx),
+                              out_window=glow_win, support=support,
+                              split_level=max(p.threshold, 1.0) * 64.0 * f * f, info=info)
+        out = rt.image(out_win)
+        rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f), (out.pitch, out.height),
+                  src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow,
+                  i32(glow.pitch), i32(glow.width), i32(glow.height), out, i32(out.pitch),
+                  i32(out.width), i32(out.height), f32(p.intensity), f32(p.threshold))
+        if f > 1:
+            ctx.notes.append(f"corona: pattern at 1/{f} resolution")
         bad = ctx.analysis.nonfinite_count
         if bad:
             ctx.notes.append(f"corona: {bad} non-finite pixels set to 0")

@@ -1,8 +1,29 @@
-"""Lens flare: aperture-shaped ghosts along the line through each light and the image centre,
-plus a halo.
+"""Lens flare: aperture-shaped ghosts along the line through each light and the image centre:
+from a lens prescription (physical, the default) or from a table of ghosts (artistic).
 
-Model
------
+Physical model (``model="physical"``)
+-------------------------------------
+``lens`` names a prescription (``presets/lenses/<name>.yaml``, or a YAML file: surfaces,
+glasses, clear apertures, the stop, coatings), read through ``ctx.read_lens``.  Every ghost
+that two reflections between its surfaces make is found by paraxial ray-transfer matrices
+per wavelength (``clfx.fx.optics``: Lee & Eisemann 2013, Hullin et al. 2011), at the camera
+block's f-number; the aperture is the camera's (``blades``, ``blade_rotation``).  A light is
+every pixel above ``threshold`` in a connected bright region (scene analysis), its flux
+``F`` the sum of those pixels (RGB), its position their luminance-weighted centroid, its
+extent their rms radius.  Each ghost is the aperture polygon (or the round rim of a lens
+limiting it) imaged through its matrix, cut by the clip discs of the other apertures on its
+path, with per-wavelength sizes and positions (``final``: 7 wavelengths, ``clfx.fx.spectral``
+weights per channel: coloured fringes), a Fresnel-diffraction rim and edges blurred by the
+light's extent and the lens's aberrations, and the brightness of its two coated reflections:
+``F * energy / T_p`` over its area (``clfx.fx.flare``: no fudge factor; ``gain`` multiplies
+it, default 1).  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
+drawn.  ``intensity``, ``ghost_count``, ``ghosts``, ``softness``, ``rim``, ``roundness`` and the
+halo belong to the artistic model.  The camera's focal length does not change the ghosts:
+the prescription is its own lens (the light's position on the sensor is what matters, in mm
+through the camera's ``sensor_width``).
+
+Artistic model (``model="artistic"``)
+-------------------------------------
 Light sources are the bright connected regions of the scene analysis
 (``ctx.analysis.light_sources(threshold, margin_px)``: tile-level, 8-connected, including
 lights up to ``margin`` outside the display window when the data window has overscan).  Each
@@ -42,10 +63,14 @@ import math
 
 import numpy as np
 
+import json
+from dataclasses import dataclass
+
 from clfx.core.errors import ParamError
-from clfx.core.plugin import Descriptor, FloatParam, IntParam, Level, StringParam
-from clfx.host import Plugin, register
+from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, StringParam
 from clfx.core.rect import Rect
+from clfx.fx import flare, optics, spectral
+from clfx.host import Plugin, register
 
 DEFAULT_GHOSTS = (
     # k (position), size (fraction of diagonal), tint (RGB)
@@ -65,14 +90,42 @@ TILE = 32
 ENTRY = 12
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
-LEVELS = {  # one closed form at every level; fp64: the sources' flux and centroid sums
-    "draft": Level("analytic ghosts, float32 per pixel (exact closed form; all levels equal)",
-                   fp64=True),
-    "preview": Level("analytic ghosts, float32 per pixel", fp64=True),
-    "final": Level("analytic ghosts, float32 per pixel", fp64=True),
-    "reference": Level("analytic ghosts, float32 per pixel; source measurement in float64 at "
-                       "every level", fp64=True),
+PHYSICAL_TILE = 16
+"""Tile of the physical ghosts' lists (level pixels): edges cost work only in their tiles."""
+
+
+@dataclass(frozen=True)
+class FlareLevel(Level):
+    """A lens-flare quality level.  Physical model: ``wavelengths`` spectral samples (3: the
+    Rec.709 primaries' dominant wavelengths, else evenly from 420 to 680 nm), and the edge
+    scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k`` resolution
+    (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic model is
+    one closed form at every level.  fp64: the lights' flux and centroid sums."""
+
+    wavelengths: int = 7
+    level_scale: float = 2.0
+    max_level: int = 4
+
+
+LEVELS = {
+    "draft": FlareLevel("physical: 3 wavelengths (RGB), ghosts with edges of >= 1 px drawn at "
+                        "reduced resolution; artistic: analytic ghosts (all levels equal)",
+                        fp64=True, wavelengths=3, level_scale=1.0),
+    "preview": FlareLevel("physical: 5 wavelengths, edges >= 1.5 px at reduced resolution; "
+                          "artistic: analytic ghosts", fp64=True, wavelengths=5, level_scale=1.5),
+    "final": FlareLevel("physical: 7 wavelengths, edges >= 2 px at reduced resolution (bilinear "
+                        "upsampling); artistic: analytic ghosts", fp64=True),
+    "reference": FlareLevel("physical: 11 wavelengths, every ghost at full resolution; "
+                            "artistic: analytic ghosts; float64 light measurement",
+                            fp64=True, wavelengths=11, level_scale=math.inf),
 }
+
+
+def flare_wavelengths(count: int) -> tuple[float, ...]:
+    """The wavelength samples (nm) of a level (see :class:`FlareLevel`)."""
+    if count == 3:
+        return optics.RGB_WAVELENGTHS_NM
+    return tuple(float(v) for v in np.linspace(420.0, 680.0, count))
 
 
 def parse_ghosts(spec: str, count: int) -> list[tuple[float, float, tuple[float, float, float]]]:
@@ -97,14 +150,6 @@ def parse_ghosts(spec: str, count: int) -> list[tuple[float, float, tuple[float,
     return out
 
 
-def aperture_normals(blades: int, rotation_deg: float) -> np.ndarray:
-    """Unit edge normals (x right, y down) of a regular N-gon with vertex 0 at rotation."""
-    if blades < 3:
-        return np.zeros((1, 2), np.float32)
-    t = math.radians(rotation_deg) + math.pi * (2 * np.arange(blades) + 1) / blades
-    return np.stack([np.cos(t), -np.sin(t)], axis=1).astype(np.float32)
-
-
 def smooth_edge(rho, edge):
     """Ghost coverage: 1 inside rho <= 1 - edge, smoothstep down to 0 at rho = 1."""
     s = np.clip((1.0 - rho) / edge, 0.0, 1.0)
@@ -123,7 +168,7 @@ def ghost_area(blades: int, rotation_deg: float, roundness: float, edge: float,
     phi = (np.arange(7200) + 0.5) * (2 * math.pi / 7200)
     g = np.ones_like(phi)
     if blades >= 3:
-        n = aperture_normals(blades, rotation_deg).astype(np.float64)
+        n = flare.aperture_normals(blades, rotation_deg)
         poly = (np.cos(phi)[:, None] * n[:, 0] - np.sin(phi)[:, None] * n[:, 1]).max(axis=1)
         poly /= math.cos(math.pi / blades)
         g = poly + (1.0 - poly) * roundness
@@ -198,37 +243,52 @@ def tile_lists(entries: np.ndarray, window: Rect):
 class LensFlare(Plugin):
     descriptor = Descriptor(
         name="lens_flare", label="Lens flare", group="Lens", kernel="lens_flare.cl",
-        summary="Aperture-shaped ghosts along the line through each light and the image "
-                "centre, plus a halo; lights just outside the frame flare too.",
+        summary="Ghosts of the aperture along the line through each light and the image "
+                "centre: every two-reflection ghost of a lens prescription, coloured and "
+                "as dim as its coatings make it (physical), or a ghost table and a halo "
+                "(artistic); lights just outside the frame flare too.",
         spreads_light=True,
         params=(
             FloatParam("threshold", 5.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance above which a region is a light source."),
+            ChoiceParam("model", "physical", choices=("physical", "artistic"),
+                        hint="physical: the ghosts of a lens prescription (`lens`); artistic: "
+                             "the ghost table (`ghosts`, `intensity`) and a halo."),
+            StringParam("lens", "double-gauss-50mm",
+                        hint="Physical: a shipped prescription (presets/lenses/NAME.yaml: "
+                             "double-gauss-50mm, retrofocus-28mm, zoom-80-200mm) or a YAML "
+                             "file."),
+            FloatParam("gain", 1.0, min=0.0, max=1e6,
+                       hint="Physical: multiplies the ghosts' brightness (1 = the coated "
+                            "reflections of the prescription, no fudge factor)."),
+            FloatParam("cull", 0.01, min=0.0, max=1.0,
+                       hint="Physical: ghosts whose brightest pixel stays below this fraction "
+                            "of the frame's median tile luminance are not drawn."),
             FloatParam("intensity", 0.05, min=0.0, max=1000.0,
-                       hint="Ghost brightness: fraction of a light's flux times the ghost tint, "
-                            "spread over the ghost's area."),
+                       hint="Artistic: ghost brightness, fraction of a light's flux times the "
+                            "ghost tint, spread over the ghost's area."),
             IntParam("ghost_count", 6, min=0, max=len(DEFAULT_GHOSTS),
-                     hint="How many ghosts of the default table to use (when `ghosts` is empty)."),
+                     hint="Artistic: how many ghosts of the default table to use (when `ghosts` is empty)."),
             StringParam("ghosts", "",
-                        hint="Ghost table 'k:size:r,g,b;...': position factor along light-centre "
+                        hint="Artistic: ghost table 'k:size:r,g,b;...': position factor along light-centre "
                              "line (0 = centre, 1 = light), radius (fraction of diagonal), tint."),
             FloatParam("softness", 0.15, min=0.0, max=1.0,
-                       hint="Ghost edge width as a fraction of its radius."),
+                       hint="Artistic: ghost edge width as a fraction of its radius."),
             FloatParam("rim", 0.4, min=0.0, max=1.0,
-                       hint="Ghost brightness profile: 0 = flat, 1 = dark centre rising to a "
+                       hint="Artistic: ghost brightness profile, 0 = flat, 1 = dark centre rising to a "
                             "bright rim (1 - rim + rim * rho^2)."),
             FloatParam("roundness", 0.0, min=0.0, max=1.0,
-                       hint="0 = the aperture polygon, 1 = a disk."),
+                       hint="Artistic: 0 = the aperture polygon, 1 = a disk."),
             IntParam("blades", 0, min=0, max=32,
                      hint="Ghost polygon sides; 0 = the camera block's blades (0 there = round)."),
             FloatParam("rotation", 0.0, min=-360.0, max=360.0, units="deg",
                        hint="Added to the camera's blade rotation, degrees counter-clockwise."),
             FloatParam("halo_radius", 0.3, min=0.0, max=2.0,
-                       hint="Halo ring radius around the centre, fraction of the diagonal."),
+                       hint="Artistic: halo ring radius around the centre, fraction of the diagonal."),
             FloatParam("halo_width", 0.02, min=0.0005, max=1.0,
-                       hint="Halo ring Gaussian width (sigma), fraction of the diagonal."),
+                       hint="Artistic: halo ring Gaussian width (sigma), fraction of the diagonal."),
             FloatParam("halo_intensity", 0.005, min=0.0, max=100.0,
-                       hint="Fraction of a light's flux in its halo (0 = no halo)."),
+                       hint="Artistic: fraction of a light's flux in its halo (0 = no halo)."),
             IntParam("max_sources", 8, min=1, max=64,
                      hint="At most this many lights flare (the most energetic)."),
             FloatParam("margin", 0.1, min=0.0, max=2.0,
@@ -243,8 +303,10 @@ class LensFlare(Plugin):
         margin = int(math.ceil(p.margin * ctx.diagonal_px))
         return ctx.analysis.light_sources(p.threshold, margin_px=margin)[:p.max_sources]
 
-    def measure(self, rt, p, ctx, candidates):
-        """(x, y, flux RGB) per source in frame pixels, refined on the device."""
+    def measure(self, rt, p, ctx, candidates, full: bool = False):
+        """(x, y, flux RGB) per source in frame pixels, refined on the device; ``full``:
+        the whole light (not only its excess over the threshold), as ``flare.Light`` with
+        its rms radius."""
         src = ctx.source
         boxes = []
         for s in candidates:
@@ -253,18 +315,27 @@ class LensFlare(Plugin):
                           b.x1 - src.window.x0, b.y1 - src.window.y0])
         n = len(boxes)
         out = rt.buffer(8 * 4 * n)
-        knl = rt.kernel("lens_flare.cl", "lens_flare_measure", fp64=self.level(ctx).fp64)
+        if n == 0:
+            return []
+        knl = rt.kernel("lens_flare.cl", "lens_flare_measure", fp64=self.level(ctx).fp64,
+                        FULL=int(full))
         rt.launch(knl, (n,), src, np.int32(src.pitch),
                   rt.to_device(np.asarray(boxes, np.int32).ravel()), np.int32(n),
                   np.float32(p.threshold), out)
         m = rt.from_device(out, np.float32, 8 * n).reshape(n, 8).astype(np.float64)
+        if full:
+            return [flare.Light(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3]), r[7])
+                    for r in m if r[3] > 0]
         return [(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3])) for r in m if r[3] > 0]
 
     # cheap questions ------------------------------------------------------------------
     def is_identity(self, p, ctx):
-        if p.intensity == 0.0 and p.halo_intensity == 0.0:
+        if p.model == "physical":
+            if p.gain == 0.0:
+                return "gain is 0"
+        elif p.intensity == 0.0 and p.halo_intensity == 0.0:
             return "intensity and halo_intensity are 0"
-        if not parse_ghosts(p.ghosts, p.ghost_count) and p.halo_intensity == 0.0:
+        elif not parse_ghosts(p.ghosts, p.ghost_count) and p.halo_intensity == 0.0:
             return "no ghosts and no halo"
         if not ctx.analysis.any_above(p.threshold):
             return "no pixel above threshold"
@@ -276,13 +347,123 @@ class LensFlare(Plugin):
         # ghosts land anywhere on the display (and beyond, but only the display is kept)
         return ctx.source.window.union(ctx.display_window)
 
+    # the physical model -----------------------------------------------------------------
+    def prescription(self, p, ctx):
+        """(key, Prescription) of ``p.lens``: read by the pipeline once per process and name
+        (YAML parsing costs more than a frame's flare), keyed on its content."""
+        def build():
+            d = ctx.read_lens(p.lens)
+            return (json.dumps(d, sort_keys=True, default=str),
+                    optics.Prescription.from_dict(d, p.lens))
+
+        return ctx.runtime.cache.get(("lens_flare.lens", p.lens), build, nbytes=4096)
+
+    def ghost_table(self, ctx, key, lens, f_number: float, wavelengths):
+        def build():
+            return optics.ghosts(lens.at_f_number(f_number), wavelengths)
+
+        t = ctx.runtime.cache.get(("lens_flare.ghosts", key, f_number, wavelengths), build,
+                                  nbytes=65536)
+        return t
+
+    @staticmethod
+    def edge_tables(ctx):
+        def build():
+            edge = flare.edge_table()
+            return edge, flare.area_table(edge), edge.astype(np.float32).ravel()
+
+        return ctx.runtime.cache.get(("lens_flare.edge", flare.EDGE_ROWS, flare.EDGE_SAMPLES),
+                                     build, nbytes=flare.EDGE_ROWS * 512 * 8)
+
+    def visible_level(self, p, ctx) -> float:
+        """The radiance below which a ghost is not drawn: ``cull`` times the median tile
+        luminance of the frame (the level the scene is seen at)."""
+        lum = ctx.analysis.mean_lum
+        median = float(np.median(lum)) if lum.size else 0.0
+        return p.cull * max(median, 1e-9)
+
+    def plan(self, rt, p, ctx):
+        """The entries of every visible ghost: (entries, levels, table rows, lights)."""
+        lvl = self.level(ctx)
+        key, lens = self.prescription(p, ctx)
+        cam = ctx.camera
+        design = lens.f_number_paraxial()
+        if cam.f_number < 0.99 * design:
+            ctx.warnings.append(
+                f"lens_flare: lens {p.lens!r} opens to f/{design:.2g}; the camera's "
+                f"f/{cam.f_number:g} opens its stop beyond the design (other rims limit the "
+                f"beam, as they would)")
+        wl = flare_wavelengths(lvl.wavelengths)
+        table = self.ghost_table(ctx, key, lens, cam.f_number, wl)
+        lights = self.measure(rt, p, ctx, self.candidate_sources(p, ctx), full=True)
+        blades = p.blades or cam.blades
+        geometry = flare.Optics(centre_px=ctx.display_window.center,
+                                px_per_mm=ctx.width_px / cam.sensor_width, blades=blades,
+                                stop_index=lens.stop_index, gain=p.gain)
+        level = self.visible_level(p, ctx)
+        keep = flare.cull(table, lights, geometry, level)
+        sub = table.subset(keep)
+        edge, areas, _ = self.edge_tables(ctx)
+        entries, levels, rows = flare.plan_entries(
+            sub, lights, geometry, spectral.channel_weights(wl), edge, areas, level=level,
+            max_level=lvl.max_level, level_scale=lvl.level_scale)
+        return entries, levels, keep[rows], lights
+
+    def render_physical(self, rt, p, ctx):
+        entries, levels, _, lights = self.plan(rt, p, ctx)
+        blades = p.blades or ctx.camera.blades
+        out = self.draw(rt, ctx, entries, levels, self.output_window(p, ctx), blades,
+                        ctx.camera.blade_rotation + p.rotation)
+        ctx.notes.append(f"lens_flare: {len(lights)} light source(s), {len(entries)} ghost(s) "
+                         f"drawn ({p.lens})")
+        bad = ctx.analysis.nonfinite_count
+        if bad:
+            ctx.notes.append(f"lens_flare: {bad} non-finite pixels set to 0")
+        return out
+
+    def draw(self, rt, ctx, entries, levels, out_win, blades: int, rotation_deg: float):
+        """The source plus the ghosts ``entries`` (``clfx.fx.flare.plan_entries``) over
+        ``out_win``: each resolution level from the coarsest, its tiles' constants and edge
+        lists, the coarser level upsampled into it; level 0 composes onto the source."""
+        src = ctx.source
+        top = min(int(levels.max(initial=0)), self.level(ctx).max_level)
+        tiles = flare.tile_plan(entries, levels, out_win.x0, out_win.y0, out_win.width,
+                                out_win.height, PHYSICAL_TILE, top)
+        normals = flare.aperture_normals(blades, rotation_deg)
+        ent = rt.to_device(entries.astype(np.float32).ravel() if entries.size
+                           else np.zeros(flare.ENTRY, np.float32))
+        norm = rt.to_device(normals.astype(np.float32).ravel())
+        edge = rt.to_device(self.edge_tables(ctx)[2])
+        ox, oy = src.window.offset_in(out_win)
+        i32, f32 = np.int32, np.float32
+        coarse = None
+        for t in reversed(tiles):
+            final = t.factor == 1
+            out = rt.image(out_win) if final else rt.image((t.height, t.width))
+            knl = rt.kernel("lens_flare.cl", "lens_flare_ghosts", TILE=PHYSICAL_TILE,
+                            BLADES=blades if blades >= 3 else 0, COMPOSE=int(final),
+                            EDGE_SAMPLES=flare.EDGE_SAMPLES, EDGE_REACH=f"{flare.EDGE_REACH}f")
+            c = coarse if coarse is not None else out
+            rt.launch(knl, (out.pitch // 4, t.height), out, i32(out.pitch), i32(t.width),
+                      i32(t.height), f32(out_win.x0 + 0.5 * t.factor),
+                      f32(out_win.y0 + 0.5 * t.factor), f32(t.factor), i32(t.tiles_x),
+                      rt.to_device(t.start), rt.to_device(t.items), ent,
+                      rt.to_device(t.constant.ravel()), norm, edge, c, i32(c.pitch),
+                      i32(c.width), i32(c.height), i32(coarse is not None), src,
+                      i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy))
+            coarse = out
+        return coarse
+
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
+        if p.model == "physical":
+            return self.render_physical(rt, p, ctx)
         src = ctx.source
         out_win = self.output_window(p, ctx)
         sources = self.measure(rt, p, ctx, self.candidate_sources(p, ctx))
         blades = p.blades or ctx.camera.blades
-        normals = aperture_normals(blades, ctx.camera.blade_rotation + p.rotation)
+        normals = flare.aperture_normals(blades, ctx.camera.blade_rotation + p.rotation)
+        normals = normals.astype(np.float32)
         entries = flare_entries(sources, p, ctx.display_window.center, ctx.diagonal_px,
                                 blades, ctx.camera.blade_rotation + p.rotation)
         tiles_x, start, flat = tile_lists(entries, out_win)

@@ -2,8 +2,15 @@
 
 Model
 -----
-Highlights (``threshold`` on Rec.709 luminance; ``rgb * max(lum - t, 0) / lum``) are spread
-along ``n`` directions by a one-sided exponential line kernel per direction,
+A streak comes from the light above its level: ``rgb * max(lum - t, 0) / lum`` with ``t`` the
+larger of ``threshold`` and ``core`` times the peak luminance of the light the pixel belongs to
+(the connected region of 32 px scene-analysis tiles brighter than ``threshold``).  So a candle
+streaks from its bright core, not from its glow or the wax it lights, and the streak is as
+wide as that core (``core = 0``: everything above ``threshold`` streaks, the former model).
+``source_color`` mixes the streaking light towards its luminance (0: the streak's colour is
+the tint alone, as the coatings of an anamorphic lens colour its streaks whatever the light).
+These highlights are spread along ``n`` directions by a one-sided exponential line kernel
+per direction,
 
     K_d(x) = sum_{k=0}^{4^N - 1} a_c^k  delta(x - k d),   a_c = 0.01^(1 / L_c),
 
@@ -22,7 +29,8 @@ perpendicular to it (the Fourier transform of a half plane), so an N-blade polyg
 (vertices at ``blade_rotation + 360 i / N``) makes spikes along its edge normals,
 ``blade_rotation + 180 (2i + 1) / N`` and their opposites: N spikes for even N (opposite
 edges are parallel), 2N for odd N (Ritschel et al. 2009).  ``blades = 0`` takes the camera
-block's blades and rotation; a round aperture has no spikes.
+block's blades and rotation; a round aperture has no spikes: the step does nothing and says
+so on stderr (``ctx.warnings``).
 
 Algorithm (Kawase 2003, "Frame buffer postprocessing effects in DOUBLE-S.T.E.A.L")
 -----------------------------------------------------------------------------------
@@ -176,7 +184,7 @@ class Streaks(Plugin):
         params=(
             FloatParam("threshold", 1.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance above which pixels streak."),
-            FloatParam("intensity", 0.2, min=0.0, max=100.0,
+            FloatParam("intensity", 0.1, min=0.0, max=100.0,
                        hint="Light added to the streaks as a fraction of the highlights' energy."),
             ChoiceParam("mode", "star", choices=("star", "aperture"),
                         hint="star: `streaks` rays at `angle`; aperture: diffraction spikes of "
@@ -190,7 +198,16 @@ class Streaks(Plugin):
             FloatParam("length", 0.08, min=0.0005, max=2.0,
                        hint="Distance at which a streak has faded to 1%, as a fraction of the "
                             "frame diagonal."),
+            FloatParam("core", 0.5, min=0.0, max=1.0,
+                       hint="Only the light above this fraction of its light's peak luminance "
+                            "streaks (a light: a connected region above threshold): the bright "
+                            "core of a flame, not its glow or what it lights (0: all above "
+                            "threshold)."),
             RGBParam("tint", (1.0, 1.0, 1.0), max=100.0, hint="Colour multiplier of the streaks."),
+            FloatParam("source_color", 1.0, min=0.0, max=1.0,
+                       hint="How much of the light's own colour a streak keeps: 1 = the "
+                            "light's colour times tint; 0 = its luminance times tint (the "
+                            "coating colours the streak, as anamorphic streaks)."),
             FloatParam("color_shift", 0.0, min=-1.0, max=1.0,
                        hint="Colour change along the streak: > 0 red reaches further (x1.5 at 1) "
                             "and blue less far (x0.5); < 0 the reverse."),
@@ -221,6 +238,9 @@ class Streaks(Plugin):
         if p.intensity == 0.0:
             return "intensity is 0"
         if p.mode == "aperture" and not self.angles(p, ctx):
+            ctx.warnings.append("streaks: mode=aperture with a round aperture (camera blades "
+                                "0 and blades 0) makes no diffraction spikes; set "
+                                "camera.blades or streaks.blades (>= 3), or mode=star")
             return "round aperture (blades 0): no diffraction spikes"
         if not ctx.analysis.any_above(p.threshold):
             return "no pixel above threshold"
@@ -231,6 +251,14 @@ class Streaks(Plugin):
 
     def region_of_interest(self, p, ctx, window):
         return window.grown(self.spread_px(p, ctx, LEVELS["final"].factor))
+
+    @staticmethod
+    def peak_map(p, ctx):
+        """Per analysis tile, the peak luminance of the light (connected bright region) it
+        belongs to, float32 (tiles_y x tiles_x) over the source window."""
+        m = ctx.analysis.region_peaks(p.threshold)
+        m = np.minimum(np.nan_to_num(m, nan=0.0, posinf=0.0), np.finfo(np.float32).max)
+        return np.ascontiguousarray(m, np.float32).ravel(), m.shape[1], m.shape[0]
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
@@ -268,9 +296,13 @@ class Streaks(Plugin):
         bright, ping, pong, total = work
         defines["CHECKED"] = int(checked)
 
-        rt.launch(rt.kernel("streaks.cl", "streaks_bright", **defines), (wp, lo_h),
+        peak, tiles_x, tiles_y = self.peak_map(p, ctx)
+        rt.launch(rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
+                            **defines), (wp, lo_h),
                   src, i32(src.pitch), i32(src.width), i32(src.height), bright, i32(org),
-                  i32(pitch), i32(wp), i32(lo_h), i32(ox), i32(oy), f32(p.threshold))
+                  i32(pitch), i32(wp), i32(lo_h), i32(ox), i32(oy), f32(p.threshold),
+                  rt.to_device(peak), i32(tiles_x), i32(tiles_y), f32(p.core),
+                  f32(p.source_color))
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
         for sx, sy, passes, weights in plans:

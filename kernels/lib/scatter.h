@@ -150,4 +150,19 @@ inline float4 scatter_add(float4 c, float4 light)
   return (float4)(r.xyz, c.w);
 }
 
+/* img (pitch, w x h pixels) at the continuous pixel position (u, v) (pixel centres at
+ * integers): bilinear, clamped at the edges.  The upsampling of a reduced-resolution glow. */
+inline float4 scatter_bilinear(global const float *img, int pitch, int w, int h, float u,
+                               float v)
+{
+  const float u0 = floor(u), v0 = floor(v);
+  const float fu = u - u0, fv = v - v0;
+  const int i0 = (int)u0, j0 = (int)v0;
+  const float4 a = clfx_load4_clamped(img, pitch, w, h, i0, j0);
+  const float4 b = clfx_load4_clamped(img, pitch, w, h, i0 + 1, j0);
+  const float4 d = clfx_load4_clamped(img, pitch, w, h, i0, j0 + 1);
+  const float4 e = clfx_load4_clamped(img, pitch, w, h, i0 + 1, j0 + 1);
+  return (a * (1.0f - fu) + b * fu) * (1.0f - fv) + (d * (1.0f - fu) + e * fu) * fv;
+}
+
 #endif /* CLFX_SCATTER_H */

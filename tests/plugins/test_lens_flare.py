@@ -8,9 +8,10 @@ from clfx.core.errors import ParamError
 from clfx.plugins.lens_flare import LensFlare, parse_ghosts
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
+from clfx.pipeline.presets import read_lens
 from tests.reference.lens_flare import lens_flare as reference, sources
 
-PARAMS = dict(threshold=5.0, ghost_count=8, softness=0.2, roundness=0.3, halo_intensity=0.05)
+PARAMS = dict(model="artistic", threshold=5.0, ghost_count=8, softness=0.2, roundness=0.3, halo_intensity=0.05)
 CAM = Camera(blades=6, blade_rotation=10.0)
 
 
@@ -60,7 +61,8 @@ def test_ghost_spec_errors():
 
 def test_ghost_position_and_brightness_follow_the_light(rt):
     h, w = 100, 160
-    p = LensFlare.params(threshold=1.0, ghosts="-1:0.05:1,1,1", halo_intensity=0.0, intensity=1.0,
+    p = LensFlare.params(model="artistic", threshold=1.0, ghosts="-1:0.05:1,1,1",
+                         halo_intensity=0.0, intensity=1.0,
                          roundness=1.0, softness=0.1)
     lx, ly = 120, 30
     glow = []
@@ -85,7 +87,8 @@ def test_hexagonal_ghost_shape(rt):
     h, w = 200, 200
     src = np.zeros((h, w, 4), np.float32)
     src[100, 100, :3] = 1e4                               # light at the centre: ghost there
-    p = LensFlare.params(threshold=1.0, ghosts="1:0.2:1,1,1", halo_intensity=0.0,
+    p = LensFlare.params(model="artistic", threshold=1.0, ghosts="1:0.2:1,1,1",
+                         halo_intensity=0.0,
                          softness=0.02, roundness=0.0)
     out = LensFlare().apply(rt, p, src, camera=Camera(blades=6, blade_rotation=0.0)) - src
     r = 0.2 * math.hypot(w, h)                            # circumradius 56.6 px
@@ -183,7 +186,8 @@ def test_finite_input_gives_finite_output(rt, effect, params, quality):
 
     cls = get_plugin(effect)
     src = wide_range_frame()
-    got = cls().apply(rt, cls.params(**params), src, quality=quality, camera=CAM)
+    got = cls().apply(rt, cls.params(**params), src, quality=quality, camera=CAM,
+                      read_lens=read_lens)
     finite = np.isfinite(src)
     assert np.isfinite(got[finite]).all(), np.argwhere(~np.isfinite(got) & finite)[:5]
 
@@ -195,5 +199,189 @@ def test_wide_float_range_exr_flares_finite(rt, exr_images):
     assert np.isfinite(f.rgba).all()
     for quality in ("draft", "reference"):
         got = LensFlare().apply(rt, LensFlare.params(), f.rgba, quality=quality,
-                                data_window=f.data_window, display_window=f.display_window)
+                                data_window=f.data_window, display_window=f.display_window,
+                                read_lens=read_lens)
         assert np.isfinite(got).all()
+
+
+# -- the physical model ----------------------------------------------------------------------
+from clfx.fx import flare, spectral  # noqa: E402
+from clfx.host import RenderContext  # noqa: E402
+from tests.reference import lens_flare as oracle  # noqa: E402
+
+LENSES = ("double-gauss-50mm", "retrofocus-28mm", "zoom-80-200mm")
+CAM_P = Camera(blades=6, blade_rotation=10.0, f_number=8.0)
+
+
+def physical_scene(h=72, w=120):
+    src = np.full((h, w, 4), 0.01, np.float32)
+    src[..., 3] = 1.0
+    src[14:17, 92:95, :3] = (2e4, 1.8e4, 1.5e4)    # a light near a corner
+    src[50, 20, :3] = 5e3
+    return src
+
+
+def planned(rt, p, src, camera=CAM_P, quality="reference"):
+    ctx = RenderContext(rt, rt.upload(src), camera=camera, quality=quality, read_lens=read_lens)
+    return ctx, LensFlare().plan(rt, p, ctx)
+
+
+@pytest.mark.parametrize("lens", LENSES)
+def test_physical_ghosts_match_reference(rt, lens):
+    src = physical_scene()
+    p = LensFlare.params(lens=lens, gain=100.0, cull=0.0)
+    got = LensFlare().apply(rt, p, src, camera=CAM_P, quality="reference", read_lens=read_lens)
+    _, (entries, levels, _, _) = planned(rt, p, src)
+    assert len(entries) > 10 and (levels == 0).all()        # reference: all at full resolution
+    table = flare.edge_table()
+    want = src[..., :3] + oracle.physical_ghosts(src.shape[:2], entries,
+                                                 flare.aperture_normals(6, 10.0), table)
+    ghosts = want - src[..., :3]
+    # float32 distances, table lookups and sums of ~100 entries: ~1e-5 of the brightest ghost
+    np.testing.assert_allclose(got[..., :3], want, rtol=1e-4, atol=2e-5 * ghosts.max())
+    assert np.array_equal(got[..., 3], src[..., 3])
+
+
+def test_physical_lights_match_reference(rt):
+    src = physical_scene()
+    p = LensFlare.params(threshold=5.0)
+    ctx = RenderContext(rt, rt.upload(src), camera=CAM_P, read_lens=read_lens)
+    got = LensFlare().measure(rt, p, ctx, LensFlare().candidate_sources(p, ctx), full=True)
+    want = oracle.lights(src, 5.0)
+    assert len(got) == len(want) == 2
+    for g, (x, y, f, r) in zip(got, want):
+        assert abs(g.x - x) < 1e-3 and abs(g.y - y) < 1e-3 and abs(g.rms_px - r) < 1e-3
+        np.testing.assert_allclose(g.flux, f, rtol=1e-6)
+
+
+def test_final_levels_close_to_full_resolution(rt):
+    # final draws soft ghosts at reduced resolution: bilinear upsampling of edges at least
+    # 2 px wide costs ~1 % of a ghost's brightness
+    src = physical_scene(96, 160)
+    p = LensFlare.params(lens="zoom-80-200mm", gain=100.0, cull=0.0)
+    ctx, (entries, levels, _, _) = planned(rt, p, src, camera=Camera(blades=6, f_number=2.8),
+                                           quality="final")
+    assert levels.max() >= 1
+    got = rt.download(LensFlare().draw(rt, ctx, entries, levels, ctx.source.window, 6, 0.0))
+    want = src[..., :3] + oracle.physical_ghosts(src.shape[:2], entries,
+                                                 flare.aperture_normals(6, 0.0), flare.edge_table())
+    err = np.abs(got[..., :3] - want)
+    peak = (want - src[..., :3]).max()
+    assert err.max() < 0.03 * peak and err.mean() < 0.003 * peak
+
+
+def test_ghost_positions_and_energies_for_a_point_light(rt):
+    # one pixel light: every unclipped ghost lands on the line through the optical centre
+    # and the light, at its centre factor c times the light's offset, and carries the
+    # light's flux times its coated reflections (energy / T_p): the table's physics
+    h, w = 240, 320
+    src = np.zeros((h, w, 4), np.float32)
+    lx, ly = 200, 90
+    src[ly, lx, :3] = 1e6
+    p = LensFlare.params(lens="double-gauss-50mm", cull=0.0)
+    cam = Camera(blades=0, f_number=16.0, sensor_width=36.0)
+    ctx, (entries, levels, rows, lights) = planned(rt, p, src, camera=cam)
+    plugin = LensFlare()
+    key, lens = plugin.prescription(p, ctx)
+    from clfx.plugins.lens_flare import flare_wavelengths
+
+    wl = flare_wavelengths(11)
+    table = plugin.ghost_table(ctx, key, lens, 16.0, wl)
+    weights = spectral.channel_weights(wl)
+    cx, cy = w / 2, h / 2
+    x_px = math.hypot(lx + 0.5 - cx, ly + 0.5 - cy)
+    ux, uy = (lx + 0.5 - cx) / x_px, (ly + 0.5 - cy) / x_px
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    checked = 0
+    for i in np.argsort(-entries[:, 15])[:12]:
+        e = entries[i]
+        g = rows[i]
+        if e[19] > 0 or e[21] > 0:
+            continue                                        # cut by a clip disc: cat's eye
+        r = (e[7:10] * e[22]).max() + flare.EDGE_REACH / e[10:13].min()
+        if not (r < e[0] < w - r and r < e[1] < h - r):
+            continue                                        # partly outside the frame
+        one = rt.download(plugin.draw(rt, ctx, entries[i:i + 1], levels[i:i + 1],
+                                      ctx.source.window, 0, 0.0))[..., :3] - src[..., :3]
+        power = flare.ghost_power(table, flare.Optics((cx, cy), w / 36.0, 0, lens.stop_index))[g]
+        want = 1e6 * weights.T @ power                     # per channel
+        np.testing.assert_allclose(one.sum(axis=(0, 1)), want, rtol=0.01)
+        gsum = one[..., 1].sum()
+        mx, my = (one[..., 1] * xs).sum() / gsum, (one[..., 1] * ys).sum() / gsum
+        c = table.centre[g, len(wl) // 2]
+        # on the line, at c x (spectral spread inside the green band: ~0.5 % of c x)
+        assert abs((mx - cx) * uy - (my - cy) * ux) < 0.05
+        assert abs(((mx - cx) * ux + (my - cy) * uy) - c * x_px) < 0.01 * abs(c) * x_px + 0.1
+        checked += 1
+    assert checked >= 3
+
+
+def test_ghosts_are_dim_by_the_physics_and_gain_multiplies(rt):
+    src = physical_scene()
+    added = []
+    for gain in (1.0, 10.0):
+        p = LensFlare.params(lens="zoom-80-200mm", gain=gain, cull=0.0)
+        out = LensFlare().apply(rt, p, src, camera=CAM_P, read_lens=read_lens, quality="reference")
+        added.append((out[..., :3] - src[..., :3]).sum())
+    flux = oracle.lights(src, 5.0)[0][2].sum()
+    # two coated reflections per ghost, 210 ghosts (most leave this small frame): 1e-5..1e-2
+    assert 1e-5 < added[0] / flux < 1e-2
+    assert abs(added[1] / added[0] - 10.0) < 1e-3
+
+
+def test_ghosts_are_coloured_and_fringed(rt):
+    src = physical_scene()
+    p = LensFlare.params(lens="zoom-80-200mm", cull=0.0)
+    _, (entries, _, _, _) = planned(rt, p, src, quality="final")
+    # coatings: a quarter-wave MgF2 layer reflects blue and red more than green
+    power = entries[:, 13:16] * entries[:, 7:10] ** 2
+    assert (power[:, 2] > power[:, 1]).mean() > 0.7
+    # dispersion: the channels' ghosts differ in size (coloured fringes)
+    assert np.median(np.abs(entries[:, 7] - entries[:, 9]) / entries[:, 8]) > 1e-3
+
+
+def test_f_number_beyond_the_lens_warns(rt):
+    src = physical_scene()
+    ctx = RenderContext(rt, rt.upload(src), camera=Camera(f_number=1.0), read_lens=read_lens)
+    LensFlare().render(rt, LensFlare.params(), ctx)
+    assert any("opens to f/2" in w for w in ctx.warnings)
+
+
+def test_unknown_lens_and_lens_files(rt, tmp_path):
+    from clfx.core.errors import ClfxError
+
+    src = physical_scene()
+    with pytest.raises(ClfxError, match="did you mean 'zoom-80-200mm'"):
+        LensFlare().apply(rt, LensFlare.params(lens="zoom-80-200"), src, read_lens=read_lens)
+    from clfx.pipeline.presets import find_lens
+
+    path = tmp_path / "mine.yaml"
+    path.write_text(find_lens("double-gauss-50mm").read_text())
+    with pytest.raises(ClfxError, match="no lens reader"):
+        LensFlare().apply(rt, LensFlare.params(lens=str(path)), src)
+    a = LensFlare().apply(rt, LensFlare.params(lens=str(path), gain=100.0), src,
+                          read_lens=read_lens)
+    b = LensFlare().apply(rt, LensFlare.params(gain=100.0), src, read_lens=read_lens)
+    assert np.array_equal(a, b) and not np.array_equal(a, src)
+
+
+def test_physical_is_deterministic_and_keeps_alpha(rt, rng):
+    src = physical_scene()
+    src[..., 3] = rng.uniform(0, 1, src.shape[:2])
+    p = LensFlare.params(lens="zoom-80-200mm", gain=10.0)
+    a = LensFlare().apply(rt, p, src, camera=CAM_P, read_lens=read_lens)
+    b = LensFlare().apply(rt, p, src, camera=CAM_P, read_lens=read_lens)
+    assert np.array_equal(a, b)
+    assert np.array_equal(a[..., 3], src[..., 3])
+    assert (a[..., :3] >= src[..., :3]).all()
+
+
+@pytest.mark.parametrize("shape", hard_shapes())
+def test_physical_hard_shapes(rt, rng, shape):
+    src = rng.uniform(0.0, 0.5, shape + (4,)).astype(np.float32)
+    src[0, -1, :3] = 1e6                                     # a light in the corner
+    for quality in ("draft", "reference"):
+        got = LensFlare().apply(rt, LensFlare.params(lens="zoom-80-200mm", gain=1e3), src,
+                                camera=CAM_P, quality=quality, read_lens=read_lens)
+        assert np.isfinite(got).all() and (got[..., :3] >= src[..., :3]).all()
+        assert np.array_equal(got[..., 3], src[..., 3])

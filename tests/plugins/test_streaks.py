@@ -1,3 +1,5 @@
+import math
+
 import numpy as np
 import pytest
 
@@ -114,7 +116,7 @@ def test_hdr_point_energy_and_no_negatives(rt):
     p = Streaks.params(**{**PARAMS, "length": 0.1, "color_shift": 0.0, "tint": (1, 1, 1)})
     got = Streaks().apply(rt, p, src)
     assert got.min() >= 0.0
-    bright = 1e5 - 1.0                       # lum - threshold of a grey pixel
+    bright = 1e5 * (1 - 0.5)                 # lum - core x peak: the pixel is its own peak
     added = (got.astype(np.float64) - src)[..., :3].sum(axis=(0, 1))
     # 9 px rays, 16 px support, stay inside the frame: energy = intensity * highlight
     np.testing.assert_allclose(added, 0.5 * bright, rtol=1e-5)
@@ -157,3 +159,96 @@ def test_bounds_tested_taps_match_reference(rt, rng, monkeypatch):
     got, p = run(rt, src, "reference")
     want = reference(src, **p.as_dict())
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+# -- what a user sees -------------------------------------------------------------------------
+def flame(h=270, w=480, glow=40.0, core=3000.0):
+    """A synthetic flame: a small very bright core (6 x 6 px) in a large dim glow (an ellipse
+    50 x 120 px, orange, far above the threshold but far below the core)."""
+    src = np.zeros((h, w, 4), np.float32)              # black: exact in a half-float output
+    src[..., 3] = 1.0
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    cx, cy = w / 2, h / 2
+    inside = ((xs - cx) / 25) ** 2 + ((ys - cy) / 60) ** 2 <= 1
+    src[inside, :3] = np.array([1.6, 1.0, 0.4]) * glow
+    src[int(cy) - 3:int(cy) + 3, int(cx) - 3:int(cx) + 3, :3] = (core, 0.8 * core, 0.5 * core)
+    return src
+
+
+def width_at(profile, frac=0.05):
+    """Number of samples at or above ``frac`` of the profile's peak."""
+    return int((profile >= frac * profile.max()).sum())
+
+
+def cli(tmp_path, src, *argv):
+    """Render ``src`` through ``clfx ARGV... in.exr out.exr`` (argv holds "{in}", "{out}")."""
+    from click.testing import CliRunner
+
+    from clfx.cli import cli as clfx_cli
+    from clfx.core.frame import Frame
+    from clfx.io.read import read_frame
+    from clfx.io.write import write_frame
+
+    write_frame(Frame.from_array(src), tmp_path / "in.exr", overwrite=True, bit_depth="float")
+    args = [str(tmp_path / "in.exr") if a == "{in}" else str(tmp_path / "out.exr")
+            if a == "{out}" else a for a in argv]
+    result = CliRunner().invoke(clfx_cli, args + ["--overwrite"], catch_exceptions=False)
+    assert result.exit_code == 0, (result.output, result.stderr)
+    return read_frame(tmp_path / "out.exr").rgba.astype(np.float64), result
+
+
+def test_streak_width_follows_the_bright_core_not_the_flame(tmp_path):
+    src = flame()
+    h, w = src.shape[:2]
+    out, _ = cli(tmp_path, src, "apply", "streaks", "{in}", "{out}", "angle=0", "streaks=2",
+                 "length=0.4")
+    streak = out[..., :3] - src[..., :3]
+    lum = streak @ [0.2126, 0.7152, 0.0722]
+    for dx in (40, 90, 150):                    # beyond the glow (25 px half-width)
+        col = lum[:, w // 2 + dx]
+        assert width_at(col) <= 9, (dx, width_at(col))          # the 6 px core, not 120 px
+    # without the core rule the whole glow streaks: the band is as tall as the flame
+    out0, _ = cli(tmp_path, src, "apply", "streaks", "{in}", "{out}", "angle=0", "streaks=2",
+                  "length=0.4", "core=0")
+    lum0 = (out0[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
+    assert width_at(lum0[:, w // 2 + 90]) > 60
+
+
+def test_default_star_x_is_not_wide_near_a_flame(tmp_path):
+    # the default star filter: 4 rays at 45 degrees; across an arm just outside the glow
+    # the streak is about as wide as the core's diagonal, not the glow's
+    src = flame()
+    h, w = src.shape[:2]
+    out, _ = cli(tmp_path, src, "apply", "streaks", "{in}", "{out}")
+    lum = (out[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
+    cx, cy = w / 2, h / 2
+    t = np.linspace(-40, 40, 161)                            # across the 45-degree arm
+    for d in (45.0, 80.0):
+        px = cx + d / math.sqrt(2) + t / math.sqrt(2)
+        py = cy - d / math.sqrt(2) + t / math.sqrt(2)
+        prof = lum[py.astype(int), px.astype(int)]
+        assert width_at(prof) * (t[1] - t[0]) <= 14, (d, width_at(prof))
+
+
+def test_anamorphic_night_streaks_are_blue(tmp_path):
+    # an orange flame through the look: its streak is blue (the look's tint and its
+    # source_color 0: the anamorphic coating colours the streak), along its whole length
+    src = flame()
+    h, w = src.shape[:2]
+    out, _ = cli(tmp_path, src, "render", "{in}", "{out}", "--look", "anamorphic-night")
+    added = out[..., :3] - src[..., :3]
+    row = added[h // 2 - 3:h // 2 + 3].mean(axis=0)           # the streak through the core
+    for dx in (40, 80, 150, 220):
+        for x in (w // 2 + dx, w // 2 - dx):
+            r, g, b = row[x]
+            assert b > 1.2 * r and b > 0, (dx, row[x])
+
+
+def test_aperture_mode_with_a_round_aperture_warns_on_stderr(tmp_path):
+    src = flame(64, 96)
+    out, result = cli(tmp_path, src, "apply", "streaks", "{in}", "{out}", "mode=aperture")
+    assert "clfx: warning: frame" in result.stderr and "round aperture" in result.stderr
+    assert np.array_equal(out.astype(np.float32), src)        # nothing drawn, but said so
+    _, quiet = cli(tmp_path, src, "apply", "streaks", "{in}", "{out}", "mode=aperture",
+                   "camera.blades=6")
+    assert "round aperture" not in quiet.stderr

@@ -13,11 +13,12 @@ def highlights(src, threshold):
 
 
 def corona(src, psf, *, threshold, intensity, pad=0, **_):
-    """out = clean source + intensity * (highlights conv psf) over the source grown by pad."""
+    """out = clean source - intensity * highlights + intensity * (highlights conv psf) over the
+    source grown by pad: the diffracted light moves into the pattern."""
     src = np.asarray(src, np.float64)
     bright, clean = highlights(src, threshold)
     h, w = src.shape[:2]
-    out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
+    out = np.pad(clean - intensity * bright, ((pad, pad), (pad, pad), (0, 0)))
     r = psf.shape[0] // 2
     ys, xs = np.nonzero(bright[..., :3].max(axis=2) > 0)
     for y, x in zip(ys, xs):              # splat each highlight pixel (plainest form)

@@ -120,3 +120,75 @@ def lens_flare(src, lights, table, *, intensity, softness, roundness, rim, blade
             norm = 2 * math.pi * rh * sigma * math.sqrt(2 * math.pi) * 0.375
             out[..., :3] += ring[..., None] * halo_intensity * flux / norm
     return out
+
+
+# -- the physical model ----------------------------------------------------------------------
+def lights(src, threshold, *, origin=(0, 0), tile=32):
+    """[(x, y, flux RGB, rms radius)] of the physical model: per 8-connected region of tiles
+    with a pixel above threshold, the sum of its pixels above threshold (whole values), their
+    luminance-weighted centroid and rms radius about it (frame px)."""
+    src = np.asarray(src, np.float64)
+    h, w = src.shape[:2]
+    clean = np.maximum(np.where(np.isfinite(src), src, 0.0), 0.0)
+    lum = 0.2126 * clean[..., 0] + 0.7152 * clean[..., 1] + 0.0722 * clean[..., 2]
+    ty, tx = -(-h // tile), -(-w // tile)
+    tmax = np.zeros((ty, tx))
+    for j in range(ty):
+        for i in range(tx):
+            tmax[j, i] = lum[j * tile:(j + 1) * tile, i * tile:(i + 1) * tile].max()
+    labels, n = ndimage.label(tmax > threshold, structure=np.ones((3, 3)))
+    out = []
+    for lab in range(1, n + 1):
+        ys, xs = np.nonzero(labels == lab)
+        x0, x1 = xs.min() * tile, min(w, (xs.max() + 1) * tile)
+        y0, y1 = ys.min() * tile, min(h, (ys.max() + 1) * tile)
+        wt = np.where(lum[y0:y1, x0:x1] > threshold, lum[y0:y1, x0:x1], 0.0)
+        flux = (clean[y0:y1, x0:x1, :3] * (wt > 0)[..., None]).sum(axis=(0, 1))
+        yy, xx = np.mgrid[y0:y1, x0:x1] + 0.5
+        mx, my = (wt * xx).sum() / wt.sum(), (wt * yy).sum() / wt.sum()
+        rms = math.sqrt(max((wt * ((xx - mx) ** 2 + (yy - my) ** 2)).sum() / wt.sum(), 0.0))
+        out.append((wt.sum(), mx + origin[0], my + origin[1], flux, rms))
+    out.sort(key=lambda s: -s[0])
+    return [(x, y, f, r) for _, x, y, f, r in out]
+
+
+def edge(table, row, t):
+    """The edge profile of clfx.fx.flare (its float64 table), linear in t, 1 / 0 beyond."""
+    from clfx.fx.flare import EDGE_REACH
+
+    n = table.shape[1]
+    x = np.clip((np.asarray(t) + EDGE_REACH) * (n - 1) / (2 * EDGE_REACH), 0, n - 1)
+    i = np.minimum(np.floor(x).astype(int), n - 2)
+    f = x - i
+    return table[int(row), i] * (1 - f) + table[int(row), i + 1] * f
+
+
+def physical_ghosts(shape, entries, normals, table, *, origin=(0, 0)):
+    """The ghost layer (h, w, 3) of ``entries`` (clfx.fx.flare.plan_entries) evaluated at
+    every pixel centre in float64: per channel the signed distance to the channel's edge
+    (a disc, or the polygon's largest normal projection shifted along the axis by its
+    nearest face), the edge profile, the clip discs' profiles, times the radiance."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    px, py = xx + origin[0] + 0.5, yy + origin[1] + 0.5
+    out = np.zeros((h, w, 3))
+    for e in np.asarray(entries, np.float64):
+        dx, dy = px - e[0], py - e[1]
+        ux, uy = e[2], e[3]
+        row = e[17]
+        if e[16] != 0:
+            proj = np.stack([e[16] * (dx * n[0] + dy * n[1]) for n in normals])
+            best = np.argmax(proj, axis=0)
+            nu = np.array([e[16] * (n[0] * ux + n[1] * uy) for n in normals])[best]
+            pm = proj.max(axis=0)
+            dist = [pm - e[4 + c] * nu - e[7 + c] for c in range(3)]
+        else:
+            dist = [np.hypot(dx - e[4 + c] * ux, dy - e[4 + c] * uy) - e[7 + c] for c in range(3)]
+        clip = np.ones((h, w))
+        for col in (18, 20):
+            if e[col + 1] > 0:
+                d = np.hypot(dx - e[col] * ux, dy - e[col] * uy) - e[col + 1]
+                clip = clip * edge(table, row, d * e[11])
+        for c in range(3):
+            out[..., c] += e[13 + c] * clip * edge(table, row, dist[c] * e[10 + c])
+    return out

@@ -14,6 +14,9 @@ def bloom_psf(radius):
         s = max(s, 0.3)
         g = np.exp(-0.5 * d2 / (s * s))
         k += w * g / g.sum()
+    # round support: 1 inside 3/4 of the radius, a raised cosine to 0 at the radius
+    t = np.clip((np.sqrt(d2) / max(r, 1) - 0.75) / 0.25, 0.0, 1.0)
+    k = k * (0.5 + 0.5 * np.cos(np.pi * t))
     return k / k.sum()
 
 

@@ -11,12 +11,35 @@ import math
 import numpy as np
 
 
-def highlights(src, threshold):
+def peak_level(lum, threshold, tile=32):
+    """Per pixel, the peak luminance of its light: the 8-connected region of 32 x 32 tiles
+    with a pixel above threshold that holds it (0 outside every region)."""
+    from scipy import ndimage
+
+    h, w = lum.shape
+    ty, tx = -(-h // tile), -(-w // tile)
+    m = np.zeros((ty, tx))
+    for j in range(ty):
+        for i in range(tx):
+            m[j, i] = lum[j * tile:(j + 1) * tile, i * tile:(i + 1) * tile].max()
+    labels, n = ndimage.label(m > threshold, structure=np.ones((3, 3)))
+    peaks = np.zeros((ty, tx))
+    for k in range(1, n + 1):
+        peaks[labels == k] = m[labels == k].max()
+    return np.kron(peaks, np.ones((tile, tile)))[:h, :w]
+
+
+def highlights(src, threshold, core=0.0, source_color=1.0):
+    """The light that streaks: above max(threshold, core x the peak near it), its colour mixed
+    towards its luminance by 1 - source_color."""
     c = np.where(np.isfinite(src), src, 0.0).astype(np.float64)
     c = np.maximum(c, 0.0)
     lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
-    k = np.where(lum > threshold, (lum - threshold) / np.where(lum > 0, lum, 1.0), 0.0)
+    level = np.maximum(threshold, core * peak_level(lum, threshold)) if core > 0 else threshold
+    k = np.where(lum > level, (lum - level) / np.where(lum > 0, lum, 1.0), 0.0)
     out = c * k[..., None]
+    hl = 0.2126 * out[..., 0] + 0.7152 * out[..., 1] + 0.0722 * out[..., 2]
+    out[..., :3] = hl[..., None] + (out[..., :3] - hl[..., None]) * source_color
     out[..., 3] = 0.0
     return out, c
 
@@ -67,13 +90,13 @@ def _unit(angle):
 
 
 def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, tint,
-            color_shift, diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False,
-            snap_from=None):
+            color_shift, core=0.0, source_color=1.0, diagonal=None, blade_rotation=0.0, pad=0,
+            line_kernel=False, snap_from=None):
     """Output over the source grown by ``pad`` pixels on every side (float64)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     diagonal = diagonal or math.hypot(w, h)
-    bright, clean = highlights(src, threshold)
+    bright, clean = highlights(src, threshold, core, source_color)
     bright = np.pad(bright, ((pad, pad), (pad, pad), (0, 0)))
     out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
     rays = angles_of(mode, streaks, angle, blades, blade_rotation)

@@ -16,7 +16,7 @@ def make(width, height, rng):
         y = int(rng.integers(height // 4, 3 * height // 4))
         src[y - 3:y + 4, x - 3:x + 4, :3] = rng.uniform(100, 20000)
     return dict(source=src, depth=None, velocity=None,
-                params={"threshold": 2.0, "intensity": 0.5, "size": 0.006, "extent": 8.0},
+                params={"threshold": 2.0},                  # the defaults: rings of 3 %
                 camera=Camera(blades=0))
 
 

@@ -19,8 +19,9 @@ def make(width, height, rng):
         x, y = int(rng.integers(0, width)), int(rng.integers(0, height))
         src[max(0, y - 2):y + 3, max(0, x - 2):x + 3, :3] = rng.uniform(50, 5000)
     return dict(source=src, depth=None, velocity=None,
+                # core 0: every pixel above threshold streaks, the operation the peers do
                 params={"threshold": 2.0, "intensity": 0.3, "streaks": 4, "length": 0.1,
-                        "color_shift": 0.3},
+                        "color_shift": 0.3, "core": 0.0},
                 camera=Camera(blades=6))
 
 

@@ -1,0 +1,292 @@
+"""`clfx gallery`: every effect and every built-in look on a few test images, one labelled
+before/after contact sheet per image, so anyone can judge the looks at a glance.
+
+Images: the built-in demo scene (frame 1, with its depth and velocity passes), a synthetic
+sunny day (:func:`sun_scene`: the light flare and corona are seen with) and, where
+the shared OpenEXR test images are found (``CLFX_SHARED_DATA``, else ``shared/data`` next to
+the repository or one folder further up), ``ScanLines/CandleGlass.exr`` and
+``ScanLines/Desk.exr``; a missing image is skipped with one line on stderr.  Each input is
+area-downscaled to ``width`` pixels (640 by default: the whole gallery takes a few minutes on
+a CPU device); sizes are fractions of the frame diagonal, so the effects look as they would
+at full resolution.
+
+Every effect runs alone at its default parameters (``clfx apply EFFECT``), every built-in
+look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
+is skipped, and the tile says so.  Written to OUTDIR:
+
+- ``<image>/sheet.png``: the input (``before``) then every effect and look (``after``), each
+  tile labelled, tone-mapped with one exposure per image (so tiles compare);
+- ``<image>/<kind>-<name>.png``: each tile at full gallery resolution;
+- ``index.json``: what was rendered, skipped and how long it took.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from clfx.core.errors import ClfxError
+from clfx.core.frame import Frame
+from clfx.demo import tonemap_preview as tonemap
+from clfx.pipeline.look import render_frame
+
+GALLERY_WIDTH = 640
+SCANLINES = ("CandleGlass", "Desk")
+KEY_VALUE = 0.18
+"""Tone mapping: the input's log-average luminance is exposed to this middle grey."""
+
+
+# -- a tiny bitmap font for the labels (5 x 7, upper case) ---------------------------------
+_GLYPHS = {
+    "A": "0E 11 11 1F 11 11 11", "B": "1E 11 11 1E 11 11 1E", "C": "0E 11 10 10 10 11 0E",
+    "D": "1E 11 11 11 11 11 1E", "E": "1F 10 10 1E 10 10 1F", "F": "1F 10 10 1E 10 10 10",
+    "G": "0E 11 10 17 11 11 0F", "H": "11 11 11 1F 11 11 11", "I": "0E 04 04 04 04 04 0E",
+    "J": "07 02 02 02 02 12 0C", "K": "11 12 14 18 14 12 11", "L": "10 10 10 10 10 10 1F",
+    "M": "11 1B 15 15 11 11 11", "N": "11 11 19 15 13 11 11", "O": "0E 11 11 11 11 11 0E",
+    "P": "1E 11 11 1E 10 10 10", "Q": "0E 11 11 11 15 12 0D", "R": "1E 11 11 1E 14 12 11",
+    "S": "0F 10 10 0E 01 01 1E", "T": "1F 04 04 04 04 04 04", "U": "11 11 11 11 11 11 0E",
+    "V": "11 11 11 11 11 0A 04", "W": "11 11 11 15 15 15 0A", "X": "11 11 0A 04 0A 11 11",
+    "Y": "11 11 0A 04 04 04 04", "Z": "1F 01 02 04 08 10 1F", "0": "0E 11 13 15 19 11 0E",
+    "1": "04 0C 04 04 04 04 0E", "2": "0E 11 01 02 04 08 1F", "3": "1F 02 04 02 01 11 0E",
+    "4": "02 06 0A 12 1F 02 02", "5": "1F 10 1E 01 01 11 0E", "6": "06 08 10 1E 11 11 0E",
+    "7": "1F 01 02 04 08 08 08", "8": "0E 11 11 0E 11 11 0E", "9": "0E 11 11 0F 01 02 0C",
+    "-": "00 00 00 1F 00 00 00", "_": "00 00 00 00 00 00 1F", ":": "00 0C 0C 00 0C 0C 00",
+    ".": "00 00 00 00 00 0C 0C", "(": "02 04 08 08 08 04 02", ")": "08 04 02 02 02 04 08",
+    "/": "01 01 02 04 08 10 10", "=": "00 00 1F 00 1F 00 00", ",": "00 00 00 00 0C 04 08",
+    " ": "00 00 00 00 00 00 00",
+}
+
+
+def _glyph(ch: str) -> np.ndarray:
+    rows = _GLYPHS.get(ch.upper(), _GLYPHS["-"]).split()
+    return np.array([[(int(r, 16) >> (4 - b)) & 1 for b in range(5)] for r in rows], bool)
+
+
+def text_mask(text: str, scale: int = 2) -> np.ndarray:
+    """A boolean mask of ``text`` in the 5 x 7 font (1 px spacing), each pixel ``scale`` wide."""
+    if not text:
+        return np.zeros((7 * scale, 1), bool)
+    cols = [np.pad(_glyph(ch), ((0, 0), (0, 1))) for ch in text]
+    mask = np.concatenate(cols, axis=1)
+    return np.kron(mask, np.ones((scale, scale), bool))
+
+
+def label(tile: np.ndarray, lines, *, scale: int = 2) -> np.ndarray:
+    """``tile`` (display-linear RGB) with ``lines`` of text in white on a darkened band at the
+    top (text wider than the tile is cut)."""
+    out = tile.copy()
+    lines = [lines] if isinstance(lines, str) else list(lines)
+    line_h = 9 * scale
+    band = out[:line_h * len(lines) + scale]
+    band *= 0.25                                   # darken behind the text, keep the image
+    for k, text in enumerate(lines):
+        mask = text_mask(text, scale)
+        w = min(mask.shape[1], out.shape[1] - 2 * scale)
+        if w > 0:
+            y = scale + k * line_h
+            out[y:y + mask.shape[0], scale:scale + w][mask[:, :w]] = 1.0
+    return out
+
+
+def thumbnail(img: np.ndarray, width: int) -> np.ndarray:
+    """Box-downscale ``img`` by the integer factor that brings it to at most ``width``."""
+    step = max(1, int(math.ceil(img.shape[1] / width)))
+    if step == 1:
+        return img
+    h, w = img.shape[0] // step * step, img.shape[1] // step * step
+    return img[:h, :w].reshape(h // step, step, w // step, step, -1).mean(axis=(1, 3))
+
+
+# -- images ---------------------------------------------------------------------------------
+def shared_data_dirs() -> list[Path]:
+    """Where the shared test data may be: ``CLFX_SHARED_DATA``, then ``shared/data`` beside
+    the repository, then one folder further up (a git worktree under ``wt/``)."""
+    repo = Path(__file__).resolve().parents[1]
+    env = os.environ.get("CLFX_SHARED_DATA")
+    dirs = [Path(env)] if env else []
+    return dirs + [repo.parent / "shared" / "data", repo.parent.parent / "shared" / "data"]
+
+
+def find_scanline_image(name: str) -> Path | None:
+    for d in shared_data_dirs():
+        p = d / "openexr-images" / "ScanLines" / f"{name}.exr"
+        if p.is_file():
+            return p
+    return None
+
+
+def area_resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Area-average resampling of an (h, w, c) array to (height, width, c): each output
+    pixel is the mean of the input area it covers, so light keeps its energy density."""
+    def weights(n_in, n_out):
+        edges = np.linspace(0.0, n_in, n_out + 1)
+        lo, hi = edges[:-1, None], edges[1:, None]
+        x = np.arange(n_in)[None, :]
+        cover = np.clip(np.minimum(hi, x + 1) - np.maximum(lo, x), 0.0, None)
+        return cover / cover.sum(axis=1, keepdims=True)
+
+    a = np.nan_to_num(np.asarray(img, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    wy, wx = weights(a.shape[0], height), weights(a.shape[1], width)
+    out = np.einsum("yi,ijc->yjc", wy, a)
+    return np.einsum("xj,yjc->yxc", wx, out).astype(np.float32)
+
+
+def sun_scene(width: int, height: int) -> Frame:
+    """A sunny day: a blue sky over dark ground and a post, and the sun (a disc of radius
+    0.8 % of the width at 1e5, diffuse white being 1) high on the right: the light that lens
+    flare, corona and spikes are seen with."""
+    ys, xs = np.mgrid[0:height, 0:width] + 0.5
+    v = ys / height
+    rgba = np.ones((height, width, 4), np.float32)
+    sky = np.array([0.35, 0.55, 1.1]) + (np.array([0.9, 1.0, 1.15]) - [0.35, 0.55, 1.1]) * \
+        (v / 0.62)[..., None] ** 2
+    ground = np.array([0.12, 0.1, 0.06]) * (1.0 + 0.3 * np.sin(xs / width * 40.0) *
+                                             np.sin(ys / height * 25.0))[..., None]
+    rgba[..., :3] = np.where((v < 0.62)[..., None], sky, ground)
+    post = (np.abs(xs - 0.3 * width) < 0.012 * width) & (v > 0.25)
+    rgba[post, :3] = 0.05
+    r = 0.008 * width
+    sun = np.hypot(xs - 0.78 * width, ys - 0.3 * height)
+    rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0))[..., None]
+    return Frame.from_array(rgba.astype(np.float32))
+
+
+def gallery_inputs(width: int, log=print) -> list[tuple[str, Frame]]:
+    """(name, frame) of every gallery image found, downscaled to ``width`` pixels."""
+    from clfx.bench.scene import demo_scene, render_sharp
+
+    height = int(round(width * 9 / 16))
+    demo = render_sharp(demo_scene(1, width, height))
+    demo.source = "demo scene frame 1"
+    sun = sun_scene(width, height)
+    sun.source = "a synthetic sunny day (clfx.gallery.sun_scene)"
+    out = [("demo", demo), ("sun", sun)]
+    for name in SCANLINES:
+        path = find_scanline_image(name)
+        if path is None:
+            log(f"clfx gallery: {name}.exr not found (looked in "
+                f"{', '.join(str(d / 'openexr-images/ScanLines') for d in shared_data_dirs())}); "
+                f"skipped")
+            continue
+        from clfx.core.frame import crop_to
+        from clfx.io.read import read_frame
+
+        frame = read_frame(path)
+        rgba = crop_to(frame.rgba, frame.data_window, frame.display_window)
+        h, w = rgba.shape[:2]
+        small = area_resize(rgba, width, max(1, int(round(h * width / w)))) if w > width else rgba
+        f = Frame.from_array(small)
+        f.source = str(path)
+        out.append((name, f))
+    return out
+
+
+# -- rendering ------------------------------------------------------------------------------
+def exposure_for(rgba: np.ndarray) -> float:
+    """One exposure per image: its log-average luminance mapped to middle grey."""
+    rgb = np.nan_to_num(rgba[..., :3].astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    lum = np.maximum(rgb @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    key = math.exp(float(np.mean(np.log(lum + 1e-4))))
+    return float(np.clip(KEY_VALUE / max(key, 1e-6), 1e-3, 1e3))
+
+
+def gallery_looks(only=None):
+    """(kind, name, look) of every effect alone and every built-in look."""
+    from clfx.pipeline.presets import available_looks, load_look, single_effect_look
+    from clfx.plugins import discover
+
+    items = [("effect", e, single_effect_look(e, [])) for e in discover()]
+    items += [("look", name, load_look(str(path))) for name, (origin, path)
+              in available_looks().items() if origin == "built-in"]
+    return [it for it in items if only is None or it[1] in only]
+
+
+def _runnable(look, frame: Frame):
+    """The look with steps lacking passes set to skip, and the names of those steps."""
+    have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
+    missing = [s.id for _, s in look.active_steps() if s.absent_passes(have)]
+    steps = [replace(s, missing_passes="skip") if s.absent_passes(have) else s for s in look.steps]
+    return replace(look, steps=steps), missing
+
+
+def contact_sheet(tiles: list[np.ndarray], columns: int = 6, gap: int = 4) -> np.ndarray:
+    """Tiles (display-linear RGB, any sizes) on a dark sheet, row by row."""
+    th = max(t.shape[0] for t in tiles)
+    tw = max(t.shape[1] for t in tiles)
+    cols = min(columns, len(tiles))
+    rows = -(-len(tiles) // cols)
+    sheet = np.full((rows * (th + gap) + gap, cols * (tw + gap) + gap, 3), 0.02, np.float32)
+    for i, t in enumerate(tiles):
+        r, c = divmod(i, cols)
+        y, x = gap + r * (th + gap), gap + c * (tw + gap)
+        sheet[y:y + t.shape[0], x:x + t.shape[1]] = t
+    return sheet
+
+
+def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | None = None,
+                only=None, columns: int = 6, thumb_width: int = 320,
+                verbosity: int = 1) -> dict:
+    """Render the gallery into ``outdir``; returns the index written to ``index.json``."""
+    from clfx.core.frame import crop_to
+    from clfx.io.write import write_frame
+
+    def log(msg):
+        if verbosity > 0:
+            print(msg, file=sys.stderr, flush=True)
+
+    def save(img, *parts):
+        path = os.path.join(outdir, *parts)
+        write_frame(Frame.from_array(np.ascontiguousarray(img, np.float32)), path,
+                    overwrite=True)
+        return path
+
+    t0 = time.perf_counter()
+    os.makedirs(outdir, exist_ok=True)
+    items = gallery_looks(only)
+    index = {"width": width, "quality": quality or "final", "images": []}
+    for name, frame in gallery_inputs(width, log):
+        os.makedirs(os.path.join(outdir, name), exist_ok=True)
+        exposure = exposure_for(frame.rgba)
+        before = tonemap(frame.rgba, exposure)
+        save(label(before, f"{name}: before"), name, "before.png")
+        thumbs = [label(thumbnail(before, thumb_width), [name, "before"])]
+        entry = {"image": name, "source": frame.source,
+                 "size": [frame.rgba.shape[1], frame.rgba.shape[0]],
+                 "exposure": round(exposure, 4), "tiles": []}
+        for kind, item, look in items:
+            runnable, missing = _runnable(look, frame)
+            lines = [f"{kind}: {item}"]
+            if missing:
+                lines.append("no pass: " + ",".join(missing) + " skipped")
+            t1 = time.perf_counter()
+            try:
+                out, report = render_frame(rt, runnable, frame, frame_number=1,
+                                           quality=quality)
+            except ClfxError as exc:      # e.g. `lens` needs a lens chosen: say so, go on
+                after, warnings, error = before, [], str(exc)
+                lines.append("not rendered: " + error[:60])
+            else:
+                error = None
+                after = tonemap(crop_to(out.rgba, out.data_window, frame.display_window),
+                                exposure)
+                warnings = [w for s in report.steps for w in s.warnings]
+            ms = (time.perf_counter() - t1) * 1e3
+            save(label(after, lines), name, f"{kind}-{item}.png")
+            thumbs.append(label(thumbnail(after, thumb_width), lines))
+            entry["tiles"].append({"kind": kind, "name": item, "ms": round(ms, 1),
+                                   "skipped_steps": missing, "warnings": warnings,
+                                   "error": error})
+            log(f"clfx gallery: {name}: {kind} {item} ({ms:.0f} ms)")
+        entry["sheet"] = save(contact_sheet(thumbs, columns), name, "sheet.png")
+        index["images"].append(entry)
+        log(f"clfx gallery: contact sheet {entry['sheet']}")
+    index["wall_s"] = round(time.perf_counter() - t0, 1)
+    with open(os.path.join(outdir, "index.json"), "w") as f:
+        json.dump(index, f, indent=1)
+    return index

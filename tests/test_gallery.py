@@ -1,0 +1,38 @@
+"""`clfx gallery`: labelled before/after contact sheets of effects and looks."""
+import json
+
+import numpy as np
+
+from clfx import gallery
+from tests.test_cli import run
+
+
+def test_gallery_sheets_tiles_and_index(tmp_path, monkeypatch):
+    monkeypatch.setattr(gallery, "shared_data_dirs", lambda: [tmp_path / "nowhere"])
+    r = run("gallery", tmp_path / "g", "--width", "96", "--only", "vignette,lens,star-filter")
+    # the missing test images are skipped with one line each
+    assert r.stderr.count("not found") == 2
+    index = json.loads((tmp_path / "g" / "index.json").read_text())
+    assert [e["image"] for e in index["images"]] == ["demo", "sun"]
+    for entry in index["images"]:
+        names = [(t["kind"], t["name"]) for t in entry["tiles"]]
+        assert names == [("effect", "lens"), ("effect", "vignette"), ("look", "star-filter")]
+        assert (tmp_path / "g" / entry["image"] / "sheet.png").is_file()
+        assert (tmp_path / "g" / entry["image"] / "look-star-filter.png").is_file()
+        lens = entry["tiles"][0]
+        assert lens["error"] and "lens" in lens["error"]     # said on its tile, not fatal
+
+
+def test_labels_are_drawn_and_sheet_layout():
+    tile = np.zeros((40, 120, 3), np.float32)
+    out = gallery.label(tile, ["AB", "c-d"])
+    assert out.max() == 1.0 and out[:2].max() == 0.0          # text below a 2 px margin
+    assert gallery.text_mask("x").shape == (14, 12)
+    sheet = gallery.contact_sheet([tile] * 7, columns=3)
+    assert sheet.shape == (3 * 44 + 4, 3 * 124 + 4, 3)
+
+
+def test_area_resize_keeps_energy_density():
+    img = np.random.default_rng(1).uniform(0, 10, (81, 100, 3))
+    small = gallery.area_resize(img, 64, 52)
+    np.testing.assert_allclose(small.mean(axis=(0, 1)), img.mean(axis=(0, 1)), rtol=1e-3)
