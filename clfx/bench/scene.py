@@ -610,7 +610,8 @@ def moving_scene(width: int, height: int, max_speed_px: float = 60.0,
     wall = Layer(depth=20.0, texture=Texture("blocks", (0.5, 0.45, 0.4), (0.05, 0.05, 0.06),
                                              period=12.0 * s, seed=3),
                  shape="full", name="wall",
-                 lights=(Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0), 2.0 * s),),
+                 lights=(Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0),
+                               max(2.0 * s, 1.0)),),
                  velocity=(0.0, 0.0) if moving_fraction else (0.05 * v, 0.0))
     if moving_fraction:
         r = 0.5 * math.sqrt(moving_fraction * width * height / math.pi) * 0.8

@@ -80,7 +80,7 @@ MIN_BLUR_PX = 0.1
 such pixels occlude nothing.  A renderer blurs a 0.4 px smear visibly at a sharp edge (a
 tenth of the contrast), so the threshold sits well below half a pixel."""
 
-CUBIC_MAX_PX = 4.0
+CUBIC_MAX_PX = 8.0
 """Tiles whose blur is shorter than this (px) fetch colours through a clamped Catmull-Rom
 instead of bilinearly (or nearest): over a short smear the reconstruction filter's own blur is
 as large as the motion's, and only a sharper one brings the result closer to the truth than
@@ -111,8 +111,8 @@ def _summary(lvl: MotionLevel) -> str:
 
 
 LEVELS = {name: replace(lvl, summary=_summary(lvl)) for name, lvl in {
-    "draft": MotionLevel("", max_samples=8, spacing=1.0, bilinear=False),
-    "preview": MotionLevel("", max_samples=16, spacing=1.0, bilinear=False),
+    "draft": MotionLevel("", max_samples=8, spacing=1.0, bilinear=True),
+    "preview": MotionLevel("", max_samples=16, spacing=1.0, bilinear=True),
     "final": MotionLevel("", max_samples=32, spacing=0.5, bilinear=True),
     "reference": MotionLevel("", fp64=True, max_samples=256, spacing=0.25, bilinear=True,
                              jitter=False),
@@ -214,6 +214,11 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     dummy = rt.buffer(16)
     rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), velocity,
               depth if depth is not None else dummy, aux, i32(pitch), i32(h), f32(vmax))
+    if depth is not None:   # rims of small bright moving surfaces move with them
+        dilated = rt.image(src.window, 4)
+        rt.launch(rt.kernel(KERNEL, "motion_dilate", **defines), (pitch // 4, h), aux, col,
+                  dilated, i32(pitch), i32(w), i32(h), f32(t1 - t0))
+        aux = dilated
 
     tx, ty = -(-w // k), -(-h // k)
     tmax = rt.buffer(tx * ty * 16)
