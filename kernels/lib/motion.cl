@@ -5,19 +5,21 @@
  *   motion_prepare           per 4 pixels: velocity sanitised (non-finite -> 0) and clamped to
  *                            the maximum speed VMAX, depth sanitised (invalid -> BIG_DEPTH);
  *                            writes aux = (vx, vy, z, |v|) per pixel
- *   motion_dilate            per 4 pixels, with a depth pass: an antialiased edge pixel of a small
- *                            bright surface in front (a light) takes that surface's motion
+ *   motion_dilate            per 4 pixels, with a depth pass: an antialiased rim pixel of a
+ *                            small bright surface in front (a light) takes its motion
  *   motion_sanitize          per 4 pixels: non-finite colour components -> 0 (only when the
  *                            analysis counted some)
  *   motion_tilemax           per K x K tile: the velocity of largest magnitude
  *   motion_neighbormax       per tile: the largest over the 3 x 3 neighbouring tiles
- *   motion_gather            per 4 pixels of the *moving* tiles only (a compact tile list built
+ *   motion_gather            per 4 pixels of the *moving* tiles only (compact tile lists built
  *                            on the host): N samples along the neighbourhood's dominant
- *                            velocity, depth-aware scatter-as-gather weights
+ *                            velocity, depth-aware scatter-as-gather weights; built with
+ *                            CUBIC=1 for the short tiles (clamped cubic / tent reads)
  *
  * Sample model of the gather (see clfx/fx/motion.py): the output pixel x collects the
- * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] with one
- * per-pixel jitter (interleaved gradient noise).  Sample y covers x if x lies on y's smear
+ * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] at the
+ * midpoints, or with one per-pixel jitter (interleaved gradient noise) in tiles whose samples
+ * are sparse (a per-tile flag).  Sample y covers x if x lies on y's smear
  * y + v_y [t0, t1]; its weight is (source length per sample) x (y's smear density at x).
  * Samples in front of x (soft depth test) occlude x; samples at x's depth or behind it form
  * the layer seen through the gaps (Jimenez's foreground / background split).
