@@ -107,12 +107,12 @@ instead of bilinearly (or nearest): over a short smear the reconstruction filter
 as large as the motion's, and only a sharper one brings the result closer to the truth than
 the unblurred input."""
 
-JITTER_SPACING_PX = 2.0
+JITTER_SPACING_PX = 4.0
 """Per-pixel jitter only where samples lie farther apart than this along the blur (the
-level's sample cap bites): denser samples use the midpoint rule, which is exact for a
-linear image and has no noise (copies up to 2 px apart merge in the reads' own blur); jitter
-turns the ghost copies of sparse samples into grain.  On the bench cases the midpoint rule
-scored 0.3-1.6 dB closer to the truth than jitter at 1-2 px spacing."""
+level's sample cap bites hard): denser samples use the midpoint rule, which is exact for a
+linear image and has no noise; jitter turns the ghost copies of very sparse samples into
+grain.  On the bench cases the midpoint rule scored 0.3-2.3 dB closer to the truth than
+jitter at 1-4 px spacing (draft at 1920x1080: samples up to 3.75 px apart)."""
 
 
 @dataclass(frozen=True)
