@@ -53,8 +53,9 @@ from clfx.host import Plugin, register
 KERNEL = "camera_blur.cl"
 
 FAST_LEVELS = ("draft", "preview")
-"""Levels whose colour fetches are nearest rather than bilinear (the path gather's long,
-smooth paths hide it; the speed is what these levels are for)."""
+"""Levels whose path gather reads the nearest pixel rather than bilinearly (its long, smooth
+paths hide it; the speed is what these levels are for).  Trucking renders through
+motion_blur's own levels (:data:`clfx.fx.motion.LEVELS`, bilinear throughout)."""
 
 
 def camera_motion(p, ctx):
@@ -198,7 +199,7 @@ class CameraBlur(Plugin):
         peak = peak_speed_bound(m, src.window, zmin)
         out, stats = reconstruct(rt, src, vel, depth, t0=t0, t1=t1,
                                  max_radius_px=min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX),
-                                 peak_speed=peak, level=level, frame=ctx.frame,
+                                 peak_speed=peak, level=LEVELS[ctx.quality], frame=ctx.frame,
                                  nonfinite=nonfinite)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px")
