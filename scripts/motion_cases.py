@@ -32,7 +32,8 @@ def main():
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
     mod = importlib.import_module(f"clfx.bench.cases.{a.effect}")
-    names = a.cases.split(",") if a.cases else list(mod.CASES)
+    cases = getattr(mod, "CASES", {a.effect: mod.CASE.make})
+    names = a.cases.split(",") if a.cases else list(cases)
     rt = Runtime.get()
     cls = get_plugin(a.effect)
     cols = list(QUALITY_LEVELS) + ["naive", "input"]
@@ -41,9 +42,11 @@ def main():
     print("|---|" + "---|" * len(cols))
     for name in names:
         t0 = time.perf_counter()
-        case = mod.CASES[name](w, h, np.random.default_rng(1), truth_samples=a.samples)
+        case = cases[name](w, h, np.random.default_rng(1), truth_samples=a.samples)
         truth = np.asarray(case["truth"], np.float64)
-        edge = edge_band(case.get("depth"), case.get("velocity"), EDGE_BAND_PX)
+        edge = case.get("edge_mask")
+        if edge is None:
+            edge = edge_band(case.get("depth"), case.get("velocity"), EDGE_BAND_PX)
         params = cls.params(**case.get("params", {}))
         outs = {}
         for q in QUALITY_LEVELS:

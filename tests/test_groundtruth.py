@@ -54,7 +54,9 @@ def test_coc_of_ground_truth_matches_the_camera():
     # A tiny light far behind the focus plane spreads into a disk of the camera's CoC.
     depth = 30.0
     sc = light_scene(depth, radius=0.3, lum=1e4)
-    truth = render_truth(sc, CAM, samples=2048, ss=2)
+    # exact_below_px=0: the light is shifted on the sharp frame's sub-sample grid (not
+    # rasterised exactly per render), so the average conserves that frame's energy exactly
+    truth = render_truth(sc, CAM, samples=2048, ss=2, exact_below_px=0.0)
     coc = CAM.coc_px(depth, sc.width)
     lit = truth[..., 0] > 0
     ys, xs = np.nonzero(lit)
@@ -222,3 +224,17 @@ def test_spinning_layer_velocity_and_truth():
     tip = case.truth[30 - 3:30 + 4, 57:60, 3]
     assert tip.min() < 0.9 and (case.truth[..., 3] > 0.01).sum() > (case.sharp.rgba[..., 3] > 0.01).sum()
     np.testing.assert_allclose(case.truth[29:31, 38:42, 3], 1.0, atol=1e-6)
+
+
+def test_blackman_harris_truth_of_a_defocused_light_keeps_its_energy():
+    from clfx.bench.groundtruth import make_case
+
+    sc = light_scene(30.0, radius=1.0, lum=1e3)
+    case = make_case(sc, CAM, samples=288, dof=True, ss=4, pixel_filter="blackman-harris")
+    sharp, truth = case.sharp.rgba[..., 0], case.truth[..., 0]
+    # a short path (CoC 1.5 px) is rasterised exactly per render: over many renders the truth
+    # integrates the disk's area (pi r^2 x 1000); the 4 x 4 sharp frame estimates it within 6%
+    assert abs(truth.sum() / (math.pi * 1e3) - 1) < 1e-3
+    assert abs(truth.sum() / sharp.sum() - 1) < 0.08
+    assert (truth > 1.0).sum() > (sharp > 1.0).sum()          # and the light spread
+    assert case.settings["pixel_filter"] == "blackman-harris"

@@ -174,7 +174,7 @@ def pixel_positions(ss: int, pixel_filter: str = "box", filter_width: float | No
 def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
                  dof: bool = True, motion: bool = True, ss: int = 1,
                  pixel_filter: str = "box", filter_width: float | None = None,
-                 progress=None) -> np.ndarray:
+                 exact_below_px: float = 4.0, progress=None) -> np.ndarray:
     """Multisample render of ``scene`` through ``camera``: the ground truth.
 
     Every sample render is the whole frame for one lens point, one shutter instant and one
@@ -202,7 +202,11 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
         Integrate over the aperture / over the shutter interval.
     ss : int
         Sub-pixel positions per pixel and axis, and the resolution ``1/ss`` px to which
-        lens and motion shifts are rounded (spinning layers are placed exactly).
+        lens and motion shifts of fast layers are rounded.
+    exact_below_px : float
+        Layers whose shifts over the aperture and shutter span less than this (px), and
+        spinning layers, are rasterised exactly for every render instead of being rounded
+        (rounding a path of a pixel to 1/4 px widens its blur by a tenth or more).
     pixel_filter : {"box", "blackman-harris"}
         Pixel filter of the beauty (:func:`clfx.bench.scene.pixel_filter_weight`).
     filter_width : float, optional
@@ -217,9 +221,11 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
 
     Notes
     -----
-    Memory: each layer is kept at ``ss x ss`` sub-samples over its extent (float32 RGBA), e.g.
-    about 0.5 GB for a full-frame layer at 1920x1080 and ``ss = 4``.  Time: one composite of
-    every layer at pixel resolution per sample render.
+    Memory: each fast or static layer is kept at ``ss x ss`` sub-samples over its extent
+    (float32 RGBA), e.g. about 0.5 GB for a full-frame layer at 1920x1080 and ``ss = 4``.
+    Time: one composite of every layer at pixel resolution per sample render, plus the
+    rasterisation of the exact layers (about 0.5 s per render for a full-frame textured
+    layer at 1920x1080).
     """
     w, h = scene.width, scene.height
     jx, jy, fw = pixel_positions(ss, pixel_filter, filter_width)
@@ -246,16 +252,23 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     bg = background_rgba(scene, -bpad, -bpad, w + 2 * bpad, h + 2 * bpad, ss)
     sprites = [_Sprite(_phase_major(bg, ss), -bpad, -bpad, bg_half, (0.0, 0.0))]
     del bg
+    t_lo, t_hi = (float(times.min()), float(times.max())) if motion else (0.0, 0.0)
     for layer in scene.layers:
         hc = half_coc(layer.depth)
         speed = math.hypot(*layer.velocity) * t_extent
-        if motion and layer.spin != 0.0:
-            lo = layer.bounds(t + float(times.min()), margin=1.0)
-            hi = layer.bounds(t + float(times.max()), margin=1.0)
-            pad = abs(hc) + reach
-            box = (math.floor(min(lo[0], hi[0]) - pad), math.floor(min(lo[1], hi[1]) - pad),
-                   math.ceil(max(lo[2], hi[2]) + pad), math.ceil(max(lo[3], hi[3]) + pad))
-            box = (max(box[0], 0), max(box[1], 0), min(box[2], w), min(box[3], h))
+        travel = 2.0 * abs(hc) + math.hypot(*layer.velocity) * (t_hi - t_lo)
+        if (motion and layer.spin != 0.0) or 0.0 < travel < exact_below_px:
+            # rasterised for every render at its exact position: a spinning layer cannot be
+            # translated, and rounding a short path to 1/ss px would blur it visibly more
+            lo, hi = layer.bounds(t + t_lo, margin=1.0), layer.bounds(t + t_hi, margin=1.0)
+            if lo is None:
+                box = (0, 0, w, h)
+            else:
+                pad = abs(hc) + reach
+                box = (max(math.floor(min(lo[0], hi[0]) - pad), 0),
+                       max(math.floor(min(lo[1], hi[1]) - pad), 0),
+                       min(math.ceil(max(lo[2], hi[2]) + pad), w),
+                       min(math.ceil(max(lo[3], hi[3]) + pad), h))
             sprites.append(_Sprite(None, box[0], box[1], hc, tuple(layer.velocity), layer, box))
         else:
             sprites.append(_sprite(scene, layer, t, abs(hc) + speed + reach, ss, hc))

@@ -17,13 +17,17 @@ screen space (pixels, +x right, +y down, pixel centres at +0.5):
 - HDR emissive :class:`Light` spots (small antialiased disks, values of 50-5000), which are
   opaque and add their radiance on top of the texture;
 - a constant screen-space velocity ``velocity`` in pixels per frame: at time ``t`` (frames,
-  relative to the scene's frame) the whole layer is translated by ``velocity * t``.
+  relative to the scene's frame) the whole layer is translated by ``velocity * t``, and
+  turned about its centre by ``spin * t`` degrees (``angle`` at t = 0): a spinning layer's
+  velocity varies across it (:meth:`Layer.velocity_at`).
 
 :func:`render_sharp` evaluates every layer analytically at ``ss x ss`` sub-pixel positions
-per pixel, composites them "over" (premultiplied alpha, far to near) and box-filters to pixels.
-Its depth pass is the depth of the nearest layer whose pixel coverage exceeds 0.5 (+inf for
-the background) and its velocity pass the forward velocity of that same layer (0 for the
-background), in clfx's conventions (:mod:`clfx.core.frame`).
+per pixel, composites them "over" (premultiplied alpha, far to near) and filters to pixels
+(a box, or Blackman-Harris: :func:`filter_taps`).  Its depth pass is the depth of the
+nearest layer owning the pixel (+inf for the background) and its velocity pass that layer's
+forward velocity at the pixel centre (0 for the background), in clfx's conventions
+(:mod:`clfx.core.frame`); a layer owns a pixel by coverage (more than half its sub-samples)
+or, as renderers write passes, by the one sample at the pixel centre (``passes="centre"``).
 
 This is a generator for tests and demos, not an effect: vectorised NumPy on the host.
 """
@@ -610,7 +614,8 @@ def moving_scene(width: int, height: int, max_speed_px: float = 60.0,
     wall = Layer(depth=20.0, texture=Texture("blocks", (0.5, 0.45, 0.4), (0.05, 0.05, 0.06),
                                              period=12.0 * s, seed=3),
                  shape="full", name="wall",
-                 lights=(Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0), 2.0 * s),),
+                 lights=(Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0),
+                               max(2.0 * s, 1.0)),),
                  velocity=(0.0, 0.0) if moving_fraction else (0.05 * v, 0.0))
     if moving_fraction:
         r = 0.5 * math.sqrt(moving_fraction * width * height / math.pi) * 0.8

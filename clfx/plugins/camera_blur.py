@@ -52,6 +52,11 @@ from clfx.host import Plugin, register
 
 KERNEL = "camera_blur.cl"
 
+FAST_LEVELS = ("draft", "preview")
+"""Levels whose path gather reads the nearest pixel rather than bilinearly (its long, smooth
+paths hide it; the speed is what these levels are for).  Trucking renders through
+motion_blur's own levels (:data:`clfx.fx.motion.LEVELS`, bilinear throughout)."""
+
 
 def camera_motion(p, ctx):
     """Image-plane motion per frame: (cx, cy) centre in frame px, (sx, sy) shift px/frame,
@@ -91,14 +96,16 @@ def peak_speed_bound(m, window, min_depth) -> float:
     return v
 
 
-QUALITY = {
-    name: replace(lvl, summary=(
+def _quality(name, lvl):
+    bilinear = lvl.bilinear and name not in FAST_LEVELS
+    return replace(lvl, bilinear=bilinear, summary=(
         f"pan/roll/zoom: exact path gather, up to {lvl.max_samples} samples (one per "
-        f"{lvl.spacing:g} px of the longest path), {'bilinear' if lvl.bilinear else 'nearest'}, "
+        f"{lvl.spacing:g} px of the longest path), {'bilinear' if bilinear else 'nearest'}, "
         f"{'float64' if lvl.fp64 else 'float32'} accumulation"
         f"{'' if lvl.jitter else ', midpoint rule'}; trucking: motion_blur's {name} level"))
-    for name, lvl in LEVELS.items()
-}
+
+
+QUALITY = {name: _quality(name, lvl) for name, lvl in LEVELS.items()}
 """The motion gather's levels (one declaration, :data:`clfx.fx.motion.LEVELS`), described
 for the path gather."""
 
@@ -192,7 +199,7 @@ class CameraBlur(Plugin):
         peak = peak_speed_bound(m, src.window, zmin)
         out, stats = reconstruct(rt, src, vel, depth, t0=t0, t1=t1,
                                  max_radius_px=min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX),
-                                 peak_speed=peak, level=level, frame=ctx.frame,
+                                 peak_speed=peak, level=LEVELS[ctx.quality], frame=ctx.frame,
                                  nonfinite=nonfinite)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px")

@@ -5,17 +5,21 @@
  *   motion_prepare           per 4 pixels: velocity sanitised (non-finite -> 0) and clamped to
  *                            the maximum speed VMAX, depth sanitised (invalid -> BIG_DEPTH);
  *                            writes aux = (vx, vy, z, |v|) per pixel
+ *   motion_dilate            per 4 pixels, with a depth pass: an antialiased rim pixel of a
+ *                            small bright surface in front (a light) takes its motion
  *   motion_sanitize          per 4 pixels: non-finite colour components -> 0 (only when the
  *                            analysis counted some)
  *   motion_tilemax           per K x K tile: the velocity of largest magnitude
  *   motion_neighbormax       per tile: the largest over the 3 x 3 neighbouring tiles
- *   motion_gather            per 4 pixels of the *moving* tiles only (a compact tile list built
+ *   motion_gather            per 4 pixels of the *moving* tiles only (compact tile lists built
  *                            on the host): N samples along the neighbourhood's dominant
- *                            velocity, depth-aware scatter-as-gather weights
+ *                            velocity, depth-aware scatter-as-gather weights; built with
+ *                            CUBIC=1 for the short tiles (clamped cubic / tent reads)
  *
  * Sample model of the gather (see clfx/fx/motion.py): the output pixel x collects the
- * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] with one
- * per-pixel jitter (interleaved gradient noise).  Sample y covers x if x lies on y's smear
+ * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] at the
+ * midpoints, or with one per-pixel jitter (interleaved gradient noise) in tiles whose samples
+ * are sparse (a per-tile flag).  Sample y covers x if x lies on y's smear
  * y + v_y [t0, t1]; its weight is (source length per sample) x (y's smear density at x).
  * Samples in front of x (soft depth test) occlude x; samples at x's depth or behind it form
  * the layer seen through the gaps (Jimenez's foreground / background split).
@@ -64,6 +68,83 @@ kernel void motion_prepare(global const float *vel, global const float *depth,
 #endif
   vstore16((float16)(vx.x, vy.x, z.x, s.x, vx.y, vy.y, z.y, s.y,
                      vx.z, vy.z, z.z, s.z, vx.w, vy.w, z.w, s.w), 0, aux + 4 * i);
+}
+
+/* Renderers write the beauty filtered over the pixel but velocity and depth from the surface
+ * at its centre: the rim pixels of a small moving light carry the background's (zero)
+ * velocity though most of their light is the light's, which then stays behind as a static
+ * ring instead of streaking.  A pixel p takes the velocity and depth of its nearest 3 x 3
+ * neighbour q when q is in front of p and moves differently, and p's colour is mostly q's:
+ * p is more than DILATE_RATIO times brighter than the neighbour b on its other side
+ * (p - (q - p), at p's depth or behind: p's background) and darker than q (a mixture of
+ * the two).  Only light-on-dark edges pass this test (a ratio of 10 needs an HDR or very
+ * bright surface over a dark one); ordinary texture edges keep their centre sample. */
+#ifndef DILATE_RATIO
+#define DILATE_RATIO 10.0f
+#endif
+kernel void motion_dilate(global const float *aux, global const float *col, global float *out,
+                          const int pitch, const int width, const int height,
+                          const float duration)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(y >= height || qx * 4 >= pitch) return;
+  const int x = qx * 4, i = y * pitch + x;
+  float16 own = vload16(0, aux + 4 * i);
+  /* the 3 x 6 records around the quad (columns x-1 .. x+4, clamped; outside = no candidate) */
+  float vx[3][6], vy[3][6], z[3][6];
+  for(int r = 0; r < 3; r++)
+  {
+    const int yy = clfx_clampi(y + r - 1, 0, height - 1);
+    for(int c = 0; c < 6; c++)
+    {
+      const float4 q = vload4(yy * pitch + clfx_clampi(x + c - 1, 0, width - 1), aux);
+      vx[r][c] = q.x; vy[r][c] = q.y; z[r][c] = q.z;
+    }
+  }
+  const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
+  const float4 lanex = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
+  float4 bz = az * (1.0f - SOFT_Z);
+  int4 bdx = (int4)(0), bdy = (int4)(0);
+  for(int dy = -1; dy <= 1; dy++)
+    for(int dx = -1; dx <= 1; dx++)
+    {
+      if(dx == 0 && dy == 0) continue;
+      const int r = dy + 1;
+      const float4 qz = (float4)(z[r][dx + 1], z[r][dx + 2], z[r][dx + 3], z[r][dx + 4]);
+      const float4 qvx = (float4)(vx[r][dx + 1], vx[r][dx + 2], vx[r][dx + 3], vx[r][dx + 4]);
+      const float4 qvy = (float4)(vy[r][dx + 1], vy[r][dx + 2], vy[r][dx + 3], vy[r][dx + 4]);
+      const float4 ex = qvx - ax, ey = qvy - ay;
+      const int4 inside = (lanex + (float)dx >= 0.0f) & (lanex + (float)dx < (float)width) &
+                          (int4)(-(int)(y + dy >= 0 && y + dy < height));
+      const int4 take = inside & (qz < bz) &
+                        (sqrt(ex * ex + ey * ey) * duration >= MIN_BLUR);
+      bz = select(bz, qz, take);
+      bdx = select(bdx, (int4)(dx), take);
+      bdy = select(bdy, (int4)(dy), take);
+    }
+  if(any((bdx | bdy) != 0))   /* rare: a nearer moving neighbour; test the colours */
+  {
+    float a16[16];
+    vstore16(own, 0, a16);
+    for(int l = 0; l < 4; l++)
+    {
+      const int dx = l == 0 ? bdx.x : l == 1 ? bdx.y : l == 2 ? bdx.z : bdx.w;
+      const int dy = l == 0 ? bdy.x : l == 1 ? bdy.y : l == 2 ? bdy.z : bdy.w;
+      const int px = x + l;
+      const int ox = px - dx, oy = y - dy;
+      if(!(dx | dy) || px >= width || ox < 0 || oy < 0 || ox >= width || oy >= height) continue;
+      const float4 b = vload4(oy * pitch + ox, aux);
+      const float lp = dot(vload4(i + l, col).xyz, (float3)(1.0f));
+      const float lb = dot(vload4(oy * pitch + ox, col).xyz, (float3)(1.0f));
+      const int q = (y + dy) * pitch + px + dx;
+      const float lq = dot(vload4(q, col).xyz, (float3)(1.0f));
+      if(b.z >= a16[4 * l + 2] * (1.0f - SOFT_Z) && lp - lb > DILATE_RATIO * fmax(lb, 0.0f) &&
+         lq > lp)
+        vstore4(vload4(q, aux), l, a16);
+    }
+    own = vload16(0, a16);
+  }
+  vstore16(own, 0, out + 4 * i);
 }
 
 kernel void motion_sanitize(global const float *src, global float *dst, const int pitch,
@@ -124,12 +205,25 @@ kernel void motion_neighbormax(global const float *tiles, global float *nmax,
     VX = (float4)(a0_.x, a1_.x, a2_.x, a3_.x); VY = (float4)(a0_.y, a1_.y, a2_.y, a3_.y); \
     Z = (float4)(a0_.z, a1_.z, a2_.z, a3_.z); S = (float4)(a0_.w, a1_.w, a2_.w, a3_.w); }
 
-/* Catmull-Rom weights of the 4 taps around a sample at fraction a in [0, 1). */
-inline float4 mb_catmull_rom(const float a)
+/* Weights of the 4 taps around a sample at fraction a in [0, 1): Catmull-Rom blended with
+ * the linear tent by 1 - beta (see mb_beta). */
+inline float4 mb_cubic_weights(const float a, const float beta)
 {
   const float a2 = a * a, a3 = a2 * a;
-  return (float4)(-0.5f * a3 + a2 - 0.5f * a, 1.5f * a3 - 2.5f * a2 + 1.0f,
-                  -1.5f * a3 + 2.0f * a2 + 0.5f * a, 0.5f * a3 - 0.5f * a2);
+  const float4 cr = (float4)(-0.5f * a3 + a2 - 0.5f * a, 1.5f * a3 - 2.5f * a2 + 1.0f,
+                             -1.5f * a3 + 2.0f * a2 + 0.5f * a, 0.5f * a3 - 0.5f * a2);
+  const float4 lin = (float4)(0.0f, 1.0f - a, a, 0.0f);
+  return lin + (cr - lin) * beta;
+}
+
+/* How much of the Catmull-Rom a smear of `len` px wants (against the tent): rendered images
+ * are box-filtered, piecewise linear between sub-pixel edges; over a smear shorter than
+ * ~3/8 px those kinks dominate what changes and the tent (whose blur grows like the smear)
+ * follows them best, while over a pixel or more the cubic's sharper passband wins (measured
+ * on the motion_blur bench cases: textures of 2-12 px features). */
+inline float mb_beta(const float len)
+{
+  return clamp((len - 0.375f) * 1.6f, 0.0f, 1.0f);
 }
 
 /* Colour at continuous position (px, py), clamp-to-edge, times `scale`: Catmull-Rom (4 x 4
@@ -138,11 +232,12 @@ inline float4 mb_catmull_rom(const float a)
  * to a quarter pixel more (as much again as a one-pixel smear), the cubic keeps the detail;
  * the clamp stops its negative lobes ringing around HDR lights. */
 inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int w,
-                             const int h, const float px, const float py, const float scale)
+                             const int h, const float px, const float py, const float scale,
+                             const float beta)
 {
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
-  const float4 wx = mb_catmull_rom(u - fu), wy = mb_catmull_rom(v - fv);
+  const float4 wx = mb_cubic_weights(u - fu, beta), wy = mb_cubic_weights(v - fv, beta);
   const int iu = (int)clamp(fu, -2.0f, (float)w), iv = (int)clamp(fv, -2.0f, (float)h);
   const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
   const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
@@ -163,18 +258,105 @@ inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int
   return clamp(acc, lo, hi);
 }
 
+/* The same at the 4 positions (px + k, py), k = 0..3, of a quad whose lanes share one
+ * offset: the 4 x 7 pixels the lanes' taps cover are loaded once (28 loads, not 64) and the
+ * weights computed once. */
+inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
+                                   const int h, const float px, const float py,
+                                   const float scale, const float beta)
+{
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v);
+  const float4 wx = mb_cubic_weights(u - fu, beta), wy = mb_cubic_weights(v - fv, beta);
+  const int iu = (int)clamp(fu, -8.0f, (float)w + 8.0f);
+  const int iv = (int)clamp(fv, -2.0f, (float)h);
+  const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
+  const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
+  const int x4 = clfx_clampi(iu + 3, 0, w - 1), x5 = clfx_clampi(iu + 4, 0, w - 1);
+  const int x6 = clfx_clampi(iu + 5, 0, w - 1);
+  float16 acc = (float16)(0.0f), lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+  for(int j = 0; j < 4; j++)
+  {
+    const int row = clfx_clampi(iv - 1 + j, 0, h - 1) * pitch;
+    const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
+    const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
+    const float4 c4 = vload4(row + x4, col) * scale, c5 = vload4(row + x5, col) * scale;
+    const float4 c6 = vload4(row + x6, col) * scale;
+    if(j == 1 || j == 2)
+    {
+      lo = fmin(lo, (float16)(fmin(c1, c2), fmin(c2, c3), fmin(c3, c4), fmin(c4, c5)));
+      hi = fmax(hi, (float16)(fmax(c1, c2), fmax(c2, c3), fmax(c3, c4), fmax(c4, c5)));
+    }
+    const float wj = j == 0 ? wy.x : j == 1 ? wy.y : j == 2 ? wy.z : wy.w;
+    acc += wj * (float16)(wx.x * c0 + wx.y * c1 + wx.z * c2 + wx.w * c3,
+                          wx.x * c1 + wx.y * c2 + wx.z * c3 + wx.w * c4,
+                          wx.x * c2 + wx.y * c3 + wx.z * c4 + wx.w * c5,
+                          wx.x * c3 + wx.y * c4 + wx.z * c5 + wx.w * c6);
+  }
+  return clamp(acc, lo, hi);
+}
+
+/* Bilinear (BILINEAR) or nearest at the 4 positions (px + k, py) of a quad sharing one
+ * offset: 2 x 5 loads (4 for nearest), as mg_fetch_scaled per lane. */
+inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
+                                    const int h, const float px, const float py,
+                                    const float scale, const float beta)
+{
+#if BILINEAR
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v);
+  const float ax = u - fu, ay = v - fv;
+  const int iu = (int)clamp(fu, -8.0f, (float)w + 8.0f);
+  const int iv = (int)clamp(fv, -1.0f, (float)h);
+  const int ya = clfx_clampi(iv, 0, h - 1) * pitch, yb = clfx_clampi(iv + 1, 0, h - 1) * pitch;
+  const int x0 = clfx_clampi(iu, 0, w - 1), x1 = clfx_clampi(iu + 1, 0, w - 1);
+  const int x2 = clfx_clampi(iu + 2, 0, w - 1), x3 = clfx_clampi(iu + 3, 0, w - 1);
+  const int x4 = clfx_clampi(iu + 4, 0, w - 1);
+  const float4 t0 = vload4(ya + x0, col) * scale, t1 = vload4(ya + x1, col) * scale;
+  const float4 t2 = vload4(ya + x2, col) * scale, t3 = vload4(ya + x3, col) * scale;
+  const float4 t4 = vload4(ya + x4, col) * scale;
+  const float4 b0 = vload4(yb + x0, col) * scale, b1 = vload4(yb + x1, col) * scale;
+  const float4 b2 = vload4(yb + x2, col) * scale, b3 = vload4(yb + x3, col) * scale;
+  const float4 b4 = vload4(yb + x4, col) * scale;
+  const float16 top = (float16)(t0, t1, t2, t3), top1 = (float16)(t1, t2, t3, t4);
+  const float16 bot = (float16)(b0, b1, b2, b3), bot1 = (float16)(b1, b2, b3, b4);
+  const float16 tt = top + (top1 - top) * ax, bb = bot + (bot1 - bot) * ax;
+  return tt + (bb - tt) * ay;
+#else
+  const int x = (int)clamp(floor(px), -8.0f, (float)w + 8.0f);
+  const int row = (int)clamp(floor(py), 0.0f, (float)(h - 1)) * pitch;
+  return (float16)(vload4(row + clfx_clampi(x, 0, w - 1), col) * scale,
+                   vload4(row + clfx_clampi(x + 1, 0, w - 1), col) * scale,
+                   vload4(row + clfx_clampi(x + 2, 0, w - 1), col) * scale,
+                   vload4(row + clfx_clampi(x + 3, 0, w - 1), col) * scale);
+#endif
+}
+
+/* mg_fetch_scaled with the (unused) blend of the cubic fetch's signature */
+inline float4 mb_fetch_linear(global const float *col, const int pitch, const int w,
+                              const int h, const float px, const float py, const float scale,
+                              const float beta)
+{
+  return mg_fetch_scaled(col, pitch, w, h, px, py, scale);
+}
+
 #if CUBIC
 #define MB_FETCH mb_fetch_cubic
+#define MB_FETCH_QUAD mb_fetch_quad_cubic
 #else
-#define MB_FETCH mg_fetch_scaled
+#define MB_FETCH mb_fetch_linear
+#define MB_FETCH_QUAD mb_fetch_quad_linear
 #endif
 
-/* Colours at 4 positions, times `scale` (in scope). */
-#define MB_FETCH4(px, py) \
-  (float16)(MB_FETCH(col, pitch, width, height, (px).x, (py).x, scale), \
-            MB_FETCH(col, pitch, width, height, (px).y, (py).y, scale), \
-            MB_FETCH(col, pitch, width, height, (px).z, (py).z, scale), \
-            MB_FETCH(col, pitch, width, height, (px).w, (py).w, scale))
+/* Colours at 4 positions, times `scale` (in scope), cubic blends `beta` (float4, per lane);
+ * `same` (runtime): the lanes share one offset and blend, i.e. the positions are
+ * (px.x + k, py.x). */
+#define MB_FETCH4(px, py, same, beta) \
+  ((same) ? MB_FETCH_QUAD(col, pitch, width, height, (px).x, (py).x, scale, (beta).x) : \
+   (float16)(MB_FETCH(col, pitch, width, height, (px).x, (py).x, scale, (beta).x), \
+             MB_FETCH(col, pitch, width, height, (px).y, (py).y, scale, (beta).y), \
+             MB_FETCH(col, pitch, width, height, (px).z, (py).z, scale, (beta).z), \
+             MB_FETCH(col, pitch, width, height, (px).w, (py).w, scale, (beta).w)))
 
 /* The gather of the 4 pixels of one work-item (lanes `lane`, row fy; centre colours cc, own
  * velocities (vxx, vxy), depths zx), every colour sample times `scale` (the result too).
@@ -199,6 +381,15 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 {
   REAL16 F = (REAL16)(0), S = (REAL16)(0);
   REAL4 aF = (REAL4)(0), aS = (REAL4)(0);
+  /* lanes whose samples sit at one offset (no jitter; for the own set, one velocity) read
+   * their colours together */
+  const int same_t = all(jit == jit.x);
+  const int same_v = same_t && all(vxx == vxx.x) && all(vxy == vxy.x);
+  const float4 beta_n = (float4)(mb_beta(vn.z * (t1 - t0)));         /* along v_n */
+  const float4 beta_x = (float4)(mb_beta(sqrt(vxx.x * vxx.x + vxy.x * vxy.x) * (t1 - t0)),
+                                 mb_beta(sqrt(vxx.y * vxx.y + vxy.y * vxy.y) * (t1 - t0)),
+                                 mb_beta(sqrt(vxx.z * vxx.z + vxy.z * vxy.z) * (t1 - t0)),
+                                 mb_beta(sqrt(vxx.w * vxx.w + vxy.w * vxy.w) * (t1 - t0)));
   for(int i = 0; i < n; i++)
   {
     const float4 t = t0 + ((float)i + jit) * dt;
@@ -225,7 +416,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       const float4 wf = f * rho * (ell / fmax(len, hell));
       if(any(wf > 0.0f))
       {
-        const float16 c = SPLAT16(wf) * MB_FETCH4(px, py);  /* rounded to float, then summed */
+        const float16 c = SPLAT16(wf) * MB_FETCH4(px, py, same_t, beta_n);  /* rounded, summed */
         aF += TO_REAL4(wf);
         F += TO_REAL16(c);
       }
@@ -239,7 +430,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 ws = 1.0f - clamp(rel, 0.0f, 1.0f);
-      const float16 c = SPLAT16(ws) * MB_FETCH4(px, py);
+      const float16 c = SPLAT16(ws) * MB_FETCH4(px, py, same_v, beta_x);
       aS += TO_REAL4(ws);
       S += TO_REAL16(c);
     }

@@ -55,10 +55,16 @@ def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int) -> dict
     return case_dict(gt, scene=scene.name)
 
 
+def _radius(px_at_640: float, width: int) -> float:
+    """A light's radius: ``px_at_640`` scaled with the width, at least a pixel (smaller
+    lights fall between the pixel centres where the passes are sampled)."""
+    return max(px_at_640 * width / 640.0, 1.0)
+
+
 def _wall(width: int, height: int, *, velocity=(0.0, 0.0), lights=True) -> Layer:
     s = width / 640.0
-    lts = ((Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0), 2.0 * s),
-            Light((-0.3 * width, 0.25 * height), (60.0, 80.0, 120.0), 1.5 * s))
+    lts = ((Light((0.1 * width, -0.2 * height), (200.0, 150.0, 100.0), _radius(2.0, width)),
+            Light((-0.3 * width, 0.25 * height), (60.0, 80.0, 120.0), _radius(1.5, width)))
            if lights else ())
     return Layer(depth=20.0, texture=Texture("blocks", (0.5, 0.45, 0.4), (0.05, 0.05, 0.06),
                                              period=12.0 * s, seed=3),
@@ -84,7 +90,7 @@ def crossing_scene(width: int, height: int) -> Scene:
                                            period=10.0 * s, angle=60.0),
                 shape="disk", center=(0.52 * width, 0.50 * height),
                 size=(0.30 * height, 0.30 * height), velocity=(-0.015 * width, 0.0),
-                lights=(Light((0.0, -0.08 * height), (400.0, 300.0, 200.0), 1.5 * s),),
+                lights=(Light((0.0, -0.08 * height), (400.0, 300.0, 200.0), _radius(1.5, width)),),
                 name="far disk")
     near = Layer(depth=2.0, texture=Texture("checker", (0.75, 0.75, 0.7), (0.05, 0.06, 0.08),
                                             period=8.0 * s, angle=-10.0),
@@ -109,7 +115,7 @@ def spin_scene(width: int, height: int) -> Scene:
                                            period=9.0 * s),
                 shape="rounded", center=(0.36 * width, 0.5 * height),
                 size=(2 * r, 0.07 * height), corner=3.0 * s, spin=10.0, angle=20.0,
-                lights=(Light((r * 0.9, 0.0), (2000.0, 1200.0, 600.0), 1.5 * s),),
+                lights=(Light((r * 0.9, 0.0), (2000.0, 1200.0, 600.0), _radius(1.5, width)),),
                 name="propeller")
     rw = 0.16 * height
     wheel = Layer(depth=5.0, texture=Texture("checker", (0.2, 0.5, 0.8), (0.9, 0.9, 0.85),
@@ -129,7 +135,7 @@ def fast_light_scene(width: int, height: int) -> Scene:
     """Small HDR lights streaking across a dim scene: a single bright one (5000) crossing at
     80 px/frame at 1920 wide in front of a slower pair (1000), over a dark wall."""
     s = width / 640.0
-    r = max(1.2 * s, 1.0)   # at least a pixel: the velocity pass sees a light's centre
+    r = _radius(1.2, width)
     dark = Layer(depth=30.0, texture=Texture("noise", (0.02, 0.02, 0.025), (0.06, 0.05, 0.04),
                                              period=14.0 * s, seed=9),
                  shape="full", name="dark wall")
