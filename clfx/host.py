@@ -225,7 +225,8 @@ class Plugin:
         """Run the effect on host arrays: upload, identity check, render, download.
 
         Returns the output cropped to the source window, or ``(array, window)`` with
-        ``keep_rod=True``.  An identity returns a copy of ``source``.
+        ``keep_rod=True``.  An identity returns a copy of ``source`` with NaN and infinities set to 0 (as a look does on
+        upload).
         """
         src = np.asarray(source, np.float32)
         if src.ndim == 2:
@@ -239,8 +240,8 @@ class Plugin:
             seed=seed, camera=camera, quality=quality, display_referred=display_referred,
             read_image=read_image, read_lens=read_lens)
         self.check_clips(ctx)
-        if self.is_identity(p, ctx):
-            out, out_window = src.copy(), window
+        if self.is_identity(p, ctx):  # as in a look, whose upload sanitises: NaN/Inf -> 0
+            out, out_window = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0), window
         else:
             img = self.render(rt, p, ctx)
             out, out_window = rt.download(img), img.window

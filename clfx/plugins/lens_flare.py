@@ -341,6 +341,8 @@ class LensFlare(Plugin):
             return "no pixel above threshold"
         if not self.candidate_sources(p, ctx):
             return "no light source in or near view"
+        if p.model == "physical" and not len(self.plan(ctx.runtime, p, ctx)[0]):
+            return "every ghost is below the visible level (cull)"
         return None
 
     def region_of_definition(self, p, ctx):

@@ -12,6 +12,7 @@ import functools
 
 import numpy as np
 
+from clfx.pipeline.look import read_image_rgba, read_lens_dict
 from clfx.core.camera import Camera
 from clfx.core.plugin import QUALITY_LEVELS, BoolParam, FloatParam, IntParam
 from clfx.core.rect import Rect
@@ -37,6 +38,9 @@ ACTIVE: dict[str, dict] = {
     "defocus": {"size": 0.02},
     "distortion": {"amount": 0.15, "p1": 0.01},
     "lens": {"maker": "Canon", "model": "Canon EF 24-70mm f/2.8L II USM"},
+    # physical ghosts of the frame's 5-nit lights are far below visible (1e-5 of the light):
+    # a large gain makes them draw, so the physical path is what the suite checks
+    "lens_flare": {"gain": 1e5},
     "sensor_noise": {"prnu": 0.01},   # all three noise terms
     "vignette": {"amount": 0.4},
 }
@@ -91,6 +95,10 @@ def clip_names(name: str) -> set[str]:
     return {c.name for c in discover()[name].descriptor.clips if c.name != "source"}
 
 
+READERS = {"read_lens": read_lens_dict, "read_image": read_image_rgba}
+"""What the pipeline hands every effect (lens prescriptions, kernel images), as a look does."""
+
+
 def passes(name: str, shape) -> dict:
     """Synthetic ``depth`` / ``velocity`` keyword arguments for every pass ``name`` reads."""
     make = {"depth": depth_pass, "velocity": velocity_pass}
@@ -106,7 +114,7 @@ def plugin(name: str):
 def apply(rt, name: str, src: np.ndarray, p=None, *, quality: str = "final", frame: int = 7,
           seed: int = 11, **kw):
     """Render ``src`` through ``name`` with synthetic passes and the contract camera."""
-    kw = {**passes(name, src.shape[:2]), "camera": CAMERA, **kw}
+    kw = {**passes(name, src.shape[:2]), "camera": CAMERA, **READERS, **kw}
     return plugin(name).apply(rt, p if p is not None else params(name), src, quality=quality,
                               frame=frame, seed=seed, **kw)
 
@@ -117,7 +125,8 @@ def context(rt, name: str, src: np.ndarray, *, quality: str = "final", window: R
     window = window or Rect.from_size(src.shape[1], src.shape[0])
     up = {k: rt.upload(v, window) for k, v in passes(name, src.shape[:2]).items()}
     return RenderContext(rt, rt.upload(src, window), display_window=display_window or window,
-                         camera=CAMERA, quality=quality, frame=7, seed=11, **up, **kw)
+                         camera=CAMERA, quality=quality, frame=7, seed=11, **up,
+                         **{**READERS, **kw})
 
 
 def neutral_candidates(name: str) -> list[dict]:

@@ -29,7 +29,7 @@ def render_all(rt, fresh: bool = False) -> dict[str, np.ndarray]:
     out = {}
     for name in E.EFFECTS:
         plugin = E.discover()[name]() if fresh else E.plugin(name)
-        kw = {**E.passes(name, src.shape[:2]), "camera": E.CAMERA}
+        kw = {**E.passes(name, src.shape[:2]), "camera": E.CAMERA, **E.READERS}
         for q in E.QUALITIES:
             out[f"{name}-{q}"] = plugin.apply(rt, E.params(name), src, quality=q, frame=7,
                                               seed=11, **kw)
