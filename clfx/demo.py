@@ -45,14 +45,20 @@ def contact_sheet(previews: list[np.ndarray], columns: int = 6, thumb_width: int
     thumbs = [p[: h - h % step or h, : w - w % step or w] for p in previews]
     thumbs = [t.reshape(t.shape[0] // step, step, t.shape[1] // step, step, 3).mean(axis=(1, 3))
               if step > 1 else t for t in thumbs]
-    th, tw = thumbs[0].shape[:2]
-    cols = min(columns, len(thumbs))
-    rows = -(-len(thumbs) // cols)
+    return tile_sheet(thumbs, columns, gap)
+
+
+def tile_sheet(tiles: list[np.ndarray], columns: int = 6, gap: int = 4) -> np.ndarray:
+    """Tiles (display-linear RGB, any sizes) on a dark sheet, row by row."""
+    th = max(t.shape[0] for t in tiles)
+    tw = max(t.shape[1] for t in tiles)
+    cols = min(columns, len(tiles))
+    rows = -(-len(tiles) // cols)
     sheet = np.full((rows * (th + gap) + gap, cols * (tw + gap) + gap, 3), 0.02, np.float32)
-    for i, t in enumerate(thumbs):
+    for i, t in enumerate(tiles):
         r, c = divmod(i, cols)
         y, x = gap + r * (th + gap), gap + c * (tw + gap)
-        sheet[y:y + th, x:x + tw] = t
+        sheet[y:y + t.shape[0], x:x + t.shape[1]] = t
     return sheet
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from clfx.core.errors import ClfxError
 from clfx.core.frame import Frame
-from clfx.demo import tonemap_preview as tonemap
+from clfx.demo import tile_sheet, tonemap_preview as tonemap
 from clfx.pipeline.look import render_frame
 
 GALLERY_WIDTH = 640
@@ -215,20 +215,6 @@ def _runnable(look, frame: Frame):
     return replace(look, steps=steps), missing
 
 
-def contact_sheet(tiles: list[np.ndarray], columns: int = 6, gap: int = 4) -> np.ndarray:
-    """Tiles (display-linear RGB, any sizes) on a dark sheet, row by row."""
-    th = max(t.shape[0] for t in tiles)
-    tw = max(t.shape[1] for t in tiles)
-    cols = min(columns, len(tiles))
-    rows = -(-len(tiles) // cols)
-    sheet = np.full((rows * (th + gap) + gap, cols * (tw + gap) + gap, 3), 0.02, np.float32)
-    for i, t in enumerate(tiles):
-        r, c = divmod(i, cols)
-        y, x = gap + r * (th + gap), gap + c * (tw + gap)
-        sheet[y:y + t.shape[0], x:x + t.shape[1]] = t
-    return sheet
-
-
 def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | None = None,
                 only=None, columns: int = 6, thumb_width: int = 320,
                 verbosity: int = 1) -> dict:
@@ -283,7 +269,7 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
                                    "skipped_steps": missing, "warnings": warnings,
                                    "error": error})
             log(f"clfx gallery: {name}: {kind} {item} ({ms:.0f} ms)")
-        entry["sheet"] = save(contact_sheet(thumbs, columns), name, "sheet.png")
+        entry["sheet"] = save(tile_sheet(thumbs, columns), name, "sheet.png")
         index["images"].append(entry)
         log(f"clfx gallery: contact sheet {entry['sheet']}")
     index["wall_s"] = round(time.perf_counter() - t0, 1)

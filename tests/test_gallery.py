@@ -28,7 +28,7 @@ def test_labels_are_drawn_and_sheet_layout():
     out = gallery.label(tile, ["AB", "c-d"])
     assert out.max() == 1.0 and out[:2].max() == 0.0          # text below a 2 px margin
     assert gallery.text_mask("x").shape == (14, 12)
-    sheet = gallery.contact_sheet([tile] * 7, columns=3)
+    sheet = gallery.tile_sheet([tile] * 7, columns=3)
     assert sheet.shape == (3 * 44 + 4, 3 * 124 + 4, 3)
 
 
