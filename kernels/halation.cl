@@ -27,27 +27,7 @@ kernel void halation_mix(global const float *src, const int spitch, const int sw
                          const int pitch, const int height, const int dx, const int dy,
                          const float strength, const float4 tint, const float threshold,
                          const float knee)
-{
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(qx * 4 >= pitch || y >= height) return;
-  const size_t i = ((size_t)y * pitch + qx * 4) * 4;
-  const float16 gl = vload16(0, g + i);
-  const float4 gg[4] = {gl.s0123, gl.s4567, gl.s89ab, gl.scdef};
-  const float4 st = strength * (float4)(tint.xyz, 0.0f);
-  float4 o[4];
-  const int sy = y + dy;
-  for(int l = 0; l < 4; l++)
-  {
-    const int sx = qx * 4 + l + dx;
-    float4 c = (float4)(0.0f);
-    if(sx >= 0 && sx < swidth && sy >= 0 && sy < sheight)
-      c = scatter_sanitise(vload4((size_t)sy * spitch + sx, src));
-    /* PSF >= 0 and h >= 0: the FFT's round-off below 0 is clamped */
-    float4 light = st * fmax(gg[l], 0.0f);
-#if CONSERVE
-    light -= st * scatter_highlight(c, threshold, knee, 0.0f);
-#endif
-    o[l] = scatter_add(c, light);
-  }
-  vstore16((float16)(o[0], o[1], o[2], o[3]), 0, dst + i);
+{  /* the glare family's mix; CONSERVE takes the tinted highlight away (mode 2) */
+  scatter_mix_body(src, spitch, swidth, sheight, g, dst, pitch, height, dx, dy, strength,
+                   tint, threshold, knee, 0.0f, CONSERVE ? 2 : 1);
 }

@@ -75,7 +75,8 @@ inline void scatter_highlights_body(global const float *src, global float *dst, 
   vstore16((float16)(h0, h1, h2, h3), 0, dst + i);
 }
 
-/* out window (>= src window): out = c - strength h (unless additive) + strength tint g.
+/* out window (>= src window): out = c + strength tint g, minus strength h (additive 0:
+ * scene-linear glare family), nothing (1: additive) or strength tint h (2: halation's CONSERVE).
  * (dx, dy): out origin minus src origin; g shares the out window and pitch.  Sums beyond the
  * float range saturate at +-FLT_MAX: finite input gives finite output. */
 inline void scatter_mix_body(global const float *src, const int spitch, const int swidth,
@@ -99,7 +100,8 @@ inline void scatter_mix_body(global const float *src, const int spitch, const in
       c = scatter_sanitise(vload4((size_t)sy * spitch + sx, src));
     /* PSF >= 0 and h >= 0: clamp the FFT's round-off (~1e-16 x energy) at 0 */
     float4 r = c + strength * tint * (float4)(fmax(gg[l].xyz, 0.0f), 0.0f);
-    if(!additive) r -= strength * scatter_highlight(c, threshold, knee, boost);
+    if(additive == 0) r -= strength * scatter_highlight(c, threshold, knee, boost);
+    if(additive == 2) r -= strength * tint * scatter_highlight(c, threshold, knee, boost);
     r = clamp(r, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
     r.w = c.w;
     o[l] = r;
