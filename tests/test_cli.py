@@ -187,7 +187,9 @@ def test_usage_error_exit_code_2():
 
 
 # -- interrupts ------------------------------------------------------------------------------
-def test_sigterm_leaves_no_partial_file(rt, exr_images, tmp_path):
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_leaves_no_partial_file(rt, exr_images, tmp_path, sig, code):
+    """SIGTERM exits 143 and SIGINT (Ctrl-C) 130, with every file present complete."""
     pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
     env = dict(os.environ)
     proc = subprocess.Popen([sys.executable, "-m", "clfx.cli", "render", pattern,
@@ -196,9 +198,9 @@ def test_sigterm_leaves_no_partial_file(rt, exr_images, tmp_path):
     deadline = time.time() + 60
     while time.time() < deadline and not list(tmp_path.glob("o.*.exr")):
         time.sleep(0.05)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode in (143, 0), err  # 0 only if it finished before the signal
+    assert proc.returncode in (code, 0), err  # 0 only if it finished before the signal
     assert not no_temp_files(tmp_path), err
     from clfx.io.read import read_frame
 

@@ -207,3 +207,20 @@ def test_progress_on_a_terminal_only_and_never_with_q(rt, tmp_path):
     r = subprocess.run(CLFX + ["render", str(pattern), str(tmp_path / "p.####.exr"), "--look",
                                "film-35mm"], capture_output=True, env=ENV, timeout=300)
     assert r.returncode == 0 and b"fps" in r.stderr and b"ETA" not in r.stderr   # summary only
+
+
+def test_nonfinite_pixels_are_set_to_0_with_one_line_whatever_q_says(rt, tmp_path):
+    """A file with NaN and Inf pixels: one warning line on stderr (even with -q), finite
+    output."""
+    from clfx.core.frame import Frame
+    from clfx.io.read import read_frame
+    from clfx.io.write import write_frame
+
+    img = np.full((16, 24, 4), 0.25, np.float32)
+    img[2, 3, 0], img[5, 7, 1], img[9, 9, 2] = np.nan, np.inf, -np.inf
+    write_frame(Frame.from_array(img), tmp_path / "in.exr", bit_depth="float")
+    r = run("-q", "render", tmp_path / "in.exr", tmp_path / "out.exr", "--look", "film-35mm")
+    said = [x for x in r.stderr.splitlines() if "NaN or infinite" in x]
+    assert len(said) == 1 and said[0].startswith("clfx: warning:") and "3 pixel(s)" in said[0], \
+        r.stderr
+    assert np.isfinite(read_frame(tmp_path / "out.exr").rgba).all()
