@@ -367,6 +367,26 @@ def test_sweep_removes_only_temps_of_dead_processes(tmp_path):
         f".o.0002.exr.tmp-{dead}-0123abcd.exr.d"}
 
 
+def test_temps_of_another_host_are_swept_only_when_old(tmp_path):
+    """On shared storage a retried farm task runs elsewhere: a PID of another host says
+    nothing, so its temps go only once they have not been written to for an hour."""
+    from clfx.io import write
+
+    here = write._host_token()
+    other = "0" * 8 if here != "0" * 8 else "1" * 8
+    fresh = tmp_path / f".o.0001.exr.tmp-{os.getpid()}-0123abcd-{other}.exr"
+    old = tmp_path / f".o.0002.exr.tmp-{os.getpid()}-0123abcd-{other}.exr"
+    mine = tmp_path / f".o.0003.exr.tmp-99999999999999-0123abcd-{here}.exr"
+    for p in (fresh, old, mine):
+        p.write_bytes(b"partial")
+    stale = time.time() - write.REMOTE_TEMP_STALE_S - 60
+    os.utime(old, (stale, stale))
+    removed = sweep_stale_temps([tmp_path / f"o.{f:04d}.exr" for f in (1, 2, 3)])
+    assert sorted(Path(p).name for p in removed) == sorted([old.name, mine.name])
+    assert fresh.exists()
+    assert here in Path(write._temp_path(str(tmp_path / "o.exr"), str(tmp_path))).name
+
+
 def test_same_frame_gives_identical_bytes(tmp_path):
     """OpenImageIO stamped DateTime (EXR, TIFF) and DPX stored the temp file's name."""
     fr = noisy(40, 30)

@@ -39,7 +39,7 @@ extension         bit depths          default    alpha    windows
 
 Atomic, checked, exclusive
 --------------------------
-1. The file is written to ``.<name>.tmp-<pid>-<8 hex><ext>`` in the output folder (created
+1. The file is written to ``.<name>.tmp-<pid>-<8 hex>-<host><ext>`` in the output folder (created
    exclusively).  JPEG is encoded in memory first and copied (libjpeg ends the process on a
    write error), so a full disk is an error, never an exit.
 2. Every result is checked: OpenImageIO's write and close return values; the temp file is not
@@ -54,15 +54,21 @@ Atomic, checked, exclusive
    inputs) is refused even with ``overwrite``.
 
 A process killed mid-write leaves its temp file; `sweep_stale_temps` removes those whose
-process is gone (``clfx render --skip-existing`` calls it).
+process is gone (``clfx render --skip-existing`` calls it).  On shared storage a farm task may
+be retried on another machine, where the dead writer's PID means nothing: temp names carry a
+token of the writer's host name, and a temp of another host is removed only once it has not
+been written to for `REMOTE_TEMP_STALE_S` (a frame is written in seconds).
 """
 from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import os
 import re
 import secrets
+import socket
+import time
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
@@ -277,7 +283,15 @@ def _write_blocks(out, part: _OutPart) -> bool:
     return True
 
 
-_TEMP_NAME = re.compile(r"\.(?P<name>.+)\.tmp-(?P<pid>[0-9]+)-[0-9a-f]{8}(?P<ext>\.[^.]*)?")
+_TEMP_NAME = re.compile(r"\.(?P<name>.+)\.tmp-(?P<pid>[0-9]+)-[0-9a-f]{8}(?:-(?P<host>[0-9a-f]{8}))?"
+                        r"(?P<ext>\.[^.]*)?")
+REMOTE_TEMP_STALE_S = 3600.0
+"""A temp file another host left is stale once it has not been written to for this long."""
+
+
+def _host_token() -> str:
+    """8 hex digits naming this machine in temp names (a PID is only meaningful on its host)."""
+    return hashlib.sha1(socket.gethostname().encode("utf-8", "replace")).hexdigest()[:8]
 _TRAILERS = {"png": b"\x00\x00\x00\x00IEND\xaeB`\x82", "jpeg": b"\xff\xd9"}
 _IN_MEMORY = {"jpeg"}    # libjpeg calls exit() on a write error: encode in memory, then copy
 _NO_HARD_LINKS = {errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS}
@@ -287,7 +301,8 @@ _COPY_CHUNK = 1 << 20
 def _temp_path(path: str, folder: str) -> str:
     name = os.path.basename(path)
     ext = os.path.splitext(name)[1]
-    return os.path.join(folder, f".{name}.tmp-{os.getpid()}-{secrets.token_hex(4)}{ext}")
+    return os.path.join(folder, f".{name}.tmp-{os.getpid()}-{secrets.token_hex(4)}-"
+                                f"{_host_token()}{ext}")
 
 
 def _memory_file() -> int | None:
@@ -456,8 +471,10 @@ def _alive(pid: int) -> bool:
 def sweep_stale_temps(outputs: Iterable) -> list[str]:
     """Remove temp files that a killed clfx left next to ``outputs``.
 
-    A temp file ``.<name>.tmp-<pid>-<8 hex><ext>`` is removed when ``<name>`` is one of the
-    outputs' names and process ``<pid>`` no longer exists (a live writer's file is kept).
+    A temp file ``.<name>.tmp-<pid>-<8 hex>-<host><ext>`` is removed when ``<name>`` is one of
+    the outputs' names and, if it was written on this host (or names no host), process
+    ``<pid>`` no longer exists (a live writer's file is kept); if another host wrote it, when
+    it has not been modified for `REMOTE_TEMP_STALE_S`.
 
     Returns
     -------
@@ -468,7 +485,7 @@ def sweep_stale_temps(outputs: Iterable) -> list[str]:
     for p in outputs:
         folder, name = os.path.split(os.path.abspath(os.fspath(p)))
         names.setdefault(folder, set()).add(name)
-    removed = []
+    removed, here, now = [], _host_token(), time.time()
     for folder, wanted in names.items():
         try:
             entries = list(os.scandir(folder))
@@ -478,8 +495,15 @@ def sweep_stale_temps(outputs: Iterable) -> list[str]:
             m = _TEMP_NAME.fullmatch(entry.name)
             if (m is None or m["name"] not in wanted
                     or (m["ext"] or "") != os.path.splitext(m["name"])[1]
-                    or not entry.is_file(follow_symlinks=False) or _alive(int(m["pid"]))):
+                    or not entry.is_file(follow_symlinks=False)):
                 continue
+            if m["host"] in (None, here):
+                if _alive(int(m["pid"])):
+                    continue
+            else:
+                with contextlib.suppress(OSError):
+                    if now - entry.stat(follow_symlinks=False).st_mtime < REMOTE_TEMP_STALE_S:
+                        continue
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(entry.path)
                 removed.append(entry.path)

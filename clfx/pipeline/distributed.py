@@ -406,7 +406,7 @@ def _duration(seconds: float) -> str:
 
 
 def _remove_orphan_temps(jobs: list[Job]) -> None:
-    """Remove the temp files of this batch's outputs (``.<name>.tmp-<pid>-<rand><ext>``, see
+    """Remove the temp files of this batch's outputs (``.<name>.tmp-<pid>-<rand>-<host><ext>``, see
     `clfx.io.write.write_frame`) that a killed worker left; every task has ended, so none is
     still being written."""
     for job in jobs:
