@@ -45,6 +45,16 @@ def coc_signed(depth, scale_px: float, focus: float):
     return np.where(z > 0, c, 0.0)
 
 
+def image_distance(focal_length_mm: float, focus: float) -> float:
+    """Thin-lens image distance ``v = f S / (S - f)`` in mm of a lens of focal length ``f``
+    (mm) focused at ``S`` (scene units, metres): how far behind the lens the sharp image
+    forms.  A unit-focusing lens moves by ``v - f`` to focus, so the frame it images scales
+    with ``v`` (lens breathing, ``clfx.plugins.breathing``).  Undefined at or inside the
+    focal length (no real image): callers clamp first."""
+    s = focus * 1000.0  # scene metres -> mm
+    return focal_length_mm * s / (s - focal_length_mm)
+
+
 def first_blade_angle(rotation_deg: float = 0.0) -> float:
     """Direction (radians, image coordinates: x right, y down) of the aperture polygon's first
     vertex: up (-y), turned ``rotation_deg`` degrees clockwise on screen."""
@@ -164,14 +174,10 @@ class Camera:
         return abs(float(self.coc_signed_px(depth, image_width_px)))
 
     def image_distance(self, focus: float | None = None) -> float:
-        """Thin-lens image distance ``v = f S / (S - f)`` in mm of a lens focused at ``focus``
-        (scene units, metres; default the camera's ``focus_distance``): how far behind the
-        lens the sharp image forms.  A unit-focusing lens moves by ``v - f`` to focus, so the
-        frame it images scales with ``v`` (lens breathing, ``clfx.plugins.breathing``).
-        Undefined at or inside the focal length (no real image): callers clamp first."""
-        f = self.focal_length
-        s = (self.focus_distance if focus is None else focus) * 1000.0  # scene metres -> mm
-        return f * s / (s - f)
+        """:func:`image_distance` of this lens focused at ``focus`` (default the camera's
+        ``focus_distance``), in mm."""
+        return image_distance(self.focal_length,
+                              self.focus_distance if focus is None else focus)
 
     # -- shutter -----------------------------------------------------------------------
     def shutter_fraction(self) -> float:

@@ -3,10 +3,11 @@
 Model
 -----
 A lens focuses by moving its optics: a unit-focusing thin lens of focal length ``f`` focused
-at ``S`` forms its image at ``v(S) = f S / (S - f)`` behind it (``Camera.image_distance``),
-and everything it images scales with ``v``.  Relative to a reference focus ``S0`` the frame
-is magnified by ``v(S) / v(S0)``: focusing closer (larger v) narrows the field of view.  Real
-lenses breathe less (floating elements) or the other way (internal focusing), so
+at ``S`` forms its image at ``v(S) = f S / (S - f)`` behind it
+(``clfx.core.camera.image_distance``), and everything it images scales with ``v``.  Relative
+to a reference focus ``S0`` the frame is magnified by ``v(S) / v(S0)``: focusing closer
+(larger v) narrows the field of view.  Real lenses breathe less (floating elements) or the
+other way (internal focusing), so
 
     m = 1 + amount * (v(S) / v(S0) - 1)
 
@@ -43,6 +44,7 @@ import math
 
 import numpy as np
 
+from clfx.core.camera import image_distance
 from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
 from clfx.core.rect import Rect
 from clfx.fx.resample import (ResampleLevel, elliptical_spread, footprint_defines,
@@ -96,9 +98,8 @@ def thin_lens_scale(focus: float, reference: float, focal_length_mm: float,
         warnings.append(f"focus distance {min(focus, reference):g} is closer than 1:1 macro for "
                         f"a {focal_length_mm:g} mm lens: breathing computed at {closest:g} "
                         f"(2 focal lengths)")
-    s, s0 = max(focus, closest) * 1000.0, max(reference, closest) * 1000.0   # mm
-    f = focal_length_mm
-    ratio = (f * s / (s - f)) / (f * s0 / (s0 - f))
+    ratio = (image_distance(focal_length_mm, max(focus, closest))
+             / image_distance(focal_length_mm, max(reference, closest)))
     m = 1.0 + amount * (ratio - 1.0)
     if m < SCALE_MIN:
         warnings.append(f"breathing scale {m:.4g} raised to {SCALE_MIN:g} (amount {amount:g})")
@@ -157,55 +158,77 @@ class Breathing(Plugin):
                     f"(scale {m:.7f})")
         return None
 
+    def _mapped(self, p, ctx, rect: Rect, m: float, reach: int) -> Rect:
+        """The pixels covering ``c + (rect - c) * m``, grown by ``reach``."""
+        cx, cy = centre(p, ctx.display_window)
+        x0, x1 = (cx + (v - cx) * m for v in (rect.x0, rect.x1))
+        y0, y1 = (cy + (v - cy) * m for v in (rect.y0, rect.y1))
+        eps = 1e-9 * (1.0 + abs(x0) + abs(x1) + abs(y0) + abs(y1))   # exact edges stay put
+        return Rect(math.floor(x0 + eps) - reach, math.floor(y0 + eps) - reach,
+                    math.ceil(x1 - eps) + reach, math.ceil(y1 - eps) + reach)
+
+    def region_of_definition(self, p, ctx):
+        # Scaling up carries the data window's content outward (a data window inside the
+        # display window grows); the filter's reach is ~4 texels, m px each on the output.
+        m, _ = self.scale(p, ctx)
+        src = ctx.source.window
+        if m <= 1.0 + IDENTITY_TOL:
+            return src
+        return src.union(self._mapped(p, ctx, src, m, math.ceil(4 * m) + 1))
+
     def region_of_interest(self, p, ctx, window):
         m, _ = self.scale(p, ctx)
-        cx, cy = centre(p, ctx.display_window)
         reach = 5 + math.ceil(0.5 / m)     # the widest window (8 taps) plus sub-footprints
-        x0, x1 = (cx + (v - cx) / m for v in (window.x0, window.x1))
-        y0, y1 = (cy + (v - cy) / m for v in (window.y0, window.y1))
-        need = Rect(math.floor(x0) - reach, math.floor(y0) - reach,
-                    math.ceil(x1) + reach, math.ceil(y1) + reach)
-        return need.union(window)
+        return self._mapped(p, ctx, window, 1.0 / m, reach).union(window)
 
-    def _overhang_warning(self, p, ctx, m: float) -> str | None:
-        """The line saying how far the kept frame reads past the rendered pixels, if it does."""
-        src = ctx.source.window
-        keep = src.intersect(ctx.display_window)
-        if keep.width <= 0 or keep.height <= 0:
+    def _overhang_warning(self, p, ctx, m: float, src: Rect, out: Rect) -> str | None:
+        """The line saying how far the kept output reads past the pixels there are, if it
+        does (``src``: the source window with the display window's empty parts added)."""
+        keep = out.intersect(ctx.display_window)
+        if keep.empty:
             return None
         cx, cy = centre(p, ctx.display_window)
         x0, x1 = (cx + (v - cx) / m for v in (keep.x0, keep.x1))
         y0, y1 = (cy + (v - cy) / m for v in (keep.y0, keep.y1))
-        over_x = max(src.x0 - x0, 0.0) + max(x1 - src.x1, 0.0)
-        over_y = max(src.y0 - y0, 0.0) + max(y1 - src.y1, 0.0)
-        if max(over_x, over_y) <= 1e-3:
+        sides = (max(src.x0 - x0, 0.0), max(x1 - src.x1, 0.0), max(src.y0 - y0, 0.0),
+                 max(y1 - src.y1, 0.0))
+        over_x, over_y = sides[0] + sides[1], sides[2] + sides[3]
+        if max(sides) <= 1e-3:
             return None
         past = 100.0 * max(over_x / keep.width, over_y / keep.height)
         change = (f"widens the frame by {100.0 * (1.0 / m - 1.0):.2f}%" if m < 1.0
                   else f"scales the frame by {m:.5f}")
         return (f"focus {ctx.camera.focus_distance:g} (reference {self.reference_focus(p, ctx):g}) "
-                f"{change}; {past:.2f}% of it lies past the rendered pixels ({max(over_x, over_y):.1f} "
-                f"px, no overscan there): edge pixels repeated (render with overscan to fill it)")
+                f"{change}; {past:.2f}% of it lies past the rendered pixels "
+                f"(up to {max(sides):.1f} px a side, no overscan there): edge pixels repeated "
+                f"(render with overscan to fill it)")
 
     def render(self, rt, p, ctx):
-        src = ctx.source
         lvl = self.level(ctx)
         m, warnings = self.scale(p, ctx)
-        line = self._overhang_warning(p, ctx, m)
+        out_win = self.output_window(p, ctx)
+        # Inside the display window, pixels outside the data window are transparent black (an
+        # element's bounding box): read as 0.  Past the display window's edge, where the data
+        # window ends there, nothing was rendered: the edge repeats (and a warning says so).
+        need = self.region_of_interest(p, ctx, out_win)
+        src = rt.reframe(ctx.source, ctx.source.window.union(need.intersect(ctx.display_window)),
+                         "zero")
+        line = self._overhang_warning(p, ctx, m, src.window, out_win)
         ctx.warnings.extend(warnings + ([line] if line else []))
         ctx.notes.append(f"breathing: scale {m:.6f}")
         double = rt.use_fp64(lvl.fp64)
         cx, cy = centre(p, ctx.display_window)
-        cx, cy = cx - src.window.x0, cy - src.window.y0        # source-window coordinates
         inv = 1.0 / m
-        ax, ay = cx + (0.5 - cx) * inv, cy + (0.5 - cy) * inv
+        # output pixel x of out_win reads x * inv + a (source-window coordinates)
+        ax = cx + (out_win.x0 + 0.5 - cx) * inv - src.window.x0
+        ay = cy + (out_win.y0 + 0.5 - cy) * inv - src.window.y0
         jac = np.array([[[inv, 0.0], [0.0, inv]]])
         defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"))
-        dst = src.like()
+        dst = rt.image(out_win, 4)
         i32 = np.int32
         head = (src, dst, i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch),
                 i32(dst.height))
-        size = (src.pitch // 4, max(src.height, 1))
+        size = (dst.pitch // 4, max(dst.height, 1))
         if double:
             jc, n = elliptical_spread(jac)
             knl = rt.kernel("breathing.cl", "breathing_ewa_f64", fp64=lvl.fp64, **defines)

@@ -687,13 +687,17 @@ inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
  * vertically first on whole rows (float16 = 4 texels); min/max instead of fmin/fmax (the
  * texels are finite: sanitised, or the frame has no NaN/Inf), the final clamp keeps
  * fmin/fmax semantics so an overflowing sum of huge finite texels stays finite. */
-inline void fp_fast_quad(global const float *src, int pitch, global const int *q,
+#ifndef FP_Q_SPACE
+#define FP_Q_SPACE global   /* where the quad's 16 ints live: a packed map; private when a
+                               kernel packs them itself (an affine map, breathing.cl) */
+#endif
+inline void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const int *q,
                          float4 *o0, float4 *o1, float4 *o2, float4 *o3)
 {
   const int row = pitch * 4;
   const int4 base = vload4(0, q);
   const float4 fx = as_float4(vload4(1, q)), fy = as_float4(vload4(2, q));
-  const float8 hh = vload_half8(0, (global const half *)(q + 12));
+  const float8 hh = vload_half8(0, (FP_Q_SPACE const half *)(q + 12));
   const float4 hx = hh.even, hy = hh.odd;
 #if FP_FILTER == 0
   /* 3x3: rows read as float16 (the 4th texel unused); clamp to the whole window (the

@@ -42,7 +42,8 @@ def test_scale_is_the_thin_lens_image_distance_ratio():
     assert thin_lens_scale(0.6, 5.0, 50.0, 0.5)[0] == pytest.approx(1 + 0.5 * (want - 1))
     assert thin_lens_scale(0.6, 5.0, 50.0, -1.0)[0] < 1.0          # widens focusing close
     assert thin_lens_scale(5.0, 5.0, 50.0, 1.0) == (1.0, [])
-    assert Camera(focal_length=50.0, focus_distance=0.6).image_distance() == pytest.approx(50 * 600 / 550)
+    lens = Camera(focal_length=50.0, focus_distance=0.6)
+    assert lens.image_distance() == pytest.approx(50 * 600 / 550)
 
 
 def test_closer_than_macro_is_clamped_with_a_warning():
@@ -173,7 +174,7 @@ def test_widening_reads_the_overscan_and_does_not_warn(rt, rng):
     p = Breathing.params()
     out = Breathing().apply(rt, p, src, camera=camera, reference_camera=setup, data_window=data,
                             display_window=display)
-    want = ref.breathing(src, m=m, data_origin=(-6, -6), display_size=(48, 32))
+    want = ref.breathing(src, m=m, data_window=(-6, -6, 54, 38), display_window=(0, 0, 48, 32))
     np.testing.assert_allclose(out, want, rtol=0, atol=2e-5)
     from clfx.host import RenderContext
 
@@ -181,6 +182,35 @@ def test_widening_reads_the_overscan_and_does_not_warn(rt, rng):
                         reference_camera=setup)
     Breathing().render(rt, p, ctx)
     assert ctx.warnings == []
+
+
+@pytest.mark.parametrize("amount", [1.0, -1.0])
+def test_element_inside_the_display_window(rt, rng, amount):
+    """A data window inside the display window (an element's bounding box): outside it the
+    frame is transparent black, read as 0 (no warning); scaling up grows the window."""
+    display, data = Rect(0, 0, 64, 48), Rect(20, 10, 50, 30)
+    src = smooth_image(rng, data.height, data.width)
+    camera = LENS.updated(breathing=amount)
+    m = m_of(camera)
+    p = Breathing.params()
+    from clfx.host import RenderContext
+
+    ctx = RenderContext(rt, rt.upload(src, data), display_window=display, camera=camera,
+                        reference_camera=SETUP)
+    img = Breathing().render(rt, p, ctx)
+    assert ctx.warnings == []
+    assert img.window.contains(data) and display.contains(img.window)
+    assert (img.window != data) == (m > 1)
+    got = rt.download(img)
+    want = ref.breathing(np.pad(src, ((data.y0 - img.window.y0, img.window.y1 - data.y1),
+                                      (data.x0 - img.window.x0, img.window.x1 - data.x1),
+                                      (0, 0))),
+                         m=m, data_window=(img.window.x0, img.window.y0, img.window.x1,
+                                           img.window.y1),
+                         display_window=(0, 0, 64, 48))
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-5)
+    # the content scaled away from the element's edge leaves transparent black
+    assert np.abs(got[0, :, 3]).max() < 1e-6
 
 
 def test_only_the_beauty_changes(rt, rng):
@@ -212,3 +242,37 @@ def test_hdr_point_is_not_rung_and_alpha_kept(rt):
         got = run(rt, src, quality, camera=LENS.updated(breathing=-2.0))
         assert (got[..., :3] >= 0.01 - 1e-6).all(), quality      # clamped: no negative lobes
         np.testing.assert_allclose(got[..., 3], 1.0, atol=1e-6)
+
+
+def test_keyframed_cli_render(rt, rng, tmp_path):
+    """`clfx render in.####.exr out.####.exr --look X --set camera.focus_distance=1:2.0,8:5.5
+    --set camera.breathing=1`: each frame scaled by its focus, one warning line per widened
+    frame without overscan, the values stamped."""
+    import json
+
+    from click.testing import CliRunner
+
+    from clfx.cli import cli
+    from clfx.io.read import read_frame
+    from clfx.io.write import write_frame
+
+    frames = {f: smooth_image(rng, 24, 40) for f in (1, 4, 8)}
+    for f, a in frames.items():
+        write_frame(Frame.from_array(a), tmp_path / f"in.{f:04d}.exr", bit_depth="float")
+    (tmp_path / "rack.yaml").write_text("name: rack\nschema: 1\ncamera: {focal_length: 50}\n"
+                                        "effects:\n  - effect: breathing\n")
+    r = CliRunner().invoke(cli, ["render", str(tmp_path / "in.####.exr"),
+                                 str(tmp_path / "out.####.exr"), "--look",
+                                 str(tmp_path / "rack.yaml"), "--float",
+                                 "--set", "camera.focus_distance=1:2.0,8:5.5",
+                                 "--set", "camera.breathing=1"], catch_exceptions=False)
+    assert r.exit_code == 0, (r.output, r.stderr)
+    warned = [line for line in r.stderr.splitlines() if "breathing:" in line]
+    assert [line.split(":")[2].strip() for line in warned] == ["frame 4", "frame 8"]
+    for f, a in frames.items():
+        out = read_frame(tmp_path / f"out.{f:04d}.exr")
+        s = 2.0 + 3.5 * (f - 1) / 7
+        values = json.loads(out.metadata["clfx:values"])
+        assert values == {"camera.focus_distance": pytest.approx(s)}
+        np.testing.assert_allclose(out.rgba, ref.breathing(a, m=ref.scale(s, 2.0, 50.0, 1.0)),
+                                   rtol=0, atol=2e-5)

@@ -24,23 +24,28 @@ def scale(focus, reference, focal_length, amount):
     return 1.0 + amount * (v / v0 - 1.0)
 
 
-def breathing(src, *, m, quality="final", center=(0.0, 0.0), data_origin=(0, 0),
-              display_size=None):
-    """``src`` (h, w, 4) scaled by ``m`` about the optical centre: the display window's centre
-    (``display_size`` (w, h), default the source's) moved by ``center`` half sizes; the source
-    sits at ``data_origin`` in the display window's coordinates."""
+def breathing(src, *, m, quality="final", center=(0.0, 0.0), data_window=None,
+              display_window=None):
+    """``src`` (h, w, 4) over ``data_window`` (x0, y0, x1, y1; default the image at 0, 0)
+    scaled by ``m`` about the optical centre: the centre of ``display_window`` (default the
+    data window) moved by ``center`` half sizes.  Inside the display window, pixels outside
+    the data window are 0; past both, the nearest pixel repeats.  Returns the data window."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
-    dw, dh = display_size or (w, h)
-    cx = dw / 2.0 + center[0] * dw / 2.0
-    cy = dh / 2.0 + center[1] * dh / 2.0
-    ox, oy = data_origin
-    xs, ys = np.meshgrid(np.arange(w) + 0.5 + ox, np.arange(h) + 0.5 + oy)
+    dx0, dy0, dx1, dy1 = data_window or (0, 0, w, h)
+    px0, py0, px1, py1 = display_window or (dx0, dy0, dx1, dy1)
+    cx = (px0 + px1) / 2.0 + center[0] * (px1 - px0) / 2.0
+    cy = (py0 + py1) / 2.0 + center[1] * (py1 - py0) / 2.0
+    # the source padded with zeros to the display window
+    ox, oy = min(dx0, px0), min(dy0, py0)
+    padded = np.zeros((max(dy1, py1) - oy, max(dx1, px1) - ox, src.shape[2]))
+    padded[dy0 - oy: dy1 - oy, dx0 - ox: dx1 - ox] = src
+    xs, ys = np.meshgrid(np.arange(dx0, dx1) + 0.5, np.arange(dy0, dy1) + 0.5)
     sx = cx + (xs - cx) / m - ox
     sy = cy + (ys - cy) / m - oy
     jac = np.zeros((h, w, 2, 2))
     jac[..., 0, 0] = jac[..., 1, 1] = 1.0 / m
     name = FOOTPRINT[quality]
     if name == "elliptical":
-        return sample_elliptical(src, sx, sy, jac, border="edge")
-    return sample_footprint(src, sx, sy, jac, name, border="edge")
+        return sample_elliptical(padded, sx, sy, jac, border="edge")
+    return sample_footprint(padded, sx, sy, jac, name, border="edge")
