@@ -53,6 +53,12 @@ class RenderContext:
     seed : int
         The look's seed.
     camera : Camera
+        The camera of this frame (keyframed values resolved at ``frame``).
+    reference_camera : Camera
+        The camera the shot is set up with: every keyframed camera value at its first key
+        (``camera`` itself when nothing is keyframed).  Effects that respond to a change over
+        the shot measure it from here (lens breathing: the focus pulled away from the first
+        key's), so a static camera never changes anything.
     quality : str
         One of ``QUALITY_LEVELS``.
     display_referred : bool
@@ -67,7 +73,7 @@ class RenderContext:
     def __init__(self, runtime, source, *, depth=None, velocity=None, display_window=None,
                  pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
                  display_referred=False, analysis=None, output_limit=None, read_image=None,
-                 read_lens=None):
+                 read_lens=None, reference_camera=None):
         self.runtime = runtime
         self.source = source
         self.depth = depth
@@ -77,6 +83,7 @@ class RenderContext:
         self.frame = int(frame)
         self.seed = int(seed)
         self.camera = camera or Camera()
+        self.reference_camera = reference_camera or self.camera
         self.quality = quality
         self.display_referred = display_referred
         self._analysis = _SharedAnalysis(analysis)
@@ -221,11 +228,12 @@ class Plugin:
               quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
               data_window: Rect | None = None, display_window: Rect | None = None,
               pixel_aspect: float = 1.0, display_referred: bool = False,
-              keep_rod: bool = False, read_image=None, read_lens=None):
+              keep_rod: bool = False, read_image=None, read_lens=None, reference_camera=None):
         """Run the effect on host arrays: upload, identity check, render, download.
 
         Returns the output cropped to the source window, or ``(array, window)`` with
-        ``keep_rod=True``.  An identity returns a copy of ``source`` with NaN and infinities set to 0 (as a look does on
+        ``keep_rod=True``.  ``reference_camera`` is the camera at the shot's first keys
+        (default ``camera``: nothing animated).  An identity returns a copy of ``source`` with NaN and infinities set to 0 (as a look does on
         upload).
         """
         src = np.asarray(source, np.float32)
@@ -238,7 +246,7 @@ class Plugin:
             velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
             display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
             seed=seed, camera=camera, quality=quality, display_referred=display_referred,
-            read_image=read_image, read_lens=read_lens)
+            read_image=read_image, read_lens=read_lens, reference_camera=reference_camera)
         self.check_clips(ctx)
         if self.is_identity(p, ctx):  # as in a look, whose upload sanitises: NaN/Inf -> 0
             out, out_window = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0), window

@@ -75,26 +75,8 @@ kernel void distortion_ewa_f64(global const float *src, global float *dst,
   for(int k = 0; k < 4; k++) {
     const int x = qx * 4 + k;
     global const REAL *m = map + 8 * (y * dst_pitch + x);
-    const REAL sx = (REAL)x + (REAL)0.5 + m[0], sy = (REAL)y + (REAL)0.5 + m[1];
-    const int n = (int)m[6];
-    if(n <= 1) {
-      o[k] = rs_sample(src, src_pitch, src_w, src_h, sx, sy);
-      continue;
-    }
-    const REAL scale = sqrt((REAL)(n * n) / (REAL)(n * n - 1)) / (REAL)n;
-    REAL4 acc = (REAL4)0;
-    float4 lo = (float4)INFINITY, hi = (float4)-INFINITY, l, u;
-    for(int b = 0; b < n; b++) {
-      const REAL ob = ((REAL)b + (REAL)0.5 - (REAL)0.5 * n) * scale;
-      for(int a = 0; a < n; a++) {
-        const REAL oa = ((REAL)a + (REAL)0.5 - (REAL)0.5 * n) * scale;
-        acc += rs_sample_range(src, src_pitch, src_w, src_h, sx + m[2] * oa + m[4] * ob,
-                               sy + m[3] * oa + m[5] * ob, &l, &u);
-        lo = fmin(lo, l);
-        hi = fmax(hi, u);
-      }
-    }
-    o[k] = clamp(acc / (REAL)(n * n), TO_REAL4(lo), TO_REAL4(hi));
+    o[k] = rs_ewa_sample(src, src_pitch, src_w, src_h, (REAL)x + (REAL)0.5 + m[0],
+                         (REAL)y + (REAL)0.5 + m[1], m[2], m[3], m[4], m[5], (int)m[6]);
   }
   rs_store_quad(dst, y * dst_pitch + qx * 4, o);
 }

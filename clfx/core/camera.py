@@ -45,6 +45,16 @@ def coc_signed(depth, scale_px: float, focus: float):
     return np.where(z > 0, c, 0.0)
 
 
+def image_distance(focal_length_mm: float, focus: float) -> float:
+    """Thin-lens image distance ``v = f S / (S - f)`` in mm of a lens of focal length ``f``
+    (mm) focused at ``S`` (scene units, metres): how far behind the lens the sharp image
+    forms.  A unit-focusing lens moves by ``v - f`` to focus, so the frame it images scales
+    with ``v`` (lens breathing, ``clfx.plugins.breathing``).  Undefined at or inside the
+    focal length (no real image): callers clamp first."""
+    s = focus * 1000.0  # scene metres -> mm
+    return focal_length_mm * s / (s - focal_length_mm)
+
+
 def first_blade_angle(rotation_deg: float = 0.0) -> float:
     """Direction (radians, image coordinates: x right, y down) of the aperture polygon's first
     vertex: up (-y), turned ``rotation_deg`` degrees clockwise on screen."""
@@ -92,11 +102,13 @@ class Camera:
     blades: int = 0                # aperture blades; 0 = round aperture
     blade_rotation: float = 0.0    # degrees
     sensor_height: float | None = None  # mm; None = from the frame's aspect
+    breathing: float = 0.0         # lens breathing: 0 none, 1 unit-focusing thin lens
 
     RANGES = {
         "focal_length": (0.5, 5000.0), "f_number": (0.5, 128.0), "sensor_width": (0.5, 200.0),
         "focus_distance": (1e-4, 1e9), "shutter_angle": (0.0, 720.0), "iso": (1.0, 1e6),
         "blades": (0, 32), "blade_rotation": (-360.0, 360.0), "sensor_height": (0.5, 200.0),
+        "breathing": (-2.0, 2.0),
     }
     CHOICES = {"shutter_offset": SHUTTER_OFFSETS}
     INTEGERS = ("blades",)
@@ -160,6 +172,12 @@ class Camera:
         at z = inf (it tends to the background CoC); 0 for an invalid depth.
         """
         return abs(float(self.coc_signed_px(depth, image_width_px)))
+
+    def image_distance(self, focus: float | None = None) -> float:
+        """:func:`image_distance` of this lens focused at ``focus`` (default the camera's
+        ``focus_distance``), in mm."""
+        return image_distance(self.focal_length,
+                              self.focus_distance if focus is None else focus)
 
     # -- shutter -----------------------------------------------------------------------
     def shutter_fraction(self) -> float:

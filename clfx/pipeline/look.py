@@ -408,6 +408,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     report = FrameReport(frame=frame_number, input=frame.source,
                          values=look.values_at(frame_number))
     stamp = look.stamp(frame_number)
+    reference_camera = look.camera   # keyframed values at their first keys
     look = look.at(frame_number)
     t_start = time.perf_counter()
     look.check_clips(frame)
@@ -418,7 +419,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     for what, win in (("display window", frame.display_window), ("data window", frame.data_window)):
         check_pixels(win.width, win.height, f"{frame.source or 'frame'}: {what}", FrameTooLarge)
     ctx = _upload(rt, look, frame, frame_number=frame_number, quality=quality,
-                  keep_overscan=keep_overscan)
+                  keep_overscan=keep_overscan, reference_camera=reference_camera)
     report.upload_ms = (time.perf_counter() - t_start) * 1e3
     report.frame_warnings = list(ctx.warnings)
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
@@ -447,8 +448,9 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
 
 
 def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | None,
-            keep_overscan: bool) -> RenderContext:
-    """The frame on the device (passes no step reads stay on the host) in a new context."""
+            keep_overscan: bool, reference_camera: Camera | None = None) -> RenderContext:
+    """The frame on the device (passes no step reads stay on the host) in a new context;
+    ``look`` is resolved at the frame, ``reference_camera`` its camera at the first keys."""
     window = frame.data_window
     used = look.clips_used()
     src = rt.upload(frame.rgba, window)
@@ -463,7 +465,8 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
                         quality=quality or DEFAULT_QUALITY,
                         display_referred=frame.display_referred,
                         output_limit=output_limit(frame, keep_overscan),
-                        read_image=read_image_rgba, read_lens=read_lens_dict)
+                        read_image=read_image_rgba, read_lens=read_lens_dict,
+                        reference_camera=reference_camera)
     if nonfinite:
         ctx.warnings.append(f"{nonfinite} pixel(s) with NaN or infinite values set to 0")
     return ctx

@@ -241,6 +241,30 @@ inline REAL4 rs_sample(global const float *src, int pitch, int w, int h, REAL sx
 #endif
 }
 
+/* The elliptical footprint of the reference levels (clfx.fx.resample.elliptical_spread): the
+ * mean of n x n rs_sample_range samples at s + J_c (a_i, a_j), J_c's columns (c00, c10) and
+ * (c01, c11), a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)), clamped to the min/max of
+ * all the samples' nearest 2x2 texels together; n <= 1 is one clamped sample (rs_sample). */
+inline REAL4 rs_ewa_sample(global const float *src, int pitch, int w, int h, REAL sx, REAL sy,
+                           REAL c00, REAL c10, REAL c01, REAL c11, int n)
+{
+  if(n <= 1) return rs_sample(src, pitch, w, h, sx, sy);
+  const REAL scale = sqrt((REAL)(n * n) / (REAL)(n * n - 1)) / (REAL)n;
+  REAL4 acc = (REAL4)0;
+  float4 lo = (float4)INFINITY, hi = (float4)-INFINITY, l, u;
+  for(int b = 0; b < n; b++) {
+    const REAL ob = ((REAL)b + (REAL)0.5 - (REAL)0.5 * n) * scale;
+    for(int a = 0; a < n; a++) {
+      const REAL oa = ((REAL)a + (REAL)0.5 - (REAL)0.5 * n) * scale;
+      acc += rs_sample_range(src, pitch, w, h, sx + c00 * oa + c01 * ob,
+                             sy + c10 * oa + c11 * ob, &l, &u);
+      lo = fmin(lo, l);
+      hi = fmax(hi, u);
+    }
+  }
+  return clamp(acc / (REAL)(n * n), TO_REAL4(lo), TO_REAL4(hi));
+}
+
 /* Four reads at once (the 4 pixels of a work-item): coordinates as float4 vectors so the
  * arithmetic is vectorised; for bilinear in float, when all four footprints are inside the
  * image each takes two vload8.  Results go to o[0..3]; written with macros, not loops over
@@ -626,18 +650,14 @@ inline float4 fp_sample(global const float *src, int pitch, int w, int h, float 
   return clamp(acc, lo, hi);
 }
 
-/* Output k of a checked quad: record c = 4 x, 4 y (float), 4 (hx, hy) half2, 4 sub-footprint
- * counts n, then J11, J12, J21, J22 (4 floats each); n x n sub-footprints centred at
- * s + J ((a + 1/2) / n - 1/2, (b + 1/2) / n - 1/2), averaged. */
-inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
-                          global const int *c, int k)
+/* The footprint filter at (sx, sy) split into n x n sub-footprints centred at
+ * s + J ((a + 1/2) / n - 1/2, (b + 1/2) / n - 1/2), each with spreads (hx, hy), averaged;
+ * n <= 1 is one footprint (fp_sample). */
+inline float4 fp_sample_grid(global const float *src, int pitch, int w, int h, float sx,
+                             float sy, float hx, float hy, int n, float j11, float j12,
+                             float j21, float j22)
 {
-  const float sx = as_float(c[k]), sy = as_float(c[4 + k]);
-  const float2 hh = vload_half2(k, (global const half *)(c + 8));
-  const int n = c[12 + k];
-  if(n <= 1) return fp_sample(src, pitch, w, h, sx, sy, hh.x, hh.y);
-  const float j11 = as_float(c[16 + k]), j12 = as_float(c[20 + k]);
-  const float j21 = as_float(c[24 + k]), j22 = as_float(c[28 + k]);
+  if(n <= 1) return fp_sample(src, pitch, w, h, sx, sy, hx, hy);
   const float inv = 1.0f / (float)(n * n);    /* scaled before the sum: no overflow */
   float4 acc = (float4)0.0f;
   for(int b = 0; b < n; b++) {
@@ -645,10 +665,21 @@ inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
     for(int a = 0; a < n; a++) {
       const float oa = ((float)a + 0.5f) / (float)n - 0.5f;
       acc += inv * fp_sample(src, pitch, w, h, sx + j11 * oa + j12 * ob,
-                             sy + j21 * oa + j22 * ob, hh.x, hh.y);
+                             sy + j21 * oa + j22 * ob, hx, hy);
     }
   }
   return acc;
+}
+
+/* Output k of a checked quad: record c = 4 x, 4 y (float), 4 (hx, hy) half2, 4 sub-footprint
+ * counts n, then J11, J12, J21, J22 (4 floats each): fp_sample_grid. */
+inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
+                          global const int *c, int k)
+{
+  const float2 hh = vload_half2(k, (global const half *)(c + 8));
+  return fp_sample_grid(src, pitch, w, h, as_float(c[k]), as_float(c[4 + k]), hh.x, hh.y,
+                        c[12 + k], as_float(c[16 + k]), as_float(c[20 + k]),
+                        as_float(c[24 + k]), as_float(c[28 + k]));
 }
 
 /* The fast path: 4 outputs of a quad from its 16 packed ints q (every window inside the
@@ -656,13 +687,17 @@ inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
  * vertically first on whole rows (float16 = 4 texels); min/max instead of fmin/fmax (the
  * texels are finite: sanitised, or the frame has no NaN/Inf), the final clamp keeps
  * fmin/fmax semantics so an overflowing sum of huge finite texels stays finite. */
-inline void fp_fast_quad(global const float *src, int pitch, global const int *q,
+#ifndef FP_Q_SPACE
+#define FP_Q_SPACE global   /* where the quad's 16 ints live: a packed map; private when a
+                               kernel packs them itself (an affine map, breathing.cl) */
+#endif
+inline void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const int *q,
                          float4 *o0, float4 *o1, float4 *o2, float4 *o3)
 {
   const int row = pitch * 4;
   const int4 base = vload4(0, q);
   const float4 fx = as_float4(vload4(1, q)), fy = as_float4(vload4(2, q));
-  const float8 hh = vload_half8(0, (global const half *)(q + 12));
+  const float8 hh = vload_half8(0, (FP_Q_SPACE const half *)(q + 12));
   const float4 hx = hh.even, hy = hh.odd;
 #if FP_FILTER == 0
   /* 3x3: rows read as float16 (the 4th texel unused); clamp to the whole window (the

@@ -34,6 +34,9 @@ ACTIVE: dict[str, dict] = {
     # Only effects whose defaults are a no-op on the contract frame, need a choice (a lens),
     # or leave a code path idle.
     "bleed": {"size": 0.05},
+    # a static camera never breathes: scale from a reference focus of 0.5 m (the frame widens
+    # 5.6%, past the frame's edges: the clamp and its warning)
+    "breathing": {"amount": 1.0, "reference_focus": 0.5},
     "camera_blur": {"length": 0.03, "roll": 2.0, "zoom": 0.02},
     "defocus": {"size": 0.02},
     "distortion": {"amount": 0.15, "p1": 0.01},
