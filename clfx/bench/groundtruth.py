@@ -31,6 +31,15 @@ by 180 degrees.  A polygonal aperture of ``blades`` blades is inscribed in the u
 The magnification change with the lens point (``v`` instead of ``f``) is ignored: the layers
 are described in screen space.
 
+Lens geometry (the camera block's, as :mod:`clfx.plugins.dof` reads it): an anamorphic
+squeeze scales the lens point's x by ``1 / anamorphic_squeeze`` (vertical oval bokeh); axial
+chromatic aberration adds each channel's offset (:meth:`clfx.core.camera.Camera.axial_ca_px`)
+to every layer's signed CoC, one composite per distinct offset (alpha from green's); optical
+vignetting accepts a lens point ``l`` at pixel ``x`` only inside the barrel circle
+``|l - c(x)| <= 1`` (:func:`clfx.core.camera.optical_vignetting_centre`, the frame's centre
+and half diagonal): each pixel accumulates its accepted renders and their weights and is
+normalised by them (the clipped aperture; the darkening is not modelled, as in the effect).
+
 Motion: at time ``t`` (frames) a layer is translated by ``velocity * t``.  The shutter is
 open for ``shutter_angle / 360`` of a frame, centred on the frame time, starting at it
 ("opening") or ending at it ("closing") per ``Camera.shutter_offset``
@@ -221,8 +230,9 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     ----------
     scene : Scene
     camera : Camera
-        Lens (focal length, f-number, sensor width, focus distance, blades, blade rotation)
-        and shutter (angle, offset).
+        Lens (focal length, f-number, sensor width, focus distance, blades, blade rotation,
+        optical vignetting, anamorphic squeeze, axial chromatic aberration) and shutter
+        (angle, offset).
     t : float
         Frame time in frames relative to the scene's frame.
     samples : int

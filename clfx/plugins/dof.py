@@ -19,6 +19,32 @@ aperture: a disk, or a polygon of ``blades`` blades inscribed in the CoC circle,
 up, turned by the rotation, blended toward the disk by ``roundness``; behind the focus plane
 it is upright, in front turned by 180 degrees (the geometry of :mod:`clfx.bench.groundtruth`).
 
+Lens geometry in the bokeh (camera block values, each off by default and free when off; the
+ground-truth renderer models the same optics):
+
+- Optical vignetting (cat-eye bokeh), ``Camera.optical_vignetting`` (``optical_vignetting``
+  overrides it; -1 = the camera's): the aperture intersected with the lens barrel, a second
+  circle of the same radius shifted by ``strength * (pixel - optical centre) / half
+  diagonal`` aperture radii (x pixels; the optical centre is the display window's): round
+  at the centre, a cat's eye with its long axis tangential towards the edges.  The gather
+  clips each tap with the destination pixel's barrel (the shape varies smoothly over a
+  bokeh; the ground truth clips its lens rays per destination pixel the same way) and the
+  near field's weights divide by the clipped area, so a flat field stays flat: the
+  darkening belongs to the ``vignette`` effect.  A point's light drifts by about
+  ``strength * r / half diagonal`` of its energy (the destination's barrel standing for the
+  point's).  Build variant ``DOF_CATEYE``.
+- Anamorphic squeeze, ``Camera.anamorphic_squeeze`` (``anamorphic_squeeze``; 0 = the
+  camera's): in the desqueezed image the bokeh is the thin-lens CoC high and CoC / squeeze
+  wide (vertical ovals).  Radii stay in x pixels and the tap tables measure offsets in
+  aperture space ``(ox * squeeze, oy / pixel aspect)``, so squeeze and pixel aspect compose.
+- Axial (longitudinal) chromatic aberration, ``Camera.axial_ca_red`` / ``axial_ca_blue`` (um,
+  the channel's focus behind green's; ``axial_ca_red`` / ``axial_ca_blue`` add to them): a
+  focus shift ``delta`` changes the signed CoC diameter by ``-delta / N`` on the sensor
+  (:meth:`clfx.core.camera.Camera.axial_ca_px`), an additive per-channel offset of the
+  signed radius.  Each distinct offset gets its own gather (``dof_prepare`` adds it; tiles,
+  reach and region of definition include it), merged by ``dof_merge_channels`` (alpha from
+  green): 2 gathers for an achromat (red and blue together), 3 otherwise.
+
 Algorithm (after Jimenez 2014, "Next generation post processing in Call of Duty: Advanced
 Warfare", simplified for offline use)
 1. ``dof_prepare``: sanitised colour and signed CoC radius into a padded buffer.
