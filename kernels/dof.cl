@@ -246,11 +246,14 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     /* near field: scatter-as-gather, the tap's light spread over its own CoC area */
 #if DOF_CATEYE
     const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
-    const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-    const float4 cov_n = fmin(clamp(arq - d_near + 0.5f, 0.0f, 1.0f),
-                              clamp(arq - sqrt(enx * enx + eny * eny) + 0.5f, 0.0f, 1.0f));
-    const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f),
-                             q_near);
+    float4 wn = (float4)(0.0f);
+    if(any(q_near))
+    {
+      const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
+      const float4 cov_n = fmin(clamp(arq - d_near + 0.5f, 0.0f, 1.0f),
+                                clamp(arq - sqrt(enx * enx + eny * eny) + 0.5f, 0.0f, 1.0f));
+      wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
+    }
 #else
     const float4 cov_n = clamp(arq - d_near + 0.5f, 0.0f, 1.0f);
     const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);

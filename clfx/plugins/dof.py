@@ -387,7 +387,7 @@ class Dof(Plugin):
         if r == 0.0:
             return 0, 0
         squeeze = self.lens(p, ctx).squeeze
-        return (int(math.ceil((r + 0.5) / squeeze)) + 1,
+        return (int(math.ceil(r / squeeze)) + 1,
                 int(math.ceil(r * ctx.pixel_aspect)) + 1)
 
     def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0):
