@@ -416,9 +416,10 @@ class Dof(Plugin):
         an = ctx.analysis
         if an.min_depth is None or not an.min_depth.size:
             return None
-        asked = 2.0 * float(np.abs(np.concatenate([
+        asked = 2.0 * max(float(np.abs(np.concatenate([
             coc_signed(an.min_depth, lens.k_half, lens.focus).ravel(),
-            coc_signed(an.max_depth, lens.k_half, lens.focus).ravel()])).max())
+            coc_signed(an.max_depth, lens.k_half, lens.focus).ravel()]) + off).max())
+            for off in lens.offsets())   # each channel's radius (axial CA)
         if asked <= 2.0 * lens.clamp_r * (1.0 + 1e-6):
             return None
         return (f"a CoC of {asked:.1f} px is asked for and clamped to "
