@@ -16,6 +16,15 @@
  *   half-resolution gather, gathered again at full resolution where that is not smooth
  *   (the rim of a bokeh disk, a sharp pixel).
  *
+ * Build variants (compile-time, nothing in the hot loop when off):
+ *   DOF_CATEYE=1: optical vignetting; every tap's coverage is also clipped by the barrel
+ *   circle, whose centre (aperture radii) grows linearly from the optical centre with the
+ *   destination pixel's position (dof_gather's cateye arguments; the shape varies smoothly,
+ *   so the destination pixel's barrel stands for its taps').
+ * Anamorphic squeeze lives in the tap tables (offsets in aperture space) and axial
+ * chromatic aberration in dof_prepare's per-channel radius offset (one gather per distinct
+ * offset, dof_merge_channels): neither costs anything here.
+ *
  * The gather accumulates in REAL (lib/precision.h: double at the reference level); a sum
  * that overflows float is taken again with every colour scaled by 2^-64.
  */
@@ -26,12 +35,17 @@
 #define EDGE_PX 1.0f     /* radius range over 3 x 3 that makes a depth edge */
 #define EDGE_TAU 0.5f    /* log-luminance distance from its own layer that makes a pixel odd */
 #define OVERFLOW_SCALE 5.421010862427522e-20f   /* 2^-64 */
+#ifndef DOF_CATEYE
+#define DOF_CATEYE 0
+#endif
+#define CATEYE_MIN_FRAC 1e-3f   /* the open aperture's smallest fraction (normalisation) */
 
-inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r)
+inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, float offset)
 {
-  /* r = K/2 (1 - S/z): finite at z = +inf (-> K/2); z NaN, 0 or < 0 is invalid -> 0. */
-  if(!(z > 0.0f)) return 0.0f;
-  const float r = clfx_is_finite(z) ? k_half * (1.0f - focus / z) : k_half;
+  /* r = K/2 (1 - S/z) + offset (a channel's axial CA; 0 without): finite at z = +inf
+     (-> K/2); z NaN, 0 or < 0 is invalid -> in the focus plane. */
+  if(!(z > 0.0f)) return clamp(offset, -clamp_r, clamp_r);
+  const float r = (clfx_is_finite(z) ? k_half * (1.0f - focus / z) : k_half) + offset;
   return clamp(r, -clamp_r, clamp_r);
 }
 
@@ -44,7 +58,7 @@ kernel void dof_prepare(global const float *src, global const float *depth, cons
                         const int width, const int height, global float *col,
                         global float *coc, const int ppitch, const int pheight,
                         const int pad, const float k_half, const float focus,
-                        const float clamp_r)
+                        const float clamp_r, const float offset)
 {
   const int qx = get_global_id(0), py = get_global_id(1);
   if(py >= pheight || qx * 4 >= ppitch) return;
@@ -54,7 +68,7 @@ kernel void dof_prepare(global const float *src, global const float *depth, cons
     const int px = qx * 4 + l;
     const int sx = clfx_clampi(px - pad, 0, width - 1);
     vstore4(clfx_finite4_or_zero(vload4(sy * pitch + sx, src)), py * ppitch + px, col);
-    coc[py * ppitch + px] = dof_coc_radius(depth[sy * pitch + sx], k_half, focus, clamp_r);
+    coc[py * ppitch + px] = dof_coc_radius(depth[sy * pitch + sx], k_half, focus, clamp_r, offset);
   }
 }
 
@@ -193,12 +207,22 @@ inline float4 dof_lum4(float16 c)
 
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
- * aperture area the tap stands for (px^2).  Returns the 4 pixels at `base` (padded index),
+ * aperture area the tap stands for (px^2); the offset in aperture space (x times the
+ * anamorphic squeeze, y over the pixel aspect: px of the CoC radius).
+ * With DOF_CATEYE, `ce_x`, `ce_y` are the 4 pixels' barrel centres (aperture radii) and
+ * `ce_frac` the open fraction of their apertures: a point at lens position l (aperture
+ * radii) is seen only if |l - c| <= 1; a tap q whose light lands at p = q - o comes through
+ * l = -o / r_q (signed radius), so its coverage is also that of |o + c r_q| <= |r_q|.  The
+ * near field's weights (a tap's light over its own bokeh) divide by the clipped area.  Returns the 4 pixels at `base` (padded index),
  * colours times `scale`; `cap`: the largest luminance a colour may have where it fills in
  * the background hidden behind a blurred foreground pixel (beyond its own CoC's reach). */
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
                           const int base, global const float *taps, const int first,
-                          const int count, const float cap, const float scale)
+                          const int count, const float cap, const float scale
+#if DOF_CATEYE
+                          , const float4 ce_x, const float4 ce_y, const float4 ce_frac
+#endif
+                          )
 {
   const float16 c0 = vload16(0, col + base * 4) * scale;
   const float4 r0 = vload4(0, coc + base);
@@ -220,13 +244,31 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float4 arq = fabs(rq);
     const int4 q_near = rq < -NEAR_EPS;
     /* near field: scatter-as-gather, the tap's light spread over its own CoC area */
+#if DOF_CATEYE
+    const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
+    float4 wn = (float4)(0.0f);
+    if(any(q_near))
+    {
+      const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
+      const float4 cov_n = fmin(clamp(arq - d_near + 0.5f, 0.0f, 1.0f),
+                                clamp(arq - sqrt(enx * enx + eny * eny) + 0.5f, 0.0f, 1.0f));
+      wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
+    }
+#else
     const float4 cov_n = clamp(arq - d_near + 0.5f, 0.0f, 1.0f);
     const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);
+#endif
     /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
        near p the far field is the background hidden behind it, estimated from the
        visible background within p's radius */
     const float4 rf = select(select(arq, fmin(arq, r0_far), rq > r0), fmax(arq, ar0), p_near);
+#if DOF_CATEYE
+    const float4 efx = ax + ce_x * rf, efy = ay + ce_y * rf;
+    const float4 cov_f = fmin(clamp(rf - d_far + 0.5f, 0.0f, 1.0f),
+                              clamp(rf - sqrt(efx * efx + efy * efy) + 0.5f, 0.0f, 1.0f));
+#else
     const float4 cov_f = clamp(rf - d_far + 0.5f, 0.0f, 1.0f);
+#endif
     const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near);
     float4 wf = cov_f * norm;
     fn += TO_REAL16(c * LANES(wn));
@@ -235,7 +277,14 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
       /* behind a near p, the part of the coverage the tap's own CoC does not give is a
          guess at hidden background: its highlights are capped (a light beside a blurred
          bar must not shine through it) */
+#if DOF_CATEYE
+      const float4 eqx = ax + ce_x * arq, eqy = ay + ce_y * arq;
+      const float4 cov_q = fmin(fmin(clamp(arq - d_far + 0.5f, 0.0f, 1.0f),
+                                     clamp(arq - sqrt(eqx * eqx + eqy * eqy) + 0.5f, 0.0f, 1.0f)),
+                                cov_f);
+#else
       const float4 cov_q = fmin(clamp(arq - d_far + 0.5f, 0.0f, 1.0f), cov_f);
+#endif
       const float4 w_fill = select((float4)(0.0f), (cov_f - cov_q) * norm, p_near);
       const float4 lum = dof_lum4(c);
       const float4 k = fmin(1.0f, cap_s / fmax(lum, 1e-30f));
@@ -267,14 +316,24 @@ inline int dof_all_finite16(float16 v)
 }
 
 /* The gather of 4 pixels, taken again with scaled colours if float sums overflowed. */
+#if DOF_CATEYE
+#define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 ce_frac
+#define CATEYE_PASS , ce_x, ce_y, ce_frac
+#else
+#define CATEYE_ARGS
+#define CATEYE_PASS
+#endif
+
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                const int ppitch, const int base, global const float *taps,
-                               const int first, const int count, const float cap)
+                               const int first, const int count, const float cap CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, 1.0f);
+  const REAL16 out = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, 1.0f
+                                 CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, OVERFLOW_SCALE);
+  const REAL16 s = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, OVERFLOW_SCALE
+                               CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
 
@@ -318,7 +377,10 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
  * unless (mode bit 1: a dense table, a full-resolution gather there is worth it) its
  * half-res pixels span more than `refine` in log luminance (a bokeh rim); every other
- * group gathers at full resolution with (first, count). */
+ * group gathers at full resolution with (first, count).
+ * `cateye` (used with DOF_CATEYE): the barrel centre of buffer pixel (x, y) is
+ * (s0 (x + 0.5) + s1, s2 (y + 0.5) + s3) aperture radii (the host folds in the strength,
+ * the optical centre, the half diagonal, the pixel aspect and the buffer's scale). */
 kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
                        const int pad, global float *dst, const int pitch,
                        const int width, const int height, global const float *taps,
@@ -326,7 +388,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
                        const int hwidth, const int hheight, const float refine,
-                       const float low_r)
+                       const float low_r, const float4 cateye)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   const int x = qx * 4;
@@ -364,6 +426,28 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     }
   }
   const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
+#if DOF_CATEYE
+  const float4 ce_x = cateye.s0 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s1;
+  const float4 ce_y = (float4)(cateye.s2 * ((float)y + 0.5f) + cateye.s3);
+  /* the open fraction of the unit aperture clipped by a unit circle d away:
+     (2 acos(d/2) - d/2 sqrt(4 - d^2)) / pi */
+  const float4 d = fmin(sqrt(ce_x * ce_x + ce_y * ce_y), 2.0f);
+  const float4 ce_frac = fmax((2.0f * acos(0.5f * d) - 0.5f * d * sqrt(4.0f - d * d))
+                              * (1.0f / CLFX_PI), CATEYE_MIN_FRAC);
+#endif
   /* rows are padded to 4 pixels: the lanes past the width land in the padding */
-  vstore16(dof_gather_safe(col, coc, ppitch, base, taps, first, count, cap), 0, out);
+  vstore16(dof_gather_safe(col, coc, ppitch, base, taps, first, count, cap CATEYE_PASS), 0,
+           out);
+}
+
+/* Axial chromatic aberration: red, green and blue from the gathers of their own radius
+ * offsets (`r`, `g`, `b` may be the same buffer), alpha from green's. */
+kernel void dof_merge_channels(global const float *r, global const float *g,
+                               global const float *b, global float *dst, const int pitch,
+                               const int width, const int height)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= width || y >= height) return;
+  const int i = (y * pitch + x) * 4;
+  vstore4((float4)(r[i], g[i + 1], b[i + 2], g[i + 3]), 0, dst + i);
 }

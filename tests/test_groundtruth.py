@@ -238,3 +238,57 @@ def test_blackman_harris_truth_of_a_defocused_light_keeps_its_energy():
     assert abs(truth.sum() / sharp.sum() - 1) < 0.08
     assert (truth > 1.0).sum() > (sharp > 1.0).sum()          # and the light spread
     assert case.settings["pixel_filter"] == "blackman-harris"
+
+
+# -- lens geometry in the bokeh: anamorphic squeeze, axial CA, optical vignetting ------------
+SMALL = CAM.updated(sensor_width=4.0)   # CoC ~13 px at 30 m on a 96 px frame
+
+
+def _extent(img, thresh):
+    ys, xs = np.nonzero(img > thresh)
+    return np.ptp(xs) + 1, np.ptp(ys) + 1
+
+
+def test_anamorphic_squeeze_makes_vertical_ovals_of_the_thin_lens_height():
+    sc = light_scene(30.0, radius=0.3, lum=1e4)
+    cam = SMALL.updated(anamorphic_squeeze=2.0)
+    truth = render_truth(sc, cam, samples=2048, ss=2, exact_below_px=0.0)
+    coc = SMALL.coc_px(30.0, sc.width)
+    wx, hy = _extent(truth[..., 0], 1.0)
+    assert abs(hy - coc) <= 2 and abs(wx - coc / 2) <= 2, (wx, hy, coc)
+    sharp = render_sharp(sc, ss=2).rgba
+    np.testing.assert_allclose(truth[..., 0].sum(), sharp[..., 0].sum(), rtol=1e-5)
+
+
+def test_axial_ca_offsets_each_channels_coc():
+    """Red and blue 100 um behind green at f/1.4: their CoC is 0.0714 mm smaller behind the
+    focus plane and larger in front of it; energy per channel is kept."""
+    cam = SMALL.updated(axial_ca_red=100.0, axial_ca_blue=100.0)
+    d_px = 0.1 / 1.4 * 96 / 4.0                      # delta / N on the sensor, in px
+    np.testing.assert_allclose(cam.axial_ca_px(96), (-d_px, -d_px))
+    for depth, sign in ((30.0, -1), (1.5, +1)):
+        sc = light_scene(depth, radius=0.3, lum=1e4)
+        truth = render_truth(sc, cam, samples=2048, ss=2, exact_below_px=0.0)
+        wr = _extent(truth[..., 0], 1.0)[0]
+        wg = _extent(truth[..., 1], 1.0)[0]
+        assert (wr - wg) * sign > 0, (depth, wr, wg)
+        assert abs(abs(wr - wg) - d_px) <= 1.5, (depth, wr, wg, d_px)
+        np.testing.assert_allclose(truth[..., 0].sum(), truth[..., 1].sum(), rtol=1e-4)
+
+
+def test_optical_vignetting_clips_lens_rays_per_pixel_and_keeps_a_flat_field():
+    flat = Layer(depth=30.0, texture=Texture("flat", (0.5, 0.5, 0.5)), shape="full",
+                 center=(48, 32), name="wall")
+    cam = SMALL.updated(optical_vignetting=1.2)
+    truth = render_truth(Scene(96, 64, (flat,)), cam, samples=512, ss=1)
+    np.testing.assert_allclose(truth[..., :3], 0.5, rtol=1e-5)    # no darkening
+    # a light near the left edge: a cat's eye, long axis vertical (tangential)
+    light = Layer(depth=30.0, shape="none", center=(12.5, 32.5),
+                  lights=(Light((0.0, 0.0), (1e4, 1e4, 1e4), 0.3),))
+    sc = Scene(96, 64, (light,), background=((0, 0, 0), (0, 0, 0)))
+    cat = render_truth(sc, cam, samples=4096, ss=2, exact_below_px=0.0)
+    wx, hy = _extent(cat[..., 0], 1.0)
+    assert hy > 1.3 * wx, (wx, hy)     # |c| = 0.73: width 2 - |c|, height 2 sqrt(1 - c^2/4)
+    round_ = render_truth(sc, SMALL, samples=4096, ss=2, exact_below_px=0.0)
+    wx0, hy0 = _extent(round_[..., 0], 1.0)
+    assert abs(hy - hy0) <= 2 and abs(wx0 - hy0) <= 1

@@ -31,6 +31,15 @@ by 180 degrees.  A polygonal aperture of ``blades`` blades is inscribed in the u
 The magnification change with the lens point (``v`` instead of ``f``) is ignored: the layers
 are described in screen space.
 
+Lens geometry (the camera block's, as :mod:`clfx.plugins.dof` reads it): an anamorphic
+squeeze scales the lens point's x by ``1 / anamorphic_squeeze`` (vertical oval bokeh); axial
+chromatic aberration adds each channel's offset (:meth:`clfx.core.camera.Camera.axial_ca_px`)
+to every layer's signed CoC, one composite per distinct offset (alpha from green's); optical
+vignetting accepts a lens point ``l`` at pixel ``x`` only inside the barrel circle
+``|l - c(x)| <= 1`` (:func:`clfx.core.camera.optical_vignetting_centre`, the frame's centre
+and half diagonal): each pixel accumulates its accepted renders and their weights and is
+normalised by them (the clipped aperture; the darkening is not modelled, as in the effect).
+
 Motion: at time ``t`` (frames) a layer is translated by ``velocity * t``.  The shutter is
 open for ``shutter_angle / 360`` of a frame, centred on the frame time, starting at it
 ("opening") or ending at it ("closing") per ``Camera.shutter_offset``
@@ -61,7 +70,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -74,7 +83,12 @@ from clfx.bench.scene import (
     rasterise_layer,
     render_sharp,
 )
-from clfx.core.camera import Camera, aperture_radius, first_blade_angle
+from clfx.core.camera import (
+    Camera,
+    aperture_radius,
+    first_blade_angle,
+    optical_vignetting_centre,
+)
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 PLASTIC_INV = 0.7548776662466927  # 1 / plastic number: a second, independent Weyl sequence
@@ -171,6 +185,31 @@ def pixel_positions(ss: int, pixel_filter: str = "box", filter_width: float | No
     return jx.ravel(), jy.ravel(), np.outer(w1, w1).ravel()
 
 
+def _composite(out: np.ndarray, sprites: list, px: float, py: float, ts: float, ox: int,
+               oy: int, ss: int, t: float) -> None:
+    """One sample render into ``out``: every sprite shifted by the lens point ``(px, py)``
+    (in CoC radii, after the anamorphic squeeze) times its half CoC, moved to the shutter
+    instant ``ts`` and composited "over" at sub-pixel position ``(ox, oy)``."""
+    for j, sp in enumerate(sprites):
+        sx = px * sp.half_coc
+        sy = py * sp.half_coc
+        if sp.layer is not None:
+            x0, y0, x1, y1 = sp.box
+            if x1 > x0 and y1 > y0:
+                img = rasterise_layer(sp.layer, x0 + (ox + 0.5) / ss - 0.5 - sx,
+                                      y0 + (oy + 0.5) / ss - 0.5 - sy, x1 - x0, y1 - y0,
+                                      1, t + ts, rim_px=1.0 / ss)
+                _place(out, img, x0, y0, first=(j == 0))
+            continue
+        sx += sp.velocity[0] * ts
+        sy += sp.velocity[1] * ts
+        offx = ox - int(round(sx * ss))
+        offy = oy - int(round(sy * ss))
+        qx, ax = divmod(offx, ss)
+        qy, ay = divmod(offy, ss)
+        _place(out, sp.phases[ay, ax], sp.x0 - qx, sp.y0 - qy, first=(j == 0))
+
+
 def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
                  dof: bool = True, motion: bool = True, ss: int = 1,
                  pixel_filter: str = "box", filter_width: float | None = None,
@@ -191,8 +230,9 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     ----------
     scene : Scene
     camera : Camera
-        Lens (focal length, f-number, sensor width, focus distance, blades, blade rotation)
-        and shutter (angle, offset).
+        Lens (focal length, f-number, sensor width, focus distance, blades, blade rotation,
+        optical vignetting, anamorphic squeeze, axial chromatic aberration) and shutter
+        (angle, offset).
     t : float
         Frame time in frames relative to the scene's frame.
     samples : int
@@ -247,16 +287,28 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     def half_coc(z):
         return 0.0 if not dof else 0.5 * float(camera.coc_signed_px(z, w))
 
+    # axial chromatic aberration: channels focusing elsewhere than green have their own
+    # signed CoC (an additive offset, Camera.axial_ca_px); one composite per distinct offset
+    ca = tuple(0.5 * v for v in camera.axial_ca_px(w)) if dof else (0.0, 0.0)
+    groups: dict[float, list[int]] = {}
+    for ch, off in ((1, 0.0), (0, ca[0]), (2, ca[1])):
+        groups.setdefault(off, []).append(ch)
+    offsets = list(groups)
+    max_off = max(abs(o) for o in offsets)
+    squeeze = camera.anamorphic_squeeze if dof else 1.0
+
     bg_half = half_coc(math.inf)
-    bpad = int(abs(bg_half)) + 2 + reach
+    bpad = int(abs(bg_half) + max_off) + 2 + reach
     bg = background_rgba(scene, -bpad, -bpad, w + 2 * bpad, h + 2 * bpad, ss)
-    sprites = [_Sprite(_phase_major(bg, ss), -bpad, -bpad, bg_half, (0.0, 0.0))]
+    bg_phases = _phase_major(bg, ss)
+    sprites = {o: [_Sprite(bg_phases, -bpad, -bpad, bg_half + o, (0.0, 0.0))] for o in offsets}
     del bg
     t_lo, t_hi = (float(times.min()), float(times.max())) if motion else (0.0, 0.0)
     for layer in scene.layers:
         hc = half_coc(layer.depth)
+        hc_max = max(abs(hc + o) for o in offsets)
         speed = math.hypot(*layer.velocity) * t_extent
-        travel = 2.0 * abs(hc) + math.hypot(*layer.velocity) * (t_hi - t_lo)
+        travel = 2.0 * hc_max + math.hypot(*layer.velocity) * (t_hi - t_lo)
         if (motion and layer.spin != 0.0) or 0.0 < travel < exact_below_px:
             # rasterised for every render at its exact position: a spinning layer cannot be
             # translated, and rounding a short path to 1/ss px would blur it visibly more
@@ -264,41 +316,58 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
             if lo is None:
                 box = (0, 0, w, h)
             else:
-                pad = abs(hc) + reach
+                pad = hc_max + reach
                 box = (max(math.floor(min(lo[0], hi[0]) - pad), 0),
                        max(math.floor(min(lo[1], hi[1]) - pad), 0),
                        min(math.ceil(max(lo[2], hi[2]) + pad), w),
                        min(math.ceil(max(lo[3], hi[3]) + pad), h))
-            sprites.append(_Sprite(None, box[0], box[1], hc, tuple(layer.velocity), layer, box))
+            for o in offsets:
+                sprites[o].append(_Sprite(None, box[0], box[1], hc + o, tuple(layer.velocity),
+                                          layer, box))
         else:
-            sprites.append(_sprite(scene, layer, t, abs(hc) + speed + reach, ss, hc))
+            sp = _sprite(scene, layer, t, hc_max + speed + reach, ss, hc)
+            for o in offsets:
+                sprites[o].append(replace(sp, half_coc=hc + o))
+
+    # optical vignetting: a lens point l is seen by pixel x only inside the barrel circle
+    # |l - c(x)| <= 1 (clfx.core.camera.optical_vignetting_centre); each pixel averages its
+    # accepted renders (mask-weighted sums over the mask weights)
+    cat = None
+    if dof and camera.optical_vignetting > 0.0:
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+        cat = optical_vignetting_centre(xx, yy, strength=camera.optical_vignetting,
+                                        centre=(0.5 * w, 0.5 * h),
+                                        half_diagonal=0.5 * math.hypot(w, h))
+        msum = np.zeros((h, w), np.float64)
+        acc_all = np.zeros((h, w, 4), np.float64)
 
     acc = np.zeros((h, w, 4), np.float64)
     out = np.empty((h, w, 4), np.float32)
     for i in range(n):
         (px, py), ts = lens[i], times[i]
         ox, oy = int(jx[pos[i]]), int(jy[pos[i]])
-        for j, sp in enumerate(sprites):
-            sx = px * sp.half_coc
-            sy = py * sp.half_coc
-            if sp.layer is not None:
-                x0, y0, x1, y1 = sp.box
-                if x1 > x0 and y1 > y0:
-                    img = rasterise_layer(sp.layer, x0 + (ox + 0.5) / ss - 0.5 - sx,
-                                          y0 + (oy + 0.5) / ss - 0.5 - sy, x1 - x0, y1 - y0,
-                                          1, t + ts, rim_px=1.0 / ss)
-                    _place(out, img, x0, y0, first=(j == 0))
-                continue
-            sx += sp.velocity[0] * ts
-            sy += sp.velocity[1] * ts
-            offx = ox - int(round(sx * ss))
-            offy = oy - int(round(sy * ss))
-            qx, ax = divmod(offx, ss)
-            qy, ay = divmod(offy, ss)
-            _place(out, sp.phases[ay, ax], sp.x0 - qx, sp.y0 - qy, first=(j == 0))
-        acc += weights[i] * out
+        if len(offsets) > 1:
+            sample = np.empty((h, w, 4), np.float32)
+        for off, chans in groups.items():
+            _composite(out, sprites[off], px / squeeze, py, ts, ox, oy, ss, t)
+            if len(offsets) == 1:
+                sample = out
+            else:
+                sample[..., chans] = out[..., chans]
+                if 1 in chans:
+                    sample[..., 3] = out[..., 3]
+        if cat is None:
+            acc += weights[i] * sample
+        else:
+            m = weights[i] * (((px - cat[0]) ** 2 + (py - cat[1]) ** 2) <= 1.0)
+            acc += m[..., None] * sample
+            msum += m
+            acc_all += weights[i] * sample
         if progress is not None:
             progress(i + 1, n)
+    if cat is not None:
+        # where no render was accepted (a barrel that closes the aperture), the unclipped mean
+        acc = np.where(msum[..., None] > 0, acc / np.maximum(msum, 1e-300)[..., None], acc_all)
     return acc.astype(np.float32)
 
 

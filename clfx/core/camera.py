@@ -75,6 +75,35 @@ def aperture_radius(phi, blades: int, first: float = -0.5 * math.pi, roundness: 
     return poly + (1.0 - poly) * roundness
 
 
+def vignetted_fraction(d, barrel: float = 1.0):
+    """Fraction of a round aperture (radius 1) left open by a barrel circle of radius
+    ``barrel`` whose centre is ``d`` away (optical vignetting; the lens-shaped intersection
+    of two circles over the aperture's area).  1 for ``d <= barrel - 1``, 0 once the circles
+    part."""
+    d = np.asarray(d, np.float64)
+    r, b = 1.0, float(barrel)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dd = np.maximum(d, 1e-300)
+        a1 = np.arccos(np.clip((dd * dd + r * r - b * b) / (2 * dd * r), -1.0, 1.0))
+        a2 = np.arccos(np.clip((dd * dd + b * b - r * r) / (2 * dd * b), -1.0, 1.0))
+        k = np.sqrt(np.maximum((-dd + r + b) * (dd + r - b) * (dd - r + b) * (dd + r + b), 0.0))
+        lens = (r * r * a1 + b * b * a2 - 0.5 * k) / (math.pi * r * r)
+    inside = d <= abs(b - r)
+    full = min(b * b, r * r) / (r * r)
+    return np.where(inside, full, np.where(d >= r + b, 0.0, lens))
+
+
+def optical_vignetting_centre(x, y, *, strength: float, centre: tuple, half_diagonal: float,
+                              pixel_aspect: float = 1.0):
+    """Centre of the barrel circle, in aperture radii, for image positions ``(x, y)`` (px,
+    pixel centres at ``i + 0.5``): ``strength * (position - optical centre) / half
+    diagonal``, measured in x pixels (y divided by the pixel aspect).  0 at the optical
+    centre; at the frame's corner ``strength`` (the barrel's offset there)."""
+    cx = strength * (np.asarray(x, np.float64) - centre[0]) / half_diagonal
+    cy = strength * (np.asarray(y, np.float64) - centre[1]) / (pixel_aspect * half_diagonal)
+    return cx, cy
+
+
 # -- shutter ---------------------------------------------------------------------------------
 def shutter_interval(angle_deg: float, offset: str) -> tuple[float, float]:
     """(t0, t1): the open shutter in frames relative to the frame time.
@@ -103,12 +132,18 @@ class Camera:
     blade_rotation: float = 0.0    # degrees
     sensor_height: float | None = None  # mm; None = from the frame's aspect
     breathing: float = 0.0         # lens breathing: 0 none, 1 unit-focusing thin lens
+    optical_vignetting: float = 0.0  # barrel offset at the frame corner, aperture radii (cat-eye)
+    anamorphic_squeeze: float = 1.0  # 1 = spherical; 1.33, 1.8, 2: oval bokeh (height / width)
+    axial_ca_red: float = 0.0      # um: focus of red behind green (longitudinal CA), sensor side
+    axial_ca_blue: float = 0.0     # um: focus of blue behind green
 
     RANGES = {
         "focal_length": (0.5, 5000.0), "f_number": (0.5, 128.0), "sensor_width": (0.5, 200.0),
         "focus_distance": (1e-4, 1e9), "shutter_angle": (0.0, 720.0), "iso": (1.0, 1e6),
         "blades": (0, 32), "blade_rotation": (-360.0, 360.0), "sensor_height": (0.5, 200.0),
         "breathing": (-2.0, 2.0),
+        "optical_vignetting": (0.0, 2.0), "anamorphic_squeeze": (1.0, 3.0),
+        "axial_ca_red": (-1000.0, 1000.0), "axial_ca_blue": (-1000.0, 1000.0),
     }
     CHOICES = {"shutter_offset": SHUTTER_OFFSETS}
     INTEGERS = ("blades",)
@@ -160,6 +195,20 @@ class Camera:
         f = self.focal_length
         s = self.focus_distance * 1000.0  # scene metres -> mm
         return (f / self.f_number) * f / max(s - f, 1e-6) * image_width_px / self.sensor_width
+
+    def axial_ca_px(self, image_width_px: float) -> tuple[float, float]:
+        """Signed CoC diameter offsets (px) of red and blue against green from the axial
+        (longitudinal) chromatic aberration.
+
+        A channel focusing ``delta`` mm further behind the lens than green (``axial_ca_*``
+        in um) meets the sensor with a cone of slope ``1/N``: its signed CoC diameter (> 0
+        behind the focus plane) is green's minus ``delta / N`` on the sensor, at every
+        depth.  An achromat has red and blue together behind green: their bokeh is smaller
+        behind the focus plane (green rims) and larger in front of it (magenta rims).
+        """
+        px_per_mm = image_width_px / self.sensor_width
+        return tuple(-(ca * 1e-3) / self.f_number * px_per_mm
+                     for ca in (self.axial_ca_red, self.axial_ca_blue))
 
     def coc_signed_px(self, depth, image_width_px: float):
         """Signed CoC diameters in pixels of planar depths (:func:`coc_signed` with ``K``)."""

@@ -19,6 +19,32 @@ aperture: a disk, or a polygon of ``blades`` blades inscribed in the CoC circle,
 up, turned by the rotation, blended toward the disk by ``roundness``; behind the focus plane
 it is upright, in front turned by 180 degrees (the geometry of :mod:`clfx.bench.groundtruth`).
 
+Lens geometry in the bokeh (camera block values, each off by default and free when off; the
+ground-truth renderer models the same optics):
+
+- Optical vignetting (cat-eye bokeh), ``Camera.optical_vignetting`` (``optical_vignetting``
+  overrides it; -1 = the camera's): the aperture intersected with the lens barrel, a second
+  circle of the same radius shifted by ``strength * (pixel - optical centre) / half
+  diagonal`` aperture radii (x pixels; the optical centre is the display window's): round
+  at the centre, a cat's eye with its long axis tangential towards the edges.  The gather
+  clips each tap with the destination pixel's barrel (the shape varies smoothly over a
+  bokeh; the ground truth clips its lens rays per destination pixel the same way) and the
+  near field's weights divide by the clipped area, so a flat field stays flat: the
+  darkening belongs to the ``vignette`` effect.  A point's light drifts by about
+  ``strength * r / half diagonal`` of its energy (the destination's barrel standing for the
+  point's).  Build variant ``DOF_CATEYE``.
+- Anamorphic squeeze, ``Camera.anamorphic_squeeze`` (``anamorphic_squeeze``; 0 = the
+  camera's): in the desqueezed image the bokeh is the thin-lens CoC high and CoC / squeeze
+  wide (vertical ovals).  Radii stay in x pixels and the tap tables measure offsets in
+  aperture space ``(ox * squeeze, oy / pixel aspect)``, so squeeze and pixel aspect compose.
+- Axial (longitudinal) chromatic aberration, ``Camera.axial_ca_red`` / ``axial_ca_blue`` (um,
+  the channel's focus behind green's; ``axial_ca_red`` / ``axial_ca_blue`` add to them): a
+  focus shift ``delta`` changes the signed CoC diameter by ``-delta / N`` on the sensor
+  (:meth:`clfx.core.camera.Camera.axial_ca_px`), an additive per-channel offset of the
+  signed radius.  Each distinct offset gets its own gather (``dof_prepare`` adds it; tiles,
+  reach and region of definition include it), merged by ``dof_merge_channels`` (alpha from
+  green): 2 gathers for an achromat (red and blue together), 3 otherwise.
+
 Algorithm (after Jimenez 2014, "Next generation post processing in Call of Duty: Advanced
 Warfare", simplified for offline use)
 1. ``dof_prepare``: sanitised colour and signed CoC radius into a padded buffer.
@@ -78,6 +104,7 @@ from typing import NamedTuple
 import numpy as np
 
 from clfx.core.camera import aperture_radius, coc_signed, first_blade_angle
+from clfx.core.errors import ParamError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
 from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE  # dof's tiles are the shared analysis's
@@ -94,6 +121,13 @@ class Lens(NamedTuple):
     clamp_r: float       # largest CoC radius (max_coc / 2 x diagonal), px
     blades: int          # aperture blades (< 3: round)
     first: float         # direction of the first blade's vertex, radians
+    squeeze: float = 1.0            # anamorphic squeeze: bokeh height / width
+    cateye: float = 0.0             # optical vignetting: barrel offset at the corner, radii
+    ca: tuple = (0.0, 0.0)          # red, blue signed CoC radius offsets (axial CA), px
+
+    def offsets(self) -> tuple:
+        """The distinct per-channel radius offsets, green's (0) first: one gather each."""
+        return tuple(dict.fromkeys((0.0, *self.ca)))
 
 
 @dataclass(frozen=True)
@@ -149,35 +183,39 @@ def focus_distance(p, camera) -> float:
     return p.focus_distance or camera.focus_distance
 
 
-def coc_radius(depth, k_half: float, focus: float, clamp_r: float):
-    """Signed CoC radius in px for planar depths (float64 NumPy; same rules as the kernel)."""
-    return np.clip(coc_signed(depth, k_half, focus), -clamp_r, clamp_r)
+def coc_radius(depth, k_half: float, focus: float, clamp_r: float, offset: float = 0.0):
+    """Signed CoC radius in px for planar depths (float64 NumPy; same rules as the kernel),
+    plus a channel's axial-CA ``offset`` (px; invalid depths are in the focus plane)."""
+    return np.clip(coc_signed(depth, k_half, focus) + offset, -clamp_r, clamp_r)
 
 
 def tap_table(radius: float, spacing: float, kmax: int, aspect: float = 1.0, blades: int = 0,
               first: float = -0.5 * math.pi, roundness: float = 0.0,
-              dense: float = 0.0) -> np.ndarray:
+              dense: float = 0.0, squeeze: float = 1.0) -> np.ndarray:
     """The gather's taps for a neighbourhood radius ``radius`` (px): (n, 8) float32 rows of
-    (offset x, offset y, near distance, far distance, area, 0, 0, 0).
+    (offset x, offset y, near distance, far distance, area, aperture x, aperture y, 0).
 
-    Up to ``dense`` px: every pixel offset within ``radius + 0.5`` (x px; y stretched by the
-    pixel aspect) is a tap standing for its own area, so a single bright pixel spreads into
-    an evenly lit disk.  Beyond: ``K = clamp(ceil(radius / spacing), 1, kmax)`` rings at radii
-    ``k radius / K`` with ``6k`` taps each (odd rings turned by half a step) plus the centre:
-    uniform density over the disk, each tap standing for ``pi/3 (radius/K)^2`` px^2 (the
-    centre ``pi/4 (...)^2``), offsets rounded to whole pixels.  Distances are measured on the
-    integer offsets in x pixels, divided by the aperture's boundary radius in the direction
-    of ``o`` (near taps: bokeh turned 180 degrees) or ``-o`` (far taps).
+    Distances and areas are measured in aperture space: an offset ``(ox, oy)`` in pixels is
+    ``(ox * squeeze, oy / aspect)`` there (x pixels of the CoC radius; the anamorphic
+    ``squeeze`` makes the bokeh ``squeeze`` times narrower than high, the pixel ``aspect``
+    stretches it over more rows), columns 5 and 6.  Up to ``dense`` px: every pixel offset
+    within ``radius + 0.5`` there is a tap standing for its own area (``squeeze / aspect``),
+    so a single bright pixel spreads into an evenly lit disk.  Beyond: ``K = clamp(ceil(radius
+    / spacing), 1, kmax)`` rings at radii ``k radius / K`` with ``6k`` taps each (odd rings
+    turned by half a step) plus the centre: uniform density over the disk, each tap standing
+    for ``pi/3 (radius/K)^2`` (the centre ``pi/4 (...)^2``), offsets rounded to whole pixels.
+    Distances are divided by the aperture's boundary radius in the direction of ``o`` (near
+    taps: bokeh turned 180 degrees) or ``-o`` (far taps).
     """
     if radius <= dense:
-        e = int(math.floor(radius + 0.5))
+        e = int(math.floor((radius + 0.5) / squeeze))
         ey = int(math.floor((radius + 0.5) * aspect))
         oy, ox = np.mgrid[-ey:ey + 1, -e:e + 1].astype(np.float64)
-        keep = np.hypot(ox, oy / aspect) <= radius + 0.5
+        keep = np.hypot(ox * squeeze, oy / aspect) <= radius + 0.5
         ox, oy = ox[keep], oy[keep]
-        order = np.lexsort((ox, oy, np.hypot(ox, oy / aspect)))   # centre first
+        order = np.lexsort((ox, oy, np.hypot(ox * squeeze, oy / aspect)))   # centre first
         ox, oy = ox[order], oy[order]
-        area = np.full(ox.shape, 1.0 / aspect)
+        area = np.full(ox.shape, squeeze / aspect)
     else:
         K = int(min(max(math.ceil(radius / spacing), 1), kmax))
         step = radius / K
@@ -185,18 +223,19 @@ def tap_table(radius: float, spacing: float, kmax: int, aspect: float = 1.0, bla
         for k in range(1, K + 1):
             n = 6 * k
             th = (np.arange(n) + (0.5 if k & 1 else 0.0)) * (2.0 * math.pi / n)
-            ox.extend(np.rint(k * step * np.cos(th)))
+            ox.extend(np.rint(k * step * np.cos(th) / squeeze))
             oy.extend(np.rint(k * step * np.sin(th) * aspect))
             area.extend([math.pi / 3.0 * step * step] * n)
         ox, oy, area = np.asarray(ox), np.asarray(oy), np.asarray(area)
-    dy = oy / aspect
-    d = np.hypot(ox, dy)
-    phi = np.arctan2(dy, ox)
+    dx, dy = ox * squeeze, oy / aspect
+    d = np.hypot(dx, dy)
+    phi = np.arctan2(dy, dx)
     table = np.zeros((len(ox), 8), np.float32)
     table[:, 0], table[:, 1] = ox, oy
     table[:, 2] = d / aperture_radius(phi, blades, first, roundness)
     table[:, 3] = d / aperture_radius(phi + math.pi, blades, first, roundness)
     table[:, 4] = area
+    table[:, 5], table[:, 6] = dx, dy
     return table
 
 
@@ -248,6 +287,21 @@ class Dof(Plugin):
                        hint="Extra rotation of the aperture polygon in degrees (clockwise)."),
             FloatParam("roundness", 0.0, min=0.0, max=1.0,
                        hint="0 = straight blades, 1 = round bokeh."),
+            FloatParam("optical_vignetting", -1.0, min=-1.0, max=2.0, units="aperture radii",
+                       hint="Cat-eye bokeh: offset of the lens barrel's circle at the frame "
+                            "corner, growing linearly from the optical centre (0 = none, 1 = "
+                            "the corner's bokeh cut to a cat's eye); -1 = the camera block's."),
+            FloatParam("anamorphic_squeeze", 0.0, min=0.0, max=3.0, units="x",
+                       hint="Anamorphic oval bokeh: height / width of the bokeh in the "
+                            "desqueezed image (1.33, 1.8, 2); 0 = the camera block's, 1 = "
+                            "round."),
+            FloatParam("axial_ca_red", 0.0, min=-1000.0, max=1000.0, units="um",
+                       hint="Axial chromatic aberration: focus of red behind green on the "
+                            "sensor side, added to the camera block's (achromat: red and blue "
+                            "~ +50 um; magenta rims in front of focus, green behind)."),
+            FloatParam("axial_ca_blue", 0.0, min=-1000.0, max=1000.0, units="um",
+                       hint="Axial chromatic aberration: focus of blue behind green (um), "
+                            "added to the camera block's."),
         ),
         quality=LEVELS,
         spreads_light=True,
@@ -255,19 +309,53 @@ class Dof(Plugin):
 
     # -- geometry --------------------------------------------------------------------------
     def lens(self, p, ctx) -> Lens:
-        """The frame's lens in pixels (CoC at infinity, focus, clamp, aperture shape)."""
-        k_half = 0.5 * lens_scale_px(p, ctx.camera, ctx.diagonal_px, ctx.width_px)
+        """The frame's lens in pixels (CoC at infinity, focus, clamp, aperture shape, cat-eye
+        strength, anamorphic squeeze, axial-CA radius offsets)."""
+        cam = ctx.camera
+        k_half = 0.5 * lens_scale_px(p, cam, ctx.diagonal_px, ctx.width_px)
         clamp_r = 0.5 * p.max_coc * ctx.diagonal_px
-        blades = ctx.camera.blades if p.blades < 0 else p.blades
-        rot = ctx.camera.blade_rotation + p.blade_rotation
-        return Lens(k_half, focus_distance(p, ctx.camera), clamp_r, blades,
-                    first_blade_angle(rot))
+        blades = cam.blades if p.blades < 0 else p.blades
+        rot = cam.blade_rotation + p.blade_rotation
+        squeeze = p.anamorphic_squeeze or cam.anamorphic_squeeze
+        if squeeze < 1.0:
+            raise ParamError(f"dof.anamorphic_squeeze = {squeeze:g}: expected 0 (the camera "
+                             f"block's) or a squeeze in [1, 3]")
+        cateye = cam.optical_vignetting if p.optical_vignetting < 0 else p.optical_vignetting
+        ca = (0.0, 0.0)
+        if p.axial_ca_red or p.axial_ca_blue or cam.axial_ca_red or cam.axial_ca_blue:
+            # the chromatic focus shift over this effect's f-number (also with max_blur)
+            eff = cam.updated(f_number=p.f_number or cam.f_number,
+                              axial_ca_red=cam.axial_ca_red + p.axial_ca_red,
+                              axial_ca_blue=cam.axial_ca_blue + p.axial_ca_blue)
+            ca = tuple(0.5 * v for v in eff.axial_ca_px(ctx.width_px))
+        return Lens(k_half, focus_distance(p, cam), clamp_r, blades, first_blade_angle(rot),
+                    float(squeeze), float(cateye), ca)
 
-    def tile_radii(self, p, ctx, *, with_near: bool = False):
+    def cateye_args(self, lens: Lens, ctx, window, scale: int = 1):
+        """``dof_gather``'s cateye float4 for a buffer over ``window`` (``scale``: its pixels
+        per full-resolution pixel's): the barrel centre of buffer pixel (x, y) is
+        ``(s0 (x + 0.5) + s1, s2 (y + 0.5) + s3)`` aperture radii."""
+        d = ctx.display_window
+        aspect = ctx.pixel_aspect
+        half_diag = 0.5 * math.hypot(d.width, d.height / aspect)
+        k = lens.cateye / half_diag
+        cx, cy = d.center
+        return (np.float32(k * scale), np.float32(k * (window.x0 - cx)),
+                np.float32(k * scale / aspect), np.float32(k * (window.y0 - cy) / aspect))
+
+    def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None):
         """Per 32 px tile: the largest CoC radius any pixel within reach can have (px); with
         ``with_near`` also the smallest radius of the tile's own pixels and the largest
-        radius of a pixel in front of the focus plane within reach (0 if none)."""
-        k_half, focus, clamp_r, _, _ = self.lens(p, ctx)
+        radius of a pixel in front of the focus plane within reach (0 if none).  ``offset``:
+        one channel's axial-CA radius offset; None: the largest over the channels."""
+        if offset is None:
+            out = [self.tile_radii(p, ctx, with_near=with_near, offset=o)
+                   for o in self.lens(p, ctx).offsets()]
+            if with_near:
+                return tuple(np.maximum.reduce(list(t)) if i != 1 else np.minimum.reduce(list(t))
+                             for i, t in enumerate(zip(*out)))
+            return np.maximum.reduce(out)
+        k_half, focus, clamp_r = self.lens(p, ctx)[:3]
         src = ctx.source
         ty, tx = max(1, -(-src.height // TILE)), max(1, -(-src.width // TILE))
         an = ctx.analysis
@@ -275,9 +363,11 @@ class Dof(Plugin):
             full = np.full((ty, tx), clamp_r, np.float32)  # no tile statistics: no skipping
             return (full, np.zeros_like(full), full) if with_near else full
         # the CoC is monotonic in 1/z, so a tile's extremes come from its depth range
-        r0 = coc_radius(an.min_depth, k_half, focus, clamp_r)
-        r1 = coc_radius(an.max_depth, k_half, focus, clamp_r)
+        r0 = coc_radius(an.min_depth, k_half, focus, clamp_r, offset)
+        r1 = coc_radius(an.max_depth, k_half, focus, clamp_r, offset)
         r = np.maximum(np.abs(r0), np.abs(r1))
+        if offset and an.bad_depth is not None:   # invalid depths: the focus plane's radius
+            r = np.where(an.bad_depth > 0, np.maximum(r, min(abs(offset), clamp_r)), r)
         reach = max(int(math.ceil(r.max() / TILE)) if r.size else 0, 1)
         r_max = dilate_tiles(r, reach).astype(np.float32)
         if not with_near:
@@ -290,25 +380,27 @@ class Dof(Plugin):
 
     def spread_px(self, p, ctx) -> tuple[int, int]:
         """How far (x, y px) light can land from its pixel: the largest CoC radius of the
-        frame (rounded up as the gather's), stretched by the pixel aspect in y, plus the
-        coverage ramp's pixel."""
+        frame over the channels (rounded up as the gather's), narrowed by the anamorphic
+        squeeze in x and stretched by the pixel aspect in y, plus the coverage ramp's pixel."""
         radii = self.tile_radii(p, ctx)
         r = float(quantised_radius(radii.max())) if radii.size else 0.0
         if r == 0.0:
             return 0, 0
-        return int(math.ceil(r)) + 1, int(math.ceil(r * ctx.pixel_aspect)) + 1
+        squeeze = self.lens(p, ctx).squeeze
+        return (int(math.ceil(r / squeeze)) + 1,
+                int(math.ceil(r * ctx.pixel_aspect)) + 1)
 
-    def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness):
+    def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0):
         """One concatenated tap table for the radii in ``levels`` and, per entry of
         ``levels``, (first, count, 0, 0); each radius's table is kept in the runtime's
         cache."""
         parts, offsets, n = [], {}, 0
         for r in sorted(set(levels.ravel().tolist()) - {0.0}):
             key = ("dof.taps", r, lvl.spacing, lvl.max_rings, lvl.dense_radius, aspect, blades,
-                   first, roundness)
+                   first, roundness, squeeze)
             taps = rt.cache.get(key, lambda r=r: tap_table(
                 r, lvl.spacing, lvl.max_rings, aspect, blades, first, roundness,
-                dense=lvl.dense_radius))
+                dense=lvl.dense_radius, squeeze=squeeze))
             offsets[r] = (n, len(taps))
             parts.append(taps)
             n += len(taps)
@@ -324,9 +416,10 @@ class Dof(Plugin):
         an = ctx.analysis
         if an.min_depth is None or not an.min_depth.size:
             return None
-        asked = 2.0 * float(np.abs(np.concatenate([
+        asked = 2.0 * max(float(np.abs(np.concatenate([
             coc_signed(an.min_depth, lens.k_half, lens.focus).ravel(),
-            coc_signed(an.max_depth, lens.k_half, lens.focus).ravel()])).max())
+            coc_signed(an.max_depth, lens.k_half, lens.focus).ravel()]) + off).max())
+            for off in lens.offsets())   # each channel's radius (axial CA)
         if asked <= 2.0 * lens.clamp_r * (1.0 + 1e-6):
             return None
         return (f"a CoC of {asked:.1f} px is asked for and clamped to "
@@ -334,8 +427,9 @@ class Dof(Plugin):
                 f"raise dof.max_coc to keep the lens")
 
     def is_identity(self, p, ctx):
-        k_half, _, clamp_r, _, _ = self.lens(p, ctx)
-        if k_half == 0.0 or clamp_r < 0.25:
+        lens = self.lens(p, ctx)
+        k_half, clamp_r = lens.k_half, lens.clamp_r
+        if (k_half == 0.0 and max(map(abs, lens.ca)) < 0.5) or clamp_r < 0.25:
             return "the circle of confusion is 0 (max_blur, max_coc or aperture)"
         if ctx.depth is not None and float(self.tile_radii(p, ctx).max()) < 0.5:
             return "circle of confusion below half a pixel everywhere"
@@ -360,11 +454,43 @@ class Dof(Plugin):
             # analysis (the tiles) is taken over the grown window; notes stay shared.
             ctx = ctx.grown_to(window)
             ctx.notes.append(f"dof: grown to {window}")
+        lens = self.lens(p, ctx)
+        offsets = lens.offsets()
+        notes = []
+        outs = {}
+        for off in offsets:   # one gather per distinct channel radius (axial CA)
+            outs[off] = self._render_pass(rt, p, ctx, lens, off, notes if off == 0.0 else [])
+        if len(offsets) == 1:
+            dst = outs[0.0]
+        else:
+            dst = ctx.source.like()
+            r, b = (outs[o] for o in lens.ca)
+            rt.launch(rt.kernel("dof.cl", "dof_merge_channels"), (dst.width, dst.height),
+                      r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
+                      np.int32(dst.height), local=(16, 4))
+            notes.append(f"axial CA: red {2 * lens.ca[0]:+.2f} px, blue {2 * lens.ca[1]:+.2f} px "
+                         f"of CoC, {len(offsets)} gathers")
+        if lens.cateye:
+            notes.append(f"optical vignetting {lens.cateye:g} (cat-eye bokeh)")
+        if lens.squeeze != 1.0:
+            notes.append(f"anamorphic squeeze {lens.squeeze:g}")
+        an = ctx.analysis
+        if an.nonfinite_count:
+            notes.insert(0, f"{an.nonfinite_count} non-finite pixels set to 0")
+        if an.bad_depth is not None and int(an.bad_depth.sum()):
+            notes.insert(1 if an.nonfinite_count else 0,
+                         f"{int(an.bad_depth.sum())} invalid depths treated as in focus")
+        ctx.notes.append("dof: " + "; ".join(notes))
+        return dst
+
+    def _render_pass(self, rt, p, ctx, lens: Lens, offset: float, notes: list):
+        """The gather of every channel with the signed CoC radii offset by ``offset`` px (one
+        channel's axial CA; 0 without)."""
         src, depth = ctx.source, ctx.depth
         lvl = self.level(ctx)
-        k_half, focus, clamp_r, blades, first = self.lens(p, ctx)
+        k_half, focus, clamp_r, blades, first = lens[:5]
         aspect = ctx.pixel_aspect
-        radii, r_min, near = self.tile_radii(p, ctx, with_near=True)
+        radii, r_min, near = self.tile_radii(p, ctx, with_near=True, offset=offset)
         levels = quantised_radius(radii)
         # Tiles whose every pixel is far out of focus are gathered at half resolution.
         half = (r_min >= lvl.half_res_radius) & (levels > 0)
@@ -378,7 +504,7 @@ class Dof(Plugin):
         prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64)
         rt.launch(prep, (col.pitch // 4, col.height), src, depth, i32(src.pitch), i32(w),
                   i32(h), col, coc0, i32(col.pitch), i32(col.height), i32(pad), f32(k_half),
-                  f32(focus), f32(clamp_r))
+                  f32(focus), f32(clamp_r), f32(offset))
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64), (-(-w // 4), h), col, coc0, coc,
                   i32(col.pitch), i32(col.height), i32(pad), i32(w), i32(h), local=(8, 4))
         del coc0
@@ -388,8 +514,9 @@ class Dof(Plugin):
         rt.launch(rt.kernel("dof.cl", "dof_tile_cap", fp64=lvl.fp64), (tx, ty), col,
                   i32(col.pitch), i32(pad), i32(w), i32(h), i32(TILE), i32(tx), i32(ty),
                   log_mean)
-        gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64)
-        common = (lvl, aspect, blades, first, p.roundness, log_mean)
+        variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
+        gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant)
+        common = (lvl, aspect, blades, first, p.roundness, log_mean, lens.squeeze)
         hdst = None
         if half.any():
             hw, hh, hpad = -(-w // 2), -(-h // 2), pad // 2
@@ -401,7 +528,7 @@ class Dof(Plugin):
             hdst = rt.image((hh, hw), 4)
             hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))
             self._gather(rt, gather, colh, coch, hpad, hdst, hlevels, hlevels, None, *common,
-                         tile=TILE // 2)
+                         self.cateye_args(lens, ctx, src.window, 2), tile=TILE // 2)
         # full resolution: sharp pixels gather over their own reach and the near field's,
         # out-of-focus ones take the half-resolution result where it is smooth
         sharp = np.where(levels > 0, quantised_radius(np.maximum(near, lvl.half_res_radius)
@@ -410,26 +537,20 @@ class Dof(Plugin):
         sharp = np.minimum(sharp, levels)
         mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
         dst = src.like()
-        self._gather(rt, gather, col, coc, pad, dst, levels, sharp, mode, *common, hres=hdst)
-        an = ctx.analysis
-        notes = []
-        if an.nonfinite_count:
-            notes.append(f"{an.nonfinite_count} non-finite pixels set to 0")
-        if an.bad_depth is not None and int(an.bad_depth.sum()):
-            notes.append(f"{int(an.bad_depth.sum())} invalid depths treated as in focus")
+        self._gather(rt, gather, col, coc, pad, dst, levels, sharp, mode, *common,
+                     self.cateye_args(lens, ctx, src.window), hres=hdst)
         skipped = int((levels == 0).sum())
         notes.append(f"{skipped}/{radii.size} tiles in focus (copied), "
                      f"{int(half.sum())} at half resolution")
-        ctx.notes.append("dof: " + "; ".join(notes))
         return dst
 
     def _gather(self, rt, knl, col, coc, pad, dst, levels, sharp, mode, lvl, aspect, blades,
-                first, roundness, log_mean, *, tile=TILE, hres=None):
+                first, roundness, log_mean, squeeze, cateye, *, tile=TILE, hres=None):
         """Launch ``dof_gather`` over ``dst``: per tile the table of radius ``levels``, that
         of radius ``sharp`` for pixels in focus, ``mode`` (bit 0: take ``hres`` where it is
         smooth, bit 1: gather again where it is not)."""
         table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
-                                      roundness)
+                                      roundness, squeeze)
         tiles = np.zeros(levels.shape + (8,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
@@ -441,6 +562,6 @@ class Dof(Plugin):
                   dst, i32(dst.pitch), i32(dst.width), i32(dst.height), taps, tile_info,
                   log_mean, i32(levels.shape[1]), i32(levels.shape[0]), i32(tile),
                   f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
-                  local=LOCAL)
+                  np.array(cateye, np.float32), local=LOCAL)
         # (the pooled tables may be dropped now: the in-order queue uses them before any
         # later command could overwrite a reused buffer)

@@ -24,20 +24,38 @@ def lens(width, height, p=None, cam=CAM):
     return 0.5 * k, cam.focus_distance, 0.5 * p.max_coc * math.hypot(width, height)
 
 
+def ca_offsets(width, cam, p):
+    """Red and blue signed CoC radius offsets (px) of the axial CA: -delta / N on the
+    sensor (delta: the channel's focus behind green, um), half of it in radius."""
+    n = p.f_number or cam.f_number
+    px_per_mm = width / cam.sensor_width
+    return tuple(-0.5 * (c + d) * 1e-3 / n * px_per_mm
+                 for c, d in ((cam.axial_ca_red, p.axial_ca_red),
+                              (cam.axial_ca_blue, p.axial_ca_blue)))
+
+
 def oracle(src, depth, quality, cam=CAM, **params):
     """The float64 oracle with the plugin's taps for one neighbourhood radius (images of up to
     3 x 3 tiles, where the tile dilation makes the radius uniform)."""
     h, w = depth.shape
     p = Dof.params(**params)
     k_half, focus, clamp_r = lens(w, h, p, cam)
-    r = reference.coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
-    radius = float(quantised_radius(np.abs(r).max()))
+    offsets = ca_offsets(w, cam, p)
+    radius = max(float(quantised_radius(np.abs(reference.coc_radius(
+        depth, k_half=k_half, focus=focus, clamp_r=clamp_r, offset=o)).max()))
+        for o in (0.0, *offsets))
     lvl = LEVELS[quality]
     blades = cam.blades if p.blades < 0 else p.blades
+    squeeze = p.anamorphic_squeeze or cam.anamorphic_squeeze
     taps = tap_table(radius, lvl.spacing, lvl.max_rings, 1.0, blades,
                      -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
-                     p.roundness, dense=lvl.dense_radius)
-    return reference.dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps)
+                     p.roundness, dense=lvl.dense_radius, squeeze=squeeze)
+    ov = cam.optical_vignetting if p.optical_vignetting < 0 else p.optical_vignetting
+    kw = dict(k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps,
+              cateye=reference.cateye_centres((h, w), ov) if ov > 0 else None)
+    if any(offsets):
+        return reference.dof_chromatic(src, depth, offsets=offsets, **kw)
+    return reference.dof(src, depth, **kw)
 
 
 def run(rt, src, depth, quality="final", cam=CAM, **params):
@@ -530,3 +548,266 @@ def test_bench_naive_is_the_reference_naive_gather(rt, rng):
     got = naive_dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
     want = reference.naive_dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+
+
+# -- lens geometry in the bokeh: cat-eye, anamorphic, axial chromatic aberration ------------
+OPTIONS = {
+    "cateye": dict(optical_vignetting=1.2),
+    "anamorphic": dict(anamorphic_squeeze=1.8),
+    "axial_ca": dict(axial_ca_red=60.0, axial_ca_blue=45.0),
+}
+
+
+@pytest.mark.parametrize("option", list(OPTIONS))
+@pytest.mark.parametrize("quality", ["preview", "reference"])
+def test_lens_geometry_options_match_reference(rt, rng, option, quality):
+    src, depth = random_case(rng, (40, 52))
+    cam = CAM.updated(sensor_width=8.0, blades=6 if option == "cateye" else 0)
+    got = run(rt, src, depth, quality, cam, **OPTIONS[option])
+    want = oracle(src, depth, quality, cam, **OPTIONS[option])
+    tol = 1e-9 if quality == "reference" else 1e-4
+    # as test_dof_matches_reference: float32 weights, one tap may move at a coverage edge
+    np.testing.assert_allclose(got, want, rtol=max(tol, 2e-6), atol=2e-3 * src.max())
+    assert np.abs(got - want).mean() < 1e-4 * src.max()
+
+
+def test_camera_block_drives_the_options_and_params_override_it(rt, rng):
+    src, depth = random_case(rng, (33, 45))
+    cam = CAM.updated(sensor_width=8.0, optical_vignetting=1.5, anamorphic_squeeze=1.33,
+                      axial_ca_red=40.0, axial_ca_blue=40.0)
+    got = run(rt, src, depth, "final", cam)
+    want = oracle(src, depth, "final", cam)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=2e-3 * src.max())
+    # dof's overrides: 0 vignetting and squeeze 1 turn the camera's off; CA adds to it
+    off = run(rt, src, depth, "final", cam, optical_vignetting=0.0, anamorphic_squeeze=1.0,
+              axial_ca_red=-40.0, axial_ca_blue=-40.0)
+    np.testing.assert_array_equal(off, run(rt, src, depth, "final", CAM.updated(sensor_width=8.0)))
+
+
+def test_options_off_by_default_change_nothing(rt, rng):
+    src, depth = random_case(rng, (40, 70))
+    cam = CAM.updated(sensor_width=8.0)
+    base = run(rt, src, depth, "final", cam)
+    for kw in (dict(optical_vignetting=0.0), dict(anamorphic_squeeze=1.0),
+               dict(axial_ca_red=0.0, axial_ca_blue=0.0)):
+        np.testing.assert_array_equal(run(rt, src, depth, "final", cam, **kw), base)
+    assert Camera().optical_vignetting == 0 and Camera().anamorphic_squeeze == 1
+    assert Camera().axial_ca_red == Camera().axial_ca_blue == 0
+
+
+def test_squeeze_below_one_and_camera_ranges_are_refused(rt):
+    from clfx.core.errors import ParamError
+
+    with pytest.raises(ParamError, match="anamorphic_squeeze"):
+        Dof.params(anamorphic_squeeze=3.5)
+    with pytest.raises(ParamError, match="anamorphic_squeeze"):
+        run(rt, np.zeros((8, 8, 4), np.float32), np.full((8, 8), 9.0, np.float32), "final",
+            CAM, anamorphic_squeeze=0.5)
+    for name, bad in (("optical_vignetting", 2.5), ("anamorphic_squeeze", 0.9),
+                      ("axial_ca_red", 2000.0)):
+        with pytest.raises(ValueError):
+            Camera.validate(name, bad)
+
+
+def _lights_frame(h=96, w=144, depth=200.0, near=None):
+    """HDR point lights near the corners, at the edges' middles and the centre."""
+    src = np.zeros((h, w, 4), np.float32)
+    src[..., :3] = 0.01
+    src[..., 3] = 1.0
+    pts = [(h // 2, w // 2), (14, 14), (14, w - 15), (h - 15, 14), (h - 15, w - 15),
+           (h // 2, 14), (14, w // 2)]
+    for y, x in pts:
+        src[y, x, :3] = 1e3
+    d = np.full((h, w), depth, np.float32)
+    return src, d, pts
+
+
+def _moments(img, y, x, rad):
+    """Second moments of the light around (y, x): (along x, along y, mean offset)."""
+    ys, xs = np.mgrid[-rad:rad + 1, -rad:rad + 1]
+    a = img[y - rad:y + rad + 1, x - rad:x + rad + 1, 1] - 0.01
+    a = np.maximum(a, 0)
+    m = a.sum()
+    mx, my = (a * xs).sum() / m, (a * ys).sum() / m
+    return (a * (xs - mx) ** 2).sum() / m, (a * (ys - my) ** 2).sum() / m, (mx, my)
+
+
+def test_cateye_bokeh_is_round_at_the_centre_and_tangential_at_the_edges(rt):
+    src, d, pts = _lights_frame()
+    cam = CAM.updated(sensor_width=4.0)           # CoC radius ~10 px at 200 m
+    out = run(rt, src, d, "reference", cam, optical_vignetting=1.0)
+    vx, vy, _ = _moments(out, *pts[0], 13)
+    assert abs(vx / vy - 1) < 0.02                # round at the optical centre
+    vx, vy, _ = _moments(out, *pts[5], 13)        # left edge: long axis vertical
+    assert vy > 1.5 * vx
+    vx, vy, _ = _moments(out, *pts[6], 13)        # top edge (nearer the centre): horizontal
+    assert vx > 1.2 * vy
+    for y, x in pts[1:5]:                         # corners: long axis across the radius
+        ys, xs = np.mgrid[-13:14, -13:14]
+        a = np.maximum(out[y - 13:y + 14, x - 13:x + 14, 1] - 0.01, 0)
+        cov = np.cov(np.stack([xs.ravel(), ys.ravel()]), aweights=a.ravel())
+        evals, evecs = np.linalg.eigh(cov)
+        radial = np.array([x + 0.5 - 72, y + 0.5 - 48])
+        radial /= np.hypot(*radial)
+        assert evals[1] > 1.5 * evals[0] and abs(evecs[:, 1] @ radial) < 0.1, (y, x)
+    # a flat field stays flat (the clipped aperture is normalised; darkening is vignette's)
+    flat = run(rt, np.full_like(src, 0.5), d, "reference", cam, optical_vignetting=1.0)
+    np.testing.assert_allclose(flat, 0.5, rtol=1e-6)
+
+
+def test_anamorphic_bokeh_is_a_vertical_oval_with_the_thin_lens_height(rt):
+    src, d, pts = _lights_frame()
+    cam = CAM.updated(sensor_width=4.0)
+    out = run(rt, src, d, "reference", cam, anamorphic_squeeze=2.0)
+    y, x = pts[0]
+    lit = out[y - 14:y + 15, x - 14:x + 15, 1] > 0.5
+    ys, xs = np.nonzero(lit)
+    r = abs(reference.coc_radius(200.0, k_half=lens(144, 96, cam=cam)[0], focus=3.0,
+                                 clamp_r=1e9))
+    assert abs((np.ptp(ys) + 1) - 2 * r) <= 2           # height: the thin-lens CoC
+    assert abs((np.ptp(xs) + 1) - r) <= 2               # width: CoC / squeeze
+    np.testing.assert_allclose(out[..., 1].sum(), src[..., 1].sum(), rtol=1e-4)   # energy
+
+
+def test_axial_ca_rims_are_green_behind_focus_and_magenta_in_front(rt):
+    cam = CAM.updated(sensor_width=4.0)
+    p = dict(axial_ca_red=80.0, axial_ca_blue=80.0)     # an achromat: red, blue behind green
+    for depth, rim in ((200.0, "green"), (1.6, "magenta")):
+        src, d, pts = _lights_frame(depth=depth)
+        out = run(rt, src, d, "reference", cam, **p)
+        y, x = pts[0]
+        k = lens(144, 96, cam=cam)[0]
+        r = abs(reference.coc_radius(depth, k_half=k, focus=3.0, clamp_r=1e9))
+        ring = out[y, x + int(r) - 1: x + int(r) + 2, :3]   # along the bokeh's rim
+        g_minus_rb = ring[:, 1].sum() - 0.5 * (ring[:, 0] + ring[:, 2]).sum()
+        assert (g_minus_rb > 0) == (rim == "green"), (depth, ring)
+        # each channel keeps its energy
+        np.testing.assert_allclose(out[..., :3].sum(axis=(0, 1)), src[..., :3].sum(axis=(0, 1)),
+                                   rtol=2e-3)
+
+
+@pytest.mark.parametrize("option", list(OPTIONS))
+def test_lens_geometry_options_hard_cases(rt, rng, option):
+    """The contract's hard cases with each option on (the contract suite runs dof at its
+    defaults): tiny and odd shapes, NaN/Inf/1e38 pixels, transparent pixels, determinism."""
+    from tests.contract import effects as E
+
+    p = Dof.params(**OPTIONS[option])
+    for shape in hard_shapes():
+        src, depth = random_case(rng, shape)
+        got = run(rt, src, depth, "final", CAM.updated(sensor_width=4.0), **OPTIONS[option])
+        assert got.shape == src.shape and np.isfinite(got).all(), shape
+    for q in ("draft", "final", "reference"):
+        for value in E.HARD_VALUES.values():
+            out = E.apply(rt, "dof", E.with_value(value), p, quality=q)
+            assert np.isfinite(out).all(), (q, value)
+        src = E.with_value(E.NONFINITE)
+        out = E.apply(rt, "dof", src, p, quality=q)
+        zeroed = E.apply(rt, "dof", np.where(np.isfinite(src), src, np.float32(0)), p, quality=q)
+        np.testing.assert_allclose(out, zeroed, rtol=1e-5, atol=1e-6)
+        t = E.transparent_scene()
+        out = E.apply(rt, "dof", t, p, quality=q)
+        assert np.isfinite(out).all() and out[..., 3].min() >= 0 and out[..., 3].max() <= 1 + 1e-6
+    a = E.apply(rt, "dof", E.scene(), p)
+    b = E.apply(rt, "dof", E.scene(), p)
+    assert a.tobytes() == b.tobytes()
+
+
+def test_options_grow_the_reach(rt):
+    """Axial CA makes red larger in front of focus: the region of definition and the tiles
+    cover it; a squeeze narrows the reach in x."""
+    from clfx.core.rect import Rect
+    from clfx.host import RenderContext
+
+    src = np.zeros((32, 32, 4), np.float32)
+    src[16, 16] = 1e3
+    depth = np.full((32, 32), 1.5, np.float32)
+    cam = CAM.updated(sensor_width=3.0)
+    ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=cam,
+                        display_window=Rect(-32, -32, 64, 64))
+    base = Dof().spread_px(Dof.params(), ctx)
+    ca = Dof().spread_px(Dof.params(axial_ca_red=150.0), ctx)
+    sq = Dof().spread_px(Dof.params(anamorphic_squeeze=2.0), ctx)
+    assert ca[0] > base[0] and ca[1] > base[1]
+    assert sq[0] < base[0] and sq[1] == base[1]
+
+
+@pytest.mark.parametrize("option", ["cateye", "anamorphic", "axial_ca"])
+def test_lens_geometry_beats_naive_and_input_on_ground_truth(rt, option):
+    """The bench's lens-geometry cases at 160x90: every level beats the naive gather (with
+    the same aperture) and the unchanged input; final is within 1 dB of reference."""
+    from clfx.bench.cases.dof import make_scene, naive
+    from clfx.host import RenderContext
+
+    c = make_scene(option, 160, 90, ss=4, samples=4096)
+    truth = c["truth"]
+    ctx = RenderContext(rt, rt.upload(c["source"]), depth=rt.upload(c["depth"]),
+                        camera=c["camera"])
+    base = max(metrics.psnr_log(naive(c, Dof.params(), ctx), truth),
+               metrics.psnr_log(c["source"], truth))
+    score = {q: metrics.psnr_log(run(rt, c["source"], c["depth"], q, c["camera"]), truth)
+             for q in QUALITY_LEVELS}
+    assert score["final"] > score["reference"] - 1.0, score
+    assert min(score.values()) > base + 1.0, (score, base)
+
+
+def test_naive_gather_with_the_lens_geometry_matches_a_direct_loop(rng):
+    from clfx.bench.cases.dof import CATEYE_STEP, _naive_shaped
+
+    h, w = 14, 19
+    src = rng.uniform(0.0, 2.0, (h, w, 4)).astype(np.float32)
+    r = np.round(rng.uniform(-4.0, 4.0, (h, w)) * 4) / 4
+    cx = np.round(rng.uniform(-0.8, 0.8, (h, w)) / CATEYE_STEP) * CATEYE_STEP
+    cy = np.round(rng.uniform(-0.5, 0.5, (h, w)) / CATEYE_STEP) * CATEYE_STEP
+    got = _naive_shaped(src, r, 1.5, (cx, cy))
+    want = np.zeros((h, w, 4))
+    for y in range(h):
+        for x in range(w):
+            acc, n = 0.0, 0
+            for oy in range(-6, 7):
+                for ox in range(-6, 7):
+                    a = ox * 1.5
+                    if (math.hypot(a, oy) <= abs(r[y, x]) + 0.5 and
+                            math.hypot(a + cx[y, x] * r[y, x], oy + cy[y, x] * r[y, x])
+                            <= abs(r[y, x]) + 0.5):
+                        acc = acc + src[min(max(y + oy, 0), h - 1), min(max(x + ox, 0), w - 1)]
+                        n += 1
+            want[y, x] = acc / n
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+
+
+def test_cateye_and_squeeze_with_pixel_aspect_match_reference(rt, rng):
+    src, depth = random_case(rng, (36, 30))
+    cam = CAM.updated(sensor_width=8.0)
+    p = Dof.params(optical_vignetting=1.5, anamorphic_squeeze=1.33)
+    got = Dof().apply(rt, p, src, depth=depth, camera=cam, pixel_aspect=1.5,
+                      quality="reference")
+    k_half, focus, clamp_r = lens(30, 36, p, cam)
+    r = reference.coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
+    lvl = LEVELS["reference"]
+    taps = tap_table(float(quantised_radius(np.abs(r).max())), lvl.spacing, lvl.max_rings, 1.5,
+                     dense=lvl.dense_radius, squeeze=1.33)
+    want = reference.dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps,
+                         cateye=reference.cateye_centres((36, 30), 1.5, aspect=1.5))
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=2e-3 * src.max())
+    assert np.abs(got - want).mean() < 1e-5 * src.max()
+
+
+def test_cateye_half_resolution_gather_follows_the_full_resolution_one(rt):
+    """Tiles far out of focus are gathered at half resolution with the barrel of the
+    half-resolution pixel: on smooth content whose blur depends on the bokeh's shape, final
+    (half resolution) stays as close to reference with a strong cat-eye as without."""
+    ys, xs = np.mgrid[0:96, 0:128].astype(np.float32)
+    src = np.stack([0.5 + 0.2 * np.sin(xs / 2.5), 0.5 + 0.2 * np.sin(ys / 2.5),
+                    0.5 + 0.2 * np.sin((xs + ys) / 3.0), np.ones_like(xs)], axis=2)
+    depth = np.full((96, 128), 50.0, np.float32)        # CoC radius ~ 8 px everywhere
+    cam = CAM.updated(sensor_width=4.0)
+    err = {}
+    for ov in (0.0, 2.0):
+        half = run(rt, src, depth, "final", cam, max_coc=0.2, optical_vignetting=ov)
+        full = run(rt, src, depth, "reference", cam, max_coc=0.2, optical_vignetting=ov)
+        err[ov] = np.abs(half - full)[16:-16, 16:-16].mean()
+        if ov:
+            plain = run(rt, src, depth, "reference", cam, max_coc=0.2)
+            shape = np.abs(full - plain)[16:-16, 16:-16].mean()
+    assert err[2.0] < 2 * err[0.0] + 1e-4 and err[2.0] < 0.2 * shape, (err, shape)

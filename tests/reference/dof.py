@@ -3,6 +3,8 @@
 ``dof``: the plainest float64 form of the plugin's full-resolution gather (same taps, same
 edge-aware radii, same near/far weights and hidden-background caps), for images small enough
 that one neighbourhood radius covers them.
+``dof_chromatic``: axial chromatic aberration, ``dof`` once per channel radius offset.
+``cateye_centres``: the barrel circle's centre per pixel (optical vignetting).
 ``naive_dof``: the classic post-process baseline the plugin must beat against ground truth:
 every pixel averages the source over its own CoC disk (no near/far layering, no occlusion).
 """
@@ -17,13 +19,31 @@ CAP_FACTOR = 4.0
 TILE = 32
 
 
-def coc_radius(depth, *, k_half, focus, clamp_r):
-    """Signed CoC radius (px): K/2 (1 - S/z); +inf -> K/2; NaN, 0, < 0 -> 0; clamped."""
+def coc_radius(depth, *, k_half, focus, clamp_r, offset=0.0):
+    """Signed CoC radius (px): K/2 (1 - S/z) + offset; +inf -> K/2 + offset; NaN, 0, < 0 ->
+    offset (the focus plane); clamped."""
     z = np.asarray(depth, np.float64)
     r = np.zeros(z.shape)
     ok = z > 0
     r[ok] = k_half * (1.0 - focus / z[ok])
-    return np.clip(r, -clamp_r, clamp_r)
+    return np.clip(r + offset, -clamp_r, clamp_r)
+
+
+def cateye_centres(shape, strength, *, centre=None, aspect=1.0):
+    """Barrel circle centre (aperture radii) of every pixel of an image of ``shape`` (its
+    display window): strength * (pixel centre - image centre) / half diagonal, y over the
+    pixel aspect (x pixels)."""
+    h, w = shape
+    cx, cy = centre if centre is not None else (0.5 * w, 0.5 * h)
+    hd = 0.5 * math.hypot(w, h / aspect)
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    return strength * (xs - cx) / hd, strength * (ys - cy) / (aspect * hd)
+
+
+def open_fraction(d):
+    """Area of the unit disk inside a unit circle ``d`` away, over pi (at least 1e-3)."""
+    d = np.minimum(np.asarray(d, np.float64), 2.0)
+    return np.maximum((2 * np.arccos(d / 2) - d / 2 * np.sqrt(4 - d * d)) / math.pi, 1e-3)
 
 
 def _clamped(img, ys, xs):
@@ -79,8 +99,13 @@ def hidden_caps(src):
     return np.repeat(np.repeat(cap, TILE, 0), TILE, 1)[:h, :w]
 
 
-def dof(src, depth, *, k_half, focus, clamp_r, taps):
-    """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area).
+def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
+    """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area,
+    aperture-space ox, oy).  ``offset``: added to every signed radius (axial CA).
+    ``cateye``: (cx, cy) per pixel (:func:`cateye_centres`): every coverage below is also
+    clipped by the barrel, near taps by clamp(|r_q| - |a - c |r_q|| + 0.5, 0, 1), far ones by
+    clamp(rf - |a + c rf| + 0.5, 0, 1) (a: the tap's aperture-space offset), and the near
+    weights divide by pi r_q^2 * :func:`open_fraction` (|c|) instead of pi r_q^2.
 
     Per pixel p and tap q = p + o (clamp-to-edge), radii r (signed, px, :func:`edge_radius`):
     near taps (r_q < -0.25): w = clamp(|r_q| - d_near + 0.5, 0, 1) / max(pi r_q^2, 1),
@@ -93,7 +118,8 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps):
     """
     src = np.asarray(src, np.float64)
     src = np.where(np.isfinite(src), src, 0.0)
-    r = edge_radius(src, coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r))
+    r = edge_radius(src, coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r,
+                                    offset=offset))
     lum = 0.2126 * src[..., 0] + 0.7152 * src[..., 1] + 0.0722 * src[..., 2]
     cap = hidden_caps(src)
     h, w = r.shape
@@ -104,18 +130,33 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps):
     wn_sum = np.zeros((h, w))
     wf_sum = np.zeros((h, w))
     alpha = np.zeros((h, w))
-    for ox, oy, d_near, d_far, area in np.asarray(taps, np.float64)[:, :5]:
+    if cateye is not None:
+        cx, cy = (np.asarray(v, np.float64) for v in cateye)
+        frac = open_fraction(np.hypot(cx, cy))
+
+    def barrel(rad, ax, ay, sign):   # coverage of the barrel circle for radius rad
+        return np.clip(rad - np.hypot(ax + sign * cx * rad, ay + sign * cy * rad) + 0.5, 0, 1)
+
+    for ox, oy, d_near, d_far, area, ax, ay in np.asarray(taps, np.float64)[:, :7]:
         c = _clamped(src, ys + int(oy), xs + int(ox))
         rq = _clamped(r, ys + int(oy), xs + int(ox))
         arq = np.abs(rq)
         q_near = rq < -NEAR_EPS
-        wn = np.where(q_near, np.clip(arq - d_near + 0.5, 0, 1) / np.maximum(math.pi * arq ** 2, 1), 0)
         rf = np.where(p_near, np.maximum(arq, np.abs(r)),
                       np.where(rq > r, np.minimum(arq, np.maximum(r, 0)), arq))
+        cov_n = np.clip(arq - d_near + 0.5, 0, 1)
         cov_f = np.clip(rf - d_far + 0.5, 0, 1)
+        cov_q = np.clip(arq - d_far + 0.5, 0, 1)
+        area_n = math.pi * arq ** 2
+        if cateye is not None:
+            cov_n = np.minimum(cov_n, barrel(arq, ax, ay, -1))
+            cov_f = np.minimum(cov_f, barrel(rf, ax, ay, +1))
+            cov_q = np.minimum(cov_q, barrel(arq, ax, ay, +1))
+            area_n = area_n * frac
+        wn = np.where(q_near, cov_n / np.maximum(area_n, 1), 0)
         norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1))
         wf = cov_f * norm
-        fill = np.where(p_near, cov_f - np.minimum(np.clip(arq - d_far + 0.5, 0, 1), cov_f), 0) * norm
+        fill = np.where(p_near, cov_f - np.minimum(cov_q, cov_f), 0) * norm
         lq = _clamped(lum, ys + int(oy), xs + int(ox))
         k = np.minimum(1.0, cap / np.maximum(lq, 1e-30))   # pixel p's cap, tap q's luminance
         fn += c * wn[..., None]
@@ -128,6 +169,15 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps):
     far = np.where((wf_sum > tiny)[..., None], ff / np.maximum(wf_sum, tiny)[..., None], near)
     a = np.where(wf_sum > tiny, np.clip(alpha, 0, 1), 1.0)[..., None]
     return far * (1 - a) + near * a
+
+
+def dof_chromatic(src, depth, *, offsets, **kw):
+    """Axial chromatic aberration: red, green and blue each from :func:`dof` with its own
+    radius offset (``offsets`` = (red, blue) px; green's is 0), alpha from green's."""
+    out = dof(src, depth, **kw)
+    for ch, off in zip((0, 2), offsets):
+        out[..., ch] = dof(src, depth, offset=off, **kw)[..., ch]
+    return out
 
 
 def naive_dof(src, depth, *, k_half, focus, clamp_r):

@@ -14,10 +14,18 @@ wide); ``SCENES`` are the classes of the depth-of-field table of issue 11, each 
 - ``bokeh``: HDR point lights far out of focus (~24 px bokeh), one cut by an in-focus edge;
 - ``bar``: a thin foreground bar blurred ~15 px over a sharp background, lights beside it;
 - ``physical``: 85 mm f/1.35 focused at 1.2 m (40 px CoC), default settings;
-- ``lines``: 1-px lines at several depths.
+- ``lines``: 1-px lines at several depths;
+- ``cateye``, ``anamorphic``, ``axial_ca``: the lens geometry in the bokeh (issue 15): HDR
+  point lights far out of focus over the whole frame, corners included, and a few in front
+  of the focus plane (:func:`corners_scene`), through a lens with optical vignetting 1.0
+  (cat-eye bokeh), an anamorphic squeeze of 1.8 (vertical ovals), or 80 um of axial
+  chromatic aberration of red and blue behind green (an achromat: green rims behind the
+  focus plane, magenta in front).
 
 ``naive(case, params, ctx)`` is the classic baseline (each pixel averages the source over the
-disk of its own CoC, no layering); ``NAIVE_LABEL`` names it in the bench table.
+disk of its own CoC, no layering), with the same aperture model as the effect (squeeze,
+barrel clipping, per-channel radii) when the lens has them; ``NAIVE_LABEL`` names it in the
+bench table.
 """
 from __future__ import annotations
 
@@ -206,8 +214,45 @@ def lines_scene(width: int, height: int) -> tuple[Scene, Camera]:
     return scene, lens_for(10.0, width)
 
 
+def corners_scene(width: int, height: int) -> tuple[Scene, Camera]:
+    """HDR point lights at 200 m (~24 px bokeh) over the whole frame, the corners and edges
+    included (where optical vignetting cuts the bokeh), and a few at 2 m in front of the
+    focus plane (~12 px), over a dark sky."""
+    s = width / 320.0
+    rng = np.random.default_rng(15)
+    grid = [Light((x * s, y * s), (v, 0.9 * v, 0.75 * v), 1.0 * s)
+            for x, y, v in ((-140, -70, 2000.0), (140, -70, 1500.0), (-140, 70, 1200.0),
+                            (140, 70, 2500.0), (0, -70, 1000.0), (-140, 0, 1800.0),
+                            (140, 0, 900.0), (0, 70, 1400.0), (0, 0, 3000.0),
+                            (-70, -35, 700.0), (70, 35, 800.0))]
+    lights = tuple(grid) + _lights(rng, 8, s, (-150, -80, 150, 80), lum=(100.0, 3000.0))
+    sky = Layer(depth=200.0, shape="none", center=(0.5 * width, 0.5 * height), lights=lights,
+                name="far lights")
+    # lamps in front of the focus plane: a small dark housing carries each light's depth
+    front = tuple(Layer(depth=2.0, texture=Texture("flat", (0.02, 0.02, 0.02)), shape="disk",
+                        center=(0.5 * width + x * s, 0.5 * height + y * s),
+                        size=(3.0 * s, 3.0 * s), lights=(Light((0.0, 0.0), (v, v, v), 0.8 * s),),
+                        name=f"lamp {i}")
+                  for i, (x, y, v) in enumerate(((-95, 45, 600.0), (95, -45, 500.0),
+                                                 (-30, -50, 400.0))))
+    scene = Scene(width, height, (sky, *front),
+                  background=((0.01, 0.012, 0.02), (0.03, 0.03, 0.04)),
+                  name="HDR lights over the frame, corners included")
+    return scene, lens_for(24.5, width)
+
+
+def _with_camera(make, **camera):
+    def scene_with(width: int, height: int):
+        scene, cam = make(width, height)
+        return scene, cam.updated(**camera)
+    return scene_with
+
+
 SCENES = {"subject": subject_scene, "bokeh": bokeh_scene, "bar": bar_scene,
-          "physical": physical_scene, "lines": lines_scene}
+          "physical": physical_scene, "lines": lines_scene,
+          "cateye": _with_camera(corners_scene, optical_vignetting=1.0),
+          "anamorphic": _with_camera(corners_scene, anamorphic_squeeze=1.8),
+          "axial_ca": _with_camera(corners_scene, axial_ca_red=80.0, axial_ca_blue=80.0)}
 
 
 def make_scene(name: str, width: int = 320, height: int = 180, *, ss: int = SS,
@@ -219,17 +264,33 @@ def make_scene(name: str, width: int = 320, height: int = 180, *, ss: int = SS,
 
 # -- the naive baseline ------------------------------------------------------------------------
 def naive_dof(src: np.ndarray, depth: np.ndarray, *, k_half: float, focus: float,
-              clamp_r: float) -> np.ndarray:
+              clamp_r: float, squeeze: float = 1.0, cateye=None,
+              ca: tuple = (0.0, 0.0)) -> np.ndarray:
     """Per-pixel-CoC gather without layering: the mean of the source over the pixel centres
     within ``|r| + 0.5`` of the pixel (``r`` its signed CoC radius; clamp-to-edge).
 
     Pixels are grouped by the disk their radius selects (one OpenCV box-normalised disk
-    filter per distinct disk), so any radius runs in seconds.
+    filter per distinct disk), so any radius runs in seconds.  With the lens geometry of
+    the effect: ``squeeze`` (the disk ``squeeze`` times narrower than high), ``cateye`` =
+    ``(cx, cy)`` barrel centres per pixel (aperture radii; the disk clipped as the effect's,
+    :func:`_naive_shaped`), ``ca``: red and blue radius offsets (px), one gather per channel.
     """
     import cv2
 
     src = np.asarray(src, np.float32)
     src = np.where(np.isfinite(src), src, 0.0).astype(np.float32)
+    if squeeze != 1.0 or cateye is not None or any(ca):
+        out = None
+        for chans, off in (((0, 1, 2, 3), 0.0), ((0,), ca[0]), ((2,), ca[1])):
+            if out is not None and off == 0.0:
+                continue        # green's radius: already there
+            r = np.clip(coc_signed(depth, 2.0 * k_half, focus) * 0.5 + off, -clamp_r, clamp_r)
+            res = _naive_shaped(src, r, squeeze, cateye)
+            if out is None:
+                out = res
+            else:
+                out[..., list(chans)] = res[..., list(chans)]
+        return out
     r = np.abs(np.clip(coc_signed(depth, 2.0 * k_half, focus) * 0.5, -clamp_r, clamp_r))
     # the disk {o : |o| <= r + 0.5} changes only where (r + 0.5)^2 passes a sum of two squares
     rmax = int(math.ceil(float(r.max()))) + 1 if r.size else 0
@@ -248,13 +309,69 @@ def naive_dof(src: np.ndarray, depth: np.ndarray, *, k_half: float, focus: float
     return out
 
 
+CATEYE_STEP = 0.05
+"""The naive gather's barrel centres are rounded to this (aperture radii) to group pixels."""
+
+
+def _naive_shaped(src: np.ndarray, r: np.ndarray, squeeze: float, cateye) -> np.ndarray:
+    """The naive gather with the effect's aperture: pixel p averages the source over the
+    offsets o with ``|o'| <= |r| + 0.5`` and (cat-eye) ``|o' + c r| <= |r| + 0.5``, ``o' =
+    (o_x squeeze, o_y)`` (the bokeh of a point with p's radius, seen from p).  Pixels are
+    grouped by radius (rounded to 1/4 px) and barrel centre (rounded to
+    :data:`CATEYE_STEP`), one normalised filter each over the pixels' bounding box."""
+    import cv2
+
+    h, w = r.shape
+    rq = np.round(r * 4.0) / 4.0
+    if cateye is not None:
+        cx = np.round(np.asarray(cateye[0]) / CATEYE_STEP).astype(np.int64)
+        cy = np.round(np.asarray(cateye[1]) / CATEYE_STEP).astype(np.int64)
+    else:
+        cx = cy = np.zeros((h, w), np.int64)
+    e = int(math.ceil(float(np.abs(rq).max()) + 0.5)) + 1 if rq.size else 1
+    padded = cv2.copyMakeBorder(src, e, e, e, e, cv2.BORDER_REPLICATE)
+    keys = np.stack([rq.ravel(), cx.ravel(), cy.ravel()], axis=1)
+    uniq, inv = np.unique(keys, axis=0, return_inverse=True)
+    inv = inv.reshape(h, w)
+    out = np.empty_like(src)
+    for k, (rad, bx, by) in enumerate(uniq):
+        ar = abs(rad)
+        ey, ex = int(math.ceil(ar + 0.5)), int(math.ceil((ar + 0.5) / squeeze))
+        oy, ox = np.mgrid[-ey:ey + 1, -ex:ex + 1].astype(np.float64)
+        ax = ox * squeeze
+        kern = np.hypot(ax, oy) <= ar + 0.5
+        if cateye is not None:
+            kern &= np.hypot(ax + bx * CATEYE_STEP * rad, oy + by * CATEYE_STEP * rad) <= ar + 0.5
+        kern = kern.astype(np.float32)
+        kern /= kern.sum()
+        ys, xs = np.nonzero(inv == k)
+        y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+        crop = padded[y0 + e - ey:y1 + e + ey, x0 + e - ex:x1 + e + ex]
+        filt = cv2.filter2D(crop, -1, kern, borderType=cv2.BORDER_REPLICATE)[ey:-ey, ex:-ex]
+        out[ys, xs] = filt[ys - y0, xs - x0]
+    return out
+
+
 def naive(case: dict, params, ctx) -> np.ndarray:
-    """The naive baseline on a bench case with the effect's lens (``params``, ``ctx``)."""
+    """The naive baseline on a bench case with the effect's lens (``params``, ``ctx``):
+    the same aperture (squeeze, cat-eye barrel, per-channel CA radii) as the effect."""
+    from clfx.core.camera import optical_vignetting_centre
     from clfx.plugins.dof import Dof
 
     lens = Dof().lens(params, ctx)
+    cateye = None
+    if lens.cateye > 0:
+        d = ctx.display_window
+        h, w = np.asarray(case["depth"]).shape
+        win = ctx.source.window
+        ys, xs = np.mgrid[0:h, 0:w] + 0.5
+        cateye = optical_vignetting_centre(xs + win.x0, ys + win.y0, strength=lens.cateye,
+                                           centre=d.center,
+                                           half_diagonal=0.5 * math.hypot(
+                                               d.width, d.height / ctx.pixel_aspect),
+                                           pixel_aspect=ctx.pixel_aspect)
     return naive_dof(case["source"], case["depth"], k_half=lens.k_half, focus=lens.focus,
-                     clamp_r=lens.clamp_r)
+                     clamp_r=lens.clamp_r, squeeze=lens.squeeze, cateye=cateye, ca=lens.ca)
 
 
 SCENE_SIZE = (320, 180)
