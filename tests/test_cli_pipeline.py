@@ -224,3 +224,14 @@ def test_nonfinite_pixels_are_set_to_0_with_one_line_whatever_q_says(rt, tmp_pat
     assert len(said) == 1 and said[0].startswith("clfx: warning:") and "3 pixel(s)" in said[0], \
         r.stderr
     assert np.isfinite(read_frame(tmp_path / "out.exr").rgba).all()
+
+
+def test_a_step_skipped_for_a_missing_pass_is_said_once(rt, tmp_path):
+    """phone-pan on frames without velocity: its motion blur and rolling shutter are skipped
+    (missing_passes: skip), each said once on stderr for the batch, even with -q."""
+    pattern = small_sequence(tmp_path, frames=(1, 2, 3))
+    r = run("-q", "render", pattern, tmp_path / "o.####.exr", "--look", "phone-pan")
+    lines = r.stderr.strip().splitlines()
+    for effect in ("motion_blur", "rolling_shutter"):
+        said = [x for x in lines if f"{effect}: skipped: no velocity pass" in x]
+        assert len(said) == 1 and said[0].startswith("clfx: warning:"), r.stderr

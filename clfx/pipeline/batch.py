@@ -465,10 +465,14 @@ class Batch:
         report.write_ms = (time.perf_counter() - t0) * 1e3
 
     def _warn(self, report) -> None:
-        """Say a frame's warnings on stderr, each distinct line once per batch."""
+        """Say a frame's warnings on stderr, each distinct text once per batch (naming the
+        first frame that said it: a pass missing from every frame is one line, not one per
+        frame)."""
+        prefix = f"clfx: warning: frame {report.frame}: "
         for line in report.warnings():
-            if line not in self._warned:
-                self._warned.add(line)
+            text = line.removeprefix(prefix)
+            if text not in self._warned:
+                self._warned.add(text)
                 self._err(line)
 
     def _err(self, msg: str, end: str = "\n") -> None:

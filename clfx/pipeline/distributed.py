@@ -360,11 +360,10 @@ def _emit(batch: Batch, result: dict, as_json: bool, explain: bool) -> None:
     rep = result["report"]  # the same lines as a local render
     said = rep.get("warnings", []) + [f"{s['effect']}: {w}" for s in rep.get("steps", [])
                                       for w in s.get("warnings", [])]
-    for w in said:
-        line = f"clfx: warning: frame {result['frame']}: {w}"
-        if line not in batch._warned:
-            batch._warned.add(line)
-            batch._err(line)
+    for w in said:   # each text once per batch, as a local render says it
+        if w not in batch._warned:
+            batch._warned.add(w)
+            batch._err(f"clfx: warning: frame {result['frame']}: {w}")
     if explain:
         batch._err(result["explain"])
 

@@ -480,6 +480,8 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     step_ctx = ctx.for_step(level)
     missing = step.absent_passes(have)
     reason = f"no {' or '.join(missing)} pass in the input" if missing else None
+    if missing:   # the look asked for this step: skipping it is said on stderr, once per batch
+        step_ctx.warnings.append(f"skipped: {reason} (missing_passes: skip)")
     mode = masked = mask = None
     if not reason and step.mask is not None:
         if masks.empty(step.mask):
