@@ -10,8 +10,9 @@ area-downscaled to ``width`` pixels (640 by default: the whole gallery takes a f
 a CPU device); sizes are fractions of the frame diagonal, so the effects look as they would
 at full resolution.
 
-Every effect runs alone at its default parameters (``clfx apply EFFECT``), every built-in
-look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
+Every effect runs alone at its default parameters (``clfx apply EFFECT``), options that are
+off by default on their own (`VARIANTS`: cat-eye, anamorphic and chromatic bokeh, a pulled
+focus breathing), every built-in look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
 is skipped, and the tile says so.  Written to OUTDIR:
 
 - ``<image>/sheet.png``: the input (``before``) then every effect and look (``after``), each
@@ -196,12 +197,31 @@ def exposure_for(rgba: np.ndarray) -> float:
     return float(np.clip(KEY_VALUE / max(key, 1e-6), 1e-3, 1e3))
 
 
+VARIANTS = {
+    # options that are off at an effect's defaults, shown on their own (name: effect, settings)
+    # focused at 1 m, wide open: the demo scene's wall and lights far out of focus
+    "dof:cat-eye": ("dof", ["camera.optical_vignetting=1.2", "camera.f_number=1.4",
+                            "camera.focus_distance=1"]),
+    "dof:anamorphic-2x": ("dof", ["camera.anamorphic_squeeze=2", "camera.f_number=1.4",
+                                  "camera.focus_distance=1"]),
+    "dof:axial-ca": ("dof", ["camera.axial_ca_red=150", "camera.axial_ca_blue=150",
+                             "camera.f_number=1.4", "camera.focus_distance=1"]),
+    # a focus pulled from 20 m to 0.5 m on a unit-focusing lens: the frame narrows by 7%
+    "breathing:pull-focus": ("breathing", ["amount=1", "reference_focus=20",
+                                           "camera.focus_distance=0.5"]),
+}
+"""Gallery tiles for options that are off at an effect's defaults."""
+
+
 def gallery_looks(only=None):
-    """(kind, name, look) of every effect alone and every built-in look."""
+    """(kind, name, look) of every effect alone, every option variant (`VARIANTS`) and every
+    built-in look."""
     from clfx.pipeline.presets import available_looks, load_look, single_effect_look
     from clfx.plugins import discover
 
     items = [("effect", e, single_effect_look(e, [])) for e in discover()]
+    items += [("effect", name, single_effect_look(effect, settings))
+              for name, (effect, settings) in VARIANTS.items()]
     items += [("look", name, load_look(str(path))) for name, (origin, path)
               in available_looks().items() if origin == "built-in"]
     return [it for it in items if only is None or it[1] in only]

@@ -36,3 +36,21 @@ def test_area_resize_keeps_energy_density():
     img = np.random.default_rng(1).uniform(0, 10, (81, 100, 3))
     small = gallery.area_resize(img, 64, 52)
     np.testing.assert_allclose(small.mean(axis=(0, 1)), img.mean(axis=(0, 1)), rtol=1e-3)
+
+
+def test_option_variants_are_tiles_of_their_own(tmp_path, monkeypatch):
+    """Options off at an effect's defaults (cat-eye bokeh, a pulled focus's breathing) get
+    tiles that differ from the plain effect's."""
+    import cv2
+
+    monkeypatch.setattr(gallery, "shared_data_dirs", lambda: [tmp_path / "nowhere"])
+    run("-q", "gallery", tmp_path / "g", "--width", "128", "--only",
+        "dof,dof:cat-eye,breathing,breathing:pull-focus")
+    demo = tmp_path / "g" / "demo"
+    tile = {n: cv2.imread(str(demo / f"effect-{n}.png")).astype(float)
+            for n in ("dof", "dof:cat-eye", "breathing", "breathing:pull-focus")}
+    before = cv2.imread(str(demo / "before.png")).astype(float)
+    body = slice(40, None)                    # below the labels
+    assert np.abs(tile["breathing"][body] - before[body]).max() == 0   # static focus: identity
+    assert np.abs(tile["breathing:pull-focus"][body] - before[body]).mean() > 1
+    assert np.abs(tile["dof:cat-eye"][body] - tile["dof"][body]).mean() > 0.1
