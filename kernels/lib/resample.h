@@ -669,8 +669,9 @@ inline __attribute__((always_inline)) void fp_fast_quad(global const float *src,
    * is one float16 of 4 texels (aligned float4 loads: a texel is 16 bytes), weighted by
    * per-pixel weights spread with one permute, so every operation is 16 lanes wide with no
    * horizontal reduction; clamped to the whole window (the Lagrange lobes sit on the outer
-   * taps, so this bounds the overshoot as a 2x2 would).  1.4x faster than the rows-per-pixel
-   * form (float16 rows, vertical then horizontal sums) it replaced. */
+   * taps, so this bounds the overshoot as a 2x2 would).  The rows-per-pixel form it replaced
+   * (float16 rows, vertical then horizontal sums) took 1.6x the CPU time (15.5 vs 9.8 ms on
+   * the 1920x1080 bench map; cv2.remap bilinear 7.9 ms). */
   const float8 f8 = as_float8(vload8(0, q + 4));                /* (f_x, f_y) */
   const float8 h8 = shuffle(hh, (uint8)(0, 2, 4, 6, 1, 3, 5, 7)); /* (h_x, h_y) */
   const float8 q8 = fma(h8, h8, f8 * f8);
@@ -678,8 +679,8 @@ inline __attribute__((always_inline)) void fp_fast_quad(global const float *src,
   const uint16 mx = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3), my = mx + 4u;
   const float16 x0 = shuffle(w0, mx), x1 = shuffle(w1, mx), x2 = shuffle(w2, mx);
   global const float4 *t = (global const float4 *)src;
-  global const float4 *p0 = t + (base.s0 >> 2), *p1 = t + (base.s1 >> 2);
-  global const float4 *p2 = t + (base.s2 >> 2), *p3 = t + (base.s3 >> 2);
+  global const float4 *p0 = t + (q[0] >> 2), *p1 = t + (q[1] >> 2);   /* scalar loads: */
+  global const float4 *p2 = t + (q[2] >> 2), *p3 = t + (q[3] >> 2);   /* no lane extracts */
   const size_t rt = (size_t)pitch;
 #define FP_TAP(o) rs_sanitise16((float16)(p0[o], p1[o], p2[o], p3[o]))
 #define FP_ROW(j) const float16 a##j = FP_TAP(j * rt), b##j = FP_TAP(j * rt + 1),           \
@@ -691,7 +692,8 @@ inline __attribute__((always_inline)) void fp_fast_quad(global const float *src,
   const float16 hi = max(max(max(a0, b0), c0), max(max(max(a1, b1), c1), max(max(a2, b2), c2)));
 #undef FP_ROW
 #undef FP_TAP
-  const float16 r = clamp(acc, lo, hi);
+  /* clamp, NaN (inf - inf of an overflowing sum) and +-inf to the bounds: finite out */
+  const float16 c = select(lo, acc, acc > lo), r = select(hi, c, c < hi);
   *o0 = r.s0123;
   *o1 = r.s4567;
   *o2 = r.s89ab;
