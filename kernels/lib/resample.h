@@ -691,7 +691,7 @@ inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
 #define FP_Q_SPACE global   /* where the quad's 16 ints live: a packed map; private when a
                                kernel packs them itself (an affine map, breathing.cl) */
 #endif
-inline void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const int *q,
+inline __attribute__((always_inline)) void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const int *q,
                          float4 *o0, float4 *o1, float4 *o2, float4 *o3)
 {
   const int row = pitch * 4;
@@ -700,22 +700,39 @@ inline void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const in
   const float8 hh = vload_half8(0, (FP_Q_SPACE const half *)(q + 12));
   const float4 hx = hh.even, hy = hh.odd;
 #if FP_FILTER == 0
-  /* 3x3: rows read as float16 (the 4th texel unused); clamp to the whole window (the
-   * Lagrange lobes sit on the outer taps, so this bounds the overshoot as a 2x2 would) */
-  const float4 qx = hx * hx + fx * fx, qy = hy * hy + fy * fy;
-  const float4 x0 = 0.5f * (qx - fx), x1 = 1.0f - qx, x2 = 0.5f * (qx + fx);
-  const float4 y0 = 0.5f * (qy - fy), y1 = 1.0f - qy, y2 = 0.5f * (qy + fy);
-#define FP_PIXEL(k, o) {                                                                     \
-    global const float *p = src + base.s##k;                                                 \
-    const float16 a0 = rs_sanitise16(vload16(0, p)), a1 = rs_sanitise16(vload16(0, p + row)); \
-    const float16 a2 = rs_sanitise16(vload16(0, p + 2 * row));                               \
-    const float16 v = fma(a2, (float16)y2.s##k, fma(a1, (float16)y1.s##k, a0 * y0.s##k));     \
-    const float4 acc = fma(v.s89ab, (float4)x2.s##k, fma(v.s4567, (float4)x1.s##k,           \
-                                                          v.s0123 * x0.s##k));               \
-    const float16 l = min(min(a0, a1), a2), u = max(max(a0, a1), a2);                         \
-    *o = clamp(acc, min(min(l.s0123, l.s4567), l.s89ab), max(max(u.s0123, u.s4567), u.s89ab)); }
-  FP_PIXEL(0, o0) FP_PIXEL(1, o1) FP_PIXEL(2, o2) FP_PIXEL(3, o3)
-#undef FP_PIXEL
+  /* 3x3, the quad's 4 pixels side by side (lanes 4k..4k+3 = pixel k): each of the 9 taps
+   * is one float16 of 4 texels (aligned float4 loads: a texel is 16 bytes), weighted by
+   * per-pixel weights spread with one permute, so every operation is 16 lanes wide with no
+   * horizontal reduction; clamped to the whole window (the Lagrange lobes sit on the outer
+   * taps, so this bounds the overshoot as a 2x2 would).  The rows-per-pixel form it replaced
+   * (float16 rows, vertical then horizontal sums) took 1.6x the CPU time (15.5 vs 9.8 ms on
+   * the 1920x1080 bench map; cv2.remap bilinear 7.9 ms). */
+  const float8 f8 = as_float8(vload8(0, q + 4));                /* (f_x, f_y) */
+  const float8 h8 = shuffle(hh, (uint8)(0, 2, 4, 6, 1, 3, 5, 7)); /* (h_x, h_y) */
+  const float8 q8 = fma(h8, h8, f8 * f8);
+  const float8 w0 = 0.5f * (q8 - f8), w1 = 1.0f - q8, w2 = 0.5f * (q8 + f8);
+  const uint16 mx = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3), my = mx + 4u;
+  const float16 x0 = shuffle(w0, mx), x1 = shuffle(w1, mx), x2 = shuffle(w2, mx);
+  global const float4 *t = (global const float4 *)src;
+  global const float4 *p0 = t + (q[0] >> 2), *p1 = t + (q[1] >> 2);   /* scalar loads: */
+  global const float4 *p2 = t + (q[2] >> 2), *p3 = t + (q[3] >> 2);   /* no lane extracts */
+  const size_t rt = (size_t)pitch;
+#define FP_TAP(o) rs_sanitise16((float16)(p0[o], p1[o], p2[o], p3[o]))
+#define FP_ROW(j) const float16 a##j = FP_TAP(j * rt), b##j = FP_TAP(j * rt + 1),           \
+                                c##j = FP_TAP(j * rt + 2);                                   \
+                  const float16 r##j = fma(c##j, x2, fma(b##j, x1, a##j * x0));
+  FP_ROW(0) FP_ROW(1) FP_ROW(2)
+  const float16 acc = fma(r2, shuffle(w2, my), fma(r1, shuffle(w1, my), r0 * shuffle(w0, my)));
+  const float16 lo = min(min(min(a0, b0), c0), min(min(min(a1, b1), c1), min(min(a2, b2), c2)));
+  const float16 hi = max(max(max(a0, b0), c0), max(max(max(a1, b1), c1), max(max(a2, b2), c2)));
+#undef FP_ROW
+#undef FP_TAP
+  /* clamp, NaN (inf - inf of an overflowing sum) and +-inf to the bounds: finite out */
+  const float16 c = select(lo, acc, acc > lo), r = select(hi, c, c < hi);
+  *o0 = r.s0123;
+  *o1 = r.s4567;
+  *o2 = r.s89ab;
+  *o3 = r.scdef;
 #elif FP_FILTER == 1
   /* both axes at once: lanes 0-3 x, 4-7 y */
   float8 k0, k1, k2, k3, b0, b1, b2, b3;

@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from clfx.bench.cases import Case
+from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.motion_blur import NAIVE_LABEL, line_blur_per_pixel
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Scene, moving_scene, render_sharp
@@ -101,4 +101,5 @@ def naive(case: dict, params, ctx) -> np.ndarray:
     return line_blur_per_pixel(np.asarray(case["source"], np.float32), vel, t0, t1)
 
 
-CASE = Case(make=make)
+CASE = Case(make=make,
+            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)))
