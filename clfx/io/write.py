@@ -523,11 +523,21 @@ def _beauty_names(layout: Layout) -> tuple[tuple[str, ...], set[str]]:
 class _Source:
     """The source file of a layout, open while its channels are copied."""
 
-    def __init__(self, path: str, out_path: str):
+    def __init__(self, path: str, out_path: str, stored: dict | None = None):
         self.path, self.out_path, self.inp = path, out_path, None
+        self.stored = stored or {}
 
-    def rows(self, part: SourcePart, y0: int, y1: int, dtype) -> np.ndarray:
-        """Every channel of rows ``y0..y1`` (inside the part's window) as stored."""
+    def rows(self, part: SourcePart, y0: int, y1: int, dtype, names: list[str]) -> np.ndarray:
+        """Channels ``names`` of rows ``y0..y1`` (inside the part's window) as stored: from
+        what the reader kept (`Layout.stored`) when it has them, else from the file."""
+        kept = self.stored.get(part.index, {})
+        if dtype == np.float32 and all(n in kept for n in names):
+            a = y0 - part.data_window.y0
+            return np.stack([kept[n][a:a + y1 - y0] for n in names], axis=-1)
+        got = self._file_rows(part, y0, y1, dtype)
+        return got[..., [part.channels.index(n) for n in names]]
+
+    def _file_rows(self, part: SourcePart, y0: int, y1: int, dtype) -> np.ndarray:
         if self.inp is None:
             check_input_file(self.path)
             self.inp = oiio.ImageInput.open(self.path)
@@ -604,7 +614,6 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
     """``rows(y0, y1)`` of one output part (see `_layout_parts`)."""
     dtype = np.float64 if any(f in ("uint", "int") for c, f in zip(sp.channels, sp.formats)
                               if c in carried) else np.float32
-    col = {c: sp.channels.index(c) for c in carried}
 
     def rows(y0, y1):
         block = np.zeros((y1 - y0, window.width, 4 * len(subs) + len(carried)), dtype)
@@ -614,10 +623,9 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
             w = sp.data_window
             a, b = max(y0, w.y0), min(y1, w.y1)
             if a < b:
-                got = source.rows(sp, a, b, dtype)
+                got = source.rows(sp, a, b, dtype, carried)
                 x = w.x0 - window.x0
-                for j, c in enumerate(carried):
-                    block[a - y0:b - y0, x:x + w.width, 4 * len(subs) + j] = got[..., col[c]]
+                block[a - y0:b - y0, x:x + w.width, 4 * len(subs):] = got
         return block
     return rows
 
@@ -687,7 +695,7 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     target = colour.output_space(colorspace, source=frame.source_colorspace,
                                  working=frame.colorspace, display=display)
     if write_passes and fmt.passes and frame.layout is not None:
-        source = _Source(frame.layout.path, path)
+        source = _Source(frame.layout.path, path, frame.layout.stored)
         try:
             parts = _layout_parts(frame, list(views), fmt, bit_depth, compression, target,
                                   attributes, path, source)
