@@ -705,6 +705,16 @@ def _layout(plan: ReadPlan, stored: dict[str, np.ndarray]) -> Layout:
                   stored={plan.beauty.part: stored} if stored else {})
 
 
+def beauty_geometry(path) -> tuple[Rect, Rect, float]:
+    """The data window, display window and pixel aspect of the part `read_frame` would take
+    the hero's beauty from, from the headers alone (to prepare a look before the first frame
+    is read)."""
+    f = _scan(path)
+    b = ch.find_beauty(f.dicts())
+    part = f.parts[b.part if b is not None else 0]
+    return part.data_window, part.display_window, part.pixel_aspect
+
+
 def read_views(path, *, view: str | None = None, all_views: bool = True, **kw) -> list[Frame]:
     """The frames of every view of a multi-view file (hero first), or of ``view`` only.
 

@@ -22,8 +22,8 @@ extension         bit depths          default    alpha    windows
 - Display-referred outputs (integer TIFF, PNG, JPEG, DPX) are sRGB-encoded (whatever
   ``frame.encoding``), then clipped to 0..1 (NaN -> 0).  Formats without alpha drop it, which
   shows the premultiplied colour over black.
-- EXR compression: none, zip (default), zips, piz, dwaa, dwab, pxr24, b44, rle.  TIFF: none,
-  zip (default), lzw, packbits.
+- EXR compression: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle; default: an EXR
+  input's, else `DEFAULT_EXR_COMPRESSION` (zips).  TIFF: none, zip (default), lzw, packbits.
 - Passes (``write_passes``, EXR only): ``Z`` = planar z in scene units, background +inf (the
   EXR/deep convention, read back as ``Z`` mode z); ``forward.u``, ``forward.v`` = forward
   pixels per frame in Nuke's y-up convention (``forward.v = -velocity[..., 1]``), so Nuke and
@@ -79,6 +79,12 @@ from clfx.io.sequence import check_input_file
 HALF_MAX = 65504.0
 
 EXR_COMPRESSIONS = ("none", "zip", "zips", "piz", "dwaa", "dwab", "pxr24", "b44", "rle")
+
+DEFAULT_EXR_COMPRESSION = "zips"
+"""EXR compression when neither the caller nor an EXR input says: lossless, as small as zip
+and no dearer to write and read (1-scanline zip; Nuke's default), measured on this machine
+(README, "EXR compression"): none and rle cost 40-60 % less CPU but write files 1.3-24x
+larger, which a shared file server pays for (docs/scaling.md)."""
 TIFF_COMPRESSIONS = ("none", "zip", "lzw", "packbits")
 
 
@@ -100,7 +106,7 @@ class _OutFormat:
 
 _OUT_FORMATS = {
     ".exr": _OutFormat("openexr", ("half", "float"), "half", True, "full",
-                       EXR_COMPRESSIONS, "zip", True),
+                       EXR_COMPRESSIONS, DEFAULT_EXR_COMPRESSION, True),
     ".tif": _OutFormat("tiff", ("uint8", "uint16", "half", "float"), "uint16", True, "tiff",
                        TIFF_COMPRESSIONS, "zip"),
     ".png": _OutFormat("png", ("uint8", "uint16"), "uint8", True, "display"),
@@ -496,9 +502,13 @@ def _default_bit_depth(frame: Frame, fmt: _OutFormat) -> str:
     return fmt.default_bit_depth
 
 
-def _default_compression(attributes: dict, fmt: _OutFormat) -> str | None:
-    """The input's compression when this format has it (``dwaa:45`` -> dwaa), else the
-    format's default."""
+def _default_compression(attributes: dict, fmt: _OutFormat, source: str = "") -> str | None:
+    """The input's compression when this format has it (``dwaa:45`` -> dwaa) and the input
+    is not a file of another format (a TIFF's or PNG's zip says nothing about an EXR), else
+    the format's default (EXR: `DEFAULT_EXR_COMPRESSION`)."""
+    ext = os.path.splitext(source or "")[1].lower()
+    if ext and _OUT_FORMATS.get(ext) is not fmt:
+        return fmt.default_compression
     got = str((attributes or {}).get("compression", "")).split(":")[0].lower()
     return got if got in fmt.compressions else fmt.default_compression
 
@@ -594,7 +604,7 @@ def _layout_parts(frame: Frame, views: list[Frame], fmt: _OutFormat, bit_depth: 
         own = sp.attributes.get("compression") if not (subs and subs[0][0] is frame) else \
             frame.metadata.get("compression")
         _finish_spec(spec, meta, extra, compression or _default_compression(
-            {"compression": own}, fmt))
+            {"compression": own}, fmt, lay.path))
         if sp.name:
             spec.attribute("name", sp.name)
         if sp.view:
@@ -656,8 +666,9 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
         Beauty bit depth; default per format (EXR half, TIFF uint16, PNG/JPEG uint8, DPX
         10-bit, HDR float).
     compression : str, optional
-        EXR: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle (default zip).  TIFF: none,
-        zip, lzw, packbits (default zip).  Other formats take none.
+        EXR: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle (default: the input's when it
+        is an EXR, else zips).  TIFF: none, zip, lzw, packbits (default: the input's when it
+        is a TIFF, else zip).  Other formats take none.
     colorspace : str, optional
         Output colour space: ``"linear"``/``"raw"`` (write the values), ``"sRGB"`` or an OCIO
         name; default `encoding_for` the output (sRGB for display-referred formats).
@@ -724,7 +735,7 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     if pass_count:
         extra.setdefault("clfx:passes", "Z: planar z, scene units, inf background; "
                                         "forward.u/v: forward px/frame, y-up (Nuke)")
-    compression = compression or _default_compression(frame.metadata, fmt)
+    compression = compression or _default_compression(frame.metadata, fmt, frame.source)
     spec = _make_spec(frame, fmt, bit_depth, compression, data, display_win, names,
                       pass_count, target, extra)
     _atomic_write(path, folder, fmt, [_planes_part(spec, planes)], overwrite)

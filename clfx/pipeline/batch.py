@@ -155,7 +155,7 @@ class RenderOptions:
     as_float : bool
         Write the EXR beauty as 32-bit float (default: the input's type).
     compression : str or None
-        EXR compression; None: zip.
+        EXR compression; None: an EXR input's, else zips (`clfx.io.write`).
     overwrite : bool
         Replace existing outputs.
     skip_existing : bool
@@ -393,6 +393,7 @@ class Batch:
         own_pool = self._pool is None
         pool = io_pool() if own_pool else self._pool
         first, self._first_read = self._first_read, None
+        prepared = self._prepare_look(rt)
         with (pool if own_pool else nullcontext()):
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
@@ -407,7 +408,30 @@ class Batch:
                 if self.on_frame is not None:
                     self.on_frame(i + 1, total, report)
             self._drain(writes, block=True)
+        if prepared is not None:
+            prepared.exception()     # done (its errors are the render's to report)
         return self._summary(reports, time.perf_counter() - t0)
+
+    def _prepare_look(self, rt) -> Future | None:
+        """`clfx.pipeline.look.prepare` for the first job's geometry (from its header), on a
+        thread of normal priority: the maps it builds are on the first frame's critical
+        path."""
+        if not self.jobs:
+            return None
+        from clfx.io.read import beauty_geometry
+        from clfx.pipeline.look import prepare
+
+        job, o = self.jobs[0], self.options
+
+        def run():
+            data, display, aspect = beauty_geometry(job.input)
+            prepare(rt, self.look, data, display, aspect, frame_number=job.frame,
+                    quality=o.quality, keep_overscan=o.keep_overscan)
+
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-prepare")
+        future = pool.submit(run)
+        pool.shutdown(wait=False)
+        return future
 
     def _summary(self, reports, wall: float) -> dict:
         summary = {"summary": True, "look": self.look.name, "frames": len(reports),
