@@ -340,7 +340,8 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     """A stream as fast as its parts?  The look over ``frames`` EXR frames through `clfx
     render`'s batch pipeline (reading, rendering and writing overlapped), beside the same
     parts measured alone in the same run: the look on the first frame (per effect), reading
-    a frame and writing its output (median of ``repeat`` warm runs each).
+    a frame and writing its output (median of ``repeat`` warm runs each, half of them before
+    the stream and half after).
 
     The inputs are the demo scene as a renderer writes it: float RGBA, depth and velocity, in
     the default EXR compression (`clfx.io.write`); outputs keep the input's type and
@@ -374,17 +375,26 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
                       output_path=os.path.join(tmp, "alone.exr"),
                       options=RenderOptions(overwrite=True), verbosity=0)
         alone.prepare()
-        with io_threads():   # the codecs as the stream runs them
+        reads, renders, writes = [], [], []
+
+        def parts(n):   # each part alone, with the codecs as the stream runs them
+            with io_threads():
+                reads.extend(timed(lambda: alone._read(alone.jobs[0])) for _ in range(n))
+                renders.extend(timed(lambda: render_frame(rt, look, read.views[0],
+                                                          frame_number=job.frame))
+                               for _ in range(n))
+                out, report = renders[-1][0]
+                writes.extend(timed(lambda: alone._write(out, alone.jobs[0], report))
+                              for _ in range(n))
+
+        with io_threads():
             read = alone._read(alone.jobs[0])
-            out, _ = render_frame(rt, look, read.views[0], frame_number=job.frame)  # warm-up
-            reads = [timed(lambda: alone._read(alone.jobs[0])) for _ in range(repeat)]
-            renders = [timed(lambda: render_frame(rt, look, read.views[0],
-                                                  frame_number=job.frame)) for _ in range(repeat)]
-            out, report = renders[-1][0]
-            writes = [timed(lambda: alone._write(out, alone.jobs[0], report)) for _ in range(repeat)]
-        c0, t0 = time.process_time(), time.perf_counter()
+            render_frame(rt, look, read.views[0], frame_number=job.frame)  # warm-up
+        parts(max(1, repeat // 2))     # half the runs before the stream, half after: a
+        c0, t0 = time.process_time(), time.perf_counter()   # machine's load drifts
         summary = batch.run(rt)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        parts(max(1, repeat - repeat // 2))
     reports = summary["reports"]
     effects = [s.effect for s in renders[0][0][1].steps]
 

@@ -9,10 +9,12 @@ Output is deterministic per frame: rendering frame N alone or inside a batch giv
 same bytes.
 
 Scheduling on few cores: the device (PoCL) runs one thread per core at normal priority; the
-two I/O threads run at ``IO_NICE`` and decode and encode on their own thread only
-(`clfx.io.read.codec_threads` 1), so reading and writing take the cores the device leaves
-idle (host work between kernels, single-threaded set-up) instead of taking cores from the
-effects.  When the device is waiting for the next frame, the I/O threads have the cores.
+read thread runs at nice ``IO_NICE // 2`` and the write thread at ``IO_NICE`` (the device
+waits for the next read, only the batch's end waits for a write), and both decode and encode
+on their own thread only (`clfx.io.read.codec_threads` 1).  So reading and writing take the
+cores the device leaves idle (host work between kernels, single-threaded set-up) instead of
+taking cores from the effects, and when the device waits for the next frame the read has
+the cores.  At most `WRITES_AHEAD` rendered frames wait for their write.
 """
 from __future__ import annotations
 
@@ -36,32 +38,40 @@ if TYPE_CHECKING:
 
 RAW = "-"
 
-IO_NICE = 10
-"""Nice increment of a batch's I/O threads (Linux: per thread).  At 10 an I/O thread gets
-about a tenth of a core a device thread wants (CFS weights 110 vs 1024): measured on the
-2-core machine, the effects' in-stream time fell from 1.6x to 0.8-1.0x their isolated time
-(README, "Streams on few cores").  0 leaves the threads alone."""
+IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
+"""Nice increment of a batch's write thread, half of it for the read thread (Linux: per
+thread; ``CLFX_IO_NICE``).  At 10 a write gets about a tenth of a core a device thread wants
+(CFS weights 110 vs 1024): measured on the 2-core machine, the effects' in-stream time fell
+from 1.5-2.7x to about 1.0x their time alone (README, "Sequences on one machine").  0 leaves
+the threads alone."""
 
 IO_CODEC_THREADS = 1
 """OpenImageIO/OpenEXR threads per read or write during a batch (`codec_threads`)."""
 
 
-def _background() -> None:
-    """Initialiser of an I/O thread: lower its priority by `IO_NICE` (where the OS can)."""
+WRITES_AHEAD = 2
+"""Frames rendered but not yet written that a batch holds before it waits for a write."""
+
+
+def _background(nice: int) -> None:
+    """Initialiser of an I/O thread: lower its priority by ``nice`` (where the OS can)."""
     import threading
 
-    if IO_NICE and hasattr(os, "setpriority"):
+    if nice and hasattr(os, "setpriority"):
         try:
             tid = threading.get_native_id()
-            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + IO_NICE)
+            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
         except OSError:
             pass     # not permitted here: the thread keeps its priority
 
 
-def io_pool(workers: int = 2) -> ThreadPoolExecutor:
-    """The threads a batch reads and writes on (low priority: see the module docstring)."""
-    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="clfx-io",
-                              initializer=_background)
+def io_pool(kind: str = "read") -> ThreadPoolExecutor:
+    """The thread a batch reads (``"read"``) or writes (``"write"``) on: low priority, and
+    writing lower than reading, since the device waits for the next frame's read but only
+    the end of the batch waits for a write (see the module docstring)."""
+    nice = IO_NICE // 2 if kind == "read" else IO_NICE
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"clfx-{kind}",
+                              initializer=_background, initargs=(nice,))
 
 
 @contextmanager
@@ -394,16 +404,18 @@ class Batch:
         pool = io_pool() if own_pool else self._pool
         first, self._first_read = self._first_read, None
         prepared = self._prepare_look(rt)
-        with (pool if own_pool else nullcontext()):
+        with (pool if own_pool else nullcontext()), io_pool("write") as writer:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
                 read = next_read.result()
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
                 frame_out, report, views_out = self.render(rt, job, read)
-                writes.append((pool.submit(self._write, frame_out, job, report, views_out),
+                writes.append((writer.submit(self._write, frame_out, job, report, views_out),
                                report))
                 writes = self._drain(writes, block=False)
+                while len(writes) > WRITES_AHEAD:
+                    writes = self._drain(writes[:1], block=True) + writes[1:]
                 reports.append(report)
                 if self.on_frame is not None:
                     self.on_frame(i + 1, total, report)
@@ -602,7 +614,7 @@ class Batch:
             return read_raw(stdin, self.raw_size, index, colorspace=o.colorspace,
                             working_space=o.working_space)
 
-        with io_pool(1) as pool:
+        with io_pool() as pool:
             frame = read(0)
             count = 0
             while frame is not None:

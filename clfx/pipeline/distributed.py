@@ -145,7 +145,7 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
     `ClfxError` is reported and the others go on (all stop after it with ``fail_fast``)."""
     results: list[dict | None] = [None] * len(jobs)
     writes = []
-    with io_threads(), io_pool() as pool:
+    with io_threads(), io_pool() as pool, io_pool("write") as writer:
         next_read = pool.submit(batch._read, jobs[0]) if jobs else None
         for i, job in enumerate(jobs):
             read, next_read = next_read, (pool.submit(batch._read, jobs[i + 1])
@@ -157,7 +157,7 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
                 if fail_fast:
                     break
                 continue
-            writes.append((i, report, pool.submit(batch._write, frame_out, job, report, views)))
+            writes.append((i, report, writer.submit(batch._write, frame_out, job, report, views)))
         for i, report, done in writes:
             try:
                 done.result()

@@ -381,23 +381,15 @@ def _limit(data: Rect, display: Rect, keep_overscan: bool) -> Rect:
     return limit
 
 
-class _Geometry:
+def _geometry(window: Rect):
     """A stand-in source for `prepare`: a window and the row pitch a device image of it
     has (`clfx.device.runtime.Runtime.image`), no pixels."""
+    from types import SimpleNamespace
 
-    def __init__(self, window: Rect, channels: int = 4):
-        from clfx.device.runtime import ALIGN_PX
+    from clfx.device.runtime import ALIGN_PX
 
-        self.window, self.channels = window, channels
-        self.pitch = max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX)
-
-    @property
-    def width(self) -> int:
-        return self.window.width
-
-    @property
-    def height(self) -> int:
-        return self.window.height
+    return SimpleNamespace(window=window, channels=4, width=window.width, height=window.height,
+                           pitch=max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX))
 
 
 def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspect: float = 1.0,
@@ -411,7 +403,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
     a value that needs pixels) costs only the work: the render builds what it needs under
     its own cache key, so the pixels never depend on this."""
     look = look.at(frame_number)
-    ctx = RenderContext(rt, _Geometry(data_window), display_window=display_window,
+    ctx = RenderContext(rt, _geometry(data_window), display_window=display_window,
                         pixel_aspect=pixel_aspect, frame=frame_number, seed=look.seed,
                         camera=look.camera, quality=quality or DEFAULT_QUALITY,
                         output_limit=_limit(data_window, display_window, keep_overscan))
@@ -422,7 +414,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
             window = step.plugin.output_window(step.params, step_ctx)
         except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
             continue
-        ctx.source = _Geometry(window)
+        ctx.source = _geometry(window)
 
 
 class FrameTooLarge(ClfxError):
