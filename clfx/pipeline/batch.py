@@ -424,16 +424,17 @@ class Batch:
             prepared.exception()     # done (its errors are the render's to report)
         return self._summary(reports, time.perf_counter() - t0)
 
-    def _prepare_look(self, rt) -> Future | None:
+    def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Future | None:
         """`clfx.pipeline.look.prepare` for the first job's geometry (from its header), on a
         thread of normal priority: the maps it builds are on the first frame's critical
-        path."""
-        if not self.jobs:
+        path (a Dask worker's later chunks find them in its cache)."""
+        jobs = self.jobs if jobs is None else jobs
+        if not jobs:
             return None
         from clfx.io.read import beauty_geometry
         from clfx.pipeline.look import prepare
 
-        job, o = self.jobs[0], self.options
+        job, o = jobs[0], self.options
 
         def run():
             data, display, aspect = beauty_geometry(job.input)

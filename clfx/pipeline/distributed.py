@@ -145,6 +145,7 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
     `ClfxError` is reported and the others go on (all stop after it with ``fail_fast``)."""
     results: list[dict | None] = [None] * len(jobs)
     writes = []
+    prepared = batch._prepare_look(rt, jobs)
     with io_threads(), io_pool() as pool, io_pool("write") as writer:
         next_read = pool.submit(batch._read, jobs[0]) if jobs else None
         for i, job in enumerate(jobs):
@@ -166,6 +167,8 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
                 continue
             results[i] = {"frame": jobs[i].frame, "worker": _where(),
                           "report": report.as_dict(), "explain": report.explain()}
+    if prepared is not None:
+        prepared.exception()     # done (its errors are the render's to report)
     return [r for r in results if r is not None]
 
 
