@@ -217,6 +217,13 @@ class Plugin:
         """Enqueue the effect; return a DeviceImage (the source itself must not be changed)."""
         raise NotImplementedError
 
+    def prepare(self, rt, p: Params, ctx: RenderContext) -> None:
+        """Build, through ``rt.cache``, what ``render`` will ask the cache for and that depends
+        only on the parameters and the frame's geometry (maps, tables), so a sequence's first
+        frame does not wait for it: a look calls this on a thread while the first frame is read
+        and the steps before this one render (`clfx.pipeline.look.prepare`).  ``ctx.source``
+        may be a stand-in with a window and row pitch but no pixels.  Default: nothing."""
+
     # conveniences ---------------------------------------------------------------------
     def check_clips(self, ctx: RenderContext) -> None:
         for clip in self.descriptor.clips:

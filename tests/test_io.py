@@ -102,7 +102,7 @@ def test_exr_half_round_trip_values_windows_aspect_metadata(tmp_path, rng):
     assert back.metadata["clfx:gain"] == pytest.approx(0.25)
     assert back.metadata["clfx:vec"] == pytest.approx([1.0, 2.0, 3.0])
     assert back.metadata["clfx:note"] == "hello"          # carried from frame.metadata
-    assert back.metadata["compression"] == "zip"           # default compression
+    assert back.metadata["compression"] == "zips"          # default compression
     json.dumps(back.metadata)                               # plain JSON-able values
 
 

@@ -53,6 +53,9 @@ class Layout:
     beauty_part: int                 # index into ``parts``
     beauty: tuple[str, ...]          # channel names as stored: R, G, B[, A] (or one grey)
     view: str | None = None          # the beauty's view (multi-view files)
+    # channels already decoded by the reader, as stored (float32), by part index: the writer
+    # copies these instead of decoding the file again
+    stored: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 @dataclass

@@ -78,6 +78,7 @@ class DeviceCache:
         self._bytes = 0
         self._idle_bytes = 0
         self._lock = threading.RLock()
+        self._building: dict[Hashable, threading.Event] = {}   # key -> set when its build ends
         self.hits = 0
         self.misses = 0
 
@@ -86,28 +87,41 @@ class DeviceCache:
             cost: float | None = None) -> T:
         """The value cached under ``key``, built by ``build()`` on a miss and kept (``nbytes``:
         its size when :func:`sizeof` cannot tell, e.g. an FFT plan's work memory; ``cost``:
-        seconds a rebuild takes, measured on the build when not given)."""
-        with self._lock:
-            hit = self._lru.get(key)
-            if hit is not None:
-                self._lru.move_to_end(key)
+        seconds a rebuild takes, measured on the build when not given).  A key another thread
+        is building is waited for, not built twice (a look prepares its maps on a thread
+        while the first frame renders)."""
+        while True:
+            with self._lock:
+                hit = self._lru.get(key)
+                if hit is not None:
+                    self._lru.move_to_end(key)
+                    self._touch(key)
+                    self.hits += 1
+                    return hit[1]
+                building = self._building.get(key)
+                if building is None:
+                    done = self._building[key] = threading.Event()
+                    break
+            building.wait()   # then look again: kept, or build it here (too big, or failed)
+        try:
+            t0 = time.perf_counter()
+            value = build()  # outside the lock: builds enqueue kernels and may take buffers
+            cost = time.perf_counter() - t0 if cost is None else float(cost)
+            size = sizeof(value) if nbytes is None else int(nbytes)
+            with self._lock:
+                self.misses += 1
+                if key in self._lru or size > self.max_bytes:
+                    return value
+                self._lru[key] = (size, value)
+                self._worth[key] = (0.0, cost / max(size, 1))
                 self._touch(key)
-                self.hits += 1
-                return hit[1]
-        t0 = time.perf_counter()
-        value = build()  # outside the lock: builds enqueue kernels and may take buffers
-        cost = time.perf_counter() - t0 if cost is None else float(cost)
-        size = sizeof(value) if nbytes is None else int(nbytes)
-        with self._lock:
-            self.misses += 1
-            if key in self._lru or size > self.max_bytes:
-                return value
-            self._lru[key] = (size, value)
-            self._worth[key] = (0.0, cost / max(size, 1))
-            self._touch(key)
-            self._bytes += size
-            self._evict()
-        return value
+                self._bytes += size
+                self._evict()
+            return value
+        finally:
+            with self._lock:
+                self._building.pop(key, None)
+            done.set()
 
     def peek(self, key: tuple):
         """The value under ``key`` or None; does not count as a use."""

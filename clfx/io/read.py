@@ -150,6 +150,26 @@ class PassSpec:
 
 
 # ============================================================================================
+# Codec threads
+
+@contextlib.contextmanager
+def codec_threads(n: int):
+    """While inside, OpenImageIO and OpenEXR's codecs use at most ``n`` threads per read or
+    write (``threads``, ``exr_threads``; 1: everything on the calling thread).  A batch sets
+    1 and runs its reads and writes on low-priority threads of its own, so decoding and
+    encoding fill the cores the device leaves idle instead of taking them from it
+    (`clfx.pipeline.batch`).  Process-wide: restored on exit."""
+    saved = {k: oiio.get_int_attribute(k, 0) for k in ("threads", "exr_threads")}
+    for k in saved:
+        oiio.attribute(k, int(n))
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            oiio.attribute(k, v)
+
+
+# ============================================================================================
 # Scanning a file
 
 @dataclass
@@ -226,11 +246,24 @@ def _scan(path) -> _File:
         return _File(os.fspath(path), inp.format_name(), parts)
 
 
-def _runs(indices: list[int]) -> list[tuple[int, int]]:
-    """Contiguous [begin, end) runs of sorted channel indices."""
+RUN_GAP = 8
+"""Channels between two wanted runs of a part that are read along rather than starting a
+second read: OpenEXR decompresses every channel of a chunk however few are asked for, so a
+second read of the same part decodes the whole file again (the beauty, depth and velocity
+of one part were decoded three times, 0.2-0.6 s per 1080p float frame)."""
+
+KEEP_CHANNELS = 16
+"""A beauty part of at most this many half/float channels is decoded whole once, and the
+channels the frame does not use are kept in its `Layout` for the writer to copy, instead
+of being decoded again from the file when the output is written."""
+
+
+def _runs(indices: list[int], gap: int = 0) -> list[tuple[int, int]]:
+    """Contiguous [begin, end) runs of sorted channel indices (runs at most ``gap`` channels
+    apart merged)."""
     runs: list[tuple[int, int]] = []
     for i in sorted(set(indices)):
-        if runs and runs[-1][1] == i:
+        if runs and i - runs[-1][1] <= gap:
             runs[-1] = (runs[-1][0], i + 1)
         else:
             runs.append((i, i + 1))
@@ -238,30 +271,60 @@ def _runs(indices: list[int]) -> list[tuple[int, int]]:
 
 
 def _read_channels(path, part: _Part, names) -> dict[str, np.ndarray]:
-    """Read named channels of one part as float32 (h, w) arrays covering its data window."""
+    """Read named channels of one part as float32 (h, w) arrays covering its data window,
+    in as few reads as `RUN_GAP` allows (the channels read along are returned too)."""
     if part.deep:
         raise fail(path, "cannot read deep image", "deep EXR is not supported")
     check_window(path, part.data_window)
-    idx = {}
+    idx = []
     for n in names:
         if n not in part.channels:
             raise fail(path, f"channel {n!r} not found in part {part.index} of",
                         f"channels are {', '.join(part.channels)}")
-        idx[n] = part.channels.index(n)
+        idx.append(part.channels.index(n))
     out: dict[str, np.ndarray] = {}
     with _open(path) as inp:
-        for begin, end in _runs(list(idx.values())):
+        for begin, end in _runs(idx, RUN_GAP):
             px = inp.read_image(part.index, 0, begin, end, "float")
             err = geterror(inp)
             if px is None or err:
                 raise fail(path, "cannot read", err or "read failed")
             px = np.asarray(px, np.float32).reshape(part.data_window.height,
                                                     part.data_window.width, end - begin)
-            for n, i in idx.items():
-                if begin <= i < end:
-                    out[n] = np.ascontiguousarray(px[..., i - begin])
+            for i in range(begin, end):
+                out[part.channels[i]] = np.ascontiguousarray(px[..., i - begin])
     return out
 
+
+class _Decoded:
+    """The channels one `read_frame` reads, each part decoded once: ``want`` every channel
+    of a part first, then ``get`` them (`_read_channels` reads a part's wanted channels in
+    one go)."""
+
+    def __init__(self):
+        self._want: dict[tuple[str, int], tuple[_Part, set[str]]] = {}
+        self._got: dict[tuple[str, int], dict[str, np.ndarray]] = {}
+
+    def want(self, path, part: _Part, names) -> None:
+        key = (os.fspath(path), part.index)
+        self._want.setdefault(key, (part, set()))[1].update(names)
+
+    def get(self, path, part: _Part, names) -> dict[str, np.ndarray]:
+        key = (os.fspath(path), part.index)
+        got = self._got.get(key)
+        if got is None or any(n not in got for n in names):
+            wanted = self._want.get(key, (part, set()))[1] | set(names)
+            got = self._got[key] = {**(got or {}), **_read_channels(path, part, sorted(wanted))}
+        return {n: got[n] for n in names}
+
+    def kept(self, path, part: _Part, without=()) -> dict[str, np.ndarray]:
+        """The channels of ``part`` decoded so far but ``without`` (as stored, float32,
+        read-only)."""
+        got = {n: a for n, a in self._got.get((os.fspath(path), part.index), {}).items()
+               if n not in without}
+        for a in got.values():
+            a.setflags(write=False)
+        return got
 
 
 # ============================================================================================
@@ -459,10 +522,10 @@ def _check_same_window(kind: str, pp: _PassPlan, beauty_path: str, beauty_win: R
                         f"match beauty {beauty_path} data window {beauty_win}")
 
 
-def _read_beauty(plan: ReadPlan) -> np.ndarray:
+def _read_beauty(plan: ReadPlan, dec: _Decoded) -> np.ndarray:
     f, b = plan.file, plan.beauty
     part = f.parts[b.part]
-    got = _read_channels(f.path, part, b.channels)
+    got = dec.get(f.path, part, b.channels)
     h, w = part.data_window.shape
     rgba = np.empty((h, w, 4), np.float32)
     for i in range(3):
@@ -472,7 +535,7 @@ def _read_beauty(plan: ReadPlan) -> np.ndarray:
 
 
 def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect,
-                aspect: float, alpha: np.ndarray | None
+                aspect: float, alpha: np.ndarray | None, dec: _Decoded | None = None
                 ) -> tuple[np.ndarray, ch.NoHit] | tuple[None, None]:
     """Planar depth over ``frame_win`` (+inf outside the pass) and how its "no hit"
     sentinels were read; ``alpha`` is the beauty's over ``frame_win`` (None: opaque)."""
@@ -481,7 +544,7 @@ def _read_depth(plan: ReadPlan, passes: PassSpec, frame_win: Rect, display: Rect
         return None, None
     if pp.separate:
         _check_same_window("depth", pp, plan.file.path, frame_win)
-    raw = _read_channels(pp.path, pp.part, pp.channels)[pp.channels[0]]
+    raw = (dec or _Decoded()).get(pp.path, pp.part, pp.channels)[pp.channels[0]]
     win = pp.part.data_window
     centres = None
     if pp.mode == "distance":
@@ -536,13 +599,14 @@ def _announce(path, plan: ReadPlan, nohit: ch.NoHit | None, notify) -> None:
         notify(msg, key)
 
 
-def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect) -> np.ndarray | None:
+def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect,
+                   dec: _Decoded) -> np.ndarray | None:
     pp = plan.velocity
     if pp is None:
         return None
     if pp.separate:
         _check_same_window("velocity", pp, plan.file.path, frame_win)
-    got = _read_channels(pp.path, pp.part, pp.channels)
+    got = dec.get(pp.path, pp.part, pp.channels)
     vel = ch.velocity_to_forward(got[pp.channels[0]], got[pp.channels[1]],
                                  direction=pp.direction, y_up=pp.y_up,
                                  scale=passes.velocity_scale)
@@ -600,19 +664,36 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
     win, display, aspect = bpart.data_window, bpart.display_window, bpart.pixel_aspect
     check_window(path, win)
     check_window(path, display, "display window")   # effects size buffers from it
-    rgba = _read_beauty(plan)
+    dec = _decoding(plan)
+    rgba = _read_beauty(plan, dec)
     alpha = rgba[..., 3] if plan.beauty.alpha else None
-    depth, nohit = _read_depth(plan, passes, win, display, aspect, alpha)
+    depth, nohit = _read_depth(plan, passes, win, display, aspect, alpha, dec)
     _announce(path, plan, nohit, notify)
-    velocity = _read_velocity(plan, passes, win)
+    velocity = _read_velocity(plan, passes, win, dec)
     bit_depth = bpart.formats[bpart.channels.index(plan.beauty.rgb[0])]
     source = None if plan.source_colorspace == colour.RAW else plan.source_colorspace
     return Frame(rgba, win, display, aspect, depth, velocity, metadata(bpart.spec),
                  plan.encoding, os.fspath(path), bit_depth, colorspace=plan.working,
-                 source_colorspace=source, layout=_layout(plan))
+                 source_colorspace=source, layout=_layout(plan, dec.kept(plan.file.path, bpart,
+                                                                 without=plan.beauty.channels)))
 
 
-def _layout(plan: ReadPlan) -> Layout:
+def _decoding(plan: ReadPlan) -> _Decoded:
+    """What `read_frame` will read, by part, so each part is decoded once: the beauty, the
+    passes and, for a beauty part of at most `KEEP_CHANNELS` half/float channels, all of its
+    channels (kept for the writer, `Layout.stored`)."""
+    dec = _Decoded()
+    bpart = plan.file.parts[plan.beauty.part]
+    dec.want(plan.file.path, bpart, plan.beauty.channels)
+    if len(bpart.channels) <= KEEP_CHANNELS and all(f in ("half", "float") for f in bpart.formats):
+        dec.want(plan.file.path, bpart, bpart.channels)
+    for pp in (plan.depth, plan.velocity):
+        if pp is not None:
+            dec.want(pp.path, pp.part, pp.channels)
+    return dec
+
+
+def _layout(plan: ReadPlan, stored: dict[str, np.ndarray]) -> Layout:
     """The source file's parts (deep ones left out: they cannot be copied) and the beauty."""
     parts = [p for p in plan.file.parts if not p.deep]
     keep = [SourcePart(p.index, p.name, p.view, p.channels,
@@ -620,7 +701,18 @@ def _layout(plan: ReadPlan) -> Layout:
                                               (p.spec.format,) * len(p.channels))),
                        p.data_window, metadata(p.spec)) for p in parts]
     beauty = next(i for i, p in enumerate(parts) if p.index == plan.beauty.part)
-    return Layout(plan.file.path, tuple(keep), beauty, tuple(plan.beauty.channels), plan.view)
+    return Layout(plan.file.path, tuple(keep), beauty, tuple(plan.beauty.channels), plan.view,
+                  stored={plan.beauty.part: stored} if stored else {})
+
+
+def beauty_geometry(path) -> tuple[Rect, Rect, float]:
+    """The data window, display window and pixel aspect of the part `read_frame` would take
+    the hero's beauty from, from the headers alone (to prepare a look before the first frame
+    is read)."""
+    f = _scan(path)
+    b = ch.find_beauty(f.dicts())
+    part = f.parts[b.part if b is not None else 0]
+    return part.data_window, part.display_window, part.pixel_aspect
 
 
 def read_views(path, *, view: str | None = None, all_views: bool = True, **kw) -> list[Frame]:

@@ -22,8 +22,8 @@ extension         bit depths          default    alpha    windows
 - Display-referred outputs (integer TIFF, PNG, JPEG, DPX) are sRGB-encoded (whatever
   ``frame.encoding``), then clipped to 0..1 (NaN -> 0).  Formats without alpha drop it, which
   shows the premultiplied colour over black.
-- EXR compression: none, zip (default), zips, piz, dwaa, dwab, pxr24, b44, rle.  TIFF: none,
-  zip (default), lzw, packbits.
+- EXR compression: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle; default: an EXR
+  input's, else `DEFAULT_EXR_COMPRESSION` (zips).  TIFF: none, zip (default), lzw, packbits.
 - Passes (``write_passes``, EXR only): ``Z`` = planar z in scene units, background +inf (the
   EXR/deep convention, read back as ``Z`` mode z); ``forward.u``, ``forward.v`` = forward
   pixels per frame in Nuke's y-up convention (``forward.v = -velocity[..., 1]``), so Nuke and
@@ -85,6 +85,12 @@ from clfx.io.sequence import check_input_file
 HALF_MAX = 65504.0
 
 EXR_COMPRESSIONS = ("none", "zip", "zips", "piz", "dwaa", "dwab", "pxr24", "b44", "rle")
+
+DEFAULT_EXR_COMPRESSION = "zips"
+"""EXR compression when neither the caller nor an EXR input says: lossless, as small as zip
+and no dearer to write and read (1-scanline zip; Nuke's default), measured on this machine
+(README, "EXR compression"): none and rle cost 40-60 % less CPU but write files 1.3-24x
+larger, which a shared file server pays for (docs/scaling.md)."""
 TIFF_COMPRESSIONS = ("none", "zip", "lzw", "packbits")
 
 
@@ -106,7 +112,7 @@ class _OutFormat:
 
 _OUT_FORMATS = {
     ".exr": _OutFormat("openexr", ("half", "float"), "half", True, "full",
-                       EXR_COMPRESSIONS, "zip", True),
+                       EXR_COMPRESSIONS, DEFAULT_EXR_COMPRESSION, True),
     ".tif": _OutFormat("tiff", ("uint8", "uint16", "half", "float"), "uint16", True, "tiff",
                        TIFF_COMPRESSIONS, "zip"),
     ".png": _OutFormat("png", ("uint8", "uint16"), "uint8", True, "display"),
@@ -520,9 +526,13 @@ def _default_bit_depth(frame: Frame, fmt: _OutFormat) -> str:
     return fmt.default_bit_depth
 
 
-def _default_compression(attributes: dict, fmt: _OutFormat) -> str | None:
-    """The input's compression when this format has it (``dwaa:45`` -> dwaa), else the
-    format's default."""
+def _default_compression(attributes: dict, fmt: _OutFormat, source: str = "") -> str | None:
+    """The input's compression when this format has it (``dwaa:45`` -> dwaa) and the input
+    is not a file of another format (a TIFF's or PNG's zip says nothing about an EXR), else
+    the format's default (EXR: `DEFAULT_EXR_COMPRESSION`)."""
+    ext = os.path.splitext(source or "")[1].lower()
+    if ext and _OUT_FORMATS.get(ext) is not fmt:
+        return fmt.default_compression
     got = str((attributes or {}).get("compression", "")).split(":")[0].lower()
     return got if got in fmt.compressions else fmt.default_compression
 
@@ -547,11 +557,21 @@ def _beauty_names(layout: Layout) -> tuple[tuple[str, ...], set[str]]:
 class _Source:
     """The source file of a layout, open while its channels are copied."""
 
-    def __init__(self, path: str, out_path: str):
+    def __init__(self, path: str, out_path: str, stored: dict | None = None):
         self.path, self.out_path, self.inp = path, out_path, None
+        self.stored = stored or {}
 
-    def rows(self, part: SourcePart, y0: int, y1: int, dtype) -> np.ndarray:
-        """Every channel of rows ``y0..y1`` (inside the part's window) as stored."""
+    def rows(self, part: SourcePart, y0: int, y1: int, dtype, names: list[str]) -> np.ndarray:
+        """Channels ``names`` of rows ``y0..y1`` (inside the part's window) as stored: from
+        what the reader kept (`Layout.stored`) when it has them, else from the file."""
+        kept = self.stored.get(part.index, {})
+        if dtype == np.float32 and all(n in kept for n in names):
+            a = y0 - part.data_window.y0
+            return np.stack([kept[n][a:a + y1 - y0] for n in names], axis=-1)
+        got = self._file_rows(part, y0, y1, dtype)
+        return got[..., [part.channels.index(n) for n in names]]
+
+    def _file_rows(self, part: SourcePart, y0: int, y1: int, dtype) -> np.ndarray:
         if self.inp is None:
             check_input_file(self.path)
             self.inp = oiio.ImageInput.open(self.path)
@@ -608,7 +628,7 @@ def _layout_parts(frame: Frame, views: list[Frame], fmt: _OutFormat, bit_depth: 
         own = sp.attributes.get("compression") if not (subs and subs[0][0] is frame) else \
             frame.metadata.get("compression")
         _finish_spec(spec, meta, extra, compression or _default_compression(
-            {"compression": own}, fmt))
+            {"compression": own}, fmt, lay.path))
         if sp.name:
             spec.attribute("name", sp.name)
         if sp.view:
@@ -628,7 +648,6 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
     """``rows(y0, y1)`` of one output part (see `_layout_parts`)."""
     dtype = np.float64 if any(f in ("uint", "int") for c, f in zip(sp.channels, sp.formats)
                               if c in carried) else np.float32
-    col = {c: sp.channels.index(c) for c in carried}
 
     def rows(y0, y1):
         block = np.zeros((y1 - y0, window.width, 4 * len(subs) + len(carried)), dtype)
@@ -638,10 +657,9 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
             w = sp.data_window
             a, b = max(y0, w.y0), min(y1, w.y1)
             if a < b:
-                got = source.rows(sp, a, b, dtype)
+                got = source.rows(sp, a, b, dtype, carried)
                 x = w.x0 - window.x0
-                for j, c in enumerate(carried):
-                    block[a - y0:b - y0, x:x + w.width, 4 * len(subs) + j] = got[..., col[c]]
+                block[a - y0:b - y0, x:x + w.width, 4 * len(subs):] = got
         return block
     return rows
 
@@ -672,8 +690,9 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
         Beauty bit depth; default per format (EXR half, TIFF uint16, PNG/JPEG uint8, DPX
         10-bit, HDR float).
     compression : str, optional
-        EXR: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle (default zip).  TIFF: none,
-        zip, lzw, packbits (default zip).  Other formats take none.
+        EXR: none, zip, zips, piz, dwaa, dwab, pxr24, b44, rle (default: the input's when it
+        is an EXR, else zips).  TIFF: none, zip, lzw, packbits (default: the input's when it
+        is a TIFF, else zip).  Other formats take none.
     colorspace : str, optional
         Output colour space: ``"linear"``/``"raw"`` (write the values), ``"sRGB"`` or an OCIO
         name; default `encoding_for` the output (sRGB for display-referred formats).
@@ -711,7 +730,7 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     target = colour.output_space(colorspace, source=frame.source_colorspace,
                                  working=frame.colorspace, display=display)
     if write_passes and fmt.passes and frame.layout is not None:
-        source = _Source(frame.layout.path, path)
+        source = _Source(frame.layout.path, path, frame.layout.stored)
         try:
             parts = _layout_parts(frame, list(views), fmt, bit_depth, compression, target,
                                   attributes, path, source)
@@ -740,7 +759,7 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
     if pass_count:
         extra.setdefault("clfx:passes", "Z: planar z, scene units, inf background; "
                                         "forward.u/v: forward px/frame, y-up (Nuke)")
-    compression = compression or _default_compression(frame.metadata, fmt)
+    compression = compression or _default_compression(frame.metadata, fmt, frame.source)
     spec = _make_spec(frame, fmt, bit_depth, compression, data, display_win, names,
                       pass_count, target, extra)
     _atomic_write(path, folder, fmt, [_planes_part(spec, planes)], overwrite)

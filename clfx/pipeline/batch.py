@@ -7,6 +7,14 @@ previous one written on worker threads while the device renders the current one,
 sequence's throughput approaches the slower of I/O and compute rather than their sum.
 Output is deterministic per frame: rendering frame N alone or inside a batch gives the
 same bytes.
+
+Scheduling on few cores: the device (PoCL) runs one thread per core at normal priority; the
+read thread runs at nice ``IO_NICE // 2`` and the write thread at ``IO_NICE`` (the device
+waits for the next read, only the batch's end waits for a write), and both decode and encode
+on their own thread only (`clfx.io.read.codec_threads` 1).  So reading and writing take the
+cores the device leaves idle (host work between kernels, single-threaded set-up) instead of
+taking cores from the effects, and when the device waits for the next frame the read has
+the cores.  At most `WRITES_AHEAD` rendered frames wait for their write.
 """
 from __future__ import annotations
 
@@ -29,6 +37,50 @@ if TYPE_CHECKING:
     from clfx.io.read import PassSpec
 
 RAW = "-"
+
+IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
+"""Nice increment of a batch's write thread, half of it for the read thread (Linux: per
+thread; ``CLFX_IO_NICE``).  At 10 a write gets about a tenth of a core a device thread wants
+(CFS weights 110 vs 1024): measured on the 2-core machine, the effects' in-stream time fell
+from 1.5-2.7x to about 1.0x their time alone (README, "Sequences on one machine").  0 leaves
+the threads alone."""
+
+IO_CODEC_THREADS = 1
+"""OpenImageIO/OpenEXR threads per read or write during a batch (`codec_threads`)."""
+
+
+WRITES_AHEAD = 2
+"""Frames rendered but not yet written that a batch holds before it waits for a write."""
+
+
+def _background(nice: int) -> None:
+    """Initialiser of an I/O thread: lower its priority by ``nice`` (where the OS can)."""
+    import threading
+
+    if nice and hasattr(os, "setpriority"):
+        try:
+            tid = threading.get_native_id()
+            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
+        except OSError:
+            pass     # not permitted here: the thread keeps its priority
+
+
+def io_pool(kind: str = "read") -> ThreadPoolExecutor:
+    """The thread a batch reads (``"read"``) or writes (``"write"``) on: low priority, and
+    writing lower than reading, since the device waits for the next frame's read but only
+    the end of the batch waits for a write (see the module docstring)."""
+    nice = IO_NICE // 2 if kind == "read" else IO_NICE
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"clfx-{kind}",
+                              initializer=_background, initargs=(nice,))
+
+
+@contextmanager
+def io_threads():
+    """Codecs on the calling thread while a batch runs (`IO_CODEC_THREADS`)."""
+    from clfx.io.read import codec_threads
+
+    with codec_threads(IO_CODEC_THREADS):
+        yield
 
 
 @dataclass(frozen=True)
@@ -113,7 +165,7 @@ class RenderOptions:
     as_float : bool
         Write the EXR beauty as 32-bit float (default: the input's type).
     compression : str or None
-        EXR compression; None: zip.
+        EXR compression; None: an EXR input's, else zips (`clfx.io.write`).
     overwrite : bool
         Replace existing outputs.
     skip_existing : bool
@@ -323,20 +375,21 @@ class Batch:
     @contextmanager
     def reading(self):
         """Start reading the first frame now (on an I/O thread); ``run`` picks it up."""
-        self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io")
-        try:
-            if self.jobs and self.input_path != RAW:
-                self._first_read = self._pool.submit(self._read, self.jobs[0])
-            yield self
-        finally:
-            self._pool.shutdown(wait=True)
-            self._pool = None
+        with io_threads():
+            self._pool = io_pool()
+            try:
+                if self.jobs and self.input_path != RAW:
+                    self._first_read = self._pool.submit(self._read, self.jobs[0])
+                yield self
+            finally:
+                self._pool.shutdown(wait=True)
+                self._pool = None
 
     def run(self, rt) -> dict:
         """Render every job; return a summary (with ``reports``: each frame's
         `FrameReport`).  The first failing frame stops the batch (its output is not
         written; frames already written stay, so --skip-existing resumes)."""
-        with self._logging():
+        with self._logging(), io_threads():
             if self.input_path == RAW or self.output_path == RAW:
                 return self._run_raw(rt)
             return self._run_files(rt)
@@ -348,23 +401,50 @@ class Batch:
         if self.skipped_existing and self.verbosity > 0:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
         own_pool = self._pool is None
-        pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io") if own_pool else self._pool
+        pool = io_pool() if own_pool else self._pool
         first, self._first_read = self._first_read, None
-        with (pool if own_pool else nullcontext()):
+        prepared = self._prepare_look(rt)
+        with (pool if own_pool else nullcontext()), io_pool("write") as writer:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
                 read = next_read.result()
                 next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
                 frame_out, report, views_out = self.render(rt, job, read)
-                writes.append((pool.submit(self._write, frame_out, job, report, views_out),
+                writes.append((writer.submit(self._write, frame_out, job, report, views_out),
                                report))
                 writes = self._drain(writes, block=False)
+                while len(writes) > WRITES_AHEAD:
+                    writes = self._drain(writes[:1], block=True) + writes[1:]
                 reports.append(report)
                 if self.on_frame is not None:
                     self.on_frame(i + 1, total, report)
             self._drain(writes, block=True)
+        if prepared is not None:
+            prepared.exception()     # done (its errors are the render's to report)
         return self._summary(reports, time.perf_counter() - t0)
+
+    def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Future | None:
+        """`clfx.pipeline.look.prepare` for the first job's geometry (from its header), on a
+        thread of normal priority: the maps it builds are on the first frame's critical
+        path (a Dask worker's later chunks find them in its cache)."""
+        jobs = self.jobs if jobs is None else jobs
+        if not jobs:
+            return None
+        from clfx.io.read import beauty_geometry
+        from clfx.pipeline.look import prepare
+
+        job, o = jobs[0], self.options
+
+        def run():
+            data, display, aspect = beauty_geometry(job.input)
+            prepare(rt, self.look, data, display, aspect, frame_number=job.frame,
+                    quality=o.quality, keep_overscan=o.keep_overscan)
+
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-prepare")
+        future = pool.submit(run)
+        pool.shutdown(wait=False)
+        return future
 
     def _summary(self, reports, wall: float) -> dict:
         summary = {"summary": True, "look": self.look.name, "frames": len(reports),
@@ -539,7 +619,7 @@ class Batch:
             return read_raw(stdin, self.raw_size, index, colorspace=o.colorspace,
                             working_space=o.working_space)
 
-        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-io") as pool:
+        with io_pool() as pool:
             frame = read(0)
             count = 0
             while frame is not None:

@@ -33,7 +33,6 @@ import socket
 import time
 import uuid
 from collections import OrderedDict
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager, suppress
 from dataclasses import dataclass, replace
 
@@ -41,7 +40,7 @@ from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError
-from clfx.pipeline.batch import RAW, Batch, Job
+from clfx.pipeline.batch import RAW, Batch, Job, io_pool, io_threads
 
 PLUGIN_NAME = "clfx"
 SPECS_KEPT = 4
@@ -146,7 +145,8 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
     `ClfxError` is reported and the others go on (all stop after it with ``fail_fast``)."""
     results: list[dict | None] = [None] * len(jobs)
     writes = []
-    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-io") as pool:
+    prepared = batch._prepare_look(rt, jobs)
+    with io_threads(), io_pool() as pool, io_pool("write") as writer:
         next_read = pool.submit(batch._read, jobs[0]) if jobs else None
         for i, job in enumerate(jobs):
             read, next_read = next_read, (pool.submit(batch._read, jobs[i + 1])
@@ -158,7 +158,7 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
                 if fail_fast:
                     break
                 continue
-            writes.append((i, report, pool.submit(batch._write, frame_out, job, report, views)))
+            writes.append((i, report, writer.submit(batch._write, frame_out, job, report, views)))
         for i, report, done in writes:
             try:
                 done.result()
@@ -167,6 +167,8 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -
                 continue
             results[i] = {"frame": jobs[i].frame, "worker": _where(),
                           "report": report.as_dict(), "explain": report.explain()}
+    if prepared is not None:
+        prepared.exception()     # done (its errors are the render's to report)
     return [r for r in results if r is not None]
 
 

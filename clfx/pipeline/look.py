@@ -370,11 +370,51 @@ def read_lens_dict(name: str) -> dict:
 
 def output_limit(frame: Frame, keep_overscan: bool) -> Rect:
     """The window effects may write to and the result is cropped to."""
-    limit = frame.data_window.union(frame.display_window)
+    return _limit(frame.data_window, frame.display_window, keep_overscan)
+
+
+def _limit(data: Rect, display: Rect, keep_overscan: bool) -> Rect:
+    limit = data.union(display)
     if keep_overscan:
-        grow = int(round(OVERSCAN_KEEP_FRACTION * frame.display_window.diagonal))
-        limit = limit.union(frame.display_window.grown(grow))
+        grow = int(round(OVERSCAN_KEEP_FRACTION * display.diagonal))
+        limit = limit.union(display.grown(grow))
     return limit
+
+
+def _geometry(window: Rect):
+    """A stand-in source for `prepare`: a window and the row pitch a device image of it
+    has (`clfx.device.runtime.Runtime.image`), no pixels."""
+    from types import SimpleNamespace
+
+    from clfx.device.runtime import ALIGN_PX
+
+    return SimpleNamespace(window=window, channels=4, width=window.width, height=window.height,
+                           pitch=max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX))
+
+
+def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspect: float = 1.0,
+            *, frame_number: int = 0, quality: str | None = None,
+            keep_overscan: bool = False) -> None:
+    """Build the caches of ``look``'s steps that depend only on parameters and geometry
+    (`Plugin.prepare`: distortion and chromatic aberration maps) for frames of these windows,
+    so the first frame does not wait for them: a batch runs this on a thread while the first
+    frame is read and its first steps render.  Each step sees the window the steps before it
+    would grow the frame to.  A guess that turns out wrong (a step skipped on the real frame,
+    a value that needs pixels) costs only the work: the render builds what it needs under
+    its own cache key, so the pixels never depend on this."""
+    look = look.at(frame_number)
+    ctx = RenderContext(rt, _geometry(data_window), display_window=display_window,
+                        pixel_aspect=pixel_aspect, frame=frame_number, seed=look.seed,
+                        camera=look.camera, quality=quality or DEFAULT_QUALITY,
+                        output_limit=_limit(data_window, display_window, keep_overscan))
+    for _, step in look.active_steps():
+        step_ctx = ctx.for_step(step.quality or quality or DEFAULT_QUALITY)
+        try:
+            step.plugin.prepare(rt, step.params, step_ctx)
+            window = step.plugin.output_window(step.params, step_ctx)
+        except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
+            continue
+        ctx.source = _geometry(window)
 
 
 class FrameTooLarge(ClfxError):

@@ -255,6 +255,17 @@ class ChromaticAberration(Plugin):
         return rt.cache.get(("chromatic_aberration.tables",) + frame_key(p, ctx) + (n, double),
                             build)
 
+    def prepare(self, rt, p, ctx):
+        if self.is_identity(p, ctx):
+            return
+        lvl = self.level(ctx)
+        n = lvl.wavelengths if p.spectral else 3
+        double = rt.use_fp64(lvl.fp64)
+        if n == 3 and not double:
+            self.packed_maps(rt, p, ctx)
+        else:
+            self.tables(rt, p, ctx, n, double)
+
     def render(self, rt, p, ctx):
         src = ctx.source
         lvl = self.level(ctx)

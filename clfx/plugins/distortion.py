@@ -337,6 +337,11 @@ class Distortion(Plugin):
         key = "elliptical" if double else filter_name
         return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (key,), build)
 
+    def prepare(self, rt, p, ctx):
+        if not self.is_identity(p, ctx):
+            lvl = self.level(ctx)
+            self.device_map(rt, p, ctx, lvl.filter, rt.use_fp64(lvl.fp64))
+
     def render(self, rt, p, ctx):
         src = ctx.source
         lvl = self.level(ctx)
