@@ -4,7 +4,8 @@ Everything that can be checked is checked before the first frame is read: the lo
 input frames (missing ones named), the output folder, existing outputs, inputs that would be
 overwritten.  Then frames flow through a small pipeline: the next frame is read and the
 previous one written on worker threads while the device renders the current one, so a
-sequence's throughput approaches the slower of I/O and compute rather than their sum.
+sequence's throughput approaches the slower of I/O and compute rather than their sum
+(frames up to 4K UHD; larger ones one at a time, :data:`OVERLAP_MAX_PIXELS`).
 Output is deterministic per frame: rendering frame N alone or inside a batch gives the
 same bytes.
 """
@@ -29,6 +30,12 @@ if TYPE_CHECKING:
     from clfx.io.read import PassSpec
 
 RAW = "-"
+
+OVERLAP_MAX_PIXELS = 3840 * 2160
+"""Frames up to this size are read and written on I/O threads while the device renders the
+previous / next one; a larger frame is read, rendered and written alone, so a sequence
+never holds more than one of them (an 8K frame renders for minutes: overlapping its I/O
+gains little and would add ~1.5 GB to the peak; see "Memory" in the README)."""
 
 
 @dataclass(frozen=True)
@@ -172,6 +179,10 @@ class FrameRead:
     views: list[Frame]
     masks: list[dict]
     read_ms: float
+
+    def pixels(self) -> int:
+        """Pixels of the largest view's data window."""
+        return max((f.data_window.width * f.data_window.height for f in self.views), default=0)
 
 
 @dataclass
@@ -355,11 +366,16 @@ class Batch:
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
                 read = next_read.result()
-                next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
+                overlap = read.pixels() <= OVERLAP_MAX_PIXELS
+                following = self.jobs[i + 1] if i + 1 < total else None
+                next_read = pool.submit(self._read, following) if overlap and following else None
                 frame_out, report, views_out = self.render(rt, job, read)
                 writes.append((pool.submit(self._write, frame_out, job, report, views_out),
                                report))
-                writes = self._drain(writes, block=False)
+                del read, frame_out, views_out     # the write holds the output until done
+                writes = self._drain(writes, block=not overlap)
+                if next_read is None and following:
+                    next_read = pool.submit(self._read, following)
                 reports.append(report)
                 if self.on_frame is not None:
                     self.on_frame(i + 1, total, report)
@@ -390,7 +406,8 @@ class Batch:
             outs.append(render_frame(
                 rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
                 keep_overscan=self.options.keep_overscan,
-                analysis_summary=self.options.as_json, stats=self.stats, masks=masks))
+                analysis_summary=self.options.as_json, stats=self.stats, masks=masks,
+                release_input=True))
         frame_out, report = outs[0]
         report.input, report.output = job.input, job.output
         report.read_ms = read.read_ms
