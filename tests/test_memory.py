@@ -1,6 +1,6 @@
-"""Issue 10 item 10: bounded memory.  A 1280x720 frame of the demo scene through the cinema
+"""Issue 10 item 10: bounded memory.  A 1920x1080 frame of the demo scene through the cinema
 look, in a fresh process with PoCL's kernel cache warm, peaks below the README's budget
-(``clfx.core.limits.memory_budget_mib``: 512 MiB + CLFX_POOL_MB + 64 bytes per pixel); the
+(``clfx.core.limits.memory_budget_mib``: 600 MiB + CLFX_POOL_MB + 72 bytes per pixel); the
 peaks at 1080p, 4K UHD and 8K UHD, measured with ``/usr/bin/time -v``, are in the README's
 table (8K: under 4 GB)."""
 import os
@@ -48,7 +48,7 @@ def peak_mib(args, env) -> float:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in KiB on Linux")
 def test_cinema_1080p_peak_memory_stays_below_the_documented_budget(rt, tmp_path):
-    w, h, pool = 1280, 720, 64
+    w, h, pool = 1920, 1080, 64
     cinema_frame(tmp_path / "in.exr", w, h)
     env = {**os.environ, "CLFX_POOL_MB": str(pool),
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
@@ -60,3 +60,4 @@ def test_cinema_1080p_peak_memory_stays_below_the_documented_budget(rt, tmp_path
     assert (tmp_path / "out.exr").is_file()
     assert peak < budget, f"peak {peak:.0f} MiB over the budget {budget:.0f} MiB"
     assert np.isfinite(peak) and peak > 100     # measured something real
+    # (before issue 10: 866 MiB here, over the 806 MiB budget)

@@ -47,6 +47,8 @@ Notes
 Memory: the work buffer holds ``B x N1 x (N2 + 2)`` reals (B = channels per batch); channels
 are processed one at a time when a batch would exceed :data:`MAX_BATCH_BYTES`.  At 3840x2160
 with a PSF radius of a quarter diagonal the float64 grid is ~3300 x 4950: ~130 MB per plane.
+The PSF is placed on the grid on the device (its wrapped quadrants copied into the zeroed
+buffer), so the host never holds a grid-sized plane (392 MiB, twice, at 8K).
 
 References: Spencer et al. 1995 (glare PSF, see ``clfx.fx.psf``); VkFFT (Tolmachev 2023).
 """

@@ -24,18 +24,13 @@ import numpy as np
 
 from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame
+from clfx.core.limits import OVERLAP_MAX_PIXELS
 from clfx.pipeline.look import Look, RunStats, render_frame
 
 if TYPE_CHECKING:
     from clfx.io.read import PassSpec
 
 RAW = "-"
-
-OVERLAP_MAX_PIXELS = 3840 * 2160
-"""Frames up to this size are read and written on I/O threads while the device renders the
-previous / next one; a larger frame is read, rendered and written alone, so a sequence
-never holds more than one of them (an 8K frame renders for minutes: overlapping its I/O
-gains little and would add ~1.5 GB to the peak; see "Memory" in the README)."""
 
 
 @dataclass(frozen=True)
