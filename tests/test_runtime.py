@@ -169,3 +169,23 @@ def test_one_cache_evicts_what_is_worth_least_per_byte_then_least_recently_used(
     cache.get(("fx.prog", 1), lambda: "program", nbytes=0)
     cache.clear("fx.map")
     assert cache.peek(("fx.map", 1)) is None and cache.peek(("fx.prog", 1)) == "program"
+
+def test_cache_counts_the_device_memory_it_allocated_and_its_peak(rt):
+    """Issue 10 item 10: the pool's buffers live in host memory on PoCL; the cache says how
+    many bytes it holds allocated (live and idle) and the most it held."""
+    from clfx.device.cache import DeviceCache
+
+    pool = DeviceCache(rt.ctx, max_bytes=1000)
+    a, b = pool.take(400), pool.take(400)
+    assert pool.device_bytes == pool.device_peak == 800
+    pool.give(400, a)                       # idle: still allocated
+    assert pool.device_bytes == 800 and pool.take(400) is a and pool.device_bytes == 800
+    pool.give(400, a)
+    pool.give(400, b)
+    big = pool.take(2000)                   # over the cap: released when given back
+    assert pool.device_peak == 2800
+    pool.give(2000, big)
+    pool.clear()                            # idle buffers released
+    assert pool.device_bytes == 0 and pool.stats()["device_peak"] == 2800
+    pool.reset_peak()
+    assert pool.device_peak == 0

@@ -22,3 +22,35 @@ def check_pixels(width: int, height: int, what: str, exc: type[ClfxError] = Clfx
     if width > MAX_SIDE or height > MAX_SIDE or width * height > MAX_PIXELS:
         raise exc(f"{what} is {width}x{height}; the limit is {MAX_PIXELS} pixels and "
                   f"{MAX_SIDE} a side (CLFX_MAX_PIXELS)")
+
+
+MEMORY_BASE_MIB = 600
+"""What a render holds whatever the frame size (Python, OpenImageIO, the OpenCL driver and the
+compiled kernels), in MiB: the constant of the documented memory budget."""
+
+MEMORY_BYTES_PER_PIXEL = 72
+"""Bytes per pixel of the documented memory budget (frame-sized device buffers, the host
+frame, the band-wise map builds): peaks measured at 1080p, 4K UHD and 8K UHD, one frame or a
+sequence, stay below it."""
+
+OVERLAP_MAX_PIXELS = 3840 * 2160
+"""Frames of a sequence up to this size are read and written on I/O threads while the device
+renders the previous / next one; a larger frame is read, rendered and written alone, so a
+sequence never holds more than one of them (an 8K frame renders for minutes: overlapping its
+I/O gains little and would add ~1.5 GB to the peak)."""
+
+MEMORY_OVERLAP_BYTES_PER_PIXEL = 96
+"""What a sequence of frames up to :data:`OVERLAP_MAX_PIXELS` adds to the budget per pixel:
+the next frame read and the last one written while the device renders."""
+
+
+def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> float:
+    """The documented bound on the peak resident memory of ``clfx render`` of frames of
+    ``pixels`` through the cinema look, with ``CLFX_POOL_MB`` = ``pool_mib``, in MiB:
+    ``MEMORY_BASE_MIB + CLFX_POOL_MB + MEMORY_BYTES_PER_PIXEL x pixels``, plus
+    ``MEMORY_OVERLAP_BYTES_PER_PIXEL x pixels`` for a ``sequence`` of frames up to
+    :data:`OVERLAP_MAX_PIXELS` (README, "Memory")."""
+    per_pixel = MEMORY_BYTES_PER_PIXEL
+    if sequence and pixels <= OVERLAP_MAX_PIXELS:
+        per_pixel += MEMORY_OVERLAP_BYTES_PER_PIXEL
+    return MEMORY_BASE_MIB + pool_mib + per_pixel * pixels / 2 ** 20

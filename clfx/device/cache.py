@@ -19,7 +19,9 @@ nothing and are never evicted.  A value larger than the cap on its own is return
 kept.
 
 Keys are tuples whose first element names the owner (``("glare.psf", params_hash, radius)``),
-so ``clear(owner)`` drops one effect's entries and ``stats()`` reports bytes per owner.
+so ``clear(owner)`` drops one effect's entries and ``stats()`` reports bytes per owner, and
+the device memory the pool has allocated (``device_bytes``: live and idle buffers; PoCL keeps
+them in host memory) with its peak (``device_peak``, restarted by ``reset_peak()``).
 """
 from __future__ import annotations
 
@@ -81,6 +83,8 @@ class DeviceCache:
         self._building: dict[Hashable, threading.Event] = {}   # key -> set when its build ends
         self.hits = 0
         self.misses = 0
+        self.device_bytes = 0        # pooled buffers created and not yet released
+        self.device_peak = 0         # the most device_bytes since creation or reset_peak()
 
     # -- derived values -------------------------------------------------------------------
     def get(self, key: tuple, build: Callable[[], T], nbytes: int | None = None,
@@ -145,7 +149,13 @@ class DeviceCache:
             for k, (size, _) in self._lru.items():
                 per[str(k[0])] = per.get(str(k[0]), 0) + size
             return {"bytes": self._bytes, "max_bytes": self.max_bytes, "owners": per,
-                    "entries": len(self._lru), "hits": self.hits, "misses": self.misses}
+                    "entries": len(self._lru), "hits": self.hits, "misses": self.misses,
+                    "device_bytes": self.device_bytes, "device_peak": self.device_peak}
+
+    def reset_peak(self) -> None:
+        """Start measuring ``device_peak`` again from the bytes allocated now."""
+        with self._lock:
+            self.device_peak = self.device_bytes
 
     @property
     def nbytes(self) -> int:
@@ -165,6 +175,8 @@ class DeviceCache:
                     self._bytes -= size
                     self._idle_bytes -= size
                     return buf
+            self.device_bytes += nbytes      # PoCL: host memory (device buffers count in RSS)
+            self.device_peak = max(self.device_peak, self.device_bytes)
         return cl.Buffer(self._ctx, cl.mem_flags.READ_WRITE, nbytes)
 
     def give(self, nbytes: int, buf) -> None:
@@ -173,6 +185,7 @@ class DeviceCache:
         with self._lock:
             if nbytes > self.max_bytes:
                 buf.release()
+                self.device_bytes -= nbytes
                 return
             key = (_BUFFER, id(buf))
             self._lru[key] = (nbytes, (nbytes, buf))
@@ -208,6 +221,7 @@ class DeviceCache:
         self._bytes -= size
         if key[0] == _BUFFER:
             self._idle_bytes -= size
+            self.device_bytes -= size
             value[1].release()
         # a dropped value's pooled buffers come back through their finalisers (give())
         del value

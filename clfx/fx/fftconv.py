@@ -47,6 +47,8 @@ Notes
 Memory: the work buffer holds ``B x N1 x (N2 + 2)`` reals (B = channels per batch); channels
 are processed one at a time when a batch would exceed :data:`MAX_BATCH_BYTES`.  At 3840x2160
 with a PSF radius of a quarter diagonal the float64 grid is ~3300 x 4950: ~130 MB per plane.
+The PSF is placed on the grid on the device (its wrapped quadrants copied into the zeroed
+buffer), so the host never holds a grid-sized plane (392 MiB, twice, at 8K).
 
 References: Spencer et al. 1995 (glare PSF, see ``clfx.fx.psf``); VkFFT (Tolmachev 2023).
 """
@@ -215,16 +217,41 @@ def _spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
     real = _real(precision)
     plane_bytes = n1 * (n2 + 2) * np.dtype(real).itemsize
     holder = rt.buffer(planes * plane_bytes)
-    for p in range(planes):  # one plane on the host at a time (a 4K plane is ~130 MB)
-        # taps that coincide modulo the grid add up: the grid can be smaller than the PSF
-        # when only a small output is kept (fft_grid proves the result exact there)
-        plane = np.zeros((n1, n2 + 2), np.float64)
-        np.add.at(plane, (ys[:, None], xs[None, :]), k[..., p])
-        rt.cl.enqueue_copy(rt.queue, holder.buffer, plane.astype(real), dst_offset=p * plane_bytes)
+    if kh <= n1 and kw <= n2:
+        # no two taps coincide modulo the grid: the taps' four wrapped quadrants are copied
+        # into the zeroed buffer (the host holds the PSF, never a grid-sized plane)
+        rt.cl.enqueue_fill_buffer(rt.queue, holder.buffer, real(0), 0, planes * plane_bytes)
+        taps = np.ascontiguousarray(np.moveaxis(k, 2, 0), real)     # (planes, kh, kw)
+        item, row = np.dtype(real).itemsize, (n2 + 2) * np.dtype(real).itemsize
+        for p in range(planes):
+            for (ky, ny, y), (kx, nx, x) in _quadrants(kh, cy, n1, kw, cx, n2):
+                rt.cl.enqueue_copy(rt.queue, holder.buffer, taps[p],
+                                   buffer_origin=(x * item, p * n1 + y, 0),
+                                   host_origin=(kx * item, ky, 0),
+                                   region=(nx * item, ny, 1),
+                                   buffer_pitches=(row, 0), host_pitches=(kw * item, 0))
+    else:
+        for p in range(planes):  # one plane on the host at a time
+            # taps that coincide modulo the grid add up: the grid can be smaller than the PSF
+            # when only a small output is kept (fft_grid proves the result exact there)
+            plane = np.zeros((n1, n2 + 2), np.float64)
+            np.add.at(plane, (ys[:, None], xs[None, :]), k[..., p])
+            rt.cl.enqueue_copy(rt.queue, holder.buffer, plane.astype(real),
+                               dst_offset=p * plane_bytes)
     shape = (planes, n1, n2 + 2)
     app = _plan(rt, shape, precision)
     app.fft(_array(rt, holder, shape, real))
     return holder, planes
+
+
+def _quadrants(kh: int, cy: int, n1: int, kw: int, cx: int, n2: int):
+    """The blocks of a (kh, kw) PSF centred at (cy, cx) wrapped onto an (n1, n2) grid (kh <=
+    n1, kw <= n2): ((first PSF row, rows, grid row), (first PSF column, columns, grid
+    column)) pairs.  PSF row j lands on grid row (j - cy) mod n1: rows >= cy at the top,
+    rows < cy at the bottom (the same for columns)."""
+    def spans(k, c, n):
+        return [s for s in ((c, k - c, 0), (0, c, n - c)) if s[1] > 0]
+    return [(a, b) for a in spans(kh, cy, n1) for b in spans(kw, cx, n2)]
 
 
 def clear_caches(rt) -> None:

@@ -83,6 +83,43 @@ def kernel_defines(filter_name: str, border: str, sanitise: bool = True) -> dict
             "RS_SANITISE": int(bool(sanitise))}
 
 
+BAND_PIXELS = 1 << 18
+"""Maps are built on the host in bands of at most this many pixels (whole rows of the source's
+pitch) and uploaded band by band: the float64 temporaries (~150 bytes per pixel) are a band's,
+not the frame's (an 8K frame's would be ~5 GB).  A 1920x1080 frame is one band."""
+
+
+def map_bands(height: int, pitch: int) -> list[tuple[int, int]]:
+    """Row ranges ``(y0, y1)`` of the bands a map of ``height`` rows of ``pitch`` pixels is
+    built in (one band, ``(0, height)``, when it fits in :data:`BAND_PIXELS`)."""
+    step = max(1, BAND_PIXELS // max(int(pitch), 1))
+    return [(y, min(height, y + step)) for y in range(0, max(height, 1), step)]
+
+
+def band_window(window, y0: int, y1: int):
+    """Rows ``y0 <= y < y1`` of ``window`` (relative to its top), as a window."""
+    return type(window)(window.x0, window.y0 + y0, window.x1, window.y0 + y1)
+
+
+def _upload_bands(rt, spans, make, records: dict):
+    """A pooled buffer filled band by band with a map's entries: ``make(y0, y1)`` returns
+    the band's entries (an array of the same bytes per row for every band), its records by
+    key (flat quad indices of the band in column 0, offset here by the band's first quad)
+    and the quads per row; ``records`` collects the records."""
+    holder = per_row = None
+    for y0, y1 in spans:
+        entries, recs, quads_per_row = make(y0, y1)
+        if holder is None:
+            per_row = entries.nbytes // max(y1 - y0, 1)
+            holder = rt.buffer(max(spans[-1][1], 1) * per_row)
+        rt.cl.enqueue_copy(rt.queue, holder.buffer, np.ascontiguousarray(entries),
+                           dst_offset=y0 * per_row)   # blocking: the band may go now
+        for key, rec in recs.items():
+            rec[:, 0] += y0 * quads_per_row
+            records.setdefault(key, []).append(rec)
+    return holder
+
+
 def pixel_centres(window, frame_origin=True):
     """(x, y) float64 grids of the pixel centres of ``window`` in frame coordinates."""
     xs = np.arange(window.width, dtype=np.float64) + 0.5 + (window.x0 if frame_origin else 0)
@@ -320,10 +357,33 @@ class PackedMap:
 
     def upload(self, rt) -> "DevicePackedMap":
         """The map's device buffers (a value for ``rt.cache``)."""
-        fix = {code: (rt.to_device(r) if len(r) else None, len(r))
-               for code, r in self.fixups.items()}
-        return DevicePackedMap(rt.to_device(self.entries), fix, self.fast_possible,
-                               self.entries.shape[2] // 12)
+        return self._device(rt, rt.to_device(self.entries), self.fixups, self.fast_possible,
+                            self.entries.shape[2] // 12)
+
+    @staticmethod
+    def _device(rt, entries, fixups, fast_possible, maps) -> "DevicePackedMap":
+        fix = {code: (rt.to_device(r) if len(r) else None, len(r)) for code, r in fixups.items()}
+        return DevicePackedMap(entries, fix, fast_possible, maps)
+
+    @classmethod
+    def device(cls, rt, points_of, width: int, height: int, pitch: int) -> "DevicePackedMap":
+        """The map built and uploaded in bands of rows (:func:`map_bands`), the same as
+        ``PackedMap(points_of(0, height), ...).upload(rt)``: ``points_of(y0, y1)`` gives
+        the points of output rows ``y0 <= y < y1``.  Host memory is one band's."""
+        spans = map_bands(height, pitch)
+        if len(spans) == 1:
+            return cls(points_of(0, height), width, height, pitch).upload(rt)
+        quads, found = pitch // 4, {}
+
+        def make(y0, y1):
+            m = cls(points_of(y0, y1), width, height, pitch)
+            found["maps"], found["fast"] = m.entries.shape[2] // 12, m.fast_possible
+            return m.entries, m.fixups, quads
+
+        records: dict = {}
+        entries = _upload_bands(rt, spans, make, records)
+        fixups = {code: np.concatenate(r) for code, r in records.items()}
+        return cls._device(rt, entries, fixups, found["fast"], found["maps"])
 
 
 @dataclass(frozen=True)
@@ -518,6 +578,33 @@ class FootprintMap:
         return DeviceFootprintMap(rt.to_device(self.entries),
                                   rt.to_device(self.records) if count else None, count,
                                   dict(self.fractions))
+
+    @classmethod
+    def device(cls, rt, points_of, filter_name: str, width: int, height: int, pitch: int,
+               border: str = "black") -> "DeviceFootprintMap":
+        """The map built and uploaded in bands of rows (:func:`map_bands`), the same as
+        ``FootprintMap(*points_of(0, height), ...).upload(rt)``: ``points_of(y0, y1)``
+        gives ``(sx, sy, jac)`` of output rows ``y0 <= y < y1``.  Host memory is one band's."""
+        spans = map_bands(height, pitch)
+        if len(spans) == 1:
+            return cls(*points_of(0, height), filter_name, width, height, pitch, border).upload(rt)
+        quads, counts = pitch // 4, {"fast": 0.0, "zero": 0.0}
+
+        def make(y0, y1):
+            m = cls(*points_of(y0, y1), filter_name, width, height, pitch, border)
+            n = (y1 - y0) * quads
+            for k in counts:
+                counts[k] += m.fractions[k] * n
+            return m.entries, {"records": m.records}, quads
+
+        records: dict = {}
+        entries = _upload_bands(rt, spans, make, records)
+        rec = np.concatenate(records["records"])
+        total = max(max(height, 1) * quads, 1)
+        fractions = {"fast": counts["fast"] / total, "zero": counts["zero"] / total,
+                     "checked": len(rec) / total}
+        return DeviceFootprintMap(entries, rt.to_device(rec) if len(rec) else None, len(rec),
+                                  fractions)
 
 
 @dataclass(frozen=True)

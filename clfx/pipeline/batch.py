@@ -4,7 +4,8 @@ Everything that can be checked is checked before the first frame is read: the lo
 input frames (missing ones named), the output folder, existing outputs, inputs that would be
 overwritten.  Then frames flow through a small pipeline: the next frame is read and the
 previous one written on worker threads while the device renders the current one, so a
-sequence's throughput approaches the slower of I/O and compute rather than their sum.
+sequence's throughput approaches the slower of I/O and compute rather than their sum
+(frames up to 4K UHD; larger ones one at a time, :data:`OVERLAP_MAX_PIXELS`).
 Output is deterministic per frame: rendering frame N alone or inside a batch gives the
 same bytes.
 
@@ -31,6 +32,7 @@ import numpy as np
 
 from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame
+from clfx.core.limits import OVERLAP_MAX_PIXELS
 from clfx.pipeline.look import Look, RunStats, render_frame
 
 if TYPE_CHECKING:
@@ -225,6 +227,10 @@ class FrameRead:
     masks: list[dict]
     read_ms: float
 
+    def pixels(self) -> int:
+        """Pixels of the largest view's data window."""
+        return max((f.data_window.width * f.data_window.height for f in self.views), default=0)
+
 
 @dataclass
 class Job:
@@ -409,13 +415,18 @@ class Batch:
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
                 read = next_read.result()
-                next_read = pool.submit(self._read, self.jobs[i + 1]) if i + 1 < total else None
+                overlap = read.pixels() <= OVERLAP_MAX_PIXELS
+                following = self.jobs[i + 1] if i + 1 < total else None
+                next_read = pool.submit(self._read, following) if overlap and following else None
                 frame_out, report, views_out = self.render(rt, job, read)
                 writes.append((writer.submit(self._write, frame_out, job, report, views_out),
                                report))
-                writes = self._drain(writes, block=False)
+                del read, frame_out, views_out     # the write holds the output until done
+                writes = self._drain(writes, block=not overlap)
                 while len(writes) > WRITES_AHEAD:
                     writes = self._drain(writes[:1], block=True) + writes[1:]
+                if next_read is None and following:
+                    next_read = pool.submit(self._read, following)
                 reports.append(report)
                 if self.on_frame is not None:
                     self.on_frame(i + 1, total, report)
@@ -470,7 +481,8 @@ class Batch:
             outs.append(render_frame(
                 rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
                 keep_overscan=self.options.keep_overscan,
-                analysis_summary=self.options.as_json, stats=self.stats, masks=masks))
+                analysis_summary=self.options.as_json, stats=self.stats, masks=masks,
+                release_input=True))
         frame_out, report = outs[0]
         report.input, report.output = job.input, job.output
         report.read_ms = read.read_ms

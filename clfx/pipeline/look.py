@@ -425,8 +425,8 @@ class FrameTooLarge(ClfxError):
 def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
                  quality: str | None = None, keep_overscan: bool = False,
                  analysis_summary: bool = False, stats: RunStats | None = None,
-                 masks: Mapping[MaskSpec, np.ndarray] | None = None
-                 ) -> tuple[Frame, FrameReport]:
+                 masks: Mapping[MaskSpec, np.ndarray] | None = None,
+                 release_input: bool = False) -> tuple[Frame, FrameReport]:
     """Render one frame through ``look``; returns the output frame and a report.
 
     ``quality`` sets the level of every step without its own override.  Keyframed values
@@ -435,7 +435,10 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     steps' running costs across the frames of one run (they estimate what skipping saved);
     without it each frame starts afresh.  ``masks`` holds the frame's masks on the host
     (`clfx.pipeline.masks.read_masks`; read here from the frame's files when None and a
-    step is masked), each uploaded once.
+    step is masked), each uploaded once.  ``release_input``: the caller hands ``frame``
+    over, and its host beauty (and passes, when the frame has a file layout to copy them
+    from) are dropped once on the device, so a frame is not held twice (see "Memory" in the
+    README).  Device passes are dropped after the last step that reads them.
 
     Raises
     ------
@@ -463,9 +466,16 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     report.upload_ms = (time.perf_counter() - t_start) * 1e3
     report.frame_warnings = list(ctx.warnings)
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
+    if release_input:
+        frame.rgba = None
+        if frame.layout is not None:     # an output copies the passes from the file
+            frame.depth = frame.velocity = None
     frame_masks = FrameMasks(rt, masks or {}, frame.data_window, frame.display_window)
     saved = 0.0
-    for index, step in look.active_steps():
+    steps = look.active_steps()
+    for n, (index, step) in enumerate(steps):
+        if not analysis_summary:          # the summary's analysis may read the passes
+            _drop_unread_passes(ctx, steps[n:])
         timing = stats.timing(index)
         step_report, out = _run_step(rt, step, ctx, step.quality or quality or DEFAULT_QUALITY,
                                      have, timing, frame_masks)
@@ -553,6 +563,16 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
         notes.append(f"masked by {step.mask.label()} ({mode})")
     return StepReport(step.id, True, ms=ms, quality=level, notes=notes,
                       warnings=list(step_ctx.warnings)), out
+
+
+def _drop_unread_passes(ctx: RenderContext, steps) -> None:
+    """Free the device passes no remaining step reads (their memory goes back to the
+    pool before the step that could use it)."""
+    used = {c.name for _, s in steps for c in s.plugin.descriptor.clips}
+    if "depth" not in used:
+        ctx.depth = None
+    if "velocity" not in used:
+        ctx.velocity = None
 
 
 def _advance(rt, ctx: RenderContext, out) -> None:

@@ -43,9 +43,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
-from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, check_fold,
-                              fold_radius, frame_key, kernel_defines, launch_packed,
-                              lut_lookup, needs_sanitising, pixel_centres, radial_lut)
+from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, band_window,
+                              check_fold, fold_radius, frame_key, kernel_defines,
+                              launch_packed, lut_lookup, needs_sanitising, pixel_centres,
+                              radial_lut)
 from clfx.host import Plugin, register
 
 LAMBDA_MIN, LAMBDA_MAX = 380.0, 720.0
@@ -177,15 +178,16 @@ def build_luts(deltas, cubic, r_max):
     return np.stack(luts)
 
 
-def channel_points(p, display_window, window, pixel_aspect):
+def channel_points(p, display_window, window, pixel_aspect, rows=None):
     """Three-channel mode: the red and blue source points of ``window``'s pixels
     (source-window coordinates, texel centres at +0.5, float64), looked up in float64 in the
-    same tables the kernel would interpolate (green and alpha stay in place)."""
+    same tables the kernel would interpolate (green and alpha stay in place).  ``rows``
+    ``(y0, y1)``: only those rows of the window (the tables are still the whole window's)."""
     cx, cy, unit, r_max = geometry(p, display_window, window, pixel_aspect)
     deltas, _ = channel_bins(p.amount)
     luts = build_luts(deltas, p.cubic, r_max)
     scale = 1.0 / (unit * r_max)
-    ox, oy = pixel_centres(window)
+    ox, oy = pixel_centres(window if rows is None else band_window(window, *rows))
     dx, dy = ox - cx, oy - cy
     rho = np.clip((dx * pixel_aspect * scale) ** 2 + (dy * scale) ** 2, 0.0, 1.0)
     return [(cx + dx * s - window.x0, cy + dy * s - window.y0)
@@ -224,9 +226,10 @@ class ChromaticAberration(Plugin):
         src = ctx.source
 
         def build():
-            points = channel_points(p, ctx.display_window, src.window, ctx.pixel_aspect)
             _, weights = channel_bins(p.amount)
-            return (PackedMap(points, src.width, src.height, src.pitch).upload(rt),
+            points_of = lambda y0, y1: channel_points(p, ctx.display_window, src.window,
+                                                      ctx.pixel_aspect, rows=(y0, y1))
+            return (PackedMap.device(rt, points_of, src.width, src.height, src.pitch),
                     rt.to_device(weights.astype(np.float32)))
 
         return rt.cache.get(("chromatic_aberration.packed",) + frame_key(p, ctx), build)

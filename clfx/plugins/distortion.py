@@ -58,9 +58,10 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, FootprintMap, ResampleLevel, check_fold, elliptical_map,
-                              fit_scale, fold_radius, footprint_defines, frame_key,
-                              launch_footprint, needs_sanitising, pixel_centres, rect_boundary)
+from clfx.fx.resample import (BORDERS, FootprintMap, ResampleLevel, band_window, check_fold,
+                              elliptical_map, fit_scale, fold_radius, footprint_defines,
+                              frame_key, launch_footprint, map_bands, needs_sanitising,
+                              pixel_centres, rect_boundary)
 from clfx.host import Plugin, register
 
 NEWTON_STEPS = 8
@@ -328,6 +329,8 @@ class Distortion(Plugin):
         src = ctx.source
 
         def build():
+            if not double and len(map_bands(src.height, src.pitch)) > 1:
+                return self.banded_map(rt, p, ctx, filter_name)
             sx, sy, jac, info = self.host_map(rt, p, ctx)
             if double:
                 return elliptical_map(rt, sx, sy, jac, src.pitch), info
@@ -341,6 +344,27 @@ class Distortion(Plugin):
         if not self.is_identity(p, ctx):
             lvl = self.level(ctx)
             self.device_map(rt, p, ctx, lvl.filter, rt.use_fp64(lvl.fp64))
+
+    def banded_map(self, rt, p, ctx, filter_name):
+        """A frame larger than one band (``clfx.fx.resample.map_bands``): the footprint map
+        built band by band from the same geometry (no float64 map of the whole frame is
+        kept): ``(map, info)``."""
+        src = ctx.source
+        g = _geometry(p, ctx.camera, ctx.display_window, src.window, ctx.pixel_aspect,
+                      "distortion")
+        no_source = 0
+
+        def points_of(y0, y1):
+            nonlocal no_source
+            sx, sy, jac = _points(g, *pixel_centres(band_window(src.window, y0, y1)), True)
+            no_source += int(np.count_nonzero(~np.isfinite(sx)))
+            return sx - src.window.x0, sy - src.window.y0, jac
+
+        dmap = FootprintMap.device(rt, points_of, filter_name, src.width, src.height,
+                                   src.pitch, p.border)
+        info = dict(fx=g["fx"], fy=g["fy"], cx=g["cx"], cy=g["cy"], k=g["k"],
+                    fit_scale=g["fit_scale"], no_source=no_source, r_fold=g["r_fold"])
+        return dmap, info
 
     def render(self, rt, p, ctx):
         src = ctx.source

@@ -290,23 +290,26 @@ class Streaks(Plugin):
         pitch = wp + 2 * margin
         org = margin * pitch + margin
         nbytes = pitch * (lo_h + 2 * margin) * 16
-        work = [rt.buffer(nbytes) for _ in range(4)]      # bright, ping, pong, total
+        work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total
         for buf in work:
             rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
-        bright, ping, pong, total = work
+        ping, pong, total = work
         defines["CHECKED"] = int(checked)
 
         peak, tiles_x, tiles_y = self.peak_map(p, ctx)
-        rt.launch(rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
-                            **defines), (wp, lo_h),
-                  src, i32(src.pitch), i32(src.width), i32(src.height), bright, i32(org),
-                  i32(pitch), i32(wp), i32(lo_h), i32(ox), i32(oy), f32(p.threshold),
-                  rt.to_device(peak), i32(tiles_x), i32(tiles_y), f32(p.core),
-                  f32(p.source_color))
+        bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
+                               **defines)
+        peak_buf = rt.to_device(peak)
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
         for sx, sy, passes, weights in plans:
-            cur = bright
+            # each ray starts from the bright pixels, extracted again into pong (cheaper than
+            # a fourth frame-sized buffer; passes write inside the zero margins only)
+            rt.launch(bright_knl, (wp, lo_h), src, i32(src.pitch), i32(src.width),
+                      i32(src.height), pong, i32(org), i32(pitch), i32(wp), i32(lo_h),
+                      i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
+                      i32(tiles_y), f32(p.core), f32(p.source_color))
+            cur = pong
             for n in range(passes):
                 last = n == passes - 1
                 dst = total if last else (ping if cur is not ping else pong)
@@ -317,6 +320,7 @@ class Streaks(Plugin):
                           i32(pitch), i32(wp), i32(lo_w), i32(lo_h), f32(sx * b), f32(sy * b),
                           i32(snap), *w, local=LOCAL)
                 cur = dst
+        del work, ping, pong
 
         out = rt.image(out_win)
         rt.launch(rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor),

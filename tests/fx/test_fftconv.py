@@ -167,3 +167,27 @@ def test_support_limits_the_input(rt, rng):
     masked[4:12, 5:15] = src[4:12, 5:15]
     want = reference(masked[..., :3], psf, (0, 0), (0, 0, 30, 20))
     np.testing.assert_allclose(got, want, atol=1e-6 * want.max())
+
+
+@pytest.mark.parametrize("kh, kw, planes, n1, n2", [(5, 7, 1, 8, 10), (6, 4, 3, 9, 12),
+                                                    (4, 6, 3, 4, 6), (1, 1, 1, 4, 6),
+                                                    (9, 9, 1, 6, 6)])
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_psf_placed_on_the_grid_without_a_grid_sized_host_plane(rt, rng, monkeypatch, kh, kw,
+                                                                 planes, n1, n2, precision):
+    """Issue 10 item 10: the PSF's wrapped quadrants are copied into the zeroed device grid
+    (no float64 plane of the grid on the host: 392 MiB twice at 8K); the same values as
+    adding the taps modulo the grid (the last case: a grid smaller than the PSF)."""
+    import types
+
+    k = rng.uniform(size=(kh, kw, planes))
+    real = fftconv._real(precision)
+    monkeypatch.setattr(fftconv, "_plan", lambda *a, **kw: types.SimpleNamespace(fft=lambda a: 0))
+    holder, _ = fftconv._spectrum(rt, k, n1, n2, precision)     # the placement, no FFT
+    got = np.empty((planes, n1, n2 + 2), real)
+    rt.cl.enqueue_copy(rt.queue, got, holder.buffer)
+    want = np.zeros((planes, n1, n2 + 2))
+    ys, xs = (np.arange(kh) - kh // 2) % n1, (np.arange(kw) - kw // 2) % n2
+    for p in range(planes):
+        np.add.at(want[p], (ys[:, None], xs[None, :]), k[..., p])
+    assert np.array_equal(got, want.astype(real))

@@ -119,3 +119,17 @@ def test_nan_and_inf_become_zero_and_finite_input_stays_finite(rt, rng, quality,
     clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
     np.testing.assert_array_equal(got, CA().apply(rt, p, clean, quality=quality))
     assert np.isfinite(CA().apply(rt, p, wide_range_image(rng), quality=quality)).all()
+
+
+def test_packed_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch):
+    """Issue 10 item 10: frames larger than a band build their map band by band; the pixels
+    are the same."""
+    import clfx.fx.resample as resample
+
+    src = rng.uniform(0.0, 2.0, (181, 323, 4)).astype(np.float32)
+    p = CA.params(amount=0.01 + rng.uniform(0, 1e-6), spectral=False, border="black")
+    whole = CA().apply(rt, p, src, quality="final")
+    rt.cache.clear("chromatic_aberration.packed")
+    monkeypatch.setattr(resample, "BAND_PIXELS", 3000)
+    banded = CA().apply(rt, p, src, quality="final")
+    assert np.array_equal(banded, whole)

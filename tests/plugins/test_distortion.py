@@ -331,3 +331,19 @@ def test_every_level_beats_bilinear_remap_and_the_input_on_ground_truth(rt, vari
         assert score > bilinear + 0.5, (q, score, bilinear)
         assert score > unchanged + 10.0, (q, score, unchanged)
     assert scores["final"] >= scores["reference"] - 1.0, scores   # issue 11: within 1 dB
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
+def test_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch, quality):
+    """Issue 10 item 10: frames larger than a band build their map band by band (an 8K
+    frame's float64 map would take ~5 GB); the pixels are the same."""
+    import clfx.fx.resample as resample
+
+    src = rng.uniform(0.0, 2.0, (181, 323, 4)).astype(np.float32)
+    p = Distortion.params(k1=-0.3 + rng.uniform(0, 1e-6), p1=0.01, border="mirror")
+    whole = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    rt.cache.clear("distortion.map")
+    monkeypatch.setattr(resample, "BAND_PIXELS", 3000)          # 9-row bands
+    assert len(resample.map_bands(181, 324)) == 21
+    banded = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    assert np.array_equal(banded, whole)
