@@ -11,9 +11,10 @@ through the rainbow, blue inside, red outside.  The RGB PSF is
 
     PSF_c(x) = sum_lambda  w_c(lambda) * I(x / s_lambda) / s_lambda^2,   s_lambda ∝ lambda,
 
-with ``w(lambda) = M_709 * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
-``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum.
-Spectral colours are outside Rec.709, so each PSF pixel is brought into gamut keeping its
+with ``w(lambda) = M * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
+``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum,
+``M`` the working space's XYZ -> RGB (the inverse of ``ctx.rgb_to_xyz``; Rec.709 by default).
+Spectral colours are outside the gamut, so each PSF pixel is brought into gamut keeping its
 luminance (``clfx.fx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
 spectrally flat (white) light keeps its colour and energy (white balance) and only the
 rings are coloured.  ``I`` is computed once per parameter set on the host (NumPy FFT of an
@@ -198,7 +199,8 @@ def psf_radius(r0_px: float, extent: float, max_radius: int | None = None) -> in
 
 
 def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
-                 n_wavelengths: int, max_radius: int | None = None) -> np.ndarray:
+                 n_wavelengths: int, max_radius: int | None = None,
+                 rgb_to_xyz=None) -> np.ndarray:
     """The white-balanced RGB corona PSF, shape (2R+1, 2R+1, 3), each channel summing to 1.
 
     Parameters
@@ -213,16 +215,18 @@ def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
         Spectral samples from 380 to 780 nm (bin centres).
     max_radius : int, optional
         Cap on the PSF radius in pixels (light beyond the frame is not kept anyway).
+    rgb_to_xyz : ndarray (3, 3), optional
+        The working space's RGB -> XYZ matrix (None: linear Rec.709).
     """
     radius = psf_radius(r0_px, extent, max_radius)
     geom = PSFGeometry(r0_px, radius)
     field = far_field(aperture(geom.m, geom.diameter, blades, rotation_deg))
     lams = spectral.wavelengths(n_wavelengths)
-    weights = spectral.spectral_rgb_weights(lams)
+    weights = spectral.spectral_rgb_weights(lams, rgb_to_xyz)
     rgb = np.zeros((2 * radius + 1, 2 * radius + 1, 3))
     for lam, w in zip(lams, weights):
         rgb += monochromatic_psf(field, geom, lam)[..., None] * w
-    rgb = spectral.to_gamut(rgb) * psflib.radial_taper(radius)[..., None]
+    rgb = spectral.to_gamut(rgb, rgb_to_xyz) * psflib.radial_taper(radius)[..., None]
     return rgb / rgb.sum(axis=(0, 1))
 
 
@@ -272,9 +276,9 @@ class Corona(SpreadRegions, Plugin):
         n = self.level(ctx).wavelengths
         cap = -(-self.max_radius(ctx) // factor)
         r0 = ctx.size_px(p.size) / factor
-        key = ("corona.psf", round(r0, 6), p.extent, blades, rotation, n, cap)
+        key = ("corona.psf", round(r0, 6), p.extent, blades, rotation, n, cap) + ctx.colour_key
         return ctx.runtime.cache.get(
-            key, lambda: spectral_psf(r0, p.extent, blades, rotation, n, cap))
+            key, lambda: spectral_psf(r0, p.extent, blades, rotation, n, cap, ctx.rgb_to_xyz))
 
     @staticmethod
     def max_radius(ctx) -> int:
@@ -292,10 +296,11 @@ class Corona(SpreadRegions, Plugin):
         ox, oy = src.window.offset_in(out_win)
         f = self.factor(p, ctx)
         support = self.highlight_support(p, ctx)
+        luma = ctx.luminance_defines     # thresholds weigh the working space's luminance
         if f == 1:
             bright = src.like()
-            rt.launch(rt.kernel("corona.cl", "corona_bright"), (src.pitch // 4, src.height),
-                      src, bright, i32(src.pitch), i32(src.height), f32(p.threshold))
+            rt.launch(rt.kernel("corona.cl", "corona_bright", **luma),
+                      (src.pitch // 4, src.height), src, bright, i32(src.pitch), i32(src.height), f32(p.threshold))
             glow_win = out_win
         else:
             # the pattern at 1 / f resolution: reduced pixel (i, j) is centred on output pixel
@@ -303,8 +308,8 @@ class Corona(SpreadRegions, Plugin):
             # highlights are splatted onto it with tent weights (their centroids kept)
             glow_win = Rect(0, 0, -(-out_win.width // f) + 2, -(-out_win.height // f) + 2)
             bright = rt.image(glow_win)
-            rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f), (bright.pitch, bright.height),
-                      src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy),
+            rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f, **luma),
+                      (bright.pitch, bright.height), src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy),
                       bright, i32(bright.pitch), i32(bright.width), i32(bright.height),
                       f32(p.threshold))
             if not support.empty:
@@ -316,8 +321,8 @@ class Corona(SpreadRegions, Plugin):
                               out_window=glow_win, support=support,
                               split_level=max(p.threshold, 1.0) * 64.0 * f * f, info=info)
         out = rt.image(out_win)
-        rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f), (out.pitch, out.height),
-                  src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow,
+        rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f, **luma),
+                  (out.pitch, out.height), src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow,
                   i32(glow.pitch), i32(glow.width), i32(glow.height), out, i32(out.pitch),
                   i32(out.width), i32(out.height), f32(p.intensity), f32(p.threshold))
         if f > 1:

@@ -13,7 +13,7 @@ every pixel above ``threshold`` in a connected bright region (scene analysis), i
 extent their rms radius.  Each ghost is the aperture polygon (or the round rim of a lens
 limiting it) imaged through its matrix, cut by the clip discs of the other apertures on its
 path, with per-wavelength sizes and positions (``final``: 7 wavelengths, ``clfx.fx.spectral``
-weights per channel: coloured fringes), a Fresnel-diffraction rim and edges blurred by the
+weights per channel in the working space's primaries, ``ctx.rgb_to_xyz``: coloured fringes), a Fresnel-diffraction rim and edges blurred by the
 light's extent and the lens's aberrations, and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``: no fudge factor; ``gain`` multiplies
 it, default 1).  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
@@ -97,7 +97,8 @@ PHYSICAL_TILE = 16
 @dataclass(frozen=True)
 class FlareLevel(Level):
     """A lens-flare quality level.  Physical model: ``wavelengths`` spectral samples (3: the
-    Rec.709 primaries' dominant wavelengths, else evenly from 420 to 680 nm), and the edge
+    Rec.709 primaries' dominant wavelengths, one per channel in any working space, else evenly
+    from 420 to 680 nm, spread over the channels by the working space's primaries), and the edge
     scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k`` resolution
     (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic model is
     one closed form at every level.  fp64: the lights' flux and centroid sums."""
@@ -126,6 +127,14 @@ def flare_wavelengths(count: int) -> tuple[float, ...]:
     if count == 3:
         return optics.RGB_WAVELENGTHS_NM
     return tuple(float(v) for v in np.linspace(420.0, 680.0, count))
+
+
+def flare_channel_weights(wavelengths, rgb_to_xyz=None) -> np.ndarray:
+    """How each colour channel spreads over ``wavelengths`` (``clfx.fx.spectral``'s channel
+    weights in the working space); three samples are one per channel in any space."""
+    if len(wavelengths) == 3:
+        return np.eye(3)
+    return spectral.channel_weights(wavelengths, rgb_to_xyz)
 
 
 def parse_ghosts(spec: str, count: int) -> list[tuple[float, float, tuple[float, float, float]]]:
@@ -318,7 +327,7 @@ class LensFlare(Plugin):
         if n == 0:
             return []
         knl = rt.kernel("lens_flare.cl", "lens_flare_measure", fp64=self.level(ctx).fp64,
-                        FULL=int(full))
+                        FULL=int(full), **ctx.luminance_defines)
         rt.launch(knl, (n,), src, np.int32(src.pitch),
                   rt.to_device(np.asarray(boxes, np.int32).ravel()), np.int32(n),
                   np.float32(p.threshold), out)
@@ -407,8 +416,8 @@ class LensFlare(Plugin):
         sub = table.subset(keep)
         edge, areas, _ = self.edge_tables(ctx)
         entries, levels, rows = flare.plan_entries(
-            sub, lights, geometry, spectral.channel_weights(wl), edge, areas, level=level,
-            max_level=lvl.max_level, level_scale=lvl.level_scale)
+            sub, lights, geometry, flare_channel_weights(wl, ctx.rgb_to_xyz), edge, areas,
+            level=level, max_level=lvl.max_level, level_scale=lvl.level_scale)
         return entries, levels, keep[rows], lights
 
     def render_physical(self, rt, p, ctx):
@@ -474,7 +483,7 @@ class LensFlare(Plugin):
         ox, oy = src.window.offset_in(out_win)
         i32 = np.int32
         knl = rt.kernel("lens_flare.cl", "lens_flare_render", TILE=TILE,
-                        BLADES=blades if blades >= 3 else 0)
+                        BLADES=blades if blades >= 3 else 0, **ctx.luminance_defines)
         rt.launch(knl, (out.pitch // 4, out.height), src, i32(src.pitch), i32(src.width),
                   i32(src.height), i32(ox), i32(oy), out, i32(out.pitch), i32(out.width),
                   i32(out.height), i32(out_win.x0), i32(out_win.y0), i32(tiles_x),

@@ -3,7 +3,8 @@ import pytest
 
 from clfx.fx.resample import lut_lookup, radial_lut
 from clfx.plugins.chromatic_aberration import ChromaticAberration as CA
-from clfx.plugins.chromatic_aberration import cie1931_xyz, radial_model, spectral_bins
+from clfx.fx.spectral import cie1931_cmf as cie1931_xyz
+from clfx.plugins.chromatic_aberration import radial_model, spectral_bins
 from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import (nonfinite_image, render_with_notes, smooth_image,
                                            wide_range_image)
@@ -119,3 +120,18 @@ def test_nan_and_inf_become_zero_and_finite_input_stays_finite(rt, rng, quality,
     clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
     np.testing.assert_array_equal(got, CA().apply(rt, p, clean, quality=quality))
     assert np.isfinite(CA().apply(rt, p, wide_range_image(rng), quality=quality)).all()
+
+
+def test_matches_reference_in_acescg(rt, rng):
+    # the working space's matrix builds the responses: the ACEScg tables, not Rec.709's
+    from clfx.io.colour import rgb_to_xyz
+
+    aces = rgb_to_xyz("ACEScg")
+    src = smooth_image(rng, 24, 36)
+    for spectral in (True, False):
+        p = CA.params(**PARAMS, spectral=spectral)
+        got = CA().apply(rt, p, src, quality="final", rgb_to_xyz=aces)
+        # as test_matches_reference_hard_shapes: float32 LUT and 16 bicubic reads, values <= 2
+        np.testing.assert_allclose(got, want(src, p, "final", rgb_to_xyz=aces), atol=2e-5)
+        # the deltas of the ACEScg red channel differ from Rec.709's by ~20 %
+        assert np.abs(got - CA().apply(rt, p, src, quality="final")).max() > 1e-4
