@@ -103,9 +103,10 @@ def channel_weights(wavelength_nm, rgb_to_xyz=None) -> np.ndarray:
     Each column is the channel's sensitivity in the working space (:func:`spectral_rgb_weights`
     with ``rgb_to_xyz``; Rec.709 by default) with its negative lobes dropped, normalised to
     sum 1 over the samples: light of one channel is carried by the wavelengths that channel
-    sees, and a spectrally flat (white) light keeps its RGB.  Three samples at the primaries' dominant wavelengths (610, 550, 465 nm)
-    give the identity; more samples spread each channel over its band (the coloured fringes
-    of lens flare ghosts are then graded, not three hard copies).
+    sees, and a spectrally flat (white) light keeps its RGB.  In Rec.709, three samples at
+    the primaries' dominant wavelengths (610, 550, 465 nm) give the identity; more samples
+    spread each channel over its band (the coloured fringes of lens flare ghosts are then
+    graded, not three hard copies).
     """
     w = np.maximum(spectral_rgb_weights(wavelength_nm, rgb_to_xyz), 0.0)
     s = w.sum(axis=0, keepdims=True)

@@ -300,7 +300,8 @@ class Corona(SpreadRegions, Plugin):
         if f == 1:
             bright = src.like()
             rt.launch(rt.kernel("corona.cl", "corona_bright", **luma),
-                      (src.pitch // 4, src.height), src, bright, i32(src.pitch), i32(src.height), f32(p.threshold))
+                      (src.pitch // 4, src.height), src, bright, i32(src.pitch), i32(src.height),
+                      f32(p.threshold))
             glow_win = out_win
         else:
             # the pattern at 1 / f resolution: reduced pixel (i, j) is centred on output pixel
@@ -309,7 +310,8 @@ class Corona(SpreadRegions, Plugin):
             glow_win = Rect(0, 0, -(-out_win.width // f) + 2, -(-out_win.height // f) + 2)
             bright = rt.image(glow_win)
             rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f, **luma),
-                      (bright.pitch, bright.height), src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy),
+                      (bright.pitch, bright.height), src, i32(src.pitch), i32(src.width),
+                      i32(src.height), i32(ox), i32(oy),
                       bright, i32(bright.pitch), i32(bright.width), i32(bright.height),
                       f32(p.threshold))
             if not support.empty:
@@ -322,7 +324,8 @@ class Corona(SpreadRegions, Plugin):
                               split_level=max(p.threshold, 1.0) * 64.0 * f * f, info=info)
         out = rt.image(out_win)
         rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f, **luma),
-                  (out.pitch, out.height), src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow,
+                  (out.pitch, out.height), src, i32(src.pitch), i32(src.width), i32(src.height),
+                  i32(ox), i32(oy), glow,
                   i32(glow.pitch), i32(glow.width), i32(glow.height), out, i32(out.pitch),
                   i32(out.width), i32(out.height), f32(p.intensity), f32(p.threshold))
         if f > 1:

@@ -97,11 +97,11 @@ PHYSICAL_TILE = 16
 @dataclass(frozen=True)
 class FlareLevel(Level):
     """A lens-flare quality level.  Physical model: ``wavelengths`` spectral samples (3: the
-    Rec.709 primaries' dominant wavelengths, one per channel in any working space, else evenly
-    from 420 to 680 nm, spread over the channels by the working space's primaries), and the edge
-    scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k`` resolution
-    (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic model is
-    one closed form at every level.  fp64: the lights' flux and centroid sums."""
+    Rec.709 primaries' dominant wavelengths, one per channel in any working space, else
+    evenly from 420 to 680 nm, spread over the channels by the working space's primaries),
+    and the edge scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k``
+    resolution (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic
+    model is one closed form at every level.  fp64: the lights' flux and centroid sums."""
 
     wavelengths: int = 7
     level_scale: float = 2.0
