@@ -220,8 +220,8 @@ def test_raw_pipe_honours_both_flags(rt):
 
 def test_cli_working_space_reaches_spectral_effects(tmp_path, rt, monkeypatch):
     """`clfx render --working-space ACEScg` hands the effects ACEScg's RGB -> XYZ matrix: the
-    corona of a Rec.709 EXR rendered in ACEScg (written back in Rec.709) matches the one
-    rendered in Rec.709 (tests/plugins/test_working_space.py says why not exactly)."""
+    corona of a Rec.709 EXR rendered in ACEScg (written back in Rec.709) is the one rendered in
+    Rec.709, to float32 precision (tolerance as in tests/plugins/test_working_space.py)."""
     from clfx.pipeline import look as look_mod
 
     src = np.full((48, 64, 4), 0.02, np.float32)
@@ -246,9 +246,14 @@ def test_cli_working_space_reaches_spectral_effects(tmp_path, rt, monkeypatch):
     np.testing.assert_allclose(seen[-1], colour.rgb_to_xyz("ACEScg"), rtol=1e-12)
     d709, dcg = outs["lin_rec709"] - src, outs["ACEScg"] - src
     assert np.abs(d709).max() > 1.0                                     # the corona is there
-    # as tests/plugins/test_working_space.py (corona): this orange light measures 1.0, 0.1,
-    # 2.6 % L1 per channel and 0.5 % per pixel
-    l1 = np.abs(dcg - d709)[..., :3].sum(axis=(0, 1)) / np.abs(d709)[..., :3].sum(axis=(0, 1))
-    px = np.abs(dcg - d709).max() / np.abs(d709).max()
-    print(f"corona via clfx render: relative L1 per channel {np.round(l1, 4)}, per pixel {px:.4f}")
-    assert (l1 < 0.04).all() and px < 0.01, (l1, px)
+    # as tests/plugins/test_working_space.py: beyond 8 float32 ulps of each pixel (the
+    # conversions in and out), the difference is below 1e-4 of the largest change, per pixel
+    # and in L1 per channel (measured: 0 and 0 here)
+    err = np.abs(dcg - d709)[..., :3]
+    ulp = np.finfo(np.float32).eps * np.abs(outs["lin_rec709"][..., :3]).max(-1, keepdims=True)
+    excess = np.maximum(err - 8 * ulp, 0.0)
+    l1 = excess.sum(axis=(0, 1)) / np.abs(d709)[..., :3].sum(axis=(0, 1))
+    px = excess.max() / np.abs(d709).max()
+    print(f"corona via clfx render: relative L1 per channel {l1}, per pixel {px:.3g}, "
+          f"before the ulp allowance {err.max() / np.abs(d709).max():.3g}")
+    assert (l1 < 1e-4).all() and px < 1e-4, (l1, px)

@@ -80,3 +80,10 @@ def luminance_defines(m=None) -> dict:
         return {}
     r, g, b = luminance_weights(m)
     return {"CLFX_LUMA_R": f"{r:.9g}f", "CLFX_LUMA_G": f"{g:.9g}f", "CLFX_LUMA_B": f"{b:.9g}f"}
+
+
+def to_reference(m=None) -> np.ndarray | None:
+    """The working space's RGB -> the spectral effects' reference basis, linear Rec.709:
+    ``XYZ_TO_REC709 @ m`` (`clfx.fx.spectral.in_reference_basis`); None for Rec.709 itself
+    (nothing to convert)."""
+    return None if is_rec709(m) else XYZ_TO_REC709 @ np.asarray(m, np.float64)

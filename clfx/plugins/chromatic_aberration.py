@@ -24,8 +24,8 @@ at the r_u solving the model (bisection, float64, tabulated per parameter set ag
 
 Spectral integration: the CIE 1931 2-degree colour matching functions (analytic multi-lobe
 Gaussian fit of Wyman, Sloan & Shirley 2013, JCGT 2(2), ``clfx.fx.spectral``) are converted
-to the working space's linear responses (the inverse of ``ctx.rgb_to_xyz``, D65; Rec.709 by
-default), negative lobes clipped to 0 (no negative light).
+to linear Rec.709 responses (XYZ -> Rec.709, D65), negative lobes clipped to 0 (no negative
+light).
 The band 380-720 nm is split into N equal bins; bin i reads the source at its centre
 wavelength's position and adds ``w_i[c] * src_c`` to channel c, where w_i[c] is the bin's
 share of channel c's (clipped) response: sum_i w_i[c] = 1, so a white or uniform image stays
@@ -36,8 +36,12 @@ shares.  The three-channel mode uses, per channel, the response-weighted mean de
 References: C. Wyman, P.-P. Sloan, P. Shirley, "Simple analytic approximations to the CIE
 XYZ color matching functions", JCGT 2013; IEC 61966-2-1 (sRGB/Rec.709 primaries).
 
-The tables depend on the working space: ``rgb_to_xyz`` (None = Rec.709) is an argument of
-every function below that builds them, and part of their cache keys.
+Working space: the model is defined in one reference basis, linear Rec.709; pixels of another
+working space are carried into it and back around the render
+(``clfx.fx.spectral.in_reference_basis``), so the fringes are the same light in any space.
+The functions below take ``rgb_to_xyz`` (None = Rec.709), which the render always leaves at
+Rec.709.  Every step is signed: the bicubic anti-ringing clamp keeps each channel within its
+neighbours' range, negative values (colours outside Rec.709) included.
 """
 from __future__ import annotations
 
@@ -247,6 +251,12 @@ class ChromaticAberration(Plugin):
                             + ctx.colour_key, build)
 
     def render(self, rt, p, ctx):
+        # the spectral model is defined in linear Rec.709; other working spaces are carried
+        # into it and back (clfx.fx.spectral.in_reference_basis)
+        return spectral.in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
+
+    def render_reference(self, rt, p, ctx):
+        """The effect on pixels in the reference basis (linear Rec.709)."""
         src = ctx.source
         lvl = self.level(ctx)
         n = lvl.wavelengths if p.spectral else 3

@@ -13,7 +13,8 @@ through the rainbow, blue inside, red outside.  The RGB PSF is
 
 with ``w(lambda) = M * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
 ``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum,
-``M`` the working space's XYZ -> RGB (the inverse of ``ctx.rgb_to_xyz``; Rec.709 by default).
+``M`` the XYZ -> RGB of the reference basis, linear Rec.709 (pixels of another working space
+are carried into it and back, ``clfx.fx.spectral.in_reference_basis``).
 Spectral colours are outside the gamut, so each PSF pixel is brought into gamut keeping its
 luminance (``clfx.fx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
 spectrally flat (white) light keeps its colour and energy (white balance) and only the
@@ -26,7 +27,11 @@ Output = sanitised source - ``intensity`` * highlights + ``intensity`` * (highli
 highlights being ``rgb * max(lum - threshold, 0) / lum``: the part of the light that the
 droplets or the aperture diffract leaves its pixel and lands in the pattern (Babinet: the
 undiffracted rest goes straight on), so the corona moves light and never adds any (the
-frame's total is kept).  ``size`` is the radius of the first dark ring at 550 nm for a round
+frame's total is kept).  The highlights take each pixel's non-negative part (per channel,
+``scatter_bright``): a negative component (a colour outside Rec.709, e.g. an ACEScg green
+carried into the reference basis) is not diffracted and stays in place, so nothing is
+clipped from the frame; this happens in the reference basis, hence the same for the same
+light in any working space.  ``size`` is the radius of the first dark ring at 550 nm for a round
 aperture (fraction of the frame diagonal; the same scale for polygons; the default 0.03 is an
 atmospheric corona's few degrees, rings wide enough to show around a candle flame, not only
 a point), ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its
@@ -290,13 +295,19 @@ class Corona(SpreadRegions, Plugin):
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
+        # the spectral model is defined in linear Rec.709; other working spaces are carried
+        # into it and back (clfx.fx.spectral.in_reference_basis)
+        return spectral.in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
+
+    def render_reference(self, rt, p, ctx):
+        """The effect on pixels in the reference basis (linear Rec.709)."""
         src = ctx.source
         i32, f32 = np.int32, np.float32
         out_win = self.output_window(p, ctx)
         ox, oy = src.window.offset_in(out_win)
         f = self.factor(p, ctx)
         support = self.highlight_support(p, ctx)
-        luma = ctx.luminance_defines     # thresholds weigh the working space's luminance
+        luma = ctx.luminance_defines     # Rec.709's: the luminance of the same light
         if f == 1:
             bright = src.like()
             rt.launch(rt.kernel("corona.cl", "corona_bright", **luma),

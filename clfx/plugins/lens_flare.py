@@ -13,12 +13,16 @@ every pixel above ``threshold`` in a connected bright region (scene analysis), i
 extent their rms radius.  Each ghost is the aperture polygon (or the round rim of a lens
 limiting it) imaged through its matrix, cut by the clip discs of the other apertures on its
 path, with per-wavelength sizes and positions (``final``: 7 wavelengths, ``clfx.fx.spectral``
-weights per channel in the working space's primaries, ``ctx.rgb_to_xyz``: coloured fringes), a Fresnel-diffraction rim and edges blurred by the
-light's extent and the lens's aberrations, and the brightness of its two coated reflections:
+weights per channel in linear Rec.709, the reference basis other working spaces are carried
+into and back, ``clfx.fx.spectral.in_reference_basis``: coloured fringes), a
+Fresnel-diffraction rim and edges blurred by the light's extent and the lens's aberrations,
+and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``: no fudge factor; ``gain`` multiplies
 it, default 1).  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
-drawn.  ``intensity``, ``ghost_count``, ``ghosts``, ``softness``, ``rim``, ``roundness`` and the
-halo belong to the artistic model.  The camera's focal length does not change the ghosts:
+drawn.  A light's flux takes each pixel's non-negative part per channel (in the reference
+basis: a colour outside Rec.709 makes ghosts of its in-gamut part, the same in any working
+space).  ``intensity``, ``ghost_count``, ``ghosts``, ``softness``, ``rim``, ``roundness``
+and the halo belong to the artistic model.  The camera's focal length does not change the ghosts:
 the prescription is its own lens (the light's position on the sensor is what matters, in mm
 through the camera's ``sensor_width``).
 
@@ -97,8 +101,8 @@ PHYSICAL_TILE = 16
 @dataclass(frozen=True)
 class FlareLevel(Level):
     """A lens-flare quality level.  Physical model: ``wavelengths`` spectral samples (3: the
-    Rec.709 primaries' dominant wavelengths, one per channel in any working space, else
-    evenly from 420 to 680 nm, spread over the channels by the working space's primaries),
+    Rec.709 primaries' dominant wavelengths, else evenly from 420 to 680 nm, spread over the
+    channels by Rec.709's primaries: the reference basis),
     and the edge scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k``
     resolution (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic
     model is one closed form at every level.  fp64: the lights' flux and centroid sums."""
@@ -467,8 +471,9 @@ class LensFlare(Plugin):
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
-        if p.model == "physical":
-            return self.render_physical(rt, p, ctx)
+        if p.model == "physical":   # spectral: in the reference basis, linear Rec.709
+            return spectral.in_reference_basis(rt, ctx,
+                                               lambda c: self.render_physical(rt, p, c))
         src = ctx.source
         out_win = self.output_window(p, ctx)
         sources = self.measure(rt, p, ctx, self.candidate_sources(p, ctx))

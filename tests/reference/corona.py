@@ -9,13 +9,17 @@ def luminance_weights(rgb_to_xyz=None):
 
 
 def highlights(src, threshold, rgb_to_xyz=None):
-    c = np.maximum(np.where(np.isfinite(src), src, 0.0).astype(np.float64), 0.0)
+    """(highlights, clean source): the bright-pass of the source's non-negative part (a
+    channel's negative light, outside the reference basis's gamut, is not scattered: it stays
+    in place), and the source with non-finite values set to 0, negatives kept."""
+    clean = np.where(np.isfinite(src), src, 0.0).astype(np.float64)
+    c = np.maximum(clean, 0.0)
     wr, wg, wb = luminance_weights(rgb_to_xyz)
     lum = wr * c[..., 0] + wg * c[..., 1] + wb * c[..., 2]
     k = np.where(lum > threshold, (lum - threshold) / np.where(lum > 0, lum, 1.0), 0.0)
     out = c * k[..., None]
     out[..., 3] = 0.0
-    return out, c
+    return out, clean
 
 
 def corona(src, psf, *, threshold, intensity, pad=0, rgb_to_xyz=None, **_):
