@@ -151,14 +151,15 @@ class ArrayResult:
 def render_array(rgba, look: str | dict | Look = "default", *, depth=None, velocity=None,
                  channels: Mapping[str, np.ndarray] | None = None, frame: int = 0,
                  quality: str | None = None, keep_overscan: bool = False,
-                 device: str | None = None, stats: RunStats | None = None) -> ArrayResult:
+                 device: str | None = None, stats: RunStats | None = None,
+                 working_space: str | None = None) -> ArrayResult:
     """Render one image held in memory through a look.
 
     Parameters
     ----------
     rgba : array_like
         (h, w, 4) scene-linear premultiplied RGBA in the working space (linear Rec.709 by
-        default); (h, w, 3) gets alpha 1; (h, w) is grey.
+        default, see ``working_space``); (h, w, 3) gets alpha 1; (h, w) is grey.
     look : str, dict or Look
         See :func:`load_look`.
     depth : array_like, optional
@@ -180,6 +181,9 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
         See :func:`runtime`.
     stats : RunStats, optional
         Share across the frames of one run to estimate what skipping saved.
+    working_space : str, optional
+        The linear OCIO space ``rgba`` is in (``"ACEScg"``; default linear Rec.709): spectral
+        effects and luminance thresholds use its primaries.  Nothing is converted.
 
     Returns
     -------
@@ -203,6 +207,13 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
             raise ParamError(f"{name}: shape {np.shape(a)} does not match the image's {shape}")
     lk = look if isinstance(look, Look) else load_look(look)
     frm = Frame.from_array(arr, depth=depth, velocity=velocity)
+    if working_space is not None:
+        from clfx.io import colour
+
+        frm.colorspace = colour.resolve(working_space, "working space")
+        if frm.colorspace == colour.RAW or not colour.is_linear(frm.colorspace):
+            raise ParamError(f"working_space {working_space!r} must be a linear colour space "
+                             f"(e.g. lin_rec709, ACEScg)")
     masks = read_masks(lk.at(frame), frm, frame, channels=channels) if lk.masks() else None
     out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=quality,
                                keep_overscan=keep_overscan, stats=stats, masks=masks)

@@ -13,6 +13,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from clfx.core import colour
 from clfx.core.camera import Camera
 from clfx.core.errors import ClipError, ParamError
 from clfx.core.frame import crop_to
@@ -68,12 +69,16 @@ class RenderContext:
     read_lens : callable(name) -> dict
         Reads a lens prescription by name (``presets/lenses/<name>.yaml``) or path, as the
         plain dict ``clfx.fx.optics.Prescription.from_dict`` takes (supplied by the pipeline).
+    rgb_to_xyz : ndarray (3, 3), float64
+        The working space's RGB -> CIE XYZ (D65) matrix, as data (the pipeline takes it from
+        OCIO); default linear Rec.709 (`clfx.core.colour`).  Spectral effects build their
+        wavelength -> RGB tables with it, thresholds weigh luminance with its Y row.
     """
 
     def __init__(self, runtime, source, *, depth=None, velocity=None, display_window=None,
                  pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
                  display_referred=False, analysis=None, output_limit=None, read_image=None,
-                 read_lens=None, reference_camera=None):
+                 read_lens=None, reference_camera=None, rgb_to_xyz=None):
         self.runtime = runtime
         self.source = source
         self.depth = depth
@@ -92,6 +97,24 @@ class RenderContext:
         self.warnings: list[str] = []  # said on stderr: a clamp, a guess, a skipped request
         self._read_image = read_image
         self._read_lens = read_lens
+        self.rgb_to_xyz = colour.rgb_to_xyz_matrix(rgb_to_xyz)
+
+    @property
+    def luminance(self) -> np.ndarray:
+        """Luminance weights of the working space's R, G, B (the Y row of ``rgb_to_xyz``;
+        Rec.709: 0.2126, 0.7152, 0.0722)."""
+        return colour.luminance_weights(self.rgb_to_xyz)
+
+    @property
+    def luminance_defines(self) -> dict:
+        """Build defines giving kernels' ``clfx_luminance`` the working space's weights
+        (none for Rec.709); pass them to ``rt.kernel`` wherever a kernel weighs luminance."""
+        return colour.luminance_defines(self.rgb_to_xyz)
+
+    @property
+    def colour_key(self) -> tuple:
+        """The working space's matrix as a cache key (() for Rec.709)."""
+        return colour.matrix_key(self.rgb_to_xyz)
 
     def read_image(self, path: str) -> np.ndarray:
         """The RGB(A) pixels of an image file a parameter names (a :class:`PathParam`), read
@@ -118,7 +141,8 @@ class RenderContext:
         if shared.value is None or shared.value.window != self.source.window:
             shared.value = analyse(self.runtime, self.source, depth=self.depth,
                                    velocity=self.velocity, camera=self.camera,
-                                   display_window=self.display_window)
+                                   display_window=self.display_window,
+                                   luminance_defines=self.luminance_defines)
             shared.seconds += shared.value.seconds
         return shared.value
 
@@ -235,8 +259,12 @@ class Plugin:
               quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
               data_window: Rect | None = None, display_window: Rect | None = None,
               pixel_aspect: float = 1.0, display_referred: bool = False,
-              keep_rod: bool = False, read_image=None, read_lens=None, reference_camera=None):
+              keep_rod: bool = False, read_image=None, read_lens=None, reference_camera=None,
+              rgb_to_xyz=None):
         """Run the effect on host arrays: upload, identity check, render, download.
+
+        ``source`` is in the working space whose RGB -> XYZ matrix is ``rgb_to_xyz`` (default
+        linear Rec.709).
 
         Returns the output cropped to the source window, or ``(array, window)`` with
         ``keep_rod=True``.  ``reference_camera`` is the camera at the shot's first keys
@@ -253,7 +281,8 @@ class Plugin:
             velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
             display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
             seed=seed, camera=camera, quality=quality, display_referred=display_referred,
-            read_image=read_image, read_lens=read_lens, reference_camera=reference_camera)
+            read_image=read_image, read_lens=read_lens, reference_camera=reference_camera,
+            rgb_to_xyz=rgb_to_xyz)
         self.check_clips(ctx)
         if self.is_identity(p, ctx):  # as in a look, whose upload sanitises: NaN/Inf -> 0
             out, out_window = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0), window

@@ -69,7 +69,7 @@ inline float16 bleed_source16(global const float *src, int spitch, int swidth, i
 inline float16 bleed_highlight16(float16 c, float threshold, float knee)
 {
   const float4 r = fmax(c.s048c, 0.0f), g = fmax(c.s159d, 0.0f), b = fmax(c.s26ae, 0.0f);
-  const float4 lum = 0.2126f * r + 0.7152f * g + 0.0722f * b;
+  const float4 lum = (CLFX_LUMA_R) * r + (CLFX_LUMA_G) * g + (CLFX_LUMA_B) * b;
   float4 soft = (float4)(0.0f);
   if(knee > 0.0f)
   {

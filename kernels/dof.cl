@@ -202,7 +202,7 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
 /* Luminance of the 4 pixels of a float16. */
 inline float4 dof_lum4(float16 c)
 {
-  return 0.2126f * c.s048c + 0.7152f * c.s159d + 0.0722f * c.s26ae;
+  return (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
 }
 
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;

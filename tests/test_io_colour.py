@@ -216,3 +216,44 @@ def test_raw_pipe_honours_both_flags(rt):
     np.testing.assert_allclose(to709[0, :, 0, 0], [want[1], want[2], want[0]], rtol=1e-4)
     srgb = _pipe([gbr], w, h, "--out-colorspace", "sRGB")          # linear Rec.709 -> sRGB
     assert srgb[0, 2, 0, 0] == pytest.approx(((0.5 ** (1 / 2.4)) * 1.055 - 0.055), rel=1e-4)
+
+
+def test_cli_working_space_reaches_spectral_effects(tmp_path, rt, monkeypatch):
+    """`clfx render --working-space ACEScg` hands the effects ACEScg's RGB -> XYZ matrix: the
+    corona of a Rec.709 EXR rendered in ACEScg (written back in Rec.709) is the one rendered in
+    Rec.709, to float32 precision (tolerance as in tests/plugins/test_working_space.py)."""
+    from clfx.pipeline import look as look_mod
+
+    src = np.full((48, 64, 4), 0.02, np.float32)
+    src[..., 3] = 1.0
+    src[20:22, 30:32, :3] = (3e3, 2e3, 1e3)
+    write_exr(tmp_path / "in.exr", src, fmt="float")
+    (tmp_path / "corona.yaml").write_text(
+        "name: corona-only\nschema: 1\neffects:\n  - effect: corona\n"
+        "    params: {threshold: 2.0, intensity: 0.5, size: 0.05, extent: 4.0}\n")
+    seen = []
+    real = look_mod.working_rgb_to_xyz
+    monkeypatch.setattr(look_mod, "working_rgb_to_xyz",
+                        lambda space: seen.append(real(space)) or seen[-1])
+    outs = {}
+    for ws in ("lin_rec709", "ACEScg"):
+        out = tmp_path / f"out-{ws}.exr"
+        r = CliRunner().invoke(cli, ["-q", "render", str(tmp_path / "in.exr"), str(out),
+                                     "--look", str(tmp_path / "corona.yaml"), "--float",
+                                     "--working-space", ws])
+        assert r.exit_code == 0, (r.output, r.stderr)
+        outs[ws] = read_raw_file(out)[0].astype(np.float64)
+    np.testing.assert_allclose(seen[-1], colour.rgb_to_xyz("ACEScg"), rtol=1e-12)
+    d709, dcg = outs["lin_rec709"] - src, outs["ACEScg"] - src
+    assert np.abs(d709).max() > 1.0                                     # the corona is there
+    # as tests/plugins/test_working_space.py: beyond 8 float32 ulps of each pixel (the
+    # conversions in and out), the difference is below 1e-4 of the largest change, per pixel
+    # and in L1 per channel (measured: 0 and 0 here)
+    err = np.abs(dcg - d709)[..., :3]
+    ulp = np.finfo(np.float32).eps * np.abs(outs["lin_rec709"][..., :3]).max(-1, keepdims=True)
+    excess = np.maximum(err - 8 * ulp, 0.0)
+    l1 = excess.sum(axis=(0, 1)) / np.abs(d709)[..., :3].sum(axis=(0, 1))
+    px = excess.max() / np.abs(d709).max()
+    print(f"corona via clfx render: relative L1 per channel {l1}, per pixel {px:.3g}, "
+          f"before the ulp allowance {err.max() / np.abs(d709).max():.3g}")
+    assert (l1 < 1e-4).all() and px < 1e-4, (l1, px)

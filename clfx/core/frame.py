@@ -2,8 +2,9 @@
 
 Conventions inside clfx (the I/O layer converts every renderer's convention to these):
 
-- ``rgba``: float32 (h, w, 4), scene-linear RGB (Rec.709 primaries),
-  premultiplied alpha as EXR stores it; covers ``data_window``.
+- ``rgba``: float32 (h, w, 4), scene-linear RGB in the working space's primaries
+  (``colorspace``; linear Rec.709 by default), premultiplied alpha as EXR stores it; covers
+  ``data_window``.
 - ``depth``: float32 (h, w), planar camera-space z in scene units (metres by default);
   background / no hit = +inf.  NaN, 0 and negatives are invalid and sanitised by effects.
 - ``velocity``: float32 (h, w, 2), forward screen-space displacement in pixels per frame
@@ -15,7 +16,7 @@ Conventions inside clfx (the I/O layer converts every renderer's convention to t
   display-referred 8/16-bit files that were linearised on read and are encoded back on write.
 - ``colorspace``: the OCIO name of the space ``rgba`` is in, the *working space* (default
   scene-linear Rec.709, ``"lin_rec709"``; ``clfx.io.colour.rgb_to_xyz(frame.colorspace)`` gives
-  its RGB -> XYZ matrix); ``source_colorspace``: the space the file stored (outputs are
+  its RGB -> XYZ matrix, which the pipeline hands to effects as ``ctx.rgb_to_xyz``); ``source_colorspace``: the space the file stored (outputs are
   written back in it unless told otherwise), None when unknown or raw.
 - ``layout``: the parts and channels of the file the frame was read from, so that outputs
   keep every channel the effects do not change (``clfx.io.write``); None for frames made in

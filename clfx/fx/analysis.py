@@ -182,8 +182,11 @@ def _label(mask: np.ndarray) -> np.ndarray:
 
 
 def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = None,
-            display_window: Rect | None = None) -> SceneAnalysis:
-    """Run the tile-statistics kernel over ``source`` (and passes sharing its window)."""
+            display_window: Rect | None = None,
+            luminance_defines: dict | None = None) -> SceneAnalysis:
+    """Run the tile-statistics kernel over ``source`` (and passes sharing its window);
+    luminance weighs RGB as ``luminance_defines`` say (``ctx.luminance_defines``: the working
+    space's Y row; default Rec.709)."""
     import time
 
     t0 = time.perf_counter()
@@ -197,7 +200,8 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
     rows = rt.buffer(max(h, 1) * tx * 8 * 4)
     dummy = rt.buffer(64)
     f = np.int32
-    rt.launch(rt.kernel("lib/analysis.cl", "analysis_rows", TILE=TILE), (tx, max(h, 1)), source,
+    rt.launch(rt.kernel("lib/analysis.cl", "analysis_rows", TILE=TILE,
+                        **(luminance_defines or {})), (tx, max(h, 1)), source,
               f(source.pitch), f(w), f(h),
               depth.buffer if depth is not None else dummy.buffer,
               velocity.buffer if velocity is not None else dummy.buffer,

@@ -137,7 +137,8 @@ class ScatterPlugin(SpreadRegions):
         self.note_nonfinite(ctx, k.shape[:2])
         h = rt.image(src.window, 4)
         f32, i32 = np.float32, np.int32
-        rt.launch(rt.kernel(kfile, f"{name}_highlights"), (src.pitch // 4, max(src.height, 1)),
+        rt.launch(rt.kernel(kfile, f"{name}_highlights", **ctx.luminance_defines),
+                  (src.pitch // 4, max(src.height, 1)),
                   src, h, i32(src.pitch), i32(src.height), f32(p.threshold), f32(p.knee),
                   f32(boost))
         out_window = self.output_window(p, ctx)
@@ -151,7 +152,8 @@ class ScatterPlugin(SpreadRegions):
 
         tint = cltypes.make_float4(*p.tint, 0.0)
         dx, dy = out_window.offset_in(src.window)
-        rt.launch(rt.kernel(kfile, f"{name}_mix"), (dst.pitch // 4, max(dst.height, 1)),
+        rt.launch(rt.kernel(kfile, f"{name}_mix", **ctx.luminance_defines),
+                  (dst.pitch // 4, max(dst.height, 1)),
                   src, i32(src.pitch), i32(src.width), i32(src.height), g, dst,
                   i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(self.strength(p)),
                   tint, f32(p.threshold), f32(p.knee), f32(boost), i32(boost > 0.0))

@@ -1,4 +1,4 @@
-"""Spectral helpers: CIE 1931 2-degree colour matching functions and XYZ -> linear Rec.709.
+"""Spectral helpers: CIE 1931 2-degree colour matching functions and XYZ -> the working space.
 
 The colour matching functions use the multi-lobe piecewise-Gaussian fit of Wyman, Sloan and
 Shirley (2013), "Simple analytic approximations to the CIE XYZ color matching functions",
@@ -8,20 +8,24 @@ for rendering purposes (the paper reports errors comparable to the differences b
 observer datasets); the peaks come out at x 1.056 (~600 nm), y 1.0 (~555 nm), z 1.78
 (~445 nm).
 
-``XYZ_TO_REC709`` is the standard matrix for linear Rec.709 / sRGB primaries with the D65
-white point (IEC 61966-2-1).  Spectral colours lie outside the Rec.709 gamut, so converted
-spectra have negative components; :func:`to_gamut` brings them inside while keeping luminance.
+Every function takes an RGB -> XYZ matrix ``rgb_to_xyz`` (None = linear Rec.709, whose
+XYZ -> RGB is the IEC 61966-2-1 matrix ``XYZ_TO_REC709``, `clfx.core.colour`).  Spectral
+colours lie outside any RGB gamut with real primaries (less far outside ACEScg's than
+Rec.709's), so converted spectra have negative components; :func:`to_gamut` brings them
+inside while keeping that space's luminance.
+
+Spectral effects (chromatic aberration, corona, lens flare's physical model) define their
+spectral model once, in one reference basis, linear Rec.709 (their tables are built with
+the default matrix); :func:`in_reference_basis` runs them on pixels of any other working
+space as ``B^-1 effect(B rgb)`` with ``B = XYZ_TO_REC709 @ ctx.rgb_to_xyz``, so the result is
+the same light in any space.
 """
 from __future__ import annotations
 
 import numpy as np
 
-XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],
-                          [-0.9692660, 1.8760108, 0.0415560],
-                          [0.0556434, -0.2040259, 1.0572252]])
-"""Linear Rec.709 RGB = XYZ_TO_REC709 @ XYZ (D65 white)."""
-
-REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+from clfx.core import colour
+from clfx.core.colour import REC709_LUMINANCE, XYZ_TO_REC709  # noqa: F401 (re-exported)
 
 VISIBLE_NM = (380.0, 780.0)
 
@@ -55,7 +59,12 @@ def cie1931_cmf(wavelength_nm) -> np.ndarray:
 
 def xyz_to_rec709(xyz) -> np.ndarray:
     """Linear Rec.709 RGB (D65) of CIE XYZ, shape (..., 3) -> (..., 3)."""
-    return np.asarray(xyz, np.float64) @ XYZ_TO_REC709.T
+    return xyz_to_rgb(xyz)
+
+
+def xyz_to_rgb(xyz, rgb_to_xyz=None) -> np.ndarray:
+    """The working space's RGB of CIE XYZ (D65), shape (..., 3) -> (..., 3)."""
+    return np.asarray(xyz, np.float64) @ colour.xyz_to_rgb(rgb_to_xyz).T
 
 
 def wavelengths(count: int, lo: float = VISIBLE_NM[0], hi: float = VISIBLE_NM[1]) -> np.ndarray:
@@ -64,25 +73,26 @@ def wavelengths(count: int, lo: float = VISIBLE_NM[0], hi: float = VISIBLE_NM[1]
     return lo + width * (np.arange(count) + 0.5)
 
 
-def spectral_rgb_weights(wavelength_nm) -> np.ndarray:
-    """Rec.709 RGB of each wavelength sample of an equal-energy spectrum, shape (n, 3).
+def spectral_rgb_weights(wavelength_nm, rgb_to_xyz=None) -> np.ndarray:
+    """Working-space RGB of each wavelength sample of an equal-energy spectrum, shape (n, 3).
 
-    Each row is ``xyz_to_rec709(cmf(lambda)) * d_lambda``; rows sum to the RGB of the
+    Each row is ``xyz_to_rgb(cmf(lambda)) * d_lambda``; rows sum to the RGB of the
     equal-energy illuminant E over the sampled band.  Rows may have negative components
-    (spectral colours are outside the Rec.709 gamut).
+    (spectral colours are outside the gamut).
     """
     lam = np.asarray(wavelength_nm, np.float64)
     d_lambda = (VISIBLE_NM[1] - VISIBLE_NM[0]) / lam.size
-    return xyz_to_rec709(cie1931_cmf(lam)) * d_lambda
+    return xyz_to_rgb(cie1931_cmf(lam), rgb_to_xyz) * d_lambda
 
 
-def to_gamut(rgb: np.ndarray) -> np.ndarray:
+def to_gamut(rgb: np.ndarray, rgb_to_xyz=None) -> np.ndarray:
     """Desaturate each RGB triple toward its own luminance until no component is negative.
 
-    Keeps Rec.709 luminance and hue direction; triples with negative luminance become 0.
+    Keeps the working space's luminance (``rgb_to_xyz``'s Y row; Rec.709's by default) and
+    hue direction; triples with negative luminance become 0.
     """
     rgb = np.asarray(rgb, np.float64)
-    lum = rgb @ REC709_LUMINANCE
+    lum = rgb @ colour.luminance_weights(rgb_to_xyz)
     lo = rgb.min(axis=-1)
     # mix(rgb, lum, t) >= 0 needs t >= -lo / (lum - lo) where lo < 0
     t = np.where(lo < 0, -lo / np.maximum(lum - lo, 1e-300), 0.0)
@@ -92,19 +102,54 @@ def to_gamut(rgb: np.ndarray) -> np.ndarray:
     return np.maximum(out, 0.0)
 
 
-def channel_weights(wavelength_nm) -> np.ndarray:
+def channel_weights(wavelength_nm, rgb_to_xyz=None) -> np.ndarray:
     """How a camera's R, G and B channels spread over wavelength samples, shape (n, 3).
 
-    Each column is the channel's Rec.709 sensitivity (:func:`spectral_rgb_weights`) with
-    its negative lobes dropped, normalised to sum 1 over the samples: light of one channel
-    is carried by the wavelengths that channel sees, and a spectrally flat (white) light
-    keeps its RGB.  Three samples at the primaries' dominant wavelengths (610, 550, 465 nm)
-    give the identity; more samples spread each channel over its band (the coloured fringes
-    of lens flare ghosts are then graded, not three hard copies).
+    Each column is the channel's sensitivity in the working space (:func:`spectral_rgb_weights`
+    with ``rgb_to_xyz``; Rec.709 by default) with its negative lobes dropped, normalised to
+    sum 1 over the samples: light of one channel is carried by the wavelengths that channel
+    sees, and a spectrally flat (white) light keeps its RGB.  In Rec.709, three samples at
+    the primaries' dominant wavelengths (610, 550, 465 nm) give the identity; more samples
+    spread each channel over its band (the coloured fringes of lens flare ghosts are then
+    graded, not three hard copies).
     """
-    w = np.maximum(spectral_rgb_weights(wavelength_nm), 0.0)
+    w = np.maximum(spectral_rgb_weights(wavelength_nm, rgb_to_xyz), 0.0)
     s = w.sum(axis=0, keepdims=True)
     if np.any(s <= 0.0):
         raise ValueError(f"wavelengths {np.asarray(wavelength_nm).tolist()} leave a colour "
                          f"channel without a sample it sees")
     return w / s
+
+
+def in_reference_basis(rt, ctx, render):
+    """``render(ctx)`` (a spectral effect's device render, returning an RGBA image) in the
+    reference basis, linear Rec.709, whatever the working space.
+
+    Rec.709 (``ctx.rgb_to_xyz`` the default): ``render(ctx)``, pixels untouched.  Any other
+    space: the source is carried into the reference basis by ``B = XYZ_TO_REC709 @
+    ctx.rgb_to_xyz`` (a 3x3 per pixel on the device, alpha kept, negative components kept),
+    rendered in a context whose matrix is Rec.709's (tables, luminance thresholds and the
+    scene analysis of the converted pixels: the luminance row ``Y_709 B`` is the working
+    space's own, to 1e-4), and the output carried back by ``B^-1``.  Every step of the effect,
+    non-linear ones included (per-channel anti-ringing clamps, thresholds), then sees the same
+    numbers as for the same light given in Rec.709.
+    """
+    b = colour.to_reference(ctx.rgb_to_xyz)
+    if b is None:
+        return render(ctx)
+    ref = ctx.with_source(rgb_matrix(rt, ctx.source, b))
+    ref.rgb_to_xyz = colour.REC709_TO_XYZ
+    return rgb_matrix(rt, render(ref), np.linalg.inv(b))
+
+
+def rgb_matrix(rt, img, m):
+    """A new RGBA device image: ``m @ rgb`` of ``img``'s pixels, alpha copied
+    (kernels/lib/image.cl ``image_rgb_matrix``, float32)."""
+    from pyopencl import cltypes
+
+    out = img.like()
+    f4 = [cltypes.make_float4(*(float(v) for v in r), 0.0) for r in np.asarray(m)]
+    rt.launch(rt.kernel("lib/image.cl", "image_rgb_matrix", CH=4, BORDER=0),
+              (img.pitch, max(img.height, 1)), img, out, np.int32(img.pitch),
+              np.int32(img.height), *f4)
+    return out

@@ -24,11 +24,13 @@ adapted with Bradford).  ``"raw"`` (OCIO's data space) means: no conversion.
 from __future__ import annotations
 
 import difflib
+import functools
 import math
 
 import numpy as np
 import OpenImageIO as oiio
 
+from clfx.core.colour import REC709_TO_XYZ
 from clfx.core.errors import ImageIOError
 from clfx.io._oiio import fail, geterror
 
@@ -187,6 +189,26 @@ def rgb_to_xyz(space: str) -> np.ndarray:
     if chroma is None:
         raise ImageIOError(f"colour space {space!r} has no chromaticities in the OCIO config")
     return _bradford(chroma[6:], _D65) @ _npm(chroma)
+
+
+@functools.lru_cache(maxsize=32)
+def _working_matrix(space: str) -> np.ndarray:
+    if same(space, DEFAULT_WORKING):
+        return REC709_TO_XYZ
+    m = rgb_to_xyz(space)
+    m.setflags(write=False)
+    return m
+
+
+def working_rgb_to_xyz(space: str | None) -> np.ndarray:
+    """The RGB -> XYZ matrix effects get for a working space (``ctx.rgb_to_xyz``): OCIO's
+    (`rgb_to_xyz`), except for linear Rec.709 (None, raw, or a space equivalent to
+    `DEFAULT_WORKING`), which gets `clfx.core.colour.REC709_TO_XYZ`, the IEC 61966-2-1
+    matrix the effects' Rec.709 tables are built with (2e-4 from OCIO's), so Rec.709 renders
+    keep their pixels."""
+    if space is None or is_raw(space):
+        return REC709_TO_XYZ
+    return _working_matrix(resolve(space))
 
 
 # --------------------------------------------------------------------------------------------

@@ -368,6 +368,16 @@ def read_lens_dict(name: str) -> dict:
     return read_lens(name)
 
 
+def working_rgb_to_xyz(space: str | None):
+    """The working space's RGB -> XYZ matrix from OCIO (`clfx.io.colour.working_rgb_to_xyz`),
+    handed to effects as data on the render context (None: Rec.709, the default)."""
+    if space in (None, "lin_rec709"):   # frames made in memory: no need for OpenImageIO
+        return None
+    from clfx.io.colour import working_rgb_to_xyz as matrix  # lazy: io pulls in OpenImageIO
+
+    return matrix(space)
+
+
 def output_limit(frame: Frame, keep_overscan: bool) -> Rect:
     """The window effects may write to and the result is cropped to."""
     return _limit(frame.data_window, frame.display_window, keep_overscan)
@@ -516,7 +526,8 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
                         display_referred=frame.display_referred,
                         output_limit=output_limit(frame, keep_overscan),
                         read_image=read_image_rgba, read_lens=read_lens_dict,
-                        reference_camera=reference_camera)
+                        reference_camera=reference_camera,
+                        rgb_to_xyz=working_rgb_to_xyz(frame.colorspace))
     if nonfinite:
         ctx.warnings.append(f"{nonfinite} pixel(s) with NaN or infinite values set to 0")
     return ctx

@@ -146,7 +146,7 @@ class Bleed(ScatterPlugin, Plugin):
         taps = 2 * r + 1
         self.note_nonfinite(ctx, (taps, taps))
         lvl = self.level(ctx)
-        defines = dict(RADIUS=r, ROWS=BLOCK_ROWS, fp64=lvl.small_fp64)
+        defines = dict(RADIUS=r, ROWS=BLOCK_ROWS, fp64=lvl.small_fp64, **ctx.luminance_defines)
         if lvl.rank:
             defines["RANK"] = lvl.rank
         weights = self._weights(rt, p, ctx, lvl)

@@ -23,8 +23,9 @@ at the r_u solving the model (bisection, float64, tabulated per parameter set ag
 (r_d / r_max)^2 and looked up in the kernel).
 
 Spectral integration: the CIE 1931 2-degree colour matching functions (analytic multi-lobe
-Gaussian fit of Wyman, Sloan & Shirley 2013, JCGT 2(2)) are converted to linear Rec.709
-responses (XYZ -> Rec.709 matrix, D65), negative lobes clipped to 0 (no negative light).
+Gaussian fit of Wyman, Sloan & Shirley 2013, JCGT 2(2), ``clfx.fx.spectral``) are converted
+to linear Rec.709 responses (XYZ -> Rec.709, D65), negative lobes clipped to 0 (no negative
+light).
 The band 380-720 nm is split into N equal bins; bin i reads the source at its centre
 wavelength's position and adds ``w_i[c] * src_c`` to channel c, where w_i[c] is the bin's
 share of channel c's (clipped) response: sum_i w_i[c] = 1, so a white or uniform image stays
@@ -34,6 +35,13 @@ shares.  The three-channel mode uses, per channel, the response-weighted mean de
 
 References: C. Wyman, P.-P. Sloan, P. Shirley, "Simple analytic approximations to the CIE
 XYZ color matching functions", JCGT 2013; IEC 61966-2-1 (sRGB/Rec.709 primaries).
+
+Working space: the model is defined in one reference basis, linear Rec.709; pixels of another
+working space are carried into it and back around the render
+(``clfx.fx.spectral.in_reference_basis``), so the fringes are the same light in any space.
+The functions below take ``rgb_to_xyz`` (None = Rec.709), which the render always leaves at
+Rec.709.  Every step is signed: the bicubic anti-ringing clamp keeps each channel within its
+neighbours' range, negative values (colours outside Rec.709) included.
 """
 from __future__ import annotations
 
@@ -43,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
+from clfx.fx import spectral
 from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, band_window,
                               check_fold, fold_radius, frame_key, kernel_defines,
                               launch_packed, lut_lookup, needs_sanitising, pixel_centres,
@@ -52,11 +61,6 @@ from clfx.host import Plugin, register
 LAMBDA_MIN, LAMBDA_MAX = 380.0, 720.0
 LAMBDA_B, LAMBDA_R = 450.0, 650.0
 LUT_SIZE = 1024
-
-XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],
-                          [-0.9692660, 1.8760108, 0.0415560],
-                          [0.0556434, -0.2040259, 1.0572252]])
-
 
 @dataclass(frozen=True)
 class SpectralLevel(ResampleLevel):
@@ -80,25 +84,11 @@ LEVELS = {
 }
 
 
-def _lobe(lam, mu, s1, s2):
-    s = np.where(lam < mu, s1, s2)
-    return np.exp(-0.5 * ((lam - mu) / s) ** 2)
-
-
-def cie1931_xyz(lam):
-    """CIE 1931 2-degree CMFs (Wyman, Sloan & Shirley 2013 multi-lobe fit); lam in nm."""
-    lam = np.asarray(lam, np.float64)
-    x = 1.056 * _lobe(lam, 599.8, 37.9, 31.0) + 0.362 * _lobe(lam, 442.0, 16.0, 26.7) \
-        - 0.065 * _lobe(lam, 501.1, 20.4, 26.2)
-    y = 0.821 * _lobe(lam, 568.8, 46.9, 40.5) + 0.286 * _lobe(lam, 530.9, 16.3, 31.1)
-    z = 1.217 * _lobe(lam, 437.0, 11.8, 36.0) + 0.681 * _lobe(lam, 459.0, 26.0, 13.8)
-    return np.stack([x, y, z], -1)
-
-
-def rgba_response(lam):
-    """Non-negative linear Rec.709 response per wavelength, plus y-bar for alpha."""
-    xyz = cie1931_xyz(lam)
-    rgb = np.clip(xyz @ XYZ_TO_REC709.T, 0.0, None)
+def rgba_response(lam, rgb_to_xyz=None):
+    """Non-negative linear response of the working space's R, G, B per wavelength (None:
+    Rec.709), plus y-bar for alpha."""
+    xyz = spectral.cie1931_cmf(lam)
+    rgb = np.clip(spectral.xyz_to_rgb(xyz, rgb_to_xyz), 0.0, None)
     return np.concatenate([rgb, xyz[..., 1:2]], -1)
 
 
@@ -106,41 +96,42 @@ def _fine_grid():
     return np.arange(LAMBDA_MIN + 0.125, LAMBDA_MAX, 0.25)
 
 
-def green_inverse_square():
+def green_inverse_square(rgb_to_xyz=None):
     """The green channel's response-weighted mean of 1/lambda^2 (nm^-2)."""
     lam = _fine_grid()
-    g = rgba_response(lam)[:, 1]
+    g = rgba_response(lam, rgb_to_xyz)[:, 1]
     return float((g / lam ** 2).sum() / g.sum())
 
 
-def dispersion(lam, amount):
+def dispersion(lam, amount, rgb_to_xyz=None):
     """Relative magnification delta(lambda) (Cauchy): 0 for the green channel's mean."""
     norm = 1.0 / LAMBDA_B ** 2 - 1.0 / LAMBDA_R ** 2
-    return amount * (1.0 / np.asarray(lam, np.float64) ** 2 - green_inverse_square()) / norm
+    return amount * (1.0 / np.asarray(lam, np.float64) ** 2
+                     - green_inverse_square(rgb_to_xyz)) / norm
 
 
-def spectral_bins(n: int, amount: float):
+def spectral_bins(n: int, amount: float, rgb_to_xyz=None):
     """(deltas[n], weights[n, 4]): bin-centre dispersion and each bin's share of R, G, B, A.
 
     Weights integrate the response over each bin on a 0.25 nm grid (midpoint rule), so few
     bins still carry the right energy; every column sums to 1.
     """
     fine = _fine_grid()
-    resp = rgba_response(fine)
+    resp = rgba_response(fine, rgb_to_xyz)
     edges = np.linspace(LAMBDA_MIN, LAMBDA_MAX, n + 1)
     which = np.clip(np.searchsorted(edges, fine, side="right") - 1, 0, n - 1)
     weights = np.zeros((n, 4))
     np.add.at(weights, which, resp)
     weights /= weights.sum(0, keepdims=True)
     centres = 0.5 * (edges[:-1] + edges[1:])
-    return dispersion(centres, amount), weights
+    return dispersion(centres, amount, rgb_to_xyz), weights
 
 
-def channel_bins(amount: float):
+def channel_bins(amount: float, rgb_to_xyz=None):
     """Three-channel mode: per channel the response-weighted mean delta, unit weights."""
     fine = _fine_grid()
-    resp = rgba_response(fine)[:, :3]
-    deltas = (resp * dispersion(fine, amount)[:, None]).sum(0) / resp.sum(0)
+    resp = rgba_response(fine, rgb_to_xyz)[:, :3]
+    deltas = (resp * dispersion(fine, amount, rgb_to_xyz)[:, None]).sum(0) / resp.sum(0)
     deltas[1] = 0.0        # zero by construction (rounding aside): green stays in place
     weights = np.zeros((3, 4))
     weights[[0, 1, 2], [0, 1, 2]] = 1.0
@@ -178,13 +169,13 @@ def build_luts(deltas, cubic, r_max):
     return np.stack(luts)
 
 
-def channel_points(p, display_window, window, pixel_aspect, rows=None):
+def channel_points(p, display_window, window, pixel_aspect, rows=None, rgb_to_xyz=None):
     """Three-channel mode: the red and blue source points of ``window``'s pixels
     (source-window coordinates, texel centres at +0.5, float64), looked up in float64 in the
     same tables the kernel would interpolate (green and alpha stay in place).  ``rows``
     ``(y0, y1)``: only those rows of the window (the tables are still the whole window's)."""
     cx, cy, unit, r_max = geometry(p, display_window, window, pixel_aspect)
-    deltas, _ = channel_bins(p.amount)
+    deltas, _ = channel_bins(p.amount, rgb_to_xyz)
     luts = build_luts(deltas, p.cubic, r_max)
     scale = 1.0 / (unit * r_max)
     ox, oy = pixel_centres(window if rows is None else band_window(window, *rows))
@@ -226,13 +217,15 @@ class ChromaticAberration(Plugin):
         src = ctx.source
 
         def build():
-            _, weights = channel_bins(p.amount)
+            _, weights = channel_bins(p.amount, ctx.rgb_to_xyz)
             points_of = lambda y0, y1: channel_points(p, ctx.display_window, src.window,
-                                                      ctx.pixel_aspect, rows=(y0, y1))
+                                                      ctx.pixel_aspect, rows=(y0, y1),
+                                                      rgb_to_xyz=ctx.rgb_to_xyz)
             return (PackedMap.device(rt, points_of, src.width, src.height, src.pitch),
                     rt.to_device(weights.astype(np.float32)))
 
-        return rt.cache.get(("chromatic_aberration.packed",) + frame_key(p, ctx), build)
+        return rt.cache.get(("chromatic_aberration.packed",) + frame_key(p, ctx)
+                            + ctx.colour_key, build)
 
     def is_identity(self, p, ctx):
         if p.amount == 0.0:
@@ -247,7 +240,9 @@ class ChromaticAberration(Plugin):
 
         def build():
             cx, cy, unit, r_max = geometry(p, ctx.display_window, src.window, ctx.pixel_aspect)
-            deltas, weights = channel_bins(p.amount) if n == 3 else spectral_bins(n, p.amount)
+            m = ctx.rgb_to_xyz
+            deltas, weights = (channel_bins(p.amount, m) if n == 3
+                               else spectral_bins(n, p.amount, m))
             luts = build_luts(deltas, p.cubic, r_max)
             dt = np.float64 if double else np.float32
             scale = 1.0 / (unit * r_max)
@@ -255,8 +250,8 @@ class ChromaticAberration(Plugin):
             return (rt.to_device(interleave(luts).astype(dt)), rt.to_device(weights.astype(dt)),
                     consts, max_shift(luts, cx, cy, src.window))
 
-        return rt.cache.get(("chromatic_aberration.tables",) + frame_key(p, ctx) + (n, double),
-                            build)
+        return rt.cache.get(("chromatic_aberration.tables",) + frame_key(p, ctx) + (n, double)
+                            + ctx.colour_key, build)
 
     def prepare(self, rt, p, ctx):
         if self.is_identity(p, ctx):
@@ -270,6 +265,12 @@ class ChromaticAberration(Plugin):
             self.tables(rt, p, ctx, n, double)
 
     def render(self, rt, p, ctx):
+        # the spectral model is defined in linear Rec.709; other working spaces are carried
+        # into it and back (clfx.fx.spectral.in_reference_basis)
+        return spectral.in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
+
+    def render_reference(self, rt, p, ctx):
+        """The effect on pixels in the reference basis (linear Rec.709)."""
         src = ctx.source
         lvl = self.level(ctx)
         n = lvl.wavelengths if p.spectral else 3

@@ -11,9 +11,11 @@ through the rainbow, blue inside, red outside.  The RGB PSF is
 
     PSF_c(x) = sum_lambda  w_c(lambda) * I(x / s_lambda) / s_lambda^2,   s_lambda ∝ lambda,
 
-with ``w(lambda) = M_709 * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
-``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum.
-Spectral colours are outside Rec.709, so each PSF pixel is brought into gamut keeping its
+with ``w(lambda) = M * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
+``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum,
+``M`` the XYZ -> RGB of the reference basis, linear Rec.709 (pixels of another working space
+are carried into it and back, ``clfx.fx.spectral.in_reference_basis``).
+Spectral colours are outside the gamut, so each PSF pixel is brought into gamut keeping its
 luminance (``clfx.fx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
 spectrally flat (white) light keeps its colour and energy (white balance) and only the
 rings are coloured.  ``I`` is computed once per parameter set on the host (NumPy FFT of an
@@ -25,7 +27,11 @@ Output = sanitised source - ``intensity`` * highlights + ``intensity`` * (highli
 highlights being ``rgb * max(lum - threshold, 0) / lum``: the part of the light that the
 droplets or the aperture diffract leaves its pixel and lands in the pattern (Babinet: the
 undiffracted rest goes straight on), so the corona moves light and never adds any (the
-frame's total is kept).  ``size`` is the radius of the first dark ring at 550 nm for a round
+frame's total is kept).  The highlights take each pixel's non-negative part (per channel,
+``scatter_bright``): a negative component (a colour outside Rec.709, e.g. an ACEScg green
+carried into the reference basis) is not diffracted and stays in place, so nothing is
+clipped from the frame; this happens in the reference basis, hence the same for the same
+light in any working space.  ``size`` is the radius of the first dark ring at 550 nm for a round
 aperture (fraction of the frame diagonal; the same scale for polygons; the default 0.03 is an
 atmospheric corona's few degrees, rings wide enough to show around a candle flame, not only
 a point), ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its
@@ -198,7 +204,8 @@ def psf_radius(r0_px: float, extent: float, max_radius: int | None = None) -> in
 
 
 def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
-                 n_wavelengths: int, max_radius: int | None = None) -> np.ndarray:
+                 n_wavelengths: int, max_radius: int | None = None,
+                 rgb_to_xyz=None) -> np.ndarray:
     """The white-balanced RGB corona PSF, shape (2R+1, 2R+1, 3), each channel summing to 1.
 
     Parameters
@@ -213,16 +220,18 @@ def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
         Spectral samples from 380 to 780 nm (bin centres).
     max_radius : int, optional
         Cap on the PSF radius in pixels (light beyond the frame is not kept anyway).
+    rgb_to_xyz : ndarray (3, 3), optional
+        The working space's RGB -> XYZ matrix (None: linear Rec.709).
     """
     radius = psf_radius(r0_px, extent, max_radius)
     geom = PSFGeometry(r0_px, radius)
     field = far_field(aperture(geom.m, geom.diameter, blades, rotation_deg))
     lams = spectral.wavelengths(n_wavelengths)
-    weights = spectral.spectral_rgb_weights(lams)
+    weights = spectral.spectral_rgb_weights(lams, rgb_to_xyz)
     rgb = np.zeros((2 * radius + 1, 2 * radius + 1, 3))
     for lam, w in zip(lams, weights):
         rgb += monochromatic_psf(field, geom, lam)[..., None] * w
-    rgb = spectral.to_gamut(rgb) * psflib.radial_taper(radius)[..., None]
+    rgb = spectral.to_gamut(rgb, rgb_to_xyz) * psflib.radial_taper(radius)[..., None]
     return rgb / rgb.sum(axis=(0, 1))
 
 
@@ -272,9 +281,9 @@ class Corona(SpreadRegions, Plugin):
         n = self.level(ctx).wavelengths
         cap = -(-self.max_radius(ctx) // factor)
         r0 = ctx.size_px(p.size) / factor
-        key = ("corona.psf", round(r0, 6), p.extent, blades, rotation, n, cap)
+        key = ("corona.psf", round(r0, 6), p.extent, blades, rotation, n, cap) + ctx.colour_key
         return ctx.runtime.cache.get(
-            key, lambda: spectral_psf(r0, p.extent, blades, rotation, n, cap))
+            key, lambda: spectral_psf(r0, p.extent, blades, rotation, n, cap, ctx.rgb_to_xyz))
 
     @staticmethod
     def max_radius(ctx) -> int:
@@ -286,16 +295,24 @@ class Corona(SpreadRegions, Plugin):
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
+        # the spectral model is defined in linear Rec.709; other working spaces are carried
+        # into it and back (clfx.fx.spectral.in_reference_basis)
+        return spectral.in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
+
+    def render_reference(self, rt, p, ctx):
+        """The effect on pixels in the reference basis (linear Rec.709)."""
         src = ctx.source
         i32, f32 = np.int32, np.float32
         out_win = self.output_window(p, ctx)
         ox, oy = src.window.offset_in(out_win)
         f = self.factor(p, ctx)
         support = self.highlight_support(p, ctx)
+        luma = ctx.luminance_defines     # Rec.709's: the luminance of the same light
         if f == 1:
             bright = src.like()
-            rt.launch(rt.kernel("corona.cl", "corona_bright"), (src.pitch // 4, src.height),
-                      src, bright, i32(src.pitch), i32(src.height), f32(p.threshold))
+            rt.launch(rt.kernel("corona.cl", "corona_bright", **luma),
+                      (src.pitch // 4, src.height), src, bright, i32(src.pitch), i32(src.height),
+                      f32(p.threshold))
             glow_win = out_win
         else:
             # the pattern at 1 / f resolution: reduced pixel (i, j) is centred on output pixel
@@ -303,8 +320,9 @@ class Corona(SpreadRegions, Plugin):
             # highlights are splatted onto it with tent weights (their centroids kept)
             glow_win = Rect(0, 0, -(-out_win.width // f) + 2, -(-out_win.height // f) + 2)
             bright = rt.image(glow_win)
-            rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f), (bright.pitch, bright.height),
-                      src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy),
+            rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f, **luma),
+                      (bright.pitch, bright.height), src, i32(src.pitch), i32(src.width),
+                      i32(src.height), i32(ox), i32(oy),
                       bright, i32(bright.pitch), i32(bright.width), i32(bright.height),
                       f32(p.threshold))
             if not support.empty:
@@ -316,8 +334,9 @@ class Corona(SpreadRegions, Plugin):
                               out_window=glow_win, support=support,
                               split_level=max(p.threshold, 1.0) * 64.0 * f * f, info=info)
         out = rt.image(out_win)
-        rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f), (out.pitch, out.height),
-                  src, i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy), glow,
+        rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f, **luma),
+                  (out.pitch, out.height), src, i32(src.pitch), i32(src.width), i32(src.height),
+                  i32(ox), i32(oy), glow,
                   i32(glow.pitch), i32(glow.width), i32(glow.height), out, i32(out.pitch),
                   i32(out.width), i32(out.height), f32(p.intensity), f32(p.threshold))
         if f > 1:

@@ -501,29 +501,32 @@ class Dof(Plugin):
         padded = Rect.from_size(-(-(w + 2 * pad + 4) // 4) * 4, h + 2 * pad)
         col, coc0, coc = rt.image(padded, 4), rt.image(padded, 1), rt.image(padded, 1)
         f32, i32 = np.float32, np.int32
-        prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64)
+        luma = ctx.luminance_defines     # log luminance of the working space
+        prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64, **luma)
         rt.launch(prep, (col.pitch // 4, col.height), src, depth, i32(src.pitch), i32(w),
                   i32(h), col, coc0, i32(col.pitch), i32(col.height), i32(pad), f32(k_half),
                   f32(focus), f32(clamp_r), f32(offset))
-        rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64), (-(-w // 4), h), col, coc0, coc,
-                  i32(col.pitch), i32(col.height), i32(pad), i32(w), i32(h), local=(8, 4))
+        rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
+                  col, coc0, coc, i32(col.pitch), i32(col.height), i32(pad), i32(w), i32(h),
+                  local=(8, 4))
         del coc0
         # mean log luminance per tile: the caps of the hidden background
         ty, tx = radii.shape
         log_mean = rt.buffer(tx * ty * 4)
-        rt.launch(rt.kernel("dof.cl", "dof_tile_cap", fp64=lvl.fp64), (tx, ty), col,
+        rt.launch(rt.kernel("dof.cl", "dof_tile_cap", fp64=lvl.fp64, **luma), (tx, ty), col,
                   i32(col.pitch), i32(pad), i32(w), i32(h), i32(TILE), i32(tx), i32(ty),
                   log_mean)
         variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
-        gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant)
+        gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant, **luma)
         common = (lvl, aspect, blades, first, p.roundness, log_mean, lens.squeeze)
         hdst = None
         if half.any():
             hw, hh, hpad = -(-w // 2), -(-h // 2), pad // 2
             hpadded = Rect.from_size(-(-(hw + 2 * hpad + 4) // 4) * 4, hh + 2 * hpad)
             colh, coch = rt.image(hpadded, 4), rt.image(hpadded, 1)
-            rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64), (colh.pitch, colh.height),
-                      col, coc, i32(col.pitch), i32(col.height), colh, coch, i32(colh.pitch),
+            rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
+                      (colh.pitch, colh.height), col, coc, i32(col.pitch), i32(col.height), colh,
+                      coch, i32(colh.pitch),
                       i32(colh.height))
             hdst = rt.image((hh, hw), 4)
             hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))

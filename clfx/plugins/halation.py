@@ -277,8 +277,9 @@ class Halation(ScatterPlugin, Plugin):
         self.note_nonfinite(ctx, k.shape[:2])
         f32, i32 = np.float32, np.int32
         h = rt.image(src.window, 4)
-        rt.launch(rt.kernel(kfile, "halation_highlights"), (src.pitch // 4, max(src.height, 1)),
-                  src, h, i32(src.pitch), i32(src.height), f32(p.threshold), f32(p.knee))
+        rt.launch(rt.kernel(kfile, "halation_highlights", **ctx.luminance_defines),
+                  (src.pitch // 4, max(src.height, 1)), src, h, i32(src.pitch), i32(src.height),
+                  f32(p.threshold), f32(p.knee))
         out_window = self.output_window(p, ctx)
         info = fftconv.ConvolveInfo()
         split = max(4.0 * p.threshold, 1e-3 * ctx.analysis.peak_luminance)
@@ -292,7 +293,8 @@ class Halation(ScatterPlugin, Plugin):
 
         dst = rt.image(out_window, 4)
         dx, dy = out_window.offset_in(src.window)
-        rt.launch(rt.kernel(kfile, "halation_mix", CONSERVE=int(p.conserve)),
+        rt.launch(rt.kernel(kfile, "halation_mix", CONSERVE=int(p.conserve),
+                            **ctx.luminance_defines),
                   (dst.pitch // 4, max(dst.height, 1)), src, i32(src.pitch), i32(src.width),
                   i32(src.height), g, dst, i32(dst.pitch), i32(dst.height), i32(dx), i32(dy),
                   f32(s.strength), cltypes.make_float4(*s.tint, 0.0), f32(p.threshold),

@@ -13,12 +13,16 @@ every pixel above ``threshold`` in a connected bright region (scene analysis), i
 extent their rms radius.  Each ghost is the aperture polygon (or the round rim of a lens
 limiting it) imaged through its matrix, cut by the clip discs of the other apertures on its
 path, with per-wavelength sizes and positions (``final``: 7 wavelengths, ``clfx.fx.spectral``
-weights per channel: coloured fringes), a Fresnel-diffraction rim and edges blurred by the
-light's extent and the lens's aberrations, and the brightness of its two coated reflections:
+weights per channel in linear Rec.709, the reference basis other working spaces are carried
+into and back, ``clfx.fx.spectral.in_reference_basis``: coloured fringes), a
+Fresnel-diffraction rim and edges blurred by the light's extent and the lens's aberrations,
+and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``: no fudge factor; ``gain`` multiplies
 it, default 1).  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
-drawn.  ``intensity``, ``ghost_count``, ``ghosts``, ``softness``, ``rim``, ``roundness`` and the
-halo belong to the artistic model.  The camera's focal length does not change the ghosts:
+drawn.  A light's flux takes each pixel's non-negative part per channel (in the reference
+basis: a colour outside Rec.709 makes ghosts of its in-gamut part, the same in any working
+space).  ``intensity``, ``ghost_count``, ``ghosts``, ``softness``, ``rim``, ``roundness``
+and the halo belong to the artistic model.  The camera's focal length does not change the ghosts:
 the prescription is its own lens (the light's position on the sensor is what matters, in mm
 through the camera's ``sensor_width``).
 
@@ -97,10 +101,11 @@ PHYSICAL_TILE = 16
 @dataclass(frozen=True)
 class FlareLevel(Level):
     """A lens-flare quality level.  Physical model: ``wavelengths`` spectral samples (3: the
-    Rec.709 primaries' dominant wavelengths, else evenly from 420 to 680 nm), and the edge
-    scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k`` resolution
-    (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic model is
-    one closed form at every level.  fp64: the lights' flux and centroid sums."""
+    Rec.709 primaries' dominant wavelengths, else evenly from 420 to 680 nm, spread over the
+    channels by Rec.709's primaries: the reference basis),
+    and the edge scale ``level_scale * 2^k`` (px) from which a ghost is drawn at ``1 / 2^k``
+    resolution (``inf``: all at full resolution), up to ``1 / 2^max_level``.  The artistic
+    model is one closed form at every level.  fp64: the lights' flux and centroid sums."""
 
     wavelengths: int = 7
     level_scale: float = 2.0
@@ -126,6 +131,14 @@ def flare_wavelengths(count: int) -> tuple[float, ...]:
     if count == 3:
         return optics.RGB_WAVELENGTHS_NM
     return tuple(float(v) for v in np.linspace(420.0, 680.0, count))
+
+
+def flare_channel_weights(wavelengths, rgb_to_xyz=None) -> np.ndarray:
+    """How each colour channel spreads over ``wavelengths`` (``clfx.fx.spectral``'s channel
+    weights in the working space); three samples are one per channel in any space."""
+    if len(wavelengths) == 3:
+        return np.eye(3)
+    return spectral.channel_weights(wavelengths, rgb_to_xyz)
 
 
 def parse_ghosts(spec: str, count: int) -> list[tuple[float, float, tuple[float, float, float]]]:
@@ -318,7 +331,7 @@ class LensFlare(Plugin):
         if n == 0:
             return []
         knl = rt.kernel("lens_flare.cl", "lens_flare_measure", fp64=self.level(ctx).fp64,
-                        FULL=int(full))
+                        FULL=int(full), **ctx.luminance_defines)
         rt.launch(knl, (n,), src, np.int32(src.pitch),
                   rt.to_device(np.asarray(boxes, np.int32).ravel()), np.int32(n),
                   np.float32(p.threshold), out)
@@ -407,8 +420,8 @@ class LensFlare(Plugin):
         sub = table.subset(keep)
         edge, areas, _ = self.edge_tables(ctx)
         entries, levels, rows = flare.plan_entries(
-            sub, lights, geometry, spectral.channel_weights(wl), edge, areas, level=level,
-            max_level=lvl.max_level, level_scale=lvl.level_scale)
+            sub, lights, geometry, flare_channel_weights(wl, ctx.rgb_to_xyz), edge, areas,
+            level=level, max_level=lvl.max_level, level_scale=lvl.level_scale)
         return entries, levels, keep[rows], lights
 
     def render_physical(self, rt, p, ctx):
@@ -458,8 +471,9 @@ class LensFlare(Plugin):
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
-        if p.model == "physical":
-            return self.render_physical(rt, p, ctx)
+        if p.model == "physical":   # spectral: in the reference basis, linear Rec.709
+            return spectral.in_reference_basis(rt, ctx,
+                                               lambda c: self.render_physical(rt, p, c))
         src = ctx.source
         out_win = self.output_window(p, ctx)
         sources = self.measure(rt, p, ctx, self.candidate_sources(p, ctx))
@@ -474,7 +488,7 @@ class LensFlare(Plugin):
         ox, oy = src.window.offset_in(out_win)
         i32 = np.int32
         knl = rt.kernel("lens_flare.cl", "lens_flare_render", TILE=TILE,
-                        BLADES=blades if blades >= 3 else 0)
+                        BLADES=blades if blades >= 3 else 0, **ctx.luminance_defines)
         rt.launch(knl, (out.pitch // 4, out.height), src, i32(src.pitch), i32(src.width),
                   i32(src.height), i32(ox), i32(oy), out, i32(out.pitch), i32(out.width),
                   i32(out.height), i32(out_win.x0), i32(out_win.y0), i32(tiles_x),

@@ -269,7 +269,7 @@ class Streaks(Plugin):
         ox, oy = src.window.offset_in(out_win)
         lo_w, lo_h = -(-out_win.width // factor), -(-out_win.height // factor)
         i32, f32 = np.int32, np.float32
-        defines = {"FACTOR": factor, "fp64": lvl.fp64}
+        defines = {"FACTOR": factor, "fp64": lvl.fp64, **ctx.luminance_defines}
 
         angles = self.angles(p, ctx)
         lengths = channel_lengths(self.length_px(p, ctx), p.color_shift) / factor
@@ -323,7 +323,8 @@ class Streaks(Plugin):
         del work, ping, pong
 
         out = rt.image(out_win)
-        rt.launch(rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor),
+        rt.launch(rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor,
+                            **ctx.luminance_defines),
                   (out.pitch, out_win.height), src, i32(src.pitch), i32(src.width),
                   i32(src.height), i32(ox), i32(oy), total, i32(org), i32(pitch), i32(lo_w),
                   i32(lo_h), out, i32(out.pitch), i32(out_win.width), i32(out_win.height))

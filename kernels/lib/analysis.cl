@@ -36,7 +36,7 @@ kernel void analysis_rows(global const float *src, const int pitch, const int wi
     const int4 inside = (int4)(x, x + 1, x + 2, x + 3) < (int4)(x1);
     const float16 c = vload16(0, src + (y * pitch + x) * 4);
     const int4 ok = analysis_finite4(c) & inside;
-    const float4 l = 0.2126f * c.s048c + 0.7152f * c.s159d + 0.0722f * c.s26ae;
+    const float4 l = (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
     max_lum = select(max_lum, fmax(max_lum, l), ok);
     sum_lum += select((float4)0.0f, l, ok);
     max_alpha = select(max_alpha, fmax(max_alpha, c.s37bf), ok);

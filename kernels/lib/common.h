@@ -38,10 +38,17 @@ inline float16 clfx_finite16_or_zero(float16 v)
   return select((float16)0.0f, v, (as_uint16(v) & 0x7f800000u) != (uint16)0x7f800000u);
 }
 
-/* Rec.709 luminance of scene-linear RGB. */
+/* Luminance of scene-linear RGB: the working space's Y row of RGB -> XYZ, given as build
+ * defines (clfx.core.colour.luminance_defines); BT.709's weights by default. */
+#ifndef CLFX_LUMA_R
+#define CLFX_LUMA_R 0.2126f
+#define CLFX_LUMA_G 0.7152f
+#define CLFX_LUMA_B 0.0722f
+#endif
+
 inline float clfx_luminance(float4 c)
 {
-  return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+  return (CLFX_LUMA_R) * c.x + (CLFX_LUMA_G) * c.y + (CLFX_LUMA_B) * c.z;
 }
 
 inline int clfx_clampi(int v, int lo, int hi)

@@ -42,3 +42,19 @@ kernel void image_sanitize(global float *img, const int pitch, const int height,
                 (any(bad.s89ab) ? 1 : 0) + (any(bad.scdef) ? 1 : 0);
   atomic_add(count, n);
 }
+
+/* image_rgb_matrix: dst.rgb = M src.rgb, dst.a = src.a for a 4-channel image (M's rows r0,
+ * r1, r2 in .xyz): the working space's pixels into the spectral effects' reference basis and
+ * back (clfx.fx.spectral.in_reference_basis).  Linear: negative components stay negative.
+ * One work-item per pixel of the padded rows. */
+kernel void image_rgb_matrix(global const float *src, global float *dst, const int pitch,
+                             const int height, const float4 r0, const float4 r1,
+                             const float4 r2)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(y >= height || x >= pitch) return;
+  const size_t i = (size_t)y * pitch + x;
+  const float4 c = vload4(i, src);
+  const float4 rgb = (float4)(c.x, c.y, c.z, 0.0f);
+  vstore4((float4)(dot(r0, rgb), dot(r1, rgb), dot(r2, rgb), c.w), i, dst);
+}

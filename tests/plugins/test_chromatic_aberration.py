@@ -3,7 +3,8 @@ import pytest
 
 from clfx.fx.resample import lut_lookup, radial_lut
 from clfx.plugins.chromatic_aberration import ChromaticAberration as CA
-from clfx.plugins.chromatic_aberration import cie1931_xyz, radial_model, spectral_bins
+from clfx.fx.spectral import cie1931_cmf as cie1931_xyz
+from clfx.plugins.chromatic_aberration import radial_model, spectral_bins
 from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import (nonfinite_image, render_with_notes, smooth_image,
                                            wide_range_image)
@@ -133,3 +134,21 @@ def test_packed_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch):
     monkeypatch.setattr(resample, "BAND_PIXELS", 3000)
     banded = CA().apply(rt, p, src, quality="final")
     assert np.array_equal(banded, whole)
+
+
+def test_matches_reference_in_acescg(rt, rng):
+    # the Rec.709 model on the pixels carried into Rec.709 and back
+    from clfx.io.colour import rgb_to_xyz
+    from tests.reference import in_reference_basis
+
+    aces = rgb_to_xyz("ACEScg")
+    src = smooth_image(rng, 24, 36)
+    for spectral in (True, False):
+        p = CA.params(**PARAMS, spectral=spectral)
+        got = CA().apply(rt, p, src, quality="final", rgb_to_xyz=aces)
+        # as test_matches_reference_hard_shapes: float32 LUT and 16 bicubic reads, values <= 2
+        # (values <= 3.4 in Rec.709)
+        np.testing.assert_allclose(
+            got, in_reference_basis(lambda s: want(s, p, "final"), src, aces), atol=4e-5)
+        # the ACEScg pixels taken as Rec.709 ones (no conversion) give other fringes
+        assert np.abs(got - CA().apply(rt, p, src, quality="final")).max() > 1e-4

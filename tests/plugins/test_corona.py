@@ -321,3 +321,26 @@ def test_sunny_flare_keeps_the_window_structure(tmp_path, exr_images, image):
     # amplitude and its pattern
     assert np.std(b) > 0.75 * np.std(a)
     assert np.corrcoef(a.ravel(), b.ravel())[0, 1] > 0.9
+
+
+def test_matches_reference_in_acescg(rt, rng):
+    # the Rec.709 model on the pixels carried into Rec.709 and back; the threshold weighs
+    # luminance, the same in either space
+    from clfx.io.colour import rgb_to_xyz
+    from tests.reference import in_reference_basis
+
+    aces = rgb_to_xyz("ACEScg")
+    src = scene(rng, (31, 37))
+    src[5, 5, :3] = (0.0, 0.0, 30.0)    # Y 2.2 in Rec.709 (above threshold), 1.7 in ACEScg
+    p = Corona.params(**PARAMS)
+    plugin = Corona()
+    got = plugin.apply(rt, p, src, quality="reference", rgb_to_xyz=aces)
+    psf = psf_for(plugin, rt, p, src, "reference")      # the reference basis's PSF
+    want = in_reference_basis(lambda s: reference(s, psf, **p.as_dict()), src, aces)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    from tests.reference.corona import highlights
+
+    assert highlights(src, p.threshold, aces)[0][5, 5].max() == 0.0      # not a highlight
+    assert highlights(src, p.threshold)[0][5, 5].max() > 0.0             # in Rec.709 it is
+    # the ACEScg pixels taken as Rec.709 ones (no conversion) give another corona
+    assert np.abs(got - plugin.apply(rt, p, src, quality="reference")).max() > 1e-3

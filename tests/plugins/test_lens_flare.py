@@ -385,3 +385,33 @@ def test_physical_hard_shapes(rt, rng, shape):
                                 camera=CAM_P, quality=quality, read_lens=read_lens)
         assert np.isfinite(got).all() and (got[..., :3] >= src[..., :3]).all()
         assert np.array_equal(got[..., 3], src[..., 3])
+
+
+def test_working_space_luminance_and_channel_weights(rt, rng):
+    from clfx.io.colour import rgb_to_xyz
+
+    aces = rgb_to_xyz("ACEScg")
+    src = scene(rng, (64, 256))
+    src[40, 128, :3] = (0.0, 0.0, 60.0)   # Y 4.3 in Rec.709, 3.5 in ACEScg; tiles of its own
+    p = LensFlare.params(**{**PARAMS, "threshold": 4.0})
+    lights = sources(src, p.threshold, rgb_to_xyz=aces)
+    assert len(lights) == len(sources(src, p.threshold)) - 1    # the blue pixel is no light
+    table = parse_ghosts(p.ghosts, p.ghost_count)
+    kw = p.as_dict() | {"blades": CAM.blades, "rotation": CAM.blade_rotation + p.rotation}
+    want = reference(src, lights, table, **kw)
+    got = LensFlare().apply(rt, p, src, camera=CAM, rgb_to_xyz=aces)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * want.max())
+    # the physical model: the light's centroid is ACEScg-luminance weighted, and channels
+    # spread over the wavelengths by ACEScg's primaries (3 samples: one per channel anyway)
+    phys = physical_scene()
+    ctx = RenderContext(rt, rt.upload(phys), camera=CAM_P, read_lens=read_lens, rgb_to_xyz=aces)
+    p = LensFlare.params(threshold=5.0)
+    got = LensFlare().measure(rt, p, ctx, LensFlare().candidate_sources(p, ctx), full=True)
+    for g, (x, y, f, r) in zip(got, oracle.lights(phys, 5.0, rgb_to_xyz=aces)):
+        assert abs(g.x - x) < 1e-3 and abs(g.y - y) < 1e-3 and abs(g.rms_px - r) < 1e-3
+    from clfx.plugins.lens_flare import flare_channel_weights
+
+    np.testing.assert_array_equal(flare_channel_weights((610.0, 550.0, 465.0), aces), np.eye(3))
+    w = flare_channel_weights(tuple(np.linspace(420.0, 680.0, 7)), aces)
+    np.testing.assert_allclose(w, spectral.channel_weights(np.linspace(420.0, 680.0, 7), aces))
+    assert not np.allclose(w, spectral.channel_weights(np.linspace(420.0, 680.0, 7)))

@@ -1,6 +1,7 @@
 """float64 NumPy oracle of clfx/plugins/chromatic_aberration.py: per-pixel bisection of the
 radial model for every wavelength bin (no look-up table), the same filters as the kernel
-(tests/reference/distortion.py), weights from the CIE 1931 fit integrated per bin."""
+(tests/reference/distortion.py), weights from the CIE 1931 fit integrated per bin, in the
+working space whose RGB -> XYZ matrix is ``rgb_to_xyz`` (None: Rec.709, the IEC matrix M)."""
 import math
 
 import numpy as np
@@ -16,36 +17,38 @@ def g(lam, mu, s1, s2):
     return np.exp(-0.5 * ((lam - mu) / np.where(lam < mu, s1, s2)) ** 2)
 
 
-def response(lam):
+def response(lam, rgb_to_xyz=None):
     x = 1.056 * g(lam, 599.8, 37.9, 31.0) + 0.362 * g(lam, 442.0, 16.0, 26.7) - 0.065 * g(lam, 501.1, 20.4, 26.2)
     y = 0.821 * g(lam, 568.8, 46.9, 40.5) + 0.286 * g(lam, 530.9, 16.3, 31.1)
     z = 1.217 * g(lam, 437.0, 11.8, 36.0) + 0.681 * g(lam, 459.0, 26.0, 13.8)
-    rgb = np.clip(np.stack([x, y, z], -1) @ M.T, 0, None)
+    to_rgb = M if rgb_to_xyz is None else np.linalg.inv(rgb_to_xyz)
+    rgb = np.clip(np.stack([x, y, z], -1) @ to_rgb.T, 0, None)
     return np.concatenate([rgb, y[:, None]], -1)
 
 
-def delta(lam, amount):
+def delta(lam, amount, rgb_to_xyz=None):
     fine = np.arange(380.125, 720.0, 0.25)
-    g = response(fine)[:, 1]
+    g = response(fine, rgb_to_xyz)[:, 1]
     green = (g / fine ** 2).sum() / g.sum()          # green channel's mean 1/lambda^2
     return amount * (lam ** -2.0 - green) / (450.0 ** -2 - 650.0 ** -2)
 
 
-def bins(n, amount):
+def bins(n, amount, rgb_to_xyz=None):
     lam = np.arange(380.125, 720.0, 0.25)
-    resp = response(lam)
+    resp = response(lam, rgb_to_xyz)
     if n == 3:
-        d = [(resp[:, c] * delta(lam, amount)).sum() / resp[:, c].sum() for c in range(3)]
+        d = [(resp[:, c] * delta(lam, amount, rgb_to_xyz)).sum() / resp[:, c].sum()
+             for c in range(3)]
         w = np.zeros((3, 4))
         w[0, 0] = w[1, 1] = w[2, 2] = w[1, 3] = 1.0
         return np.array(d), w
     edges = np.linspace(380.0, 720.0, n + 1)
     w = np.array([resp[(lam >= edges[i]) & (lam < edges[i + 1])].sum(0) for i in range(n)])
-    return delta(0.5 * (edges[:-1] + edges[1:]), amount), w / w.sum(0)
+    return delta(0.5 * (edges[:-1] + edges[1:]), amount, rgb_to_xyz), w / w.sum(0)
 
 
 def chromatic_aberration(src, *, amount, cubic, center, n=32, filter_name="bicubic",
-                         border="edge", pixel_aspect=1.0, **_):
+                         border="edge", pixel_aspect=1.0, rgb_to_xyz=None, **_):
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     cx, cy = w / 2 + center[0] * w / 2, h / 2 + center[1] * h / 2
@@ -54,7 +57,7 @@ def chromatic_aberration(src, *, amount, cubic, center, n=32, filter_name="bicub
     dx, dy = xs - cx, ys - cy
     rd = np.hypot(dx * pixel_aspect, dy) / unit
     out = np.zeros_like(src)
-    for d, wt in zip(*bins(n, amount)):
+    for d, wt in zip(*bins(n, amount, rgb_to_xyz)):
         ru = bisect(lambda r: r * (1 + d * ((1 - cubic) + cubic * r * r)), rd, 2 * rd.max() + 1)
         s = np.where(rd > 0, ru / np.where(rd > 0, rd, 1), 1 / (1 + d * (1 - cubic)))
         out += wt * sample(src, cx + dx * s, cy + dy * s, filter_name, border)

@@ -1,22 +1,32 @@
 """float64 NumPy oracle of clfx/plugins/corona.py: direct convolution of the highlights with
-the PSF (the PSF itself is checked separately against the Airy pattern and the physics)."""
+the PSF (the PSF itself is checked separately against the Airy pattern and the physics).
+Luminance is the working space's: the Y row of ``rgb_to_xyz`` (None: BT.709's weights)."""
 import numpy as np
 
 
-def highlights(src, threshold):
-    c = np.maximum(np.where(np.isfinite(src), src, 0.0).astype(np.float64), 0.0)
-    lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
+def luminance_weights(rgb_to_xyz=None):
+    return (0.2126, 0.7152, 0.0722) if rgb_to_xyz is None else tuple(np.asarray(rgb_to_xyz)[1])
+
+
+def highlights(src, threshold, rgb_to_xyz=None):
+    """(highlights, clean source): the bright-pass of the source's non-negative part (a
+    channel's negative light, outside the reference basis's gamut, is not scattered: it stays
+    in place), and the source with non-finite values set to 0, negatives kept."""
+    clean = np.where(np.isfinite(src), src, 0.0).astype(np.float64)
+    c = np.maximum(clean, 0.0)
+    wr, wg, wb = luminance_weights(rgb_to_xyz)
+    lum = wr * c[..., 0] + wg * c[..., 1] + wb * c[..., 2]
     k = np.where(lum > threshold, (lum - threshold) / np.where(lum > 0, lum, 1.0), 0.0)
     out = c * k[..., None]
     out[..., 3] = 0.0
-    return out, c
+    return out, clean
 
 
-def corona(src, psf, *, threshold, intensity, pad=0, **_):
+def corona(src, psf, *, threshold, intensity, pad=0, rgb_to_xyz=None, **_):
     """out = clean source - intensity * highlights + intensity * (highlights conv psf) over the
     source grown by pad: the diffracted light moves into the pattern."""
     src = np.asarray(src, np.float64)
-    bright, clean = highlights(src, threshold)
+    bright, clean = highlights(src, threshold, rgb_to_xyz)
     h, w = src.shape[:2]
     out = np.pad(clean - intensity * bright, ((pad, pad), (pad, pad), (0, 0)))
     r = psf.shape[0] // 2

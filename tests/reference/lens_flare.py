@@ -1,27 +1,31 @@
 """float64 NumPy oracle of clfx/plugins/lens_flare.py: plain tile labelling (scipy.ndimage),
-per-source flux and centroid, and every ghost and halo evaluated at every pixel."""
+per-source flux and centroid, and every ghost and halo evaluated at every pixel.  Luminance is
+the working space's: the Y row of ``rgb_to_xyz`` (None: BT.709's weights)."""
 import math
 
 import numpy as np
 from scipy import ndimage
 
+from tests.reference.corona import luminance_weights
 
 
 
-def _highlight(src, threshold):
+
+def _highlight(src, threshold, rgb_to_xyz=None):
     c = np.maximum(np.where(np.isfinite(src), src, 0.0).astype(np.float64), 0.0)
-    lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
+    wr, wg, wb = luminance_weights(rgb_to_xyz)
+    lum = wr * c[..., 0] + wg * c[..., 1] + wb * c[..., 2]
     k = np.where(lum > threshold, (lum - threshold) / np.where(lum > 0, lum, 1.0), 0.0)
     return c[..., :3] * k[..., None], np.maximum(lum - threshold, 0.0), c, lum
 
 
 def sources(src, threshold, *, origin=(0, 0), display=None, margin_px=0, max_sources=8,
-            tile=32):
+            tile=32, rgb_to_xyz=None):
     """[(x, y, flux)] in frame pixels: 8-connected regions of tiles with a pixel above
     threshold, refined over each region's bounding box."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
-    hl, wt, clean, lum = _highlight(src, threshold)
+    hl, wt, clean, lum = _highlight(src, threshold, rgb_to_xyz)
     finite = np.isfinite(src).all(axis=2)
     ty, tx = -(-h // tile), -(-w // tile)
     tmax = np.zeros((ty, tx))
@@ -123,14 +127,15 @@ def lens_flare(src, lights, table, *, intensity, softness, roundness, rim, blade
 
 
 # -- the physical model ----------------------------------------------------------------------
-def lights(src, threshold, *, origin=(0, 0), tile=32):
+def lights(src, threshold, *, origin=(0, 0), tile=32, rgb_to_xyz=None):
     """[(x, y, flux RGB, rms radius)] of the physical model: per 8-connected region of tiles
     with a pixel above threshold, the sum of its pixels above threshold (whole values), their
     luminance-weighted centroid and rms radius about it (frame px)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     clean = np.maximum(np.where(np.isfinite(src), src, 0.0), 0.0)
-    lum = 0.2126 * clean[..., 0] + 0.7152 * clean[..., 1] + 0.0722 * clean[..., 2]
+    wr, wg, wb = luminance_weights(rgb_to_xyz)
+    lum = wr * clean[..., 0] + wg * clean[..., 1] + wb * clean[..., 2]
     ty, tx = -(-h // tile), -(-w // tile)
     tmax = np.zeros((ty, tx))
     for j in range(ty):
