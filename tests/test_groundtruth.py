@@ -292,3 +292,16 @@ def test_optical_vignetting_clips_lens_rays_per_pixel_and_keeps_a_flat_field():
     round_ = render_truth(sc, SMALL, samples=4096, ss=2, exact_below_px=0.0)
     wx0, hy0 = _extent(round_[..., 0], 1.0)
     assert abs(hy - hy0) <= 2 and abs(wx0 - hy0) <= 1
+
+
+def test_render_rows_are_the_rows_of_the_whole_render():
+    """The rolling shutter's truth renders each row alone at its own time: the same pixels
+    as the whole frame's rows."""
+    from clfx.bench.cases.rolling_shutter import pan_scene
+    from clfx.bench.scene import demo_scene, render_rows, render_sharp
+
+    for scene in (pan_scene(96, 54), demo_scene(1, 96, 54)):
+        for t in (0.0, 0.37):
+            full = render_sharp(scene, t, ss=2).rgba
+            for y0, y1 in ((0, 1), (13, 20), (53, 54)):
+                assert np.array_equal(render_rows(scene, t, y0, y1, ss=2), full[y0:y1])

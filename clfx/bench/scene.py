@@ -509,6 +509,23 @@ def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str
     return Frame.from_array(rgba.astype(np.float32), depth=depth, velocity=velocity)
 
 
+def render_rows(scene: Scene, t: float, y0: int, y1: int, *, ss: int = 2) -> np.ndarray:
+    """Rows ``[y0, y1)`` of :func:`render_sharp`'s box-filtered beauty at time ``t`` (the same
+    samples, rendered over those rows only: a rolling shutter's truth renders each row at its
+    own time without rendering the whole frame per row)."""
+    w = scene.width
+    acc = background_rgba(scene, 0, y0, w, y1 - y0, ss)
+    for layer in scene.layers:   # far to near
+        box = _clip_box(layer.bounds(t, margin=1.0), w, y1, 0, y0)
+        if box is None:
+            continue
+        bx0, by0, bx1, by1 = box
+        rgba = rasterise_layer(layer, bx0, by0, bx1 - bx0, by1 - by0, ss, t)
+        sl = np.s_[(by0 - y0) * ss:(by1 - y0) * ss, bx0 * ss:bx1 * ss]
+        acc[sl] = rgba + acc[sl] * (1 - rgba[..., 3:4])
+    return box_downsample(acc, ss).astype(np.float32)
+
+
 # -- the built-in demo -----------------------------------------------------------------------
 def _wrap(x, lo, hi):
     """``x`` wrapped into [lo, hi) (objects leaving one side come back on the other)."""
