@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from clfx.bench.cases import Case
+from clfx.bench.cases import Case, Naive
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, moving_scene, render_sharp
 from clfx.core.camera import Camera
@@ -234,4 +234,5 @@ def naive(case: dict, params, ctx) -> np.ndarray:
                                np.asarray(case["velocity"], np.float32), t0, t1)
 
 
-CASE = Case(make=make_layers)
+CASE = Case(make=make_layers,
+            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)))
