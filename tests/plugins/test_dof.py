@@ -525,17 +525,8 @@ def bokeh_case():
 
 
 def test_final_bokeh_is_as_crisp_as_the_reference_and_every_level_beats_naive(rt, bokeh_case):
-    from clfx.bench.cases.dof import naive
-    from clfx.host import RenderContext
-
     c = bokeh_case
-    truth = c["truth"]
-    ctx = RenderContext(rt, rt.upload(c["source"]), depth=rt.upload(c["depth"]),
-                        camera=c["camera"])
-    base = max(metrics.psnr_log(naive(c, Dof.params(), ctx), truth),
-               metrics.psnr_log(c["source"], truth))
-    score = {q: metrics.psnr_log(run(rt, c["source"], c["depth"], q, c["camera"]), truth)
-             for q in QUALITY_LEVELS}
+    score, base = scores_against_truth(rt, c)
     assert score["final"] > score["reference"] - 1.0, score
     assert min(score.values()) > base, (score, base)
 
@@ -736,17 +727,10 @@ def test_options_grow_the_reach(rt):
 def test_lens_geometry_beats_naive_and_input_on_ground_truth(rt, option):
     """The bench's lens-geometry cases at 160x90: every level beats the naive gather (with
     the same aperture) and the unchanged input; final is within 1 dB of reference."""
-    from clfx.bench.cases.dof import make_scene, naive
-    from clfx.host import RenderContext
+    from clfx.bench.cases.dof import make_scene
 
     c = make_scene(option, 160, 90, ss=4, samples=4096)
-    truth = c["truth"]
-    ctx = RenderContext(rt, rt.upload(c["source"]), depth=rt.upload(c["depth"]),
-                        camera=c["camera"])
-    base = max(metrics.psnr_log(naive(c, Dof.params(), ctx), truth),
-               metrics.psnr_log(c["source"], truth))
-    score = {q: metrics.psnr_log(run(rt, c["source"], c["depth"], q, c["camera"]), truth)
-             for q in QUALITY_LEVELS}
+    score, base = scores_against_truth(rt, c)
     assert score["final"] > score["reference"] - 1.0, score
     assert min(score.values()) > base + 1.0, (score, base)
 
@@ -811,3 +795,19 @@ def test_cateye_half_resolution_gather_follows_the_full_resolution_one(rt):
             plain = run(rt, src, depth, "reference", cam, max_coc=0.2)
             shape = np.abs(full - plain)[16:-16, 16:-16].mean()
     assert err[2.0] < 2 * err[0.0] + 1e-4 and err[2.0] < 0.2 * shape, (err, shape)
+
+
+def scores_against_truth(rt, c):
+    """log-PSNR of every level against a ground-truth case, and the better of the naive
+    gather and the unchanged input."""
+    from clfx.bench.cases.dof import naive
+    from clfx.host import RenderContext
+
+    truth = c["truth"]
+    ctx = RenderContext(rt, rt.upload(c["source"]), depth=rt.upload(c["depth"]),
+                        camera=c["camera"])
+    base = max(metrics.psnr_log(naive(c, Dof.params(), ctx), truth),
+               metrics.psnr_log(c["source"], truth))
+    score = {q: metrics.psnr_log(run(rt, c["source"], c["depth"], q, c["camera"]), truth)
+             for q in QUALITY_LEVELS}
+    return score, base
