@@ -61,7 +61,7 @@ def dask_cluster(logs: Path, workers: int = 2):
         start("scheduler", "scheduler", "--host", "127.0.0.1", "--port",
               address.rsplit(":", 1)[1], "--no-dashboard")
         for i in range(workers):
-            start(f"worker{i}", "worker", address, "--nworkers", "1", "--nthreads", "1",
+            start(f"worker{i}", "worker", address, "--nworkers", "1", "--nthreads", "2",
                   "--host", "127.0.0.1", "--no-dashboard", "--no-nanny")
         with Client(address, timeout=30, set_as_default=False) as client:
             client.wait_for_workers(workers, timeout=40)

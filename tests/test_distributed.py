@@ -126,3 +126,69 @@ def test_unreachable_scheduler_is_one_line_error(beachball, tmp_path):
     assert proc.returncode == 1
     assert proc.stderr.startswith("clfx: error: cannot reach scheduler"), proc.stderr[-2000:]
     assert not Path(tmp_path / "o.0001.exr").exists()
+
+
+def test_worker_undoes_dasks_malloc_trim_threshold():
+    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes every
+    frame-sized buffer a fresh mmap; the worker plugin sets glibc's thresholds back."""
+    import platform
+    import subprocess
+    import sys
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("glibc only")
+    code = ("from clfx.pipeline.distributed import malloc_like_one_process as m; "
+            "print(m())")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    plain = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, check=True)
+    under_dask = subprocess.run([sys.executable, "-c", code],
+                                env={**env, "MALLOC_TRIM_THRESHOLD_": "65536"},
+                                capture_output=True, text=True, check=True)
+    assert plain.stdout.split() == ["False"]          # nothing to undo: glibc's own policy
+    assert under_dask.stdout.split() == ["True"]
+
+
+def test_task_threads_take_turns_on_the_device():
+    """Two tasks of one worker overlap their reads and writes, never their renders."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from clfx.pipeline.batch import Job
+    from clfx.pipeline.distributed import render_jobs
+
+    lock = threading.Lock()
+    rendering, overlaps = [0], []
+
+    class Report:
+        def as_dict(self):
+            return {}
+
+        def explain(self):
+            return ""
+
+    class StubBatch:
+        def _prepare_look(self, rt, jobs):
+            return None
+
+        def _read(self, job):
+            time.sleep(0.02)
+            return job.frame
+
+        def render(self, rt, job, frame):
+            assert lock.locked()
+            rendering[0] += 1
+            overlaps.append(rendering[0])
+            time.sleep(0.03)
+            rendering[0] -= 1
+            return frame, Report(), None
+
+        def _write(self, frame, job, report, views):
+            time.sleep(0.02)
+
+    jobs = [[Job(frame=f, input=f"in.{f}", output=f"out.{f}")] for f in range(1, 7)]
+    with ThreadPoolExecutor(2) as pool:
+        results = list(pool.map(lambda j: render_jobs(StubBatch(), None, j, device_lock=lock),
+                                jobs))
+    assert [r[0]["frame"] for r in results] == list(range(1, 7))
+    assert overlaps and max(overlaps) == 1

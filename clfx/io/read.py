@@ -152,6 +152,13 @@ class PassSpec:
 # ============================================================================================
 # Codec threads
 
+def set_codec_threads(n: int) -> None:
+    """OpenImageIO and OpenEXR's codecs use at most ``n`` threads per read or write from now
+    on (process-wide; a Dask worker sets it once, see `codec_threads`)."""
+    for k in ("threads", "exr_threads"):
+        oiio.attribute(k, int(n))
+
+
 @contextlib.contextmanager
 def codec_threads(n: int):
     """While inside, OpenImageIO and OpenEXR's codecs use at most ``n`` threads per read or
@@ -160,8 +167,7 @@ def codec_threads(n: int):
     encoding fill the cores the device leaves idle instead of taking them from it
     (`clfx.pipeline.batch`).  Process-wide: restored on exit."""
     saved = {k: oiio.get_int_attribute(k, 0) for k in ("threads", "exr_threads")}
-    for k in saved:
-        oiio.attribute(k, int(n))
+    set_codec_threads(n)
     try:
         yield
     finally:

@@ -10,7 +10,9 @@ Each worker process holds a `ClfxWorker` plugin: the OpenCL runtime, built once 
 worker joins (a process-wide `Runtime`), and the renders it has unpacked, by key, so a task
 pays neither device set-up nor look loading; effects keep their one-off set-up in the
 runtime's cache as in one process.  Inside a task the next frame is read and the previous one
-written on I/O threads while the device renders, as `Batch.run` does.
+written on I/O threads while the device renders, as `Batch.run` does; across tasks, a worker
+runs `TASK_THREADS` of them at once and a per-process device lock lets one render while the
+others read or write, so single-frame tasks overlap their I/O too.
 
 Faults: a worker that dies mid-frame leaves at most a temp file (removed when the batch
 ends); Dask reruns its task on another worker (``distributed.scheduler.allowed-failures``
@@ -30,19 +32,24 @@ import logging
 import os
 import pickle
 import socket
+import threading
 import time
 import uuid
 from collections import OrderedDict
-from contextlib import ExitStack, contextmanager, suppress
+from contextlib import ExitStack, contextmanager, nullcontext, suppress
 from dataclasses import dataclass, replace
 
 from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError
-from clfx.pipeline.batch import RAW, Batch, Job, io_pool, io_threads
+from clfx.pipeline.batch import IO_CODEC_THREADS, RAW, Batch, Job, io_pool
 
 PLUGIN_NAME = "clfx"
+TASK_THREADS = 2
+"""Task threads of a local cluster's workers (``dask worker --nthreads``): one task renders
+on the device (`ClfxWorker.device_lock`) while the other reads its input or writes its output.
+More only hold more frames in memory: renders take turns on the one device."""
 SPECS_KEPT = 4
 """Renders (look + options) a worker keeps unpacked; a long-lived cluster serves many."""
 
@@ -74,8 +81,9 @@ class RenderSpec:
 
 
 class ClfxWorker(WorkerPlugin):
-    """State of one worker process: the runtime (built when the worker joins) and the
-    renders it has unpacked (`SPECS_KEPT` most recent, by `RenderSpec.key`)."""
+    """State of one worker process: the runtime (built when the worker joins), the renders
+    it has unpacked (`SPECS_KEPT` most recent, by `RenderSpec.key`) and the lock its task
+    threads take to render (kernels share their argument slots, so one render at a time)."""
 
     idempotent = True   # a second client on the same cluster keeps the warm state
 
@@ -83,6 +91,10 @@ class ClfxWorker(WorkerPlugin):
         self.device = device
 
     def setup(self, worker=None):
+        malloc_like_one_process()
+        codec_threads_for_batches()
+        self.device_lock = threading.Lock()
+        self._lock = threading.Lock()
         self._batches: OrderedDict[str, Batch] = OrderedDict()
         self._rt = None
         self._rt_error: ClfxError | None = None
@@ -102,13 +114,58 @@ class ClfxWorker(WorkerPlugin):
         return self._rt
 
     def batch(self, spec: RenderSpec) -> Batch:
-        if spec.key in self._batches:
-            self._batches.move_to_end(spec.key)
-        else:
-            self._batches[spec.key] = spec.batch()
-            while len(self._batches) > SPECS_KEPT:
-                self._batches.popitem(last=False)
-        return self._batches[spec.key]
+        with self._lock:      # task threads
+            if spec.key in self._batches:
+                self._batches.move_to_end(spec.key)
+            else:
+                self._batches[spec.key] = spec.batch()
+                while len(self._batches) > SPECS_KEPT:
+                    self._batches.popitem(last=False)
+            return self._batches[spec.key]
+
+
+MMAP_THRESHOLD = 32 << 20
+"""glibc's largest automatic mmap threshold (64-bit): blocks below it are reused from the heap."""
+TRIM_THRESHOLD = 256 << 20
+"""Free memory at the heap's top kept for the next frame instead of returned to the OS."""
+
+
+def malloc_like_one_process() -> bool:
+    """Undo Dask's ``MALLOC_TRIM_THRESHOLD_`` in a worker process (glibc only).
+
+    Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (config
+    ``distributed.nanny.pre-spawn-environ``) so that freed memory goes back to the OS at once.
+    That also switches off glibc's adaptive mmap threshold: every buffer above 128 KiB is then
+    a fresh mmap whose pages fault in again on first touch.  A render frees and reallocates
+    the same tens of MB per frame, so a worker spent 3x the system time of one process and
+    its effects ran 1.3-1.6x slower (8 frames of 1080p ``cinema``: 6.1 vs 1.9 s system time).
+    Setting both thresholds explicitly restores what a long-lived process converges to.
+    Returns True when the thresholds were set.
+    """
+    if not any(k in os.environ for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")):
+        return False
+    import ctypes
+    import ctypes.util
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        m_trim_threshold, m_mmap_threshold = -1, -3       # <malloc.h>
+        return bool(libc.mallopt(m_mmap_threshold, MMAP_THRESHOLD)
+                    and libc.mallopt(m_trim_threshold, TRIM_THRESHOLD))
+    except (OSError, AttributeError):
+        return False
+
+
+def codec_threads_for_batches() -> None:
+    """A worker's codecs stay on its I/O threads (`IO_CODEC_THREADS`), as inside a batch;
+    set once for the process, since its task threads would undo each other's
+    `clfx.io.read.codec_threads`."""
+    from clfx.io.read import set_codec_threads
+
+    set_codec_threads(IO_CODEC_THREADS)
 
 
 def _worker_state() -> ClfxWorker:
@@ -136,23 +193,27 @@ def render_chunk(spec: RenderSpec, jobs: list[Job], fail_fast: bool = False) -> 
         rt = state.runtime()
     except ClfxError as exc:
         return [_failed(job, exc) for job in jobs]
-    return render_jobs(batch, rt, jobs, fail_fast=fail_fast)
+    return render_jobs(batch, rt, jobs, fail_fast=fail_fast, device_lock=state.device_lock)
 
 
-def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False) -> list[dict]:
+def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False,
+                device_lock=None) -> list[dict]:
     """Read, render and write ``jobs`` with `Batch`'s own steps, reading the next frame and
-    writing the previous one on I/O threads while the device renders; a frame that raises a
-    `ClfxError` is reported and the others go on (all stop after it with ``fail_fast``)."""
+    writing the previous one on I/O threads while the device renders (holding
+    ``device_lock`` if given); a frame that raises a `ClfxError` is reported and the others
+    go on (all stop after it with ``fail_fast``)."""
     results: list[dict | None] = [None] * len(jobs)
     writes = []
     prepared = batch._prepare_look(rt, jobs)
-    with io_threads(), io_pool() as pool, io_pool("write") as writer:
+    with io_pool() as pool, io_pool("write") as writer:
         next_read = pool.submit(batch._read, jobs[0]) if jobs else None
         for i, job in enumerate(jobs):
             read, next_read = next_read, (pool.submit(batch._read, jobs[i + 1])
                                           if i + 1 < len(jobs) else None)
             try:
-                frame_out, report, views = batch.render(rt, job, read.result())
+                frame_in = read.result()
+                with device_lock or nullcontext():
+                    frame_out, report, views = batch.render(rt, job, frame_in)
             except ClfxError as exc:
                 results[i] = _failed(job, exc)
                 if fail_fast:
@@ -197,8 +258,8 @@ def worker_env(workers: int, cores: int | None = None) -> dict[str, str]:
 @contextmanager
 def connect(*, workers: int | None = None, scheduler: str | None = None,
             device: str | None = None, quiet: bool = True):
-    """A Dask client on a fresh local cluster of ``workers`` processes (one task thread
-    each) or on the cluster at ``scheduler``; the `ClfxWorker` plugin is registered on every
+    """A Dask client on a fresh local cluster of ``workers`` processes (`TASK_THREADS` task
+    threads each) or on the cluster at ``scheduler``; the `ClfxWorker` plugin is registered on every
     worker, present and future."""
     if scheduler and workers:
         raise ClusterError("give --workers N (a local cluster) or --scheduler ADDRESS "
@@ -213,7 +274,7 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
                 if workers < 1:
                     raise ClusterError(f"--workers {workers}: expected 1 or more")
                 cluster = stack.enter_context(LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True,
+                    n_workers=workers, threads_per_worker=TASK_THREADS, processes=True,
                     dashboard_address=None, silence_logs=level, env=worker_env(workers)))
                 client = stack.enter_context(Client(cluster, set_as_default=False))
         except (OSError, TimeoutError) as exc:
