@@ -80,7 +80,6 @@ def test_codec_threads_set_and_restored():
 
 @pytest.mark.skipif(not hasattr(os, "setpriority"), reason="per-thread nice is Linux's")
 def test_io_threads_run_below_the_device(monkeypatch):
-    monkeypatch.setattr(batch_mod, "IO_SCHED", "nice")
     monkeypatch.setattr(batch_mod, "IO_NICE", 10)
     base = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
@@ -91,19 +90,6 @@ def test_io_threads_run_below_the_device(monkeypatch):
         got_r, got_w = r.submit(nice).result(), w.submit(nice).result()
     assert got_w == min(19, base + 10) and got_r == min(19, base + 5)
     assert nice() == base                       # the caller keeps its priority
-
-
-@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE is Linux's")
-def test_io_threads_take_only_idle_cores(monkeypatch):
-    monkeypatch.setattr(batch_mod, "IO_SCHED", "idle")
-
-    def policy():
-        return os.sched_getscheduler(threading.get_native_id())
-
-    with batch_mod.io_pool("read") as r, batch_mod.io_pool("write") as w:
-        got_r, got_w = r.submit(policy).result(), w.submit(policy).result()
-    assert got_r == got_w == os.SCHED_IDLE
-    assert policy() == os.SCHED_OTHER              # the caller keeps its policy
 
 
 def test_cache_builds_a_key_once_across_threads(rt):

@@ -10,13 +10,12 @@ Output is deterministic per frame: rendering frame N alone or inside a batch giv
 same bytes.
 
 Scheduling on few cores: the device (PoCL) runs one thread per core at normal priority; the
-read and write threads run under Linux's ``SCHED_IDLE`` policy (`IO_SCHED`), and both decode
-and encode on their own thread only (`clfx.io.read.codec_threads` 1).  So reading and writing
-take only the cores the device leaves idle (host work between kernels, single-threaded
-set-up, the waits for a read or a write) instead of taking cores from the effects, and when
-the device waits for the next frame the read has the cores.  At most `WRITES_AHEAD` rendered
-frames wait for their write.  Where ``SCHED_IDLE`` is missing (or ``CLFX_IO_SCHED=nice``),
-the read thread runs at nice ``IO_NICE // 2`` and the write thread at ``IO_NICE``.
+read thread runs at nice ``IO_NICE // 2`` and the write thread at ``IO_NICE`` (the device
+waits for the next read, only the batch's end waits for a write), and both decode and encode
+on their own thread only (`clfx.io.read.codec_threads` 1).  So reading and writing take the
+cores the device leaves idle (host work between kernels, single-threaded set-up) instead of
+taking cores from the effects, and when the device waits for the next frame the read has
+the cores.  At most `WRITES_AHEAD` rendered frames wait for their write.
 """
 from __future__ import annotations
 
@@ -41,18 +40,12 @@ if TYPE_CHECKING:
 
 RAW = "-"
 
-IO_SCHED = os.environ.get("CLFX_IO_SCHED", "idle")
-"""How a batch's read and write threads yield to the device (``CLFX_IO_SCHED``): ``idle``
-(Linux ``SCHED_IDLE``: they run only on cores nothing else wants), ``nice`` (`IO_NICE`) or
-``normal``.  Measured with `clfx bench`'s sequence table (8 frames of 1080p ``cinema``, 2
-cores, two runs each): under ``idle`` the look took 1.09-1.10x its time alone in the stream
-and every effect 0.94-1.34x, at 1.083-1.088 fps; under nice 10 / 5 the look took 1.40-1.43x
-and the effects up to 1.82x, at 1.119-1.156 fps."""
-
 IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
-"""Nice increment of a batch's write thread, half of it for the read thread, where
-`IO_SCHED` is ``nice`` or ``SCHED_IDLE`` is missing (per thread on Linux; ``CLFX_IO_NICE``).
-At 10 a write gets about a tenth of a core a device thread wants (CFS weights 110 vs 1024)."""
+"""Nice increment of a batch's write thread, half of it for the read thread (Linux: per
+thread; ``CLFX_IO_NICE``).  At 10 a write gets about a tenth of a core a device thread wants
+(CFS weights 110 vs 1024): measured on the 2-core machine, the effects' in-stream time fell
+from 1.5-2.7x to about 1.0x their time alone (README, "Sequences on one machine").  0 leaves
+the threads alone."""
 
 IO_CODEC_THREADS = 1
 """OpenImageIO/OpenEXR threads per read or write during a batch (`codec_threads`)."""
@@ -63,18 +56,9 @@ WRITES_AHEAD = 2
 
 
 def _background(nice: int) -> None:
-    """Initialiser of an I/O thread: ``SCHED_IDLE`` (`IO_SCHED`), else lower its priority by
-    ``nice`` (where the OS can)."""
+    """Initialiser of an I/O thread: lower its priority by ``nice`` (where the OS can)."""
     import threading
 
-    if IO_SCHED == "normal":
-        return
-    if IO_SCHED == "idle" and hasattr(os, "SCHED_IDLE"):
-        try:
-            os.sched_setscheduler(threading.get_native_id(), os.SCHED_IDLE, os.sched_param(0))
-            return
-        except OSError:
-            pass     # not permitted here: fall back to nice
     if nice and hasattr(os, "setpriority"):
         try:
             tid = threading.get_native_id()
