@@ -125,3 +125,52 @@ def test_a_level_that_loses_to_a_baseline_is_flagged():
     assert losing_levels(res.as_dict()) == ["draft loses to the naive and the input"]
     summary = summary_markdown({"effects": [res.as_dict()]})
     assert "30.0 / 25.0" in summary and "NO / NO (draft loses to the naive and the input)" in summary
+
+
+def _grain_levels(rt, width, height, size):
+    """The grain bench case at ``width`` x ``height`` with grain ``size`` (px at 2K), and
+    each level's output over its window."""
+    from clfx.bench.cases.grain import make
+    from clfx.bench.runner import _case_context
+    from clfx.core.frame import crop_to
+
+    case = make(width, height, np.random.default_rng(1))
+    case["params"]["size"] = size
+    cls = discover()["grain"]
+    plugin, p = cls(), cls.params(**case["params"])
+    outs = {}
+    for q in QUALITY_LEVELS:
+        ctx = _case_context(rt, case, q)
+        img = plugin.render(rt, p, ctx)
+        outs[q] = crop_to(rt.download(img), img.window, ctx.source.window)
+    return case, outs
+
+
+def test_grain_is_scored_by_its_statistics_not_its_pixels(rt):
+    """Draft's white noise has the right strength but not the grain size: it scores between
+    no grain (the input, 0 dB) and the filtered levels; the reference against itself is
+    exact.  Size 20 px at 2K is a grain of ~1 px at 96 px wide (at the nominal size it is
+    nearly white there, and draft nearly right)."""
+    from clfx.bench.cases.grain import CASE, grain_statistics_metrics
+
+    assert CASE.metrics is grain_statistics_metrics
+    case, outs = _grain_levels(rt, 96, 64, size=20.0)
+    ref = outs["reference"].astype(np.float64)
+    m = {q: grain_statistics_metrics(outs[q], ref, case) for q in QUALITY_LEVELS}
+    none = grain_statistics_metrics(case["source"], ref, case)
+    assert none["rel_rmse"] == pytest.approx(1.0) and none["psnr_log"] == pytest.approx(0.0, abs=1e-9)
+    assert m["reference"]["rel_rmse"] == 0 and m["reference"]["psnr_log"] == float("inf")
+    for q in QUALITY_LEVELS:
+        assert m[q]["psnr_log"] > none["psnr_log"], (q, m[q])
+        assert m[q]["blocks"] > 0 and np.isfinite(m[q]["rmse"]) and np.isfinite(m[q]["max_err"])
+    for q in ("preview", "final"):
+        assert m[q]["psnr_log"] > m["draft"]["psnr_log"] + 20, (q, m[q], m["draft"])
+    assert 0.1 < m["draft"]["rel_rmse"] < 0.9 and m["draft"]["acf_err"] > 0.1
+
+
+def test_grain_bench_scores_the_input_by_the_same_statistics(rt):
+    res = bench_effect(rt, "grain", 96, 64, repeat=1)
+    (inp,) = [b for b in res.baselines if b["baseline"] == "input"]
+    assert inp["rel_rmse"] == pytest.approx(1.0) and "std_rel_err" in inp
+    assert all(r["beats_input"] is True and "acf_err" in r for r in res.rows), res.rows
+    assert losing_levels(res.as_dict()) == []

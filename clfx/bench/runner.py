@@ -10,7 +10,8 @@ Three parts, all measured in one run so ratios compare like with like:
    Errors: RMSE and max in linear light, relative RMSE (RMSE / RMS of the reference), PSNR
    after a log tone map, and edge-band RMSE where the case marks an edge band
    (``edge_mask``).  Noise effects, whose levels draw different samples, supply
-   ``metrics(out, ref, case)`` comparing statistics with their model instead.  Peers
+   ``metrics(out, ref, case)`` comparing statistics with the reference's instead; it
+   scores the levels, the baselines and the peers alike.  Peers
    (OpenCV, SciPy, naive methods) doing the same operation are timed beside it where a case
    declares them with ``peers(case, params, ctx)``: host callables returning RGBA arrays, or
    ``(callable, level)`` to compare with the clfx level doing the same work (else final).
@@ -220,7 +221,8 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     for row in res.rows:
         row["error_ratio_vs_reference"] = (row["rel_rmse"] / ref_err) if ref_err > 0 else None
     peer_ctx = _case_context(rt, case, "final")
-    res.baselines = _baselines(case, spec, params, peer_ctx, ref, edge, repeat, res.effect)
+    res.baselines = _baselines(case, params, peer_ctx, ref, repeat, res.effect,
+                               spec.naive, lambda out, ref_: metric(out, ref_, case))
     _flag_levels(res)
     peers = spec.peers
     for label, peer_fn in ((peers(case, params, peer_ctx) if peers else None) or {}).items():
@@ -230,7 +232,7 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
         except Exception as exc:  # a peer missing on this machine is reported, not fatal
             res.peers.append({"effect": res.effect, "peer": label, "error": str(exc)})
             continue
-        peer = {"effect": res.effect, "peer": label, **_stats(times), **error_metrics(out, ref, edge)}
+        peer = {"effect": res.effect, "peer": label, **_stats(times), **metric(out, ref, case)}
         mine = next(r for r in res.rows if r["quality"] == level)
         peer["clfx_level"] = level
         peer["clfx_ms"] = mine["ms"]
@@ -241,16 +243,16 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     return res
 
 
-def _baselines(case, spec, params, ctx, ref, edge, repeat: int, label: str) -> list[dict]:
-    """The unchanged input's row and the naive method's row (when the case declares one),
-    scored against ``ref`` like the levels."""
+def _baselines(case, params, ctx, ref, repeat: int, label: str, naive, score) -> list[dict]:
+    """The unchanged input's row and the ``naive`` method's row (when the case declares one),
+    scored against ``ref`` like the levels: ``score(out, ref)`` is the levels' metric."""
     window = ctx.source.window
     src = np.asarray(case["source"], np.float32)
     rows = []
-    if spec.naive is not None:
-        row = {"effect": label, "baseline": "naive", "label": spec.naive.label}
+    if naive is not None:
+        row = {"effect": label, "baseline": "naive", "label": naive.label}
         try:
-            out, times = _timed(spec.naive.make(case, params, ctx), repeat)
+            out, times = _timed(naive.make(case, params, ctx), repeat)
         except Exception as exc:  # reported in the table, not fatal
             row["error"] = f"{type(exc).__name__}: {exc}"
         else:
@@ -258,10 +260,10 @@ def _baselines(case, spec, params, ctx, ref, edge, repeat: int, label: str) -> l
             if out.shape[:2] != (window.height, window.width):
                 row["error"] = f"naive output {out.shape} does not cover the window {window}"
             else:
-                row.update(_stats(times), **error_metrics(out, ref, edge))
+                row.update(_stats(times), **score(out, ref))
         rows.append(row)
     rows.append({"effect": label, "baseline": "input", "label": "unchanged input",
-                 **error_metrics(src, ref, edge)})
+                 **score(src, ref)})
     return rows
 
 

@@ -45,7 +45,11 @@ log-PSNR: "yes" or "NO") in the JSON, the markdown tables and the summary.
 with ``make``'s signature; ``clfx bench`` measures each like the main case, under the name
 ``<effect>:<name>``, with the same peers, naive method and metrics.
 
-``metrics(out, ref, case) -> dict``: replaces the pixel error metrics (noise effects).
+``metrics(out, ref, case) -> dict``: replaces the pixel error metrics (noise effects, whose
+levels draw different samples): the runner scores every level, the naive method, the
+unchanged input and every peer with it, against the same ``ref``.  The dict holds at least
+``rmse``, ``max_err``, ``rel_rmse`` and ``psnr_log`` (the tables print them; ``beats naive``
+/ ``beats input`` compare ``psnr_log``, higher is better), e.g. ``grain``'s statistics PSNR.
 
 A module whose truth is computed with code outside ``clfx.bench.scene`` and
 ``clfx.bench.groundtruth`` lists those modules in ``TRUTH_DEPENDS`` (names), so that the
