@@ -174,3 +174,7 @@ def test_grain_bench_scores_the_input_by_the_same_statistics(rt):
     assert inp["rel_rmse"] == pytest.approx(1.0) and "std_rel_err" in inp
     assert all(r["beats_input"] is True and "acf_err" in r for r in res.rows), res.rows
     assert losing_levels(res.as_dict()) == []
+    from clfx.bench.runner import markdown
+    text = markdown({"size": (96, 64), "repeat": 1, "device": "test",
+                     "effects": [res.as_dict()]})
+    assert "- grain: Score a grain output by its statistics" in text   # the table says so

@@ -152,10 +152,13 @@ class EffectResult:
     baselines: list[dict] = field(default_factory=list)
     reference_kind: str = "reference level"
     note: str = ""
+    metric: str = ""
+    """The case's own metric, in one line (its docstring's first), if it has one."""
 
     def as_dict(self) -> dict:
         return {"effect": self.effect, "rows": self.rows, "peers": self.peers,
-                "baselines": self.baselines, "reference": self.reference_kind, "note": self.note}
+                "baselines": self.baselines, "reference": self.reference_kind, "note": self.note,
+                "metric": self.metric}
 
 
 def _case_context(rt, case: dict, quality: str):
@@ -213,6 +216,9 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     ref_ms = next(r["ms"] for r in res.rows if r["quality"] == "reference")
     # Noise-like effects compare statistics, not pixels: a module may supply its own metric.
     metric = spec.metrics or (lambda out, ref_, c: error_metrics(out, ref_, edge))
+    if spec.metrics is not None:
+        res.metric = ((spec.metrics.__doc__ or "").strip().splitlines() or [""])[0] + \
+            f" ({spec.metrics.__module__}.{spec.metrics.__name__})"
     for row in res.rows:
         row.update(metric(outputs[row["quality"]], ref, case))
         row["speedup_vs_reference"] = ref_ms / row["ms"] if row["ms"] > 0 else None
@@ -535,6 +541,10 @@ def markdown(results: dict) -> str:
                     f"| {b['effect']} | {what} | {ms} | | {b['rmse']:.3g} | {b['max_err']:.3g} | "
                     f"{b['rel_rmse']:.3g} | {b['psnr_log']:.1f} | {b.get('edge_rmse', float('nan')):.3g} "
                     f"| | {e['reference']} |")
+            notes = [f"- {e['effect']}: {e['metric']}" for e in results["effects"] if e.get("metric")]
+        if notes:
+            lines += ["", "Scored by the case's own metric (RMSE, max err, rel. RMSE and PSNR log "
+                          "above are its quantities):", *notes]
         peers = [p for e in results["effects"] for p in e["peers"]]
         if peers:
             lines += ["", "| effect | peer | peer ms | clfx level | clfx ms | clfx / peer time | "
