@@ -37,9 +37,9 @@ import numpy as np
 from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
 from clfx.fx import lensdb
-from clfx.fx.resample import (BORDERS, DevicePackedMap, PackedMap, ResampleLevel, check_fold,
-                              fit_scale, fold_radius, frame_key, kernel_defines,
-                              launch_packed, lut_lookup, needs_sanitising, pixel_centres,
+from clfx.fx.resample import (BORDERS, DevicePackedMap, PackedMap, ResampleLevel, band_window,
+                              check_fold, fit_scale, fold_radius, frame_key, kernel_defines,
+                              launch_packed, lut_lookup, map_bands, needs_sanitising, pixel_centres,
                               radial_inverse, radial_inverse_fast, radial_lut, rect_boundary,
                               upload_map)
 from clfx.host import Plugin, register
@@ -194,13 +194,15 @@ class Lens(Plugin):
         return None
 
     def host_geometry(self, rt, p, ctx):
-        """Float64 geometry of this parameter set and frame (kept in ``rt.cache``): every
-        channel's source points, the TCA tables and the kernel constants.
+        """The geometry of this parameter set and frame (kept in ``rt.cache``): the kernel
+        constants, the TCA tables and how to make every channel's source points for any
+        band of rows; no whole-frame point array is kept (at 8K one is 265 MB a channel).
 
-        Returns a dict with ``green`` (gx, gy) and, with TCA, ``red``/``blue`` source points
-        (source-window coordinates, texel centres at +0.5, NaN = no source), ``luts``,
-        ``consts`` (ccx, ccy, lut_scale, vig_scale, vk1, vk2, vk3; centre in source-window
-        coordinates), ``flags`` (use_map, use_tca, use_vig) and ``notes``.
+        Returns a dict with ``points(y0, y1)`` (a list of (sx, sy): green and, with TCA,
+        red and blue source points of output rows ``y0 <= y < y1``, source-window
+        coordinates, texel centres at +0.5, NaN = no source), ``luts``, ``consts`` (ccx,
+        ccy, lut_scale, vig_scale, vk1, vk2, vk3; centre in source-window coordinates),
+        ``flags`` (use_map, use_tca, use_vig) and ``notes``.
         """
         return rt.cache.get(("lens.geometry",) + frame_key(p, ctx),
                             lambda: self._geometry(p, ctx))
@@ -224,25 +226,48 @@ class Lens(Plugin):
         if not (lens.min_focal <= focal <= (lens.max_focal or lens.min_focal)):
             notes.append(f"lens: {focal:g} mm is outside {lens.model}'s range "
                          f"{lens.min_focal:g}-{lens.max_focal:g} mm (lensfun extrapolates)")
-        gx, gy, info = simulation_geometry(cal, norm, dw, src.window, p.fit, use_map)
+        win = src.window
+        x0, y0 = win.x0, win.y0
+
+        def green(b0, b1):      # frame coordinates; the same numbers as a whole-frame call
+            gx, gy, _ = simulation_geometry(cal, norm, dw, band_window(win, b0, b1), p.fit,
+                                            use_map)
+            return gx, gy
+
+        _, _, info = simulation_geometry(cal, norm, dw, band_window(win, 0, min(1, win.height)),
+                                         p.fit, use_map)   # fold check, centre, fit scale
         ccx, ccy = info["center"]
-        x0, y0 = src.window.x0, src.window.y0
-        geo = dict(green=(gx - x0, gy - y0), luts=None, lut_scale=0.0)
+        geo = dict(luts=None, lut_scale=0.0)
         if use_tca:
-            r_g = np.hypot(gx - ccx, gy - ccy) * norm.scale
-            r_max = max(float(np.nanmax(r_g)) if r_g.size else 0.0, 1e-9) * 1.0001
+            # the largest green radius read, band by band (a whole-frame nanmax, exactly)
+            r_max = -math.inf
+            for b0, b1 in map_bands(win.height, src.pitch):
+                gx, gy = green(b0, b1)
+                r_g = np.hypot(gx - ccx, gy - ccy) * norm.scale
+                if np.any(np.isfinite(r_g)):
+                    r_max = max(r_max, float(np.nanmax(r_g)))
+            r_max = max(r_max if r_max > -math.inf else (math.nan if win.width * win.height else 0.0),
+                        1e-9) * 1.0001
             luts = tca_luts(cal, r_max)
-            lut_scale = (norm.scale / r_max) ** 2
-            geo.update(luts=luts, lut_scale=lut_scale)
-            # the kernel's table read, in float64, once: rho = |u_g - C|^2 scaled to [0, 1]
-            dx, dy = gx - ccx, gy - ccy
-            rho = (dx * dx + dy * dy) * lut_scale
-            defined = np.isfinite(rho)
-            for name, lut in (("red", luts[0]), ("blue", luts[1])):
-                s = np.where(defined, lut_lookup(lut, np.where(defined, rho, 0.0)), np.nan)
-                geo[name] = (ccx + dx * s - x0, ccy + dy * s - y0)
+            geo.update(luts=luts, lut_scale=(norm.scale / r_max) ** 2)
+        lut_scale = geo["lut_scale"]
+
+        def points(b0, b1):
+            gx, gy = green(b0, b1)
+            out = [(gx - x0, gy - y0)]
+            if use_tca:
+                # the kernel's table read, in float64: rho = |u_g - C|^2 scaled to [0, 1]
+                dx, dy = gx - ccx, gy - ccy
+                rho = (dx * dx + dy * dy) * lut_scale
+                defined = np.isfinite(rho)
+                for lut in geo["luts"]:
+                    sc = np.where(defined, lut_lookup(lut, np.where(defined, rho, 0.0)), np.nan)
+                    out.append((ccx + dx * sc - x0, ccy + dy * sc - y0))
+            return out
+
         vk = cal.vignetting[1][:3] if use_vig else (0.0, 0.0, 0.0)
-        geo.update(consts=(ccx - x0, ccy - y0, geo["lut_scale"],
+        geo.update(points=points,
+                   consts=(ccx - x0, ccy - y0, lut_scale,
                            norm.scale / norm.vignetting_unit) + tuple(vk),
                    flags=(use_map, use_tca, use_vig), notes=notes)
         return geo
@@ -250,22 +275,24 @@ class Lens(Plugin):
     def device_buffers(self, rt, p, ctx, double):
         """Device data, kept in ``rt.cache``: reference (``double``) ``(map, luts)``, float64
         buffers; float levels a :class:`clfx.fx.resample.DevicePackedMap` of green (and red,
-        blue with TCA), with ``maps`` = 0 when nothing moves (vignetting only)."""
+        blue with TCA), built band by band (`PackedMap.device`), with ``maps`` = 0 when
+        nothing moves (vignetting only)."""
         src = ctx.source
 
         def build():
             geo = self.host_geometry(rt, p, ctx)
             use_map, use_tca, _ = geo["flags"]
             if double:
+                if not use_map:
+                    return rt.to_device(np.zeros(2)), rt.to_device(
+                        geo["luts"] if use_tca else np.zeros(2))
                 ux, uy = pixel_centres(src.window, frame_origin=False)
-                gx, gy = geo["green"]
-                map_buf = upload_map(rt, gx - ux, gy - uy, src.pitch, True) if use_map else \
-                    rt.to_device(np.zeros(2))
-                return map_buf, rt.to_device(geo["luts"] if use_tca else np.zeros(2))
+                gx, gy = geo["points"](0, src.height)[0]
+                return (upload_map(rt, gx - ux, gy - uy, src.pitch, True),
+                        rt.to_device(geo["luts"] if use_tca else np.zeros(2)))
             if not (use_map or use_tca):      # vignetting only: the source is read in place
                 return DevicePackedMap(rt.to_device(np.zeros(4, np.int32)), {}, {}, 0)
-            points = [geo["green"]] + ([geo["red"], geo["blue"]] if use_tca else [])
-            return PackedMap(points, src.width, src.height, src.pitch).upload(rt)
+            return PackedMap.device(rt, geo["points"], src.width, src.height, src.pitch)
 
         return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (double,), build)
 
