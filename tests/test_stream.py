@@ -1,6 +1,7 @@
-"""A stream as fast as its parts: each file decoded once, I/O threads at low priority with the
-codecs on them, geometry-only caches prepared before the first frame, the EXR compression
-default; none of it changes a pixel."""
+"""A stream as fast as its parts: each file decoded once, on a CPU device the render alone
+and then the write beside the next read (on a GPU, I/O overlapping the render), geometry-only
+caches prepared before the first frame, the EXR compression default; none of it changes a
+pixel."""
 import os
 import threading
 import time
@@ -79,17 +80,86 @@ def test_codec_threads_set_and_restored():
 
 
 @pytest.mark.skipif(not hasattr(os, "setpriority"), reason="per-thread nice is Linux's")
-def test_io_threads_run_below_the_device(monkeypatch):
+def test_overlapping_io_threads_run_below_a_cpu_device(monkeypatch):
     monkeypatch.setattr(batch_mod, "IO_NICE", 10)
     base = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
     def nice():
         return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
-    with batch_mod.io_pool("read") as r, batch_mod.io_pool("write") as w:
+    with batch_mod.io_pool("read", lowered=True) as r, batch_mod.io_pool("write", lowered=True) as w:
         got_r, got_w = r.submit(nice).result(), w.submit(nice).result()
     assert got_w == min(19, base + 10) and got_r == min(19, base + 5)
     assert nice() == base                       # the caller keeps its priority
+    with batch_mod.io_pool("read") as r, batch_mod.io_pool("write") as w:
+        assert r.submit(nice).result() == w.submit(nice).result() == base   # phased
+
+
+class _Device:
+    def __init__(self, cpu):
+        self.shares_host_cores = cpu
+
+
+def test_stream_mode_follows_the_device(monkeypatch):
+    monkeypatch.setattr(batch_mod, "STREAM", "auto")
+    small, big = 1920 * 1080, batch_mod.OVERLAP_MAX_PIXELS + 1
+    assert batch_mod.stream_mode(_Device(True), small) == "phased"
+    assert batch_mod.stream_mode(_Device(False), small) == "overlap"
+    assert batch_mod.stream_mode(_Device(False), big) == "serial"
+    monkeypatch.setattr(batch_mod, "STREAM", "overlap")
+    assert batch_mod.stream_mode(_Device(True), small) == "overlap"
+
+
+def _timeline(tmp_path, rt, monkeypatch, stream):
+    """Run 4 frames with each read, render and write taking at least 0.15 s; return the
+    (kind, frame, start, end) intervals."""
+    for i in range(1, 5):
+        write_frame(_frame(np.random.default_rng(i)), tmp_path / f"in.{i:04d}.exr")
+    monkeypatch.setattr(batch_mod, "STREAM", stream)
+    b = Batch(look=load_look("cinema"), input_path=str(tmp_path / "in.####.exr"),
+              output_path=str(tmp_path / stream / "o.####.exr"),
+              options=RenderOptions(), verbosity=0)
+    b.prepare()
+    spans, lock = [], threading.Lock()
+
+    def timed(kind, fn, frame_of):
+        def run(*args):
+            t0 = time.perf_counter()
+            out = fn(*args)
+            time.sleep(0.15)
+            with lock:
+                spans.append((kind, frame_of(args), t0, time.perf_counter()))
+            return out
+        return run
+
+    monkeypatch.setattr(b, "_read", timed("read", b._read, lambda a: a[0].frame))
+    monkeypatch.setattr(b, "render", timed("render", b.render, lambda a: a[1].frame))
+    monkeypatch.setattr(b, "_write", timed("write", b._write, lambda a: a[1].frame))
+    assert b.run(rt)["frames"] == 4
+    return spans
+
+
+def _overlap(a, b):
+    return min(a[3], b[3]) - max(a[2], b[2]) > 0.02
+
+
+def test_phased_stream_renders_alone_and_writes_beside_the_next_read(tmp_path, rt, monkeypatch):
+    spans = _timeline(tmp_path, rt, monkeypatch, "phased")
+    renders = [s for s in spans if s[0] == "render"]
+    io = [s for s in spans if s[0] != "render"]
+    assert len(renders) == 4 and len(io) == 8
+    assert not any(_overlap(r, x) for r in renders for x in io)   # the device has the cores
+    for n in (1, 2, 3):                 # frame n's write runs beside frame n+1's read
+        w = next(s for s in io if s[:2] == ("write", n))
+        r = next(s for s in io if s[:2] == ("read", n + 1))
+        assert _overlap(w, r)
+
+
+def test_overlapping_stream_reads_while_the_device_renders(tmp_path, rt, monkeypatch):
+    spans = _timeline(tmp_path, rt, monkeypatch, "overlap")
+    renders = [s for s in spans if s[0] == "render"]
+    reads = [s for s in spans if s[0] == "read"]
+    assert sum(_overlap(r, x) for r in renders for x in reads) >= 3
 
 
 def test_cache_builds_a_key_once_across_threads(rt):

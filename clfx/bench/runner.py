@@ -357,7 +357,7 @@ def bench_io(frame: Frame, repeat: int) -> dict:
 def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
                    repeat: int = 3) -> dict:
     """A stream as fast as its parts?  The look over ``frames`` EXR frames through `clfx
-    render`'s batch pipeline (reading, rendering and writing overlapped), beside the same
+    render`'s batch pipeline (phased or overlapped, `clfx.pipeline.batch.stream_mode`), beside the same
     parts measured alone in the same run: the look on the first frame (per effect), reading
     a frame and writing its output (median of ``repeat`` warm runs each, half of them before
     the stream and half after).
@@ -371,7 +371,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     parts slow each other down."""
     from clfx.bench.scene import demo_scene, render_sharp
     from clfx.io.write import write_frame
-    from clfx.pipeline.batch import Batch, RenderOptions, io_threads
+    from clfx.pipeline.batch import Batch, RenderOptions, io_threads, stream_mode
     from clfx.pipeline.look import render_frame
     from clfx.pipeline.presets import load_look
 
@@ -439,6 +439,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     parts_cpu = sum(med([x[2] for x in xs]) for xs in (renders, reads, writes))
     ms_per_frame = 1e3 * wall / max(len(reports), 1)
     return {"look": look_name, "frames": len(reports), "fps": summary["fps"],
+            "stream": stream_mode(rt, width * height),
             "ms_per_frame": ms_per_frame, "device_ms_mean": summary["device_ms_mean"],
             "parts_ms": parts_ms, "stream_vs_parts": ms_per_frame / parts_ms if parts_ms else None,
             "cpu_ms_per_frame": 1e3 * cpu / max(len(reports), 1), "parts_cpu_ms": parts_cpu,
@@ -593,8 +594,9 @@ def sequence_markdown(s: dict) -> list[str]:
         return "-" if v is None else f"{v:.0f}"
 
     load = f", load average {s['load_avg']:.1f} on {s['cores']} cores" if s.get("load_avg") is not None else ""
+    mode = f", {s['stream']} stream" if s.get("stream") else ""
     lines = [f"Sequence (look {s['look']}, {s['frames']} frames, EXR read and write included"
-             f"{load}): {s['ms_per_frame']:.0f} ms/frame ({s['fps']} fps) end to end; the same "
+             f"{mode}{load}): {s['ms_per_frame']:.0f} ms/frame ({s['fps']} fps) end to end; the same "
              f"parts one after another take {s['parts_ms']:.0f} ms, so the stream takes "
              f"{s['stream_vs_parts']:.2f}x its parts' sum.  CPU time: {s['cpu_ms_per_frame']:.0f} ms "
              f"per frame in the stream, {s['parts_cpu_ms']:.0f} ms for the parts alone.", "",

@@ -328,6 +328,12 @@ class Runtime:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
     @property
+    def shares_host_cores(self) -> bool:
+        """Whether the device is the host's CPU (PoCL): its kernels and the host's threads
+        (EXR codecs) take turns on the same cores (`clfx.pipeline.batch.stream_mode`)."""
+        return bool(self.device.type & self.cl.device_type.CPU)
+
+    @property
     def compute_units(self) -> int:
         return int(self.device.max_compute_units)
 

@@ -9,13 +9,16 @@ sequence's throughput approaches the slower of I/O and compute rather than their
 Output is deterministic per frame: rendering frame N alone or inside a batch gives the
 same bytes.
 
-Scheduling on few cores: the device (PoCL) runs one thread per core at normal priority; the
-read thread runs at nice ``IO_NICE // 2`` and the write thread at ``IO_NICE`` (the device
-waits for the next read, only the batch's end waits for a write), and both decode and encode
-on their own thread only (`clfx.io.read.codec_threads` 1).  So reading and writing take the
-cores the device leaves idle (host work between kernels, single-threaded set-up) instead of
-taking cores from the effects, and when the device waits for the next frame the read has
-the cores.  At most `WRITES_AHEAD` rendered frames wait for their write.
+Scheduling: where the device is the CPU (PoCL), the effects and the codecs want the same
+cores, so a sequence runs in phases (`STREAM`, "phased"): the device renders frame N with
+the cores to itself, then frame N's write and frame N+1's read run side by side (one core
+each on two cores; `IO_CODEC_THREADS` each), and the next render starts when both are done.
+Nothing runs at a lowered priority, so the stream neither slows the effects down (each
+takes its time alone) nor stalls when other processes want the CPU.  Where the device is
+not the CPU (a GPU), its kernels leave the cores free: the next frame is read and the
+previous one written while it renders ("overlap"), with at most `WRITES_AHEAD` rendered
+frames waiting for their write.  Frames above :data:`OVERLAP_MAX_PIXELS` go one step at a
+time ("serial"), to bound memory.
 """
 from __future__ import annotations
 
@@ -40,19 +43,43 @@ if TYPE_CHECKING:
 
 RAW = "-"
 
-IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
-"""Nice increment of a batch's write thread, half of it for the read thread (Linux: per
-thread; ``CLFX_IO_NICE``).  At 10 a write gets about a tenth of a core a device thread wants
-(CFS weights 110 vs 1024): measured on the 2-core machine, the effects' in-stream time fell
-from 1.5-2.7x to about 1.0x their time alone (README, "Sequences on one machine").  0 leaves
-the threads alone."""
+STREAM = os.environ.get("CLFX_STREAM", "auto")
+"""How a sequence's I/O and rendering share the machine (``CLFX_STREAM``): "phased" (render,
+then write and read side by side), "overlap" (read and write while the device renders) or
+"auto": phased where the device is the CPU, overlap elsewhere (`stream_mode`)."""
 
-IO_CODEC_THREADS = 1
-"""OpenImageIO/OpenEXR threads per read or write during a batch (`codec_threads`)."""
+STREAMS = ("auto", "phased", "overlap")
+
+IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
+"""Overlap only: nice increment of the write thread, half of it for the read thread (Linux:
+per thread; ``CLFX_IO_NICE``), so that on a CPU device I/O gives way to the effects.  0
+leaves the threads alone.  Phased streams do not lower priorities: that stalls when other
+processes want the CPU (README, "Sequences on one machine")."""
+
+
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+IO_CODEC_THREADS = max(1, _cores() // 2)
+"""OpenImageIO/OpenEXR threads per read or write during a batch (`codec_threads`): half the
+cores each, since a read and a write run side by side (1 on a 2-core machine)."""
 
 
 WRITES_AHEAD = 2
-"""Frames rendered but not yet written that a batch holds before it waits for a write."""
+"""Overlap only: frames rendered but not yet written that a batch holds before it waits
+for a write."""
+
+
+def stream_mode(rt, pixels: int) -> str:
+    """"serial" for frames above :data:`OVERLAP_MAX_PIXELS`; otherwise `STREAM`, where
+    "auto" is "phased" when ``rt``'s device is the CPU (it shares the cores with the codecs)
+    and "overlap" when it is not."""
+    if pixels > OVERLAP_MAX_PIXELS:
+        return "serial"
+    if STREAM in ("phased", "overlap"):
+        return STREAM
+    return "phased" if getattr(rt, "shares_host_cores", True) else "overlap"
 
 
 def _background(nice: int) -> None:
@@ -67,18 +94,19 @@ def _background(nice: int) -> None:
             pass     # not permitted here: the thread keeps its priority
 
 
-def io_pool(kind: str = "read") -> ThreadPoolExecutor:
-    """The thread a batch reads (``"read"``) or writes (``"write"``) on: low priority, and
-    writing lower than reading, since the device waits for the next frame's read but only
-    the end of the batch waits for a write (see the module docstring)."""
-    nice = IO_NICE // 2 if kind == "read" else IO_NICE
+def io_pool(kind: str = "read", lowered: bool = False) -> ThreadPoolExecutor:
+    """The thread a batch reads (``"read"``) or writes (``"write"``) on.  ``lowered`` (an
+    overlapping stream on a CPU device): at nice ``IO_NICE // 2`` (read) or ``IO_NICE``
+    (write), the write lower since the device waits for the next frame's read but only the
+    batch's end waits for a write."""
+    nice = (IO_NICE // 2 if kind == "read" else IO_NICE) if lowered else 0
     return ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"clfx-{kind}",
                               initializer=_background, initargs=(nice,))
 
 
 @contextmanager
 def io_threads():
-    """Codecs on the calling thread while a batch runs (`IO_CODEC_THREADS`)."""
+    """The codecs' threads while a batch runs (`IO_CODEC_THREADS`)."""
     from clfx.io.read import codec_threads
 
     with codec_threads(IO_CODEC_THREADS):
@@ -406,26 +434,31 @@ class Batch:
         total = len(self.jobs)
         if self.skipped_existing and self.verbosity > 0:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
-        own_pool = self._pool is None
-        pool = io_pool() if own_pool else self._pool
         first, self._first_read = self._first_read, None
         prepared = self._prepare_look(rt)
-        with (pool if own_pool else nullcontext()), io_pool("write") as writer:
+        lowered = STREAM != "phased" and getattr(rt, "shares_host_cores", True)
+        with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
             for i, job in enumerate(self.jobs):
                 read = next_read.result()
-                overlap = read.pixels() <= OVERLAP_MAX_PIXELS
+                mode = stream_mode(rt, read.pixels())
                 following = self.jobs[i + 1] if i + 1 < total else None
-                next_read = pool.submit(self._read, following) if overlap and following else None
+                next_read = None
+                if mode == "overlap" and following:
+                    next_read = pool.submit(self._read, following)
+                elif writes:            # phased or serial: the device renders alone
+                    writes = self._drain(writes, block=True)
                 frame_out, report, views_out = self.render(rt, job, read)
                 writes.append((writer.submit(self._write, frame_out, job, report, views_out),
                                report))
                 del read, frame_out, views_out     # the write holds the output until done
-                writes = self._drain(writes, block=not overlap)
+                if mode == "serial":
+                    writes = self._drain(writes, block=True)
+                writes = self._drain(writes, block=False)
                 while len(writes) > WRITES_AHEAD:
                     writes = self._drain(writes[:1], block=True) + writes[1:]
-                if next_read is None and following:
+                if next_read is None and following:     # phased: beside this frame's write
                     next_read = pool.submit(self._read, following)
                 reports.append(report)
                 if self.on_frame is not None:

@@ -205,7 +205,8 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False,
     results: list[dict | None] = [None] * len(jobs)
     writes = []
     prepared = batch._prepare_look(rt, jobs)
-    with io_pool() as pool, io_pool("write") as writer:
+    lowered = getattr(rt, "shares_host_cores", True)   # I/O gives way to a CPU device
+    with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
         next_read = pool.submit(batch._read, jobs[0]) if jobs else None
         for i, job in enumerate(jobs):
             read, next_read = next_read, (pool.submit(batch._read, jobs[i + 1])
