@@ -10,9 +10,11 @@ Each worker process holds a `ClfxWorker` plugin: the OpenCL runtime, built once 
 worker joins (a process-wide `Runtime`), and the renders it has unpacked, by key, so a task
 pays neither device set-up nor look loading; effects keep their one-off set-up in the
 runtime's cache as in one process.  Inside a task the next frame is read and the previous one
-written on I/O threads while the device renders, as `Batch.run` does; across tasks, a worker
-runs `TASK_THREADS` of them at once and a per-process device lock lets one render while the
-others read or write, so single-frame tasks overlap their I/O too.
+written on I/O threads while the device renders (at nice 10/5 on a CPU device: the overlapped
+stream of `clfx.pipeline.batch`; workers keep it, measured faster for them than the single
+process's phases, README "Scaling out"); across tasks, a worker runs `TASK_THREADS` of them
+at once and a per-process device lock lets one render while the others read or write, so
+single-frame tasks overlap their I/O too.
 
 Faults: a worker that dies mid-frame leaves at most a temp file (removed when the batch
 ends); Dask reruns its task on another worker (``distributed.scheduler.allowed-failures``
