@@ -98,6 +98,7 @@ class RenderContext:
         self._read_image = read_image
         self._read_lens = read_lens
         self.rgb_to_xyz = colour.rgb_to_xyz_matrix(rgb_to_xyz)
+        self._handoff: dict = {}
 
     @property
     def luminance(self) -> np.ndarray:
@@ -185,6 +186,7 @@ class RenderContext:
         ctx.quality = quality
         ctx.notes = []
         ctx.warnings = []
+        ctx._handoff = {}
         return ctx
 
     def with_source(self, source) -> RenderContext:
@@ -194,7 +196,25 @@ class RenderContext:
         ctx.__dict__.update(self.__dict__)
         ctx.source = source
         ctx._analysis = _SharedAnalysis()
+        ctx._handoff = {}
         return ctx
+
+    def remember(self, key, build):
+        """``build()``, kept for this step's next `recall` of ``key``: what an effect's
+        ``is_identity`` has to compute to answer and its ``render`` needs again (lens_flare's
+        ghost plan) is computed once per frame."""
+        value = build()
+        self._handoff[key] = (self.source, value)
+        return value
+
+    def recall(self, key, build):
+        """What `remember` kept for ``key`` over this same source (taken: the next call
+        builds afresh, so a context rendered twice, as the bench does, pays every time), else
+        ``build()``."""
+        kept = self._handoff.pop(key, None)
+        if kept is not None and kept[0] is self.source:
+            return kept[1]
+        return build()
 
 
 # -- plugins -------------------------------------------------------------------------------

@@ -354,7 +354,8 @@ class LensFlare(Plugin):
             return "no pixel above threshold"
         if not self.candidate_sources(p, ctx):
             return "no light source in or near view"
-        if p.model == "physical" and not len(self.plan(ctx.runtime, p, ctx)[0]):
+        if p.model == "physical" and not len(
+                ctx.remember(("lens_flare.plan", p), lambda: self.plan(ctx.runtime, p, ctx))[0]):
             return "every ghost is below the visible level (cull)"
         return None
 
@@ -425,7 +426,8 @@ class LensFlare(Plugin):
         return entries, levels, keep[rows], lights
 
     def render_physical(self, rt, p, ctx):
-        entries, levels, _, lights = self.plan(rt, p, ctx)
+        entries, levels, _, lights = ctx.recall(("lens_flare.plan", p),
+                                                lambda: self.plan(rt, p, ctx))
         blades = p.blades or ctx.camera.blades
         out = self.draw(rt, ctx, entries, levels, self.output_window(p, ctx), blades,
                         ctx.camera.blade_rotation + p.rotation)

@@ -415,3 +415,24 @@ def test_working_space_luminance_and_channel_weights(rt, rng):
     w = flare_channel_weights(tuple(np.linspace(420.0, 680.0, 7)), aces)
     np.testing.assert_allclose(w, spectral.channel_weights(np.linspace(420.0, 680.0, 7), aces))
     assert not np.allclose(w, spectral.channel_weights(np.linspace(420.0, 680.0, 7)))
+
+
+def test_physical_plan_is_made_once_per_frame(rt, monkeypatch):
+    """is_identity's cull check and the render share one ghost plan (a measure kernel, the
+    cull and the entries); a context rendered again plans again."""
+    calls = []
+    real = LensFlare.plan
+    monkeypatch.setattr(LensFlare, "plan", lambda self, *a: calls.append(1) or real(self, *a))
+    src = physical_scene()
+    p = LensFlare.params(gain=100.0)
+    ctx = RenderContext(rt, rt.upload(src), camera=CAM_P, read_lens=read_lens).for_step("final")
+    fx = LensFlare()
+    assert fx.is_identity(p, ctx) is None
+    first = rt.download(fx.render(rt, p, ctx))
+    assert len(calls) == 1
+    again = rt.download(fx.render(rt, p, ctx))
+    assert len(calls) == 2 and np.array_equal(first, again)
+    other = ctx.with_source(rt.upload(src * 2.0))     # another source: its own plan
+    fx.is_identity(p, ctx)
+    fx.render(rt, p, other)
+    assert len(calls) == 4
