@@ -192,3 +192,19 @@ def test_task_threads_take_turns_on_the_device():
                                 jobs))
     assert [r[0]["frame"] for r in results] == list(range(1, 7))
     assert overlaps and max(overlaps) == 1
+
+
+def test_worker_codecs_take_its_share_of_the_cores(monkeypatch):
+    import OpenImageIO as oiio
+
+    from clfx.pipeline.distributed import codec_threads_for_batches
+
+    saved = {k: oiio.get_int_attribute(k, 0) for k in ("threads", "exr_threads")}
+    try:
+        monkeypatch.setenv("OPENIMAGEIO_OPTIONS", "threads=3,exr_threads=3")   # a local cluster's
+        assert codec_threads_for_batches() == 3 == oiio.get_int_attribute("exr_threads", 0)
+        monkeypatch.delenv("OPENIMAGEIO_OPTIONS")                             # a user's worker
+        assert codec_threads_for_batches() == len(os.sched_getaffinity(0))
+    finally:
+        for k, v in saved.items():
+            oiio.attribute(k, v)

@@ -110,6 +110,15 @@ def test_stream_mode_follows_the_device(monkeypatch):
     assert batch_mod.stream_mode(_Device(True), small) == "overlap"
 
 
+def test_codecs_take_every_core_unless_io_overlaps_a_cpu_device(monkeypatch):
+    monkeypatch.setattr(batch_mod, "_cores", lambda: 8)
+    monkeypatch.setattr(batch_mod, "STREAM", "auto")
+    assert batch_mod.codec_threads_for(_Device(True)) == 8       # phased: I/O has the cores
+    assert batch_mod.codec_threads_for(_Device(False)) == 8      # beside a GPU
+    monkeypatch.setattr(batch_mod, "STREAM", "overlap")
+    assert batch_mod.codec_threads_for(_Device(True)) == batch_mod.IO_CODEC_THREADS == 1
+
+
 def _timeline(tmp_path, rt, monkeypatch, stream):
     """Run 4 frames with each read, render and write taking at least 0.15 s; return the
     (kind, frame, start, end) intervals."""

@@ -371,7 +371,8 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     parts slow each other down."""
     from clfx.bench.scene import demo_scene, render_sharp
     from clfx.io.write import write_frame
-    from clfx.pipeline.batch import Batch, RenderOptions, io_threads, stream_mode
+    from clfx.pipeline.batch import (Batch, RenderOptions, codec_threads_for, io_threads,
+                                     stream_mode)
     from clfx.pipeline.look import render_frame
     from clfx.pipeline.presets import load_look
 
@@ -397,7 +398,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
         reads, renders, writes = [], [], []
 
         def parts(n):   # each part alone, with the codecs as the stream runs them
-            with io_threads():
+            with io_threads(codec_threads_for(rt)):
                 reads.extend(timed(lambda: alone._read(alone.jobs[0])) for _ in range(n))
                 renders.extend(timed(lambda: render_frame(rt, look, read.views[0],
                                                           frame_number=job.frame))
@@ -406,7 +407,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
                 writes.extend(timed(lambda: alone._write(out, alone.jobs[0], report))
                               for _ in range(n))
 
-        with io_threads():
+        with io_threads(codec_threads_for(rt)):
             read = alone._read(alone.jobs[0])
             render_frame(rt, look, read.views[0], frame_number=job.frame)  # warm-up
         parts(max(1, repeat // 2))     # half the runs before the stream, half after: a

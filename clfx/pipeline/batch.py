@@ -12,7 +12,8 @@ same bytes.
 Scheduling: where the device is the CPU (PoCL), the effects and the codecs want the same
 cores, so a sequence runs in phases (`STREAM`, "phased"): the device renders frame N with
 the cores to itself, then frame N's write and frame N+1's read run side by side (one core
-each on two cores; `IO_CODEC_THREADS` each), and the next render starts when both are done.
+each on two cores, their codecs on every core: `codec_threads_for`), and the next render
+starts when both are done.
 Nothing runs at a lowered priority, so the stream neither slows the effects down (each
 takes its time alone) nor stalls when other processes want the CPU.  Where the device is
 not the CPU (a GPU), its kernels leave the cores free: the next frame is read and the
@@ -61,9 +62,20 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-IO_CODEC_THREADS = max(1, _cores() // 2)
-"""OpenImageIO/OpenEXR threads per read or write during a batch (`codec_threads`): half the
-cores each, since a read and a write run side by side (1 on a 2-core machine)."""
+IO_CODEC_THREADS = 1
+"""OpenImageIO/OpenEXR threads per read or write where a batch's I/O overlaps a CPU device's
+renders (``CLFX_STREAM=overlap``): the codecs stay on their own low-priority thread.  (A Dask
+worker sets its own: `clfx.pipeline.distributed.codec_threads_for_batches`.)"""
+
+
+def codec_threads_for(rt) -> int:
+    """Codec threads per read or write during a batch (`clfx.io.read.codec_threads`): every
+    core in a phased stream (the I/O phase has the machine: measured on 2 cores, the write
+    and the next read side by side took 824-844 ms per frame with 2 threads each, 880-905
+    with 1) and beside a GPU; `IO_CODEC_THREADS` where I/O overlaps a CPU device."""
+    if stream_mode(rt, 0) == "overlap" and getattr(rt, "shares_host_cores", True):
+        return IO_CODEC_THREADS
+    return _cores()
 
 
 WRITES_AHEAD = 2
@@ -105,11 +117,12 @@ def io_pool(kind: str = "read", lowered: bool = False) -> ThreadPoolExecutor:
 
 
 @contextmanager
-def io_threads():
-    """The codecs' threads while a batch runs (`IO_CODEC_THREADS`)."""
+def io_threads(n: int | None = None):
+    """The codecs' threads while a batch runs: ``n``, default every core (the first read,
+    while the device is set up: `Batch.reading`)."""
     from clfx.io.read import codec_threads
 
-    with codec_threads(IO_CODEC_THREADS):
+    with codec_threads(n or _cores()):
         yield
 
 
@@ -423,7 +436,7 @@ class Batch:
         """Render every job; return a summary (with ``reports``: each frame's
         `FrameReport`).  The first failing frame stops the batch (its output is not
         written; frames already written stay, so --skip-existing resumes)."""
-        with self._logging(), io_threads():
+        with self._logging(), io_threads(codec_threads_for(rt)):
             if self.input_path == RAW or self.output_path == RAW:
                 return self._run_raw(rt)
             return self._run_files(rt)
