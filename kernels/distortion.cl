@@ -10,9 +10,11 @@
  * distortion_footprint (draft / preview / final, FP_FILTER): the map is packed
  * (clfx.fx.resample.FootprintMap): per quad of 4 pixels their windows' texel indices,
  * fractions and spreads (16 ints): a pure gather; quads marked -2 are written as 0 (no
- * source, black border), quads marked -1 are left to distortion_footprint_fix, which
- * re-renders them from their records (points, spreads, Jacobians) through the checked path
- * (border rule, sub-footprints).
+ * source, black border), quads marked -1 (under 1 % at 1080p) are rendered from their
+ * records (points, spreads, Jacobians) through the checked path (border rule,
+ * sub-footprints), in the same launch: a second kernel for them cost 0.2 ms, and PoCL 3.1
+ * at random held it queued behind the first for ~4 ms more (draft at 1080p: 4.7 ms median,
+ * 13 of 100 renders near 9 ms; one kernel: 4.2 ms, none).
  *
  * distortion_ewa_f64 (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64 map
  * per pixel (displacement dx, dy; the footprint's extra extent J_c as two columns; the
@@ -23,35 +25,13 @@
 #include "lib/resample.h"
 
 #if !REAL_IS_DOUBLE
-kernel void distortion_footprint(global const float *src, global float *dst,
-                                 global const int *map, const int src_pitch, const int src_w,
-                                 const int src_h, const int dst_pitch, const int dst_h)
+/* A checked quad from its record of 56 ints (clfx.fx.resample.FootprintMap): the quad index,
+ * 3 unused, its 16 packed ints, a mode per pixel (0 fast path, 1 checked path, 2 zero) and
+ * the checked path's record. */
+inline void distortion_checked_quad(global const float *src, global float *dst,
+                                    global const int *rec, const int src_pitch,
+                                    const int src_w, const int src_h)
 {
-  /* launched over exactly (dst_pitch / 4, dst_h): a bounds test here made PoCL keep each
-   * work-item's values in stack arrays (15% slower) */
-  const int quad = get_global_id(1) * (dst_pitch / 4) + get_global_id(0);
-  global const int *q = map + 16 * quad;
-  const int mark = q[0];
-  if(mark < 0) {
-    if(mark == -2) vstore16((float16)0.0f, 0, dst + quad * 16);
-    return;
-  }
-  float4 o0, o1, o2, o3;
-  fp_fast_quad(src, src_pitch, q, &o0, &o1, &o2, &o3);
-  vstore16((float16)(o0, o1, o2, o3), 0, dst + quad * 16);
-}
-
-/* the quads left by distortion_footprint: records of 56 ints (clfx.fx.resample.FootprintMap):
- * the quad index, 3 unused, its 16 packed ints, a mode per pixel (0 fast path, 1 checked
- * path, 2 zero) and the checked path's record */
-kernel void distortion_footprint_fix(global const float *src, global float *dst,
-                                     global const int *records, const int count,
-                                     const int src_pitch, const int src_w, const int src_h,
-                                     const int dst_pitch, const int dst_h)
-{
-  const int n = get_global_id(0);
-  if(n >= count) return;
-  global const int *rec = records + 56 * n;
   const int4 mode = vload4(5, rec);
   float4 o0 = (float4)0.0f, o1 = (float4)0.0f, o2 = (float4)0.0f, o3 = (float4)0.0f;
   if(any(mode == 0)) fp_fast_quad(src, src_pitch, rec + 4, &o0, &o1, &o2, &o3);
@@ -63,6 +43,26 @@ kernel void distortion_footprint_fix(global const float *src, global float *dst,
   vstore16((float16)(mode.s0 == 2 ? (float4)0.0f : o0, mode.s1 == 2 ? (float4)0.0f : o1,
                      mode.s2 == 2 ? (float4)0.0f : o2, mode.s3 == 2 ? (float4)0.0f : o3),
            0, dst + rec[0] * 16);
+}
+
+kernel void distortion_footprint(global const float *src, global float *dst,
+                                 global const int *map, global const int *records,
+                                 const int src_pitch, const int src_w, const int src_h,
+                                 const int dst_pitch, const int dst_h)
+{
+  /* launched over exactly (dst_pitch / 4, dst_h): a bounds test here made PoCL keep each
+   * work-item's values in stack arrays (15% slower) */
+  const int quad = get_global_id(1) * (dst_pitch / 4) + get_global_id(0);
+  global const int *q = map + 16 * quad;
+  const int mark = q[0];
+  if(mark < 0) {
+    if(mark == -2) vstore16((float16)0.0f, 0, dst + quad * 16);
+    else distortion_checked_quad(src, dst, records + 56 * q[1], src_pitch, src_w, src_h);
+    return;
+  }
+  float4 o0, o1, o2, o3;
+  fp_fast_quad(src, src_pitch, q, &o0, &o1, &o2, &o3);
+  vstore16((float16)(o0, o1, o2, o3), 0, dst + quad * 16);
 }
 #else
 kernel void distortion_ewa_f64(global const float *src, global float *dst,

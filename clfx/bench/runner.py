@@ -77,18 +77,27 @@ def error_metrics(out: np.ndarray, ref: np.ndarray, edge: np.ndarray | None = No
 
 
 WARMUP_SHORT_S = 0.1
-"""Every measurement gets a second warm-up run, and operations shorter than this two more:
-after a level's one-off set-up (seconds of host NumPy for a map), the first runs of a millisecond kernel were 1.5-2.5x
-slower than the rest (distortion draft at 1080p: 12, 10, 8, then 5.3-5.6 ms)."""
+"""Every measurement gets a second warm-up run; operations shorter than this keep warming up
+for `WARMUP_S` (at least 2 more runs).  After a level's one-off set-up (seconds of host NumPy
+for a map) the first runs of a millisecond kernel were 1.5-2.5x slower than the rest, for
+a dozen runs at times (distortion draft at 1080p: 5.8, 8.8, 8.5, then 4.4-4.5 ms)."""
+
+WARMUP_S = 0.25
+"""Warm-up time of an operation shorter than `WARMUP_SHORT_S`: at most this, and at most 50
+of its runs (50 runs of a 5 ms kernel; tiny test frames warm up for milliseconds)."""
 
 
 def _timed(fn, repeat: int) -> tuple[object, list[float]]:
     result = fn()  # warm-up: compiles kernels, builds plans and caches
     t0 = time.perf_counter()
     result = fn()
-    if time.perf_counter() - t0 < WARMUP_SHORT_S:
-        for _ in range(2):
+    once = time.perf_counter() - t0
+    if once < WARMUP_SHORT_S:
+        start, runs = time.perf_counter(), 0
+        budget = min(WARMUP_S, 50 * once)
+        while runs < 2 or time.perf_counter() - start < budget:
             result = fn()
+            runs += 1
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()

@@ -513,8 +513,9 @@ class FootprintMap:
     (float32 bits) and (h_x, h_y) as two float16 (see ``footprint_spread`` and
     ``footprint_window``), when every window lies inside the source and needs no
     sub-footprints.  Otherwise the quad's indices are -2 when all four outputs are 0 (black
-    border: no source, or every window outside the source) and -1 when the second kernel
-    renders it from ``records`` (int32, (k, 56)): the quad index, 3 unused, the quad's 16
+    border: no source, or every window outside the source) and -1 when the kernel renders it
+    from its record (the record's index in the quad's second int) in ``records`` (int32,
+    (k, 56)): the quad index, 3 unused, the quad's 16
     packed ints (a window that fits stands in for the others), a mode per pixel (0: the fast
     path, 1: the checked path, 2: 0), then for the checked path the 4 points' x and y
     (float32), their (h_x, h_y) (float16 pairs), sub-footprint counts n and the Jacobians'
@@ -566,6 +567,7 @@ class FootprintMap:
         for k, (a, b) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
             rec[:, 10 + k] = qv(jp[..., a, b].astype(np.float32)).view(np.int32)
         e[..., 0:4] = np.where(q_fast[..., None], e[..., 0:4], np.where(q_zero, -2, -1)[..., None])
+        e.reshape(rows * quads, 16)[fix, 1] = np.arange(fix.size, dtype=np.int32)
         self.entries = e
         self.records = rec.reshape(fix.size, 56)
         total = max(rows * quads, 1)
@@ -592,6 +594,9 @@ class FootprintMap:
 
         def make(y0, y1):
             m = cls(*points_of(y0, y1), filter_name, width, height, pitch, border)
+            before = sum(len(r) for r in records.get("records", ()))
+            checked = m.entries[..., 0] == -1          # record indices count from the band's
+            m.entries[..., 1][checked] += before        # first: make them the whole map's
             n = (y1 - y0) * quads
             for k in counts:
                 counts[k] += m.fractions[k] * n
@@ -622,13 +627,13 @@ class DeviceFootprintMap:
         return int(self.entries.nbytes) + (int(self.records.nbytes) if self.records is not None else 0)
 
 
-def launch_footprint(rt, fast, fix, dmap: DeviceFootprintMap, quads_x: int, rows: int,
+def launch_footprint(rt, knl, dmap: DeviceFootprintMap, quads_x: int, rows: int,
                      head: tuple, tail: tuple):
-    """Enqueue a footprint warp: ``fast(*head, entries, *tail)`` over every quad, then
-    ``fix(*head, records, count, *tail)`` over the checked quads."""
-    rt.launch(fast, (quads_x, max(rows, 1)), *head, dmap.entries, *tail)
-    if dmap.count:
-        rt.launch(fix, (dmap.count,), *head, dmap.records, np.int32(dmap.count), *tail)
+    """Enqueue a footprint warp ``knl(*head, entries, records, *tail)`` over every quad: one
+    launch, the checked quads rendered from their records inside it (PoCL 3.1 held a second
+    kernel queued behind the first for up to ~4 ms at random: kernels/distortion.cl)."""
+    records = dmap.records if dmap.records is not None else dmap.entries   # never read then
+    rt.launch(knl, (quads_x, max(rows, 1)), *head, dmap.entries, records, *tail)
 
 
 def elliptical_spread(jac):

@@ -383,6 +383,5 @@ class Distortion(Plugin):
             rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, dmap, *tail)
             return dst
         launch_footprint(rt, rt.kernel("distortion.cl", "distortion_footprint", **defines),
-                         rt.kernel("distortion.cl", "distortion_footprint_fix", **defines),
                          dmap, src.pitch // 4, src.height, (src, dst), tail)
         return dst
