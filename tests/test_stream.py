@@ -111,7 +111,7 @@ def test_stream_mode_follows_the_device(monkeypatch):
 
 
 def test_codecs_take_every_core_unless_io_overlaps_a_cpu_device(monkeypatch):
-    monkeypatch.setattr(batch_mod, "_cores", lambda: 8)
+    monkeypatch.setattr(batch_mod, "available_cores", lambda: 8)
     monkeypatch.setattr(batch_mod, "STREAM", "auto")
     assert batch_mod.codec_threads_for(_Device(True)) == 8       # phased: I/O has the cores
     assert batch_mod.codec_threads_for(_Device(False)) == 8      # beside a GPU
@@ -227,3 +227,4 @@ def test_stream_pixels_match_frames_rendered_alone(tmp_path, rng, rt):
     alone.run(rt)
     a, b2 = _pixels(tmp_path / "out" / "o.0002.exr"), _pixels(tmp_path / "alone" / "o.0002.exr")
     assert a[0] == b2[0] and np.array_equal(a[1], b2[1], equal_nan=True)
+

@@ -380,8 +380,8 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     parts slow each other down."""
     from clfx.bench.scene import demo_scene, render_sharp
     from clfx.io.write import write_frame
-    from clfx.pipeline.batch import (Batch, RenderOptions, codec_threads_for, io_threads,
-                                     stream_mode)
+    from clfx.pipeline.batch import (Batch, RenderOptions, available_cores, codec_threads_for,
+                                     io_threads, stream_mode)
     from clfx.pipeline.look import render_frame
     from clfx.pipeline.presets import load_look
 
@@ -453,7 +453,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
             "ms_per_frame": ms_per_frame, "device_ms_mean": summary["device_ms_mean"],
             "parts_ms": parts_ms, "stream_vs_parts": ms_per_frame / parts_ms if parts_ms else None,
             "cpu_ms_per_frame": 1e3 * cpu / max(len(reports), 1), "parts_cpu_ms": parts_cpu,
-            "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+            "cores": available_cores(),
             "load_avg": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
             "rows": rows}
 

@@ -49,8 +49,6 @@ STREAM = os.environ.get("CLFX_STREAM", "auto")
 then write and read side by side), "overlap" (read and write while the device renders) or
 "auto": phased where the device is the CPU, overlap elsewhere (`stream_mode`)."""
 
-STREAMS = ("auto", "phased", "overlap")
-
 IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
 """Overlap only: nice increment of the write thread, half of it for the read thread (Linux:
 per thread; ``CLFX_IO_NICE``), so that on a CPU device I/O gives way to the effects.  0
@@ -58,7 +56,8 @@ leaves the threads alone.  Phased streams do not lower priorities: that stalls w
 processes want the CPU (README, "Sequences on one machine")."""
 
 
-def _cores() -> int:
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS has one)."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
@@ -73,9 +72,14 @@ def codec_threads_for(rt) -> int:
     core in a phased stream (the I/O phase has the machine: measured on 2 cores, the write
     and the next read side by side took 824-844 ms per frame with 2 threads each, 880-905
     with 1) and beside a GPU; `IO_CODEC_THREADS` where I/O overlaps a CPU device."""
-    if stream_mode(rt, 0) == "overlap" and getattr(rt, "shares_host_cores", True):
-        return IO_CODEC_THREADS
-    return _cores()
+    return IO_CODEC_THREADS if io_overlaps_cpu_device(rt) else available_cores()
+
+
+def io_overlaps_cpu_device(rt) -> bool:
+    """Whether a batch's reads and writes run while a CPU device renders (``CLFX_STREAM=
+    overlap`` on PoCL): then, and only then, they run lowered (`io_pool`) on one codec thread
+    each (`codec_threads_for`)."""
+    return stream_mode(rt, 0) == "overlap" and getattr(rt, "shares_host_cores", True)
 
 
 WRITES_AHEAD = 2
@@ -122,7 +126,7 @@ def io_threads(n: int | None = None):
     while the device is set up: `Batch.reading`)."""
     from clfx.io.read import codec_threads
 
-    with codec_threads(n or _cores()):
+    with codec_threads(n or available_cores()):
         yield
 
 

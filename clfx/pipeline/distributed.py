@@ -45,7 +45,7 @@ from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError
-from clfx.pipeline.batch import RAW, Batch, Job, io_pool
+from clfx.pipeline.batch import RAW, Batch, Job, available_cores, io_pool
 
 PLUGIN_NAME = "clfx"
 TASK_THREADS = 2
@@ -168,15 +168,16 @@ def codec_threads_for_batches() -> int:
     ``cinema``: 1.113 and 1.082 fps with 2 threads, 1.075 and 1.034 with 1 (the I/O runs on
     its own thread at nice 10/5 beside the renders).  Once for the process, since its task
     threads would undo each other's `clfx.io.read.codec_threads`."""
+    import OpenImageIO as oiio
+
     from clfx.io.read import set_codec_threads
 
     n = 0
-    for item in os.environ.get("OPENIMAGEIO_OPTIONS", "").split(","):
-        key, _, value = item.partition("=")
-        if key.strip() == "exr_threads" and value.strip().isdigit():
-            n = int(value)
-    if not n:
-        n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    options = os.environ.get("OPENIMAGEIO_OPTIONS")
+    if options:                          # OpenImageIO's own parser of its variable
+        oiio.attribute("options", options)
+        n = oiio.get_int_attribute("exr_threads", 0)
+    n = n or available_cores()
     set_codec_threads(n)
     return n
 
@@ -260,7 +261,7 @@ def worker_env(workers: int, cores: int | None = None) -> dict[str, str]:
     decode/encode), so renders and I/O do not oversubscribe the cores.  Variables already set
     in the environment win."""
     if cores is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        cores = available_cores()
     share = str(max(1, (cores or 1) // max(1, workers)))
     env = {"POCL_MAX_PTHREAD_COUNT": share,         # PoCL <= 4 pthread device
            "POCL_CPU_MAX_CU_NUM": share,            # PoCL >= 4 cpu device
