@@ -228,3 +228,14 @@ def test_stream_pixels_match_frames_rendered_alone(tmp_path, rng, rt):
     a, b2 = _pixels(tmp_path / "out" / "o.0002.exr"), _pixels(tmp_path / "alone" / "o.0002.exr")
     assert a[0] == b2[0] and np.array_equal(a[1], b2[1], equal_nan=True)
 
+
+def test_only_io_overlapping_a_cpu_device_runs_lowered(monkeypatch):
+    """The default phased stream's read and write threads keep their priority (a lowered
+    thread would give way to other processes on a loaded machine); overlapping a CPU device's
+    renders, they are lowered; beside a GPU they are not."""
+    monkeypatch.setattr(batch_mod, "STREAM", "auto")
+    assert not batch_mod.io_overlaps_cpu_device(_Device(True))
+    assert not batch_mod.io_overlaps_cpu_device(_Device(False))
+    monkeypatch.setattr(batch_mod, "STREAM", "overlap")
+    assert batch_mod.io_overlaps_cpu_device(_Device(True))
+    assert not batch_mod.io_overlaps_cpu_device(_Device(False))

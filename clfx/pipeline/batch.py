@@ -453,7 +453,7 @@ class Batch:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
         first, self._first_read = self._first_read, None
         prepared = self._prepare_look(rt)
-        lowered = STREAM != "phased" and getattr(rt, "shares_host_cores", True)
+        lowered = io_overlaps_cpu_device(rt)
         with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
             writes: list[tuple[Future, object]] = []
