@@ -16,7 +16,8 @@
 #if !REAL_IS_DOUBLE
 /* draft / preview / final (FP_FILTER): the footprint filter at the scaled points.  A quad
  * whose four windows lie inside the source (and needs no sub-footprints) is packed in
- * private memory as the packed maps are (resample.h, "Fast path") and takes fp_fast_quad;
+ * private memory as the packed maps are (resample.h, "Fast path": fp_pack_quad) and takes
+ * fp_fast_quad;
  * the others (near the border, strong minification) the checked path, pixel by pixel. */
 kernel void breathing_footprint(global const float *src, global float *dst,
                                 const int src_pitch, const int src_w, const int src_h,
@@ -30,7 +31,7 @@ kernel void breathing_footprint(global const float *src, global float *dst,
   float fy;
   const int iy = fp_window(sy, hy, &fy);
   int fast = n <= 1 && iy >= 0 && iy + FP_TAPS <= src_h;
-  int q[16];
+  int q[FP_Q_INTS];
   float4 sx;
   for(int k = 0; k < 4; k++) {
     const float p = fma((float)(qx * 4 + k), inv_m, ax);
@@ -40,16 +41,11 @@ kernel void breathing_footprint(global const float *src, global float *dst,
 #if FP_FILTER == 0
     fast &= ix + 4 <= src_pitch || iy + FP_TAPS < src_h;   /* rows read as 4 texels */
 #endif
-    q[k] = (iy * src_pitch + ix) * 4;
-    q[4 + k] = as_int(fx);
-    q[8 + k] = as_int(fy);
+    fp_pack_quad(q, k, (iy * src_pitch + ix) * 4, fx, fy, hx, hy);
     sx[k] = p;
   }
   float4 o0, o1, o2, o3;
   if(fast) {
-    vstore_half(hx, 0, (private half *)(q + 12));
-    vstore_half(hy, 1, (private half *)(q + 12));
-    q[13] = q[14] = q[15] = q[12];
     fp_fast_quad(src, src_pitch, q, &o0, &o1, &o2, &o3);
   } else {
     o0 = fp_sample_grid(src, src_pitch, src_w, src_h, sx.s0, sy, hx, hy, n, inv_m, 0.0f,

@@ -365,6 +365,8 @@ class Runtime:
         opts = list(BUILD_OPTIONS) + [f"-I{self.kernel_dir}"] + [f"-D{k}={v}" for k, v in defines]
         if self.has_fp64:
             opts.append("-DCLFX_HAS_FP64=1")
+        if self.shares_host_cores:
+            opts.append("-DCLFX_HOST_CPU=1")   # kernels/lib/common.h: clfx_prefetch
         caught: list[str] = []
         try:
             with _compiler_quiet(caught):

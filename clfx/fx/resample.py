@@ -58,17 +58,25 @@ class Footprint:
     ``code`` (FP_FILTER), ``taps`` per axis of the fast kernel's window, ``kappa`` (scale of
     the extra variance: the filter's own shape attenuates high frequencies less than the box
     it stands for, so the draft's 3 taps need more), ``cap`` (the largest extra variance one
-    window holds; beyond it the footprint is split into n x n sub-footprints).
+    window holds; beyond it the footprint is split into n x n sub-footprints), ``half_f``
+    (the packed map stores the fractions as float16, 12 ints a quad, not float32, 16 ints:
+    ``FP_Q_INTS`` in kernels/lib/resample.h).
     """
 
     code: int
     taps: int
     kappa: float
     cap: float
+    half_f: bool = False
+
+    @property
+    def entry_ints(self) -> int:
+        """Ints per quad of the packed map."""
+        return 12 if self.half_f else 16
 
 
 FOOTPRINTS = {
-    "quadratic": Footprint(0, 3, 1.3, 0.75),
+    "quadratic": Footprint(0, 3, 1.3, 0.75, half_f=True),
     "bicubic": Footprint(1, 4, 1.0, 1.0 / 3.0),
     "lanczos3": Footprint(2, 8, 1.0, 0.98),
 }
@@ -454,7 +462,8 @@ def check_fold(name: str, coeffs: str, r_fold: float, r_corner: float, unit: str
 def footprint_defines(filter_name: str, border: str, sanitise: bool = True) -> dict:
     """``-D`` defines of the footprint kernels: FP_FILTER (``FOOTPRINTS``), the border rule,
     NaN/Inf handling, and Lanczos-3 for the reference's elliptical samples."""
-    return {"FP_FILTER": FOOTPRINTS[filter_name].code, "RS_FILTER": FILTER_CODE["lanczos3"],
+    fp = FOOTPRINTS[filter_name]
+    return {"FP_FILTER": fp.code, "FP_Q_INTS": fp.entry_ints, "RS_FILTER": FILTER_CODE["lanczos3"],
             "RS_BORDER": BORDER_CODE[border], "RS_SANITISE": int(bool(sanitise))}
 
 
@@ -508,23 +517,27 @@ class FootprintMap:
     source); ``jac`` (h, w, 2, 2) their Jacobians.  Output rows share ``pitch`` (a multiple
     of 4) with the source; padding pixels repeat each row's last pixel.
 
-    ``entries`` (int32, (h, pitch // 4, 16)): per quad of 4 output pixels the float indices
-    ``(iy0 * pitch + ix0) * 4`` of their windows' top-left texels, the fractions f_x, f_y
-    (float32 bits) and (h_x, h_y) as two float16 (see ``footprint_spread`` and
-    ``footprint_window``), when every window lies inside the source and needs no
-    sub-footprints.  Otherwise the quad's indices are -2 when all four outputs are 0 (black
-    border: no source, or every window outside the source) and -1 when the kernel renders it
-    from its record (the record's index in the quad's second int) in ``records`` (int32,
-    (k, 56)): the quad index, 3 unused, the quad's 16
-    packed ints (a window that fits stands in for the others), a mode per pixel (0: the fast
+    ``entries`` (int32, (h, pitch // 4, E), E = the filter's ``Footprint.entry_ints``): per
+    quad of 4 output pixels the float indices ``(iy0 * pitch + ix0) * 4`` of their windows'
+    top-left texels, the fractions f_x, f_y (4 each: float32 bits, or 8 float16 in 4 ints)
+    and (h_x, h_y) as two float16 (see ``footprint_spread`` and ``footprint_window``), when
+    every window lies inside the source and needs no sub-footprints.  Otherwise the quad's
+    indices are -2 when all four outputs are 0 (black border: no source, or every window
+    outside the source) and -1 when the kernel renders it from its record (the record's index
+    in the quad's second int) in ``records`` (int32, (k, 56)): the quad index, 3 unused, the
+    quad's E packed ints padded to 16 (a window that fits stands in for the others), a mode
+    per pixel (0: the fast
     path, 1: the checked path, 2: 0), then for the checked path the 4 points' x and y
     (float32), their (h_x, h_y) (float16 pairs), sub-footprint counts n and the Jacobians'
-    J11, J12, J21, J22 (float32, 4 each).
+    J11, J12, J21, J22 (float32, 4 each).  ``fast_pixels`` (bool, (h, pitch)): the pixels
+    the fast path renders from the packed fractions (float16 ones where the filter's
+    ``half_f``), the rest from their points.
     """
 
     def __init__(self, sx, sy, jac, filter_name: str, width: int, height: int, pitch: int,
                  border: str = "black"):
-        taps = FOOTPRINTS[filter_name].taps
+        fp = FOOTPRINTS[filter_name]
+        taps, ints = fp.taps, fp.entry_ints
         rows, quads = max(sx.shape[0], 1), pitch // 4
         px, py = _padded(sx, pitch, 0.5), _padded(sy, pitch, 0.5)
         jp = np.empty((rows, pitch, 2, 2))
@@ -549,17 +562,21 @@ class FootprintMap:
         q_zero = zero.reshape(rows, quads, 4).all(axis=2) & ~q_fast
         base = (np.clip(iy, 0, None) * pitch + np.clip(ix, 0, None)) * 4
         h2 = np.stack([hx, hy], -1).astype(np.float16).view(np.int32)[..., 0]
-        e = np.empty((rows, quads, 4, 4), np.int32)
+        e = np.empty((rows, quads, ints // 4, 4), np.int32)
         e[:, :, 0] = np.where(fast, base, 0).reshape(rows, quads, 4)   # 0: a window that fits
-        e[:, :, 1] = fx.reshape(rows, quads, 4).view(np.int32)
-        e[:, :, 2] = fy.reshape(rows, quads, 4).view(np.int32)
-        e[:, :, 3] = h2.reshape(rows, quads, 4)
-        e = e.reshape(rows, quads, 16)
+        if fp.half_f:       # (f_x of the 4 pixels, f_y of the 4) as 8 float16
+            f16 = np.concatenate([fx.reshape(rows, quads, 4), fy.reshape(rows, quads, 4)], 2)
+            e[:, :, 1] = f16.astype(np.float16).view(np.int32)
+        else:
+            e[:, :, 1] = fx.reshape(rows, quads, 4).view(np.int32)
+            e[:, :, 2] = fy.reshape(rows, quads, 4).view(np.int32)
+        e[:, :, -1] = h2.reshape(rows, quads, 4)
+        e = e.reshape(rows, quads, ints)
         fix = np.flatnonzero(~(q_fast | q_zero))
         qv = lambda a: a.reshape(rows * quads, 4)[fix]
         rec = np.zeros((fix.size, 14, 4), np.int32)
         rec[:, 0, 0] = fix
-        rec[:, 1:5] = e.reshape(rows * quads, 4, 4)[fix]
+        rec[:, 1:1 + ints // 4] = e.reshape(rows * quads, ints // 4, 4)[fix]
         rec[:, 5] = qv(np.where(fast, 0, np.where(zero, 2, 1)))        # per pixel: mode
         f32 = lambda a: qv(np.where(finite, a, np.nan).astype(np.float32)).view(np.int32)
         rec[:, 6], rec[:, 7] = f32(px), f32(py)
@@ -567,9 +584,10 @@ class FootprintMap:
         for k, (a, b) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
             rec[:, 10 + k] = qv(jp[..., a, b].astype(np.float32)).view(np.int32)
         e[..., 0:4] = np.where(q_fast[..., None], e[..., 0:4], np.where(q_zero, -2, -1)[..., None])
-        e.reshape(rows * quads, 16)[fix, 1] = np.arange(fix.size, dtype=np.int32)
+        e.reshape(rows * quads, ints)[fix, 1] = np.arange(fix.size, dtype=np.int32)
         self.entries = e
         self.records = rec.reshape(fix.size, 56)
+        self.fast_pixels = fast
         total = max(rows * quads, 1)
         self.fractions = {"fast": float(q_fast.sum()) / total, "zero": float(q_zero.sum()) / total,
                           "checked": fix.size / total}

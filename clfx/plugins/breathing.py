@@ -224,6 +224,8 @@ class Breathing(Plugin):
         ay = cy + (out_win.y0 + 0.5 - cy) * inv - src.window.y0
         jac = np.array([[[inv, 0.0], [0.0, inv]]])
         defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"))
+        defines["FP_Q_INTS"] = 16    # its quads are packed in private memory, not read from a
+                                     # map: float32 fractions cost nothing here
         dst = rt.image(out_win, 4)
         i32 = np.int32
         head = (src, dst, i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch),

@@ -16,6 +16,20 @@
 
 #define CLFX_PI 3.14159265358979323846f
 
+/* Software prefetch, on a CPU device only (the runtime defines CLFX_HOST_CPU there): a
+ * work-item asks for data a later work-item of the same thread will read.  On a GPU, or a
+ * compiler without the builtin, it is nothing. */
+#if defined(CLFX_HOST_CPU) && defined(__has_builtin)
+#if __has_builtin(__builtin_prefetch)
+#define CLFX_CAN_PREFETCH 1
+#define clfx_prefetch(p) __builtin_prefetch(p)
+#endif
+#endif
+#ifndef CLFX_CAN_PREFETCH
+#define CLFX_CAN_PREFETCH 0
+#define clfx_prefetch(p) ((void)0)
+#endif
+
 inline int clfx_is_finite(float v)
 {
   return (as_uint(v) & 0x7f800000u) != 0x7f800000u;

@@ -520,14 +520,18 @@ inline void fp_bspline_w8(float8 t, float8 *w0, float8 *w1, float8 *w2, float8 *
  * its whole 3x3 window: its negative lobes sit on the outer taps only, so that bounds its
  * overshoot as tightly, for fewer instructions.
  *
- * Fast path (fp_fast_quad): per quad of 4 output pixels the packed map holds 16 ints: the
- * float indices of the windows' top-left texels (-1: the quad is rendered by the checked
- * path; -2: every output of the quad is 0, e.g. outside a black border), the fractions f_x,
- * f_y and (h_x, h_y) as half2.  f is d in [-0.5, 0.5) (quadratic), t = frac(u) (bicubic), or
- * frac(u - h) (lanczos3), u = the point in texel units (texel k at u = k); the window starts
- * at round(u) - 1, floor(u) - 1 or floor(u - h) - 2.  Checked path (fp_sample): any point,
- * the border rule per texel; footprints too wide for one window are split by the host into
- * n x n sub-footprints (J / n each) and averaged (fp_sample_n).
+ * Fast path (fp_fast_quad): per quad of 4 output pixels the packed map holds FP_Q_INTS ints:
+ * the float indices of the windows' top-left texels (-1: the quad is rendered by the checked
+ * path; -2: every output of the quad is 0, e.g. outside a black border), the fractions
+ * f_x (4), f_y (4) and (h_x, h_y) as half2 (4).  f is d in [-0.5, 0.5) (quadratic),
+ * t = frac(u) (bicubic), or frac(u - h) (lanczos3), u = the point in texel units (texel k at
+ * u = k); the window starts at round(u) - 1, floor(u) - 1 or floor(u - h) - 2.  The
+ * quadratic stores f as half (12 ints a quad, steps of at most 2^-12 texel: the map is read
+ * once per output pixel, as many bytes as the source, and the draft is bound by memory);
+ * the others as float32 (16 ints: positions to ~1e-7 texel).  fp_pack_quad writes the
+ * layout.  Checked path (fp_sample): any point, the border rule per texel; footprints too
+ * wide for one window are split by the host into n x n sub-footprints (J / n each) and
+ * averaged (fp_sample_n).
  */
 #ifndef FP_FILTER
 #define FP_FILTER 2
@@ -539,6 +543,10 @@ inline void fp_bspline_w8(float8 t, float8 *w0, float8 *w1, float8 *w2, float8 *
 #else
 #define FP_TAPS 8
 #endif
+#ifndef FP_Q_INTS
+#define FP_Q_INTS 16    /* clfx.fx.resample.Footprint.entry_ints: 12, fractions as half */
+#endif
+#define FP_PREFETCH_AHEAD 32   /* quads: ~0.6 us of the draft's work ahead on PoCL */
 
 #if !REAL_IS_DOUBLE
 /* One axis: the weights of the window's FP_TAPS taps from the fraction f and spread h. */
@@ -682,22 +690,58 @@ inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
                         as_float(c[24 + k]), as_float(c[28 + k]));
 }
 
-/* The fast path: 4 outputs of a quad from its 16 packed ints q (every window inside the
+/* The fast path: 4 outputs of a quad from its FP_Q_INTS packed ints q (every window inside the
  * source; the clamp reads the texels already loaded for the weighted sum).  Sums run
  * vertically first on whole rows (float16 = 4 texels); min/max instead of fmin/fmax (the
  * texels are finite: sanitised, or the frame has no NaN/Inf), the final clamp keeps
  * fmin/fmax semantics so an overflowing sum of huge finite texels stays finite. */
 #ifndef FP_Q_SPACE
-#define FP_Q_SPACE global   /* where the quad's 16 ints live: a packed map; private when a
+#define FP_Q_SPACE global   /* where the quad's packed ints live: a packed map; private when a
                                kernel packs them itself (an affine map, breathing.cl) */
 #endif
+/* Pack output k of a quad (its window's top-left texel (ix, iy), fractions f_x, f_y and
+ * spreads) into q, laid out as the packed maps are (a kernel with an affine map packs its
+ * own quads: breathing.cl). */
+inline void fp_pack_quad(FP_Q_SPACE int *q, int k, int index, float fx, float fy, float hx,
+                         float hy)
+{
+  q[k] = index;
+#if FP_Q_INTS == 12
+  vstore_half(fx, k, (FP_Q_SPACE half *)(q + 4));
+  vstore_half(fy, 4 + k, (FP_Q_SPACE half *)(q + 4));
+#else
+  q[4 + k] = as_int(fx);
+  q[8 + k] = as_int(fy);
+#endif
+  vstore_half(hx, 2 * k, (FP_Q_SPACE half *)(q + FP_Q_INTS - 4));
+  vstore_half(hy, 2 * k + 1, (FP_Q_SPACE half *)(q + FP_Q_INTS - 4));
+}
+
+/* Ask a CPU device to fetch the source rows of the fast quad q (its first and last windows'
+ * ends, every row of the window) into cache: the map decides the addresses, so the
+ * hardware prefetchers, which follow strides, miss them where the map curves across rows
+ * (the draft at 1920x1080 spent ~40% of its time waiting for them). */
+inline void fp_prefetch_quad(global const float *src, int pitch, global const int *q)
+{
+#if CLFX_CAN_PREFETCH
+  if(q[0] < 0) return;
+  global const float *a = src + q[0], *b = src + q[3] + 4 * (FP_TAPS - 1);
+  for(int j = 0; j < FP_TAPS; j++) {
+    clfx_prefetch(a + (size_t)j * pitch * 4);
+    clfx_prefetch(b + (size_t)j * pitch * 4);
+  }
+#endif
+}
+
 inline __attribute__((always_inline)) void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const int *q,
                          float4 *o0, float4 *o1, float4 *o2, float4 *o3)
 {
   const int row = pitch * 4;
   const int4 base = vload4(0, q);
+#if FP_Q_INTS == 16
   const float4 fx = as_float4(vload4(1, q)), fy = as_float4(vload4(2, q));
-  const float8 hh = vload_half8(0, (FP_Q_SPACE const half *)(q + 12));
+#endif
+  const float8 hh = vload_half8(0, (FP_Q_SPACE const half *)(q + FP_Q_INTS - 4));
   const float4 hx = hh.even, hy = hh.odd;
 #if FP_FILTER == 0
   /* 3x3, the quad's 4 pixels side by side (lanes 4k..4k+3 = pixel k): each of the 9 taps
@@ -707,7 +751,11 @@ inline __attribute__((always_inline)) void fp_fast_quad(global const float *src,
    * taps, so this bounds the overshoot as a 2x2 would).  The rows-per-pixel form it replaced
    * (float16 rows, vertical then horizontal sums) took 1.6x the CPU time (15.5 vs 9.8 ms on
    * the 1920x1080 bench map; cv2.remap bilinear 7.9 ms). */
-  const float8 f8 = as_float8(vload8(0, q + 4));                /* (f_x, f_y) */
+#if FP_Q_INTS == 12
+  const float8 f8 = vload_half8(0, (FP_Q_SPACE const half *)(q + 4));  /* (f_x, f_y) */
+#else
+  const float8 f8 = as_float8(vload8(0, q + 4));
+#endif
   const float8 h8 = shuffle(hh, (uint8)(0, 2, 4, 6, 1, 3, 5, 7)); /* (h_x, h_y) */
   const float8 q8 = fma(h8, h8, f8 * f8);
   const float8 w0 = 0.5f * (q8 - f8), w1 = 1.0f - q8, w2 = 0.5f * (q8 + f8);

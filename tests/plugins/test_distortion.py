@@ -9,6 +9,7 @@ from clfx.core.camera import Camera
 from clfx.core.errors import ParamError
 from clfx.plugins.distortion import Distortion, build_map, coefficients, intrinsics
 from clfx.core.rect import Rect
+from clfx.fx.resample import FootprintMap
 from tests.conftest import hard_shapes
 from tests.reference import distortion as ref
 
@@ -54,6 +55,18 @@ def render_with_notes(rt, plugin, p, src, **kw):
 
     ctx = RenderContext(rt, rt.upload(src), **kw)
     return rt.download(plugin.render(rt, p, ctx)), ctx.notes
+
+
+def half_fractions(p, w, h, border, display=None, data=None, camera=CAM):
+    """The pixels whose draft (quadratic) offsets the kernel reads as float16 from the packed
+    map (its fast path: ``FootprintMap.fast_pixels``), for the oracle's ``half``."""
+    display = display or Rect(0, 0, w, h)
+    data = data or display
+    sx, sy, info = build_map(p, camera, display, data, 1.0, jacobian=True)
+    pitch = -(-w // 4) * 4
+    m = FootprintMap(sx - data.x0, sy - data.y0, info["jacobian"], "quadratic", w, h, pitch,
+                     border)
+    return m.fast_pixels[:, :w]
 
 
 def oracle_args(p, w, h, pixel_aspect=1.0, camera=CAM):
@@ -133,7 +146,8 @@ def test_each_quality_matches_its_own_filter(rt, rng, quality):
     src = rng.uniform(0.0, 1.0, (23, 41, 4)).astype(np.float32)
     p = Distortion.params(amount=0.15, fit="fit-all", border="edge")
     got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
-    want = ref.distortion(src, footprint=QUALITY_FOOTPRINT[quality], border="edge",
+    half = half_fractions(p, 41, 23, "edge") if quality == "draft" else None
+    want = ref.distortion(src, footprint=QUALITY_FOOTPRINT[quality], border="edge", half=half,
                           **oracle_args(p, 41, 23))
     tol = 1e-7 if quality == "reference" else 1e-5   # float64 sums, float32 output (ulp 6e-8)
     np.testing.assert_allclose(got, want, rtol=0, atol=tol)
@@ -259,7 +273,8 @@ def test_data_window_render_matches_oracle_in_frame_coordinates(rt, rng):
                              display_window=display)
     sx, sy, info = build_map(p, CAM, display, data, 1.0, jacobian=True)
     want = ref.sample_footprint(src, sx - data.x0, sy - data.y0, info["jacobian"], "quadratic",
-                                "edge")
+                                "edge", half_fractions(p, data.width, data.height, "edge",
+                                                       display, data))
     np.testing.assert_allclose(got, want, atol=1e-5)
 
 
@@ -272,7 +287,8 @@ def test_strong_minification_matches_the_footprint_oracle(rt, rng, coeffs, quali
     src = rng.uniform(0.0, 2.0, (40, 64, 4)).astype(np.float32)
     p = Distortion.params(border="edge", fx=30.0, **coeffs)
     got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
-    want = ref.distortion(src, footprint=QUALITY_FOOTPRINT[quality], border="edge",
+    half = half_fractions(p, 64, 40, "edge") if quality == "draft" else None
+    want = ref.distortion(src, footprint=QUALITY_FOOTPRINT[quality], border="edge", half=half,
                           **oracle_args(p, 64, 40))
     # float32 positions (1e-7 px), weights and sums over up to 64 taps per sub-footprint, of
     # values <= 2: a few 1e-6 (measured <= 4e-6); the reference sums in float64

@@ -197,13 +197,17 @@ def spread(jac, name):
     return footprint_spread(jac, name)
 
 
-def footprint_taps(p, h, name):
+def footprint_taps(p, h, name, half=None):
     """First tap (texel index) and the weights (..., taps) of a footprint filter along one
-    axis at continuous coordinate p (texel centres at +0.5) with spread h."""
+    axis at continuous coordinate p (texel centres at +0.5) with spread h.  ``half`` (bool,
+    like p): where the quadratic's offset d is read as float16 (its packed map stores d so:
+    the fast path), rounded as the host rounds it (float32, then float16)."""
     u = p - 0.5                       # texel k sits at u = k
     if name == "quadratic":           # nearest texel m and its two neighbours
         m = np.floor(p)
         d = p - (m + 0.5)
+        if half is not None:
+            d = np.where(half, d.astype(np.float32).astype(np.float16), d)
         q = h * h + d * d
         return m.astype(np.int64) - 1, np.stack([(q - d) / 2, 1 - q, (q + d) / 2], -1)
     if name == "bicubic":             # Keys blended with the cubic B-spline, alpha = 3 h^2
@@ -223,9 +227,9 @@ def footprint_taps(p, h, name):
     return i.astype(np.int64) - 2, 0.5 * (one(u - h) + one(u + h))
 
 
-def _footprint_one(src, px, py, hx, hy, name, border):
-    x0, wx = footprint_taps(px, hx, name)
-    y0, wy = footprint_taps(py, hy, name)
+def _footprint_one(src, px, py, hx, hy, name, border, half=None):
+    x0, wx = footprint_taps(px, hx, name, half)
+    y0, wy = footprint_taps(py, hy, name, half)
     taps = wx.shape[-1]
     # clamp: texels within 1 + h of the point (the union of the 2x2 footprints at u +- h);
     # the quadratic: its whole window
@@ -247,10 +251,11 @@ def _footprint_one(src, px, py, hx, hy, name, border):
     return np.clip(acc, lo, hi)
 
 
-def sample_footprint(src, sx, sy, jac, name="lanczos3", border="black"):
+def sample_footprint(src, sx, sy, jac, name="lanczos3", border="black", half=None):
     """Footprint filter ``name`` at continuous points with Jacobians ``jac`` (..., 2, 2):
     the mean of n x n sub-footprints (centres s + J ((a + 1/2) / n - 1/2, (b + 1/2) / n - 1/2),
-    Jacobian J / n), each filtered with its spread and clamped."""
+    Jacobian J / n), each filtered with its spread and clamped.  ``half``: the pixels whose
+    quadratic offsets are float16 (``footprint_taps``)."""
     src = np.asarray(src, np.float64)
     bad = ~(np.isfinite(sx) & np.isfinite(sy))
     jac = np.where(bad[..., None, None], np.eye(2), jac)
@@ -264,7 +269,8 @@ def sample_footprint(src, sx, sy, jac, name="lanczos3", border="black"):
             for ob in offs:
                 px = sx[sel] + jac[sel][:, 0, 0] * oa + jac[sel][:, 0, 1] * ob
                 py = sy[sel] + jac[sel][:, 1, 0] * oa + jac[sel][:, 1, 1] * ob
-                acc = acc + _footprint_one(src, px, py, hx[sel], hy[sel], name, border)
+                acc = acc + _footprint_one(src, px, py, hx[sel], hy[sel], name, border,
+                                           None if half is None else half[sel])
         out[sel] = acc / nn ** 2
     return out
 
@@ -307,9 +313,11 @@ def sample_elliptical(src, sx, sy, jac, border="black"):
     return out
 
 
-def distortion(src, *, filter_name="lanczos3", border="black", footprint=None, **map_args):
+def distortion(src, *, filter_name="lanczos3", border="black", footprint=None, half=None,
+               **map_args):
     """Distort ``src``: point sampling with ``filter_name``, or the footprint filter
-    ``footprint`` ("quadratic", "bicubic", "lanczos3" or "elliptical")."""
+    ``footprint`` ("quadratic", "bicubic", "lanczos3" or "elliptical"; ``half``: see
+    ``sample_footprint``)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     sx, sy = distortion_map(w, h, **map_args)
@@ -318,4 +326,4 @@ def distortion(src, *, filter_name="lanczos3", border="black", footprint=None, *
     jac = map_jacobian(sx, sy, **map_args)
     if footprint == "elliptical":
         return sample_elliptical(src, sx, sy, jac, border)
-    return sample_footprint(src, sx, sy, jac, footprint, border)
+    return sample_footprint(src, sx, sy, jac, footprint, border, half)
