@@ -85,6 +85,27 @@ def test_failed_build_shows_the_build_log(rt, tmp_path, monkeypatch):
     assert "undefined_name" in str(err.value)
 
 
+def test_cpu_device_builds_get_software_prefetch(rt, tmp_path, monkeypatch):
+    """kernels/lib/common.h's clfx_prefetch is live where the device is the host's CPU (the
+    runtime defines CLFX_HOST_CPU there) and nothing elsewhere; a kernel using it builds and
+    runs either way."""
+    import shutil
+
+    (tmp_path / "lib").mkdir()
+    shutil.copy(rt.kernel_dir / "lib" / "common.h", tmp_path / "lib" / "common.h")
+    (tmp_path / "probe.cl").write_text(
+        '#include "lib/common.h"\n'
+        "kernel void probe(global int *o, global const float *s)\n"
+        "{ clfx_prefetch(s + 16); o[0] = CLFX_CAN_PREFETCH; }\n")
+    monkeypatch.setattr(rt, "kernel_dir", tmp_path)
+    out, src = np.full(1, -1, np.int32), np.zeros(64, np.float32)
+    o, s = rt.to_device(out), rt.to_device(src)
+    rt.launch(rt.kernel("probe.cl", "probe"), (1,), o, s)
+    rt.cl.enqueue_copy(rt.queue, out, o.buffer)
+    rt.finish()
+    assert out[0] == int(rt.shares_host_cores)
+
+
 @pytest.mark.parametrize("shape", [(1, 1), (1, 7), (5, 3), (17, 33)])
 @pytest.mark.parametrize("channels", [1, 2, 4])
 def test_upload_download_round_trip_with_padding(rt, rng, shape, channels):
