@@ -223,9 +223,8 @@ class Breathing(Plugin):
         ax = cx + (out_win.x0 + 0.5 - cx) * inv - src.window.x0
         ay = cy + (out_win.y0 + 0.5 - cy) * inv - src.window.y0
         jac = np.array([[[inv, 0.0], [0.0, inv]]])
-        defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"))
-        defines["FP_Q_INTS"] = 16    # its quads are packed in private memory, not read from a
-                                     # map: float32 fractions cost nothing here
+        defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"),
+                                    packed_map=False)   # its quads are packed per work-item
         dst = rt.image(out_win, 4)
         i32 = np.int32
         head = (src, dst, i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch),
