@@ -208,3 +208,18 @@ def test_worker_codecs_take_its_share_of_the_cores(monkeypatch):
     finally:
         for k, v in saved.items():
             oiio.attribute(k, v)
+
+
+def test_several_local_workers_do_not_pin_pocl_threads(monkeypatch):
+    """The runtime pins PoCL's threads one per core by default (clfx.device.runtime
+    ``_ensure_pocl_affinity``); several local workers would pin theirs to the same cores, so
+    their environment turns it off, unless the user chose."""
+    from clfx.device import runtime
+    from clfx.pipeline.distributed import worker_env
+
+    monkeypatch.setattr(runtime, "_AFFINITY_DEFAULTED", True)
+    monkeypatch.setenv("POCL_AFFINITY", "1")                      # the runtime's default
+    assert worker_env(2, cores=2)["POCL_AFFINITY"] == "0"
+    assert "POCL_AFFINITY" not in worker_env(1, cores=2)
+    monkeypatch.setattr(runtime, "_AFFINITY_DEFAULTED", False)    # the user's own setting
+    assert "POCL_AFFINITY" not in worker_env(2, cores=2)

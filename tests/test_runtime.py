@@ -145,6 +145,24 @@ def test_buffers_return_to_the_pool_and_idle_memory_is_capped(rt):
     assert pool.take(300) is c and pool.take(400) is b
 
 
+def test_pocl_threads_pinned_by_default_where_every_core_is_ours(monkeypatch):
+    import os
+
+    monkeypatch.setattr(runtime, "_AFFINITY_DEFAULTED", False)
+    monkeypatch.delenv("POCL_AFFINITY", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {1})       # confined: left alone
+    runtime._ensure_pocl_affinity()
+    assert "POCL_AFFINITY" not in os.environ
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    runtime._ensure_pocl_affinity()
+    assert os.environ["POCL_AFFINITY"] == "1" and not runtime.user_set_pocl_affinity()
+    monkeypatch.setattr(runtime, "_AFFINITY_DEFAULTED", False)
+    monkeypatch.setenv("POCL_AFFINITY", "0")                              # the user's wins
+    runtime._ensure_pocl_affinity()
+    assert os.environ["POCL_AFFINITY"] == "0" and runtime.user_set_pocl_affinity()
+
+
 def test_pocl_cache_dir_is_persistent_by_default():
     import os
 

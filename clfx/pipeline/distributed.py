@@ -45,6 +45,7 @@ from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError
+from clfx.device.runtime import user_set_pocl_affinity
 from clfx.pipeline.batch import RAW, Batch, Job, available_cores, io_pool
 
 PLUGIN_NAME = "clfx"
@@ -267,7 +268,10 @@ def worker_env(workers: int, cores: int | None = None) -> dict[str, str]:
            "POCL_CPU_MAX_CU_NUM": share,            # PoCL >= 4 cpu device
            "OPENIMAGEIO_OPTIONS": f"threads={share},exr_threads={share}",
            "OMP_NUM_THREADS": share}
-    return {k: v for k, v in env.items() if k not in os.environ}
+    env = {k: v for k, v in env.items() if k not in os.environ}
+    if workers > 1 and not user_set_pocl_affinity():
+        env["POCL_AFFINITY"] = "0"   # each would pin its PoCL thread i to core i: all on
+    return env                       # the same cores (clfx.device.runtime's default)
 
 
 @contextmanager
