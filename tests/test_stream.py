@@ -110,6 +110,15 @@ def test_stream_mode_follows_the_device(monkeypatch):
     assert batch_mod.stream_mode(_Device(True), small) == "overlap"
 
 
+def test_unknown_stream_value_is_said_once_and_taken_as_auto(monkeypatch, capsys):
+    monkeypatch.setattr(batch_mod, "STREAM", "fast")
+    monkeypatch.setattr(batch_mod, "_STREAM_SAID", False)
+    assert batch_mod.stream_mode(_Device(True), 1920 * 1080) == "phased"
+    assert batch_mod.stream_mode(_Device(False), 1920 * 1080) == "overlap"
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "CLFX_STREAM='fast'" in err[0] and "using auto" in err[0]
+
+
 def test_codecs_take_every_core_unless_io_overlaps_a_cpu_device(monkeypatch):
     monkeypatch.setattr(batch_mod, "available_cores", lambda: 8)
     monkeypatch.setattr(batch_mod, "STREAM", "auto")

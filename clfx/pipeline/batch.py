@@ -91,11 +91,19 @@ def stream_mode(rt, pixels: int) -> str:
     """"serial" for frames above :data:`OVERLAP_MAX_PIXELS`; otherwise `STREAM`, where
     "auto" is "phased" when ``rt``'s device is the CPU (it shares the cores with the codecs)
     and "overlap" when it is not."""
+    global _STREAM_SAID
     if pixels > OVERLAP_MAX_PIXELS:
         return "serial"
     if STREAM in ("phased", "overlap"):
         return STREAM
+    if STREAM != "auto" and not _STREAM_SAID:      # never reinterpret silently: once a process
+        _STREAM_SAID = True
+        print(f"clfx: warning: CLFX_STREAM={STREAM!r} is not auto, phased or overlap; "
+              f"using auto", file=sys.stderr, flush=True)
     return "phased" if getattr(rt, "shares_host_cores", True) else "overlap"
+
+
+_STREAM_SAID = False
 
 
 def _background(nice: int) -> None:
