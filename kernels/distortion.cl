@@ -12,8 +12,9 @@
  * fractions and spreads (FP_Q_INTS ints): a pure gather, the source rows of the quad
  * FP_PREFETCH_AHEAD quads on prefetched on a CPU device (draft at 1080p: 3.5-4.0 ms without,
  * 2.5-2.8 with; 2.3 with the half fractions of the 12-int quadratic map, 2.2 if the map were
- * the identity, so what is left is arithmetic); quads marked -2 are written as 0 (no
- * source, black border), quads marked -1 (under 1 % at 1080p) are rendered from their
+ * the identity, so what is left is arithmetic), outputs written with streaming stores where
+ * the host asks (CLFX_STREAM_STORES, kernels/lib/common.h); quads marked -2 are written as 0
+ * (no source, black border), quads marked -1 (under 1 % at 1080p) are rendered from their
  * records (points, spreads, Jacobians) through the checked path (border rule,
  * sub-footprints), in the same launch: a second kernel for them cost 0.2 ms, and PoCL 3.1
  * at random held it queued behind the first for ~4 ms more (draft at 1080p: 4.7 ms median,
@@ -28,9 +29,20 @@
 #include "lib/resample.h"
 
 #if !REAL_IS_DOUBLE
+/* Output k of a checked quad through the checked path (record c): out of line on a CPU
+ * device (CLFX_COLD), reached from one call site. */
+CLFX_COLD float4 distortion_checked_pixel(global const float *src, global const int *c,
+                                          const int k, const int src_pitch, const int src_w,
+                                          const int src_h)
+{
+  return fp_sample_n(src, src_pitch, src_w, src_h, c, k);
+}
+
 /* A checked quad from its record of 56 ints (clfx.fx.resample.FootprintMap): the quad index,
  * 3 unused, its packed ints (FP_Q_INTS of 16), a mode per pixel (0 fast path, 1 checked
- * path, 2 zero) and the checked path's record. */
+ * path, 2 zero) and the checked path's record.  The checked pixels go through one call
+ * site in a loop kept rolled (inlined four times, the checked pixels, under 1 % of a 1080p
+ * frame, cost the draft 7 %; this way 2-3 %). */
 inline void distortion_checked_quad(global const float *src, global float *dst,
                                     global const int *rec, const int src_pitch,
                                     const int src_w, const int src_h)
@@ -38,14 +50,14 @@ inline void distortion_checked_quad(global const float *src, global float *dst,
   const int4 mode = vload4(5, rec);
   float4 o0 = (float4)0.0f, o1 = (float4)0.0f, o2 = (float4)0.0f, o3 = (float4)0.0f;
   if(any(mode == 0)) fp_fast_quad(src, src_pitch, rec + 4, &o0, &o1, &o2, &o3);
-  global const int *c = rec + 24;
-  if(mode.s0 == 1) o0 = fp_sample_n(src, src_pitch, src_w, src_h, c, 0);
-  if(mode.s1 == 1) o1 = fp_sample_n(src, src_pitch, src_w, src_h, c, 1);
-  if(mode.s2 == 1) o2 = fp_sample_n(src, src_pitch, src_w, src_h, c, 2);
-  if(mode.s3 == 1) o3 = fp_sample_n(src, src_pitch, src_w, src_h, c, 3);
-  vstore16((float16)(mode.s0 == 2 ? (float4)0.0f : o0, mode.s1 == 2 ? (float4)0.0f : o1,
-                     mode.s2 == 2 ? (float4)0.0f : o2, mode.s3 == 2 ? (float4)0.0f : o3),
-           0, dst + rec[0] * 16);
+  float4 s[4];
+#pragma unroll 1
+  for(int k = 0; k < 4; k++)
+    s[k] = rec[20 + k] == 1 ? distortion_checked_pixel(src, rec + 24, k, src_pitch, src_w,
+                                                       src_h) : (float4)0.0f;
+  clfx_store16_streaming(((float16)(mode.s0 == 0 ? o0 : s[0], mode.s1 == 0 ? o1 : s[1],
+                                     mode.s2 == 0 ? o2 : s[2], mode.s3 == 0 ? o3 : s[3])),
+                         dst + rec[0] * 16);
 }
 
 kernel void distortion_footprint(global const float *src, global float *dst,
@@ -60,14 +72,16 @@ kernel void distortion_footprint(global const float *src, global float *dst,
                                                          quads * dst_h - 1));
   global const int *q = map + FP_Q_INTS * quad;
   const int mark = q[0];
-  if(mark < 0) {
-    if(mark == -2) vstore16((float16)0.0f, 0, dst + quad * 16);
-    else distortion_checked_quad(src, dst, records + 56 * q[1], src_pitch, src_w, src_h);
-    return;
+  if(mark >= 0) {
+    float4 o0, o1, o2, o3;
+    fp_fast_quad(src, src_pitch, q, &o0, &o1, &o2, &o3);
+    clfx_store16_streaming(((float16)(o0, o1, o2, o3)), dst + quad * 16);
+  } else if(mark == -2) {
+    clfx_store16_streaming((float16)0.0f, dst + quad * 16);
+  } else {
+    distortion_checked_quad(src, dst, records + 56 * q[1], src_pitch, src_w, src_h);
   }
-  float4 o0, o1, o2, o3;
-  fp_fast_quad(src, src_pitch, q, &o0, &o1, &o2, &o3);
-  vstore16((float16)(o0, o1, o2, o3), 0, dst + quad * 16);
+  clfx_streaming_fence();                       /* every path: the group's last item fences */
 }
 #else
 kernel void distortion_ewa_f64(global const float *src, global float *dst,

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from clfx.bench.runner import (EffectResult, _flag_levels, analysis_frames, bench_effect,
-                               error_metrics, losing_levels, markdown, summary_markdown)
+from clfx.bench.runner import (SHORT_RUNS, EffectResult, _flag_levels, _timed_pair,
+                               analysis_frames, bench_effect, error_metrics, losing_levels,
+                               markdown, summary_markdown)
 from clfx.cli import cli
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins import discover
@@ -111,6 +112,28 @@ def test_case_variants_are_benchmarked_under_their_own_name(rt):
     res = bench_effect(rt, "distortion", 96, 54, repeat=1, variant="moustache")
     assert res.effect == "distortion:moustache" and len(res.rows) == len(QUALITY_LEVELS)
     assert all(r["effect"] == "distortion:moustache" for r in res.rows)
+
+
+def test_a_peer_and_its_level_are_timed_run_for_run():
+    """The timed runs of a peer and of the level it is compared with alternate (warm-ups
+    first), so drift on a shared machine reaches both; short operations get SHORT_RUNS each."""
+    calls = []
+    out, mine, peer = _timed_pair(lambda: calls.append("level") or "L",
+                                  lambda: calls.append("peer"), repeat=3)
+    timed = calls[-2 * len(mine):]
+    assert out == "L" and len(mine) == len(peer) == SHORT_RUNS
+    assert timed == ["level", "peer"] * SHORT_RUNS
+    assert calls.index("peer") > 2     # the level warmed up before the first peer run
+
+
+def test_peer_rows_time_the_level_beside_the_peer(rt):
+    res = bench_effect(rt, "distortion", 96, 54, repeat=1)
+    rows = {p["peer"]: p for p in res.peers}
+    assert {"cv2.remap bilinear", "cv2.remap cubic", "cv2.remap lanczos4"} <= set(rows)
+    for p in rows.values():
+        assert p["clfx_ms"] > 0 and p["clfx_time_ratio"] > 0
+        level = next(r for r in res.rows if r["quality"] == p["clfx_level"])
+        assert p["clfx_rel_rmse"] == level["rel_rmse"]
 
 
 def test_a_level_that_loses_to_a_baseline_is_flagged():

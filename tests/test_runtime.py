@@ -106,6 +106,47 @@ def test_cpu_device_builds_get_software_prefetch(rt, tmp_path, monkeypatch):
     assert out[0] == int(rt.shares_host_cores)
 
 
+@pytest.mark.parametrize("stream", [0, 1])
+def test_streaming_stores_write_every_value_and_are_live_only_where_asked(rt, tmp_path,
+                                                                         monkeypatch, stream):
+    """kernels/lib/common.h's clfx_store16_streaming streams past the cache where the host
+    asks (CLFX_STREAM_STORES=1) on the host's CPU, and is vstore16 elsewhere; either way every
+    work-group's stores land (the group's last work-item fences), whatever the group size."""
+    import shutil
+
+    (tmp_path / "lib").mkdir()
+    shutil.copy(rt.kernel_dir / "lib" / "common.h", tmp_path / "lib" / "common.h")
+    (tmp_path / "probe.cl").write_text(
+        '#include "lib/common.h"\n'
+        "kernel void probe(global float *o, global int *can)\n"
+        "{ const int i = get_global_id(1) * get_global_size(0) + get_global_id(0);\n"
+        "  clfx_store16_streaming((float16)(float)i + (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9,"
+        " 10, 11, 12, 13, 14, 15) * 0.0625f, o + 16 * i);\n"
+        "  if(i == 0) can[0] = CLFX_CAN_STREAM_STORE;\n  clfx_streaming_fence(); }\n")
+    monkeypatch.setattr(rt, "kernel_dir", tmp_path)
+    knl = rt.kernel("probe.cl", "probe", CLFX_STREAM_STORES=stream)
+    for size, local in (((64, 9), None), ((16, 4), (8, 2)), ((1, 1), None)):
+        n = size[0] * size[1]
+        out = rt.to_device(np.full(16 * n, -1.0, np.float32))
+        can = rt.to_device(np.full(1, -1, np.int32))
+        rt.launch(knl, size, out, can, local=local)
+        got, flag = np.empty(16 * n, np.float32), np.empty(1, np.int32)
+        rt.cl.enqueue_copy(rt.queue, got, out.buffer)
+        rt.cl.enqueue_copy(rt.queue, flag, can.buffer)
+        rt.finish()
+        want = np.repeat(np.arange(n, dtype=np.float32), 16) + np.tile(np.arange(16) / 16, n)
+        np.testing.assert_array_equal(got, want.astype(np.float32))
+        assert flag[0] == int(bool(stream) and rt.shares_host_cores)
+
+
+def test_streaming_stores_are_asked_for_outputs_the_cache_cannot_keep(rt, monkeypatch):
+    cache = int(rt.device.global_mem_cache_size)
+    if not rt.shares_host_cores or cache <= 0:
+        assert not rt.streams_stores(1 << 40)
+        return
+    assert rt.streams_stores(cache // 2) and not rt.streams_stores(cache // 2 - 1)
+
+
 @pytest.mark.parametrize("shape", [(1, 1), (1, 7), (5, 3), (17, 33)])
 @pytest.mark.parametrize("channels", [1, 2, 4])
 def test_upload_download_round_trip_with_padding(rt, rng, shape, channels):

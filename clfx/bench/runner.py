@@ -14,7 +14,9 @@ Three parts, all measured in one run so ratios compare like with like:
    scores the levels, the baselines and the peers alike.  Peers
    (OpenCV, SciPy, naive methods) doing the same operation are timed beside it where a case
    declares them with ``peers(case, params, ctx)``: host callables returning RGBA arrays, or
-   ``(callable, level)`` to compare with the clfx level doing the same work (else final).
+   ``(callable, level)`` to compare with the clfx level doing the same work (else final);
+   a peer and that level are timed alternately, run for run, and their time ratio is the
+   median of the runs' ratios (the machine's drift during a bench reaches both alike).
    Beside the levels every effect gets two baselines scored against the same reference:
    the unchanged input and, where the case declares one (``Case(naive=Naive(...))``), the
    naive method the effect exists to beat; each level is flagged ``beats naive`` /
@@ -94,7 +96,8 @@ SHORT_RUNS = 25
 of 25 is the usual time (the slow runs show in the max)."""
 
 
-def _timed(fn, repeat: int) -> tuple[object, list[float]]:
+def _warm(fn, repeat: int) -> tuple[object, int]:
+    """Warm ``fn`` up; its last result and the number of timed runs it needs."""
     result = fn()  # warm-up: compiles kernels, builds plans and caches
     t0 = time.perf_counter()
     result = fn()
@@ -106,12 +109,37 @@ def _timed(fn, repeat: int) -> tuple[object, list[float]]:
             result = fn()
             runs += 1
         repeat = max(repeat, SHORT_RUNS)
+    return result, repeat
+
+
+def _timed(fn, repeat: int) -> tuple[object, list[float]]:
+    result, repeat = _warm(fn, repeat)
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
         result = fn()
         times.append((time.perf_counter() - t0) * 1e3)
     return result, times
+
+
+def _timed_pair(fn, other, repeat: int) -> tuple[object, list[float], list[float]]:
+    """``fn`` and ``other`` timed alternately, run for run: ``fn``'s last result, its times
+    and ``other``'s.  These shared machines drift (the same kernel 4.5 ms in one minute and
+    5.8 ms in the next, with nothing else running here), so a peer timed a minute after the
+    level it is compared with can win or lose on the drift alone; alternating exposes both
+    to the same spells."""
+    result, n = _warm(fn, repeat)
+    _, m = _warm(other, repeat)
+    times, others = [], []
+    for _ in range(max(n, m)):
+        t0 = time.perf_counter()
+        result = fn()
+        t1 = time.perf_counter()
+        other()
+        t2 = time.perf_counter()
+        times.append((t1 - t0) * 1e3)
+        others.append((t2 - t1) * 1e3)
+    return result, times, others
 
 
 def _stats(times: list[float]) -> dict:
@@ -216,19 +244,20 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     case = load_case(module, spec, name, width, height, rng_seed, variant)
     plugin = cls()
     params = cls.params(**case.get("params", {}))
-    outputs = {}
+    outputs, runs = {}, {}
     for level in QUALITY_LEVELS:
         ctx = _case_context(rt, case, level)
         window = ctx.source.window
         reason = plugin.is_identity(params, ctx)
 
-        def run():
+        def run(ctx=ctx, reason=reason):
             if reason:
                 return ctx.source
             img = plugin.render(rt, params, ctx)
             rt.finish()
             return img
 
+        runs[level] = run
         img, times = _timed(run, repeat)
         outputs[level] = crop_to(rt.download(img), img.window, window)
         res.rows.append({"effect": res.effect, "quality": level, **_stats(times),
@@ -262,17 +291,18 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
     for label, peer_fn in ((peers(case, params, peer_ctx) if peers else None) or {}).items():
         fn, level = peer_fn if isinstance(peer_fn, tuple) else (peer_fn, "final")
         try:
-            out, times = _timed(fn, repeat)
+            out, times, mine_times = _timed_pair(fn, runs[level], repeat)
         except Exception as exc:  # a peer missing on this machine is reported, not fatal
             res.peers.append({"effect": res.effect, "peer": label, "error": str(exc)})
             continue
         peer = {"effect": res.effect, "peer": label, **_stats(times), **metric(out, ref, case)}
         mine = next(r for r in res.rows if r["quality"] == level)
         peer["clfx_level"] = level
-        peer["clfx_ms"] = mine["ms"]
+        peer["clfx_ms"] = float(np.median(mine_times))   # the level's runs between the peer's
         peer["clfx_rel_rmse"] = mine["rel_rmse"]
         peer["clfx_psnr_log"] = mine.get("psnr_log")
-        peer["clfx_time_ratio"] = mine["ms"] / peer["ms"] if peer["ms"] > 0 else None
+        ratios = [a / b for a, b in zip(mine_times, times) if b > 0]
+        peer["clfx_time_ratio"] = float(np.median(ratios)) if ratios else None
         res.peers.append(peer)
     return res
 

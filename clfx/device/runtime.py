@@ -360,6 +360,17 @@ class Runtime:
         (EXR codecs) take turns on the same cores (`clfx.pipeline.batch.stream_mode`)."""
         return bool(self.device.type & self.cl.device_type.CPU)
 
+    def streams_stores(self, nbytes: int) -> bool:
+        """Whether a kernel writing ``nbytes`` of output should stream it past the cache
+        (``CLFX_STREAM_STORES``, kernels/lib/common.h): on a CPU device, for an output of at
+        least half its global memory cache, which would not stay cached beside its source
+        anyway; the store then skips reading each line in first.  The kernels store whole
+        64-byte lines, so buffers must be aligned to at least that."""
+        cache = int(getattr(self.device, "global_mem_cache_size", 0) or 0)
+        align_bits = int(getattr(self.device, "mem_base_addr_align", 0) or 0)
+        return (self.shares_host_cores and cache > 0 and align_bits >= 512
+                and nbytes >= cache // 2)
+
     @property
     def compute_units(self) -> int:
         return int(self.device.max_compute_units)
@@ -393,7 +404,7 @@ class Runtime:
         if self.has_fp64:
             opts.append("-DCLFX_HAS_FP64=1")
         if self.shares_host_cores:
-            opts.append("-DCLFX_HOST_CPU=1")   # kernels/lib/common.h: clfx_prefetch
+            opts.append("-DCLFX_HOST_CPU=1")   # kernels/lib/common.h: prefetch, streaming, cold
         caught: list[str] = []
         try:
             with _compiler_quiet(caught):

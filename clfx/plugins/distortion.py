@@ -376,6 +376,8 @@ class Distortion(Plugin):
                              f"left transparent")
         defines = footprint_defines(lvl.filter, p.border, needs_sanitising(ctx, "distortion"))
         dst = src.like()
+        if not double:
+            defines["CLFX_STREAM_STORES"] = int(rt.streams_stores(dst.nbytes))
         i32 = np.int32
         tail = (i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch), i32(dst.height))
         if double:

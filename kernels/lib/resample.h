@@ -546,7 +546,15 @@ inline void fp_bspline_w8(float8 t, float8 *w0, float8 *w1, float8 *w2, float8 *
 #ifndef FP_Q_INTS
 #define FP_Q_INTS 16    /* clfx.fx.resample.Footprint.entry_ints: 12, fractions as half */
 #endif
-#define FP_PREFETCH_AHEAD 32   /* quads: ~0.6 us of the draft's work ahead on PoCL */
+/* How many quads ahead fp_prefetch_quad asks for: the memory's latency in quads of work, so
+ * it depends on the machine.  Draft at 1080p on two machines of this project: the first ran
+ * best at 32 (8: 3.35 ms, 16: 2.9, 32: 2.5, 64: 3.0); the second, where the draft and
+ * cv2.remap both ran about half as fast, at 16-24 (12: 4.4, 16: 4.4-4.8, 20: 4.6-4.7,
+ * 24: 4.4-4.6, 32: 4.9-5.4, 64: 5.2-5.9).  24 sits between the two (not measured on the
+ * first).  A build may set it (-D FP_PREFETCH_AHEAD=n) to tune. */
+#ifndef FP_PREFETCH_AHEAD
+#define FP_PREFETCH_AHEAD 24
+#endif
 
 #if !REAL_IS_DOUBLE
 /* One axis: the weights of the window's FP_TAPS taps from the fraction f and spread h. */

@@ -363,3 +363,22 @@ def test_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch, quality
     assert len(resample.map_bands(181, 324)) == 21
     banded = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
     assert np.array_equal(banded, whole)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
+def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
+    """Outputs at least half the device's cache are written with streaming stores
+    (Runtime.streams_stores, kernels/lib/common.h); forced on a small frame (black border:
+    fast, checked and zero quads all present), every pixel is what plain stores write."""
+    src = smooth_image(rng, 61, 90)
+    p = Distortion.params(k1=-0.45 + rng.uniform(0, 1e-6), k2=0.1, fit="none", border="black")
+    asked = []
+    monkeypatch.setattr(rt, "streams_stores", lambda n: asked.append(n) or False)
+    plain = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    assert asked and asked[-1] >= src.nbytes          # asked with the output's size
+    monkeypatch.setattr(rt, "streams_stores", lambda n: True)
+    streamed = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    assert np.array_equal(streamed, plain)
+    key = next(k for k in rt._programs if k[0] == "distortion.cl"
+               and ("CLFX_STREAM_STORES", "1") in k[1])
+    assert key
