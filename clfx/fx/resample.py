@@ -459,14 +459,12 @@ def check_fold(name: str, coeffs: str, r_fold: float, r_corner: float, unit: str
 
 
 # -- footprint filters: resampling that follows the map's Jacobian --------------------------
-def footprint_defines(filter_name: str, border: str, sanitise: bool = True,
-                      packed_map: bool = True) -> dict:
-    """``-D`` defines of the footprint kernels: FP_FILTER (``FOOTPRINTS``), the quads' layout
-    (FP_Q_INTS: a :class:`FootprintMap`'s, or 16 ints with float32 fractions where a kernel
-    packs its own quads in private memory, ``packed_map=False``), the border rule, NaN/Inf
-    handling, and Lanczos-3 for the reference's elliptical samples."""
+def footprint_defines(filter_name: str, border: str, sanitise: bool = True) -> dict:
+    """``-D`` defines of the footprint kernels: FP_FILTER (``FOOTPRINTS``), the layout of a
+    :class:`FootprintMap`'s quads (FP_Q_INTS), the border rule, NaN/Inf handling, and
+    Lanczos-3 for the reference's elliptical samples."""
     fp = FOOTPRINTS[filter_name]
-    return {"FP_FILTER": fp.code, "FP_Q_INTS": fp.entry_ints if packed_map else 16,
+    return {"FP_FILTER": fp.code, "FP_Q_INTS": fp.entry_ints,
             "RS_FILTER": FILTER_CODE["lanczos3"], "RS_BORDER": BORDER_CODE[border],
             "RS_SANITISE": int(bool(sanitise))}
 

@@ -223,8 +223,7 @@ class Breathing(Plugin):
         ax = cx + (out_win.x0 + 0.5 - cx) * inv - src.window.x0
         ay = cy + (out_win.y0 + 0.5 - cy) * inv - src.window.y0
         jac = np.array([[[inv, 0.0], [0.0, inv]]])
-        defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"),
-                                    packed_map=False)   # its quads are packed per work-item
+        defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"))
         dst = rt.image(out_win, 4)
         i32 = np.int32
         head = (src, dst, i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch),
@@ -237,7 +236,8 @@ class Breathing(Plugin):
                       np.float64(jc[0, 0, 0]), i32(n[0]))
             return dst
         hx, hy, n = footprint_spread(jac, lvl.filter)
-        knl = rt.kernel("breathing.cl", "breathing_footprint", **defines)
+        knl = rt.kernel("breathing.cl", "breathing_footprint",
+                        CLFX_STREAM_STORES=int(rt.streams_stores(dst.nbytes)), **defines)
         f32 = np.float32
         rt.launch(knl, size, *head, f32(ax), f32(ay), f32(inv), f32(hx[0]), f32(hy[0]), i32(n[0]))
         return dst

@@ -528,10 +528,11 @@ inline void fp_bspline_w8(float8 t, float8 *w0, float8 *w1, float8 *w2, float8 *
  * u = k); the window starts at round(u) - 1, floor(u) - 1 or floor(u - h) - 2.  The
  * quadratic stores f as half (12 ints a quad, steps of at most 2^-12 texel: the map is read
  * once per output pixel, as many bytes as the source, and the draft is bound by memory);
- * the others as float32 (16 ints: positions to ~1e-7 texel).  fp_pack_quad writes the
- * layout.  Checked path (fp_sample): any point, the border rule per texel; footprints too
- * wide for one window are split by the host into n x n sub-footprints (J / n each) and
- * averaged (fp_sample_n).
+ * the others as float32 (16 ints: positions to ~1e-7 texel); clfx.fx.resample.FootprintMap
+ * writes the layout (a kernel with an affine map computes the same values per work-item and
+ * calls fp_fast_quad_at: breathing.cl).  Checked path (fp_sample): any point, the border
+ * rule per texel; footprints too wide for one window are split by the host into n x n
+ * sub-footprints (J / n each) and averaged (fp_sample_n).
  */
 #ifndef FP_FILTER
 #define FP_FILTER 2
@@ -624,6 +625,24 @@ inline int fp_window(float p, float h, float *f)
 #endif
 }
 
+/* fp_window for 4 points at once (the same operations lane by lane). */
+inline int4 fp_window4(float4 p, float h, float4 *f)
+{
+#if FP_FILTER == 0
+  const float4 m = floor(p);
+  *f = p - m - 0.5f;
+  return convert_int4(m) - 1;
+#elif FP_FILTER == 1
+  const float4 u = p - 0.5f, i = floor(u);
+  *f = u - i;
+  return convert_int4(i) - 1;
+#else
+  const float4 m = p - h - 0.5f, i = floor(m);
+  *f = m - i;
+  return convert_int4(i) - 2;
+#endif
+}
+
 /* The footprint filter at (sx, sy) with spreads (hx, hy), texels through the border rule. */
 inline float4 fp_sample(global const float *src, int pitch, int w, int h, float sx, float sy,
                         float hx, float hy)
@@ -703,27 +722,6 @@ inline float4 fp_sample_n(global const float *src, int pitch, int w, int h,
  * vertically first on whole rows (float16 = 4 texels); min/max instead of fmin/fmax (the
  * texels are finite: sanitised, or the frame has no NaN/Inf), the final clamp keeps
  * fmin/fmax semantics so an overflowing sum of huge finite texels stays finite. */
-#ifndef FP_Q_SPACE
-#define FP_Q_SPACE global   /* where the quad's packed ints live: a packed map; private when a
-                               kernel packs them itself (an affine map, breathing.cl) */
-#endif
-/* Pack output k of a quad (its window's top-left texel (ix, iy), fractions f_x, f_y and
- * spreads) into q, laid out as the packed maps are (a kernel with an affine map packs its
- * own quads: breathing.cl). */
-inline void fp_pack_quad(FP_Q_SPACE int *q, int k, int index, float fx, float fy, float hx,
-                         float hy)
-{
-  q[k] = index;
-#if FP_Q_INTS == 12
-  vstore_half(fx, k, (FP_Q_SPACE half *)(q + 4));
-  vstore_half(fy, 4 + k, (FP_Q_SPACE half *)(q + 4));
-#else
-  q[4 + k] = as_int(fx);
-  q[8 + k] = as_int(fy);
-#endif
-  vstore_half(hx, 2 * k, (FP_Q_SPACE half *)(q + FP_Q_INTS - 4));
-  vstore_half(hy, 2 * k + 1, (FP_Q_SPACE half *)(q + FP_Q_INTS - 4));
-}
 
 /* Ask a CPU device to fetch the source rows of the fast quad q (its first and last windows'
  * ends, every row of the window) into cache: the map decides the addresses, so the
@@ -741,15 +739,17 @@ inline void fp_prefetch_quad(global const float *src, int pitch, global const in
 #endif
 }
 
-inline __attribute__((always_inline)) void fp_fast_quad(global const float *src, int pitch, FP_Q_SPACE const int *q,
-                         float4 *o0, float4 *o1, float4 *o2, float4 *o3)
+/* The fast path from the quad's values: the windows' float indices base, fractions
+ * f8 = (f_x of the 4 pixels, f_y of the 4) and spreads hh = (h_x, h_y) of each pixel
+ * interleaved, as a packed quad holds them (a kernel with an affine map passes its own:
+ * breathing.cl). */
+inline __attribute__((always_inline)) void fp_fast_quad_at(global const float *src, int pitch,
+                                                           int4 base, float8 f8, float8 hh,
+                                                           float4 *o0, float4 *o1,
+                                                           float4 *o2, float4 *o3)
 {
   const int row = pitch * 4;
-  const int4 base = vload4(0, q);
-#if FP_Q_INTS == 16
-  const float4 fx = as_float4(vload4(1, q)), fy = as_float4(vload4(2, q));
-#endif
-  const float8 hh = vload_half8(0, (FP_Q_SPACE const half *)(q + FP_Q_INTS - 4));
+  const float4 fx = f8.lo, fy = f8.hi;
   const float4 hx = hh.even, hy = hh.odd;
 #if FP_FILTER == 0
   /* 3x3, the quad's 4 pixels side by side (lanes 4k..4k+3 = pixel k): each of the 9 taps
@@ -759,19 +759,14 @@ inline __attribute__((always_inline)) void fp_fast_quad(global const float *src,
    * taps, so this bounds the overshoot as a 2x2 would).  The rows-per-pixel form it replaced
    * (float16 rows, vertical then horizontal sums) took 1.6x the CPU time (15.5 vs 9.8 ms on
    * the 1920x1080 bench map; cv2.remap bilinear 7.9 ms). */
-#if FP_Q_INTS == 12
-  const float8 f8 = vload_half8(0, (FP_Q_SPACE const half *)(q + 4));  /* (f_x, f_y) */
-#else
-  const float8 f8 = as_float8(vload8(0, q + 4));
-#endif
   const float8 h8 = shuffle(hh, (uint8)(0, 2, 4, 6, 1, 3, 5, 7)); /* (h_x, h_y) */
   const float8 q8 = fma(h8, h8, f8 * f8);
   const float8 w0 = 0.5f * (q8 - f8), w1 = 1.0f - q8, w2 = 0.5f * (q8 + f8);
   const uint16 mx = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3), my = mx + 4u;
   const float16 x0 = shuffle(w0, mx), x1 = shuffle(w1, mx), x2 = shuffle(w2, mx);
   global const float4 *t = (global const float4 *)src;
-  global const float4 *p0 = t + (q[0] >> 2), *p1 = t + (q[1] >> 2);   /* scalar loads: */
-  global const float4 *p2 = t + (q[2] >> 2), *p3 = t + (q[3] >> 2);   /* no lane extracts */
+  global const float4 *p0 = t + (base.s0 >> 2), *p1 = t + (base.s1 >> 2);
+  global const float4 *p2 = t + (base.s2 >> 2), *p3 = t + (base.s3 >> 2);
   const size_t rt = (size_t)pitch;
 #define FP_TAP(o) rs_sanitise16((float16)(p0[o], p1[o], p2[o], p3[o]))
 #define FP_ROW(j) const float16 a##j = FP_TAP(j * rt), b##j = FP_TAP(j * rt + 1),           \
@@ -866,6 +861,20 @@ inline __attribute__((always_inline)) void fp_fast_quad(global const float *src,
 #undef FP_PIXEL
 #undef FP_ROW
 #endif
+}
+
+/* The fast path of a packed quad q (FP_Q_INTS ints of a packed map). */
+inline __attribute__((always_inline)) void fp_fast_quad(global const float *src, int pitch,
+                                                        global const int *q, float4 *o0,
+                                                        float4 *o1, float4 *o2, float4 *o3)
+{
+#if FP_Q_INTS == 12
+  const float8 f8 = vload_half8(0, (global const half *)(q + 4));  /* (f_x, f_y) */
+#else
+  const float8 f8 = as_float8(vload8(0, q + 4));
+#endif
+  fp_fast_quad_at(src, pitch, vload4(0, q), f8,
+                  vload_half8(0, (global const half *)(q + FP_Q_INTS - 4)), o0, o1, o2, o3);
 }
 #endif
 

@@ -276,3 +276,19 @@ def test_keyframed_cli_render(rt, rng, tmp_path):
         assert values == {"camera.focus_distance": pytest.approx(s)}
         np.testing.assert_allclose(out.rgba, ref.breathing(a, m=ref.scale(s, 2.0, 50.0, 1.0)),
                                    rtol=0, atol=2e-5)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
+@pytest.mark.parametrize("camera", [LENS, Camera(focal_length=50.0, focus_distance=0.1,
+                                                 breathing=-2.0)])
+def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality, camera):
+    """Outputs at least half the device's cache are written with streaming stores
+    (Runtime.streams_stores); forced on a small frame, with fast quads and checked ones (the
+    edge, the minifying lens's sub-footprints), every pixel is what plain stores write."""
+    src = smooth_image(rng, 37, 58)
+    asked = []
+    monkeypatch.setattr(rt, "streams_stores", lambda n: asked.append(n) or False)
+    plain = run(rt, src, quality, camera=camera)
+    assert asked and asked[-1] >= src.nbytes
+    monkeypatch.setattr(rt, "streams_stores", lambda n: True)
+    assert np.array_equal(run(rt, src, quality, camera=camera), plain)
