@@ -116,20 +116,34 @@ def test_case_variants_are_benchmarked_under_their_own_name(rt):
 
 def test_a_peer_and_its_level_are_timed_run_for_run():
     """The timed runs of a peer and of the level it is compared with alternate (warm-ups
-    first), so drift on a shared machine reaches both; short operations get SHORT_RUNS each."""
+    before), so drift on a shared machine reaches both and every run follows one of the
+    other; short operations get SHORT_RUNS each."""
     calls = []
-    out, mine, peer = _timed_pair(lambda: calls.append("level") or "L",
-                                  lambda: calls.append("peer"), repeat=3)
-    timed = calls[-2 * len(mine):]
-    assert out == "L" and len(mine) == len(peer) == SHORT_RUNS
-    assert timed == ["level", "peer"] * SHORT_RUNS
-    assert calls.index("peer") > 2     # the level warmed up before the first peer run
+    out, peer, level = _timed_pair(lambda: calls.append("peer") or "P",
+                                   lambda: calls.append("level"), repeat=3)
+    assert out == "P" and len(peer) == len(level) == SHORT_RUNS
+    assert calls[-2 * SHORT_RUNS:] == ["peer", "level"] * SHORT_RUNS
+    first_level = calls.index("level")
+    assert calls[:first_level] == ["peer"] * first_level and first_level >= 4   # warm-ups
 
 
-def test_peer_rows_time_the_level_beside_the_peer(rt):
+def test_peer_rows_time_the_level_beside_the_peer(rt, monkeypatch):
+    """Each peer is paired with the run of the level it names (the run's context says which)."""
+    import clfx.bench.runner as runner
+
+    paired = []
+
+    def spy(fn, other, repeat):
+        paired.append(other.__defaults__[0].quality)     # run(ctx=..., reason=...)
+        return real(fn, other, repeat)
+
+    real = runner._timed_pair
+    monkeypatch.setattr(runner, "_timed_pair", spy)
     res = bench_effect(rt, "distortion", 96, 54, repeat=1)
     rows = {p["peer"]: p for p in res.peers}
     assert {"cv2.remap bilinear", "cv2.remap cubic", "cv2.remap lanczos4"} <= set(rows)
+    assert paired == [p["clfx_level"] for p in res.peers]
+    assert paired[:3] == ["draft", "preview", "final"]
     for p in rows.values():
         assert p["clfx_ms"] > 0 and p["clfx_time_ratio"] > 0
         level = next(r for r in res.rows if r["quality"] == p["clfx_level"])

@@ -292,3 +292,5 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality, ca
     assert asked and asked[-1] >= src.nbytes
     monkeypatch.setattr(rt, "streams_stores", lambda n: True)
     assert np.array_equal(run(rt, src, quality, camera=camera), plain)
+    assert any(k[0] == "breathing.cl" and ("CLFX_STREAM_STORES", "1") in k[1]
+               for k in rt._programs)

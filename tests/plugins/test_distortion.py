@@ -379,6 +379,5 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
     monkeypatch.setattr(rt, "streams_stores", lambda n: True)
     streamed = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
     assert np.array_equal(streamed, plain)
-    key = next(k for k in rt._programs if k[0] == "distortion.cl"
-               and ("CLFX_STREAM_STORES", "1") in k[1])
-    assert key
+    assert any(k[0] == "distortion.cl" and ("CLFX_STREAM_STORES", "1") in k[1]
+               for k in rt._programs)
