@@ -13,17 +13,6 @@
 #include "lib/resample.h"
 
 #if !REAL_IS_DOUBLE
-/* Output k of a checked quad (pixel x = sx, row sy): out of line on a CPU device
- * (CLFX_COLD), reached from one call site. */
-CLFX_COLD float4 breathing_checked_pixel(global const float *src, const int src_pitch,
-                                         const int src_w, const int src_h, const float sx,
-                                         const float sy, const float hx, const float hy,
-                                         const int n, const float inv_m)
-{
-  return fp_sample_grid(src, src_pitch, src_w, src_h, sx, sy, hx, hy, n, inv_m, 0.0f, 0.0f,
-                        inv_m);
-}
-
 /* draft / preview / final (FP_FILTER): the footprint filter at the scaled points.  A quad
  * whose four windows lie inside the source (and needs no sub-footprints) takes
  * fp_fast_quad_at with its windows, fractions and spreads (the spreads rounded to half
@@ -64,8 +53,8 @@ kernel void breathing_footprint(global const float *src, global float *dst,
   } else {
 #pragma unroll 1
     for(int k = 0; k < 4; k++)
-      o[k] = breathing_checked_pixel(src, src_pitch, src_w, src_h, sx[k], sy, hx, hy, n,
-                                     inv_m);
+      o[k] = fp_sample_grid(src, src_pitch, src_w, src_h, sx[k], sy, hx, hy, n, inv_m, 0.0f,
+                            0.0f, inv_m);
   }
   clfx_store16_streaming(((float16)(o[0], o[1], o[2], o[3])),
                          dst + (y * dst_pitch + qx * 4) * 4);

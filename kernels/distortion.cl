@@ -29,20 +29,11 @@
 #include "lib/resample.h"
 
 #if !REAL_IS_DOUBLE
-/* Output k of a checked quad through the checked path (record c): out of line on a CPU
- * device (CLFX_COLD), reached from one call site. */
-CLFX_COLD float4 distortion_checked_pixel(global const float *src, global const int *c,
-                                          const int k, const int src_pitch, const int src_w,
-                                          const int src_h)
-{
-  return fp_sample_n(src, src_pitch, src_w, src_h, c, k);
-}
-
 /* A checked quad from its record of 56 ints (clfx.fx.resample.FootprintMap): the quad index,
  * 3 unused, its packed ints (FP_Q_INTS of 16), a mode per pixel (0 fast path, 1 checked
  * path, 2 zero) and the checked path's record.  The checked pixels go through one call
- * site in a loop kept rolled (inlined four times, the checked pixels, under 1 % of a 1080p
- * frame, cost the draft 7 %; this way 2-3 %). */
+ * site in a loop kept rolled (fp_sample_n; its fp_sample_grid is out of line on a CPU
+ * device). */
 inline void distortion_checked_quad(global const float *src, global float *dst,
                                     global const int *rec, const int src_pitch,
                                     const int src_w, const int src_h)
@@ -53,8 +44,8 @@ inline void distortion_checked_quad(global const float *src, global float *dst,
   float4 s[4];
 #pragma unroll 1
   for(int k = 0; k < 4; k++)
-    s[k] = rec[20 + k] == 1 ? distortion_checked_pixel(src, rec + 24, k, src_pitch, src_w,
-                                                       src_h) : (float4)0.0f;
+    s[k] = mode[k] == 1 ? fp_sample_n(src, src_pitch, src_w, src_h, rec + 24, k)
+                        : (float4)0.0f;
   clfx_store16_streaming(((float16)(mode.s0 == 0 ? o0 : s[0], mode.s1 == 0 ? o1 : s[1],
                                      mode.s2 == 0 ? o2 : s[2], mode.s3 == 0 ? o3 : s[3])),
                          dst + rec[0] * 16);

@@ -25,10 +25,10 @@
 #define clfx_prefetch(p) __builtin_prefetch(p)
 #endif
 #endif
-/* A rarely taken path kept out of line on a CPU device, called from one site: inlined four
- * times into a hot kernel it crowds the instruction cache (distortion's checked pixels,
- * under 1 % of a frame, cost the draft 7 % inlined, 2-3 % out of line).  Elsewhere the
- * compiler decides. */
+/* A rarely taken path kept out of line on a CPU device (resample.h's checked path,
+ * fp_sample_grid): inlined four times into a hot kernel it crowds the instruction cache
+ * (distortion's checked pixels, under 1 % of a frame, cost the draft 7 % inlined, 2-3 % out
+ * of line).  Elsewhere the compiler decides. */
 #if defined(CLFX_HOST_CPU) && defined(__has_attribute)
 #if __has_attribute(noinline)
 #define CLFX_COLD __attribute__((noinline))

@@ -607,41 +607,24 @@ inline void fp_clamp_range(float f, float h, int *c0, int *c1)
 }
 
 /* The window's first texel and its fraction along one axis at continuous coordinate p
- * (texel centres at +0.5) with spread h. */
-inline int fp_window(float p, float h, float *f)
-{
+ * (texel centres at +0.5) with spread h: fp_window for one point, fp_window4 for 4 (the same
+ * operations lane by lane). */
 #if FP_FILTER == 0
-  const float m = floor(p);
-  *f = p - m - 0.5f;
-  return (int)m - 1;
+#define FP_WINDOW_N(name, T, IT)                                                              \
+inline IT name(T p, float h, T *f)                                                            \
+{ const T m = floor(p); *f = p - m - 0.5f; return convert_##IT(m) - 1; }
 #elif FP_FILTER == 1
-  const float u = p - 0.5f, i = floor(u);
-  *f = u - i;
-  return (int)i - 1;
+#define FP_WINDOW_N(name, T, IT)                                                              \
+inline IT name(T p, float h, T *f)                                                            \
+{ const T u = p - 0.5f, i = floor(u); *f = u - i; return convert_##IT(i) - 1; }
 #else
-  const float m = p - h - 0.5f, i = floor(m);
-  *f = m - i;
-  return (int)i - 2;
+#define FP_WINDOW_N(name, T, IT)                                                              \
+inline IT name(T p, float h, T *f)                                                            \
+{ const T m = p - h - 0.5f, i = floor(m); *f = m - i; return convert_##IT(i) - 2; }
 #endif
-}
-
-/* fp_window for 4 points at once (the same operations lane by lane). */
-inline int4 fp_window4(float4 p, float h, float4 *f)
-{
-#if FP_FILTER == 0
-  const float4 m = floor(p);
-  *f = p - m - 0.5f;
-  return convert_int4(m) - 1;
-#elif FP_FILTER == 1
-  const float4 u = p - 0.5f, i = floor(u);
-  *f = u - i;
-  return convert_int4(i) - 1;
-#else
-  const float4 m = p - h - 0.5f, i = floor(m);
-  *f = m - i;
-  return convert_int4(i) - 2;
-#endif
-}
+FP_WINDOW_N(fp_window, float, int)
+FP_WINDOW_N(fp_window4, float4, int4)
+#undef FP_WINDOW_N
 
 /* The footprint filter at (sx, sy) with spreads (hx, hy), texels through the border rule. */
 inline float4 fp_sample(global const float *src, int pitch, int w, int h, float sx, float sy,
@@ -687,8 +670,9 @@ inline float4 fp_sample(global const float *src, int pitch, int w, int h, float 
 
 /* The footprint filter at (sx, sy) split into n x n sub-footprints centred at
  * s + J ((a + 1/2) / n - 1/2, (b + 1/2) / n - 1/2), each with spreads (hx, hy), averaged;
- * n <= 1 is one footprint (fp_sample). */
-inline float4 fp_sample_grid(global const float *src, int pitch, int w, int h, float sx,
+ * n <= 1 is one footprint (fp_sample).  The checked path: out of line on a CPU device
+ * (CLFX_COLD), so a kernel calling it for a quad's pixels stays small. */
+CLFX_COLD float4 fp_sample_grid(global const float *src, int pitch, int w, int h, float sx,
                              float sy, float hx, float hy, int n, float j11, float j12,
                              float j21, float j22)
 {

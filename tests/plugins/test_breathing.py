@@ -11,7 +11,8 @@ from clfx.core.rect import Rect
 from clfx.pipeline.look import render_frame
 from clfx.plugins.breathing import Breathing, thin_lens_scale
 from tests.conftest import hard_shapes
-from tests.plugins.test_distortion import nonfinite_image, render_with_notes, smooth_image
+from tests.plugins.test_distortion import (built_with_streaming, nonfinite_image,
+                                           plain_and_streamed, render_with_notes, smooth_image)
 from tests.reference import breathing as ref
 
 LENS = Camera(focal_length=50.0, focus_distance=0.6, breathing=1.0)
@@ -286,11 +287,8 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality, ca
     (Runtime.streams_stores); forced on a small frame, with fast quads and checked ones (the
     edge, the minifying lens's sub-footprints), every pixel is what plain stores write."""
     src = smooth_image(rng, 37, 58)
-    asked = []
-    monkeypatch.setattr(rt, "streams_stores", lambda n: asked.append(n) or False)
-    plain = run(rt, src, quality, camera=camera)
+    plain, streamed, asked = plain_and_streamed(
+        rt, monkeypatch, lambda: run(rt, src, quality, camera=camera))
     assert asked and asked[-1] >= src.nbytes
-    monkeypatch.setattr(rt, "streams_stores", lambda n: True)
-    assert np.array_equal(run(rt, src, quality, camera=camera), plain)
-    assert any(k[0] == "breathing.cl" and ("CLFX_STREAM_STORES", "1") in k[1]
-               for k in rt._programs)
+    assert np.array_equal(streamed, plain)
+    assert built_with_streaming(rt, "breathing.cl")

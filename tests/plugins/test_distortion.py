@@ -365,6 +365,20 @@ def test_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch, quality
     assert np.array_equal(banded, whole)
 
 
+def plain_and_streamed(rt, monkeypatch, render):
+    """``render()`` once with streaming stores refused and once forced
+    (``Runtime.streams_stores``): both outputs and the output sizes the effect asked about."""
+    asked = []
+    monkeypatch.setattr(rt, "streams_stores", lambda n: asked.append(n) or False)
+    plain = render()
+    monkeypatch.setattr(rt, "streams_stores", lambda n: True)
+    return plain, render(), asked
+
+
+def built_with_streaming(rt, kernel_file: str) -> bool:
+    return any(k[0] == kernel_file and ("CLFX_STREAM_STORES", "1") in k[1] for k in rt._programs)
+
+
 @pytest.mark.parametrize("quality", ["draft", "preview", "final"])
 def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
     """Outputs at least half the device's cache are written with streaming stores
@@ -372,12 +386,8 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
     fast, checked and zero quads all present), every pixel is what plain stores write."""
     src = smooth_image(rng, 61, 90)
     p = Distortion.params(k1=-0.45 + rng.uniform(0, 1e-6), k2=0.1, fit="none", border="black")
-    asked = []
-    monkeypatch.setattr(rt, "streams_stores", lambda n: asked.append(n) or False)
-    plain = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    plain, streamed, asked = plain_and_streamed(
+        rt, monkeypatch, lambda: Distortion().apply(rt, p, src, quality=quality, camera=CAM))
     assert asked and asked[-1] >= src.nbytes          # asked with the output's size
-    monkeypatch.setattr(rt, "streams_stores", lambda n: True)
-    streamed = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
     assert np.array_equal(streamed, plain)
-    assert any(k[0] == "distortion.cl" and ("CLFX_STREAM_STORES", "1") in k[1]
-               for k in rt._programs)
+    assert built_with_streaming(rt, "distortion.cl")
