@@ -125,7 +125,10 @@ def look_from_stamp(path: str | os.PathLike) -> Look:
         data = json.loads(text)
     except ValueError:
         raise PresetError(f"{os.fspath(path)}: clfx:lookJSON is not JSON") from None
-    return look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
+    from dataclasses import replace
+
+    look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
+    return replace(look, source=os.fspath(path), files=(os.fspath(path),))
 
 
 @dataclass

@@ -70,3 +70,59 @@ def test_a_closed_pipe_reader_exits_quietly():
     proc.stdout.close()  # the reader went away (`clfx ... | head -0`)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode in (0, 1) and b"Traceback" not in err and b"Exception" not in err, err
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 23, red team: hangs, tracebacks and silent reinterpretation
+
+@pytest.fixture
+def small(tmp_path):
+    """A 24x16 EXR and a one-effect look in ``tmp_path``."""
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
+    rgba[..., 3] = 1
+    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
+    (tmp_path / "look.yaml").write_text("name: t\neffects:\n  - effect: vignette\n")
+    return tmp_path
+
+
+def render_small(small, *args, env=None, **kw):
+    """``clfx -q render in.exr o.exr --look look.yaml ARGS`` in ``small`` (a subprocess)."""
+    return subprocess.run(CLFX + ["-q", "render", str(small / "in.exr"), str(small / "o.exr"),
+                                  "--look", str(small / "look.yaml"), *map(str, args)],
+                          capture_output=True, timeout=60, env=dict(os.environ, **(env or {})),
+                          check=False, **kw)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "broken"])
+def test_ocio_fifo_or_broken_config_is_refused_in_one_line(small, kind):
+    """A FIFO blocked the OCIO library for ever (ignoring SIGTERM); a broken config was
+    silently replaced by the built-in one."""
+    config = small / "config.ocio"
+    if kind == "fifo":
+        os.mkfifo(config)
+    else:
+        config.write_text("garbage: [\n")
+    r = render_small(small, env={"OCIO": str(config)})
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), f"$OCIO {config}",
+             "not a FIFO" if kind == "fifo" else "not a usable OCIO config")
+    assert not (small / "o.exr").exists()
+
+
+def test_log_on_a_fifo_is_refused_without_blocking(small):
+    fifo = small / "log.fifo"
+    os.mkfifo(fifo)
+    r = render_small(small, "--log", fifo)
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), f"cannot write --log {fifo}: not a regular file (a FIFO)")
+    assert not (small / "o.exr").exists()
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_log_on_a_full_disk_is_one_line_and_exit_1(small, rt):
+    r = render_small(small, "--log", "/dev/full")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), "cannot write --log /dev/full: No space left on device")

@@ -283,7 +283,8 @@ def _build(doc: _Located, default_name: str, source: str, chain: tuple) -> Look:
             doc.fail(("base",), str(exc))
     look = Look(name=str(data.get("name") or default_name),
                 description=str(data.get("description") or ""),
-                source=source, base=str(data["base"]) if data.get("base") else None)
+                source=source, base=str(data["base"]) if data.get("base") else None,
+                files=((source,) if source else ()) + (base.files if base else ()))
     if base:
         look.camera, look.seed = base.camera, base.seed
         look.camera_animated = base.camera_animated
