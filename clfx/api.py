@@ -111,20 +111,17 @@ def look_from_stamp(path: str | os.PathLike) -> Look:
     PresetError
         The file carries no clfx look (not rendered by clfx, or by a clfx before 0.1.0).
     """
-    import json
-
     from clfx.core.errors import PresetError
+    from clfx.core.limits import load_json
     from clfx.io.probe import header_attribute
-    from clfx.pipeline.presets import look_from_dict
+    from clfx.pipeline.presets import MAX_LOOK_BYTES, look_from_dict
 
     text = header_attribute(path, "clfx:lookJSON")
     if not text:
         raise PresetError(f"{os.fspath(path)}: no clfx:lookJSON attribute (not rendered by clfx "
                           "with a stamped look)")
-    try:
-        data = json.loads(text)
-    except ValueError:
-        raise PresetError(f"{os.fspath(path)}: clfx:lookJSON is not JSON") from None
+    data = load_json(text, f"{os.fspath(path)}: clfx:lookJSON", PresetError,
+                     max_bytes=MAX_LOOK_BYTES)     # the same limits as a look file
     from dataclasses import replace
 
     look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")

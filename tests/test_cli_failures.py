@@ -89,9 +89,11 @@ def small(tmp_path):
 
 
 def render_small(small, *args, env=None, **kw):
-    """``clfx -q render in.exr o.exr --look look.yaml ARGS`` in ``small`` (a subprocess)."""
+    """``clfx -q render in.exr o.exr --look look.yaml ARGS`` in ``small`` (a subprocess;
+    without --look when ARGS give --look-from)."""
+    look = [] if "--look-from" in args else ["--look", str(small / "look.yaml")]
     return subprocess.run(CLFX + ["-q", "render", str(small / "in.exr"), str(small / "o.exr"),
-                                  "--look", str(small / "look.yaml"), *map(str, args)],
+                                  *look, *map(str, args)],
                           capture_output=True, timeout=60, env=dict(os.environ, **(env or {})),
                           check=False, **kw)
 
@@ -126,3 +128,99 @@ def test_log_on_a_full_disk_is_one_line_and_exit_1(small, rt):
     r = render_small(small, "--log", "/dev/full")
     assert r.returncode == 1, r.stderr
     one_line(r.stderr.decode(), "cannot write --log /dev/full: No space left on device")
+
+
+def stamped(path, look_json: str):
+    """An EXR whose clfx:lookJSON attribute is ``look_json``."""
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec(8, 4, 4, "float")
+    spec.attribute("clfx:lookJSON", look_json)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec), oiio.geterror()
+    assert out.write_image(np.zeros((4, 8, 4), np.float32))
+    out.close()
+
+
+@pytest.mark.parametrize("look_json,message", [
+    ('{"name": "x", "description": "' + "x" * (2 << 20) + '"}', "the limit is 1048576"),
+    ("[" * 100000 + "]" * 100000, "nested 100000 levels deep; the limit is 32"),
+    ('{"name": "x", "seed": ' + "9" * 5000 + "}", "is not JSON"),
+])
+def test_look_from_a_hostile_stamp_is_refused_in_one_line(small, look_json, message):
+    """A 2 MB lookJSON had no size limit (YAML looks have 1 MiB); deep JSON and a 5000-digit
+    integer were tracebacks."""
+    stamped(small / "stamp.exr", look_json)
+    r = render_small(small, "--look-from", small / "stamp.exr")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), "clfx:lookJSON", message)
+
+
+def test_a_5000_digit_yaml_integer_is_one_line(small):
+    (small / "big.yaml").write_text("name: big\nseed: " + "9" * 5000 + "\neffects: []\n")
+    r = clfx("look", "show", small / "big.yaml")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), "big.yaml:2: an integer of 5000 digits")
+
+
+@pytest.mark.parametrize("args", [("apply", "dof", "IN", "OUT", "blades=2"),
+                                  ("apply", "streaks", "IN", "OUT", "blades=1"),
+                                  ("render", "IN", "OUT", "--set", "camera.blades=1")])
+def test_one_or_two_blades_are_refused_not_rendered_round(small, args):
+    r = CliRunner().invoke(cli, [str(small / "in.exr") if a == "IN" else
+                                 str(small / "o.exr") if a == "OUT" else a for a in args])
+    assert r.exit_code == 1, r.output
+    one_line(r.stderr, "is not allowed (1 or 2 blades make no polygon")
+    assert not (small / "o.exr").exists()
+
+
+@pytest.fixture
+def silent_port():
+    """A TCP port that accepts connections and never says a word (not a Dask scheduler)."""
+    import socket
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    held = []
+
+    def accept():
+        while True:
+            try:
+                held.append(srv.accept()[0])
+            except OSError:
+                return
+
+    threading.Thread(target=accept, daemon=True).start()
+    yield srv.getsockname()[1]
+    srv.close()
+    for c in held:
+        c.close()
+
+
+def test_a_port_that_is_not_dask_times_out_in_one_line(silent_port):
+    import time
+
+    from clfx.core.errors import ClusterError
+    from clfx.pipeline.distributed import check_scheduler
+
+    t0 = time.perf_counter()
+    with pytest.raises(ClusterError, match="no Dask scheduler answered within 1 s"):
+        check_scheduler(f"tcp://127.0.0.1:{silent_port}", timeout=1.0)
+    assert time.perf_counter() - t0 < 10
+
+
+@pytest.mark.parametrize("address,message", [
+    ("foo://x:1", "unknown protocol 'foo'"),
+    ("tcp://127.0.0.1:99999", "not an address like tcp://HOST:8786"),
+    ("tcp://127.0.0.1:1", "cannot reach scheduler tcp://127.0.0.1:1: Connection refused"),
+])
+@pytest.mark.parametrize("how", ["option", "env"])
+def test_a_bad_scheduler_is_one_line_at_once(small, address, message, how):
+    """Was 61 s and then a traceback."""
+    args = ("--scheduler", address) if how == "option" else ()
+    r = render_small(small, *args, env={"CLFX_SCHEDULER": address} if how == "env" else None)
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), message)
+    assert not (small / "o.exr").exists()

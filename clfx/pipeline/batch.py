@@ -415,7 +415,7 @@ class Batch:
         files: set[str] = set()
         for step, mask in self.look.masks():
             files.update(check_mask(mask, jobs[0].input, [j.frame for j in jobs],
-                                    f"effect {step.id!r}"))
+                                    f"effect {step.id!r}", notify=self._assumed))
         self.mask_files = sorted(files)
 
     def _reads(self, jobs: list[Job]) -> list[tuple[str, str]]:
@@ -665,7 +665,7 @@ class Batch:
                             all_views=job.output.lower().endswith(".exr") and o.passes_mode != "drop",
                             colorspace=o.colorspace, working_space=o.working_space,
                             depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
-        masks = [read_masks(self.look, f, job.frame) for f in frames]
+        masks = [read_masks(self.look, f, job.frame, notify=self._assumed) for f in frames]
         return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3)
 
     def _notice(self, message: str, key: str) -> None:
@@ -677,6 +677,14 @@ class Batch:
             self._log_line({"notice": message}, f"clfx: {message}")
             if self.verbosity > 0:
                 self._err(f"clfx: {message}")
+
+    def _assumed(self, message: str, key: str) -> None:
+        """What clfx had to assume about an input (a NaN mask, a Cryptomatte without
+        manifest): one warning line per batch and key, whatever -q says."""
+        if key not in self.noticed:
+            self.noticed.add(key)
+            self._log_line({"warning": message}, f"clfx: warning: {message}")
+            self._err(f"clfx: warning: {message}")
 
     def stamp(self, frame: int) -> dict:
         """The attributes an output of ``frame`` is stamped with (`Look.stamp`)."""
@@ -691,7 +699,8 @@ class Batch:
             write_frame(frame, job.output, bit_depth="float" if o.as_float else None,
                         compression=o.compression, colorspace=o.out_colorspace,
                         overwrite=o.overwrite, attributes=self.stamp(job.frame),
-                        protect=self.read_paths(),
+                        protect=[p for p in (job.input, job.depth, job.velocity) if p]
+                        + self.read_paths(),
                         write_passes=o.passes_mode != "drop", views=views)
         except OutputExistsError:
             if not o.skip_existing:
@@ -804,7 +813,7 @@ class Batch:
                 masks = None
                 if self.look.masks():
                     from clfx.pipeline.masks import read_masks
-                    masks = read_masks(self.look, frame, count)
+                    masks = read_masks(self.look, frame, count, notify=self._assumed)
                 out, report = render_frame(rt, self.look, frame, frame_number=count,
                                            quality=o.quality, stats=self.stats, masks=masks)
                 next_frame = following.result()   # raises on a short read: nothing written

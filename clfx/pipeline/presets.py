@@ -60,6 +60,8 @@ MAX_LOOK_BYTES = 1 << 20
 """A look file is a page of YAML; anything bigger is refused before it is parsed."""
 MAX_NESTING = 32
 """Deepest nesting of YAML mappings and lists a look may use (a look needs 4)."""
+MAX_INT_DIGITS = 20
+"""Most digits of an integer in a look (a 64-bit seed has 20)."""
 MAX_BASE_DEPTH = 16
 """Longest chain of ``base:`` looks."""
 
@@ -141,6 +143,13 @@ class _LookLoader(yaml.SafeLoader):
         finally:
             self._depth -= 1
 
+    def construct_yaml_int(self, node):
+        digits = sum(c.isalnum() for c in str(node.value))
+        if digits > MAX_INT_DIGITS:      # Python refuses > 4300 digits with a ValueError
+            raise _Refused(f"an integer of {digits} digits (a look needs at most "
+                           f"{MAX_INT_DIGITS})", node.start_mark)
+        return super().construct_yaml_int(node)
+
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
             first: dict = {}
@@ -179,6 +188,9 @@ def _read_text(path: Path) -> str:
         line = data[:exc.start].count(b"\n") + 1
         raise PresetError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
                           f"save the look as UTF-8") from None
+
+
+_LookLoader.add_constructor("tag:yaml.org,2002:int", _LookLoader.construct_yaml_int)
 
 
 class _Located:
