@@ -224,3 +224,95 @@ def test_a_bad_scheduler_is_one_line_at_once(small, address, message, how):
     assert r.returncode == 1, r.stderr
     one_line(r.stderr.decode(), message)
     assert not (small / "o.exr").exists()
+
+
+@pytest.mark.parametrize("kw,error,message", [
+    ({"quality": "ultra"}, ValueError, "quality: 'ultra' is not one of draft, preview"),
+    ({"frame": "x"}, TypeError, "frame: 'x' (str) is not a whole number"),
+    ({"look": 5}, TypeError, "look: 5 (int) is not a look name, a file, a dict or a Look"),
+    ({"rgba": np.full((4, 6, 4), 255, np.uint8)}, TypeError, "rgba: dtype uint8 is not floating"),
+    ({"rgba": np.ones((4, 6, 4), bool)}, TypeError, "rgba: dtype bool is not floating"),
+    ({"rgba": np.ones((4, 6, 4), complex)}, TypeError, "rgba: dtype complex128 is not floating"),
+    ({"depth": np.ones((4, 6), np.int64)}, TypeError, "depth: dtype int64 is not floating"),
+])
+def test_api_arguments_of_the_wrong_type_or_value_name_the_argument(kw, error, message):
+    import re
+
+    import clfx
+
+    args = {"rgba": np.ones((4, 6, 4), np.float32), "look": {"effects": []}, **kw}
+    with pytest.raises(error, match=re.escape(message)):
+        clfx.render_array(args.pop("rgba"), args.pop("look"), **args)
+
+
+def test_api_float_arrays_of_any_width_are_float32(rt):
+    import clfx
+
+    for dtype in (np.float16, np.float64):
+        out = clfx.render_array(np.full((4, 6, 4), 0.5, dtype), {"effects": []})
+        assert out.rgba.dtype == np.float32 and np.all(out.rgba == 0.5)
+
+
+def test_api_render_names_bad_quality_and_look(small):
+    import clfx
+
+    with pytest.raises(ValueError, match="quality: 'ultra'"):
+        clfx.render_file(small / "in.exr", small / "o.exr", quality="ultra")
+    with pytest.raises(TypeError, match="look: 5"):
+        clfx.render_file(small / "in.exr", small / "o.exr", 5)
+
+
+@pytest.mark.parametrize("pattern", ["o.####.####.exr", "o.%04d.$F4.exr", "o_####_v2.####.exr"])
+def test_two_frame_tokens_in_a_pattern_are_refused(small, pattern):
+    r = CliRunner().invoke(cli, ["render", str(small / "in.exr"), str(small / pattern),
+                                 "--look", str(small / "look.yaml")])
+    assert r.exit_code == 1, r.output
+    one_line(r.stderr, "2 frame tokens", "give one")
+    assert list(small.glob("o*")) == []
+
+
+@pytest.mark.parametrize("out,args,message", [
+    ("o.exr", ("--compression", "bogus"), "compression 'bogus' not supported"),
+    ("o.png", ("--compression", "zip"), "compression 'zip' not supported"),
+    ("o.png", ("--float",), "bit depth 'float' not supported"),
+])
+def test_bad_output_options_are_found_before_rendering(small, monkeypatch, out, args, message):
+    """Was found only when the first frame was written (after its render)."""
+    from clfx.pipeline import look as look_module
+
+    def no_render(*a, **k):
+        raise AssertionError("rendered before the output options were checked")
+
+    monkeypatch.setattr(look_module, "render_frame", no_render)
+    monkeypatch.setattr("clfx.pipeline.batch.render_frame", no_render)
+    r = CliRunner().invoke(cli, ["render", str(small / "in.exr"), str(small / out),
+                                 "--look", str(small / "look.yaml"), *args])
+    assert r.exit_code == 1, r.output
+    one_line(r.stderr, message)
+
+
+def test_zero_bytes_of_raw_stdin_is_an_error(rt):
+    r = clfx("-q", "render", "-", "-", "--look", "wide-angle", "--raw", "8x4", input=b"")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr.decode(), "stdin: no raw frames (0 bytes")
+    assert r.stdout == b""
+
+
+@pytest.mark.parametrize("args,message", [
+    (("render", "-", "o.exr"), "'-' as INPUT or OUTPUT needs --raw WxH"),
+    (("render", "-", "o.exr", "--raw", "8x4"), "raw pipes need '-' for both INPUT and OUTPUT"),
+    (("render", "i.exr", "o.exr", "--raw", "8x4"), "--raw WxH is for raw pipes"),
+    (("render", "i.exr", "o.####.exr", "--workers", "2", "--scheduler", "tcp://h:1"),
+     "give --workers N (a local cluster) or --scheduler ADDRESS"),
+    (("render", "i.exr", "o.exr", "--bogus"), "No such option '--bogus'"),
+    (("--bogus",), "No such option '--bogus'"),
+    (("nosuchcommand",), "No such command 'nosuchcommand'"),
+])
+def test_usage_errors_are_one_line_and_exit_2(args, message):
+    """Were click's three-line form (--raw, --workers with --scheduler: exit 1)."""
+    r = clfx(*args)
+    assert r.returncode == 2, r.stderr
+    one_line(r.stderr.decode(), message, "--help)")
+    r = CliRunner().invoke(cli, list(args))       # the click entry point says the same
+    assert r.exit_code == 2, r.output
+    one_line(r.stderr, message)

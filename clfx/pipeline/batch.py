@@ -490,7 +490,11 @@ class Batch:
             raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
 
     def _check_outputs(self, jobs: list[Job]) -> None:
+        from clfx.io.write import check_output_format
+
         outs = [j.output for j in jobs]
+        check_output_format(outs[0], "float" if self.options.as_float else None,
+                            self.options.compression)    # not after the first render
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
                                 f"(add a frame token such as #### to the output)")
@@ -807,6 +811,10 @@ class Batch:
 
         with io_pool() as pool:
             frame = read(0)
+            if frame is None:     # an empty stream is an error, not zero frames rendered
+                w, h = self.raw_size
+                raise SequenceError(f"stdin: no raw frames (0 bytes; --raw {w}x{h} frames are "
+                                    f"{w * h * 12} bytes each, gbrpf32le)")
             count = 0
             while frame is not None:
                 following = pool.submit(read, count + 1)
