@@ -28,7 +28,8 @@ separated); the user folder ``<config>/clfx/looks`` (XDG, ``click.get_app_dir``)
 ``presets/`` shipped with clfx.  Every problem is reported before any frame is read, as one
 line naming the file, the line and the key, with the closest valid name where one exists.
 A look file is at most 1 MiB of UTF-8; YAML aliases, duplicate keys, nesting deeper than 32
-levels and chains of more than 16 ``base:`` looks are refused the same way.
+levels, integers of more than 20 digits and chains of more than 16 ``base:`` looks are
+refused the same way.
 """
 from __future__ import annotations
 
