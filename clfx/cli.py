@@ -3,8 +3,9 @@
 Exit codes: 0 success; 1 processing error (bad input file, failed frame, bad look, no
 device); 2 usage error (unknown option, bad argument: one line too); 130 interrupted
 (Ctrl-C), 143 terminated (SIGTERM).  Interruptions leave no partial output: every write goes
-to a temp file in the output folder and is renamed into place only when complete.  A closed stdin or stdout,
-or a write to stdout that fails (a full disk), is one error line and exit code 1.
+to a temp file in the output folder and is renamed into place only when complete.  A closed
+stdin or stdout, or a write to stdout that fails (a full disk), is one error line and exit
+code 1.
 
 stdout carries only data (``--json`` lines, listings); progress and logs go to stderr, and
 progress is shown only when stderr is a terminal and ``-q`` is not given.

@@ -426,9 +426,8 @@ class Batch:
         checked against (`_check_outputs`, `_check_log`, the writer's ``protect``)."""
         from clfx.io.colour import config_file
 
-        reads = [(role, p) for j in jobs
-                 for role, p in (("input", j.input), ("--depth", j.depth), ("--velocity", j.velocity))
-                 if p]
+        reads = [(role, p) for j in jobs for role, p in
+                 (("input", j.input), ("--depth", j.depth), ("--velocity", j.velocity)) if p]
         reads += [("look", p) for p in self.look.files]
         reads += [("mask", p) for p in self.mask_files]
         reads += look_files(self.look) + lens_files(self.look)
