@@ -492,8 +492,6 @@ class Batch:
         from clfx.io.write import check_output_format
 
         outs = [j.output for j in jobs]
-        check_output_format(outs[0], "float" if self.options.as_float else None,
-                            self.options.compression)    # not after the first render
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
                                 f"(add a frame token such as #### to the output)")
@@ -520,6 +518,8 @@ class Batch:
                 elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
+        check_output_format(outs[0], "float" if self.options.as_float else None,
+                            self.options.compression)    # not after the first render
 
     # -- running ------------------------------------------------------------------------
     @contextmanager
