@@ -30,9 +30,10 @@ def clfx(*args, input=b"", stdout=subprocess.PIPE, close_stdout=False, timeout=1
 
 @pytest.mark.parametrize("size", ["-64x32", "64x-32", "0x32", "64x", "64x32x2", "\uff16\uff14x32"])
 def test_raw_size_must_be_two_positive_whole_numbers(size):
+    """A usage error (exit 2, one line; issue 23: was exit 1)."""
     r = CliRunner().invoke(cli, ["render", "-", "-", "--raw", size], input=b"\0" * 64)
-    assert r.exit_code == 1, (r.exit_code, r.output)
-    one_line(r.stderr, "is not WxH")
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    one_line(r.stderr, "Invalid value for '--raw'", "is not WxH")
 
 
 def test_raw_size_over_the_pixel_limit_is_refused_before_reading():
