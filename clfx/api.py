@@ -87,6 +87,9 @@ def load_look(look: str | os.PathLike | dict | Look = "default", *,
 
     from clfx.pipeline.presets import apply_overrides, load_look as _load, look_from_dict
 
+    _check_look(look)
+    if isinstance(set, (str, bytes)) or not isinstance(set, Iterable):
+        raise TypeError(f"set: {set!r} is not a list of 'key=value' strings")
     if isinstance(look, Look):
         lk = replace(look, steps=list(look.steps))
     elif isinstance(look, dict):
@@ -95,6 +98,42 @@ def load_look(look: str | os.PathLike | dict | Look = "default", *,
         text = os.fspath(look)
         lk = look_from_stamp(text) if _is_image(text) else _load(text)
     return apply_overrides(lk, list(set))
+
+
+def _check_look(look) -> None:
+    """TypeError unless ``look`` is a name, a path, a dict or a Look."""
+    if not isinstance(look, (str, os.PathLike, dict, Look)):
+        raise TypeError(f"look: {look!r} ({type(look).__name__}) is not a look name, a file, "
+                        f"a dict or a Look")
+
+
+def _check_quality(quality) -> None:
+    """ValueError unless ``quality`` is None or a quality level."""
+    from clfx.core.plugin import QUALITY_LEVELS
+
+    if quality is not None and (not isinstance(quality, str) or quality not in QUALITY_LEVELS):
+        raise ValueError(f"quality: {quality!r} is not one of {', '.join(QUALITY_LEVELS)} "
+                         f"(or None: final)")
+
+
+def _check_frame(frame) -> int:
+    """``frame`` as an int; TypeError unless it is a whole number."""
+    if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
+        raise TypeError(f"frame: {frame!r} ({type(frame).__name__}) is not a whole number")
+    return int(frame)
+
+
+def _float_array(a, name: str) -> np.ndarray:
+    """``a`` as float32.  The rule: floating-point arrays (float16, float32, float64) are
+    converted to float32; anything else (uint8, bool, complex, int, object) is refused with a
+    TypeError, since clfx takes scene-linear values and an 8-bit image is neither linear nor
+    scaled (convert it yourself, e.g. ``srgb_uint8 / 255`` then linearise)."""
+    arr = np.asarray(a)
+    if arr.dtype.kind != "f":
+        raise TypeError(f"{name}: dtype {arr.dtype} is not floating point; clfx takes "
+                        f"scene-linear float values (float16/32/64), e.g. convert 8-bit sRGB "
+                        f"with rgb / 255 and linearise it first")
+    return arr.astype(np.float32, copy=False)
 
 
 def _is_image(path: str) -> bool:
@@ -111,21 +150,21 @@ def look_from_stamp(path: str | os.PathLike) -> Look:
     PresetError
         The file carries no clfx look (not rendered by clfx, or by a clfx before 0.1.0).
     """
-    import json
-
     from clfx.core.errors import PresetError
+    from clfx.core.limits import load_json
     from clfx.io.probe import header_attribute
-    from clfx.pipeline.presets import look_from_dict
+    from clfx.pipeline.presets import MAX_LOOK_BYTES, look_from_dict
 
     text = header_attribute(path, "clfx:lookJSON")
     if not text:
         raise PresetError(f"{os.fspath(path)}: no clfx:lookJSON attribute (not rendered by clfx "
                           "with a stamped look)")
-    try:
-        data = json.loads(text)
-    except ValueError:
-        raise PresetError(f"{os.fspath(path)}: clfx:lookJSON is not JSON") from None
-    return look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
+    data = load_json(text, f"{os.fspath(path)}: clfx:lookJSON", PresetError,
+                     max_bytes=MAX_LOOK_BYTES)     # the same limits as a look file
+    from dataclasses import replace
+
+    look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
+    return replace(look, source=os.fspath(path), files=(os.fspath(path),))
 
 
 @dataclass
@@ -159,7 +198,9 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     ----------
     rgba : array_like
         (h, w, 4) scene-linear premultiplied RGBA in the working space (linear Rec.709 by
-        default, see ``working_space``); (h, w, 3) gets alpha 1; (h, w) is grey.
+        default, see ``working_space``); (h, w, 3) gets alpha 1; (h, w) is grey.  Floating
+        point (float16/32/64, converted to float32); other dtypes (uint8, bool, complex,
+        int) are refused with a TypeError, as for ``depth``, ``velocity`` and ``channels``.
     look : str, dict or Look
         See :func:`load_look`.
     depth : array_like, optional
@@ -195,10 +236,20 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
         A step needs a pass (depth, velocity) or mask channel that was not given.
     ParamError, PresetError
         Bad look or values.
+    TypeError, ValueError
+        An argument of the wrong type (``look=5``, ``frame="x"``, a uint8 array) or value
+        (``quality="ultra"``), naming the argument.
     """
     from clfx.pipeline.masks import read_masks
 
-    arr = np.asarray(rgba, np.float32)
+    _check_look(look)
+    _check_quality(quality)
+    frame = _check_frame(frame)
+    arr = _float_array(rgba, "rgba")
+    depth = None if depth is None else _float_array(depth, "depth")
+    velocity = None if velocity is None else _float_array(velocity, "velocity")
+    if channels is not None:
+        channels = {k: _float_array(v, f"channels[{k!r}]") for k, v in channels.items()}
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (3, 4)) or arr.size == 0:
         raise ParamError(f"rgba: shape {arr.shape} is not (h, w, 4), (h, w, 3) or (h, w)")
     h, w = arr.shape[:2]
@@ -287,6 +338,10 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
         options = _options(option_values)
     elif option_values:
         raise TypeError("give options= or option keywords, not both")
+    if not isinstance(options, RenderOptions):
+        raise TypeError(f"options: {options!r} is not a clfx.RenderOptions")
+    _check_look(look)
+    _check_quality(options.quality)
     lk = look if isinstance(look, Look) and not set else load_look(look, set=set)
     batch = Batch(look=lk, input_path=os.fspath(input), output_path=os.fspath(output),
                   options=options, verbosity=verbosity, on_frame=on_frame)

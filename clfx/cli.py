@@ -1,10 +1,11 @@
 """The ``clfx`` command line (click).
 
 Exit codes: 0 success; 1 processing error (bad input file, failed frame, bad look, no
-device); 2 usage error (unknown option, bad argument); 130 interrupted (Ctrl-C), 143
-terminated (SIGTERM).  Interruptions leave no partial output: every write goes to a temp file
-in the output folder and is renamed into place only when complete.  A closed stdin or stdout,
-or a write to stdout that fails (a full disk), is one error line and exit code 1.
+device); 2 usage error (unknown option, bad argument: one line too); 130 interrupted
+(Ctrl-C), 143 terminated (SIGTERM).  Interruptions leave no partial output: every write goes
+to a temp file in the output folder and is renamed into place only when complete.  A closed
+stdin or stdout, or a write to stdout that fails (a full disk), is one error line and exit
+code 1.
 
 stdout carries only data (``--json`` lines, listings); progress and logs go to stderr, and
 progress is shown only when stderr is a terminal and ``-q`` is not given.
@@ -112,13 +113,37 @@ class ClfxClickError(click.ClickException):
         click.echo(f"clfx: error: {self.message}", err=True)
 
 
+class ClfxUsageError(click.UsageError):
+    """A usage error shown as one line (``clfx: error: ...``, naming the command's help)
+    with exit code 2, not click's three-line form."""
+
+    def show(self, file=None):
+        where = f" (see {self.ctx.command_path} --help)" if self.ctx is not None else ""
+        click.echo(f"clfx: error: {' '.join(self.format_message().split())}{where}", err=True)
+
+
+def _one_line_usage(exc: click.UsageError) -> click.UsageError:
+    """``exc`` as a `ClfxUsageError`; a request for help (a bare group) stays as it is."""
+    if isinstance(exc, ClfxUsageError) or type(exc).__name__ == "NoArgsIsHelpError":
+        return exc
+    out = ClfxUsageError(exc.format_message(), exc.ctx)
+    out.exit_code = exc.exit_code
+    return out
+
+
 class ClfxGroup(click.Group):
     """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1; the
     root group keeps the arguments it was given (stamped into outputs)."""
 
     def make_context(self, info_name, args, parent=None, **extra):
         argv = list(args)
-        ctx = super().make_context(info_name, args, parent=parent, **extra)
+        try:
+            ctx = super().make_context(info_name, args, parent=parent, **extra)
+        except click.UsageError as exc:     # the group's own options (clfx --bogus)
+            one = _one_line_usage(exc)
+            if one is exc:
+                raise
+            raise one from exc
         if parent is None:
             ctx.meta["clfx.argv"] = argv
         return ctx
@@ -126,6 +151,11 @@ class ClfxGroup(click.Group):
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
+        except click.UsageError as exc:
+            one = _one_line_usage(exc)
+            if one is exc:
+                raise
+            raise one from exc
         except ClfxError as exc:
             msg = str(exc)
             # Build logs keep their lines; everything else is one line.
@@ -414,13 +444,17 @@ def _command_line() -> str:
 
 
 def _check_raw_usage(input_path: str, output_path: str, raw_size) -> None:
-    """'-' needs --raw WxH, and '-' on both sides: usage errors (exit 2) before anything."""
+    """'-' needs --raw WxH, '-' on both sides, and --raw needs '-': usage errors (exit 2)
+    before anything."""
     if RAW in (input_path, output_path):
         if not raw_size:
             raise click.UsageError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le "
                                    "frames, as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
         if input_path != output_path:
             raise click.UsageError("raw pipes need '-' for both INPUT and OUTPUT")
+    elif raw_size:
+        raise click.UsageError("--raw WxH is for raw pipes ('-' as INPUT and OUTPUT); "
+                               "INPUT and OUTPUT here are files")
 
 
 RAW = "-"
@@ -455,6 +489,9 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     _check_raw_usage(input_path, output_path, kw.get("raw_size"))
     if workers and ctx.get_parameter_source("scheduler") == click.core.ParameterSource.ENVIRONMENT:
         scheduler = None  # an explicit --workers wins over CLFX_SCHEDULER
+    if workers and scheduler:
+        raise click.UsageError("give --workers N (a local cluster) or --scheduler ADDRESS "
+                               "(an existing one), not both")
     scale = {"workers": workers, "scheduler": scheduler, "chunk": chunk, "fail_fast": fail_fast}
     runtime = None if workers or scheduler else _runtime_soon(ctx)
     from clfx.api import load_look, look_from_stamp
@@ -679,6 +716,9 @@ def _main(argv):
     except click.exceptions.Abort:
         click.echo("clfx: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
+    except click.UsageError as exc:          # before a subcommand runs (clfx --bogus)
+        _one_line_usage(exc).show()
+        sys.exit(exc.exit_code)
     except click.ClickException as exc:
         exc.show()
         sys.exit(exc.exit_code)

@@ -49,6 +49,21 @@ def check_frames(ctx, param, value):
     return value
 
 
+def check_raw_size(ctx, param, value):
+    """A --raw value that is not WxH is a usage error (exit 2); its size limit is checked
+    with the render (exit 1)."""
+    if value is None:
+        return None
+    from clfx.core.errors import SequenceError
+    from clfx.io.raw import parse_wxh
+
+    try:
+        parse_wxh(value)
+    except SequenceError:
+        raise click.BadParameter(f"{value!r} is not WxH (two positive whole numbers)") from None
+    return value
+
+
 quality_option = click.option(
     "--quality", type=click.Choice(QUALITY_LEVELS), default=None,
     help="Quality level of every effect without its own override.")
@@ -109,7 +124,7 @@ render_options = stack(
                  help="Skip frames whose output exists (resume a batch)."),
     click.option("--skip-missing", is_flag=True, help="Skip missing input frames instead of failing."),
     click.option("--keep-overscan", is_flag=True, help="Keep light spread past the display window."),
-    click.option("--raw", "raw_size", default=None, metavar="WxH",
+    click.option("--raw", "raw_size", default=None, metavar="WxH", callback=check_raw_size,
                  help="With '-' as INPUT/OUTPUT: raw gbrpf32le frames on stdin/stdout (ffmpeg)."),
     click.option("--explain", is_flag=True,
                  help="Per frame: which effects ran, which were skipped and why."),

@@ -61,6 +61,11 @@ def first_blade_angle(rotation_deg: float = 0.0) -> float:
     return -0.5 * math.pi + math.radians(rotation_deg)
 
 
+NO_POLYGON = (1, 2)
+"""Blade counts that make no polygon: refused (they used to render round without a word)."""
+BLADES_WHY = "1 or 2 blades make no polygon: 0 is a round aperture, 3 to 32 a polygon"
+
+
 def aperture_radius(phi, blades: int, first: float = -0.5 * math.pi, roundness: float = 0.0):
     """Boundary radius (circumradius 1) of the aperture in direction ``phi`` (radians, image
     coordinates), i.e. the shape of the bokeh: ``blades`` < 3 is a disk; otherwise a regular
@@ -168,6 +173,8 @@ class Camera:
         lo, hi = cls.RANGES[name]
         if not lo <= value <= hi:
             raise ValueError(f"{shown} is outside the allowed range [{lo:g}, {hi:g}]")
+        if name == "blades" and value in NO_POLYGON:
+            raise ValueError(f"{shown} is not allowed ({BLADES_WHY})")
         return int(value) if name in cls.INTEGERS else float(value)
 
     def as_dict(self) -> dict:

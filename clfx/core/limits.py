@@ -54,3 +54,41 @@ def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> f
     if sequence and pixels <= OVERLAP_MAX_PIXELS:
         per_pixel += MEMORY_OVERLAP_BYTES_PER_PIXEL
     return MEMORY_BASE_MIB + pool_mib + per_pixel * pixels / 2 ** 20
+
+
+MAX_JSON_NESTING = 32
+"""Deepest nesting of JSON arrays and objects clfx reads (a stamped look needs 5, a Cryptomatte
+manifest 1); deeper text is refused before parsing (Python's parser recurses per level)."""
+
+
+def json_nesting(text: str) -> int:
+    """The deepest nesting of ``[`` and ``{`` in JSON ``text`` (brackets inside strings not
+    counted), in one pass without parsing."""
+    import re
+
+    depth = deepest = 0
+    for ch in re.sub(r'"(?:[^"\\]|\\.)*"', '""', text):
+        if ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    return deepest
+
+
+def load_json(text: str, what: str, exc: type[ClfxError] = ClfxError, *,
+              max_bytes: int | None = None, max_depth: int = MAX_JSON_NESTING):
+    """``json.loads(text)``, refusing in one line (``exc`` naming ``what``) text over
+    ``max_bytes`` (UTF-8), nested deeper than ``max_depth``, or not JSON (an integer of more
+    than Python's 4300 digits included)."""
+    import json
+
+    if max_bytes is not None and len(text) > max_bytes // 4 and len(text.encode()) > max_bytes:
+        raise exc(f"{what} is {len(text.encode())} bytes; the limit is {max_bytes}")
+    depth = json_nesting(text)
+    if depth > max_depth:
+        raise exc(f"{what} is nested {depth} levels deep; the limit is {max_depth}")
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise exc(f"{what} is not JSON ({' '.join(str(e).split())[:200]})") from None

@@ -136,6 +136,9 @@ class FloatParam(Param):
 class IntParam(Param):
     min: int = -(2 ** 31)
     max: int = 2 ** 31 - 1
+    exclude: tuple[int, ...] = ()
+    """Values inside the range that mean nothing (``blades`` 1 and 2: no polygon), refused."""
+    exclude_why: str = ""
     kind: ClassVar[str] = "int"
 
     def validate(self, value, where=""):
@@ -145,6 +148,8 @@ class IntParam(Param):
             self._fail(where, value, "an integer")
         value = int(value)
         _check_range(self, where, value, self.min, self.max)
+        if value in self.exclude:
+            raise ParamError(f"{where or self.name}: {value!r} is not allowed ({self.exclude_why})")
         return value
 
     def parse(self, text, where=""):

@@ -26,6 +26,7 @@ from __future__ import annotations
 import difflib
 import functools
 import math
+import os
 
 import numpy as np
 import OpenImageIO as oiio
@@ -46,8 +47,46 @@ _BRADFORD = np.array([[0.8951, 0.2664, -0.1614],
 _D65 = (0.3127, 0.3290)
 
 
+def config_file() -> str | None:
+    """The OCIO config file ``$OCIO`` names (None when unset, empty or an ``ocio://`` URI):
+    an input of every render."""
+    path = os.environ.get("OCIO", "")
+    return path if path and not path.startswith("ocio://") else None
+
+
+_CHECKED: set[str] = set()
+
+
+def check_config() -> None:
+    """Raise `ImageIOError` in one line if ``$OCIO`` names anything but a readable, valid
+    OCIO config: a FIFO or device would block the OCIO library forever (it is never
+    opened), and a broken config would silently be replaced by the built-in one."""
+    path = config_file()
+    if path is None or path in _CHECKED:
+        return
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        raise ImageIOError(f"$OCIO {path}: cannot read the OCIO config: {exc.strerror} "
+                           f"(unset OCIO for the built-in config)") from None
+    if not stat.S_ISREG(mode):
+        kind = "a folder" if stat.S_ISDIR(mode) else \
+            "a FIFO" if stat.S_ISFIFO(mode) else "a special file"
+        raise ImageIOError(f"$OCIO {path}: the OCIO config must be a regular file, not {kind}")
+    cfg = oiio.ColorConfig(path)            # (OpenImageIO's shared config left alone)
+    if cfg.configname() == "built-in":      # OpenImageIO fell back: the config did not load
+        why = " ".join((cfg.geterror() or "").split()) or "it did not load"
+        raise ImageIOError(f"$OCIO {path}: not a usable OCIO config ({why}); fix it or unset "
+                           f"OCIO for the built-in config")
+    _CHECKED.add(path)
+
+
 def config():
-    """OpenImageIO's colour configuration ($OCIO, else its built-in OCIO config)."""
+    """OpenImageIO's colour configuration ($OCIO, else its built-in OCIO config); a broken
+    ``$OCIO`` is an error (`check_config`), never silently the built-in config."""
+    check_config()
     return oiio.ColorConfig.default_colorconfig()
 
 

@@ -16,13 +16,13 @@ Names missing from the manifest are an error naming the closest ones.
 from __future__ import annotations
 
 import difflib
-import json
 import os
 import struct
 
 import numpy as np
 
 from clfx.core.errors import ClipError
+from clfx.core.limits import load_json
 from clfx.core.rect import Rect
 from clfx.io.read import _Part, _read_channels, _scan
 
@@ -147,21 +147,42 @@ def _layer_attributes(f) -> dict[str, dict]:
     return layers
 
 
+def _sidecar(f, attrs: dict) -> str | None:
+    """The manifest file a layer names (``manif_file``, relative to the image), or None."""
+    return os.path.join(os.path.dirname(f.path), str(attrs["manif_file"])) \
+        if attrs.get("manif_file") else None
+
+
+def manifest_files(path, layer: str) -> list[str]:
+    """The sidecar manifest file of ``layer`` in ``path``, if it has one (an input)."""
+    side = _sidecar(_scan(path), _layer_attributes(_scan(path)).get(layer, {}))
+    return [side] if side and os.path.exists(side) else []
+
+
 def _manifest(f, layer: str, attrs: dict) -> dict[str, int]:
     text = attrs.get("manifest")
-    if text is None and attrs.get("manif_file"):
-        side = os.path.join(os.path.dirname(f.path), str(attrs["manif_file"]))
+    side = _sidecar(f, attrs)
+    if text is None and side:
+        from clfx.core.errors import ImageIOError
+        from clfx.io.sequence import check_input_file
+
         try:
+            check_input_file(side, f"Cryptomatte {layer!r} manifest")   # a FIFO would block
             with open(side, encoding="utf-8") as fh:
                 text = fh.read()
+        except ImageIOError as exc:
+            raise ClipError(f"{f.path}: {exc}") from None
         except OSError as exc:
             raise ClipError(f"{f.path}: Cryptomatte {layer!r}: cannot read its manifest "
                             f"{side}: {exc.strerror}") from None
     if text is None:
         return {}
+    data = load_json(str(text), f"{f.path}: Cryptomatte {layer!r}: the manifest", ClipError)
     try:
-        data = json.loads(text)
-        return {str(k): int(str(v), 16) for k, v in data.items()}
+        out = {str(k): int(str(v), 16) for k, v in data.items()}
+        if any(not 0 <= h <= 0xFFFFFFFF for h in out.values()):
+            raise ValueError("a hash of more than 8 hex digits")
+        return out
     except (ValueError, AttributeError, TypeError):
         raise ClipError(f"{f.path}: Cryptomatte {layer!r}: the manifest is not JSON of "
                         "name -> hex hash") from None
@@ -214,9 +235,17 @@ def _selection(f, layer: str, names) -> tuple[list[str], list[int]]:
     return channels, hashes
 
 
-def check_cryptomatte(path, layer: str, names) -> None:
-    """Raise `ClipError` now (from the header only) if the layer or a name is missing."""
-    _selection(_scan(path), layer, names)
+def check_cryptomatte(path, layer: str, names) -> bool:
+    """Raise `ClipError` now (from the header only) if the layer or a name is missing;
+    return whether the layer has a manifest (without one, names are matched by hash)."""
+    f = _scan(path)
+    _selection(f, layer, names)
+    return bool(_manifest(f, layer, _layer_attributes(f).get(layer, {})))
+
+
+def display_window(path) -> Rect:
+    """The display window of ``path``'s first part (from the header)."""
+    return _scan(path).parts[0].display_window
 
 
 def cryptomatte(path, layer: str, names, *, view: str | None = None) -> tuple[np.ndarray, Rect]:

@@ -38,12 +38,18 @@ def parse_size(text: str) -> tuple[int, int]:
         Not ``WxH`` with positive integers, or over `clfx.core.limits` (checked before any
         buffer is allocated).
     """
+    w, h = parse_wxh(text)
+    check_pixels(w, h, "--raw frame", SequenceError)  # before a frame's bytes are read
+    return w, h
+
+
+def parse_wxh(text: str) -> tuple[int, int]:
+    """``"1920x1080"`` -> ``(1920, 1080)`` without the size limit; SequenceError unless
+    ``WxH`` with positive integers (the CLI's usage check, `parse_size`'s first half)."""
     parts = str(text).lower().split("x")
     if len(parts) != 2 or not all(v.isascii() and v.isdigit() and int(v) > 0 for v in parts):
         raise SequenceError(f"--raw {text!r} is not WxH (two positive whole numbers)")
-    w, h = int(parts[0]), int(parts[1])
-    check_pixels(w, h, "--raw frame", SequenceError)  # before a frame's bytes are read
-    return w, h
+    return int(parts[0]), int(parts[1])
 
 
 def read_raw(stream, size: tuple[int, int], index: int = 0, *, colorspace: str | None = None,

@@ -184,6 +184,10 @@ def compact(frames) -> str:
     return str(fileseq.FrameSet(frames)) if frames else ""
 
 
+FRAME_TOKEN = re.compile(r"#+|@+|%0?\d*d|\$F\d*")
+"""A frame token: ``#``..., ``@``..., ``%04d``, ``$F4``."""
+
+
 def _pad_style(path: str):
     """HASH4 for a lone ``#``, HASH1 when the token has several ``#`` (see module docs)."""
     probe = fileseq.FileSequence(path, pad_style=fileseq.PAD_STYLE_HASH4)
@@ -223,6 +227,10 @@ class Pattern:
         text = os.fspath(path)
         if text in ("", "-"):
             return cls(text, False, None, None)
+        tokens = FRAME_TOKEN.findall(text)
+        if len(tokens) > 1:      # fileseq filled one and kept the other literally (or neither)
+            raise SequenceError(f"invalid frame pattern {text!r}: {len(tokens)} frame tokens "
+                                f"({', '.join(tokens)}); give one")
         try:
             style = _pad_style(text)
             seq = fileseq.FileSequence(text, pad_style=style)

@@ -144,6 +144,28 @@ def encoding_for(path, bit_depth: str | None = None) -> str:
     return "linear"
 
 
+def check_output_format(path, bit_depth: str | None = None,
+                        compression: str | None = None) -> _OutFormat:
+    """The output format of ``path``'s extension, with ``bit_depth`` and ``compression``
+    checked against it: what `write_frame` refuses, said before any frame renders.
+
+    Raises
+    ------
+    ImageIOError
+        Unsupported extension, bit depth or compression (the allowed ones listed).
+    """
+    path = os.fspath(path)
+    fmt = _out_format(path)
+    if bit_depth is not None and bit_depth not in fmt.bit_depths:
+        raise ImageIOError(f"cannot write {path}: bit depth {bit_depth!r} not supported; "
+                           f"expected one of {', '.join(fmt.bit_depths)}")
+    if compression is not None and compression not in fmt.compressions:
+        allowed = ", ".join(fmt.compressions) or "none (no choice for this format)"
+        raise ImageIOError(f"cannot write {path}: compression {compression!r} not supported; "
+                           f"expected one of {allowed}")
+    return fmt
+
+
 def _out_format(path: str) -> _OutFormat:
     ext = os.path.splitext(path)[1].lower()
     if ext not in _OUT_FORMATS:
@@ -715,15 +737,8 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
         nothing at ``path``).
     """
     path = os.fspath(path)
-    fmt = _out_format(path)
-    bit_depth = bit_depth or _default_bit_depth(frame, fmt)
-    if bit_depth not in fmt.bit_depths:
-        raise ImageIOError(f"cannot write {path}: bit depth {bit_depth!r} not supported; "
-                           f"expected one of {', '.join(fmt.bit_depths)}")
-    if compression is not None and compression not in fmt.compressions:
-        allowed = ", ".join(fmt.compressions) or "none (no choice for this format)"
-        raise ImageIOError(f"cannot write {path}: compression {compression!r} not supported; "
-                           f"expected one of {allowed}")
+    bit_depth = bit_depth or _default_bit_depth(frame, _out_format(path))
+    fmt = check_output_format(path, bit_depth, compression)
     folder = _check_destination(path, overwrite, protect)
 
     display = encoding_for(path, bit_depth) == "sRGB"

@@ -271,6 +271,32 @@ def look_files(look: Look) -> list[tuple[str, str]]:
             for p in s.plugin.descriptor.params if p.kind == "path" and getattr(s.params, p.name)]
 
 
+LENS_PARAMS = (("lens_flare", "lens"),)
+"""(effect, parameter) naming a lens prescription (a name or a file, `find_lens`): the file
+it resolves to is read by the render."""
+
+
+def lens_files(look: Look) -> list[tuple[str, str]]:
+    """(``effect.param``, file) of every lens prescription an enabled step reads."""
+    from clfx.pipeline.presets import find_lens
+
+    out = []
+    for s in look.steps:
+        for effect, name in LENS_PARAMS:
+            if s.enabled and s.effect == effect and getattr(s.params, name, ""):
+                out.append((f"{s.id}.{name}", str(find_lens(getattr(s.params, name)))))
+    return out
+
+
+def _inode(path: str) -> tuple[int, int] | None:
+    """(device, inode) of the file at ``path``, None if there is none."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_dev, st.st_ino
+
+
 @dataclass
 class FrameRead:
     """One job's input, read (on an I/O thread): every view's frame (hero first), each
@@ -315,6 +341,8 @@ class Batch:
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
+    reads: list[tuple[str, str]] = field(default_factory=list, init=False)  # (role, path) read
+    _read_index: tuple | None = field(default=None, init=False, repr=False)
     on_frame: object = field(default=None, repr=False)  # callable(done, total, report): progress
     _log: object = field(default=None, init=False, repr=False)   # the --log file, while running
     noticed: set[str] = field(default_factory=set, init=False, repr=False)  # reader notices said
@@ -327,7 +355,10 @@ class Batch:
         """Resolve frames and outputs; raise before any pixel is read if anything is wrong."""
         from clfx.io.sequence import Pattern, output_path, parse_frames, resolve_inputs
 
+        from clfx.io.colour import check_config
+
         o = self.options
+        check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
         if self.input_path == RAW or self.output_path == RAW:
             self._prepare_raw()
             return
@@ -358,9 +389,10 @@ class Batch:
         from clfx.io.sequence import check_input_file
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_masks(jobs)
+        self.reads = self._reads(jobs)
         self._check_outputs(jobs)
+        self._check_log(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
-        self._check_log()
         self.passes = o.passes.spec(self._radial_depth_focal_px())
 
     def _radial_depth_focal_px(self) -> float | None:
@@ -383,17 +415,73 @@ class Batch:
         files: set[str] = set()
         for step, mask in self.look.masks():
             files.update(check_mask(mask, jobs[0].input, [j.frame for j in jobs],
-                                    f"effect {step.id!r}"))
+                                    f"effect {step.id!r}", notify=self._assumed))
         self.mask_files = sorted(files)
 
-    def _check_log(self) -> None:
-        """The --log file can be written (created now, empty)."""
+    def _reads(self, jobs: list[Job]) -> list[tuple[str, str]]:
+        """(role, path) of every file this render reads: the frames and their depth and
+        velocity files, the files the look was read from (its YAML and its base looks', or
+        the output of ``--look-from``), mask files, files effects read (kernel images, lens
+        prescriptions) and the OCIO config.  The one list every output and ``--log`` is
+        checked against (`_check_outputs`, `_check_log`, the writer's ``protect``)."""
+        from clfx.io.colour import config_file
+
+        reads = [(role, p) for j in jobs for role, p in
+                 (("input", j.input), ("--depth", j.depth), ("--velocity", j.velocity)) if p]
+        reads += [("look", p) for p in self.look.files]
+        reads += [("mask", p) for p in self.mask_files]
+        reads += look_files(self.look) + lens_files(self.look)
+        ocio = config_file()
+        if ocio:
+            reads.append(("$OCIO", ocio))
+        return reads
+
+    def read_paths(self) -> list[str]:
+        """The paths of `reads` (what the writer protects)."""
+        return [p for _, p in self.reads]
+
+    def _read_by(self, path: str) -> str | None:
+        """The role of the file ``path`` (the same file, through a symbolic or hard link) if
+        the render reads it, else None."""
+        if self._read_index is None or self._read_index[0] is not self.reads:
+            by_path, by_inode = {}, {}
+            for role, p in reversed(self.reads):     # the first role given wins
+                by_path[os.path.realpath(p)] = role
+                key = _inode(p)
+                if key is not None:
+                    by_inode[key] = role
+            self._read_index = (self.reads, by_path, by_inode)
+        _, by_path, by_inode = self._read_index
+        role = by_path.get(os.path.realpath(path))
+        key = _inode(path)
+        return role if role is not None or key is None else by_inode.get(key)
+
+    def _check_log(self, jobs: list[Job] | None = None) -> None:
+        """The --log file is none of the render's inputs or outputs, is a regular file (or a
+        device such as /dev/null; a FIFO would block), and can be written (created now,
+        empty)."""
+        import stat
+
         path = self.options.log_path
         if not path:
             return
-        if os.path.realpath(path) in {os.path.realpath(j.output) for j in self.jobs} | \
-                {os.path.realpath(j.input) for j in self.jobs}:
-            raise ImageIOError(f"--log {path} is an input or output of this render")
+        role = self._read_by(path)
+        if role is not None:
+            raise ImageIOError(f"--log {path} is an input of this render ({role}); clfx never "
+                               f"overwrites its inputs")
+        real = os.path.realpath(path)
+        if any(os.path.realpath(j.output) == real for j in (jobs or [])):
+            raise ImageIOError(f"--log {path} is an output of this render")
+        try:
+            mode = os.stat(path).st_mode
+        except FileNotFoundError:
+            mode = None
+        except OSError as exc:
+            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+        if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISCHR(mode)):
+            kind = "a folder" if stat.S_ISDIR(mode) else \
+                "not a regular file (a FIFO)" if stat.S_ISFIFO(mode) else "not a regular file"
+            raise ImageIOError(f"cannot write --log {path}: {kind}")
         try:
             with open(path, "w", encoding="utf-8"):
                 pass
@@ -401,8 +489,8 @@ class Batch:
             raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
 
     def _check_outputs(self, jobs: list[Job]) -> None:
-        inputs = {os.path.realpath(p) for j in jobs for p in (j.input, j.depth, j.velocity) if p}
-        inputs |= {os.path.realpath(p) for p in self.look_files + self.mask_files}
+        from clfx.io.write import check_output_format
+
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
@@ -419,16 +507,19 @@ class Batch:
             from clfx.io.write import sweep_stale_temps
             sweep_stale_temps(outs)   # temp files of killed runs (their process is gone)
         for j in jobs:
-            real = os.path.realpath(j.output)
-            if real in inputs:
-                raise ImageIOError(f"output {j.output} is an input of this render; clfx never "
-                                   f"overwrites its inputs")
+            role = self._read_by(j.output)
+            if role is not None:
+                what = "" if role == "input" else f" ({role})"
+                raise ImageIOError(f"output {j.output} is an input of this render{what}; clfx "
+                                   f"never overwrites its inputs")
             if os.path.lexists(j.output):   # a dangling symlink counts
                 if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
                 elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
+        check_output_format(outs[0], "float" if self.options.as_float else None,
+                            self.options.compression)    # not after the first render
 
     # -- running ------------------------------------------------------------------------
     @contextmanager
@@ -577,7 +668,7 @@ class Batch:
                             all_views=job.output.lower().endswith(".exr") and o.passes_mode != "drop",
                             colorspace=o.colorspace, working_space=o.working_space,
                             depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
-        masks = [read_masks(self.look, f, job.frame) for f in frames]
+        masks = [read_masks(self.look, f, job.frame, notify=self._assumed) for f in frames]
         return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3)
 
     def _notice(self, message: str, key: str) -> None:
@@ -589,6 +680,14 @@ class Batch:
             self._log_line({"notice": message}, f"clfx: {message}")
             if self.verbosity > 0:
                 self._err(f"clfx: {message}")
+
+    def _assumed(self, message: str, key: str) -> None:
+        """What clfx had to assume about an input (a NaN mask, a Cryptomatte without
+        manifest): one warning line per batch and key, whatever -q says."""
+        if key not in self.noticed:
+            self.noticed.add(key)
+            self._log_line({"warning": message}, f"clfx: warning: {message}")
+            self._err(f"clfx: warning: {message}")
 
     def stamp(self, frame: int) -> dict:
         """The attributes an output of ``frame`` is stamped with (`Look.stamp`)."""
@@ -604,7 +703,7 @@ class Batch:
                         compression=o.compression, colorspace=o.out_colorspace,
                         overwrite=o.overwrite, attributes=self.stamp(job.frame),
                         protect=[p for p in (job.input, job.depth, job.velocity) if p]
-                        + self.look_files + self.mask_files,
+                        + self.read_paths(),
                         write_passes=o.passes_mode != "drop", views=views)
         except OutputExistsError:
             if not o.skip_existing:
@@ -635,20 +734,37 @@ class Batch:
         if not path:
             yield
             return
-        with open(path, "a", encoding="utf-8") as f:
-            self._log = f
+        try:
+            f = open(path, "a", encoding="utf-8")     # noqa: SIM115 (closed below)
+        except OSError as exc:
+            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+        self._log = f
+        try:
+            yield
+        finally:
+            self._log = None
             try:
-                yield
-            finally:
-                self._log = None
+                f.close()
+            except OSError:
+                pass        # what failed was reported by the write that failed
 
     def _log_line(self, record: dict, text: str) -> None:
-        """One entry of the --log file: ``record`` as a JSON line, or ``text``."""
+        """One entry of the --log file: ``record`` as a JSON line, or ``text``.  A failed
+        write (a full disk) is a one-line `ImageIOError`."""
         if self._log is None:
             return
         as_json = self.options.log_path.lower().endswith((".json", ".jsonl"))
-        self._log.write((json.dumps(record, default=str) if as_json else text) + "\n")
-        self._log.flush()
+        try:
+            self._log.write((json.dumps(record, default=str) if as_json else text) + "\n")
+            self._log.flush()
+        except OSError as exc:
+            log, self._log = self._log, None
+            try:
+                log.close()
+            except OSError:
+                pass
+            raise ImageIOError(f"cannot write --log {self.options.log_path}: "
+                               f"{exc.strerror or exc}") from None
 
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:
@@ -672,6 +788,9 @@ class Batch:
         from clfx.io.raw import check_stream_size
 
         check_stream_size(sys.stdin.buffer, self.raw_size)
+        self.look_files = [p for _, p in look_files(self.look)]
+        self.mask_files = sorted({f for _, m in self.look.masks() for f in [m.file] if f})
+        self.reads = self._reads([])
         self._check_log()
 
     def _run_raw(self, rt) -> dict:
@@ -691,13 +810,17 @@ class Batch:
 
         with io_pool() as pool:
             frame = read(0)
+            if frame is None:     # an empty stream is an error, not zero frames rendered
+                w, h = self.raw_size
+                raise SequenceError(f"stdin: no raw frames (0 bytes; --raw {w}x{h} frames are "
+                                    f"{w * h * 12} bytes each, gbrpf32le)")
             count = 0
             while frame is not None:
                 following = pool.submit(read, count + 1)
                 masks = None
                 if self.look.masks():
                     from clfx.pipeline.masks import read_masks
-                    masks = read_masks(self.look, frame, count)
+                    masks = read_masks(self.look, frame, count, notify=self._assumed)
                 out, report = render_frame(rt, self.look, frame, frame_number=count,
                                            quality=o.quality, stats=self.stats, masks=masks)
                 next_frame = following.result()   # raises on a short read: nothing written

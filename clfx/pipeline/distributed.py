@@ -71,15 +71,17 @@ class RenderSpec:
 
     @classmethod
     def of(cls, batch: Batch) -> RenderSpec:
+        reads = [(role, os.path.abspath(p)) for role, p in batch.reads]  # what writes protect
         blob = pickle.dumps((batch.look, batch.input_path, batch.output_path, batch.options,
-                             batch.passes, batch.look_files), protocol=pickle.HIGHEST_PROTOCOL)
+                             batch.passes, batch.look_files, reads),
+                            protocol=pickle.HIGHEST_PROTOCOL)
         return cls(f"{batch.look.params_hash()}-{hashlib.sha1(blob).hexdigest()[:12]}", blob)
 
     def batch(self) -> Batch:
-        look, input_path, output_path, options, passes, look_files = pickle.loads(self.blob)
+        look, input_path, output_path, options, passes, look_files, reads = pickle.loads(self.blob)
         batch = Batch(look=look, input_path=input_path, output_path=output_path,
                       options=options, verbosity=0)
-        batch.passes, batch.look_files = passes, look_files  # prepared on the client
+        batch.passes, batch.look_files, batch.reads = passes, look_files, reads  # from the client
         return batch
 
 
@@ -274,6 +276,49 @@ def worker_env(workers: int, cores: int | None = None) -> dict[str, str]:
     return env                       # the same cores (clfx.device.runtime's default)
 
 
+CONNECT_TIMEOUT_S = 10.0
+"""Seconds to reach a ``--scheduler`` and hear its Dask handshake (a scheduler sends one at
+once); a port where something else listens is refused after this, not waited on."""
+
+
+def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Raise `ClusterError` in one line unless a Dask scheduler answers at ``address``
+    within ``timeout`` seconds: an unknown protocol, a bad port or host, nothing listening,
+    or (``tcp://``) a listener that never sends Dask's handshake."""
+    from distributed.comm import registry
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    what = f"--scheduler {address!r}"
+    try:
+        scheme, loc = parse_address(address.strip(), strict=False)
+    except (ValueError, TypeError) as exc:
+        raise ClusterError(f"{what}: not an address like tcp://HOST:8786 ({exc})") from None
+    if scheme not in registry.backends:
+        raise ClusterError(f"{what}: unknown protocol {scheme!r} (expected "
+                           f"{', '.join(sorted(registry.backends))}; e.g. tcp://HOST:8786)")
+    if scheme != "tcp":
+        return
+    try:
+        host, port = parse_host_port(loc, 8786)
+        port = int(port)
+        if not host or not 0 < port < 65536:
+            raise ValueError(f"host {host!r}, port {port}")
+    except (ValueError, TypeError) as exc:
+        raise ClusterError(f"{what}: not an address like tcp://HOST:8786 ({exc})") from None
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock:
+            sock.settimeout(timeout)
+            if not sock.recv(1):
+                raise ClusterError(f"cannot reach scheduler {address}: it closed the "
+                                   f"connection (not a Dask scheduler?)")
+    except socket.timeout:
+        raise ClusterError(f"cannot reach scheduler {address}: no Dask scheduler answered "
+                           f"within {timeout:g} s") from None
+    except OSError as exc:
+        raise ClusterError(f"cannot reach scheduler {address}: "
+                           f"{exc.strerror or exc}") from None
+
+
 @contextmanager
 def connect(*, workers: int | None = None, scheduler: str | None = None,
             device: str | None = None, quiet: bool = True):
@@ -287,8 +332,9 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
     with ExitStack() as stack:
         try:
             if scheduler:
-                # waits distributed.comm.timeouts.connect (dask config, default 30 s)
-                client = stack.enter_context(Client(scheduler, set_as_default=False))
+                check_scheduler(scheduler)
+                client = stack.enter_context(Client(scheduler, set_as_default=False,
+                                                    timeout=CONNECT_TIMEOUT_S))
             else:
                 if workers < 1:
                     raise ClusterError(f"--workers {workers}: expected 1 or more")

@@ -164,6 +164,9 @@ class Look:
     source: str = ""
     base: str | None = None
     camera_animated: tuple[tuple[str, Animated], ...] = ()
+    files: tuple[str, ...] = ()
+    """The files the look was read from: its YAML and its base looks', or the output whose
+    ``clfx:lookJSON`` it is (``--look-from``): inputs of every render with it."""
 
     def camera_values(self) -> dict:
         """Every camera value, keyframed ones as their keyframe mappings."""

@@ -182,10 +182,35 @@ def mask_file(spec: MaskSpec, frame_number: int) -> str | None:
     return Pattern.parse(spec.file).path(frame_number)
 
 
-def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str) -> list[str]:
+class MaskWarning(UserWarning):
+    """A mask was read with an assumption (NaN coverage as 0, Cryptomatte ids from names)."""
+
+
+def _say(notify, message: str, key: str) -> None:
+    if notify is None:
+        import warnings
+
+        warnings.warn(message, MaskWarning, stacklevel=3)
+    else:
+        notify(message, key)
+
+
+def check_feather(spec: MaskSpec, display: Rect, where: str) -> None:
+    """Raise `ClipError` if a feather in pixels is wider than the frame's diagonal (its
+    blur would cost memory in proportion: 1e7px asked for 88 GiB)."""
+    if spec.feather_px and spec.feather > max(display.diagonal, 1.0):
+        raise ClipError(f"{where}: mask feather {spec.feather:g}px is more than the frame's "
+                        f"diagonal ({display.diagonal:.0f} px); a feather of 1 (the whole "
+                        f"diagonal) is the widest")
+
+
+def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str, notify=None) -> list[str]:
     """Raise `ClipError` before any frame is read if a mask cannot be made: a missing mask
-    file, or (from the header of the first) a missing channel, layer or name.  ``source`` is
-    the first input file.  Returns the mask files (inputs of the render)."""
+    file, a mask file of another size than the frames (display window), a feather wider than
+    the frame, or (from the header of the first) a missing channel, layer or name.
+    ``source`` is the first input file.  ``notify(message, key)`` hears what will be assumed
+    (a Cryptomatte without manifest).  Returns the files the mask reads (inputs of the
+    render)."""
     from clfx.io import mattes
     from clfx.io.sequence import Pattern, resolve_inputs
 
@@ -201,20 +226,34 @@ def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str) -> list[s
         files = [p for _, p in found]
         first = files[0]
     try:
+        display = mattes.display_window(source)
+        if spec.file:
+            theirs = mattes.display_window(first)
+            if theirs != display:
+                raise ClipError(f"{first} is {theirs.width}x{theirs.height} at "
+                                f"({theirs.x0}, {theirs.y0}) (display window), the frames "
+                                f"{display.width}x{display.height} at ({display.x0}, "
+                                f"{display.y0}); a mask must match the frames")
         if spec.cryptomatte:
-            mattes.check_cryptomatte(first, spec.cryptomatte, spec.names)
+            if not mattes.check_cryptomatte(first, spec.cryptomatte, spec.names):
+                _say(notify, f"{where}: mask: {first}: Cryptomatte {spec.cryptomatte!r} has "
+                     f"no manifest; objects are found by the hash of their names (the "
+                     f"Cryptomatte spec's ids)", f"crypto-manifest:{spec.cryptomatte}")
+            files += mattes.manifest_files(first, spec.cryptomatte)
         else:
             mattes.check_channel(first, spec.channel if (spec.channel or not spec.file) else None)
     except ClipError as exc:
         raise ClipError(f"{where}: mask: {exc}") from None
+    check_feather(spec, display, where)
     return files
 
 
 def read_mask(spec: MaskSpec, frame: Frame, frame_number: int, *,
-              channels: Mapping[str, np.ndarray] | None = None, view: str | None = None
-              ) -> np.ndarray:
+              channels: Mapping[str, np.ndarray] | None = None, view: str | None = None,
+              notify=None) -> np.ndarray:
     """The mask of one frame as float32 (h, w) over ``frame.data_window``, clipped to
-    [0, 1], inverted if asked (feathering happens on the device).
+    [0, 1], inverted if asked (feathering happens on the device).  NaN coverage counts as 0,
+    said through ``notify(message, key)`` (default: a `MaskWarning`).
 
     ``channels`` (the Python API) supplies channel masks as arrays by name, over the frame's
     data window; otherwise the channel is read from the frame's file (``frame.source``) or
@@ -238,20 +277,26 @@ def read_mask(spec: MaskSpec, frame: Frame, frame_number: int, *,
         else:
             channel = spec.channel if (spec.channel or not spec.file) else None
             arr, window = mattes.read_channel(path, channel, view=view)
+    check_feather(spec, frame.display_window, f"mask {spec.label()}")
+    bad = int(np.count_nonzero(np.isnan(arr)))
+    if bad:
+        _say(notify, f"mask {spec.label()}: {bad} NaN pixel(s) counted as 0 (not masked)",
+             f"mask-nan:{spec.label()}")
     arr = np.nan_to_num(arr, nan=0.0, posinf=1.0, neginf=0.0)
     arr = np.clip(crop_to(arr, window, frame.data_window, 0.0), 0.0, 1.0)
     return (1.0 - arr).astype(np.float32) if spec.invert else arr.astype(np.float32)
 
 
 def read_masks(look, frame: Frame, frame_number: int, *,
-               channels: Mapping[str, np.ndarray] | None = None) -> dict[MaskSpec, np.ndarray]:
+               channels: Mapping[str, np.ndarray] | None = None,
+               notify=None) -> dict[MaskSpec, np.ndarray]:
     """Every distinct mask the look's enabled steps use, for one frame (read once each)."""
     view = frame.layout.view if frame.layout is not None else None
     out: dict[MaskSpec, np.ndarray] = {}
     for _, step in look.active_steps():
         if step.mask is not None and step.mask not in out:
             out[step.mask] = read_mask(step.mask, frame, frame_number, channels=channels,
-                                       view=view)
+                                       view=view, notify=notify)
     return out
 
 

@@ -28,7 +28,8 @@ separated); the user folder ``<config>/clfx/looks`` (XDG, ``click.get_app_dir``)
 ``presets/`` shipped with clfx.  Every problem is reported before any frame is read, as one
 line naming the file, the line and the key, with the closest valid name where one exists.
 A look file is at most 1 MiB of UTF-8; YAML aliases, duplicate keys, nesting deeper than 32
-levels and chains of more than 16 ``base:`` looks are refused the same way.
+levels, integers of more than 20 digits and chains of more than 16 ``base:`` looks are
+refused the same way.
 """
 from __future__ import annotations
 
@@ -60,6 +61,8 @@ MAX_LOOK_BYTES = 1 << 20
 """A look file is a page of YAML; anything bigger is refused before it is parsed."""
 MAX_NESTING = 32
 """Deepest nesting of YAML mappings and lists a look may use (a look needs 4)."""
+MAX_INT_DIGITS = 20
+"""Most digits of an integer in a look (a 64-bit seed has 20)."""
 MAX_BASE_DEPTH = 16
 """Longest chain of ``base:`` looks."""
 
@@ -141,6 +144,13 @@ class _LookLoader(yaml.SafeLoader):
         finally:
             self._depth -= 1
 
+    def construct_yaml_int(self, node):
+        digits = sum(c.isalnum() for c in str(node.value))
+        if digits > MAX_INT_DIGITS:      # Python refuses > 4300 digits with a ValueError
+            raise _Refused(f"an integer of {digits} digits (a look needs at most "
+                           f"{MAX_INT_DIGITS})", node.start_mark)
+        return super().construct_yaml_int(node)
+
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
             first: dict = {}
@@ -179,6 +189,9 @@ def _read_text(path: Path) -> str:
         line = data[:exc.start].count(b"\n") + 1
         raise PresetError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
                           f"save the look as UTF-8") from None
+
+
+_LookLoader.add_constructor("tag:yaml.org,2002:int", _LookLoader.construct_yaml_int)
 
 
 class _Located:
@@ -283,7 +296,8 @@ def _build(doc: _Located, default_name: str, source: str, chain: tuple) -> Look:
             doc.fail(("base",), str(exc))
     look = Look(name=str(data.get("name") or default_name),
                 description=str(data.get("description") or ""),
-                source=source, base=str(data["base"]) if data.get("base") else None)
+                source=source, base=str(data["base"]) if data.get("base") else None,
+                files=((source,) if source else ()) + (base.files if base else ()))
     if base:
         look.camera, look.seed = base.camera, base.seed
         look.camera_animated = base.camera_animated

@@ -53,6 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import Descriptor, FloatParam, IntParam
 from clfx.fx import fftconv, spectral
 from clfx.fx import psf as psflib
@@ -255,9 +256,9 @@ class Corona(SpreadRegions, Plugin):
                             "frame diagonal."),
             FloatParam("extent", 5.0, min=1.5, max=40.0,
                        hint="PSF radius in first-ring radii (more = more, fainter rings)."),
-            IntParam("blades", 0, min=0, max=32,
+            IntParam("blades", 0, min=0, max=32, exclude=NO_POLYGON, exclude_why=BLADES_WHY,
                      hint="Aperture blades; 0 = the camera block's (a camera value of 0 means "
-                          "a round aperture), 1-2 = round.  Rotation: the camera block's."),
+                          "a round aperture).  Rotation: the camera block's."),
         ),
         quality=LEVELS,
     )

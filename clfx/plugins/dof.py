@@ -103,7 +103,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from clfx.core.camera import aperture_radius, coc_signed, first_blade_angle
+from clfx.core.camera import BLADES_WHY, NO_POLYGON, aperture_radius, coc_signed, first_blade_angle
 from clfx.core.errors import ParamError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
 from clfx.core.rect import Rect
@@ -281,7 +281,7 @@ class Dof(Plugin):
                        hint="Largest CoC diameter as a fraction of the frame diagonal: a "
                             "safety clamp that any physical lens passes by default; when it "
                             "bites, a warning names the CoC asked for."),
-            IntParam("blades", -1, min=-1, max=32,
+            IntParam("blades", -1, min=-1, max=32, exclude=NO_POLYGON, exclude_why=BLADES_WHY,
                      hint="Aperture blades; -1 = the camera block's, 0 = round."),
             FloatParam("blade_rotation", 0.0, min=-360.0, max=360.0,
                        hint="Extra rotation of the aperture polygon in degrees (clockwise)."),

@@ -71,6 +71,7 @@ import json
 from dataclasses import dataclass
 
 from clfx.core.errors import ParamError
+from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, StringParam
 from clfx.core.rect import Rect
 from clfx.fx import flare, optics, spectral
@@ -292,7 +293,7 @@ class LensFlare(Plugin):
                             "bright rim (1 - rim + rim * rho^2)."),
             FloatParam("roundness", 0.0, min=0.0, max=1.0,
                        hint="Artistic: 0 = the aperture polygon, 1 = a disk."),
-            IntParam("blades", 0, min=0, max=32,
+            IntParam("blades", 0, min=0, max=32, exclude=NO_POLYGON, exclude_why=BLADES_WHY,
                      hint="Ghost polygon sides; 0 = the camera block's blades (0 there = round)."),
             FloatParam("rotation", 0.0, min=-360.0, max=360.0, units="deg",
                        hint="Added to the camera's blade rotation, degrees counter-clockwise."),

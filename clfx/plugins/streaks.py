@@ -67,6 +67,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, RGBParam
 from clfx.host import Plugin, register
 
@@ -193,7 +194,7 @@ class Streaks(Plugin):
             FloatParam("angle", 45.0, min=-360.0, max=360.0, units="deg",
                        hint="Angle of the first ray (star) or extra aperture rotation, degrees "
                             "counter-clockwise from +x."),
-            IntParam("blades", 0, min=0, max=32,
+            IntParam("blades", 0, min=0, max=32, exclude=NO_POLYGON, exclude_why=BLADES_WHY,
                      hint="Aperture blades in aperture mode; 0 = the camera block's blades."),
             FloatParam("length", 0.08, min=0.0005, max=2.0,
                        hint="Distance at which a streak has faded to 1%, as a fraction of the "
