@@ -59,7 +59,7 @@
 #define MASK4 int4
 #define MASK2 int2
 #define SN_LOG(x) clfx_log16(x)
-#define SN_EXP(x) sensor_noise_exp16(x)
+#define SN_EXP(x) clfx_exp16(x)
 #define SN_SINCOS2PI(u, c) clfx_sincos2pi16((u), (c))
 #define SN_COS2PI(u) sensor_noise_cos2pi16(u)
 #endif
@@ -91,20 +91,6 @@ inline int sensor_noise_any16(const MASK16 m)
   return (c.x | c.y) < 0;
 }
 CLFX_DEFINE_FASTMATH(16)
-
-/* exp(x) for x in [-126 ln 2, 0]: clfx_exp2_16's polynomial, with the rounding to the
- * nearest integer done by the 1.5 * 2^23 trick (PoCL expands rint() into a dozen
- * instructions); bit for bit clfx_exp2_16(x * log2 e) there. */
-inline float16 sensor_noise_exp16(const float16 x)
-{
-  const float16 xc = max(x * 1.44269504f, -126.0f);
-  const float16 big = xc + 12582912.0f;                /* 1.5 * 2^23: k in the low bits */
-  const float16 k = big - 12582912.0f;
-  const float16 t = (xc - k) * 0.69314718f;
-  const float16 p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f
-                    + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));
-  return p * as_float16((as_int16(big) - 0x4B400000 + 127) << 23);
-}
 
 inline float16 sensor_noise_cos2pi16(const float16 u)
 {
