@@ -41,6 +41,9 @@
 #ifndef MAX_COUNT
 #define MAX_COUNT 200
 #endif
+#ifndef MOSAIC
+#define MOSAIC 0            /* 1: write the CFA site deviations (one float per pixel) */
+#endif
 #define U_CAP 4e-6
 
 #include "lib/precision.h"
@@ -125,6 +128,13 @@ kernel void sensor_noise_prnu(global float *pattern, const int pitch, const int 
            pattern + (size_t)(y * pitch + x) * 4);
 }
 
+/* CFA colour of frame pixel (X, Y): 0 R, 1 G, 2 B (RGGB) */
+inline int sn_cfa(int fx, int fy)
+{
+  const int ox = fx & 1, oy = fy & 1;
+  return ox == oy ? (ox ? 2 : 0) : 1;
+}
+
 kernel void sensor_noise_apply(global const float *src, global float *dst,
                                global const float *pattern, const int pitch,
                                const int height, const int fx0, const int fy0,
@@ -140,6 +150,9 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   const float16 cs = clfx_finite16_or_zero(c);                /* non-finite -> 0, alpha too */
   /* |v| <= 1e38 so the PRNU gain (<= 1.6) cannot overflow float */
   REAL16 v = TO_REAL16(clamp(cs, -1e38f, 1e38f));
+#if MOSAIC
+  const REAL16 v_clean = v;
+#endif
 
   /* electrons per unit of linear value (k) and linear value per electron (g); alpha: 0 */
   const REAL zero = (REAL)0;
@@ -219,6 +232,134 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   out += (REAL)read_e * g16 * r * si;                  /* Gaussian read noise, electrons */
 #endif
 
+#if MOSAIC
+  /* one float per pixel: the deviation (PRNU, shot, read) of the pixel's CFA colour, the
+   * photosite's own noise (sensor_noise_demosaic interpolates the rest) */
+  const float16 dev = TO_FLOAT16(out - v_clean);
+  const int c0 = sn_cfa(fx, fy), c1 = sn_cfa(fx + 1, fy);   /* colours alternate in a row */
+  vstore4((float4)(dev[c0], dev[4 + c1], dev[8 + c0], dev[12 + c1]), 0, dst + (size_t)y * pitch + x);
+#else
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
   vstore16(select(TO_FLOAT16(out), cs, alpha), 0, dst + i);
+#endif
+}
+
+/* ---- Bayer mosaic, demosaic and chroma blotches (sensor_noise_demosaic) -----------------
+ * The camera measures one colour per photosite (RGGB at frame coordinates: R at even X and
+ * even Y, B at odd X and odd Y, G elsewhere) and interpolates the others.  The site's
+ * deviation is the photosite's own noise: sensor_noise_apply drew independent deviations
+ * for all three channels of every pixel (noisy - v), and the site keeps its CFA colour's.
+ * The deviation mosaic is then demosaiced by Malvar, He and Cutler's gradient-corrected
+ * bilinear filters (2004; 5 x 5, the interpolated channel corrected by the centre site's
+ * Laplacian), so noise becomes correlated across channels and neighbouring pixels as in a
+ * camera's output; the clean signal v is not demosaiced (the plate keeps its detail).
+ * Sites outside the data window are read mirrored about its edge (x -> -x, w-1 -> w+1... and
+ * then clamped for windows under 3 px), so within 2 px of the edge a crop differs from a
+ * full render.  DEMOSAIC=0 keeps each pixel's own deviation (mosaic "none").
+ * CHROMA=1 adds low-frequency chroma noise: two value-noise fields (unit Gaussians at the
+ * nodes of a grid of CELL px in frame coordinates, per frame, blended with smoothstep
+ * weights) a, b give dR = k a, dB = k b, dG = -(wR dR + wB dB) / wG (luminance unchanged),
+ * k = chroma * the green noise deviation the model gives at the pixel. */
+#ifndef DEMOSAIC
+#define DEMOSAIC 1
+#endif
+#ifndef CHROMA
+#define CHROMA 0
+#endif
+
+inline int sn_mirror(int i, int n)
+{
+  i = i < 0 ? -i : i;
+  i = i >= n ? 2 * (n - 1) - i : i;
+  return clamp(i, 0, n - 1);
+}
+
+/* the site deviation at window pixel (x, y), mirrored inside the window (mirroring keeps
+ * the parity, so the colour is the unmirrored site's except where a window under 3 px
+ * clamps: then the site it lands on) */
+inline float sn_site(global const float *mosaic, int x, int y, int pitch, int width, int height)
+{
+  return mosaic[(size_t)sn_mirror(y, height) * pitch + sn_mirror(x, width)];
+}
+
+inline float sn_hash_gauss(uint seed, int frame, int gx, int gy, int stream)
+{
+  const float u1 = clfx_uniform(seed, frame, gx, gy, stream);
+  const float u2 = clfx_uniform(seed, frame, gx, gy, stream + 1);
+  return sqrt(-2.0f * log(u1)) * cos(6.283185307179586f * u2);
+}
+
+inline float sn_value_noise(uint seed, int frame, float px, float py, int stream)
+{
+  const float gx = floor(px), gy = floor(py);
+  const float tx = px - gx, ty = py - gy;
+  const float sx = tx * tx * (3.0f - 2.0f * tx), sy = ty * ty * (3.0f - 2.0f * ty);
+  const int ix = (int)gx, iy = (int)gy;
+  const float a = sn_hash_gauss(seed, frame, ix, iy, stream);
+  const float b = sn_hash_gauss(seed, frame, ix + 1, iy, stream);
+  const float c = sn_hash_gauss(seed, frame, ix, iy + 1, stream);
+  const float d = sn_hash_gauss(seed, frame, ix + 1, iy + 1, stream);
+  return mix(mix(a, b, sx), mix(c, d, sx), sy);
+}
+
+/* noisy: DEMOSAIC=1 the site mosaic (one float per pixel, sensor_noise_apply with MOSAIC=1),
+ * else the per-pixel noisy RGBA */
+kernel void sensor_noise_demosaic(global const float *src, global const float *noisy,
+                                  global float *dst, const int pitch, const int width,
+                                  const int height, const int fx0, const int fy0,
+                                  const uint seed, const int frame, const float g_green,
+                                  const float read_e, const float chroma, const float inv_cell)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= pitch || y >= height) return;
+  const size_t i = ((size_t)y * pitch + x) * 4;
+  if(x >= width)                                       /* row padding */
+  {
+    vstore4((float4)0.0f, 0, dst + i);
+    return;
+  }
+  const float4 raw = vload4(0, src + i);
+  const float4 v = select((float4)0.0f, clamp(raw, -1e38f, 1e38f), isfinite(raw));
+  const float alpha = isfinite(raw.w) ? raw.w : 0.0f;  /* bit for bit where finite */
+  float4 d;
+#if DEMOSAIC
+#define S(dx, dy) sn_site(noisy, x + (dx), y + (dy), pitch, width, height)
+  const int fx = fx0 + x, fy = fy0 + y, c = sn_cfa(fx, fy);
+  const float s0 = S(0, 0);
+  const float ax = S(-1, 0) + S(1, 0), ay = S(0, -1) + S(0, 1);      /* axis neighbours */
+  const float bx = S(-2, 0) + S(2, 0), by = S(0, -2) + S(0, 2);      /* two away */
+  const float dg = S(-1, -1) + S(1, -1) + S(-1, 1) + S(1, 1);        /* diagonals */
+#undef S
+  /* Malvar-He-Cutler, coefficients / 8 */
+  if(c == 1)
+  {
+    /* green site: the horizontal neighbours are R in an R row (even Y), B in a B row */
+    const float hor = (5.0f * s0 + 4.0f * ax - bx - dg + 0.5f * by) / 8.0f;
+    const float ver = (5.0f * s0 + 4.0f * ay - by - dg + 0.5f * bx) / 8.0f;
+    const int rrow = (fy & 1) == 0;
+    d = (float4)(rrow ? hor : ver, s0, rrow ? ver : hor, 0.0f);
+  }
+  else
+  {
+    const float g = (4.0f * s0 + 2.0f * (ax + ay) - (bx + by)) / 8.0f;
+    const float o = (6.0f * s0 + 2.0f * dg - 1.5f * (bx + by)) / 8.0f;  /* the other colour */
+    d = c == 0 ? (float4)(s0, g, o, 0.0f) : (float4)(o, g, s0, 0.0f);
+  }
+#else
+  d = vload4(0, noisy + i) - v;                        /* each pixel's own deviations */
+#endif
+  float4 out = v + (float4)(d.x, d.y, d.z, 0.0f);
+#if CHROMA
+  {
+    const float px = (float)(fx0 + x) * inv_cell, py = (float)(fy0 + y) * inv_cell;
+    const float a = sn_value_noise(seed, frame, px, py, 12);
+    const float b = sn_value_noise(seed, frame, px, py, 14);
+    const float sd = sqrt(g_green * max(v.y, 0.0f) + g_green * g_green * read_e * read_e);
+    const float dr = chroma * sd * a, db = chroma * sd * b;
+    out += (float4)(dr, -((CLFX_LUMA_R) * dr + (CLFX_LUMA_B) * db) / (CLFX_LUMA_G), db, 0.0f);
+  }
+#endif
+  out = clamp(out, -FLT_MAX, FLT_MAX);
+  out.w = alpha;
+  vstore4(out, 0, dst + i);
 }
