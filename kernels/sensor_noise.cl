@@ -323,13 +323,29 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
   const float alpha = isfinite(raw.w) ? raw.w : 0.0f;  /* bit for bit where finite */
   float4 d;
 #if DEMOSAIC
-#define S(dx, dy) sn_site(noisy, x + (dx), y + (dy), pitch, width, height)
   const int fx = fx0 + x, fy = fy0 + y, c = sn_cfa(fx, fy);
-  const float s0 = S(0, 0);
-  const float ax = S(-1, 0) + S(1, 0), ay = S(0, -1) + S(0, 1);      /* axis neighbours */
-  const float bx = S(-2, 0) + S(2, 0), by = S(0, -2) + S(0, 2);      /* two away */
-  const float dg = S(-1, -1) + S(1, -1) + S(-1, 1) + S(1, 1);        /* diagonals */
+  float s0, ax, ay, bx, by, dg;
+  if(x >= 2 && y >= 2 && x < width - 2 && y < height - 2)
+  {
+    /* interior: the 5 x 5 neighbourhood read directly */
+    global const float *m = noisy + (size_t)y * pitch + x;
+    const size_t r = (size_t)pitch;
+    s0 = m[0];
+    ax = m[-1] + m[1];
+    ay = m[-(long)r] + m[r];
+    bx = m[-2] + m[2];
+    by = m[-2 * (long)r] + m[2 * r];
+    dg = m[-(long)r - 1] + m[-(long)r + 1] + m[r - 1] + m[r + 1];
+  }
+  else
+  {
+#define S(dx, dy) sn_site(noisy, x + (dx), y + (dy), pitch, width, height)
+    s0 = S(0, 0);
+    ax = S(-1, 0) + S(1, 0); ay = S(0, -1) + S(0, 1);                /* axis neighbours */
+    bx = S(-2, 0) + S(2, 0); by = S(0, -2) + S(0, 2);                /* two away */
+    dg = S(-1, -1) + S(1, -1) + S(-1, 1) + S(1, 1);                  /* diagonals */
 #undef S
+  }
   /* Malvar-He-Cutler, coefficients / 8 */
   if(c == 1)
   {
