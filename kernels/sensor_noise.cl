@@ -10,6 +10,9 @@
  * frame 0, so the pattern is the same on every frame: sensor_noise_prnu writes it once per
  * parameter set and window (cached in the runtime's cache) and sensor_noise_apply reads it.
  *
+ * With MOSAIC=1 sensor_noise_apply writes, per pixel, only the deviation of its Bayer (RGGB)
+ * colour: the photosite's noise; sensor_noise_demosaic (end of file) demosaics that mosaic
+ * (Malvar-He-Cutler) onto the clean plate and adds the optional chroma blotches.
  * Defines: SHOT, READ, PRNU (0/1) drop unused terms at compile time; INVERT=1 samples the
  * Poisson count exactly by inversion when lambda <= SWITCH electrons (a search over the
  * summed CDF, four terms per step, bounded by MAX_COUNT terms; u capped at 1 - 4e-6), else
