@@ -1,11 +1,12 @@
-/* grain.cl: band-limited, luminance-dependent film grain (clfx/plugins/grain.py).
+/* grain.cl: film grain as Poisson dye clouds, in density relative to exposure
+ * (clfx/plugins/grain.py has the model).
  *
  * Pipeline (preview/final/reference):
  *   grain_noise    white Gaussian noise N(0, 1) per (seed, frame, X, Y, channel) over the
  *                  output window grown by RADIUS on every side (X, Y = frame coordinates, so
  *                  a crop or an overscan render sees the same noise at the same pixel);
  *   grain_blur_h   separable Gaussian along x, per-channel weights (float4 per tap);
- *   grain_apply    the same along y, then out = in + sigma(L) * amount_c * n_c on RGB.
+ *   grain_apply    the same along y, then the tone model (grain_mix16) on RGB.
  * Draft runs grain_apply_white only: unfiltered white noise in one pass.
  *
  * Each work-item handles 4 consecutive pixels as one 16-lane vector (rows are padded to 4
@@ -24,15 +25,31 @@
 #ifndef MONO
 #define MONO 0
 #endif
-/* Luminance is clamped to [FLOOR, CAP]: the cap keeps sigma * noise finite for inputs near
- * FLT_MAX, the floor keeps log() finite (grain at black is then ~1e-15 * amount, not 0). */
-#define GRAIN_LUMINANCE_CAP 1e30
-#define GRAIN_LUMINANCE_FLOOR 1e-30
-#define GRAIN_MID_GREY 0.18
+#ifndef GRAIN_GAMMA
+#define GRAIN_GAMMA 0.6
+#endif
+#ifndef GRAIN_FOG
+#define GRAIN_FOG 0.1
+#endif
+#ifndef GRAIN_TOE
+#define GRAIN_TOE 0.0625
+#endif
+/* density of middle grey, D(1) = FOG + GAMMA log10(1 + 1 / TOE) (the host passes all four) */
+#ifndef GRAIN_D_GREY
+#define GRAIN_D_GREY 0.8382738
+#endif
+/* |v| is clamped here first; the exponent of the log-normal factor to [-87, 80] */
+#define GRAIN_VALUE_CAP 1e30
+#define GRAIN_EXP_MIN (-87)
+#define GRAIN_EXP_MAX 80
+
+#ifndef RESPONSE_MODE
+#define RESPONSE_MODE 3     /* 0: response 0, 1: 0.5 (Nutting), 2: 1, 3: any (pow) */
+#endif
 
 #include "lib/fastmath.h"
-CLFX_DEFINE_FASTMATH(4)
 CLFX_DEFINE_FASTMATH(8)
+CLFX_DEFINE_FASTMATH(16)
 
 /* Unit Gaussian white noise for 4 pixels (Box-Muller): per pixel the uniforms of channels
  * (0, 1) give R = r cos, G = r sin; channels (2, 3) give B = r cos.  MONO: R = G = B. */
@@ -58,28 +75,60 @@ inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 #endif
 }
 
-/* out = in + sigma(L) * amount_c * n_c on RGB, sigma(L) = (L / 0.18)^response (the 0.18 of
- * "relative to mid-grey" is folded into amount_c on the host).  Non-finite values become 0
- * before the grain (they must not spread into L); alpha is copied unchanged (0 if it was
- * not finite). */
-inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, const REAL response)
+/* The tone model of clfx/plugins/grain.py on 4 RGBA pixels, with grey = the exposure
+ * reference E and n the unit grain field:
+ *   e   = clamp(v / E, 0, cap)            relative exposure (MONO: the luminance's)
+ *   D   = FOG + GAMMA log10(1 + e / TOE)  density on the characteristic curve
+ *   s   = amt_c (D / D(1))^response       log-exposure deviation (Nutting: response 0.5)
+ *   out = v + E (e_c + TOE) (exp(s n - s^2 / 2) - 1)
+ * Non-finite values become 0 first (they must not spread); alpha is copied unchanged (0 if
+ * it was not finite); the result is clamped to the float range. */
+inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, const REAL response,
+                           const REAL grey, const REAL inv_grey)
 {
   const float16 c0 = clfx_finite16_or_zero(c);
-  const REAL16 cs = TO_REAL16(c0);
-  const REAL4 lum = (REAL)0.2126 * (REAL4)(cs.s0, cs.s4, cs.s8, cs.sc)
-                  + (REAL)0.7152 * (REAL4)(cs.s1, cs.s5, cs.s9, cs.sd)
-                  + (REAL)0.0722 * (REAL4)(cs.s2, cs.s6, cs.sa, cs.se);
-  const REAL4 l = clamp(lum, (REAL)GRAIN_LUMINANCE_FLOOR, (REAL)GRAIN_LUMINANCE_CAP);
-#if REAL_IS_DOUBLE
-  const REAL4 s = pow(l * (REAL)(1.0 / GRAIN_MID_GREY), (REAL4)(response));
+  const REAL16 cs = TO_REAL16(clamp(c0, (float16)(-GRAIN_VALUE_CAP), (float16)GRAIN_VALUE_CAP));
+  const REAL16 e = clamp(cs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+#if MONO
+  const REAL4 lum = (REAL)(CLFX_LUMA_R) * e.s048c + (REAL)(CLFX_LUMA_G) * e.s159d
+                  + (REAL)(CLFX_LUMA_B) * e.s26ae;
+  const REAL4 l = max(lum, (REAL)0);
+  const REAL16 ed = (REAL16)(l.x, l.x, l.x, l.x, l.y, l.y, l.y, l.y,
+                             l.z, l.z, l.z, l.z, l.w, l.w, l.w, l.w);
 #else
-  const REAL4 s = clfx_exp2_4(response * 1.44269504f * clfx_log4(l * (1.0f / 0.18f)));
+  const REAL16 ed = e;
 #endif
-  const REAL16 s16 = (REAL16)(s.x, s.x, s.x, s.x, s.y, s.y, s.y, s.y,
-                              s.z, s.z, s.z, s.z, s.w, s.w, s.w, s.w);
-  const float16 out = TO_FLOAT16(cs + s16 * (REAL16)(amt, amt, amt, amt) * n);
+  const REAL16 x = (REAL)1 + ed * (REAL)(1.0 / GRAIN_TOE);
+  /* D / D(1); the response's common values are build variants (no pow) */
+#if REAL_IS_DOUBLE
+  const REAL16 dr = ((REAL)GRAIN_FOG + (REAL)(GRAIN_GAMMA * 0.4342944819032518) * log(x))
+                  * (REAL)(1.0 / GRAIN_D_GREY);
+#else
+  const float16 dr = ((float)GRAIN_FOG + (float)(GRAIN_GAMMA * 0.4342944819032518)
+                      * clfx_log16(x)) * (float)(1.0 / GRAIN_D_GREY);
+#endif
+#if RESPONSE_MODE == 0
+  const REAL16 q = (REAL16)((REAL)1);
+#elif RESPONSE_MODE == 1
+  const REAL16 q = sqrt(dr);
+#elif RESPONSE_MODE == 2
+  const REAL16 q = dr;
+#elif REAL_IS_DOUBLE
+  const REAL16 q = pow(dr, (REAL16)(response));
+#else
+  const float16 q = clfx_exp2_16(response * 1.44269504f * clfx_log16(dr));
+#endif
+  const REAL16 s = (REAL16)(amt, amt, amt, amt) * q;
+  const REAL16 ex = s * n - (REAL)0.5 * s * s;
+#if REAL_IS_DOUBLE
+  const REAL16 f = exp(clamp(ex, (REAL)GRAIN_EXP_MIN, (REAL)GRAIN_EXP_MAX));
+#else
+  const float16 f = clfx_exp16(clamp(ex, (float)GRAIN_EXP_MIN, (float)GRAIN_EXP_MAX));
+#endif
+  const REAL16 dev = grey * (e + (REAL)GRAIN_TOE) * (f - (REAL)1);
+  const REAL16 o = clamp(cs + dev, (REAL)(-FLT_MAX), (REAL)FLT_MAX);
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  return select(out, c0, alpha);
+  return select(TO_FLOAT16(o), c0, alpha);
 }
 
 kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
@@ -118,26 +167,29 @@ kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global cons
 /* Vertical taps (tmp is offset by R rows) and the mix with the source. */
 kernel void grain_apply(global const float *src, global float *dst, global const REAL *tmp,
                         global const REAL *weights, const int pitch, const int height,
-                        const float ar, const float ag, const float ab, const float response)
+                        const float ar, const float ag, const float ab, const float response,
+                        const float grey, const float inv_grey)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
   const int x = qx * 4;
   const size_t i = (size_t)(y * pitch + x) * 4;
   const REAL16 acc = grain_taps16(tmp + i, (size_t)pitch * 4, weights);
-  vstore16(grain_mix16(vload16(0, src + i), acc, (REAL4)(ar, ag, ab, 0), response), 0, dst + i);
+  vstore16(grain_mix16(vload16(0, src + i), acc, (REAL4)(ar, ag, ab, 0), response, grey,
+                              inv_grey), 0, dst + i);
 }
 
 /* Draft: white noise generated in place, one pass. */
 kernel void grain_apply_white(global const float *src, global float *dst, const int pitch,
                               const int height, const int fx0, const int fy0, const uint seed,
                               const int frame, const float ar, const float ag, const float ab,
-                              const float response)
+                              const float response, const float grey, const float inv_grey)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
   const int x = qx * 4;
   const size_t i = (size_t)(y * pitch + x) * 4;
   const REAL16 n = grain_white16(seed, frame, fx0 + x, fy0 + y);
-  vstore16(grain_mix16(vload16(0, src + i), n, (REAL4)(ar, ag, ab, 0), response), 0, dst + i);
+  vstore16(grain_mix16(vload16(0, src + i), n, (REAL4)(ar, ag, ab, 0), response, grey,
+                              inv_grey), 0, dst + i);
 }

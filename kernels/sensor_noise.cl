@@ -10,6 +10,9 @@
  * frame 0, so the pattern is the same on every frame: sensor_noise_prnu writes it once per
  * parameter set and window (cached in the runtime's cache) and sensor_noise_apply reads it.
  *
+ * With MOSAIC=1 sensor_noise_apply writes, per pixel, only the deviation of its Bayer (RGGB)
+ * colour: the photosite's noise; sensor_noise_demosaic (end of file) demosaics that mosaic
+ * (Malvar-He-Cutler) onto the clean plate and adds the optional chroma blotches.
  * Defines: SHOT, READ, PRNU (0/1) drop unused terms at compile time; INVERT=1 samples the
  * Poisson count exactly by inversion when lambda <= SWITCH electrons (a search over the
  * summed CDF, four terms per step, bounded by MAX_COUNT terms; u capped at 1 - 4e-6), else
@@ -41,6 +44,9 @@
 #ifndef MAX_COUNT
 #define MAX_COUNT 200
 #endif
+#ifndef MOSAIC
+#define MOSAIC 0            /* 1: write the CFA site deviations (one float per pixel) */
+#endif
 #define U_CAP 4e-6
 
 #include "lib/precision.h"
@@ -59,7 +65,7 @@
 #define MASK4 int4
 #define MASK2 int2
 #define SN_LOG(x) clfx_log16(x)
-#define SN_EXP(x) sensor_noise_exp16(x)
+#define SN_EXP(x) clfx_exp16(x)
 #define SN_SINCOS2PI(u, c) clfx_sincos2pi16((u), (c))
 #define SN_COS2PI(u) sensor_noise_cos2pi16(u)
 #endif
@@ -91,20 +97,6 @@ inline int sensor_noise_any16(const MASK16 m)
   return (c.x | c.y) < 0;
 }
 CLFX_DEFINE_FASTMATH(16)
-
-/* exp(x) for x in [-126 ln 2, 0]: clfx_exp2_16's polynomial, with the rounding to the
- * nearest integer done by the 1.5 * 2^23 trick (PoCL expands rint() into a dozen
- * instructions); bit for bit clfx_exp2_16(x * log2 e) there. */
-inline float16 sensor_noise_exp16(const float16 x)
-{
-  const float16 xc = max(x * 1.44269504f, -126.0f);
-  const float16 big = xc + 12582912.0f;                /* 1.5 * 2^23: k in the low bits */
-  const float16 k = big - 12582912.0f;
-  const float16 t = (xc - k) * 0.69314718f;
-  const float16 p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f
-                    + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));
-  return p * as_float16((as_int16(big) - 0x4B400000 + 127) << 23);
-}
 
 inline float16 sensor_noise_cos2pi16(const float16 u)
 {
@@ -139,6 +131,13 @@ kernel void sensor_noise_prnu(global float *pattern, const int pitch, const int 
            pattern + (size_t)(y * pitch + x) * 4);
 }
 
+/* CFA colour of frame pixel (X, Y): 0 R, 1 G, 2 B (RGGB) */
+inline int sn_cfa(int fx, int fy)
+{
+  const int ox = fx & 1, oy = fy & 1;
+  return ox == oy ? (ox ? 2 : 0) : 1;
+}
+
 kernel void sensor_noise_apply(global const float *src, global float *dst,
                                global const float *pattern, const int pitch,
                                const int height, const int fx0, const int fy0,
@@ -154,6 +153,9 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   const float16 cs = clfx_finite16_or_zero(c);                /* non-finite -> 0, alpha too */
   /* |v| <= 1e38 so the PRNU gain (<= 1.6) cannot overflow float */
   REAL16 v = TO_REAL16(clamp(cs, -1e38f, 1e38f));
+#if MOSAIC
+  const REAL16 v_clean = v;
+#endif
 
   /* electrons per unit of linear value (k) and linear value per electron (g); alpha: 0 */
   const REAL zero = (REAL)0;
@@ -233,6 +235,150 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   out += (REAL)read_e * g16 * r * si;                  /* Gaussian read noise, electrons */
 #endif
 
+#if MOSAIC
+  /* one float per pixel: the deviation (PRNU, shot, read) of the pixel's CFA colour, the
+   * photosite's own noise (sensor_noise_demosaic interpolates the rest) */
+  const float16 dev = TO_FLOAT16(out - v_clean);
+  const int c0 = sn_cfa(fx, fy), c1 = sn_cfa(fx + 1, fy);   /* colours alternate in a row */
+  vstore4((float4)(dev[c0], dev[4 + c1], dev[8 + c0], dev[12 + c1]), 0, dst + (size_t)y * pitch + x);
+#else
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
   vstore16(select(TO_FLOAT16(out), cs, alpha), 0, dst + i);
+#endif
+}
+
+/* ---- Bayer mosaic, demosaic and chroma blotches (sensor_noise_demosaic) -----------------
+ * The camera measures one colour per photosite (RGGB at frame coordinates: R at even X and
+ * even Y, B at odd X and odd Y, G elsewhere) and interpolates the others.  The site's
+ * deviation is the photosite's own noise: sensor_noise_apply drew independent deviations
+ * for all three channels of every pixel (noisy - v), and the site keeps its CFA colour's.
+ * The deviation mosaic is then demosaiced by Malvar, He and Cutler's gradient-corrected
+ * bilinear filters (2004; 5 x 5, the interpolated channel corrected by the centre site's
+ * Laplacian), so noise becomes correlated across channels and neighbouring pixels as in a
+ * camera's output; the clean signal v is not demosaiced (the plate keeps its detail).
+ * Sites outside the data window are read mirrored about its edge (x -> -x, w-1 -> w+1... and
+ * then clamped for windows under 3 px), so within 2 px of the edge a crop differs from a
+ * full render.  DEMOSAIC=0 keeps each pixel's own deviation (mosaic "none").
+ * CHROMA=1 adds low-frequency chroma noise: two value-noise fields (unit Gaussians at the
+ * nodes of a grid of CELL px in frame coordinates, per frame, blended with smoothstep
+ * weights) a, b give dR = k a, dB = k b, dG = -(wR dR + wB dB) / wG (luminance unchanged),
+ * k = chroma * the green noise deviation the model gives at the pixel. */
+#ifndef DEMOSAIC
+#define DEMOSAIC 1
+#endif
+#ifndef CHROMA
+#define CHROMA 0
+#endif
+
+inline int sn_mirror(int i, int n)
+{
+  i = i < 0 ? -i : i;
+  i = i >= n ? 2 * (n - 1) - i : i;
+  return clamp(i, 0, n - 1);
+}
+
+/* the site deviation at window pixel (x, y), mirrored inside the window (mirroring keeps
+ * the parity, so the colour is the unmirrored site's except where a window under 3 px
+ * clamps: then the site it lands on) */
+inline float sn_site(global const float *mosaic, int x, int y, int pitch, int width, int height)
+{
+  return mosaic[(size_t)sn_mirror(y, height) * pitch + sn_mirror(x, width)];
+}
+
+inline float sn_hash_gauss(uint seed, int frame, int gx, int gy, int stream)
+{
+  const float u1 = clfx_uniform(seed, frame, gx, gy, stream);
+  const float u2 = clfx_uniform(seed, frame, gx, gy, stream + 1);
+  return sqrt(-2.0f * log(u1)) * cos(6.283185307179586f * u2);
+}
+
+inline float sn_value_noise(uint seed, int frame, float px, float py, int stream)
+{
+  const float gx = floor(px), gy = floor(py);
+  const float tx = px - gx, ty = py - gy;
+  const float sx = tx * tx * (3.0f - 2.0f * tx), sy = ty * ty * (3.0f - 2.0f * ty);
+  const int ix = (int)gx, iy = (int)gy;
+  const float a = sn_hash_gauss(seed, frame, ix, iy, stream);
+  const float b = sn_hash_gauss(seed, frame, ix + 1, iy, stream);
+  const float c = sn_hash_gauss(seed, frame, ix, iy + 1, stream);
+  const float d = sn_hash_gauss(seed, frame, ix + 1, iy + 1, stream);
+  return mix(mix(a, b, sx), mix(c, d, sx), sy);
+}
+
+/* noisy: DEMOSAIC=1 the site mosaic (one float per pixel, sensor_noise_apply with MOSAIC=1),
+ * else the per-pixel noisy RGBA */
+kernel void sensor_noise_demosaic(global const float *src, global const float *noisy,
+                                  global float *dst, const int pitch, const int width,
+                                  const int height, const int fx0, const int fy0,
+                                  const uint seed, const int frame, const float g_green,
+                                  const float read_e, const float chroma, const float inv_cell)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= pitch || y >= height) return;
+  const size_t i = ((size_t)y * pitch + x) * 4;
+  if(x >= width)                                       /* row padding */
+  {
+    vstore4((float4)0.0f, 0, dst + i);
+    return;
+  }
+  const float4 raw = vload4(0, src + i);
+  const float4 v = select((float4)0.0f, clamp(raw, -1e38f, 1e38f), isfinite(raw));
+  const float alpha = isfinite(raw.w) ? raw.w : 0.0f;  /* bit for bit where finite */
+  float4 d;
+#if DEMOSAIC
+  const int fx = fx0 + x, fy = fy0 + y, c = sn_cfa(fx, fy);
+  float s0, ax, ay, bx, by, dg;
+  if(x >= 2 && y >= 2 && x < width - 2 && y < height - 2)
+  {
+    /* interior: the 5 x 5 neighbourhood read directly */
+    global const float *m = noisy + (size_t)y * pitch + x;
+    const size_t r = (size_t)pitch;
+    s0 = m[0];
+    ax = m[-1] + m[1];
+    ay = m[-(long)r] + m[r];
+    bx = m[-2] + m[2];
+    by = m[-2 * (long)r] + m[2 * r];
+    dg = m[-(long)r - 1] + m[-(long)r + 1] + m[r - 1] + m[r + 1];
+  }
+  else
+  {
+#define S(dx, dy) sn_site(noisy, x + (dx), y + (dy), pitch, width, height)
+    s0 = S(0, 0);
+    ax = S(-1, 0) + S(1, 0); ay = S(0, -1) + S(0, 1);                /* axis neighbours */
+    bx = S(-2, 0) + S(2, 0); by = S(0, -2) + S(0, 2);                /* two away */
+    dg = S(-1, -1) + S(1, -1) + S(-1, 1) + S(1, 1);                  /* diagonals */
+#undef S
+  }
+  /* Malvar-He-Cutler, coefficients / 8 */
+  if(c == 1)
+  {
+    /* green site: the horizontal neighbours are R in an R row (even Y), B in a B row */
+    const float hor = (5.0f * s0 + 4.0f * ax - bx - dg + 0.5f * by) / 8.0f;
+    const float ver = (5.0f * s0 + 4.0f * ay - by - dg + 0.5f * bx) / 8.0f;
+    const int rrow = (fy & 1) == 0;
+    d = (float4)(rrow ? hor : ver, s0, rrow ? ver : hor, 0.0f);
+  }
+  else
+  {
+    const float g = (4.0f * s0 + 2.0f * (ax + ay) - (bx + by)) / 8.0f;
+    const float o = (6.0f * s0 + 2.0f * dg - 1.5f * (bx + by)) / 8.0f;  /* the other colour */
+    d = c == 0 ? (float4)(s0, g, o, 0.0f) : (float4)(o, g, s0, 0.0f);
+  }
+#else
+  d = vload4(0, noisy + i) - v;                        /* each pixel's own deviations */
+#endif
+  float4 out = v + (float4)(d.x, d.y, d.z, 0.0f);
+#if CHROMA
+  {
+    const float px = (float)(fx0 + x) * inv_cell, py = (float)(fy0 + y) * inv_cell;
+    const float a = sn_value_noise(seed, frame, px, py, 12);
+    const float b = sn_value_noise(seed, frame, px, py, 14);
+    const float sd = sqrt(g_green * max(v.y, 0.0f) + g_green * g_green * read_e * read_e);
+    const float dr = chroma * sd * a, db = chroma * sd * b;
+    out += (float4)(dr, -((CLFX_LUMA_R) * dr + (CLFX_LUMA_B) * db) / (CLFX_LUMA_G), db, 0.0f);
+  }
+#endif
+  out = clamp(out, -FLT_MAX, FLT_MAX);
+  out.w = alpha;
+  vstore4(out, 0, dst + i);
 }

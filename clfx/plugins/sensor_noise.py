@@ -1,4 +1,5 @@
-"""Sensor noise in linear light: Poisson shot noise, Gaussian read noise, fixed-pattern PRNU.
+"""Sensor noise in linear light: Poisson shot noise, Gaussian read noise, fixed-pattern PRNU,
+through a Bayer mosaic and a demosaic, with optional low-frequency chroma noise.
 
 A separate effect from ``grain``: digital noise is per-pixel (no grain size), its variance
 follows the photon count, and it is driven by the camera block's ISO, while film grain is a
@@ -28,6 +29,29 @@ the search: only the top 4e-6 quantile is moved to its lower edge), and by the
 normal approximation ``lambda + sqrt(lambda) z`` above (same mean and variance; the skew
 of a Poisson at 30 counts is 0.18).  Draft uses the normal approximation at every count.
 
+Mosaic and demosaic (``mosaic = "bayer"``, the default).  A camera measures one colour per
+photosite (an RGGB Bayer pattern at frame coordinates: R at even X and even Y, B at odd X
+and odd Y) and interpolates the other two.  Each photosite keeps the deviation above for its
+CFA colour (with that colour's electrons and gain); the mosaic of deviations is then
+demosaiced with Malvar, He and Cutler's gradient-corrected bilinear filters (5 x 5, each
+interpolated colour corrected by the centre site's Laplacian), and added to the clean
+plate (the signal is not demosaiced: the plate keeps its detail).  So a pixel's colours are
+correlated and neighbouring pixels are correlated: on a flat field with equal site
+variances the exact linear model gives channel correlations R-G 0.63, G-B 0.63, R-B 0.60,
+lag-1 autocorrelations 0.38 (R, B) and 0.32 (G), and variances 0.98 (R, B) and 0.78 (G) of
+the sites'; at a site its own colour follows the photon-transfer model above.  Sites
+outside the data window are mirrored about its edge, so within 2 px of the edge a crop
+differs from a full render (elsewhere they agree).  ``mosaic = "none"`` keeps the
+per-pixel, per-channel independent noise.
+
+Chroma blotches (``chroma_noise`` > 0): low-frequency colour noise, as the shadows of a
+high-ISO frame show (banding and low-frequency read noise, after the camera's colour
+processing).  Two value-noise fields ``a, b`` (unit Gaussians at the nodes of a grid of
+``chroma_size`` x the frame diagonal, in frame coordinates and new every frame, blended with
+smoothstep weights) shift the colour without changing luminance: ``dR = k a``,
+``dB = k b``, ``dG = -(wR dR + wB dB) / wG`` with ``k = chroma_noise x`` the model's green
+deviation at the pixel (so blotches follow the noise: strongest in the shadows at high ISO).
+
 Random numbers come from ``clfx_uniform(seed, frame, X, Y, c)`` at frame coordinates, so
 the noise is identical for a frame rendered alone, in a batch, cropped, or on any thread
 count; the PRNU pattern uses frame 0 and its own seed, so it stays fixed over a sequence
@@ -36,7 +60,8 @@ one frame-sized float buffer).
 Non-finite inputs become 0 (then get read noise) and values are clamped to +-1e38 so
 nothing overflows; alpha is kept bit for bit (0 where it was not finite).
 
-References: EMVA Standard 1288 (linear photon-transfer model: variance = K (mu - mu_dark)
+References: Malvar, He, Cutler 2004, "High-quality linear interpolation for demosaicing of
+Bayer-patterned color images"; EMVA Standard 1288 (linear photon-transfer model: variance = K (mu - mu_dark)
 + sigma_read^2, PRNU); Foi et al. 2008, "Practical Poissonian-Gaussian noise modeling and
 fitting for single-image raw-data".
 """
@@ -46,7 +71,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clfx.core.plugin import BoolParam, Descriptor, FloatParam, Level, RGBParam
+from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
 from clfx.fx.noise import SEED_PARAM, effect_seed
 from clfx.host import Plugin, register
 
@@ -104,8 +129,10 @@ class SensorNoise(Plugin):
 
     descriptor = Descriptor(
         name="sensor_noise", label="Sensor noise", group="Camera", kernel="sensor_noise.cl",
-        summary="Poisson shot noise and Gaussian read noise in linear light from the ISO, plus "
-                "a fixed photo-response non-uniformity pattern.",
+        summary="Poisson shot noise and Gaussian read noise in linear light from the ISO, a "
+                "fixed photo-response non-uniformity pattern, a Bayer mosaic demosaiced by "
+                "Malvar-He-Cutler (colour noise correlated across channels and neighbours) "
+                "and optional low-frequency chroma blotches.",
         frame_varying=True,
         params=(
             FloatParam("iso", 0.0, min=0.0, max=1e6,
@@ -125,6 +152,16 @@ class SensorNoise(Plugin):
             RGBParam("channel_sensitivity", (1.0, 1.0, 1.0), min=0.01, max=100.0,
                      hint="Relative electrons per unit per channel (e.g. 0.5 = that channel "
                           "needs twice the white-balance gain and is noisier)."),
+            ChoiceParam("mosaic", "bayer", choices=("bayer", "none"),
+                        hint="bayer: one colour per photosite (RGGB), demosaiced (correlated "
+                             "colour noise, as a camera's output); none: independent noise "
+                             "per pixel and channel."),
+            FloatParam("chroma_noise", 0.0, min=0.0, max=10.0,
+                       hint="Low-frequency chroma blotches: their deviation relative to the "
+                            "pixel's green noise deviation (0 = none)."),
+            FloatParam("chroma_size", 0.02, min=1e-4, max=1.0,
+                       hint="Grid spacing of the chroma blotches as a fraction of the frame "
+                            "diagonal."),
             SEED_PARAM,
         ),
         quality=LEVELS,
@@ -183,10 +220,24 @@ class SensorNoise(Plugin):
                    "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT}
         pattern = self.prnu_pattern(rt, p, ctx, lvl.fp64) if p.prnu > 0 else src  # src: unread
         kr, kg, kb = (np.float32(k) for k in electrons_per_unit(p, ctx.camera))
-        dst = src.like()
-        knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64, **defines)
+        seed = np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT))
+        x0, y0 = np.int32(src.window.x0), np.int32(src.window.y0)
+        demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
+        # bayer: the first pass writes each photosite's deviation (one float per pixel)
+        dst = rt.buffer(src.pitch * src.height * 4) if demosaic else src.like()
+        knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64,
+                        MOSAIC=int(demosaic), **defines)
         rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
-                  np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
-                  np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT)), np.int32(ctx.frame),
+                  np.int32(src.height), x0, y0, seed, np.int32(ctx.frame),
                   kr, kg, kb, np.float32(p.read_noise))
-        return dst
+        if not (demosaic or chroma):
+            return dst
+        out = src.like()
+        cell = max(p.chroma_size * ctx.diagonal_px, 1.0)
+        knl = rt.kernel("sensor_noise.cl", "sensor_noise_demosaic", DEMOSAIC=int(demosaic),
+                        CHROMA=int(chroma), **ctx.luminance_defines)
+        rt.launch(knl, (src.pitch, src.height), src, dst, out, np.int32(src.pitch),
+                  np.int32(src.window.width), np.int32(src.height), x0, y0, seed,
+                  np.int32(ctx.frame), np.float32(1.0 / float(kg)), np.float32(p.read_noise),
+                  np.float32(p.chroma_noise), np.float32(1.0 / cell))
+        return out

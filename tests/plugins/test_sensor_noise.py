@@ -1,5 +1,7 @@
-"""Sensor noise: oracle agreement, the photon-transfer variance model at low and high counts,
-mean preservation, frame independence vs the fixed PRNU pattern, determinism, hard values."""
+"""Sensor noise: oracle agreement, the photon-transfer variance model at low and high counts
+(per site: ``run`` defaults to mosaic "none"), mean preservation, frame independence vs the
+fixed PRNU pattern, determinism, hard values; the Bayer demosaic's cross-channel correlation
+and spectrum against the exact linear model; the chroma blotches."""
 import math
 
 import numpy as np
@@ -13,6 +15,7 @@ from clfx.plugins.sensor_noise import (SensorNoise, electrons_per_unit,
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import wide_range_image
+from tests.reference.sensor_noise import demosaic_deviation
 from tests.reference.sensor_noise import sensor_noise as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
@@ -20,10 +23,12 @@ SWITCH = {"draft": None, "preview": 10.0, "final": 30.0, "reference": 30.0}
 CAMERA = Camera(iso=3200.0)   # gain 32: 312.5 electrons per unit of linear value (green)
 
 
-def run(rt, src, quality="final", frame=0, look_seed=0, data_window=None, camera=CAMERA, **kw):
+def run(rt, src, quality="final", frame=0, look_seed=0, data_window=None, camera=CAMERA,
+        display=None, **kw):
+    kw.setdefault("mosaic", "none")   # the photon-transfer model per site; demosaic below
     p = SensorNoise.params(**kw)
     out = SensorNoise().apply(rt, p, src, quality=quality, frame=frame, seed=look_seed,
-                              data_window=data_window, camera=camera)
+                              data_window=data_window, camera=camera, display_window=display)
     return out, p
 
 
@@ -211,18 +216,20 @@ def test_cached_prnu_pattern_follows_params_and_window(rt, rng):
 
 # -- hard cases -------------------------------------------------------------------------------
 @pytest.mark.parametrize("quality", LEVELS)
-def test_hard_values_stay_finite_and_alpha_is_kept(rt, quality):
+@pytest.mark.parametrize("mosaic", ("none", "bayer"))
+def test_hard_values_stay_finite_and_alpha_is_kept(rt, quality, mosaic):
     vals = np.array([-1.0, 0.0, 1e-30, 65504.0, 1e5, 3.4e38, np.nan, np.inf, -np.inf],
                     np.float32)
     src = np.repeat(np.repeat(vals[None, :, None], 4, axis=2), 3, axis=0)
     out, _ = run(rt, src, quality, prnu=0.1, read_noise=100.0, full_well=1.0,
-                 channel_sensitivity=(0.01, 1.0, 100.0), iso=1e6)
+                 channel_sensitivity=(0.01, 1.0, 100.0), iso=1e6, mosaic=mosaic,
+                 chroma_noise=3.0)
     assert np.isfinite(out).all()
     # alpha bit for bit where finite; NaN / Inf (colour or alpha) become 0 first
     assert out[:, :6, 3].tobytes() == src[:, :6, 3].tobytes()
     np.testing.assert_array_equal(out[:, 6:, 3], 0.0)
     out, _ = run(rt, wide_range_image(np.random.default_rng(1)), quality, prnu=0.1,
-                 read_noise=100.0, full_well=1.0, iso=1e6)
+                 read_noise=100.0, full_well=1.0, iso=1e6, mosaic=mosaic, chroma_noise=3.0)
     assert np.isfinite(out).all()
 
 
@@ -244,3 +251,116 @@ def test_descriptor_and_bench_case(rt, rng):
     assert out.shape == (36, 64, 4) and np.isfinite(out).all()
 
 
+
+
+# -- Bayer mosaic and demosaic, chroma blotches -----------------------------------------------
+@pytest.mark.parametrize("shape", hard_shapes())
+@pytest.mark.parametrize("extra", (dict(mosaic="bayer"),
+                                   dict(mosaic="bayer", chroma_noise=2.0, chroma_size=0.1),
+                                   dict(mosaic="none", chroma_noise=1.0)))
+def test_camera_pipeline_matches_reference(rt, rng, shape, extra):
+    src = rng.uniform(-0.01, 0.2, shape + (4,)).astype(np.float32)
+    kw = dict(prnu=0.01, channel_sensitivity=(0.5, 1.0, 0.4), seed=2, **extra)
+    window = Rect(3, 6, 3 + shape[1], 6 + shape[0])   # odd origin: the CFA phase moves
+    got, p = run(rt, src, frame=5, look_seed=9, data_window=window, **kw)
+    want = reference(src, **p.as_dict(), frame=5, look_seed=9, camera_iso=3200.0,
+                               data_origin=(3, 6))
+    g = 1 / min(electrons_per_unit(p, CAMERA))
+    # as the per-site oracle test; a flipped count reaches the 5 x 5 neighbours with weights
+    # <= 1 (still <= one electron) and the blotches add float32 log/cos (rel. ~1e-6)
+    assert count_flips(got[..., :3], want[..., :3], g) <= max(2, 25 * got[..., :3].size // 1000)
+    close = np.abs(got - want)[..., :3] <= 1e-3 * g
+    np.testing.assert_allclose(got[..., :3][close], want[..., :3][close], rtol=1e-5,
+                               atol=5e-5 * g)
+    np.testing.assert_array_equal(got[..., 3], src[..., 3])
+
+
+def demosaic_covariance(var_site, lag):
+    """Exact covariance (3 x 3 channels) of the demosaiced deviation between pixels lag
+    (dx, dy) apart, averaged over the four CFA phases: the demosaic is linear, so it is the
+    reference demosaic applied to unit impulses at every site of a period, weighted by the
+    site colour's variance."""
+    n = 16
+    cov = np.zeros((3, 3))
+    imp = np.zeros((n, n, 3))
+    resp = {}
+    y, x = np.mgrid[0:n, 0:n]
+    from tests.reference.sensor_noise import cfa
+    colours = cfa(x, y)
+    for j in range(4, 12):
+        for i in range(4, 12):
+            imp[:] = 0
+            imp[j, i, colours[j, i]] = 1.0
+            resp[(j, i)] = demosaic_deviation(imp) * math.sqrt(var_site[colours[j, i]])
+    dx, dy = lag
+    for py in (7, 8):
+        for px in (7, 8):
+            for r in resp.values():
+                cov += np.outer(r[py, px], r[py + dy, px + dx])
+    return cov / 4
+
+
+def test_demosaic_correlates_channels_and_neighbours_as_the_linear_model(rt):
+    """Flat grey at 0.05, ISO 3200: the measured covariance of the output noise between
+    channels (same pixel) and at lags 1 and 2 (spectrum) matches the exact model."""
+    h = w = 256
+    out, p = run(rt, flat(h, w, 0.05), mosaic="bayer", read_noise=3.0, seed=4)
+    d = out[..., :3].astype(np.float64) - 0.05
+    var_site = [noise_variance(0.05, p, CAMERA, c) for c in range(3)]
+    n = h * w
+    for lag in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1)):
+        dx, dy = lag
+        a, b = d[:h - dy, :w - dx], d[dy:, dx:]
+        got = np.einsum("yxi,yxj->ij", a, b) / a.shape[0] / a.shape[1]
+        want = demosaic_covariance(var_site, lag)
+        # the estimate's standard error: ~ var / sqrt(N / 25) (neighbourhoods of 25 sites
+        # share samples); 5 of them
+        tol = 5 * max(var_site) / math.sqrt(n / 25)
+        np.testing.assert_allclose(got, want, atol=tol, err_msg=str(lag))
+    corr = np.corrcoef(d.reshape(-1, 3).T)
+    # correlated colour noise (independent per-pixel noise would give 0 +- 0.01)
+    assert corr[0, 1] > 0.3 and corr[1, 2] > 0.3 and corr[0, 2] > 0.3
+    lag1 = np.mean(d[:, :-1, 1] * d[:, 1:, 1]) / d[..., 1].var()
+    assert lag1 > 0.2
+
+
+def test_demosaic_keeps_the_mean_and_the_site_colour_follows_the_model(rt):
+    out, p = run(rt, flat(128, 128, 0.1), mosaic="bayer", read_noise=3.0, seed=6)
+    d = out[..., :3].astype(np.float64) - 0.1
+    g = 1 / electrons_per_unit(p, CAMERA)[1]
+    # the demosaic's weights sum to 1 per channel: mean kept within 4 standard errors
+    assert np.all(np.abs(d.mean(axis=(0, 1))) <= 4 * math.sqrt(noise_variance(0.1, p, CAMERA))
+                  * 2 / 128)
+    # at a site its own colour is the photon-transfer model's (R sites: even, even)
+    r_sites = d[0::2, 0::2, 0]
+    var = noise_variance(0.1, p, CAMERA, 0)
+    assert abs(r_sites.var() / var - 1) <= 4 * math.sqrt(2 / r_sites.size)
+
+
+def test_bayer_crops_agree_away_from_the_edge(rt, rng):
+    src = rng.uniform(0.0, 0.1, (40, 60, 4)).astype(np.float32)
+    # one display window (the blotches' cell is a fraction of its diagonal)
+    kw = dict(mosaic="bayer", chroma_noise=1.0, seed=3, display=Rect(0, 0, 64, 64))
+    a, _ = run(rt, src, frame=8, data_window=Rect(-20, 10, 40, 50), **kw)
+    crop, _ = run(rt, src[5:30, 9:50], frame=8, data_window=Rect(-11, 15, 30, 40), **kw)
+    inner = np.ascontiguousarray(a[5:30, 9:50])
+    assert crop[2:-2, 2:-2].tobytes() == np.ascontiguousarray(inner[2:-2, 2:-2]).tobytes()
+
+
+def test_chroma_blotches_are_low_frequency_and_keep_luminance(rt):
+    h, w = 256, 384
+    src = flat(h, w, 0.02)
+    base, p = run(rt, src, mosaic="none", seed=7, frame=3)
+    blot, _ = run(rt, src, mosaic="none", chroma_noise=2.0, chroma_size=0.05, seed=7, frame=3)
+    delta = blot[..., :3].astype(np.float64) - base[..., :3]
+    lum = delta @ np.array([0.2126, 0.7152, 0.0722])
+    assert np.abs(lum).max() <= 1e-6                        # luminance unchanged
+    sd = math.sqrt(noise_variance(0.02, p, CAMERA, 1))
+    # value noise of unit node deviation: between ~0.6 and 1 of chroma x sd on average
+    assert 0.5 * 2.0 * sd <= delta[..., 0].std() <= 1.05 * 2.0 * sd
+    # low frequency: the blotches are nearly equal one pixel apart (cells of 23 px)
+    r = delta[..., 0] - delta[..., 0].mean()
+    assert np.mean(r[:, :-1] * r[:, 1:]) / r.var() > 0.99
+    # and they change every frame
+    other, _ = run(rt, src, mosaic="none", chroma_noise=2.0, chroma_size=0.05, seed=7, frame=4)
+    assert not np.allclose(other, blot)

@@ -92,8 +92,44 @@ def grain_noise(h, w, *, sigmas, seed, frame, monochrome, data_origin=(0, 0),
     return out
 
 
-def grain(src, *, stock, amount, size, response, channel_amount, channel_size, monochrome,
-          seed, frame=0, look_seed=0, data_origin=(0, 0), display_width=None, truncation=6.0):
+GAMMA, FOG, TOE = 0.6, 0.1, 2.0 ** -4
+
+
+def pixel_variance_1d(a, sigma):
+    """Per-axis variance of the unit field (autocorrelation exp(-u^2 / 4 sigma^2)) averaged
+    over a pixel of side a, by plain numerical integration of (2/a^2) int_0^a (a - u)
+    rho(u) du (Simpson, 2001 points)."""
+    u = np.linspace(0.0, a, 2001)
+    f = (a - u) * np.exp(-u * u / (4 * sigma * sigma))
+    h = u[1] - u[0]
+    simpson = h / 3 * (f[0] + f[-1] + 4 * f[1:-1:2].sum() + 2 * f[2:-1:2].sum())
+    return 2.0 / (a * a) * simpson
+
+
+def selwyn(sigma, ref):
+    """Deviation of the field seen by a 1-px pixel relative to a ref-px pixel."""
+    if sigma < 1e-6 * max(1.0, ref):
+        return ref
+    return pixel_variance_1d(1.0, sigma) / pixel_variance_1d(ref, sigma)
+
+
+def meter(src, tile=32):
+    """Log-average of 32 x 32 tile mean luminances (non-finite pixels count as 0), each
+    floored at 1e-3 of their mean; 0.18 when nothing is positive."""
+    h, w = src.shape[:2]
+    rgb = np.where(np.isfinite(src).all(-1, keepdims=True), src[..., :3], 0.0)
+    lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    means = [lum[y:y + tile, x:x + tile].mean() for y in range(0, h, tile)
+             for x in range(0, w, tile)]
+    m = np.array(means)
+    if not m.mean() > 0:
+        return 0.18
+    return float(np.exp(np.mean(np.log(np.maximum(m, 1e-3 * m.mean())))))
+
+
+def grain(src, *, stock, amount, diameter, middle_grey, response, channel_amount,
+          channel_size, monochrome, size, seed, frame=0, look_seed=0, data_origin=(0, 0),
+          display_width=None, sensor_width=36.0, truncation=6.0):
     """Film grain on ``src`` (h, w, 4) float64; same parameters as the plugin."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
@@ -104,14 +140,32 @@ def grain(src, *, stock, amount, size, response, channel_amount, channel_size, m
     mono = monochrome or st.monochrome
     if mono:
         sizes = [sizes[1]] * 3
-    sigmas = [s * size * display_width / 2048 for s in sizes]
+    if size >= 0:
+        cloud_um = size * sensor_width * 1000 / 2048
+    else:
+        cloud_um = (diameter or st.diameter) / 4
+    px_per_um = display_width / (sensor_width * 1000)
+    sigmas = [s * cloud_um * px_per_um for s in sizes]
+    ref = display_width / 2048
+    amt = [amount * a * selwyn(s, ref) / (1 + TOE) for a, s in zip(amounts, sigmas)]
     n = grain_noise(h, w, sigmas=sigmas, seed=effect_seed(seed, look_seed, 0x6772616E),
                     frame=frame, monochrome=mono, data_origin=data_origin,
                     truncation=truncation)
-    rgb = np.where(np.isfinite(src[..., :3]), src[..., :3], 0.0)
-    lum = np.clip(rgb @ np.array([0.2126, 0.7152, 0.0722]), 1e-30, 1e30)
-    sigma = (lum / 0.18) ** response
-    out = src.copy()
+    grey = middle_grey if middle_grey > 0 else meter(src)
+    finite = np.isfinite(src)
+    v = np.clip(np.where(finite[..., :3], src[..., :3], 0.0), -1e30, 1e30)
+    e = np.clip(v / grey, 0.0, 1e30)
+    if mono:
+        lum = np.maximum(e @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+        ed = np.repeat(lum[..., None], 3, axis=-1)
+    else:
+        ed = e
+    density = FOG + GAMMA * np.log10(1 + ed / TOE)
+    d_grey = FOG + GAMMA * np.log10(1 + 1 / TOE)
+    out = np.where(finite, src, 0.0)
     for c in range(3):
-        out[..., c] = rgb[..., c] + amount * amounts[c] * 0.18 * sigma * n[..., c]
+        s = amt[c] * (density[..., c] / d_grey) ** response
+        factor = np.exp(np.clip(s * n[..., c] - s * s / 2, -87, 80))
+        out[..., c] = np.clip(v[..., c] + grey * (e[..., c] + TOE) * (factor - 1),
+                              -3.4028234663852886e38, 3.4028234663852886e38)
     return out

@@ -27,10 +27,11 @@ def poisson_by_inversion(lam, u, max_count=200, u_cap=4e-6):
     return n
 
 
-def sensor_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
+def site_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
                  channel_sensitivity, seed, frame=0, look_seed=0, data_origin=(0, 0),
                  camera_iso=400.0, switch=30.0):
-    """Sensor noise on ``src`` (h, w, 4) float64; ``switch`` None = normal approximation only."""
+    """Per-site sensor noise on ``src`` (h, w, 4) float64 (every pixel, every channel
+    independent: mosaic "none"); ``switch`` None = normal approximation only."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     gain = (iso if iso > 0 else camera_iso) / base_iso
@@ -62,4 +63,93 @@ def sensor_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
         if read_noise > 0:
             res = res + read_noise * g * r * np.sin(2 * np.pi * ub)
         out[..., c] = res
+    return out
+
+
+def cfa(fx, fy):
+    """RGGB colour index of frame pixels: 0 R (even, even), 2 B (odd, odd), 1 G."""
+    ox, oy = fx & 1, fy & 1
+    return np.where(ox == oy, np.where(ox == 1, 2, 0), 1)
+
+
+def mirror(i, n):
+    i = np.abs(i)
+    i = np.where(i >= n, 2 * (n - 1) - i, i)
+    return np.clip(i, 0, n - 1)
+
+
+def demosaic_deviation(dev, data_origin=(0, 0)):
+    """Malvar-He-Cutler demosaic of the site mosaic of ``dev`` (h, w, 3): each pixel keeps
+    its CFA colour's deviation; sites outside the window mirrored about its edge."""
+    h, w = dev.shape[:2]
+    y, x = np.mgrid[0:h, 0:w]
+    fx, fy = x + data_origin[0], y + data_origin[1]
+
+    def site(dx, dy):
+        xx, yy = mirror(x + dx, w), mirror(y + dy, h)
+        # the mirrored pixel's own CFA colour (the kernel reads the site it lands on)
+        return dev[yy, xx, cfa(xx + data_origin[0], yy + data_origin[1])]
+
+    s0 = site(0, 0)
+    ax, ay = site(-1, 0) + site(1, 0), site(0, -1) + site(0, 1)
+    bx, by = site(-2, 0) + site(2, 0), site(0, -2) + site(0, 2)
+    dg = site(-1, -1) + site(1, -1) + site(-1, 1) + site(1, 1)
+    c = cfa(fx, fy)
+    hor = (5 * s0 + 4 * ax - bx - dg + 0.5 * by) / 8
+    ver = (5 * s0 + 4 * ay - by - dg + 0.5 * bx) / 8
+    g = (4 * s0 + 2 * (ax + ay) - (bx + by)) / 8
+    o = (6 * s0 + 2 * dg - 1.5 * (bx + by)) / 8
+    rrow = (fy & 1) == 0
+    out = np.empty_like(dev)
+    out[..., 0] = np.where(c == 0, s0, np.where(c == 2, o, np.where(rrow, hor, ver)))
+    out[..., 1] = np.where(c == 1, s0, g)
+    out[..., 2] = np.where(c == 2, s0, np.where(c == 0, o, np.where(rrow, ver, hor)))
+    return out
+
+
+def value_noise(seed, frame, px, py, stream):
+    """Unit Gaussians at integer nodes (Box-Muller of streams s, s + 1), smoothstep-blended."""
+    gx, gy = np.floor(px), np.floor(py)
+    tx, ty = px - gx, py - gy
+    sx, sy = tx * tx * (3 - 2 * tx), ty * ty * (3 - 2 * ty)
+    ix, iy = gx.astype(np.int64), gy.astype(np.int64)
+
+    def node(i, j):
+        u1 = uniform(seed, frame, i, j, stream)
+        u2 = uniform(seed, frame, i, j, stream + 1)
+        return np.sqrt(-2 * np.log(u1)) * np.cos(2 * np.pi * u2)
+
+    a, b, c, d = node(ix, iy), node(ix + 1, iy), node(ix, iy + 1), node(ix + 1, iy + 1)
+    return (a + (b - a) * sx) * (1 - sy) + (c + (d - c) * sx) * sy
+
+
+def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, diagonal=None,
+                 **kw):
+    """The full model: per-site noise (``sensor_noise``), the Bayer demosaic of the
+    deviations and the chroma blotches; same parameters as the plugin."""
+    src = np.asarray(src, np.float64)
+    h, w = src.shape[:2]
+    noisy = site_noise(src, **kw)
+    v = np.clip(np.where(np.isfinite(src[..., :3]), src[..., :3], 0.0), -1e38, 1e38)
+    dev = noisy[..., :3] - v
+    x0, y0 = kw.get("data_origin", (0, 0))
+    if mosaic == "bayer":
+        dev = demosaic_deviation(dev, (x0, y0))
+    out = noisy.copy()
+    out[..., :3] = v + dev
+    if chroma_noise > 0:
+        iso = kw["iso"] if kw["iso"] > 0 else kw.get("camera_iso", 400.0)
+        g = 1.0 / (kw["full_well"] * kw["channel_sensitivity"][1] / (iso / kw["base_iso"]))
+        cell = max(chroma_size * (diagonal or np.hypot(w, h)), 1.0)
+        y, x = np.mgrid[0:h, 0:w]
+        seed = effect_seed(kw["seed"], kw.get("look_seed", 0), SENSOR_SALT)
+        px, py = (x + x0) / cell, (y + y0) / cell
+        a = value_noise(seed, kw.get("frame", 0), px, py, 12)
+        b = value_noise(seed, kw.get("frame", 0), px, py, 14)
+        sd = np.sqrt(g * np.maximum(v[..., 1], 0) + (g * kw["read_noise"]) ** 2)
+        dr, db = chroma_noise * sd * a, chroma_noise * sd * b
+        out[..., 0] += dr
+        out[..., 2] += db
+        out[..., 1] -= (0.2126 * dr + 0.0722 * db) / 0.7152
+    out[..., :3] = np.clip(out[..., :3], -3.4028234663852886e38, 3.4028234663852886e38)
     return out

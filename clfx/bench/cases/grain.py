@@ -22,7 +22,8 @@ import numpy as np
 
 from clfx.bench.cases import Case
 from clfx.core.camera import Camera
-from clfx.plugins.grain import MID_GREY, STOCKS, grain_amounts, grain_sigmas_px
+from clfx.plugins.grain import (D_GREY, FOG, GAMMA, STOCKS, TOE, grain_amounts,
+                                grain_sigmas_px, meter)
 
 
 def make(width, height, rng):
@@ -36,8 +37,7 @@ def make(width, height, rng):
     src.reshape(-1, 4)[hot, :3] = 1e4
     stock = STOCKS["fast-500t"]
     return dict(source=src, depth=None, velocity=None,
-                params={"stock": "fast-500t", "amount": stock.nominal_amount,
-                        "size": stock.nominal_size, "seed": 7},
+                params={"stock": "fast-500t", "amount": stock.nominal_amount, "seed": 7},
                 camera=Camera())
 
 
@@ -48,8 +48,9 @@ def peers(case, params, ctx=None):
     except ImportError:
         return {}
     src = np.asarray(case["source"], np.float32)
-    sigmas = grain_sigmas_px(params, src.shape[1])
-    amounts = grain_amounts(params)
+    width, fmt = src.shape[1], case["camera"].sensor_width
+    sigmas = grain_sigmas_px(params, width, fmt)
+    amounts = grain_amounts(params, width, fmt)
 
     def opencv_grain():
         rgb = src[..., :3]
@@ -57,14 +58,21 @@ def peers(case, params, ctx=None):
         # per-channel mean and deviation: scalars 0.0, 1.0 would mean (1, 0, 0, 0), i.e. no
         # noise in green and blue (the statistics metric found that)
         cv2.randn(noise, (0.0,) * 3, (1.0,) * 3)
-        lum = np.clip(rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32), 1e-30, 1e30)
-        scale = (lum / MID_GREY) ** params.response
+        finite = np.isfinite(rgb).all(-1)
+        lum = np.where(finite, rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32), 0.0)
+        h, w = lum.shape
+        tiles = [lum[y:y + 32, x:x + 32].mean() for y in range(0, h, 32) for x in range(0, w, 32)]
+        grey = params.middle_grey or meter(tiles)
+        e = np.clip(rgb / grey, 0.0, 1e30)
+        s = np.asarray(amounts, np.float32) * ((FOG + GAMMA * np.log10(1 + e / TOE)) / D_GREY) \
+            ** params.response
         out = src.copy()
         for c in range(3):
             # continuous-limit normalisation of Gaussian-filtered white noise: 2 sqrt(pi) sigma
             field = cv2.GaussianBlur(np.ascontiguousarray(noise[..., c]), (0, 0), sigmas[c])
-            norm = 2 * math.sqrt(math.pi) * sigmas[c]
-            out[..., c] = rgb[..., c] + amounts[c] * scale * field * norm
+            n = field * 2 * math.sqrt(math.pi) * sigmas[c]
+            sc = s[..., c]
+            out[..., c] = rgb[..., c] + grey * (e[..., c] + TOE) * np.expm1(sc * n - sc * sc / 2)
         return out
 
     return {"opencv randn + GaussianBlur + mix": opencv_grain}
