@@ -27,10 +27,20 @@ background) or none (the background it uncovers):
   motion blur); a start is valid when its forward map lands within half a pixel of ``p``;
 - the nearest valid surface wins (depth pass; at the same depth within 2 %, or without a
   depth pass, the faster one: nearer surfaces move faster under camera motion);
-- no valid start is a disocclusion: it is filled from the background (the farthest surface
-  of the neighbourhood with a depth pass, else the slowest), as motion blur fills what a
-  moving edge reveals: the source pixel nearest to ``p - v_bg t`` that moves with the
-  background, searched along the foreground's relative motion.
+- no valid start is a disocclusion: the background point ``b = p - v_bg t`` (background: the
+  farthest surface of the neighbourhood with a depth pass, else the slowest) was hidden at
+  the frame time by an occluder moving with ``v_o`` (the surface at ``b`` in the source, else
+  the neighbourhood's fastest).  As motion blur fills what a moving edge reveals, the
+  background beside the occluder's trailing edge stands in, translated by the occluder's
+  relative motion: ``b - (v_o - v_bg) t = p - v_o t``; where that pixel does not move with the
+  background, the nearest one that does is searched along the relative motion (away from the
+  occluder first).  A translated strip keeps the background's texture; the former fill (the
+  nearest background pixel to ``b``) repeated one pixel along each row, a comb of streaks
+  that also repeated the occluder's antialiased rim (issue 24);
+- a winning background surface on an occluder's *rim* (a 4-neighbour in front of it moves
+  away from it by a pixel or more by ``|t|``) counts as uncovered too: renderers write the
+  velocity of the surface at the pixel centre, so the rim carries the background's motion
+  and part of the occluder's colour, and kept it would outline where the occluder was.
 
 The colour at ``q`` is read bilinearly.  Velocities are sanitised and
 clamped like motion blur's, so no row moves farther than ``max_shift`` x the frame diagonal

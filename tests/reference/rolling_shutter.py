@@ -136,22 +136,39 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
         best[take] = c
         qb[take], zb[take], sb[take] = q[take], a[..., 2][take], a[..., 3][take]
 
+    # a winner on an occluder's antialiased rim left behind (a 4-neighbour in front moving
+    # away from it by >= 1 px by |t|) counts as uncovered
+    aw = _nearest(aux, qb)
+    rim = np.zeros((h, w), bool)
+    for e in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+        nbv = _nearest(aux, qb + np.array(e))
+        dvn = nbv[..., :2] - aw[..., :2]
+        ln = np.hypot(dvn[..., 0], dvn[..., 1])
+        same = np.abs(nbv[..., 2] - zb) <= SOFT_Z * np.minimum(nbv[..., 2], zb)
+        front = np.where(same, nbv[..., 3] > sb, nbv[..., 2] < zb)
+        rim |= (ln * np.abs(t) >= 1.0) & (dvn @ np.array(e) > 0.5 * ln) & front
+    best[(best >= 0) & rim] = -1
     hole = best < 0
     vb = nb[..., 1, :]
+    tabs = np.abs(t)
     q0 = p - vb * tt
-    qb[hole] = q0[hole]
+    vo = _nearest(aux, q0)[..., :2]
+    bgo = np.hypot(*(vo - vb).transpose(2, 0, 1)) * tabs <= TOL
+    vo = np.where(bgo[..., None], nb[..., 0, :], vo)
+    q1 = p - vo * tt
+    qb[hole] = q1[hole]
     if max_search > 0:
-        dv = nb[..., 0, :] - vb
+        dv = vo - vb
         ln = np.hypot(dv[..., 0], dv[..., 1])
         direc = np.where((ln > 1e-6)[..., None], dv / np.where(ln > 1e-6, ln, 1)[..., None],
                          np.array([1.0, 0.0]))
-        reach = np.minimum(np.ceil(ln * np.abs(t)) + 1, max_search)
+        reach = np.minimum(np.ceil(ln * tabs) + 1, max_search)
         todo = hole.copy()
         for j in range(int(reach[hole].max(initial=-1)) + 1):
-            for sgn in ((1,) if j == 0 else (1, -1)):
-                q = q0 + direc * (sgn * j)
+            for sgn in ((-1,) if j == 0 else (-1, 1)):
+                q = q1 + direc * (sgn * j)
                 dd = _nearest(aux, q)[..., :2] - vb
-                ok = todo & (j <= reach) & (np.hypot(dd[..., 0], dd[..., 1]) * np.abs(t) <= TOL)
+                ok = todo & (j <= reach) & (np.hypot(dd[..., 0], dd[..., 1]) * tabs <= TOL)
                 qb[ok] = q[ok]
                 todo &= ~ok
     return _bilinear(col, qb)
