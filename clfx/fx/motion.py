@@ -58,8 +58,10 @@ up to a quarter pixel, as much again as the motion, and per-pixel jitter with tw
 samples is noise of the texture's full contrast; both ended 8-9 dB further from a
 supersampled truth than the unblurred input on fine stripes moving 2 px/frame.  Short tiles
 therefore use the midpoint rule and a Catmull-Rom blended with the tent by the smear's
-length (tent below ~3/8 px, where the kinks of box-filtered edges dominate; full cubic from
-a pixel on), clamped per channel to the 2 x 2 pixels around each read so it cannot ring
+length (tent up to 3/8 px, where the kinks of box-filtered edges dominate; full cubic from
+half a pixel on: with the full cubic only from a whole pixel, fine stripes and grain moving
+1 px/frame through a 180 degree shutter ended 2-8 dB below the input, issue 24), clamped per
+channel to the 2 x 2 pixels around each read so it cannot ring
 around HDR lights (the clamp adds a little energy to an isolated hot pixel: up to ~8%).
 
 Without a depth pass all pixels count as one depth (no occlusion ordering).  Reads outside
