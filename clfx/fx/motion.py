@@ -172,6 +172,18 @@ def tile_size(radius_px: float) -> int:
     return int(max(8, 4 * math.ceil(min(radius_px, MAX_RADIUS_PX) / 4.0)))
 
 
+def path(forward, backward, t):
+    """Displacement (px) at time ``t`` (frames) of a point whose motion to the next frame is
+    ``forward`` and from the previous one ``backward`` (px/frame): the quadratic through its
+    positions at -1, 0 and +1 frame, ``t (f + b) / 2 + t^2 (f - b) / 2``.  With ``f = b``
+    it is the straight line ``f t``; on a circle it follows the arc far closer than either
+    half's chord (72 deg/frame through a centred 180 degree shutter: within 0.56 px of a
+    40 px radius, where the line along the forward motion strays 7.9 px; 1.8 px through a
+    360 degree shutter)."""
+    f, b = np.asarray(forward, np.float64), np.asarray(backward, np.float64)
+    return t * 0.5 * (f + b) + t * t * 0.5 * (f - b)
+
+
 @dataclass
 class BlurStats:
     """What one reconstruction did (for notes and benchmarks)."""
@@ -193,7 +205,8 @@ def sanitized_copy(rt, src):
 
 
 def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radius_px: float,
-                peak_speed: float, level: MotionLevel, frame: int = 0, nonfinite: int = 0):
+                peak_speed: float, level: MotionLevel, frame: int = 0, nonfinite: int = 0,
+                velocity_back=None):
     """Motion blur of ``src`` from a velocity field (and optional depth) on the device.
 
     Parameters
@@ -218,6 +231,10 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         Shifts the jitter pattern per frame.
     nonfinite : int
         Number of non-finite source pixels (> 0 makes a sanitised copy first).
+    velocity_back : DeviceImage or None
+        Backward motion, px/frame (current - previous position, +y down), same window: with
+        it every path is the quadratic through the previous, current and next positions
+        (:func:`path`); without it, the straight line along ``velocity``.
 
     Returns
     -------
@@ -232,20 +249,33 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         return dst, BlurStats(0, radius, 0, 0, 0)
     k = tile_size(radius)
     vmax = radius / reach_t
+    curved = velocity_back is not None
     defines = dict(BILINEAR=int(level.bilinear), JITTER=int(level.jitter),
                    HAS_DEPTH=int(depth is not None), MIN_BLUR=f"{MIN_BLUR_PX!r}f",
-                   fp64=level.fp64)
+                   fp64=level.fp64, **({"CURVED": 1} if curved else {}))
     i32, f32 = np.int32, np.float32
 
     aux = rt.image(src.window, 4)
     dummy = rt.buffer(16)
     rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), velocity,
               depth if depth is not None else dummy, aux, i32(pitch), i32(h), f32(vmax))
+    auxb = dummy
+    if curved:              # (bx, by, z, |b|), clamped like the forward motion
+        auxb = rt.image(src.window, 4)
+        rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h),
+                  velocity_back, depth if depth is not None else dummy, auxb, i32(pitch),
+                  i32(h), f32(vmax))
     if depth is not None:   # rims of small bright moving surfaces move with them
         dilated = rt.image(src.window, 4)
+        extra = ()
+        if curved:          # the backward records follow the same choices
+            dilated_b = rt.image(src.window, 4)
+            extra = (auxb, dilated_b)
         rt.launch(rt.kernel(KERNEL, "motion_dilate", **defines), (pitch // 4, h), aux, col,
-                  dilated, i32(pitch), i32(w), i32(h), f32(t1 - t0))
+                  dilated, i32(pitch), i32(w), i32(h), f32(t1 - t0), *extra)
         aux = dilated
+        if curved:
+            auxb = dilated_b
 
     tx, ty = -(-w // k), -(-h // k)
     tmax = rt.buffer(tx * ty * 16)
@@ -273,6 +303,6 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
                                       axis=1).astype(np.int32).ravel())
         count = int(sel.sum())
         rt.launch(rt.kernel(KERNEL, "motion_gather", CUBIC=cubic, **defines),
-                  (count * qpt,), col, aux, nmax, table, i32(count), dst, i32(pitch), i32(w),
+                  (count * qpt,), col, aux, auxb, nmax, table, i32(count), dst, i32(pitch), i32(w),
                   i32(h), i32(tx), i32(k), f32(t0), f32(t1), i32(frame), local=(LOCAL,))
     return dst, BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()))
