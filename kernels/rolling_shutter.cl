@@ -20,6 +20,10 @@
  *                              velocity at p - v_bg t), else the nearest pixel moving with the
  *                              background searched from there along the occluder's relative
  *                              motion (up to MAX_SEARCH px).
+ * With CURVED (both halves of the vector pass) a point's displacement at time t is the quadratic
+ * through its positions one frame before, at and after the frame time,
+ * t (f + b) / 2 + t^2 (f - b) / 2 (f, b: forward and backward motion; lib/motion.cl's MB_PATH),
+ * in the fixed-point iteration, its test and the disocclusion fill.
  * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
  */
 #include "lib/common.h"
@@ -33,6 +37,9 @@
 #endif
 #ifndef MAX_SEARCH
 #define MAX_SEARCH 64
+#endif
+#ifndef CURVED
+#define CURVED 0       /* 1: backward motion records too (auxb): paths are quadratics */
 #endif
 
 /* starts of the fixed-point iteration: own, fastest, background (, nearest with depth) */
@@ -135,16 +142,30 @@ inline float4 rs_colour(global const float *col, const int pitch, const int w, c
   return TO_FLOAT4(c);
 }
 
-/* Fixed-point iteration from the start velocity v0: q <- p - v(q) t.  Returns whether it
- * converged; *q, *a: the final position and its aux record. */
-inline int rs_solve(global const float *aux, const int pitch, const int w, const int h,
-                    const REAL2 p, const REAL t, const float2 v0, REAL2 *q, float4 *a)
+/* Displacement by time t of the point at q moving with forward f (CURVED: and backward b). */
+inline REAL2 rs_disp(global const float *auxb, const int pitch, const int w, const int h,
+                     const REAL2 q, const float2 f, const REAL t)
+{
+#if CURVED
+  const REAL2 b = TO_REAL2(rs_aux(auxb, pitch, w, h, q).xy), ff = TO_REAL2(f);
+  return t * (REAL)0.5 * (ff + b) + t * t * (REAL)0.5 * (ff - b);
+#else
+  return TO_REAL2(f) * t;
+#endif
+}
+
+/* Fixed-point iteration from the start velocity v0: q <- p - d(q, t) (d: v(q) t, or the
+ * curved path).  Returns whether it converged; *q, *a: the final position and its aux
+ * record. */
+inline int rs_solve(global const float *aux, global const float *auxb, const int pitch,
+                    const int w, const int h, const REAL2 p, const REAL t, const float2 v0,
+                    REAL2 *q, float4 *a)
 {
   REAL2 s = p - TO_REAL2(v0) * t;
   for(int i = 0; i < ITERATIONS; i++)
-    s = p - TO_REAL2(rs_aux(aux, pitch, w, h, s).xy) * t;
+    s = p - rs_disp(auxb, pitch, w, h, s, rs_aux(aux, pitch, w, h, s).xy, t);
   const float4 r = rs_aux(aux, pitch, w, h, s);
-  const REAL2 d = p - TO_REAL2(r.xy) * t - s;
+  const REAL2 d = p - rs_disp(auxb, pitch, w, h, s, r.xy, t) - s;
   *q = s;
   *a = r;
   return dot(d, d) <= (REAL)(TOL * TOL);
@@ -180,6 +201,7 @@ inline int rs_trailing_rim(global const float *aux, const int pitch, const int w
 }
 
 kernel void rolling_shutter_gather(global const float *col, global const float *aux,
+                                   global const float *auxb,
                                    global const float *nbr, global float *dst, const int pitch,
                                    const int width, const int height, const int tiles_x,
                                    const int k, const float tx, const float ty, const float xr,
@@ -209,7 +231,7 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
     if(seen) continue;
     REAL2 q;
     float4 a;
-    if(rs_solve(aux, pitch, width, height, p, t, starts[c], &q, &a)
+    if(rs_solve(aux, auxb, pitch, width, height, p, t, starts[c], &q, &a)
        && (best < 0 || rs_in_front(a.z, a.w, zb, sb)))
     {
       best = c; qb = q; zb = a.z; sb = a.w;
@@ -232,8 +254,14 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
     const REAL2 q0 = p - TO_REAL2(vb) * t;
     const float tabs = (float)fabs(t);
     float2 vo = rs_aux(aux, pitch, width, height, q0).xy;
-    if(length(vo - vb) * tabs <= TOL) vo = vf;
-    const REAL2 q1 = p - TO_REAL2(vo) * t;
+#if CURVED
+    float2 bo = rs_aux(auxb, pitch, width, height, q0).xy;
+#else
+    float2 bo = vo;
+#endif
+    if(length(vo - vb) * tabs <= TOL) { vo = vf; bo = vf; }   /* the tile's: no backward */
+    const REAL2 q1 = p - t * (REAL)0.5 * TO_REAL2(vo + bo)
+                       - t * t * (REAL)0.5 * TO_REAL2(vo - bo);
     qb = q1;
 #if MAX_SEARCH > 0
     const float2 dv = vo - vb;

@@ -42,6 +42,12 @@ background) or none (the background it uncovers):
   velocity of the surface at the pixel centre, so the rim carries the background's motion
   and part of the occluder's colour, and kept it would outline where the occluder was.
 
+With both halves of the vector pass (``velocity_back``: current - previous position, as
+Blender's Vector XY), a point's displacement by time ``t`` is the quadratic through its
+positions a frame before, at and after the frame time, ``t (f + b) / 2 + t^2 (f - b) / 2``
+(:func:`clfx.fx.motion.path`), in the iteration and in the fill: a spinning object shears
+along its arcs.  With one half it is ``v t`` (today's straight paths; the note says which).
+
 The colour at ``q`` is read bilinearly.  Velocities are sanitised and
 clamped like motion blur's, so no row moves farther than ``max_shift`` x the frame diagonal
 (and 512 px); reads outside the source clamp to its edge.  Motion blur within each row's own
@@ -216,21 +222,34 @@ class RollingShutter(Plugin):
         rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=has_depth),
                   (pitch // 4, h), vel, depth if depth is not None else dummy, aux,
                   i32(pitch), i32(h), f32(vmax))
+        back = getattr(ctx, "velocity_back", None)
+        back = back if back is not None and back.window == src.window else None
+        auxb = dummy
+        if back is not None:   # (bx, by, z, |b|), clamped like the forward motion
+            auxb = rt.image(src.window, 4)
+            rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=has_depth),
+                      (pitch // 4, h), back, depth if depth is not None else dummy, auxb,
+                      i32(pitch), i32(h), f32(vmax))
         k = tile_size(shift)
         ntx, nty = -(-w // k), -(-h // k)
         kfile = self.descriptor.kernel
-        defines = dict(HAS_DEPTH=has_depth, ITERATIONS=lvl.iterations, MAX_SEARCH=lvl.max_search, fp64=lvl.fp64)
+        defines = dict(HAS_DEPTH=has_depth, ITERATIONS=lvl.iterations, MAX_SEARCH=lvl.max_search, fp64=lvl.fp64,
+                       **({"CURVED": 1} if back is not None else {}))
         tiles, nbr = rt.buffer(ntx * nty * 48), rt.buffer(ntx * nty * 48)   # 3 float4 a tile
         rt.launch(rt.kernel(kfile, "rolling_shutter_tiles", **defines), (ntx, nty), aux, tiles,
                   i32(pitch), i32(w), i32(h), i32(ntx), i32(nty), i32(k))
         rt.launch(rt.kernel(kfile, "rolling_shutter_neighbors", **defines), (ntx, nty), tiles,
                   nbr, i32(ntx), i32(nty))
-        rt.launch(rt.kernel(kfile, "rolling_shutter_gather", **defines), (w, h), col, aux, nbr,
+        rt.launch(rt.kernel(kfile, "rolling_shutter_gather", **defines), (w, h), col, aux, auxb, nbr,
                   dst, i32(pitch), i32(w), i32(h), i32(ntx), i32(k), f32(times.tx),
                   f32(times.ty), f32(times.xr), f32(times.yr))
         ctx.notes.append(f"rolling_shutter: readout {self.readout(p):.3g} frame "
                          f"({p.direction}, t = 0 at the {p.reference} row), largest shift "
-                         f"{shift:.1f} px, {k} px tiles"
+                         f"{shift:.1f} px, {k} px tiles, "
+                         + ("curved paths through the previous, current and next positions "
+                            "(both halves of the vector pass)" if back is not None else
+                            "straight paths along the forward motion (one half of the vector "
+                            "pass)")
                          + (f", {a.nonfinite_count} non-finite pixels zeroed"
                             if a.nonfinite_count else ""))
         return dst

@@ -99,7 +99,7 @@ def tile_size(shift):
 
 def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
                     reference="first", max_shift=0.1, iterations=3, max_search=64,
-                    data_window=None, display_window=None):
+                    data_window=None, display_window=None, velocity_back=None):
     """The rolling-shutter output over the data window (see the plugin's notes)."""
     src = np.asarray(src, np.float64)
     col = np.where(np.isfinite(src), src, 0.0)
@@ -113,6 +113,16 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
     t_max = np.abs(t).max()
     shift = min(peak * t_max, max_shift * diag, MAX_RADIUS_PX)
     aux = prepare(velocity, depth, shift / t_max if t_max > 0 else 0.0)
+    auxb = None if velocity_back is None else prepare(velocity_back, depth,
+                                                      shift / t_max if t_max > 0 else 0.0)
+
+    def disp(q, f):
+        """Displacement by t of the point at q moving with f (and, curved, its backward)."""
+        if auxb is None:
+            return f * tt
+        b = _nearest(auxb, q)[..., :2]
+        return tt * 0.5 * (f + b) + tt * tt * 0.5 * (f - b)
+
     k = tile_size(shift)
     nbr = tile_candidates(aux, k, depth is not None)
     yy, xx = np.mgrid[0:h, 0:w]
@@ -126,9 +136,9 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
     for c, v0 in enumerate(starts):
         q = p - v0 * tt
         for _ in range(iterations):
-            q = p - _nearest(aux, q)[..., :2] * tt
+            q = p - disp(q, _nearest(aux, q)[..., :2])
         a = _nearest(aux, q)
-        d = p - a[..., :2] * tt - q
+        d = p - disp(q, a[..., :2]) - q
         valid = (d ** 2).sum(axis=2) <= TOL * TOL
         same = np.abs(a[..., 2] - zb) <= SOFT_Z * np.minimum(a[..., 2], zb)
         front = np.where(same, a[..., 3] > sb, a[..., 2] < zb)
@@ -153,9 +163,11 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
     tabs = np.abs(t)
     q0 = p - vb * tt
     vo = _nearest(aux, q0)[..., :2]
-    bgo = np.hypot(*(vo - vb).transpose(2, 0, 1)) * tabs <= TOL
-    vo = np.where(bgo[..., None], nb[..., 0, :], vo)
-    q1 = p - vo * tt
+    bo = vo if auxb is None else _nearest(auxb, q0)[..., :2]
+    bgo = (np.hypot(*(vo - vb).transpose(2, 0, 1)) * tabs <= TOL)[..., None]
+    vo = np.where(bgo, nb[..., 0, :], vo)       # the tile's fastest: no backward motion
+    bo = np.where(bgo, nb[..., 0, :], bo)
+    q1 = p - tt * 0.5 * (vo + bo) - tt * tt * 0.5 * (vo - bo)
     qb[hole] = q1[hole]
     if max_search > 0:
         dv = vo - vb
