@@ -24,7 +24,9 @@ the exact result is the average of the inverse look-ups along each pixel's path 
 spin and radial gathers in one kernel; arcs for roll, not tangents).  With trucking, the
 motion is turned into a velocity field and rendered by the depth-aware reconstruction of
 :mod:`clfx.fx.motion` (the gather motion_blur uses), which handles the parallax's occlusions;
-there the roll is linearised (the tangent of the arc).
+there a roll gives both halves of a vector pass (``v +- a/2``, ``a`` the second derivative of
+the similarity at the frame time), so the gather's paths are ``v t + a t^2 / 2``, the roll's
+arcs to second order (the tangent alone was a straight line).
 
 Reads outside the source window clamp to its edge (the blur does not grow the frame).
 Non-finite input pixels are set to 0 before they are spread (counted in ``ctx.notes``); finite
@@ -195,12 +197,21 @@ class CameraBlur(Plugin):
         if depth is None or depth.window != src.window:
             raise ClipError("camera_blur: truck/dolly need a depth pass covering the source "
                             f"window {src.window}")
-        vel = rt.image(src.window, 2)
-        rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
-                  (src.pitch // 4, src.height), depth, vel, i32(src.pitch), i32(src.width),
-                  i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
-                  f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]), f32(m["zoom"]),
-                  f32(m["truck_x"]), f32(m["truck_y"]), f32(m["dolly"]))
+        # with a roll, v + a/2 and v - a/2 (a: the roll's second derivative) as the two
+        # halves of a vector pass: the gather's quadratic paths follow the arcs (to second
+        # order); else the tangent
+        curved = m["roll"] != 0.0
+        fields = []
+        for chord in ((1.0, -1.0) if curved else (0.0,)):
+            vel = rt.image(src.window, 2)
+            rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
+                      (src.pitch // 4, src.height), depth, vel, i32(src.pitch), i32(src.width),
+                      i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
+                      f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]),
+                      f32(m["zoom"]), f32(m["truck_x"]), f32(m["truck_y"]), f32(m["dolly"]),
+                      f32(chord))
+            fields.append(vel)
+        vel, back = fields[0], (fields[1] if curved else None)
         a = ctx.analysis
         finite = a.min_depth[np.isfinite(a.min_depth)] if a.min_depth is not None else None
         zmin = float(finite.min()) if finite is not None and finite.size else math.inf
@@ -209,8 +220,10 @@ class CameraBlur(Plugin):
                                  max_radius_px=min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX),
                                  peak_speed=peak, level=CAMERA_LEVELS[ctx.quality],
                                  frame=ctx.frame,
-                                 nonfinite=nonfinite)
+                                 nonfinite=nonfinite, velocity_back=back)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
-                         f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px")
+                         f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
+                         + ("the roll along its arcs (quadratic paths through the previous, "
+                            "current and next positions)" if curved else "straight paths"))
         return out
 

@@ -26,8 +26,10 @@
  * With CURVED (both halves of the vector pass: forward f and backward b motion per pixel in a
  * second aux record, aux_b = (bx, by, z, |b|)), a point's displacement at time t is the
  * quadratic through its positions one frame before, at and after the frame time,
- * d(t) = t (f + b) / 2 + t^2 (f - b) / 2 (MB_PATH): samples follow the tile's dominant path,
- * and a sample's smear covers x where its own path passes within a pixel of x.
+ * d(t) = t (f + b) / 2 + t^2 (f - b) / 2 (MB_PATH): x's own surface is sampled where x's
+ * path was at -t, x + d(-t) (exact for a steady flow such as a turn), occluders along the
+ * tile's dominant path, x - d_n(t) (a small object carried along one path), and a sample's
+ * smear covers x where its own path passes within a pixel of x.
  * The gather accumulates in REAL (lib/precision.h: double where the level asks for fp64).
  */
 #include "lib/motion_gather.h"
@@ -443,6 +445,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     /* occluders, along v_n */
     {
 #if CURVED
+      /* an occluder moves along the path of the tile's fastest pixel: the one over x at
+       * time t sits at x - d(t) at the frame time */
       const float4 dx = MB_PATH(vn.x, bn.x, t), dy = MB_PATH(vn.y, bn.y, t);   /* d = x - y */
 #else
       const float4 dx = vn.x * t, dy = vn.y * t;             /* d = x - y */
@@ -489,7 +493,11 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     if(any_moving)
     {
 #if CURVED
-      const float4 px = lane + 0.5f - MB_PATH(vxx, bxx, t), py = fy + 0.5f - MB_PATH(vxy, bxy, t);
+      /* the point of x's surface over x at time t came from where x's own path was at -t
+       * (a steady flow, exact for turning and translating surfaces): y = x + d(-t); x - d(t)
+       * would bend the other way */
+      const float4 px = lane + 0.5f + MB_PATH(vxx, bxx, -t);
+      const float4 py = fy + 0.5f + MB_PATH(vxy, bxy, -t);
 #else
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
