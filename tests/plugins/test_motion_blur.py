@@ -391,3 +391,25 @@ def test_spinning_light_streak_follows_its_arc_with_both_halves(rt):
     same = MotionBlur().apply(rt, MotionBlur.params(), src, velocity=fwd, depth=depth,
                               velocity_back=fwd, camera=CENTRED)
     np.testing.assert_allclose(same, straight, rtol=1e-5, atol=1e-3)
+
+
+def test_explain_says_which_halves_of_the_vector_pass_were_used(rt):
+    """Issue 24: a frame with both halves (Blender's XY and ZW) blurs along curved paths,
+    one with the forward half alone keeps the straight ones; the step's notes say which."""
+    from dataclasses import replace
+
+    from clfx.core.frame import Frame
+    from clfx.pipeline.look import Look, Step, render_frame
+    from clfx.plugins import get_plugin
+
+    src, fwd, back, depth, *_ = _spinning_light(size=64, radius=20.0)
+    look = Look("m", steps=[Step("motion_blur", get_plugin("motion_blur").params())],
+                camera=CENTRED)
+    one = Frame.from_array(src, depth=depth, velocity=fwd)
+    both = replace(one, velocity_back=back)
+    notes = {}
+    for label, frame in (("one", one), ("both", both)):
+        _, report = render_frame(rt, look, frame, frame_number=1)
+        notes[label] = " ".join(n for s in report.steps for n in s.notes)
+    assert "straight paths along the forward motion (one half" in notes["one"], notes
+    assert "curved paths through the previous, current and next positions" in notes["both"]
