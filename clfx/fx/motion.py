@@ -126,6 +126,7 @@ class MotionLevel(Level):
     bilinear: bool = True   # bilinear colour fetches on long blurs (else nearest)
     jitter: bool = True     # per-pixel jitter where the sample cap leaves samples sparse
                             # (else the midpoint rule everywhere: exact quadrature, may band)
+    cubic_max_px: float = CUBIC_MAX_PX   # tiles with shorter blurs read through the cubic
 
 
 def _summary(lvl: MotionLevel) -> str:
@@ -294,7 +295,7 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     length = length[ys, xs]
     n = np.clip(np.ceil(length / level.spacing), 2, level.max_samples).astype(np.int32)
     jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
-    short = length < CUBIC_MAX_PX
+    short = length < level.cubic_max_px
     qpt = k * k // 4
     for sel, cubic in ((short, 1), (~short, 0)):   # one launch per fetch filter
         if not sel.any():
