@@ -45,6 +45,10 @@ class RenderContext:
     depth, velocity : DeviceImage or None
         Passes in clfx's conventions (planar z in scene units; forward px/frame, +y down),
         covering ``source.window`` (the look re-frames them when an effect grows the window).
+    velocity_back : DeviceImage or None
+        The other half of the vector pass where the renderer writes both (Blender's XY):
+        backward motion, current - previous position in px/frame, +y down.  The blurs of
+        motion then follow the quadratic through the previous, current and next positions.
     display_window : Rect
         The frame's display window; resolution-independent sizes refer to its diagonal.
     pixel_aspect : float
@@ -75,7 +79,8 @@ class RenderContext:
         wavelength -> RGB tables with it, thresholds weigh luminance with its Y row.
     """
 
-    def __init__(self, runtime, source, *, depth=None, velocity=None, display_window=None,
+    def __init__(self, runtime, source, *, depth=None, velocity=None, velocity_back=None,
+                 display_window=None,
                  pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
                  display_referred=False, analysis=None, output_limit=None, read_image=None,
                  read_lens=None, reference_camera=None, rgb_to_xyz=None):
@@ -83,6 +88,7 @@ class RenderContext:
         self.source = source
         self.depth = depth
         self.velocity = velocity
+        self.velocity_back = velocity_back
         self.display_window = display_window or source.window
         self.pixel_aspect = float(pixel_aspect)
         self.frame = int(frame)
@@ -176,6 +182,8 @@ class RenderContext:
         ctx.source = rt.reframe(self.source, window, "zero")
         ctx.depth = None if self.depth is None else rt.reframe(self.depth, window, "clamp")
         ctx.velocity = None if self.velocity is None else rt.reframe(self.velocity, window, "clamp")
+        ctx.velocity_back = (None if self.velocity_back is None
+                             else rt.reframe(self.velocity_back, window, "clamp"))
         return ctx
 
     def for_step(self, quality: str) -> RenderContext:
@@ -276,7 +284,7 @@ class Plugin:
                                 f"and the frame has none (see `clfx probe`, --depth/--velocity)")
 
     def apply(self, rt, p: Params, source: np.ndarray, *, depth=None, velocity=None,
-              quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
+              velocity_back=None, quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
               data_window: Rect | None = None, display_window: Rect | None = None,
               pixel_aspect: float = 1.0, display_referred: bool = False,
               keep_rod: bool = False, read_image=None, read_lens=None, reference_camera=None,
@@ -299,6 +307,8 @@ class Plugin:
             rt, rt.upload(src, window),
             depth=None if depth is None else rt.upload(np.asarray(depth, np.float32), window),
             velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
+            velocity_back=(None if velocity_back is None
+                           else rt.upload(np.asarray(velocity_back, np.float32), window)),
             display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
             seed=seed, camera=camera, quality=quality, display_referred=display_referred,
             read_image=read_image, read_lens=read_lens, reference_camera=reference_camera,

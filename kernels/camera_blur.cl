@@ -79,7 +79,7 @@ kernel void camera_blur_velocity(global const float *depth, global float *vel, c
                                  const float cx, const float cy, const float sx,
                                  const float sy, const float roll, const float zoom,
                                  const float truck_px_x, const float truck_px_y,
-                                 const float dolly)
+                                 const float dolly, const float chord)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
@@ -88,6 +88,13 @@ kernel void camera_blur_velocity(global const float *depth, global float *vel, c
   const float py = (float)y + 0.5f + (float)y0 - cy;
   float4 vx = sx + zoom * px - roll * py;      /* d/dt of R(roll t)(p - c): roll x perp */
   float4 vy = sy + zoom * py + roll * px;
+  /* chord = +-1: v +- a/2, with a the second derivative of (1 + zoom t) R(roll t)(p - c) at
+   * t = 0 (centripetal -roll^2 (p - c), plus 2 zoom roll perp): as the forward and backward
+   * halves of a vector pass, the motion gather's quadratic path is then v t + a t^2 / 2,
+   * the arc to second order (the chords themselves under-run the arc's speed by
+   * sin(roll) / roll) */
+  vx += 0.5f * chord * (-roll * roll * px - 2.0f * zoom * roll * py);
+  vy += 0.5f * chord * (-roll * roll * py + 2.0f * zoom * roll * px);
 #if HAS_DEPTH
   const float4 z = vload4(0, depth + i);
   const int4 valid = (z > 0.0f) & ((as_int4(z) & 0x7f800000) != 0x7f800000);  /* inf: 0 */

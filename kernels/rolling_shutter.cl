@@ -15,10 +15,15 @@
  *                              the starts p's own velocity, the fastest, the background's and
  *                              the nearest's; a start is valid when |q + v(q) t - p| <= TOL px;
  *                              the nearest valid one wins (same depth within SOFT_Z: the faster);
- *                              no valid one is a disocclusion, filled from the background: the
- *                              nearest pixel moving with the background velocity, searched from
- *                              p - v_bg t along the foreground's relative motion (up to
- *                              MAX_SEARCH px).
+ *                              no valid one is a disocclusion, filled from the background beside
+ *                              the occluder's trailing edge, p - v_o t (v_o: the occluder's
+ *                              velocity at p - v_bg t), else the nearest pixel moving with the
+ *                              background searched from there along the occluder's relative
+ *                              motion (up to MAX_SEARCH px).
+ * With CURVED (both halves of the vector pass) a point's displacement at time t is the quadratic
+ * through its positions one frame before, at and after the frame time,
+ * t (f + b) / 2 + t^2 (f - b) / 2 (f, b: forward and backward motion; lib/motion.cl's MB_PATH),
+ * in the fixed-point iteration, its test and the disocclusion fill.
  * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
  */
 #include "lib/common.h"
@@ -32,6 +37,9 @@
 #endif
 #ifndef MAX_SEARCH
 #define MAX_SEARCH 64
+#endif
+#ifndef CURVED
+#define CURVED 0       /* 1: backward motion records too (auxb): paths are quadratics */
 #endif
 
 /* starts of the fixed-point iteration: own, fastest, background (, nearest with depth) */
@@ -134,16 +142,30 @@ inline float4 rs_colour(global const float *col, const int pitch, const int w, c
   return TO_FLOAT4(c);
 }
 
-/* Fixed-point iteration from the start velocity v0: q <- p - v(q) t.  Returns whether it
- * converged; *q, *a: the final position and its aux record. */
-inline int rs_solve(global const float *aux, const int pitch, const int w, const int h,
-                    const REAL2 p, const REAL t, const float2 v0, REAL2 *q, float4 *a)
+/* Displacement by time t of the point at q moving with forward f (CURVED: and backward b). */
+inline REAL2 rs_disp(global const float *auxb, const int pitch, const int w, const int h,
+                     const REAL2 q, const float2 f, const REAL t)
+{
+#if CURVED
+  const REAL2 b = TO_REAL2(rs_aux(auxb, pitch, w, h, q).xy), ff = TO_REAL2(f);
+  return t * (REAL)0.5 * (ff + b) + t * t * (REAL)0.5 * (ff - b);
+#else
+  return TO_REAL2(f) * t;
+#endif
+}
+
+/* Fixed-point iteration from the start velocity v0: q <- p - d(q, t) (d: v(q) t, or the
+ * curved path).  Returns whether it converged; *q, *a: the final position and its aux
+ * record. */
+inline int rs_solve(global const float *aux, global const float *auxb, const int pitch,
+                    const int w, const int h, const REAL2 p, const REAL t, const float2 v0,
+                    REAL2 *q, float4 *a)
 {
   REAL2 s = p - TO_REAL2(v0) * t;
   for(int i = 0; i < ITERATIONS; i++)
-    s = p - TO_REAL2(rs_aux(aux, pitch, w, h, s).xy) * t;
+    s = p - rs_disp(auxb, pitch, w, h, s, rs_aux(aux, pitch, w, h, s).xy, t);
   const float4 r = rs_aux(aux, pitch, w, h, s);
-  const REAL2 d = p - TO_REAL2(r.xy) * t - s;
+  const REAL2 d = p - rs_disp(auxb, pitch, w, h, s, r.xy, t) - s;
   *q = s;
   *a = r;
   return dot(d, d) <= (REAL)(TOL * TOL);
@@ -157,7 +179,29 @@ inline int rs_in_front(const float z, const float s, const float zb, const float
   return same ? s > sb : z < zb;
 }
 
+/* The winning surface's pixel (at q, record a) is the antialiased rim left behind an
+ * occluder: a 4-neighbour in front of it moves away from it (within 60 degrees of the
+ * neighbour's direction) by a pixel or more by the time |t|.  Renderers write the velocity of
+ * the surface at the pixel centre, so such a rim carries the background's motion but part of
+ * the occluder's colour; kept, it stays behind as an outline of where the occluder was. */
+inline int rs_trailing_rim(global const float *aux, const int pitch, const int w, const int h,
+                           const REAL2 q, const float4 a, const float tabs)
+{
+  for(int k = 0; k < 4; k++)
+  {
+    const float2 e = k == 0 ? (float2)(1.0f, 0.0f) : k == 1 ? (float2)(-1.0f, 0.0f)
+                   : k == 2 ? (float2)(0.0f, 1.0f) : (float2)(0.0f, -1.0f);
+    const float4 nb = rs_aux(aux, pitch, w, h, q + TO_REAL2(e));
+    const float2 dv = nb.xy - a.xy;
+    const float ln = length(dv);
+    if(ln * tabs >= 1.0f && dot(e, dv) > 0.5f * ln && rs_in_front(nb.z, nb.w, a.z, a.w))
+      return 1;
+  }
+  return 0;
+}
+
 kernel void rolling_shutter_gather(global const float *col, global const float *aux,
+                                   global const float *auxb,
                                    global const float *nbr, global float *dst, const int pitch,
                                    const int width, const int height, const int tiles_x,
                                    const int k, const float tx, const float ty, const float xr,
@@ -187,28 +231,48 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
     if(seen) continue;
     REAL2 q;
     float4 a;
-    if(rs_solve(aux, pitch, width, height, p, t, starts[c], &q, &a)
+    if(rs_solve(aux, auxb, pitch, width, height, p, t, starts[c], &q, &a)
        && (best < 0 || rs_in_front(a.z, a.w, zb, sb)))
     {
       best = c; qb = q; zb = a.z; sb = a.w;
     }
   }
+  if(best >= 0 && rs_trailing_rim(aux, pitch, width, height, qb,
+                                   (float4)(rs_aux(aux, pitch, width, height, qb).xy, zb, sb),
+                                   (float)fabs(t)))
+    best = -1;                    /* an occluder's rim left behind: what it uncovered */
   if(best < 0)
   {
-    /* disocclusion: the background, as near to p - v_bg t as it shows in the source */
+    /* disocclusion: the background point b = p - v_bg t was hidden at the frame time by an
+     * occluder o (velocity v_o: the surface at b in the source, else the neighbourhood's
+     * fastest).  As motion blur reveals a moving edge's background, the background beside
+     * o's trailing edge stands in for it, translated with o's relative motion:
+     * b - (v_o - v_bg) t = p - v_o t.  This keeps the background's texture (no streak of
+     * one repeated pixel, no antialiased rim of o repeated behind it); where that point is
+     * no background either, the nearest pixel moving with the background is searched along
+     * the relative motion (away from o first). */
     const REAL2 q0 = p - TO_REAL2(vb) * t;
-    qb = q0;
+    const float tabs = (float)fabs(t);
+    float2 vo = rs_aux(aux, pitch, width, height, q0).xy;
+#if CURVED
+    float2 bo = rs_aux(auxb, pitch, width, height, q0).xy;
+#else
+    float2 bo = vo;
+#endif
+    if(length(vo - vb) * tabs <= TOL) { vo = vf; bo = vf; }   /* the tile's: no backward */
+    const REAL2 q1 = p - t * (REAL)0.5 * TO_REAL2(vo + bo)
+                       - t * t * (REAL)0.5 * TO_REAL2(vo - bo);
+    qb = q1;
 #if MAX_SEARCH > 0
-    const float2 dv = vf - vb;
+    const float2 dv = vo - vb;
     const float len = length(dv);
     const REAL2 dir = len > 1e-6f ? TO_REAL2(dv / len) : (REAL2)(1, 0);
-    const float tabs = (float)fabs(t);
     const int reach = (int)min(ceil(len * tabs) + 1.0f, (float)MAX_SEARCH);
     int found = 0;
     for(int j = 0; j <= reach && !found; j++)
-      for(int sgn = 1; sgn >= (j ? -1 : 1) && !found; sgn -= 2)
+      for(int sgn = -1; sgn <= (j ? 1 : -1) && !found; sgn += 2)
       {
-        const REAL2 q = q0 + dir * (REAL)(sgn * j);
+        const REAL2 q = q1 + dir * (REAL)(sgn * j);
         const float2 d = rs_aux(aux, pitch, width, height, q).xy - vb;
         if(length(d) * tabs <= TOL) { qb = q; found = 1; }
       }

@@ -305,3 +305,19 @@ def test_render_rows_are_the_rows_of_the_whole_render():
             full = render_sharp(scene, t, ss=2).rgba
             for y0, y1 in ((0, 1), (13, 20), (53, 54)):
                 assert np.array_equal(render_rows(scene, t, y0, y1, ss=2), full[y0:y1])
+
+
+def test_every_pixel_position_integrates_the_whole_shutter():
+    # Issue 24: one Weyl sequence over the renders gave sub-pixel position m the instants
+    # 0.5 + (m + 16 j) a (mod 1), 31% of the shutter at 64 renders: the truth's blur then
+    # depended on the direction of motion.  Now each position has one instant per stratum.
+    from clfx.bench.groundtruth import shutter_times
+
+    cam = CAM.updated(shutter_angle=180.0)
+    for n, k in ((64, 16), (256, 16), (12, 4), (5, 1)):
+        t = shutter_times(n, cam, k)
+        u = (t + 0.25) / 0.5
+        assert ((u >= 0) & (u < 1)).all()
+        for m in range(k):
+            strata = np.floor(u[m::k] * (n // k)).astype(int)
+            assert sorted(strata) == list(range(n // k)), (n, k, m)

@@ -325,6 +325,10 @@ def test_blender_multilayer_conventions(tmp_path):
                                                                 "ViewLayer.Vector.Y")),
                        notify=lambda msg, key: None)
     np.testing.assert_array_equal(fr_xy.velocity[0, 0], [-1.0, 2.0])
+    # both halves (issue 24): XY = previous - current, y-up -> backward motion
+    # current - previous = -(X, Y), y flipped -> (-1, 2); XY alone: no second half
+    np.testing.assert_array_equal(fr.velocity_back[0, 0], [-1.0, 2.0])
+    assert fr_xy.velocity_back is None
 
 
 def test_vray_normalized_and_velocity_overrides(tmp_path):

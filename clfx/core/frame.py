@@ -74,6 +74,9 @@ class Frame:
     colorspace: str = "lin_rec709"
     source_colorspace: str | None = None
     layout: Layout | None = None
+    velocity_back: np.ndarray | None = None
+    """The other half of the vector pass where the renderer writes both (Blender's Vector
+    XY beside ZW): backward motion, current - previous position, px/frame, +y down."""
 
     def __post_init__(self):
         h, w = self.data_window.shape
@@ -83,6 +86,9 @@ class Frame:
             raise ValueError(f"depth shape {self.depth.shape} does not match data window {self.data_window}")
         if self.velocity is not None and self.velocity.shape != (h, w, 2):
             raise ValueError(f"velocity shape {self.velocity.shape} does not match data window {self.data_window}")
+        if self.velocity_back is not None and self.velocity_back.shape != (h, w, 2):
+            raise ValueError(f"velocity_back shape {self.velocity_back.shape} does not match "
+                             f"data window {self.data_window}")
 
     @property
     def display_referred(self) -> bool:
@@ -95,6 +101,7 @@ class Frame:
         return replace(self, rgba=rgba, data_window=window,
                        depth=self.depth if same else None,
                        velocity=self.velocity if same else None,
+                       velocity_back=self.velocity_back if same else None,
                        metadata=dict(self.metadata))
 
     @classmethod

@@ -619,6 +619,31 @@ def _read_velocity(plan: ReadPlan, passes: PassSpec, frame_win: Rect,
     return crop_to(vel, pp.part.data_window, frame_win, 0.0)
 
 
+def _back_channels(pp) -> tuple[str, str] | None:
+    """Blender's other half: the Vector pass's X, Y (previous - current, y-up) in the part
+    whose Z, W (current - next) are the velocity; None elsewhere."""
+    if pp is None or pp.direction != "backward" or not pp.channels[0].endswith("Vector.Z") \
+            or not pp.channels[1].endswith("Vector.W"):
+        return None
+    names = (pp.channels[0][:-1] + "X", pp.channels[1][:-1] + "Y")
+    return names if all(n in pp.part.channels for n in names) else None
+
+
+def _read_velocity_back(plan: ReadPlan, passes: PassSpec, frame_win: Rect,
+                        dec: _Decoded) -> np.ndarray | None:
+    """Backward motion (current - previous position, px/frame, +y down) where the vector
+    pass holds both halves (Blender); None where it holds one."""
+    pp = plan.velocity
+    names = _back_channels(pp)
+    if names is None:
+        return None
+    got = dec.get(pp.path, pp.part, names)
+    # XY = previous - current: a backward vector, negated like ZW -> current - previous
+    back = ch.velocity_to_forward(got[names[0]], got[names[1]], direction="backward",
+                                  y_up=pp.y_up, scale=passes.velocity_scale)
+    return crop_to(back, pp.part.data_window, frame_win, 0.0)
+
+
 def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
                depth_path=None, velocity_path=None, part: int | str | None = None,
                notify=None, working_space: str | None = None,
@@ -676,12 +701,14 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
     depth, nohit = _read_depth(plan, passes, win, display, aspect, alpha, dec)
     _announce(path, plan, nohit, notify)
     velocity = _read_velocity(plan, passes, win, dec)
+    velocity_back = _read_velocity_back(plan, passes, win, dec)
     bit_depth = bpart.formats[bpart.channels.index(plan.beauty.rgb[0])]
     source = None if plan.source_colorspace == colour.RAW else plan.source_colorspace
     return Frame(rgba, win, display, aspect, depth, velocity, metadata(bpart.spec),
                  plan.encoding, os.fspath(path), bit_depth, colorspace=plan.working,
                  source_colorspace=source, layout=_layout(plan, dec.kept(plan.file.path, bpart,
-                                                                 without=plan.beauty.channels)))
+                                                                 without=plan.beauty.channels)),
+                 velocity_back=velocity_back)
 
 
 def _decoding(plan: ReadPlan) -> _Decoded:
@@ -696,6 +723,9 @@ def _decoding(plan: ReadPlan) -> _Decoded:
     for pp in (plan.depth, plan.velocity):
         if pp is not None:
             dec.want(pp.path, pp.part, pp.channels)
+    back = _back_channels(plan.velocity)
+    if back is not None:
+        dec.want(plan.velocity.path, plan.velocity.part, back)
     return dec
 
 

@@ -521,8 +521,11 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
     depth = rt.upload(frame.depth, window) if frame.depth is not None and "depth" in used else None
     velocity = (rt.upload(frame.velocity, window)
                 if frame.velocity is not None and "velocity" in used else None)
+    back = getattr(frame, "velocity_back", None)
+    velocity_back = (rt.upload(back, window)
+                     if back is not None and velocity is not None else None)
     rt.finish()
-    ctx = RenderContext(rt, src, depth=depth, velocity=velocity,
+    ctx = RenderContext(rt, src, depth=depth, velocity=velocity, velocity_back=velocity_back,
                         display_window=frame.display_window, pixel_aspect=frame.pixel_aspect,
                         frame=frame_number, seed=look.seed, camera=look.camera,
                         quality=quality or DEFAULT_QUALITY,

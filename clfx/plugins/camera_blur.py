@@ -24,7 +24,9 @@ the exact result is the average of the inverse look-ups along each pixel's path 
 spin and radial gathers in one kernel; arcs for roll, not tangents).  With trucking, the
 motion is turned into a velocity field and rendered by the depth-aware reconstruction of
 :mod:`clfx.fx.motion` (the gather motion_blur uses), which handles the parallax's occlusions;
-there the roll is linearised (the tangent of the arc).
+there a roll gives both halves of a vector pass (``v +- a/2``, ``a`` the second derivative of
+the similarity at the frame time), so the gather's paths are ``v t + a t^2 / 2``, the roll's
+arcs to second order (the tangent alone was a straight line).
 
 Reads outside the source window clamp to its edge (the blur does not grow the frame).
 Non-finite input pixels are set to 0 before they are spread (counted in ``ctx.notes``); finite
@@ -55,7 +57,7 @@ KERNEL = "camera_blur.cl"
 FAST_LEVELS = ("draft", "preview")
 """Levels whose path gather reads the nearest pixel rather than bilinearly (its long, smooth
 paths hide it; the speed is what these levels are for).  Trucking renders through
-the motion gather's levels (:data:`CAMERA_LEVELS`, bilinear throughout)."""
+the motion gather's levels (:data:`CAMERA_LEVELS`: bilinear, the clamped cubic under 2 px)."""
 
 
 def camera_motion(p, ctx):
@@ -96,12 +98,27 @@ def peak_speed_bound(m, window, min_depth) -> float:
     return v
 
 
-CAMERA_LEVELS = dict(LEVELS, draft=replace(LEVELS["draft"], max_samples=10))
-"""The motion gather's levels (:data:`clfx.fx.motion.LEVELS`), with 10 samples at most for
-draft instead of 8: on the bench case at 1920x1080 (blurs up to 32 px) 8 samples lie 4 px
-apart, and the ghost copies of the texture left draft 0.08 dB below the naive per-pixel line
-blur (39.07 vs 39.14 dB log-PSNR); 10 samples score 39.48 dB, level with preview's 16
-(39.49), for 81% of preview's CPU time (9 samples: 39.08)."""
+CAMERA_CUBIC_MAX_PX = 2.0
+"""Trucking: tiles whose blur is shorter than this read through the clamped cubic, longer
+ones bilinearly (motion_blur's threshold is 8 px).  Under a camera every pixel moves, so the
+far background's blur of a few pixels fills most of the frame: there the cubic ended further
+from the truth than the naive bilinear line blur (bench case at 480x270: final 36.1 vs 36.3
+dB), while under 2 px (smears of slow fine texture, issue 24) the cubic stays."""
+
+_BASE_LEVELS = dict(LEVELS, draft=replace(LEVELS["draft"], max_samples=10))
+
+CAMERA_LEVELS = {name: replace(lvl, cubic_max_px=CAMERA_CUBIC_MAX_PX,
+                               spacing=min(lvl.spacing, 0.5))
+                 for name, lvl in _BASE_LEVELS.items()}
+"""The motion gather's levels (:data:`clfx.fx.motion.LEVELS`) for trucking, with the cubic
+only under :data:`CAMERA_CUBIC_MAX_PX`, a sample per half pixel of blur at every level (the
+background's blurs of a few pixels took 3 samples at draft and preview, which ended below the
+naive line blur's 5: 36.1 vs 36.3 dB at 480x270; 36.4 with them, the cap still bounding
+long blurs) and 10 samples at most for draft instead of 8: on the bench case
+at 1920x1080 (blurs up to 32 px) 8 samples lie 4 px apart, and the ghost copies of the
+texture left draft 0.08 dB below the naive per-pixel line blur (39.07 vs 39.14 dB log-PSNR);
+10 samples score 39.48 dB, level with preview's 16 (39.49), for 81% of preview's CPU time
+(9 samples: 39.08)."""
 
 
 def _quality(name, lvl):
@@ -111,10 +128,12 @@ def _quality(name, lvl):
         f"{lvl.spacing:g} px of the longest path), {'bilinear' if bilinear else 'nearest'}, "
         f"{'float64' if lvl.fp64 else 'float32'} accumulation"
         f"{'' if lvl.jitter else ', midpoint rule'}; trucking: the motion gather "
-        f"(motion_blur's), up to {lvl.max_samples} samples, bilinear"))
+        f"(motion_blur's), up to {lvl.max_samples} samples (one per "
+        f"{min(lvl.spacing, 0.5):g} px), clamped cubic under {CAMERA_CUBIC_MAX_PX:g} px, "
+        f"bilinear above"))
 
 
-QUALITY = {name: _quality(name, lvl) for name, lvl in CAMERA_LEVELS.items()}
+QUALITY = {name: _quality(name, lvl) for name, lvl in _BASE_LEVELS.items()}
 """:data:`CAMERA_LEVELS`, described for the path gather."""
 
 
@@ -195,12 +214,21 @@ class CameraBlur(Plugin):
         if depth is None or depth.window != src.window:
             raise ClipError("camera_blur: truck/dolly need a depth pass covering the source "
                             f"window {src.window}")
-        vel = rt.image(src.window, 2)
-        rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
-                  (src.pitch // 4, src.height), depth, vel, i32(src.pitch), i32(src.width),
-                  i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
-                  f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]), f32(m["zoom"]),
-                  f32(m["truck_x"]), f32(m["truck_y"]), f32(m["dolly"]))
+        # with a roll, v + a/2 and v - a/2 (a: the roll's second derivative) as the two
+        # halves of a vector pass: the gather's quadratic paths follow the arcs (to second
+        # order); else the tangent
+        curved = m["roll"] != 0.0
+        fields = []
+        for chord in ((1.0, -1.0) if curved else (0.0,)):
+            vel = rt.image(src.window, 2)
+            rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
+                      (src.pitch // 4, src.height), depth, vel, i32(src.pitch), i32(src.width),
+                      i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
+                      f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]),
+                      f32(m["zoom"]), f32(m["truck_x"]), f32(m["truck_y"]), f32(m["dolly"]),
+                      f32(chord))
+            fields.append(vel)
+        vel, back = fields[0], (fields[1] if curved else None)
         a = ctx.analysis
         finite = a.min_depth[np.isfinite(a.min_depth)] if a.min_depth is not None else None
         zmin = float(finite.min()) if finite is not None and finite.size else math.inf
@@ -209,8 +237,10 @@ class CameraBlur(Plugin):
                                  max_radius_px=min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX),
                                  peak_speed=peak, level=CAMERA_LEVELS[ctx.quality],
                                  frame=ctx.frame,
-                                 nonfinite=nonfinite)
+                                 nonfinite=nonfinite, velocity_back=back)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
-                         f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px")
+                         f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
+                         + ("the roll along its arcs (quadratic paths through the previous, "
+                            "current and next positions)" if curved else "straight paths"))
         return out
 

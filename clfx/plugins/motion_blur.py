@@ -107,21 +107,28 @@ class MotionBlur(Plugin):
             raise ClipError("motion_blur: the velocity pass must cover the source window "
                             f"{src.window} (it covers {None if vel is None else vel.window})")
         depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
+        back = getattr(ctx, "velocity_back", None)
+        back = back if back is not None and back.window == src.window else None
         window = self.output_window(p, ctx)
         if window != src.window:
             # past the data window: nothing (transparent black), moving like the edge
             src = rt.reframe(src, window, "zero")
             vel = rt.reframe(vel, window, "clamp")
             depth = None if depth is None else rt.reframe(depth, window, "clamp")
+            back = None if back is None else rt.reframe(back, window, "clamp")
         t0, t1 = shutter_from(p, ctx.camera)
         a = ctx.analysis
         out, stats = reconstruct(
             rt, src, vel, depth, t0=t0, t1=t1, max_radius_px=self.max_radius_px(p, ctx),
             peak_speed=a.peak_speed, level=self.level(ctx), frame=ctx.frame,
-            nonfinite=a.nonfinite_count)
+            nonfinite=a.nonfinite_count, velocity_back=back)
         ctx.notes.append(f"motion_blur: {stats.moving_tiles}/{stats.tiles} tiles of "
                          f"{stats.tile} px moving, radius {stats.radius_px:.1f} px, "
-                         f"<= {stats.max_samples} samples"
+                         f"<= {stats.max_samples} samples, "
+                         + ("curved paths through the previous, current and next positions "
+                            "(both halves of the vector pass)" if back is not None else
+                            "straight paths along the forward motion (one half of the vector "
+                            "pass)")
                          + (f", {a.nonfinite_count} non-finite pixels zeroed"
                             if a.nonfinite_count else "")
                          + (f", grown to {window}" if window != ctx.source.window else ""))

@@ -27,10 +27,26 @@ background) or none (the background it uncovers):
   motion blur); a start is valid when its forward map lands within half a pixel of ``p``;
 - the nearest valid surface wins (depth pass; at the same depth within 2 %, or without a
   depth pass, the faster one: nearer surfaces move faster under camera motion);
-- no valid start is a disocclusion: it is filled from the background (the farthest surface
-  of the neighbourhood with a depth pass, else the slowest), as motion blur fills what a
-  moving edge reveals: the source pixel nearest to ``p - v_bg t`` that moves with the
-  background, searched along the foreground's relative motion.
+- no valid start is a disocclusion: the background point ``b = p - v_bg t`` (background: the
+  farthest surface of the neighbourhood with a depth pass, else the slowest) was hidden at
+  the frame time by an occluder moving with ``v_o`` (the surface at ``b`` in the source, else
+  the neighbourhood's fastest).  As motion blur fills what a moving edge reveals, the
+  background beside the occluder's trailing edge stands in, translated by the occluder's
+  relative motion: ``b - (v_o - v_bg) t = p - v_o t``; where that pixel does not move with the
+  background, the nearest one that does is searched along the relative motion (away from the
+  occluder first).  A translated strip keeps the background's texture; the former fill (the
+  nearest background pixel to ``b``) repeated one pixel along each row, a comb of streaks
+  that also repeated the occluder's antialiased rim (issue 24);
+- a winning background surface on an occluder's *rim* (a 4-neighbour in front of it moves
+  away from it by a pixel or more by ``|t|``) counts as uncovered too: renderers write the
+  velocity of the surface at the pixel centre, so the rim carries the background's motion
+  and part of the occluder's colour, and kept it would outline where the occluder was.
+
+With both halves of the vector pass (``velocity_back``: current - previous position, as
+Blender's Vector XY), a point's displacement by time ``t`` is the quadratic through its
+positions a frame before, at and after the frame time, ``t (f + b) / 2 + t^2 (f - b) / 2``
+(:func:`clfx.fx.motion.path`), in the iteration and in the fill: a spinning object shears
+along its arcs.  With one half it is ``v t`` (today's straight paths; the note says which).
 
 The colour at ``q`` is read bilinearly.  Velocities are sanitised and
 clamped like motion blur's, so no row moves farther than ``max_shift`` x the frame diagonal
@@ -206,21 +222,34 @@ class RollingShutter(Plugin):
         rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=has_depth),
                   (pitch // 4, h), vel, depth if depth is not None else dummy, aux,
                   i32(pitch), i32(h), f32(vmax))
+        back = getattr(ctx, "velocity_back", None)
+        back = back if back is not None and back.window == src.window else None
+        auxb = dummy
+        if back is not None:   # (bx, by, z, |b|), clamped like the forward motion
+            auxb = rt.image(src.window, 4)
+            rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=has_depth),
+                      (pitch // 4, h), back, depth if depth is not None else dummy, auxb,
+                      i32(pitch), i32(h), f32(vmax))
         k = tile_size(shift)
         ntx, nty = -(-w // k), -(-h // k)
         kfile = self.descriptor.kernel
-        defines = dict(HAS_DEPTH=has_depth, ITERATIONS=lvl.iterations, MAX_SEARCH=lvl.max_search, fp64=lvl.fp64)
+        defines = dict(HAS_DEPTH=has_depth, ITERATIONS=lvl.iterations, MAX_SEARCH=lvl.max_search, fp64=lvl.fp64,
+                       **({"CURVED": 1} if back is not None else {}))
         tiles, nbr = rt.buffer(ntx * nty * 48), rt.buffer(ntx * nty * 48)   # 3 float4 a tile
         rt.launch(rt.kernel(kfile, "rolling_shutter_tiles", **defines), (ntx, nty), aux, tiles,
                   i32(pitch), i32(w), i32(h), i32(ntx), i32(nty), i32(k))
         rt.launch(rt.kernel(kfile, "rolling_shutter_neighbors", **defines), (ntx, nty), tiles,
                   nbr, i32(ntx), i32(nty))
-        rt.launch(rt.kernel(kfile, "rolling_shutter_gather", **defines), (w, h), col, aux, nbr,
+        rt.launch(rt.kernel(kfile, "rolling_shutter_gather", **defines), (w, h), col, aux, auxb, nbr,
                   dst, i32(pitch), i32(w), i32(h), i32(ntx), i32(k), f32(times.tx),
                   f32(times.ty), f32(times.xr), f32(times.yr))
         ctx.notes.append(f"rolling_shutter: readout {self.readout(p):.3g} frame "
                          f"({p.direction}, t = 0 at the {p.reference} row), largest shift "
-                         f"{shift:.1f} px, {k} px tiles"
+                         f"{shift:.1f} px, {k} px tiles, "
+                         + ("curved paths through the previous, current and next positions "
+                            "(both halves of the vector pass)" if back is not None else
+                            "straight paths along the forward motion (one half of the vector "
+                            "pass)")
                          + (f", {a.nonfinite_count} non-finite pixels zeroed"
                             if a.nonfinite_count else ""))
         return dst

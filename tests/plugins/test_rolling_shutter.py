@@ -155,10 +155,12 @@ def test_beats_input_and_naive_splat_on_ground_truth(rt, pan_case):
     others = max(scores["unchanged input"], scores["naive forward splat (holes left)"],
                  scores["naive forward splat over the input"])
     # measured at 160 x 90: input 19.2, naive splat 19.6 (holes left) / 22.2 dB (over the
-    # input); draft 25.9, preview and final 26.1, reference 26.0 dB
+    # input); draft 26.51, preview and final 26.45, reference 26.47 dB (before the
+    # disocclusion fill of issue 24: 25.9, 26.1, 26.1, 26.0): the levels differ only in how
+    # far a hole searches for background, which the translated fill rarely needs
     assert scores["final"] >= others + 3.0, scores
     assert min(scores[q] for q in LEVELS) >= others + 3.0, scores
-    assert scores["draft"] <= scores["final"] <= scores["reference"] + 0.1, scores
+    assert max(scores[q] for q in LEVELS) - min(scores[q] for q in LEVELS) <= 0.1, scores
 
 
 def test_ground_truth_rows_are_renders_at_their_time(pan_case):
@@ -171,3 +173,101 @@ def test_ground_truth_rows_are_renders_at_their_time(pan_case):
         np.testing.assert_array_equal(pan_case["truth"][y],
                                       render_sharp(scene, float(times[y, 0]), ss=2).rgba[y])
     np.testing.assert_array_equal(pan_case["truth"][0], pan_case["source"][0])  # t = 0
+
+
+def test_trailing_edge_has_no_row_comb_or_left_behind_rim(rt):
+    # A striped disk moving right over a fine static texture (issue 24): where the disk
+    # uncovers the background, rows must not alternate between object and background (a
+    # comb) nor repeat its antialiased rim (a left-behind patch).  Measured against the
+    # per-row-time truth: the vertical second difference over the uncovered pixels.
+    from clfx.bench.scene import Layer, Scene, Texture, render_sharp
+
+    w, h = 128, 96
+    wall = Layer(depth=20.0, texture=Texture("noise", (0.5, 0.45, 0.4), (0.1, 0.1, 0.1),
+                                             period=4.0, seed=3), shape="full", name="wall")
+    disk = Layer(depth=5.0, texture=Texture("stripes", (0.9, 0.25, 0.1), (0.95, 0.9, 0.8),
+                                            period=14.0, angle=30.0),
+                 shape="disk", center=(50, 48), size=(40, 40), velocity=(12.0, 0.0))
+    scene = Scene(w, h, (wall, disk))
+    sharp = render_sharp(scene, 0.0, ss=2)
+    params = dict(readout_fraction=0.75)
+    truth = case_module.row_time_truth(scene, case_module.time_map(w, h, params))
+    # uncovered: the disk at the frame time, background at the row's time (and a pixel
+    # either side in x, where the rim sits)
+    disk_now = sharp.depth < 10.0
+    rows = case_module.time_map(w, h, params)
+    bg_then = np.abs(truth - sharp.rgba).sum(-1) > 0.02
+    uncovered = disk_now & bg_then & (rows * 12.0 >= 2.0)
+    uncovered = uncovered | np.roll(uncovered, -1, 1) | np.roll(uncovered, 1, 1)
+
+    def comb(img):
+        d2 = np.abs(img[2:, :, :3] - 2 * img[1:-1, :, :3] + img[:-2, :, :3]).sum(-1)
+        return d2[uncovered[1:-1]].mean()
+
+    want = comb(truth)
+    p = RollingShutter.params(**params)
+    for q in LEVELS:
+        out = RollingShutter().apply(rt, p, sharp.rgba, velocity=sharp.velocity,
+                                     depth=sharp.depth, quality=q)
+        got = comb(out)
+        psnr = error_metrics(out, truth)["psnr_log"]
+        # measured: truth 0.146; before the fill (the nearest background pixel repeated
+        # along the row, rim included) 0.233 draft, 0.210 the others (PSNR 28.9 / 30.6 dB);
+        # with it 0.143 at every level (33.5 dB)
+        assert got <= 1.15 * want, (q, got, want)
+        assert psnr >= 32.0, (q, psnr)
+
+
+def test_both_halves_match_reference_and_one_half_is_today(rt, rng):
+    src, vel, depth = layered((48, 64), rng)
+    back = vel + rng.normal(0.0, 1.5, vel.shape).astype(np.float32)
+    p = RollingShutter.params(readout_fraction=0.8, reference="centre", max_shift=0.3)
+    for q in LEVELS:
+        got = RollingShutter().apply(rt, p, src, velocity=vel, velocity_back=back, depth=depth,
+                                     quality=q)
+        want = oracle(src, vel, depth, p, q, velocity_back=back)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 if q == "reference" else 1e-5,
+                                   err_msg=q)
+    one = RollingShutter().apply(rt, p, src, velocity=vel, depth=depth)
+    same = RollingShutter().apply(rt, p, src, velocity=vel, velocity_back=vel, depth=depth)
+    np.testing.assert_allclose(same, one, rtol=0, atol=1e-5)
+
+
+def test_spinning_wheel_shears_along_its_arcs_with_both_halves(rt):
+    # A checkered wheel turning 20 deg/frame over a static wall: with the chords to the
+    # previous and next positions (Blender's two halves) the rows follow the arcs; the
+    # forward chord alone (or the tangent) moves them along straight lines.  Measured: both
+    # halves 28.3 dB, the forward chord 24.8, the exact tangent (which no renderer's vector
+    # pass holds) 28.0; at 40 deg/frame 20.2, 17.5 and 20.5 (the tangent ahead there).
+    from clfx.bench.scene import Layer, Scene, Texture, render_sharp
+
+    w, h, omega, cx, cy = 128, 96, 20.0, 64.0, 48.0
+    wall = Layer(depth=20.0, texture=Texture("noise", (0.5, 0.45, 0.4), (0.1, 0.1, 0.1),
+                                             period=4.0, seed=3), shape="full")
+    wheel = Layer(depth=5.0, texture=Texture("checker", (0.9, 0.3, 0.1), (0.95, 0.9, 0.8),
+                                             period=10.0), shape="disk", center=(cx, cy),
+                  size=(70.0, 70.0), spin=omega)
+    scene = Scene(w, h, (wall, wheel))
+    sharp = render_sharp(scene, 0.0, ss=2)
+    params = dict(readout_fraction=0.75, max_shift=0.3)
+    truth = case_module.row_time_truth(scene, case_module.time_map(w, h, params))
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    rx, ry = xx - cx, yy - cy
+    on = sharp.depth < 10.0
+
+    def turned(deg):
+        a = np.radians(deg)
+        return np.stack([np.cos(a) * rx - np.sin(a) * ry, np.sin(a) * rx + np.cos(a) * ry], -1)
+
+    rel = np.stack([rx, ry], -1)
+    fwd = np.where(on[..., None], turned(omega) - rel, 0.0).astype(np.float32)
+    back = np.where(on[..., None], rel - turned(-omega), 0.0).astype(np.float32)
+    p = RollingShutter.params(**params)
+    score = {}
+    for label, kw in (("both", dict(velocity=fwd, velocity_back=back)),
+                      ("forward", dict(velocity=fwd)),
+                      ("tangent", dict(velocity=sharp.velocity))):
+        out = RollingShutter().apply(rt, p, sharp.rgba, depth=sharp.depth, **kw)
+        score[label] = error_metrics(out, truth)["psnr_log"]
+    assert score["both"] >= score["forward"] + 3.0, score
+    assert score["both"] >= score["tangent"], score

@@ -99,7 +99,7 @@ def tile_size(shift):
 
 def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
                     reference="first", max_shift=0.1, iterations=3, max_search=64,
-                    data_window=None, display_window=None):
+                    data_window=None, display_window=None, velocity_back=None):
     """The rolling-shutter output over the data window (see the plugin's notes)."""
     src = np.asarray(src, np.float64)
     col = np.where(np.isfinite(src), src, 0.0)
@@ -113,6 +113,16 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
     t_max = np.abs(t).max()
     shift = min(peak * t_max, max_shift * diag, MAX_RADIUS_PX)
     aux = prepare(velocity, depth, shift / t_max if t_max > 0 else 0.0)
+    auxb = None if velocity_back is None else prepare(velocity_back, depth,
+                                                      shift / t_max if t_max > 0 else 0.0)
+
+    def disp(q, f):
+        """Displacement by t of the point at q moving with f (and, curved, its backward)."""
+        if auxb is None:
+            return f * tt
+        b = _nearest(auxb, q)[..., :2]
+        return tt * 0.5 * (f + b) + tt * tt * 0.5 * (f - b)
+
     k = tile_size(shift)
     nbr = tile_candidates(aux, k, depth is not None)
     yy, xx = np.mgrid[0:h, 0:w]
@@ -126,9 +136,9 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
     for c, v0 in enumerate(starts):
         q = p - v0 * tt
         for _ in range(iterations):
-            q = p - _nearest(aux, q)[..., :2] * tt
+            q = p - disp(q, _nearest(aux, q)[..., :2])
         a = _nearest(aux, q)
-        d = p - a[..., :2] * tt - q
+        d = p - disp(q, a[..., :2]) - q
         valid = (d ** 2).sum(axis=2) <= TOL * TOL
         same = np.abs(a[..., 2] - zb) <= SOFT_Z * np.minimum(a[..., 2], zb)
         front = np.where(same, a[..., 3] > sb, a[..., 2] < zb)
@@ -136,22 +146,41 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
         best[take] = c
         qb[take], zb[take], sb[take] = q[take], a[..., 2][take], a[..., 3][take]
 
+    # a winner on an occluder's antialiased rim left behind (a 4-neighbour in front moving
+    # away from it by >= 1 px by |t|) counts as uncovered
+    aw = _nearest(aux, qb)
+    rim = np.zeros((h, w), bool)
+    for e in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+        nbv = _nearest(aux, qb + np.array(e))
+        dvn = nbv[..., :2] - aw[..., :2]
+        ln = np.hypot(dvn[..., 0], dvn[..., 1])
+        same = np.abs(nbv[..., 2] - zb) <= SOFT_Z * np.minimum(nbv[..., 2], zb)
+        front = np.where(same, nbv[..., 3] > sb, nbv[..., 2] < zb)
+        rim |= (ln * np.abs(t) >= 1.0) & (dvn @ np.array(e) > 0.5 * ln) & front
+    best[(best >= 0) & rim] = -1
     hole = best < 0
     vb = nb[..., 1, :]
+    tabs = np.abs(t)
     q0 = p - vb * tt
-    qb[hole] = q0[hole]
+    vo = _nearest(aux, q0)[..., :2]
+    bo = vo if auxb is None else _nearest(auxb, q0)[..., :2]
+    bgo = (np.hypot(*(vo - vb).transpose(2, 0, 1)) * tabs <= TOL)[..., None]
+    vo = np.where(bgo, nb[..., 0, :], vo)       # the tile's fastest: no backward motion
+    bo = np.where(bgo, nb[..., 0, :], bo)
+    q1 = p - tt * 0.5 * (vo + bo) - tt * tt * 0.5 * (vo - bo)
+    qb[hole] = q1[hole]
     if max_search > 0:
-        dv = nb[..., 0, :] - vb
+        dv = vo - vb
         ln = np.hypot(dv[..., 0], dv[..., 1])
         direc = np.where((ln > 1e-6)[..., None], dv / np.where(ln > 1e-6, ln, 1)[..., None],
                          np.array([1.0, 0.0]))
-        reach = np.minimum(np.ceil(ln * np.abs(t)) + 1, max_search)
+        reach = np.minimum(np.ceil(ln * tabs) + 1, max_search)
         todo = hole.copy()
         for j in range(int(reach[hole].max(initial=-1)) + 1):
-            for sgn in ((1,) if j == 0 else (1, -1)):
-                q = q0 + direc * (sgn * j)
+            for sgn in ((-1,) if j == 0 else (-1, 1)):
+                q = q1 + direc * (sgn * j)
                 dd = _nearest(aux, q)[..., :2] - vb
-                ok = todo & (j <= reach) & (np.hypot(dd[..., 0], dd[..., 1]) * np.abs(t) <= TOL)
+                ok = todo & (j <= reach) & (np.hypot(dd[..., 0], dd[..., 1]) * tabs <= TOL)
                 qb[ok] = q[ok]
                 todo &= ~ok
     return _bilinear(col, qb)
