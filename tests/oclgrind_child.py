@@ -33,6 +33,9 @@ PARAMS = {
     "bleed": {"size": 0.05},
     # a small corona: the FFT grid (and VkFFT's tolerated race reports, ~1 per element) stay small
     "corona": {"size": 0.015, "extent": 3.0},
+    # a small glare: its direct gather (PSFs <= 21x21 taps) costs Oclgrind ~taps x pixels;
+    # the FFT paths it shares with corona (clfx.fx.fftconv) run through corona
+    "glare": {"size": 0.08},
     "breathing": {"amount": 0.5, "reference_focus": 1.0},
     "camera_blur": {"length": 0.05, "roll": 2.0, "zoom": 0.02},
     "defocus": {"size": 0.03},
