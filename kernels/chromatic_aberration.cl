@@ -49,7 +49,7 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
   const float4 ux4 = dx4 * ax;
   const float uy1 = dy1 * ay;
   const float4 t4 = clamp(ux4 * ux4 + uy1 * uy1, 0.0f, 1.0f) * (float)LUTN;
-  const int4 j4 = min(convert_int4(t4), LUTN - 1);
+  const int4 j4 = min(convert_int4(t4), (int4)(LUTN - 1));
   const float4 f4 = t4 - convert_float4(j4);
   /* the tables are interleaved (entry j holds all NWP wavelengths): per pixel two vector
    * loads and one mix give every wavelength's scale (scalar reads per wavelength cost 40%) */

@@ -5,7 +5,9 @@
 #
 # Installs, only where missing:
 #   - Debian packages: pocl-opencl-icd (the CPU OpenCL driver), ocl-icd-opencl-dev (headers,
-#     needed to build pyvkfft), python3-venv, clinfo.  Needs root or sudo; otherwise prints the
+#     needed to build pyvkfft), python3-venv, clinfo, oclgrind (the OpenCL simulator that
+#     tests/test_oclgrind.py runs every kernel under; registered with no ICD, so it never
+#     becomes a render device).  Needs root or sudo; otherwise prints the
 #     exact command to run and stops.
 #   - .venv with clfx installed editable plus its [test] extras, and pyvkfft built from source
 #     with its OpenCL backend (VKFFT_BACKEND=opencl).  Never PyPI's pocl-binary-distribution:
@@ -15,7 +17,7 @@ cd "$(dirname "$0")/.."
 
 PYTHON=${PYTHON:-python3}
 VENV=${VENV:-.venv}
-APT_PKGS=(pocl-opencl-icd ocl-icd-opencl-dev ocl-icd-libopencl1 python3-venv clinfo)
+APT_PKGS=(pocl-opencl-icd ocl-icd-opencl-dev ocl-icd-libopencl1 python3-venv clinfo oclgrind)
 
 say() { printf 'clfx setup: %s\n' "$*" >&2; }
 

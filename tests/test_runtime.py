@@ -108,7 +108,30 @@ def test_cpu_device_builds_get_software_prefetch(rt, tmp_path, monkeypatch):
     rt.launch(rt.kernel("probe.cl", "probe"), (1,), o, s)
     rt.cl.enqueue_copy(rt.queue, out, o.buffer)
     rt.finish()
-    assert out[0] == int(rt.shares_host_cores)
+    assert out[0] == int(rt.host_cpu_kernels)
+
+
+def test_cpu_only_kernel_paths_follow_the_implementation_not_the_device_type(rt, monkeypatch):
+    """CLFX_HOST_CPU (prefetch, streaming stores, out-of-line cold paths) is for PoCL's CPU
+    device: Oclgrind reports every device type, CPU included, and cannot build a prefetch."""
+    from types import SimpleNamespace
+
+    from clfx.device.runtime import Runtime, is_pocl
+
+    assert is_pocl("Portable Computing Language") and is_pocl("PoCL")
+    assert not is_pocl("Oclgrind") and not is_pocl("Intel(R) OpenCL")
+    cpu, all_types = int(rt.cl.device_type.CPU), int(rt.cl.device_type.ALL)
+    for platform, kind, want in (("Portable Computing Language", cpu, True),
+                                 ("Oclgrind", all_types, False),   # what Oclgrind reports
+                                 ("Intel(R) OpenCL", cpu, False),
+                                 ("Portable Computing Language", int(rt.cl.device_type.GPU), False)):
+        fake = SimpleNamespace(cl=rt.cl, device=SimpleNamespace(
+            type=kind, platform=SimpleNamespace(name=platform), global_mem_cache_size=1 << 20,
+            mem_base_addr_align=1024))
+        fake.shares_host_cores = Runtime.shares_host_cores.fget(fake)
+        assert Runtime.host_cpu_kernels.fget(fake) is want, platform
+        fake.host_cpu_kernels = want
+        assert Runtime.streams_stores(fake, 1 << 30) is want, platform
 
 
 @pytest.mark.parametrize("stream", [0, 1])
@@ -143,12 +166,12 @@ def test_streaming_stores_write_every_value_and_are_live_only_where_asked(rt, tm
         rt.finish()
         want = np.repeat(np.arange(n, dtype=np.float32), 16) + np.tile(np.arange(16) / 16, n)
         np.testing.assert_array_equal(got, want.astype(np.float32))
-        assert flag[0] == int(bool(stream) and rt.shares_host_cores)
+        assert flag[0] == int(bool(stream) and rt.host_cpu_kernels)
 
 
 def test_streaming_stores_are_asked_for_outputs_the_cache_cannot_keep(rt, monkeypatch):
     cache = int(rt.device.global_mem_cache_size)
-    if not rt.shares_host_cores or cache <= 0:
+    if not rt.host_cpu_kernels or cache <= 0:
         assert not rt.streams_stores(1 << 40)
         return
     assert rt.streams_stores(cache // 2) and not rt.streams_stores(cache // 2 - 1)
@@ -276,3 +299,28 @@ def test_cache_counts_the_device_memory_it_allocated_and_its_peak(rt):
     assert pool.device_bytes == 0 and pool.stats()["device_peak"] == 2800
     pool.reset_peak()
     assert pool.device_peak == 0
+
+
+def test_a_device_without_float64_says_so_once_and_reference_still_renders(rt, monkeypatch,
+                                                                         capfd):
+    """Where the device lacks cl_khr_fp64 (simulated), the first float64 request says so in
+    one line on stderr; the reference level renders in float32 and says nothing more."""
+    from clfx import api
+
+    monkeypatch.setattr(rt, "has_fp64", False)
+    monkeypatch.setattr(rt, "_fp64_said", False)
+    monkeypatch.setattr(rt, "_programs", {})
+    monkeypatch.setattr(rt, "_kernels", {})
+    assert rt.use_fp64(False) is False
+    assert capfd.readouterr().err == ""
+    rgba = np.full((9, 13, 4), 0.5, np.float32)
+    rgba[4, 6, :3] = 1e4
+    look = {"name": "fp64", "schema": 1,
+            "effects": [{"effect": "glare", "params": {"strength": 0.1}},
+                        {"effect": "grain", "params": {"amount": 0.02}}]}
+    out = api.render_array(rgba, look, quality="reference", device=None)
+    assert np.isfinite(out.rgba).all() and out.report.as_dict()["ran"] == ["glare", "grain"]
+    assert rt.use_fp64(True) is False
+    err = [line for line in capfd.readouterr().err.splitlines() if "float64" in line]
+    assert len(err) == 1, err
+    assert "has no float64 (cl_khr_fp64)" in err[0] and "reference" in err[0]

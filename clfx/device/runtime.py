@@ -217,6 +217,12 @@ def user_set_pocl_affinity() -> bool:
     return "POCL_AFFINITY" in os.environ and not _AFFINITY_DEFAULTED
 
 
+def is_pocl(platform_name: str) -> bool:
+    """Whether an OpenCL platform is PoCL ("Portable Computing Language")."""
+    name = platform_name.lower()
+    return "portable computing language" in name or "pocl" in name
+
+
 def survey_devices(selector: str | None = None) -> tuple[list[DeviceReport], object | None]:
     """Try every platform and device; return the reports and the chosen ``cl.Device``.
 
@@ -259,7 +265,7 @@ def survey_devices(selector: str | None = None) -> tuple[list[DeviceReport], obj
             reports.append(rep)
 
     def rank(r: DeviceReport):
-        pocl = "portable computing language" in r.platform.lower() or "pocl" in r.platform.lower()
+        pocl = is_pocl(r.platform)
         return (0 if r.kind == "CPU" and pocl else 1 if r.kind == "CPU" else 2, r.index)
 
     usable = sorted((r for r in reports if r.usable), key=rank)
@@ -336,6 +342,7 @@ class Runtime:
         self.ctx = cl.Context([device])
         self.queue = cl.CommandQueue(self.ctx)
         self.has_fp64 = "cl_khr_fp64" in device.extensions
+        self._fp64_said = False
         self.cache = DeviceCache(self.ctx)
         self._programs: dict = {}
         self._kernels: dict = {}
@@ -360,15 +367,26 @@ class Runtime:
         (EXR codecs) take turns on the same cores (`clfx.pipeline.batch.stream_mode`)."""
         return bool(self.device.type & self.cl.device_type.CPU)
 
+    @property
+    def host_cpu_kernels(self) -> bool:
+        """Whether kernels may use the CPU-only paths (``CLFX_HOST_CPU``, kernels/lib/common.h:
+        ``__builtin_prefetch``, x86 streaming stores and ``sfence``, out-of-line cold paths):
+        on PoCL's CPU device only.  Not on any device that reports the CPU type: Oclgrind
+        reports every type and cannot build a prefetch (``llvm.prefetch`` is an undefined
+        external function there), and another CPU implementation's compiler may not take
+        the x86 builtins."""
+        return self.shares_host_cores and is_pocl(self.device.platform.name)
+
     def streams_stores(self, nbytes: int) -> bool:
         """Whether a kernel writing ``nbytes`` of output should stream it past the cache
-        (``CLFX_STREAM_STORES``, kernels/lib/common.h): on a CPU device, for an output of at
+        (``CLFX_STREAM_STORES``, kernels/lib/common.h): on PoCL's CPU device
+        (:attr:`host_cpu_kernels`), for an output of at
         least half its global memory cache, which would not stay cached beside its source
         anyway; the store then skips reading each line in first.  The kernels store whole
         64-byte lines, so buffers must be aligned to at least that."""
         cache = int(getattr(self.device, "global_mem_cache_size", 0) or 0)
         align_bits = int(getattr(self.device, "mem_base_addr_align", 0) or 0)
-        return (self.shares_host_cores and cache > 0 and align_bits >= 512
+        return (self.host_cpu_kernels and cache > 0 and align_bits >= 512
                 and nbytes >= cache // 2)
 
     @property
@@ -377,7 +395,15 @@ class Runtime:
 
     # -- programs -------------------------------------------------------------------------
     def use_fp64(self, wanted: bool) -> bool:
-        """Whether a program asked for float64 (a quality Level's ``fp64``) gets it here."""
+        """Whether a program asked for float64 (a quality Level's ``fp64``) gets it here.
+        Where the device lacks ``cl_khr_fp64`` the first such request says so in one line on
+        stderr (the ``reference`` level then accumulates in float32) and later ones do not."""
+        if wanted and not self.has_fp64 and not self._fp64_said:
+            self._fp64_said = True
+            with contextlib.suppress(Exception):
+                sys.stderr.write(f"clfx: {self.description} has no float64 (cl_khr_fp64): "
+                                 f"levels that ask for it (reference) accumulate in float32\n")
+                sys.stderr.flush()
         return bool(wanted) and self.has_fp64
 
     def program(self, file: str, fp64: bool = False, **defines):
@@ -403,7 +429,7 @@ class Runtime:
         opts = list(BUILD_OPTIONS) + [f"-I{self.kernel_dir}"] + [f"-D{k}={v}" for k, v in defines]
         if self.has_fp64:
             opts.append("-DCLFX_HAS_FP64=1")
-        if self.shares_host_cores:
+        if self.host_cpu_kernels:
             opts.append("-DCLFX_HOST_CPU=1")   # kernels/lib/common.h: prefetch, streaming, cold
         caught: list[str] = []
         try:

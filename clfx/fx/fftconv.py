@@ -312,7 +312,7 @@ def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | No
         raise ValueError(f"precision {precision!r} is not one of {PRECISIONS}")
     if method not in METHODS:
         raise ValueError(f"method {method!r} is not one of {METHODS}")
-    if precision == "float64" and not rt.has_fp64:
+    if precision == "float64" and not rt.use_fp64(True):   # says so once on stderr
         precision = "float32"
     info = info if info is not None else ConvolveInfo()
     info.method, info.precision = method, precision
@@ -341,7 +341,7 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
             info.fallback = (f"more than {max_points} pixels above the split level "
                              f"{split:g}: float64 FFT instead")
             info.notes.append(info.fallback)
-            precision = "float64" if rt.has_fp64 else "float32"
+            precision = "float64" if rt.use_fp64(True) else "float32"
             split = None
         else:
             info.bright_pixels = bright[2]

@@ -6,6 +6,10 @@
  *
  * Non-finite tests use the exponent bits, not isnan/isinf, so they survive any build flags
  * (notes/hard-cases.md case 4).
+ *
+ * Integer min/max/clamp of a vector take vector bounds, `clamp(i4, (int4)(0), (int4)(w - 1))`,
+ * not scalars: Oclgrind 21.10 reads a scalar bound as a vector (lanes 1-3 garbage), so its
+ * checks saw indices "clamped" outside the image (tests/test_oclgrind.py).
  */
 #ifndef CLFX_COMMON_H
 #define CLFX_COMMON_H

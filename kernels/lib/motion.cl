@@ -452,8 +452,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       const float4 dx = vn.x * t, dy = vn.y * t;             /* d = x - y */
 #endif
       const float4 px = lane + 0.5f - dx, py = fy + 0.5f - dy;
-      const int4 ix = clamp(convert_int4(floor(px)), 0, width - 1);
-      const int4 iy = clamp(convert_int4(floor(py)), 0, height - 1);
+      const int4 ix = clamp(convert_int4(floor(px)), (int4)(0), (int4)(width - 1));
+      const int4 iy = clamp(convert_int4(floor(py)), (int4)(0), (int4)(height - 1));
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 f = clamp(rel, 0.0f, 1.0f);
@@ -501,8 +501,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 #else
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
-      const int4 ix = clamp(convert_int4(floor(px)), 0, width - 1);
-      const int4 iy = clamp(convert_int4(floor(py)), 0, height - 1);
+      const int4 ix = clamp(convert_int4(floor(px)), (int4)(0), (int4)(width - 1));
+      const int4 iy = clamp(convert_int4(floor(py)), (int4)(0), (int4)(height - 1));
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 ws = 1.0f - clamp(rel, 0.0f, 1.0f);
