@@ -168,6 +168,14 @@ def _runtime(ctx: click.Context):
     return Runtime.get(ctx.obj.get("device") if ctx.obj else None)
 
 
+def _check_first_frame(input_path: str, options) -> None:
+    """Refuse a first frame whose windows exceed the pixel limits from its header, before
+    the device is set up on a thread (`clfx.pipeline.batch.check_first_frame`)."""
+    from clfx.pipeline.batch import check_first_frame
+
+    check_first_frame(input_path, options)
+
+
 def _runtime_soon(ctx: click.Context):
     """Start creating the runtime on a thread (`clfx.api.runtime_soon`), so device set-up
     overlaps loading the look and reading the first frame; call ``.result()`` for it."""
@@ -493,12 +501,14 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
         raise click.UsageError("give --workers N (a local cluster) or --scheduler ADDRESS "
                                "(an existing one), not both")
     scale = {"workers": workers, "scheduler": scheduler, "chunk": chunk, "fail_fast": fail_fast}
+    options = _render_options(kw)
+    _check_first_frame(input_path, options)
     runtime = None if workers or scheduler else _runtime_soon(ctx)
     from clfx.api import load_look, look_from_stamp
 
     lk = look_from_stamp(look_from) if look_from else (look_name or "default")
     lk = load_look(lk, set=assignments)
-    _run_batch(ctx, lk, input_path, output_path, _render_options(kw), runtime,
+    _run_batch(ctx, lk, input_path, output_path, options, runtime,
                scale if runtime is None else None)
 
 
@@ -546,11 +556,13 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
     _check_raw_usage(input_path, output_path, kw.get("raw_size"))
+    options = _render_options(kw)
+    _check_first_frame(input_path, options)
     runtime = _runtime_soon(ctx)
     from clfx.pipeline.presets import single_effect_look
 
     lk = single_effect_look(effect, list(assignments))
-    _run_batch(ctx, lk, input_path, output_path, _render_options(kw), runtime)
+    _run_batch(ctx, lk, input_path, output_path, options, runtime)
 
 
 def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):

@@ -248,3 +248,21 @@ def test_only_io_overlapping_a_cpu_device_runs_lowered(monkeypatch):
     monkeypatch.setattr(batch_mod, "STREAM", "overlap")
     assert batch_mod.io_overlaps_cpu_device(_Device(True))
     assert not batch_mod.io_overlaps_cpu_device(_Device(False))
+
+
+def test_a_frame_over_4k_keeps_no_channels_for_the_writer(tmp_path, rng, monkeypatch):
+    """Issue 23 (memory): above `KEEP_MAX_PIXELS` the reader keeps nothing for the writer (an
+    8K frame's passes as float32 would sit through the render: 380 MiB); the writer decodes
+    them again, to the same bytes."""
+    src = tmp_path / "in.exr"
+    write_frame(_frame(rng), src, bit_depth="float")
+    write_frame(read_frame(src), tmp_path / "kept.exr")
+    monkeypatch.setattr(io_read, "KEEP_MAX_PIXELS", 24 * 40 - 1)
+    reads = []
+    real = oiio.ImageInput.read_image
+    monkeypatch.setattr(oiio.ImageInput, "read_image",
+                        lambda self, *a: reads.append(a) or real(self, *a))
+    fr = read_frame(src)
+    assert fr.layout.stored == {} and len(reads) == 1   # beauty and passes still in one read
+    write_frame(fr, tmp_path / "file.exr")
+    assert (tmp_path / "kept.exr").read_bytes() == (tmp_path / "file.exr").read_bytes()

@@ -55,7 +55,8 @@ class Layout:
     beauty: tuple[str, ...]          # channel names as stored: R, G, B[, A] (or one grey)
     view: str | None = None          # the beauty's view (multi-view files)
     # channels already decoded by the reader, as stored (float32), by part index: the writer
-    # copies these instead of decoding the file again
+    # copies these instead of decoding the file again (frames up to 4K UHD only:
+    # clfx.io.read.KEEP_MAX_PIXELS)
     stored: dict = field(default_factory=dict, compare=False, repr=False)
 
 

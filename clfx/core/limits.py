@@ -39,6 +39,14 @@ renders the previous / next one; a larger frame is read, rendered and written al
 sequence never holds more than one of them (an 8K frame renders for minutes: overlapping its
 I/O gains little and would add ~1.5 GB to the peak)."""
 
+PREPARE_MAX_PIXELS = OVERLAP_MAX_PIXELS // 2
+"""A look's maps (distortion, chromatic aberration) are built on a thread while the first
+frame is read and renders only for frames up to this size (1920x1080, 2K DCI, 2560x1440).
+The maps, and the buffers they are built in, then coexist with the steps before them: at
+4K UHD that put the cinema look 200-290 MiB higher (1574-1677 MiB, budget 1682), and at 8K,
+where a map is too large to keep in the pool and the render built it again, 660 MiB
+higher (3794 MiB, budget 3390).  Larger frames build each map when their step needs it."""
+
 MEMORY_OVERLAP_BYTES_PER_PIXEL = 96
 """What a sequence of frames up to :data:`OVERLAP_MAX_PIXELS` adds to the budget per pixel:
 the next frame read and the last one written while the device renders."""

@@ -123,6 +123,33 @@ def _ensure_pocl_cache() -> None:
             pass  # PoCL falls back to its own default
 
 
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or None (another C library, another system)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
+    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
+    return trim
+
+
+_TRIM = _malloc_trim()
+
+
+def release_freed_heap() -> None:
+    """Give the pages of freed heap memory back to the system (glibc: ``malloc_trim``; a
+    no-op elsewhere).  After a kernel build: the OpenCL compiler (PoCL's LLVM, in-process on
+    a cold kernel cache) frees most of what it took, in pieces glibc keeps; they stayed
+    resident through the render (a cold 1080p cinema frame peaked 250 MiB above a warm one,
+    and 110 MiB with this)."""
+    if _TRIM is not None:
+        _TRIM(0)
+
+
 def kernel_dir() -> Path:
     """Folder holding the ``.cl`` files: ``clfx/kernels`` in an installed wheel, or the
     repository's top-level ``kernels/`` in a source checkout (editable install)."""
@@ -438,6 +465,8 @@ class Runtime:
         except cl.Error as exc:
             log = str(exc)
             raise KernelBuildError(f"building kernels/{file} with {' '.join(opts)} failed:\n{log}") from exc
+        finally:
+            release_freed_heap()
         if caught:
             try:
                 log = prg.get_build_info(self.device, cl.program_build_info.LOG).strip()

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core import cancel
 from clfx.core.errors import ParamError
 from clfx.core.plugin import Level
 
@@ -116,6 +117,7 @@ def _upload_bands(rt, spans, make, records: dict):
     and the quads per row; ``records`` collects the records."""
     holder = per_row = None
     for y0, y1 in spans:
+        cancel.check()      # a map prepared ahead of need stops here once cancelled
         entries, recs, quads_per_row = make(y0, y1)
         if holder is None:
             per_row = entries.nbytes // max(y1 - y0, 1)

@@ -67,6 +67,7 @@ import OpenImageIO as oiio
 
 from clfx.core.errors import ClipError, ImageIOError
 from clfx.core.frame import Frame, Layout, SourcePart, crop_to
+from clfx.core.limits import OVERLAP_MAX_PIXELS
 from clfx.core.rect import Rect
 from clfx.io import channels as ch
 from clfx.io import colour
@@ -262,6 +263,12 @@ KEEP_CHANNELS = 16
 """A beauty part of at most this many half/float channels is decoded whole once, and the
 channels the frame does not use are kept in its `Layout` for the writer to copy, instead
 of being decoded again from the file when the output is written."""
+
+KEEP_MAX_PIXELS = OVERLAP_MAX_PIXELS
+"""Frames up to this size (4K UHD) keep their beauty part's other channels for the writer
+(`KEEP_CHANNELS`).  A larger frame keeps none: they would be held, as float32, through its
+whole render (an 8K frame's depth and velocity as stored: 380 MiB), and the writer decodes
+them again band by band in seconds of a render that takes minutes."""
 
 
 def _runs(indices: list[int], gap: int = 0) -> list[tuple[int, int]]:
@@ -706,19 +713,20 @@ def read_frame(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = 
     source = None if plan.source_colorspace == colour.RAW else plan.source_colorspace
     return Frame(rgba, win, display, aspect, depth, velocity, metadata(bpart.spec),
                  plan.encoding, os.fspath(path), bit_depth, colorspace=plan.working,
-                 source_colorspace=source, layout=_layout(plan, dec.kept(plan.file.path, bpart,
-                                                                 without=plan.beauty.channels)),
+                 source_colorspace=source,
+                 layout=_layout(plan, dec.kept(plan.file.path, bpart, without=plan.beauty.channels)
+                                if _keeps(bpart) else {}),
                  velocity_back=velocity_back)
 
 
 def _decoding(plan: ReadPlan) -> _Decoded:
     """What `read_frame` will read, by part, so each part is decoded once: the beauty, the
-    passes and, for a beauty part of at most `KEEP_CHANNELS` half/float channels, all of its
-    channels (kept for the writer, `Layout.stored`)."""
+    passes and, for a beauty part the reader keeps (`_keeps`), all of its channels (kept for
+    the writer, `Layout.stored`)."""
     dec = _Decoded()
     bpart = plan.file.parts[plan.beauty.part]
     dec.want(plan.file.path, bpart, plan.beauty.channels)
-    if len(bpart.channels) <= KEEP_CHANNELS and all(f in ("half", "float") for f in bpart.formats):
+    if _keeps(bpart):
         dec.want(plan.file.path, bpart, bpart.channels)
     for pp in (plan.depth, plan.velocity):
         if pp is not None:
@@ -727,6 +735,14 @@ def _decoding(plan: ReadPlan) -> _Decoded:
     if back is not None:
         dec.want(plan.velocity.path, plan.velocity.part, back)
     return dec
+
+
+def _keeps(part: _Part) -> bool:
+    """Whether `read_frame` keeps ``part``'s other channels for the writer (`KEEP_CHANNELS`,
+    `KEEP_MAX_PIXELS`)."""
+    return (len(part.channels) <= KEEP_CHANNELS and part.data_window.width
+            * part.data_window.height <= KEEP_MAX_PIXELS
+            and all(f in ("half", "float") for f in part.formats))
 
 
 def _layout(plan: ReadPlan, stored: dict[str, np.ndarray]) -> Layout:
@@ -741,13 +757,17 @@ def _layout(plan: ReadPlan, stored: dict[str, np.ndarray]) -> Layout:
                   stored={plan.beauty.part: stored} if stored else {})
 
 
-def beauty_geometry(path) -> tuple[Rect, Rect, float]:
+def beauty_geometry(path, check: bool = False) -> tuple[Rect, Rect, float]:
     """The data window, display window and pixel aspect of the part `read_frame` would take
     the hero's beauty from, from the headers alone (to prepare a look before the first frame
-    is read)."""
+    is read).  ``check``: refuse windows `read_frame` would refuse (empty, or over the limits
+    of `clfx.core.limits`), with its message."""
     f = _scan(path)
     b = ch.find_beauty(f.dicts())
     part = f.parts[b.part if b is not None else 0]
+    if check:
+        check_window(path, part.data_window)
+        check_window(path, part.display_window, "display window")
     return part.data_window, part.display_window, part.pixel_aspect
 
 

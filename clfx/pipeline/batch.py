@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
@@ -36,7 +37,7 @@ import numpy as np
 
 from clfx.core.errors import ImageIOError, SequenceError
 from clfx.core.frame import Frame
-from clfx.core.limits import OVERLAP_MAX_PIXELS
+from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
 from clfx.pipeline.look import Look, RunStats, render_frame
 
 if TYPE_CHECKING:
@@ -297,6 +298,49 @@ def _inode(path: str) -> tuple[int, int] | None:
     return st.st_dev, st.st_ino
 
 
+def first_frame_geometry(path: str):
+    """The data window, display window and pixel aspect of the frame `read_frame` would take
+    from ``path``, from its headers; refused (`ImageIOError`, the reader's message) when a
+    window exceeds the limits of `clfx.core.limits`.  A render checks its first frame so
+    before anything is set up for it (the device, the first read, the maps)."""
+    from clfx.io.read import beauty_geometry
+
+    return beauty_geometry(path, check=True)
+
+
+def check_first_frame(input_path: str, options: RenderOptions) -> None:
+    """Refuse the first frame of ``input_path`` (a file or a sequence, ``options.frames``)
+    whose windows exceed the pixel limits, from its header: ``clfx render`` calls this before
+    it starts setting up the device.  Missing frames and everything else are left to
+    `Batch.prepare`, which checks the first frame it will render again."""
+    if input_path == RAW:
+        return
+    from clfx.io.sequence import Pattern, parse_frames, resolve_inputs
+
+    try:
+        frames = parse_frames(options.frames) if options.frames else None
+        inputs = resolve_inputs(Pattern.parse(input_path), frames, skip_missing=True)
+    except SequenceError:
+        return              # said by Batch.prepare, in its order of checks
+    if inputs and not options.skip_existing:   # with --skip-existing: the first one rendered
+        first_frame_geometry(inputs[0][1])
+
+
+@dataclass
+class Preparing:
+    """A look's maps being prepared on a thread (`Batch._prepare_look`)."""
+
+    future: Future
+    cancelled: threading.Event
+
+    def close(self, cancel: bool = False) -> None:
+        """Wait for the thread; ``cancel``: stop it first (before its next step or map band),
+        when what it prepares for will not be rendered (a refused frame)."""
+        if cancel:
+            self.cancelled.set()
+        self.future.exception()     # done (its errors are the render's to report)
+
+
 @dataclass
 class FrameRead:
     """One job's input, read (on an I/O thread): every view's frame (hero first), each
@@ -393,6 +437,8 @@ class Batch:
         self._check_outputs(jobs)
         self._check_log(jobs)
         self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
+        if self.jobs:   # before anything is set up for it (device, first read, maps)
+            first_frame_geometry(self.jobs[0].input)
         self.passes = o.passes.spec(self._radial_depth_focal_px())
 
     def _radial_depth_focal_px(self) -> float | None:
@@ -546,12 +592,24 @@ class Batch:
 
     def _run_files(self, rt) -> dict:
         t0 = time.perf_counter()
-        reports = []
-        total = len(self.jobs)
         if self.skipped_existing and self.verbosity > 0:
             self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
         first, self._first_read = self._first_read, None
         prepared = self._prepare_look(rt)
+        try:
+            reports = self._stream(rt, first)
+        except BaseException:
+            if prepared is not None:
+                prepared.close(cancel=True)     # a refused frame: no more work for it
+            raise
+        if prepared is not None:
+            prepared.close()
+        return self._summary(reports, time.perf_counter() - t0)
+
+    def _stream(self, rt, first: Future | None) -> list:
+        """Read, render and write every job (`stream_mode`); their reports."""
+        reports = []
+        total = len(self.jobs)
         lowered = io_overlaps_cpu_device(rt)
         with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
             next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
@@ -580,31 +638,39 @@ class Batch:
                 if self.on_frame is not None:
                     self.on_frame(i + 1, total, report)
             self._drain(writes, block=True)
-        if prepared is not None:
-            prepared.exception()     # done (its errors are the render's to report)
-        return self._summary(reports, time.perf_counter() - t0)
+        return reports
 
-    def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Future | None:
+    def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Preparing | None:
         """`clfx.pipeline.look.prepare` for the first job's geometry (from its header), on a
         thread of normal priority: the maps it builds are on the first frame's critical
-        path (a Dask worker's later chunks find them in its cache)."""
+        path (a Dask worker's later chunks find them in its cache).  Nothing is started for
+        a frame whose windows the reader will refuse, nor for one larger than
+        `PREPARE_MAX_PIXELS` (its maps would sit beside the first steps' buffers: each is
+        built when its step needs it).  The caller closes what it returns, cancelling it
+        when the frame is refused."""
         jobs = self.jobs if jobs is None else jobs
         if not jobs:
             return None
-        from clfx.io.read import beauty_geometry
+        from clfx.core.errors import ClfxError
         from clfx.pipeline.look import prepare
 
         job, o = jobs[0], self.options
+        try:
+            data, display, aspect = first_frame_geometry(job.input)
+        except ClfxError:
+            return None          # the read says why
+        if max(data.width * data.height, display.width * display.height) > PREPARE_MAX_PIXELS:
+            return None
+        cancelled = threading.Event()
 
         def run():
-            data, display, aspect = beauty_geometry(job.input)
             prepare(rt, self.look, data, display, aspect, frame_number=job.frame,
-                    quality=o.quality, keep_overscan=o.keep_overscan)
+                    quality=o.quality, keep_overscan=o.keep_overscan, cancel=cancelled)
 
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-prepare")
         future = pool.submit(run)
         pool.shutdown(wait=False)
-        return future
+        return Preparing(future, cancelled)
 
     def _summary(self, reports, wall: float) -> dict:
         summary = {"summary": True, "look": self.look.name, "frames": len(reports),

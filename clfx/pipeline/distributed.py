@@ -219,9 +219,23 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False,
     writing the previous one on I/O threads while the device renders (holding
     ``device_lock`` if given); a frame that raises a `ClfxError` is reported and the others
     go on (all stop after it with ``fail_fast``)."""
+    prepared = batch._prepare_look(rt, jobs)
+    try:
+        results = _render_jobs(batch, rt, jobs, fail_fast, device_lock)
+    except BaseException:
+        if prepared is not None:
+            prepared.close(cancel=True)
+        raise
+    if prepared is not None:      # a frame failed or was not rendered: stop preparing for it
+        prepared.close(cancel=any(r is None or "error" in r for r in results))
+    return [r for r in results if r is not None]
+
+
+def _render_jobs(batch: Batch, rt, jobs: list[Job], fail_fast: bool,
+                 device_lock) -> list[dict | None]:
+    """`render_jobs` without the maps' thread: a result per job (None: not rendered)."""
     results: list[dict | None] = [None] * len(jobs)
     writes = []
-    prepared = batch._prepare_look(rt, jobs)
     lowered = getattr(rt, "shares_host_cores", True)   # I/O gives way to a CPU device
     with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
         next_read = pool.submit(batch._read, jobs[0]) if jobs else None
@@ -246,9 +260,7 @@ def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False,
                 continue
             results[i] = {"frame": jobs[i].frame, "worker": _where(),
                           "report": report.as_dict(), "explain": report.explain()}
-    if prepared is not None:
-        prepared.exception()     # done (its errors are the render's to report)
-    return [r for r in results if r is not None]
+    return results
 
 
 def _failed(job: Job, exc: BaseException) -> dict:

@@ -407,27 +407,40 @@ def _geometry(window: Rect):
 
 def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspect: float = 1.0,
             *, frame_number: int = 0, quality: str | None = None,
-            keep_overscan: bool = False) -> None:
+            keep_overscan: bool = False, cancel=None) -> None:
     """Build the caches of ``look``'s steps that depend only on parameters and geometry
     (`Plugin.prepare`: distortion and chromatic aberration maps) for frames of these windows,
     so the first frame does not wait for them: a batch runs this on a thread while the first
     frame is read and its first steps render.  Each step sees the window the steps before it
     would grow the frame to.  A guess that turns out wrong (a step skipped on the real frame,
     a value that needs pixels) costs only the work: the render builds what it needs under
-    its own cache key, so the pixels never depend on this."""
+    its own cache key, so the pixels never depend on this.
+
+    ``cancel`` (a `threading.Event`): once set, the work stops before the next step or the
+    next band of a map (`clfx.core.cancel`), e.g. when the first frame is refused.  The
+    windows must be within the pixel limit (the caller checks them, as the reader does)."""
+    from clfx.core import cancel as cancelling
+
+    for what, win in (("display window", display_window), ("data window", data_window)):
+        check_pixels(win.width, win.height, f"prepared frame: {what}", FrameTooLarge)
     look = look.at(frame_number)
     ctx = RenderContext(rt, _geometry(data_window), display_window=display_window,
                         pixel_aspect=pixel_aspect, frame=frame_number, seed=look.seed,
                         camera=look.camera, quality=quality or DEFAULT_QUALITY,
                         output_limit=_limit(data_window, display_window, keep_overscan))
-    for _, step in look.active_steps():
-        step_ctx = ctx.for_step(step.quality or quality or DEFAULT_QUALITY)
-        try:
-            step.plugin.prepare(rt, step.params, step_ctx)
-            window = step.plugin.output_window(step.params, step_ctx)
-        except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
-            continue
-        ctx.source = _geometry(window)
+    with cancelling.scope(cancel):
+        for _, step in look.active_steps():
+            if cancel is not None and cancel.is_set():
+                return
+            step_ctx = ctx.for_step(step.quality or quality or DEFAULT_QUALITY)
+            try:
+                step.plugin.prepare(rt, step.params, step_ctx)
+                window = step.plugin.output_window(step.params, step_ctx)
+            except cancelling.Cancelled:
+                return
+            except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
+                continue
+            ctx.source = _geometry(window)
 
 
 class FrameTooLarge(ClfxError):
