@@ -11,7 +11,7 @@ LEVELS = ("draft", "preview", "final", "reference")
 
 def oracle(src, p, **kw):
     h, w = src.shape[:2]
-    r = int(round(p.size * np.hypot(w, h)))
+    r = int(round(3.0 * p.size * np.hypot(w, h)))      # the support: 3 x size
     return reference(src, r, amount=p.amount, threshold=p.threshold, knee=p.knee, tint=p.tint, **kw)
 
 
