@@ -14,8 +14,9 @@ Models
 
     Angles come from the camera block (degrees per pixel at the optical centre,
     ``degrees(atan(sensor_width / (width_px * focal_length)))``) or from a given horizontal
-    field of view.  Pixels within 4 px of the centre are integrated over their area (8 x 8
-    sub-samples): the core is narrower than a pixel at usual focal lengths.  The power-law
+    field of view.  Pixels within 4 px of the centre, and as far as the Gaussian core reaches
+    (0.07 degrees), are integrated over their area (8 x 8 sub-samples): the core is narrower
+    than a pixel at usual focal lengths.  The power-law
     tail ends through :func:`tail_fade` (below 1e-5 of the PSF one pixel out before the
     support's outer tenth, then zero at the radius).
 ``gaussians``
@@ -73,8 +74,10 @@ def spencer(radius_px: int, deg_per_px: float, *, supersample: int = 8,
     r = max(int(radius_px), 0)
     x, y = _radial_grid(r)
     k = spencer_value(np.hypot(x, y) * deg_per_px)
-    # area-integrate the centre: the Gaussian core and the 1/t^3 term vary within a pixel
-    c = min(core_px, r)
+    # area-integrate the centre: the Gaussian core and the 1/t^3 term vary within a pixel;
+    # the integrated disc reaches past the Gaussian core (3.5 x 0.02 degrees: exp(-12)), or
+    # a long lens shows the switch to point samples as a kink in the profile
+    c = min(max(core_px, math.ceil(0.07 / max(deg_per_px, 1e-9))), r)
     n = supersample
     off = (np.arange(n) + 0.5) / n - 0.5
     su, sv = np.meshgrid(off, off)

@@ -54,8 +54,8 @@ exactly (a redistribution, for footage that must not brighten).
 Stocks
 ------
 ``stock`` supplies ``strength``, ``tint`` and the physical ``radius`` (from the base
-thickness ``b``: SUPPORT x H = SUPPORT x 2 b on the film, converted to pixels through the camera block's
-``sensor_width``); a parameter set explicitly (not -1) overrides the stock's value.
+thickness ``b``: SUPPORT x H = SUPPORT x 2 b on the film, converted to pixels through the
+camera block's ``sensor_width``); a parameter set explicitly (not -1) overrides the stock's value.
 Sources (what they state) and estimates (what they do not):
 
 ``vision3-500t`` / ``vision3-250d``

@@ -171,3 +171,21 @@ def test_nonfinite_pixels_do_not_spread(rt):
     assert np.isfinite(out).all() and any("2 non-finite" in n for n in ctx.notes)
     zeroed = np.where(np.isfinite(bad).all(axis=2, keepdims=True), bad, 0.0)
     np.testing.assert_allclose(out, Halation().apply(rt, p, zeroed), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("stock,size", [("cinestill-800t", -1.0), ("vision3-500t", -1.0),
+                                        ("cinestill-800t", 0.1)])
+def test_point_light_halation_fades_smoothly_before_its_support_ends(rt, stock, size):
+    # issue 25: a glow hugging the light, not a disc with a rim: monotone, no step above 1e-4
+    # of the peak, below it before the support ends
+    from tests.light_profile import assert_smooth_tail, point_light, ray
+
+    src = point_light()
+    h, w = src.shape[:2]
+    p = Halation.params(stock=stock, radius=size)
+    out = Halation().apply(rt, p, src)
+    ctx = RenderContext(rt, rt.upload(src))
+    support = Halation().settings(p, ctx).radius_px
+    assert support >= 8
+    assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support, start=3,
+                       what=f"halation {stock} {size}")
