@@ -34,8 +34,8 @@ cylinder: two reflections off a single-layer MgF2 quarter-wave coating (index 1.
 spectrum (CIE 1931, Rec.709), normalised to luminance 1 and multiplied by ``tint``: blue-cyan
 for a coating designed in the red (650 nm: RGB 0.63, 0.92, 2.88).  The streak is thin: each
 pixel's light is weighted by ``(L / peak)^core_power`` (``core_power`` -1: 3), so a light's
-brightest rows carry it; and it falls off with distance: 60 % of its light in a bright part
-fading to 1 % at ``length / 5``, 40 % in a long faint part fading to 1 % at ``length`` (a
+brightest rows carry it; and it falls off with distance: 70 % of its light in a bright part
+fading to 1 % at ``0.15 length``, 30 % in a long faint part fading to 1 % at ``length`` (a
 sum of two exponentials, each run as its own Kawase chain).
 
 Diffraction spikes (``mode="aperture"``): the far field of a straight blade edge is a line
@@ -92,7 +92,7 @@ TAPS = 4
 TAIL = math.log(1e5) / math.log(100.0)
 """Support of the exponential in units of its 1 % length: there it is 1e-5 of its start."""
 
-ANAMORPHIC_PARTS = ((0.2, 0.6), (1.0, 0.4))
+ANAMORPHIC_PARTS = ((0.15, 0.7), (1.0, 0.3))
 """mode anamorphic: (1 % length as a fraction of ``length``, share of the light) of the bright
 near part and the long faint part."""
 

@@ -123,7 +123,7 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
     """Output over the source grown by ``pad`` pixels on every side (float64).
 
     mode "anamorphic": rays at angle and angle + 180, colour tint x coating_tint(coating_nm),
-    two exponentials (1 % at length / 5 with 60 % of the light, at length with 40 %),
+    two exponentials (1 % at 0.15 length with 70 % of the light, at length with 30 %),
     core_power -1 = 3 (else 0)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
@@ -138,7 +138,7 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
     parts = [(1.0, 1.0)]
     if mode == "anamorphic":
         colour = colour * coating_tint(coating_nm)
-        parts = [(0.2, 0.6), (1.0, 0.4)]
+        parts = [(0.15, 0.7), (1.0, 0.3)]
     for (fraction, share), ang in [(pt, ang) for pt in parts for ang in rays]:
         gain = intensity * share * colour / len(rays)
         dx, dy, step_len = _unit(ang)
