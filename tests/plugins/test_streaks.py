@@ -265,26 +265,30 @@ def test_aperture_mode_with_a_round_aperture_warns_on_stderr(tmp_path):
     assert "round aperture" not in quiet.stderr
 
 
-@pytest.mark.parametrize("mode", ["star", "anamorphic"])
-def test_point_light_streak_fades_smoothly_before_its_support_ends(rt, mode):
+@pytest.mark.parametrize("mode,kw", [
+    ("star", {}),                                      # the default 4-ray star, 45 degrees
+    # a horizontal pair whose 1 % length (60 px) sat just under the former 4^3 = 64 px
+    # support: it stopped at 0.7 % of its start
+    ("star", dict(streaks=2, angle=0.0, length=60.0 / math.hypot(480, 320))),
+    ("anamorphic", dict(length=0.1, angle=0.0)),
+])
+def test_point_light_streak_fades_smoothly_before_its_support_ends(rt, mode, kw):
     # issue 25: along a ray the streak is monotone, has no step above 1e-4 of its start and
-    # is below that before its support ends (the former one stopped at 1 %)
+    # is below that before its support ends
     from clfx.plugins.streaks import grid_step, support_steps
     from tests.light_profile import assert_smooth_tail, point_light, ray
 
-    src = point_light()
+    src = point_light(320, 480)
     h, w = src.shape[:2]
-    kw = dict(mode=mode, length=0.1, angle=0.0) if mode == "anamorphic" else {}
-    p = Streaks.params(**kw)
+    p = Streaks.params(mode=mode, **kw)
     out = Streaks().apply(rt, p, src)
-    angle = p.angle if mode == "star" else 0.0
-    step = grid_step(angle)[2]
+    step = grid_step(p.angle)[2]
     support = support_steps(p.length * math.hypot(w, h) / step)     # in samples of the ray
-    dx, dy = (1, -1) if angle == 45.0 else (1, 0)
-    n = min(w // 2, h // 2) if dy else w // 2
+    dx, dy = (1, -1) if p.angle == 45.0 else (1, 0)
+    n = h // 2 if dy else w // 2
     assert support < n - 2
     assert_smooth_tail(ray(out, h // 2, w // 2, dx, dy, n), support, start=2,
-                       what=f"streaks {mode}")
+                       what=f"streaks {mode} {kw}")
 
 
 def spot(h=180, w=320, sigma=3.0, peak=1e4):
