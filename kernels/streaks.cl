@@ -7,14 +7,16 @@
  * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
  * interior's padding columns stay zero: they stand for "outside the image".
  * Pipeline:
- *   streaks_bright   sanitised, thresholded highlights, box-averaged over FACTOR x FACTOR
- *                    source pixels (FACTOR = 1 at full resolution), placed in the output window
+ *   streaks_bright   sanitised, thresholded highlights (weighted by (L / peak)^core_power:
+ *                    a thin core), box-averaged over FACTOR x FACTOR source pixels (FACTOR =
+ *                    1 at full resolution), placed in the output window
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
  *                    taps (or, with `snap`, taps rounded to whole pixels: one load instead of
  *                    four), zero outside the buffer; ACCUM adds the result to `out`
  *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
- * sum_{k=0}^{4^N-1} a^k delta(x + k d) exactly (each k has one base-4 expansion).
+ * sum_{k=0}^{T 4^(N-1)-1} a^k delta(x + k d) exactly (each k has one base-4 expansion; the
+ * last pass has T <= 4 taps of non-zero weight).
  */
 #include "lib/scatter.h"
 #include "lib/precision.h"
@@ -30,6 +32,13 @@
 #define PEAK_TILE 32
 #endif
 
+/* The peak luminance of the light a source pixel belongs to (0 outside every light). */
+inline float streaks_peak(global const float *peak, int tiles_x, int tiles_y, int sx, int sy)
+{
+  const int i = min(sx / PEAK_TILE, tiles_x - 1), j = min(sy / PEAK_TILE, tiles_y - 1);
+  return peak[j * tiles_x + i];
+}
+
 /* The level a source pixel's light must pass: the threshold, or `core` times the peak of the
  * light it belongs to (`peak`: per scene-analysis tile, tiles_x x tiles_y over the source
  * window, the peak luminance of its connected bright region), whichever is higher. */
@@ -37,15 +46,18 @@ inline float streaks_level(global const float *peak, int tiles_x, int tiles_y, i
                            float threshold, float core)
 {
   if(core <= 0.0f) return threshold;
-  const int i = min(sx / PEAK_TILE, tiles_x - 1), j = min(sy / PEAK_TILE, tiles_y - 1);
-  return fmax(threshold, core * peak[j * tiles_x + i]);
+  return fmax(threshold, core * streaks_peak(peak, tiles_x, tiles_y, sx, sy));
 }
 
-/* The light that streaks: above its level (scatter_bright), its colour kept by
- * `source_color` (0: its luminance, the streak's colour is then the tint). */
-inline float4 streaks_light(float4 c, float level, float source_color)
+/* The light that streaks: above its level (scatter_bright), weighted by (L / peak)^core_power
+ * (> 0: the brightest rows of a light dominate, the streak's core is thin), its colour kept
+ * by `source_color` (0: its luminance, the streak's colour is then the tint). */
+inline float4 streaks_light(float4 c, float level, float source_color, float core_power,
+                            float peak)
 {
-  const float4 h = scatter_bright(c, level);
+  float4 h = scatter_bright(c, level);
+  if(core_power > 0.0f && peak > 0.0f)
+    h *= pow(clamp(clfx_luminance(c) / peak, 0.0f, 1.0f), core_power);
   if(source_color >= 1.0f) return h;
   const float l = clfx_luminance(h);
   return (float4)((float3)l + (h.xyz - (float3)l) * source_color, 0.0f);
@@ -57,7 +69,7 @@ inline float4 streaks_light(float4 c, float level, float source_color)
 inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
                           int y, int ox, int oy, float threshold, float scale,
                           global const float *peak, int tiles_x, int tiles_y, float core,
-                          float source_color)
+                          float source_color, float core_power)
 {
   float4 acc = (float4)0.0f;
   for(int j = 0; j < FACTOR; j++)
@@ -69,7 +81,9 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
       const int sx = x * FACTOR + i - ox;
       if(sx < 0 || sx >= src_w) continue;
       const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
-      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color) * scale;
+      const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
+      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
+                           pk) * scale;
     }
   }
   return acc;
@@ -81,16 +95,19 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
                            const int dst_pitch, const int dst_wp, const int dst_h,
                            const int ox, const int oy, const float threshold,
                            global const float *peak, const int tiles_x, const int tiles_y,
-                           const float core, const float source_color)
+                           const float core, const float source_color,
+                           const float core_power)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
   float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
-                           tiles_x, tiles_y, core, source_color) * (1.0f / (FACTOR * FACTOR));
+                           tiles_x, tiles_y, core, source_color, core_power)
+               * (1.0f / (FACTOR * FACTOR));
   if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
     acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
-                      1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color);
+                      1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color,
+                      core_power);
   clfx_store4(dst, dst_pitch, x, y, acc);
 }
 

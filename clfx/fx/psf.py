@@ -14,11 +14,18 @@ Models
 
     Angles come from the camera block (degrees per pixel at the optical centre,
     ``degrees(atan(sensor_width / (width_px * focal_length)))``) or from a given horizontal
-    field of view.  Pixels within 4 px of the centre are integrated over their area (8 x 8
-    sub-samples): the core is narrower than a pixel at usual focal lengths.  Truncated at
-    the radius with a raised-cosine taper over its outer quarter (no visible rim).
+    field of view.  Pixels within 4 px of the centre, and as far as the Gaussian core reaches
+    (0.07 degrees), are integrated over their area (8 x 8 sub-samples): the core is narrower
+    than a pixel at usual focal lengths.  The power-law
+    tail ends through :func:`tail_fade` (below 1e-5 of the PSF one pixel out before the
+    support's outer tenth, then zero at the radius).
 ``gaussians``
-    Bloom as a sum of Gaussians (Kawase-style), sigmas in pixels and relative weights.
+    Bloom as a sum of Gaussians (Kawase-style), sigmas in pixels and relative weights, ended
+    by :func:`tail_fade`.
+``exponentials``
+    Diffusion (soft focus, Pro-Mist-like filters): a sum of radial exponentials
+    ``exp(-d / s)`` (light scattered many times in a turbid layer falls off exponentially),
+    ended by :func:`tail_fade`.
 ``image``
     A user-supplied kernel image (its pixels: the caller reads the file, e.g. glare through
     ``ctx.read_image``), resampled so its larger side spans 2r + 1 pixels; each colour plane
@@ -67,18 +74,56 @@ def spencer(radius_px: int, deg_per_px: float, *, supersample: int = 8,
     r = max(int(radius_px), 0)
     x, y = _radial_grid(r)
     k = spencer_value(np.hypot(x, y) * deg_per_px)
-    # area-integrate the centre: the Gaussian core and the 1/t^3 term vary within a pixel
-    c = min(core_px, r)
+    # area-integrate the centre: the Gaussian core and the 1/t^3 term vary within a pixel;
+    # the integrated disc reaches past the Gaussian core (3.5 x 0.02 degrees: exp(-12)), or
+    # a long lens shows the switch to point samples as a kink in the profile
+    c = min(max(core_px, math.ceil(0.07 / max(deg_per_px, 1e-9))), r)
     n = supersample
     off = (np.arange(n) + 0.5) / n - 0.5
     su, sv = np.meshgrid(off, off)
     for j in range(-c, c + 1):
         for i in range(-c, c + 1):
             k[r + j, r + i] = spencer_value(np.hypot(i + su, j + sv) * deg_per_px).mean()
-    # round support fading out over its outer quarter: neither the square corners of the
-    # array nor the hard rim of a truncated power law show in exposed-up shadows
-    k *= radial_taper(r)
-    return _normalise(k[..., None])[..., 0]
+    # a round support whose tail is below 1e-5 of the PSF one pixel out before it fades to
+    # 0: neither the array's square nor the rim of a truncated power law shows, even on a
+    # 1e4 light graded up
+    return _normalise(tail_fade(k, r)[..., None])[..., 0]
+
+
+TAIL_FLOOR = 1e-5
+"""Where :func:`tail_fade`'s taper starts, a PSF is at most this fraction of its value one
+pixel from the centre: 1e-4 of a point light's spread light is the level a graded-up 1e4 light
+on black shows, so every truncation happens below it."""
+
+TAIL_TAPER = 0.9
+""":func:`tail_fade`'s raised-cosine taper runs from this fraction of the radius to the
+radius."""
+
+
+def tail_fade(k: np.ndarray, radius: int, *, floor: float = TAIL_FLOOR,
+              start: float = TAIL_TAPER) -> np.ndarray:
+    """End a centred, radially decreasing (2r + 1)^2 kernel smoothly inside its support.
+
+    Its physical tail is kept where it is above ``floor`` x its value one pixel from the
+    centre (``k1``) at ``start`` x r; where it is not (a power law on a small support, a wide
+    Gaussian), it is multiplied by the Gaussian roll-off ``exp(-(d / rho)^2)`` that brings it
+    there (smooth and monotone: no kink, no step).  Then a raised cosine takes it from
+    ``start`` x r to 0 at r (below ``floor`` x ``k1`` all the way).  Returns the product
+    (not normalised).
+    """
+    r = int(radius)
+    if r < 2:
+        return k
+    k1 = float(k[r, r + 1])
+    i0 = int(math.floor(start * r))
+    ke = float(k[r, r + i0])
+    x, y = _radial_grid(r)
+    d = np.hypot(x, y)
+    out = k * radial_taper(r, start)
+    if k1 > 0.0 and ke > floor * k1:
+        rho = i0 / math.sqrt(math.log(ke / (floor * k1)))
+        out = out * np.exp(-(d / rho) ** 2)
+    return out
 
 
 def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
@@ -92,8 +137,9 @@ def radial_taper(radius: int, start: float = 0.75) -> np.ndarray:
 
 
 def gaussians(radius_px: int, sigmas_px, weights) -> np.ndarray:
-    """Normalised sum of Gaussians (bloom): sum_i w_i N(0, sigma_i^2), truncated at r with
-    the round :func:`radial_taper` (a 1e5 sun would otherwise show the array's square)."""
+    """Normalised sum of Gaussians (bloom): sum_i w_i N(0, sigma_i^2), ended by
+    :func:`tail_fade` (below 1e-5 of the PSF one pixel out before the taper: a 1e5 sun shows
+    neither the array's square nor a rim)."""
     r = max(int(radius_px), 0)
     x, y = _radial_grid(r)
     d2 = x * x + y * y
@@ -102,7 +148,20 @@ def gaussians(radius_px: int, sigmas_px, weights) -> np.ndarray:
         s = max(float(s), 0.3)
         g = np.exp(-0.5 * d2 / (s * s))
         k += float(w) * g / g.sum()
-    return _normalise((k * radial_taper(r))[..., None])[..., 0]
+    return _normalise(tail_fade(k, r)[..., None])[..., 0]
+
+
+def exponentials(radius_px: int, scales_px, weights) -> np.ndarray:
+    """Normalised sum of radial exponentials ``sum_i w_i exp(-d / s_i) / (2 pi s_i^2)``
+    (diffusion: each term integrates to ``w_i`` over the plane), ended by :func:`tail_fade`."""
+    r = max(int(radius_px), 0)
+    x, y = _radial_grid(r)
+    d = np.hypot(x, y)
+    k = np.zeros_like(d)
+    for s, w in zip(scales_px, weights):
+        s = max(float(s), 0.5)
+        k += float(w) * np.exp(-d / s) / (2.0 * np.pi * s * s)
+    return _normalise(tail_fade(k, r)[..., None])[..., 0]
 
 
 def bloom_sigmas(radius_px: float, count: int = 4, ratio: float = 2.0, falloff: float = 0.5):

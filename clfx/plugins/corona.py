@@ -32,9 +32,10 @@ frame's total is kept).  The highlights take each pixel's non-negative part (per
 carried into the reference basis) is not diffracted and stays in place, so nothing is
 clipped from the frame; this happens in the reference basis, hence the same for the same
 light in any working space.  ``size`` is the radius of the first dark ring at 550 nm for a round
-aperture (fraction of the frame diagonal; the same scale for polygons; the default 0.03 is an
-atmospheric corona's few degrees, rings wide enough to show around a candle flame, not only
-a point), ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its
+aperture (fraction of the frame diagonal; the same scale for polygons; the default 0.012,
+26 px at 1080p, gives a small bright core and rings out to ~130 px around a street light: the
+former 0.03 made a flat white core ~60 px wide and rings to ~240 px from a 7 px light,
+issue 25; an atmospheric corona's few degrees needs ~0.03, as sunny-flare sets), ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its
 outer quarter, then renormalised; the default 5 keeps three to four rings).
 
 The pattern is smooth at the scale of its rings, so below ``reference`` it is computed at a
@@ -251,7 +252,7 @@ class Corona(SpreadRegions, Plugin):
                        hint="Fraction of the highlights' light that diffracts into the pattern "
                             "(its core included); the rest stays put: light is moved, never "
                             "added."),
-            FloatParam("size", 0.03, min=0.0002, max=0.2,
+            FloatParam("size", 0.012, min=0.0002, max=0.2,
                        hint="Radius of the first dark ring at 550 nm, as a fraction of the "
                             "frame diagonal."),
             FloatParam("extent", 5.0, min=1.5, max=40.0,

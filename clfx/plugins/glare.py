@@ -6,7 +6,12 @@ Per pixel (scene-linear RGB, luminance ``L`` Rec.709) the light that scatters is
 highlight ``h = max(rgb, 0) * clamp(max(s, L - t) / L, 0, 1)``, ``s = clamp(L - t + k, 0,
 2k)^2 / 4k`` (threshold ``t``, knee ``k``).  It is convolved with a normalised PSF
 (``clfx.fx.psf``): Spencer et al. 1995's eye PSF (power-law falloff), a sum of Gaussians (bloom)
-or a user kernel image (``kernel_path``, read by the pipeline: ``ctx.read_image``), truncated at ``size`` x the frame diagonal.  Scene-linear frames keep
+or a user kernel image (``kernel_path``, read by the pipeline: ``ctx.read_image``), with a
+support of radius ``size`` x the frame diagonal.  The Spencer and Gaussian PSFs keep their own tails
+down to 1e-5 of the PSF one pixel from the light and end smoothly inside the support
+(``clfx.fx.psf.tail_fade``: a Gaussian roll-off where the tail would still be above that at 0.9
+x the radius, then a raised cosine to 0 at the radius), so a point light graded up shows no
+rim, step or square anywhere above 1e-4 of its glare.  Scene-linear frames keep
 their energy: ``out = c - strength h + strength tint (PSF * h)``; with a white tint the total
 light is unchanged away from the borders.
 
@@ -44,7 +49,9 @@ class Glare(ScatterPlugin, Plugin):
     descriptor = Descriptor(
         name="glare", label="Glare", group="Lens", kernel="glare.cl",
         summary="Highlights scattered by a large point spread function (Spencer eye PSF, "
-                "Gaussian bloom or a kernel image), HDR-safe FFT convolution.",
+                "Gaussian bloom or a kernel image), HDR-safe FFT convolution.  The Spencer "
+                "and Gaussian tails are below 1e-5 of the PSF one pixel out from 0.9 x size "
+                "and end (raised cosine) at size x the diagonal.",
         spreads_light=True,
         params=(
             FloatParam("strength", 0.05, min=0.0, max=1.0,
@@ -53,7 +60,8 @@ class Glare(ScatterPlugin, Plugin):
                        hint="Scene-linear luminance where light starts to scatter."),
             knee_param(0.5),
             FloatParam("size", 0.15, min=0.0, max=2.0,
-                       hint="PSF radius as a fraction of the frame diagonal."),
+                       hint="PSF support radius as a fraction of the frame diagonal: the tail "
+                            "fades below 1e-5 of the PSF one pixel out by 0.9 x size, 0 beyond."),
             ChoiceParam("psf", "spencer", choices=("spencer", "gaussians", "image"),
                         hint="Spencer et al. 1995 eye PSF, a sum of Gaussians, or a kernel image."),
             PathParam("kernel_path", "",

@@ -12,24 +12,34 @@ glow hugging bright edges and lights.
 0, 1)``, ``s = clamp(L - t + k, 0, 2k)^2 / 4k`` (Rec.709 luminance ``L``, ``threshold`` t,
 ``knee`` k).  Halation is linear in exposure; the threshold keeps it to where it shows.
 
-*PSF* (:func:`halation_psf`, the geometry of the classical halation ring).  Light scattered in
-the emulsion enters a base of thickness ``b`` and index ``n`` (1.5) diffusely (Lambertian);
-a ray at angle ``theta`` comes back ``d = 2 b tan(theta)`` away.  Unfolding the path, the
-returning irradiance at ``d`` is that of a Lambertian source at distance ``H = 2 b``:
-``E(d) ~ R(theta) cos^4(theta) = R(theta) / (1 + (d / H)^2)^2``, where ``R`` is the
-back surface's reflectance:
+*PSF* (:func:`halation_psf`).  Light scattered in the emulsion enters a base of thickness
+``b`` and index ``n`` (1.5) diffusely (Lambertian); a ray at angle ``theta`` comes back
+``d = 2 b tan(theta)`` away.  Unfolding the path, the returning irradiance at ``d`` is that of
+a Lambertian source at distance ``H = 2 b``: ``cos^4(theta) = 1 / (1 + (d / H)^2)^2``.  What
+comes back is then spread again: the emulsion is a turbid layer (the light re-enters it from
+behind and diffuses sideways before it exposes the red layer), and a bare back returns light
+more than once (each bounce between emulsion and back goes further and comes back weaker).
+Multiple scattering falls off roughly exponentially, so the PSF is
+
+    P(d) ~ cos^4(theta) exp(-d / (lambda H)),
+
+a centre-peaked glow hugging the light (photographs of CineStill's halation show a glow,
+not a ring):
 
 - a *bare* back (no rem-jet; an anti-halation dye layer under the emulsion, or none at all)
   reflects by Fresnel's law, 4 % at normal incidence and totally beyond the critical angle
-  ``asin(1 / n)`` = 41.8 degrees: a bright ring at ``d = 0.89 H`` with a ``d^-4`` tail;
+  ``asin(1 / n)`` = 41.8 degrees: most of the light comes back, bounces again, and travels
+  far: ``lambda`` = 1 (the first return alone would be a ring at 0.89 H; the bounces and the
+  emulsion's diffusion fill it in);
 - a back coated with an absorbing backing in optical contact (Kodak's carbon rem-jet) has no
-  total internal reflection; what little returns is taken as angle-independent (``R`` = 1,
-  scaled by ``strength``): a centre-peaked glow of the same reach.
+  total internal reflection; what little returns comes from near the normal: ``lambda`` = 0.4,
+  a faint, tight glow.
 
-The PSF is truncated at ``radius`` = 4 H (keeping 89 % of the ring's light; the rest is
-renormalised in), area-integrated over each pixel (8 x 8 samples up to 16 px, fewer for
-larger PSFs: :func:`supersample`) and normalised to sum 1.  Its radius is at most half the
-frame diagonal (a stock on a tiny sensor is clamped to it).
+The support radius is :data:`SUPPORT` H for the back (6 H bare, 4 H backed); the profile is
+below 1e-5 of the PSF one pixel out by 0.9 x that radius and ends there smoothly
+(``clfx.fx.psf.tail_fade``: no disc edge, no rim).  Pixels are area-integrated (8 x 8 samples
+up to 16 px, fewer for larger PSFs: :func:`supersample`) and the PSF is normalised to sum 1.
+Its radius is at most half the frame diagonal (a stock on a tiny sensor is clamped to it).
 
 *Mix and energy.*  ``out = c + strength tint (PSF * h)`` per channel, alpha kept.  The PSF sums
 to 1 and the region of definition grows by its radius, so the spread itself neither creates
@@ -44,14 +54,14 @@ exactly (a redistribution, for footage that must not brighten).
 Stocks
 ------
 ``stock`` supplies ``strength``, ``tint`` and the physical ``radius`` (from the base
-thickness ``b``: 4 H = 8 b on the film, converted to pixels through the camera block's
-``sensor_width``); a parameter set explicitly (not -1) overrides the stock's value.
+thickness ``b``: SUPPORT x H = SUPPORT x 2 b on the film, converted to pixels through the
+camera block's ``sensor_width``); a parameter set explicitly (not -1) overrides the stock's value.
 Sources (what they state) and estimates (what they do not):
 
 ``vision3-500t`` / ``vision3-250d``
     Kodak VISION3 500T 5219 and 250D 5207 colour negative (Kodak technical data H-1-5219,
     H-1-5207): "clear acetate safety base with rem-jet backing", i.e. an absorbing carbon
-    backing on the back of the base: no ring, faint glow.  Base 0.13 mm (acetate motion
+    backing on the back of the base: a faint, tight glow.  Base 0.13 mm (acetate motion
     picture bases are 0.12-0.14 mm; Kodak gives 120 micrometres for its ESTAR bases, e.g.
     H-1-5242t): estimate.  Strength 0.02 / 0.015, tint: estimates.
 ``cinestill-800t``
@@ -61,7 +71,7 @@ Sources (what they state) and estimates (what they do not):
 ``portra-400``
     Kodak Portra 400 (technical data E-4050): a still colour negative with an
     anti-halation layer that processing removes, no rem-jet: a bare base behind a dye that
-    absorbs most of the light, a faint orange ring.  Base 0.125 mm, strength 0.03, tint:
+    absorbs most of the light, a faint orange glow.  Base 0.125 mm, strength 0.03, tint:
     estimates.
 ``phoenix-200``
     Harman Phoenix 200 colour negative, sold as having strong halation (no anti-halation
@@ -98,8 +108,12 @@ from clfx.host import Plugin, register
 REFRACTIVE_INDEX = 1.5
 """Refractive index of the film base (cellulose triacetate ~1.48, PET ~1.64): an estimate."""
 
-SUPPORT = 4.0
-"""PSF support radius in units of the unfolded path H = 2 x base thickness."""
+SUPPORT = {True: 6.0, False: 4.0}
+"""PSF support radius in units of the unfolded path H = 2 x base thickness, for a bare back
+(True) and a backed one (False)."""
+
+SPREAD = {True: 1.0, False: 0.4}
+"""Exponential scale of the multiply scattered return, in units of H (bare, backed)."""
 
 MAX_RADIUS = 0.5
 """Largest PSF radius as a fraction of the frame diagonal (the ``radius`` parameter's maximum,
@@ -114,7 +128,7 @@ class Stock:
     """What a film stock's halation looks like (see the module notes for the sources).
 
     ``base_mm``: base thickness; ``bare_back``: the base's back surface is bare (total
-    internal reflection: a ring) rather than coated with an absorbing backing; ``strength``:
+    internal reflection: a wide glow) rather than coated with an absorbing backing; ``strength``:
     fraction of the highlight light returned; ``tint``: per-channel share of it that reaches
     the layers (red first).
     """
@@ -135,50 +149,38 @@ STOCKS = {
 
 
 # -- physics ---------------------------------------------------------------------------------
-def base_reflectance(theta, n: float = REFRACTIVE_INDEX):
-    """Unpolarised Fresnel reflectance inside a base of index ``n`` at its back surface to
-    air, for rays at ``theta`` (radians) from the normal: 1 beyond the critical angle."""
-    theta = np.asarray(theta, np.float64)
-    ci = np.cos(theta)
-    st = n * np.sin(theta)
-    ct = np.sqrt(np.clip(1.0 - st * st, 0.0, 1.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rs = ((n * ci - ct) / (n * ci + ct)) ** 2
-        rp = ((n * ct - ci) / (n * ct + ci)) ** 2
-    return np.where(st >= 1.0, 1.0, 0.5 * (rs + rp))
-
-
-def halation_profile(d_over_h, bare_back: bool, n: float = REFRACTIVE_INDEX):
-    """Returning irradiance (unnormalised) at ``d / H`` from the source point: ``R(theta)
-    cos^4(theta)``, ``theta = atan(d / H)``; ``R`` Fresnel's (bare back) or 1 (backing)."""
+def halation_profile(d_over_h, bare_back: bool):
+    """Returning irradiance (unnormalised) at ``d / H`` from the source point:
+    ``cos^4(theta) exp(-d / (SPREAD H))``, ``theta = atan(d / H)`` (total internal reflection
+    at a bare back, beyond ``asin(1 / REFRACTIVE_INDEX)``, sets how far its light goes)."""
     x = np.asarray(d_over_h, np.float64)
-    falloff = 1.0 / (1.0 + x * x) ** 2
-    return base_reflectance(np.arctan(x), n) * falloff if bare_back else falloff
+    return np.exp(-x / SPREAD[bool(bare_back)]) / (1.0 + x * x) ** 2
 
 
 def supersample(radius_px: int) -> int:
-    """Samples per pixel and axis for a PSF of ``radius_px``: 8 up to 16 px (the ring is a
+    """Samples per pixel and axis for a PSF of ``radius_px``: 8 up to 16 px (the core is a
     pixel or two wide), 4 up to 64 px, 2 up to 256 px, 1 beyond (a smooth profile)."""
     return 8 if radius_px <= 16 else 4 if radius_px <= 64 else 2 if radius_px <= 256 else 1
 
 
-def halation_psf(radius_px: int, bare_back: bool, *, n: float = REFRACTIVE_INDEX) -> np.ndarray:
+def halation_psf(radius_px: int, bare_back: bool) -> np.ndarray:
     """The normalised halation PSF on a (2r + 1)^2 grid (see the module notes).
 
     Each pixel is the mean of ``supersample(r)^2`` samples of :func:`halation_profile` at
-    ``d / H``, ``H = r / SUPPORT``; samples beyond ``r + 0.5`` px count 0.  ``r`` = 0 is the
+    ``d / H``, ``H = r / SUPPORT``; then ended by ``psflib.tail_fade``.  ``r`` = 0 is the
     single tap 1 (the light returns where it left).  Memory stays (2r + 1)^2 floats.
     """
     r = max(int(radius_px), 0)
     if r == 0:
         return np.ones((1, 1))
-    h, ss = r / SUPPORT, supersample(r)
+    h, ss = r / SUPPORT[bool(bare_back)], supersample(r)
     c = np.arange(-r, r + 1, dtype=np.float64)
     k = np.zeros((2 * r + 1, 2 * r + 1))
     for oy in (np.arange(ss) + 0.5) / ss - 0.5:
         for ox in (np.arange(ss) + 0.5) / ss - 0.5:
             d = np.hypot(c[None, :] + ox, c[:, None] + oy)
-            k += np.where(d <= r + 0.5, halation_profile(d / h, bare_back, n), 0.0)
+            k += halation_profile(d / h, bare_back)
+    k = psflib.tail_fade(k, r)
     return k / k.sum()
 
 
@@ -210,12 +212,14 @@ class Halation(ScatterPlugin, Plugin):
     descriptor = Descriptor(
         name="halation", label="Halation", group="Film", kernel="halation.cl",
         summary="Film halation: light reflected off the base re-exposes the red layer, a "
-                "red-orange glow hugging bright edges (stock presets).",
+                "red-orange glow hugging bright edges (stock presets); the glow falls "
+                "roughly exponentially and ends smoothly at the radius.",
         spreads_light=True,
         params=(
             ChoiceParam("stock", "cinestill-800t", choices=tuple(sorted(STOCKS)),
-                        hint="Film stock: base thickness, backing (rem-jet: a glow; bare: a "
-                             "ring), strength and tint (strengths and tints are estimates)."),
+                        hint="Film stock: base thickness, backing (rem-jet: a tight glow; "
+                             "bare: a wide one), strength and tint (strengths and tints are "
+                             "estimates)."),
             FloatParam("strength", FROM_STOCK, min=FROM_STOCK, max=1.0,
                        hint="Fraction of the highlight light that returns as halation; -1 = "
                             "the stock's."),
@@ -223,9 +227,10 @@ class Halation(ScatterPlugin, Plugin):
                        hint="Scene-linear luminance where halation starts to show."),
             knee_param(0.5),
             FloatParam("radius", FROM_STOCK, min=FROM_STOCK, max=MAX_RADIUS,
-                       hint="PSF radius as a fraction of the frame diagonal (the ring sits at "
-                            "0.22 of it); -1 = from the stock's base thickness and the "
-                            "camera's sensor width."),
+                       hint="PSF support radius as a fraction of the frame diagonal (6 H "
+                            "bare back, 4 H backed; the glow is below 1e-5 of the PSF one "
+                            "pixel out by 0.9 x it and ends there); -1 = from the stock's "
+                            "base thickness and the camera's sensor width."),
             StockTintParam("tint", (FROM_STOCK,) * 3, min=FROM_STOCK, max=1.0,
                            hint="Per-channel share of the returned light (red first); -1 = "
                                 "the stock's."),
@@ -241,9 +246,9 @@ class Halation(ScatterPlugin, Plugin):
         stock = STOCKS[p.stock]
         if p.radius >= 0.0:
             r = psflib.psf_radius_px(p.radius, ctx.diagonal_px)
-        else:   # 4 H = 8 b on the film, in pixels of the display window's width
+        else:   # SUPPORT x H = SUPPORT x 2 b on the film, in pixels of the display width
             px_per_mm = ctx.width_px / ctx.camera.sensor_width
-            r = int(min(round(SUPPORT * 2.0 * stock.base_mm * px_per_mm),
+            r = int(min(round(SUPPORT[stock.bare_back] * 2.0 * stock.base_mm * px_per_mm),
                         psflib.psf_radius_px(MAX_RADIUS, ctx.diagonal_px)))
         return Settings(strength=stock.strength if p.strength < 0.0 else p.strength,
                         tint=stock.tint if p.tint[0] < 0.0 else p.tint, radius_px=r,
@@ -287,7 +292,7 @@ class Halation(ScatterPlugin, Plugin):
                            support=self.highlight_support(p, ctx), split_level=split, info=info)
         ctx.notes.extend(f"halation: {note}" for note in info.notes)
         ctx.notes.append(f"halation: {p.stock}, strength {s.strength:g}, PSF radius "
-                         f"{s.radius_px} px ({'ring' if s.bare_back else 'glow'}), "
+                         f"{s.radius_px} px ({'bare back' if s.bare_back else 'backed'}), "
                          f"{'conserved' if p.conserve else 'added'}")
         from pyopencl import cltypes
 

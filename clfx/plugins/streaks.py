@@ -12,17 +12,31 @@ the tint alone, as the coatings of an anamorphic lens colour its streaks whateve
 These highlights are spread along ``n`` directions by a one-sided exponential line kernel
 per direction,
 
-    K_d(x) = sum_{k=0}^{4^N - 1} a_c^k  delta(x - k d),   a_c = 0.01^(1 / L_c),
+    K_d(x) = sum_{k=0}^{S - 1} a_c^k  delta(x - k d),   a_c = 0.01^(1 / L_c),
 
 so a streak has faded to 1% of its start after ``L_c`` pixels (``length`` times the frame
 diagonal; ``color_shift`` makes red travel further than blue, or the reverse, so a streak
-changes colour along its length as a diffraction streak does).  Each direction's kernel is
-normalised to sum to ``intensity * tint_c / n``, so the added light equals ``intensity`` times
-the highlights' energy.  Output = sanitised source + streaks; alpha is kept.
+changes colour along its length as a diffraction streak does).  The support ``S`` reaches
+:data:`TAIL` (2.5) x ``L``, where the exponential is 1e-5 of its start: a streak fades
+smoothly into the dark and its end is below 1e-4 of its brightest pixel (no blunt end,
+whatever the light's brightness).  Each direction's kernel is normalised to sum to
+``intensity * tint_c / n``, so the added light equals ``intensity`` times the highlights'
+energy.  Output = sanitised source + streaks; alpha is kept.
 
 Star filter (``mode="star"``): ``streaks`` directions at ``angle + 360 i / streaks`` degrees,
 counter-clockwise from +x (screen up is -y).  A scratched filter gives a streak
 perpendicular to each scratch; ``streaks`` counts the rays, not the scratches.
+
+Anamorphic streaks (``mode="anamorphic"``): two rays, at ``angle`` and opposite (0:
+horizontal).  A streak is the light reflected between the coated faces of the anamorphic
+cylinder: two reflections off a single-layer MgF2 quarter-wave coating (index 1.38 on glass
+1.52) designed at ``coating_nm``; its colour is that reflectance squared over the visible
+spectrum (CIE 1931, Rec.709), normalised to luminance 1 and multiplied by ``tint``: blue-cyan
+for a coating designed in the red (650 nm: RGB 0.63, 0.92, 2.88).  The streak is thin: each
+pixel's light is weighted by ``(L / peak)^core_power`` (``core_power`` -1: 3), so a light's
+brightest rows carry it; and it falls off with distance: 70 % of its light in a bright part
+fading to 1 % at ``0.15 length``, 30 % in a long faint part fading to 1 % at ``length`` (a
+sum of two exponentials, each run as its own Kawase chain).
 
 Diffraction spikes (``mode="aperture"``): the far field of a straight blade edge is a line
 perpendicular to it (the Fourier transform of a half plane), so an N-blade polygon aperture
@@ -34,12 +48,13 @@ so on stderr (``ctx.warnings``).
 
 Algorithm (Kawase 2003, "Frame buffer postprocessing effects in DOUBLE-S.T.E.A.L")
 -----------------------------------------------------------------------------------
-Per direction, N = ceil(log4(L' + 1)) passes; pass n has 4 taps at offsets ``s * 4^n * d``
-(s = 0..3) with weights ``a_c^(s 4^n)``, where the step ``d`` is one whole pixel along the
+Per direction, N passes with ``T 4^(N-1) >= TAIL L' + 1`` (smallest N, then smallest T <= 4
+taps in the last pass); pass n has 4 taps at offsets ``s * 4^n * d`` (s = 0..3) with weights
+``a_c^(s 4^n)`` (0 for s >= T in the last pass), where the step ``d`` is one whole pixel along the
 ray's major axis (|d| = 1 / max(|cos|, |sin|) px, L' = L / |d| steps), so taps fall on
-pixel columns (rows) and interpolate linearly between two pixels.  Every k in [0, 4^N) has
+pixel columns (rows) and interpolate linearly between two pixels.  Every k in [0, S) has
 exactly one base-4 expansion, so the passes compose to exactly the truncated exponential
-above: 4N taps per pixel instead of L.  Interpolated taps blur each pass by a sub-pixel
+above: 4N taps per pixel instead of S.  Interpolated taps blur each pass by a sub-pixel
 amount across the streak (not at all for rays at multiples of 45 degrees); the oracle
 (``tests/reference/streaks.py``) computes exactly this composition in float64, and
 ``line_kernel_streaks`` there the exponential line kernel at the same tap positions (one
@@ -51,8 +66,9 @@ difference of 0.25 (0.27 with the snapped taps of draft/preview/final) and an rm
 across the ray of 0.47 px (0.45 snapped) against 0.35 px: the Kawase streak is a fraction
 of a pixel wider, never longer or brighter.  At 1080p (one 30-degree ray, L = 100 px, 12
 lights), max error / peak against the exact line kernel: reference 3.7e-2, final 4.7e-2,
-preview 0.22, draft 0.47 (reduced resolution widens the ray).  Truncation at 4^N - 1 >= L'
-drops at most 1% of the infinite exponential's energy (the kernel is renormalised).
+preview 0.22, draft 0.47 (reduced resolution widens the ray; measured before the support
+reached 2.5 L).  Truncation at S > 2.5 L' drops 1e-5 of the infinite exponential's energy
+(the kernel is renormalised).
 
 Quality levels run the passes at 1/4 (draft), 1/2 (preview) or full (final, reference)
 resolution (bright-pass box-averaged, steps scaled, bilinear upsample on compose); below
@@ -73,6 +89,19 @@ from clfx.host import Plugin, register
 
 TAPS = 4
 """Taps per pass; pass n steps 4^n pixels, so N passes cover 4^N - 1 pixels."""
+
+TAIL = math.log(1e5) / math.log(100.0)
+"""Support of the exponential in units of its 1 % length: there it is 1e-5 of its start."""
+
+ANAMORPHIC_PARTS = ((0.15, 0.7), (1.0, 0.3))
+"""mode anamorphic: (1 % length as a fraction of ``length``, share of the light) of the bright
+near part and the long faint part."""
+
+ANAMORPHIC_CORE_POWER = 3.0
+"""mode anamorphic, core_power -1: the exponent of (L / peak) weighting each pixel's light."""
+
+COATING_INDEX, GLASS_INDEX = 1.38, 1.52
+"""The anamorphic coating model: a MgF2 quarter-wave layer on crown glass."""
 
 
 @dataclass(frozen=True)
@@ -110,12 +139,15 @@ def streak_angles(mode: str, streaks: int, angle: float, blades: int,
                   blade_rotation: float) -> list[float]:
     """Directions of the rays in degrees (counter-clockwise from +x, screen up = -y).
 
-    ``mode="star"``: ``streaks`` rays from ``angle``.  ``mode="aperture"``: edge normals of a
-    regular ``blades``-gon rotated by ``blade_rotation`` plus ``angle``, and their opposites
-    (N for even N, 2N for odd N); empty for a round aperture (``blades < 3``).
+    ``mode="star"``: ``streaks`` rays from ``angle``.  ``mode="anamorphic"``: ``angle`` and
+    its opposite.  ``mode="aperture"``: edge normals of a regular ``blades``-gon rotated by
+    ``blade_rotation`` plus ``angle``, and their opposites (N for even N, 2N for odd N); empty
+    for a round aperture (``blades < 3``).
     """
     if mode == "star":
         return [angle + 360.0 * i / streaks for i in range(streaks)]
+    if mode == "anamorphic":
+        return [angle, angle + 180.0]
     if blades < 3:
         return []
     normals = [blade_rotation + angle + 180.0 * (2 * i + 1) / blades for i in range(blades)]
@@ -150,29 +182,59 @@ def channel_lengths(length_px: float, color_shift: float) -> np.ndarray:
     return length_px * (1.0 + 0.5 * color_shift * np.array([1.0, 0.0, -1.0]))
 
 
-def pass_count(max_length_px: float) -> int:
-    """Smallest N with 4^N - 1 >= L (so the truncated tail is below 1% of the start)."""
-    return max(1, math.ceil(math.log(max(max_length_px, 1.0) + 1.0, TAPS)))
+def pass_plan(max_length_px: float) -> tuple[int, int]:
+    """(N passes, T taps in the last one): the smallest support ``S = T 4^(N-1)`` with
+    ``S >= TAIL L + 1`` (the truncated tail is below 1e-5 of the start)."""
+    need = TAIL * max(max_length_px, 1.0) + 1.0
+    n = max(1, math.ceil(math.log(need, TAPS) - 1e-12))
+    top = min(TAPS, max(1, math.ceil(need / TAPS ** (n - 1) - 1e-9)))
+    return n, top
 
 
-def pass_weights(lengths_px: np.ndarray, passes: int, gain: np.ndarray) -> list[np.ndarray]:
-    """Per-pass tap weights, shape (passes, 4 taps, 4 channels); gain folded into pass 0.
+def support_steps(max_length_px: float) -> int:
+    """The support ``T 4^(N-1)`` of :func:`pass_plan`, in steps."""
+    n, top = pass_plan(max_length_px)
+    return top * TAPS ** (n - 1)
+
+
+def pass_weights(lengths_px: np.ndarray, passes: int, gain: np.ndarray,
+                 top: int = TAPS) -> list[np.ndarray]:
+    """Per-pass tap weights, shape (passes, 4 taps, 4 channels); gain folded into pass 0; the
+    last pass has ``top`` taps of non-zero weight.
 
     ``gain`` (3,) is divided by the truncated kernel's sum so each channel sums to ``gain``.
     """
     a = 0.01 ** (1.0 / np.maximum(lengths_px, 1e-3))        # per-channel decay per pixel
-    support = TAPS ** passes
+    support = top * TAPS ** (passes - 1)
     total = np.where(a < 1.0, (1.0 - a ** support) / np.maximum(1.0 - a, 1e-300), support)
     out = []
     for n in range(passes):
         b = TAPS ** n
         w = np.zeros((TAPS, 4))
-        for s in range(TAPS):
+        for s in range(top if n == passes - 1 else TAPS):
             w[s, :3] = a ** (s * b)
         if n == 0:
             w[:, :3] *= gain / total
         out.append(w)
     return out
+
+
+def coating_tint(design_nm: float) -> np.ndarray:
+    """RGB (luminance 1) of light reflected twice off a single-layer MgF2 quarter-wave coating
+    designed at ``design_nm`` on crown glass: the coating's residual reflectance squared,
+    integrated with the CIE 1931 observer into linear Rec.709 (into gamut)."""
+    from clfx.fx import optics, spectral
+
+    lam = spectral.wavelengths(80)
+    weights = spectral.spectral_rgb_weights(lam)
+    refl = optics.quarter_wave_reflectance(1.0, GLASS_INDEX, COATING_INDEX, design_nm, lam)
+    rgb = spectral.to_gamut((refl ** 2) @ weights / weights.sum(axis=0))
+    return rgb / float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
+
+
+def streak_parts(mode: str) -> tuple[tuple[float, float], ...]:
+    """(1 % length as a fraction of ``length``, share of the light) of each exponential."""
+    return ANAMORPHIC_PARTS if mode == "anamorphic" else ((1.0, 1.0),)
 
 
 @register
@@ -187,9 +249,12 @@ class Streaks(Plugin):
                        hint="Scene-linear luminance above which pixels streak."),
             FloatParam("intensity", 0.1, min=0.0, max=100.0,
                        hint="Light added to the streaks as a fraction of the highlights' energy."),
-            ChoiceParam("mode", "star", choices=("star", "aperture"),
+            ChoiceParam("mode", "star", choices=("star", "aperture", "anamorphic"),
                         hint="star: `streaks` rays at `angle`; aperture: diffraction spikes of "
-                             "the blade polygon (N spikes for even N, 2N for odd N)."),
+                             "the blade polygon (N spikes for even N, 2N for odd N); "
+                             "anamorphic: a thin streak both ways along `angle` (0: "
+                             "horizontal), coloured by the coating, bright near the light and "
+                             "long and faint beyond."),
             IntParam("streaks", 4, min=1, max=32, hint="Number of rays in star mode."),
             FloatParam("angle", 45.0, min=-360.0, max=360.0, units="deg",
                        hint="Angle of the first ray (star) or extra aperture rotation, degrees "
@@ -198,12 +263,19 @@ class Streaks(Plugin):
                      hint="Aperture blades in aperture mode; 0 = the camera block's blades."),
             FloatParam("length", 0.08, min=0.0005, max=2.0,
                        hint="Distance at which a streak has faded to 1%, as a fraction of the "
-                            "frame diagonal."),
+                            "frame diagonal; it ends (below 1e-5) at 2.5 x that."),
             FloatParam("core", 0.5, min=0.0, max=1.0,
                        hint="Only the light above this fraction of its light's peak luminance "
                             "streaks (a light: a connected region above threshold): the bright "
                             "core of a flame, not its glow or what it lights (0: all above "
                             "threshold)."),
+            FloatParam("core_power", -1.0, min=-1.0, max=8.0,
+                       hint="Weight of each pixel's light by (L / its light's peak)^power: "
+                            "> 0 thins a streak to its light's brightest rows; -1 = 3 in "
+                            "anamorphic mode, 0 otherwise."),
+            FloatParam("coating_nm", 650.0, min=380.0, max=780.0, units="nm",
+                       hint="Anamorphic mode: design wavelength of the MgF2 coating whose "
+                            "residual reflection (twice) colours the streak (650: blue-cyan)."),
             RGBParam("tint", (1.0, 1.0, 1.0), max=100.0, hint="Colour multiplier of the streaks."),
             FloatParam("source_color", 1.0, min=0.0, max=1.0,
                        hint="How much of the light's own colour a streak keeps: 1 = the "
@@ -225,13 +297,25 @@ class Streaks(Plugin):
     def length_px(self, p, ctx) -> float:
         return p.length * ctx.diagonal_px
 
+    @staticmethod
+    def core_power(p) -> float:
+        if p.core_power >= 0.0:
+            return p.core_power
+        return ANAMORPHIC_CORE_POWER if p.mode == "anamorphic" else 0.0
+
+    @staticmethod
+    def colour(p) -> np.ndarray:
+        """The streaks' colour multiplier: ``tint``, times the coating's in anamorphic mode."""
+        tint = np.asarray(p.tint, np.float64)
+        return tint * coating_tint(p.coating_nm) if p.mode == "anamorphic" else tint
+
     def spread_px(self, p, ctx, factor: int = 1) -> int:
         """How far light travels: the truncated kernel's support plus the bilinear footprint."""
         longest = float(channel_lengths(self.length_px(p, ctx), p.color_shift).max())
         reach = 0.0
         for a in self.angles(p, ctx) or [0.0]:
             step = grid_step(a)[2]
-            reach = max(reach, (TAPS ** pass_count(longest / factor / step)) * step * factor)
+            reach = max(reach, support_steps(longest / factor / step) * step * factor)
         return int(math.ceil(reach)) + 2 * factor
 
     # cheap questions ------------------------------------------------------------------
@@ -273,13 +357,16 @@ class Streaks(Plugin):
         defines = {"FACTOR": factor, "fp64": lvl.fp64, **ctx.luminance_defines}
 
         angles = self.angles(p, ctx)
-        lengths = channel_lengths(self.length_px(p, ctx), p.color_shift) / factor
-        gain = p.intensity * np.asarray(p.tint) / len(angles)
+        colour = self.colour(p)
         plans = []
-        for a in angles:
-            sx, sy, step_len = grid_step(a)
-            passes = pass_count(float(lengths.max()) / step_len)
-            plans.append((sx, sy, passes, pass_weights(lengths / step_len, passes, gain)))
+        for fraction, share in streak_parts(p.mode):
+            lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift) / factor
+            gain = p.intensity * share * colour / len(angles)
+            for a in angles:
+                sx, sy, step_len = grid_step(a)
+                passes, top = pass_plan(float(lengths.max()) / step_len)
+                plans.append((sx, sy, passes, pass_weights(lengths / step_len, passes, gain,
+                                                           top)))
         # zero margin wide enough for every tap (no bounds tests), unless the rays are so long
         # that the margin would cost more than the tests
         reach = 3 * TAPS ** (max(n for _, _, n, _ in plans) - 1) + 2
@@ -309,7 +396,7 @@ class Streaks(Plugin):
             rt.launch(bright_knl, (wp, lo_h), src, i32(src.pitch), i32(src.width),
                       i32(src.height), pong, i32(org), i32(pitch), i32(wp), i32(lo_h),
                       i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
-                      i32(tiles_y), f32(p.core), f32(p.source_color))
+                      i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)))
             cur = pong
             for n in range(passes):
                 last = n == passes - 1

@@ -206,3 +206,19 @@ def test_glare_kernel_image_comes_from_the_context_reader(rt, rng):
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
     with pytest.raises(ParamError, match="glare.kernel_path: psf 'image' needs a kernel image"):
         Glare().apply(rt, Glare.params(psf="image", size=0.3), src, read_image=read_image)
+
+
+@pytest.mark.parametrize("psf", ["spencer", "gaussians"])
+@pytest.mark.parametrize("size", [0.05, 0.15])
+def test_point_light_glare_fades_smoothly_before_its_support_ends(rt, psf, size):
+    # issue 25: the radial profile of a 1e4 point is monotone, has no step above 1e-4 of its
+    # peak and is below that before the PSF's support ends (size 0.05 on 320 px: the former
+    # taper started at 1e-3 and ended the tail in a shoulder)
+    from tests.light_profile import assert_smooth_tail, point_light, ray
+
+    src = point_light()
+    h, w = src.shape[:2]
+    out = Glare().apply(rt, Glare.params(psf=psf, size=size), src)
+    support = round(size * math.hypot(w, h))
+    assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support,
+                       what=f"glare {psf} size {size}")

@@ -37,17 +37,19 @@ def test_psf_matches_its_formula(r, bare):
     assert halation_psf(r, bare).sum() == pytest.approx(1.0, abs=1e-12)
 
 
-def test_psf_shape_ring_versus_glow():
-    # bare base: total internal reflection beyond asin(1/1.5) -> a ring at 0.894 H
-    x = np.linspace(0.0, 4.0, 4001)
-    ring = halation_profile(x, True)
-    assert x[np.argmax(ring)] == pytest.approx(math.tan(math.asin(1 / 1.5)), abs=2e-3)
-    assert ring[0] == pytest.approx(0.04, abs=1e-12)           # Fresnel at normal incidence
-    glow = halation_profile(x, False)
-    assert np.all(np.diff(glow) <= 0) and glow[0] == 1.0       # rem-jet: centre-peaked
-    k = halation_psf(40, True)
-    row = k[40, 40:]
-    assert 8 <= int(np.argmax(row)) <= 10                      # 0.894 x 40 / 4 = 8.9 px
+def test_psf_shape_glow_not_ring():
+    # both backs: a centre-peaked glow falling roughly exponentially (no rim); the bare back's
+    # (total internal reflection, repeated bounces) reaches further than the backed one's
+    x = np.linspace(0.0, 6.0, 6001)
+    for bare in (True, False):
+        prof = halation_profile(x, bare)
+        assert prof[0] == 1.0 and np.all(np.diff(prof) < 0)
+    assert halation_profile(2.0, True) > 10 * halation_profile(2.0, False)
+    for bare in (True, False):
+        k = halation_psf(40, bare)
+        row = k[40, 40:]
+        assert np.all(np.diff(row) <= 0) and row[-1] == 0.0
+        assert row[int(0.9 * 40)] <= 1e-5 * row[1]        # below 1e-5 before the taper
 
 
 @pytest.mark.parametrize("shape", hard_shapes())
@@ -77,8 +79,10 @@ def test_halation_fft_path_and_levels(rt, rng, conserve):
     assert errs["reference"] <= 2e-7 * 1e4 and errs["final"] <= 2e-7 * 1e4, errs
     # float32 FFT with the bright pixels gathered exactly: ~1e-7 of the spread light
     assert errs["preview"] <= 1e-6 * scale, errs
-    # one pyramid level: light moves <= 0.5 px, the ring blurred ~1 px
-    assert errs["draft"] <= 0.05 * scale, errs
+    # one pyramid level: light moves <= 0.5 px and the core is blurred ~1 px; the glow's core
+    # (H = 2.5 px here) is as sharp as the light, so the error sits at the light's edge:
+    # measured 0.18 x scale within 3 px of the light (0.04 x scale beyond)
+    assert errs["draft"] <= 0.2 * scale, errs
     assert all(a >= b * 0.999 for a, b in zip([errs[q] for q in LEVELS],
                                               [errs[q] for q in LEVELS[1:]])), errs
 
@@ -88,7 +92,7 @@ def test_energy_added_or_conserved(rt):
     src[..., 3] = 1.0
     src[40, 40, :3] = (1e4, 2e3, 5e2)
     for conserve in (False, True):
-        p = Halation.params(radius=0.12, conserve=conserve)       # 14 px, ring at 3 px
+        p = Halation.params(radius=0.12, conserve=conserve)       # 14 px
         out = Halation().apply(rt, p, src).astype(np.float64)
         st = STOCKS[p.stock]
         c = src[40, 40, :3].astype(np.float64)
@@ -100,8 +104,8 @@ def test_energy_added_or_conserved(rt):
         np.testing.assert_allclose(added, want, atol=2e-6 * h.max())
         np.testing.assert_array_equal(out[..., 3], 1.0)            # alpha kept
     out = Halation().apply(rt, Halation.params(radius=0.12), src)
-    ring = out[40, 40:, 0]
-    assert np.argmax(ring[1:]) + 1 in (3, 4)            # the halo hugs the light (ring 3.1 px)
+    glow = out[40, 40:, 0]
+    assert np.argmax(glow[1:]) == 0                     # the halo hugs the light: no ring
     assert out[40, 44, 0] > 10 * out[40, 44, 2]                   # and it is red
 
 
@@ -143,8 +147,8 @@ def test_stock_radius_from_base_and_sensor(rt):
     h = Halation()
     for name, st in STOCKS.items():
         s = h.settings(Halation.params(stock=name), ctx)
-        # 4 H = 8 x base thickness on the film, 160 px across 24.89 mm
-        assert s.radius_px == round(8 * st.base_mm * 160 / 24.89)
+        # 6 H (bare back) or 4 H (backed), H = 2 x base thickness, 160 px across 24.89 mm
+        assert s.radius_px == round((12 if st.bare_back else 8) * st.base_mm * 160 / 24.89)
         assert (s.strength, s.tint) == (st.strength, st.tint)
     s = h.settings(Halation.params(strength=0.1, tint=(1, 0.5, 0), radius=0.05), ctx)
     assert (s.strength, s.tint, s.radius_px) == (0.1, (1.0, 0.5, 0.0), round(0.05 * ctx.diagonal_px))
@@ -167,3 +171,21 @@ def test_nonfinite_pixels_do_not_spread(rt):
     assert np.isfinite(out).all() and any("2 non-finite" in n for n in ctx.notes)
     zeroed = np.where(np.isfinite(bad).all(axis=2, keepdims=True), bad, 0.0)
     np.testing.assert_allclose(out, Halation().apply(rt, p, zeroed), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("stock,size", [("cinestill-800t", -1.0), ("vision3-500t", -1.0),
+                                        ("cinestill-800t", 0.1)])
+def test_point_light_halation_fades_smoothly_before_its_support_ends(rt, stock, size):
+    # issue 25: a glow hugging the light, not a disc with a rim: monotone, no step above 1e-4
+    # of the peak, below it before the support ends
+    from tests.light_profile import assert_smooth_tail, point_light, ray
+
+    src = point_light()
+    h, w = src.shape[:2]
+    p = Halation.params(stock=stock, radius=size)
+    out = Halation().apply(rt, p, src)
+    ctx = RenderContext(rt, rt.upload(src))
+    support = Halation().settings(p, ctx).radius_px
+    assert support >= 8
+    assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support, start=3,
+                       what=f"halation {stock} {size}")

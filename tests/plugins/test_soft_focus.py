@@ -11,7 +11,7 @@ LEVELS = ("draft", "preview", "final", "reference")
 
 def oracle(src, p, **kw):
     h, w = src.shape[:2]
-    r = int(round(p.size * np.hypot(w, h)))
+    r = int(round(3.0 * p.size * np.hypot(w, h)))      # the support: 3 x size
     return reference(src, r, amount=p.amount, threshold=p.threshold, knee=p.knee, tint=p.tint, **kw)
 
 
@@ -57,3 +57,17 @@ def test_soft_focus_hdr_nonfinite_identity(rt, rng):
     high = SoftFocus.params(threshold=0.5, knee=0.1)
     assert SoftFocus().is_identity(high, RenderContext(rt, rt.upload(dark))) == "no pixel above threshold"
     assert SoftFocus().is_identity(SoftFocus.params(amount=0.0), ctx) == "amount is 0"
+
+
+@pytest.mark.parametrize("size", [0.03, 0.1])
+def test_point_light_diffusion_fades_smoothly_before_its_support_ends(rt, size):
+    # issue 25: exponential diffusion, no disc edge: monotone, no step above 1e-4 of the
+    # peak, below it before the support (3 x size) ends
+    from tests.light_profile import assert_smooth_tail, point_light, ray
+
+    src = point_light()
+    h, w = src.shape[:2]
+    out = SoftFocus().apply(rt, SoftFocus.params(size=size), src)
+    support = round(3.0 * size * np.hypot(w, h))
+    assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support,
+                       what=f"soft_focus size {size}")

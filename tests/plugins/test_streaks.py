@@ -35,6 +35,17 @@ def test_streaks_match_reference(rt, rng, shape):
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
 
 
+@pytest.mark.parametrize("shape", [(17, 31), (48, 64)])
+def test_anamorphic_matches_reference(rt, rng, shape):
+    # two exponentials per ray, the coating's colour, the (L / peak)^3 weighting
+    src = scene(rng, shape)
+    got, p = run(rt, src, "reference", mode="anamorphic", angle=10.0, core=0.3,
+                 source_color=0.0)
+    want = reference(src, **p.as_dict())
+    # as above: float32 buffers between the passes of each chain
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
 def test_final_matches_reference_with_snapped_taps(rt, rng):
     src = scene(rng, (48, 64))
     got, p = run(rt, src, "final", length=1.0)     # 80 px: passes step 1, 4, 16, 64
@@ -252,3 +263,74 @@ def test_aperture_mode_with_a_round_aperture_warns_on_stderr(tmp_path):
     _, quiet = cli(tmp_path, src, "apply", "streaks", "{in}", "{out}", "mode=aperture",
                    "camera.blades=6")
     assert "round aperture" not in quiet.stderr
+
+
+@pytest.mark.parametrize("mode,kw", [
+    ("star", {}),                                      # the default 4-ray star, 45 degrees
+    # a horizontal pair whose 1 % length (60 px) sat just under the former 4^3 = 64 px
+    # support: it stopped at 0.7 % of its start
+    ("star", dict(streaks=2, angle=0.0, length=60.0 / math.hypot(480, 320))),
+    ("anamorphic", dict(length=0.1, angle=0.0)),
+])
+def test_point_light_streak_fades_smoothly_before_its_support_ends(rt, mode, kw):
+    # issue 25: along a ray the streak is monotone, has no step above 1e-4 of its start and
+    # is below that before its support ends
+    from clfx.plugins.streaks import grid_step, support_steps
+    from tests.light_profile import assert_smooth_tail, point_light, ray
+
+    src = point_light(320, 480)
+    h, w = src.shape[:2]
+    p = Streaks.params(mode=mode, **kw)
+    out = Streaks().apply(rt, p, src)
+    step = grid_step(p.angle)[2]
+    support = support_steps(p.length * math.hypot(w, h) / step)     # in samples of the ray
+    dx, dy = (1, -1) if p.angle == 45.0 else (1, 0)
+    n = h // 2 if dy else w // 2
+    assert support < n - 2
+    assert_smooth_tail(ray(out, h // 2, w // 2, dx, dy, n), support, start=2,
+                       what=f"streaks {mode} {kw}")
+
+
+def spot(h=180, w=320, sigma=3.0, peak=1e4):
+    """A round light with a bright centre (Gaussian, sigma px) on black."""
+    src = np.zeros((h, w, 4), np.float32)
+    src[..., 3] = 1.0
+    y, x = np.mgrid[0:h, 0:w]
+    g = peak * np.exp(-((x - w // 2) ** 2 + (y - h // 2) ** 2) / (2 * sigma ** 2))
+    src[..., :3] = g[..., None]
+    return src
+
+
+def fwhm(col):
+    """Width (px) of the samples above half the maximum."""
+    return int((col >= 0.5 * col.max()).sum())
+
+
+def test_anamorphic_streak_thin_core_falls_off_and_is_blue_cyan(rt):
+    # issue 25: not a constant-width, constant-brightness white bar
+    src = spot()
+    h, w = src.shape[:2]
+    ana = Streaks.params(mode="anamorphic", angle=0.0, length=0.35, core=0.3, source_color=0.0)
+    out = Streaks().apply(rt, ana, src).astype(np.float64)
+    added = out[..., :3] - src[..., :3]
+    lum = added @ [0.2126, 0.7152, 0.0722]
+    # thin: the streak is narrower than the light (7 px at half maximum) and than the same
+    # streak without the core weighting (measured 5 px against 7)
+    flat = Streaks().apply(rt, Streaks.params(**{**ana.as_dict(), "core_power": 0.0}), src)
+    lum0 = (flat[..., :3].astype(np.float64) - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
+    for dx in (30, 80, 140):
+        assert fwhm(lum[:, w // 2 + dx]) <= 5, (dx, fwhm(lum[:, w // 2 + dx]))
+        assert fwhm(lum[:, w // 2 + dx]) < fwhm(lum0[:, w // 2 + dx])
+    # falls off with distance: a bright part near the light, a long faint one beyond
+    row = lum[h // 2]
+    assert row[w // 2 + 10] > 2.0 * row[w // 2 + 60] > 0
+    assert row[w // 2 + 60] > 1.5 * row[w // 2 + 150] > 0
+    assert row[w // 2 - 60] == pytest.approx(row[w // 2 + 60], rel=1e-3)   # both ways
+    # blue-cyan from the coating: blue over green over red, everywhere along it
+    for dx in (10, 60, 150):
+        r, g, b = added[h // 2, w // 2 + dx]
+        assert b > 2.0 * r and g > 1.2 * r, (dx, r, g, b)
+    # the coating's design sets the colour: one designed in the blue gives a warmer streak
+    warm = Streaks().apply(rt, Streaks.params(**{**ana.as_dict(), "coating_nm": 450.0}), src)
+    r, g, b = warm[h // 2, w // 2 + 60, :3] - src[h // 2, w // 2 + 60, :3]
+    assert r > b

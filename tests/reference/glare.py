@@ -85,3 +85,26 @@ def glare(src, psf, *, strength, threshold, knee, tint=(1.0, 1.0, 1.0), boost=0.
         out[..., :3] -= strength * hh
     out[..., 3] = c[..., 3]
     return out
+
+
+def tail_fade(k, radius, floor=1e-5, start=0.9):
+    """A radially decreasing (2r + 1)^2 kernel ended inside its support (plain loops): if its
+    value at floor(start r) px on the axis is above ``floor`` x its value 1 px out, times
+    exp(-(d / rho)^2) with rho making it exactly that; then times a raised cosine from start r
+    to r (clfx.fx.psf.tail_fade)."""
+    import math
+
+    r = int(radius)
+    if r < 2:
+        return np.asarray(k, np.float64)
+    k1, i0 = k[r, r + 1], int(math.floor(start * r))
+    ke = k[r, r + i0]
+    rho = i0 / math.sqrt(math.log(ke / (floor * k1))) if ke > floor * k1 else math.inf
+    out = np.zeros_like(k, dtype=np.float64)
+    for j in range(-r, r + 1):
+        for i in range(-r, r + 1):
+            d = math.hypot(i, j)
+            t = min(max((d / r - start) / (1.0 - start), 0.0), 1.0)
+            env = math.exp(-(d / rho) ** 2) if math.isfinite(rho) else 1.0
+            out[j + r, i + r] = k[j + r, i + r] * (0.5 + 0.5 * math.cos(math.pi * t)) * env
+    return out

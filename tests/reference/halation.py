@@ -1,34 +1,24 @@
-"""float64 NumPy oracle of clfx/plugins/halation.py: the halation PSF from its formula, the
+"""float64 NumPy oracle of clfx/plugins/halation.py: the halation PSF from its formula (a
+Lambertian return times an exponential spread, tail-faded), the
 glare family's highlight and convolution (tests/reference/glare.py), the additive or
 conserving mix."""
 import math
 
 import numpy as np
 
-from tests.reference.glare import convolve, highlight, sanitise
+from tests.reference.glare import convolve, highlight, sanitise, tail_fade
 
-N = 1.5          # base refractive index
-SUPPORT = 4.0    # support radius / H
-
-
-def fresnel_back(theta):
-    """Unpolarised Fresnel reflectance from glass of index N into air at angle theta."""
-    s = N * math.sin(theta)
-    if s >= 1.0:
-        return 1.0
-    ci, ct = math.cos(theta), math.sqrt(1.0 - s * s)
-    rs = ((N * ci - ct) / (N * ci + ct)) ** 2
-    rp = ((N * ct - ci) / (N * ct + ci)) ** 2
-    return 0.5 * (rs + rp)
+SUPPORT = {True: 6.0, False: 4.0}    # support radius / H (bare back, backed)
+SPREAD = {True: 1.0, False: 0.4}     # exponential scale of the return / H
 
 
 def psf(radius, bare_back, ss=8):
-    """Pixel-integrated (ss x ss samples) R(theta) cos^4(theta), theta = atan(d / H),
-    H = radius / 4, zero beyond radius + 0.5, normalised (plain loops)."""
+    """Pixel-integrated (ss x ss samples) cos^4(theta) exp(-d / (SPREAD H)), theta =
+    atan(d / H), H = radius / SUPPORT, tail-faded and normalised (plain loops)."""
     r = int(radius)
     if r == 0:
         return np.ones((1, 1))
-    h = r / SUPPORT
+    h = r / SUPPORT[bare_back]
     k = np.zeros((2 * r + 1, 2 * r + 1))
     for j in range(-r, r + 1):
         for i in range(-r, r + 1):
@@ -36,11 +26,10 @@ def psf(radius, bare_back, ss=8):
             for sj in range(ss):
                 for si in range(ss):
                     d = math.hypot(i + (si + 0.5) / ss - 0.5, j + (sj + 0.5) / ss - 0.5)
-                    if d > r + 0.5:
-                        continue
                     theta = math.atan(d / h)
-                    acc += (fresnel_back(theta) if bare_back else 1.0) * math.cos(theta) ** 4
+                    acc += math.cos(theta) ** 4 * math.exp(-d / h / SPREAD[bare_back])
             k[j + r, i + r] = acc / ss ** 2
+    k = tail_fade(k, r)
     return k / k.sum()
 
 

@@ -1,25 +1,30 @@
-"""float64 NumPy oracle of clfx/plugins/soft_focus.py: glare's model, a 3-Gaussian bloom PSF."""
+"""float64 NumPy oracle of clfx/plugins/soft_focus.py: glare's model, a diffusion PSF of three
+radial exponentials ended by the tail fade."""
+import math
+
 import numpy as np
 
-from tests.reference.glare import glare
+from tests.reference.glare import glare, tail_fade
+
+SUPPORT = 3.0    # support radius / size
 
 
-def bloom_psf(radius):
+def diffusion_psf(radius):
+    """sum_i w_i exp(-d / s_i) / (2 pi s_i^2), s = size / 4, / 8, / 16 (size = radius / 3),
+    w = 1, 2, 4; tail-faded and normalised (plain loops)."""
     r = int(radius)
-    y, x = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
-    d2 = x * x + y * y
-    k = np.zeros_like(d2)
-    for i, w in enumerate((0.25, 0.5, 1.0)):       # widest r/3, each next 2x narrower
-        s = max(r / 3.0 / 2 ** i, 0.5)
-        s = max(s, 0.3)
-        g = np.exp(-0.5 * d2 / (s * s))
-        k += w * g / g.sum()
-    # round support: 1 inside 3/4 of the radius, a raised cosine to 0 at the radius
-    t = np.clip((np.sqrt(d2) / max(r, 1) - 0.75) / 0.25, 0.0, 1.0)
-    k = k * (0.5 + 0.5 * np.cos(np.pi * t))
+    size = r / SUPPORT
+    k = np.zeros((2 * r + 1, 2 * r + 1))
+    for s, w in ((size / 4, 1.0), (size / 8, 2.0), (size / 16, 4.0)):
+        s = max(s, 0.5)
+        for j in range(-r, r + 1):
+            for i in range(-r, r + 1):
+                k[j + r, i + r] += w * math.exp(-math.hypot(i, j) / s) / (2 * math.pi * s * s)
+    k = tail_fade(k, r)
     return k / k.sum()
 
 
 def soft_focus(src, radius, *, amount, threshold, knee, tint=(1.0, 1.0, 1.0), **kw):
-    return glare(src, bloom_psf(radius), strength=amount, threshold=threshold, knee=knee,
+    """``radius``: the PSF's support radius in px (3 x size x the diagonal)."""
+    return glare(src, diffusion_psf(radius), strength=amount, threshold=threshold, knee=knee,
                  tint=tint, **kw)

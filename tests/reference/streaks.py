@@ -29,14 +29,18 @@ def peak_level(lum, threshold, tile=32):
     return np.kron(peaks, np.ones((tile, tile)))[:h, :w]
 
 
-def highlights(src, threshold, core=0.0, source_color=1.0):
-    """The light that streaks: above max(threshold, core x the peak near it), its colour mixed
-    towards its luminance by 1 - source_color."""
+def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
+    """The light that streaks: above max(threshold, core x the peak near it), weighted by
+    (lum / peak)^core_power, its colour mixed towards its luminance by 1 - source_color."""
     c = np.where(np.isfinite(src), src, 0.0).astype(np.float64)
     c = np.maximum(c, 0.0)
     lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
-    level = np.maximum(threshold, core * peak_level(lum, threshold)) if core > 0 else threshold
+    peak = peak_level(lum, threshold)
+    level = np.maximum(threshold, core * peak) if core > 0 else threshold
     k = np.where(lum > level, (lum - level) / np.where(lum > 0, lum, 1.0), 0.0)
+    if core_power > 0:
+        ratio = np.clip(lum / np.where(peak > 0, peak, 1.0), 0, 1)
+        k = k * np.where(peak > 0, ratio, 1.0) ** core_power
     out = c * k[..., None]
     hl = 0.2126 * out[..., 0] + 0.7152 * out[..., 1] + 0.0722 * out[..., 2]
     out[..., :3] = hl[..., None] + (out[..., :3] - hl[..., None]) * source_color
@@ -63,6 +67,8 @@ def shifted(img, dx, dy):
 def angles_of(mode, streaks, angle, blades, blade_rotation):
     if mode == "star":
         return [angle + 360.0 * i / streaks for i in range(streaks)]
+    if mode == "anamorphic":
+        return [angle, angle + 180.0]
     if blades < 3:
         return []
     n = blades if blades % 2 == 0 else 2 * blades
@@ -72,12 +78,34 @@ def angles_of(mode, streaks, angle, blades, blade_rotation):
 
 
 def _setup(lengths_frac, diagonal, color_shift, step_len):
-    """Per-channel decay per step and pass count; a step is ``step_len`` px long."""
+    """Per-channel decay per step, pass count and taps of the last pass: the support
+    top x 4^(n - 1) is the smallest >= 2.5 L + 1 (where the exponential is 1e-5 of its start);
+    a step is ``step_len`` px long."""
     L = lengths_frac * diagonal * (1 + 0.5 * color_shift * np.array([1.0, 0.0, -1.0]))
     L = L / step_len
     a = 0.01 ** (1.0 / L)
-    n = max(1, math.ceil(math.log(max(L.max(), 1.0) + 1.0, 4)))
-    return a, n
+    need = math.log(1e5) / math.log(100) * max(L.max(), 1.0) + 1
+    n = 1
+    while 4 ** n < need - 1e-9:
+        n += 1
+    top = 1
+    while top * 4 ** (n - 1) < need - 1e-9:
+        top += 1
+    return a, n, top
+
+
+def coating_tint(design_nm):
+    """RGB (luminance 1) of two reflections off a MgF2 (1.38) quarter-wave coating designed at
+    design_nm on glass 1.52 (Airy reflectance, CIE 1931 -> Rec.709, into gamut)."""
+    from clfx.fx import spectral
+
+    lam = spectral.wavelengths(80)
+    wts = spectral.spectral_rgb_weights(lam)
+    r1, r2 = (1.0 - 1.38) / (1.0 + 1.38), (1.38 - 1.52) / (1.38 + 1.52)
+    cos_d = np.cos(np.pi * design_nm / lam)
+    refl = (r1 ** 2 + r2 ** 2 + 2 * r1 * r2 * cos_d) / (1 + (r1 * r2) ** 2 + 2 * r1 * r2 * cos_d)
+    rgb = spectral.to_gamut((refl ** 2) @ wts / wts.sum(axis=0))
+    return rgb / (rgb @ np.array([0.2126, 0.7152, 0.0722]))
 
 
 def _unit(angle):
@@ -90,21 +118,32 @@ def _unit(angle):
 
 
 def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, tint,
-            color_shift, core=0.0, source_color=1.0, diagonal=None, blade_rotation=0.0, pad=0,
-            line_kernel=False, snap_from=None):
-    """Output over the source grown by ``pad`` pixels on every side (float64)."""
+            color_shift, core=0.0, source_color=1.0, core_power=-1.0, coating_nm=650.0,
+            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, snap_from=None):
+    """Output over the source grown by ``pad`` pixels on every side (float64).
+
+    mode "anamorphic": rays at angle and angle + 180, colour tint x coating_tint(coating_nm),
+    two exponentials (1 % at 0.15 length with 70 % of the light, at length with 30 %),
+    core_power -1 = 3 (else 0)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     diagonal = diagonal or math.hypot(w, h)
-    bright, clean = highlights(src, threshold, core, source_color)
+    if core_power < 0:
+        core_power = 3.0 if mode == "anamorphic" else 0.0
+    bright, clean = highlights(src, threshold, core, source_color, core_power)
     bright = np.pad(bright, ((pad, pad), (pad, pad), (0, 0)))
     out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
     rays = angles_of(mode, streaks, angle, blades, blade_rotation)
-    gain = intensity * np.asarray(tint, np.float64) / len(rays)
-    for ang in rays:
+    colour = np.asarray(tint, np.float64)
+    parts = [(1.0, 1.0)]
+    if mode == "anamorphic":
+        colour = colour * coating_tint(coating_nm)
+        parts = [(0.15, 0.7), (1.0, 0.3)]
+    for (fraction, share), ang in [(pt, ang) for pt in parts for ang in rays]:
+        gain = intensity * share * colour / len(rays)
         dx, dy, step_len = _unit(ang)
-        a, n = _setup(length, diagonal, color_shift, step_len)
-        support = 4 ** n
+        a, n, top = _setup(fraction * length, diagonal, color_shift, step_len)
+        support = top * 4 ** (n - 1)
         total = (1 - a ** support) / (1 - a)
         if line_kernel:
             acc = np.zeros_like(bright)
@@ -116,7 +155,7 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
             for p in range(n):
                 b = 4 ** p
                 nxt = np.zeros_like(cur)
-                for s in range(4):
+                for s in range(top if p == n - 1 else 4):
                     ox, oy = s * b * dx, s * b * dy
                     if snap_from is not None and b >= snap_from:
                         ox, oy = np.rint(ox), np.rint(oy)   # the plugin's whole-pixel taps

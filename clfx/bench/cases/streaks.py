@@ -8,7 +8,7 @@ import numpy as np
 
 from clfx.bench.cases import Case
 from clfx.core.camera import Camera
-from clfx.plugins.streaks import TAPS, Streaks, channel_lengths, grid_step, pass_count
+from clfx.plugins.streaks import Streaks, channel_lengths, grid_step, support_steps
 
 
 def make(width, height, rng):
@@ -46,7 +46,7 @@ def peers(case, params, ctx):
         sx, sy, step_len = grid_step(ang)
         lengths = channel_lengths(plugin.length_px(params, ctx), params.color_shift) / step_len
         a = 0.01 ** (1.0 / np.maximum(lengths, 1e-3))
-        support = TAPS ** pass_count(float(lengths.max()))
+        support = support_steps(float(lengths.max()))
         radius = int(math.ceil(support * max(abs(sx), abs(sy)))) + 1
         kern = np.zeros((3, 2 * radius + 1, 2 * radius + 1), np.float64)
         for step in range(support):
