@@ -11,7 +11,8 @@
  *                     cost is pixels x overlapping entries, and the sum order is fixed: no
  *                     atomics, identical bytes on every run.
  * Entry layout (ENTRY floats): x, y (frame px, centre), radius px, 1/edge width (in units
- * of the normalised radius), R, G, B radiance, kind (0 ghost, 1 halo), dir x, dir y, 0, 0.
+ * of the normalised radius), R, G, B radiance, kind (0 ghost, 1 halo), dir x, dir y (halo),
+ * rim (ghost: 1 - rim + rim rho^2), 0.
  */
 #include "lib/scatter.h"
 #include "lib/precision.h"
@@ -142,7 +143,7 @@ kernel void lens_flare_render(global const float *src, const int src_pitch, cons
       /* ghost: 1 inside, smoothstep to 0 across the edge width */
       const float4 rho = lens_flare_rho(dx, dy, e[2], normals, roundness);
       const float4 s = clamp((1.0f - rho) * e[3], 0.0f, 1.0f);
-      wgt = s * s * (3.0f - 2.0f * s) * ((1.0f - rim) + rim * rho * rho);
+      wgt = s * s * (3.0f - 2.0f * s) * ((1.0f - e[10]) + e[10] * rho * rho);
     }
     else
     {

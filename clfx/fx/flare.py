@@ -82,6 +82,10 @@ ABERRATION_BLUR = 0.5
 """Edge blur per radius and squared paraxial incidence (third-order estimate)."""
 FADE_FROM_RAD, FADE_TO_RAD = 0.5, 1.0
 """Ghosts fade out between these paraxial incidence angles."""
+VEIL_FROM, VEIL_TO = 0.1, 0.2
+"""Ghosts whose radius exceeds ``VEIL_FROM`` of the frame's diagonal fade (linearly) to
+nothing at ``VEIL_TO``: paraxially a uniform polygon over the whole frame, in a real lens
+vignetted by the barrel and smeared by aberrations into veiling glare (the glare effect)."""
 PEAK = 1.4
 FRESNEL_ASYMPTOTIC = 20.0
 """Beyond this argument Fresnel's integrals take their asymptotic form."""
@@ -233,11 +237,18 @@ class Optics:
     blades: int                        # aperture polygon (< 3: round)
     stop_index: int                    # the prescription's aperture stop
     gain: float = 1.0
+    diagonal_px: float = math.inf      # the frame's diagonal (ghosts beyond VEIL_FROM fade)
 
 
 def fade(incidence_rad) -> np.ndarray:
     """1 up to FADE_FROM_RAD, linearly to 0 at FADE_TO_RAD."""
     return np.clip((FADE_TO_RAD - np.asarray(incidence_rad)) / (FADE_TO_RAD - FADE_FROM_RAD),
+                   0.0, 1.0)
+
+
+def veil_fade(radius_over_diagonal) -> np.ndarray:
+    """1 up to VEIL_FROM, linearly to 0 at VEIL_TO (ghost radius over the frame diagonal)."""
+    return np.clip((VEIL_TO - np.asarray(radius_over_diagonal)) / (VEIL_TO - VEIL_FROM),
                    0.0, 1.0)
 
 
@@ -356,6 +367,7 @@ def plan_entries(table, lights: list[Light], optics: Optics, weights: np.ndarray
     af = np.broadcast_to(layout.area_fraction, power.shape[:2] + (3,))
     radiance = flux[:, None, :] * pc / np.maximum(area * af, 1e-300)
     radiance = np.where((af > 0) & np.isfinite(radiance), radiance, 0.0)
+    radiance = radiance * veil_fade(r_c.max(axis=-1) / optics.diagonal_px)[..., None]
     peak = radiance.max(axis=-1) * PEAK
     keep = (peak >= level) & (peak > 0) & (r_c[..., 1] > 0)
     li, gi = np.nonzero(keep)

@@ -17,8 +17,14 @@ weights per channel in linear Rec.709, the reference basis other working spaces 
 into and back, ``clfx.fx.spectral.in_reference_basis``: coloured fringes), a
 Fresnel-diffraction rim and edges blurred by the light's extent and the lens's aberrations,
 and the brightness of its two coated reflections:
-``F * energy / T_p`` over its area (``clfx.fx.flare``: no fudge factor; ``gain`` multiplies
-it, default 1).  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
+``F * energy / T_p`` over its area (``clfx.fx.flare``), times ``gain`` (default
+``DEFAULT_GAIN`` = 300: the light a plate's recorded highlights leave out; 1 = the recorded
+flux alone).  ``coatings`` "multi" (the default) tunes each glass-air surface's film to its
+own wavelength (``MULTI_COATING_NM``), so ghosts differ in tint as a multi-coated lens's do;
+"lens" keeps the prescription's single film (every ghost the same violet).  Ghosts larger
+than 0.1 of the diagonal (radius) fade out by 0.2 of it (``clfx.fx.flare.VEIL_FROM``):
+their paraxial shape is an artefact (real ones are vignetted and smeared into veiling glare,
+the glare effect's business), not a polygon over the whole frame.  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
 drawn.  A light's flux takes each pixel's non-negative part per channel (in the reference
 basis: a colour outside Rec.709 makes ghosts of its in-gamut part, the same in any working
 space).  ``intensity``, ``ghost_count``, ``ghosts``, ``softness``, ``rim``, ``roundness``
@@ -47,13 +53,14 @@ the integral of the ghost's soft-edged coverage, so each ghost carries exactly
 ``intensity * tint * F``), shaped as the aperture: a regular N-gon (camera blades and
 rotation; ``roundness`` blends to a disk) with a smooth edge ``softness * r`` wide (at least
 1.5 px) and a radial profile ``1 - rim + rim rho^2`` (real ghosts are often brighter towards
-their rim).  The halo is a Gaussian ring of radius ``halo_radius`` and width ``halo_width`` (fractions of the diagonal) around ``c``,
+their rim); softness and rim are per ghost (the table's, else the parameters').  The halo is a Gaussian ring of radius ``halo_radius`` and width ``halo_width`` (fractions of the diagonal) around ``c``,
 brightest on the light's side ((1 + cos)/2)^2, carrying ``halo_intensity * F`` in total.
 Output = sanitised source + ghosts + halos; alpha kept.
 
-Ghost table: ``ghosts`` = "k:size:r,g,b;..." overrides the default table (``ghost_count``
-takes its first entries).  Defaults after the look of multi-coated zooms: a few small
-greenish/magenta ghosts near the centre, larger faint ones beyond it.
+Ghost table: ``ghosts`` = "k:size:r,g,b[:softness[:rim]];..." overrides the default table
+(``ghost_count`` takes its first entries).  Defaults after the look of multi-coated zooms:
+ghosts that differ in size, sharpness, rim and tint (green, magenta, amber, blue, teal),
+small crisp ones near the centre, larger soft ones beyond it, none mirroring another.
 
 Determinism: a per-pixel gather over the entries overlapping each 32 x 32 tile (the lists
 are built on the host, in a fixed order); no atomics.  References: Hullin et al. 2011,
@@ -78,18 +85,31 @@ from clfx.fx import flare, optics, spectral
 from clfx.host import Plugin, register
 
 DEFAULT_GHOSTS = (
-    # k (position), size (fraction of diagonal), tint (RGB)
-    (-0.45, 0.030, (0.10, 0.45, 0.20)),
-    (-0.85, 0.060, (0.35, 0.20, 0.45)),
-    (0.35, 0.015, (0.45, 0.40, 0.15)),
-    (-0.20, 0.012, (0.25, 0.35, 0.60)),
-    (-1.30, 0.100, (0.20, 0.25, 0.45)),
-    (0.65, 0.045, (0.40, 0.25, 0.15)),
-    (-0.65, 0.020, (0.50, 0.30, 0.10)),
-    (1.25, 0.070, (0.15, 0.35, 0.30)),
+    # k (position), size (fraction of diagonal), tint (RGB), softness (edge / radius), rim
+    (-0.42, 0.022, (0.10, 0.50, 0.18), 0.06, 0.7),    # small sharp green ring
+    (-0.95, 0.075, (0.42, 0.14, 0.38), 0.45, 0.2),    # large soft magenta
+    (0.31, 0.011, (0.55, 0.38, 0.07), 0.10, 0.5),     # tiny amber spot
+    (-0.18, 0.040, (0.14, 0.28, 0.58), 0.70, 0.0),    # soft blue blob near the centre
+    (-1.45, 0.130, (0.30, 0.32, 0.14), 0.35, 0.85),   # big faint olive ring beyond the centre
+    (0.72, 0.028, (0.50, 0.22, 0.10), 0.25, 0.3),     # orange between light and centre
+    (-0.66, 0.016, (0.55, 0.12, 0.45), 0.05, 0.9),    # crisp magenta ring
+    (1.22, 0.055, (0.12, 0.40, 0.34), 0.55, 0.4),     # teal beyond the light
 )
 """The default ghost table: with the default ``intensity`` 0.05 a ghost carries 0.5-2.5 % of
-its light's flux (coated zooms show ghosts of ~1e-3..1e-2; a stronger look is the default)."""
+its light's flux (coated zooms show ghosts of ~1e-3..1e-2; a stronger look is the default).
+Like a real zoom's ghosts they differ in size (0.011-0.13 of the diagonal), sharpness (edge
+0.05-0.7 of the radius: a ghost focused near the sensor is crisp, others are blurs), rim
+(0: flat, 0.9: a ring) and coating tint (green, magenta, amber, blue, olive, teal), at
+positions that do not mirror each other about the centre."""
+
+DEFAULT_GAIN = 300.0
+"""The physical model's default ``gain``.  The ghosts of two coated reflections carry 1e-4 to
+1e-6 of a light's flux; from the flux a plate records (a light 1000-2000 times the
+background, clipped or graded down) that leaves ghosts of ~1e-4 of the background: nothing
+to see.  A real lamp or sun is 1e4-1e6 times diffuse white, so a lens shows its ghosts
+plainly; 300 brings a 3 x 3 px light 2000 times the background to a brightest ghost of
+0.4-2 times the background and several at 5-30 % of it (f/2.8, the three shipped lenses,
+``tests/plugins/test_lens_flare.py``).  ``gain: 1`` is the recorded flux alone."""
 
 TILE = 32
 ENTRY = 12
@@ -142,25 +162,35 @@ def flare_channel_weights(wavelengths, rgb_to_xyz=None) -> np.ndarray:
     return spectral.channel_weights(wavelengths, rgb_to_xyz)
 
 
-def parse_ghosts(spec: str, count: int) -> list[tuple[float, float, tuple[float, float, float]]]:
-    """The ghost table: ``spec`` ("k:size:r,g,b;...") or the first ``count`` default ghosts."""
+def parse_ghosts(spec: str, count: int):
+    """The ghost table: ``spec`` ("k:size:r,g,b[:softness[:rim]];...") or the first ``count``
+    default ghosts; entries (k, size, tint, softness, rim), softness / rim ``None`` where the
+    entry leaves them to the ``softness`` / ``rim`` parameters."""
     if not spec.strip():
         return list(DEFAULT_GHOSTS[:count])
     out = []
     for i, item in enumerate(t for t in spec.split(";") if t.strip()):
         parts = item.split(":")
         try:
+            if len(parts) > 5:
+                raise ValueError
             k, size = float(parts[0]), float(parts[1])
             tint = (tuple(float(v) for v in parts[2].split(",")) if len(parts) > 2
                     else (1.0,) * 3)
+            soft = float(parts[3]) if len(parts) > 3 and parts[3].strip() else None
+            rim = float(parts[4]) if len(parts) > 4 and parts[4].strip() else None
         except (ValueError, IndexError):
             raise ParamError(f"lens_flare.ghosts: entry {i} {item!r} is not "
-                             f"'k:size:r,g,b'") from None
+                             f"'k:size:r,g,b[:softness[:rim]]'") from None
         finite = all(map(math.isfinite, (k, size) + tint))
         if len(tint) != 3 or size <= 0 or min(tint) < 0 or not finite:
             raise ParamError(f"lens_flare.ghosts: entry {i} {item!r} needs size > 0 and 3 "
                              f"non-negative tint values")
-        out.append((k, size, tint))
+        for name, v in (("softness", soft), ("rim", rim)):
+            if v is not None and not 0.0 <= v <= 1.0:
+                raise ParamError(f"lens_flare.ghosts: entry {i} {item!r}: {name} {v!r} is "
+                                 f"not in [0, 1]")
+        out.append((k, size, tint, soft, rim))
     return out
 
 
@@ -203,12 +233,15 @@ def flare_entries(sources, p, centre, diagonal, blades=0, rotation_deg=0.0) -> n
     table = parse_ghosts(p.ghosts, p.ghost_count)
     for lx, ly, flux in sources:
         flux = np.asarray(flux, np.float64)
-        for k, size, tint in table:
+        for k, size, tint, soft, rim in table:
+            soft = p.softness if soft is None else soft
+            rim = p.rim if rim is None else rim
             r = size * diagonal
-            edge = max(p.softness, 1.5 / max(r, 1e-6))
-            area = ghost_area(blades, rotation_deg, p.roundness, edge, p.rim) * r * r
+            edge = max(soft, 1.5 / max(r, 1e-6))
+            area = ghost_area(blades, rotation_deg, p.roundness, edge, rim) * r * r
             e = np.minimum(p.intensity * np.asarray(tint) * flux / area, FLOAT32_MAX)
-            rows.append([cx + k * (lx - cx), cy + k * (ly - cy), r, 1.0 / edge, *e, 0, 0, 0, 0, 0])
+            rows.append([cx + k * (lx - cx), cy + k * (ly - cy), r, 1.0 / edge, *e, 0, 0, 0,
+                         rim, 0])
         if p.halo_intensity > 0:
             rh, sigma = p.halo_radius * diagonal, max(p.halo_width * diagonal, 0.5)
             norm = 2 * math.pi * rh * sigma * math.sqrt(2 * math.pi) * 0.375 + 1e-300
@@ -253,6 +286,43 @@ def tile_lists(entries: np.ndarray, window: Rect):
     return tx, start, flat if flat.size else np.zeros(1, np.int32)
 
 
+MULTI_COATING_NM = (470.0, 545.0, 450.0, 520.0, 490.0, 565.0, 460.0, 530.0, 500.0, 440.0)
+"""Design wavelengths (nm) of the films of a multi-coated lens, surface after surface: each
+glass-air surface's quarter-wave film reflects least at its own wavelength, so every pair of
+surfaces tints its ghost differently (films tuned to the blue reflect amber, mid-band ones
+magenta, those towards the yellow violet-blue).  A single-layer film reflects short
+wavelengths more steeply than long ones, so the films sit at 440-565 nm: tuned further to
+the red, every ghost turns blue."""
+
+
+def multi_coated(d: dict) -> dict:
+    """A lens dictionary whose glass-air surfaces without a coating of their own carry the
+    lens's film (index) tuned to ``MULTI_COATING_NM`` in turn, as a maker tunes each surface
+    of a multi-coated lens differently; a bare lens (``coating: none``) stays bare."""
+    base = d.get("coating", "default")
+    if base is None or base is False or base == "none":
+        return d
+    index = base.get("index", optics.MGF2_INDEX) if isinstance(base, dict) else optics.MGF2_INDEX
+    rows = d.get("surfaces")
+    if not isinstance(rows, list):
+        return d
+    out, n_before, j = [], 1.0, 0
+    for row in rows:
+        if isinstance(row, (list, tuple)) and len(row) == len(optics._ROW):
+            row = dict(zip(optics._ROW, row))
+        if not isinstance(row, dict):
+            return d                         # malformed: let the prescription say why
+        nd = row.get("nd")
+        nd = 1.0 if nd is None else nd
+        if "coating" not in row and (nd == 1.0) != (n_before == 1.0):
+            row = {**row, "coating": {"index": index,
+                                      "wavelength": MULTI_COATING_NM[j % len(MULTI_COATING_NM)]}}
+            j += 1
+        out.append(row)
+        n_before = nd
+    return {**d, "surfaces": out}
+
+
 @register
 class LensFlare(Plugin):
     descriptor = Descriptor(
@@ -272,9 +342,14 @@ class LensFlare(Plugin):
                         hint="Physical: a shipped prescription (presets/lenses/NAME.yaml: "
                              "double-gauss-50mm, retrofocus-28mm, zoom-80-200mm) or a YAML "
                              "file."),
-            FloatParam("gain", 1.0, min=0.0, max=1e6,
+            FloatParam("gain", DEFAULT_GAIN, min=0.0, max=1e6,
                        hint="Physical: multiplies the ghosts' brightness (1 = the coated "
-                            "reflections of the prescription, no fudge factor)."),
+                            "reflections of the recorded light alone; the default stands for "
+                            "the light a plate's clipped highlights leave out)."),
+            ChoiceParam("coatings", "multi", choices=("multi", "lens"),
+                        hint="Physical: multi = each glass-air surface's film tuned to its own "
+                             "wavelength (ghosts green, amber, magenta, blue); lens = the "
+                             "prescription's coatings as written (one film: all alike)."),
             FloatParam("cull", 0.01, min=0.0, max=1.0,
                        hint="Physical: ghosts whose brightest pixel stays below this fraction "
                             "of the frame's median tile luminance are not drawn."),
@@ -284,10 +359,11 @@ class LensFlare(Plugin):
             IntParam("ghost_count", 6, min=0, max=len(DEFAULT_GHOSTS),
                      hint="Artistic: how many ghosts of the default table to use (when `ghosts` is empty)."),
             StringParam("ghosts", "",
-                        hint="Artistic: ghost table 'k:size:r,g,b;...': position factor along light-centre "
-                             "line (0 = centre, 1 = light), radius (fraction of diagonal), tint."),
+                        hint="Artistic: ghost table 'k:size:r,g,b[:softness[:rim]];...': position factor "
+                             "along light-centre line (0 = centre, 1 = light), radius (fraction "
+                             "of diagonal), tint, optional edge softness and rim of the ghost."),
             FloatParam("softness", 0.15, min=0.0, max=1.0,
-                       hint="Artistic: ghost edge width as a fraction of its radius."),
+                       hint="Artistic: ghost edge width as a fraction of its radius (ghosts without their own)."),
             FloatParam("rim", 0.4, min=0.0, max=1.0,
                        hint="Artistic: ghost brightness profile, 0 = flat, 1 = dark centre rising to a "
                             "bright rim (1 - rim + rim * rho^2)."),
@@ -367,13 +443,17 @@ class LensFlare(Plugin):
     # the physical model -----------------------------------------------------------------
     def prescription(self, p, ctx):
         """(key, Prescription) of ``p.lens``: read by the pipeline once per process and name
-        (YAML parsing costs more than a frame's flare), keyed on its content."""
+        (YAML parsing costs more than a frame's flare), keyed on its content; ``coatings``
+        "multi" tunes each surface's film to its own wavelength (:func:`multi_coated`)."""
         def build():
             d = ctx.read_lens(p.lens)
+            if p.coatings == "multi":
+                d = multi_coated(d)
             return (json.dumps(d, sort_keys=True, default=str),
                     optics.Prescription.from_dict(d, p.lens))
 
-        return ctx.runtime.cache.get(("lens_flare.lens", p.lens), build, nbytes=4096)
+        return ctx.runtime.cache.get(("lens_flare.lens", p.lens, p.coatings), build,
+                                     nbytes=4096)
 
     def ghost_table(self, ctx, key, lens, f_number: float, wavelengths):
         def build():
@@ -416,7 +496,8 @@ class LensFlare(Plugin):
         blades = p.blades or cam.blades
         geometry = flare.Optics(centre_px=ctx.display_window.center,
                                 px_per_mm=ctx.width_px / cam.sensor_width, blades=blades,
-                                stop_index=lens.stop_index, gain=p.gain)
+                                stop_index=lens.stop_index, gain=p.gain,
+                                diagonal_px=ctx.diagonal_px)
         level = self.visible_level(p, ctx)
         keep = flare.cull(table, lights, geometry, level)
         sub = table.subset(keep)

@@ -95,7 +95,9 @@ def lens_flare(src, lights, table, *, intensity, softness, roundness, rim, blade
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     px, py = xx + origin[0] + 0.5, yy + origin[1] + 0.5
     for lx, ly, flux in lights:
-        for k, size, tint in table:
+        for k, size, tint, soft, g_rim in table:
+            soft = softness if soft is None else soft
+            g_rim = rim if g_rim is None else g_rim
             r = size * diag
             gx, gy = cx + k * (lx - cx), cy + k * (ly - cy)
             dx, dy = px - gx, py - gy
@@ -110,9 +112,9 @@ def lens_flare(src, lights, table, *, intensity, softness, roundness, rim, blade
                 rho = poly + (circle - poly) * roundness
             else:
                 rho = circle
-            edge = max(softness, 1.5 / r)
-            wgt = _edge(rho, edge) * (1 - rim + rim * rho ** 2)
-            area = _area(blades, rotation, roundness, edge, rim) * r * r
+            edge = max(soft, 1.5 / r)
+            wgt = _edge(rho, edge) * (1 - g_rim + g_rim * rho ** 2)
+            area = _area(blades, rotation, roundness, edge, g_rim) * r * r
             out[..., :3] += wgt[..., None] * intensity * np.asarray(tint) * flux / area
         if halo_intensity > 0:
             rh, sigma = halo_radius * diag, max(halo_width * diag, 0.5)
