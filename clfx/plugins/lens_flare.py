@@ -348,7 +348,7 @@ class LensFlare(Plugin):
                             "the light a plate's clipped highlights leave out)."),
             ChoiceParam("coatings", "multi", choices=("multi", "lens"),
                         hint="Physical: multi = each glass-air surface's film tuned to its own "
-                             "wavelength (ghosts green, amber, magenta, blue); lens = the "
+                             "wavelength (ghosts amber, magenta, violet); lens = the "
                              "prescription's coatings as written (one film: all alike)."),
             FloatParam("cull", 0.01, min=0.0, max=1.0,
                        hint="Physical: ghosts whose brightest pixel stays below this fraction "
