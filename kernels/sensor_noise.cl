@@ -44,6 +44,9 @@
 #ifndef MAX_COUNT
 #define MAX_COUNT 200
 #endif
+#ifndef COVERAGE
+#define COVERAGE 0          /* 1: weight the deviation by alpha (the pass that writes the output) */
+#endif
 #ifndef MOSAIC
 #define MOSAIC 0            /* 1: write the CFA site deviations (one float per pixel) */
 #endif
@@ -153,7 +156,7 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   const float16 cs = clfx_finite16_or_zero(c);                /* non-finite -> 0, alpha too */
   /* |v| <= 1e38 so the PRNU gain (<= 1.6) cannot overflow float */
   REAL16 v = TO_REAL16(clamp(cs, -1e38f, 1e38f));
-#if MOSAIC
+#if MOSAIC || COVERAGE
   const REAL16 v_clean = v;
 #endif
 
@@ -242,6 +245,15 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   const int c0 = sn_cfa(fx, fy), c1 = sn_cfa(fx + 1, fy);   /* colours alternate in a row */
   vstore4((float4)(dev[c0], dev[4 + c1], dev[8 + c0], dev[12 + c1]), 0, dst + (size_t)y * pitch + x);
 #else
+#if COVERAGE
+  {
+    /* the deviation weighted by alpha in [0, 1]: transparent pixels stay as they were, opaque
+     * ones keep the full deviation bit for bit */
+    const REAL16 cov = TO_REAL16(clamp((float16)(cs.s3333, cs.s7777, cs.sbbbb, cs.sffff),
+                                       0.0f, 1.0f));
+    out = select(v_clean + cov * (out - v_clean), out, cov >= (REAL)1);
+  }
+#endif
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
   vstore16(select(TO_FLOAT16(out), cs, alpha), 0, dst + i);
 #endif
@@ -376,6 +388,13 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
     const float sd = sqrt(g_green * max(v.y, 0.0f) + g_green * g_green * read_e * read_e);
     const float dr = chroma * sd * a, db = chroma * sd * b;
     out += (float4)(dr, -((CLFX_LUMA_R) * dr + (CLFX_LUMA_B) * db) / (CLFX_LUMA_G), db, 0.0f);
+  }
+#endif
+#if COVERAGE
+  {
+    const float cov = clamp(alpha, 0.0f, 1.0f);      /* transparent pixels stay empty */
+    if(cov < 1.0f)
+      out = v + cov * (out - v);
   }
 #endif
   out = clamp(out, -FLT_MAX, FLT_MAX);

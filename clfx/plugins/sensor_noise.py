@@ -57,8 +57,15 @@ the noise is identical for a frame rendered alone, in a batch, cropped, or on an
 count; the PRNU pattern uses frame 0 and its own seed, so it stays fixed over a sequence
 (it is computed once per parameter set and data window and kept in the runtime's cache:
 one frame-sized float buffer).
-Non-finite inputs become 0 (then get read noise) and values are clamped to +-1e38 so
-nothing overflows; alpha is kept bit for bit (0 where it was not finite).
+Coverage (``coverage = "alpha"``, the default): the deviation (shot, read, PRNU, chroma) is
+weighted by the pixel's alpha clamped to [0, 1], ``out = v + alpha (noisy - v)``, so the
+transparent part of a CG element stays empty: without it read noise fills the whole data
+window, a visible rectangle around a tight-windowed element (OpenEXR's Beachball), and the
+comp would add it on top of the plate's own noise.  Opaque pixels (alpha >= 1, and every
+pixel of a plate without alpha) get the full model bit for bit.  ``"ignore"`` adds noise to
+every pixel of the data window.  Either way nothing is added outside the data window.
+Non-finite inputs become 0 (then get read noise where covered) and values are clamped to
++-1e38 so nothing overflows; alpha is kept bit for bit (0 where it was not finite).
 
 References: Malvar, He, Cutler 2004, "High-quality linear interpolation for demosaicing of
 Bayer-patterned color images"; EMVA Standard 1288 (linear photon-transfer model: variance = K (mu - mu_dark)
@@ -162,6 +169,11 @@ class SensorNoise(Plugin):
             FloatParam("chroma_size", 0.02, min=1e-4, max=1.0,
                        hint="Grid spacing of the chroma blotches as a fraction of the frame "
                             "diagonal."),
+            ChoiceParam("coverage", "alpha", choices=("alpha", "ignore"),
+                        hint="alpha: noise weighted by the pixel's alpha, so the transparent "
+                             "part of a CG element stays empty (no noise rectangle over the "
+                             "data window; the plate it is comped over has its own noise); "
+                             "ignore: noise over every pixel of the data window."),
             SEED_PARAM,
         ),
         quality=LEVELS,
@@ -225,17 +237,19 @@ class SensorNoise(Plugin):
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
         # bayer: the first pass writes each photosite's deviation (one float per pixel)
         dst = rt.buffer(src.pitch * src.height * 4) if demosaic else src.like()
+        coverage = int(p.coverage == "alpha")
+        last = not (demosaic or chroma)          # the apply pass writes the output itself
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64,
-                        MOSAIC=int(demosaic), **defines)
+                        MOSAIC=int(demosaic), COVERAGE=coverage * int(last), **defines)
         rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
                   np.int32(src.height), x0, y0, seed, np.int32(ctx.frame),
                   kr, kg, kb, np.float32(p.read_noise))
-        if not (demosaic or chroma):
+        if last:
             return dst
         out = src.like()
         cell = max(p.chroma_size * ctx.diagonal_px, 1.0)
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_demosaic", DEMOSAIC=int(demosaic),
-                        CHROMA=int(chroma), **ctx.luminance_defines)
+                        CHROMA=int(chroma), COVERAGE=coverage, **ctx.luminance_defines)
         rt.launch(knl, (src.pitch, src.height), src, dst, out, np.int32(src.pitch),
                   np.int32(src.window.width), np.int32(src.height), x0, y0, seed,
                   np.int32(ctx.frame), np.float32(1.0 / float(kg)), np.float32(p.read_noise),

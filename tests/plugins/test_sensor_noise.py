@@ -74,6 +74,7 @@ def test_reference_level_matches_oracle_exactly_up_to_rounding(rt, rng):
 def test_error_falls_monotonically_with_quality(rt, rng):
     # expected counts 0-60 electrons: both the inversion and the normal branch run
     src = rng.uniform(0.0, 0.2, (48, 64, 4)).astype(np.float32)
+    src[..., 3] = 1.0           # opaque: the levels differ in the model, not in the coverage
     kw = dict(read_noise=2.0, seed=6)
     p = SensorNoise.params(**kw)
     want = reference(src, **p.as_dict(), frame=3, camera_iso=3200.0)
@@ -364,3 +365,30 @@ def test_chroma_blotches_are_low_frequency_and_keep_luminance(rt):
     # and they change every frame
     other, _ = run(rt, src, mosaic="none", chroma_noise=2.0, chroma_size=0.05, seed=7, frame=4)
     assert not np.allclose(other, blot)
+
+
+# -- coverage ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("extra", [dict(mosaic="none"), dict(mosaic="bayer"),
+                                   dict(mosaic="none", chroma_noise=1.0, chroma_size=0.1),
+                                   dict(mosaic="bayer", chroma_noise=1.0, chroma_size=0.1)])
+def test_transparent_pixels_stay_empty_and_edges_get_alpha_share(rt, extra):
+    # Beachball: a tight data window around an element whose background is alpha 0.  Read
+    # noise there drew a visible rectangle around the element; weighted by coverage the
+    # transparent band stays 0, a half-covered band gets half the deviation.
+    h, w = 96, 96
+    src = np.zeros((h, w, 4), np.float32)
+    src[:, 32:64, 3] = 0.5
+    src[:, 64:, 3] = 1.0
+    kw = dict(read_noise=8.0, prnu=0.02, seed=3, **extra)
+    out, p = run(rt, src, **kw)
+    interior = slice(4, h - 4)                   # away from the demosaic's mirrored edge
+    assert (out[interior, 2:30, :3] == 0).all()
+    half = out[interior, 36:60, :3].std()
+    full = out[interior, 68:92, :3].std()
+    assert full > 0 and abs(half / full - 0.5) < 0.08, (half, full)
+    np.testing.assert_array_equal(out[..., 3], src[..., 3])           # alpha bit for bit
+    want = reference(src, **p.as_dict(), camera_iso=3200.0)
+    np.testing.assert_allclose(out[..., :3], want[..., :3], rtol=1e-4, atol=1e-5)
+    # "ignore": noise over the whole data window, transparent or not
+    out, _ = run(rt, src, coverage="ignore", **kw)
+    assert out[interior, 2:30, :3].std() > 0.5 * full

@@ -124,9 +124,9 @@ def value_noise(seed, frame, px, py, stream):
 
 
 def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, diagonal=None,
-                 **kw):
+                 coverage="alpha", **kw):
     """The full model: per-site noise (``sensor_noise``), the Bayer demosaic of the
-    deviations and the chroma blotches; same parameters as the plugin."""
+    deviations, the chroma blotches and the alpha coverage; same parameters as the plugin."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     noisy = site_noise(src, **kw)
@@ -151,5 +151,9 @@ def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, dia
         out[..., 0] += dr
         out[..., 2] += db
         out[..., 1] -= (0.2126 * dr + 0.0722 * db) / 0.7152
+    if coverage == "alpha":
+        a = src[..., 3]
+        cov = np.clip(np.where(np.isfinite(a), a, 0.0), 0.0, 1.0)[..., None]
+        out[..., :3] = np.where(cov < 1.0, v + cov * (out[..., :3] - v), out[..., :3])
     out[..., :3] = np.clip(out[..., :3], -3.4028234663852886e38, 3.4028234663852886e38)
     return out
