@@ -19,6 +19,8 @@ from clfx.core.rect import Rect
 
 TILE = 32
 """Tile size in pixels of the analysis grid."""
+STATS = 9
+"""Values per tile (``kernels/lib/analysis.cl``)."""
 
 
 @dataclass
@@ -47,6 +49,9 @@ class SceneAnalysis:
     bad_depth: np.ndarray | None
     camera: Camera = field(default_factory=Camera)
     seconds: float = 0.0
+    max_alpha: np.ndarray | None = None
+    stray_light: np.ndarray | None = None
+    """Per tile, finite pixels with light but no alpha (alpha <= 0, some RGB != 0)."""
 
     # -- highlights ---------------------------------------------------------------------
     @property
@@ -116,6 +121,14 @@ class SceneAnalysis:
             np.maximum.at(peaks, labels[mask], self.max_lum[mask])
             out[mask] = peaks[labels[mask]]
         return out
+
+    # -- alpha --------------------------------------------------------------------------
+    def alpha_is_coverage(self) -> bool:
+        """True if no pixel with alpha <= 0 holds light: the frame is premultiplied and its
+        transparent areas are empty (a CG element on nothing, as OpenEXR's Beachball; an
+        opaque plate trivially).  A photograph with a matte in its alpha (ScanLines'
+        CandleGlass: light where alpha is 0) or an additive element (light, alpha 0) is not."""
+        return self.stray_light is not None and int(self.stray_light.sum()) == 0
 
     # -- motion -------------------------------------------------------------------------
     def moving_tiles(self, min_px: float = 0.5) -> np.ndarray | None:
@@ -196,8 +209,8 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
         depth = None  # passes no longer aligned with the beauty (an effect changed the window)
     if velocity is not None and velocity.window != source.window:
         velocity = None
-    stats = rt.buffer(tx * ty * 8 * 4)
-    rows = rt.buffer(max(h, 1) * tx * 8 * 4)
+    stats = rt.buffer(tx * ty * STATS * 4)
+    rows = rt.buffer(max(h, 1) * tx * STATS * 4)
     dummy = rt.buffer(64)
     f = np.int32
     rt.launch(rt.kernel("lib/analysis.cl", "analysis_rows", TILE=TILE,
@@ -208,7 +221,7 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
               f(depth is not None), f(velocity is not None), rows, f(tx))
     rt.launch(rt.kernel("lib/analysis.cl", "analysis_tiles", TILE=TILE), (tx, ty), rows, f(w), f(h),
               stats, f(tx), f(ty))
-    s = rt.from_device(stats, np.float32, tx * ty * 8).reshape(ty, tx, 8)
+    s = rt.from_device(stats, np.float32, tx * ty * STATS).reshape(ty, tx, STATS)
     if w == 0 or h == 0:
         s[:] = 0
     return SceneAnalysis(
@@ -218,4 +231,5 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
         min_depth=s[..., 4].copy() if depth is not None else None,
         max_depth=s[..., 5].copy() if depth is not None else None,
         bad_depth=s[..., 6].astype(np.int64) if depth is not None else None,
-        camera=camera or Camera(), seconds=time.perf_counter() - t0)
+        camera=camera or Camera(), seconds=time.perf_counter() - t0,
+        max_alpha=s[..., 7].copy(), stray_light=s[..., 8].astype(np.int64))

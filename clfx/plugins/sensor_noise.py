@@ -57,13 +57,17 @@ the noise is identical for a frame rendered alone, in a batch, cropped, or on an
 count; the PRNU pattern uses frame 0 and its own seed, so it stays fixed over a sequence
 (it is computed once per parameter set and data window and kept in the runtime's cache:
 one frame-sized float buffer).
-Coverage (``coverage = "alpha"``, the default): the deviation (shot, read, PRNU, chroma) is
-weighted by the pixel's alpha clamped to [0, 1], ``out = v + alpha (noisy - v)``, so the
-transparent part of a CG element stays empty: without it read noise fills the whole data
-window, a visible rectangle around a tight-windowed element (OpenEXR's Beachball), and the
-comp would add it on top of the plate's own noise.  Opaque pixels (alpha >= 1, and every
-pixel of a plate without alpha) get the full model bit for bit.  ``"ignore"`` adds noise to
-every pixel of the data window.  Either way nothing is added outside the data window.
+Coverage (``coverage = "alpha"``): the deviation (shot, read, PRNU, chroma) is weighted by
+the pixel's alpha clamped to [0, 1], ``out = v + alpha (noisy - v)``, so the transparent
+part of a CG element stays empty: without it read noise fills the whole data window, a
+visible rectangle around a tight-windowed element (OpenEXR's Beachball), and the comp would
+add it on top of the plate's own noise.  Opaque pixels (alpha >= 1, and every pixel of a
+plate without alpha) get the full model bit for bit.  ``"ignore"`` adds noise to every
+pixel of the data window.  ``"auto"`` (the default) reads alpha as coverage when the scene
+analysis finds no light in a pixel whose alpha is <= 0 (premultiplied, empty background),
+else ignores it (a photograph whose alpha is a matte, ScanLines' CandleGlass: light where
+alpha is 0; an additive element), and says so in ``--explain``.  Either way nothing is
+added outside the data window.
 Non-finite inputs become 0 (then get read noise where covered) and values are clamped to
 +-1e38 so nothing overflows; alpha is kept bit for bit (0 where it was not finite).
 
@@ -169,11 +173,13 @@ class SensorNoise(Plugin):
             FloatParam("chroma_size", 0.02, min=1e-4, max=1.0,
                        hint="Grid spacing of the chroma blotches as a fraction of the frame "
                             "diagonal."),
-            ChoiceParam("coverage", "alpha", choices=("alpha", "ignore"),
+            ChoiceParam("coverage", "auto", choices=("auto", "alpha", "ignore"),
                         hint="alpha: noise weighted by the pixel's alpha, so the transparent "
                              "part of a CG element stays empty (no noise rectangle over the "
                              "data window; the plate it is comped over has its own noise); "
-                             "ignore: noise over every pixel of the data window."),
+                             "ignore: noise over every pixel of the data window; auto: alpha "
+                             "when no pixel with alpha 0 holds light (premultiplied, empty "
+                             "background), else ignore (a matte in a photograph's alpha)."),
             SEED_PARAM,
         ),
         quality=LEVELS,
@@ -183,6 +189,16 @@ class SensorNoise(Plugin):
         if not p.shot_noise and p.read_noise == 0.0 and p.prnu == 0.0:
             return "shot noise is off, read noise and prnu are 0"
         return None
+
+    def alpha_is_coverage(self, p, ctx) -> bool:
+        """``coverage`` resolved for this frame ("auto": from the scene analysis)."""
+        if p.coverage != "auto":
+            return p.coverage == "alpha"
+        if ctx.analysis.alpha_is_coverage():
+            return True
+        ctx.notes.append("sensor_noise: light where alpha is 0 (a matte, not coverage): "
+                         "noise over the whole data window")
+        return False
 
     def prnu_pattern(self, rt, p, ctx, fp64):
         """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, kept in ``rt.cache`` per
@@ -237,7 +253,7 @@ class SensorNoise(Plugin):
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
         # bayer: the first pass writes each photosite's deviation (one float per pixel)
         dst = rt.buffer(src.pitch * src.height * 4) if demosaic else src.like()
-        coverage = int(p.coverage == "alpha")
+        coverage = int(self.alpha_is_coverage(p, ctx))
         last = not (demosaic or chroma)          # the apply pass writes the output itself
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64,
                         MOSAIC=int(demosaic), COVERAGE=coverage * int(last), **defines)

@@ -392,3 +392,33 @@ def test_transparent_pixels_stay_empty_and_edges_get_alpha_share(rt, extra):
     # "ignore": noise over the whole data window, transparent or not
     out, _ = run(rt, src, coverage="ignore", **kw)
     assert out[interior, 2:30, :3].std() > 0.5 * full
+
+
+def test_auto_coverage_reads_a_photographs_matte_as_no_coverage(rt):
+    # light where alpha is 0 (a matte in a photograph's alpha, an additive element): auto
+    # noises every pixel, as "ignore" does
+    src = np.full((64, 64, 4), 0.02, np.float32)
+    src[..., 3] = 0.0
+    src[20:40, 20:40, 3] = 1.0
+    out, p = run(rt, src, read_noise=8.0, seed=4)
+    ignore, _ = run(rt, src, read_noise=8.0, seed=4, coverage="ignore")
+    np.testing.assert_array_equal(out, ignore)
+    assert out[:16, :16, :3].std() > 0
+
+
+@pytest.mark.parametrize("image, covered", [("Beachball/singlepart.0001.exr", True),
+                                            ("ScanLines/CandleGlass.exr", False)])
+def test_auto_coverage_on_real_files(rt, exr_images, image, covered):
+    from clfx.io.read import read_frame
+
+    fr = read_frame(exr_images / image)
+    src = fr.rgba
+    out, _ = run(rt, src, read_noise=3.0, seed=1, data_window=fr.data_window,
+                 display=fr.display_window)
+    empty = (src[..., 3] <= 0) & (src[..., :3] == 0).all(axis=-1)
+    moved = np.abs(out[..., :3] - src[..., :3]).max(axis=-1)
+    if covered:   # Beachball: the transparent background around the ball stays empty
+        assert empty.mean() > 0.2 and (moved[empty] == 0).all()
+    else:         # CandleGlass: its alpha is a matte; the dark room around it is noisy
+        assert (src[..., 3] <= 0).mean() > 0.5
+        assert (moved[src[..., 3] <= 0] > 0).mean() > 0.9

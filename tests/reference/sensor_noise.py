@@ -124,7 +124,7 @@ def value_noise(seed, frame, px, py, stream):
 
 
 def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, diagonal=None,
-                 coverage="alpha", **kw):
+                 coverage="auto", **kw):
     """The full model: per-site noise (``sensor_noise``), the Bayer demosaic of the
     deviations, the chroma blotches and the alpha coverage; same parameters as the plugin."""
     src = np.asarray(src, np.float64)
@@ -151,6 +151,10 @@ def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, dia
         out[..., 0] += dr
         out[..., 2] += db
         out[..., 1] -= (0.2126 * dr + 0.0722 * db) / 0.7152
+    if coverage == "auto":       # alpha is coverage unless a pixel with alpha <= 0 holds light
+        finite = np.isfinite(src).all(axis=-1)
+        stray = finite & (src[..., 3] <= 0) & (src[..., :3] != 0).any(axis=-1)
+        coverage = "ignore" if stray.any() else "alpha"
     if coverage == "alpha":
         a = src[..., 3]
         cov = np.clip(np.where(np.isfinite(a), a, 0.0), 0.0, 1.0)[..., None]
