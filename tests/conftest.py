@@ -72,3 +72,34 @@ def pytest_xdist_make_scheduler(config, log):
             return nodeid if module in SPLIT_ACROSS_WORKERS else module
 
     return ModuleScheduling(config, log)
+
+
+CPU_LOG = os.environ.get("CLFX_TEST_CPU_LOG")
+"""Opt-in: a file to which every test appends one JSON line, its node id and the CPU seconds
+(user + system) it took in this process and in the child processes it waited for, with its
+wall time; under xdist, each worker appends its own lines.  Per-module sums say where CI's
+time goes (wall time does not, on a shared machine)."""
+
+
+def _cpu_now() -> tuple[float, float, float]:
+    import resource
+    import time
+
+    me, kids = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime, time.perf_counter()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    if not CPU_LOG:
+        yield
+        return
+    import json
+
+    before = _cpu_now()
+    yield
+    after = _cpu_now()
+    own, kids, wall = (round(b - a, 3) for a, b in zip(before, after))
+    with open(CPU_LOG, "a") as log:
+        log.write(json.dumps({"id": item.nodeid, "cpu_s": own, "children_cpu_s": kids,
+                              "wall_s": wall}) + "\n")
