@@ -7,6 +7,9 @@ PY := $(VENV)/bin/python
 CLFX := $(VENV)/bin/clfx
 DEMO_OUT ?= demo-out
 PYTEST_ARGS ?=
+# Test workers (pytest-xdist): each module whole on one worker, the modules tests/conftest.py
+# names (SPLIT_ACROSS_WORKERS) one test at a time.  0 runs the suite in one process.
+PYTEST_WORKERS ?= 2
 
 .PHONY: setup demo test bench clean
 
@@ -17,7 +20,7 @@ demo: setup
 	$(CLFX) demo $(DEMO_OUT) --overwrite
 
 test: setup
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadscope $(PYTEST_ARGS)
 
 bench: setup
 	$(CLFX) bench --size 1920x1080 --markdown bench.md --json > bench.jsonl

@@ -14,7 +14,8 @@ Oclgrind 21.10 mis-executes some of the ``-Oz`` code it makes itself (grain's an
 sensor_noise's polynomial log, ``clfx_log8`` in kernels/lib/fastmath.h, returned 175.3 for
 log(0.4676) there, -0.760 unoptimised and on PoCL: NaN noise), and its uninitialised-value
 check crashes on optimised vector shuffles.  Unoptimised, every access is checked as the
-source writes it.  Oclgrind with race detection is slow: the module is marked ``slow``.
+source writes it.  Oclgrind with race detection is slow and single-threaded: the module is
+marked ``slow``, and two groups run at once (``CLFX_OCLGRIND_JOBS``; the ``groups`` fixture).
 Run it alone with ``.venv/bin/python -m pytest tests/test_oclgrind.py``; it skips with the
 reason where Oclgrind is not installed (Debian: ``apt-get install oclgrind``; ``make
 setup`` does).  The last tests ask whether any output depends on uninitialised device
@@ -169,9 +170,46 @@ def _check(records, findings, expect_runs):
         assert r["finite"], r
 
 
+GROUP_TESTS = {"test_effect_every_level_under_oclgrind": ("effect", ",".join(QUALITY_LEVELS)),
+               "test_builtin_look_under_oclgrind": ("look", "draft")}
+"""The tests that each run one group: their parameter is the effect or look name."""
+
+
+def _group_args(item) -> tuple[str, ...] | None:
+    kind, levels = GROUP_TESTS.get(getattr(item, "originalname", ""), (None, None))
+    if kind is None or item.module.__name__ != __name__:
+        return None
+    return (kind, item.callspec.params[kind], levels)
+
+
+@pytest.fixture(scope="module")
+def groups(request, tmp_path_factory):
+    """Each selected group's run, started ahead: Oclgrind is single-threaded, so up to
+    ``CLFX_OCLGRIND_JOBS`` (default 2, at most the cores) groups run at once, each in its own
+    process and folder, in the order the tests ask for them.  Under pytest-xdist the workers
+    already run tests side by side: there each test runs its own group when it asks."""
+    import concurrent.futures
+
+    jobs = int(os.environ.get("CLFX_OCLGRIND_JOBS") or min(2, os.cpu_count() or 1))
+    ahead = [] if hasattr(request.config, "workerinput") or _icd_library() is None else [
+        a for a in map(_group_args, request.session.items) if a is not None]
+    pool = concurrent.futures.ThreadPoolExecutor(max(jobs, 1), thread_name_prefix="oclgrind")
+    started = {}
+
+    def result(*args):
+        if args not in started:
+            started[args] = pool.submit(run_group, tmp_path_factory.mktemp("oclgrind"), *args)
+        return started[args].result()
+
+    for args in ahead:
+        started[args] = pool.submit(run_group, tmp_path_factory.mktemp("oclgrind"), *args)
+    yield result
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
 @pytest.mark.parametrize("effect", _builtin("effect"))
-def test_effect_every_level_under_oclgrind(tmp_path, effect):
-    records, findings, _ = run_group(tmp_path, "effect", effect, ",".join(QUALITY_LEVELS))
+def test_effect_every_level_under_oclgrind(groups, effect):
+    records, findings, _ = groups("effect", effect, ",".join(QUALITY_LEVELS))
     _check(records, findings, len(QUALITY_LEVELS) + 2)
     for r in records:   # the effect did its work: the test's parameters are not an identity
         if r["size"] == [48, 32]:
@@ -179,8 +217,8 @@ def test_effect_every_level_under_oclgrind(tmp_path, effect):
 
 
 @pytest.mark.parametrize("look", _builtin("look"))
-def test_builtin_look_under_oclgrind(tmp_path, look):
-    records, findings, _ = run_group(tmp_path, "look", look, "draft")
+def test_builtin_look_under_oclgrind(groups, look):
+    records, findings, _ = groups("look", look, "draft")
     _check(records, findings, 1)
     assert records[0]["ran"], records
 
