@@ -139,9 +139,10 @@ def area_resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 def sun_scene(width: int, height: int) -> Frame:
-    """A sunny day: a blue sky over dark ground and a post, and the sun (a disc of radius
-    0.8 % of the width at 1e5, diffuse white being 1) high on the right: the light that lens
-    flare, corona and spikes are seen with."""
+    """A sunny day: a blue sky over dark ground and a post, and the sun (a limb-darkened disc
+    of radius 0.8 % of the width, 1e5 at its centre, diffuse white being 1; the size of the
+    Sun through a 55 mm lens on full frame) high on the right: the light that lens flare,
+    corona and spikes are seen with."""
     ys, xs = np.mgrid[0:height, 0:width] + 0.5
     v = ys / height
     rgba = np.ones((height, width, 4), np.float32)
@@ -154,7 +155,9 @@ def sun_scene(width: int, height: int) -> Frame:
     rgba[post, :3] = 0.05
     r = 0.008 * width
     sun = np.hypot(xs - 0.78 * width, ys - 0.3 * height)
-    rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0))[..., None]
+    # limb-darkened (I = 1 - 0.6 (1 - mu), the Sun's in the visible): brightest at its centre
+    mu = np.sqrt(np.clip(1.0 - (sun / r) ** 2, 0.0, 1.0))
+    rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0) * (1.0 - 0.6 * (1.0 - mu)))[..., None]
     return Frame.from_array(rgba.astype(np.float32))
 
 

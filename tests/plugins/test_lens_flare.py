@@ -318,6 +318,20 @@ def test_ghost_positions_and_energies_for_a_point_light(rt):
     assert checked >= 3
 
 
+def tint_kinds(power):
+    """Per ghost, which family its channel shares (power / sum) put it in: green (G the
+    largest, > 0.4), amber (R > 0.45 and G > B), magenta (R and B > 0.35 each), blue
+    (B > 0.42); others (near-white, cyan, yellow) are left out."""
+    share = power / power.sum(axis=1, keepdims=True)
+    kinds = {}
+    for r, g, b in share:
+        k = ("green" if g > 0.4 and g >= max(r, b) else "amber" if r > 0.45 and g > b
+             else "magenta" if min(r, b) > 0.35 else "blue" if b > 0.42 else None)
+        if k:
+            kinds[k] = kinds.get(k, 0) + 1
+    return kinds
+
+
 def test_ghosts_are_dim_by_the_physics_and_gain_multiplies(rt):
     src = physical_scene()
     added = []
@@ -339,13 +353,13 @@ def test_ghosts_are_coloured_and_fringed(rt):
     # blue and red more than green: every ghost violet
     power = entries[:, 13:16] * entries[:, 7:10] ** 2
     assert (power[:, 2] > power[:, 1]).mean() > 0.7
-    # multi-coated (the default): each surface's film its own, so the ghosts' tints differ:
-    # amber ones (red the largest share) beside violet-blue ones
+    # multi-coated (the default): each surface its own multilayer stack, so the ghosts'
+    # tints differ: green ones (broadband stacks' hump) beside amber, magenta and blue ones
     _, (multi, _, _, _) = planned(rt, LensFlare.params(lens="zoom-80-200mm", cull=0.0), src,
                                   quality="final")
     power = multi[:, 13:16] * multi[:, 7:10] ** 2
-    share = power / power.sum(axis=1, keepdims=True)
-    assert (share[:, 0] > 0.5).mean() > 0.15 and (share[:, 2] > 0.4).mean() > 0.15
+    kinds = tint_kinds(power)
+    assert {"green", "amber", "magenta", "blue"} <= set(kinds), kinds
     # dispersion: the channels' ghosts differ in size (coloured fringes)
     assert np.median(np.abs(entries[:, 7] - entries[:, 9]) / entries[:, 8]) > 1e-3
 
@@ -471,12 +485,12 @@ def test_physical_flare_is_visible_varied_and_veil_free_at_defaults(rt, lens):
     ys, xs = np.mgrid[0:h, 0:w] + 0.5
     away = np.hypot(xs - lx - 0.5, ys - ly - 0.5) > 12      # not the light itself
     # visible: the brightest ghost adds at least 0.3 of the background (+30 %: plainly seen;
-    # today 0.4-2x); not overwhelming: nowhere more than 10 times the background
+    # today 1.2-4.4x); not overwhelming: nowhere more than 10 times the background
     peak = added[away].max()
     assert 0.3 * bg <= peak <= 10 * bg
     # at least 3 ghosts above 5 % of the background (a patch that much brighter than a flat
     # field is seen), of clearly different tints (their power's channel shares differ by
-    # > 0.15: amber beside violet, magenta)
+    # > 0.15: green or amber beside violet, magenta)
     ctx, (entries, _, _, _) = planned(rt, p, src, camera=cam, quality="final")
     seen = entries[entries[:, 13:16].max(axis=1) >= 0.05 * bg]
     assert len(seen) >= 3
@@ -486,7 +500,7 @@ def test_physical_flare_is_visible_varied_and_veil_free_at_defaults(rt, lens):
     for s in share[1:]:
         if all(np.abs(s - d).max() > 0.15 for d in distinct):
             distinct.append(s)
-    assert len(distinct) >= 2 and np.ptp(share[:, 0]) > 0.3
+    assert len(distinct) >= 2 and np.ptp(share, axis=0).max() > 0.2
     # no veil: every drawn ghost's radius is at most VEIL_TO (0.2) of the diagonal, and far
     # from the axis through the centre and the light (> 0.35 of the diagonal) nothing is added
     diag = math.hypot(w, h)
