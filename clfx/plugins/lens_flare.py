@@ -19,7 +19,9 @@ Fresnel-diffraction rim and edges blurred by the light's extent and the lens's a
 and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``), times ``gain`` (default
 ``DEFAULT_GAIN`` = 500: the light a plate's recorded highlights leave out; 1 = the recorded
-flux alone).  ``coatings`` "multi" (the default) gives each glass-air surface its own
+flux alone) up to ``light_level``: a light recorded at peak ``P`` takes ``min(gain, max(1,
+light_level / P))`` (``DEFAULT_LIGHT_LEVEL``: an unclipped sun or HDR flame is not brightened
+as a clipped lamp is; 0 = every light the whole gain).  ``coatings`` "multi" (the default) gives each glass-air surface its own
 multilayer stack (``MULTI_COATINGS``: three-layer broadband and two-layer V-coats, each
 surface tuned differently; reflectance per wavelength by the transfer-matrix method,
 ``clfx.fx.optics.thin_film_reflectance``), so ghosts differ in tint as a multi-coated
@@ -114,6 +116,23 @@ plainly; 500 brings a 3 x 3 px light 2000 times the background to a brightest gh
 1.2-4.4 times the background and several at 5-30 % of it (f/2.8, the three shipped lenses
 multi-coated, ``tests/plugins/test_lens_flare.py``; multilayer stacks reflect 2-3 times less
 than the single MgF2 film 300 was set for).  ``gain: 1`` is the recorded flux alone."""
+
+DEFAULT_LIGHT_LEVEL = 1e4
+"""The physical model's default ``light_level``: real lamps and the sun are 1e4-1e6 times
+diffuse white, so ``gain`` stands for light a plate left out only up to this level: a light
+recorded at peak ``P`` takes ``min(gain, max(1, light_level / P))``.  A clipped lamp at 20
+takes the whole default gain (500); CandleGlass's flame, recorded at 212 in an HDR merge,
+47, so its ghosts stay as faint as the real ones in that photograph; a sun recorded at 1e5
+none (``gain`` 1: its recorded flux is the real one)."""
+
+
+def light_gain(gain: float, light_level: float, peak: float) -> float:
+    """The part of ``gain`` a light recorded at peak luminance ``peak`` takes: ``min(gain,
+    max(1, light_level / peak)) / gain`` (1 where ``light_level`` is 0 or ``gain`` is 0)."""
+    if light_level <= 0.0 or gain <= 0.0 or not peak > 0.0:
+        return 1.0
+    return min(gain, max(1.0, light_level / peak)) / gain
+
 
 TILE = 32
 ENTRY = 12
@@ -354,6 +373,12 @@ class LensFlare(Plugin):
                        hint="Physical: multiplies the ghosts' brightness (1 = the coated "
                             "reflections of the recorded light alone; the default stands for "
                             "the light a plate's clipped highlights leave out)."),
+            FloatParam("light_level", DEFAULT_LIGHT_LEVEL, min=0.0, max=1e12,
+                       hint="Physical: the luminance real lights have (diffuse white = 1): a "
+                            "light recorded at peak P takes min(gain, max(1, light_level / P)), "
+                            "so an unclipped bright light (a sun at 1e5, an HDR candle at 200) "
+                            "is not brightened as a clipped one; 0 = every light the whole "
+                            "gain."),
             ChoiceParam("coatings", "multi", choices=("multi", "lens"),
                         hint="Physical: multi = each glass-air surface its own multilayer "
                              "stack (ghosts green, magenta, amber, cyan, blue); lens = the "
@@ -422,8 +447,9 @@ class LensFlare(Plugin):
                   np.float32(p.threshold), out)
         m = rt.from_device(out, np.float32, 8 * n).reshape(n, 8).astype(np.float64)
         if full:
-            return [flare.Light(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3]), r[7])
-                    for r in m if r[3] > 0]
+            return [flare.Light(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3]), r[7],
+                                light_gain(p.gain, p.light_level, s.peak))
+                    for s, r in zip(candidates, m) if r[3] > 0]
         return [(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3])) for r in m if r[3] > 0]
 
     # cheap questions ------------------------------------------------------------------
