@@ -19,9 +19,10 @@ Fresnel-diffraction rim and edges blurred by the light's extent and the lens's a
 and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``), times ``gain`` (default
 ``DEFAULT_GAIN`` = 500: the light a plate's recorded highlights leave out; 1 = the recorded
-flux alone) up to ``light_level``: a light recorded at peak ``P`` takes ``min(gain, max(1,
-light_level / P))`` (``DEFAULT_LIGHT_LEVEL``: an unclipped sun or HDR flame is not brightened
-as a clipped lamp is; 0 = every light the whole gain).  ``coatings`` "multi" (the default) gives each glass-air surface its own
+flux alone) up to ``light_level``: a light recorded at peak ``P`` takes ``min(gain,
+max(GAIN_FLOOR, light_level / P))`` (``DEFAULT_LIGHT_LEVEL``: an unclipped sun or HDR flame
+is not brightened as a clipped lamp is; 0 = every light the whole gain).
+``coatings`` "multi" (the default) gives each glass-air surface its own
 multilayer stack (``MULTI_COATINGS``: three-layer broadband and two-layer V-coats, each
 surface tuned differently; reflectance per wavelength by the transfer-matrix method,
 ``clfx.fx.optics.thin_film_reflectance``), so ghosts differ in tint as a multi-coated
@@ -120,18 +121,25 @@ than the single MgF2 film 300 was set for).  ``gain: 1`` is the recorded flux al
 DEFAULT_LIGHT_LEVEL = 1e4
 """The physical model's default ``light_level``: real lamps and the sun are 1e4-1e6 times
 diffuse white, so ``gain`` stands for light a plate left out only up to this level: a light
-recorded at peak ``P`` takes ``min(gain, max(1, light_level / P))``.  A clipped lamp at 20
-takes the whole default gain (500); CandleGlass's flame, recorded at 212 in an HDR merge,
-47, so its ghosts stay as faint as the real ones in that photograph; a sun recorded at 1e5
-none (``gain`` 1: its recorded flux is the real one)."""
+recorded at peak ``P`` takes ``min(gain, max(GAIN_FLOOR, light_level / P))``.  A clipped
+lamp at 20 takes the whole default gain (500); CandleGlass's flame, recorded at 212 in an
+HDR merge, 47, so its ghosts come out as faint as the real ones in that photograph; a sun
+recorded at 1e5 ``GAIN_FLOOR``."""
+
+GAIN_FLOOR = 30.0
+"""The least gain a light takes however bright it was recorded (when ``gain`` is larger):
+CandleGlass's own ghosts (a flame recorded unclipped) match the model's at 30-50 times the
+paraxial table's energy, which leaves out what real ghosts gain at oblique incidence and from
+imperfect coatings, so even an unclipped sun keeps visible ghosts."""
 
 
 def light_gain(gain: float, light_level: float, peak: float) -> float:
     """The part of ``gain`` a light recorded at peak luminance ``peak`` takes: ``min(gain,
-    max(1, light_level / peak)) / gain`` (1 where ``light_level`` is 0 or ``gain`` is 0)."""
+    max(GAIN_FLOOR, light_level / P)) / gain`` (1 where ``light_level`` is 0 or ``gain``
+    is 0)."""
     if light_level <= 0.0 or gain <= 0.0 or not peak > 0.0:
         return 1.0
-    return min(gain, max(1.0, light_level / peak)) / gain
+    return min(gain, max(GAIN_FLOOR, light_level / peak)) / gain
 
 
 TILE = 32
@@ -375,7 +383,7 @@ class LensFlare(Plugin):
                             "the light a plate's clipped highlights leave out)."),
             FloatParam("light_level", DEFAULT_LIGHT_LEVEL, min=0.0, max=1e12,
                        hint="Physical: the luminance real lights have (diffuse white = 1): a "
-                            "light recorded at peak P takes min(gain, max(1, light_level / P)), "
+                            "light recorded at peak P takes min(gain, max(30, light_level / P)), "
                             "so an unclipped bright light (a sun at 1e5, an HDR candle at 200) "
                             "is not brightened as a clipped one; 0 = every light the whole "
                             "gain."),

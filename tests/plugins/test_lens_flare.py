@@ -554,16 +554,17 @@ def test_artistic_ghosts_differ_in_size_sharpness_rim_and_tint(rt):
 
 
 def test_unclipped_bright_lights_take_less_gain(rt):
-    """A light recorded at peak P takes min(gain, max(1, light_level / P)) of the gain: a
-    clipped lamp at 20 the whole default gain, an HDR flame at 200 50, a sun at 1e5 none
+    """A light recorded at peak P takes min(gain, max(30, light_level / P)) of the gain: a
+    clipped lamp at 20 the whole default gain, an HDR flame at 200 50, a sun at 1e5 30
     (CandleGlass's flame at the whole gain laid ghosts far brighter than the real ghosts in
     that photograph)."""
-    from clfx.plugins.lens_flare import DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, light_gain
+    from clfx.plugins.lens_flare import DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, GAIN_FLOOR, light_gain
 
     assert DEFAULT_LIGHT_LEVEL / 20.0 >= DEFAULT_GAIN
     assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 20.0) == 1.0
     assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 200.0) * DEFAULT_GAIN == pytest.approx(50)
-    assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 1e5) * DEFAULT_GAIN == 1.0
+    assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 1e5) * DEFAULT_GAIN == GAIN_FLOOR
+    assert light_gain(10.0, DEFAULT_LIGHT_LEVEL, 1e5) == 1.0       # below the floor: all of it
     assert light_gain(10.0, 0.0, 1e5) == 1.0                       # 0: the whole gain
     bg = 0.01
     added = []
