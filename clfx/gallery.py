@@ -10,13 +10,21 @@ area-downscaled to ``width`` pixels (640 by default: the whole gallery takes a f
 a CPU device); sizes are fractions of the frame diagonal, so the effects look as they would
 at full resolution.
 
+Calibration: every tile is exposed as the footage would be seen, not graded to show off its
+defect: one exposure per image, taken from the *input* (its log-average luminance to middle
+grey, :func:`exposure_for`), the same for every tile, through the same plain per-channel
+Reinhard curve and the sRGB encoding; nothing is boosted, and each effect and look runs as
+shipped (an effect that needs a choice to do anything, ``lens``, gets the real-lens look's
+lens: `EFFECT_SETTINGS`).
+
 Every effect runs alone at its default parameters (``clfx apply EFFECT``), options that are
 off by default on their own (`VARIANTS`: cat-eye, anamorphic and chromatic bokeh, a pulled
 focus breathing), every built-in look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
 is skipped, and the tile says so.  Written to OUTDIR:
 
 - ``<image>/sheet.png``: the input (``before``) then every effect and look (``after``), each
-  tile labelled, tone-mapped with one exposure per image (so tiles compare);
+  tile labelled and captioned with one sentence (`CAPTIONS`: what the defect is and where
+  to look), tone-mapped with one exposure per image (so tiles compare);
 - ``<image>/<kind>-<name>.png``: each tile at full gallery resolution;
 - ``index.json``: what was rendered, skipped and how long it took.
 """
@@ -60,7 +68,8 @@ _GLYPHS = {
     "-": "00 00 00 1F 00 00 00", "_": "00 00 00 00 00 00 1F", ":": "00 0C 0C 00 0C 0C 00",
     ".": "00 00 00 00 00 0C 0C", "(": "02 04 08 08 08 04 02", ")": "08 04 02 02 02 04 08",
     "/": "01 01 02 04 08 10 10", "=": "00 00 1F 00 1F 00 00", ",": "00 00 00 00 0C 04 08",
-    " ": "00 00 00 00 00 00 00",
+    " ": "00 00 00 00 00 00 00", "'": "04 04 08 00 00 00 00", "%": "18 19 02 04 08 13 03",
+    "+": "00 04 04 1F 04 04 00", ";": "00 0C 0C 00 0C 04 08", "^": "04 0A 11 00 00 00 00",
 }
 
 
@@ -91,6 +100,38 @@ def label(tile: np.ndarray, lines, *, scale: int = 2) -> np.ndarray:
         w = min(mask.shape[1], out.shape[1] - 2 * scale)
         if w > 0:
             y = scale + k * line_h
+            out[y:y + mask.shape[0], scale:scale + w][mask[:, :w]] = 1.0
+    return out
+
+
+def wrap(text: str, chars: int) -> list[str]:
+    """``text`` in lines of at most ``chars`` characters, broken at spaces."""
+    lines, line = [], ""
+    for word in text.split():
+        if line and len(line) + 1 + len(word) > chars:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    return lines + [line] if line else lines
+
+
+def caption(tile: np.ndarray, text: str, *, scale: int = 1, max_lines: int = 4) -> np.ndarray:
+    """``tile`` with ``text`` wrapped in white on a darkened band at the bottom (at most
+    ``max_lines`` lines; the image above it untouched)."""
+    out = tile.copy()
+    chars = max(1, (out.shape[1] - 2 * scale) // (6 * scale))
+    lines = wrap(text, chars)[:max_lines]
+    if not lines:
+        return out
+    line_h = 9 * scale
+    top = max(0, out.shape[0] - line_h * len(lines) - scale)
+    out[top:] *= 0.25
+    for k, line in enumerate(lines):
+        mask = text_mask(line, scale)
+        w = min(mask.shape[1], out.shape[1] - 2 * scale)
+        y = top + scale + k * line_h
+        if w > 0 and y + mask.shape[0] <= out.shape[0]:
             out[y:y + mask.shape[0], scale:scale + w][mask[:, :w]] = 1.0
     return out
 
@@ -139,9 +180,10 @@ def area_resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 def sun_scene(width: int, height: int) -> Frame:
-    """A sunny day: a blue sky over dark ground and a post, and the sun (a disc of radius
-    0.8 % of the width at 1e5, diffuse white being 1) high on the right: the light that lens
-    flare, corona and spikes are seen with."""
+    """A sunny day: a blue sky over dark ground and a post, and the sun (a limb-darkened disc
+    of radius 0.8 % of the width, 1e5 at its centre, diffuse white being 1; the size of the
+    Sun through a 55 mm lens on full frame) high on the right: the light that lens flare,
+    corona and spikes are seen with."""
     ys, xs = np.mgrid[0:height, 0:width] + 0.5
     v = ys / height
     rgba = np.ones((height, width, 4), np.float32)
@@ -154,7 +196,9 @@ def sun_scene(width: int, height: int) -> Frame:
     rgba[post, :3] = 0.05
     r = 0.008 * width
     sun = np.hypot(xs - 0.78 * width, ys - 0.3 * height)
-    rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0))[..., None]
+    # limb-darkened (I = 1 - 0.6 (1 - mu), the Sun's in the visible): brightest at its centre
+    mu = np.sqrt(np.clip(1.0 - (sun / r) ** 2, 0.0, 1.0))
+    rgba[..., :3] += (1e5 * np.clip(r + 0.5 - sun, 0.0, 1.0) * (1.0 - 0.6 * (1.0 - mu)))[..., None]
     return Frame.from_array(rgba.astype(np.float32))
 
 
@@ -197,6 +241,86 @@ def exposure_for(rgba: np.ndarray) -> float:
     return float(np.clip(KEY_VALUE / max(key, 1e-6), 1e-3, 1e3))
 
 
+EFFECT_SETTINGS = {
+    # effects that do nothing until a setting is chosen: the gallery chooses one
+    "lens": ["maker=Canon", "model=Canon EF 24-70mm f/2.8L II USM", "fit=fill",
+             "camera.focal_length=24", "camera.f_number=2.8"],
+}
+"""Settings the gallery gives an effect that needs one to run at all (``lens`` needs a lens
+from lensfun: the real-lens look's)."""
+
+CAPTIONS = {
+    "before": "The input, exposed as every tile of this sheet: log-average to middle grey, "
+              "no grade.",
+    # effects at their defaults
+    "bleed": "Sensor crosstalk: look at the edges of the brightest lights, a pixel or two of "
+             "soft spill.",
+    "breathing": "Focus breathing, still focus: nothing changes (the frame scales only while "
+                 "the focus moves).",
+    "camera_blur": "Camera shake over the shutter: every edge smeared the same way, the lights "
+                   "drawn into short trails.",
+    "chromatic_aberration": "Lateral colour: red and blue fringes on edges towards the "
+                            "corners, none at the centre.",
+    "corona": "Diffraction corona: rainbow rings around the strongest lights only.",
+    "defocus": "Uniform defocus: the whole frame evenly soft, lights into small discs.",
+    "distortion": "Barrel distortion: straight lines near the edges bow outwards.",
+    "dof": "Depth of field from the depth pass: the focus plane sharp, near and far soft, "
+           "lights into aperture-shaped bokeh.",
+    "glare": "Veiling glare: a faint wide glow around the brightest lights, lifting the dark "
+             "areas next to them.",
+    "grain": "Film grain: fine clumpy texture, most visible in the midtones and flat areas.",
+    "halation": "Halation: a thin red-orange glow hugging bright edges and lights.",
+    "lens": "A real lens (Canon 24-70 at 24 mm, lensfun): barrel distortion, colour fringes "
+            "and darker corners.",
+    "lens_flare": "Lens flare: coloured aperture-shaped ghosts on the line through each "
+                  "strong light and the centre.",
+    "motion_blur": "Object motion blur from the velocity pass: movers smeared along their "
+                   "paths, the background sharp.",
+    "rolling_shutter": "Rolling shutter: moving objects and verticals lean, rows read one "
+                       "after another.",
+    "sensor_noise": "Sensor noise: colour speckle and blotches in the shadows, little in the "
+                    "highlights.",
+    "soft_focus": "Diffusion filter: bright areas glow softly into their surroundings.",
+    "streaks": "Star-filter streaks: four thin rays from each light, fading with distance.",
+    "vignette": "Natural falloff: corners a little darker than the centre.",
+    # option variants
+    "dof:cat-eye": "Optical vignetting: bokeh towards the corners cut into cat's eyes, round "
+                   "at the centre.",
+    "dof:anamorphic-2x": "Anamorphic bokeh: tall ovals, squeezed twice as narrow as high.",
+    "dof:axial-ca": "Axial colour: green rims on bokeh behind the focus, magenta ones in "
+                    "front.",
+    "breathing:pull-focus": "Focus pulled from 20 m to 0.5 m: the frame grows by 7 %, edges "
+                            "move outwards.",
+    # looks
+    "anamorphic-night": "Anamorphic at night: long thin blue streaks across the lights, oval "
+                        "bokeh, soft glare.",
+    "cinema": "Cinema camera: a subtle mix, shallow focus, a little glare, fringing, falloff "
+              "and grain.",
+    "default": "A general camera: depth of field and motion where passes exist, subtle glare, "
+               "falloff, fine grain.",
+    "dreamy": "Diffusion filter: every bright area glows, a warm halo round the lights.",
+    "film-35mm": "35 mm negative: red halation round lights, colour grain, a soft vignette.",
+    "handheld-phone": "Handheld phone in dim light: camera shake smearing every edge, fine "
+                      "noise.",
+    "high-iso": "ISO 12800: coarse colour noise and chroma blotches, blue noisiest.",
+    "macro": "Macro at f/2.8: a paper-thin plane of focus, everything else melts.",
+    "phone-pan": "A fast phone pan: motion smear and leaning verticals (rolling shutter).",
+    "real-lens": "Canon 24-70 at 24 mm wide open: distortion, fringes and vignetting as "
+                 "measured.",
+    "soft-camera": "A plastic lens: nothing quite sharp, dark corners.",
+    "star-filter": "Six-point star filter: long rays from every bright light, slightly "
+                   "coloured.",
+    "sunny-flare": "Sun through a zoom: coloured ghosts across the frame, rainbow corona, "
+                   "faint thin spikes.",
+    "vintage-prime": "Vintage prime wide open: cat-eye bokeh, coloured fringes on blur, a "
+                     "glow and strong falloff.",
+    "vintage-zoom": "Old tele zoom: pincushion lines and strong colour fringes.",
+    "webcam": "Cheap webcam: barrel distortion, dark corners and heavy noise.",
+    "wide-angle": "16 mm wide angle: strong cos^4 falloff towards the corners.",
+}
+"""One sentence per tile: what the defect is and where to look (on the tile and in
+``index.json``)."""
+
 VARIANTS = {
     # options that are off at an effect's defaults, shown on their own (name: effect, settings)
     # focused at 1 m, wide open: the demo scene's wall and lights far out of focus
@@ -219,7 +343,8 @@ def gallery_looks(only=None):
     from clfx.pipeline.presets import available_looks, load_look, single_effect_look
     from clfx.plugins import discover
 
-    items = [("effect", e, single_effect_look(e, [])) for e in discover()]
+    items = [("effect", e, single_effect_look(e, EFFECT_SETTINGS.get(e, [])))
+             for e in discover()]
     items += [("effect", name, single_effect_look(effect, settings))
               for name, (effect, settings) in VARIANTS.items()]
     items += [("look", name, load_look(str(path))) for name, (origin, path)
@@ -261,7 +386,8 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
         exposure = exposure_for(frame.rgba)
         before = tonemap(frame.rgba, exposure)
         save(label(before, f"{name}: before"), name, "before.png")
-        thumbs = [label(thumbnail(before, thumb_width), [name, "before"])]
+        thumbs = [caption(label(thumbnail(before, thumb_width), [name, "before"]),
+                          CAPTIONS["before"])]
         entry = {"image": name, "source": frame.source,
                  "size": [frame.rgba.shape[1], frame.rgba.shape[0]],
                  "exposure": round(exposure, 4), "tiles": []}
@@ -284,8 +410,10 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
                 warnings = [w for s in report.steps for w in s.warnings]
             ms = (time.perf_counter() - t1) * 1e3
             save(label(after, lines), name, f"{kind}-{item}.png")
-            thumbs.append(label(thumbnail(after, thumb_width), lines))
-            entry["tiles"].append({"kind": kind, "name": item, "ms": round(ms, 1),
+            text = CAPTIONS.get(item, "")
+            thumbs.append(caption(label(thumbnail(after, thumb_width), lines), text))
+            entry["tiles"].append({"kind": kind, "name": item, "caption": text,
+                                   "ms": round(ms, 1),
                                    "skipped_steps": missing, "warnings": warnings,
                                    "error": error})
             log(f"clfx gallery: {name}: {kind} {item} ({ms:.0f} ms)")

@@ -20,7 +20,24 @@ def test_gallery_sheets_tiles_and_index(tmp_path, monkeypatch):
         assert (tmp_path / "g" / entry["image"] / "sheet.png").is_file()
         assert (tmp_path / "g" / entry["image"] / "look-star-filter.png").is_file()
         lens = entry["tiles"][0]
-        assert lens["error"] and "lens" in lens["error"]     # said on its tile, not fatal
+        assert lens["error"] is None                     # the gallery gives it a lens
+        assert all(t["caption"] for t in entry["tiles"])
+
+
+def test_every_tile_has_a_caption_the_font_can_draw():
+    """One sentence per tile (what the defect is, where to look), in the sheet's font."""
+    from clfx.pipeline.presets import available_looks
+    from clfx.plugins import discover
+
+    names = (list(discover()) + list(gallery.VARIANTS)
+             + [n for n, (origin, _) in available_looks().items() if origin == "built-in"])
+    assert sorted(n for n in names if n not in gallery.CAPTIONS) == []
+    for name, text in gallery.CAPTIONS.items():
+        assert text.endswith(".") and len(gallery.wrap(text, 52)) <= 3, name
+        assert all(c.upper() in gallery._GLYPHS for c in text), name
+    tile = np.zeros((60, 320, 3), np.float32) + 0.5
+    out = gallery.caption(tile, gallery.CAPTIONS["lens_flare"])
+    assert out[:30].min() == 0.5 and out[-20:].max() == 1.0      # text at the bottom only
 
 
 def test_labels_are_drawn_and_sheet_layout():

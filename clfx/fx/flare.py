@@ -220,12 +220,14 @@ def aperture_normals(blades: int, rotation_deg: float) -> np.ndarray:
 # -- lights to entries ----------------------------------------------------------------------
 @dataclass(frozen=True)
 class Light:
-    """A measured light: centroid (frame px), flux per channel (pixel sums) and rms radius."""
+    """A measured light: centroid (frame px), flux per channel (pixel sums), rms radius and
+    ``gain``, a factor of its own on ``Optics.gain`` (how much of the gain it takes)."""
 
     x: float
     y: float
     flux: tuple[float, float, float]
     rms_px: float = 0.0
+    gain: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -270,7 +272,7 @@ def cull(table, lights: list[Light], optics: Optics, level: float) -> np.ndarray
     area = polygon_area_factor(optics.blades if optics.blades >= 3 else 0) * \
         (table.radius_mm * optics.px_per_mm) ** 2
     per_flux = (ghost_power(table, optics) / np.maximum(area, 1e-12)).max(axis=1)   # (G,)
-    brightest = max(max(lt.flux) for lt in lights)
+    brightest = max(max(lt.flux) * lt.gain for lt in lights)
     return np.nonzero(per_flux * brightest * PEAK >= level)[0]
 
 
@@ -322,7 +324,7 @@ def plan_entries(table, lights: list[Light], optics: Optics, weights: np.ndarray
     dist = np.hypot(vx, vy)
     ux = np.where(dist > 1e-9, vx / np.maximum(dist, 1e-300), 1.0)
     uy = np.where(dist > 1e-9, vy / np.maximum(dist, 1e-300), 0.0)
-    flux = np.array([lt.flux for lt in lights], np.float64)            # (L, 3)
+    flux = np.array([np.asarray(lt.flux, np.float64) * lt.gain for lt in lights])   # (L, 3)
     rms = np.array([lt.rms_px for lt in lights], np.float64)          # (L,)
     # clip discs and hidden ghosts at the middle wavelength (the clipping varies little
     # across the spectrum; 1 / W of the work); centres at every wavelength

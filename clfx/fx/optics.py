@@ -46,7 +46,13 @@ index ``n_c`` and quarter-wave optical thickness at ``lambda0`` (``n_c d = lambd
 has the Airy reflectance ``R = (r1^2 + r2^2 + 2 r1 r2 cos d) / (1 + r1^2 r2^2 + 2 r1 r2
 cos d)`` with ``r1 = (n1 - n_c) / (n1 + n_c)``, ``r2 = (n_c - n2) / (n_c + n2)`` and
 ``d = pi lambda0 / lambda``, minimal at ``lambda0`` where it is ``((n1 n2 - n_c^2) /
-(n1 n2 + n_c^2))**2`` (Born & Wolf, sec. 1.6.4; Hullin et al. 2011, sec. 4.2).  Glass-air
+(n1 n2 + n_c^2))**2`` (Born & Wolf, sec. 1.6.4; Hullin et al. 2011, sec. 4.2).  A stack of
+films (``Coating.layers``: the V-coats and three-layer broadband designs of multi-coated
+lenses, ``MULTILAYER_DESIGNS``) by the transfer-matrix method, :func:`thin_film_reflectance`
+(Macleod ch. 2): its residual reflectance has one or two minima and humps between them, so
+ghosts take green, magenta, amber or blue tints from the product of their two surfaces'
+curves (checked against the closed forms above, textbook quarter-wave stacks and the
+reference's film-by-film recursion, ``tests/fx/test_optics.py``).  Glass-air
 surfaces carry the lens's coating unless a surface says otherwise; cemented (glass-glass)
 surfaces are bare.  A ghost's *transmission* is ``R_i R_j`` times ``(1 - R_k)`` of every
 other crossing on its path.  Its *energy* is the fraction of the light entering the
@@ -183,15 +189,83 @@ def quarter_wave_reflectance(n1, n2, coating_index: float, design_nm: float,
     return num / (1.0 + (r1 * r2) ** 2 + 2.0 * r1 * r2 * cos_d)
 
 
+def thin_film_reflectance(n1, n2, layers, design_nm: float, wavelength_nm) -> np.ndarray:
+    """Reflectance at normal incidence of a stack of thin films (transfer-matrix method).
+
+    Parameters
+    ----------
+    n1, n2 : array_like
+        Indices of the media on either side.  The stack faces the lower-index one (a lens's
+        films face the air): ``layers[0]`` touches it, ``layers[-1]`` the other (the glass).
+        A lossless stack reflects alike from either side, so which side the light comes
+        from does not matter.
+    layers : sequence of (index, quarter_waves)
+        Each film's index and optical thickness ``n d`` in quarter waves of ``design_nm``
+        (1: a quarter wave, 2: a half wave, which is *absent* at ``design_nm``).
+    design_nm : float
+        The wavelength the optical thicknesses are quarter waves of (nm).
+    wavelength_nm : array_like
+        Wavelengths in nanometres.
+
+    Returns
+    -------
+    ndarray
+        ``|r|^2`` with ``r = (eta0 B - C) / (eta0 B + C)`` and ``(B, C) = M_1 ... M_k (1,
+        eta_s)``, each film's characteristic matrix ``M = [[cos d, i sin d / n], [i n sin d,
+        cos d]]``, phase ``d = 2 pi n d / lambda = (pi / 2) q design / lambda`` (Macleod,
+        *Thin-Film Optical Filters*, ch. 2; Born & Wolf sec. 1.6.2).  Film indices are taken
+        constant over the visible (their dispersion shifts the curve by a few nm).
+    """
+    n1, n2, lam = np.broadcast_arrays(np.asarray(n1, np.float64), np.asarray(n2, np.float64),
+                                      np.asarray(wavelength_nm, np.float64))
+    n0, ns = np.minimum(n1, n2), np.maximum(n1, n2)    # the films face the lower index
+    m11 = np.ones(lam.shape, np.complex128)
+    m12 = np.zeros(lam.shape, np.complex128)
+    m21 = np.zeros(lam.shape, np.complex128)
+    m22 = np.ones(lam.shape, np.complex128)
+    for n, q in layers:
+        d = 0.5 * np.pi * q * design_nm / lam
+        c, s = np.cos(d), 1j * np.sin(d)
+        m11, m12, m21, m22 = (m11 * c + m12 * n * s, m11 * s / n + m12 * c,
+                              m21 * c + m22 * n * s, m21 * s / n + m22 * c)
+    b = m11 + m12 * ns
+    c = m21 + m22 * ns
+    return np.abs((n0 * b - c) / (n0 * b + c)) ** 2
+
+
+MULTILAYER_DESIGNS = {
+    "mgf2": ((MGF2_INDEX, 1.0),),
+    "v-coat": ((MGF2_INDEX, 1.0), (1.63, 1.0)),
+    "broadband": ((MGF2_INDEX, 1.0), (2.05, 2.0), (1.63, 1.0)),
+    "broadband-hi": ((MGF2_INDEX, 1.0), (2.10, 2.0), (1.70, 1.0)),
+}
+"""Classic anti-reflection stacks, films from the air side as (index, quarter waves):
+``mgf2`` one quarter wave of MgF2 (1.38); ``v-coat`` quarter-quarter MgF2 / Al2O3 (1.63): a
+V-shaped curve, zero where ``n_H / n_L = sqrt(n_s)`` at the design wavelength, rising
+steeply either side (purple-magenta residual when tuned to the green); ``broadband``
+quarter-half-quarter MgF2 / ZrO2 (2.05) / Al2O3 (1.63), the three-layer design of most
+multi-coated camera lenses: a W-shaped curve with two minima either side of the design
+wavelength and a hump between them, so tuned to 500-540 nm it reflects green (the green
+reflections and ghosts of real multi-coated lenses); ``broadband-hi`` the same with
+ZrO2 2.10 / a 1.70 middle-index film (after Macleod ch. 4; H. A. Macleod, *Thin-Film Optical
+Filters*, 4th ed., CRC 2010)."""
+
+
 @dataclass(frozen=True)
 class Coating:
-    """A single-layer anti-reflection film, a quarter wave thick at ``wavelength_nm``."""
+    """An anti-reflection coating tuned to ``wavelength_nm``: one quarter-wave film of
+    ``index`` (``layers`` empty, the default), or a stack ``layers`` of ``(index,
+    quarter_waves)`` from the air side (:func:`thin_film_reflectance`)."""
 
     index: float = MGF2_INDEX
     wavelength_nm: float = 550.0
+    layers: tuple[tuple[float, float], ...] = ()
 
     def reflectance(self, n1, n2, wavelength_nm) -> np.ndarray:
-        return quarter_wave_reflectance(n1, n2, self.index, self.wavelength_nm, wavelength_nm)
+        if not self.layers:
+            return quarter_wave_reflectance(n1, n2, self.index, self.wavelength_nm,
+                                            wavelength_nm)
+        return thin_film_reflectance(n1, n2, self.layers, self.wavelength_nm, wavelength_nm)
 
 
 @dataclass(frozen=True)
@@ -238,6 +312,9 @@ def _number(where, value, *, lo=-math.inf, hi=math.inf, what="a number", lo_open
     return v
 
 
+_COATING_KEYS = ("index", "wavelength", "layers", "design")
+
+
 def _coating(where, value, default):
     if value is None or value == "none" or value is False:
         return None
@@ -245,15 +322,43 @@ def _coating(where, value, default):
         return default
     if not isinstance(value, dict):
         raise ParamError(f"{where}: {value!r} is not a coating ({{index: 1.38, wavelength: "
-                         f"550}} or none)")
+                         f"550}}, {{design: broadband, wavelength: 520}}, {{layers: [[1.38, 1], "
+                         f"[1.63, 1]], wavelength: 510}} or none)")
     for k in value:
-        if k not in ("index", "wavelength"):
-            _unknown(where, k, ("index", "wavelength"))
+        if k not in _COATING_KEYS:
+            _unknown(where, k, _COATING_KEYS)
+    design_nm = _number(f"{where}.wavelength", value.get("wavelength", 550.0), lo=300.0,
+                        hi=1100.0, what="a design wavelength in [300, 1100] nm")
+    if "design" in value and "layers" in value:
+        raise ParamError(f"{where}: give either design or layers, not both")
+    layers = value.get("layers")
+    if "design" in value:
+        name = value["design"]
+        if name not in MULTILAYER_DESIGNS:
+            _unknown(f"{where}.design", name, tuple(MULTILAYER_DESIGNS))
+        layers = MULTILAYER_DESIGNS[name]
+    elif layers is not None:
+        if not isinstance(layers, (list, tuple)) or not 1 <= len(layers) <= 16:
+            raise ParamError(f"{where}.layers: {layers!r} is not a list of 1 to 16 films "
+                             f"[index, quarter waves]")
+        out = []
+        for k, film in enumerate(layers):
+            w = f"{where}.layers[{k}]"
+            if not isinstance(film, (list, tuple)) or len(film) != 2:
+                raise ParamError(f"{w}: {film!r} is not a film [index, quarter waves]")
+            out.append((_number(f"{w}[0]", film[0], lo=1.0, hi=3.0,
+                                what="a film index in [1, 3]"),
+                        _number(f"{w}[1]", film[1], lo=0.0, hi=20.0, lo_open=True,
+                                what="an optical thickness in (0, 20] quarter waves")))
+        layers = tuple(out)
+    if layers is not None:
+        if "index" in value:
+            raise ParamError(f"{where}.index: a stack's films carry their own indices")
+        return Coating(index=layers[0][0], wavelength_nm=design_nm, layers=tuple(layers))
     return Coating(
         index=_number(f"{where}.index", value.get("index", MGF2_INDEX), lo=1.0, hi=3.0,
                       what="a coating index in [1, 3]"),
-        wavelength_nm=_number(f"{where}.wavelength", value.get("wavelength", 550.0),
-                              lo=300.0, hi=1100.0, what="a design wavelength in [300, 1100] nm"))
+        wavelength_nm=design_nm)
 
 
 @dataclass(frozen=True)
@@ -284,8 +389,10 @@ class Prescription:
             semi_aperture]`` or a mapping with those keys plus ``stop: true`` and
             ``coating``; optional ``description``, ``source``, ``focal_length`` and
             ``f_number`` (published values, after scaling), ``coating`` (lens default for
-            glass-air surfaces: ``{index: 1.38, wavelength: 550}``, the default, or
-            ``none``), ``scale`` (multiplies every length of the table, so a patent's
+            glass-air surfaces: ``{index: 1.38, wavelength: 550}``, the default, a stack
+            ``{design: broadband, wavelength: 520}`` (``MULTILAYER_DESIGNS``) or ``{layers:
+            [[1.38, 1], [1.63, 1]], wavelength: 510}`` (films from the air side: index,
+            quarter waves), or ``none``), ``scale`` (multiplies every length of the table, so a patent's
             ``f = 100`` table can be listed as printed).  ``radius: 0`` (or ``.inf``) is
             flat; ``nd: 1`` is air.  Adjacent surfaces must not cross inside their clear
             apertures.

@@ -18,10 +18,16 @@ into and back, ``clfx.fx.spectral.in_reference_basis``: coloured fringes), a
 Fresnel-diffraction rim and edges blurred by the light's extent and the lens's aberrations,
 and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``), times ``gain`` (default
-``DEFAULT_GAIN`` = 300: the light a plate's recorded highlights leave out; 1 = the recorded
-flux alone).  ``coatings`` "multi" (the default) tunes each glass-air surface's film to its
-own wavelength (``MULTI_COATING_NM``), so ghosts differ in tint as a multi-coated lens's do;
-"lens" keeps the prescription's single film (every ghost the same violet).  Ghosts larger
+``DEFAULT_GAIN`` = 500: the light a plate's recorded highlights leave out; 1 = the recorded
+flux alone) up to ``light_level``: a light recorded at peak ``P`` takes ``min(gain,
+max(GAIN_FLOOR, light_level / P))`` (``DEFAULT_LIGHT_LEVEL``: an unclipped sun or HDR flame
+is not brightened as a clipped lamp is; 0 = every light the whole gain).
+``coatings`` "multi" (the default) gives each glass-air surface its own
+multilayer stack (``MULTI_COATINGS``: three-layer broadband and two-layer V-coats, each
+surface tuned differently; reflectance per wavelength by the transfer-matrix method,
+``clfx.fx.optics.thin_film_reflectance``), so ghosts differ in tint as a multi-coated
+lens's do: green, magenta, amber, cyan, blue; "lens" keeps the prescription's coatings as
+written (the shipped lenses: one MgF2 film, every ghost the same violet).  Ghosts larger
 than 0.1 of the diagonal (radius) fade out by 0.2 of it (``clfx.fx.flare.VEIL_FROM``):
 their paraxial shape is an artefact (real ones are vignetted and smeared into veiling glare,
 the glare effect's business), not a polygon over the whole frame.  Ghosts fainter than ``cull`` times the frame's median tile luminance are not
@@ -102,14 +108,39 @@ Like a real zoom's ghosts they differ in size (0.011-0.13 of the diagonal), shar
 (0: flat, 0.9: a ring) and coating tint (green, magenta, amber, blue, olive, teal), at
 positions that do not mirror each other about the centre."""
 
-DEFAULT_GAIN = 300.0
+DEFAULT_GAIN = 500.0
 """The physical model's default ``gain``.  The ghosts of two coated reflections carry 1e-4 to
 1e-6 of a light's flux; from the flux a plate records (a light 1000-2000 times the
 background, clipped or graded down) that leaves ghosts of ~1e-4 of the background: nothing
 to see.  A real lamp or sun is 1e4-1e6 times diffuse white, so a lens shows its ghosts
-plainly; 300 brings a 3 x 3 px light 2000 times the background to a brightest ghost of
-0.4-2 times the background and several at 5-30 % of it (f/2.8, the three shipped lenses,
-``tests/plugins/test_lens_flare.py``).  ``gain: 1`` is the recorded flux alone."""
+plainly; 500 brings a 3 x 3 px light 2000 times the background to a brightest ghost of
+1.2-4.4 times the background and several at 5-30 % of it (f/2.8, the three shipped lenses
+multi-coated, ``tests/plugins/test_lens_flare.py``; multilayer stacks reflect 2-3 times less
+than the single MgF2 film 300 was set for).  ``gain: 1`` is the recorded flux alone."""
+
+DEFAULT_LIGHT_LEVEL = 1e4
+"""The physical model's default ``light_level``: real lamps and the sun are 1e4-1e6 times
+diffuse white, so ``gain`` stands for light a plate left out only up to this level: a light
+recorded at peak ``P`` takes ``min(gain, max(GAIN_FLOOR, light_level / P))``.  A clipped
+lamp at 20 takes the whole default gain (500); CandleGlass's flame, recorded at 212 in an
+HDR merge, 47, so its ghosts come out as faint as the real ones in that photograph; a sun
+recorded at 1e5 ``GAIN_FLOOR``."""
+
+GAIN_FLOOR = 30.0
+"""The least gain a light takes however bright it was recorded (when ``gain`` is larger):
+CandleGlass's own ghosts (a flame recorded unclipped) match the model's at 30-50 times the
+paraxial table's energy, which leaves out what real ghosts gain at oblique incidence and from
+imperfect coatings, so even an unclipped sun keeps visible ghosts."""
+
+
+def light_gain(gain: float, light_level: float, peak: float) -> float:
+    """The part of ``gain`` a light recorded at peak luminance ``peak`` takes: ``min(gain,
+    max(GAIN_FLOOR, light_level / P)) / gain`` (1 where ``light_level`` is 0 or ``gain``
+    is 0)."""
+    if light_level <= 0.0 or gain <= 0.0 or not peak > 0.0:
+        return 1.0
+    return min(gain, max(GAIN_FLOOR, light_level / peak)) / gain
+
 
 TILE = 32
 ENTRY = 12
@@ -286,23 +317,27 @@ def tile_lists(entries: np.ndarray, window: Rect):
     return tx, start, flat if flat.size else np.zeros(1, np.int32)
 
 
-MULTI_COATING_NM = (470.0, 545.0, 450.0, 520.0, 490.0, 565.0, 460.0, 530.0, 500.0, 440.0)
-"""Design wavelengths (nm) of the films of a multi-coated lens, surface after surface: each
-glass-air surface's quarter-wave film reflects least at its own wavelength, so every pair of
-surfaces tints its ghost differently (films tuned to the blue reflect amber, mid-band ones
-magenta, those towards the yellow violet-blue).  A single-layer film reflects short
-wavelengths more steeply than long ones, so the films sit at 440-565 nm: tuned further to
-the red, every ghost turns blue."""
+MULTI_COATINGS = (("broadband", 520.0), ("v-coat", 500.0), ("broadband", 540.0),
+                  ("v-coat", 470.0), ("broadband-hi", 490.0), ("v-coat", 540.0),
+                  ("broadband", 510.0), ("mgf2", 480.0), ("broadband-hi", 530.0),
+                  ("v-coat", 520.0))
+"""The films of a multi-coated lens, glass-air surface after surface: a design of
+``clfx.fx.optics.MULTILAYER_DESIGNS`` and its wavelength (nm), as a maker mixes stacks and
+tunes each surface differently.  Three-layer broadband stacks tuned to 510-540 nm reflect
+a green hump between their two minima; quarter-quarter V-coats reflect magenta-purple
+(tuned to the green), amber (to the blue) or violet-blue (to the yellow); the plain MgF2
+film amber-pink.  A ghost's tint is the product of its two surfaces' curves: green, cyan,
+magenta, amber, blue and near-white ghosts from one lens (``tests/plugins/
+test_lens_flare.py``)."""
 
 
 def multi_coated(d: dict) -> dict:
     """A lens dictionary whose glass-air surfaces without a coating of their own carry the
-    lens's film (index) tuned to ``MULTI_COATING_NM`` in turn, as a maker tunes each surface
-    of a multi-coated lens differently; a bare lens (``coating: none``) stays bare."""
+    stacks of ``MULTI_COATINGS`` in turn, as a maker coats each surface of a multi-coated
+    lens differently; a bare lens (``coating: none``) stays bare."""
     base = d.get("coating", "default")
     if base is None or base is False or base == "none":
         return d
-    index = base.get("index", optics.MGF2_INDEX) if isinstance(base, dict) else optics.MGF2_INDEX
     rows = d.get("surfaces")
     if not isinstance(rows, list):
         return d
@@ -315,8 +350,8 @@ def multi_coated(d: dict) -> dict:
         nd = row.get("nd")
         nd = 1.0 if nd is None else nd
         if "coating" not in row and (nd == 1.0) != (n_before == 1.0):
-            row = {**row, "coating": {"index": index,
-                                      "wavelength": MULTI_COATING_NM[j % len(MULTI_COATING_NM)]}}
+            design, nm = MULTI_COATINGS[j % len(MULTI_COATINGS)]
+            row = {**row, "coating": {"design": design, "wavelength": nm}}
             j += 1
         out.append(row)
         n_before = nd
@@ -346,9 +381,15 @@ class LensFlare(Plugin):
                        hint="Physical: multiplies the ghosts' brightness (1 = the coated "
                             "reflections of the recorded light alone; the default stands for "
                             "the light a plate's clipped highlights leave out)."),
+            FloatParam("light_level", DEFAULT_LIGHT_LEVEL, min=0.0, max=1e12,
+                       hint="Physical: the luminance real lights have (diffuse white = 1): a "
+                            "light recorded at peak P takes min(gain, max(30, light_level / P)), "
+                            "so an unclipped bright light (a sun at 1e5, an HDR candle at 200) "
+                            "is not brightened as a clipped one; 0 = every light the whole "
+                            "gain."),
             ChoiceParam("coatings", "multi", choices=("multi", "lens"),
-                        hint="Physical: multi = each glass-air surface's film tuned to its own "
-                             "wavelength (ghosts amber, magenta, violet); lens = the "
+                        hint="Physical: multi = each glass-air surface its own multilayer "
+                             "stack (ghosts green, magenta, amber, cyan, blue); lens = the "
                              "prescription's coatings as written (one film: all alike)."),
             FloatParam("cull", 0.01, min=0.0, max=1.0,
                        hint="Physical: ghosts whose brightest pixel stays below this fraction "
@@ -414,8 +455,9 @@ class LensFlare(Plugin):
                   np.float32(p.threshold), out)
         m = rt.from_device(out, np.float32, 8 * n).reshape(n, 8).astype(np.float64)
         if full:
-            return [flare.Light(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3]), r[7])
-                    for r in m if r[3] > 0]
+            return [flare.Light(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3]), r[7],
+                                light_gain(p.gain, p.light_level, s.peak))
+                    for s, r in zip(candidates, m) if r[3] > 0]
         return [(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3])) for r in m if r[3] > 0]
 
     # cheap questions ------------------------------------------------------------------

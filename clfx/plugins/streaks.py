@@ -44,7 +44,11 @@ perpendicular to it (the Fourier transform of a half plane), so an N-blade polyg
 ``blade_rotation + 180 (2i + 1) / N`` and their opposites: N spikes for even N (opposite
 edges are parallel), 2N for odd N (Ritschel et al. 2009).  ``blades = 0`` takes the camera
 block's blades and rotation; a round aperture has no spikes: the step does nothing and says
-so on stderr (``ctx.warnings``).
+so on stderr (``ctx.warnings``).  A spike is shaped as diffraction makes it: its brightness
+falls as the inverse square of the distance (three exponentials, ``APERTURE_PARTS``: a
+bright root tapering into a long faint tip, 1 % of the root at ``length``) and each channel
+reaches as far as its wavelength (``SPIKE_WAVELENGTHS_NM``: the tips turn red).  Its width
+is the light's: a light's core (``core``) streaks, so a small bright sun gives thin spikes.
 
 Algorithm (Kawase 2003, "Frame buffer postprocessing effects in DOUBLE-S.T.E.A.L")
 -----------------------------------------------------------------------------------
@@ -96,6 +100,19 @@ TAIL = math.log(1e5) / math.log(100.0)
 ANAMORPHIC_PARTS = ((0.15, 0.7), (1.0, 0.3))
 """mode anamorphic: (1 % length as a fraction of ``length``, share of the light) of the bright
 near part and the long faint part."""
+
+APERTURE_PARTS = ((0.08, 0.068), (0.3, 0.246), (1.0, 0.686))
+"""mode aperture: three exponentials (1 % lengths as fractions of ``length`` L, shares of the
+light) whose sum follows a diffraction spike's ``1 / (1 + 9 r / L)^2`` (the far field of a
+straight blade edge falls as the inverse square of the distance) within 12 % out to 0.5 L
+(a least-squares fit), then falls faster than the power law (0.3 % of its root at L where
+the law has 1 %; an exponential tail, below 1e-5 at 2.5 L): a bright root that tapers into
+a long faint tip instead of a bar of even brightness."""
+
+SPIKE_WAVELENGTHS_NM = (610.0, 550.0, 465.0)
+"""mode aperture: each channel's spike is as long as its wavelength (the diffraction angle
+of an edge scales with lambda): red 1.11 x and blue 0.85 x green's length, so a spike's tip
+turns red and its root stays white, as real starbursts do."""
 
 ANAMORPHIC_CORE_POWER = 3.0
 """mode anamorphic, core_power -1: the exponent of (L / peak) weighting each pixel's light."""
@@ -177,9 +194,13 @@ def grid_step(angle_deg: float) -> tuple[float, float, float]:
     return dx / major, dy / major, 1.0 / major
 
 
-def channel_lengths(length_px: float, color_shift: float) -> np.ndarray:
-    """Per-channel 1% length in pixels: red longer and blue shorter for color_shift > 0."""
-    return length_px * (1.0 + 0.5 * color_shift * np.array([1.0, 0.0, -1.0]))
+def channel_lengths(length_px: float, color_shift: float, mode: str = "star") -> np.ndarray:
+    """Per-channel 1% length in pixels: red longer and blue shorter for color_shift > 0; in
+    aperture mode also in proportion to the channel's wavelength (``SPIKE_WAVELENGTHS_NM``)."""
+    out = length_px * (1.0 + 0.5 * color_shift * np.array([1.0, 0.0, -1.0]))
+    if mode == "aperture":
+        out = out * np.asarray(SPIKE_WAVELENGTHS_NM) / SPIKE_WAVELENGTHS_NM[1]
+    return out
 
 
 def pass_plan(max_length_px: float) -> tuple[int, int]:
@@ -234,7 +255,7 @@ def coating_tint(design_nm: float) -> np.ndarray:
 
 def streak_parts(mode: str) -> tuple[tuple[float, float], ...]:
     """(1 % length as a fraction of ``length``, share of the light) of each exponential."""
-    return ANAMORPHIC_PARTS if mode == "anamorphic" else ((1.0, 1.0),)
+    return {"anamorphic": ANAMORPHIC_PARTS, "aperture": APERTURE_PARTS}.get(mode, ((1.0, 1.0),))
 
 
 @register
@@ -311,7 +332,7 @@ class Streaks(Plugin):
 
     def spread_px(self, p, ctx, factor: int = 1) -> int:
         """How far light travels: the truncated kernel's support plus the bilinear footprint."""
-        longest = float(channel_lengths(self.length_px(p, ctx), p.color_shift).max())
+        longest = float(channel_lengths(self.length_px(p, ctx), p.color_shift, p.mode).max())
         reach = 0.0
         for a in self.angles(p, ctx) or [0.0]:
             step = grid_step(a)[2]
@@ -360,7 +381,8 @@ class Streaks(Plugin):
         colour = self.colour(p)
         plans = []
         for fraction, share in streak_parts(p.mode):
-            lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift) / factor
+            lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift,
+                                      p.mode) / factor
             gain = p.intensity * share * colour / len(angles)
             for a in angles:
                 sx, sy, step_len = grid_step(a)

@@ -45,7 +45,9 @@ from clfx.fx.optics import (
     cauchy_index,
     fresnel_reflectance,
     ghosts,
+    MULTILAYER_DESIGNS,
     quarter_wave_reflectance,
+    thin_film_reflectance,
 )
 from tests.reference import optics_trace as reference
 
@@ -157,6 +159,13 @@ def _set(path, value):
     (_set(("surfaces", 0, "sag"), 1.0), "lens.surfaces[0]: unknown key 'sag'"),
     (_set(("coating",), {"index": 5.0}), "lens.coating.index"),
     (_set(("coating",), {"wavelength": 50}), "lens.coating.wavelength"),
+    (_set(("coating",), {"design": "quad"}), "lens.coating.design: unknown key 'quad'"),
+    (_set(("coating",), {"layers": [[1.38, 1], [5.0, 1]]}), "lens.coating.layers[1][0]"),
+    (_set(("coating",), {"layers": [[1.38, 0]]}), "lens.coating.layers[0][1]"),
+    (_set(("coating",), {"layers": [1.38]}), "lens.coating.layers[0]"),
+    (_set(("coating",), {"layers": []}), "lens.coating.layers"),
+    (_set(("coating",), {"layers": [[1.38, 1]], "index": 1.4}), "lens.coating.index"),
+    (_set(("coating",), {"layers": [[1.38, 1]], "design": "mgf2"}), "either design or layers"),
     (_set(("surfaces", 1, 1), 0.1), "cross inside their clear apertures"),
     (_set(("scale",), -1.0), "lens.scale"),
 ])
@@ -212,6 +221,106 @@ def test_reference_thin_film_agrees_at_normal_incidence():
             assert got == pytest.approx(want, rel=1e-12)
         assert reference.reflectance(1.0, n2, 1.0, None, 550.0) == pytest.approx(
             fresnel_reflectance(1.0, n2), rel=1e-12)
+
+
+# -- multilayer films: transfer matrices against closed forms and the oracle ----------------
+
+LAM = np.arange(380.0, 760.01, 5.0)
+
+
+def test_one_film_by_transfer_matrices_is_the_closed_form_airy_film():
+    # float64 throughout: the two formulas differ by rounding only (1e-12 relative)
+    for n2 in (1.5, 1.62, 1.8):
+        for design in (480.0, 550.0, 620.0):
+            want = quarter_wave_reflectance(1.0, n2, 1.38, design, LAM)
+            got = thin_film_reflectance(1.0, n2, [(1.38, 1.0)], design, LAM)
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-16)
+    # a half-wave film is absent at its design wavelength: the bare interface
+    assert thin_film_reflectance(1.0, 1.62, [(2.05, 2.0)], 550.0, 550.0) == pytest.approx(
+        fresnel_reflectance(1.0, 1.62), rel=1e-12)
+
+
+def test_quarter_wave_stacks_have_their_textbook_reflectance():
+    """Macleod ch. 4: a quarter wave turns an admittance Y into n^2 / Y, so at the design
+    wavelength a stack's reflectance is ((n0 - Y) / (n0 + Y))^2 with Y built film by film
+    from the substrate."""
+    n0, ns, nl, nm, nh = 1.0, 1.52, 1.38, 1.63, 2.05
+    # V-coat (quarter-quarter, low then high from the air): Y = nl^2 ns / nm^2 ... zero
+    # where nm = nl sqrt(ns)
+    y = nl ** 2 / (nm ** 2 / ns)
+    want = ((n0 - y) / (n0 + y)) ** 2
+    assert thin_film_reflectance(n0, ns, [(nl, 1), (nm, 1)], 520.0, 520.0) == pytest.approx(
+        want, rel=1e-12)
+    assert want == pytest.approx(((n0 * nm ** 2 - ns * nl ** 2) / (n0 * nm ** 2 + ns * nl ** 2))
+                                 ** 2, rel=1e-12)
+    ideal = nl * math.sqrt(ns)
+    assert thin_film_reflectance(n0, ns, [(nl, 1), (ideal, 1)], 520.0, 520.0) < 1e-30
+    # quarter-half-quarter broadband: the half wave is absent at the design wavelength
+    qhq = thin_film_reflectance(n0, ns, [(nl, 1), (nh, 2), (nm, 1)], 520.0, 520.0)
+    assert qhq == pytest.approx(want, rel=1e-12)
+    # a quarter-wave mirror (HL)^N: Y = (nh / nl)^(2N) ns
+    for pairs in (1, 3, 8):
+        y = (nh / nl) ** (2 * pairs) * ns
+        got = thin_film_reflectance(n0, ns, [(nh, 1), (nl, 1)] * pairs, 600.0, 600.0)
+        assert got == pytest.approx(((n0 - y) / (n0 + y)) ** 2, rel=1e-12)
+    assert got > 0.99
+
+
+def test_stacks_match_the_reference_recursion_from_either_side(rng):
+    """Characteristic matrices (the code) against Airy's formula applied film by film
+    (tests/reference/optics_trace.py) for random stacks, from the air and from the glass."""
+    for _ in range(20):
+        k = int(rng.integers(1, 6))
+        films = [(float(rng.uniform(1.3, 2.4)), float(rng.uniform(0.3, 3.0))) for _ in range(k)]
+        ns = float(rng.uniform(1.45, 1.95))
+        design = float(rng.uniform(420.0, 650.0))
+        coating = Coating(films[0][0], design, tuple(films))
+        got = coating.reflectance(1.0, ns, LAM)
+        assert np.all((got >= 0.0) & (got < 1.0))
+        for lam in LAM[::8]:
+            want = reference.reflectance(1.0, ns, 1.0, coating, lam)
+            back = reference.reflectance(ns, 1.0, 1.0, coating, lam)
+            r = thin_film_reflectance(1.0, ns, films, design, lam)
+            assert r == pytest.approx(want, rel=1e-10, abs=1e-15)
+            assert r == pytest.approx(back, rel=1e-10, abs=1e-15)   # lossless: either side
+            assert thin_film_reflectance(ns, 1.0, films, design, lam) == pytest.approx(r,
+                                                                                      rel=1e-12)
+
+
+def test_broadband_stacks_reflect_green_and_v_coats_magenta():
+    """What makes real multi-coated ghosts green: a three-layer broadband stack tuned to
+    510-540 nm has two minima either side and a hump between them; a V-coat tuned to the
+    green reflects the blue and red ends (magenta); every stack reflects less than the
+    single MgF2 film over the visible on the glass it is made for."""
+    from clfx.fx.spectral import channel_weights
+
+    lam = np.linspace(420.0, 680.0, 27)
+    w = channel_weights(lam)
+    for ns in (1.52, 1.62, 1.75):
+        bb = thin_film_reflectance(1.0, ns, MULTILAYER_DESIGNS["broadband"], 520.0, lam) @ w
+        assert bb[1] > bb[0] and bb[1] > bb[2], (ns, bb)                   # green
+        v = thin_film_reflectance(1.0, ns, MULTILAYER_DESIGNS["v-coat"], 510.0, lam) @ w
+        if ns < 1.7:                    # (on dense flint the V-coat is a poor match: grey)
+            assert v[1] < min(v[0], v[2]), (ns, v)                            # magenta
+        # each stack for its glass (broadband: crown, broadband-hi: dense flint)
+        one = quarter_wave_reflectance(1.0, ns, 1.38, 520.0, lam).mean()
+        stack = MULTILAYER_DESIGNS["broadband" if ns < 1.7 else "broadband-hi"]
+        assert thin_film_reflectance(1.0, ns, stack, 520.0, lam).mean() < 0.75 * one
+
+
+def test_prescription_coatings_name_a_design_or_list_films():
+    d = {"name": "x", "coating": {"design": "broadband", "wavelength": 520}, "surfaces": [
+        {"stop": True, "thickness": 5.0, "semi_aperture": 6.0},
+        {"radius": 51.68, "thickness": 4.0, "nd": 1.5168, "vd": 64.17, "semi_aperture": 10.0},
+        {"radius": math.inf, "thickness": 97.36, "semi_aperture": 10.0,
+         "coating": {"layers": [[1.38, 1], [1.63, 1]], "wavelength": 500}}]}
+    lens = Prescription.from_dict(d, "x")
+    assert lens.surfaces[1].coating == Coating(1.38, 520.0, MULTILAYER_DESIGNS["broadband"])
+    assert lens.surfaces[2].coating == Coating(1.38, 500.0, ((1.38, 1.0), (1.63, 1.0)))
+    n = lens.media(LAM)
+    np.testing.assert_array_equal(
+        lens.reflectances(LAM)[2],
+        thin_film_reflectance(n[2], n[3], [(1.38, 1.0), (1.63, 1.0)], 500.0, LAM))
 
 
 def test_cauchy_dispersion_passes_through_the_d_line_and_the_abbe_number():

@@ -334,3 +334,50 @@ def test_anamorphic_streak_thin_core_falls_off_and_is_blue_cyan(rt):
     warm = Streaks().apply(rt, Streaks.params(**{**ana.as_dict(), "coating_nm": 450.0}), src)
     r, g, b = warm[h // 2, w // 2 + 60, :3] - src[h // 2, w // 2 + 60, :3]
     assert r > b
+
+
+@pytest.mark.parametrize("shape", [(17, 31), (48, 64)])
+def test_aperture_spikes_match_reference(rt, rng, shape):
+    # three exponentials per spike, channel lengths in proportion to their wavelengths
+    src = scene(rng, shape)
+    got, p = run(rt, src, "reference", mode="aperture", blades=7, angle=5.0, core=0.3,
+                 core_power=2.0)
+    want = reference(src, **p.as_dict())
+    # as above: float32 buffers between the passes of each chain
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+def test_aperture_spike_tapers_as_diffraction_and_reddens(rt):
+    """Issue 25 (sunny-flare's spikes were heavy white bars of even brightness): along a
+    spike a point light's brightness follows the far field of a straight edge, 1 / (1 + 9 r /
+    L)^2, within 20 % out to 0.5 L (then faster: 0.2-0.4 % of the root at L), and fades to
+    below 1e-4 before its support ends; red reaches further than blue (the diffraction angle
+    scales with wavelength).  A ray along +x: the passes compose the line kernel exactly."""
+    from clfx.plugins.streaks import APERTURE_PARTS, grid_step, support_steps
+    from tests.light_profile import assert_smooth_tail, point_light
+
+    h, w, L = 9, 560, 150.0
+    src = point_light(h, 2 * w)
+    diag = math.hypot(2 * w, h)
+    p = Streaks.params(mode="aperture", blades=4, angle=45.0, length=L / diag,
+                       threshold=1.0, intensity=1.0, core=0.0)
+    got = Streaks().apply(rt, p, src, quality="reference", camera=Camera(blades=4))
+    prof = (got[h // 2, w:, :3] - src[h // 2, w:, :3]).astype(np.float64)
+    # the kernel in closed form: each part's exponential, normalised over its support
+    k = np.arange(w)
+    want = np.zeros((w, 3))
+    for frac, share in APERTURE_PARTS:
+        lc = frac * L * np.array([610.0, 550.0, 465.0]) / 550.0
+        a = 0.01 ** (1.0 / lc)
+        support = support_steps(lc.max())
+        want += share * np.where(k[:, None] < support, a ** k[:, None], 0.0) * (1 - a) / (
+            1 - a ** support)
+    want *= (1e4 - 1.0) / 4.0             # the light above threshold; 4 spikes share it
+    np.testing.assert_allclose(prof[1:], want[1:], rtol=1e-4, atol=1e-7 * want.max())
+    r = np.arange(2, int(0.5 * L))
+    law = (1.0 + 9.0 / L) ** 2 / (1.0 + 9.0 * r / L) ** 2
+    assert np.abs(prof[r, 1] / prof[1, 1] / law - 1.0).max() < 0.2
+    assert 2e-3 < prof[int(L), 1] / prof[1, 1] < 4e-3
+    assert prof[int(L), 0] > 1.5 * prof[int(L), 2]                 # red tips
+    support = support_steps(L * 610.0 / 550.0 / grid_step(0.0)[2])
+    assert_smooth_tail(prof[:, 0], support, start=2, what="aperture spike (red)")

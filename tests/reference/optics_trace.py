@@ -7,8 +7,8 @@ regular grid over the first surface's clear aperture, in two stages (a coarse gr
 part of the beam that survives the path, a fine grid over its bounding box measures it), and
 land on the image plane (the last surface's thickness behind it).
 
-Fresnel factors come from the general single-film (Airy) formula with s and p averaged
-(unpolarised light), written here independently of ``clfx.fx.optics``: ``fresnel="normal"``
+Fresnel factors come from the general thin-film (Airy) formula with s and p averaged
+(unpolarised light; a stack of films film by film), written here independently of ``clfx.fx.optics``: ``fresnel="normal"``
 evaluates it at normal incidence (the matrix model's assumption, so the comparison isolates
 geometry), ``fresnel="exact"`` at each ray's incidence angle (the physics the paraxial model
 leaves out).  Only the prescription's data (radii, thicknesses, semi-apertures, coatings and
@@ -56,23 +56,33 @@ def _r_interface(na, ca, nb, cb):
 
 
 def reflectance(n1, n2, cos1, coating, wavelength_nm):
-    """Unpolarised reflectance of a bare or single-film-coated interface at incidence cosine
-    ``cos1`` (from medium ``n1``); Born & Wolf sec. 1.5.2 and 1.6.4."""
+    """Unpolarised reflectance of a bare or coated interface at incidence cosine ``cos1``
+    (from medium ``n1``); Born & Wolf sec. 1.5.2 and 1.6.4.  A stack of films (``coating.
+    layers``, from the lower-index side, each ``(index, quarter waves of coating.
+    wavelength_nm)``) by Airy's formula applied film by film from the far side (the
+    recursion of Rouard's method), not by characteristic matrices as the code under test."""
     cos1 = np.asarray(cos1, np.complex128)
     sin2 = 1.0 - cos1 * cos1
     cos2 = np.sqrt(1.0 - (n1 / n2) ** 2 * sin2 + 0j)
     if coating is None:
         rs, rp = _r_interface(n1, cos1, n2, cos2)
-    else:
-        nc = coating.index
-        cosc = np.sqrt(1.0 - (n1 / nc) ** 2 * sin2 + 0j)
-        thickness = coating.wavelength_nm / (4.0 * nc)
-        phase = np.exp(2j * (2.0 * np.pi * nc * thickness * cosc / wavelength_nm))
-        out = []
-        for r01, r12 in zip(_r_interface(n1, cos1, nc, cosc), _r_interface(nc, cosc, n2, cos2)):
-            out.append((r01 + r12 * phase) / (1.0 + r01 * r12 * phase))
-        rs, rp = out
-    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+        return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+    films = list(getattr(coating, "layers", ()) or ((coating.index, 1.0),))
+    if n1 > n2:                          # arriving from the glass: the films in reverse
+        films = films[::-1]
+    idx = [n1] + [f[0] for f in films] + [n2]
+    cos = [np.sqrt(1.0 - (n1 / n) ** 2 * sin2 + 0j) for n in idx]
+    out = []
+    for pol in (0, 1):
+        r = _r_interface(idx[-2], cos[-2], idx[-1], cos[-1])[pol]
+        for k in range(len(films) - 1, -1, -1):        # film k lies between idx[k], idx[k+2]
+            nf, qw = films[k]
+            thickness = qw * coating.wavelength_nm / (4.0 * nf)
+            phase = np.exp(2j * (2.0 * np.pi * nf * thickness * cos[k + 1] / wavelength_nm))
+            r0 = _r_interface(idx[k], cos[k], nf, cos[k + 1])[pol]
+            r = (r0 + r * phase) / (1.0 + r0 * r * phase)
+        out.append(r)
+    return 0.5 * (np.abs(out[0]) ** 2 + np.abs(out[1]) ** 2)
 
 
 def ghost_path(lens, i, j):

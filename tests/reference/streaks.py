@@ -77,11 +77,12 @@ def angles_of(mode, streaks, angle, blades, blade_rotation):
     return [blade_rotation + angle + 180.0 / blades + step * i for i in range(n)]
 
 
-def _setup(lengths_frac, diagonal, color_shift, step_len):
+def _setup(lengths_frac, diagonal, color_shift, step_len, scale=(1.0, 1.0, 1.0)):
     """Per-channel decay per step, pass count and taps of the last pass: the support
     top x 4^(n - 1) is the smallest >= 2.5 L + 1 (where the exponential is 1e-5 of its start);
-    a step is ``step_len`` px long."""
+    a step is ``step_len`` px long; ``scale`` multiplies each channel's length."""
     L = lengths_frac * diagonal * (1 + 0.5 * color_shift * np.array([1.0, 0.0, -1.0]))
+    L = L * np.asarray(scale)
     L = L / step_len
     a = 0.01 ** (1.0 / L)
     need = math.log(1e5) / math.log(100) * max(L.max(), 1.0) + 1
@@ -124,7 +125,9 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
 
     mode "anamorphic": rays at angle and angle + 180, colour tint x coating_tint(coating_nm),
     two exponentials (1 % at 0.15 length with 70 % of the light, at length with 30 %),
-    core_power -1 = 3 (else 0)."""
+    core_power -1 = 3 (else 0).  mode "aperture": three exponentials (1 % at 0.08, 0.3 and 1
+    length with 6.8, 24.6 and 68.6 % of the light), each channel's length times its
+    wavelength over 550 nm (610, 550, 465 nm)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     diagonal = diagonal or math.hypot(w, h)
@@ -139,10 +142,15 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
     if mode == "anamorphic":
         colour = colour * coating_tint(coating_nm)
         parts = [(0.15, 0.7), (1.0, 0.3)]
+    scale = (1.0, 1.0, 1.0)
+    if mode == "aperture":
+        # three exponentials after 1 / (1 + 9 r / L)^2; lengths in proportion to 610, 550, 465 nm
+        parts = [(0.08, 0.068), (0.3, 0.246), (1.0, 0.686)]
+        scale = (610.0 / 550.0, 1.0, 465.0 / 550.0)
     for (fraction, share), ang in [(pt, ang) for pt in parts for ang in rays]:
         gain = intensity * share * colour / len(rays)
         dx, dy, step_len = _unit(ang)
-        a, n, top = _setup(fraction * length, diagonal, color_shift, step_len)
+        a, n, top = _setup(fraction * length, diagonal, color_shift, step_len, scale)
         support = top * 4 ** (n - 1)
         total = (1 - a ** support) / (1 - a)
         if line_kernel:
