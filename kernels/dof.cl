@@ -227,9 +227,10 @@ inline float4 dof_lum4(float16 c)
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
  * aperture area the tap stands for (px^2); the offset in aperture space (x times the
- * anamorphic squeeze, y over the pixel aspect: px of the CoC radius); the lattice level L:
- * the colour is read from plane L of the prefilter pyramid (`plane` pixels apart) and every
- * coverage ramp is 2^L px wide (a lattice of spacing 2^L: the tents interpolate the ramp).
+ * anamorphic squeeze, y over the pixel aspect: px of the CoC radius); the lattice level L
+ * (the same for a whole table: the caller passes it): the taps' colours are read from
+ * `tcol`, plane L of the prefilter pyramid, and every coverage ramp is 2^L px wide
+ * (`inv_s` = 2^-L; a lattice of spacing 2^L: the tents interpolate the ramp).
  * With DOF_CATEYE, `ce_x`, `ce_y` are the 4 pixels' barrel centres (aperture radii) and
  * `ce_frac` the open fraction of their apertures: a point at lens position l (aperture
  * radii) is seen only if |l - c| <= 1; a tap q whose light lands at p = q - o comes through
@@ -238,8 +239,9 @@ inline float4 dof_lum4(float16 c)
  * colours times `scale`; `cap`: the largest luminance a colour may have where it fills in
  * the background hidden behind a blurred foreground pixel (beyond its own CoC's reach). */
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
-                          const int plane, const int base, global const float *taps,
-                          const int first, const int count, const float cap, const float scale
+                          global const float *tcol, const float inv_s, const int base,
+                          global const float *taps, const int first, const int count,
+                          const float cap, const float scale
 #if DOF_CATEYE
                           , const float4 ce_x, const float4 ce_y, const float4 ce_frac
 #endif
@@ -259,10 +261,8 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   {
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
-    const int lv = (int)tp.s7;
-    const float inv_s = 1.0f / (float)(1 << lv);   /* ramps 2^L px wide */
     const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
-    const float16 c = vload16(0, col + (at + lv * plane) * 4) * scale;
+    const float16 c = vload16(0, tcol + at * 4) * scale;
     const float4 rq = vload4(0, coc + at);
     const float4 arq = fabs(rq);
     const int4 q_near = rq < -NEAR_EPS;
@@ -351,15 +351,15 @@ inline int dof_all_finite16(float16 v)
 #endif
 
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
-                               const int ppitch, const int plane, const int base,
-                               global const float *taps, const int first, const int count,
-                               const float cap CATEYE_ARGS)
+                               const int ppitch, global const float *tcol,
+                               const float inv_s, const int base, global const float *taps,
+                               const int first, const int count, const float cap CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, ppitch, plane, base, taps, first, count, cap, 1.0f
-                                 CATEYE_PASS);
+  const REAL16 out = dof_gather4(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap,
+                                 1.0f CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, ppitch, plane, base, taps, first, count, cap,
+  const REAL16 s = dof_gather4(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap,
                                OVERFLOW_SCALE
                                CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
@@ -399,7 +399,8 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
   return cap_factor * (exp(g) - 1.0f);
 }
 
-/* tile_info[t] = (first, count, sharp first, sharp count, mode, 0, 0, 0): count 0 copies the
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, 0): the
+ * lattice levels of the two tables (tap_table's column 7, one per table); count 0 copies the
  * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
  * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
@@ -432,11 +433,12 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     return;
   }
   const float4 r = vload4(0, coc + base);
-  int first = info.s0, count = info.s1;
+  int first = info.s0, count = info.s1, level = info.s5;
   if(all(r >= -NEAR_EPS && r < low_r))
   {
     first = info.s2;
     count = info.s3;
+    level = info.s6;
   }
   else if((info.s4 & 1) && all(fabs(r) >= low_r))
   {
@@ -465,7 +467,10 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                               * (1.0f / CLFX_PI), CATEYE_MIN_FRAC);
 #endif
   /* rows are padded to 4 pixels: the lanes past the width land in the padding */
-  vstore16(dof_gather_safe(col, coc, ppitch, plane, base, taps, first, count, cap
+  /* the table's lattice level: its plane of the prefilter pyramid, its ramps' width */
+  global const float *tcol = col + (size_t)level * (size_t)plane * 4;
+  const float inv_s = 1.0f / (float)(1 << level);
+  vstore16(dof_gather_safe(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap
                            CATEYE_PASS), 0, out);
 }
 

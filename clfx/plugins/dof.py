@@ -606,6 +606,8 @@ class Dof(Plugin):
         tiles = np.zeros(levels.shape + (8,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
+        level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
+        tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
         taps, tile_info = rt.to_device(table), rt.to_device(tiles)
         i32, f32 = np.int32, np.float32
         hres_args = ((hres, i32(hres.pitch), i32(hres.width), i32(hres.height)) if hres is not None
