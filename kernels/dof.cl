@@ -9,6 +9,8 @@
  *   blurred foreground (dof_cap).
  * dof_down2: the 2 x 2 box of the padded colour and radius (radius halved: half-res px),
  *   each term scaled before the sum so that finite values stay finite.
+ * dof_prefilter: one pass of the binomial a-trous pyramid of the padded colour: planes
+ *   1..L after plane 0, the tents that the sparse lattices of taps sample.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
  *   same pattern of integer tap offsets, so every tap is a vload16 + vload4 and the weights
  *   are float4 vectors (PoCL does not vectorise one-pixel work-items).  Per tile (host
@@ -182,6 +184,23 @@ kernel void dof_tile_cap(global const float *col, const int ppitch, const int pa
   out[ty * tiles_x + tx] = sum / (float)max(n, 1);
 }
 
+/* One separable pass of a-trous level L (`step` = 2^(L-1)): dst = 1/4 src(-step) +
+ * 1/2 src + 1/4 src(+step) along x (`vertical` 0) or y, clamped to the padded plane (the
+ * image's clamp-to-edge: the padding repeats the edge pixels).  Offsets in pixels. */
+kernel void dof_prefilter(global const float *src, const int src_off, global float *dst,
+                          const int dst_off, const int ppitch, const int pheight,
+                          const int step, const int vertical)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= ppitch || y >= pheight) return;
+  const int xa = vertical ? x : max(x - step, 0), xb = vertical ? x : min(x + step, ppitch - 1);
+  const int ya = vertical ? max(y - step, 0) : y, yb = vertical ? min(y + step, pheight - 1) : y;
+  const float4 c = 0.25f * vload4(src_off + ya * ppitch + xa, src)
+                 + 0.5f * vload4(src_off + y * ppitch + x, src)
+                 + 0.25f * vload4(src_off + yb * ppitch + xb, src);
+  vstore4(c, dst_off + y * ppitch + x, dst);
+}
+
 kernel void dof_down2(global const float *col, global const float *coc, const int ppitch,
                       const int pheight, global float *hcol, global float *hcoc,
                       const int hpitch, const int hheight)
@@ -208,7 +227,10 @@ inline float4 dof_lum4(float16 c)
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
  * aperture area the tap stands for (px^2); the offset in aperture space (x times the
- * anamorphic squeeze, y over the pixel aspect: px of the CoC radius).
+ * anamorphic squeeze, y over the pixel aspect: px of the CoC radius); the lattice level L
+ * (the same for a whole table: the caller passes it): the taps' colours are read from
+ * `tcol`, plane L of the prefilter pyramid, and every coverage ramp is 2^L px wide
+ * (`inv_s` = 2^-L; a lattice of spacing 2^L: the tents interpolate the ramp).
  * With DOF_CATEYE, `ce_x`, `ce_y` are the 4 pixels' barrel centres (aperture radii) and
  * `ce_frac` the open fraction of their apertures: a point at lens position l (aperture
  * radii) is seen only if |l - c| <= 1; a tap q whose light lands at p = q - o comes through
@@ -217,8 +239,9 @@ inline float4 dof_lum4(float16 c)
  * colours times `scale`; `cap`: the largest luminance a colour may have where it fills in
  * the background hidden behind a blurred foreground pixel (beyond its own CoC's reach). */
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
-                          const int base, global const float *taps, const int first,
-                          const int count, const float cap, const float scale
+                          global const float *tcol, const float inv_s, const int base,
+                          global const float *taps, const int first, const int count,
+                          const float cap, const float scale
 #if DOF_CATEYE
                           , const float4 ce_x, const float4 ce_y, const float4 ce_frac
 #endif
@@ -239,7 +262,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
     const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
-    const float16 c = vload16(0, col + at * 4) * scale;
+    const float16 c = vload16(0, tcol + at * 4) * scale;
     const float4 rq = vload4(0, coc + at);
     const float4 arq = fabs(rq);
     const int4 q_near = rq < -NEAR_EPS;
@@ -250,12 +273,13 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     if(any(q_near))
     {
       const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-      const float4 cov_n = fmin(clamp(arq - d_near + 0.5f, 0.0f, 1.0f),
-                                clamp(arq - sqrt(enx * enx + eny * eny) + 0.5f, 0.0f, 1.0f));
+      const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f),
+                                clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f,
+                                      0.0f, 1.0f));
       wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
     }
 #else
-    const float4 cov_n = clamp(arq - d_near + 0.5f, 0.0f, 1.0f);
+    const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
     const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);
 #endif
     /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
@@ -264,10 +288,11 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float4 rf = select(select(arq, fmin(arq, r0_far), rq > r0), fmax(arq, ar0), p_near);
 #if DOF_CATEYE
     const float4 efx = ax + ce_x * rf, efy = ay + ce_y * rf;
-    const float4 cov_f = fmin(clamp(rf - d_far + 0.5f, 0.0f, 1.0f),
-                              clamp(rf - sqrt(efx * efx + efy * efy) + 0.5f, 0.0f, 1.0f));
+    const float4 cov_f = fmin(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
+                              clamp((rf - sqrt(efx * efx + efy * efy)) * inv_s + 0.5f,
+                                    0.0f, 1.0f));
 #else
-    const float4 cov_f = clamp(rf - d_far + 0.5f, 0.0f, 1.0f);
+    const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
 #endif
     const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near);
     float4 wf = cov_f * norm;
@@ -279,11 +304,12 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
          bar must not shine through it) */
 #if DOF_CATEYE
       const float4 eqx = ax + ce_x * arq, eqy = ay + ce_y * arq;
-      const float4 cov_q = fmin(fmin(clamp(arq - d_far + 0.5f, 0.0f, 1.0f),
-                                     clamp(arq - sqrt(eqx * eqx + eqy * eqy) + 0.5f, 0.0f, 1.0f)),
+      const float4 cov_q = fmin(fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
+                                     clamp((arq - sqrt(eqx * eqx + eqy * eqy)) * inv_s + 0.5f,
+                                           0.0f, 1.0f)),
                                 cov_f);
 #else
-      const float4 cov_q = fmin(clamp(arq - d_far + 0.5f, 0.0f, 1.0f), cov_f);
+      const float4 cov_q = fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), cov_f);
 #endif
       const float4 w_fill = select((float4)(0.0f), (cov_f - cov_q) * norm, p_near);
       const float4 lum = dof_lum4(c);
@@ -325,14 +351,16 @@ inline int dof_all_finite16(float16 v)
 #endif
 
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
-                               const int ppitch, const int base, global const float *taps,
+                               const int ppitch, global const float *tcol,
+                               const float inv_s, const int base, global const float *taps,
                                const int first, const int count, const float cap CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, 1.0f
-                                 CATEYE_PASS);
+  const REAL16 out = dof_gather4(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap,
+                                 1.0f CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, ppitch, base, taps, first, count, cap, OVERFLOW_SCALE
+  const REAL16 s = dof_gather4(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap,
+                               OVERFLOW_SCALE
                                CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
@@ -371,7 +399,8 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
   return cap_factor * (exp(g) - 1.0f);
 }
 
-/* tile_info[t] = (first, count, sharp first, sharp count, mode, 0, 0, 0): count 0 copies the
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, 0): the
+ * lattice levels of the two tables (tap_table's column 7, one per table); count 0 copies the
  * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
  * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
@@ -380,7 +409,8 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
  * group gathers at full resolution with (first, count).
  * `cateye` (used with DOF_CATEYE): the barrel centre of buffer pixel (x, y) is
  * (s0 (x + 0.5) + s1, s2 (y + 0.5) + s3) aperture radii (the host folds in the strength,
- * the optical centre, the half diagonal, the pixel aspect and the buffer's scale). */
+ * the optical centre, the half diagonal, the pixel aspect and the buffer's scale).
+ * `plane`: pixels between the planes of `col`'s prefilter pyramid (dof_prefilter). */
 kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
                        const int pad, global float *dst, const int pitch,
                        const int width, const int height, global const float *taps,
@@ -388,7 +418,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
                        const int hwidth, const int hheight, const float refine,
-                       const float low_r, const float4 cateye)
+                       const float low_r, const float4 cateye, const int plane)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   const int x = qx * 4;
@@ -403,11 +433,12 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     return;
   }
   const float4 r = vload4(0, coc + base);
-  int first = info.s0, count = info.s1;
+  int first = info.s0, count = info.s1, level = info.s5;
   if(all(r >= -NEAR_EPS && r < low_r))
   {
     first = info.s2;
     count = info.s3;
+    level = info.s6;
   }
   else if((info.s4 & 1) && all(fabs(r) >= low_r))
   {
@@ -436,8 +467,11 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                               * (1.0f / CLFX_PI), CATEYE_MIN_FRAC);
 #endif
   /* rows are padded to 4 pixels: the lanes past the width land in the padding */
-  vstore16(dof_gather_safe(col, coc, ppitch, base, taps, first, count, cap CATEYE_PASS), 0,
-           out);
+  /* the table's lattice level: its plane of the prefilter pyramid, its ramps' width */
+  global const float *tcol = col + (size_t)level * (size_t)plane * 4;
+  const float inv_s = 1.0f / (float)(1 << level);
+  vstore16(dof_gather_safe(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap
+                           CATEYE_PASS), 0, out);
 }
 
 /* Axial chromatic aberration: red, green and blue from the gathers of their own radius

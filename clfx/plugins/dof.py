@@ -63,8 +63,11 @@ Warfare", simplified for offline use)
    gather over only that and their own radius.
 4. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
    the level's ``dense_radius`` (a single bright pixel spreads into an evenly lit disk with
-   an antialiased rim), beyond that rings (ring spacing and count by quality); two fields
-   per pixel:
+   an antialiased rim), beyond that a lattice of every 2nd, 4th, ... pixel (at most the
+   level's ``lattice`` taps per radius) over a copy of the image prefiltered with the tent
+   of the lattice's spacing (``dof_prefilter``, a binomial a-trous pyramid: the tents of a
+   lattice sum to 1, so a bright pixel still spreads into an evenly lit disk and no
+   sampling pattern shows at any radius; :func:`tap_table`); two fields per pixel:
    - near field (taps in front of the focus plane): each tap spreads its light over its own
      CoC area (weight ``coverage / (pi r^2)``), so a blurred foreground spreads over the
      in-focus background; its coverage (tap area x weight, summed) is the foreground alpha;
@@ -134,34 +137,32 @@ class Lens(NamedTuple):
 class DofLevel(Level):
     """What one quality level of the gather does."""
 
-    spacing: float = 1.0              # ring spacing of sparse tap tables, px
-    max_rings: int = 12               # rings at most (3 K (K + 1) + 1 taps)
+    lattice: int = 12                 # beyond dense_radius: at most this many taps per radius
     dense_radius: float = 16.0        # radii up to this: every pixel of the disk is a tap
     half_res_radius: float = 6.0      # tiles whose every CoC radius is >= this: half resolution
     refine: float = math.inf          # log-luminance span that a half-res pixel gathers again
 
 
 LEVELS = {
-    "draft": DofLevel("every pixel of the disk a tap up to 16 px radius, then at most 8 rings; "
-                      "half resolution where every CoC radius >= 3 px, only strong bokeh rims "
-                      "gathered again at full resolution; float32 sums",
-                      spacing=1.0, max_rings=8, dense_radius=16.0, half_res_radius=3.0,
-                      refine=1.0),
-    "preview": DofLevel("every pixel of the disk a tap up to 16 px radius, then at most 12 "
-                        "rings; half resolution where every CoC radius >= 3 px, bokeh rims "
-                        "gathered again at full resolution; float32 sums",
-                        spacing=1.0, max_rings=12, dense_radius=16.0, half_res_radius=3.0,
-                        refine=0.5),
-    "final": DofLevel("every pixel of the disk a tap up to 32 px radius, then at most 32 rings; "
-                      "half resolution where every CoC radius >= 6 px, bokeh rims and other "
-                      "contrasts over 0.15 in log luminance gathered again at full resolution; "
-                      "float32 sums",
-                      spacing=1.0, max_rings=32, dense_radius=32.0, half_res_radius=6.0,
-                      refine=0.15),
-    "reference": DofLevel("every pixel of the disk a tap up to 32 px radius, then at most 32 "
-                          "rings, all at full resolution, float64 sums",
-                          fp64=True, spacing=1.0, max_rings=32, dense_radius=32.0,
-                          half_res_radius=math.inf),
+    "draft": DofLevel("every pixel of the disk a tap up to 16 px radius, then a lattice of at "
+                      "most 10 taps per radius over a prefiltered copy; half resolution where "
+                      "every CoC radius >= 3 px, only strong bokeh rims gathered again at full "
+                      "resolution; float32 sums",
+                      lattice=10, dense_radius=16.0, half_res_radius=3.0, refine=1.0),
+    "preview": DofLevel("every pixel of the disk a tap up to 16 px radius, then a lattice of at "
+                        "most 16 taps per radius over a prefiltered copy; half resolution where "
+                        "every CoC radius >= 3 px, bokeh rims gathered again at full "
+                        "resolution; float32 sums",
+                        lattice=16, dense_radius=16.0, half_res_radius=3.0, refine=0.5),
+    "final": DofLevel("every pixel of the disk a tap up to 32 px radius, then a lattice of at "
+                      "most 32 taps per radius over a prefiltered copy; half resolution where "
+                      "every CoC radius >= 6 px, bokeh rims and other contrasts over 0.15 in "
+                      "log luminance gathered again at full resolution; float32 sums",
+                      lattice=32, dense_radius=32.0, half_res_radius=6.0, refine=0.15),
+    "reference": DofLevel("every pixel of the disk a tap up to 32 px radius, then a lattice of "
+                          "at most 32 taps per radius over a prefiltered copy, all at full "
+                          "resolution, float64 sums",
+                          fp64=True, lattice=32, dense_radius=32.0, half_res_radius=math.inf),
 }
 
 CAP_FACTOR = 4.0
@@ -189,44 +190,46 @@ def coc_radius(depth, k_half: float, focus: float, clamp_r: float, offset: float
     return np.clip(coc_signed(depth, k_half, focus) + offset, -clamp_r, clamp_r)
 
 
-def tap_table(radius: float, spacing: float, kmax: int, aspect: float = 1.0, blades: int = 0,
+def lattice_level(radius: float, lattice: int, dense: float) -> int:
+    """The prefilter level ``L`` of a neighbourhood radius (px): 0 (every pixel a tap) up to
+    ``dense``, beyond it the smallest ``L >= 1`` whose lattice spacing ``2^L`` puts at most
+    ``lattice`` taps along the radius."""
+    if radius <= dense:
+        return 0
+    return max(1, int(math.ceil(math.log2(radius / max(lattice, 1)) - 1e-9)))
+
+
+def tap_table(radius: float, lattice: int, aspect: float = 1.0, blades: int = 0,
               first: float = -0.5 * math.pi, roundness: float = 0.0,
               dense: float = 0.0, squeeze: float = 1.0) -> np.ndarray:
     """The gather's taps for a neighbourhood radius ``radius`` (px): (n, 8) float32 rows of
-    (offset x, offset y, near distance, far distance, area, aperture x, aperture y, 0).
+    (offset x, offset y, near distance, far distance, area, aperture x, aperture y, level).
 
     Distances and areas are measured in aperture space: an offset ``(ox, oy)`` in pixels is
     ``(ox * squeeze, oy / aspect)`` there (x pixels of the CoC radius; the anamorphic
     ``squeeze`` makes the bokeh ``squeeze`` times narrower than high, the pixel ``aspect``
-    stretches it over more rows), columns 5 and 6.  Up to ``dense`` px: every pixel offset
-    within ``radius + 0.5`` there is a tap standing for its own area (``squeeze / aspect``),
-    so a single bright pixel spreads into an evenly lit disk.  Beyond: ``K = clamp(ceil(radius
-    / spacing), 1, kmax)`` rings at radii ``k radius / K`` with ``6k`` taps each (odd rings
-    turned by half a step) plus the centre: uniform density over the disk, each tap standing
-    for ``pi/3 (radius/K)^2`` (the centre ``pi/4 (...)^2``), offsets rounded to whole pixels.
+    stretches it over more rows), columns 5 and 6.  The taps are the points of a square
+    lattice of spacing ``s = 2^L`` px (``L``: :func:`lattice_level`, column 7) within
+    ``radius + s / 2`` there, each standing for its own area (``s^2 squeeze / aspect``): up to
+    ``dense`` px every pixel (``L = 0``), so a single bright pixel spreads into an evenly lit
+    disk; beyond, every ``s``-th pixel of a copy of the image prefiltered with the tent of
+    half-width ``s`` (``dof_prefilter``: level ``L`` of a binomial a-trous pyramid).  The
+    tents of a lattice of spacing ``s`` sum to 1 everywhere, so a bright pixel still spreads
+    into an evenly lit disk (no sampling pattern, whatever the radius) and its rim, whose
+    coverage ramp is ``s`` px wide for these taps, is a smooth ramp instead of a staircase.
     Distances are divided by the aperture's boundary radius in the direction of ``o`` (near
     taps: bokeh turned 180 degrees) or ``-o`` (far taps).
     """
-    if radius <= dense:
-        e = int(math.floor((radius + 0.5) / squeeze))
-        ey = int(math.floor((radius + 0.5) * aspect))
-        oy, ox = np.mgrid[-ey:ey + 1, -e:e + 1].astype(np.float64)
-        keep = np.hypot(ox * squeeze, oy / aspect) <= radius + 0.5
-        ox, oy = ox[keep], oy[keep]
-        order = np.lexsort((ox, oy, np.hypot(ox * squeeze, oy / aspect)))   # centre first
-        ox, oy = ox[order], oy[order]
-        area = np.full(ox.shape, squeeze / aspect)
-    else:
-        K = int(min(max(math.ceil(radius / spacing), 1), kmax))
-        step = radius / K
-        ox, oy, area = [0.0], [0.0], [0.25 * math.pi * step * step]
-        for k in range(1, K + 1):
-            n = 6 * k
-            th = (np.arange(n) + (0.5 if k & 1 else 0.0)) * (2.0 * math.pi / n)
-            ox.extend(np.rint(k * step * np.cos(th) / squeeze))
-            oy.extend(np.rint(k * step * np.sin(th) * aspect))
-            area.extend([math.pi / 3.0 * step * step] * n)
-        ox, oy, area = np.asarray(ox), np.asarray(oy), np.asarray(area)
+    level = lattice_level(radius, lattice, dense)
+    s = 1 << level
+    e = int(math.floor((radius + 0.5 * s) / squeeze / s))
+    ey = int(math.floor((radius + 0.5 * s) * aspect / s))
+    oy, ox = (np.mgrid[-ey:ey + 1, -e:e + 1] * s).astype(np.float64)
+    keep = np.hypot(ox * squeeze, oy / aspect) <= radius + 0.5 * s
+    ox, oy = ox[keep], oy[keep]
+    order = np.lexsort((ox, oy, np.hypot(ox * squeeze, oy / aspect)))   # centre first
+    ox, oy = ox[order], oy[order]
+    area = np.full(ox.shape, s * s * squeeze / aspect)
     dx, dy = ox * squeeze, oy / aspect
     d = np.hypot(dx, dy)
     phi = np.arctan2(dy, dx)
@@ -236,7 +239,21 @@ def tap_table(radius: float, spacing: float, kmax: int, aspect: float = 1.0, bla
     table[:, 3] = d / aperture_radius(phi + math.pi, blades, first, roundness)
     table[:, 4] = area
     table[:, 5], table[:, 6] = dx, dy
+    table[:, 7] = level
     return table
+
+
+def lattice_reach(radius: float, lvl: DofLevel, squeeze: float = 1.0,
+                  aspect: float = 1.0) -> tuple[float, float]:
+    """How far (x, y px) a gather of neighbourhood radius ``radius`` takes light from: its
+    taps' reach (``radius + s / 2`` in aperture space for a lattice of spacing ``s``) plus the
+    prefilter tent's ``s - 1`` px (none for a dense table).  The half-resolution gather of
+    the same radius reaches no further (its lattice is half as wide in its own pixels)."""
+    level = lattice_level(radius, lvl.lattice, lvl.dense_radius)
+    if level == 0:
+        return radius / squeeze, radius * aspect
+    s = 1 << level
+    return (radius + 0.5 * s) / squeeze + s - 1, (radius + 0.5 * s) * aspect + s - 1
 
 
 def quantised_radius(r):
@@ -256,6 +273,26 @@ def dilate_tiles(t: np.ndarray, reach: int) -> np.ndarray:
             xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
             out[yd, xd] = np.maximum(out[yd, xd], t[ys, xs])
     return out
+
+
+def prefilter(rt, col, pheight: int, levels: int) -> None:
+    """Fill planes 1..``levels`` of the padded colour ``col`` (planes of ``pheight`` rows)
+    with the binomial a-trous pyramid of plane 0: plane L is plane L - 1 filtered with
+    (1/4, 1/2, 1/4) at a spacing of ``2^(L - 1)`` px along x then y (clamped to the padded
+    buffer: the image's clamp-to-edge), the tent of half-width ``2^L`` that a lattice of
+    spacing ``2^L`` samples (:func:`tap_table`)."""
+    if levels < 1:
+        return
+    knl = rt.kernel("dof.cl", "dof_prefilter")
+    plane = col.pitch * pheight
+    tmp = rt.image(Rect.from_size(col.pitch, pheight), 4)
+    i32 = np.int32
+    for lv in range(1, levels + 1):
+        step = i32(1 << (lv - 1))
+        rt.launch(knl, (col.pitch, pheight), col, i32((lv - 1) * plane), tmp, i32(0),
+                  i32(col.pitch), i32(pheight), step, i32(0), local=(16, 4))
+        rt.launch(knl, (col.pitch, pheight), tmp, i32(0), col, i32(lv * plane),
+                  i32(col.pitch), i32(pheight), step, i32(1), local=(16, 4))
 
 
 @register
@@ -381,14 +418,14 @@ class Dof(Plugin):
     def spread_px(self, p, ctx) -> tuple[int, int]:
         """How far (x, y px) light can land from its pixel: the largest CoC radius of the
         frame over the channels (rounded up as the gather's), narrowed by the anamorphic
-        squeeze in x and stretched by the pixel aspect in y, plus the coverage ramp's pixel."""
+        squeeze in x and stretched by the pixel aspect in y, plus the coverage ramp's pixel
+        (and a sparse lattice's wider ramp and prefilter, :func:`lattice_reach`)."""
         radii = self.tile_radii(p, ctx)
         r = float(quantised_radius(radii.max())) if radii.size else 0.0
         if r == 0.0:
             return 0, 0
-        squeeze = self.lens(p, ctx).squeeze
-        return (int(math.ceil(r / squeeze)) + 1,
-                int(math.ceil(r * ctx.pixel_aspect)) + 1)
+        rx, ry = lattice_reach(r, self.level(ctx), self.lens(p, ctx).squeeze, ctx.pixel_aspect)
+        return int(math.ceil(rx)) + 1, int(math.ceil(ry)) + 1
 
     def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0):
         """One concatenated tap table for the radii in ``levels`` and, per entry of
@@ -396,10 +433,10 @@ class Dof(Plugin):
         cache."""
         parts, offsets, n = [], {}, 0
         for r in sorted(set(levels.ravel().tolist()) - {0.0}):
-            key = ("dof.taps", r, lvl.spacing, lvl.max_rings, lvl.dense_radius, aspect, blades,
-                   first, roundness, squeeze)
+            key = ("dof.taps", r, lvl.lattice, lvl.dense_radius, aspect, blades, first,
+                   roundness, squeeze)
             taps = rt.cache.get(key, lambda r=r: tap_table(
-                r, lvl.spacing, lvl.max_rings, aspect, blades, first, roundness,
+                r, lvl.lattice, aspect, blades, first, roundness,
                 dense=lvl.dense_radius, squeeze=squeeze))
             offsets[r] = (n, len(taps))
             parts.append(taps)
@@ -495,19 +532,25 @@ class Dof(Plugin):
         # Tiles whose every pixel is far out of focus are gathered at half resolution.
         half = (r_min >= lvl.half_res_radius) & (levels > 0)
         r_max = float(levels.max())
-        # pad by the largest reach (+2 for rounding), quantised so buffers get reused
-        pad = int(math.ceil((r_max * max(1.0, aspect) + 2) / 8.0) * 8)
+        # pad by the taps' largest reach (+2 for rounding), quantised so buffers get reused
+        s_max = 1 << lattice_level(r_max, lvl.lattice, lvl.dense_radius)
+        reach = r_max + (0.5 * s_max if s_max > 1 else 0.0)
+        pad = int(math.ceil((reach * max(1.0, aspect) + 2) / 8.0) * 8)
         w, h = src.width, src.height
         padded = Rect.from_size(-(-(w + 2 * pad + 4) // 4) * 4, h + 2 * pad)
-        col, coc0, coc = rt.image(padded, 4), rt.image(padded, 1), rt.image(padded, 1)
+        # the colour, then its prefiltered copies for the sparse taps (planes 1..L)
+        full_l = lattice_level(r_max, lvl.lattice, lvl.dense_radius)
+        col = rt.image(Rect.from_size(padded.width, padded.height * (1 + full_l)), 4)
+        coc0, coc = rt.image(padded, 1), rt.image(padded, 1)
         f32, i32 = np.float32, np.int32
         luma = ctx.luminance_defines     # log luminance of the working space
         prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64, **luma)
-        rt.launch(prep, (col.pitch // 4, col.height), src, depth, i32(src.pitch), i32(w),
-                  i32(h), col, coc0, i32(col.pitch), i32(col.height), i32(pad), f32(k_half),
+        rt.launch(prep, (col.pitch // 4, padded.height), src, depth, i32(src.pitch), i32(w),
+                  i32(h), col, coc0, i32(col.pitch), i32(padded.height), i32(pad), f32(k_half),
                   f32(focus), f32(clamp_r), f32(offset))
+        prefilter(rt, col, padded.height, full_l)
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
-                  col, coc0, coc, i32(col.pitch), i32(col.height), i32(pad), i32(w), i32(h),
+                  col, coc0, coc, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h),
                   local=(8, 4))
         del coc0
         # mean log luminance per tile: the caps of the hidden background
@@ -523,15 +566,18 @@ class Dof(Plugin):
         if half.any():
             hw, hh, hpad = -(-w // 2), -(-h // 2), pad // 2
             hpadded = Rect.from_size(-(-(hw + 2 * hpad + 4) // 4) * 4, hh + 2 * hpad)
-            colh, coch = rt.image(hpadded, 4), rt.image(hpadded, 1)
-            rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
-                      (colh.pitch, colh.height), col, coc, i32(col.pitch), i32(col.height), colh,
-                      coch, i32(colh.pitch),
-                      i32(colh.height))
-            hdst = rt.image((hh, hw), 4)
             hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))
+            half_l = lattice_level(float(hlevels.max()), lvl.lattice, lvl.dense_radius)
+            colh = rt.image(Rect.from_size(hpadded.width, hpadded.height * (1 + half_l)), 4)
+            coch = rt.image(hpadded, 1)
+            rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
+                      (colh.pitch, hpadded.height), col, coc, i32(col.pitch), i32(padded.height),
+                      colh, coch, i32(colh.pitch), i32(hpadded.height))
+            prefilter(rt, colh, hpadded.height, half_l)
+            hdst = rt.image((hh, hw), 4)
             self._gather(rt, gather, colh, coch, hpad, hdst, hlevels, hlevels, None, *common,
-                         self.cateye_args(lens, ctx, src.window, 2), tile=TILE // 2)
+                         self.cateye_args(lens, ctx, src.window, 2), tile=TILE // 2,
+                         plane=colh.pitch * hpadded.height)
         # full resolution: sharp pixels gather over their own reach and the near field's,
         # out-of-focus ones take the half-resolution result where it is smooth
         sharp = np.where(levels > 0, quantised_radius(np.maximum(near, lvl.half_res_radius)
@@ -541,22 +587,27 @@ class Dof(Plugin):
         mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
         dst = src.like()
         self._gather(rt, gather, col, coc, pad, dst, levels, sharp, mode, *common,
-                     self.cateye_args(lens, ctx, src.window), hres=hdst)
+                     self.cateye_args(lens, ctx, src.window), hres=hdst,
+                     plane=col.pitch * padded.height)
         skipped = int((levels == 0).sum())
         notes.append(f"{skipped}/{radii.size} tiles in focus (copied), "
                      f"{int(half.sum())} at half resolution")
         return dst
 
     def _gather(self, rt, knl, col, coc, pad, dst, levels, sharp, mode, lvl, aspect, blades,
-                first, roundness, log_mean, squeeze, cateye, *, tile=TILE, hres=None):
+                first, roundness, log_mean, squeeze, cateye, *, tile=TILE, hres=None,
+                plane=0):
         """Launch ``dof_gather`` over ``dst``: per tile the table of radius ``levels``, that
         of radius ``sharp`` for pixels in focus, ``mode`` (bit 0: take ``hres`` where it is
-        smooth, bit 1: gather again where it is not)."""
+        smooth, bit 1: gather again where it is not); ``plane``: pixels between the planes of
+        ``col``'s prefilter pyramid (:func:`prefilter`)."""
         table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
                                       roundness, squeeze)
         tiles = np.zeros(levels.shape + (8,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
+        level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
+        tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
         taps, tile_info = rt.to_device(table), rt.to_device(tiles)
         i32, f32 = np.int32, np.float32
         hres_args = ((hres, i32(hres.pitch), i32(hres.width), i32(hres.height)) if hres is not None
@@ -565,6 +616,6 @@ class Dof(Plugin):
                   dst, i32(dst.pitch), i32(dst.width), i32(dst.height), taps, tile_info,
                   log_mean, i32(levels.shape[1]), i32(levels.shape[0]), i32(tile),
                   f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
-                  np.array(cateye, np.float32), local=LOCAL)
+                  np.array(cateye, np.float32), i32(plane), local=LOCAL)
         # (the pooled tables may be dropped now: the in-order queue uses them before any
         # later command could overwrite a reused buffer)

@@ -99,9 +99,29 @@ def hidden_caps(src):
     return np.repeat(np.repeat(cap, TILE, 0), TILE, 1)[:h, :w]
 
 
+def prefilter_pyramid(src, levels, pad=0):
+    """Planes 0..``levels`` of the image extended by ``pad`` px each side (clamp-to-edge):
+    the image, then plane L = plane L - 1 filtered with (1/4, 1/2, 1/4) at a spacing of
+    2^(L - 1) px along x, then along y (clamp-to-edge): the binomial a-trous pyramid, whose
+    plane L is the tent of half-width 2^L (plain loops over the offsets)."""
+    src = np.asarray(src, np.float64)
+    planes = [np.pad(src, ((pad, pad), (pad, pad)) + ((0, 0),) * (src.ndim - 2), mode="edge")]
+    h, w = planes[0].shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w]
+    for lv in range(1, levels + 1):
+        s = 2 ** (lv - 1)
+        p = planes[-1]
+        p = sum(k * _clamped(p, ys, xs + o) for k, o in ((0.25, -s), (0.5, 0), (0.25, s)))
+        p = sum(k * _clamped(p, ys + o, xs) for k, o in ((0.25, -s), (0.5, 0), (0.25, s)))
+        planes.append(p)
+    return planes
+
+
 def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area,
-    aperture-space ox, oy).  ``offset``: added to every signed radius (axial CA).
+    aperture-space ox, oy, level L).  A tap of level L reads plane L of
+    :func:`prefilter_pyramid` (colour and luminance) and every coverage ramp below is
+    ``s = 2^L`` px wide: ``clamp((a - b) / s + 0.5, 0, 1)`` for ``clamp(a - b + 0.5, 0, 1)``.  ``offset``: added to every signed radius (axial CA).
     ``cateye``: (cx, cy) per pixel (:func:`cateye_centres`): every coverage below is also
     clipped by the barrel, near taps by clamp(|r_q| - |a - c |r_q|| + 0.5, 0, 1), far ones by
     clamp(rf - |a + c rf| + 0.5, 0, 1) (a: the tap's aperture-space offset), and the near
@@ -120,7 +140,12 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     src = np.where(np.isfinite(src), src, 0.0)
     r = edge_radius(src, coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r,
                                     offset=offset))
-    lum = 0.2126 * src[..., 0] + 0.7152 * src[..., 1] + 0.0722 * src[..., 2]
+    taps = np.asarray(taps, np.float64)
+    # the pyramid of the image extended past every tap (the kernel's padded buffer): a tap
+    # outside reads the prefiltered extension, not the prefiltered image's edge
+    pad = int(np.abs(taps[:, :2]).max()) + 1 if len(taps) else 0
+    planes = prefilter_pyramid(src, int(taps[:, 7].max()) if len(taps) else 0, pad)
+    lums = [0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2] for c in planes]
     cap = hidden_caps(src)
     h, w = r.shape
     ys, xs = np.mgrid[0:h, 0:w]
@@ -135,18 +160,23 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
         frac = open_fraction(np.hypot(cx, cy))
 
     def barrel(rad, ax, ay, sign):   # coverage of the barrel circle for radius rad
-        return np.clip(rad - np.hypot(ax + sign * cx * rad, ay + sign * cy * rad) + 0.5, 0, 1)
+        return ramp(rad - np.hypot(ax + sign * cx * rad, ay + sign * cy * rad))
 
-    for ox, oy, d_near, d_far, area, ax, ay in np.asarray(taps, np.float64)[:, :7]:
-        c = _clamped(src, ys + int(oy), xs + int(ox))
+    for ox, oy, d_near, d_far, area, ax, ay, lv in taps:
+        inv_s = 2.0 ** -lv
+
+        def ramp(v):   # noqa: E306 (the coverage ramp of this tap's lattice)
+            return np.clip(v * inv_s + 0.5, 0, 1)
+
+        c = _clamped(planes[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
         rq = _clamped(r, ys + int(oy), xs + int(ox))
         arq = np.abs(rq)
         q_near = rq < -NEAR_EPS
         rf = np.where(p_near, np.maximum(arq, np.abs(r)),
                       np.where(rq > r, np.minimum(arq, np.maximum(r, 0)), arq))
-        cov_n = np.clip(arq - d_near + 0.5, 0, 1)
-        cov_f = np.clip(rf - d_far + 0.5, 0, 1)
-        cov_q = np.clip(arq - d_far + 0.5, 0, 1)
+        cov_n = ramp(arq - d_near)
+        cov_f = ramp(rf - d_far)
+        cov_q = ramp(arq - d_far)
         area_n = math.pi * arq ** 2
         if cateye is not None:
             cov_n = np.minimum(cov_n, barrel(arq, ax, ay, -1))
@@ -157,7 +187,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
         norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1))
         wf = cov_f * norm
         fill = np.where(p_near, cov_f - np.minimum(cov_q, cov_f), 0) * norm
-        lq = _clamped(lum, ys + int(oy), xs + int(ox))
+        lq = _clamped(lums[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
         k = np.minimum(1.0, cap / np.maximum(lq, 1e-30))   # pixel p's cap, tap q's luminance
         fn += c * wn[..., None]
         ff += c * (wf - fill + fill * k)[..., None]
