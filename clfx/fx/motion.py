@@ -173,16 +173,41 @@ def tile_size(radius_px: float) -> int:
     return int(max(8, 4 * math.ceil(min(radius_px, MAX_RADIUS_PX) / 4.0)))
 
 
+MAX_TURN = 2.6
+"""rad/frame: a path turning faster is taken as turning this fast (kernels' MB_MAX_TURN)."""
+
+
+def turn_rate(forward, backward):
+    """Turn rate (rad/frame, >= 0) of the circle through a point's positions at -1, 0 and +1
+    frame: with ``s = f + b`` and ``e = f - b``, a point turning at ``w`` about a centre has
+    ``e`` perpendicular to ``s`` and ``|e| / |s| = tan(w / 2)``; only ``e``'s part across
+    ``s`` counts (a straight path that speeds up has ``e`` along ``s``: ``w = 0``)."""
+    f, b = np.asarray(forward, np.float64), np.asarray(backward, np.float64)
+    s, e = f + b, f - b
+    cross = np.abs(s[..., 0] * e[..., 1] - s[..., 1] * e[..., 0])
+    return np.minimum(2.0 * np.arctan2(cross, (s * s).sum(-1)), MAX_TURN)
+
+
 def path(forward, backward, t):
     """Displacement (px) at time ``t`` (frames) of a point whose motion to the next frame is
-    ``forward`` and from the previous one ``backward`` (px/frame): the quadratic through its
-    positions at -1, 0 and +1 frame, ``t (f + b) / 2 + t^2 (f - b) / 2``.  With ``f = b``
-    it is the straight line ``f t``; on a circle it follows the arc far closer than either
-    half's chord (72 deg/frame through a centred 180 degree shutter: within 0.56 px of a
-    40 px radius, where the line along the forward motion strays 7.9 px; 1.8 px through a
-    360 degree shutter)."""
+    ``forward`` and from the previous one ``backward`` (px/frame, last axis x, y): the arc
+    through its positions at -1, 0 and +1 frame at a constant turn rate ``w``
+    (:func:`turn_rate`), ``A (f + b) / 2 + C (f - b) / 2`` with ``A = sin(w t) / sin(w)``,
+    ``C = sin^2(w t / 2) / sin^2(w / 2)``; on a straight path (``w = 0``) the quadratic
+    ``t (f + b) / 2 + t^2 (f - b) / 2``, and with ``f = b`` the line ``f t``.  A point on a
+    turning surface follows its circle exactly (kernels/lib/motion.cl ``MB_ARC``); the
+    quadratic through the same three positions cuts inside the arc and ends short (72
+    deg/frame through a centred 180 degree shutter: 0.56 px off a 40 px radius and its ends
+    2.9 px short; the line along the forward motion strays 7.9 px)."""
     f, b = np.asarray(forward, np.float64), np.asarray(backward, np.float64)
-    return t * 0.5 * (f + b) + t * t * 0.5 * (f - b)
+    w = turn_rate(f, b)[..., None]
+    t = np.asarray(t, np.float64)
+    t = t[..., None] if t.ndim else t
+    curved = w > 1e-3
+    ws = np.where(curved, w, 1.0)
+    a = np.where(curved, np.sin(ws * t) / np.sin(ws), t)
+    c = np.where(curved, (np.sin(0.5 * ws * t) / np.sin(0.5 * ws)) ** 2, t * t)
+    return a * 0.5 * (f + b) + c * 0.5 * (f - b)
 
 
 @dataclass
@@ -234,8 +259,8 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         Number of non-finite source pixels (> 0 makes a sanitised copy first).
     velocity_back : DeviceImage or None
         Backward motion, px/frame (current - previous position, +y down), same window: with
-        it every path is the quadratic through the previous, current and next positions
-        (:func:`path`); without it, the straight line along ``velocity``.
+        it every path is the arc through the previous, current and next positions at a
+        constant turn rate (:func:`path`); without it, the straight line along ``velocity``.
 
     Returns
     -------

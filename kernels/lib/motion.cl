@@ -25,8 +25,9 @@
  * the layer seen through the gaps (Jimenez's foreground / background split).
  * With CURVED (both halves of the vector pass: forward f and backward b motion per pixel in a
  * second aux record, aux_b = (bx, by, z, |b|)), a point's displacement at time t is the
- * quadratic through its positions one frame before, at and after the frame time,
- * d(t) = t (f + b) / 2 + t^2 (f - b) / 2 (MB_PATH): x's own surface is sampled where x's
+ * circular arc through its positions one frame before, at and after the frame time, at a
+ * constant turn rate (MB_ARC; the quadratic t (f + b) / 2 + t^2 (f - b) / 2 on straight
+ * paths, where the turn rate is 0): x's own surface is sampled where x's
  * path was at -t, x + d(-t) (exact for a steady flow such as a turn), occluders along the
  * tile's dominant path, x - d_n(t) (a small object carried along one path), and a sample's
  * smear covers x where its own path passes within a pixel of x.
@@ -229,9 +230,32 @@ kernel void motion_neighbormax(global const float *tiles, global float *nmax,
 
 /* --- gather ----------------------------------------------------------------------------- */
 /* Displacement at time t (frames) of a point moving with forward f and backward b (px/frame):
- * the quadratic through -b (t = -1), 0 and f (t = 1); its time derivative. */
-#define MB_PATH(f, b, t) ((t) * 0.5f * ((f) + (b)) + (t) * (t) * 0.5f * ((f) - (b)))
-#define MB_TANGENT(f, b, t) (0.5f * ((f) + (b)) + (t) * ((f) - (b)))
+ * the circular arc through -b (t = -1), 0 and f (t = 1) at a constant turn rate w (mb_turn),
+ * d(t) = A(t) (f + b) / 2 + C(t) (f - b) / 2 with A = sin(w t) / sin(w) and
+ * C = sin^2(w t / 2) / sin^2(w / 2); on a straight path (w = 0) the quadratic A = t, C = t^2.
+ * MB_ARC_TANGENT: its time derivative.  Per component (x and y share w). */
+#define MB_MIN_TURN 1e-3f   /* rad/frame: below this the arc is the quadratic (float-exact) */
+#define MB_MAX_TURN 2.6f    /* rad/frame (149 deg): a faster turn is taken as this one */
+inline float4 mb_turn(const float4 fx, const float4 fy, const float4 bx, const float4 by)
+{
+  /* with s = f + b, e = f - b: turning at w about a centre, e is perpendicular to s and
+   * |e| / |s| = tan(w / 2); only e's part across s counts (a straight path that speeds up
+   * or slows down has e along s: w = 0) */
+  const float4 sx = fx + bx, sy = fy + by, ex = fx - bx, ey = fy - by;
+  return fmin(2.0f * atan2(fabs(sx * ey - sy * ex), sx * sx + sy * sy), MB_MAX_TURN);
+}
+inline float4 mb_arc_a(const float4 t, const float4 w)
+{ return select(t, sin(w * t) / sin(w), w > MB_MIN_TURN); }
+inline float4 mb_arc_c(const float4 t, const float4 w)
+{ const float4 r = sin(0.5f * w * t) / sin(0.5f * w); return select(t * t, r * r, w > MB_MIN_TURN); }
+inline float4 mb_arc_da(const float4 t, const float4 w)
+{ return select((float4)(1.0f), w * cos(w * t) / sin(w), w > MB_MIN_TURN); }
+inline float4 mb_arc_dc(const float4 t, const float4 w)
+{ const float4 h = sin(0.5f * w);
+  return select(2.0f * t, w * sin(w * t) / (2.0f * h * h), w > MB_MIN_TURN); }
+#define MB_ARC(f, b, t, w) (mb_arc_a(t, w) * 0.5f * ((f) + (b)) + mb_arc_c(t, w) * 0.5f * ((f) - (b)))
+#define MB_ARC_TANGENT(f, b, t, w) \
+  (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
 #define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
 
 /* Load the aux records of 4 sample positions (nearest pixel) as vectors. */
@@ -433,6 +457,10 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
   const int same_v = same_t && all(vxx == vxx.x) && all(vxy == vxy.x)
                      && all(bxx == bxx.x) && all(bxy == bxy.x);
   const float4 beta_n = (float4)(mb_beta(vn.z * (t1 - t0)));         /* along v_n */
+#if CURVED
+  const float4 wn = mb_turn((float4)(vn.x), (float4)(vn.y), (float4)(bn.x), (float4)(bn.y));
+  const float4 wx = mb_turn(vxx, vxy, bxx, bxy);       /* turn rates of the paths (MB_ARC) */
+#endif
   const float4 beta_x = (float4)(mb_beta(sqrt(vxx.x * vxx.x + vxy.x * vxy.x) * (t1 - t0)),
                                  mb_beta(sqrt(vxx.y * vxx.y + vxy.y * vxy.y) * (t1 - t0)),
                                  mb_beta(sqrt(vxx.z * vxx.z + vxy.z * vxy.z) * (t1 - t0)),
@@ -447,7 +475,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 #if CURVED
       /* an occluder moves along the path of the tile's fastest pixel: the one over x at
        * time t sits at x - d(t) at the frame time */
-      const float4 dx = MB_PATH(vn.x, bn.x, t), dy = MB_PATH(vn.y, bn.y, t);   /* d = x - y */
+      const float4 dx = MB_ARC(vn.x, bn.x, t, wn), dy = MB_ARC(vn.y, bn.y, t, wn);  /* d = x - y */
 #else
       const float4 dx = vn.x * t, dy = vn.y * t;             /* d = x - y */
 #endif
@@ -463,8 +491,9 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
        * passes x, which must lie in the shutter) and across it */
       float4 byx, byy, bz_, bs_;
       MB_LOAD_AUXB(ix, iy, byx, byy, bz_, bs_);
-      const float4 ex = dx - MB_PATH(vyx, byx, t), ey = dy - MB_PATH(vyy, byy, t);
-      const float4 gx = MB_TANGENT(vyx, byx, t), gy = MB_TANGENT(vyy, byy, t);
+      const float4 wy = mb_turn(vyx, vyy, byx, byy);
+      const float4 ex = dx - MB_ARC(vyx, byx, t, wy), ey = dy - MB_ARC(vyy, byy, t, wy);
+      const float4 gx = MB_ARC_TANGENT(vyx, byx, t, wy), gy = MB_ARC_TANGENT(vyy, byy, t, wy);
       const float4 st = sqrt(gx * gx + gy * gy);
       const float4 inv_st = 1.0f / fmax(st, MIN_SPEED);
       const float4 al = (ex * gx + ey * gy) * inv_st;
@@ -496,8 +525,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       /* the point of x's surface over x at time t came from where x's own path was at -t
        * (a steady flow, exact for turning and translating surfaces): y = x + d(-t); x - d(t)
        * would bend the other way */
-      const float4 px = lane + 0.5f + MB_PATH(vxx, bxx, -t);
-      const float4 py = fy + 0.5f + MB_PATH(vxy, bxy, -t);
+      const float4 px = lane + 0.5f + MB_ARC(vxx, bxx, -t, wx);
+      const float4 py = fy + 0.5f + MB_ARC(vxy, bxy, -t, wx);
 #else
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
