@@ -16,8 +16,9 @@ from clfx.plugins import get_plugin
 MOTION = [(e, v) for e in ("motion_blur", "camera_blur", "rolling_shutter")
           for v in cases.for_effect(e).variants if v.startswith("cycles_")]
 
-DATA_BUDGET = 1_500_000
-"""Bytes of every checked-in render together."""
+DATA_BUDGET = 3_000_000
+"""Bytes of every checked-in render together (2.78 MB: 320x180 lossless half float of
+textured scenes; see clfx/bench/cycles/__init__.py)."""
 
 
 def _have(name):
@@ -96,10 +97,10 @@ def _streak_offsets(img, half_width=12):
 
 def test_rotating_light_streak_follows_its_arc_on_a_cycles_render(rt):
     """Issue 24: a light on a wheel turning 72 deg/frame streaks along its arc.  Its centre
-    line in Cycles' render lies within 0.3 px of the arc (the geometry is right); clfx's
-    within 1 px (0.33 with the arc paths, 1.12 with the quadratic through the same three
+    line in Cycles' render lies within 0.24 px of the arc (the geometry is right); clfx's
+    within 1 px (0.32 with the arc paths, 1.12 with the quadratic through the same three
     positions, whose ends fall short and inside); Blender's Vector Blur follows the chord
-    (7.7 px off)."""
+    (6-8 px off, its ends short)."""
     _have("spin")
     d = cycles.load("spin")
     assert np.abs(_streak_offsets(d["truth"])).max() < 0.5
@@ -110,4 +111,4 @@ def test_rotating_light_streak_follows_its_arc_on_a_cycles_render(rt):
     img = cls().render(rt, cls.params(), ctx)
     out = crop_to(rt.download(img), img.window, ctx.source.window)
     assert np.abs(_streak_offsets(out)).max() < 1.0
-    assert np.abs(_streak_offsets(d["vector_blur"])).max() > 3.0
+    assert np.nanmax(np.abs(_streak_offsets(d["vector_blur"]))) > 3.0   # (nan: no light)

@@ -670,6 +670,7 @@ def truth_markdown(results: dict) -> list[str]:
     naive method, every peer image (Blender's Vector Blur), each level, and the truth's own
     noise floor (a second render with another seed, against the truth)."""
     cases = [e for e in results.get("effects", []) if e.get("truth_floor") is not None
+             or str(e.get("scene", "")).startswith("cycles:")
              or any(b["baseline"] == "peer" for b in e.get("baselines", []))]
     if not cases:
         return []

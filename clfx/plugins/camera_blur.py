@@ -214,9 +214,8 @@ class CameraBlur(Plugin):
         if depth is None or depth.window != src.window:
             raise ClipError("camera_blur: truck/dolly need a depth pass covering the source "
                             f"window {src.window}")
-        # with a roll, v + a/2 and v - a/2 (a: the roll's second derivative) as the two
-        # halves of a vector pass: the gather's quadratic paths follow the arcs (to second
-        # order); else the tangent
+        # with a roll, the chords to the positions one frame after and before as the two
+        # halves of a vector pass: the gather's paths follow the arcs; else the tangent
         curved = m["roll"] != 0.0
         fields = []
         for chord in ((1.0, -1.0) if curved else (0.0,)):

@@ -613,3 +613,54 @@ kernel void motion_gather(global const float *col, global const float *aux,
     out = clamp(out / scale, -FLT_MAX, FLT_MAX);
   vstore16(out, 0, dst + base * 4);
 }
+
+/* Colour at continuous position (px, py) (pixel i's centre at i + 0.5), bilinear, clamp to
+ * the edge. */
+inline float4 mb_bilinear(global const float *col, const int pitch, const int width,
+                          const int height, const float px, const float py)
+{
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v), a = u - fu, b = v - fv;
+  const int x0 = clamp((int)fu, 0, width - 1), x1 = clamp((int)fu + 1, 0, width - 1);
+  const int y0 = clamp((int)fv, 0, height - 1), y1 = clamp((int)fv + 1, 0, height - 1);
+  return (vload4((size_t)y0 * pitch + x0, col) * (1.0f - a) + vload4((size_t)y0 * pitch + x1, col) * a) * (1.0f - b)
+       + (vload4((size_t)y1 * pitch + x0, col) * (1.0f - a) + vload4((size_t)y1 * pitch + x1, col) * a) * b;
+}
+
+/* Tiles whose every smear is under a pixel (clfx/fx/motion.py TINY_MAX_PX) through a centred
+ * shutter [-T, T]: the average of the image along each pixel's own motion, to second order,
+ * I + (L^2 / 24) (I(x + u) + I(x - u) - 2 I(x)), L = |v| (t1 - t0) the smear, u the unit
+ * direction of v (the second difference across a pixel; error O(L^4)).  A sampled
+ * reconstruction (tent or cubic at fractions of a pixel) blurs fine texture by more than such
+ * a smear does; this keeps the input where nothing moves and never blurs more than the
+ * motion.  Same tile table and work layout as motion_gather (4 pixels per work-item). */
+kernel void motion_tiny(global const float *col, global const float *aux,
+                        global const int *tiles, const int ntiles, global float *dst,
+                        const int pitch, const int width, const int height, const int k,
+                        const float t0, const float t1)
+{
+  const int gid = get_global_id(0);
+  const int qpt = k * k / 4;
+  const int tile = gid / qpt;
+  if(tile >= ntiles) return;
+  const int r = gid - tile * qpt, qrow = k / 4;
+  const int x = tiles[4 * tile] * k + (r % qrow) * 4, y = tiles[4 * tile + 1] * k + r / qrow;
+  if(y >= height) return;
+  for(int l = 0; l < 4; l++)
+  {
+    const int xi = x + l;
+    if(xi >= width) break;
+    const size_t i = (size_t)y * pitch + xi;
+    const float4 a = vload4(i, aux), c = vload4(i, col);
+    const float len = a.w * (t1 - t0);
+    float4 o = c;
+    if(len >= MIN_BLUR)
+    {
+      const float ux = a.x / a.w, uy = a.y / a.w, px = (float)xi + 0.5f, py = (float)y + 0.5f;
+      const float4 sum = mb_bilinear(col, pitch, width, height, px + ux, py + uy)
+                       + mb_bilinear(col, pitch, width, height, px - ux, py - uy);
+      o = c + (len * len / 24.0f) * (sum - 2.0f * c);
+    }
+    vstore4(o, i, dst);
+  }
+}
