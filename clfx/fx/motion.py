@@ -109,13 +109,17 @@ instead of bilinearly (or nearest): over a short smear the reconstruction filter
 as large as the motion's, and only a sharper one brings the result closer to the truth than
 the unblurred input."""
 
-TINY_MAX_PX = 0.5
-"""Tiles whose every smear (their NeighborMax velocity's) is shorter than this (px) through a
-centred shutter take the second-order average along each pixel's motion instead of the
-gather (kernels/lib/motion.cl ``motion_tiny``): the input plus ``L^2 / 24`` of its second
-difference along the motion.  Fine texture moving under 1 px/frame through 180 degrees
-(stripes 2.5 px, a 2 px checker, grain of 1.5 px at 0.4-0.75 px/frame) ended 3-20 dB below
-the unblurred input through the tent and 0-4 dB below through the cubic (issue 24)."""
+TINY_MAX_PX = 0.0
+"""Off (0): tiles whose every smear (their NeighborMax velocity's) is shorter than this (px)
+through a centred shutter would take the second-order average along each pixel's motion
+instead of the gather (kernels/lib/motion.cl ``motion_tiny``): the input plus ``L^2 / 24`` of
+its second difference along the motion.  Measured at 0.5 (issue 24): fine stripes, a 2 px
+checker and 1.5 px grain at 0.4-0.75 px/frame through 180 degrees went from 3-20 dB below
+the unblurred input (the tent) to 0.1-3.1 dB above it, but the blocky box-filtered walls of
+``layers`` and ``shutter_270`` (320x180, final) fell 34.82 -> 34.40 and 33.12 -> 31.14 dB
+(naive 32.27): at the kinks of a piecewise linear image the tent's ``L / 8`` of the second
+difference is exact and ``L^2 / 24`` blurs too little.  Left off until one rule serves both;
+a level may set ``tiny_max_px``."""
 
 JITTER_SPACING_PX = 4.0
 """Per-pixel jitter only where samples lie farther apart than this along the blur (the

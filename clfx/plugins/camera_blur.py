@@ -239,7 +239,7 @@ class CameraBlur(Plugin):
                                  nonfinite=nonfinite, velocity_back=back)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
-                         + ("the roll along its arcs (quadratic paths through the previous, "
+                         + ("the roll along its arcs (circular paths through the previous, "
                             "current and next positions)" if curved else "straight paths"))
         return out
 
