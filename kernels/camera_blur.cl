@@ -88,13 +88,15 @@ kernel void camera_blur_velocity(global const float *depth, global float *vel, c
   const float py = (float)y + 0.5f + (float)y0 - cy;
   float4 vx = sx + zoom * px - roll * py;      /* d/dt of R(roll t)(p - c): roll x perp */
   float4 vy = sy + zoom * py + roll * px;
-  /* chord = +-1: v +- a/2, with a the second derivative of (1 + zoom t) R(roll t)(p - c) at
-   * t = 0 (centripetal -roll^2 (p - c), plus 2 zoom roll perp): as the forward and backward
-   * halves of a vector pass, the motion gather's quadratic path is then v t + a t^2 / 2,
-   * the arc to second order (the chords themselves under-run the arc's speed by
-   * sin(roll) / roll) */
-  vx += 0.5f * chord * (-roll * roll * px - 2.0f * zoom * roll * py);
-  vy += 0.5f * chord * (-roll * roll * py + 2.0f * zoom * roll * px);
+  /* chord = +-1: the chords of (1 + zoom t) R(roll t)(p - c) to t = +-1, as the forward and
+   * backward halves of a vector pass: the motion gather's path through them is then the arc
+   * at the roll's turn rate (lib/motion.cl MB_ARC), exact for a roll without zoom */
+  if(chord != 0.0f)
+  {
+    const float c = cos(chord * roll), s = sin(chord * roll), m = 1.0f + chord * zoom;
+    vx = sx + chord * (m * (c * px - s * py) - px);
+    vy = sy + chord * (m * (s * px + c * py) - py);
+  }
 #if HAS_DEPTH
   const float4 z = vload4(0, depth + i);
   const int4 valid = (z > 0.0f) & ((as_int4(z) & 0x7f800000) != 0x7f800000);  /* inf: 0 */

@@ -20,10 +20,11 @@
  *                              velocity at p - v_bg t), else the nearest pixel moving with the
  *                              background searched from there along the occluder's relative
  *                              motion (up to MAX_SEARCH px).
- * With CURVED (both halves of the vector pass) a point's displacement at time t is the quadratic
- * through its positions one frame before, at and after the frame time,
- * t (f + b) / 2 + t^2 (f - b) / 2 (f, b: forward and backward motion; lib/motion.cl's MB_PATH),
- * in the fixed-point iteration, its test and the disocclusion fill.
+ * With CURVED (both halves of the vector pass) a point's displacement at time t is the circular
+ * arc through its positions one frame before, at and after the frame time at a constant turn
+ * rate (rs_path; lib/motion.cl's MB_ARC: the quadratic t (f + b) / 2 + t^2 (f - b) / 2 on a
+ * straight path; f, b: forward and backward motion), in the fixed-point iteration, its test
+ * and the disocclusion fill.
  * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
  */
 #include "lib/common.h"
@@ -142,13 +143,24 @@ inline float4 rs_colour(global const float *col, const int pitch, const int w, c
   return TO_FLOAT4(c);
 }
 
+/* Displacement by time t of a point moving with forward f and backward b: the arc at a
+ * constant turn rate w through -b, 0 and f (lib/motion.cl's MB_ARC, in REAL). */
+inline REAL2 rs_path(const REAL2 f, const REAL2 b, const REAL t)
+{
+  const REAL2 s = f + b, e = f - b;
+  const REAL w = fmin((REAL)2 * atan2(fabs(s.x * e.y - s.y * e.x), dot(s, s)), (REAL)2.6);
+  if(w <= (REAL)1e-3)
+    return t * (REAL)0.5 * s + t * t * (REAL)0.5 * e;
+  const REAL r = sin((REAL)0.5 * w * t) / sin((REAL)0.5 * w);
+  return sin(w * t) / sin(w) * (REAL)0.5 * s + r * r * (REAL)0.5 * e;
+}
+
 /* Displacement by time t of the point at q moving with forward f (CURVED: and backward b). */
 inline REAL2 rs_disp(global const float *auxb, const int pitch, const int w, const int h,
                      const REAL2 q, const float2 f, const REAL t)
 {
 #if CURVED
-  const REAL2 b = TO_REAL2(rs_aux(auxb, pitch, w, h, q).xy), ff = TO_REAL2(f);
-  return t * (REAL)0.5 * (ff + b) + t * t * (REAL)0.5 * (ff - b);
+  return rs_path(TO_REAL2(f), TO_REAL2(rs_aux(auxb, pitch, w, h, q).xy), t);
 #else
   return TO_REAL2(f) * t;
 #endif
@@ -260,8 +272,7 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
     float2 bo = vo;
 #endif
     if(length(vo - vb) * tabs <= TOL) { vo = vf; bo = vf; }   /* the tile's: no backward */
-    const REAL2 q1 = p - t * (REAL)0.5 * TO_REAL2(vo + bo)
-                       - t * t * (REAL)0.5 * TO_REAL2(vo - bo);
+    const REAL2 q1 = p - rs_path(TO_REAL2(vo), TO_REAL2(bo), t);
     qb = q1;
 #if MAX_SEARCH > 0
     const float2 dv = vo - vb;

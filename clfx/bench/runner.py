@@ -182,6 +182,9 @@ def load_case(module, spec: "cases.Case", name: str, width: int, height: int, se
     are unchanged."""
     import pickle
 
+    maker = spec.maker(variant)
+    if getattr(maker, "cached", True) is False:    # read from files: nothing to cache
+        return maker(width, height, np.random.default_rng(seed))
     path = _case_cache_path(module, case_label(name, variant), width, height, seed)
     if os.path.exists(path):
         try:
@@ -189,7 +192,7 @@ def load_case(module, spec: "cases.Case", name: str, width: int, height: int, se
                 return pickle.load(f)
         except Exception:
             pass  # a damaged cache entry is rebuilt
-    case = spec.maker(variant)(width, height, np.random.default_rng(seed))
+    case = maker(width, height, np.random.default_rng(seed))
     if case.get("truth") is not None:
         os.makedirs(os.path.dirname(path), exist_ok=True)
         tmp = f"{path}.tmp-{os.getpid()}"
@@ -214,11 +217,15 @@ class EffectResult:
     note: str = ""
     metric: str = ""
     """The case's own metric, in one line (its docstring's first), if it has one."""
+    truth_floor: float | None = None
+    """log-PSNR of a second render of the truth (another seed) against it: the truth's own
+    noise floor, for cases rendered by a path tracer (``case["truth_floor"]``)."""
+    scene: str = ""
 
     def as_dict(self) -> dict:
         return {"effect": self.effect, "rows": self.rows, "peers": self.peers,
                 "baselines": self.baselines, "reference": self.reference_kind, "note": self.note,
-                "metric": self.metric}
+                "metric": self.metric, "truth_floor": self.truth_floor, "scene": self.scene}
 
 
 def _case_context(rt, case: dict, quality: str):
@@ -227,7 +234,9 @@ def _case_context(rt, case: dict, quality: str):
     up = rt.upload(src, window)
     depth = rt.upload(np.asarray(case["depth"], np.float32), window) if case.get("depth") is not None else None
     vel = rt.upload(np.asarray(case["velocity"], np.float32), window) if case.get("velocity") is not None else None
-    return RenderContext(rt, up, depth=depth, velocity=vel,
+    back = case.get("velocity_back")
+    back = rt.upload(np.asarray(back, np.float32), window) if back is not None else None
+    return RenderContext(rt, up, depth=depth, velocity=vel, velocity_back=back,
                          display_window=case.get("display_window") or window,
                          pixel_aspect=case.get("pixel_aspect", 1.0), frame=case.get("frame", 1),
                          seed=case.get("seed", 0), camera=case.get("camera") or Camera(),
@@ -246,6 +255,8 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
         res.note = "no bench case"
         return res
     case = load_case(module, spec, name, width, height, rng_seed, variant)
+    res.truth_floor = case.get("truth_floor")
+    res.scene = str(case.get("scene", ""))
     plugin = cls()
     params = cls.params(**case.get("params", {}))
     outputs, runs = {}, {}
@@ -333,15 +344,23 @@ def _baselines(case, params, ctx, ref, repeat: int, label: str, naive, score) ->
         rows.append(row)
     rows.append({"effect": label, "baseline": "input", "label": "unchanged input",
                  **score(src, ref)})
+    for what, img in (case.get("peer_images") or {}).items():   # another tool's output
+        rows.append({"effect": label, "baseline": "peer", "label": what,
+                     **score(np.asarray(img, np.float32), ref)})
     return rows
 
 
 def _flag_levels(res: EffectResult) -> None:
-    """``beats_naive`` / ``beats_input`` on every level row: True when its log-PSNR is
-    higher than the baseline's, None when there is nothing to compare."""
-    scores = {b["baseline"]: b.get("psnr_log") for b in res.baselines if "error" not in b}
+    """``beats_naive`` / ``beats_input`` (/ ``beats_peer``: every peer image of the case,
+    e.g. Blender's Vector Blur) on every level row: True when its log-PSNR is higher than the
+    baseline's, None when there is nothing to compare."""
+    scores = {b["baseline"]: b.get("psnr_log") for b in res.baselines
+              if "error" not in b and b["baseline"] != "peer"}
+    peers = [b.get("psnr_log") for b in res.baselines if b["baseline"] == "peer" and "error" not in b]
+    if peers:
+        scores["peer"] = max(peers)
     for row in res.rows:
-        for key, base in (("beats_naive", "naive"), ("beats_input", "input")):
+        for key, base in (("beats_naive", "naive"), ("beats_input", "input"), ("beats_peer", "peer")):
             theirs, mine = scores.get(base), row.get("psnr_log")
             row[key] = None if theirs is None or mine is None else bool(mine > theirs)
 
@@ -350,7 +369,8 @@ def losing_levels(effect: dict) -> list[str]:
     """``level: loses to naive/input`` for every flagged level of an effect's results."""
     out = []
     for r in effect.get("rows", []):
-        lost = [b for b, k in (("naive", "beats_naive"), ("input", "beats_input")) if r.get(k) is False]
+        lost = [b for b, k in (("naive", "beats_naive"), ("input", "beats_input"),
+                               ("peer", "beats_peer")) if r.get(k) is False]
         if lost:
             out.append(f"{r['quality']} loses to the {' and the '.join(lost)}")
     return out
@@ -626,6 +646,7 @@ def markdown(results: dict) -> str:
                                  f"{p['clfx_ms']:.1f} | {p['clfx_time_ratio']:.2f} | {p['rel_rmse']:.3g} | "
                                  f"{p['clfx_rel_rmse']:.3g} | {p['psnr_log']:.1f} / "
                                  f"{p.get('clfx_psnr_log', float('nan')):.1f} | {p['max_err']:.3g} |")
+    lines += truth_markdown(results)
     if results.get("looks"):
         lines += ["", "| look | ms/frame (min-max) | per effect (ms) |", "|---|---|---|"]
         for lk in results["looks"]:
@@ -642,6 +663,36 @@ def markdown(results: dict) -> str:
             skipped = "; ".join(f"{e}: {why}" for e, why in r["skipped"].items()) or "-"
             lines.append(f"| {k} | {r['ms']:.0f} | {r['vs_io']:.2f} | {skipped} |")
     return "\n".join(lines) + "\n"
+
+
+def truth_markdown(results: dict) -> list[str]:
+    """The cases rendered by a path tracer, one row each: log-PSNR (dB) of the input, the
+    naive method, every peer image (Blender's Vector Blur), each level, and the truth's own
+    noise floor (a second render with another seed, against the truth)."""
+    cases = [e for e in results.get("effects", []) if e.get("truth_floor") is not None
+             or str(e.get("scene", "")).startswith("cycles:")
+             or any(b["baseline"] == "peer" for b in e.get("baselines", []))]
+    if not cases:
+        return []
+    lines = ["", "Against a path tracer's render (log-PSNR dB; noise floor: the same render with "
+                 "another seed, against the truth):", "",
+             "| case | input | naive | peer | " + " | ".join(QUALITY_LEVELS)
+             + " | noise floor | final beats input / naive / peer |",
+             "|---|---|---|---|" + "---|" * len(QUALITY_LEVELS) + "---|---|"]
+    for e in cases:
+        base = {}
+        for b in e.get("baselines", []):
+            base.setdefault(b["baseline"], b)
+        rows = {r["quality"]: r for r in e["rows"]}
+        levels = " | ".join(f"{rows[q]['psnr_log']:.1f}" if q in rows and "psnr_log" in rows[q]
+                            else "-" for q in QUALITY_LEVELS)
+        floor = e.get("truth_floor")
+        fin = rows.get("final", {})
+        flags = " / ".join(_yes_no(fin.get(k)) for k in ("beats_input", "beats_naive", "beats_peer"))
+        lines.append(f"| {e['effect']} | {_psnr_cell(base.get('input'))} | "
+                     f"{_psnr_cell(base.get('naive'))} | {_psnr_cell(base.get('peer'))} | {levels} | "
+                     f"{'-' if floor is None else f'{floor:.1f}'} | {flags} |")
+    return lines
 
 
 def sequence_markdown(s: dict) -> list[str]:
@@ -720,7 +771,8 @@ def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5
                 log(f"clfx bench: {label} FAILED: {exc!r}")
                 continue
             results["effects"].append(res.as_dict())
-            log(f"clfx bench: {label} done in {time.perf_counter() - t0:.1f} s")
+            floor = "" if res.truth_floor is None else f" (truth's noise floor {res.truth_floor:.1f} dB)"
+            log(f"clfx bench: {label} done in {time.perf_counter() - t0:.1f} s{floor}")
             for lost in losing_levels(res.as_dict()):
                 log(f"clfx bench: {label}: {lost} in log-PSNR")
     if looks is None or looks:

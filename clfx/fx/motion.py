@@ -109,6 +109,18 @@ instead of bilinearly (or nearest): over a short smear the reconstruction filter
 as large as the motion's, and only a sharper one brings the result closer to the truth than
 the unblurred input."""
 
+TINY_MAX_PX = 0.0
+"""Off (0): tiles whose every smear (their NeighborMax velocity's) is shorter than this (px)
+through a centred shutter would take the second-order average along each pixel's motion
+instead of the gather (kernels/lib/motion.cl ``motion_tiny``): the input plus ``L^2 / 24`` of
+its second difference along the motion.  Measured at 0.5 (issue 24): fine stripes, a 2 px
+checker and 1.5 px grain at 0.4-0.75 px/frame through 180 degrees went from 3-20 dB below
+the unblurred input (the tent) to 0.1-3.1 dB above it, but the blocky box-filtered walls of
+``layers`` and ``shutter_270`` (320x180, final) fell 34.82 -> 34.40 and 33.12 -> 31.14 dB
+(naive 32.27): at the kinks of a piecewise linear image the tent's ``L / 8`` of the second
+difference is exact and ``L^2 / 24`` blurs too little.  Left off until one rule serves both;
+a level may set ``tiny_max_px``."""
+
 JITTER_SPACING_PX = 4.0
 """Per-pixel jitter only where samples lie farther apart than this along the blur (the
 level's sample cap bites hard): denser samples use the midpoint rule, which is exact for a
@@ -127,6 +139,7 @@ class MotionLevel(Level):
     jitter: bool = True     # per-pixel jitter where the sample cap leaves samples sparse
                             # (else the midpoint rule everywhere: exact quadrature, may band)
     cubic_max_px: float = CUBIC_MAX_PX   # tiles with shorter blurs read through the cubic
+    tiny_max_px: float = TINY_MAX_PX     # tiles with shorter blurs (centred shutter): motion_tiny
 
 
 def _summary(lvl: MotionLevel) -> str:
@@ -173,16 +186,41 @@ def tile_size(radius_px: float) -> int:
     return int(max(8, 4 * math.ceil(min(radius_px, MAX_RADIUS_PX) / 4.0)))
 
 
+MAX_TURN = 2.6
+"""rad/frame: a path turning faster is taken as turning this fast (kernels' MB_MAX_TURN)."""
+
+
+def turn_rate(forward, backward):
+    """Turn rate (rad/frame, >= 0) of the circle through a point's positions at -1, 0 and +1
+    frame: with ``s = f + b`` and ``e = f - b``, a point turning at ``w`` about a centre has
+    ``e`` perpendicular to ``s`` and ``|e| / |s| = tan(w / 2)``; only ``e``'s part across
+    ``s`` counts (a straight path that speeds up has ``e`` along ``s``: ``w = 0``)."""
+    f, b = np.asarray(forward, np.float64), np.asarray(backward, np.float64)
+    s, e = f + b, f - b
+    cross = np.abs(s[..., 0] * e[..., 1] - s[..., 1] * e[..., 0])
+    return np.minimum(2.0 * np.arctan2(cross, (s * s).sum(-1)), MAX_TURN)
+
+
 def path(forward, backward, t):
     """Displacement (px) at time ``t`` (frames) of a point whose motion to the next frame is
-    ``forward`` and from the previous one ``backward`` (px/frame): the quadratic through its
-    positions at -1, 0 and +1 frame, ``t (f + b) / 2 + t^2 (f - b) / 2``.  With ``f = b``
-    it is the straight line ``f t``; on a circle it follows the arc far closer than either
-    half's chord (72 deg/frame through a centred 180 degree shutter: within 0.56 px of a
-    40 px radius, where the line along the forward motion strays 7.9 px; 1.8 px through a
-    360 degree shutter)."""
+    ``forward`` and from the previous one ``backward`` (px/frame, last axis x, y): the arc
+    through its positions at -1, 0 and +1 frame at a constant turn rate ``w``
+    (:func:`turn_rate`), ``A (f + b) / 2 + C (f - b) / 2`` with ``A = sin(w t) / sin(w)``,
+    ``C = sin^2(w t / 2) / sin^2(w / 2)``; on a straight path (``w = 0``) the quadratic
+    ``t (f + b) / 2 + t^2 (f - b) / 2``, and with ``f = b`` the line ``f t``.  A point on a
+    turning surface follows its circle exactly (kernels/lib/motion.cl ``MB_ARC``); the
+    quadratic through the same three positions cuts inside the arc and ends short (72
+    deg/frame through a centred 180 degree shutter: 0.56 px off a 40 px radius and its ends
+    2.9 px short; the line along the forward motion strays 7.9 px)."""
     f, b = np.asarray(forward, np.float64), np.asarray(backward, np.float64)
-    return t * 0.5 * (f + b) + t * t * 0.5 * (f - b)
+    w = turn_rate(f, b)[..., None]
+    t = np.asarray(t, np.float64)
+    t = t[..., None] if 0 < t.ndim < f.ndim else t      # per point, or already (..., 1)
+    curved = w > 1e-3
+    ws = np.where(curved, w, 1.0)
+    a = np.where(curved, np.sin(ws * t) / np.sin(ws), t)
+    c = np.where(curved, (np.sin(0.5 * ws * t) / np.sin(0.5 * ws)) ** 2, t * t)
+    return a * 0.5 * (f + b) + c * 0.5 * (f - b)
 
 
 @dataclass
@@ -234,8 +272,8 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         Number of non-finite source pixels (> 0 makes a sanitised copy first).
     velocity_back : DeviceImage or None
         Backward motion, px/frame (current - previous position, +y down), same window: with
-        it every path is the quadratic through the previous, current and next positions
-        (:func:`path`); without it, the straight line along ``velocity``.
+        it every path is the arc through the previous, current and next positions at a
+        constant turn rate (:func:`path`); without it, the straight line along ``velocity``.
 
     Returns
     -------
@@ -295,8 +333,18 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     length = length[ys, xs]
     n = np.clip(np.ceil(length / level.spacing), 2, level.max_samples).astype(np.int32)
     jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
-    short = length < level.cubic_max_px
     qpt = k * k // 4
+    moving = int(xs.size)
+    tiny = (length < level.tiny_max_px) & (abs(t0 + t1) <= 1e-6 * (t1 - t0))
+    if tiny.any():          # second order along each pixel's motion (centred shutter)
+        table = rt.to_device(np.stack([xs[tiny], ys[tiny], n[tiny], jitter[tiny]],
+                                      axis=1).astype(np.int32).ravel())
+        count = int(tiny.sum())
+        rt.launch(rt.kernel(KERNEL, "motion_tiny", **defines), (count * qpt,), col, aux, table,
+                  i32(count), dst, i32(pitch), i32(w), i32(h), i32(k), f32(t0), f32(t1),
+                  local=(LOCAL,))
+        xs, ys, n, jitter, length = (a[~tiny] for a in (xs, ys, n, jitter, length))
+    short = length < level.cubic_max_px
     for sel, cubic in ((short, 1), (~short, 0)):   # one launch per fetch filter
         if not sel.any():
             continue
@@ -306,4 +354,4 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         rt.launch(rt.kernel(KERNEL, "motion_gather", CUBIC=cubic, **defines),
                   (count * qpt,), col, aux, auxb, nmax, table, i32(count), dst, i32(pitch), i32(w),
                   i32(h), i32(tx), i32(k), f32(t0), f32(t1), i32(frame), local=(LOCAL,))
-    return dst, BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()))
+    return dst, BlurStats(k, radius, tx * ty, moving, int(n.max()) if n.size else 0)

@@ -214,9 +214,8 @@ class CameraBlur(Plugin):
         if depth is None or depth.window != src.window:
             raise ClipError("camera_blur: truck/dolly need a depth pass covering the source "
                             f"window {src.window}")
-        # with a roll, v + a/2 and v - a/2 (a: the roll's second derivative) as the two
-        # halves of a vector pass: the gather's quadratic paths follow the arcs (to second
-        # order); else the tangent
+        # with a roll, the chords to the positions one frame after and before as the two
+        # halves of a vector pass: the gather's paths follow the arcs; else the tangent
         curved = m["roll"] != 0.0
         fields = []
         for chord in ((1.0, -1.0) if curved else (0.0,)):
@@ -240,7 +239,7 @@ class CameraBlur(Plugin):
                                  nonfinite=nonfinite, velocity_back=back)
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
-                         + ("the roll along its arcs (quadratic paths through the previous, "
+                         + ("the roll along its arcs (circular paths through the previous, "
                             "current and next positions)" if curved else "straight paths"))
         return out
 

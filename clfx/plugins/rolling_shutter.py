@@ -43,9 +43,10 @@ background) or none (the background it uncovers):
   and part of the occluder's colour, and kept it would outline where the occluder was.
 
 With both halves of the vector pass (``velocity_back``: current - previous position, as
-Blender's Vector XY), a point's displacement by time ``t`` is the quadratic through its
-positions a frame before, at and after the frame time, ``t (f + b) / 2 + t^2 (f - b) / 2``
-(:func:`clfx.fx.motion.path`), in the iteration and in the fill: a spinning object shears
+Blender's Vector XY), a point's displacement by time ``t`` is the arc through its
+positions a frame before, at and after the frame time at a constant turn rate (the quadratic
+``t (f + b) / 2 + t^2 (f - b) / 2`` on a straight path; :func:`clfx.fx.motion.path`), in
+the iteration and in the fill: a spinning object shears
 along its arcs.  With one half it is ``v t`` (today's straight paths; the note says which).
 
 The colour at ``q`` is read bilinearly.  Velocities are sanitised and

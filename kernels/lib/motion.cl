@@ -25,8 +25,9 @@
  * the layer seen through the gaps (Jimenez's foreground / background split).
  * With CURVED (both halves of the vector pass: forward f and backward b motion per pixel in a
  * second aux record, aux_b = (bx, by, z, |b|)), a point's displacement at time t is the
- * quadratic through its positions one frame before, at and after the frame time,
- * d(t) = t (f + b) / 2 + t^2 (f - b) / 2 (MB_PATH): x's own surface is sampled where x's
+ * circular arc through its positions one frame before, at and after the frame time, at a
+ * constant turn rate (MB_ARC; the quadratic t (f + b) / 2 + t^2 (f - b) / 2 on straight
+ * paths, where the turn rate is 0): x's own surface is sampled where x's
  * path was at -t, x + d(-t) (exact for a steady flow such as a turn), occluders along the
  * tile's dominant path, x - d_n(t) (a small object carried along one path), and a sample's
  * smear covers x where its own path passes within a pixel of x.
@@ -229,9 +230,32 @@ kernel void motion_neighbormax(global const float *tiles, global float *nmax,
 
 /* --- gather ----------------------------------------------------------------------------- */
 /* Displacement at time t (frames) of a point moving with forward f and backward b (px/frame):
- * the quadratic through -b (t = -1), 0 and f (t = 1); its time derivative. */
-#define MB_PATH(f, b, t) ((t) * 0.5f * ((f) + (b)) + (t) * (t) * 0.5f * ((f) - (b)))
-#define MB_TANGENT(f, b, t) (0.5f * ((f) + (b)) + (t) * ((f) - (b)))
+ * the circular arc through -b (t = -1), 0 and f (t = 1) at a constant turn rate w (mb_turn),
+ * d(t) = A(t) (f + b) / 2 + C(t) (f - b) / 2 with A = sin(w t) / sin(w) and
+ * C = sin^2(w t / 2) / sin^2(w / 2); on a straight path (w = 0) the quadratic A = t, C = t^2.
+ * MB_ARC_TANGENT: its time derivative.  Per component (x and y share w). */
+#define MB_MIN_TURN 1e-3f   /* rad/frame: below this the arc is the quadratic (float-exact) */
+#define MB_MAX_TURN 2.6f    /* rad/frame (149 deg): a faster turn is taken as this one */
+inline float4 mb_turn(const float4 fx, const float4 fy, const float4 bx, const float4 by)
+{
+  /* with s = f + b, e = f - b: turning at w about a centre, e is perpendicular to s and
+   * |e| / |s| = tan(w / 2); only e's part across s counts (a straight path that speeds up
+   * or slows down has e along s: w = 0) */
+  const float4 sx = fx + bx, sy = fy + by, ex = fx - bx, ey = fy - by;
+  return fmin(2.0f * atan2(fabs(sx * ey - sy * ex), sx * sx + sy * sy), MB_MAX_TURN);
+}
+inline float4 mb_arc_a(const float4 t, const float4 w)
+{ return select(t, sin(w * t) / sin(w), w > MB_MIN_TURN); }
+inline float4 mb_arc_c(const float4 t, const float4 w)
+{ const float4 r = sin(0.5f * w * t) / sin(0.5f * w); return select(t * t, r * r, w > MB_MIN_TURN); }
+inline float4 mb_arc_da(const float4 t, const float4 w)
+{ return select((float4)(1.0f), w * cos(w * t) / sin(w), w > MB_MIN_TURN); }
+inline float4 mb_arc_dc(const float4 t, const float4 w)
+{ const float4 h = sin(0.5f * w);
+  return select(2.0f * t, w * sin(w * t) / (2.0f * h * h), w > MB_MIN_TURN); }
+#define MB_ARC(f, b, t, w) (mb_arc_a(t, w) * 0.5f * ((f) + (b)) + mb_arc_c(t, w) * 0.5f * ((f) - (b)))
+#define MB_ARC_TANGENT(f, b, t, w) \
+  (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
 #define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
 
 /* Load the aux records of 4 sample positions (nearest pixel) as vectors. */
@@ -433,6 +457,10 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
   const int same_v = same_t && all(vxx == vxx.x) && all(vxy == vxy.x)
                      && all(bxx == bxx.x) && all(bxy == bxy.x);
   const float4 beta_n = (float4)(mb_beta(vn.z * (t1 - t0)));         /* along v_n */
+#if CURVED
+  const float4 wn = mb_turn((float4)(vn.x), (float4)(vn.y), (float4)(bn.x), (float4)(bn.y));
+  const float4 wx = mb_turn(vxx, vxy, bxx, bxy);       /* turn rates of the paths (MB_ARC) */
+#endif
   const float4 beta_x = (float4)(mb_beta(sqrt(vxx.x * vxx.x + vxy.x * vxy.x) * (t1 - t0)),
                                  mb_beta(sqrt(vxx.y * vxx.y + vxy.y * vxy.y) * (t1 - t0)),
                                  mb_beta(sqrt(vxx.z * vxx.z + vxy.z * vxy.z) * (t1 - t0)),
@@ -447,7 +475,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 #if CURVED
       /* an occluder moves along the path of the tile's fastest pixel: the one over x at
        * time t sits at x - d(t) at the frame time */
-      const float4 dx = MB_PATH(vn.x, bn.x, t), dy = MB_PATH(vn.y, bn.y, t);   /* d = x - y */
+      const float4 dx = MB_ARC(vn.x, bn.x, t, wn), dy = MB_ARC(vn.y, bn.y, t, wn);  /* d = x - y */
 #else
       const float4 dx = vn.x * t, dy = vn.y * t;             /* d = x - y */
 #endif
@@ -463,8 +491,9 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
        * passes x, which must lie in the shutter) and across it */
       float4 byx, byy, bz_, bs_;
       MB_LOAD_AUXB(ix, iy, byx, byy, bz_, bs_);
-      const float4 ex = dx - MB_PATH(vyx, byx, t), ey = dy - MB_PATH(vyy, byy, t);
-      const float4 gx = MB_TANGENT(vyx, byx, t), gy = MB_TANGENT(vyy, byy, t);
+      const float4 wy = mb_turn(vyx, vyy, byx, byy);
+      const float4 ex = dx - MB_ARC(vyx, byx, t, wy), ey = dy - MB_ARC(vyy, byy, t, wy);
+      const float4 gx = MB_ARC_TANGENT(vyx, byx, t, wy), gy = MB_ARC_TANGENT(vyy, byy, t, wy);
       const float4 st = sqrt(gx * gx + gy * gy);
       const float4 inv_st = 1.0f / fmax(st, MIN_SPEED);
       const float4 al = (ex * gx + ey * gy) * inv_st;
@@ -496,8 +525,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       /* the point of x's surface over x at time t came from where x's own path was at -t
        * (a steady flow, exact for turning and translating surfaces): y = x + d(-t); x - d(t)
        * would bend the other way */
-      const float4 px = lane + 0.5f + MB_PATH(vxx, bxx, -t);
-      const float4 py = fy + 0.5f + MB_PATH(vxy, bxy, -t);
+      const float4 px = lane + 0.5f + MB_ARC(vxx, bxx, -t, wx);
+      const float4 py = fy + 0.5f + MB_ARC(vxy, bxy, -t, wx);
 #else
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
@@ -583,4 +612,55 @@ kernel void motion_gather(global const float *col, global const float *aux,
   if(scale != 1.0f)
     out = clamp(out / scale, -FLT_MAX, FLT_MAX);
   vstore16(out, 0, dst + base * 4);
+}
+
+/* Colour at continuous position (px, py) (pixel i's centre at i + 0.5), bilinear, clamp to
+ * the edge. */
+inline float4 mb_bilinear(global const float *col, const int pitch, const int width,
+                          const int height, const float px, const float py)
+{
+  const float u = px - 0.5f, v = py - 0.5f;
+  const float fu = floor(u), fv = floor(v), a = u - fu, b = v - fv;
+  const int x0 = clamp((int)fu, 0, width - 1), x1 = clamp((int)fu + 1, 0, width - 1);
+  const int y0 = clamp((int)fv, 0, height - 1), y1 = clamp((int)fv + 1, 0, height - 1);
+  return (vload4((size_t)y0 * pitch + x0, col) * (1.0f - a) + vload4((size_t)y0 * pitch + x1, col) * a) * (1.0f - b)
+       + (vload4((size_t)y1 * pitch + x0, col) * (1.0f - a) + vload4((size_t)y1 * pitch + x1, col) * a) * b;
+}
+
+/* Tiles whose every smear is under a pixel (clfx/fx/motion.py TINY_MAX_PX) through a centred
+ * shutter [-T, T]: the average of the image along each pixel's own motion, to second order,
+ * I + (L^2 / 24) (I(x + u) + I(x - u) - 2 I(x)), L = |v| (t1 - t0) the smear, u the unit
+ * direction of v (the second difference across a pixel; error O(L^4)).  A sampled
+ * reconstruction (tent or cubic at fractions of a pixel) blurs fine texture by more than such
+ * a smear does; this keeps the input where nothing moves and never blurs more than the
+ * motion.  Same tile table and work layout as motion_gather (4 pixels per work-item). */
+kernel void motion_tiny(global const float *col, global const float *aux,
+                        global const int *tiles, const int ntiles, global float *dst,
+                        const int pitch, const int width, const int height, const int k,
+                        const float t0, const float t1)
+{
+  const int gid = get_global_id(0);
+  const int qpt = k * k / 4;
+  const int tile = gid / qpt;
+  if(tile >= ntiles) return;
+  const int r = gid - tile * qpt, qrow = k / 4;
+  const int x = tiles[4 * tile] * k + (r % qrow) * 4, y = tiles[4 * tile + 1] * k + r / qrow;
+  if(y >= height) return;
+  for(int l = 0; l < 4; l++)
+  {
+    const int xi = x + l;
+    if(xi >= width) break;
+    const size_t i = (size_t)y * pitch + xi;
+    const float4 a = vload4(i, aux), c = vload4(i, col);
+    const float len = a.w * (t1 - t0);
+    float4 o = c;
+    if(len >= MIN_BLUR)
+    {
+      const float ux = a.x / a.w, uy = a.y / a.w, px = (float)xi + 0.5f, py = (float)y + 0.5f;
+      const float4 sum = mb_bilinear(col, pitch, width, height, px + ux, py + uy)
+                       + mb_bilinear(col, pitch, width, height, px - ux, py - uy);
+      o = c + (len * len / 24.0f) * (sum - 2.0f * c);
+    }
+    vstore4(o, i, dst);
+  }
 }

@@ -5,6 +5,9 @@ import math
 
 import numpy as np
 
+from clfx.fx.motion import path as arc
+
+
 BIG_DEPTH = 1e30
 TOL = 0.5
 SOFT_Z = 0.02
@@ -120,8 +123,7 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
         """Displacement by t of the point at q moving with f (and, curved, its backward)."""
         if auxb is None:
             return f * tt
-        b = _nearest(auxb, q)[..., :2]
-        return tt * 0.5 * (f + b) + tt * tt * 0.5 * (f - b)
+        return arc(f, _nearest(auxb, q)[..., :2], tt)
 
     k = tile_size(shift)
     nbr = tile_candidates(aux, k, depth is not None)
@@ -167,7 +169,7 @@ def rolling_shutter(src, velocity, depth=None, *, readout, direction="top-down",
     bgo = (np.hypot(*(vo - vb).transpose(2, 0, 1)) * tabs <= TOL)[..., None]
     vo = np.where(bgo, nb[..., 0, :], vo)       # the tile's fastest: no backward motion
     bo = np.where(bgo, nb[..., 0, :], bo)
-    q1 = p - tt * 0.5 * (vo + bo) - tt * tt * 0.5 * (vo - bo)
+    q1 = p - arc(vo, bo, tt)
     qb[hole] = q1[hole]
     if max_search > 0:
         dv = vo - vb

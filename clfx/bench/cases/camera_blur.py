@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.motion_blur import NAIVE_LABEL, line_blur_per_pixel
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
@@ -101,5 +102,18 @@ def naive(case: dict, params, ctx) -> np.ndarray:
     return line_blur_per_pixel(np.asarray(case["source"], np.float32), vel, t0, t1)
 
 
+def cycles_params() -> dict:
+    """camera_blur's parameters of the Cycles scenes' camera moves: ``truck`` (the truck) and
+    ``pan`` (the pan, trucking the other way at half the speed)."""
+    f_px = cycles.FOCAL_MM / cycles.SENSOR_MM * cycles.WIDTH
+    diag = math.hypot(cycles.WIDTH, cycles.HEIGHT)
+    truck = cycles.truck_m_per_frame()
+    return {"truck": dict(length=0.0, roll=0.0, truck=(truck, 0.0)),
+            "pan": dict(length=f_px * math.radians(cycles.PAN_DEG) / diag, direction=180.0,
+                        roll=0.0, truck=(-0.5 * truck, 0.0))}
+
+
 CASE = Case(make=make,
-            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)))
+            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)),
+            variants={f"cycles_{k}": cycles.maker(k, params=p, velocity=False)
+                      for k, p in cycles_params().items() if cycles.available(k)})

@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, moving_scene, render_sharp
@@ -234,5 +235,10 @@ def naive(case: dict, params, ctx) -> np.ndarray:
                                np.asarray(case["velocity"], np.float32), t0, t1)
 
 
+CYCLES_SCENES = ("spin", "truck", "pan", "crossing", "slow")
+"""Scenes rendered by Blender Cycles (:mod:`clfx.bench.cycles`), each a variant
+``cycles_<name>`` scored against Cycles' own motion blur, Blender's Vector Blur beside."""
+
 CASE = Case(make=make_layers,
-            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)))
+            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)),
+            variants=cycles.variants(CYCLES_SCENES))

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clfx.bench import cycles
 from clfx.bench.cases import Case
 from clfx.bench.scene import Layer, Scene, Texture, render_rows, render_sharp
 from clfx.core.camera import Camera
@@ -121,4 +122,6 @@ def peers(case, params, ctx):
     }
 
 
-CASE = Case(make=make, peers=peers)
+CASE = Case(make=make, peers=peers,
+            variants={"cycles_truck": cycles.maker("truck_rolling", params=PARAMS)}
+            if cycles.available("truck_rolling") else {})

@@ -1,0 +1,161 @@
+"""Bench cases rendered by Blender Cycles: a real path tracer's motion blur as the truth.
+
+The scenes are made by :mod:`clfx.bench.cycles.render_scenes` (run with ``bpy``, Python
+3.13; the ``cycles`` bench extra, not needed by the tests) and packed by
+``python -m clfx.bench.cycles.pack RENDER_DIR`` into ``data/`` here, two files per scene
+(320x180, half float, ZIP; 2.78 MB in all: textured frames do not compress far losslessly):
+
+- ``<name>.exr``: the sharp frame as Blender writes it, one part with Blender's multilayer
+  names: ``ViewLayer.Combined.RGBA``, ``ViewLayer.Depth.Z`` (float), ``ViewLayer.Vector.XYZW``
+  (both halves of the vector pass: XY previous - current, ZW current - next, pixels, y-up).
+  It is read through clfx's own EXR reader (:func:`clfx.io.read.read_frame`), so the bench
+  sees the passes as a user's Blender render gives them;
+- ``<name>.ref.exr``: ``truth.RGB``, the frame rendered with Cycles' motion blur (180 degree
+  shutter centred on the frame; ``truck_rolling``: Cycles' rolling shutter), seed 1, and
+  ``vectorblur.RGB``, Blender's compositor Vector Blur node of the sharp frame's passes
+  (shutter 0.5, 32 samples), the peer row.
+
+The same frame rendered with seed 2 scores ``log-PSNR(seed 2, truth)`` against it: the
+truth's own noise floor (no method can be shown to score above it), stored in the header
+and printed beside every Cycles case (:func:`noise_floor`).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parent / "data"
+
+WIDTH, HEIGHT = 320, 180
+FOCAL_MM, SENSOR_MM = 50.0, 36.0
+
+PEER_LABEL = "Blender Vector Blur (compositor, 32 samples)"
+
+SCENES = {
+    "spin": "a wheel spinning 72 deg/frame with a rim light, a propeller turning 60 deg/frame, "
+            "a box moving 40 px/frame",
+    "truck": "the camera trucking sideways past posts at 2.5-10 m over a wall at 20 m "
+             "(parallax: 40 to 5 px/frame)",
+    "pan": "the camera panning 2.5 deg/frame while trucking the other way (parallax in a pan)",
+    "crossing": "a near card (3 m, 36 px/frame) crossing a far disk (8 m, -22 px/frame)",
+    "slow": "fine stripes, grain and a 2.5 px checker moving 1-3 px/frame",
+    "truck_rolling": "the truck through a rolling shutter (top first, 0.75 frame readout)",
+}
+"""Every scene, in a few words (render_scenes.py has the exact set-up)."""
+
+PAN_DEG = 2.5
+"""The pan: degrees per frame (render_scenes.PAN_DEG)."""
+
+TRUCK_PX_AT_2_5_M = 40.0
+"""The truck: the post at 2.5 m moves this many px/frame (render_scenes.TRUCK_M)."""
+
+
+FLOOR_ATTRIBUTE = "clfx:noise_floor_log_psnr"
+"""Header attribute of ``<name>.ref.exr``: log-PSNR of the seed-2 render against the truth."""
+
+
+def base_scene(name: str) -> str:
+    """The scene whose sharp frame ``name`` uses (``truck_rolling``: ``truck``)."""
+    return name[: -len("_rolling")] if name.endswith("_rolling") else name
+
+
+def files(name: str) -> tuple[Path, Path]:
+    """(sharp frame, references) of scene ``name``."""
+    return DATA / f"{base_scene(name)}.exr", DATA / f"{name}.ref.exr"
+
+
+def available(name: str) -> bool:
+    return all(p.exists() for p in files(name))
+
+
+def _read_layers(path: Path) -> tuple[dict[str, np.ndarray], dict]:
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"cannot open {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        floor = spec.getattribute(FLOOR_ATTRIBUTE)
+    finally:
+        inp.close()
+    out: dict[str, list] = {}
+    for i, name in enumerate(spec.channelnames):
+        layer, _, _ = name.rpartition(".")
+        out.setdefault(layer, []).append(data[..., i])
+    return ({k: np.stack(v, -1).astype(np.float32) for k, v in out.items()},
+            {"floor": None if floor is None else float(floor)})
+
+
+@lru_cache(maxsize=None)
+def load(name: str) -> dict:
+    """The scene's sharp frame (through clfx's reader), truth, its noise floor and
+    Blender's Vector Blur (where rendered)."""
+    from clfx.io.read import read_frame
+
+    sharp, ref = files(name)
+    frame = read_frame(str(sharp))
+    layers, attrs = _read_layers(ref)
+    alpha = np.ones(layers["truth"].shape[:2] + (1,), np.float32)
+    rgba = {k: np.concatenate([v[..., :3], alpha], -1) for k, v in layers.items()}
+    return dict(source=np.ascontiguousarray(frame.rgba, np.float32),
+                depth=frame.depth, velocity=frame.velocity, velocity_back=frame.velocity_back,
+                truth=rgba["truth"], truth2=rgba.get("truth2"),
+                vector_blur=rgba.get("vectorblur"), floor=attrs["floor"])
+
+
+def noise_floor(name: str) -> float | None:
+    """log-PSNR of the second seed's render against the truth (None: rendered once)."""
+    return load(name)["floor"]
+
+
+def camera():
+    from clfx.core.camera import Camera
+
+    return Camera(focal_length=FOCAL_MM, sensor_width=SENSOR_MM, shutter_angle=180.0,
+                  shutter_offset="centered")
+
+
+def truck_m_per_frame() -> float:
+    """The truck's speed in metres per frame (the nearest post, 2.5 m, moves 40 px/frame)."""
+    f_px = FOCAL_MM / SENSOR_MM * WIDTH
+    return TRUCK_PX_AT_2_5_M * 2.5 / f_px
+
+
+def case(name: str, *, params: dict | None = None, velocity: bool = True) -> dict:
+    """A bench case dict of scene ``name`` (the :class:`clfx.bench.cases.Case` protocol) with
+    ``truth_floor`` and Blender's Vector Blur as ``peer_images``."""
+    d = load(name)
+    out = dict(source=d["source"], depth=d["depth"],
+               velocity=d["velocity"] if velocity else None,
+               velocity_back=d["velocity_back"] if velocity else None,
+               params=dict(params or {}), camera=camera(), truth=d["truth"],
+               truth_floor=noise_floor(name), scene=f"cycles:{name}")
+    if d.get("vector_blur") is not None:
+        out["peer_images"] = {PEER_LABEL: d["vector_blur"]}
+    return out
+
+
+def maker(name: str, **kw):
+    """A ``make(width, height, rng)`` of scene ``name`` (always 320x180: the renders are)."""
+    def make(width: int, height: int, rng=None, **_):
+        if not available(name):
+            raise FileNotFoundError(f"Cycles bench data for {name!r} is missing under {DATA} "
+                                    "(re-make it: clfx/bench/cycles/render_scenes.py)")
+        return case(name, **kw)
+    make.__doc__ = f"Cycles scene {name!r}: {SCENES[name]} (320x180, rendered truth)."
+    make.cached = False     # read from files: the bench's case cache is not needed
+    return make
+
+
+def variants(names, **kw) -> dict:
+    """``{"cycles_<name>": make}`` for the scenes whose data is present."""
+    return {f"cycles_{n}": maker(n, **kw) for n in names if available(n)}
+
+
+def data_files() -> list[Path]:
+    """Every data file (their bytes key the bench's case cache)."""
+    return sorted(DATA.glob("*.exr")) if DATA.exists() else []
