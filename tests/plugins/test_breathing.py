@@ -292,3 +292,21 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality, ca
     assert asked and asked[-1] >= src.nbytes
     assert np.array_equal(streamed, plain)
     assert built_with_streaming(rt, "breathing.cl")
+
+
+@pytest.mark.parametrize("amount", [1.0, -1.0])
+def test_tight_window_gives_the_full_frame_pixels(rt, rng, amount):
+    """An element in its own data window gives the pixels it gives placed in a full-frame
+    window (zooming in grows the window; out keeps it)."""
+    from tests.plugins.windows import element, tight_and_full
+
+    display, data = Rect(0, 0, 96, 64), Rect(50, 30, 90, 60)
+    camera, setup = Camera(focal_length=50.0, focus_distance=0.6), Camera(focal_length=50.0,
+                                                                           focus_distance=3.0)
+    p = Breathing.params(amount=amount)
+    tight, full, window = tight_and_full(rt, Breathing(), p, element(rng, data), data,
+                                         display, camera=camera, reference_camera=setup,
+                                         quality="final")
+    # the same affine map from other window origins (float32 positions): values <= 4
+    np.testing.assert_allclose(tight, full, rtol=0, atol=1e-5)
+    assert (window != data) == (amount > 0)
