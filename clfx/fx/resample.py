@@ -694,3 +694,134 @@ def elliptical_map(rt, sx, sy, jac, pitch: int):
     host[h:, :, 6] = 1.0
     host[:, w:, 6] = 1.0
     return rt.to_device(host)
+
+
+# -- the window a warp renders over -----------------------------------------------------------
+WARP_REACH_TEXELS = 4
+"""How far past a texel a warp's filters read it (Lanczos-3's 3 taps, rounded up): a source
+window grown by this many texels before it is mapped bounds where its pixels can land."""
+
+
+def warp_frame(ctx):
+    """The frame a warp's ``border`` rule applies at: the display window, or the data window
+    where it is larger (overscan).  Inside it, pixels outside the data window are
+    transparent black (an element's bounding box), not an edge to repeat."""
+    return ctx.source.window.union(ctx.display_window)
+
+
+def bounding_rect(xs, ys, margin: int, fallback):
+    """The pixels covering the finite points ``(xs, ys)`` (frame coordinates), grown by
+    ``margin``; ``fallback`` when none is finite."""
+    xs, ys = np.asarray(xs, np.float64), np.asarray(ys, np.float64)
+    ok = np.isfinite(xs) & np.isfinite(ys)
+    if not ok.any():
+        return fallback
+    rect = type(fallback)
+    return rect(math.floor(xs[ok].min()) - margin, math.floor(ys[ok].min()) - margin,
+                math.ceil(xs[ok].max()) + margin, math.ceil(ys[ok].max()) + margin)
+
+
+def warp_region(forward, ctx, border: str, margin: int = 2, reach: int = 0):
+    """Region of definition of a warp whose source points land at ``forward(xs, ys)`` (frame
+    coordinates; a list of ``(xs, ys)``, one per channel that moves differently).
+
+    The data window, grown by the filters' reach (``WARP_REACH_TEXELS``, plus ``reach``
+    texels where footprints widen), has its outline mapped: the maps here are radial and
+    monotonic, so the outline's image bounds the whole window's; the data window itself
+    stays (an image that shrinks keeps its window).  ``margin`` output pixels cover the sampling of the outline and the
+    footprints' sub-samples.  ``border``: with ``edge`` where the data window reaches the
+    frame's edge (``warp_frame``), or ``mirror``, points read past the frame bring its edge
+    in anywhere: the frame is added."""
+    src = ctx.source.window
+    if src.empty:
+        return src
+    xs, ys = rect_boundary(src.grown(WARP_REACH_TEXELS + max(int(reach), 0)), 512)
+    rod = src           # the data window stays (a shrinking image keeps its window)
+    for fx, fy in forward(xs, ys):
+        rod = rod.union(bounding_rect(fx, fy, margin, src))
+    frame = warp_frame(ctx)
+    if border == "mirror" or (border == "edge" and not _inside(src, frame)):
+        rod = rod.union(frame)
+    return rod
+
+
+def warp_interest(inverse, window, reach: int):
+    """Region of interest of a warp: the source points ``inverse(xs, ys)`` (a list of
+    ``(xs, ys)`` per channel) of ``window``'s outline, bounded and grown by ``reach``
+    texels, with ``window`` itself."""
+    if window.empty:
+        return window
+    xs, ys = rect_boundary(window, 512)
+    roi = window
+    for sx, sy in inverse(xs, ys):
+        roi = roi.union(bounding_rect(sx, sy, reach, window))
+    return roi
+
+
+def _inside(rect, frame) -> bool:
+    """``rect`` lies strictly inside ``frame`` (touches none of its edges)."""
+    return (rect.x0 > frame.x0 and rect.y0 > frame.y0 and rect.x1 < frame.x1
+            and rect.y1 < frame.y1)
+
+
+def warp_canvas(plugin, p, ctx, border: str):
+    """``(canvas, out)``: the window a warp renders over and the one it returns.
+
+    ``out`` is ``plugin.output_window`` (the data window grown to where its content lands,
+    within the output limit).  The canvas is ``out`` with a black border; with ``edge`` or
+    ``mirror`` it also covers the frame (``warp_frame``), so the rule applies at the frame's
+    edge and never at a data window smaller than the frame.  ``edge`` with a data window
+    strictly inside the frame needs only a transparent pixel around it: the frame's edge is
+    transparent there, and so is the canvas's."""
+    out = plugin.output_window(p, ctx)
+    src, frame = ctx.source.window, warp_frame(ctx)
+    if border == "black":
+        return out, out
+    if border == "edge" and _inside(src, frame):
+        return out.union(src.grown(1)), out
+    return out.union(frame), out
+
+
+def warp_source(rt, ctx, canvas, border: str):
+    """The source on ``canvas``: transparent black inside the frame where the data window
+    does not reach; past the frame the edge repeated (``edge``) or black."""
+    src, frame = ctx.source, warp_frame(ctx)
+    if border == "black" or canvas == frame or _inside(src.window, frame):
+        return rt.reframe(src, canvas, "zero")
+    return rt.reframe(rt.reframe(src, frame, "zero"), canvas,
+                      "clamp" if border == "edge" else "zero")
+
+
+def canvas_stand_in(window):
+    """A source with ``window``'s geometry and no pixels (a look's `prepare`), for building
+    the maps of a warp's canvas ahead of the frame."""
+    from types import SimpleNamespace
+
+    from clfx.device.runtime import ALIGN_PX
+
+    return SimpleNamespace(window=window, channels=4, width=window.width,
+                           height=window.height,
+                           pitch=max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX))
+
+
+def on_canvas(plugin, rt, p, ctx, border: str, render):
+    """Render a warp over its canvas (`warp_canvas`): ``render(canvas_ctx, sanitise)`` sees
+    a context whose source is the frame on the canvas (its maps are built for the canvas's
+    pixels and cached under its window); the result is cut to the output window.
+    ``sanitise``: the frame has non-finite pixels (asked of the frame's own analysis)."""
+    name = plugin.descriptor.name
+    sanitise = needs_sanitising(ctx, name)
+    canvas, out = warp_canvas(plugin, p, ctx, border)
+    if canvas == ctx.source.window:
+        img = render(ctx, sanitise)
+    else:
+        img = render(ctx.with_source(warp_source(rt, ctx, canvas, border)), sanitise)
+    return rt.reframe(img, out, "zero")
+
+
+def canvas_context(plugin, p, ctx, border: str):
+    """``ctx`` over a stand-in of the warp's canvas (for `Plugin.prepare`)."""
+    canvas, _ = warp_canvas(plugin, p, ctx, border)
+    if canvas == ctx.source.window:
+        return ctx
+    return ctx.with_source(canvas_stand_in(canvas))

@@ -29,7 +29,11 @@ Rendering
 centre, moved by ``center``).  Scaling up (m > 1) crops; scaling down (m < 1) needs pixels
 outside the frame: the data window's overscan beyond the display window is used where the
 input has it; beyond the rendered pixels the edge is repeated, and one warning line says by
-how much the frame widened past them.  The map is affine, so its Jacobian is ``(1 / m) I``
+how much the frame widened past them.  Inside the display window, pixels outside the data
+window (an element's bounding box) are transparent black.  The output window is the data
+window's image (``region_of_definition``, grown by the filter's reach) with the data window:
+an element scaled up grows past its box, one scaled down towards a centre outside its box
+moves past the box's edge facing the centre.  The map is affine, so its Jacobian is ``(1 / m) I``
 everywhere: the shared footprint filters (``clfx.fx.resample``, ``kernels/lib/resample.h``)
 widen by the variance a minified pixel's preimage adds, the same for every pixel, and the
 kernel computes each source point itself (nothing is built per frame while the focus moves).
@@ -168,13 +172,13 @@ class Breathing(Plugin):
                     math.ceil(x1 - eps) + reach, math.ceil(y1 - eps) + reach)
 
     def region_of_definition(self, p, ctx):
-        # Scaling up carries the data window's content outward (a data window inside the
-        # display window grows); the filter's reach is ~4 texels, m px each on the output.
+        # Scaling carries the data window's content along rays from the optical centre:
+        # outward when m > 1 (a data window inside the display window grows), inward when
+        # m < 1, where a box beside the centre moves past its own edge that faces it.  The
+        # filter's reach is ~4 texels, m px each on the output (at least a pixel's).
         m, _ = self.scale(p, ctx)
         src = ctx.source.window
-        if m <= 1.0 + IDENTITY_TOL:
-            return src
-        return src.union(self._mapped(p, ctx, src, m, math.ceil(4 * m) + 1))
+        return src.union(self._mapped(p, ctx, src, m, math.ceil(4 * max(m, 1.0)) + 1))
 
     def region_of_interest(self, p, ctx, window):
         m, _ = self.scale(p, ctx)

@@ -53,9 +53,9 @@ import numpy as np
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
 from clfx.fx import spectral
 from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, band_window,
-                              check_fold, fold_radius, frame_key, kernel_defines,
-                              launch_packed, lut_lookup, needs_sanitising, pixel_centres,
-                              radial_lut)
+                              canvas_context, check_fold, fold_radius, frame_key,
+                              kernel_defines, launch_packed, lut_lookup, on_canvas,
+                              pixel_centres, radial_lut, warp_region)
 from clfx.host import Plugin, register
 
 LAMBDA_MIN, LAMBDA_MAX = 380.0, 720.0
@@ -150,6 +150,22 @@ def geometry(p, display_window, window, pixel_aspect):
     return cx, cy, unit, max(r_max, 1e-9)
 
 
+def forward_points(p, display_window, pixel_aspect, sx, sy, rgb_to_xyz=None):
+    """Where the output shows the source points ``(sx, sy)`` (frame coordinates) at the
+    band's two ends, 380 and 720 nm: ``[(x, y), (x, y)]``.  The image of a point moves
+    along its ray monotonically with the wavelength's delta, so every wavelength lands
+    between these two."""
+    cx, cy, unit, _ = geometry(p, display_window, display_window, pixel_aspect)
+    dx, dy = sx - cx, sy - cy
+    r2 = ((dx * pixel_aspect) ** 2 + dy * dy) / (unit * unit)
+    out = []
+    for lam in (LAMBDA_MIN, LAMBDA_MAX):
+        m = 1.0 + float(dispersion(np.float64(lam), p.amount, rgb_to_xyz)) * (
+            (1.0 - p.cubic) + p.cubic * r2)
+        out.append((cx + dx * m, cy + dy * m))
+    return out
+
+
 def radial_model(delta, cubic):
     fwd = lambda r: r * (1 + delta * ((1 - cubic) + cubic * r * r))
     der = lambda r: 1 + delta * (1 - cubic) + 3 * delta * cubic * r * r
@@ -206,10 +222,30 @@ class ChromaticAberration(Plugin):
                       hint="Integrate N wavelengths (smooth rainbow fringes); false = three "
                            "offset channels at every quality."),
             ChoiceParam("border", "edge", choices=BORDERS,
-                        hint="What reads outside the source return: black, edge (clamp), mirror."),
+                        hint="What reads outside the frame (display window) return: black, edge "
+                             "(clamp), mirror; inside the frame, outside the data window is "
+                             "transparent black."),
         ),
         quality=LEVELS,
     )
+
+    def region_of_definition(self, p, ctx):
+        # every wavelength's image of the data window (the bins' centres lie in 380-720 nm)
+        return warp_region(lambda xs, ys: forward_points(p, ctx.display_window,
+                                                         ctx.pixel_aspect, xs, ys,
+                                                         ctx.rgb_to_xyz), ctx, p.border)
+
+    def region_of_interest(self, p, ctx, window):
+        # a pixel reads c + v S with |S - 1| <= |m - 1| / (1 - |m - 1|) of the band's ends
+        # (m at the window's corners: the scale grows with the radius)
+        cx, cy = geometry(p, ctx.display_window, window, ctx.pixel_aspect)[:2]
+        xs = np.array([window.x0, window.x1, window.x0, window.x1], np.float64)
+        ys = np.array([window.y0, window.y0, window.y1, window.y1], np.float64)
+        far = np.hypot(xs - cx, ys - cy)
+        dev = max(float((np.hypot(x - xs, y - ys) / np.maximum(far, 1.0)).max())
+                  for x, y in forward_points(p, ctx.display_window, ctx.pixel_aspect, xs, ys,
+                                             ctx.rgb_to_xyz))
+        return window.grown(math.ceil(far.max() * dev / max(1.0 - dev, 1e-3)) + 4)
 
     def packed_maps(self, rt, p, ctx):
         """Three-bin float levels: the red and blue bins' source points as a packed map on
@@ -256,6 +292,7 @@ class ChromaticAberration(Plugin):
     def prepare(self, rt, p, ctx):
         if self.is_identity(p, ctx):
             return
+        ctx = canvas_context(self, p, ctx, p.border)
         lvl = self.level(ctx)
         n = lvl.wavelengths if p.spectral else 3
         double = rt.use_fp64(lvl.fp64)
@@ -265,18 +302,21 @@ class ChromaticAberration(Plugin):
             self.tables(rt, p, ctx, n, double)
 
     def render(self, rt, p, ctx):
-        # the spectral model is defined in linear Rec.709; other working spaces are carried
-        # into it and back (clfx.fx.spectral.in_reference_basis)
-        return spectral.in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
+        # over the window the data window's content lands in (`on_canvas`); the spectral
+        # model is defined in linear Rec.709; other working spaces are carried into it and
+        # back (clfx.fx.spectral.in_reference_basis)
+        return on_canvas(self, rt, p, ctx, p.border, lambda c, sanitise: (
+            spectral.in_reference_basis(
+                rt, c, lambda cc: self.render_reference(rt, p, cc, sanitise))))
 
-    def render_reference(self, rt, p, ctx):
-        """The effect on pixels in the reference basis (linear Rec.709)."""
+    def render_reference(self, rt, p, ctx, sanitise=True):
+        """The effect on pixels in the reference basis (linear Rec.709), over
+        ``ctx.source``'s window; ``sanitise``: the frame has non-finite pixels."""
         src = ctx.source
         lvl = self.level(ctx)
         n = lvl.wavelengths if p.spectral else 3
         double = rt.use_fp64(lvl.fp64)
-        defines = kernel_defines(lvl.filter, p.border,
-                                 needs_sanitising(ctx, "chromatic_aberration"))
+        defines = kernel_defines(lvl.filter, p.border, sanitise)
         defines.update(NWAVE=n, NWP=padded_count(n), LUTN=LUT_SIZE, GREEN_IN_PLACE=int(n == 3))
         dst = src.like()
         i32 = np.int32

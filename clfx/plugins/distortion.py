@@ -42,7 +42,16 @@ corner, so the corner moves by ``amount`` of its radius.
 Parameters whose radial map folds over (d r_d / d r_u <= 0) inside the frame are refused
 with a ParamError: a real lens images each point once, and a folded map has two answers.
 Output points beyond the largest radius the lens reaches have no source and are transparent;
-points whose source lies outside the source image are filled by ``border``.
+points whose source lies outside the frame (the display window, or the data window where it
+is larger) are filled by ``border`` at the frame's edge.  Inside the frame, pixels outside
+the data window (an element's tight bounding box) are transparent black, never an edge to
+repeat.
+
+Windows: the output covers where the data window's content lands (``region_of_definition``:
+the data window's outline, grown by the filters' reach, mapped forward), within the output
+limit, so a magnified element grows its window instead of being cut at it; a window whose
+content shrinks (barrel, fit) keeps the data window.  The map is built for that window's
+pixels (``clfx.fx.resample.on_canvas``).
 
 ``fit``: ``none`` keeps the scale; ``fit-all`` scales the output so the whole source frame
 stays visible (its imaged outline touches the frame); ``fill`` so that no output pixel reads
@@ -58,10 +67,11 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, FootprintMap, ResampleLevel, band_window, check_fold,
-                              elliptical_map, fit_scale, fold_radius, footprint_defines,
-                              frame_key, launch_footprint, map_bands, needs_sanitising,
-                              pixel_centres, rect_boundary)
+from clfx.fx.resample import (BORDERS, FootprintMap, ResampleLevel, band_window, canvas_context,
+                              check_fold, elliptical_map, fit_scale, fold_radius,
+                              footprint_defines, frame_key, launch_footprint, map_bands,
+                              on_canvas, pixel_centres, rect_boundary, WARP_REACH_TEXELS,
+                              warp_frame, warp_interest, warp_region)
 from clfx.host import Plugin, register
 
 NEWTON_STEPS = 8
@@ -238,6 +248,28 @@ def _points(g, ox, oy, jacobian):
     return xu * fx + cx, yu * fy + cy
 
 
+def forward_points(g, sx, sy):
+    """Where the output shows the source points ``(sx, sy)`` (frame coordinates): the
+    model's projection, scaled by the fit about the principal point (the map's inverse)."""
+    fx, fy, cx, cy, s_fit = g["fx"], g["fy"], g["cx"], g["cy"], g["fit_scale"]
+    xd, yd = project((sx - cx) / fx, (sy - cy) / fy, g["k"])
+    return cx + xd * fx / s_fit, cy + yd * fy / s_fit
+
+
+def _widest(g, rect, n: int = 33) -> float:
+    """The largest |J| (2-norm, texels per output pixel) of the map over ``rect``: its
+    outline and an n x n grid (compression grows with the radius up to a fold, so the
+    outline holds the maximum of the models accepted here; the grid covers the others)."""
+    if rect.empty:
+        return 1.0
+    bx, by = rect_boundary(rect, 256)
+    gx, gy = np.meshgrid(np.linspace(rect.x0, rect.x1, n), np.linspace(rect.y0, rect.y1, n))
+    _, _, jac = _points(g, np.concatenate([bx, gx.ravel()]), np.concatenate([by, gy.ravel()]),
+                        True)
+    norms = np.linalg.norm(np.nan_to_num(jac), ord=2, axis=(-2, -1))
+    return max(float(norms.max(initial=0.0)), 1.0)
+
+
 def build_map(p, camera, display_window, window, pixel_aspect, *, name="distortion",
               jacobian=False):
     """Source points (frame coordinates, float64) for the pixel centres of ``window``.
@@ -298,8 +330,9 @@ class Distortion(Plugin):
                         hint="none; fit-all = the whole source stays visible; fill = no "
                              "undefined border."),
             ChoiceParam("border", "black", choices=BORDERS,
-                        hint="What points outside the source read: black (transparent), edge "
-                             "(clamp), mirror."),
+                        hint="What points outside the frame (display window) read: black "
+                             "(transparent), edge (clamp), mirror; inside the frame, outside "
+                             "the data window is transparent black."),
         ),
         quality=LEVELS,
     )
@@ -308,6 +341,28 @@ class Distortion(Plugin):
         if p.amount == 0.0 and p.k1 == p.k2 == p.k3 == p.p1 == p.p2 == 0.0:
             return "amount and all coefficients (k1, k2, k3, p1, p2) are 0"
         return None
+
+    def geometry(self, p, ctx):
+        return _geometry(p, ctx.camera, ctx.display_window, ctx.source.window,
+                         ctx.pixel_aspect, "distortion")
+
+    def region_of_definition(self, p, ctx):
+        # Output pixels read up to ~0.75 |J| + 4 texels from their source points (footprints
+        # widen where the lens compresses: |J| = 50 near a strong barrel's fold), so the data
+        # window grown by that, mapped forward, bounds where its content lands.
+        g = self.geometry(p, ctx)
+        widest = _widest(g, ctx.source.window.union(ctx.output_limit))
+        reach = math.ceil(0.75 * widest) + WARP_REACH_TEXELS - 4
+        if corner_radius(ctx.source.window.grown(reach + 4), g["fx"], g["fy"], g["cx"],
+                         g["cy"]) >= g["r_fold"]:
+            return ctx.source.window.union(warp_frame(ctx))   # near the fold: anywhere
+        return warp_region(lambda xs, ys: [forward_points(g, xs, ys)], ctx, p.border,
+                           reach=reach)
+
+    def region_of_interest(self, p, ctx, window):
+        g = self.geometry(p, ctx)
+        return warp_interest(lambda x, y: [_points(g, x, y, False)], window,
+                             4 + math.ceil(0.75 * _widest(g, window)))
 
     def host_map(self, rt, p, ctx):
         """The float64 source points of ``ctx.source``'s pixels (source-window coordinates,
@@ -343,7 +398,8 @@ class Distortion(Plugin):
     def prepare(self, rt, p, ctx):
         if not self.is_identity(p, ctx):
             lvl = self.level(ctx)
-            self.device_map(rt, p, ctx, lvl.filter, rt.use_fp64(lvl.fp64))
+            self.device_map(rt, p, canvas_context(self, p, ctx, p.border), lvl.filter,
+                            rt.use_fp64(lvl.fp64))
 
     def banded_map(self, rt, p, ctx, filter_name):
         """A frame larger than one band (``clfx.fx.resample.map_bands``): the footprint map
@@ -367,6 +423,11 @@ class Distortion(Plugin):
         return dmap, info
 
     def render(self, rt, p, ctx):
+        return on_canvas(self, rt, p, ctx, p.border,
+                         lambda c, sanitise: self.render_canvas(rt, p, c, sanitise))
+
+    def render_canvas(self, rt, p, ctx, sanitise):
+        """The warp over ``ctx.source``'s window (the canvas: `on_canvas`)."""
         src = ctx.source
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
@@ -374,7 +435,7 @@ class Distortion(Plugin):
         if info["no_source"]:
             ctx.notes.append(f"distortion: {info['no_source']} px beyond the lens's reach "
                              f"left transparent")
-        defines = footprint_defines(lvl.filter, p.border, needs_sanitising(ctx, "distortion"))
+        defines = footprint_defines(lvl.filter, p.border, sanitise)
         dst = src.like()
         if not double:
             defines["CLFX_STREAM_STORES"] = int(rt.streams_stores(dst.nbytes))

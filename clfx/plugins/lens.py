@@ -38,10 +38,10 @@ from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
 from clfx.fx import lensdb
 from clfx.fx.resample import (BORDERS, DevicePackedMap, PackedMap, ResampleLevel, band_window,
-                              check_fold, fit_scale, fold_radius, frame_key, kernel_defines,
-                              launch_packed, lut_lookup, map_bands, needs_sanitising, pixel_centres,
-                              radial_inverse, radial_inverse_fast, radial_lut, rect_boundary,
-                              upload_map)
+                              canvas_context, check_fold, fit_scale, fold_radius, frame_key,
+                              kernel_defines, launch_packed, lut_lookup, map_bands, on_canvas,
+                              pixel_centres, radial_inverse, radial_inverse_fast, radial_lut,
+                              rect_boundary, upload_map, warp_interest, warp_region)
 from clfx.host import Plugin, register
 
 LUT_SIZE = 1024
@@ -92,8 +92,10 @@ def settings(p, camera):
     return focal, aperture, distance
 
 
-def simulation_geometry(cal, norm, display_window, window, fit="none", distortion=True):
-    """Green source points (frame coordinates) for ``window``'s pixel centres, and info.
+def simulation_geometry(cal, norm, display_window, window, fit="none", distortion=True,
+                        points=None):
+    """Green source points (frame coordinates) for ``window``'s pixel centres (or for the
+    output ``points`` (xs, ys), frame coordinates), and info.
 
     lensfun works in pixel-index coordinates of the display window (centres at integers):
     p = u - 0.5 - origin.  Returns ``(sx, sy, info)`` with sx = NaN where no source exists;
@@ -101,7 +103,7 @@ def simulation_geometry(cal, norm, display_window, window, fit="none", distortio
     """
     ox0, oy0 = display_window.x0 + 0.5, display_window.y0 + 0.5
     ccx, ccy = norm.center_x + ox0, norm.center_y + oy0          # centre, frame coordinates
-    ux, uy = pixel_centres(window)
+    ux, uy = pixel_centres(window) if points is None else points
     corners = [(x, y) for x in (display_window.x0, display_window.x1)
                for y in (display_window.y0, display_window.y1)]
     r_corner = max(math.hypot(x - ccx, y - ccy) for x, y in corners) * norm.scale
@@ -128,6 +130,33 @@ def simulation_geometry(cal, norm, display_window, window, fit="none", distortio
     return ccx + dx * s, ccy + dy * s, info
 
 
+def forward_points(cal, norm, display_window, sx, sy, fit="none", distortion=True, tca=True):
+    """Where the output shows the source points ``(sx, sy)`` (frame coordinates) in each
+    channel that moves differently: green (and alpha) through the distortion model, red and
+    blue through their TCA model, then the distortion (the kernels' maps inverted)."""
+    _, _, info = simulation_geometry(cal, norm, display_window, display_window, fit,
+                                     distortion, points=(np.zeros(1), np.zeros(1)))
+    ccx, ccy = info["center"]
+    dist = distortion_model(*cal.distortion) if distortion and cal.distortion else None
+
+    def radial(fwd, x, y):
+        r = np.hypot(x - ccx, y - ccy) * norm.scale
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m = np.where(r > 0, fwd(r) / np.where(r > 0, r, 1.0), 1.0)
+        return ccx + (x - ccx) * m, ccy + (y - ccy) * m
+
+    def out(x, y):
+        if dist is not None:
+            x, y = radial(dist[0], x, y)
+        s = 1.0 / info["fit_scale"]
+        return ccx + (x - ccx) * s, ccy + (y - ccy) * s
+
+    channels = [out(sx, sy)]
+    for fwd, _ in (tca_models(*cal.tca) if tca and cal.tca else []):
+        channels.append(out(*radial(fwd, sx, sy)))
+    return channels
+
+
 def tca_luts(cal, r_max):
     """Inverse radial scale tables for red and blue (normalised radius of the green point)."""
     luts = []
@@ -140,10 +169,13 @@ def tca_luts(cal, r_max):
     return np.stack(luts)
 
 
-def channel_points(cal, norm, display_window, window, fit="none", distortion=True, tca=True):
+def channel_points(cal, norm, display_window, window, fit="none", distortion=True, tca=True,
+                   points=None):
     """Host twin of the kernel's coordinates: {'red','green','blue'} -> (sx, sy) in frame
-    coordinates, by direct bisection (no table).  Used by the tests against lensfunpy."""
-    gx, gy, info = simulation_geometry(cal, norm, display_window, window, fit, distortion)
+    coordinates, by direct bisection (no table), of ``window``'s pixel centres or of the
+    output ``points``.  Used by the tests against lensfunpy and for regions of interest."""
+    gx, gy, info = simulation_geometry(cal, norm, display_window, window, fit, distortion,
+                                       points)
     out = {"green": (gx, gy)}
     ccx, ccy = info["center"]
     for name, model in zip(("red", "blue"), tca_models(*cal.tca) if (tca and cal.tca) else []):
@@ -181,7 +213,9 @@ class Lens(Plugin):
                         hint="none (lensfun scale 1); fit-all = whole source visible; fill = "
                              "no undefined border."),
             ChoiceParam("border", "edge", choices=BORDERS,
-                        hint="What reads outside the source return: black, edge (clamp), mirror."),
+                        hint="What reads outside the frame (display window) return: black, edge "
+                             "(clamp), mirror; inside the frame, outside the data window is "
+                             "transparent black."),
         ),
         quality=LEVELS,
     )
@@ -207,14 +241,44 @@ class Lens(Plugin):
         return rt.cache.get(("lens.geometry",) + frame_key(p, ctx),
                             lambda: self._geometry(p, ctx))
 
-    def _geometry(self, p, ctx):
-        src = ctx.source
+    def calibration(self, p, ctx):
+        """``(lens, cal, norm, focal)``: the lens, its calibration at this frame's settings
+        and lensfun's normalisation of the display window."""
         dw = ctx.display_window
         crop = lensdb.crop_factor(ctx.camera, dw.width, dw.height, ctx.pixel_aspect)
         lens = lensdb.get_lens(p.maker, p.model, crop)
         focal, aperture, distance = settings(p, ctx.camera)
         cal = lensdb.calibration(lens, focal, aperture, distance)
-        norm = lensdb.Normalisation.for_image(cal, crop, dw.width, dw.height)
+        return lens, cal, lensdb.Normalisation.for_image(cal, crop, dw.width, dw.height), focal
+
+    def region_of_definition(self, p, ctx):
+        _, cal, norm, _ = self.calibration(p, ctx)
+        use_map, use_tca = bool(p.distortion and cal.distortion), bool(p.tca and cal.tca)
+        if not (use_map or use_tca):
+            return ctx.source.window        # vignetting only: nothing moves
+        # lensfun's models compress the source by well under 2x inside the frame: the
+        # filters' reach covers their windows
+        return warp_region(lambda xs, ys: forward_points(cal, norm, ctx.display_window, xs, ys,
+                                                         p.fit, use_map, use_tca),
+                           ctx, p.border)
+
+    def region_of_interest(self, p, ctx, window):
+        _, cal, norm, _ = self.calibration(p, ctx)
+        use_map, use_tca = bool(p.distortion and cal.distortion), bool(p.tca and cal.tca)
+        if not (use_map or use_tca):
+            return window
+
+        def inverse(xs, ys):
+            chans, _ = channel_points(cal, norm, ctx.display_window, window, p.fit, use_map,
+                                      use_tca, points=(xs, ys))
+            return list(chans.values())
+
+        return warp_interest(inverse, window, 5)
+
+    def _geometry(self, p, ctx):
+        src = ctx.source
+        dw = ctx.display_window
+        lens, cal, norm, focal = self.calibration(p, ctx)
         notes = []
         use_map = bool(p.distortion and cal.distortion)
         use_tca = bool(p.tca and cal.tca)
@@ -296,7 +360,18 @@ class Lens(Plugin):
 
         return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (double,), build)
 
+    def prepare(self, rt, p, ctx):
+        if not self.is_identity(p, ctx):
+            lvl = self.level(ctx)
+            self.device_buffers(rt, p, canvas_context(self, p, ctx, p.border),
+                                rt.use_fp64(lvl.fp64))
+
     def render(self, rt, p, ctx):
+        return on_canvas(self, rt, p, ctx, p.border,
+                         lambda c, sanitise: self.render_canvas(rt, p, c, sanitise))
+
+    def render_canvas(self, rt, p, ctx, sanitise):
+        """The lens over ``ctx.source``'s window (the canvas: `on_canvas`)."""
         src = ctx.source
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
@@ -304,7 +379,7 @@ class Lens(Plugin):
         geo = self.host_geometry(rt, p, ctx)
         use_map, use_tca, use_vig = geo["flags"]
         ctx.notes.extend(geo["notes"])
-        defines = kernel_defines(lvl.filter, p.border, needs_sanitising(ctx, "lens"))
+        defines = kernel_defines(lvl.filter, p.border, sanitise)
         defines.update(HAS_MAP=int(use_map), HAS_TCA=int(use_tca), HAS_VIG=int(use_vig),
                        LUTN=LUT_SIZE)
         dst = src.like()

@@ -152,3 +152,23 @@ def test_matches_reference_in_acescg(rt, rng):
             got, in_reference_basis(lambda s: want(s, p, "final"), src, aces), atol=4e-5)
         # the ACEScg pixels taken as Rec.709 ones (no conversion) give other fringes
         assert np.abs(got - CA().apply(rt, p, src, quality="final")).max() > 1e-4
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "reference"])
+@pytest.mark.parametrize("params", [dict(amount=0.04), dict(amount=-0.04, cubic=1.0),
+                                    dict(amount=0.03, spectral=False, border="black")])
+def test_tight_window_gives_the_full_frame_pixels(rt, rng, quality, params):
+    """An element in its own data window (right of and below the centre) gives the pixels it
+    gives placed in a full-frame window: its fringes past the box are kept (the window
+    grows), and ``edge`` repeats the frame's transparent edge, not the box's."""
+    from clfx.core.rect import Rect
+    from tests.plugins.windows import element, tight_and_full
+
+    display, data = Rect(0, 0, 128, 96), Rect(70, 50, 120, 90)
+    p = CA.params(**params)
+    tight, full, window = tight_and_full(rt, CA(), p, element(rng, data), data, display,
+                                         quality=quality)
+    # the tables span the window's largest radius: interpolated to ~1e-7 of the radius
+    # (~1e-5 px), values <= 4: measured <= 7e-6
+    np.testing.assert_allclose(tight, full, rtol=0, atol=3e-5)
+    assert window.contains(data) and window != data and display.contains(window)

@@ -266,16 +266,22 @@ def test_data_window_map_is_the_display_map_cropped():
 
 
 def test_data_window_render_matches_oracle_in_frame_coordinates(rt, rng):
+    """A data window inside the display window: the oracle over the whole frame with the
+    pixels outside the data window transparent (``edge`` repeats the frame's edge, not the
+    data window's), on the output window (grown: the pincushion carries content out)."""
+    from tests.plugins.windows import placed
+
     display, data = Rect(0, 0, 48, 32), Rect(6, 4, 38, 26)
     src = rng.uniform(0.0, 1.0, (data.height, data.width, 4)).astype(np.float32)
     p = Distortion.params(k1=0.12, border="edge")
-    got = Distortion().apply(rt, p, src, quality="draft", camera=CAM, data_window=data,
-                             display_window=display)
-    sx, sy, info = build_map(p, CAM, display, data, 1.0, jacobian=True)
-    want = ref.sample_footprint(src, sx - data.x0, sy - data.y0, info["jacobian"], "quadratic",
-                                "edge", half_fractions(p, data.width, data.height, "edge",
-                                                       display, data))
-    np.testing.assert_allclose(got, want, atol=1e-5)
+    got, window = Distortion().apply(rt, p, src, quality="final", camera=CAM, data_window=data,
+                                     display_window=display, keep_rod=True)
+    assert window.contains(data) and window != data
+    sx, sy, info = build_map(p, CAM, display, display, 1.0, jacobian=True)
+    want = ref.sample_footprint(placed(src, data, display), sx, sy, info["jacobian"],
+                                "lanczos3", "edge")
+    # float32 positions and sums of values <= 1 (as the hard shapes' tolerance)
+    np.testing.assert_allclose(got, want[window.y0:window.y1, window.x0:window.x1], atol=1e-5)
 
 
 # -- footprints that follow the map's Jacobian (issue 11, item 7) ----------------------------
@@ -391,3 +397,129 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
     assert asked and asked[-1] >= src.nbytes          # asked with the output's size
     assert np.array_equal(streamed, plain)
     assert built_with_streaming(rt, "distortion.cl")
+
+
+# -- tight data windows: the output grows to where the element lands -----------------------
+TIGHT_DISPLAY, TIGHT_DATA = Rect(0, 0, 128, 96), Rect(58, 40, 112, 84)
+"""A frame and an element's bounding box right of and below its centre (Beachball's ball:
+the lens carries it outward, past its box)."""
+WARPS = [dict(amount=-0.12, fit="fill"),          # the webcam look: barrel filled: magnified
+         dict(amount=0.25),                       # pincushion: outward
+         dict(amount=0.2, p1=0.01, p2=-0.008),    # with decentering
+         dict(k1=-0.25)]                          # barrel, no fit: inward
+
+
+@pytest.mark.parametrize("coeffs", WARPS)
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+@pytest.mark.parametrize("border", ["black", "edge"])
+def test_tight_window_gives_the_full_frame_pixels(rt, rng, coeffs, quality, border):
+    """The element in its own data window gives the pixels it gives placed in a full-frame
+    data window (over the union of both outputs): nothing is cut at the data window's edge,
+    and ``edge`` repeats the frame's (transparent) edge, never the element's box."""
+    from tests.plugins.windows import element, tight_and_full
+
+    src = element(rng, TIGHT_DATA)
+    p = Distortion.params(border=border, **coeffs)
+    tight, full, window = tight_and_full(rt, Distortion(), p, src, TIGHT_DATA, TIGHT_DISPLAY,
+                                         quality=quality, camera=CAM)
+    # the same map in other window coordinates: float32 fractions differ by ~1e-7 px;
+    # values <= 4 (measured: 0 or a few 1e-7)
+    np.testing.assert_allclose(tight, full, rtol=0, atol=1e-5)
+    assert TIGHT_DISPLAY.contains(window)
+    if coeffs.get("k1", 0.0) >= 0.0:     # the content moves outward: the window grows
+        assert window.contains(TIGHT_DATA) and window != TIGHT_DATA
+        # and stays tight: the element's image (the full render's nonzero pixels) fills
+        # the window to within the filters' reach and the margin (a few px)
+        ys, xs = np.nonzero(np.abs(full).sum(axis=2) > 0)
+        both = window.union(TIGHT_DISPLAY)        # the arrays' window
+        x0, y0 = both.x0 + xs.min(), both.y0 + ys.min()
+        x1, y1 = both.x0 + xs.max() + 1, both.y0 + ys.max() + 1
+        assert max(x0 - window.x0, y0 - window.y0, window.x1 - x1, window.y1 - y1) <= 12
+
+
+def test_edge_border_on_a_tight_window_repeats_the_frame_not_the_box(rt, rng):
+    """A barrel without fit reads past the frame at its corners: ``edge`` repeats the
+    frame's edge, transparent for an element inside it, so the element's box edge is not
+    smeared to the frame's corners (the output equals the black border's)."""
+    src = np.ones((TIGHT_DATA.height, TIGHT_DATA.width, 4), np.float32)   # opaque box
+    kw = dict(quality="final", camera=CAM, data_window=TIGHT_DATA, display_window=TIGHT_DISPLAY,
+              keep_rod=True)
+    edge, ew = Distortion().apply(rt, Distortion.params(k1=-0.2, border="edge"), src, **kw)
+    black, bw = Distortion().apply(rt, Distortion.params(k1=-0.2, border="black"), src, **kw)
+    assert ew == bw
+    np.testing.assert_array_equal(edge, black)
+    # inside the display window, beyond the box's image: transparent
+    assert np.all(edge[-1] == 0.0) and np.all(edge[:, -1] == 0.0)
+
+
+@pytest.mark.parametrize("quality", ["draft", "reference"])
+def test_tight_window_matches_the_oracle_on_the_grown_window(rt, rng, quality):
+    """The float64 oracle on the element placed in the frame (outside the data window:
+    transparent black), cropped to the grown window, agrees with the tight render."""
+    from tests.plugins.windows import element, placed
+
+    src = element(rng, TIGHT_DATA)
+    p = Distortion.params(amount=-0.12, fit="fill", border="edge")
+    got, window = Distortion().apply(rt, p, src, quality=quality, camera=CAM,
+                                     data_window=TIGHT_DATA, display_window=TIGHT_DISPLAY,
+                                     keep_rod=True)
+    full = placed(src, TIGHT_DATA, TIGHT_DISPLAY)
+    w, h = TIGHT_DISPLAY.width, TIGHT_DISPLAY.height
+    half = half_fractions(p, w, h, "edge") if quality == "draft" else None
+    want = ref.distortion(full, footprint=QUALITY_FOOTPRINT[quality], border="edge",
+                          half=half, **oracle_args(p, w, h))
+    want = want[window.y0:window.y1, window.x0:window.x1]
+    # as test_strong_minification_matches_the_footprint_oracle (values <= 4 here); the
+    # draft's float16 fractions are the full frame's (its pixels' fast path may differ on
+    # the tight canvas: 1e-3 px, a few 1e-4 of the value)
+    tol = 1e-6 if quality == "reference" else 2e-3
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+    assert np.abs(want).sum() == pytest.approx(
+        np.abs(ref.distortion(full, footprint=QUALITY_FOOTPRINT[quality], border="edge",
+                              half=half, **oracle_args(p, w, h))).sum(), rel=1e-9)
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_tight_window_map_built_in_bands(rt, rng, monkeypatch, quality):
+    """A grown window built band by band gives the pixels of the one-band map."""
+    import clfx.fx.resample as resample
+    from tests.plugins.windows import element
+
+    src = element(rng, TIGHT_DATA)
+    p = Distortion.params(amount=0.25 + rng.uniform(0, 1e-6), border="black")
+    kw = dict(quality=quality, camera=CAM, data_window=TIGHT_DATA,
+              display_window=TIGHT_DISPLAY, keep_rod=True)
+    whole, ww = Distortion().apply(rt, p, src, **kw)
+    rt.cache.clear("distortion.map")
+    monkeypatch.setattr(resample, "BAND_PIXELS", 600)
+    banded, bw = Distortion().apply(rt, p, src, **kw)
+    assert bw == ww and len(resample.map_bands(ww.height, -(-ww.width // 4) * 4)) > 3
+    assert np.array_equal(banded, whole)
+
+
+def test_regions_bound_what_the_render_reads_and_writes(rt, rng):
+    """region_of_definition holds every pixel the element reaches; region_of_interest of
+    the output window holds every source pixel that changes it."""
+    from clfx.host import RenderContext
+    from tests.plugins.windows import element, placed
+
+    src = element(rng, TIGHT_DATA)
+    p = Distortion.params(amount=0.25, border="black")
+    ctx = RenderContext(rt, rt.upload(src, TIGHT_DATA), display_window=TIGHT_DISPLAY, camera=CAM)
+    rod = Distortion().region_of_definition(p, ctx)
+    full = Distortion().apply(rt, p, placed(src, TIGHT_DATA, TIGHT_DISPLAY), camera=CAM,
+                              quality="final")
+    ys, xs = np.nonzero(np.abs(full).sum(axis=2) > 0)
+    assert rod.contains(Rect(xs.min(), ys.min(), xs.max() + 1, ys.max() + 1))
+    out = Rect(20, 10, 60, 40)
+    roi = Distortion().region_of_interest(p, ctx, out)
+    assert roi.contains(out)
+    # hot source pixels just outside the RoI change nothing in ``out``
+    frame = np.zeros((96, 128, 4), np.float32)
+    mx, my = (roi.x0 + roi.x1) // 2, (roi.y0 + roi.y1) // 2
+    for x, y in ((roi.x0 - 1, my), (roi.x1, my), (mx, roi.y0 - 1), (mx, roi.y1)):
+        if 0 <= x < 128 and 0 <= y < 96:
+            frame[y, x] = 1e4
+    assert frame.any()
+    got = Distortion().apply(rt, p, frame, camera=CAM, quality="final")
+    assert np.all(got[out.y0:out.y1, out.x0:out.x1] == 0.0)

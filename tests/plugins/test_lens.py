@@ -206,3 +206,21 @@ def test_maps_built_in_bands_are_the_whole_frame_maps(rt, rng, monkeypatch, qual
     assert len(resample.map_bands(h, 204)) == 10
     banded = Lens().apply(rt, p, src, quality=quality, camera=cam)
     assert np.array_equal(banded, whole)
+
+
+@pytest.mark.parametrize("quality", ["draft", "final", "reference"])
+@pytest.mark.parametrize("fit,border", [("none", "edge"), ("fill", "black"), ("none", "mirror")])
+def test_tight_window_gives_the_full_frame_pixels(rt, rng, quality, fit, border):
+    """An element in its own data window gives the pixels it gives placed in a full-frame
+    window: what the lens carries past the box is kept (the window grows)."""
+    from clfx.core.rect import Rect
+    from tests.plugins.windows import element, tight_and_full
+
+    display, data = Rect(0, 0, 120, 80), Rect(66, 40, 116, 76)
+    cam = camera_for_crop(1.0, 120, 80, focal_length=24.0, f_number=2.8, focus_distance=2.0)
+    p = Lens.params(maker=CANON[0], model=CANON[1], fit=fit, border=border)
+    tight, full, window = tight_and_full(rt, Lens(), p, element(rng, data), data, display,
+                                         quality=quality, camera=cam)
+    # TCA tables span the window's largest radius (~1e-5 px apart), values <= 4: <= 4e-6
+    np.testing.assert_allclose(tight, full, rtol=0, atol=3e-5)
+    assert window.contains(data) and window != data and display.contains(window)
