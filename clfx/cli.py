@@ -500,13 +500,20 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     if workers and scheduler:
         raise click.UsageError("give --workers N (a local cluster) or --scheduler ADDRESS "
                                "(an existing one), not both")
-    scale = {"workers": workers, "scheduler": scheduler, "chunk": chunk, "fail_fast": fail_fast}
+    from clfx.pipeline.batch import ClusterOptions
+
+    scale = ClusterOptions(workers=workers, scheduler=scheduler, chunk=chunk, fail_fast=fail_fast)
     options = _render_options(kw)
     _check_first_frame(input_path, options)
     runtime = None if workers or scheduler else _runtime_soon(ctx)
-    from clfx.api import load_look, look_from_stamp
+    from dataclasses import replace
 
-    lk = look_from_stamp(look_from) if look_from else (look_name or "default")
+    from clfx.api import load_look, look_from_stamp, stamped_quality
+
+    if look_from and not options.quality:      # the level FILE was rendered at
+        options = replace(options, quality=stamped_quality(look_from))
+    lk = look_from_stamp(look_from, relevel=bool(options.quality)) if look_from \
+        else (look_name or "default")
     lk = load_look(lk, set=assignments)
     _run_batch(ctx, lk, input_path, output_path, options, runtime,
                scale if runtime is None else None)
@@ -579,34 +586,47 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
 
 class _Progress:
     """Frames done/total, frames per second, elapsed time and ETA on stderr (rich), only
-    on a terminal and never with -q: `clfx.api.render`'s ``on_frame``."""
+    on a terminal and never with -q: `clfx.api.render`'s ``on_frame`` (in this process or
+    on a cluster).  Elapsed time counts from when the render was asked for (device set-up
+    and the first frame included); frames per second from the first frame's start."""
 
-    def __init__(self):
+    def __init__(self, clock=None):
+        import time
+
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                                   TimeElapsedColumn, TimeRemainingColumn)
+                                   TimeRemainingColumn)
 
+        self.clock = clock or time.perf_counter
         self.bar = Progress(TextColumn("clfx"), BarColumn(), MofNCompleteColumn(),
-                            TextColumn("frames  {task.fields[fps]}"), TimeElapsedColumn(),
+                            TextColumn("frames  {task.fields[fps]}"),
+                            TextColumn("{task.fields[elapsed]}"),
                             TextColumn("ETA"), TimeRemainingColumn(),
                             console=Console(file=sys.stderr), transient=True)
         self.task = None
+        self.t_start = self.clock()
         self.t0 = None
 
     def __call__(self, done: int, total: int | None, report) -> None:
-        import time
-
-        now = time.perf_counter()
-        if self.task is None:
-            self.t0 = now - max(report.total_ms + report.read_ms, 1.0) / 1e3
+        now = self.clock()
+        if self.task is None:   # the first frame began about its own time ago
+            took = (report.total_ms + report.read_ms) / 1e3 if report is not None else 0.0
+            self.t0 = max(self.t_start, now - max(took, 1e-3))
             self.bar.start()
-            self.task = self.bar.add_task("render", total=total, fps="")
+            self.task = self.bar.add_task("render", total=total, fps="", elapsed="")
         fps = done / max(now - self.t0, 1e-9)
-        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps")
+        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps",
+                        elapsed=_clock_text(now - self.t_start))
 
     def close(self) -> None:
         if self.task is not None:
             self.bar.stop()
+
+
+def _clock_text(seconds: float) -> str:
+    """``m:ss``, or ``h:mm:ss`` from an hour."""
+    s = round(seconds)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
 
 
 @contextlib.contextmanager
