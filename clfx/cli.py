@@ -122,11 +122,19 @@ class ClfxUsageError(click.UsageError):
         click.echo(f"clfx: error: {' '.join(self.format_message().split())}{where}", err=True)
 
 
+GROUP_OPTIONS = ("-q", "--quiet", "-v", "--verbose", "-vv", "--device")
+"""Options of the ``clfx`` group itself: given after a command, they are named as such."""
+
+
 def _one_line_usage(exc: click.UsageError) -> click.UsageError:
     """``exc`` as a `ClfxUsageError`; a request for help (a bare group) stays as it is."""
     if isinstance(exc, ClfxUsageError) or type(exc).__name__ == "NoArgsIsHelpError":
         return exc
-    out = ClfxUsageError(exc.format_message(), exc.ctx)
+    message = exc.format_message()
+    if isinstance(exc, click.NoSuchOption) and exc.option_name in GROUP_OPTIONS:
+        message = (f"{exc.option_name} goes before the command (clfx {exc.option_name} "
+                   f"{exc.ctx.info_name if exc.ctx else 'COMMAND'} ...)")
+    out = ClfxUsageError(message, exc.ctx)
     out.exit_code = exc.exit_code
     return out
 
@@ -666,7 +674,8 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 @cli.command()
 @click.argument("outdir", default="clfx-gallery", required=False)
 @click.option("--width", default=640, show_default=True, help="Width the images are scaled to.")
-@click.option("--only", default=None, metavar="A,B", help="Only these effects and looks.")
+@click.option("--only", default=None, metavar="A,B", callback=lambda c, p, v: _gallery_names(v),
+              help="Only these effects and looks.")
 @quality_option
 @click.pass_context
 def gallery(ctx, outdir, width, only, quality):
@@ -674,15 +683,58 @@ def gallery(ctx, outdir, width, only, quality):
     labelled before/after contact sheet per image in OUTDIR."""
     from clfx.gallery import run_gallery
 
-    run_gallery(_runtime(ctx), outdir, width=width, quality=quality,
-                only=None if only is None else set(only.split(",")),
+    run_gallery(_runtime(ctx), outdir, width=width, quality=quality, only=only,
                 verbosity=ctx.obj.get("verbosity", 1))
+
+
+def _gallery_names(value: str | None) -> set[str] | None:
+    """``--only A,B``: names of gallery tiles (effects, their variants, built-in looks); an
+    unknown one is a usage error naming the closest, before anything renders."""
+    if value is None:
+        return None
+    from clfx.gallery import VARIANTS
+    from clfx.pipeline.presets import available_looks
+    from clfx.plugins import discover
+
+    known = set(discover()) | set(VARIANTS) | {n for n, (origin, _) in available_looks().items()
+                                              if origin == "built-in"}
+    names = {n.strip() for n in value.split(",")}
+    _check_names(names, known, "effect or look")
+    return names
+
+
+def _check_names(names, known, what: str) -> None:
+    """A usage error for the first of ``names`` not in ``known``, naming the closest."""
+    import difflib
+
+    for name in sorted(names):
+        if name not in known:
+            close = difflib.get_close_matches(name, sorted(known), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise click.BadParameter(f"unknown {what} {name!r}{hint} (known: "
+                                     f"{', '.join(sorted(known))})")
+
+
+def _bench_looks(ctx, param, value):
+    """``--looks A,B``: looks the bench can load (names or files), or ``none``; an unknown
+    one is a usage error before anything is measured."""
+    if value is None or value == "none":
+        return value
+    from clfx.core.errors import PresetError
+    from clfx.pipeline.presets import find_look
+
+    for name in value.split(","):
+        try:
+            find_look(name)
+        except PresetError as exc:
+            raise click.BadParameter(" ".join(str(exc).split())) from None
+    return value
 
 
 @cli.command()
 @click.option("--effects", default=None, metavar="A,B",
               help="Effects to measure (default: all; 'none' to skip).")
-@click.option("--looks", default=None, metavar="A,B",
+@click.option("--looks", default=None, metavar="A,B", callback=_bench_looks,
               help="Looks to measure (default: every built-in look; 'none' to skip).")
 @click.option("--size", default="1920x1080", show_default=True, help="WxH of the bench frames.")
 @click.option("--repeat", default=5, show_default=True, help="Warm runs per measurement (median; at least 25 for operations under 0.1 s).")

@@ -278,3 +278,22 @@ def test_workers_protect_mask_files_as_one_process_does(tmp_path, monkeypatch):
     assert done[0].error is None and isinstance(done[0].report, FrameReport)
     assert [s.effect for s in done[0].report.steps if s.ran] == ["vignette"]
     assert (tmp_path / "out.exr").is_file()
+
+
+def test_quiet_workers_say_nothing_on_a_cold_compiler_cache(tmp_path):
+    """``-q --workers``: the workers' OpenCL compiler warnings stay off stderr as in one
+    process (a cold PoCL cache made the cinema look print ~1,700 lines)."""
+    import numpy as np
+
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    rgba = np.random.default_rng(2).uniform(0, 4, (36, 64, 4)).astype(np.float32)
+    for f in (1, 2):
+        write_frame(Frame.from_array(rgba), tmp_path / f"in.{f:04d}.exr")
+    (tmp_path / "v.yaml").write_text("name: v\neffects:\n  - effect: vignette\n  - effect: glare\n")
+    proc = clfx("-q", "render", tmp_path / "in.####.exr", tmp_path / "out" / "o.####.exr",
+                "--look", tmp_path / "v.yaml", "--workers", "1",
+                POCL_CACHE_DIR=str(tmp_path / "cold-cache"))
+    assert proc.stderr == "" and proc.stdout == ""
+    assert sorted(os.listdir(tmp_path / "out")) == ["o.0001.exr", "o.0002.exr"]
