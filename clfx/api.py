@@ -33,7 +33,7 @@ from clfx.core.errors import ParamError, SequenceError
 from clfx.core.frame import Frame
 from clfx.core.rect import Rect
 from clfx.device.runtime import KernelBuildWarning
-from clfx.pipeline.batch import Batch, ClusterOptions, PassOptions, RenderOptions
+from clfx.pipeline.batch import Batch, ClusterOptions, PassOptions, RenderOptions, resolve_quality
 from clfx.pipeline.look import FrameReport, Look, RunStats, render_frame
 
 warnings.filterwarnings("ignore", category=KernelBuildWarning, append=True)
@@ -282,7 +282,7 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     for name, a, shape in (("depth", depth, (h, w)), ("velocity", velocity, (h, w, 2))):
         if a is not None and np.shape(a) != shape:
             raise ParamError(f"{name}: shape {np.shape(a)} does not match the image's {shape}")
-    lk = look if isinstance(look, Look) else load_look(look)
+    lk, level = resolve_quality(look if isinstance(look, Look) else load_look(look), quality)
     frm = Frame.from_array(arr, depth=depth, velocity=velocity)
     if working_space is not None:
         from clfx.io import colour
@@ -292,7 +292,7 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
             raise ParamError(f"working_space {working_space!r} must be a linear colour space "
                              f"(e.g. lin_rec709, ACEScg)")
     masks = read_masks(lk.at(frame), frm, frame, channels=channels) if lk.masks() else None
-    out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=quality,
+    out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=level,
                                keep_overscan=keep_overscan, stats=stats, masks=masks)
     return ArrayResult(out.rgba, out.data_window, report)
 

@@ -669,8 +669,6 @@ def render_stream(rt, plan: BatchPlan, jobs, sink, *, stats: RunStats | None = N
     bool
         Whether every job was rendered and written.
     """
-    from clfx.pipeline.report import FrameResult
-
     jobs = iter(jobs)
     job = next(jobs, None)
     prepared = None
@@ -678,8 +676,8 @@ def render_stream(rt, plan: BatchPlan, jobs, sink, *, stats: RunStats | None = N
         prepared = prepare_maps(rt, plan.look, [job], plan.quality, plan.settings.keep_overscan)
     failed = True
     try:
-        failed = _stream(rt, plan, job, jobs, sink, FrameResult, stats, first, keep_going,
-                         fail_fast, device_lock, overlap, worker)
+        failed = _stream(rt, plan, job, jobs, sink, stats, first, keep_going, fail_fast,
+                         device_lock, overlap, worker)
     finally:
         if prepared is not None:     # a refused frame: no more work for it
             prepared.close(cancel=failed)
@@ -694,9 +692,12 @@ class _Pending:
     write: Future | None
     report: object
     notices: list
-    error: str | None = None
+    error: BaseException | None = None
 
-    def result(self, FrameResult, keep_going: bool, worker: str | None):
+    def result(self, keep_going: bool, worker: str | None):
+        """The frame's `clfx.pipeline.report.FrameResult` (waiting for its write)."""
+        from clfx.pipeline.report import FrameResult
+
         error, skipped = self.error, False
         if error is None:
             try:
@@ -704,19 +705,15 @@ class _Pending:
             except ClfxError as exc:
                 if not keep_going:
                     raise
-                error = _one_line(exc)
-        return FrameResult(self.job.frame, self.job.input, self.job.output,
-                           report=None if error else self.report, error=error, worker=worker,
-                           notices=self.notices, skipped=skipped)
+                error = exc
+        if error is not None:
+            return FrameResult.failure(self.job, error, worker, self.notices)
+        return FrameResult(self.job.frame, self.job.input, self.job.output, report=self.report,
+                           worker=worker, notices=self.notices, skipped=skipped)
 
 
-def _one_line(exc: BaseException) -> str:
-    message = str(exc) if isinstance(exc, ClfxError) else f"{type(exc).__name__}: {exc}"
-    return " ".join(message.split())
-
-
-def _stream(rt, plan, job, jobs, sink, FrameResult, stats, first, keep_going, fail_fast,
-            device_lock, overlap, worker) -> bool:
+def _stream(rt, plan, job, jobs, sink, stats, first, keep_going, fail_fast, device_lock,
+            overlap, worker) -> bool:
     """`render_stream`'s loop; True when a frame failed."""
     raw = plan.raw_size is not None
     lowered = getattr(rt, "shares_host_cores", True) if overlap else io_overlaps_cpu_device(rt)
@@ -728,7 +725,7 @@ def _stream(rt, plan, job, jobs, sink, FrameResult, stats, first, keep_going, fa
         done = 0
         while pending and (block or pending[0].write is None or pending[0].write.done()) \
                 and (count is None or done < count):
-            result = pending.pop(0).result(FrameResult, keep_going, worker)
+            result = pending.pop(0).result(keep_going, worker)
             failed |= result.error is not None
             sink(result)
             done += 1
@@ -763,7 +760,7 @@ def _stream(rt, plan, job, jobs, sink, FrameResult, stats, first, keep_going, fa
             except ClfxError as exc:
                 if not keep_going:
                     raise
-                pending.append(_Pending(job, None, None, notices, error=_one_line(exc)))
+                pending.append(_Pending(job, None, None, notices, error=exc))
                 failed = True
                 if fail_fast:
                     break
@@ -793,7 +790,6 @@ class Batch:
     output_path: str
     options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
-    progress: bool = False
     jobs: list[Job] = field(default_factory=list, init=False)
     skipped_existing: list[int] = field(default_factory=list, init=False)
     passes: PassSpec | None = field(default=None, init=False)  # what frames are read with

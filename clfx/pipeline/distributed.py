@@ -223,9 +223,7 @@ def render_chunk(shipped: ShippedPlan, start: int, stop: int,
 
 
 def _failed(job: Job, exc: BaseException) -> FrameResult:
-    message = str(exc) if isinstance(exc, ClfxError) else f"{type(exc).__name__}: {exc}"
-    return FrameResult(job.frame, job.input, job.output, error=" ".join(message.split()),
-                       worker=_where())
+    return FrameResult.failure(job, exc, _where())
 
 
 # -- the cluster ---------------------------------------------------------------------------

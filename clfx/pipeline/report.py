@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
-from clfx.core.errors import ImageIOError
+from clfx.core.errors import ClfxError, ImageIOError
 from clfx.pipeline.look import FrameReport
 
 
@@ -74,12 +74,25 @@ class FrameResult:
     notices: list = field(default_factory=list)
     skipped: bool = False
 
+    @classmethod
+    def failure(cls, job, exc: BaseException, worker: str | None = None,
+                notices=()) -> FrameResult:
+        """The result of ``job`` (a `clfx.pipeline.batch.Job`) that ``exc`` failed."""
+        return cls(job.frame, job.input, job.output, error=one_line(exc), worker=worker,
+                   notices=list(notices))
+
     def named(self, input: str, output: str) -> FrameResult:
         """This result naming the files as ``input`` / ``output`` (the user's paths)."""
         self.input, self.output = input, output
         if self.report is not None:
             self.report.input, self.report.output = input, output
         return self
+
+
+def one_line(exc: BaseException) -> str:
+    """Why a frame failed, in one line (a `ClfxError`'s message; else its type too)."""
+    message = str(exc) if isinstance(exc, ClfxError) else f"{type(exc).__name__}: {exc}"
+    return " ".join(message.split())
 
 
 @dataclass(frozen=True)
