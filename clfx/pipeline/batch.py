@@ -1,8 +1,13 @@
 """Running a look over a frame sequence (or one file, or a raw stdin/stdout pipe).
 
-Everything that can be checked is checked before the first frame is read: the look, the
-input frames (missing ones named), the output folder, existing outputs, inputs that would be
-overwritten.  Then frames flow through a small pipeline: the next frame is read and the
+Everything that can be checked is checked before the first frame is read (`Batch.prepare`):
+the look, the input frames (missing ones named), the output folder, existing outputs, inputs
+that would be overwritten.  What the render then needs is one frozen `BatchPlan` (the look
+with every step's quality level resolved, the jobs, how passes are read, every file read),
+the one thing sent to Dask workers; `render_stream` is the one loop that reads, renders and
+writes its frames, in this process, on a worker and for a raw pipe, and hands each frame to
+a sink as a typed `clfx.pipeline.report.FrameResult` (a `Reporter` says them).  Frames flow
+through a small pipeline: the next frame is read and the
 previous one written on worker threads while the device renders the current one, so a
 sequence's throughput approaches the slower of I/O and compute rather than their sum
 (frames up to 4K UHD; larger ones one at a time, :data:`OVERLAP_MAX_PIXELS`).
