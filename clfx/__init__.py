@@ -29,7 +29,8 @@ Names are imported on first use, so ``import clfx`` stays cheap (no OpenCL, no O
 """
 from clfx._version import __version__
 
-_API = ("ArrayResult", "FrameReport", "Look", "PassOptions", "RenderOptions", "RenderResult",
+_API = ("ArrayResult", "ClusterOptions", "FrameReport", "Look", "PassOptions", "RenderOptions",
+        "RenderResult",
         "load_look", "look_from_stamp", "render", "render_array", "render_file",
         "render_sequence", "runtime")
 

@@ -22,6 +22,7 @@ Examples
 from __future__ import annotations
 
 import os
+import warnings
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Mapping
@@ -31,10 +32,16 @@ import numpy as np
 from clfx.core.errors import ParamError, SequenceError
 from clfx.core.frame import Frame
 from clfx.core.rect import Rect
-from clfx.pipeline.batch import Batch, PassOptions, RenderOptions
+from clfx.device.runtime import KernelBuildWarning
+from clfx.pipeline.batch import Batch, ClusterOptions, PassOptions, RenderOptions, resolve_quality
 from clfx.pipeline.look import FrameReport, Look, RunStats, render_frame
 
-__all__ = ["Look", "FrameReport", "RenderOptions", "PassOptions", "ArrayResult", "RenderResult",
+warnings.filterwarnings("ignore", category=KernelBuildWarning, append=True)
+"""The OpenCL compiler's warnings (hundreds of lines on a cold PoCL cache) stay quiet, as on
+the command line without -v; appended, so a filter of the caller's own (``-W``,
+``warnings.simplefilter``) still shows them."""
+
+__all__ = ["Look", "FrameReport", "RenderOptions", "PassOptions", "ClusterOptions", "ArrayResult", "RenderResult",
            "load_look", "runtime", "render_array", "render_file", "render_sequence", "render"]
 
 
@@ -141,9 +148,14 @@ def _is_image(path: str) -> bool:
                                                  ".jpeg", ".dpx", ".hdr")
 
 
-def look_from_stamp(path: str | os.PathLike) -> Look:
+def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False) -> Look:
     """The look an output of clfx was rendered with (its ``clfx:lookJSON`` header
     attribute), to render a shot again from the file alone.
+
+    The stamped look carries every step's quality level as the render resolved it, so it
+    renders the same pixels whatever level the render asked for.  ``relevel``: the steps
+    that took the render's level (``clfx:quality``) take the next render's instead (``clfx
+    render --look-from FILE --quality LEVEL``); steps with their own level keep it.
 
     Raises
     ------
@@ -164,7 +176,21 @@ def look_from_stamp(path: str | os.PathLike) -> Look:
     from dataclasses import replace
 
     look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
+    if relevel:
+        level = header_attribute(path, "clfx:quality")
+        look = replace(look, steps=[replace(s, quality=None) if s.quality == level else s
+                                    for s in look.steps])
     return replace(look, source=os.fspath(path), files=(os.fspath(path),))
+
+
+def stamped_quality(path: str | os.PathLike) -> str | None:
+    """The quality level an output of clfx was rendered at (its ``clfx:quality``), None
+    when it has none (rendered by a clfx before it was stamped) or not a level."""
+    from clfx.core.plugin import QUALITY_LEVELS
+    from clfx.io.probe import header_attribute
+
+    level = header_attribute(path, "clfx:quality")
+    return level if level in QUALITY_LEVELS else None
 
 
 @dataclass
@@ -256,7 +282,7 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     for name, a, shape in (("depth", depth, (h, w)), ("velocity", velocity, (h, w, 2))):
         if a is not None and np.shape(a) != shape:
             raise ParamError(f"{name}: shape {np.shape(a)} does not match the image's {shape}")
-    lk = look if isinstance(look, Look) else load_look(look)
+    lk, level = resolve_quality(look if isinstance(look, Look) else load_look(look), quality)
     frm = Frame.from_array(arr, depth=depth, velocity=velocity)
     if working_space is not None:
         from clfx.io import colour
@@ -266,7 +292,7 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
             raise ParamError(f"working_space {working_space!r} must be a linear colour space "
                              f"(e.g. lin_rec709, ACEScg)")
     masks = read_masks(lk.at(frame), frm, frame, channels=channels) if lk.masks() else None
-    out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=quality,
+    out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=level,
                                keep_overscan=keep_overscan, stats=stats, masks=masks)
     return ArrayResult(out.rgba, out.data_window, report)
 
@@ -295,7 +321,7 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
            look: str | dict | Look = "default", *, set: Iterable[str] = (),
            options: RenderOptions | None = None, verbosity: int = 0,
            on_frame: Callable | None = None, device: str | None = None, runtime=None,
-           distributed: dict | None = None, **option_values) -> RenderResult:
+           distributed: ClusterOptions | dict | None = None, **option_values) -> RenderResult:
     """Render a file, a sequence or a raw pipe through a look: :func:`render_file` and
     :func:`render_sequence` are this function (the command line's ``clfx render``).
 
@@ -321,9 +347,10 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     device, runtime
         The OpenCL device (:func:`runtime`'s ``device``), or a runtime (or a Future of
         one) to use.
-    distributed : dict, optional
-        Render on a Dask cluster: ``{"workers": N}`` or ``{"scheduler": "tcp://..."}``
-        (plus ``chunk``, ``fail_fast``); see ``docs/scaling.md``.
+    distributed : ClusterOptions or dict, optional
+        Render on a Dask cluster: ``ClusterOptions(workers=N)`` or
+        ``ClusterOptions(scheduler="tcp://...")`` (plus ``chunk``, ``fail_fast``; a dict of
+        these is accepted); see ``docs/scaling.md``.
 
     Returns
     -------
@@ -349,9 +376,8 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     if distributed:
         from clfx.pipeline.distributed import render_distributed
 
-        batch.progress = bool(on_frame)
-        summary = render_distributed(batch, device=device, **distributed) or {}
-        return RenderResult(summary, [], [j.output for j in batch.jobs])
+        summary = render_distributed(batch, ClusterOptions.of(distributed), device=device)
+        return RenderResult(summary, batch.reporter.reports, [j.output for j in batch.jobs])
     if runtime is None:
         runtime = runtime_soon(device)
     with batch.reading():   # the first frame is read while the device finishes setting up

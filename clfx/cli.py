@@ -122,11 +122,19 @@ class ClfxUsageError(click.UsageError):
         click.echo(f"clfx: error: {' '.join(self.format_message().split())}{where}", err=True)
 
 
+GROUP_OPTIONS = ("-q", "--quiet", "-v", "--verbose", "-vv", "--device")
+"""Options of the ``clfx`` group itself: given after a command, they are named as such."""
+
+
 def _one_line_usage(exc: click.UsageError) -> click.UsageError:
     """``exc`` as a `ClfxUsageError`; a request for help (a bare group) stays as it is."""
     if isinstance(exc, ClfxUsageError) or type(exc).__name__ == "NoArgsIsHelpError":
         return exc
-    out = ClfxUsageError(exc.format_message(), exc.ctx)
+    message = exc.format_message()
+    if isinstance(exc, click.NoSuchOption) and exc.option_name in GROUP_OPTIONS:
+        message = (f"{exc.option_name} goes before the command (clfx {exc.option_name} "
+                   f"{exc.ctx.info_name if exc.ctx else 'COMMAND'} ...)")
+    out = ClfxUsageError(message, exc.ctx)
     out.exit_code = exc.exit_code
     return out
 
@@ -500,13 +508,20 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     if workers and scheduler:
         raise click.UsageError("give --workers N (a local cluster) or --scheduler ADDRESS "
                                "(an existing one), not both")
-    scale = {"workers": workers, "scheduler": scheduler, "chunk": chunk, "fail_fast": fail_fast}
+    from clfx.pipeline.batch import ClusterOptions
+
+    scale = ClusterOptions(workers=workers, scheduler=scheduler, chunk=chunk, fail_fast=fail_fast)
     options = _render_options(kw)
     _check_first_frame(input_path, options)
     runtime = None if workers or scheduler else _runtime_soon(ctx)
-    from clfx.api import load_look, look_from_stamp
+    from dataclasses import replace
 
-    lk = look_from_stamp(look_from) if look_from else (look_name or "default")
+    from clfx.api import load_look, look_from_stamp, stamped_quality
+
+    if look_from and not options.quality:      # the level FILE was rendered at
+        options = replace(options, quality=stamped_quality(look_from))
+    lk = look_from_stamp(look_from, relevel=bool(options.quality)) if look_from \
+        else (look_name or "default")
     lk = load_look(lk, set=assignments)
     _run_batch(ctx, lk, input_path, output_path, options, runtime,
                scale if runtime is None else None)
@@ -579,34 +594,47 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
 
 class _Progress:
     """Frames done/total, frames per second, elapsed time and ETA on stderr (rich), only
-    on a terminal and never with -q: `clfx.api.render`'s ``on_frame``."""
+    on a terminal and never with -q: `clfx.api.render`'s ``on_frame`` (in this process or
+    on a cluster).  Elapsed time counts from when the render was asked for (device set-up
+    and the first frame included); frames per second from the first frame's start."""
 
-    def __init__(self):
+    def __init__(self, clock=None):
+        import time
+
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                                   TimeElapsedColumn, TimeRemainingColumn)
+                                   TimeRemainingColumn)
 
+        self.clock = clock or time.perf_counter
         self.bar = Progress(TextColumn("clfx"), BarColumn(), MofNCompleteColumn(),
-                            TextColumn("frames  {task.fields[fps]}"), TimeElapsedColumn(),
+                            TextColumn("frames  {task.fields[fps]}"),
+                            TextColumn("{task.fields[elapsed]}"),
                             TextColumn("ETA"), TimeRemainingColumn(),
                             console=Console(file=sys.stderr), transient=True)
         self.task = None
+        self.t_start = self.clock()
         self.t0 = None
 
     def __call__(self, done: int, total: int | None, report) -> None:
-        import time
-
-        now = time.perf_counter()
-        if self.task is None:
-            self.t0 = now - max(report.total_ms + report.read_ms, 1.0) / 1e3
+        now = self.clock()
+        if self.task is None:   # the first frame began about its own time ago
+            took = (report.total_ms + report.read_ms) / 1e3 if report is not None else 0.0
+            self.t0 = max(self.t_start, now - max(took, 1e-3))
             self.bar.start()
-            self.task = self.bar.add_task("render", total=total, fps="")
+            self.task = self.bar.add_task("render", total=total, fps="", elapsed="")
         fps = done / max(now - self.t0, 1e-9)
-        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps")
+        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps",
+                        elapsed=_clock_text(now - self.t_start))
 
     def close(self) -> None:
         if self.task is not None:
             self.bar.stop()
+
+
+def _clock_text(seconds: float) -> str:
+    """``m:ss``, or ``h:mm:ss`` from an hour."""
+    s = round(seconds)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
 
 
 @contextlib.contextmanager
@@ -646,7 +674,8 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 @cli.command()
 @click.argument("outdir", default="clfx-gallery", required=False)
 @click.option("--width", default=640, show_default=True, help="Width the images are scaled to.")
-@click.option("--only", default=None, metavar="A,B", help="Only these effects and looks.")
+@click.option("--only", default=None, metavar="A,B", callback=lambda c, p, v: _gallery_names(v),
+              help="Only these effects and looks.")
 @quality_option
 @click.pass_context
 def gallery(ctx, outdir, width, only, quality):
@@ -654,15 +683,58 @@ def gallery(ctx, outdir, width, only, quality):
     labelled before/after contact sheet per image in OUTDIR."""
     from clfx.gallery import run_gallery
 
-    run_gallery(_runtime(ctx), outdir, width=width, quality=quality,
-                only=None if only is None else set(only.split(",")),
+    run_gallery(_runtime(ctx), outdir, width=width, quality=quality, only=only,
                 verbosity=ctx.obj.get("verbosity", 1))
+
+
+def _gallery_names(value: str | None) -> set[str] | None:
+    """``--only A,B``: names of gallery tiles (effects, their variants, built-in looks); an
+    unknown one is a usage error naming the closest, before anything renders."""
+    if value is None:
+        return None
+    from clfx.gallery import VARIANTS
+    from clfx.pipeline.presets import available_looks
+    from clfx.plugins import discover
+
+    known = set(discover()) | set(VARIANTS) | {n for n, (origin, _) in available_looks().items()
+                                              if origin == "built-in"}
+    names = {n.strip() for n in value.split(",")}
+    _check_names(names, known, "effect or look")
+    return names
+
+
+def _check_names(names, known, what: str) -> None:
+    """A usage error for the first of ``names`` not in ``known``, naming the closest."""
+    import difflib
+
+    for name in sorted(names):
+        if name not in known:
+            close = difflib.get_close_matches(name, sorted(known), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise click.BadParameter(f"unknown {what} {name!r}{hint} (known: "
+                                     f"{', '.join(sorted(known))})")
+
+
+def _bench_looks(ctx, param, value):
+    """``--looks A,B``: looks the bench can load (names or files), or ``none``; an unknown
+    one is a usage error before anything is measured."""
+    if value is None or value == "none":
+        return value
+    from clfx.core.errors import PresetError
+    from clfx.pipeline.presets import find_look
+
+    for name in value.split(","):
+        try:
+            find_look(name)
+        except PresetError as exc:
+            raise click.BadParameter(" ".join(str(exc).split())) from None
+    return value
 
 
 @cli.command()
 @click.option("--effects", default=None, metavar="A,B",
               help="Effects to measure (default: all; 'none' to skip).")
-@click.option("--looks", default=None, metavar="A,B",
+@click.option("--looks", default=None, metavar="A,B", callback=_bench_looks,
               help="Looks to measure (default: every built-in look; 'none' to skip).")
 @click.option("--size", default="1920x1080", show_default=True, help="WxH of the bench frames.")
 @click.option("--repeat", default=5, show_default=True, help="Warm runs per measurement (median; at least 25 for operations under 0.1 s).")

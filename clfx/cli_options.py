@@ -35,6 +35,15 @@ def _names(ctx, param, value):
     return tuple(value.split(",")) if value else None
 
 
+def _channel_pair(ctx, param, value):
+    """``U,V``: two channel names (a usage error otherwise)."""
+    names = _names(ctx, param, value)
+    if names is not None and (len(names) != 2 or not all(n.strip() for n in names)):
+        raise click.BadParameter(f"{value!r} is not two channel names U,V (e.g. "
+                                 f"forward.u,forward.v)")
+    return names
+
+
 def check_frames(ctx, param, value):
     """A bad frame range is a usage error (exit 2), said before anything is read."""
     if value is None:
@@ -82,7 +91,7 @@ pass_options = stack(
     click.option("--focal-length-px", type=float, default=None,
                  help="For --depth-mode distance: focal length in pixels (default: from the "
                       "look's camera block and the frame width)."),
-    click.option("--velocity-channels", default=None, metavar="U,V", callback=_names,
+    click.option("--velocity-channels", default=None, metavar="U,V", callback=_channel_pair,
                  help="Velocity channel names."),
     click.option("--velocity-y-up/--velocity-y-down", default=None,
                  help="Direction of +v in the velocity pass (overrides detection)."),

@@ -116,3 +116,25 @@ def test_cli_is_a_thin_layer_over_the_api():
     src = inspect.getsource(cli)
     assert "from clfx.api import render as render_api" in src
     assert "Batch(" not in src and "render_frame" not in src
+
+
+def test_the_api_keeps_compiler_warnings_quiet_on_a_cold_cache(rt, tmp_path):
+    """A cold PoCL cache makes the compiler warn (hundreds of lines for a look); the API
+    says nothing, as the command line without -v, unless the caller's own filter asks."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    code = ("import numpy as np, clfx; clfx.render_array(np.ones((8, 8, 4), np.float32), "
+            "{'effects': [{'effect': 'vignette'}]})")
+
+    def run(*flags, cache):
+        env = {**os.environ, "PYTHONPATH": str(root), "POCL_CACHE_DIR": str(tmp_path / cache)}
+        return subprocess.run([sys.executable, *flags, "-c", code], capture_output=True,
+                              text=True, env=env, timeout=300)
+
+    quiet = run(cache="a")
+    assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
+    shown = run("-W", "always::UserWarning", cache="b")     # the warnings are there to hide
+    assert shown.returncode == 0 and "KernelBuildWarning" in shown.stderr

@@ -186,6 +186,48 @@ def test_usage_error_exit_code_2():
     run("nosuchcommand", code=2)
 
 
+@pytest.mark.parametrize("args, fragments", [
+    (["gallery", "out", "--only", "vignete"], ["--only", "unknown effect or look 'vignete'",
+                                               "did you mean 'vignette'"]),
+    (["bench", "--looks", "cinma"], ["--looks", "unknown look 'cinma'"]),
+    (["render", "a.exr", "b.exr", "--velocity-channels", "u"], ["--velocity-channels",
+                                                                "two channel names"]),
+    (["render", "a.exr", "b.exr", "-q"], ["-q goes before the command (clfx -q render ...)"]),
+    (["render", "a.exr", "b.exr", "--device", "0:0"], ["--device goes before the command"]),
+])
+def test_usage_errors_are_one_line_before_anything_runs(tmp_path, args, fragments):
+    """Checked before anything renders or measures (a bad --only rendered the whole gallery,
+    a bad --looks ran every effect's bench first): one ``clfx: error:`` line, exit 2."""
+    r = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert r.exit_code == 2, r.output
+    one_line_error(r, *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_progress_counts_elapsed_time_from_the_start_of_the_render():
+    """The elapsed time includes device set-up and the first frame (it started when the first
+    frame was done); frames per second count from the first frame's start."""
+    from types import SimpleNamespace
+
+    from clfx.cli import _Progress
+
+    now = [100.0]
+    bar = _Progress(clock=lambda: now[0])
+    try:
+        now[0] = 130.0                      # set-up, then a first frame of 2.5 s
+        bar(1, 10, SimpleNamespace(total_ms=2000.0, read_ms=500.0))
+        assert bar.bar.tasks[0].fields["elapsed"] == "0:30"
+        now[0] = 132.5
+        bar(2, 10, SimpleNamespace(total_ms=2000.0, read_ms=500.0))
+        task = bar.bar.tasks[0]
+        assert task.fields["elapsed"] == "0:32" and task.fields["fps"] == "0.40 fps"
+        now[0] = 3800.0
+        bar(3, 10, None)                    # a failed frame (a cluster's): no report
+        assert bar.bar.tasks[0].fields["elapsed"] == "1:01:40"
+    finally:
+        bar.close()
+
+
 # -- interrupts ------------------------------------------------------------------------------
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_a_signal_leaves_no_partial_file(rt, exr_images, tmp_path, sig, code):

@@ -58,19 +58,38 @@ def raw_frames(n, w, h, seed=1):
     return np.random.default_rng(seed).uniform(0, 1, (n, 3, h, w)).astype(np.float32).tobytes()
 
 
-def test_set_drops_or_skips_steps_so_cinema_runs_on_a_raw_pipe(rt):
+def test_cinema_on_a_raw_pipe_skips_what_needs_a_pass_with_one_warning_each(rt):
+    """Every built-in look skips a step whose pass the input lacks, as default does: one
+    warning line per step for the whole stream, even with -q; ``missing_passes=error``
+    makes it an error again, and ``enabled=false`` drops the step silently."""
     w, h = 40, 24
     r = subprocess.run(CLFX + ["-q", "render", "-", "-", "--raw", f"{w}x{h}", "--look", "cinema"],
+                       input=raw_frames(3, w, h), capture_output=True, env=ENV, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert len(r.stdout) == 3 * 3 * w * h * 4
+    assert r.stderr.decode().splitlines() == [
+        "clfx: warning: frame 0: dof: skipped: no depth pass in the input (missing_passes: skip)",
+        "clfx: warning: frame 0: motion_blur: skipped: no velocity pass in the input "
+        "(missing_passes: skip)"]
+    r = subprocess.run(CLFX + ["-q", "render", "-", "-", "--raw", f"{w}x{h}", "--look", "cinema",
+                               "--set", "dof.missing_passes=error"],
                        input=raw_frames(1, w, h), capture_output=True, env=ENV, timeout=300)
     assert r.returncode == 1 and b"--set dof.enabled=false" in r.stderr
     r = subprocess.run(CLFX + ["-q", "render", "-", "-", "--raw", f"{w}x{h}", "--look", "cinema",
-                               "--set", "dof.enabled=false",
-                               "--set", "motion_blur.missing_passes=skip", "--explain"],
+                               "--set", "dof.enabled=false", "--explain"],
                        input=raw_frames(2, w, h), capture_output=True, env=ENV, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert len(r.stdout) == 2 * 3 * w * h * 4
     err = r.stderr.decode()
     assert "skipped motion_blur" in err and "no velocity pass" in err and " dof " not in err
+
+
+def test_no_built_in_look_needs_a_pass():
+    from clfx.pipeline.presets import available_looks, load_look
+
+    looks = [name for name, (kind, _) in available_looks().items() if kind == "built-in"]
+    assert "cinema" in looks and len(looks) > 10
+    assert {name: load_look(name).required_clips() for name in looks
+            if load_look(name).required_clips()} == {}
 
 
 def test_wrong_raw_size_is_caught_before_anything_is_written(rt, tmp_path):

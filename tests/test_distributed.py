@@ -149,62 +149,75 @@ def test_worker_undoes_dasks_malloc_trim_threshold():
     assert under_dask.stdout.split() == ["True"]
 
 
-def test_task_threads_take_turns_on_the_device():
-    """Two tasks of one worker overlap their reads and writes, never their renders."""
+def test_task_threads_take_turns_on_the_device(monkeypatch):
+    """Two tasks of one worker overlap their reads and writes, never their renders (both run
+    `render_stream`, the loop of a local render)."""
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from clfx.pipeline.batch import Job
-    from clfx.pipeline.distributed import render_jobs
+    from clfx.pipeline import batch as batch_mod
+    from clfx.pipeline.batch import BatchPlan, Job, render_stream
+    from clfx.pipeline.presets import load_look
 
     lock = threading.Lock()
     rendering, overlaps = [0], []
 
-    class Report:
-        def as_dict(self):
-            return {}
+    class Read:
+        notices = []
 
-        def explain(self):
-            return ""
+        def pixels(self):
+            return 64
 
-    class StubBatch:
-        def _prepare_look(self, rt, jobs):
-            return None
-
-        def _read(self, job):
+    class StubPlan(BatchPlan):
+        def read(self, job):
             time.sleep(0.02)
-            return job.frame
+            return Read()
 
-        def render(self, rt, job, frame):
+        def render(self, rt, job, read, stats=None):
             assert lock.locked()
             rendering[0] += 1
             overlaps.append(rendering[0])
             time.sleep(0.03)
             rendering[0] -= 1
-            return frame, Report(), None
+            return job.frame, job.frame, None
 
-        def _write(self, frame, job, report, views):
+        def write(self, frame, job, report, rest=()):
             time.sleep(0.02)
+            return False
 
+    monkeypatch.setattr(batch_mod, "prepare_maps", lambda *a, **k: None)
+    plan = StubPlan(look=load_look("default"), quality="final")
     jobs = [[Job(frame=f, input=f"in.{f}", output=f"out.{f}")] for f in range(1, 7)]
+
+    def task(chunk):
+        results = []
+        render_stream(None, plan, chunk, results.append, keep_going=True, overlap=True,
+                      device_lock=lock)
+        return results
+
     with ThreadPoolExecutor(2) as pool:
-        results = list(pool.map(lambda j: render_jobs(StubBatch(), None, j, device_lock=lock),
-                                jobs))
-    assert [r[0]["frame"] for r in results] == list(range(1, 7))
+        results = list(pool.map(task, jobs))
+    assert [r[0].frame for r in results] == list(range(1, 7))
+    assert all(r[0].report == r[0].frame and r[0].error is None for r in results)
     assert overlaps and max(overlaps) == 1
 
 
 def test_worker_codecs_take_its_share_of_the_cores(monkeypatch):
+    """A local cluster gives each worker its share of the cores as a number (the plugin's
+    ``codec_threads``); a farm's worker keeps its own OPENIMAGEIO_OPTIONS, else every core."""
     import OpenImageIO as oiio
 
-    from clfx.pipeline.distributed import codec_threads_for_batches
+    from clfx.pipeline.distributed import ClfxWorker, codec_threads_for_batches, worker_share
 
     saved = {k: oiio.get_int_attribute(k, 0) for k in ("threads", "exr_threads")}
     try:
-        monkeypatch.setenv("OPENIMAGEIO_OPTIONS", "threads=3,exr_threads=3")   # a local cluster's
-        assert codec_threads_for_batches() == 3 == oiio.get_int_attribute("exr_threads", 0)
-        monkeypatch.delenv("OPENIMAGEIO_OPTIONS")                             # a user's worker
-        assert codec_threads_for_batches() == len(os.sched_getaffinity(0))
+        monkeypatch.delenv("OPENIMAGEIO_OPTIONS", raising=False)
+        assert worker_share(2, cores=7) == 3 and worker_share(4, cores=2) == 1
+        assert ClfxWorker(None, worker_share(2, cores=6)).codec_threads == 3
+        assert codec_threads_for_batches(3) == 3 == oiio.get_int_attribute("exr_threads", 0)
+        assert codec_threads_for_batches() == len(os.sched_getaffinity(0))   # a user's worker
+        monkeypatch.setenv("OPENIMAGEIO_OPTIONS", "threads=2,exr_threads=2")  # set by the user
+        assert codec_threads_for_batches() == 2 == oiio.get_int_attribute("exr_threads", 0)
     finally:
         for k, v in saved.items():
             oiio.attribute(k, v)
@@ -223,3 +236,64 @@ def test_several_local_workers_do_not_pin_pocl_threads(monkeypatch):
     assert "POCL_AFFINITY" not in worker_env(1, cores=2)
     monkeypatch.setattr(runtime, "_AFFINITY_DEFAULTED", False)    # the user's own setting
     assert "POCL_AFFINITY" not in worker_env(2, cores=2)
+
+
+def test_workers_protect_mask_files_as_one_process_does(tmp_path, monkeypatch):
+    """A worker writes with the plan's list of every file the render reads, mask files
+    included: an output that is a mask file is refused on the worker (the client refuses it
+    too, before the first frame; here the plan is changed after that check), and the frame
+    a worker renders comes back as a typed `FrameResult` with its `FrameReport`."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+    from clfx.pipeline.batch import Batch, RenderOptions
+    from clfx.pipeline.distributed import ShippedPlan, connect, render_chunk
+    from clfx.pipeline.look import FrameReport
+    from clfx.pipeline.presets import load_look
+
+    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
+    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
+    write_frame(Frame.from_array(np.full((16, 24, 4), 0.5, np.float32)), tmp_path / "mask.exr")
+    (tmp_path / "masked.yaml").write_text(
+        "name: m\neffects:\n  - effect: vignette\n    mask: {file: mask.exr}\n")
+    monkeypatch.chdir(tmp_path)
+    batch = Batch(look=load_look("masked.yaml"), input_path="in.exr", output_path="out.exr",
+                  options=RenderOptions(), verbosity=0)
+    batch.prepare()
+    plan = batch.plan
+    assert ("mask", "mask.exr") in plan.reads
+    onto_mask = replace(plan, jobs=(replace(plan.jobs[0], output="mask.exr"),),
+                        io=replace(plan.io, overwrite=True))
+    before = (tmp_path / "mask.exr").read_bytes()
+    with connect(workers=1) as client:
+        assert client.scheduler.address.startswith("tcp://127.0.0.1:")
+        refused = client.submit(render_chunk, ShippedPlan.of(onto_mask), 0, 1, pure=False).result()
+        done = client.submit(render_chunk, ShippedPlan.of(plan), 0, 1, pure=False).result()
+    assert len(refused) == 1 and refused[0].report is None
+    assert "refusing to write" in refused[0].error and "mask.exr" in refused[0].error
+    assert (tmp_path / "mask.exr").read_bytes() == before
+    assert done[0].error is None and isinstance(done[0].report, FrameReport)
+    assert [s.effect for s in done[0].report.steps if s.ran] == ["vignette"]
+    assert (tmp_path / "out.exr").is_file()
+
+
+def test_quiet_workers_say_nothing_on_a_cold_compiler_cache(tmp_path):
+    """``-q --workers``: the workers' OpenCL compiler warnings stay off stderr as in one
+    process (a cold PoCL cache made the cinema look print ~1,700 lines)."""
+    import numpy as np
+
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    rgba = np.random.default_rng(2).uniform(0, 4, (36, 64, 4)).astype(np.float32)
+    for f in (1, 2):
+        write_frame(Frame.from_array(rgba), tmp_path / f"in.{f:04d}.exr")
+    (tmp_path / "v.yaml").write_text("name: v\neffects:\n  - effect: vignette\n  - effect: glare\n")
+    proc = clfx("-q", "render", tmp_path / "in.####.exr", tmp_path / "out" / "o.####.exr",
+                "--look", tmp_path / "v.yaml", "--workers", "1",
+                POCL_CACHE_DIR=str(tmp_path / "cold-cache"))
+    assert proc.stderr == "" and proc.stdout == ""
+    assert sorted(os.listdir(tmp_path / "out")) == ["o.0001.exr", "o.0002.exr"]

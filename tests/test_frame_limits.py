@@ -103,7 +103,7 @@ def _no_set_up(monkeypatch):
     monkeypatch.setattr(clfx.api, "runtime_soon", lambda *a, **k: started.append("device"))
     monkeypatch.setattr(Runtime, "get", classmethod(lambda cls, *a: started.append("device")))
     monkeypatch.setattr(look_mod, "prepare", lambda *a, **k: started.append("maps"))
-    monkeypatch.setattr(batch_mod.Batch, "_read", lambda *a: started.append("read"))
+    monkeypatch.setattr(batch_mod.BatchPlan, "read", lambda *a: started.append("read"))
     return started
 
 

@@ -150,9 +150,10 @@ def _timeline(tmp_path, rt, monkeypatch, stream):
             return out
         return run
 
-    monkeypatch.setattr(b, "_read", timed("read", b._read, lambda a: a[0].frame))
-    monkeypatch.setattr(b, "render", timed("render", b.render, lambda a: a[1].frame))
-    monkeypatch.setattr(b, "_write", timed("write", b._write, lambda a: a[1].frame))
+    plan = batch_mod.BatchPlan
+    monkeypatch.setattr(plan, "read", timed("read", plan.read, lambda a: a[1].frame))
+    monkeypatch.setattr(plan, "render", timed("render", plan.render, lambda a: a[2].frame))
+    monkeypatch.setattr(plan, "write", timed("write", plan.write, lambda a: a[2].frame))
     assert b.run(rt)["frames"] == 4
     return spans
 

@@ -471,16 +471,16 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
 
         def parts(n):   # each part alone, with the codecs as the stream runs them
             with io_threads(codec_threads_for(rt)):
-                reads.extend(timed(lambda: alone._read(alone.jobs[0])) for _ in range(n))
+                reads.extend(timed(lambda: alone.plan.read(alone.jobs[0])) for _ in range(n))
                 renders.extend(timed(lambda: render_frame(rt, look, read.views[0],
                                                           frame_number=job.frame))
                                for _ in range(n))
                 out, report = renders[-1][0]
-                writes.extend(timed(lambda: alone._write(out, alone.jobs[0], report))
+                writes.extend(timed(lambda: alone.plan.write(out, alone.jobs[0], report))
                               for _ in range(n))
 
         with io_threads(codec_threads_for(rt)):
-            read = alone._read(alone.jobs[0])
+            read = alone.plan.read(alone.jobs[0])
             render_frame(rt, look, read.views[0], frame_number=job.frame)  # warm-up
         parts(max(1, repeat // 2))     # half the runs before the stream, half after: a
         c0, t0 = time.process_time(), time.perf_counter()   # machine's load drifts

@@ -1,8 +1,13 @@
 """Running a look over a frame sequence (or one file, or a raw stdin/stdout pipe).
 
-Everything that can be checked is checked before the first frame is read: the look, the
-input frames (missing ones named), the output folder, existing outputs, inputs that would be
-overwritten.  Then frames flow through a small pipeline: the next frame is read and the
+Everything that can be checked is checked before the first frame is read (`Batch.prepare`):
+the look, the input frames (missing ones named), the output folder, existing outputs, inputs
+that would be overwritten.  What the render then needs is one frozen `BatchPlan` (the look
+with every step's quality level resolved, the jobs, how passes are read, every file read),
+the one thing sent to Dask workers; `render_stream` is the one loop that reads, renders and
+writes its frames, in this process, on a worker and for a raw pipe, and hands each frame to
+a sink as a typed `clfx.pipeline.report.FrameResult` (a `Reporter` says them).  Frames flow
+through a small pipeline: the next frame is read and the
 previous one written on worker threads while the device renders the current one, so a
 sequence's throughput approaches the slower of I/O and compute rather than their sum
 (frames up to 4K UHD; larger ones one at a time, :data:`OVERLAP_MAX_PIXELS`).
@@ -23,19 +28,19 @@ time ("serial"), to bound memory.
 """
 from __future__ import annotations
 
-import json
+import hashlib
+import itertools
 import os
+import pickle
 import sys
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from clfx.core.errors import ImageIOError, SequenceError
+from clfx.core.errors import ClfxError, ImageIOError, SequenceError
 from clfx.core.frame import Frame
 from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
 from clfx.pipeline.look import Look, RunStats, render_frame
@@ -196,8 +201,44 @@ class PassOptions:
 
 
 @dataclass(frozen=True)
-class RenderOptions:
-    """Everything ``clfx render`` and ``clfx apply`` set besides the look (the CLI builds it).
+class RenderSettings:
+    """What the device does with each frame: the quality level of every step without its own
+    (None: ``final``; resolved once, `resolve_quality`) and whether light spread past the
+    display window is kept."""
+
+    quality: str | None = None
+    keep_overscan: bool = False
+
+
+@dataclass(frozen=True)
+class IOOptions:
+    """What a render reads and writes, and how (the fields of `RenderOptions` of the same
+    names: frames, passes, colour spaces, the output's encoding, overwrites)."""
+
+    frames: str | None = None
+    depth_path: str | None = None
+    velocity_path: str | None = None
+    passes: PassOptions = field(default_factory=PassOptions)
+    colorspace: str | None = None
+    out_colorspace: str | None = None
+    working_space: str | None = None
+    view: str | None = None
+    passes_mode: str = "keep"
+    as_float: bool = False
+    compression: str | None = None
+    overwrite: bool = False
+    skip_existing: bool = False
+    skip_missing: bool = False
+    raw_size: str | None = None
+    command: str | None = None
+
+
+@dataclass(frozen=True)
+class RenderOptions(IOOptions):
+    """Everything ``clfx render`` and ``clfx apply`` set besides the look (the CLI builds it),
+    as keywords: the `IOOptions`, and the fields a render splits off into its
+    `RenderSettings` (``quality``, ``keep_overscan``) and its
+    `clfx.pipeline.report.ReportOptions` (``explain``, ``as_json``, ``log_path``).
 
     Attributes
     ----------
@@ -243,27 +284,59 @@ class RenderOptions:
         The command line, stamped into outputs as ``clfx:commandLine``.
     """
 
-    frames: str | None = None
     quality: str | None = None
-    depth_path: str | None = None
-    velocity_path: str | None = None
-    passes: PassOptions = field(default_factory=PassOptions)
-    colorspace: str | None = None
-    out_colorspace: str | None = None
-    working_space: str | None = None
-    view: str | None = None
-    passes_mode: str = "keep"
-    as_float: bool = False
-    compression: str | None = None
-    overwrite: bool = False
-    skip_existing: bool = False
-    skip_missing: bool = False
     keep_overscan: bool = False
-    raw_size: str | None = None
     explain: bool = False
     as_json: bool = False
     log_path: str | None = None
-    command: str | None = None
+
+    def render_settings(self) -> RenderSettings:
+        """What the device does with each frame (the quality level resolved later, once,
+        against the look: `BatchPlan.of`)."""
+        return RenderSettings(quality=self.quality, keep_overscan=self.keep_overscan)
+
+    def io_options(self) -> IOOptions:
+        """What is read and written, and how."""
+        return IOOptions(**{f.name: getattr(self, f.name) for f in fields(IOOptions)})
+
+    def report_options(self, verbosity: int = 1):
+        """What the render says (`clfx.pipeline.report.ReportOptions`)."""
+        from clfx.pipeline.report import ReportOptions
+
+        return ReportOptions(explain=self.explain, as_json=self.as_json,
+                             log_path=self.log_path, verbosity=verbosity)
+
+
+@dataclass(frozen=True)
+class ClusterOptions:
+    """Where a render runs when not in this process (``--workers``, ``--scheduler``).
+
+    Attributes
+    ----------
+    workers : int or None
+        A local Dask cluster of this many processes.
+    scheduler : str or None
+        An existing Dask cluster's scheduler address (``tcp://host:8786``).
+    chunk : int
+        Frames per task.
+    fail_fast : bool
+        Stop at the first failed frame (default: the other frames go on).
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+    chunk: int = 1
+    fail_fast: bool = False
+
+    @classmethod
+    def of(cls, value) -> ClusterOptions:
+        """``value`` as ClusterOptions (a mapping of its fields is accepted)."""
+        if isinstance(value, cls):
+            return value
+        try:
+            return cls(**dict(value))
+        except TypeError as exc:
+            raise TypeError(f"distributed: {exc} (see clfx.pipeline.batch.ClusterOptions)") from None
 
 
 def look_files(look: Look) -> list[tuple[str, str]]:
@@ -328,7 +401,7 @@ def check_first_frame(input_path: str, options: RenderOptions) -> None:
 
 @dataclass
 class Preparing:
-    """A look's maps being prepared on a thread (`Batch._prepare_look`)."""
+    """A look's maps being prepared on a thread (`prepare_maps`)."""
 
     future: Future
     cancelled: threading.Event
@@ -344,32 +417,377 @@ class Preparing:
 @dataclass
 class FrameRead:
     """One job's input, read (on an I/O thread): every view's frame (hero first), each
-    view's masks (`clfx.pipeline.masks.read_masks`), and the milliseconds reading took."""
+    view's masks (`clfx.pipeline.masks.read_masks`), the milliseconds reading took and what
+    the reader assumed (`clfx.pipeline.report.FrameResult.notices`)."""
 
     views: list[Frame]
-    masks: list[dict]
+    masks: list[dict | None]
     read_ms: float
+    notices: list = field(default_factory=list)
 
     def pixels(self) -> int:
         """Pixels of the largest view's data window."""
         return max((f.data_window.width * f.data_window.height for f in self.views), default=0)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Job:
+    """One frame to render: its number, input, output and pass files."""
+
     frame: int
     input: str
     output: str
     depth: str | None = None
     velocity: str | None = None
 
+    def absolute(self) -> Job:
+        """This job with absolute paths (what a worker in another folder needs)."""
+        return replace(self, **{k: os.path.abspath(v) for k in ("input", "output", "depth",
+                                                                 "velocity")
+                                if (v := getattr(self, k)) and v != RAW})
+
+
+def resolve_quality(look: Look, quality: str | None) -> tuple[Look, str]:
+    """The render's quality level (``quality``, else ``final``) and ``look`` with every
+    step's level resolved (its own override, else the render's): the one place a batch
+    resolves it, so the stamped look (``clfx:lookJSON``) renders the same pixels again."""
+    from dataclasses import replace as copy
+
+    from clfx.pipeline.look import DEFAULT_QUALITY
+
+    level = quality or DEFAULT_QUALITY
+    steps = [s if s.quality else copy(s, quality=level) for s in look.steps]
+    return copy(look, steps=steps), level
+
+
+@dataclass(frozen=True)
+class BatchPlan:
+    """Everything a render needs, resolved and checked: the one thing sent to Dask workers.
+
+    Attributes
+    ----------
+    look : Look
+        Every step's quality level resolved (`resolve_quality`); stamped into outputs.
+    quality : str
+        The render's level (steps without their own override take it).
+    jobs : tuple of Job
+    passes : PassSpec or None
+        How depth and velocity are read.
+    reads : tuple of (role, path)
+        Every file the render reads (frames, pass files, the look's files, mask files,
+        files effects read, the OCIO config): outputs never replace one (`write`).
+    settings : RenderSettings
+    io : IOOptions
+    analysis : bool
+        Reports carry the frame analysis summary (``--json``).
+    raw_size : (int, int) or None
+        Frames are raw gbrpf32le on stdin/stdout of this size (jobs are frame indices).
+    """
+
+    look: Look
+    quality: str
+    jobs: tuple[Job, ...] = ()
+    passes: PassSpec | None = None
+    reads: tuple[tuple[str, str], ...] = ()
+    settings: RenderSettings = field(default_factory=RenderSettings)
+    io: IOOptions = field(default_factory=IOOptions)
+    analysis: bool = False
+    raw_size: tuple[int, int] | None = None
+
+    @classmethod
+    def of(cls, look: Look, options: RenderOptions, *, jobs=(), passes=None, reads=(),
+           raw_size=None) -> BatchPlan:
+        """The plan of rendering ``jobs`` through ``look`` with ``options``."""
+        resolved, level = resolve_quality(look, options.quality)
+        return cls(look=resolved, quality=level, jobs=tuple(jobs), passes=passes,
+                   reads=tuple(reads), settings=options.render_settings(),
+                   io=options.io_options(), analysis=options.as_json and raw_size is None,
+                   raw_size=raw_size)
+
+    def for_workers(self) -> BatchPlan:
+        """This plan with absolute paths (workers need not share the client's folder)."""
+        return replace(self, jobs=tuple(j.absolute() for j in self.jobs),
+                       reads=tuple((role, os.path.abspath(p)) for role, p in self.reads))
+
+    def key(self) -> str:
+        """Identifies the plan in a worker's cache: the look's params hash and a hash of the
+        whole plan."""
+        blob = pickle.dumps(self, protocol=pickle.HIGHEST_PROTOCOL)
+        return f"{self.look.params_hash()}-{hashlib.sha1(blob).hexdigest()[:12]}"
+
+    def read_paths(self) -> list[str]:
+        """The paths of `reads` (what the writer protects)."""
+        return [p for _, p in self.reads]
+
+    def stamp(self, frame: int) -> dict:
+        """The attributes an output of ``frame`` is stamped with (`Look.stamp`, the look
+        with its levels resolved, and ``clfx:quality``)."""
+        return {**self.look.stamp(frame, self.io.command), "clfx:quality": self.quality}
+
+    # -- the three steps of a frame -------------------------------------------------------
+    def read(self, job: Job) -> FrameRead | None:
+        """The job's frame (every view of a multi-view file when the output can hold them,
+        hero first) with each view's masks; None at the end of a raw stream."""
+        from clfx.pipeline.masks import read_masks
+
+        t0 = time.perf_counter()
+        io, notes = self.io, []
+        if self.raw_size is not None:
+            from clfx.io.raw import read_raw
+
+            frame = read_raw(sys.stdin.buffer, self.raw_size, job.frame,
+                             colorspace=io.colorspace, working_space=io.working_space)
+            if frame is None:
+                return None
+            frames = [frame]
+        else:
+            from clfx.io.read import read_views
+
+            frames = read_views(job.input, view=io.view, passes=self.passes,
+                                all_views=job.output.lower().endswith(".exr")
+                                and io.passes_mode != "drop",
+                                colorspace=io.colorspace, working_space=io.working_space,
+                                depth_path=job.depth, velocity_path=job.velocity,
+                                notify=lambda m, k: notes.append(("notice", m, k)))
+        masks = [read_masks(self.look, f, job.frame,
+                            notify=lambda m, k: notes.append(("warning", m, k)))
+                 if self.look.masks() or self.raw_size is None else None for f in frames]
+        return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3, notes)
+
+    def render(self, rt, job: Job, read: FrameRead, stats: RunStats | None = None):
+        """Render one job's frames (already read) through the look: the hero's output frame
+        and report, and what its write needs besides (the other views' output frames; a raw
+        frame's input window).  The one place a batch renders, in this process or on a
+        worker."""
+        raw = self.raw_size is not None
+        outs = []
+        for frame_in, masks in zip(read.views, read.masks):
+            outs.append(render_frame(
+                rt, self.look, frame_in, frame_number=job.frame, quality=self.quality,
+                keep_overscan=self.settings.keep_overscan and not raw,
+                analysis_summary=self.analysis, stats=stats, masks=masks,
+                release_input=not raw))
+        frame_out, report = outs[0]
+        if not raw:
+            report.input, report.output = job.input, job.output
+        report.read_ms = read.read_ms
+        rest = read.views[0].data_window if raw else [f for f, _ in outs[1:]]
+        return frame_out, report, rest
+
+    def write(self, frame: Frame, job: Job, report, rest=()) -> bool:
+        """Write a rendered frame (atomically; never over one of `reads`); True when
+        ``--skip-existing`` left an output another writer published meanwhile."""
+        t0 = time.perf_counter()
+        io, skipped = self.io, False
+        if self.raw_size is not None:
+            from clfx.io.raw import write_raw
+
+            write_raw(sys.stdout.buffer, frame, rest, colorspace=io.out_colorspace)
+        else:
+            from clfx.io.write import OutputExistsError, write_frame
+
+            try:   # not overwrite: an output published meanwhile is never replaced
+                write_frame(frame, job.output, bit_depth="float" if io.as_float else None,
+                            compression=io.compression, colorspace=io.out_colorspace,
+                            overwrite=io.overwrite, attributes=self.stamp(job.frame),
+                            protect=[p for p in (job.input, job.depth, job.velocity) if p]
+                            + self.read_paths(),
+                            write_passes=io.passes_mode != "drop", views=rest)
+            except OutputExistsError:
+                if not io.skip_existing:
+                    raise
+                skipped = True
+        report.write_ms = (time.perf_counter() - t0) * 1e3
+        return skipped
+
+
+def prepare_maps(rt, look: Look, jobs, quality: str | None,
+                 keep_overscan: bool = False) -> Preparing | None:
+    """`clfx.pipeline.look.prepare` for the first job's geometry (from its header), on a
+    thread of normal priority: the maps it builds are on the first frame's critical path (a
+    Dask worker's later chunks find them in its cache).  Nothing is started for a frame whose
+    windows the reader will refuse, nor for one larger than `PREPARE_MAX_PIXELS` (its maps
+    would sit beside the first steps' buffers: each is built when its step needs it).  The
+    caller closes what it returns, cancelling it when the frame is refused."""
+    if not jobs or jobs[0].input == RAW:
+        return None
+    from clfx.core.errors import ClfxError
+    from clfx.pipeline.look import prepare
+
+    job = jobs[0]
+    try:
+        data, display, aspect = first_frame_geometry(job.input)
+    except ClfxError:
+        return None          # the read says why
+    if max(data.width * data.height, display.width * display.height) > PREPARE_MAX_PIXELS:
+        return None
+    cancelled = threading.Event()
+
+    def run():
+        prepare(rt, look, data, display, aspect, frame_number=job.frame,
+                quality=quality, keep_overscan=keep_overscan, cancel=cancelled)
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-prepare")
+    future = pool.submit(run)
+    pool.shutdown(wait=False)
+    return Preparing(future, cancelled)
+
+
+# -- the stream ----------------------------------------------------------------------------
+def render_stream(rt, plan: BatchPlan, jobs, sink, *, stats: RunStats | None = None,
+                  first: Future | None = None, keep_going: bool = False,
+                  fail_fast: bool = False, device_lock=None, overlap: bool = False,
+                  worker: str | None = None) -> bool:
+    """Read, render and write ``jobs`` (`BatchPlan.read`, ``render``, ``write``): the one
+    loop of every render, in this process and on a Dask worker.
+
+    The next frame is read and the previous one written on I/O threads as `stream_mode`
+    says: "phased" (the device renders alone, then the write beside the next read),
+    "overlap" (read and write while the device renders, at most `WRITES_AHEAD` frames
+    waiting for their write; ``overlap`` asks for it where "phased" would run, as workers
+    do) or "serial" (large frames).  A raw stream (``plan.raw_size``) reads until its end
+    and writes a frame only once the next one has been read whole.
+
+    Parameters
+    ----------
+    jobs : iterable of Job
+        Rendered in order (a raw stream's: frame indices, unbounded).
+    sink : callable(FrameResult)
+        Called once per job, in order, once its write is done (or it failed).
+    stats : RunStats, optional
+        The steps' running costs over this render's frames.
+    first : Future, optional
+        The first job's read, already started (`Batch.reading`).
+    keep_going : bool
+        A frame that raises a `ClfxError` becomes a result with its error and the others go
+        on (a worker's chunk); else the error stops the stream (a local render: frames
+        already written stay, so --skip-existing resumes).
+    fail_fast : bool
+        With ``keep_going``: stop after the first failed frame.
+    device_lock : lock, optional
+        Held while rendering (task threads of one worker share its device).
+    worker : str, optional
+        Names the worker in each result.
+
+    Returns
+    -------
+    bool
+        Whether every job was rendered and written.
+    """
+    jobs = iter(jobs)
+    job = next(jobs, None)
+    prepared = None
+    if job is not None:
+        prepared = prepare_maps(rt, plan.look, [job], plan.quality, plan.settings.keep_overscan)
+    failed = True
+    try:
+        failed = _stream(rt, plan, job, jobs, sink, stats, first, keep_going, fail_fast,
+                         device_lock, overlap, worker)
+    finally:
+        if prepared is not None:     # a refused frame: no more work for it
+            prepared.close(cancel=failed)
+    return not failed
+
+
+@dataclass
+class _Pending:
+    """A frame rendered (its write under way) or failed, waiting for its turn to report."""
+
+    job: Job
+    write: Future | None
+    report: object
+    notices: list
+    error: BaseException | None = None
+
+    def result(self, keep_going: bool, worker: str | None):
+        """The frame's `clfx.pipeline.report.FrameResult` (waiting for its write)."""
+        from clfx.pipeline.report import FrameResult
+
+        error, skipped = self.error, False
+        if error is None:
+            try:
+                skipped = self.write.result()
+            except ClfxError as exc:
+                if not keep_going:
+                    raise
+                error = exc
+        if error is not None:
+            return FrameResult.failure(self.job, error, worker, self.notices)
+        return FrameResult(self.job.frame, self.job.input, self.job.output, report=self.report,
+                           worker=worker, notices=self.notices, skipped=skipped)
+
+
+def _stream(rt, plan, job, jobs, sink, stats, first, keep_going, fail_fast, device_lock,
+            overlap, worker) -> bool:
+    """`render_stream`'s loop; True when a frame failed."""
+    raw = plan.raw_size is not None
+    lowered = getattr(rt, "shares_host_cores", True) if overlap else io_overlaps_cpu_device(rt)
+    failed = False
+    pending: list[_Pending] = []
+
+    def drain(block: bool, count: int | None = None) -> None:
+        nonlocal failed
+        done = 0
+        while pending and (block or pending[0].write is None or pending[0].write.done()) \
+                and (count is None or done < count):
+            result = pending.pop(0).result(keep_going, worker)
+            failed |= result.error is not None
+            sink(result)
+            done += 1
+
+    with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
+        next_read = first if first is not None else \
+            (pool.submit(plan.read, job) if job is not None else None)
+        while job is not None:
+            following = next(jobs, None)
+            mode, notices = "overlap", []
+            try:
+                read = next_read.result()
+                next_read = None
+                if read is None:                 # a raw stream's end
+                    break
+                notices = read.notices
+                mode = stream_mode(rt, read.pixels())
+                if mode == "phased" and (overlap or raw):
+                    mode = "overlap"
+                if mode == "overlap" and following is not None:
+                    next_read = pool.submit(plan.read, following)
+                elif pending:                    # phased or serial: the device renders alone
+                    drain(block=True)
+                with device_lock or nullcontext():
+                    frame_out, report, rest = plan.render(rt, job, read, stats)
+                del read                         # the write holds the output until done
+                if raw and next_read is not None:
+                    next_read.result()           # a short read raises: nothing written
+                pending.append(_Pending(job, writer.submit(plan.write, frame_out, job, report,
+                                                           rest), report, notices))
+                del frame_out, rest
+            except ClfxError as exc:
+                if not keep_going:
+                    raise
+                pending.append(_Pending(job, None, None, notices, error=exc))
+                failed = True
+                if fail_fast:
+                    break
+            if mode == "serial":
+                drain(block=True)
+            drain(block=False)
+            while len(pending) > WRITES_AHEAD:
+                drain(block=True, count=1)
+            if next_read is None and following is not None:   # phased: beside this write
+                next_read = pool.submit(plan.read, following)
+            job = following
+        drain(block=True)
+    return failed
+
 
 @dataclass
 class Batch:
-    """A look over INPUT to OUTPUT: ``prepare`` checks everything, ``run`` renders.
+    """A look over INPUT to OUTPUT: ``prepare`` checks everything and makes the `plan`,
+    ``run`` renders it (`render_stream`), its `reporter` says what happened.
 
-    ``jobs``, ``skipped_existing``, ``passes`` and ``raw_size`` are filled by ``prepare``;
-    ``stats`` holds the steps' running costs over this batch's frames.
+    ``jobs``, ``skipped_existing``, ``passes``, ``raw_size`` and ``plan`` are filled by
+    ``prepare``; ``stats`` holds the steps' running costs over this batch's frames.
     """
 
     look: Look
@@ -377,7 +795,6 @@ class Batch:
     output_path: str
     options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
-    progress: bool = False
     jobs: list[Job] = field(default_factory=list, init=False)
     skipped_existing: list[int] = field(default_factory=list, init=False)
     passes: PassSpec | None = field(default=None, init=False)  # what frames are read with
@@ -386,17 +803,29 @@ class Batch:
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
     reads: list[tuple[str, str]] = field(default_factory=list, init=False)  # (role, path) read
+    plan: BatchPlan | None = field(default=None, init=False)
     _read_index: tuple | None = field(default=None, init=False, repr=False)
     on_frame: object = field(default=None, repr=False)  # callable(done, total, report): progress
-    _log: object = field(default=None, init=False, repr=False)   # the --log file, while running
-    noticed: set[str] = field(default_factory=set, init=False, repr=False)  # reader notices said
-    _warned: set = field(default_factory=set, init=False, repr=False)
+    _reporter: object = field(default=None, init=False, repr=False)
     _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
     _first_read: Future | None = field(default=None, init=False, repr=False)
 
+    @property
+    def reporter(self):
+        """The `clfx.pipeline.report.Reporter` of this batch (warnings said while checking
+        count for the render: each once)."""
+        if self._reporter is None:
+            from clfx.pipeline.report import Reporter
+
+            self._reporter = Reporter(self.look, self.options.report_options(self.verbosity),
+                                      on_frame=self.on_frame,
+                                      data_on_stdout=RAW in (self.input_path, self.output_path))
+        return self._reporter
+
     # -- checks -------------------------------------------------------------------------
     def prepare(self) -> None:
-        """Resolve frames and outputs; raise before any pixel is read if anything is wrong."""
+        """Resolve frames and outputs; raise before any pixel is read if anything is wrong;
+        make the `plan`."""
         from clfx.io.sequence import Pattern, output_path, parse_frames, resolve_inputs
 
         from clfx.io.colour import check_config
@@ -426,10 +855,9 @@ class Batch:
         jobs = []
         for frame, path in inputs:
             out = output_path(pout, frame) if pout.is_sequence else self.output_path
-            job = Job(frame, path, out)
-            for name, (pat, found) in aux.items():
-                setattr(job, name, found[frame] if pat.is_sequence else next(iter(found.values())))
-            jobs.append(job)
+            passes = {name: found[frame] if pat.is_sequence else next(iter(found.values()))
+                      for name, (pat, found) in aux.items()}
+            jobs.append(Job(frame, path, out, **passes))
         from clfx.io.sequence import check_input_file
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_masks(jobs)
@@ -440,6 +868,8 @@ class Batch:
         if self.jobs:   # before anything is set up for it (device, first read, maps)
             first_frame_geometry(self.jobs[0].input)
         self.passes = o.passes.spec(self._radial_depth_focal_px())
+        self.plan = BatchPlan.of(self.look, o, jobs=self.jobs, passes=self.passes,
+                                 reads=self.reads)
 
     def _radial_depth_focal_px(self) -> float | None:
         """Focal length in pixels for --depth-mode distance, from the look's camera block and
@@ -461,7 +891,7 @@ class Batch:
         files: set[str] = set()
         for step, mask in self.look.masks():
             files.update(check_mask(mask, jobs[0].input, [j.frame for j in jobs],
-                                    f"effect {step.id!r}", notify=self._assumed))
+                                    f"effect {step.id!r}", notify=self.reporter.assumed))
         self.mask_files = sorted(files)
 
     def _reads(self, jobs: list[Job]) -> list[tuple[str, str]]:
@@ -575,262 +1005,42 @@ class Batch:
             self._pool = io_pool()
             try:
                 if self.jobs and self.input_path != RAW:
-                    self._first_read = self._pool.submit(self._read, self.jobs[0])
+                    self._first_read = self._pool.submit(self.plan.read, self.jobs[0])
                 yield self
             finally:
                 self._pool.shutdown(wait=True)
                 self._pool = None
 
     def run(self, rt) -> dict:
-        """Render every job; return a summary (with ``reports``: each frame's
-        `FrameReport`).  The first failing frame stops the batch (its output is not
+        """Render every job (`render_stream`); return the summary (with ``reports``: each
+        frame's `FrameReport`).  The first failing frame stops the batch (its output is not
         written; frames already written stay, so --skip-existing resumes)."""
-        with self._logging(), io_threads(codec_threads_for(rt)):
-            if self.input_path == RAW or self.output_path == RAW:
-                return self._run_raw(rt)
-            return self._run_files(rt)
-
-    def _run_files(self, rt) -> dict:
-        t0 = time.perf_counter()
-        if self.skipped_existing and self.verbosity > 0:
-            self._err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose output exists")
-        first, self._first_read = self._first_read, None
-        prepared = self._prepare_look(rt)
-        try:
-            reports = self._stream(rt, first)
-        except BaseException:
-            if prepared is not None:
-                prepared.close(cancel=True)     # a refused frame: no more work for it
-            raise
-        if prepared is not None:
-            prepared.close()
-        return self._summary(reports, time.perf_counter() - t0)
-
-    def _stream(self, rt, first: Future | None) -> list:
-        """Read, render and write every job (`stream_mode`); their reports."""
-        reports = []
-        total = len(self.jobs)
-        lowered = io_overlaps_cpu_device(rt)
-        with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
-            next_read: Future | None = first or (pool.submit(self._read, self.jobs[0]) if self.jobs else None)
-            writes: list[tuple[Future, object]] = []
-            for i, job in enumerate(self.jobs):
-                read = next_read.result()
-                mode = stream_mode(rt, read.pixels())
-                following = self.jobs[i + 1] if i + 1 < total else None
-                next_read = None
-                if mode == "overlap" and following:
-                    next_read = pool.submit(self._read, following)
-                elif writes:            # phased or serial: the device renders alone
-                    writes = self._drain(writes, block=True)
-                frame_out, report, views_out = self.render(rt, job, read)
-                writes.append((writer.submit(self._write, frame_out, job, report, views_out),
-                               report))
-                del read, frame_out, views_out     # the write holds the output until done
-                if mode == "serial":
-                    writes = self._drain(writes, block=True)
-                writes = self._drain(writes, block=False)
-                while len(writes) > WRITES_AHEAD:
-                    writes = self._drain(writes[:1], block=True) + writes[1:]
-                if next_read is None and following:     # phased: beside this frame's write
-                    next_read = pool.submit(self._read, following)
-                reports.append(report)
-                if self.on_frame is not None:
-                    self.on_frame(i + 1, total, report)
-            self._drain(writes, block=True)
-        return reports
+        raw = self.input_path == RAW or self.output_path == RAW
+        reporter = self.reporter
+        reporter.start(None if raw else len(self.jobs))
+        with reporter.logging(), io_threads(codec_threads_for(rt)):
+            if raw:
+                jobs = (Job(i, RAW, RAW) for i in itertools.count())
+            else:
+                jobs = self.jobs
+                if self.skipped_existing and self.verbosity > 0:
+                    reporter.err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose "
+                                 f"output exists")
+            first, self._first_read = self._first_read, None
+            render_stream(rt, self.plan, jobs, reporter.frame, stats=self.stats, first=first)
+            if raw and not reporter.reports:   # an empty stream is an error, not 0 frames
+                w, h = self.raw_size
+                raise SequenceError(f"stdin: no raw frames (0 bytes; --raw {w}x{h} frames are "
+                                    f"{w * h * 12} bytes each, gbrpf32le)")
+            summary = reporter.summary(skipped_existing=len(self.skipped_existing), raw=raw)
+        self.skipped_existing += reporter.skipped
+        return {**summary, "reports": reporter.reports}
 
     def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Preparing | None:
-        """`clfx.pipeline.look.prepare` for the first job's geometry (from its header), on a
-        thread of normal priority: the maps it builds are on the first frame's critical
-        path (a Dask worker's later chunks find them in its cache).  Nothing is started for
-        a frame whose windows the reader will refuse, nor for one larger than
-        `PREPARE_MAX_PIXELS` (its maps would sit beside the first steps' buffers: each is
-        built when its step needs it).  The caller closes what it returns, cancelling it
-        when the frame is refused."""
-        jobs = self.jobs if jobs is None else jobs
-        if not jobs:
-            return None
-        from clfx.core.errors import ClfxError
-        from clfx.pipeline.look import prepare
-
-        job, o = jobs[0], self.options
-        try:
-            data, display, aspect = first_frame_geometry(job.input)
-        except ClfxError:
-            return None          # the read says why
-        if max(data.width * data.height, display.width * display.height) > PREPARE_MAX_PIXELS:
-            return None
-        cancelled = threading.Event()
-
-        def run():
-            prepare(rt, self.look, data, display, aspect, frame_number=job.frame,
-                    quality=o.quality, keep_overscan=o.keep_overscan, cancel=cancelled)
-
-        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-prepare")
-        future = pool.submit(run)
-        pool.shutdown(wait=False)
-        return Preparing(future, cancelled)
-
-    def _summary(self, reports, wall: float) -> dict:
-        summary = {"summary": True, "look": self.look.name, "frames": len(reports),
-                   "skipped_existing": len(self.skipped_existing), "wall_s": round(wall, 3),
-                   "fps": round(len(reports) / wall, 3) if wall > 0 and reports else None,
-                   "device_ms_mean": round(float(np.mean([r.total_ms for r in reports])), 2) if reports else None,
-                   "saved_ms_estimate": round(sum(r.saved_ms or 0.0 for r in reports), 1)}
-        line = (f"clfx: {len(reports)} frame(s) rendered with look {self.look.name!r} in "
-                f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
-        self._log_line(summary, line)
-        if self.options.as_json:
-            print(json.dumps(summary), flush=True)
-        elif self.verbosity > 0:
-            self._err(line)
-        return {**summary, "reports": reports}
-
-    def render(self, rt, job: Job, read: FrameRead):
-        """Render one job's frames (already read) through the look: the hero's output frame
-        and report, and the other views' output frames.  The one place a batch renders, in
-        this process or in a distributed task."""
-        outs = []
-        for frame_in, masks in zip(read.views, read.masks):
-            outs.append(render_frame(
-                rt, self.look, frame_in, frame_number=job.frame, quality=self.options.quality,
-                keep_overscan=self.options.keep_overscan,
-                analysis_summary=self.options.as_json, stats=self.stats, masks=masks,
-                release_input=True))
-        frame_out, report = outs[0]
-        report.input, report.output = job.input, job.output
-        report.read_ms = read.read_ms
-        return frame_out, report, [f for f, _ in outs[1:]]
-
-    def _drain(self, writes, *, block: bool):
-        """Report finished writes in frame order (re-raising a write's error)."""
-        while writes and (block or writes[0][0].done()):
-            future, report = writes.pop(0)
-            future.result()
-            self._report(report)
-        return writes
-
-    def _report(self, report, stdout: bool = True) -> None:
-        """A rendered (and written) frame's report: warnings on stderr (each once per
-        batch), ``--json`` on stdout (not when stdout carries frames), ``--explain`` on
-        stderr, everything to ``--log``."""
-        self._warn(report)
-        if self.options.as_json and stdout:
-            print(json.dumps(report.as_dict()), flush=True)
-        if self.options.explain:
-            self._err(report.explain())
-        self._log_line(report.as_dict(), report.explain())
-
-    def _read(self, job: Job) -> FrameRead:
-        """The job's frame (every view of a multi-view file when the output can hold them,
-        hero first) with each view's masks, and the milliseconds it took to read."""
-        from clfx.io.read import read_views
-        from clfx.pipeline.masks import read_masks
-
-        t0 = time.perf_counter()
-        o = self.options
-        frames = read_views(job.input, view=o.view, passes=self.passes,
-                            all_views=job.output.lower().endswith(".exr") and o.passes_mode != "drop",
-                            colorspace=o.colorspace, working_space=o.working_space,
-                            depth_path=job.depth, velocity_path=job.velocity, notify=self._notice)
-        masks = [read_masks(self.look, f, job.frame, notify=self._assumed) for f in frames]
-        return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3)
-
-    def _notice(self, message: str, key: str) -> None:
-        """What the reader assumed (e.g. depth 0 = no hit): one line per sequence and key."""
-        if key.startswith("depth") and "depth" not in self.look.clips_used():
-            return                       # no step reads the depth: its conventions are moot
-        if key not in self.noticed:
-            self.noticed.add(key)
-            self._log_line({"notice": message}, f"clfx: {message}")
-            if self.verbosity > 0:
-                self._err(f"clfx: {message}")
-
-    def _assumed(self, message: str, key: str) -> None:
-        """What clfx had to assume about an input (a NaN mask, a Cryptomatte without
-        manifest): one warning line per batch and key, whatever -q says."""
-        if key not in self.noticed:
-            self.noticed.add(key)
-            self._log_line({"warning": message}, f"clfx: warning: {message}")
-            self._err(f"clfx: warning: {message}")
-
-    def stamp(self, frame: int) -> dict:
-        """The attributes an output of ``frame`` is stamped with (`Look.stamp`)."""
-        return self.look.stamp(frame, self.options.command)
-
-    def _write(self, frame: Frame, job: Job, report, views=()) -> None:
-        from clfx.io.write import OutputExistsError, write_frame
-
-        t0 = time.perf_counter()
-        o = self.options
-        try:   # not overwrite: an output another writer published meanwhile is never replaced
-            write_frame(frame, job.output, bit_depth="float" if o.as_float else None,
-                        compression=o.compression, colorspace=o.out_colorspace,
-                        overwrite=o.overwrite, attributes=self.stamp(job.frame),
-                        protect=[p for p in (job.input, job.depth, job.velocity) if p]
-                        + self.read_paths(),
-                        write_passes=o.passes_mode != "drop", views=views)
-        except OutputExistsError:
-            if not o.skip_existing:
-                raise
-            self.skipped_existing.append(job.frame)
-            if self.verbosity > 0:
-                self._err(f"clfx: frame {job.frame}: {job.output} appeared meanwhile; skipped")
-        report.write_ms = (time.perf_counter() - t0) * 1e3
-
-    def _warn(self, report) -> None:
-        """Say a frame's warnings on stderr, each distinct text once per batch (naming the
-        first frame that said it: a pass missing from every frame is one line, not one per
-        frame)."""
-        prefix = f"clfx: warning: frame {report.frame}: "
-        for line in report.warnings():
-            text = line.removeprefix(prefix)
-            if text not in self._warned:
-                self._warned.add(text)
-                self._err(line)
-
-    def _err(self, msg: str, end: str = "\n") -> None:
-        print(msg, end=end, file=sys.stderr, flush=True)
-
-    # -- the log file ---------------------------------------------------------------------
-    @contextmanager
-    def _logging(self):
-        path = self.options.log_path
-        if not path:
-            yield
-            return
-        try:
-            f = open(path, "a", encoding="utf-8")     # noqa: SIM115 (closed below)
-        except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
-        self._log = f
-        try:
-            yield
-        finally:
-            self._log = None
-            try:
-                f.close()
-            except OSError:
-                pass        # what failed was reported by the write that failed
-
-    def _log_line(self, record: dict, text: str) -> None:
-        """One entry of the --log file: ``record`` as a JSON line, or ``text``.  A failed
-        write (a full disk) is a one-line `ImageIOError`."""
-        if self._log is None:
-            return
-        as_json = self.options.log_path.lower().endswith((".json", ".jsonl"))
-        try:
-            self._log.write((json.dumps(record, default=str) if as_json else text) + "\n")
-            self._log.flush()
-        except OSError as exc:
-            log, self._log = self._log, None
-            try:
-                log.close()
-            except OSError:
-                pass
-            raise ImageIOError(f"cannot write --log {self.options.log_path}: "
-                               f"{exc.strerror or exc}") from None
+        """`prepare_maps` for this batch's first job (or ``jobs``' first)."""
+        look, level = resolve_quality(self.look, self.options.quality)
+        return prepare_maps(rt, look, self.jobs if jobs is None else jobs, level,
+                            self.options.keep_overscan)
 
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:
@@ -858,48 +1068,5 @@ class Batch:
         self.mask_files = sorted({f for _, m in self.look.masks() for f in [m.file] if f})
         self.reads = self._reads([])
         self._check_log()
-
-    def _run_raw(self, rt) -> dict:
-        """Read gbrpf32le frames from stdin until EOF; write them to stdout.  A frame is
-        written only once the next one has been read whole (or the stream ended at a frame
-        boundary), so a stream of the wrong size fails before its first frame is written."""
-        from clfx.io.raw import read_raw, write_raw
-
-        stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
-        o = self.options
-        t0 = time.perf_counter()
-        reports = []
-
-        def read(index):
-            return read_raw(stdin, self.raw_size, index, colorspace=o.colorspace,
-                            working_space=o.working_space)
-
-        with io_pool() as pool:
-            frame = read(0)
-            if frame is None:     # an empty stream is an error, not zero frames rendered
-                w, h = self.raw_size
-                raise SequenceError(f"stdin: no raw frames (0 bytes; --raw {w}x{h} frames are "
-                                    f"{w * h * 12} bytes each, gbrpf32le)")
-            count = 0
-            while frame is not None:
-                following = pool.submit(read, count + 1)
-                masks = None
-                if self.look.masks():
-                    from clfx.pipeline.masks import read_masks
-                    masks = read_masks(self.look, frame, count, notify=self._assumed)
-                out, report = render_frame(rt, self.look, frame, frame_number=count,
-                                           quality=o.quality, stats=self.stats, masks=masks)
-                next_frame = following.result()   # raises on a short read: nothing written
-                write_raw(stdout, out, frame.data_window, colorspace=o.out_colorspace)
-                self._report(report, stdout=False)
-                reports.append(report)
-                count += 1
-                if self.on_frame is not None:
-                    self.on_frame(count, None, report)
-                frame = next_frame
-        wall = time.perf_counter() - t0
-        summary = {"summary": True, "look": self.look.name, "frames": count,
-                   "wall_s": round(wall, 3),
-                   "fps": round(count / wall, 3) if wall > 0 and count else None}
-        self._log_line(summary, f"clfx: {count} raw frame(s) rendered in {wall:.2f} s")
-        return {**summary, "reports": reports}
+        self.plan = BatchPlan.of(self.look, self.options, reads=self.reads,
+                                 raw_size=self.raw_size)

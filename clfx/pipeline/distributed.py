@@ -1,13 +1,15 @@
 """Rendering a sequence on a Dask cluster: a local one (``--workers N``) or an existing one
 (``--scheduler ADDRESS``, env ``CLFX_SCHEDULER``).
 
-Frames, or chunks of ``--chunk N`` consecutive frames, are Dask tasks.  A task carries only its
-jobs (paths and frame numbers) and a small pickled spec of the render (look, options, pass
-overrides); the worker reads its inputs and writes its outputs itself (shared storage) with the
-same atomic writes as a single-process render, and sends back one small report per frame.
+Frames, or chunks of ``--chunk N`` consecutive frames, are Dask tasks.  A task carries the
+batch's `BatchPlan` (pickled once on the client) and the range of its jobs it renders; the
+worker runs the same `render_stream` as a single-process render (it reads its inputs and
+writes its outputs itself, shared storage, with the same atomic writes and the same files
+protected) and sends back one typed `FrameResult` per frame, which the client's `Reporter`
+says as a local render would.
 
 Each worker process holds a `ClfxWorker` plugin: the OpenCL runtime, built once when the
-worker joins (a process-wide `Runtime`), and the renders it has unpacked, by key, so a task
+worker joins (a process-wide `Runtime`), and the plans it has unpacked, by key, so a task
 pays neither device set-up nor look loading; effects keep their one-off set-up in the
 runtime's cache as in one process.  Inside a task the next frame is read and the previous one
 written on I/O threads while the device renders (at nice 10/5 on a CPU device: the overlapped
@@ -28,8 +30,6 @@ same as in one process (the look's seed and the frame number decide the noise).
 from __future__ import annotations
 
 import glob
-import hashlib
-import json
 import logging
 import os
 import pickle
@@ -38,15 +38,18 @@ import threading
 import time
 import uuid
 from collections import OrderedDict
-from contextlib import ExitStack, contextmanager, nullcontext, suppress
-from dataclasses import dataclass, replace
+from contextlib import ExitStack, contextmanager, suppress
+from dataclasses import dataclass
 
 from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError
-from clfx.device.runtime import user_set_pocl_affinity
-from clfx.pipeline.batch import RAW, Batch, Job, available_cores, io_pool
+from clfx.device.runtime import KernelBuildWarning, user_set_pocl_affinity
+from clfx.pipeline.batch import (RAW, Batch, BatchPlan, ClusterOptions, Job, available_cores,
+                                 render_stream)
+from clfx.pipeline.look import RunStats
+from clfx.pipeline.report import ClusterInfo, FrameResult, Reporter
 
 PLUGIN_NAME = "clfx"
 TASK_THREADS = 2
@@ -59,48 +62,50 @@ SPECS_KEPT = 4
 
 # -- what travels to the workers -----------------------------------------------------------
 @dataclass(frozen=True)
-class RenderSpec:
-    """A batch's look, paths, options and pass overrides, pickled once on the client.
+class ShippedPlan:
+    """A batch's `BatchPlan` (absolute paths), pickled once on the client: the one thing a
+    task carries besides the frames it renders.
 
-    ``key`` starts with the look's params hash and identifies the render in each worker's
-    cache, so the look is unpacked once per worker process, not once per task.
+    ``key`` starts with the look's params hash and identifies the plan in each worker's
+    cache, so it is unpacked once per worker process, not once per task.
     """
 
     key: str
     blob: bytes
 
     @classmethod
-    def of(cls, batch: Batch) -> RenderSpec:
-        reads = [(role, os.path.abspath(p)) for role, p in batch.reads]  # what writes protect
-        blob = pickle.dumps((batch.look, batch.input_path, batch.output_path, batch.options,
-                             batch.passes, batch.look_files, reads),
-                            protocol=pickle.HIGHEST_PROTOCOL)
-        return cls(f"{batch.look.params_hash()}-{hashlib.sha1(blob).hexdigest()[:12]}", blob)
+    def of(cls, plan: BatchPlan) -> ShippedPlan:
+        plan = plan.for_workers()
+        return cls(plan.key(), pickle.dumps(plan, protocol=pickle.HIGHEST_PROTOCOL))
 
-    def batch(self) -> Batch:
-        look, input_path, output_path, options, passes, look_files, reads = pickle.loads(self.blob)
-        batch = Batch(look=look, input_path=input_path, output_path=output_path,
-                      options=options, verbosity=0)
-        batch.passes, batch.look_files, batch.reads = passes, look_files, reads  # from the client
-        return batch
+    def plan(self) -> BatchPlan:
+        return pickle.loads(self.blob)
 
 
 class ClfxWorker(WorkerPlugin):
-    """State of one worker process: the runtime (built when the worker joins), the renders
-    it has unpacked (`SPECS_KEPT` most recent, by `RenderSpec.key`) and the lock its task
-    threads take to render (kernels share their argument slots, so one render at a time)."""
+    """State of one worker process: the runtime (built when the worker joins), the plans
+    it has unpacked with their running statistics (`SPECS_KEPT` most recent, by
+    `ShippedPlan.key`) and the lock its task threads take to render (kernels share their
+    argument slots, so one render at a time).
+
+    ``codec_threads``: OpenImageIO threads per read or write (a local cluster gives each
+    worker its share of the cores; None: every core)."""
 
     idempotent = True   # a second client on the same cluster keeps the warm state
 
-    def __init__(self, device: str | None = None):
+    def __init__(self, device: str | None = None, codec_threads: int | None = None):
         self.device = device
+        self.codec_threads = codec_threads
 
     def setup(self, worker=None):
+        import warnings
+
+        warnings.filterwarnings("ignore", category=KernelBuildWarning)   # -v shows them
         malloc_like_one_process()
-        codec_threads_for_batches()
+        codec_threads_for_batches(self.codec_threads)
         self.device_lock = threading.Lock()
         self._lock = threading.Lock()
-        self._batches: OrderedDict[str, Batch] = OrderedDict()
+        self._plans: OrderedDict[str, tuple[BatchPlan, RunStats]] = OrderedDict()
         self._rt = None
         self._rt_error: ClfxError | None = None
         self.runtime_s = 0.0
@@ -118,15 +123,16 @@ class ClfxWorker(WorkerPlugin):
             raise self._rt_error or ClusterError("clfx worker plugin was not set up")
         return self._rt
 
-    def batch(self, spec: RenderSpec) -> Batch:
+    def plan(self, shipped: ShippedPlan) -> tuple[BatchPlan, RunStats]:
+        """The plan and its statistics on this worker (unpacked once)."""
         with self._lock:      # task threads
-            if spec.key in self._batches:
-                self._batches.move_to_end(spec.key)
+            if shipped.key in self._plans:
+                self._plans.move_to_end(shipped.key)
             else:
-                self._batches[spec.key] = spec.batch()
-                while len(self._batches) > SPECS_KEPT:
-                    self._batches.popitem(last=False)
-            return self._batches[spec.key]
+                self._plans[shipped.key] = (shipped.plan(), RunStats())
+                while len(self._plans) > SPECS_KEPT:
+                    self._plans.popitem(last=False)
+            return self._plans[shipped.key]
 
 
 MMAP_THRESHOLD = 32 << 20
@@ -164,21 +170,19 @@ def malloc_like_one_process() -> bool:
         return False
 
 
-def codec_threads_for_batches() -> int:
-    """Set, once for the process, the codec threads of a worker's reads and writes: its share
-    of the cores (``OPENIMAGEIO_OPTIONS``'s ``exr_threads``, which a local cluster sets to
-    cores / N), else every core.  Measured with `--workers 1` on 2 cores, 24 frames of 1080p
-    ``cinema``: 1.113 and 1.082 fps with 2 threads, 1.075 and 1.034 with 1 (the I/O runs on
-    its own thread at nice 10/5 beside the renders).  Once for the process, since its task
-    threads would undo each other's `clfx.io.read.codec_threads`."""
-    import OpenImageIO as oiio
-
+def codec_threads_for_batches(n: int | None = None) -> int:
+    """Set, once for the process, the codec threads of a worker's reads and writes: ``n``
+    (a local cluster's share of the cores per worker), else every core.  Measured with
+    `--workers 1` on 2 cores, 24 frames of 1080p ``cinema``: 1.113 and 1.082 fps with 2
+    threads, 1.075 and 1.034 with 1 (the I/O runs on its own thread at nice 10/5 beside the
+    renders).  Once for the process, since its task threads would undo each other's
+    `clfx.io.read.codec_threads`."""
     from clfx.io.read import set_codec_threads
 
-    n = 0
-    options = os.environ.get("OPENIMAGEIO_OPTIONS")
-    if options:                          # OpenImageIO's own parser of its variable
-        oiio.attribute("options", options)
+    if not n and os.environ.get("OPENIMAGEIO_OPTIONS"):   # a farm worker's own setting
+        import OpenImageIO as oiio
+
+        oiio.attribute("options", os.environ["OPENIMAGEIO_OPTIONS"])
         n = oiio.get_int_attribute("exr_threads", 0)
     n = n or available_cores()
     set_codec_threads(n)
@@ -198,89 +202,47 @@ def _where() -> str:
 
 
 # -- the task ------------------------------------------------------------------------------
-def render_chunk(spec: RenderSpec, jobs: list[Job], fail_fast: bool = False) -> list[dict]:
-    """The Dask task: render ``jobs`` on this worker; one small result per frame.
-
-    Each result has ``frame``, ``worker`` and either ``report`` (`FrameReport.as_dict`) and
-    ``explain``, or ``error`` (the message of the `ClfxError` that failed the frame).
-    """
+def render_chunk(shipped: ShippedPlan, start: int, stop: int,
+                 fail_fast: bool = False) -> list[FrameResult]:
+    """The Dask task: render the plan's jobs ``start:stop`` on this worker (`render_stream`,
+    I/O overlapping the renders, one render at a time per worker); one `FrameResult` per
+    frame rendered or failed (a `ClfxError` fails its frame, the others go on unless
+    ``fail_fast``)."""
     state = _worker_state()
-    batch = state.batch(spec)
+    plan, stats = state.plan(shipped)
+    jobs = plan.jobs[start:stop]
     try:
         rt = state.runtime()
     except ClfxError as exc:
         return [_failed(job, exc) for job in jobs]
-    return render_jobs(batch, rt, jobs, fail_fast=fail_fast, device_lock=state.device_lock)
-
-
-def render_jobs(batch: Batch, rt, jobs: list[Job], *, fail_fast: bool = False,
-                device_lock=None) -> list[dict]:
-    """Read, render and write ``jobs`` with `Batch`'s own steps, reading the next frame and
-    writing the previous one on I/O threads while the device renders (holding
-    ``device_lock`` if given); a frame that raises a `ClfxError` is reported and the others
-    go on (all stop after it with ``fail_fast``)."""
-    prepared = batch._prepare_look(rt, jobs)
-    try:
-        results = _render_jobs(batch, rt, jobs, fail_fast, device_lock)
-    except BaseException:
-        if prepared is not None:
-            prepared.close(cancel=True)
-        raise
-    if prepared is not None:      # a frame failed or was not rendered: stop preparing for it
-        prepared.close(cancel=any(r is None or "error" in r for r in results))
-    return [r for r in results if r is not None]
-
-
-def _render_jobs(batch: Batch, rt, jobs: list[Job], fail_fast: bool,
-                 device_lock) -> list[dict | None]:
-    """`render_jobs` without the maps' thread: a result per job (None: not rendered)."""
-    results: list[dict | None] = [None] * len(jobs)
-    writes = []
-    lowered = getattr(rt, "shares_host_cores", True)   # I/O gives way to a CPU device
-    with io_pool(lowered=lowered) as pool, io_pool("write", lowered=lowered) as writer:
-        next_read = pool.submit(batch._read, jobs[0]) if jobs else None
-        for i, job in enumerate(jobs):
-            read, next_read = next_read, (pool.submit(batch._read, jobs[i + 1])
-                                          if i + 1 < len(jobs) else None)
-            try:
-                frame_in = read.result()
-                with device_lock or nullcontext():
-                    frame_out, report, views = batch.render(rt, job, frame_in)
-            except ClfxError as exc:
-                results[i] = _failed(job, exc)
-                if fail_fast:
-                    break
-                continue
-            writes.append((i, report, writer.submit(batch._write, frame_out, job, report, views)))
-        for i, report, done in writes:
-            try:
-                done.result()
-            except ClfxError as exc:
-                results[i] = _failed(jobs[i], exc)
-                continue
-            results[i] = {"frame": jobs[i].frame, "worker": _where(),
-                          "report": report.as_dict(), "explain": report.explain()}
+    results: list[FrameResult] = []
+    render_stream(rt, plan, jobs, results.append, stats=stats, keep_going=True,
+                  fail_fast=fail_fast, device_lock=state.device_lock, overlap=True,
+                  worker=_where())
     return results
 
 
-def _failed(job: Job, exc: BaseException) -> dict:
-    message = str(exc) if isinstance(exc, ClfxError) else f"{type(exc).__name__}: {exc}"
-    return {"frame": job.frame, "worker": _where(), "input": job.input, "output": job.output,
-            "error": " ".join(message.split())}
+def _failed(job: Job, exc: BaseException) -> FrameResult:
+    return FrameResult.failure(job, exc, _where())
 
 
 # -- the cluster ---------------------------------------------------------------------------
-def worker_env(workers: int, cores: int | None = None) -> dict[str, str]:
-    """Environment for ``workers`` local worker processes sharing ``cores``: each gets an
-    equal share of threads for PoCL (its OpenCL CPU device) and OpenImageIO (EXR
-    decode/encode), so renders and I/O do not oversubscribe the cores.  Variables already set
-    in the environment win."""
+def worker_share(workers: int, cores: int | None = None) -> int:
+    """Threads each of ``workers`` local worker processes sharing ``cores`` gets."""
     if cores is None:
         cores = available_cores()
-    share = str(max(1, (cores or 1) // max(1, workers)))
+    return max(1, (cores or 1) // max(1, workers))
+
+
+def worker_env(workers: int, cores: int | None = None) -> dict[str, str]:
+    """Environment for ``workers`` local worker processes sharing ``cores``: PoCL (its
+    OpenCL CPU device, which reads its thread count from the environment only) gets each
+    worker's share (`worker_share`; OpenImageIO's is the `ClfxWorker` plugin's
+    ``codec_threads``), so renders and I/O do not oversubscribe the cores.  Variables
+    already set in the environment win."""
+    share = str(worker_share(workers, cores))
     env = {"POCL_MAX_PTHREAD_COUNT": share,         # PoCL <= 4 pthread device
            "POCL_CPU_MAX_CU_NUM": share,            # PoCL >= 4 cpu device
-           "OPENIMAGEIO_OPTIONS": f"threads={share},exr_threads={share}",
            "OMP_NUM_THREADS": share}
     env = {k: v for k, v in env.items() if k not in os.environ}
     if workers > 1 and not user_set_pocl_affinity():
@@ -357,17 +319,18 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
         except (OSError, TimeoutError) as exc:
             where = f"scheduler {scheduler}" if scheduler else f"a local cluster of {workers}"
             raise ClusterError(f"cannot reach {where}: {exc}") from exc
-        client.register_plugin(ClfxWorker(device), name=PLUGIN_NAME)
+        client.register_plugin(ClfxWorker(device, None if scheduler else worker_share(workers)),
+                               name=PLUGIN_NAME)
         yield client
 
 
 # -- the client ----------------------------------------------------------------------------
-def render_distributed(batch: Batch, *, workers: int | None = None, scheduler: str | None = None,
-                       chunk: int = 1, fail_fast: bool = False, device: str | None = None) -> dict:
-    """Render a prepared batch (``batch.prepare()`` done, passes set) on a Dask cluster.
+def render_distributed(batch: Batch, cluster: ClusterOptions, *,
+                       device: str | None = None) -> dict:
+    """Render a prepared batch (``batch.prepare()`` done) on a Dask cluster.
 
-    Prints what `Batch.run` prints (JSON lines in frame order and a summary with ``--json``,
-    ``--explain`` texts), plus progress with frames per second and ETA on a terminal.
+    Says what `Batch.run` says, through the batch's `Reporter` (JSON lines in frame order
+    and a summary with ``--json``, ``--explain`` texts, warnings once, ``--log``, progress).
 
     Returns
     -------
@@ -387,161 +350,76 @@ def render_distributed(batch: Batch, *, workers: int | None = None, scheduler: s
     if batch.input_path == RAW or batch.output_path == RAW:
         raise SequenceError("raw pipes ('-') render in one process; --workers and "
                             "--scheduler render files")
-    if chunk < 1:
-        raise SequenceError(f"--chunk {chunk}: expected 1 or more frames per task")
-    o = batch.options
-    as_json, explain = o.as_json, o.explain
+    if cluster.chunk < 1:
+        raise SequenceError(f"--chunk {cluster.chunk}: expected 1 or more frames per task")
+    reporter = batch.reporter
     jobs = batch.jobs
+    reporter.start(len(jobs))
     if batch.skipped_existing and batch.verbosity > 0:
-        batch._err(f"clfx: skipping {len(batch.skipped_existing)} frame(s) whose output exists")
-    spec = RenderSpec.of(batch)
-    remote = [_absolute(j) for j in jobs]   # workers need not share the client's folder
-    chunks = [remote[i:i + chunk] for i in range(0, len(remote), chunk)]
+        reporter.err(f"clfx: skipping {len(batch.skipped_existing)} frame(s) whose output exists")
+    shipped = ShippedPlan.of(batch.plan)
+    chunks = [(i, min(i + cluster.chunk, len(jobs))) for i in range(0, len(jobs), cluster.chunk)]
     t0 = time.perf_counter()
-    reports, failed = [], []
     ended = False   # every task has ended (none is still writing a temp file)
-    startup = 0.0
-    try:
-        with connect(workers=workers, scheduler=scheduler, device=device,
-                     quiet=batch.verbosity < 2) as client:
-            nworkers = len(client.scheduler_info()["workers"]) if scheduler else workers
-            startup = time.perf_counter() - t0
-            ended = _collect(batch, client, spec, chunks, fail_fast, as_json, explain,
-                             reports, failed, {j.frame: j for j in jobs})
-    finally:
-        if ended or not scheduler:   # a local cluster's workers are gone by now
-            _remove_orphan_temps(jobs)
-    wall = time.perf_counter() - t0
-    render_s = wall - startup
-    device_ms = [r["report"]["total_ms"] for r in reports]
-    summary = {"summary": True, "look": batch.look.name, "frames": len(reports),
-               "failed": [r["frame"] for r in failed],
-               "skipped_existing": len(batch.skipped_existing), "wall_s": round(wall, 3),
-               "startup_s": round(startup, 3),
-               "fps": round(len(reports) / render_s, 3) if render_s > 0 and reports else None,
-               "device_ms_mean": round(sum(device_ms) / len(device_ms), 2) if device_ms else None,
-               "workers": nworkers, "chunk": chunk,
-               "scheduler": scheduler or "local"}
-    if as_json:
-        print(json.dumps(summary), flush=True)
-    elif batch.verbosity > 0:
-        batch._err(f"clfx: {len(reports)} frame(s) rendered with look {batch.look.name!r} on "
-                   f"{nworkers} worker(s) in {wall:.2f} s"
-                   + (f" ({summary['fps']} fps after {startup:.1f} s start-up)"
-                      if summary["fps"] else ""))
+    startup, nworkers = 0.0, cluster.workers
+    with reporter.logging():
+        try:
+            with connect(workers=cluster.workers, scheduler=cluster.scheduler, device=device,
+                         quiet=batch.verbosity < 2) as client:
+                if cluster.scheduler:
+                    nworkers = len(client.scheduler_info()["workers"])
+                startup = time.perf_counter() - t0
+                ended = _collect(reporter, client, shipped, jobs, chunks, cluster.fail_fast)
+        finally:
+            if ended or not cluster.scheduler:   # a local cluster's workers are gone by now
+                _remove_orphan_temps(jobs)
+        summary = reporter.summary(skipped_existing=len(batch.skipped_existing),
+                                   cluster=ClusterInfo(nworkers, cluster.chunk,
+                                                       cluster.scheduler, startup))
+    failed = reporter.failed
     if failed:
         first = failed[0]
         more = f" (and {len(failed) - 1} more: frames {_frames_text(failed[1:])})" if len(failed) > 1 else ""
-        raise ClfxError(f"frame {first['frame']} failed: {first['error']}{more}")
+        raise ClfxError(f"frame {first.frame} failed: {first.error}{more}")
     return summary
 
 
-def _collect(batch: Batch, client, spec: RenderSpec, chunks: list[list[Job]], fail_fast: bool,
-             as_json: bool, explain: bool, reports: list, failed: list,
-             given: dict[int, Job]) -> bool:
-    """Submit one task per chunk, emit results in frame order as tasks finish; True when
-    every task ended (False when ``fail_fast`` cancelled the rest).  Reports name the
-    files as ``given`` (the client's jobs by frame)."""
-    progress = _Progress(batch, sum(map(len, chunks))) if batch.progress else None
+def _collect(reporter: Reporter, client, shipped: ShippedPlan, jobs: list[Job],
+             chunks: list[tuple[int, int]], fail_fast: bool) -> bool:
+    """Submit one task per chunk, report results in frame order as tasks finish; True when
+    every task ended (False when ``fail_fast`` cancelled the rest).  Results name the files
+    as ``jobs`` do (tasks saw absolute paths)."""
     run = uuid.uuid4().hex[:8]
-    futures = {client.submit(render_chunk, spec, c, fail_fast, pure=False, retries=0,
-                             key=f"clfx-render-{c[0].frame}-{c[-1].frame}-{run}"): i
-               for i, c in enumerate(chunks)}
-    results: dict[int, list[dict]] = {}
+    futures = {client.submit(render_chunk, shipped, a, b, fail_fast, pure=False, retries=0,
+                             key=f"clfx-render-{jobs[a].frame}-{jobs[b - 1].frame}-{run}"): i
+               for i, (a, b) in enumerate(chunks)}
+    given = {j.frame: j for j in jobs}
+    results: dict[int, list[FrameResult]] = {}
     emitted = 0
-    try:
-        for future in as_completed(futures, loop=client.loop):
-            i = futures[future]
-            if future.status == "error":
-                exc = future.exception()
-                results[i] = [_failed(job, exc) for job in chunks[i]]
-            else:
-                results[i] = future.result()
-            future.release()
-            while emitted in results:   # frame order
-                for r in results.pop(emitted):
-                    _as_given(r, given[r["frame"]])
-                    _emit(batch, r, as_json, explain)
-                    (failed if "error" in r else reports).append(r)
-                    if progress:
-                        progress.update(r)
-                emitted += 1
-            if fail_fast and failed:
-                client.cancel(list(futures))
-                return False
-    finally:
-        if progress:
-            progress.close()
+    for future in as_completed(futures, loop=client.loop):
+        i = futures[future]
+        if future.status == "error":
+            exc = future.exception()
+            a, b = chunks[i]
+            results[i] = [_failed(job, exc) for job in jobs[a:b]]
+        else:
+            results[i] = future.result()
+        future.release()
+        while emitted in results:   # frame order
+            for r in results.pop(emitted):
+                job = given[r.frame]
+                reporter.frame(r.named(job.input, job.output))
+            emitted += 1
+        if fail_fast and reporter.failed:
+            client.cancel(list(futures))
+            return False
     return True
 
 
-def _absolute(job: Job) -> Job:
-    return replace(job, **{k: os.path.abspath(v) for k in ("input", "output", "depth", "velocity")
-                           if (v := getattr(job, k))})
-
-
-def _as_given(result: dict, job: Job) -> None:
-    """Name the files in a result as the user gave them (tasks saw absolute paths)."""
-    for d in (result, result.get("report")):
-        if d is not None and "input" in d:
-            d["input"], d["output"] = job.input, job.output
-
-
-def _emit(batch: Batch, result: dict, as_json: bool, explain: bool) -> None:
-    if "error" in result:
-        if as_json:
-            print(json.dumps(result), flush=True)
-        if batch.verbosity > 0:
-            batch._err(f"clfx: frame {result['frame']} failed on {result['worker']}: "
-                       f"{result['error']}")
-        return
-    if as_json:
-        print(json.dumps({**result["report"], "worker": result["worker"]}), flush=True)
-    rep = result["report"]  # the same lines as a local render
-    said = rep.get("warnings", []) + [f"{s['effect']}: {w}" for s in rep.get("steps", [])
-                                      for w in s.get("warnings", [])]
-    for w in said:   # each text once per batch, as a local render says it
-        if w not in batch._warned:
-            batch._warned.add(w)
-            batch._err(f"clfx: warning: frame {result['frame']}: {w}")
-    if explain:
-        batch._err(result["explain"])
-
-
-def _frames_text(results: list[dict]) -> str:
+def _frames_text(results: list[FrameResult]) -> str:
     from clfx.io.sequence import compact
 
-    return compact(r["frame"] for r in results)
-
-
-class _Progress:
-    """One stderr line: frames done, frames per second and time left (rate measured from the
-    first finished frame, so cluster start-up does not count)."""
-
-    def __init__(self, batch: Batch, total: int):
-        self.batch, self.total, self.done, self.failed = batch, total, 0, 0
-        self.t_first: float | None = None
-
-    def update(self, result: dict) -> None:
-        now = time.perf_counter()
-        self.done += 1
-        self.failed += "error" in result
-        if self.t_first is None:
-            self.t_first = now
-        rate = (self.done - 1) / (now - self.t_first) if self.done > 1 and now > self.t_first else None
-        eta = f"ETA {_duration((self.total - self.done) / rate)}" if rate else "ETA --"
-        fps = f"{rate:.2f} fps" if rate else "-- fps"
-        bad = f", {self.failed} failed" if self.failed else ""
-        self.batch._err(f"\rclfx: {self.done}/{self.total} frames{bad}  {fps}  {eta}   ", end="")
-
-    def close(self) -> None:
-        if self.done:
-            self.batch._err("")
-
-
-def _duration(seconds: float) -> str:
-    s = round(seconds)
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+    return compact(r.frame for r in results)
 
 
 def _remove_orphan_temps(jobs: list[Job]) -> None:
