@@ -9,7 +9,8 @@ pipeline supplies: effects never open files themselves.
 """
 from __future__ import annotations
 
-from typing import ClassVar
+from dataclasses import KW_ONLY, dataclass, field, replace
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -34,8 +35,38 @@ class _SharedAnalysis:
         self.seconds = 0.0
 
 
+class _FrameAnalysis(_SharedAnalysis):
+    """The analysis box of a tile's context: the whole frame's analysis, never recomputed
+    over the tile (an effect that tiles reads only its frame-wide values: counts, peaks,
+    the metering level; one that reads its per-tile arrays renders whole)."""
+
+    __slots__ = ()
+
+
+def _no_reader(what: str, keyword: str):
+    """A reader for a context made without one: says so in a ParamError."""
+    def read(name):
+        raise ParamError(f"no {what} reader in this context to read {name!r} "
+                         f"(pass {keyword}= to the render context)")
+    return read
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """What one step derives once per frame from its parameters and the frame (openfx-misc's
+    per-time params struct, darktable's ``commit_params``): ``is_identity``, the regions, the
+    clamp warnings and ``render`` read it instead of deriving it again.  Effects subclass it
+    (frozen) with their fields; the base holds nothing (an effect with nothing costly to
+    derive).  ``identity``: the reason the step has nothing to do on this frame, or None."""
+
+    identity: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
 class RenderContext:
-    """Everything an effect may read while rendering one frame.
+    """Everything an effect may read while rendering one frame: frozen, derived with
+    :func:`dataclasses.replace` (:meth:`for_step`, :meth:`with_source`, :meth:`grown_to`,
+    :meth:`over`).
 
     Attributes
     ----------
@@ -71,40 +102,59 @@ class RenderContext:
     read_image : callable(path) -> ndarray
         Reads a file a :class:`~clfx.core.plugin.PathParam` names (supplied by the pipeline).
     read_lens : callable(name) -> dict
-        Reads a lens prescription by name (``presets/lenses/<name>.yaml``) or path, as the
-        plain dict ``clfx.fx.optics.Prescription.from_dict`` takes (supplied by the pipeline).
+        A lens prescription by name (``presets/lenses/<name>.yaml``) or path, as the plain
+        dict ``clfx.fx.optics.Prescription.from_dict`` takes (supplied by the pipeline, which
+        resolved and validated it when the look was loaded: `clfx.io.lenses`).
     rgb_to_xyz : ndarray (3, 3), float64
         The working space's RGB -> CIE XYZ (D65) matrix, as data (the pipeline takes it from
         OCIO); default linear Rec.709 (`clfx.core.colour`).  Spectral effects build their
         wavelength -> RGB tables with it, thresholds weigh luminance with its Y row.
+    notes, warnings : list of str
+        This step's notes for the report and lines said on stderr (a clamp, a guess, a
+        skipped request); the lists are shared by the contexts derived within one step.
     """
 
-    def __init__(self, runtime, source, *, depth=None, velocity=None, velocity_back=None,
-                 display_window=None,
-                 pixel_aspect=1.0, frame=0, seed=0, camera=None, quality=DEFAULT_QUALITY,
-                 display_referred=False, analysis=None, output_limit=None, read_image=None,
-                 read_lens=None, reference_camera=None, rgb_to_xyz=None):
-        self.runtime = runtime
-        self.source = source
-        self.depth = depth
-        self.velocity = velocity
-        self.velocity_back = velocity_back
-        self.display_window = display_window or source.window
-        self.pixel_aspect = float(pixel_aspect)
-        self.frame = int(frame)
-        self.seed = int(seed)
-        self.camera = camera or Camera()
-        self.reference_camera = reference_camera or self.camera
-        self.quality = quality
-        self.display_referred = display_referred
-        self._analysis = _SharedAnalysis(analysis)
-        self.output_limit = output_limit or source.window.union(self.display_window)
-        self.notes: list[str] = []
-        self.warnings: list[str] = []  # said on stderr: a clamp, a guess, a skipped request
-        self._read_image = read_image
-        self._read_lens = read_lens
-        self.rgb_to_xyz = colour.rgb_to_xyz_matrix(rgb_to_xyz)
-        self._handoff: dict = {}
+    runtime: Any
+    source: Any
+    _: KW_ONLY
+    depth: Any = None
+    velocity: Any = None
+    velocity_back: Any = None
+    display_window: Rect | None = None
+    pixel_aspect: float = 1.0
+    frame: int = 0
+    seed: int = 0
+    camera: Camera | None = None
+    quality: str = DEFAULT_QUALITY
+    display_referred: bool = False
+    output_limit: Rect | None = None
+    read_image: Any = field(default=None, repr=False)
+    read_lens: Any = field(default=None, repr=False)
+    reference_camera: Camera | None = None
+    rgb_to_xyz: Any = field(default=None, repr=False)
+    notes: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    shared: _SharedAnalysis = field(default_factory=_SharedAnalysis, repr=False)
+    """The frame's scene analysis box (shared by the step contexts of one frame)."""
+    plans: dict = field(default_factory=dict, repr=False)
+    """This step's plans (`Plugin.planned`), shared by the contexts derived within it."""
+
+    def __post_init__(self):
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        put("display_window", self.display_window or self.source.window)
+        put("pixel_aspect", float(self.pixel_aspect))
+        put("frame", int(self.frame))
+        put("seed", int(self.seed))
+        put("camera", self.camera or Camera())
+        put("reference_camera", self.reference_camera or self.camera)
+        put("output_limit", self.output_limit or self.source.window.union(self.display_window))
+        put("rgb_to_xyz", colour.rgb_to_xyz_matrix(self.rgb_to_xyz))
+        if self.read_image is None:
+            put("read_image", _no_reader("image", "read_image"))
+        if self.read_lens is None:
+            put("read_lens", _no_reader("lens", "read_lens"))
 
     @property
     def luminance(self) -> np.ndarray:
@@ -123,28 +173,14 @@ class RenderContext:
         """The working space's matrix as a cache key (() for Rec.709)."""
         return colour.matrix_key(self.rgb_to_xyz)
 
-    def read_image(self, path: str) -> np.ndarray:
-        """The RGB(A) pixels of an image file a parameter names (a :class:`PathParam`), read
-        by the pipeline's reader (effects never open files)."""
-        if self._read_image is None:
-            raise ParamError(f"no image reader in this context to read {path!r} "
-                             f"(pass read_image= to the render context)")
-        return self._read_image(path)
-
-    def read_lens(self, name: str) -> dict:
-        """A lens prescription (a shipped name or a file) as a plain dict, read by the
-        pipeline's reader (effects never open files or parse YAML)."""
-        if self._read_lens is None:
-            raise ParamError(f"no lens reader in this context to read {name!r} "
-                             f"(pass read_lens= to the render context)")
-        return self._read_lens(name)
-
     @property
     def analysis(self):
         """The frame's shared scene analysis of the current source: computed on first use,
         and again only if an effect has since changed the source's window (its tiles are
         always those of ``source.window``)."""
-        shared = self._analysis
+        shared = self.shared
+        if isinstance(shared, _FrameAnalysis):
+            return shared.value
         if shared.value is None or shared.value.window != self.source.window:
             shared.value = analyse(self.runtime, self.source, depth=self.depth,
                                    velocity=self.velocity, camera=self.camera,
@@ -157,7 +193,7 @@ class RenderContext:
     def analysis_seconds(self) -> float:
         """Seconds spent computing this frame's analyses so far (this context and every
         per-step context made from it)."""
-        return self._analysis.seconds
+        return self.shared.seconds
 
     @property
     def diagonal_px(self) -> float:
@@ -171,58 +207,50 @@ class RenderContext:
         """A resolution-independent size (fraction of the frame diagonal) in pixels."""
         return fraction_of_diagonal * self.diagonal_px
 
+    def over(self, **changes) -> RenderContext:
+        """This context with ``changes`` (`dataclasses.replace`): the same step (notes,
+        warnings, plans and the frame's analysis shared)."""
+        return replace(self, **changes)
+
     def grown_to(self, window: Rect) -> RenderContext:
         """This context over a larger ``window`` (an effect whose light leaves the data
         window): the source padded with transparent black, depth and velocity extended from
-        their edges; notes and the frame's analysis box shared (the analysis is recomputed
-        for the new window on first use)."""
-        ctx = RenderContext.__new__(RenderContext)
-        ctx.__dict__.update(self.__dict__)
+        their edges; notes, plans and the frame's analysis box shared (the analysis is
+        recomputed for the new window on first use)."""
         rt = self.runtime
-        ctx.source = rt.reframe(self.source, window, "zero")
-        ctx.depth = None if self.depth is None else rt.reframe(self.depth, window, "clamp")
-        ctx.velocity = None if self.velocity is None else rt.reframe(self.velocity, window, "clamp")
-        ctx.velocity_back = (None if self.velocity_back is None
-                             else rt.reframe(self.velocity_back, window, "clamp"))
-        return ctx
+
+        def clamp(img):
+            return None if img is None else rt.reframe(img, window, "clamp")
+
+        return replace(self, source=rt.reframe(self.source, window, "zero"),
+                       depth=clamp(self.depth), velocity=clamp(self.velocity),
+                       velocity_back=clamp(self.velocity_back))
 
     def for_step(self, quality: str) -> RenderContext:
         """A context for one effect of a look: this one at ``quality``, with its own
-        ``notes`` and the same scene analysis (one the step computes is this frame's)."""
-        ctx = RenderContext.__new__(RenderContext)
-        ctx.__dict__.update(self.__dict__)  # shares the analysis
-        ctx.quality = quality
-        ctx.notes = []
-        ctx.warnings = []
-        ctx._handoff = {}
-        return ctx
+        ``notes``, ``warnings`` and plans and the same scene analysis (one the step computes
+        is this frame's)."""
+        return replace(self, quality=quality, notes=[], warnings=[], plans={})
+
+    def tile(self, window: Rect) -> RenderContext:
+        """This step's context over the part ``window`` of its source and passes (a tile of a
+        tiled render: `clfx.pipeline.look`): the same plans and notes, and the whole frame's
+        scene analysis (computed now if not yet), not the tile's."""
+        rt = self.runtime
+        frame = _FrameAnalysis(self.analysis)
+
+        def crop(img):
+            return None if img is None else rt.reframe(img, window, "clamp")
+
+        return replace(self, source=rt.reframe(self.source, window, "zero"),
+                       depth=crop(self.depth), velocity=crop(self.velocity),
+                       velocity_back=crop(self.velocity_back), shared=frame)
 
     def with_source(self, source) -> RenderContext:
         """This context over another source image (a masked copy of the frame): same notes
-        and passes, its own scene analysis (the frame's does not describe ``source``)."""
-        ctx = RenderContext.__new__(RenderContext)
-        ctx.__dict__.update(self.__dict__)
-        ctx.source = source
-        ctx._analysis = _SharedAnalysis()
-        ctx._handoff = {}
-        return ctx
-
-    def remember(self, key, build):
-        """``build()``, kept for this step's next `recall` of ``key``: what an effect's
-        ``is_identity`` has to compute to answer and its ``render`` needs again (lens_flare's
-        ghost plan) is computed once per frame."""
-        value = build()
-        self._handoff[key] = (self.source, value)
-        return value
-
-    def recall(self, key, build):
-        """What `remember` kept for ``key`` over this same source (taken: the next call
-        builds afresh, so a context rendered twice, as the bench does, pays every time), else
-        ``build()``."""
-        kept = self._handoff.pop(key, None)
-        if kept is not None and kept[0] is self.source:
-            return kept[1]
-        return build()
+        and passes, its own scene analysis and plans (the frame's do not describe
+        ``source``)."""
+        return replace(self, source=source, shared=_SharedAnalysis(), plans={})
 
 
 # -- plugins -------------------------------------------------------------------------------
@@ -230,6 +258,10 @@ class Plugin:
     """Base of every effect.  Subclasses set ``descriptor`` and implement ``render``."""
 
     descriptor: ClassVar[Descriptor]
+    whole_frame: ClassVar[str | None] = "not shown to give the same pixels in tiles"
+    """Why the effect renders the whole frame at once (a global FFT, whole-frame statistics),
+    or None: it renders in tiles, each from its region of interest, with the same pixels
+    (checked for every such effect by tests/contract/test_tiles.py)."""
 
     @classmethod
     def params(cls, _where: str = "", **values) -> Params:
@@ -245,10 +277,37 @@ class Plugin:
         """This effect's declared settings for ``ctx.quality``."""
         return self.descriptor.level(ctx.quality)
 
+    # the step's plan -----------------------------------------------------------------
+    def plan(self, p: Params, ctx: RenderContext) -> StepPlan:
+        """What this step derives from ``p`` and the frame that more than one of
+        ``is_identity``, the regions, the warnings and ``render`` need (a lens, tile radii, a
+        ghost table): built once per step per frame through :meth:`planned`, never called
+        directly.  Default: nothing to derive."""
+        return StepPlan()
+
+    def planned(self, p: Params, ctx: RenderContext) -> StepPlan:
+        """This step's plan for ``p`` on ``ctx``'s frame: built on first use, then the same
+        object for every context derived within the step (`RenderContext.over`, `grown_to`,
+        the tiles of a tiled render); `RenderContext.for_step` and `with_source` start
+        afresh."""
+        key = (type(self), p)
+        plan = ctx.plans.get(key)
+        if plan is None:
+            plan = ctx.plans[key] = self.plan(p, ctx)
+        return plan
+
+    def lens_refs(self, p: Params) -> tuple:
+        """The lenses ``p`` names, as ``(param, kind, value)``: kind "prescription" (value a
+        name in ``presets/lenses`` or a YAML file) or "lensfun" (value ``(maker, model)``).
+        The pipeline reads and validates them when the look is loaded (`clfx.io.lenses`), so
+        a bad name fails before any frame.  Default: none."""
+        return ()
+
     # cheap questions ------------------------------------------------------------------
     def is_identity(self, p: Params, ctx: RenderContext) -> str | None:
-        """A reason (e.g. "amount is 0") if this frame needs nothing from the effect."""
-        return None
+        """A reason (e.g. "amount is 0") if this frame needs nothing from the effect
+        (default: the plan's ``identity``)."""
+        return self.planned(p, ctx).identity
 
     def region_of_definition(self, p: Params, ctx: RenderContext) -> Rect:
         """Where the output can be non-zero: the source window grown by the light spread."""

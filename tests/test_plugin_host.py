@@ -136,7 +136,7 @@ def test_analysis_always_covers_the_current_source_window(rt):
     assert ctx.analysis is first  # computed once
     grown = np.zeros((12, 16, 4), np.float32)
     grown[0, 0, :3] = 50.0
-    ctx.source = rt.upload(grown, Rect(-4, -2, 12, 10))  # an effect grew the window
+    ctx = ctx.over(source=rt.upload(grown, Rect(-4, -2, 12, 10)))  # an effect grew the window
     assert ctx.analysis.window == Rect(-4, -2, 12, 10)
     assert ctx.analysis.peak_luminance == pytest.approx(50.0, rel=4e-7)  # float32 luminance
 

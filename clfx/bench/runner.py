@@ -268,7 +268,8 @@ def bench_effect(rt, name: str, width: int, height: int, repeat: int,
         def run(ctx=ctx, reason=reason):
             if reason:
                 return ctx.source
-            img = plugin.render(rt, params, ctx)
+            # a new step each run: its plan is built (and timed) every time, as in a look
+            img = plugin.render(rt, params, ctx.for_step(level))
             rt.finish()
             return img
 

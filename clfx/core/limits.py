@@ -52,6 +52,13 @@ MEMORY_OVERLAP_BYTES_PER_PIXEL = 96
 the next frame read and the last one written while the device renders."""
 
 
+def tile_pixels() -> int | None:
+    """The most pixels a step that tiles renders at once (`clfx.pipeline.look.render_tiled`):
+    ``CLFX_TILE_PIXELS`` (unset or 0: whole frames)."""
+    value = int(os.environ.get("CLFX_TILE_PIXELS", "0") or 0)
+    return value if value > 0 else None
+
+
 def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> float:
     """The documented bound on the peak resident memory of ``clfx render`` of frames of
     ``pixels`` through the cinema look, with ``CLFX_POOL_MB`` = ``pool_mib``, in MiB:

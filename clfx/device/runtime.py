@@ -585,6 +585,19 @@ class Runtime:
                     local=None)
         return dst
 
+    def paste(self, src: DeviceImage, dst: DeviceImage, rect: Rect) -> None:
+        """Copy the pixels of ``rect`` (frame coordinates, inside both windows) from ``src``
+        into ``dst`` (one rectangular buffer copy; the tiles of a tiled render)."""
+        if rect.empty:
+            return
+        ch = src.channels * 4
+        sx, sy = rect.x0 - src.window.x0, rect.y0 - src.window.y0
+        dx, dy = rect.x0 - dst.window.x0, rect.y0 - dst.window.y0
+        self.cl.enqueue_copy(self.queue, dst.buffer, src.buffer,
+                             src_origin=(sx * ch, sy, 0), dst_origin=(dx * ch, dy, 0),
+                             region=(rect.width * ch, rect.height, 1),
+                             src_pitches=(src.pitch * ch, 0), dst_pitches=(dst.pitch * ch, 0))
+
     def sanitize(self, img: DeviceImage) -> int:
         """Set the non-finite floats of a 4-channel image to 0 in place; return how many
         pixels had one (so a look can say so).  Waits for the count."""

@@ -137,8 +137,7 @@ def in_reference_basis(rt, ctx, render):
     b = colour.to_reference(ctx.rgb_to_xyz)
     if b is None:
         return render(ctx)
-    ref = ctx.with_source(rgb_matrix(rt, ctx.source, b))
-    ref.rgb_to_xyz = colour.REC709_TO_XYZ
+    ref = ctx.with_source(rgb_matrix(rt, ctx.source, b)).over(rgb_to_xyz=colour.REC709_TO_XYZ)
     return rgb_matrix(rt, render(ref), np.linalg.inv(b))
 
 

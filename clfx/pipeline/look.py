@@ -26,11 +26,14 @@ from clfx._version import __version__
 from clfx.core.camera import Camera
 from clfx.core.errors import ClfxError, ClipError
 from clfx.core.frame import Frame
+from clfx.core import limits
 from clfx.core.limits import check_pixels
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
 from clfx.core.rect import Rect
 from clfx.fx import mask as mask_fx
 from clfx.host import Plugin, RenderContext
+from clfx.io import lenses as lens_io
+from clfx.io.lenses import Lenses
 from clfx.pipeline.animation import Animated
 from clfx.pipeline.masks import FrameMasks, MaskSpec
 from clfx.plugins import get_plugin
@@ -167,6 +170,9 @@ class Look:
     files: tuple[str, ...] = ()
     """The files the look was read from: its YAML and its base looks', or the output whose
     ``clfx:lookJSON`` it is (``--look-from``): inputs of every render with it."""
+    lenses: Lenses | None = field(default=None, compare=False, repr=False)
+    """The lens data its steps name, read and validated when the look was loaded
+    (`clfx.io.lenses.resolve`); None for a look built in code (read on first use)."""
 
     def camera_values(self) -> dict:
         """Every camera value, keyframed ones as their keyframe mappings."""
@@ -364,11 +370,10 @@ def read_image_rgba(path: str):
 
 
 def read_lens_dict(name: str) -> dict:
-    """A lens prescription by name or path (``presets/lenses``), as a plain dict: the reader
-    the pipeline hands effects through their render context."""
-    from clfx.pipeline.presets import read_lens  # lazy: presets imports this module
-
-    return read_lens(name)
+    """A lens prescription by name or path (``presets/lenses``), as a plain dict, read now
+    (`clfx.io.lenses.read_lens`): the reader for a look built in code; a loaded look hands
+    effects the lenses it resolved (:attr:`Look.lenses`)."""
+    return lens_io.read_lens(name)
 
 
 def working_rgb_to_xyz(space: str | None):
@@ -440,7 +445,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
                 return
             except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
                 continue
-            ctx.source = _geometry(window)
+            ctx = ctx.over(source=_geometry(window))
 
 
 class FrameTooLarge(ClfxError):
@@ -452,7 +457,8 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
                  quality: str | None = None, keep_overscan: bool = False,
                  analysis_summary: bool = False, stats: RunStats | None = None,
                  masks: Mapping[MaskSpec, np.ndarray] | None = None,
-                 release_input: bool = False) -> tuple[Frame, FrameReport]:
+                 release_input: bool = False,
+                 tile_pixels: int | None = None) -> tuple[Frame, FrameReport]:
     """Render one frame through ``look``; returns the output frame and a report.
 
     ``quality`` sets the level of every step without its own override.  Keyframed values
@@ -465,6 +471,9 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     over, and its host beauty (and passes, when the frame has a file layout to copy them
     from) are dropped once on the device, so a frame is not held twice (see "Memory" in the
     README).  Device passes are dropped after the last step that reads them.
+    ``tile_pixels``: steps that tile render in bands of at most this many pixels, each from
+    its region of interest, with the same pixels (`render_tiled`; default
+    ``CLFX_TILE_PIXELS``, `clfx.core.limits.tile_pixels`; None there: whole frames).
 
     Raises
     ------
@@ -474,6 +483,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         The frame's windows, or a window an effect would grow it to, exceed the pixel limit.
     """
     stats = RunStats() if stats is None else stats
+    tiles = tile_pixels if tile_pixels is not None else limits.tile_pixels()
     report = FrameReport(frame=frame_number, input=frame.source,
                          values=look.values_at(frame_number))
     stamp = look.stamp(frame_number)
@@ -501,15 +511,15 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     steps = look.active_steps()
     for n, (index, step) in enumerate(steps):
         if not analysis_summary:          # the summary's analysis may read the passes
-            _drop_unread_passes(ctx, steps[n:])
+            ctx = _drop_unread_passes(ctx, steps[n:])
         timing = stats.timing(index)
         step_report, out = _run_step(rt, step, ctx, step.quality or quality or DEFAULT_QUALITY,
-                                     have, timing, frame_masks)
+                                     have, timing, frame_masks, tiles)
         report.steps.append(step_report)
         if out is None:
             saved += timing.mean_ms or 0.0
         else:
-            _advance(rt, ctx, out)
+            ctx = _advance(rt, ctx, out)
     t_dl = time.perf_counter()
     rgba, window = _download(rt, ctx)
     report.download_ms = (time.perf_counter() - t_dl) * 1e3
@@ -544,7 +554,8 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
                         quality=quality or DEFAULT_QUALITY,
                         display_referred=frame.display_referred,
                         output_limit=output_limit(frame, keep_overscan),
-                        read_image=read_image_rgba, read_lens=read_lens_dict,
+                        read_image=read_image_rgba,
+                        read_lens=read_lens_dict if look.lenses is None else look.lenses.read,
                         reference_camera=reference_camera,
                         rgb_to_xyz=working_rgb_to_xyz(frame.colorspace))
     if nonfinite:
@@ -553,7 +564,7 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
 
 
 def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bool],
-              timing: StepTiming, masks: FrameMasks):
+              timing: StepTiming, masks: FrameMasks, tile_pixels: int | None = None):
     """Run one step at ``level`` unless it has nothing to do; returns its report and its
     output (None when skipped).  A masked step blends its output with the source by its
     mask, or renders from the masked source (`clfx.pipeline.masks`)."""
@@ -577,10 +588,11 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     if reason:
         return StepReport(step.id, False, reason, quality=level,
                           warnings=list(step_ctx.warnings)), None
+    step.plugin.planned(step.params, step_ctx)  # once per step: the regions and render read it
     grown = step.plugin.output_window(step.params, step_ctx)
     check_pixels(grown.width, grown.height, f"frame grown by {step.id}", FrameTooLarge)
     t0 = time.perf_counter()
-    out = step.plugin.render(rt, step.params, step_ctx)
+    out = render_tiled(rt, step.plugin, step.params, step_ctx, grown, tile_pixels)
     if mode == "mix":
         out = mask_fx.mix(rt, ctx.source, out, mask)
     elif mode == "sources":
@@ -595,25 +607,58 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
                       warnings=list(step_ctx.warnings)), out
 
 
-def _drop_unread_passes(ctx: RenderContext, steps) -> None:
-    """Free the device passes no remaining step reads (their memory goes back to the
-    pool before the step that could use it)."""
+def tile_bands(window: Rect, tile_pixels: int | None) -> list[Rect]:
+    """``window`` in full-width bands of at most ``tile_pixels`` pixels (one band, the
+    window, without a tile size or when it fits)."""
+    rows = max(1, tile_pixels // max(window.width, 1)) if tile_pixels else window.height
+    if rows >= window.height:
+        return [window]
+    return [Rect(window.x0, y, window.x1, min(y + rows, window.y1))
+            for y in range(window.y0, window.y1, rows)]
+
+
+def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect,
+                 tile_pixels: int | None):
+    """``plugin``'s output over ``window`` (its output window): whole, or, for an effect
+    that tiles (``whole_frame`` None) and a window of more than ``tile_pixels`` pixels, band
+    by band: each band rendered from its region of interest (`Plugin.region_of_interest`:
+    the band and the overlap its light comes from, cut to the source) into one output, so the
+    effect's own buffers are band-sized.  The step's plan is the frame's (built before, on
+    the whole frame); the pixels are the whole render's (tests/contract/test_tiles.py)."""
+    bands = [] if plugin.whole_frame else tile_bands(window, tile_pixels)
+    rois = [plugin.region_of_interest(p, ctx, band).intersect(ctx.source.window)
+            for band in bands]
+    if len(bands) < 2 or any(roi.empty for roi in rois):   # no light reaches a band: whole
+        return plugin.render(rt, p, ctx)
+    out = rt.image(window, ctx.source.channels)
+    name = plugin.descriptor.name
+    for band, roi in zip(bands, rois):
+        part = plugin.render(rt, p, ctx.tile(roi))
+        if not part.window.contains(band):
+            raise RuntimeError(f"effect {name!r}: a tile's output {part.window} does not "
+                               f"cover its band {band}")
+        rt.paste(part, out, band)
+        del part
+    return out
+
+
+def _drop_unread_passes(ctx: RenderContext, steps) -> RenderContext:
+    """The context without the device passes no remaining step reads (their memory goes
+    back to the pool before the step that could use it)."""
     used = {c.name for _, s in steps for c in s.plugin.descriptor.clips}
-    if "depth" not in used:
-        ctx.depth = None
-    if "velocity" not in used:
-        ctx.velocity = None
+    drop = {name: None for name in ("depth", "velocity")
+            if name not in used and getattr(ctx, name) is not None}
+    return ctx.over(**drop) if drop else ctx
 
 
-def _advance(rt, ctx: RenderContext, out) -> None:
-    """Make a step's output the current source; when its window grew, extend the passes to
-    it by edge clamping so later effects see aligned passes."""
+def _advance(rt, ctx: RenderContext, out) -> RenderContext:
+    """The context with a step's output as the current source; when its window grew, the
+    passes extended to it by edge clamping so later effects see aligned passes."""
+    passes = {}
     if out.window != ctx.source.window:
-        if ctx.depth is not None:
-            ctx.depth = rt.reframe(ctx.depth, out.window, "clamp")
-        if ctx.velocity is not None:
-            ctx.velocity = rt.reframe(ctx.velocity, out.window, "clamp")
-    ctx.source = out
+        passes = {name: rt.reframe(getattr(ctx, name), out.window, "clamp")
+                  for name in ("depth", "velocity") if getattr(ctx, name) is not None}
+    return ctx.over(source=out, **passes)
 
 
 def _download(rt, ctx: RenderContext):

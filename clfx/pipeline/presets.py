@@ -34,16 +34,17 @@ refused the same way.
 from __future__ import annotations
 
 import difflib
-import os
-import stat
 from dataclasses import replace
 from pathlib import Path
-
-import yaml
 
 from clfx.core.camera import Camera
 from clfx.core.errors import ClfxError, ParamError, PresetError
 from clfx.core.plugin import QUALITY_LEVELS, BoolParam, Params, StringParam
+from clfx.io import lenses as lens_io
+from clfx.io.lenses import available_lenses, find_lens, lens_dirs, read_lens  # noqa: F401 (re-exported)
+from clfx.io.presetfiles import (MAX_INT_DIGITS, MAX_LOOK_BYTES, MAX_NESTING,  # noqa: F401
+                                 Located as _Located, builtin_dir, find_file, search_dirs,
+                                 suggest as _suggest, user_dir, yaml_files)
 from clfx.pipeline import animation
 from clfx.pipeline.animation import is_keyframed
 from clfx.pipeline.look import MISSING_PASSES, Look, Step, validate_quality
@@ -57,201 +58,23 @@ STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing
 ANIMATABLE = ("double", "int", "rgb", "double2d")
 """Parameter kinds that may be keyframed (numbers and vectors of numbers)."""
 DEFAULT_LOOK = "default"
-MAX_LOOK_BYTES = 1 << 20
-"""A look file is a page of YAML; anything bigger is refused before it is parsed."""
-MAX_NESTING = 32
-"""Deepest nesting of YAML mappings and lists a look may use (a look needs 4)."""
-MAX_INT_DIGITS = 20
-"""Most digits of an integer in a look (a 64-bit seed has 20)."""
 MAX_BASE_DEPTH = 16
 """Longest chain of ``base:`` looks."""
 
 
-def builtin_dir() -> Path:
-    """The built-in looks: ``clfx/presets`` in a wheel, or the repository's ``presets/``."""
-    here = Path(__file__).resolve().parent.parent  # the clfx package
-    for path in (here / "presets", here.parent / "presets"):
-        if path.is_dir() and any(path.glob("*.yaml")):
-            return path
-    return here.parent / "presets"
-
-
-def user_dir() -> Path:
-    import click
-
-    return Path(click.get_app_dir("clfx")) / "looks"
-
-
-def search_dirs() -> list[tuple[str, Path]]:
-    dirs = [("CLFX_PRESET_PATH", Path(p)) for p in
-            os.environ.get("CLFX_PRESET_PATH", "").split(os.pathsep) if p]
-    dirs.append(("user", user_dir()))
-    dirs.append(("built-in", builtin_dir()))
-    return dirs
-
-
 def available_looks() -> dict[str, tuple[str, Path]]:
     """Look name -> (origin, path); earlier search folders win."""
-    found: dict[str, tuple[str, Path]] = {}
-    for origin, folder in search_dirs():
-        if folder.is_dir():
-            for path in sorted(folder.glob("*.y*ml")):
-                found.setdefault(path.stem, (origin, path))
-    return found
+    return yaml_files(search_dirs())
 
 
 def find_look(name_or_path: str) -> Path:
-    p = Path(name_or_path)
-    if p.suffix.lower() in (".yaml", ".yml") or os.sep in name_or_path:
-        if p.is_file():
-            return p
-        raise PresetError(f"look file {name_or_path} does not exist")
-    looks = available_looks()
-    if name_or_path in looks:
-        return looks[name_or_path][1]
-    close = difflib.get_close_matches(name_or_path, list(looks), n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(looks)})"
-    raise PresetError(f"unknown look {name_or_path!r}{hint}")
+    return find_file(name_or_path, "look", lambda: {k: v[1] for k, v in available_looks().items()},
+                     _look_hint)
 
 
-class _Refused(yaml.YAMLError):
-    """YAML a look may not use (aliases, duplicate keys, deep nesting), at a mark."""
-
-    def __init__(self, problem: str, mark):
-        super().__init__(problem)
-        self.problem, self.problem_mark = problem, mark
-
-
-class _LookLoader(yaml.SafeLoader):
-    """SafeLoader refusing what a look never needs: aliases (an alias bomb expands without
-    bound), duplicate keys (YAML would keep the last one silently) and nesting deeper than
-    ``MAX_NESTING`` (the composer recurses once per level)."""
-
-    def __init__(self, stream):
-        super().__init__(stream)
-        self._depth = 0
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            event = self.peek_event()
-            raise _Refused(f"YAML aliases (*{event.anchor}) are not allowed in a look",
-                           event.start_mark)
-        if self._depth >= MAX_NESTING:
-            raise _Refused(f"nested deeper than {MAX_NESTING} levels", self.peek_event().start_mark)
-        self._depth += 1
-        try:
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-    def construct_yaml_int(self, node):
-        digits = sum(c.isalnum() for c in str(node.value))
-        if digits > MAX_INT_DIGITS:      # Python refuses > 4300 digits with a ValueError
-            raise _Refused(f"an integer of {digits} digits (a look needs at most "
-                           f"{MAX_INT_DIGITS})", node.start_mark)
-        return super().construct_yaml_int(node)
-
-    def construct_mapping(self, node, deep=False):
-        if isinstance(node, yaml.MappingNode):
-            first: dict = {}
-            for key_node, _ in node.value:
-                if key_node.tag == "tag:yaml.org,2002:merge":
-                    continue
-                key = self.construct_object(key_node, deep=True)
-                try:
-                    seen = first.setdefault(key, key_node)
-                except TypeError:  # an unhashable key: the base class reports it
-                    continue
-                if seen is not key_node:
-                    raise _Refused(f"duplicate key {key!r} (first on line "
-                                   f"{seen.start_mark.line + 1})", key_node.start_mark)
-        return super().construct_mapping(node, deep=deep)
-
-
-def _read_text(path: Path) -> str:
-    """A look file's text: a regular file of at most MAX_LOOK_BYTES of UTF-8."""
-    try:
-        st = path.stat()
-        if not stat.S_ISREG(st.st_mode):
-            raise PresetError(f"{path}: a look must be a regular file")
-        if st.st_size > MAX_LOOK_BYTES:
-            raise PresetError(f"{path}: look file is {st.st_size} bytes; the limit is "
-                              f"{MAX_LOOK_BYTES} (1 MiB)")
-        with open(path, "rb") as f:
-            data = f.read(MAX_LOOK_BYTES + 1)
-    except OSError as exc:
-        raise PresetError(f"{path}: cannot read look file: {exc.strerror}") from exc
-    if len(data) > MAX_LOOK_BYTES:
-        raise PresetError(f"{path}: look file is over the limit of {MAX_LOOK_BYTES} bytes (1 MiB)")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
-        raise PresetError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
-                          f"save the look as UTF-8") from None
-
-
-_LookLoader.add_constructor("tag:yaml.org,2002:int", _LookLoader.construct_yaml_int)
-
-
-class _Located:
-    """YAML data with the line of every key path, for error messages."""
-
-    @classmethod
-    def from_data(cls, data, where: str) -> "_Located":
-        """A look given as data (a dict: the Python API, an output's ``clfx:lookJSON``):
-        errors name ``where`` and the key."""
-        doc = cls.__new__(cls)
-        doc.path, doc.data, doc.lines = where, data, {}
-        return doc
-
-    def __init__(self, path: Path):
-        self.path = path
-        text = _read_text(path)
-        loader = None
-        try:
-            loader = _LookLoader(text)  # the reader refuses control characters at once
-            node = loader.get_single_node()
-            self.data = loader.construct_document(node) if node is not None else None
-        except _Refused as exc:
-            raise PresetError(f"{path}:{exc.problem_mark.line + 1}: {exc.problem}") from None
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f"{path}:{mark.line + 1}" if mark else str(path)
-            problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-            raise PresetError(f"{where}: malformed YAML: {problem}") from exc
-        finally:
-            if loader is not None:
-                loader.dispose()
-        self.lines: dict[tuple, int] = {}
-        if node is not None:
-            self._index(node, ())
-
-    def _index(self, node, path):
-        self.lines.setdefault(path, node.start_mark.line + 1)
-        if isinstance(node, yaml.MappingNode):
-            for k, v in node.value:
-                key = k.value
-                self.lines[path + (key,)] = k.start_mark.line + 1
-                self._index(v, path + (key,))
-        elif isinstance(node, yaml.SequenceNode):
-            for i, v in enumerate(node.value):
-                self._index(v, path + (i,))
-
-    def where(self, *path) -> str:
-        for n in range(len(path), -1, -1):
-            if path[:n] in self.lines:
-                return f"{self.path}:{self.lines[path[:n]]}"
-        return str(self.path)
-
-    def fail(self, path: tuple, message: str):
-        key = ".".join(f"[{p}]" if isinstance(p, int) else str(p) for p in path).replace(".[", "[")
-        raise PresetError(f"{self.where(*path)}: {key + ': ' if key else ''}{message}")
-
-
-def _suggest(name, options) -> str:
-    close = difflib.get_close_matches(str(name), list(options), n=1)
-    return f"; did you mean {close[0]!r}?" if close else f" (expected one of: {', '.join(options)})"
+def _look_hint(name: str, looks: list) -> str:
+    close = difflib.get_close_matches(name, looks, n=1)
+    return f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(looks)})"
 
 
 class _BaseChainTooLong(PresetError):
@@ -310,6 +133,11 @@ def _build(doc: _Located, default_name: str, source: str, chain: tuple) -> Look:
             doc.fail(("seed",), f"{data['seed']!r} is not an integer")
         look.seed = data["seed"]
     look.steps = _steps(doc, data.get("effects"), look.steps)
+    if len(chain) <= 1:     # the look itself, not a base: its lenses, read and validated now
+        try:
+            look.lenses = lens_io.resolve(look.steps)
+        except PresetError as exc:
+            raise PresetError(f"{doc.path}: {exc}") from None
     return look
 
 
@@ -475,6 +303,8 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
             raise PresetError(f"--set {text!r}: look {look.name!r} has no effect {target!r}"
                               f"{_suggest(target, names) if names else ''}")
         look.steps[look.steps.index(step)] = _step_override(step, key, pname, value)
+    if assignments:
+        look.lenses = lens_io.resolve(look.steps)   # a lens named by --set: checked now
     return look
 
 
@@ -548,53 +378,6 @@ def _number(name: str, text: str) -> float:
         return float(text)
     except ValueError:
         raise PresetError(f"--set camera.{name}: {text!r} is not a number") from None
-
-
-# -- lens prescriptions (presets/lenses) ------------------------------------------------------
-LENS_FOLDER = "lenses"
-
-
-def lens_dirs() -> list[tuple[str, Path]]:
-    """Folders of lens prescriptions, searched in order: ``lenses/`` inside each
-    ``CLFX_PRESET_PATH`` folder, beside the user's looks, and the built-in ``presets/lenses``."""
-    dirs = [(origin, folder / LENS_FOLDER) for origin, folder in search_dirs()[:-2]]
-    dirs.append(("user", user_dir().parent / LENS_FOLDER))
-    dirs.append(("built-in", builtin_dir() / LENS_FOLDER))
-    return dirs
-
-
-def available_lenses() -> dict[str, Path]:
-    """Lens name -> prescription file; earlier folders win."""
-    found: dict[str, Path] = {}
-    for _, folder in lens_dirs():
-        if folder.is_dir():
-            for path in sorted(folder.glob("*.y*ml")):
-                found.setdefault(path.stem, path)
-    return found
-
-
-def find_lens(name_or_path: str) -> Path:
-    """The file of a lens prescription: a path (``.yaml`` or with a separator) or a name."""
-    p = Path(name_or_path)
-    if p.suffix.lower() in (".yaml", ".yml") or os.sep in name_or_path:
-        if p.is_file():
-            return p
-        raise PresetError(f"lens file {name_or_path} does not exist")
-    lenses = available_lenses()
-    if name_or_path in lenses:
-        return lenses[name_or_path]
-    raise PresetError(f"unknown lens {name_or_path!r}{_suggest(name_or_path, list(lenses))}")
-
-
-def read_lens(name_or_path: str) -> dict:
-    """A lens prescription as the plain dict ``clfx.fx.optics.Prescription.from_dict`` takes:
-    found by :func:`find_lens`, read with the same limits and YAML safety as a look (a regular
-    UTF-8 file of at most 1 MiB, no aliases, no duplicate keys); the optics validate it."""
-    path = find_lens(name_or_path)
-    data = _Located(path).data
-    if not isinstance(data, dict):
-        raise PresetError(f"{path}: a lens prescription is a mapping with name and surfaces")
-    return data
 
 
 def single_effect_look(effect: str, assignments: list[str]) -> Look:

@@ -102,6 +102,7 @@ def separable_psf_error(k: np.ndarray, rank: int) -> float:
 
 @register
 class Bleed(ScatterPlugin, Plugin):
+    whole_frame = ("an FFT convolution over the whole frame")
     descriptor = Descriptor(
         name="bleed", label="Bleed", group="Sensor", kernel="bleed.cl",
         summary="Sensor crosstalk: bright pixels leak a little light into their neighbours.",

@@ -45,6 +45,7 @@ belongs after the effects that read those passes (dof, motion blur) and beside d
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -53,7 +54,7 @@ from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
 from clfx.core.rect import Rect
 from clfx.fx.resample import (ResampleLevel, elliptical_spread, footprint_defines,
                               footprint_spread, needs_sanitising)
-from clfx.host import Plugin, register
+from clfx.host import Plugin, StepPlan, register
 
 MACRO = 2.0
 """Closest focus, in focal lengths: 1:1 macro (the image as large as the object)."""
@@ -118,8 +119,17 @@ def centre(p, display_window: Rect) -> tuple[float, float]:
             cy + p.center[1] * display_window.height / 2.0)
 
 
+@dataclass(frozen=True)
+class BreathingPlan(StepPlan):
+    """breathing's plan for one step of a frame: the scale m and its clamps' warnings."""
+
+    m: float = 1.0
+    warnings: tuple = ()
+
+
 @register
 class Breathing(Plugin):
+    whole_frame = ("its scale maps source-window coordinates (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="breathing", label="Lens breathing", group="Lens", kernel="breathing.cl",
         summary="Focusing changes the field of view: with an animated focus distance the frame "
@@ -147,20 +157,26 @@ class Breathing(Plugin):
     def reference_focus(self, p, ctx) -> float:
         return p.reference_focus if p.reference_focus > 0.0 else ctx.reference_camera.focus_distance
 
+    def plan(self, p, ctx) -> BreathingPlan:
+        if self.amount(p, ctx) == 0.0:
+            return BreathingPlan("breathing amount is 0 (the step's amount and camera.breathing)")
+        m, warnings = thin_lens_scale(ctx.camera.focus_distance, self.reference_focus(p, ctx),
+                                      ctx.camera.focal_length, self.amount(p, ctx))
+        identity = None
+        if abs(m - 1.0) <= IDENTITY_TOL:
+            identity = (f"focus distance {ctx.camera.focus_distance:g} is the reference "
+                        f"{self.reference_focus(p, ctx):g}: the field of view does not change "
+                        f"(scale {m:.7f})")
+        return BreathingPlan(identity, m, tuple(warnings))
+
     def scale(self, p, ctx) -> tuple[float, list[str]]:
-        """The frame's scale m (> 1 narrows the view) and the warnings of its clamps."""
-        return thin_lens_scale(ctx.camera.focus_distance, self.reference_focus(p, ctx),
-                               ctx.camera.focal_length, self.amount(p, ctx))
+        """The frame's scale m (> 1 narrows the view) and the warnings of its clamps: the
+        step's plan's."""
+        plan = self.planned(p, ctx)
+        return plan.m, list(plan.warnings)
 
     def is_identity(self, p, ctx):
-        if self.amount(p, ctx) == 0.0:
-            return "breathing amount is 0 (the step's amount and camera.breathing)"
-        m, _ = self.scale(p, ctx)
-        if abs(m - 1.0) <= IDENTITY_TOL:
-            return (f"focus distance {ctx.camera.focus_distance:g} is the reference "
-                    f"{self.reference_focus(p, ctx):g}: the field of view does not change "
-                    f"(scale {m:.7f})")
-        return None
+        return self.planned(p, ctx).identity
 
     def _mapped(self, p, ctx, rect: Rect, m: float, reach: int) -> Rect:
         """The pixels covering ``c + (rect - c) * m``, grown by ``reach``."""

@@ -139,6 +139,7 @@ QUALITY = {name: _quality(name, lvl) for name, lvl in _BASE_LEVELS.items()}
 
 @register
 class CameraBlur(Plugin):
+    whole_frame = ("its path is sampled in source-window coordinates (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="camera_blur", label="Camera blur", group="Camera", kernel=KERNEL,
         summary="Blur of the camera's pan, tilt, roll, zoom and trucking during the shutter "

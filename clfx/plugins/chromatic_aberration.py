@@ -203,6 +203,7 @@ def channel_points(p, display_window, window, pixel_aspect, rows=None, rgb_to_xy
 
 @register
 class ChromaticAberration(Plugin):
+    whole_frame = ("its maps are built over the source window (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="chromatic_aberration", label="Chromatic aberration", group="Lens",
         kernel="chromatic_aberration.cl",

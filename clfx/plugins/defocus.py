@@ -48,6 +48,7 @@ def defocus_sigmas(p, ctx) -> tuple[float, float]:
 
 @register
 class Defocus(Plugin):
+    whole_frame = ("an FFT convolution over the whole frame at large sizes")
     descriptor = Descriptor(
         name="defocus", label="Defocus", group="Lens", kernel="defocus.cl",
         summary="Uniform Gaussian softness from 0.3 px to hundreds of pixels, resolution-"

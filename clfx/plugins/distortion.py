@@ -302,6 +302,7 @@ def _reach(k, r_needed: float) -> float:
 
 @register
 class Distortion(Plugin):
+    whole_frame = ("its maps are built over the source window (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="distortion", label="Lens distortion", group="Lens", kernel="distortion.cl",
         summary="Brown-Conrady barrel/pincushion/tangential distortion with OpenCV's "

@@ -101,7 +101,7 @@ depth by its edge values, and the tiles are taken over the grown window.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -111,7 +111,7 @@ from clfx.core.errors import ParamError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
 from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE  # dof's tiles are the shared analysis's
-from clfx.host import Plugin, register
+from clfx.host import Plugin, StepPlan, register
 
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
 
@@ -131,6 +131,15 @@ class Lens(NamedTuple):
     def offsets(self) -> tuple:
         """The distinct per-channel radius offsets, green's (0) first: one gather each."""
         return tuple(dict.fromkeys((0.0, *self.ca)))
+
+
+@dataclass(frozen=True)
+class DofPlan(StepPlan):
+    """dof's plan for one step of a frame: the lens (built once), and per source window and
+    channel offset the tile radii (`Dof.tile_radii`), computed on first use."""
+
+    lens: Lens | None = None
+    radii: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -297,6 +306,7 @@ def prefilter(rt, col, pheight: int, levels: int) -> None:
 
 @register
 class Dof(Plugin):
+    whole_frame = ("its CoC radii and half-resolution choice come from the whole frame's depth statistics (scene-analysis tiles)")
     descriptor = Descriptor(
         name="dof", label="Depth of field", group="Lens", kernel="dof.cl",
         summary="Thin-lens depth of field from a depth pass: gather with separate near and "
@@ -344,10 +354,22 @@ class Dof(Plugin):
         spreads_light=True,
     )
 
+    # -- the plan --------------------------------------------------------------------------
+    def plan(self, p, ctx) -> DofPlan:
+        lens = self.make_lens(p, ctx)
+        identity = None
+        if (lens.k_half == 0.0 and max(map(abs, lens.ca)) < 0.5) or lens.clamp_r < 0.25:
+            identity = "the circle of confusion is 0 (max_blur, max_coc or aperture)"
+        return DofPlan(identity, lens)
+
     # -- geometry --------------------------------------------------------------------------
     def lens(self, p, ctx) -> Lens:
         """The frame's lens in pixels (CoC at infinity, focus, clamp, aperture shape, cat-eye
-        strength, anamorphic squeeze, axial-CA radius offsets)."""
+        strength, anamorphic squeeze, axial-CA radius offsets): the step's plan's."""
+        return self.planned(p, ctx).lens
+
+    def make_lens(self, p, ctx) -> Lens:
+        """Build the frame's :class:`Lens` (once per step: :meth:`plan`)."""
         cam = ctx.camera
         k_half = 0.5 * lens_scale_px(p, cam, ctx.diagonal_px, ctx.width_px)
         clamp_r = 0.5 * p.max_coc * ctx.diagonal_px
@@ -385,20 +407,30 @@ class Dof(Plugin):
         ``with_near`` also the smallest radius of the tile's own pixels and the largest
         radius of a pixel in front of the focus plane within reach (0 if none).  ``offset``:
         one channel's axial-CA radius offset; None: the largest over the channels."""
+        plan = self.planned(p, ctx)
         if offset is None:
             out = [self.tile_radii(p, ctx, with_near=with_near, offset=o)
-                   for o in self.lens(p, ctx).offsets()]
+                   for o in plan.lens.offsets()]
             if with_near:
                 return tuple(np.maximum.reduce(list(t)) if i != 1 else np.minimum.reduce(list(t))
                              for i, t in enumerate(zip(*out)))
             return np.maximum.reduce(out)
-        k_half, focus, clamp_r = self.lens(p, ctx)[:3]
+        key = (ctx.source.window, offset)
+        if key not in plan.radii:    # once per window and channel offset in a step
+            plan.radii[key] = self._tile_radii(plan.lens, ctx, offset)
+        r_max, r_min, near = plan.radii[key]
+        return (r_max, r_min, near) if with_near else r_max
+
+    @staticmethod
+    def _tile_radii(lens: Lens, ctx, offset: float):
+        """(r_max, r_min, near) of :meth:`tile_radii` for one channel offset."""
+        k_half, focus, clamp_r = lens[:3]
         src = ctx.source
         ty, tx = max(1, -(-src.height // TILE)), max(1, -(-src.width // TILE))
         an = ctx.analysis
         if an.min_depth is None:
             full = np.full((ty, tx), clamp_r, np.float32)  # no tile statistics: no skipping
-            return (full, np.zeros_like(full), full) if with_near else full
+            return full, np.zeros_like(full), full
         # the CoC is monotonic in 1/z, so a tile's extremes come from its depth range
         r0 = coc_radius(an.min_depth, k_half, focus, clamp_r, offset)
         r1 = coc_radius(an.max_depth, k_half, focus, clamp_r, offset)
@@ -407,8 +439,6 @@ class Dof(Plugin):
             r = np.where(an.bad_depth > 0, np.maximum(r, min(abs(offset), clamp_r)), r)
         reach = max(int(math.ceil(r.max() / TILE)) if r.size else 0, 1)
         r_max = dilate_tiles(r, reach).astype(np.float32)
-        if not with_near:
-            return r_max
         # straddling the focus plane, or holding invalid depths (in focus): some pixel is sharp
         r_min = np.where((r0 * r1 <= 0) | (an.bad_depth > 0), 0.0,
                          np.minimum(np.abs(r0), np.abs(r1)))
@@ -464,10 +494,9 @@ class Dof(Plugin):
                 f"raise dof.max_coc to keep the lens")
 
     def is_identity(self, p, ctx):
-        lens = self.lens(p, ctx)
-        k_half, clamp_r = lens.k_half, lens.clamp_r
-        if (k_half == 0.0 and max(map(abs, lens.ca)) < 0.5) or clamp_r < 0.25:
-            return "the circle of confusion is 0 (max_blur, max_coc or aperture)"
+        plan = self.planned(p, ctx)
+        if plan.identity:
+            return plan.identity
         if ctx.depth is not None and float(self.tile_radii(p, ctx).max()) < 0.5:
             return "circle of confusion below half a pixel everywhere"
         return None

@@ -297,6 +297,7 @@ def exposure_reference(p, ctx) -> float:
 class Grain(Plugin):
     """Deterministic film grain; see the module docstring for the model."""
 
+    whole_frame = None   # tiles: the same pixels band by band (tests/contract/test_tiles.py)
     descriptor = Descriptor(
         name="grain", label="Film grain", group="Film", kernel="grain.cl",
         version=(2, 0),

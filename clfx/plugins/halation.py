@@ -209,6 +209,7 @@ class Settings:
 
 @register
 class Halation(ScatterPlugin, Plugin):
+    whole_frame = ("an FFT convolution over the whole frame")
     descriptor = Descriptor(
         name="halation", label="Halation", group="Film", kernel="halation.cl",
         summary="Film halation: light reflected off the base re-exposes the red layer, a "

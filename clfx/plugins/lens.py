@@ -192,6 +192,7 @@ def channel_points(cal, norm, display_window, window, fit="none", distortion=Tru
 
 @register
 class Lens(Plugin):
+    whole_frame = ("its lensfun maps are built over the source window (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="lens", label="Real lens (lensfun)", group="Lens", kernel="lens.cl",
         summary="Distortion, transverse CA and vignetting of a real lens from the lensfun "
@@ -219,6 +220,9 @@ class Lens(Plugin):
         ),
         quality=LEVELS,
     )
+
+    def lens_refs(self, p):
+        return (("model", "lensfun", (p.maker, p.model)),) if p.model.strip() else ()
 
     def is_identity(self, p, ctx):
         if not p.model.strip():

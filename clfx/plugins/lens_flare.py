@@ -88,7 +88,7 @@ from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, StringParam
 from clfx.core.rect import Rect
 from clfx.fx import flare, optics, spectral
-from clfx.host import Plugin, register
+from clfx.host import Plugin, StepPlan, register
 
 DEFAULT_GHOSTS = (
     # k (position), size (fraction of diagonal), tint (RGB), softness (edge / radius), rim
@@ -148,6 +148,14 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 PHYSICAL_TILE = 16
 """Tile of the physical ghosts' lists (level pixels): edges cost work only in their tiles."""
+
+
+@dataclass(frozen=True)
+class FlarePlan(StepPlan):
+    """lens_flare's plan for one step of a frame: the physical model's visible ghosts
+    ``(entries, levels, table rows, lights)`` (`LensFlare.ghost_plan`), or None."""
+
+    ghosts: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -360,6 +368,7 @@ def multi_coated(d: dict) -> dict:
 
 @register
 class LensFlare(Plugin):
+    whole_frame = ("its ghosts come from the lights measured over the whole frame")
     descriptor = Descriptor(
         name="lens_flare", label="Lens flare", group="Lens", kernel="lens_flare.cl",
         summary="Ghosts of the aperture along the line through each light and the image "
@@ -460,6 +469,9 @@ class LensFlare(Plugin):
                     for s, r in zip(candidates, m) if r[3] > 0]
         return [(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3])) for r in m if r[3] > 0]
 
+    def lens_refs(self, p):
+        return (("lens", "prescription", p.lens),) if p.model == "physical" else ()
+
     # cheap questions ------------------------------------------------------------------
     def is_identity(self, p, ctx):
         if p.model == "physical":
@@ -471,12 +483,19 @@ class LensFlare(Plugin):
             return "no ghosts and no halo"
         if not ctx.analysis.any_above(p.threshold):
             return "no pixel above threshold"
+        return self.planned(p, ctx).identity
+
+    def plan(self, p, ctx) -> FlarePlan:
+        """Whether any light flares and, for the physical model, every visible ghost
+        (:meth:`ghost_plan`): once per step, read by ``is_identity`` and ``render``."""
         if not self.candidate_sources(p, ctx):
-            return "no light source in or near view"
-        if p.model == "physical" and not len(
-                ctx.remember(("lens_flare.plan", p), lambda: self.plan(ctx.runtime, p, ctx))[0]):
-            return "every ghost is below the visible level (cull)"
-        return None
+            return FlarePlan("no light source in or near view")
+        if p.model != "physical":
+            return FlarePlan()
+        ghosts = self.ghost_plan(ctx.runtime, p, ctx)
+        if not len(ghosts[0]):
+            return FlarePlan("every ghost is below the visible level (cull)", ghosts)
+        return FlarePlan(None, ghosts)
 
     def region_of_definition(self, p, ctx):
         # ghosts land anywhere on the display (and beyond, but only the display is kept)
@@ -521,7 +540,7 @@ class LensFlare(Plugin):
         median = float(np.median(lum)) if lum.size else 0.0
         return p.cull * max(median, 1e-9)
 
-    def plan(self, rt, p, ctx):
+    def ghost_plan(self, rt, p, ctx):
         """The entries of every visible ghost: (entries, levels, table rows, lights)."""
         lvl = self.level(ctx)
         key, lens = self.prescription(p, ctx)
@@ -550,8 +569,8 @@ class LensFlare(Plugin):
         return entries, levels, keep[rows], lights
 
     def render_physical(self, rt, p, ctx):
-        entries, levels, _, lights = ctx.recall(("lens_flare.plan", p),
-                                                lambda: self.plan(rt, p, ctx))
+        ghosts = self.planned(p, ctx).ghosts
+        entries, levels, _, lights = ghosts if ghosts is not None else self.ghost_plan(rt, p, ctx)
         blades = p.blades or ctx.camera.blades
         out = self.draw(rt, ctx, entries, levels, self.output_window(p, ctx), blades,
                         ctx.camera.blade_rotation + p.rotation)

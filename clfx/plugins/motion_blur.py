@@ -46,6 +46,7 @@ from clfx.host import Plugin, register
 
 @register
 class MotionBlur(Plugin):
+    whole_frame = ("its gather runs in source-window coordinates (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="motion_blur", label="Motion blur", group="Camera", kernel="motion_blur.cl",
         summary="Object motion blur reconstructed from the velocity pass (McGuire 2012 "

@@ -119,6 +119,7 @@ class RowTimes:
 
 @register
 class RollingShutter(Plugin):
+    whole_frame = ("its row times are in source-window coordinates (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="rolling_shutter", label="Rolling shutter", group="Camera",
         kernel="rolling_shutter.cl",

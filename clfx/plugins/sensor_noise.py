@@ -138,6 +138,7 @@ def noise_variance(v, p, camera, channel=1):
 class SensorNoise(Plugin):
     """Photon shot noise, read noise and PRNU; see the module docstring for the model."""
 
+    whole_frame = ("its noise is seeded by source-window pixel indices")
     descriptor = Descriptor(
         name="sensor_noise", label="Sensor noise", group="Camera", kernel="sensor_noise.cl",
         summary="Poisson shot noise and Gaussian read noise in linear light from the ISO, a "

@@ -260,6 +260,7 @@ def streak_parts(mode: str) -> tuple[tuple[float, float], ...]:
 
 @register
 class Streaks(Plugin):
+    whole_frame = ("its rays start from the scene analysis' per-tile light peaks (whole-frame statistics)")
     descriptor = Descriptor(
         name="streaks", label="Streaks (star filter)", group="Glare", kernel="streaks.cl",
         summary="Star-filter streaks or aperture diffraction spikes from the highlights, "

@@ -53,6 +53,7 @@ def vignette_geometry(p, camera, display_window, pixel_aspect):
 
 @register
 class Vignette(Plugin):
+    whole_frame = None   # tiles: the same pixels band by band (tests/contract/test_tiles.py)
     descriptor = Descriptor(
         name="vignette", label="Vignette", group="Lens", kernel="vignette.cl",
         summary="Natural cos^4 falloff from the camera's focal length and sensor, plus an "

@@ -223,7 +223,7 @@ def physical_scene(h=72, w=120):
 
 def planned(rt, p, src, camera=CAM_P, quality="reference"):
     ctx = RenderContext(rt, rt.upload(src), camera=camera, quality=quality, read_lens=read_lens)
-    return ctx, LensFlare().plan(rt, p, ctx)
+    return ctx, LensFlare().ghost_plan(rt, p, ctx)
 
 
 @pytest.mark.parametrize("lens", LENSES)
@@ -443,10 +443,12 @@ def test_working_space_luminance_and_channel_weights(rt, rng):
 
 def test_physical_plan_is_made_once_per_frame(rt, monkeypatch):
     """is_identity's cull check and the render share one ghost plan (a measure kernel, the
-    cull and the entries); a context rendered again plans again."""
+    cull and the entries), the step's plan; a new step (`for_step`) or another source
+    (`with_source`) plans again."""
     calls = []
-    real = LensFlare.plan
-    monkeypatch.setattr(LensFlare, "plan", lambda self, *a: calls.append(1) or real(self, *a))
+    real = LensFlare.ghost_plan
+    monkeypatch.setattr(LensFlare, "ghost_plan",
+                        lambda self, *a: calls.append(1) or real(self, *a))
     src = physical_scene()
     p = LensFlare.params(light_level=0.0, gain=100.0)
     ctx = RenderContext(rt, rt.upload(src), camera=CAM_P, read_lens=read_lens).for_step("final")
@@ -454,12 +456,14 @@ def test_physical_plan_is_made_once_per_frame(rt, monkeypatch):
     assert fx.is_identity(p, ctx) is None
     first = rt.download(fx.render(rt, p, ctx))
     assert len(calls) == 1
-    again = rt.download(fx.render(rt, p, ctx))
-    assert len(calls) == 2 and np.array_equal(first, again)
+    again = rt.download(fx.render(rt, p, ctx))          # the same step: the same plan
+    assert len(calls) == 1 and np.array_equal(first, again)
+    anew = rt.download(fx.render(rt, p, ctx.for_step("final")))   # a new step plans again
+    assert len(calls) == 2 and np.array_equal(first, anew)
     other = ctx.with_source(rt.upload(src * 2.0))     # another source: its own plan
     fx.is_identity(p, ctx)
     fx.render(rt, p, other)
-    assert len(calls) == 4
+    assert len(calls) == 3
 
 
 def point_light_frame(h=270, w=480, background=0.01, ratio=2000.0, at=(360, 70)):

@@ -423,7 +423,7 @@ def scene_table(rt, width: int = 320, height: int = 180, *, names=None, repeat: 
             times = []
             for i in range(repeat + 1):
                 t0 = time.perf_counter()
-                img = plugin.render(rt, p, ctx)
+                img = plugin.render(rt, p, ctx.for_step(q))   # a new step: plans again
                 rt.finish()
                 times.append((time.perf_counter() - t0) * 1e3)
             got = crop_to(rt.download(img), img.window, ctx.source.window)
