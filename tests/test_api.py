@@ -137,4 +137,6 @@ def test_the_api_keeps_compiler_warnings_quiet_on_a_cold_cache(rt, tmp_path):
     quiet = run(cache="a")
     assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
     shown = run("-W", "always::UserWarning", cache="b")     # the warnings are there to hide
-    assert shown.returncode == 0 and "KernelBuildWarning" in shown.stderr
+    assert shown.returncode == 0, shown.stderr
+    if "Portable Computing Language" in rt.device.platform.name:   # NVIDIA's compiler is silent
+        assert "KernelBuildWarning" in shown.stderr

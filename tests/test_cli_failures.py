@@ -147,7 +147,8 @@ def stamped(path, look_json: str):
     ('{"name": "x", "description": "' + "x" * (2 << 20) + '"}', "the limit is 1048576"),
     ("[" * 100000 + "]" * 100000, "nested 100000 levels deep; the limit is 32"),
     ('{"name": "x", "seed": ' + "9" * 5000 + "}", "is not JSON"),
-])
+], ids=["2MB", "deep", "5000-digits"])   # short ids: pytest puts the id in PYTEST_CURRENT_TEST,
+# which the CLI subprocess inherits; a 2 MB environment string fails exec with E2BIG
 def test_look_from_a_hostile_stamp_is_refused_in_one_line(small, look_json, message):
     """A 2 MB lookJSON had no size limit (YAML looks have 1 MiB); deep JSON and a 5000-digit
     integer were tracebacks."""

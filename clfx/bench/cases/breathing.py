@@ -73,6 +73,7 @@ class _Ctx:
     def __init__(self, camera):
         self.camera = camera
         self.reference_camera = camera
+        self.plans = {}          # Plugin.planned keeps the step's plan here
 
 
 def make(width, height, rng):
