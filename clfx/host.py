@@ -79,7 +79,8 @@ class RenderContext:
     velocity_back : DeviceImage or None
         The other half of the vector pass where the renderer writes both (Blender's XY):
         backward motion, current - previous position in px/frame, +y down.  The blurs of
-        motion then follow the quadratic through the previous, current and next positions.
+        motion then follow the circular arc at a constant turn rate through the previous,
+        current and next positions (`clfx.fx.motion.path`).
     display_window : Rect
         The frame's display window; resolution-independent sizes refer to its diagonal.
     pixel_aspect : float

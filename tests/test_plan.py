@@ -183,3 +183,20 @@ def test_8k_renders_tiled_within_a_small_pool_bit_identical(rt, monkeypatch):
                                  tile_pixels=1 << 20)
     assert all(s.ran for s in report.steps)
     assert np.array_equal(whole.rgba.view(np.uint32), tiled.rgba.view(np.uint32))
+
+
+def test_a_grown_window_carries_both_halves_of_the_vector_pass(rt):
+    # dof grows the window before motion_blur in cinema: the backward half of the vector
+    # pass was left at the old window, so motion_blur silently fell back to one half
+    from clfx.core.rect import Rect
+    from clfx.pipeline.look import _advance
+
+    win = Rect(10, 10, 26, 22)
+    vel = np.full((12, 16, 2), 1.5, np.float32)
+    ctx = RenderContext(rt, rt.upload(np.ones((12, 16, 4), np.float32), win),
+                        velocity=rt.upload(vel, win), velocity_back=rt.upload(-vel, win))
+    grown = rt.image(win.grown(3), 4)
+    after = _advance(rt, ctx, grown)
+    assert after.velocity.window == after.velocity_back.window == grown.window
+    back = rt.download(after.velocity_back)
+    assert np.array_equal(back, np.full(back.shape, -1.5, np.float32))   # edge-clamped

@@ -648,6 +648,8 @@ def _drop_unread_passes(ctx: RenderContext, steps) -> RenderContext:
     used = {c.name for _, s in steps for c in s.plugin.descriptor.clips}
     drop = {name: None for name in ("depth", "velocity")
             if name not in used and getattr(ctx, name) is not None}
+    if "velocity" not in used and ctx.velocity_back is not None:   # read only beside velocity
+        drop["velocity_back"] = None
     return ctx.over(**drop) if drop else ctx
 
 
@@ -657,7 +659,8 @@ def _advance(rt, ctx: RenderContext, out) -> RenderContext:
     passes = {}
     if out.window != ctx.source.window:
         passes = {name: rt.reframe(getattr(ctx, name), out.window, "clamp")
-                  for name in ("depth", "velocity") if getattr(ctx, name) is not None}
+                  for name in ("depth", "velocity", "velocity_back")
+                  if getattr(ctx, name) is not None}
     return ctx.over(source=out, **passes)
 
 
