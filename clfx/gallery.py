@@ -34,6 +34,7 @@ import json
 import math
 import os
 import sys
+import textwrap
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -87,33 +88,30 @@ def text_mask(text: str, scale: int = 2) -> np.ndarray:
     return np.kron(mask, np.ones((scale, scale), bool))
 
 
-def label(tile: np.ndarray, lines, *, scale: int = 2) -> np.ndarray:
-    """``tile`` (display-linear RGB) with ``lines`` of text in white on a darkened band at the
-    top (text wider than the tile is cut)."""
-    out = tile.copy()
-    lines = [lines] if isinstance(lines, str) else list(lines)
+def _text_band(out: np.ndarray, lines: list[str], top: int, scale: int) -> np.ndarray:
+    """Draw ``lines`` in white on a darkened band of ``out`` from row ``top`` (in place; text
+    wider than the tile is cut, lines below its bottom are left out)."""
     line_h = 9 * scale
-    band = out[:line_h * len(lines) + scale]
-    band *= 0.25                                   # darken behind the text, keep the image
+    out[top:top + line_h * len(lines) + scale] *= 0.25   # darken behind the text, keep the image
     for k, text in enumerate(lines):
         mask = text_mask(text, scale)
         w = min(mask.shape[1], out.shape[1] - 2 * scale)
-        if w > 0:
-            y = scale + k * line_h
+        y = top + scale + k * line_h
+        if w > 0 and y + mask.shape[0] <= out.shape[0]:
             out[y:y + mask.shape[0], scale:scale + w][mask[:, :w]] = 1.0
     return out
 
 
+def label(tile: np.ndarray, lines, *, scale: int = 2) -> np.ndarray:
+    """``tile`` (display-linear RGB) with ``lines`` of text in white on a darkened band at the
+    top (text wider than the tile is cut)."""
+    lines = [lines] if isinstance(lines, str) else list(lines)
+    return _text_band(tile.copy(), lines, 0, scale)
+
+
 def wrap(text: str, chars: int) -> list[str]:
     """``text`` in lines of at most ``chars`` characters, broken at spaces."""
-    lines, line = [], ""
-    for word in text.split():
-        if line and len(line) + 1 + len(word) > chars:
-            lines.append(line)
-            line = word
-        else:
-            line = f"{line} {word}" if line else word
-    return lines + [line] if line else lines
+    return textwrap.wrap(text, chars, break_long_words=False, break_on_hyphens=False)
 
 
 def caption(tile: np.ndarray, text: str, *, scale: int = 1, max_lines: int = 4) -> np.ndarray:
@@ -124,16 +122,8 @@ def caption(tile: np.ndarray, text: str, *, scale: int = 1, max_lines: int = 4) 
     lines = wrap(text, chars)[:max_lines]
     if not lines:
         return out
-    line_h = 9 * scale
-    top = max(0, out.shape[0] - line_h * len(lines) - scale)
-    out[top:] *= 0.25
-    for k, line in enumerate(lines):
-        mask = text_mask(line, scale)
-        w = min(mask.shape[1], out.shape[1] - 2 * scale)
-        y = top + scale + k * line_h
-        if w > 0 and y + mask.shape[0] <= out.shape[0]:
-            out[y:y + mask.shape[0], scale:scale + w][mask[:, :w]] = 1.0
-    return out
+    top = max(0, out.shape[0] - 9 * scale * len(lines) - scale)
+    return _text_band(out, lines, top, scale)
 
 
 def thumbnail(img: np.ndarray, width: int) -> np.ndarray:

@@ -235,17 +235,11 @@ class RenderContext:
 
     def tile(self, window: Rect) -> RenderContext:
         """This step's context over the part ``window`` of its source and passes (a tile of a
-        tiled render: `clfx.pipeline.look`): the same plans and notes, and the whole frame's
-        scene analysis (computed now if not yet), not the tile's."""
-        rt = self.runtime
+        tiled render: `clfx.pipeline.look`): `grown_to` the tile, with the same plans and
+        notes, and the whole frame's scene analysis (computed now if not yet), not the
+        tile's."""
         frame = _FrameAnalysis(self.analysis)
-
-        def crop(img):
-            return None if img is None else rt.reframe(img, window, "clamp")
-
-        return replace(self, source=rt.reframe(self.source, window, "zero"),
-                       depth=crop(self.depth), velocity=crop(self.velocity),
-                       velocity_back=crop(self.velocity_back), shared=frame)
+        return replace(self.grown_to(window), shared=frame)
 
     def with_source(self, source) -> RenderContext:
         """This context over another source image (a masked copy of the frame): same notes

@@ -49,7 +49,6 @@ class SceneAnalysis:
     bad_depth: np.ndarray | None
     camera: Camera = field(default_factory=Camera)
     seconds: float = 0.0
-    max_alpha: np.ndarray | None = None
     stray_light: np.ndarray | None = None
     """Per tile, finite pixels with light but no alpha (alpha <= 0, some RGB != 0)."""
 
@@ -232,4 +231,4 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
         max_depth=s[..., 5].copy() if depth is not None else None,
         bad_depth=s[..., 6].astype(np.int64) if depth is not None else None,
         camera=camera or Camera(), seconds=time.perf_counter() - t0,
-        max_alpha=s[..., 7].copy(), stray_light=s[..., 8].astype(np.int64))
+        stray_light=s[..., 8].astype(np.int64))

@@ -76,7 +76,8 @@ class ShippedPlan:
     @classmethod
     def of(cls, plan: BatchPlan) -> ShippedPlan:
         plan = plan.for_workers()
-        return cls(plan.key(), pickle.dumps(plan, protocol=pickle.HIGHEST_PROTOCOL))
+        blob = pickle.dumps(plan, protocol=pickle.HIGHEST_PROTOCOL)
+        return cls(plan.key(blob), blob)
 
     def plan(self) -> BatchPlan:
         return pickle.loads(self.blob)

@@ -31,6 +31,7 @@ from clfx.core.limits import check_pixels
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
 from clfx.core.rect import Rect
 from clfx.fx import mask as mask_fx
+from clfx.fx import resample
 from clfx.host import Plugin, RenderContext
 from clfx.io import lenses as lens_io
 from clfx.io.lenses import Lenses
@@ -402,12 +403,7 @@ def _limit(data: Rect, display: Rect, keep_overscan: bool) -> Rect:
 def _geometry(window: Rect):
     """A stand-in source for `prepare`: a window and the row pitch a device image of it
     has (`clfx.device.runtime.Runtime.image`), no pixels."""
-    from types import SimpleNamespace
-
-    from clfx.device.runtime import ALIGN_PX
-
-    return SimpleNamespace(window=window, channels=4, width=window.width, height=window.height,
-                           pitch=max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX))
+    return resample.canvas_stand_in(window)
 
 
 def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspect: float = 1.0,

@@ -105,7 +105,7 @@ def naive(case: dict, params, ctx) -> np.ndarray:
 def cycles_params() -> dict:
     """camera_blur's parameters of the Cycles scenes' camera moves: ``truck`` (the truck) and
     ``pan`` (the pan, trucking the other way at half the speed)."""
-    f_px = cycles.FOCAL_MM / cycles.SENSOR_MM * cycles.WIDTH
+    f_px = cycles.camera().focal_length_px(cycles.WIDTH)
     diag = math.hypot(cycles.WIDTH, cycles.HEIGHT)
     truck = cycles.truck_m_per_frame()
     return {"truck": dict(length=0.0, roll=0.0, truck=(truck, 0.0)),

@@ -103,7 +103,7 @@ def load(name: str) -> dict:
     rgba = {k: np.concatenate([v[..., :3], alpha], -1) for k, v in layers.items()}
     return dict(source=np.ascontiguousarray(frame.rgba, np.float32),
                 depth=frame.depth, velocity=frame.velocity, velocity_back=frame.velocity_back,
-                truth=rgba["truth"], truth2=rgba.get("truth2"),
+                truth=rgba["truth"],
                 vector_blur=rgba.get("vectorblur"), floor=attrs["floor"])
 
 
@@ -121,8 +121,7 @@ def camera():
 
 def truck_m_per_frame() -> float:
     """The truck's speed in metres per frame (the nearest post, 2.5 m, moves 40 px/frame)."""
-    f_px = FOCAL_MM / SENSOR_MM * WIDTH
-    return TRUCK_PX_AT_2_5_M * 2.5 / f_px
+    return TRUCK_PX_AT_2_5_M * 2.5 / camera().focal_length_px(WIDTH)
 
 
 def case(name: str, *, params: dict | None = None, velocity: bool = True) -> dict:
@@ -157,5 +156,5 @@ def variants(names, **kw) -> dict:
 
 
 def data_files() -> list[Path]:
-    """Every data file (their bytes key the bench's case cache)."""
+    """Every data file (the Cycles cases are not cached: `maker` reads them per run)."""
     return sorted(DATA.glob("*.exr")) if DATA.exists() else []
