@@ -90,6 +90,7 @@ stable feature-aware motion blur filter", HPG 2014.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -97,6 +98,7 @@ import numpy as np
 from clfx.core.camera import SHUTTER_OFFSETS as CAMERA_SHUTTER_OFFSETS
 from clfx.core.camera import shutter_interval
 from clfx.core.plugin import Level
+from clfx.device.runtime import kernel_dir
 
 KERNEL = "lib/motion.cl"
 
@@ -185,8 +187,21 @@ def tile_size(radius_px: float) -> int:
     return int(max(8, 4 * math.ceil(min(radius_px, MAX_RADIUS_PX) / 4.0)))
 
 
-MAX_TURN = 2.6
-"""rad/frame: a path turning faster is taken as turning this fast (kernels' MB_MAX_TURN)."""
+def _arc_constant(name: str) -> float:
+    """``#define <name> <value>f`` of kernels/lib/arc.h: the arc's constants have one copy,
+    the kernels'."""
+    m = re.search(rf"^#define {name} ([0-9.eE+-]+)f\b", (kernel_dir() / "lib/arc.h").read_text(),
+                  re.MULTILINE)
+    if m is None:
+        raise RuntimeError(f"kernels/lib/arc.h defines no {name}")
+    return float(m.group(1))
+
+
+MIN_TURN = _arc_constant("ARC_MIN_TURN")
+"""rad/frame: a path turning slower is the quadratic through its three positions."""
+
+MAX_TURN = _arc_constant("ARC_MAX_TURN")
+"""rad/frame: a path turning faster is taken as turning this fast."""
 
 
 def turn_rate(forward, backward):
@@ -207,7 +222,7 @@ def path(forward, backward, t):
     (:func:`turn_rate`), ``A (f + b) / 2 + C (f - b) / 2`` with ``A = sin(w t) / sin(w)``,
     ``C = sin^2(w t / 2) / sin^2(w / 2)``; on a straight path (``w = 0``) the quadratic
     ``t (f + b) / 2 + t^2 (f - b) / 2``, and with ``f = b`` the line ``f t``.  A point on a
-    turning surface follows its circle exactly (kernels/lib/motion.cl ``MB_ARC``); the
+    turning surface follows its circle exactly (kernels/lib/arc.h, ``MB_ARC``); the
     quadratic through the same three positions cuts inside the arc and ends short (72
     deg/frame through a centred 180 degree shutter: 0.56 px off a 40 px radius and its ends
     2.9 px short; the line along the forward motion strays 7.9 px)."""
@@ -215,7 +230,7 @@ def path(forward, backward, t):
     w = turn_rate(f, b)[..., None]
     t = np.asarray(t, np.float64)
     t = t[..., None] if 0 < t.ndim < f.ndim else t      # per point, or already (..., 1)
-    curved = w > 1e-3
+    curved = w > MIN_TURN
     ws = np.where(curved, w, 1.0)
     a = np.where(curved, np.sin(ws * t) / np.sin(ws), t)
     c = np.where(curved, (np.sin(0.5 * ws * t) / np.sin(0.5 * ws)) ** 2, t * t)

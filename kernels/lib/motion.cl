@@ -34,6 +34,7 @@
  * smear covers x where its own path passes within a pixel of x.
  * The gather accumulates in REAL (lib/precision.h: double where the level asks for fp64).
  */
+#include "lib/arc.h"
 #include "lib/motion_gather.h"
 #include "lib/precision.h"
 #ifndef HAS_DEPTH
@@ -232,28 +233,20 @@ kernel void motion_neighbormax(global const float *tiles, global float *nmax,
 /* --- gather ----------------------------------------------------------------------------- */
 /* Displacement at time t (frames) of a point moving with forward f and backward b (px/frame):
  * the circular arc through -b (t = -1), 0 and f (t = 1) at a constant turn rate w (mb_turn),
- * d(t) = A(t) (f + b) / 2 + C(t) (f - b) / 2 with A = sin(w t) / sin(w) and
- * C = sin^2(w t / 2) / sin^2(w / 2); on a straight path (w = 0) the quadratic A = t, C = t^2.
- * MB_ARC_TANGENT: its time derivative.  Per component (x and y share w). */
-#define MB_MIN_TURN 1e-3f   /* rad/frame: below this the arc is the quadratic (float-exact) */
-#define MB_MAX_TURN 2.6f    /* rad/frame (149 deg): a faster turn is taken as this one */
+ * lib/arc.h.  MB_ARC_TANGENT: its time derivative.  Per component (x and y share w). */
 inline float4 mb_turn(const float4 fx, const float4 fy, const float4 bx, const float4 by)
 {
-  /* with s = f + b, e = f - b: turning at w about a centre, e is perpendicular to s and
-   * |e| / |s| = tan(w / 2); only e's part across s counts (a straight path that speeds up
-   * or slows down has e along s: w = 0) */
-  const float4 sx = fx + bx, sy = fy + by, ex = fx - bx, ey = fy - by;
-  return fmin(2.0f * atan2(fabs(sx * ey - sy * ex), sx * sx + sy * sy), MB_MAX_TURN);
+  return ARC_TURN(float4, fx + bx, fy + by, fx - bx, fy - by);
 }
+#define MB_CURVED(w) ((w) > (float4)(ARC_MIN_TURN))
 inline float4 mb_arc_a(const float4 t, const float4 w)
-{ return select(t, sin(w * t) / sin(w), w > MB_MIN_TURN); }
+{ return select(t, ARC_A(float4, t, w), MB_CURVED(w)); }
 inline float4 mb_arc_c(const float4 t, const float4 w)
-{ const float4 r = sin(0.5f * w * t) / sin(0.5f * w); return select(t * t, r * r, w > MB_MIN_TURN); }
+{ const float4 r = ARC_R(float4, t, w); return select(t * t, r * r, MB_CURVED(w)); }
 inline float4 mb_arc_da(const float4 t, const float4 w)
-{ return select((float4)(1.0f), w * cos(w * t) / sin(w), w > MB_MIN_TURN); }
+{ return select((float4)(1.0f), ARC_DA(float4, t, w), MB_CURVED(w)); }
 inline float4 mb_arc_dc(const float4 t, const float4 w)
-{ const float4 h = sin(0.5f * w);
-  return select(2.0f * t, w * sin(w * t) / (2.0f * h * h), w > MB_MIN_TURN); }
+{ return select(2.0f * t, ARC_DC(float4, t, w), MB_CURVED(w)); }
 #define MB_ARC(f, b, t, w) (mb_arc_a(t, w) * 0.5f * ((f) + (b)) + mb_arc_c(t, w) * 0.5f * ((f) - (b)))
 #define MB_ARC_TANGENT(f, b, t, w) \
   (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
