@@ -283,9 +283,10 @@ inline float4 mb_cubic_weights(const float a, const float beta)
  * a (1 - a)) is ~6x the motion's over a half-pixel smear, which flattened fine stripes and
  * grain moving 1 px/frame 2-8 dB below the unblurred input (issue 24; the ramp used to
  * reach the full cubic only at a whole pixel). */
+#define MB_BETA(len) clamp(((len) - 0.375f) * 8.0f, 0.0f, 1.0f)    /* float or float4 */
 inline float mb_beta(const float len)
 {
-  return clamp((len - 0.375f) * 8.0f, 0.0f, 1.0f);
+  return MB_BETA(len);
 }
 
 /* Sub-pixel smears (issue 24): the closed form that replaces the gather's own-surface average
@@ -605,7 +606,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
   const float4 glen = sqrt(gx * gx + gy * gy);
   const float4 slen = glen * (t1 - t0);
   const float4 wsh = select((float4)(0.0f),
-                            1.0f - clamp((slen - 0.375f) * 8.0f, 0.0f, 1.0f),   /* 1 - mb_beta */
+                            1.0f - MB_BETA(slen),
                             (slen >= MIN_BLUR) & (int4)(-(fabs(t0 + t1) <= 1e-6f * (t1 - t0))));
   if(any(wsh > 0.0f))
   {
