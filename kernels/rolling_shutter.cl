@@ -27,6 +27,7 @@
  * and the disocclusion fill.
  * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
  */
+#include "lib/arc.h"
 #include "lib/common.h"
 #include "lib/precision.h"
 
@@ -144,15 +145,15 @@ inline float4 rs_colour(global const float *col, const int pitch, const int w, c
 }
 
 /* Displacement by time t of a point moving with forward f and backward b: the arc at a
- * constant turn rate w through -b, 0 and f (lib/motion.cl's MB_ARC, in REAL). */
+ * constant turn rate w through -b, 0 and f (lib/arc.h, as lib/motion.cl's MB_ARC, in REAL). */
 inline REAL2 rs_path(const REAL2 f, const REAL2 b, const REAL t)
 {
   const REAL2 s = f + b, e = f - b;
-  const REAL w = fmin((REAL)2 * atan2(fabs(s.x * e.y - s.y * e.x), dot(s, s)), (REAL)2.6);
-  if(w <= (REAL)1e-3)
+  const REAL w = ARC_TURN(REAL, s.x, s.y, e.x, e.y);
+  if(w <= (REAL)ARC_MIN_TURN)
     return t * (REAL)0.5 * s + t * t * (REAL)0.5 * e;
-  const REAL r = sin((REAL)0.5 * w * t) / sin((REAL)0.5 * w);
-  return sin(w * t) / sin(w) * (REAL)0.5 * s + r * r * (REAL)0.5 * e;
+  const REAL r = ARC_R(REAL, t, w);
+  return ARC_A(REAL, t, w) * (REAL)0.5 * s + r * r * (REAL)0.5 * e;
 }
 
 /* Displacement by time t of the point at q moving with forward f (CURVED: and backward b). */

@@ -32,7 +32,8 @@ Warfare"; Guertin, McGuire & Nowrouzezahrai 2014)
    samples use the midpoint rule (deterministic, exact for a linear image) unless the cap
    leaves them sparser than :data:`JITTER_SPACING_PX`, where a per-pixel jitter turns ghost
    copies into grain.  Tiles shorter than :data:`CUBIC_MAX_PX` read colours through a
-   clamped cubic (one launch), the others bilinearly (another).
+   clamped cubic (one launch; sub-pixel smears take a closed form, below), the others
+   bilinearly (another).
 4. *Gather*: each work-item shades 4 pixels sharing the tile's ``v_n``.  Pixel ``x`` takes N
    samples ``y_i = x - v_n t_i`` with ``t_i`` stratified over ``[t0, t1]`` (midpoint, or one
    per-pixel jitter: interleaved gradient noise, shifted per frame).  With
@@ -64,6 +65,17 @@ half a pixel on: with the full cubic only from a whole pixel, fine stripes and g
 channel to the 2 x 2 pixels around each read so it cannot ring
 around HDR lights (the clamp adds a little energy to an isolated hot pixel: up to ~8%).
 
+Where the tent would be read (a pixel's own smear ``L`` under 3/8 px, blended out by 1/2 px,
+centred shutters), the average over the pixel's own surface is the closed form of a short
+box instead (kernels/lib/motion.cl ``mb_short_smear``, per pixel, no tile switches): the
+pixel plus ``c`` times the second difference along its motion, ``c = L^2 / 16`` (between a
+smooth image's ``L^2 / 24`` and ``pi^2 L^2 / 96`` at the Nyquist frequency) or the tent's
+``L / 8`` where the samples alternate along the motion and cannot place their edges (the
+blocky, pixel-periodic walls of the layered bench).  The tent flattened fine texture moving
+0.4-0.75 px/frame 3-20 dB below the unblurred input (its response at the Nyquist frequency
+``1 - L / 2`` against the smear's ``sinc(L / 2)``); the closed form ends 0.07-3.2 dB above
+it, and a per-tile second-order path tried before cost the walls 0.4-2 dB (issue 24).
+
 Without a depth pass all pixels count as one depth (no occlusion ordering).  Reads outside
 the images clamp to their edge: a caller that wants the blur to leave its data window passes
 images already extended to the grown window.
@@ -78,6 +90,7 @@ stable feature-aware motion blur filter", HPG 2014.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -85,6 +98,7 @@ import numpy as np
 from clfx.core.camera import SHUTTER_OFFSETS as CAMERA_SHUTTER_OFFSETS
 from clfx.core.camera import shutter_interval
 from clfx.core.plugin import Level
+from clfx.device.runtime import kernel_dir
 
 KERNEL = "lib/motion.cl"
 
@@ -109,18 +123,6 @@ instead of bilinearly (or nearest): over a short smear the reconstruction filter
 as large as the motion's, and only a sharper one brings the result closer to the truth than
 the unblurred input."""
 
-TINY_MAX_PX = 0.0
-"""Off (0): tiles whose every smear (their NeighborMax velocity's) is shorter than this (px)
-through a centred shutter would take the second-order average along each pixel's motion
-instead of the gather (kernels/lib/motion.cl ``motion_tiny``): the input plus ``L^2 / 24`` of
-its second difference along the motion.  Measured at 0.5 (issue 24): fine stripes, a 2 px
-checker and 1.5 px grain at 0.4-0.75 px/frame through 180 degrees went from 3-20 dB below
-the unblurred input (the tent) to 0.1-3.1 dB above it, but the blocky box-filtered walls of
-``layers`` and ``shutter_270`` (320x180, final) fell 34.82 -> 34.40 and 33.12 -> 31.14 dB
-(naive 32.27): at the kinks of a piecewise linear image the tent's ``L / 8`` of the second
-difference is exact and ``L^2 / 24`` blurs too little.  Left off until one rule serves both;
-a level may set ``tiny_max_px``."""
-
 JITTER_SPACING_PX = 4.0
 """Per-pixel jitter only where samples lie farther apart than this along the blur (the
 level's sample cap bites hard): denser samples use the midpoint rule, which is exact for a
@@ -139,7 +141,6 @@ class MotionLevel(Level):
     jitter: bool = True     # per-pixel jitter where the sample cap leaves samples sparse
                             # (else the midpoint rule everywhere: exact quadrature, may band)
     cubic_max_px: float = CUBIC_MAX_PX   # tiles with shorter blurs read through the cubic
-    tiny_max_px: float = TINY_MAX_PX     # tiles with shorter blurs (centred shutter): motion_tiny
 
 
 def _summary(lvl: MotionLevel) -> str:
@@ -186,8 +187,21 @@ def tile_size(radius_px: float) -> int:
     return int(max(8, 4 * math.ceil(min(radius_px, MAX_RADIUS_PX) / 4.0)))
 
 
-MAX_TURN = 2.6
-"""rad/frame: a path turning faster is taken as turning this fast (kernels' MB_MAX_TURN)."""
+def _arc_constant(name: str) -> float:
+    """``#define <name> <value>f`` of kernels/lib/arc.h: the arc's constants have one copy,
+    the kernels'."""
+    m = re.search(rf"^#define {name} ([0-9.eE+-]+)f\b", (kernel_dir() / "lib/arc.h").read_text(),
+                  re.MULTILINE)
+    if m is None:
+        raise RuntimeError(f"kernels/lib/arc.h defines no {name}")
+    return float(m.group(1))
+
+
+MIN_TURN = _arc_constant("ARC_MIN_TURN")
+"""rad/frame: a path turning slower is the quadratic through its three positions."""
+
+MAX_TURN = _arc_constant("ARC_MAX_TURN")
+"""rad/frame: a path turning faster is taken as turning this fast."""
 
 
 def turn_rate(forward, backward):
@@ -208,7 +222,7 @@ def path(forward, backward, t):
     (:func:`turn_rate`), ``A (f + b) / 2 + C (f - b) / 2`` with ``A = sin(w t) / sin(w)``,
     ``C = sin^2(w t / 2) / sin^2(w / 2)``; on a straight path (``w = 0``) the quadratic
     ``t (f + b) / 2 + t^2 (f - b) / 2``, and with ``f = b`` the line ``f t``.  A point on a
-    turning surface follows its circle exactly (kernels/lib/motion.cl ``MB_ARC``); the
+    turning surface follows its circle exactly (kernels/lib/arc.h, ``MB_ARC``); the
     quadratic through the same three positions cuts inside the arc and ends short (72
     deg/frame through a centred 180 degree shutter: 0.56 px off a 40 px radius and its ends
     2.9 px short; the line along the forward motion strays 7.9 px)."""
@@ -216,7 +230,7 @@ def path(forward, backward, t):
     w = turn_rate(f, b)[..., None]
     t = np.asarray(t, np.float64)
     t = t[..., None] if 0 < t.ndim < f.ndim else t      # per point, or already (..., 1)
-    curved = w > 1e-3
+    curved = w > MIN_TURN
     ws = np.where(curved, w, 1.0)
     a = np.where(curved, np.sin(ws * t) / np.sin(ws), t)
     c = np.where(curved, (np.sin(0.5 * ws * t) / np.sin(0.5 * ws)) ** 2, t * t)
@@ -335,15 +349,6 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
     qpt = k * k // 4
     moving = int(xs.size)
-    tiny = (length < level.tiny_max_px) & (abs(t0 + t1) <= 1e-6 * (t1 - t0))
-    if tiny.any():          # second order along each pixel's motion (centred shutter)
-        table = rt.to_device(np.stack([xs[tiny], ys[tiny], n[tiny], jitter[tiny]],
-                                      axis=1).astype(np.int32).ravel())
-        count = int(tiny.sum())
-        rt.launch(rt.kernel(KERNEL, "motion_tiny", **defines), (count * qpt,), col, aux, table,
-                  i32(count), dst, i32(pitch), i32(w), i32(h), i32(k), f32(t0), f32(t1),
-                  local=(LOCAL,))
-        xs, ys, n, jitter, length = (a[~tiny] for a in (xs, ys, n, jitter, length))
     short = length < level.cubic_max_px
     for sel, cubic in ((short, 1), (~short, 0)):   # one launch per fetch filter
         if not sel.any():

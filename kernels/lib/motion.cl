@@ -14,7 +14,8 @@
  *   motion_gather            per 4 pixels of the *moving* tiles only (compact tile lists built
  *                            on the host): N samples along the neighbourhood's dominant
  *                            velocity, depth-aware scatter-as-gather weights; built with
- *                            CUBIC=1 for the short tiles (clamped cubic / tent reads)
+ *                            CUBIC=1 for the short tiles (clamped cubic / tent reads; under
+ *                            3/8 px of own smear the closed form mb_short_smear instead)
  *
  * Sample model of the gather (see clfx/fx/motion.py): the output pixel x collects the
  * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] at the
@@ -33,6 +34,7 @@
  * smear covers x where its own path passes within a pixel of x.
  * The gather accumulates in REAL (lib/precision.h: double where the level asks for fp64).
  */
+#include "lib/arc.h"
 #include "lib/motion_gather.h"
 #include "lib/precision.h"
 #ifndef HAS_DEPTH
@@ -231,28 +233,20 @@ kernel void motion_neighbormax(global const float *tiles, global float *nmax,
 /* --- gather ----------------------------------------------------------------------------- */
 /* Displacement at time t (frames) of a point moving with forward f and backward b (px/frame):
  * the circular arc through -b (t = -1), 0 and f (t = 1) at a constant turn rate w (mb_turn),
- * d(t) = A(t) (f + b) / 2 + C(t) (f - b) / 2 with A = sin(w t) / sin(w) and
- * C = sin^2(w t / 2) / sin^2(w / 2); on a straight path (w = 0) the quadratic A = t, C = t^2.
- * MB_ARC_TANGENT: its time derivative.  Per component (x and y share w). */
-#define MB_MIN_TURN 1e-3f   /* rad/frame: below this the arc is the quadratic (float-exact) */
-#define MB_MAX_TURN 2.6f    /* rad/frame (149 deg): a faster turn is taken as this one */
+ * lib/arc.h.  MB_ARC_TANGENT: its time derivative.  Per component (x and y share w). */
 inline float4 mb_turn(const float4 fx, const float4 fy, const float4 bx, const float4 by)
 {
-  /* with s = f + b, e = f - b: turning at w about a centre, e is perpendicular to s and
-   * |e| / |s| = tan(w / 2); only e's part across s counts (a straight path that speeds up
-   * or slows down has e along s: w = 0) */
-  const float4 sx = fx + bx, sy = fy + by, ex = fx - bx, ey = fy - by;
-  return fmin(2.0f * atan2(fabs(sx * ey - sy * ex), sx * sx + sy * sy), MB_MAX_TURN);
+  return ARC_TURN(float4, fx + bx, fy + by, fx - bx, fy - by);
 }
+#define MB_CURVED(w) ((w) > (float4)(ARC_MIN_TURN))
 inline float4 mb_arc_a(const float4 t, const float4 w)
-{ return select(t, sin(w * t) / sin(w), w > MB_MIN_TURN); }
+{ return select(t, ARC_A(float4, t, w), MB_CURVED(w)); }
 inline float4 mb_arc_c(const float4 t, const float4 w)
-{ const float4 r = sin(0.5f * w * t) / sin(0.5f * w); return select(t * t, r * r, w > MB_MIN_TURN); }
+{ const float4 r = ARC_R(float4, t, w); return select(t * t, r * r, MB_CURVED(w)); }
 inline float4 mb_arc_da(const float4 t, const float4 w)
-{ return select((float4)(1.0f), w * cos(w * t) / sin(w), w > MB_MIN_TURN); }
+{ return select((float4)(1.0f), ARC_DA(float4, t, w), MB_CURVED(w)); }
 inline float4 mb_arc_dc(const float4 t, const float4 w)
-{ const float4 h = sin(0.5f * w);
-  return select(2.0f * t, w * sin(w * t) / (2.0f * h * h), w > MB_MIN_TURN); }
+{ return select(2.0f * t, ARC_DC(float4, t, w), MB_CURVED(w)); }
 #define MB_ARC(f, b, t, w) (mb_arc_a(t, w) * 0.5f * ((f) + (b)) + mb_arc_c(t, w) * 0.5f * ((f) - (b)))
 #define MB_ARC_TANGENT(f, b, t, w) \
   (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
@@ -289,9 +283,61 @@ inline float4 mb_cubic_weights(const float a, const float beta)
  * a (1 - a)) is ~6x the motion's over a half-pixel smear, which flattened fine stripes and
  * grain moving 1 px/frame 2-8 dB below the unblurred input (issue 24; the ramp used to
  * reach the full cubic only at a whole pixel). */
+#define MB_BETA(len) clamp(((len) - 0.375f) * 8.0f, 0.0f, 1.0f)    /* float or float4 */
 inline float mb_beta(const float len)
 {
-  return clamp((len - 0.375f) * 8.0f, 0.0f, 1.0f);
+  return MB_BETA(len);
+}
+
+/* Sub-pixel smears (issue 24): the closed form that replaces the gather's own-surface average
+ * where mb_beta leaves the tent (weight 1 - mb_beta, centred shutters only).  Along the unit
+ * direction u of the pixel's path, with p_k the colour at x + k u (bilinear, k = -2..2) and
+ * L the smear length, a box of length L < 1 changes a pixel by
+ *   c (p_-1 + p_1 - 2 p_0),  c = L^2 / SHORT_SMOOTH  ... L / 8
+ * L^2 / 24 for a smooth image, about L^2 / 10 at the Nyquist frequency (1 - sinc(pi L / 2)
+ * of a sampled cosine), L / 8 for an edge on a pixel boundary (the tent's own response,
+ * exact there).  c is L^2 / SHORT_SMOOTH unless the samples alternate along u (p_-1 = p_1
+ * and p_0 repeats at p_-2 or p_2, within SHORT_KAPPA of the second difference): there the
+ * samples cannot say where the edges lie inside the pixels, and the tent's L / 8 is the
+ * expected response of edges anywhere between the renderer's sub-samples (the blocky walls
+ * of the layered bench: L^2 / 12 alone ends 2 dB below the tent on its wall at 270 deg).
+ * A flat field stays flat;
+ * with one coefficient along a row the row's sum is kept (the alternation switch moves a
+ * little light between pixels). */
+#define SHORT_SMOOTH 16.0f
+#define SHORT_KAPPA 0.05f
+inline float4 mb_short_smear(const float4 pm2, const float4 pm1, const float4 p0,
+                             const float4 pp1, const float4 pp2, const float len)
+{
+  const float4 d2 = pm1 + pp1 - 2.0f * p0;
+  const float4 e = fabs(pm1 - pp1) + fmin(fabs(pm2 - p0), fabs(pp2 - p0));
+  const float4 alt = clamp(1.0f - e / fmax(SHORT_KAPPA * fabs(d2), FLT_MIN), 0.0f, 1.0f);
+  const float smooth = len * len / SHORT_SMOOTH;
+  return p0 + (smooth + alt * (0.125f * len - smooth)) * d2;
+}
+
+/* The closed form at the pixel centre (px, py) along (ux, uy), its colour p0 (times
+ * `scale`), depth z0: the four taps read bilinearly, times `scale`; *q: how much of the
+ * neighbourhood is x's own layer or behind it (a tap in front of x pulls it to 0). */
+inline float4 mb_short_at(global const float *col, global const float *aux, const int pitch,
+                          const int w, const int h, const float px, const float py,
+                          const float ux, const float uy, const float4 p0, const float z0,
+                          const float len, const float scale, float *q)
+{
+  float4 tap[4];
+  float keep = 1.0f;
+  for(int k = 0; k < 4; k++)
+  {
+    const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
+    const float x = px + o * ux, y = py + o * uy;
+    tap[k] = mg_fetch_scaled(col, pitch, w, h, x, y, scale);
+    const int ix = clfx_clampi((int)clamp(floor(x), -1.0f, (float)w), 0, w - 1);
+    const int iy = clfx_clampi((int)clamp(floor(y), -1.0f, (float)h), 0, h - 1);
+    const float z = vload4(iy * pitch + ix, aux).z;
+    keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
+  }
+  *q = keep;
+  return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
 }
 
 /* Colour at continuous position (px, py), clamp-to-edge, times `scale`: Catmull-Rom (4 x 4
@@ -545,12 +591,46 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
   const REAL4 fscale = one / fmax(aF, one);
   /* the layer behind the occluders: the own-velocity average, or the centre pixel if no
    * sample belongs to it (all rejected) or nothing moves in this quad */
-  const REAL4 sscale = select((REAL4)(0), (one - cov) / fmax(aS, (REAL4)(1e-6)),
-                              aS > (REAL4)(1e-6));
-  const REAL4 ccov = select(one - cov, (REAL4)(0), aS > (REAL4)(1e-6));
+  const REAL4 sown = select((REAL4)(0), one / fmax(aS, (REAL4)(1e-6)), aS > (REAL4)(1e-6));
+  const REAL4 cown = select(one, (REAL4)(0), aS > (REAL4)(1e-6));
+  REAL16 own = S * (REAL16)(sown.xxxx, sown.yyyy, sown.zzzz, sown.wwww)
+               + TO_REAL16(cc * scale) * (REAL16)(cown.xxxx, cown.yyyy, cown.zzzz, cown.wwww);
+  /* sub-pixel smears through a centred shutter: the closed form (mb_short_smear), blended
+   * in by each pixel's own path length where the gather's fetch is the tent */
+#if CURVED
+  const float4 gx = MB_ARC_TANGENT(vxx, bxx, (float4)(0.0f), wx);
+  const float4 gy = MB_ARC_TANGENT(vxy, bxy, (float4)(0.0f), wx);
+#else
+  const float4 gx = vxx, gy = vxy;
+#endif
+  const float4 glen = sqrt(gx * gx + gy * gy);
+  const float4 slen = glen * (t1 - t0);
+  const float4 wsh = select((float4)(0.0f),
+                            1.0f - MB_BETA(slen),
+                            (slen >= MIN_BLUR) & (int4)(-(fabs(t0 + t1) <= 1e-6f * (t1 - t0))));
+  if(any(wsh > 0.0f))
+  {
+    float wl[4], gxl[4], gyl[4], gl[4], sl[4], zl[4];
+    vstore4(wsh, 0, wl); vstore4(gx, 0, gxl); vstore4(gy, 0, gyl); vstore4(glen, 0, gl);
+    vstore4(slen, 0, sl); vstore4(zx, 0, zl);
+    float cl[16], ol[16], dl[16];
+    vstore16(cc * scale, 0, cl);
+    vstore16(TO_FLOAT16(own), 0, ol);
+    vstore16((float16)(0.0f), 0, dl);
+    for(int l = 0; l < 4; l++)
+    {
+      if(wl[l] <= 0.0f) continue;
+      float q;
+      const float4 c = mb_short_at(col, aux, pitch, width, height, lane.x + (float)l + 0.5f,
+                                   fy + 0.5f, gxl[l] / gl[l], gyl[l] / gl[l], vload4(l, cl),
+                                   zl[l], sl[l], scale, &q);
+      vstore4((c - vload4(l, ol)) * (wl[l] * q), l, dl);
+    }
+    own += TO_REAL16(vload16(0, dl));
+  }
+  const REAL4 keep = one - cov;
   return F * (REAL16)(fscale.xxxx, fscale.yyyy, fscale.zzzz, fscale.wwww)
-         + S * (REAL16)(sscale.xxxx, sscale.yyyy, sscale.zzzz, sscale.wwww)
-         + TO_REAL16(cc * scale) * (REAL16)(ccov.xxxx, ccov.yyyy, ccov.zzzz, ccov.wwww);
+         + own * (REAL16)(keep.xxxx, keep.yyyy, keep.zzzz, keep.wwww);
 }
 
 /* tiles: (tx, ty, samples, jitter) per moving tile (jitter 0: the midpoint rule, exact for the
@@ -612,55 +692,4 @@ kernel void motion_gather(global const float *col, global const float *aux,
   if(scale != 1.0f)
     out = clamp(out / scale, -FLT_MAX, FLT_MAX);
   vstore16(out, 0, dst + base * 4);
-}
-
-/* Colour at continuous position (px, py) (pixel i's centre at i + 0.5), bilinear, clamp to
- * the edge. */
-inline float4 mb_bilinear(global const float *col, const int pitch, const int width,
-                          const int height, const float px, const float py)
-{
-  const float u = px - 0.5f, v = py - 0.5f;
-  const float fu = floor(u), fv = floor(v), a = u - fu, b = v - fv;
-  const int x0 = clamp((int)fu, 0, width - 1), x1 = clamp((int)fu + 1, 0, width - 1);
-  const int y0 = clamp((int)fv, 0, height - 1), y1 = clamp((int)fv + 1, 0, height - 1);
-  return (vload4((size_t)y0 * pitch + x0, col) * (1.0f - a) + vload4((size_t)y0 * pitch + x1, col) * a) * (1.0f - b)
-       + (vload4((size_t)y1 * pitch + x0, col) * (1.0f - a) + vload4((size_t)y1 * pitch + x1, col) * a) * b;
-}
-
-/* Tiles whose every smear is under a pixel (clfx/fx/motion.py TINY_MAX_PX) through a centred
- * shutter [-T, T]: the average of the image along each pixel's own motion, to second order,
- * I + (L^2 / 24) (I(x + u) + I(x - u) - 2 I(x)), L = |v| (t1 - t0) the smear, u the unit
- * direction of v (the second difference across a pixel; error O(L^4)).  A sampled
- * reconstruction (tent or cubic at fractions of a pixel) blurs fine texture by more than such
- * a smear does; this keeps the input where nothing moves and never blurs more than the
- * motion.  Same tile table and work layout as motion_gather (4 pixels per work-item). */
-kernel void motion_tiny(global const float *col, global const float *aux,
-                        global const int *tiles, const int ntiles, global float *dst,
-                        const int pitch, const int width, const int height, const int k,
-                        const float t0, const float t1)
-{
-  const int gid = get_global_id(0);
-  const int qpt = k * k / 4;
-  const int tile = gid / qpt;
-  if(tile >= ntiles) return;
-  const int r = gid - tile * qpt, qrow = k / 4;
-  const int x = tiles[4 * tile] * k + (r % qrow) * 4, y = tiles[4 * tile + 1] * k + r / qrow;
-  if(y >= height) return;
-  for(int l = 0; l < 4; l++)
-  {
-    const int xi = x + l;
-    if(xi >= width) break;
-    const size_t i = (size_t)y * pitch + xi;
-    const float4 a = vload4(i, aux), c = vload4(i, col);
-    const float len = a.w * (t1 - t0);
-    float4 o = c;
-    if(len >= MIN_BLUR)
-    {
-      const float ux = a.x / a.w, uy = a.y / a.w, px = (float)xi + 0.5f, py = (float)y + 0.5f;
-      const float4 sum = mb_bilinear(col, pitch, width, height, px + ux, py + uy)
-                       + mb_bilinear(col, pitch, width, height, px - ux, py - uy);
-      o = c + (len * len / 24.0f) * (sum - 2.0f * c);
-    }
-    vstore4(o, i, dst);
-  }
 }

@@ -13,7 +13,7 @@ from clfx.fx.motion import CUBIC_MAX_PX, MAX_RADIUS_PX, tile_size
 from clfx.host import RenderContext
 from clfx.plugins.motion_blur import MotionBlur
 from tests.conftest import hard_shapes
-from tests.reference.motion_blur import line_blur, naive_blur
+from tests.reference.motion_blur import line_blur, naive_blur, short_blur
 
 QUALITIES = ("draft", "preview", "final", "reference")
 CENTRED = Camera(shutter_angle=180.0, shutter_offset="centered")
@@ -248,18 +248,15 @@ def test_slow_fine_texture_never_worse_than_the_input_in_any_direction(rt, textu
                 assert got > unblurred, (speed, direction, q, got, unblurred)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 24, open: sub-pixel smears of fine texture "
-                   "lose to the input through the tent; the second-order path that fixes it "
-                   "(clfx.fx.motion.TINY_MAX_PX) costs the blocky walls of layers/shutter_270 "
-                   "0.4-2 dB, so it is off")
 @pytest.mark.parametrize("texture,period,angle", [("stripes", 2.5, 15.0), ("checker", 2.0, 15.0),
                                                    ("noise", 1.5, 0.0)])
 def test_sub_pixel_smears_never_worse_than_the_input(rt, texture, period, angle):
     """Issue 24: fine texture moving 0.4 and 0.75 px/frame (smears of 0.2 and 0.375 px
-    through a centred 180 degree shutter) should end closer to the truth than the unblurred
-    frame at every level.  Measured (final, 96x64, 256 renders, 200 degrees) through the
-    tent: 5.1/6.5 (stripes), 3.1/4.3 (checker), 19.6/13.1 dB (noise) below the input; with
-    TINY_MAX_PX = 0.5: 0.1/1.1, 0.1/0.3, 1.9/3.1 dB above it."""
+    through a centred 180 degree shutter) ends closer to the truth than the unblurred frame
+    at every level.  Measured (final, 96x64, 256 renders, 200 degrees) through the tent:
+    5.1/6.5 (stripes), 3.1/4.3 (checker), 19.6/13.1 dB (noise) below the input; with the
+    closed form of kernels/lib/motion.cl ``mb_short_smear``: 0.13/1.26, 0.07/0.32 and
+    1.31/3.20 dB above it."""
     from clfx.bench.groundtruth import RENDER_SS, make_case
     from clfx.bench.scene import Layer, Scene, Texture
 
@@ -277,6 +274,32 @@ def test_sub_pixel_smears_never_worse_than_the_input(rt, texture, period, angle)
             got = error_metrics(run(rt, f.rgba, f.velocity, f.depth, quality=q)[inner],
                                 gt.truth[inner])["psnr_log"]
             assert got > unblurred, (speed, q, got, unblurred)
+
+
+@pytest.mark.parametrize("speed", [0.4, 0.75, 0.9])
+@pytest.mark.parametrize("direction", [0.0, 90.0, 200.0, 37.0])
+def test_sub_pixel_smear_matches_the_oracle(rt, rng, speed, direction):
+    """Issue 24: one velocity under a pixel of smear (0.2, 0.375 and 0.45 px through a centred
+    180 degree shutter): the closed form (tests/reference ``short_smear``) up to 3/8 px,
+    blended into the cubic line blur by 1/2 px, at every level; flat fields stay flat."""
+    h, w = 40, 48
+    src = rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32)
+    src[8:16, 8:30] = 0.25                            # flat patches and pixel-aligned edges
+    src[20:30:2, 10:40] = 0.9                         # alternation across rows
+    src[22:32, 12:40:2] = 0.05                        # ... and along them
+    a = math.radians(direction)
+    v = (speed * math.cos(a), speed * math.sin(a))
+    t0, t1 = CENTRED.shutter_interval()
+    inner = np.s_[4:-4, 4:-4]
+    for q in QUALITIES:
+        lvl = MotionBlur.descriptor.quality[q]
+        length = speed * (t1 - t0)
+        n = int(np.clip(math.ceil(length / lvl.spacing), 2, lvl.max_samples))
+        want = short_blur(src, v, t0=t0, t1=t1, n=n)
+        got = run(rt, src, uniform((h, w), v), np.full((h, w), 3.0, np.float32), quality=q)
+        np.testing.assert_allclose(got[inner], want[inner], atol=2e-5, err_msg=q)
+        flat = run(rt, np.full((h, w, 4), 0.37, np.float32), uniform((h, w), v), quality=q)
+        np.testing.assert_allclose(flat, 0.37, rtol=1e-6, atol=0)
 
 
 def test_naive_baseline_is_the_per_pixel_line_blur(rng):

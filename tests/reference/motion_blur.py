@@ -5,7 +5,11 @@ positions (pixel centres at +0.5), over ``n`` instants of the open shutter ``[t0
 (midpoint rule).  With ``n`` large this is the exact time integral of the bilinear image.
 
 - ``line_blur``: one constant velocity (the exact box line blur; camera pan); ``interp =
-  "cubic"`` reads through the clamped Catmull-Rom the gather uses on short blurs.
+  "cubic"`` reads through the clamped Catmull-Rom the gather uses on short blurs (``beta``:
+  its blend with the tent, as ``mb_beta``).
+- ``short_smear``: the closed form of a sub-pixel smear along one velocity (``mb_short_smear``)
+  and ``short_blur``: what the gather makes of one velocity under a pixel of smear through a
+  centred shutter, the closed form blended with the cubic line blur by the smear's length.
 - ``naive_blur``: the naive baseline — each pixel blurred along its *own* velocity (no
   tiles, no depth, no scatter): what a per-pixel directional blur does.
 - ``similarity_blur``: the camera's image-plane motion ``p(t) = c + (1 + zoom t) R(roll t)
@@ -37,13 +41,19 @@ def _catmull_rom(a):
             -1.5 * a3 + 2.0 * a2 + 0.5 * a, 0.5 * a3 - 0.5 * a2)
 
 
-def cubic(src, px, py):
-    """``src`` read through a Catmull-Rom (4 x 4 taps), clamp-to-edge, each channel clamped
-    to the range of the 2 x 2 pixels around the position (no ringing)."""
+def _blended(a, beta):
+    lin = (0.0 * a, 1.0 - a, a, 0.0 * a)
+    return tuple(l + (c - l) * beta for l, c in zip(lin, _catmull_rom(a)))
+
+
+def cubic(src, px, py, beta=1.0):
+    """``src`` read through a Catmull-Rom (4 x 4 taps; ``beta`` < 1 blends its weights with
+    the tent's), clamp-to-edge, each channel clamped to the range of the 2 x 2 pixels around
+    the position (no ringing)."""
     h, w = src.shape[:2]
     u, v = px - 0.5, py - 0.5
     u0, v0 = np.floor(u), np.floor(v)
-    wx, wy = _catmull_rom(u - u0), _catmull_rom(v - v0)
+    wx, wy = _blended(u - u0, beta), _blended(v - v0, beta)
     xs = [np.clip(u0 + i, 0, w - 1).astype(np.int64) for i in (-1, 0, 1, 2)]
     ys = [np.clip(v0 + j, 0, h - 1).astype(np.int64) for j in (-1, 0, 1, 2)]
     acc = 0.0
@@ -62,17 +72,54 @@ def _sanitise(src):
     return np.where(np.isfinite(src), src, 0.0)
 
 
-def line_blur(src, velocity, *, t0, t1, n=1024, interp="linear"):
+def line_blur(src, velocity, *, t0, t1, n=1024, interp="linear", beta=1.0):
     """Box line blur: mean over t of ``src(x - v t)`` for one velocity ``v`` (px/frame),
-    read bilinearly (``interp="linear"``) or through :func:`cubic`."""
+    read bilinearly (``interp="linear"``) or through :func:`cubic` (blend ``beta``)."""
     src = _sanitise(src)
     h, w = src.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
     acc = np.zeros(src.shape)
-    read = cubic if interp == "cubic" else bilinear
     for t in _times(t0, t1, n):
-        acc += read(src, xs - velocity[0] * t, ys - velocity[1] * t)
+        px, py = xs - velocity[0] * t, ys - velocity[1] * t
+        acc += cubic(src, px, py, beta) if interp == "cubic" else bilinear(src, px, py)
     return acc / n
+
+
+SHORT_SMOOTH = 16.0   # c = L^2 / SHORT_SMOOTH on smooth texture
+SHORT_KAPPA = 0.05    # alternation tolerance, fraction of the second difference
+
+
+def short_smear(src, velocity, *, t0, t1):
+    """A smear of length ``L = |v| (t1 - t0)`` < 1 px centred on each pixel, to second order
+    along the unit direction ``u`` of ``v``: ``p0 + c (p-1 + p1 - 2 p0)`` with ``pk`` the
+    image at ``x + k u`` (bilinear); ``c = L^2 / SHORT_SMOOTH``, or the tent's ``L / 8``
+    where the samples alternate along ``u`` (``p-1 = p1`` and ``p0`` repeated at ``p-2`` or
+    ``p2``, within ``SHORT_KAPPA`` of the second difference; blended linearly)."""
+    src = _sanitise(src)
+    h, w = src.shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    v = np.asarray(velocity, np.float64)
+    speed = math.hypot(v[0], v[1])
+    length = speed * (t1 - t0)
+    u = v / speed
+    p = {k: bilinear(src, xs + k * u[0], ys + k * u[1]) for k in (-2, -1, 1, 2)}
+    d2 = p[-1] + p[1] - 2.0 * src
+    e = np.abs(p[-1] - p[1]) + np.minimum(np.abs(p[-2] - src), np.abs(p[2] - src))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alt = np.clip(1.0 - e / np.maximum(SHORT_KAPPA * np.abs(d2), 1e-300), 0.0, 1.0)
+    smooth = length * length / SHORT_SMOOTH
+    return src + (smooth + alt * (0.125 * length - smooth)) * d2
+
+
+def short_blur(src, velocity, *, t0, t1, n):
+    """The gather on one velocity whose smear ``L`` is under half a pixel, centred shutter:
+    the closed form :func:`short_smear` where the fetch would be the tent (``L`` <= 3/8 px),
+    the line blur of ``n`` midpoint samples read through the tent-blended cubic from 1/2 px
+    on, linearly between (``beta = clip((L - 3/8) 8, 0, 1)``)."""
+    length = math.hypot(*velocity) * (t1 - t0)
+    beta = min(max((length - 0.375) * 8.0, 0.0), 1.0)
+    line = line_blur(src, velocity, t0=t0, t1=t1, n=n, interp="cubic", beta=beta)
+    return line + (1.0 - beta) * (short_smear(src, velocity, t0=t0, t1=t1) - line)
 
 
 def naive_blur(src, velocity, *, t0, t1, n=256):
