@@ -108,6 +108,26 @@ def pytest_runtest_protocol(item, nextitem):
     yield
     after = _cpu_now()
     own, kids, wall = (round(b - a, 3) for a, b in zip(before, after))
+    row = {"id": item.nodeid, "cpu_s": own, "children_cpu_s": kids, "wall_s": wall}
+    if nextitem is None or nextitem.nodeid.split("::")[0] != item.nodeid.split("::")[0]:
+        row["kernel_cache"] = _kernel_cache_entries()
     with open(CPU_LOG, "a") as log:
-        log.write(json.dumps({"id": item.nodeid, "cpu_s": own, "children_cpu_s": kids,
-                              "wall_s": wall}) + "\n")
+        log.write(json.dumps(row) + "\n")
+
+
+def _kernel_cache_entries() -> list[int] | None:
+    """Programs and compiled kernels in PoCL's cache (``POCL_CACHE_DIR``: PROGRAM/program.bc
+    and PROGRAM/KERNEL/*/KERNEL.so) at the end of a module: differences between modules are
+    the compiles each module caused (in a one-worker run; with two, the other's interleave)."""
+    root = os.environ.get("POCL_CACHE_DIR")
+    if not root or not os.path.isdir(root):
+        return None
+    programs = kernels = 0
+    for shard in os.scandir(root):
+        if not shard.is_dir():
+            continue
+        for prog in os.scandir(shard.path):
+            if prog.is_dir():
+                programs += 1
+                kernels += sum(1 for k in os.scandir(prog.path) if k.is_dir())
+    return [programs, kernels]
