@@ -63,20 +63,30 @@ SPLIT_ACROSS_WORKERS = (
 """Modules whose tests share no module-scoped state, so pytest-xdist may spread them over its
 workers one test at a time (see ``pytest_xdist_make_scheduler``)."""
 
+BY_EFFECT = ("tests/fuzz/test_fuzz.py", "tests/contract/test_values.py",
+             "tests/contract/test_regions.py", "tests/contract/test_shapes.py")
+"""Of those, the modules whose test ids start with the effect (or look) they render: their
+tests are handed out one effect at a time, so that the tests that build the same programs
+(one effect at its levels, values and images) run in one process, one after the other.  One
+test at a time, two workers on a cold kernel cache compiled the same programs at once."""
+
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """``pytest -n N --dist loadscope`` (``make test``): each module runs whole on one worker,
     in its own order (its module-scoped fixtures built once), except ``SPLIT_ACROSS_WORKERS``,
-    whose tests are handed out one at a time.  (xdist's ``loadgroup`` marks would say the
-    same, but pytest 9.2 ignores the node-id suffix they work by: pytest-xdist issue 1386.)"""
+    whose tests are handed out one at a time (``BY_EFFECT``: one effect at a time).  (xdist's
+    ``loadgroup`` marks would say the same, but pytest 9.2 ignores the node-id suffix they
+    work by: pytest-xdist issue 1386.)"""
     if config.getvalue("dist") != "loadscope":
         return None
     from xdist.scheduler import LoadScopeScheduling
 
     class ModuleScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            module = nodeid.split("::", 1)[0]
+            module, _, test = nodeid.partition("::")
+            if module in BY_EFFECT and "[" in test:
+                return f"{module}::{test.split('[', 1)[1].split('-', 1)[0]}"
             return nodeid if module in SPLIT_ACROSS_WORKERS else module
 
     return ModuleScheduling(config, log)
