@@ -63,20 +63,30 @@ SPLIT_ACROSS_WORKERS = (
 """Modules whose tests share no module-scoped state, so pytest-xdist may spread them over its
 workers one test at a time (see ``pytest_xdist_make_scheduler``)."""
 
+BY_EFFECT = ("tests/fuzz/test_fuzz.py", "tests/contract/test_values.py",
+             "tests/contract/test_regions.py", "tests/contract/test_shapes.py")
+"""Of those, the modules whose test ids start with the effect (or look) they render: their
+tests are handed out one effect at a time, so that the tests that build the same programs
+(one effect at its levels, values and images) run in one process, one after the other.  One
+test at a time, two workers on a cold kernel cache compiled the same programs at once."""
+
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """``pytest -n N --dist loadscope`` (``make test``): each module runs whole on one worker,
     in its own order (its module-scoped fixtures built once), except ``SPLIT_ACROSS_WORKERS``,
-    whose tests are handed out one at a time.  (xdist's ``loadgroup`` marks would say the
-    same, but pytest 9.2 ignores the node-id suffix they work by: pytest-xdist issue 1386.)"""
+    whose tests are handed out one at a time (``BY_EFFECT``: one effect at a time).  (xdist's
+    ``loadgroup`` marks would say the same, but pytest 9.2 ignores the node-id suffix they
+    work by: pytest-xdist issue 1386.)"""
     if config.getvalue("dist") != "loadscope":
         return None
     from xdist.scheduler import LoadScopeScheduling
 
     class ModuleScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            module = nodeid.split("::", 1)[0]
+            module, _, test = nodeid.partition("::")
+            if module in BY_EFFECT and "[" in test:
+                return f"{module}::{test.split('[', 1)[1].split('-', 1)[0]}"
             return nodeid if module in SPLIT_ACROSS_WORKERS else module
 
     return ModuleScheduling(config, log)
@@ -108,6 +118,26 @@ def pytest_runtest_protocol(item, nextitem):
     yield
     after = _cpu_now()
     own, kids, wall = (round(b - a, 3) for a, b in zip(before, after))
+    row = {"id": item.nodeid, "cpu_s": own, "children_cpu_s": kids, "wall_s": wall}
+    if nextitem is None or nextitem.nodeid.split("::")[0] != item.nodeid.split("::")[0]:
+        row["kernel_cache"] = _kernel_cache_entries()
     with open(CPU_LOG, "a") as log:
-        log.write(json.dumps({"id": item.nodeid, "cpu_s": own, "children_cpu_s": kids,
-                              "wall_s": wall}) + "\n")
+        log.write(json.dumps(row) + "\n")
+
+
+def _kernel_cache_entries() -> list[int] | None:
+    """Programs and compiled kernels in PoCL's cache (``POCL_CACHE_DIR``: PROGRAM/program.bc
+    and PROGRAM/KERNEL/*/KERNEL.so) at the end of a module: differences between modules are
+    the compiles each module caused (in a one-worker run; with two, the other's interleave)."""
+    root = os.environ.get("POCL_CACHE_DIR")
+    if not root or not os.path.isdir(root):
+        return None
+    programs = kernels = 0
+    for shard in os.scandir(root):
+        if not shard.is_dir():
+            continue
+        for prog in os.scandir(shard.path):
+            if prog.is_dir():
+                programs += 1
+                kernels += sum(1 for k in os.scandir(prog.path) if k.is_dir())
+    return [programs, kernels]

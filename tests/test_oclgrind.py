@@ -8,8 +8,8 @@ process): Oclgrind is the only OpenCL platform there, through a private ICD fold
 ``CLFX_DEVICE=oclgrind`` and its checks switched on by ``OCLGRIND_*`` variables.  Kernel
 errors go to ``OCLGRIND_LOG``; API errors (``OCLGRIND_CHECK_API``) to stderr.  Both are read.
 
-Frames are tiny (48x32 at every level; a mask and a 13x7 frame at ``draft``; looks at
-``draft``).  Programs are built with ``-cl-opt-disable`` (``CLFX_TEST_OPT_DISABLE``):
+Frames are tiny (effects: 40x24 at every level, a 13x7 frame with and without a mask at
+``draft``; looks: 48x32 at ``draft``; see ``tests/oclgrind_child.py``).  Programs are built with ``-cl-opt-disable`` (``CLFX_TEST_OPT_DISABLE``):
 Oclgrind 21.10 mis-executes some of the ``-Oz`` code it makes itself (grain's and
 sensor_noise's polynomial log, ``clfx_log8`` in kernels/lib/fastmath.h, returned 175.3 for
 log(0.4676) there, -0.760 unoptimised and on PoCL: NaN noise), and its uninitialised-value
@@ -34,6 +34,7 @@ from pathlib import Path
 import pytest
 
 from clfx.core.plugin import QUALITY_LEVELS
+from tests import oclgrind_child as child
 
 ROOT = Path(__file__).resolve().parents[1]
 CHILD = Path(__file__).resolve().parent / "oclgrind_child.py"
@@ -291,9 +292,6 @@ def _poison_pool(rt, monkeypatch, poison: float) -> None:
 def _render_poisoned(rt, monkeypatch, look, level, poison):
     from clfx import api
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import oclgrind_child as child
-
     _poison_pool(rt, monkeypatch, poison)
     try:
         rgba, depth, vel, channels = child.scene(child.W, child.H)
@@ -321,9 +319,6 @@ def test_no_output_depends_on_uninitialised_device_memory(rt, monkeypatch, effec
     ``run_group``), so the same question is asked of the default device: every pooled buffer
     filled with 0, then with 7.25, before each use; every level's output must not change."""
     import numpy as np
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import oclgrind_child as child
 
     look = child.effect_look(effect, masked=True)
     for level in QUALITY_LEVELS:

@@ -27,6 +27,7 @@ import re
 import sys
 import tempfile
 import threading
+import time
 import warnings
 import weakref
 from dataclasses import dataclass, field
@@ -213,6 +214,22 @@ def _test_device(dev) -> str | None:
         msg = " ".join(str(exc).split())
         return f"test kernel failed: {msg[:200]}"
     return None
+
+
+BUILD_LOG = os.environ.get("CLFX_BUILD_LOG")
+"""Opt-in: a file to which every program build appends one JSON line (kernel file, defines,
+seconds, and the test running it, from ``PYTEST_CURRENT_TEST``).  The distinct (file, defines)
+pairs are the programs a cold kernel cache compiles; ``scripts/test_cpu_table.py --builds``
+sums them per test module."""
+
+
+def _log_build(file: str, defines, seconds: float) -> None:
+    import json
+
+    test = os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" (", 1)[0]
+    with contextlib.suppress(OSError), open(BUILD_LOG, "a") as log:
+        log.write(json.dumps({"file": file, "defines": [list(d) for d in defines],
+                              "s": round(seconds, 3), "pid": os.getpid(), "test": test}) + "\n")
 
 
 def _matches(selector: str, index: str, label: str) -> bool:
@@ -459,6 +476,7 @@ class Runtime:
         if self.host_cpu_kernels:
             opts.append("-DCLFX_HOST_CPU=1")   # kernels/lib/common.h: prefetch, streaming, cold
         caught: list[str] = []
+        started = time.perf_counter()
         try:
             with _compiler_quiet(caught):
                 prg = cl.Program(self.ctx, src).build(options=opts)
@@ -467,6 +485,8 @@ class Runtime:
             raise KernelBuildError(f"building kernels/{file} with {' '.join(opts)} failed:\n{log}") from exc
         finally:
             release_freed_heap()
+        if BUILD_LOG:
+            _log_build(file, defines, time.perf_counter() - started)
         if caught:
             try:
                 log = prg.get_build_info(self.device, cl.program_build_info.LOG).strip()
