@@ -7,12 +7,13 @@
  * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
  * interior's padding columns stay zero: they stand for "outside the image".
  * Pipeline:
- *   streaks_bright   sanitised, thresholded highlights (weighted by (L / peak)^core_power:
- *                    a thin core), box-averaged over FACTOR x FACTOR source pixels (FACTOR =
- *                    1 at full resolution), placed in the output window
+ *   streaks_seeds    each light's streaking light (thresholded, weighted by
+ *                    (L / peak)^core_power) gathered into one point per light: its peak's
+ *                    window, at the light's centroid (source pixels; a list)
+ *   streaks_bright   the points splatted bilinearly on the FACTOR-times lower resolution
+ *                    buffer (placed in the output window; the host bins the seeds)
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
- *                    taps (or, with `snap`, taps rounded to whole pixels: one load instead of
- *                    four), zero outside the buffer; ACCUM adds the result to `out`
+ *                    taps, zero outside the buffer; ACCUM adds the result to `out`
  *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{T 4^(N-1)-1} a^k delta(x + k d) exactly (each k has one base-4 expansion; the
@@ -63,52 +64,82 @@ inline float4 streaks_light(float4 c, float level, float source_color, float cor
   return (float4)((float3)l + (h.xyz - (float3)l) * source_color, 0.0f);
 }
 
-/* scale x the sum of the streaking light of the FACTOR x FACTOR source pixels under
- * low-resolution pixel (x, y); (ox, oy) = source window origin inside the output window,
- * full-resolution pixels. */
-inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
-                          int y, int ox, int oy, float threshold, float scale,
-                          global const float *peak, int tiles_x, int tiles_y, float core,
-                          float source_color, float core_power)
+/* One seed per light: a source pixel whose streaking light is non-zero and whose luminance
+ * is the highest within `radius` px (Chebyshev; ties go to the earlier pixel in raster order)
+ * gathers the streaking light of that window into a point at its luminance-weighted centroid:
+ * seeds[i] = (x, y, centroid x, centroid y, r, g, b, 0), source pixels; `count` counts the
+ * seeds (those past `cap` are counted, not stored).  A streak is then as thin as diffraction
+ * draws it, whatever the size of the light. */
+kernel void streaks_seeds(global const float *src, const int src_pitch, const int src_w,
+                          const int src_h, const float threshold, global const float *peak,
+                          const int tiles_x, const int tiles_y, const float core,
+                          const float source_color, const float core_power, const int radius,
+                          global float *seeds, volatile global int *count, const int cap)
 {
-  float4 acc = (float4)0.0f;
-  for(int j = 0; j < FACTOR; j++)
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= src_w || y >= src_h) return;
+  const float4 c = clfx_load4(src, src_pitch, x, y);
+  const float pk = streaks_peak(peak, tiles_x, tiles_y, x, y);
+  const float4 h = streaks_light(c, streaks_level(peak, tiles_x, tiles_y, x, y, threshold, core),
+                                 source_color, core_power, pk);
+  if(!(h.x > 0.0f || h.y > 0.0f || h.z > 0.0f)) return;
+  const float l0 = clfx_luminance(fmax(clfx_finite4_or_zero(c), (float4)0.0f));
+  float4 sum = (float4)0.0f;
+  float wsum = 0.0f, wx = 0.0f, wy = 0.0f;
+  /* rows outwards from the seed: a brighter neighbour usually ends the scan early */
+  for(int k = 0; k <= 2 * radius; k++)
   {
-    const int sy = y * FACTOR + j - oy;
+    const int dy = (k & 1) ? -((k + 1) >> 1) : (k >> 1);
+    const int sy = y + dy;
     if(sy < 0 || sy >= src_h) continue;
-    for(int i = 0; i < FACTOR; i++)
+    for(int dx = -radius; dx <= radius; dx++)
     {
-      const int sx = x * FACTOR + i - ox;
+      const int sx = x + dx;
       if(sx < 0 || sx >= src_w) continue;
-      const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
-      const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
-      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
-                           pk) * scale;
+      const float4 q = clfx_load4(src, src_pitch, sx, sy);
+      const float lq = clfx_luminance(fmax(clfx_finite4_or_zero(q), (float4)0.0f));
+      if(lq > l0 || (lq == l0 && (dy < 0 || (dy == 0 && dx < 0)))) return;
+      const float pq = streaks_peak(peak, tiles_x, tiles_y, sx, sy);
+      const float4 hq = streaks_light(q, streaks_level(peak, tiles_x, tiles_y, sx, sy,
+                                                       threshold, core),
+                                      source_color, core_power, pq);
+      const float wq = clfx_luminance(hq);
+      sum += hq;
+      wsum += wq;
+      wx += wq * (float)dx;
+      wy += wq * (float)dy;
     }
   }
-  return acc;
+  const int i = atomic_inc(count);
+  if(i >= cap) return;
+  const float cx = wsum > 0.0f ? wx / wsum : 0.0f, cy = wsum > 0.0f ? wy / wsum : 0.0f;
+  sum = fmin(sum, (float4)SCATTER_FLT_MAX);
+  vstore8((float8)((float)x, (float)y, (float)x + cx, (float)y + cy, sum.x, sum.y, sum.z, 0.0f),
+          i, seeds);
 }
 
-/* One work-item per low-resolution pixel: the box average of the highlights. */
-kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
-                           const int src_h, global float *dst, const int org,
-                           const int dst_pitch, const int dst_wp, const int dst_h,
-                           const int ox, const int oy, const float threshold,
-                           global const float *peak, const int tiles_x, const int tiles_y,
-                           const float core, const float source_color,
-                           const float core_power)
+/* One work-item per low-resolution pixel: the seeds' light splatted bilinearly.  `points`:
+ * (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
+ * divided by FACTOR^2; `bin_start` (bins_x * bins_y + 1) and `bin_seed` list, per BIN x BIN
+ * block of low-resolution pixels, the seeds whose splat touches it, in seed order. */
+kernel void streaks_bright(global const float *points, global const int *bin_start,
+                           global const int *bin_seed, const int bins_x, const int bin,
+                           global float *dst, const int org, const int dst_pitch,
+                           const int dst_wp, const int dst_h)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
-  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
-                           tiles_x, tiles_y, core, source_color, core_power)
-               * (1.0f / (FACTOR * FACTOR));
-  if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
-    acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
-                      1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color,
-                      core_power);
-  clfx_store4(dst, dst_pitch, x, y, acc);
+  const int b = (y / bin) * bins_x + x / bin;
+  float4 acc = (float4)0.0f;
+  for(int k = bin_start[b]; k < bin_start[b + 1]; k++)
+  {
+    const float8 s = vload8(bin_seed[k], points);
+    const float w = fmax(1.0f - fabs(s.s0 - (float)x), 0.0f)
+                    * fmax(1.0f - fabs(s.s1 - (float)y), 0.0f);
+    acc += (float4)(s.s2, s.s3, s.s4, 0.0f) * w;
+  }
+  clfx_store4(dst, dst_pitch, x, y, fmin(acc, (float4)SCATTER_FLT_MAX));
 }
 
 /* Reads relative to the interior origin; `wp` = interior pitch, `h` = interior rows.  With
@@ -135,9 +166,8 @@ inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, in
 /* Bilinear sample of 4 consecutive pixels shifted by (dx, dy): the weights are the same for
  * all four, so it is four float16 loads and four vector multiply-adds. */
 inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int x, int y,
-                           float dx, float dy, int snap)
+                           float dx, float dy)
 {
-  if(snap) { dx = rint(dx); dy = rint(dy); }  /* whole-pixel tap: one load, no blur */
   const float fx0 = floor(dx), fy0 = floor(dy);
   const int ix = x + (int)fx0, iy = y + (int)fy0;
   const float fx = dx - fx0, fy = dy - fy0;
@@ -165,7 +195,7 @@ inline REAL16 streaks_term(float16 v, float4 w)
  * Each work-item produces 4 pixels of a row.  ACCUM = 1: out += result (last pass). */
 kernel void streaks_pass(global const float *in, global float *out, const int org,
                          const int pitch, const int wp, const int w, const int h,
-                         const float step_x, const float step_y, const int snap,
+                         const float step_x, const float step_y,
                          const float4 w0, const float4 w1, const float4 w2, const float4 w3)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
@@ -174,9 +204,9 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
   in += 4 * org;
   out += 4 * org;
   REAL16 sum = streaks_term(vload16(0, in + (y * pitch + x) * 4), w0);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y, snap), w1);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y, snap), w2);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y, snap), w3);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y), w1);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y), w2);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y), w3);
   sum = fmin(sum, (REAL)SCATTER_FLT_MAX);  /* saturate: finite input, finite output */
   if(x + 4 > w)  /* padding stays zero: it stands for "outside the image" */
   {
