@@ -7,11 +7,13 @@
  * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
  * interior's padding columns stay zero: they stand for "outside the image".
  * Pipeline:
- *   streaks_seeds    each light's streaking light (thresholded, weighted by
- *                    (L / peak)^core_power) gathered into one point per light: its peak's
- *                    window, at the light's centroid (source pixels; a list)
- *   streaks_bright   the points splatted bilinearly on the FACTOR-times lower resolution
- *                    buffer (placed in the output window; the host bins the seeds)
+ *   streaks_seeds    each compact light's streaking light (thresholded, weighted by
+ *                    (L / peak)^core_power) gathered into one point: its peak's window, at
+ *                    the light's centroid (source pixels; a list), the peaks flagged
+ *   streaks_dilate   the flags grown to the windows the seeds gathered (x, then y)
+ *   streaks_bright   the streaking light no seed gathered (extended lights), box-averaged
+ *                    over FACTOR x FACTOR source pixels, plus the points splatted bilinearly
+ *                    (placed in the output window; the host bins the seeds)
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
  *                    taps, zero outside the buffer; ACCUM adds the result to `out`
  *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
@@ -64,17 +66,21 @@ inline float4 streaks_light(float4 c, float level, float source_color, float cor
   return (float4)((float3)l + (h.xyz - (float3)l) * source_color, 0.0f);
 }
 
-/* One seed per light: a source pixel whose streaking light is non-zero and whose luminance
- * is the highest within `radius` px (Chebyshev; ties go to the earlier pixel in raster order)
- * gathers the streaking light of that window into a point at its luminance-weighted centroid:
- * seeds[i] = (x, y, centroid x, centroid y, r, g, b, 0), source pixels; `count` counts the
- * seeds (those past `cap` are counted, not stored).  A streak is then as thin as diffraction
- * draws it, whatever the size of the light. */
+/* One seed per compact light: a source pixel whose streaking light is non-zero, whose
+ * luminance is the highest within `radius` px (Chebyshev; ties go to the earlier pixel in
+ * raster order) and whose window's border ring holds no streaking light above `ring_share`
+ * of its own (the light is smaller than the window) gathers the streaking light of that
+ * window into a point at its luminance-weighted centroid: seeds[i] = (x, y, centroid x,
+ * centroid y, r, g, b, 0), source pixels; `count` counts the seeds (those past `cap` are
+ * counted, not stored); flags[x, y] = 1 marks the seed. A streak is then as thin as
+ * diffraction draws it, whatever the light's size; an extended light (a window, the sky)
+ * streaks pixel by pixel (streaks_bright). */
 kernel void streaks_seeds(global const float *src, const int src_pitch, const int src_w,
                           const int src_h, const float threshold, global const float *peak,
                           const int tiles_x, const int tiles_y, const float core,
                           const float source_color, const float core_power, const int radius,
-                          global float *seeds, volatile global int *count, const int cap)
+                          const float ring_share, global float *seeds,
+                          volatile global int *count, const int cap, global uchar *flags)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= src_w || y >= src_h) return;
@@ -84,6 +90,7 @@ kernel void streaks_seeds(global const float *src, const int src_pitch, const in
                                  source_color, core_power, pk);
   if(!(h.x > 0.0f || h.y > 0.0f || h.z > 0.0f)) return;
   const float l0 = clfx_luminance(fmax(clfx_finite4_or_zero(c), (float4)0.0f));
+  const float h0 = clfx_luminance(h);
   float4 sum = (float4)0.0f;
   float wsum = 0.0f, wx = 0.0f, wy = 0.0f;
   /* rows outwards from the seed: a brighter neighbour usually ends the scan early */
@@ -104,12 +111,14 @@ kernel void streaks_seeds(global const float *src, const int src_pitch, const in
                                                        threshold, core),
                                       source_color, core_power, pq);
       const float wq = clfx_luminance(hq);
+      if(wq > ring_share * h0 && (abs(dx) == radius || abs(dy) == radius)) return; /* extended */
       sum += hq;
       wsum += wq;
       wx += wq * (float)dx;
       wy += wq * (float)dy;
     }
   }
+  flags[y * src_w + x] = 1;
   const int i = atomic_inc(count);
   if(i >= cap) return;
   const float cx = wsum > 0.0f ? wx / wsum : 0.0f, cy = wsum > 0.0f ? wy / wsum : 0.0f;
@@ -118,20 +127,74 @@ kernel void streaks_seeds(global const float *src, const int src_pitch, const in
           i, seeds);
 }
 
-/* One work-item per low-resolution pixel: the seeds' light splatted bilinearly.  `points`:
+/* One pass of the seeds' windows: out(x, y) = max of in over (x + k sx, y + k sy), |k| <=
+ * radius (run along x then y: the pixels a seed gathered, flagged 1). */
+kernel void streaks_dilate(global const uchar *in, global uchar *out, const int w, const int h,
+                           const int radius, const int sx, const int sy)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= w || y >= h) return;
+  uchar m = 0;
+  for(int k = -radius; k <= radius && !m; k++)
+  {
+    const int u = x + k * sx, v = y + k * sy;
+    if(u >= 0 && u < w && v >= 0 && v < h) m = in[v * w + u];
+  }
+  out[y * w + x] = m;
+}
+
+/* scale x the sum of the streaking light of the FACTOR x FACTOR source pixels under
+ * low-resolution pixel (x, y) that no seed gathered (`gathered`: source-sized flags);
+ * (ox, oy) = source window origin inside the output window, full-resolution pixels. */
+inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
+                          int y, int ox, int oy, float threshold, float scale,
+                          global const float *peak, int tiles_x, int tiles_y, float core,
+                          float source_color, float core_power, global const uchar *gathered)
+{
+  float4 acc = (float4)0.0f;
+  for(int j = 0; j < FACTOR; j++)
+  {
+    const int sy = y * FACTOR + j - oy;
+    if(sy < 0 || sy >= src_h) continue;
+    for(int i = 0; i < FACTOR; i++)
+    {
+      const int sx = x * FACTOR + i - ox;
+      if(sx < 0 || sx >= src_w || gathered[sy * src_w + sx]) continue;
+      const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
+      const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
+      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
+                           pk) * scale;
+    }
+  }
+  return acc;
+}
+
+/* One work-item per low-resolution pixel: the box average of the streaking light no seed
+ * gathered (extended lights), plus the seeds' points splatted bilinearly.  `points`:
  * (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
  * divided by FACTOR^2; `bin_start` (bins_x * bins_y + 1) and `bin_seed` list, per BIN x BIN
  * block of low-resolution pixels, the seeds whose splat touches it, in seed order. */
-kernel void streaks_bright(global const float *points, global const int *bin_start,
-                           global const int *bin_seed, const int bins_x, const int bin,
-                           global float *dst, const int org, const int dst_pitch,
-                           const int dst_wp, const int dst_h)
+kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
+                           const int src_h, global float *dst, const int org,
+                           const int dst_pitch, const int dst_wp, const int dst_h,
+                           const int ox, const int oy, const float threshold,
+                           global const float *peak, const int tiles_x, const int tiles_y,
+                           const float core, const float source_color,
+                           const float core_power, global const uchar *gathered,
+                           global const float *points, global const int *bin_start,
+                           global const int *bin_seed, const int bins_x, const int bin)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
+  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
+                           tiles_x, tiles_y, core, source_color, core_power, gathered)
+               * (1.0f / (FACTOR * FACTOR));
+  if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
+    acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
+                      1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color,
+                      core_power, gathered);
   const int b = (y / bin) * bins_x + x / bin;
-  float4 acc = (float4)0.0f;
   for(int k = bin_start[b]; k < bin_start[b + 1]; k++)
   {
     const float8 s = vload8(bin_seed[k], points);

@@ -8,17 +8,19 @@ belongs to (the connected region of 32 px scene-analysis tiles brighter than ``t
 So a candle streaks from its bright core, not from its glow or the wax it lights (``core =
 0``: everything above ``threshold`` streaks). ``source_color`` mixes the streaking light
 towards its luminance (0: the streak's colour is the tint alone, as the coatings of an
-anamorphic lens colour its streaks whatever the light). Each light's streaking light is then
-gathered into one point: a pixel whose luminance is the highest within ``SEED_RADIUS`` (0.5
-% of the diagonal, ties to the earlier pixel) takes the streaking light of that window to
-its luminance-weighted centroid (bilinear splat, sub-pixel). A star filter's or a blade's
-streak is a diffraction line a pixel or two wide (the filter's grating or the edge spreads
-each point of the image into a line as thin as the lens resolves); spreading every pixel of
-a light drew a band as wide as the flame, with the light's own shape along its edges, which
-the eye reads as a thick smeared bar. Two peaks closer than the radius streak as one; light
-beyond the radius from its peak does not streak.
-These points are spread along ``n`` directions by a one-sided exponential line kernel
-per direction,
+anamorphic lens colour its streaks whatever the light). Each compact light's streaking light
+is then gathered into one point: a pixel whose luminance is the highest within
+``SEED_RADIUS`` (1.2 % of the diagonal, ties to the earlier pixel) and whose window's border
+holds no streaking light takes the streaking light of that window to its luminance-weighted
+centroid (bilinear splat, sub-pixel). A star filter's or a blade's streak is a diffraction
+line a pixel or two wide (the filter's grating or the edge spreads each point of the image
+into a line as thin as the lens resolves); spreading every pixel of a small light drew a
+band as wide as the flame, which the eye reads as a thick smeared bar. Two peaks closer than
+the radius streak as one. An extended light (streaking light on its window's border: a
+window pane, the sky) streaks pixel by pixel, a band as wide as it is: gathered into points
+it gave a hatch of parallel lines from its noise's local maxima.
+These points and pixels are spread along ``n`` directions by a one-sided exponential line
+kernel per direction,
 
     K_d(x) = sum_{k=0}^{S - 1} a_c^k  delta(x - k d),   a_c = 0.01^(1 / L_c),
 
@@ -78,12 +80,12 @@ interpolated tap per step k).
 
 Error against that exact line kernel, measured (float64, one ray, L = 60 px, 1e4 point):
 identical energy; identical kernels at multiples of 45 degrees; at 30 degrees a relative L1
-difference of 0.25 and an rms width across the ray of 0.47 px against 0.35 px: the Kawase streak is a fraction
-of a pixel wider, never longer or brighter.  At 1080p (one 30-degree ray, L = 100 px, 12
-lights), max error / peak against the exact line kernel: reference 3.7e-2, final 4.7e-2,
-preview 0.22, draft 0.47 (reduced resolution widens the ray; measured before the support
-reached 2.5 L).  Truncation at S > 2.5 L' drops 1e-5 of the infinite exponential's energy
-(the kernel is renormalised).
+difference of 0.25 and an rms width across the ray of 0.47 px against 0.35 px: the Kawase
+streak is a fraction of a pixel wider, never longer or brighter. At 1080p (one 30-degree
+ray, L = 100 px, 12 lights), max error / peak against the exact line kernel: reference
+3.7e-2, final 4.7e-2, preview 0.22, draft 0.47 (reduced resolution widens the ray; measured
+before the support reached 2.5 L). Truncation at S > 2.5 L' drops 1e-5 of the infinite
+exponential's energy (the kernel is renormalised).
 
 Quality levels run the passes at 1/4 (draft), 1/2 (preview) or full (final, reference)
 resolution (points splatted on the coarser grid, steps scaled, bilinear upsample on compose);
@@ -150,10 +152,16 @@ LEVELS = {
                               "the oracle's composed kernel)", fp64=True),
 }
 
-SEED_RADIUS = 0.005
-"""A light's peak gathers the streaking light within this fraction of the frame diagonal (a
-Chebyshev radius: 3 px at 640 x 360, 11 px at 1080p) into one point, the light's centroid;
-of two peaks closer than this only the brighter streaks."""
+SEED_RADIUS = 0.012
+"""A compact light's peak gathers the streaking light within this fraction of the frame
+diagonal (a Chebyshev radius: 9 px at 640 x 360, 26 px at 1080p; a candle flame's core fits)
+into one point, the light's centroid; of two peaks closer than this only the brighter
+streaks.  A light with streaking light on that window's border (``RING_SHARE``) is
+extended: it streaks pixel by pixel."""
+
+RING_SHARE = 0.1
+"""Streaking light (luminance) on the window's border above this share of the peak's own
+makes a light extended."""
 
 MAX_SEEDS = 1 << 16
 """Most lights (seed points) one frame streaks from."""
@@ -414,12 +422,17 @@ class Streaks(Plugin):
         """Half-width (px) of the window a light's peak gathers its streaking light from."""
         return max(1, round(SEED_RADIUS * ctx.diagonal_px))
 
-    def seed_points(self, rt, p, ctx, ox: int, oy: int, factor: int) -> np.ndarray:
-        """One point per light (kernel ``streaks_seeds``), sorted by its peak's position (a
-        fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows, x and y at
-        the light's centroid in the working buffer's pixels, light divided by ``factor``^2."""
+    def seed_points(self, rt, p, ctx, peak, ox: int, oy: int, factor: int):
+        """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
+        position (a fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows,
+        x and y at the light's centroid in the working buffer's pixels, light divided by
+        ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered."""
         src = ctx.source
-        peak, tiles_x, tiles_y = self.peak_map(p, ctx)
+        (peak, tiles_x, tiles_y), radius = peak, self.seed_radius(ctx)
+        npx = src.width * src.height
+        flags = [rt.buffer(max(npx, 16)) for _ in range(2)]
+        for f in flags:
+            rt.cl.enqueue_fill_buffer(rt.queue, f.buffer, np.uint8(0), 0, max(npx, 16))
         count = rt.to_device(np.zeros(1, np.int32))
         seeds = rt.buffer(MAX_SEEDS * 32)
         knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=ctx.analysis.tile,
@@ -428,7 +441,11 @@ class Streaks(Plugin):
         rt.launch(knl, (src.width, src.height), src, i32(src.pitch), i32(src.width),
                   i32(src.height), f32(p.threshold), rt.to_device(peak), i32(tiles_x),
                   i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
-                  i32(self.seed_radius(ctx)), seeds, count, i32(MAX_SEEDS))
+                  i32(radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
+        dilate = rt.kernel("streaks.cl", "streaks_dilate")
+        for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
+            rt.launch(dilate, (src.width, src.height), flags[a], flags[b], i32(src.width),
+                      i32(src.height), i32(radius), i32(sx), i32(sy))
         n = int(rt.from_device(count, np.int32, 1)[0])
         if n > MAX_SEEDS:
             ctx.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
@@ -441,7 +458,7 @@ class Streaks(Plugin):
         out[:, 0] = (rows[:, 2] + ox + 0.5) / factor - 0.5
         out[:, 1] = (rows[:, 3] + oy + 0.5) / factor - 0.5
         out[:, 2:5] = rows[:, 4:7] / np.float32(factor * factor)
-        return out
+        return out, flags[0]
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
@@ -483,20 +500,27 @@ class Streaks(Plugin):
         ping, pong, total = work
         defines["CHECKED"] = int(checked)
 
-        points = self.seed_points(rt, p, ctx, ox, oy, factor)
+        peak, tiles_x, tiles_y = self.peak_map(p, ctx)
+        peak_buf = rt.to_device(peak)
+        points, gathered = self.seed_points(rt, p, ctx, (peak, tiles_x, tiles_y), ox, oy,
+                                            factor)
         starts, members = bin_points(points, wp, lo_h, BIN)
         points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
             points if len(points) else np.zeros((1, 8), np.float32), starts,
             members if len(members) else np.zeros(1, np.int32)))
-        bright_knl = rt.kernel("streaks.cl", "streaks_bright", **defines)
+        bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
+                               **defines)
         bins_x = -(-wp // BIN)
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
         for sx, sy, passes, weights in plans:
             # each ray starts from the bright pixels, extracted again into pong (cheaper than
             # a fourth frame-sized buffer; passes write inside the zero margins only)
-            rt.launch(bright_knl, (wp, lo_h), points_buf, starts_buf, members_buf, i32(bins_x),
-                      i32(BIN), pong, i32(org), i32(pitch), i32(wp), i32(lo_h))
+            rt.launch(bright_knl, (wp, lo_h), src, i32(src.pitch), i32(src.width),
+                      i32(src.height), pong, i32(org), i32(pitch), i32(wp), i32(lo_h),
+                      i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
+                      i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
+                      gathered, points_buf, starts_buf, members_buf, i32(bins_x), i32(BIN))
             cur = pong
             for n in range(passes):
                 last = n == passes - 1

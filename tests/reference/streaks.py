@@ -48,16 +48,20 @@ def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
     return out, c
 
 
-def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radius=1):
-    """Each light's streaking light gathered into one point: a pixel with streaking light whose
-    luminance is the highest within ``radius`` (Chebyshev; ties to the earlier pixel in raster
-    order) takes the window's streaking light to its weighted centroid, splatted bilinearly.
-    Returns the point image (float64) and the sanitised source."""
+def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radius=1,
+                ring_share=0.1):
+    """Each compact light's streaking light gathered into one point: a pixel with streaking
+    light whose luminance is the highest within ``radius`` (Chebyshev; ties to the earlier
+    pixel in raster order) and whose window's border ring has none above ``ring_share`` of
+    its own takes the window's streaking light to its weighted centroid, splatted
+    bilinearly; the streaking light of pixels in no such window stays where it is.  Returns
+    the image that streaks (float64) and the sanitised source."""
     hl, c = highlights(src, threshold, core, source_color, core_power)
     h, w = c.shape[:2]
     lum = c[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
     hlum = hl[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
     out = np.zeros_like(hl)
+    gathered = np.zeros((h, w), bool)
     order = np.arange(h * w).reshape(h, w)
     for y, x in zip(*np.nonzero((hl[..., :3] > 0).any(axis=2))):
         y0, y1, x0, x1 = max(y - radius, 0), min(y + radius + 1, h), max(x - radius, 0), \
@@ -65,6 +69,11 @@ def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radi
         win, idx = lum[y0:y1, x0:x1], order[y0:y1, x0:x1]
         if (win > lum[y, x]).any() or ((win == lum[y, x]) & (idx < order[y, x])).any():
             continue
+        ring = np.maximum(np.abs(np.arange(y0, y1) - y)[:, None],
+                          np.abs(np.arange(x0, x1) - x)[None, :]) == radius
+        if (hlum[y0:y1, x0:x1][ring] > ring_share * hlum[y, x]).any():
+            continue                                    # an extended light
+        gathered[y0:y1, x0:x1] = True
         e = hl[y0:y1, x0:x1, :3].reshape(-1, 3).sum(axis=0)
         wt = hlum[y0:y1, x0:x1]
         ys, xs = np.mgrid[y0:y1, x0:x1]
@@ -75,6 +84,7 @@ def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radi
             for v in (iy, iy + 1):
                 if 0 <= u < w and 0 <= v < h:
                     out[v, u, :3] += e * max(1 - abs(cx - u), 0) * max(1 - abs(cy - v), 0)
+    out[~gathered, :3] += hl[~gathered, :3]
     return out, c
 
 
@@ -152,8 +162,9 @@ def _unit(angle):
 
 
 def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, tint,
-            color_shift, core=0.0, source_color=1.0, core_power=-1.0, coating_nm=740.0, coating="v-coat",
-            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, seed_radius=0.005):
+            color_shift, core=0.0, source_color=1.0, core_power=-1.0, coating_nm=740.0,
+            coating="v-coat",
+            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, seed_radius=0.012):
     """Output over the source grown by ``pad`` pixels on every side (float64).
 
     mode "anamorphic": rays at angle and angle + 180, colour tint x coating_tint(coating_nm),
