@@ -44,12 +44,16 @@ inline float streaks_peak(global const float *peak, int tiles_x, int tiles_y, in
 
 /* The level a source pixel's light must pass: the threshold, or `core` times the peak of the
  * light it belongs to (`peak`: per scene-analysis tile, tiles_x x tiles_y over the source
- * window, the peak luminance of its connected bright region), whichever is higher. */
+ * window, the peak luminance of its connected bright region), whichever is higher.  With a
+ * core rule, light in no light's tile does not streak: the analysis is the frame's, so that
+ * is light an earlier step drew (a star filter's rays before its spikes), and streaked again
+ * pixel by pixel its lines fanned out into wedges. */
 inline float streaks_level(global const float *peak, int tiles_x, int tiles_y, int sx, int sy,
                            float threshold, float core)
 {
   if(core <= 0.0f) return threshold;
-  return fmax(threshold, core * streaks_peak(peak, tiles_x, tiles_y, sx, sy));
+  const float pk = streaks_peak(peak, tiles_x, tiles_y, sx, sy);
+  return pk > 0.0f ? fmax(threshold, core * pk) : INFINITY;
 }
 
 /* The light that streaks: above its level (scatter_bright), weighted by (L / peak)^core_power

@@ -6,19 +6,21 @@ A streak comes from the light above its level: ``rgb * max(lum - t, 0) / lum`` w
 the larger of ``threshold`` and ``core`` times the peak luminance of the light the pixel
 belongs to (the connected region of 32 px scene-analysis tiles brighter than ``threshold``).
 So a candle streaks from its bright core, not from its glow or the wax it lights (``core =
-0``: everything above ``threshold`` streaks). ``source_color`` mixes the streaking light
-towards its luminance (0: the streak's colour is the tint alone, as the coatings of an
-anamorphic lens colour its streaks whatever the light). Each compact light's streaking light
-is then gathered into one point: a pixel whose luminance is the highest within
-``SEED_RADIUS`` (1.2 % of the diagonal, ties to the earlier pixel) and whose window's border
-holds no streaking light takes the streaking light of that window to its luminance-weighted
-centroid (bilinear splat, sub-pixel). A star filter's or a blade's streak is a diffraction
-line a pixel or two wide (the filter's grating or the edge spreads each point of the image
-into a line as thin as the lens resolves); spreading every pixel of a small light drew a
-band as wide as the flame, which the eye reads as a thick smeared bar. Two peaks closer than
-the radius streak as one. An extended light (streaking light on its window's border: a
-window pane, the sky) streaks pixel by pixel, a band as wide as it is: gathered into points
-it gave a hatch of parallel lines from its noise's local maxima.
+0``: everything above ``threshold`` streaks). With a core rule, light in no light's tile
+(light an earlier step of the look drew: the analysis is the frame's) does not streak:
+star-filter's spikes fanned its star's rays out into wedges. ``source_color`` mixes the
+streaking light towards its luminance (0: the streak's colour is the tint alone, as the
+coatings of an anamorphic lens colour its streaks whatever the light). Each compact light's
+streaking light is then gathered into one point: a pixel whose luminance is the highest
+within ``SEED_RADIUS`` (1.2 % of the diagonal, ties to the earlier pixel) and whose window's
+border holds no streaking light takes the streaking light of that window to its
+luminance-weighted centroid (bilinear splat, sub-pixel). A star filter's or a blade's streak
+is a diffraction line a pixel or two wide (the filter's grating or the edge spreads each
+point of the image into a line as thin as the lens resolves); spreading every pixel of a
+small light drew a band as wide as the flame, which the eye reads as a thick smeared bar.
+Two peaks closer than the radius streak as one. An extended light (streaking light on its
+window's border: a window pane, the sky) streaks pixel by pixel, a band as wide as it is:
+gathered into points it gave a hatch of parallel lines from its noise's local maxima.
 These points and pixels are spread along ``n`` directions by a one-sided exponential line
 kernel per direction,
 

@@ -36,8 +36,10 @@ def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
     c = np.maximum(c, 0.0)
     lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
     peak = peak_level(lum, threshold)
-    level = np.maximum(threshold, core * peak) if core > 0 else threshold
-    k = np.where(lum > level, (lum - level) / np.where(lum > 0, lum, 1.0), 0.0)
+    level = np.where(peak > 0, np.maximum(threshold, core * peak), np.inf) if core > 0 \
+        else threshold                       # with a core rule, light in no light's tile: none
+    k = np.where(lum > level, (lum - np.where(np.isfinite(level), level, 0.0))
+                 / np.where(lum > 0, lum, 1.0), 0.0)
     if core_power > 0:
         ratio = np.clip(lum / np.where(peak > 0, peak, 1.0), 0, 1)
         k = k * np.where(peak > 0, ratio, 1.0) ** core_power
