@@ -7,8 +7,9 @@
  * dof_tile_cap: per tile, the mean of log(1 + luminance) over every 4th pixel and row: the
  *   gather turns it into the cap of the colours that fill in the background hidden behind a
  *   blurred foreground (dof_cap).
- * dof_down2: the 2 x 2 box of the padded colour and radius (radius halved: half-res px),
- *   each term scaled before the sum so that finite values stay finite.
+ * dof_down2: the 2 x 2 box of the padded colour and its radius (halved: half-res px),
+ *   weighted by each pixel's luminance (and evenly), each term scaled before the sum so
+ *   that finite values stay finite.
  * dof_prefilter: one pass of the binomial a-trous pyramid of the padded colour: planes
  *   1..L after plane 0, the tents that the sparse lattices of taps sample.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
@@ -212,8 +213,20 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
   const float4 c = 0.25f * vload4(y0 * ppitch + x0, col) + 0.25f * vload4(y0 * ppitch + x1, col)
                  + 0.25f * vload4(y1 * ppitch + x0, col) + 0.25f * vload4(y1 * ppitch + x1, col);
   vstore4(c, y * hpitch + x, hcol);
-  hcoc[y * hpitch + x] = 0.125f * (coc[y0 * ppitch + x0] + coc[y0 * ppitch + x1]
-                                   + coc[y1 * ppitch + x0] + coc[y1 * ppitch + x1]);
+  /* the radius the box's light spreads with: each pixel's weighted by its luminance over
+   * the box's brightest (plus 1 %), so a light's antialiased edge pixel beside the sky
+   * spreads at the light's radius, not at the mean with the sky's (a broken ring of half-res
+   * dots around a light, issue 25); the plain mean where the box is even or dark */
+  const int i00 = y0 * ppitch + x0, i01 = y0 * ppitch + x1;
+  const int i10 = y1 * ppitch + x0, i11 = y1 * ppitch + x1;
+  const float4 l = fmax((float4)(clfx_luminance(vload4(i00, col)),
+                                 clfx_luminance(vload4(i01, col)),
+                                 clfx_luminance(vload4(i10, col)),
+                                 clfx_luminance(vload4(i11, col))), 0.0f);
+  const float m = fmax(fmax(l.x, l.y), fmax(l.z, l.w));
+  const float4 w = m > 0.0f && m <= FLT_MAX ? l / m + 0.01f : (float4)1.0f;
+  const float4 r = (float4)(coc[i00], coc[i01], coc[i10], coc[i11]);
+  hcoc[y * hpitch + x] = 0.5f * dot(w, r) / dot(w, (float4)1.0f);
 }
 
 #define LANES(v) ((v).s0000111122223333)

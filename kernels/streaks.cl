@@ -7,12 +7,15 @@
  * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
  * interior's padding columns stay zero: they stand for "outside the image".
  * Pipeline:
- *   streaks_bright   sanitised, thresholded highlights (weighted by (L / peak)^core_power:
- *                    a thin core), box-averaged over FACTOR x FACTOR source pixels (FACTOR =
- *                    1 at full resolution), placed in the output window
+ *   streaks_seeds    each compact light's streaking light (thresholded, weighted by
+ *                    (L / peak)^core_power) gathered into one point: its peak's window, at
+ *                    the light's centroid (source pixels; a list), the peaks flagged
+ *   streaks_dilate   the flags grown to the windows the seeds gathered (x, then y)
+ *   streaks_bright   the streaking light no seed gathered (extended lights), box-averaged
+ *                    over FACTOR x FACTOR source pixels, plus the points splatted bilinearly
+ *                    (placed in the output window; the host bins the seeds)
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
- *                    taps (or, with `snap`, taps rounded to whole pixels: one load instead of
- *                    four), zero outside the buffer; ACCUM adds the result to `out`
+ *                    taps, zero outside the buffer; ACCUM adds the result to `out`
  *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{T 4^(N-1)-1} a^k delta(x + k d) exactly (each k has one base-4 expansion; the
@@ -41,12 +44,16 @@ inline float streaks_peak(global const float *peak, int tiles_x, int tiles_y, in
 
 /* The level a source pixel's light must pass: the threshold, or `core` times the peak of the
  * light it belongs to (`peak`: per scene-analysis tile, tiles_x x tiles_y over the source
- * window, the peak luminance of its connected bright region), whichever is higher. */
+ * window, the peak luminance of its connected bright region), whichever is higher.  With a
+ * core rule, light in no light's tile does not streak: the analysis is the frame's, so that
+ * is light an earlier step drew (a star filter's rays before its spikes), and streaked again
+ * pixel by pixel its lines fanned out into wedges. */
 inline float streaks_level(global const float *peak, int tiles_x, int tiles_y, int sx, int sy,
                            float threshold, float core)
 {
   if(core <= 0.0f) return threshold;
-  return fmax(threshold, core * streaks_peak(peak, tiles_x, tiles_y, sx, sy));
+  const float pk = streaks_peak(peak, tiles_x, tiles_y, sx, sy);
+  return pk > 0.0f ? fmax(threshold, core * pk) : INFINITY;
 }
 
 /* The light that streaks: above its level (scatter_bright), weighted by (L / peak)^core_power
@@ -63,13 +70,90 @@ inline float4 streaks_light(float4 c, float level, float source_color, float cor
   return (float4)((float3)l + (h.xyz - (float3)l) * source_color, 0.0f);
 }
 
+/* One seed per compact light: a source pixel whose streaking light is non-zero, whose
+ * luminance is the highest within `radius` px (Chebyshev; ties go to the earlier pixel in
+ * raster order) and whose window's border ring holds no streaking light above `ring_share`
+ * of its own (the light is smaller than the window) gathers the streaking light of that
+ * window into a point at its luminance-weighted centroid: seeds[i] = (x, y, centroid x,
+ * centroid y, r, g, b, 0), source pixels; `count` counts the seeds (those past `cap` are
+ * counted, not stored); flags[x, y] = 1 marks the seed. A streak is then as thin as
+ * diffraction draws it, whatever the light's size; an extended light (a window, the sky)
+ * streaks pixel by pixel (streaks_bright). */
+kernel void streaks_seeds(global const float *src, const int src_pitch, const int src_w,
+                          const int src_h, const float threshold, global const float *peak,
+                          const int tiles_x, const int tiles_y, const float core,
+                          const float source_color, const float core_power, const int radius,
+                          const float ring_share, global float *seeds,
+                          volatile global int *count, const int cap, global uchar *flags)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= src_w || y >= src_h) return;
+  const float4 c = clfx_load4(src, src_pitch, x, y);
+  const float pk = streaks_peak(peak, tiles_x, tiles_y, x, y);
+  const float4 h = streaks_light(c, streaks_level(peak, tiles_x, tiles_y, x, y, threshold, core),
+                                 source_color, core_power, pk);
+  if(!(h.x > 0.0f || h.y > 0.0f || h.z > 0.0f)) return;
+  const float l0 = clfx_luminance(fmax(clfx_finite4_or_zero(c), (float4)0.0f));
+  const float h0 = clfx_luminance(h);
+  float4 sum = (float4)0.0f;
+  float wsum = 0.0f, wx = 0.0f, wy = 0.0f;
+  /* rows outwards from the seed: a brighter neighbour usually ends the scan early */
+  for(int k = 0; k <= 2 * radius; k++)
+  {
+    const int dy = (k & 1) ? -((k + 1) >> 1) : (k >> 1);
+    const int sy = y + dy;
+    if(sy < 0 || sy >= src_h) continue;
+    for(int dx = -radius; dx <= radius; dx++)
+    {
+      const int sx = x + dx;
+      if(sx < 0 || sx >= src_w) continue;
+      const float4 q = clfx_load4(src, src_pitch, sx, sy);
+      const float lq = clfx_luminance(fmax(clfx_finite4_or_zero(q), (float4)0.0f));
+      if(lq > l0 || (lq == l0 && (dy < 0 || (dy == 0 && dx < 0)))) return;
+      const float pq = streaks_peak(peak, tiles_x, tiles_y, sx, sy);
+      const float4 hq = streaks_light(q, streaks_level(peak, tiles_x, tiles_y, sx, sy,
+                                                       threshold, core),
+                                      source_color, core_power, pq);
+      const float wq = clfx_luminance(hq);
+      if(wq > ring_share * h0 && (abs(dx) == radius || abs(dy) == radius)) return; /* extended */
+      sum += hq;
+      wsum += wq;
+      wx += wq * (float)dx;
+      wy += wq * (float)dy;
+    }
+  }
+  flags[y * src_w + x] = 1;
+  const int i = atomic_inc(count);
+  if(i >= cap) return;
+  const float cx = wsum > 0.0f ? wx / wsum : 0.0f, cy = wsum > 0.0f ? wy / wsum : 0.0f;
+  sum = fmin(sum, (float4)SCATTER_FLT_MAX);
+  vstore8((float8)((float)x, (float)y, (float)x + cx, (float)y + cy, sum.x, sum.y, sum.z, 0.0f),
+          i, seeds);
+}
+
+/* One pass of the seeds' windows: out(x, y) = max of in over (x + k sx, y + k sy), |k| <=
+ * radius (run along x then y: the pixels a seed gathered, flagged 1). */
+kernel void streaks_dilate(global const uchar *in, global uchar *out, const int w, const int h,
+                           const int radius, const int sx, const int sy)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= w || y >= h) return;
+  uchar m = 0;
+  for(int k = -radius; k <= radius && !m; k++)
+  {
+    const int u = x + k * sx, v = y + k * sy;
+    if(u >= 0 && u < w && v >= 0 && v < h) m = in[v * w + u];
+  }
+  out[y * w + x] = m;
+}
+
 /* scale x the sum of the streaking light of the FACTOR x FACTOR source pixels under
- * low-resolution pixel (x, y); (ox, oy) = source window origin inside the output window,
- * full-resolution pixels. */
+ * low-resolution pixel (x, y) that no seed gathered (`gathered`: source-sized flags);
+ * (ox, oy) = source window origin inside the output window, full-resolution pixels. */
 inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
                           int y, int ox, int oy, float threshold, float scale,
                           global const float *peak, int tiles_x, int tiles_y, float core,
-                          float source_color, float core_power)
+                          float source_color, float core_power, global const uchar *gathered)
 {
   float4 acc = (float4)0.0f;
   for(int j = 0; j < FACTOR; j++)
@@ -79,7 +163,7 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
     for(int i = 0; i < FACTOR; i++)
     {
       const int sx = x * FACTOR + i - ox;
-      if(sx < 0 || sx >= src_w) continue;
+      if(sx < 0 || sx >= src_w || gathered[sy * src_w + sx]) continue;
       const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
       const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
       acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
@@ -89,26 +173,40 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
   return acc;
 }
 
-/* One work-item per low-resolution pixel: the box average of the highlights. */
+/* One work-item per low-resolution pixel: the box average of the streaking light no seed
+ * gathered (extended lights), plus the seeds' points splatted bilinearly.  `points`:
+ * (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
+ * divided by FACTOR^2; `bin_start` (bins_x * bins_y + 1) and `bin_seed` list, per BIN x BIN
+ * block of low-resolution pixels, the seeds whose splat touches it, in seed order. */
 kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
                            const int src_h, global float *dst, const int org,
                            const int dst_pitch, const int dst_wp, const int dst_h,
                            const int ox, const int oy, const float threshold,
                            global const float *peak, const int tiles_x, const int tiles_y,
                            const float core, const float source_color,
-                           const float core_power)
+                           const float core_power, global const uchar *gathered,
+                           global const float *points, global const int *bin_start,
+                           global const int *bin_seed, const int bins_x, const int bin)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
   float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
-                           tiles_x, tiles_y, core, source_color, core_power)
+                           tiles_x, tiles_y, core, source_color, core_power, gathered)
                * (1.0f / (FACTOR * FACTOR));
   if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
     acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
                       1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color,
-                      core_power);
-  clfx_store4(dst, dst_pitch, x, y, acc);
+                      core_power, gathered);
+  const int b = (y / bin) * bins_x + x / bin;
+  for(int k = bin_start[b]; k < bin_start[b + 1]; k++)
+  {
+    const float8 s = vload8(bin_seed[k], points);
+    const float w = fmax(1.0f - fabs(s.s0 - (float)x), 0.0f)
+                    * fmax(1.0f - fabs(s.s1 - (float)y), 0.0f);
+    acc += (float4)(s.s2, s.s3, s.s4, 0.0f) * w;
+  }
+  clfx_store4(dst, dst_pitch, x, y, fmin(acc, (float4)SCATTER_FLT_MAX));
 }
 
 /* Reads relative to the interior origin; `wp` = interior pitch, `h` = interior rows.  With
@@ -135,9 +233,8 @@ inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, in
 /* Bilinear sample of 4 consecutive pixels shifted by (dx, dy): the weights are the same for
  * all four, so it is four float16 loads and four vector multiply-adds. */
 inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int x, int y,
-                           float dx, float dy, int snap)
+                           float dx, float dy)
 {
-  if(snap) { dx = rint(dx); dy = rint(dy); }  /* whole-pixel tap: one load, no blur */
   const float fx0 = floor(dx), fy0 = floor(dy);
   const int ix = x + (int)fx0, iy = y + (int)fy0;
   const float fx = dx - fx0, fy = dy - fy0;
@@ -165,7 +262,7 @@ inline REAL16 streaks_term(float16 v, float4 w)
  * Each work-item produces 4 pixels of a row.  ACCUM = 1: out += result (last pass). */
 kernel void streaks_pass(global const float *in, global float *out, const int org,
                          const int pitch, const int wp, const int w, const int h,
-                         const float step_x, const float step_y, const int snap,
+                         const float step_x, const float step_y,
                          const float4 w0, const float4 w1, const float4 w2, const float4 w3)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
@@ -174,9 +271,9 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
   in += 4 * org;
   out += 4 * org;
   REAL16 sum = streaks_term(vload16(0, in + (y * pitch + x) * 4), w0);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y, snap), w1);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y, snap), w2);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y, snap), w3);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y), w1);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y), w2);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y), w3);
   sum = fmin(sum, (REAL)SCATTER_FLT_MAX);  /* saturate: finite input, finite output */
   if(x + 4 > w)  /* padding stays zero: it stands for "outside the image" */
   {

@@ -18,7 +18,7 @@ Models
     (0.07 degrees), are integrated over their area (8 x 8 sub-samples): the core is narrower
     than a pixel at usual focal lengths.  The power-law
     tail ends through :func:`tail_fade` (below 1e-5 of the PSF one pixel out before the
-    support's outer tenth, then zero at the radius).
+    support's outer tenth, faded by a raised cosine from half the radius to zero at it).
 ``gaussians``
     Bloom as a sum of Gaussians (Kawase-style), sigmas in pixels and relative weights, ended
     by :func:`tail_fade`.
@@ -95,27 +95,32 @@ TAIL_FLOOR = 1e-5
 pixel from the centre: 1e-4 of a point light's spread light is the level a graded-up 1e4 light
 on black shows, so every truncation happens below it."""
 
-TAIL_TAPER = 0.9
+TAIL_ROLL = 0.9
+""":func:`tail_fade` brings a tail to ``TAIL_FLOOR`` by this fraction of the radius."""
+
+TAIL_TAPER = 0.5
 """:func:`tail_fade`'s raised-cosine taper runs from this fraction of the radius to the
-radius."""
+radius.  Over the outer tenth only (as before issue 25) it cut a power-law tail that an
+exposure for a dark room lifts (a candle flame's glare: ten times the room at 0.9 radius)
+to nothing within a few pixels: a disc with a rim; from half the radius it fades."""
 
 
 def tail_fade(k: np.ndarray, radius: int, *, floor: float = TAIL_FLOOR,
-              start: float = TAIL_TAPER) -> np.ndarray:
+              start: float = TAIL_TAPER, roll: float = TAIL_ROLL) -> np.ndarray:
     """End a centred, radially decreasing (2r + 1)^2 kernel smoothly inside its support.
 
     Its physical tail is kept where it is above ``floor`` x its value one pixel from the
-    centre (``k1``) at ``start`` x r; where it is not (a power law on a small support, a wide
+    centre (``k1``) at ``roll`` x r; where it is not (a power law on a small support, a wide
     Gaussian), it is multiplied by the Gaussian roll-off ``exp(-(d / rho)^2)`` that brings it
     there (smooth and monotone: no kink, no step).  Then a raised cosine takes it from
-    ``start`` x r to 0 at r (below ``floor`` x ``k1`` all the way).  Returns the product
+    ``start`` x r to 0 at r (below ``floor`` x ``k1`` from ``roll`` x r on).  Returns the product
     (not normalised).
     """
     r = int(radius)
     if r < 2:
         return k
     k1 = float(k[r, r + 1])
-    i0 = int(math.floor(start * r))
+    i0 = int(math.floor(roll * r))
     ke = float(k[r, r + i0])
     x, y = _radial_grid(r)
     d = np.hypot(x, y)

@@ -36,7 +36,10 @@ aperture (fraction of the frame diagonal; the same scale for polygons; the defau
 26 px at 1080p, gives a small bright core and rings out to ~130 px around a street light: the
 former 0.03 made a flat white core ~60 px wide and rings to ~240 px from a 7 px light,
 issue 25; an atmospheric corona's few degrees needs ~0.03, as sunny-flare sets), ``extent`` how many of those radii the PSF keeps (a raised-cosine taper over its
-outer quarter, then renormalised; the default 5 keeps three to four rings).
+outer quarter, then renormalised; the default 5 keeps three to four rings).  ``intensity``
+defaults to 0.05: at 0.2 a fifth of a candle flame's light went into the Airy core and its
+shoulders and an exposure for the room showed a flat white disc twice the flame's width
+instead of a bright flame with a glow and faint coloured rings (issue 25).
 
 The pattern is smooth at the scale of its rings, so below ``reference`` it is computed at a
 reduced resolution ``1 / f`` (f a power of two, at most 16) that still gives the first dark
@@ -249,7 +252,7 @@ class Corona(SpreadRegions, Plugin):
         params=(
             FloatParam("threshold", 2.0, min=0.0, max=1e6,
                        hint="Scene-linear luminance above which pixels diffract."),
-            FloatParam("intensity", 0.2, min=0.0, max=1.0,
+            FloatParam("intensity", 0.05, min=0.0, max=1.0,
                        hint="Fraction of the highlights' light that diffracts into the pattern "
                             "(its core included); the rest stays put: light is moved, never "
                             "added."),

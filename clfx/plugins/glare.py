@@ -2,18 +2,18 @@
 
 Model
 -----
-Per pixel (scene-linear RGB, luminance ``L`` Rec.709) the light that scatters is the soft-knee
-highlight ``h = max(rgb, 0) * clamp(max(s, L - t) / L, 0, 1)``, ``s = clamp(L - t + k, 0,
-2k)^2 / 4k`` (threshold ``t``, knee ``k``).  It is convolved with a normalised PSF
-(``clfx.fx.psf``): Spencer et al. 1995's eye PSF (power-law falloff), a sum of Gaussians (bloom)
-or a user kernel image (``kernel_path``, read by the pipeline: ``ctx.read_image``), with a
-support of radius ``size`` x the frame diagonal.  The Spencer and Gaussian PSFs keep their own tails
-down to 1e-5 of the PSF one pixel from the light and end smoothly inside the support
-(``clfx.fx.psf.tail_fade``: a Gaussian roll-off where the tail would still be above that at 0.9
-x the radius, then a raised cosine to 0 at the radius), so a point light graded up shows no
-rim, step or square anywhere above 1e-4 of its glare.  Scene-linear frames keep
-their energy: ``out = c - strength h + strength tint (PSF * h)``; with a white tint the total
-light is unchanged away from the borders.
+Per pixel (scene-linear RGB, luminance ``L`` Rec.709) the light that scatters is the
+soft-knee highlight ``h = max(rgb, 0) * clamp(max(s, L - t) / L, 0, 1)``, ``s = clamp(L - t
++ k, 0, 2k)^2 / 4k`` (threshold ``t``, knee ``k``). It is convolved with a normalised PSF
+(``clfx.fx.psf``): Spencer et al. 1995's eye PSF (power-law falloff), a sum of Gaussians
+(bloom) or a user kernel image (``kernel_path``, read by the pipeline: ``ctx.read_image``),
+with a support of radius ``size`` x the frame diagonal. The Spencer and Gaussian PSFs keep
+their own tails down to 1e-5 of the PSF one pixel from the light and end smoothly inside the
+support (``clfx.fx.psf.tail_fade``: a Gaussian roll-off where the tail would still be above
+that at 0.9 x the radius, and a raised cosine from half the radius to 0 at it), so a point
+light graded up shows no rim, step or square anywhere above 1e-4 of its glare. Scene-linear
+frames keep their energy: ``out = c - strength h + strength tint (PSF * h)``; with a white
+tint the total light is unchanged away from the borders.
 
 Display-referred (8-bit) input has no highlights above 1: luminance is first expanded by an
 inverse tone curve ``e(L) = L / max(1 - L (1 - 1/B), 1/B)`` (``B`` = ``display_boost``: 1.0 maps

@@ -2,15 +2,27 @@
 
 Model
 -----
-A streak comes from the light above its level: ``rgb * max(lum - t, 0) / lum`` with ``t`` the
-larger of ``threshold`` and ``core`` times the peak luminance of the light the pixel belongs to
-(the connected region of 32 px scene-analysis tiles brighter than ``threshold``).  So a candle
-streaks from its bright core, not from its glow or the wax it lights, and the streak is as
-wide as that core (``core = 0``: everything above ``threshold`` streaks, the former model).
-``source_color`` mixes the streaking light towards its luminance (0: the streak's colour is
-the tint alone, as the coatings of an anamorphic lens colour its streaks whatever the light).
-These highlights are spread along ``n`` directions by a one-sided exponential line kernel
-per direction,
+A streak comes from the light above its level: ``rgb * max(lum - t, 0) / lum`` with ``t``
+the larger of ``threshold`` and ``core`` times the peak luminance of the light the pixel
+belongs to (the connected region of 32 px scene-analysis tiles brighter than ``threshold``).
+So a candle streaks from its bright core, not from its glow or the wax it lights (``core =
+0``: everything above ``threshold`` streaks). With a core rule, light in no light's tile
+(light an earlier step of the look drew: the analysis is the frame's) does not streak:
+star-filter's spikes fanned its star's rays out into wedges. ``source_color`` mixes the
+streaking light towards its luminance (0: the streak's colour is the tint alone, as the
+coatings of an anamorphic lens colour its streaks whatever the light). Each compact light's
+streaking light is then gathered into one point: a pixel whose luminance is the highest
+within ``SEED_RADIUS`` (1.2 % of the diagonal, ties to the earlier pixel) and whose window's
+border holds no streaking light takes the streaking light of that window to its
+luminance-weighted centroid (bilinear splat, sub-pixel). A star filter's or a blade's streak
+is a diffraction line a pixel or two wide (the filter's grating or the edge spreads each
+point of the image into a line as thin as the lens resolves); spreading every pixel of a
+small light drew a band as wide as the flame, which the eye reads as a thick smeared bar.
+Two peaks closer than the radius streak as one. An extended light (streaking light on its
+window's border: a window pane, the sky) streaks pixel by pixel, a band as wide as it is:
+gathered into points it gave a hatch of parallel lines from its noise's local maxima.
+These points and pixels are spread along ``n`` directions by a one-sided exponential line
+kernel per direction,
 
     K_d(x) = sum_{k=0}^{S - 1} a_c^k  delta(x - k d),   a_c = 0.01^(1 / L_c),
 
@@ -28,15 +40,19 @@ counter-clockwise from +x (screen up is -y).  A scratched filter gives a streak
 perpendicular to each scratch; ``streaks`` counts the rays, not the scratches.
 
 Anamorphic streaks (``mode="anamorphic"``): two rays, at ``angle`` and opposite (0:
-horizontal).  A streak is the light reflected between the coated faces of the anamorphic
-cylinder: two reflections off a single-layer MgF2 quarter-wave coating (index 1.38 on glass
-1.52) designed at ``coating_nm``; its colour is that reflectance squared over the visible
-spectrum (CIE 1931, Rec.709), normalised to luminance 1 and multiplied by ``tint``: blue-cyan
-for a coating designed in the red (650 nm: RGB 0.63, 0.92, 2.88).  The streak is thin: each
-pixel's light is weighted by ``(L / peak)^core_power`` (``core_power`` -1: 3), so a light's
-brightest rows carry it; and it falls off with distance: 70 % of its light in a bright part
-fading to 1 % at ``0.15 length``, 30 % in a long faint part fading to 1 % at ``length`` (a
-sum of two exponentials, each run as its own Kawase chain).
+horizontal). A streak is the light reflected between the coated faces of the anamorphic
+cylinder: two reflections off its anti-reflection coating (``coating``, a stack of
+:data:`clfx.fx.optics.MULTILAYER_DESIGNS` on crown glass 1.52, by the transfer-matrix
+method) designed at ``coating_nm``; its colour is that reflectance squared over the visible
+spectrum (CIE 1931, Rec.709), normalised to luminance 1 and multiplied by ``tint``. A V-coat
+(MgF2 / Al2O3 quarter-quarter) tuned in the deep red, 740 nm, reflects almost nothing there
+and more and more towards the blue: blue-cyan, hue 213 degrees (RGB 0.00, 1.14, 2.54). A
+single MgF2 layer cannot be that colour: its residual rises in the red as well as the blue,
+hue 225-258 degrees, lavender-violet over a warm scene. Each pixel's light is weighted by
+``(L / peak)^core_power`` (``core_power`` -1: 3), so a light's brightest rows carry it (the
+streak is a line from its point, as every mode's); and it falls off with distance: 70 % of
+its light in a bright part fading to 1 % at ``0.15 length``, 30 % in a long faint part
+fading to 1 % at ``length`` (a sum of two exponentials, each run as its own Kawase chain).
 
 Diffraction spikes (``mode="aperture"``): the far field of a straight blade edge is a line
 perpendicular to it (the Fourier transform of a half plane), so an N-blade polygon aperture
@@ -66,18 +82,17 @@ interpolated tap per step k).
 
 Error against that exact line kernel, measured (float64, one ray, L = 60 px, 1e4 point):
 identical energy; identical kernels at multiples of 45 degrees; at 30 degrees a relative L1
-difference of 0.25 (0.27 with the snapped taps of draft/preview/final) and an rms width
-across the ray of 0.47 px (0.45 snapped) against 0.35 px: the Kawase streak is a fraction
-of a pixel wider, never longer or brighter.  At 1080p (one 30-degree ray, L = 100 px, 12
-lights), max error / peak against the exact line kernel: reference 3.7e-2, final 4.7e-2,
-preview 0.22, draft 0.47 (reduced resolution widens the ray; measured before the support
-reached 2.5 L).  Truncation at S > 2.5 L' drops 1e-5 of the infinite exponential's energy
-(the kernel is renormalised).
+difference of 0.25 and an rms width across the ray of 0.47 px against 0.35 px: the Kawase
+streak is a fraction of a pixel wider, never longer or brighter. At 1080p (one 30-degree
+ray, L = 100 px, 12 lights), max error / peak against the exact line kernel: reference
+3.7e-2, final 4.7e-2, preview 0.22, draft 0.47 (reduced resolution widens the ray; measured
+before the support reached 2.5 L). Truncation at S > 2.5 L' drops 1e-5 of the infinite
+exponential's energy (the kernel is renormalised).
 
 Quality levels run the passes at 1/4 (draft), 1/2 (preview) or full (final, reference)
-resolution (bright-pass box-averaged, steps scaled, bilinear upsample on compose); below
-reference, passes whose step is >= 16 px round their taps to whole pixels (one load, half a
-pixel of wander at most per pass).
+resolution (points splatted on the coarser grid, steps scaled, bilinear upsample on compose);
+every tap is interpolated (taps rounded to whole pixels in long passes made a thin ray wander
+by half a pixel per pass, a staircase along it).
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -117,32 +132,64 @@ turns red and its root stays white, as real starbursts do."""
 ANAMORPHIC_CORE_POWER = 3.0
 """mode anamorphic, core_power -1: the exponent of (L / peak) weighting each pixel's light."""
 
-COATING_INDEX, GLASS_INDEX = 1.38, 1.52
-"""The anamorphic coating model: a MgF2 quarter-wave layer on crown glass."""
+GLASS_INDEX = 1.52
+"""The anamorphic coating model: a stack of ``MULTILAYER_DESIGNS`` on crown glass."""
 
 
 @dataclass(frozen=True)
 class StreaksLevel(Level):
-    """A streaks quality level: the passes run at 1 / ``factor`` resolution; passes whose step
-    is at least ``snap_from`` (working-resolution) pixels round each tap to a whole pixel (one
-    load instead of an interpolated two; the ray wanders by at most half a pixel per snapped
-    pass), 0 = always interpolate; ``fp64``: float64 tap sums."""
+    """A streaks quality level: the passes run at 1 / ``factor`` resolution, every tap
+    interpolated (whole-pixel taps made a thin ray wander by half a pixel per long pass: a
+    staircase); ``fp64``: float64 tap sums."""
 
     factor: int = 1
-    snap_from: int = 16
 
 
 LEVELS = {
-    "draft": StreaksLevel("Kawase passes at 1/4 resolution (box-averaged bright-pass, bilinear "
-                          "upsample), taps of passes stepping >= 16 px snapped to whole pixels, "
-                          "float32", factor=4),
-    "preview": StreaksLevel("Kawase passes at 1/2 resolution, long-step taps snapped, float32",
-                            factor=2),
-    "final": StreaksLevel("Kawase passes at full resolution, long-step taps snapped, float32"),
-    "reference": StreaksLevel("Kawase passes at full resolution, every tap interpolated, "
-                              "float64 tap sums (exactly the oracle's composed kernel)",
-                              fp64=True, snap_from=0),
+    "draft": StreaksLevel("Kawase passes at 1/4 resolution (bilinear splat of each light's "
+                          "point, bilinear upsample), float32", factor=4),
+    "preview": StreaksLevel("Kawase passes at 1/2 resolution, float32", factor=2),
+    "final": StreaksLevel("Kawase passes at full resolution, float32"),
+    "reference": StreaksLevel("Kawase passes at full resolution, float64 tap sums (exactly "
+                              "the oracle's composed kernel)", fp64=True),
 }
+
+SEED_RADIUS = 0.012
+"""A compact light's peak gathers the streaking light within this fraction of the frame
+diagonal (a Chebyshev radius: 9 px at 640 x 360, 26 px at 1080p; a candle flame's core fits)
+into one point, the light's centroid; of two peaks closer than this only the brighter
+streaks.  A light with streaking light on that window's border (``RING_SHARE``) is
+extended: it streaks pixel by pixel."""
+
+RING_SHARE = 0.1
+"""Streaking light (luminance) on the window's border above this share of the peak's own
+makes a light extended."""
+
+MAX_SEEDS = 1 << 16
+"""Most lights (seed points) one frame streaks from."""
+
+BIN = 16
+"""Working pixels per side of the blocks the seed points are listed by."""
+
+
+def bin_points(points: np.ndarray, width: int, height: int, size: int):
+    """(starts, members) int32: for each ``size`` x ``size`` block of a ``width`` x ``height``
+    grid (row-major), the indices of the points whose bilinear splat (the 2 x 2 pixels
+    around the point) touches it, ``members[starts[b]:starts[b + 1]]``, in point order."""
+    bx, by = -(-width // size), -(-height // size)
+    pairs = []
+    for i, (x, y) in enumerate(points[:, :2].astype(np.float64)):
+        x0, y0 = math.floor(x), math.floor(y)
+        blocks = {(min(max(u, 0), width - 1) // size, min(max(v, 0), height - 1) // size)
+                  for u in (x0, x0 + 1) for v in (y0, y0 + 1)
+                  if 0 <= u < width and 0 <= v < height}
+        pairs += [(v * bx + u, i) for u, v in blocks]
+    pairs.sort()
+    counts = np.bincount([b for b, _ in pairs], minlength=bx * by) if pairs else \
+        np.zeros(bx * by, np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    return starts, np.array([i for _, i in pairs], np.int32)
+
 
 MAX_MARGIN = 512
 """Largest zero margin (working-resolution pixels) given to the pass buffers; longer rays use
@@ -240,15 +287,17 @@ def pass_weights(lengths_px: np.ndarray, passes: int, gain: np.ndarray,
     return out
 
 
-def coating_tint(design_nm: float) -> np.ndarray:
-    """RGB (luminance 1) of light reflected twice off a single-layer MgF2 quarter-wave coating
-    designed at ``design_nm`` on crown glass: the coating's residual reflectance squared,
-    integrated with the CIE 1931 observer into linear Rec.709 (into gamut)."""
+def coating_tint(design_nm: float, design: str = "v-coat") -> np.ndarray:
+    """RGB (luminance 1) of light reflected twice off the anti-reflection stack ``design``
+    (:data:`clfx.fx.optics.MULTILAYER_DESIGNS`) designed at ``design_nm`` on crown glass: the
+    stack's residual reflectance squared, integrated with the CIE 1931 observer into linear
+    Rec.709 (into gamut)."""
     from clfx.fx import optics, spectral
 
     lam = spectral.wavelengths(80)
     weights = spectral.spectral_rgb_weights(lam)
-    refl = optics.quarter_wave_reflectance(1.0, GLASS_INDEX, COATING_INDEX, design_nm, lam)
+    refl = optics.thin_film_reflectance(1.0, GLASS_INDEX, optics.MULTILAYER_DESIGNS[design],
+                                        design_nm, lam)
     rgb = spectral.to_gamut((refl ** 2) @ weights / weights.sum(axis=0))
     return rgb / float(rgb @ np.array([0.2126, 0.7152, 0.0722]))
 
@@ -295,9 +344,13 @@ class Streaks(Plugin):
                        hint="Weight of each pixel's light by (L / its light's peak)^power: "
                             "> 0 thins a streak to its light's brightest rows; -1 = 3 in "
                             "anamorphic mode, 0 otherwise."),
-            FloatParam("coating_nm", 650.0, min=380.0, max=780.0, units="nm",
-                       hint="Anamorphic mode: design wavelength of the MgF2 coating whose "
-                            "residual reflection (twice) colours the streak (650: blue-cyan)."),
+            ChoiceParam("coating", "v-coat", choices=("mgf2", "v-coat", "broadband",
+                                                      "broadband-hi"),
+                        hint="Anamorphic mode: the anti-reflection stack whose residual "
+                             "reflection (twice) colours the streak (clfx.fx.optics)."),
+            FloatParam("coating_nm", 740.0, min=380.0, max=780.0, units="nm",
+                       hint="Anamorphic mode: design wavelength of that coating (a V-coat "
+                            "at 740: blue-cyan)."),
             RGBParam("tint", (1.0, 1.0, 1.0), max=100.0, hint="Colour multiplier of the streaks."),
             FloatParam("source_color", 1.0, min=0.0, max=1.0,
                        hint="How much of the light's own colour a streak keeps: 1 = the "
@@ -329,7 +382,7 @@ class Streaks(Plugin):
     def colour(p) -> np.ndarray:
         """The streaks' colour multiplier: ``tint``, times the coating's in anamorphic mode."""
         tint = np.asarray(p.tint, np.float64)
-        return tint * coating_tint(p.coating_nm) if p.mode == "anamorphic" else tint
+        return tint * coating_tint(p.coating_nm, p.coating) if p.mode == "anamorphic" else tint
 
     def spread_px(self, p, ctx, factor: int = 1) -> int:
         """How far light travels: the truncated kernel's support plus the bilinear footprint."""
@@ -367,11 +420,53 @@ class Streaks(Plugin):
         m = np.minimum(np.nan_to_num(m, nan=0.0, posinf=0.0), np.finfo(np.float32).max)
         return np.ascontiguousarray(m, np.float32).ravel(), m.shape[1], m.shape[0]
 
+    def seed_radius(self, ctx) -> int:
+        """Half-width (px) of the window a light's peak gathers its streaking light from."""
+        return max(1, round(SEED_RADIUS * ctx.diagonal_px))
+
+    def seed_points(self, rt, p, ctx, peak, ox: int, oy: int, factor: int):
+        """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
+        position (a fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows,
+        x and y at the light's centroid in the working buffer's pixels, light divided by
+        ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered."""
+        src = ctx.source
+        (peak, tiles_x, tiles_y), radius = peak, self.seed_radius(ctx)
+        npx = src.width * src.height
+        flags = [rt.buffer(max(npx, 16)) for _ in range(2)]
+        for f in flags:
+            rt.cl.enqueue_fill_buffer(rt.queue, f.buffer, np.uint8(0), 0, max(npx, 16))
+        count = rt.to_device(np.zeros(1, np.int32))
+        seeds = rt.buffer(MAX_SEEDS * 32)
+        knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=ctx.analysis.tile,
+                        **ctx.luminance_defines)
+        i32, f32 = np.int32, np.float32
+        rt.launch(knl, (src.width, src.height), src, i32(src.pitch), i32(src.width),
+                  i32(src.height), f32(p.threshold), rt.to_device(peak), i32(tiles_x),
+                  i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
+                  i32(radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
+        dilate = rt.kernel("streaks.cl", "streaks_dilate")
+        for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
+            rt.launch(dilate, (src.width, src.height), flags[a], flags[b], i32(src.width),
+                      i32(src.height), i32(radius), i32(sx), i32(sy))
+        n = int(rt.from_device(count, np.int32, 1)[0])
+        if n > MAX_SEEDS:
+            ctx.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
+            n = MAX_SEEDS
+        rows = rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8) if n else \
+            np.zeros((0, 8), np.float32)
+        rows = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
+        out = np.zeros((n, 8), np.float32)
+        # source pixel -> output window pixel -> working pixel (centres aligned)
+        out[:, 0] = (rows[:, 2] + ox + 0.5) / factor - 0.5
+        out[:, 1] = (rows[:, 3] + oy + 0.5) / factor - 0.5
+        out[:, 2:5] = rows[:, 4:7] / np.float32(factor * factor)
+        return out, flags[0]
+
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
         src = ctx.source
         lvl = self.level(ctx)
-        factor, snap_from = lvl.factor, lvl.snap_from
+        factor = lvl.factor
         out_win = self.output_window(p, ctx)
         ox, oy = src.window.offset_in(out_win)
         lo_w, lo_h = -(-out_win.width // factor), -(-out_win.height // factor)
@@ -408,9 +503,16 @@ class Streaks(Plugin):
         defines["CHECKED"] = int(checked)
 
         peak, tiles_x, tiles_y = self.peak_map(p, ctx)
+        peak_buf = rt.to_device(peak)
+        points, gathered = self.seed_points(rt, p, ctx, (peak, tiles_x, tiles_y), ox, oy,
+                                            factor)
+        starts, members = bin_points(points, wp, lo_h, BIN)
+        points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
+            points if len(points) else np.zeros((1, 8), np.float32), starts,
+            members if len(members) else np.zeros(1, np.int32)))
         bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
                                **defines)
-        peak_buf = rt.to_device(peak)
+        bins_x = -(-wp // BIN)
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
         for sx, sy, passes, weights in plans:
@@ -419,17 +521,17 @@ class Streaks(Plugin):
             rt.launch(bright_knl, (wp, lo_h), src, i32(src.pitch), i32(src.width),
                       i32(src.height), pong, i32(org), i32(pitch), i32(wp), i32(lo_h),
                       i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
-                      i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)))
+                      i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
+                      gathered, points_buf, starts_buf, members_buf, i32(bins_x), i32(BIN))
             cur = pong
             for n in range(passes):
                 last = n == passes - 1
                 dst = total if last else (ping if cur is not ping else pong)
                 b = TAPS ** n
-                snap = snap_from > 0 and b >= snap_from
                 w = [w4.astype(np.float32) for w4 in weights[n]]
                 rt.launch(accum_knl if last else step_knl, (wp // 4, lo_h), cur, dst, i32(org),
                           i32(pitch), i32(wp), i32(lo_w), i32(lo_h), f32(sx * b), f32(sy * b),
-                          i32(snap), *w, local=LOCAL)
+                          *w, local=LOCAL)
                 cur = dst
         del work, ping, pong
 

@@ -344,3 +344,32 @@ def test_matches_reference_in_acescg(rt, rng):
     assert highlights(src, p.threshold)[0][5, 5].max() > 0.0             # in Rec.709 it is
     # the ACEScg pixels taken as Rec.709 ones (no conversion) give another corona
     assert np.abs(got - plugin.apply(rt, p, src, quality="reference")).max() > 1e-3
+
+
+def test_default_corona_around_a_candle_is_not_a_flat_white_disc(rt):
+    # issue 25: a flame (a 200-nit light 3 x 6 px, like CandleGlass's at 640 px) in a dark
+    # room, exposed as the gallery exposes it: at intensity 0.2 a fifth of the flame's light
+    # filled the Airy core's ~4 px radius and its shoulders, and the display went white
+    # (>= 0.95: sRGB code 249 and up) over 21 px through a flame 11 px across (0.1: 17 px;
+    # 0.05, the default now: 13 px).  The near-white run stays within 4 px of the flame's.
+    from clfx.demo import tonemap_preview
+    from clfx.gallery import exposure_for
+
+    h, w = 200, 320
+    y, x = np.mgrid[0:h, 0:w]
+    src = np.full((h, w, 4), 0.001, np.float32)
+    src[..., 3] = 1.0
+    src[..., :3] += (200.0 * np.exp(-((x - w // 2) ** 2 / 4.5 + (y - h // 2) ** 2 / 18.0)))[
+        ..., None]
+    e = exposure_for(src)
+
+    def white_run(img):
+        return int((tonemap_preview(img, e)[h // 2, :, 1] >= 0.95).sum())
+
+    out = Corona().apply(rt, Corona.params(), src).astype(np.float64)
+    assert white_run(out) <= white_run(src) + 4, (white_run(out), white_run(src))
+    # and the corona shows: the glow at 3 first-ring radii lifts the room visibly
+    r0 = Corona.params().size * math.hypot(w, h)
+    glow = tonemap_preview(out, e)[h // 2, w // 2 + int(3 * r0), 1]
+    room = tonemap_preview(src, e)[h // 2, w // 2 + int(3 * r0), 1]
+    assert glow > room + 0.05, (glow, room)

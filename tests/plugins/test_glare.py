@@ -222,3 +222,29 @@ def test_point_light_glare_fades_smoothly_before_its_support_ends(rt, psf, size)
     support = round(size * math.hypot(w, h))
     assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support,
                        what=f"glare {psf} size {size}")
+
+
+def test_glare_of_a_flame_in_a_dark_room_fades_without_a_rim(rt):
+    # issue 25: anamorphic-night's glare (Spencer, size 0.2) around a 200-nit flame, exposed
+    # for the dark room as the gallery exposes it: the raised-cosine taper over the support's
+    # outer tenth cut a tail ten times the room's level to nothing within a few pixels, an
+    # orange disc with a rim.  The displayed profile must fade ever more gently (convex): the
+    # per-pixel drop (5 px mean) never grows beyond 0.3 x the radius (the outer-tenth taper:
+    # +2.6e-4 of display white per px; the taper from half the radius: none)
+    from clfx.demo import tonemap_preview
+    from clfx.gallery import exposure_for
+
+    h, w = 260, 480
+    y, x = np.mgrid[0:h, 0:w]
+    src = np.full((h, w, 4), 4e-4, np.float32)
+    src[..., 3] = 1.0
+    src[..., :3] += (200.0 * np.exp(-((x - w // 2) ** 2 / 8.0 + (y - h // 2) ** 2 / 32.0)))[
+        ..., None]
+    p = Glare.params(strength=0.04, threshold=2.0, knee=1.0, size=0.2, psf="spencer")
+    out = Glare().apply(rt, p, src).astype(np.float64)
+    radius = p.size * math.hypot(w, h)
+    row = tonemap_preview(out, exposure_for(src))[h // 2, w // 2:, 1].astype(np.float64)
+    drop = np.convolve(-np.diff(row), np.ones(5) / 5, mode="valid")
+    seg = drop[int(0.3 * radius):int(radius) + 2]
+    assert np.diff(seg).max() <= 2e-5, np.round(seg * 1e3, 2)
+    assert row[int(0.3 * radius)] > row[-1] + 0.05        # and the glow shows

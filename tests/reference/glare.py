@@ -87,9 +87,9 @@ def glare(src, psf, *, strength, threshold, knee, tint=(1.0, 1.0, 1.0), boost=0.
     return out
 
 
-def tail_fade(k, radius, floor=1e-5, start=0.9):
+def tail_fade(k, radius, floor=1e-5, start=0.5, roll=0.9):
     """A radially decreasing (2r + 1)^2 kernel ended inside its support (plain loops): if its
-    value at floor(start r) px on the axis is above ``floor`` x its value 1 px out, times
+    value at floor(roll r) px on the axis is above ``floor`` x its value 1 px out, times
     exp(-(d / rho)^2) with rho making it exactly that; then times a raised cosine from start r
     to r (clfx.fx.psf.tail_fade)."""
     import math
@@ -97,7 +97,7 @@ def tail_fade(k, radius, floor=1e-5, start=0.9):
     r = int(radius)
     if r < 2:
         return np.asarray(k, np.float64)
-    k1, i0 = k[r, r + 1], int(math.floor(start * r))
+    k1, i0 = k[r, r + 1], int(math.floor(roll * r))
     ke = k[r, r + i0]
     rho = i0 / math.sqrt(math.log(ke / (floor * k1))) if ke > floor * k1 else math.inf
     out = np.zeros_like(k, dtype=np.float64)

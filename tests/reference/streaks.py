@@ -36,8 +36,10 @@ def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
     c = np.maximum(c, 0.0)
     lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
     peak = peak_level(lum, threshold)
-    level = np.maximum(threshold, core * peak) if core > 0 else threshold
-    k = np.where(lum > level, (lum - level) / np.where(lum > 0, lum, 1.0), 0.0)
+    level = np.where(peak > 0, np.maximum(threshold, core * peak), np.inf) if core > 0 \
+        else threshold                       # with a core rule, light in no light's tile: none
+    k = np.where(lum > level, (lum - np.where(np.isfinite(level), level, 0.0))
+                 / np.where(lum > 0, lum, 1.0), 0.0)
     if core_power > 0:
         ratio = np.clip(lum / np.where(peak > 0, peak, 1.0), 0, 1)
         k = k * np.where(peak > 0, ratio, 1.0) ** core_power
@@ -45,6 +47,46 @@ def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
     hl = 0.2126 * out[..., 0] + 0.7152 * out[..., 1] + 0.0722 * out[..., 2]
     out[..., :3] = hl[..., None] + (out[..., :3] - hl[..., None]) * source_color
     out[..., 3] = 0.0
+    return out, c
+
+
+def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radius=1,
+                ring_share=0.1):
+    """Each compact light's streaking light gathered into one point: a pixel with streaking
+    light whose luminance is the highest within ``radius`` (Chebyshev; ties to the earlier
+    pixel in raster order) and whose window's border ring has none above ``ring_share`` of
+    its own takes the window's streaking light to its weighted centroid, splatted
+    bilinearly; the streaking light of pixels in no such window stays where it is.  Returns
+    the image that streaks (float64) and the sanitised source."""
+    hl, c = highlights(src, threshold, core, source_color, core_power)
+    h, w = c.shape[:2]
+    lum = c[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    hlum = hl[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    out = np.zeros_like(hl)
+    gathered = np.zeros((h, w), bool)
+    order = np.arange(h * w).reshape(h, w)
+    for y, x in zip(*np.nonzero((hl[..., :3] > 0).any(axis=2))):
+        y0, y1, x0, x1 = max(y - radius, 0), min(y + radius + 1, h), max(x - radius, 0), \
+            min(x + radius + 1, w)
+        win, idx = lum[y0:y1, x0:x1], order[y0:y1, x0:x1]
+        if (win > lum[y, x]).any() or ((win == lum[y, x]) & (idx < order[y, x])).any():
+            continue
+        ring = np.maximum(np.abs(np.arange(y0, y1) - y)[:, None],
+                          np.abs(np.arange(x0, x1) - x)[None, :]) == radius
+        if (hlum[y0:y1, x0:x1][ring] > ring_share * hlum[y, x]).any():
+            continue                                    # an extended light
+        gathered[y0:y1, x0:x1] = True
+        e = hl[y0:y1, x0:x1, :3].reshape(-1, 3).sum(axis=0)
+        wt = hlum[y0:y1, x0:x1]
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        cx, cy = ((wt * xs).sum() / wt.sum(), (wt * ys).sum() / wt.sum()) if wt.sum() > 0 \
+            else (x, y)
+        ix, iy = int(np.floor(cx)), int(np.floor(cy))
+        for u in (ix, ix + 1):
+            for v in (iy, iy + 1):
+                if 0 <= u < w and 0 <= v < h:
+                    out[v, u, :3] += e * max(1 - abs(cx - u), 0) * max(1 - abs(cy - v), 0)
+    out[~gathered, :3] += hl[~gathered, :3]
     return out, c
 
 
@@ -95,16 +137,19 @@ def _setup(lengths_frac, diagonal, color_shift, step_len, scale=(1.0, 1.0, 1.0))
     return a, n, top
 
 
-def coating_tint(design_nm):
-    """RGB (luminance 1) of two reflections off a MgF2 (1.38) quarter-wave coating designed at
-    design_nm on glass 1.52 (Airy reflectance, CIE 1931 -> Rec.709, into gamut)."""
-    from clfx.fx import spectral
+def coating_tint(design_nm, design="v-coat"):
+    """RGB (luminance 1) of two reflections off the stack ``design`` (films from the air side,
+    as clfx.fx.optics.MULTILAYER_DESIGNS) designed at design_nm on glass 1.52: the film-by-film
+    Airy recursion of tests/reference/optics_trace.py, CIE 1931 -> Rec.709, into gamut."""
+    from types import SimpleNamespace
+
+    from clfx.fx import optics, spectral
+    from tests.reference.optics_trace import reflectance
 
     lam = spectral.wavelengths(80)
     wts = spectral.spectral_rgb_weights(lam)
-    r1, r2 = (1.0 - 1.38) / (1.0 + 1.38), (1.38 - 1.52) / (1.38 + 1.52)
-    cos_d = np.cos(np.pi * design_nm / lam)
-    refl = (r1 ** 2 + r2 ** 2 + 2 * r1 * r2 * cos_d) / (1 + (r1 * r2) ** 2 + 2 * r1 * r2 * cos_d)
+    coating = SimpleNamespace(layers=optics.MULTILAYER_DESIGNS[design], wavelength_nm=design_nm)
+    refl = reflectance(1.0, 1.52, 1.0, coating, lam)
     rgb = spectral.to_gamut((refl ** 2) @ wts / wts.sum(axis=0))
     return rgb / (rgb @ np.array([0.2126, 0.7152, 0.0722]))
 
@@ -119,8 +164,9 @@ def _unit(angle):
 
 
 def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, tint,
-            color_shift, core=0.0, source_color=1.0, core_power=-1.0, coating_nm=650.0,
-            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, snap_from=None):
+            color_shift, core=0.0, source_color=1.0, core_power=-1.0, coating_nm=740.0,
+            coating="v-coat",
+            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, seed_radius=0.012):
     """Output over the source grown by ``pad`` pixels on every side (float64).
 
     mode "anamorphic": rays at angle and angle + 180, colour tint x coating_tint(coating_nm),
@@ -133,14 +179,15 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
     diagonal = diagonal or math.hypot(w, h)
     if core_power < 0:
         core_power = 3.0 if mode == "anamorphic" else 0.0
-    bright, clean = highlights(src, threshold, core, source_color, core_power)
+    radius = max(1, round(seed_radius * diagonal))
+    bright, clean = seed_points(src, threshold, core, source_color, core_power, radius)
     bright = np.pad(bright, ((pad, pad), (pad, pad), (0, 0)))
     out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
     rays = angles_of(mode, streaks, angle, blades, blade_rotation)
     colour = np.asarray(tint, np.float64)
     parts = [(1.0, 1.0)]
     if mode == "anamorphic":
-        colour = colour * coating_tint(coating_nm)
+        colour = colour * coating_tint(coating_nm, coating)
         parts = [(0.15, 0.7), (1.0, 0.3)]
     scale = (1.0, 1.0, 1.0)
     if mode == "aperture":
@@ -165,8 +212,6 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
                 nxt = np.zeros_like(cur)
                 for s in range(top if p == n - 1 else 4):
                     ox, oy = s * b * dx, s * b * dy
-                    if snap_from is not None and b >= snap_from:
-                        ox, oy = np.rint(ox), np.rint(oy)   # the plugin's whole-pixel taps
                     nxt[..., :3] += a ** (s * b) * shifted(cur, ox, oy)[..., :3]
                 cur = nxt
         out[..., :3] += cur[..., :3] * (gain / total)
