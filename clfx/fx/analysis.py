@@ -23,6 +23,34 @@ STATS = 9
 """Values per tile (``kernels/lib/analysis.cl``)."""
 
 
+MID_GREY = 0.18
+"""The exposure reference when an effect's ``middle_grey`` is 0 and the frame has no
+positive light."""
+
+METER_FLOOR = 1e-3
+"""The meter floors each tile's mean luminance at this fraction of their arithmetic mean, so
+black tiles count as 10 stops under, not as minus infinity."""
+
+
+def meter(mean_lum) -> float:
+    """Metered middle grey: the log-average of tile mean luminances, each floored at
+    ``METER_FLOOR`` x their arithmetic mean; ``MID_GREY`` when nothing is positive."""
+    m = np.asarray(mean_lum, np.float64).ravel()
+    m = m[np.isfinite(m)]
+    avg = float(m.mean()) if m.size else 0.0
+    if not avg > 0.0:
+        return MID_GREY
+    return float(np.exp(np.mean(np.log(np.maximum(m, METER_FLOOR * avg)))))
+
+
+def exposure_reference(p, ctx) -> float:
+    """The scene-linear value an exposure-relative effect (grain, sensor noise) takes as
+    middle grey: its ``middle_grey`` param, or (0) metered from the frame's analysis."""
+    if p.middle_grey > 0.0:
+        return float(p.middle_grey)
+    return meter(ctx.analysis.mean_lum)
+
+
 @dataclass
 class LightSource:
     """A bright connected region of tiles, in the frame's full pixel coordinates."""

@@ -103,11 +103,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
+from clfx.fx.analysis import exposure_reference
 from clfx.fx.noise import SEED_PARAM, effect_seed
 from clfx.host import Plugin, register
-
-MID_GREY = 0.18
-"""The exposure reference when ``middle_grey`` is 0 and the frame has no positive light."""
 
 REFERENCE_WIDTH = 2048
 """``amount`` is stated for a pixel of a scan this wide (of the same format); the legacy
@@ -125,11 +123,6 @@ TOE = 2.0 ** -4
 
 D_GREY = FOG + GAMMA * math.log10(1.0 + 1.0 / TOE)
 """Density of middle grey, D(1)."""
-
-METER_FLOOR = 1e-3
-"""The meter floors each tile's mean luminance at this fraction of their arithmetic mean, so
-black tiles count as 10 stops under, not as minus infinity."""
-
 
 @dataclass(frozen=True)
 class GrainLevel(Level):
@@ -273,24 +266,6 @@ def grain_amounts(p, display_width: int, sensor_width_mm: float) -> tuple[float,
     ref_px = display_width / REFERENCE_WIDTH
     return tuple(p.amount * a * selwyn_factor(s, ref_px) / (1.0 + TOE)
                  for a, s in zip(amounts, sigmas))
-
-
-def meter(mean_lum) -> float:
-    """Metered middle grey: the log-average of tile mean luminances, each floored at
-    ``METER_FLOOR`` x their arithmetic mean; ``MID_GREY`` when nothing is positive."""
-    m = np.asarray(mean_lum, np.float64).ravel()
-    m = m[np.isfinite(m)]
-    avg = float(m.mean()) if m.size else 0.0
-    if not avg > 0.0:
-        return MID_GREY
-    return float(np.exp(np.mean(np.log(np.maximum(m, METER_FLOOR * avg)))))
-
-
-def exposure_reference(p, ctx) -> float:
-    """The scene-linear value taken as middle grey: ``middle_grey``, or metered (0)."""
-    if p.middle_grey > 0.0:
-        return float(p.middle_grey)
-    return meter(ctx.analysis.mean_lum)
 
 
 @register

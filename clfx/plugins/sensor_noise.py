@@ -29,6 +29,15 @@ the search: only the top 4e-6 quantile is moved to its lower edge), and by the
 normal approximation ``lambda + sqrt(lambda) z`` above (same mean and variance; the skew
 of a Poisson at 30 counts is 0.18).  Draft uses the normal approximation at every count.
 
+Exposure.  A real camera is exposed for its ISO: middle grey lands on the same fraction of
+the full well whatever the scene's light, so its noise depends on the ISO, not on how bright
+the scene was.  A scene-linear plate has no such scale (a night plate may sit at 0.01), so
+``k_c`` is stated for a plate whose middle grey is 0.18 and scaled by ``0.18 / E``, with ``E``
+= ``middle_grey`` (default 0.18: the plate is taken as it is) or, with ``middle_grey = 0``,
+metered from the frame as grain meters it (`clfx.fx.analysis.meter`).  Metered, scaling a
+plate by any factor scales the output (noise included) by that factor: the same look at any
+exposure.
+
 Mosaic and demosaic (``mosaic = "bayer"``, the default).  A camera measures one colour per
 photosite (an RGGB Bayer pattern at frame coordinates: R at even X and even Y, B at odd X
 and odd Y) and interpolates the other two.  Each photosite keeps the deviation above for its
@@ -83,6 +92,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
+from clfx.fx.analysis import MID_GREY, exposure_reference
 from clfx.fx.noise import SEED_PARAM, effect_seed
 from clfx.host import Plugin, register
 
@@ -121,15 +131,18 @@ def sensor_gain(p, camera) -> float:
     return iso / p.base_iso
 
 
-def electrons_per_unit(p, camera) -> tuple[float, float, float]:
-    """``k_c``: electrons collected per unit of scene-linear value, per channel."""
+def electrons_per_unit(p, camera, reference: float = MID_GREY) -> tuple[float, float, float]:
+    """``k_c``: electrons collected per unit of scene-linear value, per channel, for a plate
+    whose middle grey is the scene-linear value ``reference`` (`exposure_reference`; the
+    default 0.18 is the model's own scale: ``full_well`` electrons at 1.0 and base ISO)."""
     gain = sensor_gain(p, camera)
-    return tuple(p.full_well * s / gain for s in p.channel_sensitivity)
+    scale = MID_GREY / reference
+    return tuple(p.full_well * s / gain * scale for s in p.channel_sensitivity)
 
 
-def noise_variance(v, p, camera, channel=1):
+def noise_variance(v, p, camera, channel=1, reference: float = MID_GREY):
     """The model's variance of the output at linear value ``v`` (PRNU aside)."""
-    g = 1.0 / electrons_per_unit(p, camera)[channel]
+    g = 1.0 / electrons_per_unit(p, camera, reference)[channel]
     shot = g * np.maximum(v, 0.0) if p.shot_noise else 0.0
     return shot + (g * p.read_noise) ** 2
 
@@ -153,7 +166,13 @@ class SensorNoise(Plugin):
                        hint="ISO at which the sensor collects full_well electrons per unit "
                             "of linear value (unity analogue gain)."),
             FloatParam("full_well", 10000.0, min=1.0, max=1e7, units="e-",
-                       hint="Electrons collected for a scene-linear value of 1.0 at base ISO."),
+                       hint="Electrons collected for a scene-linear value of 1.0 at base ISO "
+                            "on a plate whose middle grey is 0.18 (see middle_grey)."),
+            FloatParam("middle_grey", MID_GREY, min=0.0, max=1e6,
+                       hint="Scene-linear value the camera exposed as middle grey: electrons "
+                            "scale by 0.18 / middle_grey, so a plate at any exposure gets the "
+                            "same noise; 0 = meter each frame (log-average luminance, as "
+                            "grain's)."),
             BoolParam("shot_noise", True,
                       hint="Poisson photon noise (variance proportional to the signal)."),
             FloatParam("read_noise", 3.0, min=0.0, max=1e4, units="e-",
@@ -248,7 +267,8 @@ class SensorNoise(Plugin):
                    "PRNU": int(p.prnu > 0), "INVERT": int(switch is not None),
                    "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT}
         pattern = self.prnu_pattern(rt, p, ctx, lvl.fp64) if p.prnu > 0 else src  # src: unread
-        kr, kg, kb = (np.float32(k) for k in electrons_per_unit(p, ctx.camera))
+        kr, kg, kb = (np.float32(k) for k in
+                      electrons_per_unit(p, ctx.camera, exposure_reference(p, ctx)))
         seed = np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT))
         x0, y0 = np.int32(src.window.x0), np.int32(src.window.y0)
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0

@@ -157,6 +157,37 @@ def test_channel_sensitivity_and_iso_scale_the_noise(rt):
     assert abs(ratio - 2.0) <= 0.1
 
 
+@pytest.mark.parametrize("middle_grey", [0.0, 0.02])
+def test_exposure_reference_matches_the_oracle(rt, rng, middle_grey):
+    """``middle_grey`` stated (0.02: a night plate) or metered (0): the electrons scale by
+    0.18 / the plate's grey, in the kernel as in the float64 oracle (which meters itself)."""
+    src = rng.uniform(0.0, 0.03, (40, 70, 4)).astype(np.float32)
+    src[..., 3] = 1.0
+    got, p = run(rt, src, "reference", frame=2, prnu=0.01, middle_grey=middle_grey,
+                 mosaic="bayer", chroma_noise=0.5)
+    want = reference(src, **p.as_dict(), frame=2, camera_iso=3200.0)
+    g = 1 / electrons_per_unit(p, CAMERA, middle_grey or 0.015)[1]
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-4 * g)
+
+
+def test_metered_noise_is_the_same_look_at_any_exposure(rt, rng):
+    """Metered (``middle_grey`` 0), a plate 64x darker gives the same frame 64x darker, noise
+    included; stated at 0.18 (the default) the darker plate is far noisier, as the sensor
+    model says of a plate taken as it is."""
+    src = rng.uniform(0.05, 0.4, (64, 64, 4)).astype(np.float32)
+    src[..., 3] = 1.0
+    dark = src.copy()
+    dark[..., :3] /= 64.0
+    bright, _ = run(rt, src, middle_grey=0.0, mosaic="bayer", read_noise=3.0)
+    dim, _ = run(rt, dark, middle_grey=0.0, mosaic="bayer", read_noise=3.0)
+    dev_bright = bright[..., :3] - src[..., :3]
+    dev_dim = (dim[..., :3] - dark[..., :3]) * 64.0
+    assert dev_bright.std() > 1e-3
+    np.testing.assert_allclose(dev_dim, dev_bright, rtol=1e-3, atol=1e-4 * dev_bright.std())
+    plain, _ = run(rt, dark, mosaic="bayer", read_noise=3.0)
+    assert ((plain[..., :3] - dark[..., :3]) * 64.0).std() > 4.0 * dev_bright.std()
+
+
 def test_frames_are_uncorrelated_but_prnu_is_fixed(rt):
     src = flat(128, 128, 0.3)
     a, _ = run(rt, src, frame=1)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from tests.reference.grain import effect_seed, uniform
+from tests.reference.grain import effect_seed, meter, uniform
 
 SENSOR_SALT = 0x73656E73
 PRNU_SALT = 0x70726E75
@@ -27,14 +27,24 @@ def poisson_by_inversion(lam, u, max_count=200, u_cap=4e-6):
     return n
 
 
+def electrons(src, *, iso, base_iso, full_well, camera_iso=400.0, middle_grey=0.18, **_):
+    """Electrons per unit of linear value before channel sensitivity: ``full_well`` at base
+    ISO for a plate whose middle grey is 0.18, scaled by 0.18 / the plate's middle grey
+    (``middle_grey``, or 0: the frame metered as grain meters it)."""
+    gain = (iso if iso > 0 else camera_iso) / base_iso
+    grey = middle_grey if middle_grey > 0 else meter(np.asarray(src, np.float64))
+    return full_well / gain * (0.18 / grey)
+
+
 def site_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
-                 channel_sensitivity, seed, frame=0, look_seed=0, data_origin=(0, 0),
-                 camera_iso=400.0, switch=30.0):
+               channel_sensitivity, seed, frame=0, look_seed=0, data_origin=(0, 0),
+               camera_iso=400.0, switch=30.0, middle_grey=0.18):
     """Per-site sensor noise on ``src`` (h, w, 4) float64 (every pixel, every channel
     independent: mosaic "none"); ``switch`` None = normal approximation only."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
-    gain = (iso if iso > 0 else camera_iso) / base_iso
+    k_unit = electrons(src, iso=iso, base_iso=base_iso, full_well=full_well,
+                       camera_iso=camera_iso, middle_grey=middle_grey)
     s_main = effect_seed(seed, look_seed, SENSOR_SALT)
     s_prnu = effect_seed(seed, look_seed, PRNU_SALT)
     y, x = np.mgrid[0:h, 0:w]
@@ -42,7 +52,7 @@ def site_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
     y = y + data_origin[1]
     out = src.copy()
     for c in range(3):
-        k = full_well * channel_sensitivity[c] / gain
+        k = k_unit * channel_sensitivity[c]
         g = 1.0 / k
         v = np.clip(np.where(np.isfinite(src[..., c]), src[..., c], 0.0), -1e38, 1e38)
         if prnu > 0:
@@ -138,8 +148,7 @@ def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, dia
     out = noisy.copy()
     out[..., :3] = v + dev
     if chroma_noise > 0:
-        iso = kw["iso"] if kw["iso"] > 0 else kw.get("camera_iso", 400.0)
-        g = 1.0 / (kw["full_well"] * kw["channel_sensitivity"][1] / (iso / kw["base_iso"]))
+        g = 1.0 / (electrons(src, **kw) * kw["channel_sensitivity"][1])
         cell = max(chroma_size * (diagonal or np.hypot(w, h)), 1.0)
         y, x = np.mgrid[0:h, 0:w]
         seed = effect_seed(kw["seed"], kw.get("look_seed", 0), SENSOR_SALT)

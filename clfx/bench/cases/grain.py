@@ -22,8 +22,8 @@ import numpy as np
 
 from clfx.bench.cases import Case
 from clfx.core.camera import Camera
-from clfx.plugins.grain import (D_GREY, FOG, GAMMA, STOCKS, TOE, grain_amounts,
-                                grain_sigmas_px, meter)
+from clfx.fx.analysis import meter
+from clfx.plugins.grain import D_GREY, FOG, GAMMA, STOCKS, TOE, grain_amounts, grain_sigmas_px
 
 
 def make(width, height, rng):
