@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from clfx.bench import cases, cycles
-from clfx.bench.runner import _case_context, error_metrics
+from clfx.bench.cases.shared import case_context
+from clfx.bench.metrics import error_metrics
 from clfx.core.frame import crop_to
 from clfx.plugins import get_plugin
 
@@ -47,14 +48,14 @@ def _score(rt, effect, variant, quality="final"):
     case = spec.maker(variant)(cycles.WIDTH, cycles.HEIGHT, None)
     cls = get_plugin(effect)
     params = cls.params(**case.get("params", {}))
-    ctx = _case_context(rt, case, quality)
+    ctx = case_context(rt, case, quality)
     img = cls().render(rt, params, ctx)
     out = crop_to(rt.download(img), img.window, ctx.source.window)
     truth = np.asarray(case["truth"], np.float64)
     scores = {"final": error_metrics(out, truth)["psnr_log"],
               "input": error_metrics(case["source"], truth)["psnr_log"]}
     if spec.naive is not None:
-        naive = np.asarray(spec.naive.make(case, params, _case_context(rt, case, "final"))())
+        naive = np.asarray(spec.naive.make(case, params, case_context(rt, case, "final"))())
         scores["naive"] = error_metrics(naive, truth)["psnr_log"]
     for label, peer in (case.get("peer_images") or {}).items():
         scores["Blender Vector Blur"] = error_metrics(peer, truth)["psnr_log"]
@@ -107,7 +108,7 @@ def test_rotating_light_streak_follows_its_arc_on_a_cycles_render(rt):
     spec = cases.for_effect("motion_blur")
     case = spec.maker("cycles_spin")(cycles.WIDTH, cycles.HEIGHT, None)
     cls = get_plugin("motion_blur")
-    ctx = _case_context(rt, case, "final")
+    ctx = case_context(rt, case, "final")
     img = cls().render(rt, cls.params(), ctx)
     out = crop_to(rt.download(img), img.window, ctx.source.window)
     assert np.abs(_streak_offsets(out)).max() < 1.0
