@@ -225,12 +225,18 @@ class IOOptions:
     view: str | None = None
     passes_mode: str = "keep"
     as_float: bool = False
+    bit_depth: str | None = None
     compression: str | None = None
     overwrite: bool = False
     skip_existing: bool = False
     skip_missing: bool = False
     raw_size: str | None = None
     command: str | None = None
+
+    def out_bit_depth(self) -> str | None:
+        """The output beauty's bit depth: float with ``as_float``, else ``bit_depth``
+        (None: the input's type)."""
+        return "float" if self.as_float else self.bit_depth
 
 
 @dataclass(frozen=True)
@@ -261,6 +267,9 @@ class RenderOptions(IOOptions):
         keep: every other channel and part of the input written through unchanged (EXR).
     as_float : bool
         Write the EXR beauty as 32-bit float (default: the input's type).
+    bit_depth : str or None
+        The output beauty's bit depth when not ``as_float`` (``"half"``: what `clfx demo`
+        writes from its float scene); None: the input's type.
     compression : str or None
         EXR compression; None: an EXR input's, else zips (`clfx.io.write`).
     overwrite : bool
@@ -588,7 +597,7 @@ class BatchPlan:
             from clfx.io.write import OutputExistsError, write_frame
 
             try:   # not overwrite: an output published meanwhile is never replaced
-                write_frame(frame, job.output, bit_depth="float" if io.as_float else None,
+                write_frame(frame, job.output, bit_depth=io.out_bit_depth(),
                             compression=io.compression, colorspace=io.out_colorspace,
                             overwrite=io.overwrite, attributes=self.stamp(job.frame),
                             protect=[p for p in (job.input, job.depth, job.velocity) if p]
@@ -995,7 +1004,7 @@ class Batch:
                 elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
-        check_output_format(outs[0], "float" if self.options.as_float else None,
+        check_output_format(outs[0], self.options.out_bit_depth(),
                             self.options.compression)    # not after the first render
 
     # -- running ------------------------------------------------------------------------
