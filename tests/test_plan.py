@@ -126,6 +126,37 @@ def test_a_bad_lens_name_fails_at_look_load_in_one_line(tmp_path):
         {"effect": "lens", "params": {"model": "Nope 1mm"}, "enabled": False}]})
 
 
+def test_set_reads_only_the_lenses_it_names(monkeypatch):
+    """--set resolves the look's lenses again (a lens it names is checked before any frame),
+    taking those read when the look was loaded from them: each prescription is read once."""
+    from clfx.io import lenses as lens_io
+    from clfx.pipeline.presets import apply_overrides, load_look
+
+    reads, real = [], lens_io.read_lens
+    monkeypatch.setattr(lens_io, "read_lens", lambda name: reads.append(name) or real(name))
+    look = load_look("sunny-flare")
+    apply_overrides(look, ["corona.intensity=0.2"])
+    assert reads == ["zoom-80-200mm"]
+    apply_overrides(look, ["lens_flare.lens=double-gauss-50mm"])
+    assert reads == ["zoom-80-200mm", "double-gauss-50mm"]
+    assert set(look.lenses.prescriptions) == {"double-gauss-50mm"}
+
+
+def test_the_files_a_batch_protects_are_the_lenses_its_steps_read():
+    """`lens_files` lists what `Plugin.lens_refs` names (the lenses the render reads): a
+    physical flare's prescription; not an artistic flare's unused ``lens``, nor a disabled
+    step's, nor the ``lens`` effect's lensfun name (no file)."""
+    from clfx.pipeline.batch import lens_files
+    from clfx.pipeline.presets import find_lens, look_from_dict
+
+    look = look_from_dict({"name": "x", "effects": [
+        {"id": "a", "effect": "lens_flare", "params": {"lens": "zoom-80-200mm", "model": "artistic"}},
+        {"id": "p", "effect": "lens_flare", "params": {"lens": "double-gauss-50mm", "model": "physical"}},
+        {"id": "off", "effect": "lens_flare", "params": {"lens": "zoom-80-200mm", "model": "physical"},
+         "enabled": False}]})
+    assert lens_files(look) == [("p.lens", str(find_lens("double-gauss-50mm")))]
+
+
 def test_a_loaded_look_renders_from_the_lenses_it_resolved(rt, monkeypatch):
     """A render reads the prescriptions resolved at load, never a file."""
     from clfx.io import lenses as lens_io

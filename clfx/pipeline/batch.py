@@ -354,21 +354,13 @@ def look_files(look: Look) -> list[tuple[str, str]]:
             for p in s.plugin.descriptor.params if p.kind == "path" and getattr(s.params, p.name)]
 
 
-LENS_PARAMS = (("lens_flare", "lens"),)
-"""(effect, parameter) naming a lens prescription (a name or a file, `find_lens`): the file
-it resolves to is read by the render."""
-
-
 def lens_files(look: Look) -> list[tuple[str, str]]:
-    """(``effect.param``, file) of every lens prescription an enabled step reads."""
+    """(``effect.param``, file) of every lens prescription an enabled step reads (its
+    plugin's `clfx.host.Plugin.lens_refs`, the lenses `clfx.io.lenses.resolve` reads)."""
     from clfx.pipeline.presets import find_lens
 
-    out = []
-    for s in look.steps:
-        for effect, name in LENS_PARAMS:
-            if s.enabled and s.effect == effect and getattr(s.params, name, ""):
-                out.append((f"{s.id}.{name}", str(find_lens(getattr(s.params, name)))))
-    return out
+    return [(f"{s.id}.{param}", str(find_lens(value))) for s in look.steps if s.enabled
+            for param, kind, value in s.plugin.lens_refs(s.params) if kind == "prescription"]
 
 
 def _inode(path: str) -> tuple[int, int] | None:
