@@ -1038,12 +1038,6 @@ class Batch:
         self.skipped_existing += reporter.skipped
         return {**summary, "reports": reporter.reports}
 
-    def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Preparing | None:
-        """`prepare_maps` for this batch's first job (or ``jobs``' first)."""
-        look, level = resolve_quality(self.look, self.options.quality)
-        return prepare_maps(rt, look, self.jobs if jobs is None else jobs, level,
-                            self.options.keep_overscan)
-
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:
         size = self.options.raw_size
