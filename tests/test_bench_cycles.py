@@ -43,6 +43,31 @@ def test_cycles_data_is_small_and_read_as_blender_writes_it():
     assert cycles.noise_floor("spin") is not None
 
 
+def test_cycles_references_are_read_through_clfx_io_as_stored(rt):
+    """The references are read by `clfx.io.read.read_channels` (grouped into layers) and the
+    noise floor by `header_attribute`: the same numbers as OpenImageIO's own read of the
+    file, channel for channel."""
+    import OpenImageIO as oiio
+
+    from clfx.io.probe import header_attribute
+
+    _have("spin")
+    _, ref = cycles.files("spin")
+    inp = oiio.ImageInput.open(str(ref))
+    spec = inp.spec()
+    direct = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    names = list(spec.channelnames)
+    inp.close()
+    layers = cycles.read_layers(ref)
+    assert sorted(layers) == sorted({n.rpartition(".")[0] for n in names})
+    for layer, planes in layers.items():
+        idx = [i for i, n in enumerate(names) if n.rpartition(".")[0] == layer]
+        assert planes.dtype == np.float32 and np.array_equal(planes, direct[..., idx])
+    floor = spec.getattribute(cycles.FLOOR_ATTRIBUTE)
+    assert header_attribute(ref, cycles.FLOOR_ATTRIBUTE) == floor
+    assert cycles.noise_floor("spin") == float(floor)
+
+
 def _score(rt, effect, variant, quality="final"):
     spec = cases.for_effect(effect)
     case = spec.maker(variant)(cycles.WIDTH, cycles.HEIGHT, None)
