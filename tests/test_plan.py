@@ -66,6 +66,31 @@ def test_one_plan_and_one_lens_per_step_per_frame(rt, monkeypatch):
     assert all(v == len(frames) for v in radii.values()) and len(radii) <= 2
 
 
+def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, monkeypatch):
+    """The lattice level of a gather's largest radius sets the padding, the prefilter
+    pyramid's depth and the reach of the regions; the regions and the render each computed
+    it (three times a frame); now it is the step plan's, once per window and channel offset
+    (`Dof.gather_radii`).  Counted: every call but the tap tables' and the per-tile levels'."""
+    import sys
+
+    calls = []
+    real = dof_module.lattice_level
+
+    def counted(radius, lattice, dense):
+        caller = sys._getframe(1).f_code.co_name
+        if caller not in ("tap_table", "<lambda>"):
+            calls.append(caller)
+        return real(radius, lattice, dense)
+
+    monkeypatch.setattr(dof_module, "lattice_level", counted)
+    look = clfx.load_look({"name": "d", "schema": 1, "camera": {"f_number": 1.4},
+                           "effects": [{"effect": "dof", "params": {"focus_distance": 1.0}}]})
+    out, report = render_frame(rt, look, scene(), frame_number=1)
+    assert report.steps[0].ran and np.isfinite(out.rgba).all()
+    # once over the source window and once over the window dof grows to (as the radii)
+    assert set(calls) == {"gather_radii"} and len(calls) <= 2, calls
+
+
 def test_plans_are_per_step_and_per_source(rt):
     """A step's contexts share its plan (derived with `over`, `grown_to`); a new step
     (`for_step`) or another source (`with_source`) plans afresh."""
