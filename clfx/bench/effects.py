@@ -23,6 +23,10 @@ from clfx.plugins import discover
 
 @dataclass
 class EffectResult:
+    """One effect's (or case variant's) bench results: a row per quality level, the peers,
+    the baselines (naive method, unchanged input, another tool's images) and what they were
+    scored against."""
+
     effect: str
     rows: list[dict] = field(default_factory=list)
     peers: list[dict] = field(default_factory=list)

@@ -21,6 +21,7 @@ from clfx.core.frame import Frame
 
 
 def demo_frame(width: int, height: int, frame: int = 12) -> Frame:
+    """Frame ``frame`` of the demo scene, sharp with its passes: the looks' bench input."""
     from clfx.bench.scene import demo_scene, render_sharp
 
     return render_sharp(demo_scene(frame, width, height))
