@@ -79,7 +79,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     them through `clfx render`'s own pipeline (`clfx.pipeline.batch.render_stream`: read,
     render, write; half-float output stamped like a render's), so ``clfx render`` of the
     scene files with the same look renders the same frames (written as float there, the
-    input's type, unless asked otherwise).  Each preview is the output as written."""
+    input's type).  Each preview is the output as written."""
     from clfx.core.errors import ImageIOError
     from clfx.io.write import write_frame
     from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
