@@ -747,7 +747,9 @@ def _bench_looks(ctx, param, value):
 def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path, md_path):
     """What accuracy costs in time: every effect at every quality level against its reference
     (with OpenCV/SciPy peers), whole looks, sequence throughput, and scene-analysis skipping."""
-    from clfx.bench.runner import markdown, pareto_plot, run_bench
+    from clfx.bench.plots import pareto_plot
+    from clfx.bench.report import markdown
+    from clfx.bench.runner import run_bench
 
     w, h = _parse_size(size)
     look_list = None if looks is None else ([] if looks == "none" else looks.split(","))

@@ -2,7 +2,8 @@
 
 For each frame the layered HDR scene of :func:`clfx.bench.scene.demo_scene` (bright lights,
 textured surfaces at several depths, moving objects) is rendered sharp with exact depth and
-velocity passes, then through the look.  Written to OUTDIR:
+velocity passes and written; the look then runs over those files through ``clfx render``'s
+own pipeline.  Written to OUTDIR:
 
 - ``scene.####.exr``  the sharp input with its ``Z`` and ``forward.u/v`` passes (feed it to
   ``clfx render`` to try other looks);
@@ -22,7 +23,6 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from clfx.core.frame import Frame
-from clfx.pipeline.look import RunStats, render_frame
 
 PREVIEW_EXPOSURE = 1.0
 
@@ -73,11 +73,17 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
              look_name: str = "default", quality: str | None = None, overwrite: bool = False,
              explain: bool = False, as_json: bool = False, verbosity: int = 1) -> dict:
     """Render the demo scene into ``outdir``.  Without ``overwrite``, files of an earlier
-    demo there are an error before anything is rendered (like ``clfx render``)."""
+    demo there are an error before anything is rendered (like ``clfx render``).
+
+    The scene's frames are written first (``scene.####.exr``, float); the look then runs over
+    them through `clfx render`'s own pipeline (`clfx.pipeline.batch.render_stream`: read,
+    render, write; half-float output stamped like a render's), so ``clfx render`` of the
+    scene files with the same look renders the same frames (written as float there, the
+    input's type).  Each preview is the output as written."""
     from clfx.core.errors import ImageIOError
     from clfx.io.write import write_frame
+    from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
     from clfx.pipeline.presets import load_look
-    from clfx.bench.scene import demo_scene, render_sharp
 
     look = load_look(look_name)
     if not overwrite:
@@ -88,42 +94,31 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
                                f"demo in {outdir}, or another folder")
     os.makedirs(outdir, exist_ok=True)
     t0 = time.perf_counter()
-    previews, reports = [], []
-    stats = RunStats()
-
-    def write_all(frame_no, sharp, out, preview):
-        base = os.path.join(outdir, f"%s.{frame_no:04d}.%s")
-        write_frame(sharp, base % ("scene", "exr"), overwrite=overwrite, bit_depth="float")
-        write_frame(out, base % ("demo", "exr"), overwrite=overwrite,
-                    attributes=look.stamp(frame_no))
-        write_frame(Frame.from_array(preview), base % ("demo", "png"), overwrite=overwrite)
-
-    def preview_of(out):
-        from clfx.core.frame import crop_to
-
-        rgba = crop_to(out.rgba, out.data_window, out.display_window)
-        return tonemap_preview(rgba)
-
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-demo") as pool:
-        writes = []
-        for i in range(count):
-            frame_no = i + 1
-            sharp = render_sharp(demo_scene(frame_no, width, height))
-            sharp.source = f"demo scene frame {frame_no}"
-            out, report = render_frame(rt, look, sharp, frame_number=frame_no, quality=quality,
-                                       analysis_summary=as_json, stats=stats)
-            report.output = os.path.join(outdir, f"demo.{frame_no:04d}.exr")
-            reports.append(report)
-            previews.append(preview_of(out))
-            writes.append(pool.submit(write_all, frame_no, sharp, out, previews[-1]))
-            if explain:
-                print(report.explain(), file=sys.stderr)
-            if as_json:
-                print(json.dumps(report.as_dict()), flush=True)
-            elif verbosity > 0 and sys.stderr.isatty():
-                print(f"\rclfx demo: frame {frame_no}/{count}", end="", file=sys.stderr, flush=True)
-        for f in writes:
-            f.result()
+        list(pool.map(lambda n: write_scene(outdir, n, width, height, overwrite), range(1, count + 1)))
+    batch = Batch(look=look, input_path=os.path.join(outdir, "scene.####.exr"),
+                  output_path=os.path.join(outdir, "demo.####.exr"),
+                  options=RenderOptions(frames=f"1-{count}", quality=quality, bit_depth="half",
+                                        overwrite=overwrite, as_json=as_json),
+                  verbosity=0)
+    batch.prepare()
+    previews, reports = [], []
+
+    def frame_done(result):
+        report = result.report
+        reports.append(report)
+        previews.append(preview_of(result.output))
+        write_frame(Frame.from_array(previews[-1]), os.path.splitext(result.output)[0] + ".png",
+                    overwrite=overwrite)
+        if explain:
+            print(report.explain(), file=sys.stderr)
+        if as_json:
+            print(json.dumps(report.as_dict()), flush=True)
+        elif verbosity > 0 and sys.stderr.isatty():
+            print(f"\rclfx demo: frame {result.frame}/{count}", end="", file=sys.stderr, flush=True)
+
+    with io_threads(codec_threads_for(rt)):
+        render_stream(rt, batch.plan, batch.jobs, frame_done, stats=batch.stats)
     if verbosity > 0 and sys.stderr.isatty() and not as_json:
         print("", file=sys.stderr)
     sheet_path = os.path.join(outdir, "contact_sheet.png")
@@ -140,3 +135,24 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
               file=sys.stderr)
         print(f"clfx demo: contact sheet {sheet_path}", file=sys.stderr)
     return summary
+
+
+def write_scene(outdir: str, frame_no: int, width: int, height: int, overwrite: bool) -> str:
+    """Frame ``frame_no`` of the demo scene, sharp with its depth and velocity passes, as
+    ``scene.####.exr`` (float) in ``outdir``; its path."""
+    from clfx.bench.scene import demo_scene, render_sharp
+    from clfx.io.write import write_frame
+
+    path = os.path.join(outdir, f"scene.{frame_no:04d}.exr")
+    write_frame(render_sharp(demo_scene(frame_no, width, height)), path, overwrite=overwrite,
+                bit_depth="float")
+    return path
+
+
+def preview_of(path: str) -> np.ndarray:
+    """The tone-mapped preview (`tonemap_preview`) of an output file's display window."""
+    from clfx.core.frame import crop_to
+    from clfx.io.read import read_frame
+
+    out = read_frame(path)
+    return tonemap_preview(crop_to(out.rgba, out.data_window, out.display_window))

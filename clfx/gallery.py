@@ -353,7 +353,12 @@ def _runnable(look, frame: Frame):
 def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | None = None,
                 only=None, columns: int = 6, thumb_width: int = 320,
                 verbosity: int = 1) -> dict:
-    """Render the gallery into ``outdir``; returns the index written to ``index.json``."""
+    """Render the gallery into ``outdir``; returns the index written to ``index.json``.
+
+    Not a read/render/write loop (`clfx.pipeline.batch.render_stream` is the one): each
+    input is read once and resized in memory, every look renders that frame in memory, and
+    what is written is a labelled, tone-mapped sRGB tile about the render, never a rendered
+    frame."""
     from clfx.core.frame import crop_to
     from clfx.io.write import write_frame
 

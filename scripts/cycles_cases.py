@@ -3,8 +3,8 @@
     PYTHONPATH=$PWD python scripts/cycles_cases.py [--effects motion_blur,camera_blur,rolling_shutter]
         [--cases spin,truck] [--repeat 1]
 
-Runs ``clfx bench``'s own measurement (:func:`clfx.bench.runner.bench_effect`) on every
-``cycles_*`` variant of the effects and prints :func:`clfx.bench.runner.truth_markdown`:
+Runs ``clfx bench``'s own measurement (:func:`clfx.bench.effects.bench_effect`) on every
+``cycles_*`` variant of the effects and prints :func:`clfx.bench.report.truth_markdown`:
 log-PSNR (dB) of the input, the naive method, Blender's Vector Blur, each level, and the
 truth's noise floor.  ``clfx bench --effects ... --looks none --sequence-frames 0`` prints
 the same table after its others.
@@ -14,7 +14,8 @@ from __future__ import annotations
 import argparse
 
 from clfx.bench import cases
-from clfx.bench.runner import bench_effect, truth_markdown
+from clfx.bench.effects import bench_effect
+from clfx.bench.report import truth_markdown
 from clfx.device.runtime import Runtime
 
 

@@ -5,7 +5,7 @@
 
 Prints, per case, the log-PSNR (dB) and edge-band RMSE of every quality level, the case
 module's naive baseline and the unchanged input against the multisample truth
-(clfx.bench.runner.error_metrics; edge band: clfx.bench.metrics.edge_band, 4 px).
+(clfx.bench.metrics.error_metrics; edge band: clfx.bench.metrics.edge_band, 4 px).
 """
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ import time
 import numpy as np
 
 from clfx.bench.metrics import edge_band
-from clfx.bench.runner import EDGE_BAND_PX, _case_context, error_metrics
+from clfx.bench.cases.shared import case_context
+from clfx.bench.metrics import EDGE_BAND_PX, error_metrics
 from clfx.core.frame import crop_to
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.device.runtime import Runtime
@@ -50,11 +51,11 @@ def main():
         params = cls.params(**case.get("params", {}))
         outs = {}
         for q in QUALITY_LEVELS:
-            ctx = _case_context(rt, case, q)
+            ctx = case_context(rt, case, q)
             reason = cls().is_identity(params, ctx)
             img = ctx.source if reason else cls().render(rt, params, ctx)
             outs[q] = crop_to(rt.download(img), img.window, ctx.source.window)
-        ctx = _case_context(rt, case, "final")
+        ctx = case_context(rt, case, "final")
         outs["naive"] = mod.naive(case, params, ctx)
         outs["input"] = case["source"]
         cells = []

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from clfx.bench.runner import (SHORT_RUNS, EffectResult, _flag_levels, _timed_pair,
-                               analysis_frames, bench_effect, error_metrics, losing_levels,
-                               markdown, summary_markdown)
+from clfx.bench.effects import EffectResult, _flag_levels, bench_effect
+from clfx.bench.looks import analysis_frames
+from clfx.bench.metrics import error_metrics
+from clfx.bench.report import losing_levels, markdown, summary_markdown
+from clfx.bench.timing import SHORT_RUNS, timed_pair
 from clfx.cli import cli
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins import discover
@@ -119,7 +121,7 @@ def test_a_peer_and_its_level_are_timed_run_for_run():
     before), so drift on a shared machine reaches both and every run follows one of the
     other; short operations get SHORT_RUNS each."""
     calls = []
-    out, peer, level = _timed_pair(lambda: calls.append("peer") or "P",
+    out, peer, level = timed_pair(lambda: calls.append("peer") or "P",
                                    lambda: calls.append("level"), repeat=3)
     assert out == "P" and len(peer) == len(level) == SHORT_RUNS
     assert calls[-2 * SHORT_RUNS:] == ["peer", "level"] * SHORT_RUNS
@@ -129,7 +131,7 @@ def test_a_peer_and_its_level_are_timed_run_for_run():
 
 def test_peer_rows_time_the_level_beside_the_peer(rt, monkeypatch):
     """Each peer is paired with the run of the level it names (the run's context says which)."""
-    import clfx.bench.runner as runner
+    import clfx.bench.effects as effects
 
     paired = []
 
@@ -137,8 +139,8 @@ def test_peer_rows_time_the_level_beside_the_peer(rt, monkeypatch):
         paired.append(other.__defaults__[0].quality)     # run(ctx=..., reason=...)
         return real(fn, other, repeat)
 
-    real = runner._timed_pair
-    monkeypatch.setattr(runner, "_timed_pair", spy)
+    real = effects.timed_pair
+    monkeypatch.setattr(effects, "timed_pair", spy)
     res = bench_effect(rt, "distortion", 96, 54, repeat=1)
     rows = {p["peer"]: p for p in res.peers}
     assert {"cv2.remap bilinear", "cv2.remap cubic", "cv2.remap lanczos4"} <= set(rows)
@@ -168,7 +170,7 @@ def _grain_levels(rt, width, height, size):
     """The grain bench case at ``width`` x ``height`` with grain ``size`` (px at 2K), and
     each level's output over its window."""
     from clfx.bench.cases.grain import make
-    from clfx.bench.runner import _case_context
+    from clfx.bench.cases.shared import case_context
     from clfx.core.frame import crop_to
 
     case = make(width, height, np.random.default_rng(1))
@@ -177,7 +179,7 @@ def _grain_levels(rt, width, height, size):
     plugin, p = cls(), cls.params(**case["params"])
     outs = {}
     for q in QUALITY_LEVELS:
-        ctx = _case_context(rt, case, q)
+        ctx = case_context(rt, case, q)
         img = plugin.render(rt, p, ctx)
         outs[q] = crop_to(rt.download(img), img.window, ctx.source.window)
     return case, outs
@@ -211,7 +213,36 @@ def test_grain_bench_scores_the_input_by_the_same_statistics(rt):
     assert inp["rel_rmse"] == pytest.approx(1.0) and "std_rel_err" in inp
     assert all(r["beats_input"] is True and "acf_err" in r for r in res.rows), res.rows
     assert losing_levels(res.as_dict()) == []
-    from clfx.bench.runner import markdown
     text = markdown({"size": (96, 64), "repeat": 1, "device": "test",
                      "effects": [res.as_dict()]})
     assert "- grain: Score a grain output by its statistics" in text   # the table says so
+
+
+def test_case_modules_import_only_the_shared_helpers():
+    """A case module imports the case protocol, the shared helpers (`clfx.bench.cases.shared`,
+    ``metrics``, ``cache``, ``scene``, ``groundtruth``, ``cycles``) and the library, never the
+    bench's drivers (``runner``, ``effects``, ``looks``) nor another case module."""
+    import ast
+    from pathlib import Path
+
+    from clfx.bench import cases
+
+    drivers = {"clfx.bench.runner", "clfx.bench.effects", "clfx.bench.looks",
+               "clfx.bench.report", "clfx.bench.plots", "clfx.bench.timing"}
+    folder = Path(cases.__file__).parent
+    effects = {p.stem for p in folder.glob("*.py")} - {"__init__", "shared"}
+    bad = []
+    for path in sorted(folder.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            for name in names:
+                if name in drivers or (name.startswith("clfx.bench.cases.")
+                                       and name.split(".")[3] in effects):
+                    bad.append(f"{path.name}:{node.lineno} imports {name}")
+    assert not bad, bad
+    assert {"distortion", "motion_blur", "dof"} <= effects   # the check sees the modules

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from clfx.bench import cases, cycles
-from clfx.bench.runner import _case_context, error_metrics
+from clfx.bench.cases.shared import case_context
+from clfx.bench.metrics import error_metrics
 from clfx.core.frame import crop_to
 from clfx.plugins import get_plugin
 
@@ -42,19 +43,44 @@ def test_cycles_data_is_small_and_read_as_blender_writes_it():
     assert cycles.noise_floor("spin") is not None
 
 
+def test_cycles_references_are_read_through_clfx_io_as_stored(rt):
+    """The references are read by `clfx.io.read.read_channels` (grouped into layers) and the
+    noise floor by `header_attribute`: the same numbers as OpenImageIO's own read of the
+    file, channel for channel."""
+    import OpenImageIO as oiio
+
+    from clfx.io.probe import header_attribute
+
+    _have("spin")
+    _, ref = cycles.files("spin")
+    inp = oiio.ImageInput.open(str(ref))
+    spec = inp.spec()
+    direct = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    names = list(spec.channelnames)
+    inp.close()
+    layers = cycles.read_layers(ref)
+    assert sorted(layers) == sorted({n.rpartition(".")[0] for n in names})
+    for layer, planes in layers.items():
+        idx = [i for i, n in enumerate(names) if n.rpartition(".")[0] == layer]
+        assert planes.dtype == np.float32 and np.array_equal(planes, direct[..., idx])
+    floor = spec.getattribute(cycles.FLOOR_ATTRIBUTE)
+    assert header_attribute(ref, cycles.FLOOR_ATTRIBUTE) == floor
+    assert cycles.noise_floor("spin") == float(floor)
+
+
 def _score(rt, effect, variant, quality="final"):
     spec = cases.for_effect(effect)
     case = spec.maker(variant)(cycles.WIDTH, cycles.HEIGHT, None)
     cls = get_plugin(effect)
     params = cls.params(**case.get("params", {}))
-    ctx = _case_context(rt, case, quality)
+    ctx = case_context(rt, case, quality)
     img = cls().render(rt, params, ctx)
     out = crop_to(rt.download(img), img.window, ctx.source.window)
     truth = np.asarray(case["truth"], np.float64)
     scores = {"final": error_metrics(out, truth)["psnr_log"],
               "input": error_metrics(case["source"], truth)["psnr_log"]}
     if spec.naive is not None:
-        naive = np.asarray(spec.naive.make(case, params, _case_context(rt, case, "final"))())
+        naive = np.asarray(spec.naive.make(case, params, case_context(rt, case, "final"))())
         scores["naive"] = error_metrics(naive, truth)["psnr_log"]
     for label, peer in (case.get("peer_images") or {}).items():
         scores["Blender Vector Blur"] = error_metrics(peer, truth)["psnr_log"]
@@ -107,7 +133,7 @@ def test_rotating_light_streak_follows_its_arc_on_a_cycles_render(rt):
     spec = cases.for_effect("motion_blur")
     case = spec.maker("cycles_spin")(cycles.WIDTH, cycles.HEIGHT, None)
     cls = get_plugin("motion_blur")
-    ctx = _case_context(rt, case, "final")
+    ctx = case_context(rt, case, "final")
     img = cls().render(rt, cls.params(), ctx)
     out = crop_to(rt.download(img), img.window, ctx.source.window)
     assert np.abs(_streak_offsets(out)).max() < 1.0

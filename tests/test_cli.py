@@ -263,6 +263,10 @@ def test_demo_writes_frames_previews_and_contact_sheet(rt, tmp_path):
 
     scene = read_frame(tmp_path / "demo" / "scene.0002.exr")
     assert scene.depth is not None and scene.velocity is not None
+    # the look ran over the float scene files (render_stream) and wrote half, as before
+    out = read_frame(tmp_path / "demo" / "demo.0002.exr")
+    assert scene.bit_depth == "float" and out.bit_depth == "half"
+    assert out.metadata.get("clfx:quality") == "final"     # stamped like `clfx render`
 
 
 def test_radial_depth_uses_the_look_camera_focal_length(rt, tmp_path):

@@ -152,23 +152,23 @@ def test_a_refused_frame_costs_no_memory_in_a_fresh_process(tmp_path):
 
 
 def test_maps_are_prepared_only_for_frames_that_will_render_and_fit(rt, tmp_path, monkeypatch):
-    """`Batch._prepare_look` starts nothing for a frame the reader will refuse nor for one
+    """`prepare_maps` (what `render_stream` starts for its first job) starts nothing for a frame the reader will refuse nor for one
     above `PREPARE_MAX_PIXELS` (at 8K the maps sat beside the first steps: 3794 MiB, budget
     3390); for a small frame it starts, and closing it with ``cancel`` stops it."""
     from clfx.pipeline import look as look_mod
-    from clfx.pipeline.batch import Batch, Job
+    from clfx.pipeline.batch import Job, prepare_maps, resolve_quality
     from clfx.pipeline.presets import load_look
 
     prepared = []
     monkeypatch.setattr(look_mod, "prepare", lambda *a, **k: prepared.append(k["cancel"]))
-    batch = Batch(look=load_look("cinema"), input_path="in.exr", output_path="out.exr")
+    look, level = resolve_quality(load_look("cinema"), None)
     side = int((limits.PREPARE_MAX_PIXELS) ** 0.5) + 1
     for name, w in (("refused", 60000), ("large", side)):
         job = Job(1, str(tiny_exr(tmp_path / f"{name}.exr", w, w)), str(tmp_path / "o.exr"))
-        assert batch._prepare_look(rt, [job]) is None
+        assert prepare_maps(rt, look, [job], level) is None
     assert prepared == []
     job = Job(1, str(tiny_exr(tmp_path / "small.exr", 64, 48)), str(tmp_path / "o.exr"))
-    handle = batch._prepare_look(rt, [job])
+    handle = prepare_maps(rt, look, [job], level)
     handle.close(cancel=True)
     assert len(prepared) == 1 and prepared[0] is handle.cancelled and handle.cancelled.is_set()
 

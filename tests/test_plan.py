@@ -66,6 +66,31 @@ def test_one_plan_and_one_lens_per_step_per_frame(rt, monkeypatch):
     assert all(v == len(frames) for v in radii.values()) and len(radii) <= 2
 
 
+def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, monkeypatch):
+    """The lattice level of a gather's largest radius sets the padding, the prefilter
+    pyramid's depth and the reach of the regions; the regions and the render each computed
+    it (three times a frame); now it is the step plan's, once per window and channel offset
+    (`Dof.gather_radii`).  Counted: every call but the tap tables' and the per-tile levels'."""
+    import sys
+
+    calls = []
+    real = dof_module.lattice_level
+
+    def counted(radius, lattice, dense):
+        caller = sys._getframe(1).f_code.co_name
+        if caller not in ("tap_table", "<lambda>"):
+            calls.append(caller)
+        return real(radius, lattice, dense)
+
+    monkeypatch.setattr(dof_module, "lattice_level", counted)
+    look = clfx.load_look({"name": "d", "schema": 1, "camera": {"f_number": 1.4},
+                           "effects": [{"effect": "dof", "params": {"focus_distance": 1.0}}]})
+    out, report = render_frame(rt, look, scene(), frame_number=1)
+    assert report.steps[0].ran and np.isfinite(out.rgba).all()
+    # once over the source window and once over the window dof grows to (as the radii)
+    assert set(calls) == {"gather_radii"} and len(calls) <= 2, calls
+
+
 def test_plans_are_per_step_and_per_source(rt):
     """A step's contexts share its plan (derived with `over`, `grown_to`); a new step
     (`for_step`) or another source (`with_source`) plans afresh."""
@@ -124,6 +149,37 @@ def test_a_bad_lens_name_fails_at_look_load_in_one_line(tmp_path):
     look_from_dict({"name": "x", "effects": [
         {"effect": "lens_flare", "params": {"lens": "nope", "model": "artistic"}},
         {"effect": "lens", "params": {"model": "Nope 1mm"}, "enabled": False}]})
+
+
+def test_set_reads_only_the_lenses_it_names(monkeypatch):
+    """--set resolves the look's lenses again (a lens it names is checked before any frame),
+    taking those read when the look was loaded from them: each prescription is read once."""
+    from clfx.io import lenses as lens_io
+    from clfx.pipeline.presets import apply_overrides, load_look
+
+    reads, real = [], lens_io.read_lens
+    monkeypatch.setattr(lens_io, "read_lens", lambda name: reads.append(name) or real(name))
+    look = load_look("sunny-flare")
+    apply_overrides(look, ["corona.intensity=0.2"])
+    assert reads == ["zoom-80-200mm"]
+    apply_overrides(look, ["lens_flare.lens=double-gauss-50mm"])
+    assert reads == ["zoom-80-200mm", "double-gauss-50mm"]
+    assert set(look.lenses.prescriptions) == {"double-gauss-50mm"}
+
+
+def test_the_files_a_batch_protects_are_the_lenses_its_steps_read():
+    """`lens_files` lists what `Plugin.lens_refs` names (the lenses the render reads): a
+    physical flare's prescription; not an artistic flare's unused ``lens``, nor a disabled
+    step's, nor the ``lens`` effect's lensfun name (no file)."""
+    from clfx.pipeline.batch import lens_files
+    from clfx.pipeline.presets import find_lens, look_from_dict
+
+    look = look_from_dict({"name": "x", "effects": [
+        {"id": "a", "effect": "lens_flare", "params": {"lens": "zoom-80-200mm", "model": "artistic"}},
+        {"id": "p", "effect": "lens_flare", "params": {"lens": "double-gauss-50mm", "model": "physical"}},
+        {"id": "off", "effect": "lens_flare", "params": {"lens": "zoom-80-200mm", "model": "physical"},
+         "enabled": False}]})
+    assert lens_files(look) == [("p.lens", str(find_lens("double-gauss-50mm")))]
 
 
 def test_a_loaded_look_renders_from_the_lenses_it_resolved(rt, monkeypatch):

@@ -2,9 +2,11 @@
 and then the write beside the next read (on a GPU, I/O overlapping the render), geometry-only
 caches prepared before the first frame, the EXR compression default; none of it changes a
 pixel."""
+import ast
 import os
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
@@ -267,3 +269,78 @@ def test_a_frame_over_4k_keeps_no_channels_for_the_writer(tmp_path, rng, monkeyp
     assert fr.layout.stored == {} and len(reads) == 1   # beauty and passes still in one read
     write_frame(fr, tmp_path / "file.exr")
     assert (tmp_path / "kept.exr").read_bytes() == (tmp_path / "file.exr").read_bytes()
+
+
+# -- render_stream is the one loop -----------------------------------------------------------
+RENDERS = {"render_frame", "plan.render"}
+WRITES = {"write_frame", "write_raw", "plan.write"}
+ONE_LOOP_EXCEPTIONS = {
+    "clfx/gallery.py:run_gallery":
+        "renders each look on an input resized in memory and writes labelled, tone-mapped "
+        "sRGB tiles about the render, never a rendered frame",
+    "clfx/bench/looks.py:bench_sequence":
+        "times BatchPlan.read, render_frame and BatchPlan.write each alone (n runs of each) "
+        "beside the stream it measures, which is Batch.run's render_stream",
+}
+"""Functions outside `clfx.pipeline` that both render and write, and why that is no
+read/render/write loop of their own."""
+
+
+def _call_name(node) -> str | None:
+    f = node.func
+    if isinstance(f, ast.Name):
+        return f.id
+    if isinstance(f, ast.Attribute):   # x.plan.write / plan.write -> plan.write
+        owner = f.value.attr if isinstance(f.value, ast.Attribute) else getattr(f.value, "id", "")
+        return f"{owner}.{f.attr}"
+    return None
+
+
+def render_write_functions(root) -> dict[str, set]:
+    """``{"path:function": calls}`` of the top-level functions and methods (nested functions
+    and lambdas included) of the modules under ``root`` outside ``clfx/pipeline`` and
+    ``clfx/io`` that call a renderer (`RENDERS`) and a frame writer (`WRITES`)."""
+    found = {}
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root.parent).as_posix()
+        if rel.startswith(("clfx/pipeline/", "clfx/io/")):
+            continue
+        tree = ast.parse(path.read_text())
+        tops = [n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+        tops += [m for c in tree.body if isinstance(c, ast.ClassDef) for m in c.body
+                 if isinstance(m, (ast.FunctionDef, ast.AsyncFunctionDef))]
+        for fn in tops:
+            calls = {_call_name(n) for n in ast.walk(fn) if isinstance(n, ast.Call)}
+            if calls & RENDERS and calls & WRITES:
+                found[f"{rel}:{fn.name}"] = calls & (RENDERS | WRITES)
+    return found
+
+
+def test_no_module_outside_the_pipeline_runs_a_read_render_write_loop():
+    """`clfx.pipeline.batch.render_stream` is the one loop that reads (or is handed), renders
+    and writes frames: a local render, a Dask worker, a raw pipe and `clfx demo` all run it.
+    A function elsewhere that calls a renderer and a frame writer is one loop too many,
+    unless it is one of the listed exceptions (each says why it is not such a loop)."""
+    import clfx
+
+    root = Path(clfx.__file__).resolve().parent
+    found = render_write_functions(root)
+    extra = sorted(set(found) - set(ONE_LOOP_EXCEPTIONS))
+    assert not extra, f"read/render/write outside render_stream: {[(k, found[k]) for k in extra]}"
+    assert set(ONE_LOOP_EXCEPTIONS) <= set(found), "an exception no longer renders and writes: drop it"
+
+
+def test_the_one_loop_check_sees_a_render_and_write_loop(tmp_path):
+    """The check above finds a loop like the one `clfx demo` had before it ran render_stream
+    (render_frame on each generated frame, then write_frame of the output)."""
+    pkg = tmp_path / "clfx"
+    pkg.mkdir()
+    (pkg / "demo.py").write_text(
+        "def run(rt, look, frames, out):\n"
+        "    for i, f in enumerate(frames):\n"
+        "        img, report = render_frame(rt, look, f)\n"
+        "        pool.submit(lambda: write_frame(img, out % i))\n")
+    (pkg / "pipeline").mkdir()
+    (pkg / "pipeline" / "batch.py").write_text(
+        "def render_stream(plan, job):\n    plan.write(plan.render(plan.read(job)), job)\n")
+    assert set(render_write_functions(pkg)) == {"clfx/demo.py:run"}

@@ -14,6 +14,10 @@ import math
 
 import numpy as np
 
+EDGE_BAND_PX = 4.0
+"""Pixels within this distance of a depth or velocity discontinuity form the bench's edge
+band (`edge_band`'s ``radius_px`` wherever a case or a level is scored)."""
+
 
 def _edges(values: np.ndarray, is_jump) -> np.ndarray:
     """Both pixels of every 4-neighbour pair (along rows and columns) where
@@ -78,7 +82,7 @@ def dilate(mask: np.ndarray, radius_px: float) -> np.ndarray:
     return out
 
 
-def edge_band(depth, velocity=None, radius_px: float = 4.0, *, rel_tol: float = 0.02,
+def edge_band(depth, velocity=None, radius_px: float = EDGE_BAND_PX, *, rel_tol: float = 0.02,
               tol_px: float = 0.5) -> np.ndarray:
     """Boolean mask of the pixels within ``radius_px`` of a depth or velocity discontinuity.
 
@@ -134,7 +138,7 @@ def psnr_log(a, reference, mask=None) -> float:
     return 20.0 * math.log10(max(peak, 1e-12) / e)
 
 
-def compare(result, truth, depth=None, velocity=None, radius_px: float = 4.0) -> dict:
+def compare(result, truth, depth=None, velocity=None, radius_px: float = EDGE_BAND_PX) -> dict:
     """Overall and edge-band RMSE, max error and log-PSNR of ``result`` against ``truth``."""
     band = edge_band(depth, velocity, radius_px) if (depth is not None or velocity is not None) else None
     d = {"rmse": rmse(result, truth), "max_err": max_err(result, truth),
@@ -143,3 +147,31 @@ def compare(result, truth, depth=None, velocity=None, radius_px: float = 4.0) ->
         d.update(edge_rmse=rmse(result, truth, band), edge_max_err=max_err(result, truth, band),
                  edge_psnr_log=psnr_log(result, truth, band), edge_fraction=float(band.mean()))
     return d
+
+
+# -- the bench's scores of a level, a baseline or a peer ------------------------------------
+def _rgb(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, np.float64)
+    return a[..., :3] if a.ndim == 3 else a
+
+
+def error_metrics(out: np.ndarray, ref: np.ndarray, edge: np.ndarray | None = None) -> dict:
+    """RMSE / max in linear light, relative RMSE, RMSE and PSNR after log(1 + x) (what an
+    eye sees of HDR errors: linear RMSE is dominated by the brightest pixels), edge-band RMSE."""
+    o, r = _rgb(out), _rgb(ref)
+    finite = np.isfinite(r)
+    o = np.where(finite, np.nan_to_num(o, nan=1e30, posinf=1e30, neginf=-1e30), 0.0)
+    r = np.where(finite, r, 0.0)
+    diff = o - r
+    rmse = float(np.sqrt(np.mean(diff ** 2))) if diff.size else 0.0
+    rms_ref = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+    lo, lr = np.log1p(np.maximum(o, 0)), np.log1p(np.maximum(r, 0))
+    peak = max(float(lr.max()) if lr.size else 0.0, 1e-12)
+    mse_log = float(np.mean((lo - lr) ** 2)) if lo.size else 0.0
+    psnr = float("inf") if mse_log == 0 else 10 * math.log10(peak ** 2 / mse_log)
+    m = {"rmse": rmse, "max_err": float(np.abs(diff).max()) if diff.size else 0.0,
+         "rel_rmse": rmse / rms_ref if rms_ref > 0 else rmse, "psnr_log": psnr,
+         "log_rmse": math.sqrt(mse_log)}
+    if edge is not None and edge.any():
+        m["edge_rmse"] = float(np.sqrt(np.mean(diff[edge] ** 2)))
+    return m

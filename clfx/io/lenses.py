@@ -72,13 +72,16 @@ class Lenses:
                               f"(clfx.io.lenses.resolve)") from None
 
 
-def resolve(steps, read=None) -> Lenses:
+def resolve(steps, read=None, known: Lenses | None = None) -> Lenses:
     """Read and validate every lens the enabled ``steps`` name (`Plugin.lens_refs`):
     prescriptions are read (``read``: default :func:`read_lens`) and parsed by the optics,
-    lensfun names looked up.  Raises a ClfxError of one line naming ``STEP.PARAM``."""
+    lensfun names looked up.  Prescriptions in ``known`` (what the look resolved when it was
+    loaded, before ``--set``) are taken from it, not read and checked again.  Raises a
+    ClfxError of one line naming ``STEP.PARAM``."""
     from clfx.fx import optics   # the prescription's own validation
 
     read = read or read_lens
+    done = known.prescriptions if known is not None else {}
     found: dict[str, dict] = {}
     for step in steps:
         if not step.enabled:
@@ -87,7 +90,9 @@ def resolve(steps, read=None) -> Lenses:
             where = f"{step.id}.{param}"
             try:
                 if kind == "prescription":
-                    if value not in found:
+                    if value in done:
+                        found[value] = done[value]
+                    elif value not in found:
                         data = read(value)
                         optics.Prescription.from_dict(data, value)
                         found[value] = data

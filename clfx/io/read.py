@@ -771,6 +771,17 @@ def beauty_geometry(path, check: bool = False) -> tuple[Rect, Rect, float]:
     return part.data_window, part.display_window, part.pixel_aspect
 
 
+def read_channels(path) -> dict[str, np.ndarray]:
+    """Every channel of every part of ``path`` by its name, as float32 (h, w) arrays over its
+    part's data window, as stored (no beauty, passes or colour conventions: a data file, e.g.
+    the bench's Blender renders; a later part's channel replaces an earlier one's of the same
+    name)."""
+    out: dict[str, np.ndarray] = {}
+    for part in _scan(path).parts:
+        out.update(_read_channels(path, part, part.channels))
+    return out
+
+
 def read_views(path, *, view: str | None = None, all_views: bool = True, **kw) -> list[Frame]:
     """The frames of every view of a multi-view file (hero first), or of ``view`` only.
 

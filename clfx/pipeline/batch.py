@@ -225,12 +225,18 @@ class IOOptions:
     view: str | None = None
     passes_mode: str = "keep"
     as_float: bool = False
+    bit_depth: str | None = None
     compression: str | None = None
     overwrite: bool = False
     skip_existing: bool = False
     skip_missing: bool = False
     raw_size: str | None = None
     command: str | None = None
+
+    def out_bit_depth(self) -> str | None:
+        """The output beauty's bit depth: float with ``as_float``, else ``bit_depth``
+        (None: the input's type)."""
+        return "float" if self.as_float else self.bit_depth
 
 
 @dataclass(frozen=True)
@@ -261,6 +267,9 @@ class RenderOptions(IOOptions):
         keep: every other channel and part of the input written through unchanged (EXR).
     as_float : bool
         Write the EXR beauty as 32-bit float (default: the input's type).
+    bit_depth : str or None
+        The output beauty's bit depth when not ``as_float`` (``"half"``: what `clfx demo`
+        writes from its float scene); None: the input's type.
     compression : str or None
         EXR compression; None: an EXR input's, else zips (`clfx.io.write`).
     overwrite : bool
@@ -345,21 +354,13 @@ def look_files(look: Look) -> list[tuple[str, str]]:
             for p in s.plugin.descriptor.params if p.kind == "path" and getattr(s.params, p.name)]
 
 
-LENS_PARAMS = (("lens_flare", "lens"),)
-"""(effect, parameter) naming a lens prescription (a name or a file, `find_lens`): the file
-it resolves to is read by the render."""
-
-
 def lens_files(look: Look) -> list[tuple[str, str]]:
-    """(``effect.param``, file) of every lens prescription an enabled step reads."""
+    """(``effect.param``, file) of every lens prescription an enabled step reads (its
+    plugin's `clfx.host.Plugin.lens_refs`, the lenses `clfx.io.lenses.resolve` reads)."""
     from clfx.pipeline.presets import find_lens
 
-    out = []
-    for s in look.steps:
-        for effect, name in LENS_PARAMS:
-            if s.enabled and s.effect == effect and getattr(s.params, name, ""):
-                out.append((f"{s.id}.{name}", str(find_lens(getattr(s.params, name)))))
-    return out
+    return [(f"{s.id}.{param}", str(find_lens(value))) for s in look.steps if s.enabled
+            for param, kind, value in s.plugin.lens_refs(s.params) if kind == "prescription"]
 
 
 def _inode(path: str) -> tuple[int, int] | None:
@@ -588,7 +589,7 @@ class BatchPlan:
             from clfx.io.write import OutputExistsError, write_frame
 
             try:   # not overwrite: an output published meanwhile is never replaced
-                write_frame(frame, job.output, bit_depth="float" if io.as_float else None,
+                write_frame(frame, job.output, bit_depth=io.out_bit_depth(),
                             compression=io.compression, colorspace=io.out_colorspace,
                             overwrite=io.overwrite, attributes=self.stamp(job.frame),
                             protect=[p for p in (job.input, job.depth, job.velocity) if p]
@@ -995,7 +996,7 @@ class Batch:
                 elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
-        check_output_format(outs[0], "float" if self.options.as_float else None,
+        check_output_format(outs[0], self.options.out_bit_depth(),
                             self.options.compression)    # not after the first render
 
     # -- running ------------------------------------------------------------------------
@@ -1036,12 +1037,6 @@ class Batch:
             summary = reporter.summary(skipped_existing=len(self.skipped_existing), raw=raw)
         self.skipped_existing += reporter.skipped
         return {**summary, "reports": reporter.reports}
-
-    def _prepare_look(self, rt, jobs: list[Job] | None = None) -> Preparing | None:
-        """`prepare_maps` for this batch's first job (or ``jobs``' first)."""
-        look, level = resolve_quality(self.look, self.options.quality)
-        return prepare_maps(rt, look, self.jobs if jobs is None else jobs, level,
-                            self.options.keep_overscan)
 
     # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
     def _prepare_raw(self) -> None:

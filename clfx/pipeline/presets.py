@@ -304,7 +304,8 @@ def apply_overrides(look: Look, assignments: list[str]) -> Look:
                               f"{_suggest(target, names) if names else ''}")
         look.steps[look.steps.index(step)] = _step_override(step, key, pname, value)
     if assignments:
-        look.lenses = lens_io.resolve(look.steps)   # a lens named by --set: checked now
+        # a lens named by --set: read and checked now (those read at load are kept)
+        look.lenses = lens_io.resolve(look.steps, known=look.lenses)
     return look
 
 

@@ -136,10 +136,12 @@ class Lens(NamedTuple):
 @dataclass(frozen=True)
 class DofPlan(StepPlan):
     """dof's plan for one step of a frame: the lens (built once), and per source window and
-    channel offset the tile radii (`Dof.tile_radii`), computed on first use."""
+    channel offset the tile radii (`Dof.tile_radii`) and the gather's radii with the lattice
+    level of the largest (`Dof.gather_radii`), computed on first use."""
 
     lens: Lens | None = None
     radii: dict = field(default_factory=dict, compare=False, repr=False)
+    gathers: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -252,13 +254,13 @@ def tap_table(radius: float, lattice: int, aspect: float = 1.0, blades: int = 0,
     return table
 
 
-def lattice_reach(radius: float, lvl: DofLevel, squeeze: float = 1.0,
+def lattice_reach(radius: float, level: int, squeeze: float = 1.0,
                   aspect: float = 1.0) -> tuple[float, float]:
     """How far (x, y px) a gather of neighbourhood radius ``radius`` takes light from: its
-    taps' reach (``radius + s / 2`` in aperture space for a lattice of spacing ``s``) plus the
-    prefilter tent's ``s - 1`` px (none for a dense table).  The half-resolution gather of
-    the same radius reaches no further (its lattice is half as wide in its own pixels)."""
-    level = lattice_level(radius, lvl.lattice, lvl.dense_radius)
+    taps' reach (``radius + s / 2`` in aperture space for a lattice of spacing ``s = 2^level``,
+    ``level`` the radius's :func:`lattice_level`) plus the prefilter tent's ``s - 1`` px (none
+    for a dense table).  The half-resolution gather of the same radius reaches no further
+    (its lattice is half as wide in its own pixels)."""
     if level == 0:
         return radius / squeeze, radius * aspect
     s = 1 << level
@@ -450,12 +452,28 @@ class Dof(Plugin):
         frame over the channels (rounded up as the gather's), narrowed by the anamorphic
         squeeze in x and stretched by the pixel aspect in y, plus the coverage ramp's pixel
         (and a sparse lattice's wider ramp and prefilter, :func:`lattice_reach`)."""
-        radii = self.tile_radii(p, ctx)
-        r = float(quantised_radius(radii.max())) if radii.size else 0.0
+        lens = self.lens(p, ctx)
+        gathers = [self.gather_radii(p, ctx, o) for o in lens.offsets()]
+        r = max(float(levels.max()) if levels.size else 0.0 for levels, _ in gathers)
         if r == 0.0:
             return 0, 0
-        rx, ry = lattice_reach(r, self.level(ctx), self.lens(p, ctx).squeeze, ctx.pixel_aspect)
+        level = max(lattice for _, lattice in gathers)   # the level of the largest radius
+        rx, ry = lattice_reach(r, level, lens.squeeze, ctx.pixel_aspect)
         return int(math.ceil(rx)) + 1, int(math.ceil(ry)) + 1
+
+    def gather_radii(self, p, ctx, offset: float = 0.0) -> tuple[np.ndarray, int]:
+        """Per tile the gather's radius (:func:`quantised_radius` of :meth:`tile_radii` for
+        the channel ``offset``) and the :func:`lattice_level` of the largest, which sets the
+        padding, the prefilter pyramid's depth and the reach: once per window and offset in
+        a step (the plan's), read by the regions (:meth:`spread_px`) and the render."""
+        plan = self.planned(p, ctx)
+        key = (ctx.source.window, offset)
+        if key not in plan.gathers:
+            levels = quantised_radius(self.tile_radii(p, ctx, offset=offset))
+            lvl = self.level(ctx)
+            r_max = float(levels.max()) if levels.size else 0.0
+            plan.gathers[key] = (levels, lattice_level(r_max, lvl.lattice, lvl.dense_radius))
+        return plan.gathers[key]
 
     def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0):
         """One concatenated tap table for the radii in ``levels`` and, per entry of
@@ -557,18 +575,17 @@ class Dof(Plugin):
         k_half, focus, clamp_r, blades, first = lens[:5]
         aspect = ctx.pixel_aspect
         radii, r_min, near = self.tile_radii(p, ctx, with_near=True, offset=offset)
-        levels = quantised_radius(radii)
+        levels, full_l = self.gather_radii(p, ctx, offset)
         # Tiles whose every pixel is far out of focus are gathered at half resolution.
         half = (r_min >= lvl.half_res_radius) & (levels > 0)
         r_max = float(levels.max())
         # pad by the taps' largest reach (+2 for rounding), quantised so buffers get reused
-        s_max = 1 << lattice_level(r_max, lvl.lattice, lvl.dense_radius)
+        s_max = 1 << full_l
         reach = r_max + (0.5 * s_max if s_max > 1 else 0.0)
         pad = int(math.ceil((reach * max(1.0, aspect) + 2) / 8.0) * 8)
         w, h = src.width, src.height
         padded = Rect.from_size(-(-(w + 2 * pad + 4) // 4) * 4, h + 2 * pad)
         # the colour, then its prefiltered copies for the sparse taps (planes 1..L)
-        full_l = lattice_level(r_max, lvl.lattice, lvl.dense_radius)
         col = rt.image(Rect.from_size(padded.width, padded.height * (1 + full_l)), 4)
         coc0, coc = rt.image(padded, 1), rt.image(padded, 1)
         f32, i32 = np.float32, np.int32

@@ -153,9 +153,15 @@ PHYSICAL_TILE = 16
 @dataclass(frozen=True)
 class FlarePlan(StepPlan):
     """lens_flare's plan for one step of a frame: the physical model's visible ghosts
-    ``(entries, levels, table rows, lights)`` (`LensFlare.ghost_plan`), or None."""
+    ``(entries, levels, table rows, lights)`` (`LensFlare.ghost_plan`; `NO_GHOSTS` without
+    a light), None for the artistic model."""
 
     ghosts: tuple | None = None
+
+
+NO_GHOSTS = (np.zeros((0, flare.ENTRY)), np.zeros(0, np.int64), np.zeros(0, np.intp), [])
+"""The physical model's ghosts of a frame without a light (`LensFlare.ghost_plan`'s types):
+a render that is called anyway draws none, without reading the lens or its ghost table."""
 
 
 @dataclass(frozen=True)
@@ -489,7 +495,8 @@ class LensFlare(Plugin):
         """Whether any light flares and, for the physical model, every visible ghost
         (:meth:`ghost_plan`): once per step, read by ``is_identity`` and ``render``."""
         if not self.candidate_sources(p, ctx):
-            return FlarePlan("no light source in or near view")
+            return FlarePlan("no light source in or near view",
+                             NO_GHOSTS if p.model == "physical" else None)
         if p.model != "physical":
             return FlarePlan()
         ghosts = self.ghost_plan(ctx.runtime, p, ctx)
@@ -569,8 +576,7 @@ class LensFlare(Plugin):
         return entries, levels, keep[rows], lights
 
     def render_physical(self, rt, p, ctx):
-        ghosts = self.planned(p, ctx).ghosts
-        entries, levels, _, lights = ghosts if ghosts is not None else self.ghost_plan(rt, p, ctx)
+        entries, levels, _, lights = self.planned(p, ctx).ghosts   # the physical plan's
         blades = p.blades or ctx.camera.blades
         out = self.draw(rt, ctx, entries, levels, self.output_window(p, ctx), blades,
                         ctx.camera.blade_rotation + p.rotation)

@@ -159,7 +159,7 @@ def test_case_beats_naive_and_input_on_ground_truth(rt):
     """The bench case (pan, roll, trucking) against its multisample truth: draft and final end
     closer to it than the per-pixel line blur and the unblurred input (log-PSNR)."""
     from clfx.bench.cases import camera_blur as cb
-    from clfx.bench.runner import error_metrics
+    from clfx.bench.metrics import error_metrics
 
     c = cb.make(320, 180, None, truth_samples=128)
     ctx = RenderContext(rt, rt.upload(c["source"]), camera=c["camera"])

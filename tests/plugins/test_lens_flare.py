@@ -466,6 +466,20 @@ def test_physical_plan_is_made_once_per_frame(rt, monkeypatch):
     assert len(calls) == 3
 
 
+def test_physical_render_of_a_frame_without_a_light_reads_no_lens(rt, monkeypatch):
+    """Without a light the plan is the identity with no ghosts: a render called anyway (as
+    the pipeline never does) draws none and builds no ghost plan (it used to build one)."""
+    monkeypatch.setattr(LensFlare, "ghost_plan", lambda *a: pytest.fail("ghost plan built"))
+    src = np.full((40, 60, 4), 0.01, np.float32)
+    src[..., 3] = 1.0
+    p = LensFlare.params(light_level=0.0, gain=100.0)
+    ctx = RenderContext(rt, rt.upload(src), camera=CAM_P, read_lens=read_lens).for_step("final")
+    fx = LensFlare()
+    assert fx.is_identity(p, ctx) is not None
+    out = rt.download(fx.render(rt, p, ctx))
+    assert np.array_equal(out, src)
+
+
 def point_light_frame(h=270, w=480, background=0.01, ratio=2000.0, at=(360, 70)):
     """A flat background and a 3 x 3 px light ``ratio`` times brighter near a corner."""
     src = np.full((h, w, 4), background, np.float32)

@@ -5,8 +5,8 @@ import pytest
 
 from clfx.bench import metrics
 from clfx.bench.cases.motion_blur import CASE, CASES
-from clfx.bench.cases.motion_blur import line_blur_per_pixel as naive_line_blur
-from clfx.bench.runner import EDGE_BAND_PX, error_metrics
+from clfx.bench.cases.shared import line_blur_per_pixel as naive_line_blur
+from clfx.bench.metrics import EDGE_BAND_PX, error_metrics
 from clfx.core.camera import Camera
 from clfx.core.rect import Rect
 from clfx.fx.motion import CUBIC_MAX_PX, MAX_RADIUS_PX, tile_size

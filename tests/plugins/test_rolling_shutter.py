@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from clfx.bench.cases import rolling_shutter as case_module
-from clfx.bench.runner import error_metrics
+from clfx.bench.metrics import error_metrics
 from clfx.core.rect import Rect
 from clfx.host import RenderContext
 from clfx.plugins.rolling_shutter import LEVELS, RollingShutter

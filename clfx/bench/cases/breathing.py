@@ -4,7 +4,7 @@ OpenCV's warpAffine as the peers and bilinear warpAffine about the centre as the
 
 Ground truth
 ------------
-The texture is distortion's (:func:`clfx.bench.cases.distortion.texture`: a zone plate up to
+The texture is distortion's (:func:`clfx.bench.cases.shared.texture`: a zone plate up to
 0.45 cycles/px, a fine checker, 7-segment glyphs of 0.45 px strokes, HDR spots), a function of
 continuous frame coordinates.  The source is its area average over each pixel of the data
 window (8x8 points); the truth is the area average over each output pixel of the texture seen
@@ -26,13 +26,13 @@ import math
 import numpy as np
 
 from clfx.bench.cases import Case, Naive
-from clfx.bench.cases.distortion import SUPERSAMPLE, _box_average, _rgba, edge_mask, texture
+from clfx.bench.cases.shared import SUPERSAMPLE, box_average, edge_mask, grey_rgba, texture
 from clfx.core.camera import Camera
 from clfx.core.rect import Rect
 from clfx.plugins.breathing import Breathing
 
-TRUTH_DEPENDS = ("clfx.plugins.breathing", "clfx.bench.cases.distortion")
-"""The scale comes from the plugin's thin-lens model; the texture from distortion's case."""
+TRUTH_DEPENDS = ("clfx.plugins.breathing",)
+"""The scale comes from the plugin's thin-lens model (the texture from the shared helpers)."""
 
 NEAR, FAR = 0.35, 10.0
 """The rack focus, metres: a 35 mm lens at 10 focal lengths and at 10 m."""
@@ -56,8 +56,8 @@ def _make(focus: float, reference: float, width: int, height: int) -> dict:
         fx, fy = x + data.x0, y + data.y0
         return texture(cx + (fx - cx) / m, cy + (fy - cy) / m, width, height)
 
-    source = _rgba(_box_average(frame_texture, data.width, data.height)).astype(np.float32)
-    truth = _rgba(_box_average(seen, data.width, data.height, SUPERSAMPLE))
+    source = grey_rgba(box_average(frame_texture, data.width, data.height)).astype(np.float32)
+    truth = grey_rgba(box_average(seen, data.width, data.height, SUPERSAMPLE))
     if margin:
         inside = np.zeros(truth.shape[:2], bool)
         inside[margin:margin + height, margin:margin + width] = True

@@ -8,8 +8,8 @@ arc, the layer spinning with the roll: the arc's sagitta over half a frame is fa
 thousandth of a pixel here).  The truth is rendered like the motion_blur cases (beauty
 supersampled 4 x 4, depth from the pixel centre; :func:`clfx.bench.groundtruth.make_case`).
 
-``naive(case, params, ctx)`` (``NAIVE_LABEL``): every pixel averaged along its own image
-velocity under the camera motion (:func:`clfx.bench.cases.motion_blur.line_blur_per_pixel`).
+``naive(case, params, ctx)`` (``LINE_BLUR_LABEL``): every pixel averaged along its own image
+velocity under the camera motion (:func:`clfx.bench.cases.shared.line_blur_per_pixel`).
 """
 from __future__ import annotations
 
@@ -20,12 +20,12 @@ import numpy as np
 
 from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
-from clfx.bench.cases.motion_blur import NAIVE_LABEL, line_blur_per_pixel
+from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Scene, moving_scene, render_sharp
 from clfx.core.camera import Camera
 
-__all__ = ["CASE", "NAIVE_LABEL", "PARAMS", "camera_scene", "make", "naive"]
+__all__ = ["CASE", "PARAMS", "camera_scene", "make", "naive"]
 
 PARAMS = dict(length=0.01, direction=200.0, roll=0.3, truck=(0.02, 0.0))
 """The case's camera motion: a pan of 1% of the diagonal per frame, 0.3 degrees of roll and
@@ -74,8 +74,7 @@ def make(width: int, height: int, rng=None, *, truth: bool = True,
 
 
 def _edge_band(depth, velocity):
-    from clfx.bench.metrics import edge_band
-    from clfx.bench.runner import EDGE_BAND_PX
+    from clfx.bench.metrics import EDGE_BAND_PX, edge_band
 
     return edge_band(depth, velocity, EDGE_BAND_PX)
 
@@ -93,7 +92,7 @@ def image_velocity(depth: np.ndarray, params, camera: Camera) -> np.ndarray:
 
 
 def naive(case: dict, params, ctx) -> np.ndarray:
-    """The naive baseline (:data:`NAIVE_LABEL`): the per-pixel line blur along the image
+    """The naive baseline (:data:`LINE_BLUR_LABEL`): the per-pixel line blur along the image
     velocity of the camera motion."""
     from clfx.fx.motion import shutter_from
 
@@ -114,6 +113,6 @@ def cycles_params() -> dict:
 
 
 CASE = Case(make=make,
-            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)),
+            naive=Naive(LINE_BLUR_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)),
             variants={f"cycles_{k}": cycles.maker(k, params=p, velocity=False)
                       for k, p in cycles_params().items() if cycles.available(k)})

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from clfx.bench.cases import Case
-from clfx.bench.cases.distortion import cv2_border, cv2_map
+from clfx.bench.cases.shared import cv2_border, cv2_map
 from clfx.core.camera import Camera
 from clfx.plugins.chromatic_aberration import channel_points
 

@@ -403,8 +403,8 @@ def scene_table(rt, width: int = 320, height: int = 180, *, names=None, repeat: 
     import sys
     import time
 
-    from clfx.bench.metrics import edge_band
-    from clfx.bench.runner import EDGE_BAND_PX, error_metrics, load_case
+    from clfx.bench.cache import load_case
+    from clfx.bench.metrics import EDGE_BAND_PX, edge_band, error_metrics
     from clfx.core.frame import crop_to
     from clfx.host import RenderContext
     from clfx.plugins.dof import Dof

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from clfx.bench.cases import Case
+from clfx.bench.cases.shared import soft_knee_highlight
 from clfx.core.camera import Camera
 from clfx.plugins.glare import Glare
 
@@ -26,16 +27,6 @@ def make(width, height, rng):
     return dict(source=src, depth=None, velocity=None,
                 params={"strength": 0.05, "threshold": 1.0, "size": 512.0 / math.hypot(1920, 1080)},
                 camera=Camera())
-
-
-def soft_knee_highlight(rgb: np.ndarray, threshold: float, knee: float) -> np.ndarray:
-    """Host copy of the soft-knee highlight (``kernels/lib/scatter.h``), for the peers."""
-    lum = rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    x = np.clip(lum - threshold + knee, 0.0, 2.0 * knee)
-    soft = x * x / (4.0 * knee) if knee > 0 else np.zeros_like(lum)
-    safe = np.where(lum > 0, lum, 1.0)
-    w = np.where(lum > 0, np.clip(np.maximum(soft, lum - threshold) / safe, 0.0, 1.0), 0.0)
-    return (rgb * w[..., None]).astype(np.float32)
 
 
 def peers(case, params, ctx):

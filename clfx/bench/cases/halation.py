@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from clfx.bench.cases import Case
-from clfx.bench.cases.glare import soft_knee_highlight
+from clfx.bench.cases.shared import soft_knee_highlight
 from clfx.core.camera import Camera
 from clfx.plugins.halation import Halation
 

@@ -23,23 +23,21 @@ with the :class:`clfx.bench.cases.Case` ``make`` protocol:
 Speeds and sizes scale with the width (the same shot at any size), except ``slow_stripes``,
 whose stripe width and speed are in pixels (the case is about sub-pixel detail).
 
-``naive(case, params, ctx)`` is the baseline (``NAIVE_LABEL``): every pixel averaged along its
+``naive(case, params, ctx)`` is the baseline (``LINE_BLUR_LABEL``): every pixel averaged along its
 own velocity over the shutter (bilinear, midpoint rule, no depth, no tiles, no scatter).
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
 from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
+from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, moving_scene, render_sharp
 from clfx.core.camera import Camera
 from clfx.fx.motion import shutter_from
 
-NAIVE_LABEL = "naive per-pixel line blur"
 
 TRUTH_SAMPLES = 256
 """Sample renders of a truth (16 per sub-pixel position at ``RENDER_SS`` = 4)."""
@@ -199,37 +197,8 @@ CASES = {
 
 
 # -- the naive baseline ----------------------------------------------------------------------
-def line_blur_per_pixel(src: np.ndarray, velocity: np.ndarray, t0: float, t1: float, *,
-                        spacing: float = 0.5, max_samples: int = 64) -> np.ndarray:
-    """Each pixel averaged along its *own* velocity over ``[t0, t1]`` (float32 NumPy).
-
-    Bilinear reads (clamp to edge) at midpoint-rule instants, one per ``spacing`` px of the
-    longest blur (at least 2, at most ``max_samples``); no depth, no tiles, no scatter: what a
-    per-pixel directional blur does.
-    """
-    src = np.where(np.isfinite(src), src, 0.0).astype(np.float32)
-    v = np.where(np.isfinite(velocity), velocity, 0.0).astype(np.float32)
-    h, w = src.shape[:2]
-    longest = float(np.hypot(v[..., 0], v[..., 1]).max()) * abs(t1 - t0) if v.size else 0.0
-    n = int(min(max(2, math.ceil(longest / spacing)), max_samples))
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-    acc = np.zeros_like(src)
-    for i in range(n):
-        t = np.float32(t0 + (i + 0.5) / n * (t1 - t0))
-        u = xs - v[..., 0] * t
-        q = ys - v[..., 1] * t
-        u0, q0 = np.floor(u), np.floor(q)
-        fu, fq = (u - u0)[..., None], (q - q0)[..., None]
-        xa, xb = np.clip(u0, 0, w - 1).astype(np.intp), np.clip(u0 + 1, 0, w - 1).astype(np.intp)
-        ya, yb = np.clip(q0, 0, h - 1).astype(np.intp), np.clip(q0 + 1, 0, h - 1).astype(np.intp)
-        top = src[ya, xa] + (src[ya, xb] - src[ya, xa]) * fu
-        bot = src[yb, xa] + (src[yb, xb] - src[yb, xa]) * fu
-        acc += top + (bot - top) * fq
-    return acc / np.float32(n)
-
-
 def naive(case: dict, params, ctx) -> np.ndarray:
-    """The naive baseline of a case (:data:`NAIVE_LABEL`), RGBA like the effect's output."""
+    """The naive baseline of a case (:data:`LINE_BLUR_LABEL`), RGBA like the effect's output."""
     t0, t1 = shutter_from(params, ctx.camera)
     return line_blur_per_pixel(np.asarray(case["source"], np.float32),
                                np.asarray(case["velocity"], np.float32), t0, t1)
@@ -240,5 +209,5 @@ CYCLES_SCENES = ("spin", "truck", "pan", "crossing", "slow")
 ``cycles_<name>`` scored against Cycles' own motion blur, Blender's Vector Blur beside."""
 
 CASE = Case(make=make_layers,
-            naive=Naive(NAIVE_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)),
+            naive=Naive(LINE_BLUR_LABEL, lambda case, params, ctx: lambda: naive(case, params, ctx)),
             variants=cycles.variants(CYCLES_SCENES))

@@ -70,41 +70,34 @@ def available(name: str) -> bool:
     return all(p.exists() for p in files(name))
 
 
-def _read_layers(path: Path) -> tuple[dict[str, np.ndarray], dict]:
-    import OpenImageIO as oiio
+def read_layers(path: Path) -> dict[str, np.ndarray]:
+    """The layers of a data file (``truth.R/G/B`` -> ``truth``), (h, w, n) float32, their
+    channels in the file's order (`clfx.io.read.read_channels`)."""
+    from clfx.io.read import read_channels
 
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise OSError(f"cannot open {path}: {oiio.geterror()}")
-    try:
-        spec = inp.spec()
-        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        floor = spec.getattribute(FLOOR_ATTRIBUTE)
-    finally:
-        inp.close()
     out: dict[str, list] = {}
-    for i, name in enumerate(spec.channelnames):
-        layer, _, _ = name.rpartition(".")
-        out.setdefault(layer, []).append(data[..., i])
-    return ({k: np.stack(v, -1).astype(np.float32) for k, v in out.items()},
-            {"floor": None if floor is None else float(floor)})
+    for name, plane in read_channels(path).items():
+        out.setdefault(name.rpartition(".")[0], []).append(plane)
+    return {k: np.stack(v, -1) for k, v in out.items()}
 
 
 @lru_cache(maxsize=None)
 def load(name: str) -> dict:
     """The scene's sharp frame (through clfx's reader), truth, its noise floor and
     Blender's Vector Blur (where rendered)."""
+    from clfx.io.probe import header_attribute
     from clfx.io.read import read_frame
 
     sharp, ref = files(name)
     frame = read_frame(str(sharp))
-    layers, attrs = _read_layers(ref)
+    layers = read_layers(ref)
+    floor = header_attribute(ref, FLOOR_ATTRIBUTE)
     alpha = np.ones(layers["truth"].shape[:2] + (1,), np.float32)
     rgba = {k: np.concatenate([v[..., :3], alpha], -1) for k, v in layers.items()}
     return dict(source=np.ascontiguousarray(frame.rgba, np.float32),
                 depth=frame.depth, velocity=frame.velocity, velocity_back=frame.velocity_back,
                 truth=rgba["truth"],
-                vector_blur=rgba.get("vectorblur"), floor=attrs["floor"])
+                vector_blur=rgba.get("vectorblur"), floor=None if floor is None else float(floor))
 
 
 def noise_floor(name: str) -> float | None:

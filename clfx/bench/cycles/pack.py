@@ -20,24 +20,6 @@ from pathlib import Path
 import numpy as np
 
 
-def _read_parts(path: str) -> dict[str, np.ndarray]:
-    import OpenImageIO as oiio
-
-    inp = oiio.ImageInput.open(path)
-    if inp is None:
-        raise OSError(f"cannot open {path}: {oiio.geterror()}")
-    out = {}
-    part = 0
-    while inp.seek_subimage(part, 0):
-        spec = inp.spec()
-        data = inp.read_image(part, 0, 0, spec.nchannels, "float")
-        for i, name in enumerate(spec.channelnames):
-            out[name] = np.asarray(data[..., i], np.float32)
-        part += 1
-    inp.close()
-    return out
-
-
 def _write(path: str, channels: dict[str, np.ndarray], formats: dict[str, str],
            attributes: dict | None = None) -> None:
     import OpenImageIO as oiio
@@ -63,9 +45,10 @@ def _write(path: str, channels: dict[str, np.ndarray], formats: dict[str, str],
 def pack(src: str, name: str, out_dir: str, keep_second: bool = False) -> None:
     from clfx.bench.cycles import FLOOR_ATTRIBUTE, base_scene
     from clfx.bench.metrics import psnr_log
+    from clfx.io.read import read_channels
 
     if base_scene(name) == name:
-        sharp = _read_parts(os.path.join(src, f"{name}.sharp.exr"))
+        sharp = read_channels(os.path.join(src, f"{name}.sharp.exr"))
         keep = [f"ViewLayer.Combined.{c}" for c in "RGBA"] + ["ViewLayer.Depth.Z"]
         keep += [f"ViewLayer.Vector.{c}" for c in "XYZW" if f"ViewLayer.Vector.{c}" in sharp]
         _write(os.path.join(out_dir, f"{name}.exr"), {k: sharp[k] for k in keep},
@@ -76,7 +59,7 @@ def pack(src: str, name: str, out_dir: str, keep_second: bool = False) -> None:
     for seed in (1, 2):
         path = os.path.join(src, f"{name}.truth{seed}.exr")
         if os.path.exists(path):
-            t = _read_parts(path)
+            t = read_channels(path)
             truths.append(np.stack([t[c] for c in "RGB"], -1))
     ref = {f"truth.{c}": truths[0][..., i] for i, c in enumerate("RGB")}
     if keep_second and len(truths) > 1:
