@@ -10,6 +10,21 @@ supersampled 4 x 4, depth from the pixel centre; :func:`clfx.bench.groundtruth.m
 
 ``naive(case, params, ctx)`` (``LINE_BLUR_LABEL``): every pixel averaged along its own image
 velocity under the camera motion (:func:`clfx.bench.cases.shared.line_blur_per_pixel`).
+
+What limits the score (issue 24, measured with ``scripts/motion_cases.py --effect
+camera_blur``): the naive blur is given each pixel's exact camera velocity (it equals the
+scene's own to 1e-6 px/frame), and on 85% of the frame (the wall's interior) that line blur is
+what the gather does too, so camera_blur can only win in the 4 px edge band around the
+parallax (6% of the pixels; final's edge RMSE 0.0172 vs 0.0191 at 480x270) and on the frame
+border, whose incoming content is outside the source (clamp, mirror or dropped reads score
+within 0.05 dB of each other).  Replacing final's edge band by the truth gives 36.81 dB at
+480x270 against the naive's 36.28: no edge handling can win by 1 dB here.  The wall's
+interior error is set by the 4 x 4 sub-pixel grid of both renders (:data:`clfx.bench.groundtruth.RENDER_SS`): its
+0.4-0.6 px gaps between "words" are covered in quarter pixels by the sharp frame but in
+every phase by the moving truth, so input, naive and final carry one mean offset on the wall
+(+0.009 at 320x180, -0.0065 at 480x270) and the ranking of the reads flips with the size:
+Catmull-Rom line blur vs bilinear +2.6 dB at 320x180, -1.9 at 480x270, -0.5 at 240x135
+(sharp frame at 16 x 16: Catmull-Rom half blended in +1.2 dB at 480x270).
 """
 from __future__ import annotations
 
