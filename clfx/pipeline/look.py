@@ -629,7 +629,7 @@ def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect
     out = rt.image(window, ctx.source.channels)
     name = plugin.descriptor.name
     for band, roi in zip(bands, rois):
-        part = plugin.render(rt, p, ctx.tile(roi))
+        part = plugin.render(rt, p, ctx.tile(roi, band))
         if not part.window.contains(band):
             raise RuntimeError(f"effect {name!r}: a tile's output {part.window} does not "
                                f"cover its band {band}")

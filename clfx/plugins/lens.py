@@ -372,7 +372,7 @@ class Lens(Plugin):
 
     def render(self, rt, p, ctx):
         return on_canvas(self, rt, p, ctx, p.border,
-                         lambda c, sanitise: self.render_canvas(rt, p, c, sanitise))
+                         lambda c, sanitise, _rows: self.render_canvas(rt, p, c, sanitise))
 
     def render_canvas(self, rt, p, ctx, sanitise):
         """The lens over ``ctx.source``'s window (the canvas: `on_canvas`)."""
