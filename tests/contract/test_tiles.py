@@ -28,7 +28,8 @@ def test_every_effect_tiles_or_says_why_not():
     for name in effects.EFFECTS:
         why = effects.plugin(name).whole_frame
         assert why is None or (isinstance(why, str) and len(why) > 10), name
-    assert {"vignette", "grain", "chromatic_aberration", "distortion"} <= set(TILING)
+    assert {"vignette", "grain", "chromatic_aberration", "distortion",
+            "sensor_noise"} <= set(TILING)
 
 
 def test_bands_cover_the_window_once():
@@ -83,3 +84,34 @@ def test_warp_tiles_at_every_border_and_window(rt, name, border, layout, quality
     assert_tiles_give_the_whole_render(rt, name, effects.params(name, border=border), quality,
                                        effects.scene((70, 90)), rows=7, window=window,
                                        display_window=display)
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("mosaic", ["bayer", "none"])
+def test_sensor_noise_tiles_with_its_mosaic_and_chroma(rt, mosaic, quality):
+    p = effects.params("sensor_noise", mosaic=mosaic, chroma_noise=1.0)
+    window, display = LAYOUTS["overscan"]
+    assert_tiles_give_the_whole_render(rt, "sensor_noise", p, quality, effects.scene((70, 90)),
+                                       rows=5, window=window, display_window=display)
+
+
+@pytest.mark.parametrize("mosaic", ["bayer", "none"])
+def test_sensor_noise_is_the_same_on_a_crop_at_the_same_place(rt, mosaic):
+    """Noise is hashed on frame coordinates: a crop (odd origin) gets the frame's noise at
+    its pixels (with a mosaic, away from the crop's edges the demosaic reads past)."""
+    name = "sensor_noise"
+    plugin = effects.plugin(name)
+    p = effects.params(name, mosaic=mosaic, chroma_noise=1.0, coverage="ignore")
+    src = effects.scene((70, 90))
+    window, crop = Rect(-7, -9, 83, 61), Rect(-2, 4, 61, 41)
+    full = rt.download(plugin.render(rt, p, effects.context(rt, name, src, window=window)))
+    part = src[crop.y0 - window.y0:crop.y1 - window.y0, crop.x0 - window.x0:crop.x1 - window.x0]
+    cropped = rt.download(plugin.render(rt, p, effects.context(rt, name, part.copy(),
+                                                               window=crop,
+                                                               display_window=window)))
+    inner = crop.grown(-2) if mosaic == "bayer" else crop
+    want = full[inner.y0 - window.y0:inner.y1 - window.y0, inner.x0 - window.x0:inner.x1 - window.x0]
+    got = cropped[inner.y0 - crop.y0:inner.y1 - crop.y0, inner.x0 - crop.x0:inner.x1 - crop.x0]
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert not np.array_equal(got, part[inner.y0 - crop.y0:inner.y1 - crop.y0,
+                                        inner.x0 - crop.x0:inner.x1 - crop.x0])
