@@ -335,15 +335,18 @@ class PackedMap:
 
     TAPS = {FILTER_CODE[f]: taps for f, taps in FILTER_TAPS.items()}
 
-    def __init__(self, points, width: int, height: int, pitch: int):
+    def __init__(self, points, width: int, height: int, pitch: int, first_row: int = 0):
         rows, quads = max(points[0][0].shape[0], 1), pitch // 4
         entries, coords = [], []
         bad = {code: np.zeros((rows, quads), bool) for code in self.TAPS}
+        # where the fast kernel reads for an undefined point (its quad is re-rendered): the
+        # output pixel itself, rows first_row.. of the image, inside a tile's buffer too
+        own_x, own_y = np.meshgrid(np.arange(pitch) + 0.5, np.arange(rows) + 0.5 + first_row)
         for sx, sy in points:
             px, py = _padded(sx, pitch, 0.5), _padded(sy, pitch, 0.5)
             finite = np.isfinite(px) & np.isfinite(py) & (np.abs(px) < 1e7) & (np.abs(py) < 1e7)
-            ix, tx = _split(np.where(finite, px, 0.5))
-            iy, ty = _split(np.where(finite, py, 0.5))
+            ix, tx = _split(np.where(finite, px, own_x))
+            iy, ty = _split(np.where(finite, py, own_y))
             for code, taps in self.TAPS.items():
                 off = taps // 2 - 1
                 inside = finite & (ix - off >= 0) & (ix - off + taps <= width) \
@@ -398,7 +401,7 @@ class PackedMap:
         quads, found = pitch // 4, {}
 
         def make(y0, y1):
-            m = cls(points_of(y0, y1), width, height, pitch)
+            m = cls(points_of(y0, y1), width, height, pitch, y0)
             found["maps"], found["fast"] = m.entries.shape[2] // 12, m.fast_possible
             return m.entries, m.fixups, quads
 
@@ -551,7 +554,7 @@ class FootprintMap:
     """
 
     def __init__(self, sx, sy, jac, filter_name: str, width: int, height: int, pitch: int,
-                 border: str = "black"):
+                 border: str = "black", first_row: int = 0):
         fp = FOOTPRINTS[filter_name]
         taps, ints = fp.taps, fp.entry_ints
         rows, quads = max(sx.shape[0], 1), pitch // 4
@@ -579,7 +582,10 @@ class FootprintMap:
         base = (np.clip(iy, 0, None) * pitch + np.clip(ix, 0, None)) * 4
         h2 = np.stack([hx, hy], -1).astype(np.float16).view(np.int32)[..., 0]
         e = np.empty((rows, quads, ints // 4, 4), np.int32)
-        e[:, :, 0] = np.where(fast, base, 0).reshape(rows, quads, 4)   # 0: a window that fits
+        # a window that fits, for pixels not on the fast path (read, then not used): at the
+        # map's first row (``first_row``, of the image), inside a tile's buffer too
+        fits = (min(max(first_row, 0), max(height - taps, 0)) * pitch) * 4
+        e[:, :, 0] = np.where(fast, base, fits).reshape(rows, quads, 4)
         if fp.half_f:       # (f_x of the 4 pixels, f_y of the 4) as 8 float16
             f16 = np.concatenate([fx.reshape(rows, quads, 4), fy.reshape(rows, quads, 4)], 2)
             e[:, :, 1] = f16.astype(np.float16).view(np.int32)
@@ -630,7 +636,7 @@ class FootprintMap:
         quads, counts = pitch // 4, {"fast": 0.0, "zero": 0.0}
 
         def make(y0, y1):
-            m = cls(*points_of(y0, y1), filter_name, width, height, pitch, border)
+            m = cls(*points_of(y0, y1), filter_name, width, height, pitch, border, y0)
             before = sum(len(r) for r in records.get("records", ()))
             checked = m.entries[..., 0] == -1          # record indices count from the band's
             m.entries[..., 1][checked] += before        # first: make them the whole map's

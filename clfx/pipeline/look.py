@@ -635,6 +635,7 @@ def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect
                                f"cover its band {band}")
         rt.paste(part, out, band)
         del part
+    ctx.notes[:] = list(dict.fromkeys(ctx.notes))     # a note each band made, said once
     return out
 
 
