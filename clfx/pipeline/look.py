@@ -635,7 +635,8 @@ def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect
                                f"cover its band {band}")
         rt.paste(part, out, band)
         del part
-    ctx.notes[:] = list(dict.fromkeys(ctx.notes))     # a note each band made, said once
+    for said in (ctx.notes, ctx.warnings):     # a line each band made, said once
+        said[:] = list(dict.fromkeys(said))
     return out
 
 

@@ -115,3 +115,13 @@ def test_sensor_noise_is_the_same_on_a_crop_at_the_same_place(rt, mosaic):
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
     assert not np.array_equal(got, part[inner.y0 - crop.y0:inner.y1 - crop.y0,
                                         inner.x0 - crop.x0:inner.x1 - crop.x0])
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+@pytest.mark.parametrize("reference_focus", [0.5, 20.0])   # the frame widens / narrows
+def test_breathing_tiles_in_every_window(rt, reference_focus, layout, quality):
+    window, display = LAYOUTS[layout]
+    p = effects.params("breathing", reference_focus=reference_focus)
+    assert_tiles_give_the_whole_render(rt, "breathing", p, quality, effects.scene((70, 90)),
+                                       rows=7, window=window, display_window=display)
