@@ -62,6 +62,18 @@ class StepPlan:
     identity: str | None = None
 
 
+@dataclass(frozen=True)
+class Tiling:
+    """Where a tile's context sits in its step (`RenderContext.tile`): ``whole``, the
+    step's source window (the untiled render's), and ``band``, the part of the step's
+    output window this tile renders.  Effects whose arithmetic depends on the window they
+    render over (a warp's coordinates and canvas) compute it from ``whole``, so a band
+    gets the whole render's bits."""
+
+    whole: Rect
+    band: Rect
+
+
 @dataclass(frozen=True, eq=False)
 class RenderContext:
     """Everything an effect may read while rendering one frame: frozen, derived with
@@ -113,6 +125,9 @@ class RenderContext:
     notes, warnings : list of str
         This step's notes for the report and lines said on stderr (a clamp, a guess, a
         skipped request); the lists are shared by the contexts derived within one step.
+    tiling : Tiling or None
+        In a tile of a tiled render (`tile`): the step's whole source window and the band of
+        the output this tile renders; None in a whole render.
     """
 
     runtime: Any
@@ -139,6 +154,7 @@ class RenderContext:
     """The frame's scene analysis box (shared by the step contexts of one frame)."""
     plans: dict = field(default_factory=dict, repr=False)
     """This step's plans (`Plugin.planned`), shared by the contexts derived within it."""
+    tiling: Tiling | None = None
 
     def __post_init__(self):
         def put(name, value):
@@ -233,13 +249,16 @@ class RenderContext:
         is this frame's)."""
         return replace(self, quality=quality, notes=[], warnings=[], plans={})
 
-    def tile(self, window: Rect) -> RenderContext:
+    def tile(self, window: Rect, band: Rect | None = None) -> RenderContext:
         """This step's context over the part ``window`` of its source and passes (a tile of a
         tiled render: `clfx.pipeline.look`): `grown_to` the tile, with the same plans and
         notes, and the whole frame's scene analysis (computed now if not yet), not the
-        tile's."""
+        tile's; ``tiling`` says the whole source window and the ``band`` of the output the
+        tile renders (default ``window``)."""
         frame = _FrameAnalysis(self.analysis)
-        return replace(self.grown_to(window), shared=frame)
+        whole = self.tiling.whole if self.tiling else self.source.window
+        return replace(self.grown_to(window), shared=frame,
+                       tiling=Tiling(whole, band if band is not None else window))
 
     def with_source(self, source) -> RenderContext:
         """This context over another source image (a masked copy of the frame): same notes

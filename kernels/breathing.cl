@@ -9,6 +9,11 @@
  * (clfx.fx.resample.footprint_spread; elliptical_spread for the reference).  Quads inside
  * the source take resample.h's fast path, the rest its checked path (edge clamp).
  * Each work-item renders 4 consecutive output pixels (rows are padded to 4).
+ *
+ * Rows are the whole render's: output row y of dst is row y + row0 of the whole output,
+ * and src holds the whole render's source rows from `shift` on (RS_TILE: a tile of a tiled
+ * render, clfx.fx.resample.CanvasRows; both 0 in a whole render), so a band's pixels take
+ * the whole render's arithmetic.
  */
 #include "lib/resample.h"
 
@@ -27,10 +32,11 @@ kernel void breathing_footprint(global const float *src, global float *dst,
                                 const int src_pitch, const int src_w, const int src_h,
                                 const int dst_pitch, const int dst_h, const float ax,
                                 const float ay, const float inv_m, const float hx,
-                                const float hy, const int n)
+                                const float hy, const int n, const int row0, const int shift)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
-  const float sy = fma((float)y, inv_m, ay);
+  RS_TILE(src, src_pitch, shift);
+  const float sy = fma((float)(y + row0), inv_m, ay);
   float fy;
   const int iy = fp_window(sy, hy, &fy);
   const float4 sx = fma(convert_float4((int4)(qx * 4) + (int4)(0, 1, 2, 3)), inv_m, ax);
@@ -65,11 +71,13 @@ kernel void breathing_footprint(global const float *src, global float *dst,
 kernel void breathing_ewa_f64(global const float *src, global float *dst,
                               const int src_pitch, const int src_w, const int src_h,
                               const int dst_pitch, const int dst_h, const REAL ax,
-                              const REAL ay, const REAL inv_m, const REAL e, const int n)
+                              const REAL ay, const REAL inv_m, const REAL e, const int n,
+                              const int row0, const int shift)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= dst_h || qx * 4 >= dst_pitch) return;
-  const REAL sy = (REAL)y * inv_m + ay;
+  RS_TILE(src, src_pitch, shift);
+  const REAL sy = (REAL)(y + row0) * inv_m + ay;
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {
     const REAL sx = (REAL)(qx * 4 + k) * inv_m + ax;

@@ -16,6 +16,10 @@
  * shift of any wavelength keeps every footprint inside the source (an unchecked vector
  * gather, kernels/lib/resample.h rs_fast4), and with CA_FAST = 0 over the border ring (border
  * rule and checks).  The launched rectangle is [qx0, qx0 + nqx) x [row0, row0 + nrows).
+ *
+ * Rows are the canvas's (w x h, origin (x0, y0) in the frame): a tile of a tiled render
+ * (clfx.fx.resample.CanvasRows) passes buffers holding canvas rows from `shift` on, and
+ * RS_TILE addresses them in canvas rows, so its pixels take the whole render's arithmetic.
  */
 #include "lib/resample.h"
 
@@ -35,8 +39,10 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
                                        const REAL cx, const REAL cy,
                                        const REAL ax, const REAL ay,
                                        const int qx0, const int row0, const int nqx,
-                                       const int nrows)
+                                       const int nrows, const int shift)
 {
+  RS_TILE(src, pitch, shift);
+  RS_TILE(dst, pitch, shift);
   /* the launch covers quads [qx0, qx0 + nqx) x rows [row0, row0 + nrows) */
   if(get_global_id(0) >= nqx || get_global_id(1) >= nrows) return;
   const int qx = get_global_id(0) + qx0, y = get_global_id(1) + row0;
@@ -139,27 +145,34 @@ inline void ca_mix_store(global const float *src, global float *dst, global cons
            0, dst + quad * 16);
 }
 
+/* the map holds canvas rows row0 .. row0 + rows (all in a whole render) */
 kernel void chromatic_aberration_packed(global const float *src, global float *dst,
                                         global const int *map, global const float *weights,
-                                        const int pitch, const int w, const int h)
+                                        const int pitch, const int w, const int h,
+                                        const int row0, const int rows, const int shift)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= h || qx * 4 >= pitch) return;
-  const int quad = y * (pitch / 4) + qx;
+  if(y >= rows || qx * 4 >= pitch) return;
+  RS_TILE(src, pitch, shift);
+  RS_TILE(dst, pitch, shift);
+  const int entry = y * (pitch / 4) + qx, quad = entry + row0 * (pitch / 4);
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
-  rs_fast_quad(src, pitch, w, h, map + 24 * quad, &r0, &r1, &r2, &r3);
-  rs_fast_quad(src, pitch, w, h, map + 24 * quad + 12, &b0, &b1, &b2, &b3);
+  rs_fast_quad(src, pitch, w, h, map + 24 * entry, &r0, &r1, &r2, &r3);
+  rs_fast_quad(src, pitch, w, h, map + 24 * entry + 12, &b0, &b1, &b2, &b3);
   ca_mix_store(src, dst, weights, quad, r0, r1, r2, r3, b0, b1, b2, b3);
 }
 
-/* records of 20 ints: quad index, 3 unused, then each map's 4 x and 4 y */
+/* records of 20 ints: quad index (in canvas rows), 3 unused, then each map's 4 x and 4 y */
 kernel void chromatic_aberration_packed_fix(global const float *src, global float *dst,
                                             global const int *records, const int count,
                                             global const float *weights, const int pitch,
-                                            const int w, const int h)
+                                            const int w, const int h, const int row0,
+                                            const int rows, const int shift)
 {
   const int n = get_global_id(0);
   if(n >= count) return;
+  RS_TILE(src, pitch, shift);
+  RS_TILE(dst, pitch, shift);
   global const int *rec = records + 20 * n;
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fix_quad(src, pitch, w, h, rec + 4, &r0, &r1, &r2, &r3);

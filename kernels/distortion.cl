@@ -25,6 +25,11 @@
  * samples per axis n): the mean of n x n Lanczos-3 samples at s + J_c (a_i, a_j),
  * a_i = ((i + 1/2) / n - 1/2) sqrt(n^2 / (n^2 - 1)), in float64, clamped to the min/max of
  * the samples' nearest 2x2 texels together (one sample: today's 2x2 clamp).
+ *
+ * Both render the canvas rows row0 .. row0 + dst_h (the map's rows: all of them in a whole
+ * render) from buffers holding the canvas rows from `shift` on (RS_TILE: a tile of a tiled
+ * render, clfx.fx.resample.CanvasRows; 0 in a whole render); records count quads from the
+ * canvas's first row.
  */
 #include "lib/resample.h"
 
@@ -54,14 +59,18 @@ inline void distortion_checked_quad(global const float *src, global float *dst,
 kernel void distortion_footprint(global const float *src, global float *dst,
                                  global const int *map, global const int *records,
                                  const int src_pitch, const int src_w, const int src_h,
-                                 const int dst_pitch, const int dst_h)
+                                 const int dst_pitch, const int dst_h, const int row0,
+                                 const int shift)
 {
   /* launched over exactly (dst_pitch / 4, dst_h): a bounds test here made PoCL keep each
    * work-item's values in stack arrays (15% slower) */
-  const int quads = dst_pitch / 4, quad = get_global_id(1) * quads + get_global_id(0);
-  fp_prefetch_quad(src, src_pitch, map + FP_Q_INTS * min(quad + FP_PREFETCH_AHEAD,
+  RS_TILE(src, src_pitch, shift);
+  RS_TILE(dst, dst_pitch, shift);
+  const int quads = dst_pitch / 4, entry = get_global_id(1) * quads + get_global_id(0);
+  const int quad = entry + row0 * quads;
+  fp_prefetch_quad(src, src_pitch, map + FP_Q_INTS * min(entry + FP_PREFETCH_AHEAD,
                                                          quads * dst_h - 1));
-  global const int *q = map + FP_Q_INTS * quad;
+  global const int *q = map + FP_Q_INTS * entry;
   const int mark = q[0];
   if(mark >= 0) {
     float4 o0, o1, o2, o3;
@@ -77,14 +86,17 @@ kernel void distortion_footprint(global const float *src, global float *dst,
 #else
 kernel void distortion_ewa_f64(global const float *src, global float *dst,
                                global const REAL *map, const int src_pitch, const int src_w,
-                               const int src_h, const int dst_pitch, const int dst_h)
+                               const int src_h, const int dst_pitch, const int dst_h,
+                               const int row0, const int shift)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= dst_h || qx * 4 >= dst_pitch) return;
+  const int qx = get_global_id(0), my = get_global_id(1), y = my + row0;
+  if(my >= dst_h || qx * 4 >= dst_pitch) return;
+  RS_TILE(src, src_pitch, shift);
+  RS_TILE(dst, dst_pitch, shift);
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {
     const int x = qx * 4 + k;
-    global const REAL *m = map + 8 * (y * dst_pitch + x);
+    global const REAL *m = map + 8 * (my * dst_pitch + x);
     o[k] = rs_ewa_sample(src, src_pitch, src_w, src_h, (REAL)x + (REAL)0.5 + m[0],
                          (REAL)y + (REAL)0.5 + m[1], m[2], m[3], m[4], m[5], (int)m[6]);
   }

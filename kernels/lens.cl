@@ -17,6 +17,11 @@
  * lens_apply (reference, a CLFX_FP64 build: kernels/lib/precision.h): a float64
  * displacement map for green (HAS_MAP = 0: u_g = u) and float64 TCA tables, float64
  * coordinates, weights and sums.
+ *
+ * Each renders the canvas rows row0 .. row0 + rows (the map's rows: all in a whole render)
+ * from buffers holding the canvas rows from `shift` on (RS_TILE: a tile of a tiled render,
+ * clfx.fx.resample.CanvasRows; 0 in a whole render); records count quads from the canvas's
+ * first row.
  */
 #include "lib/resample.h"
 
@@ -46,19 +51,22 @@ inline void lens_vignette(int qx, int y, float ccx, float ccy, float vig_scale, 
     c0.z = r0.z; c1.z = r1.z; c2.z = r2.z; c3.z = r3.z; }
 
 kernel void lens_packed(global const float *src, global float *dst, global const int *map,
-                        const int pitch, const int w, const int h, const float ccx,
+                        const int pitch, const int w, const int h, const int row0,
+                        const int rows, const int shift, const float ccx,
                         const float ccy, const float vig_scale, const float vk1,
                         const float vk2, const float vk3)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= h || qx * 4 >= pitch) return;
-  const int quad = y * (pitch / 4) + qx;
+  const int qx = get_global_id(0), my = get_global_id(1), y = my + row0;
+  if(my >= rows || qx * 4 >= pitch) return;
+  RS_TILE(src, pitch, shift);
+  RS_TILE(dst, pitch, shift);
+  const int entry = my * (pitch / 4) + qx, quad = y * (pitch / 4) + qx;
   float4 c0, c1, c2, c3;
 #if LENS_MAPS == 0
   const float16 s = rs_sanitise16(vload16(0, src + quad * 16));
   c0 = s.lo.lo; c1 = s.lo.hi; c2 = s.hi.lo; c3 = s.hi.hi;
 #else
-  global const int *q = map + 12 * LENS_MAPS * quad;
+  global const int *q = map + 12 * LENS_MAPS * entry;
   rs_fast_quad(src, pitch, w, h, q, &c0, &c1, &c2, &c3);
 #if LENS_MAPS == 3
   LENS_RED_BLUE(rs_fast_quad, q + 12, q + 24)
@@ -73,12 +81,15 @@ kernel void lens_packed(global const float *src, global float *dst, global const
  * 3 unused, then per map the 4 x and 4 y of the source points) */
 kernel void lens_packed_fix(global const float *src, global float *dst,
                             global const int *records, const int count, const int pitch,
-                            const int w, const int h, const float ccx, const float ccy,
+                            const int w, const int h, const int row0, const int rows,
+                            const int shift, const float ccx, const float ccy,
                             const float vig_scale, const float vk1, const float vk2,
                             const float vk3)
 {
   const int n = get_global_id(0);
   if(n >= count) return;
+  RS_TILE(src, pitch, shift);
+  RS_TILE(dst, pitch, shift);
   global const int *rec = records + (4 + 8 * LENS_MAPS) * n;
   const int quad = rec[0];
   float4 c0, c1, c2, c3;
@@ -94,12 +105,16 @@ kernel void lens_packed_fix(global const float *src, global float *dst,
 #else
 kernel void lens_apply(global const float *src, global float *dst, global const REAL *map,
                        global const REAL *luts, const int pitch, const int w, const int h,
-                       const int x0, const int y0, const REAL ccx, const REAL ccy,
+                       const int row0, const int rows, const int shift,
+                       const REAL ccx, const REAL ccy,
                        const REAL lut_scale, const REAL vig_scale, const REAL vk1,
                        const REAL vk2, const REAL vk3)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= h || qx * 4 >= pitch) return;
+  const int qx = get_global_id(0), my = get_global_id(1), y = my + row0;
+  if(my >= rows || qx * 4 >= pitch) return;
+  RS_TILE(src, pitch, shift);
+  RS_TILE(dst, pitch, shift);
+  map -= (size_t)row0 * pitch * 2;    /* the map holds rows row0 .. row0 + rows */
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {
 #if HAS_MAP

@@ -78,6 +78,17 @@ def scene(w: int, h: int):
     return rgba, depth, vel, {"m": mask}
 
 
+TILE_ROWS = 8
+"""An effect that tiles also renders in bands of this many rows of the main frame."""
+
+
+def tiles(name: str) -> bool:
+    """Whether effect ``name`` renders in tiles (`clfx.host.Plugin.whole_frame` None)."""
+    from clfx.plugins import get_plugin
+
+    return get_plugin(name).whole_frame is None
+
+
 def effect_look(name: str, masked: bool) -> dict:
     step = {"effect": name, "params": PARAMS.get(name, {})}
     if masked:
@@ -86,12 +97,13 @@ def effect_look(name: str, masked: bool) -> dict:
             "effects": [step]}
 
 
-def render(look, level: str, size, label: str) -> dict:
+def render(look, level: str, size, label: str, tile_pixels: int = 0) -> dict:
     from clfx import api
     from clfx.device.runtime import Runtime
 
     t0 = time.perf_counter()
     rgba, depth, vel, channels = scene(*size)
+    os.environ["CLFX_TILE_PIXELS"] = str(tile_pixels)   # 0: whole frames
     res = api.render_array(rgba, look, depth=depth, velocity=vel, channels=channels,
                            quality=level, frame=1)
     rt = Runtime.get()
@@ -133,10 +145,13 @@ def main(argv) -> int:
             if level == "draft":   # the mask and an odd size, at the cheapest level
                 runs += [(effect_look(name, masked=True), ODD, f"{name}@{level}+mask {ODD}"),
                          (effect_look(name, masked=False), ODD, f"{name}@{level} {ODD}")]
+            if tiles(name):        # and in bands of 8 rows (`clfx.pipeline.look.render_tiled`)
+                runs += [(effect_look(name, masked=False), (W, H), f"{name}@{level} tiled",
+                          W * TILE_ROWS)]
         else:
             runs = [(name, LOOK_SIZE, f"look {name}@{level}")]
-        for look, size, label in runs:
-            print(json.dumps(render(look, level, size, label)), flush=True)
+        for look, size, label, *tile_pixels in runs:
+            print(json.dumps(render(look, level, size, label, *tile_pixels)), flush=True)
     return 0
 
 

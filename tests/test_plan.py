@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import clfx
+from clfx.bench.scene import synthetic_plate as cinema_frame
 from clfx.core.frame import Frame
 from clfx.core.rect import Rect
 from clfx.host import Plugin, RenderContext, StepPlan
@@ -194,24 +195,6 @@ def test_a_loaded_look_renders_from_the_lenses_it_resolved(rt, monkeypatch):
     assert report.steps[0].ran
 
 
-def cinema_frame(w, h):
-    """A synthetic plate with depth, velocity and a few hot lights (no scene rasteriser:
-    cheap at 8K)."""
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    rgba = np.empty((h, w, 4), np.float32)
-    rgba[..., 0] = 0.3 + 0.2 * np.sin(x * 0.013) * np.cos(y * 0.011)
-    rgba[..., 1] = 0.3 + 0.2 * np.sin(x * 0.007 + 1.0)
-    rgba[..., 2] = 0.3 + 0.2 * np.cos(y * 0.009)
-    rgba[..., 3] = 1.0
-    for fx, fy in ((0.2, 0.3), (0.7, 0.6), (0.5, 0.5)):
-        cy, cx = int(fy * h), int(fx * w)
-        rgba[cy - 2:cy + 3, cx - 2:cx + 3, :3] = 400.0
-    depth = (1.0 + 20.0 * x / w + 3.0 * y / h).astype(np.float32)
-    vel = np.stack([np.full_like(x, 3.0), 1.0 + 2.0 * y / h], axis=2).astype(np.float32)
-    del x, y
-    return Frame.from_array(rgba, depth=depth, velocity=vel)
-
-
 def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
     """The cinema look with its tiling steps in bands of 64 rows: bit-identical to the
     whole frame (the steps that cannot tile run whole: `Plugin.whole_frame`)."""
@@ -226,13 +209,15 @@ def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
 
 @pytest.mark.slow
 def test_8k_renders_tiled_within_a_small_pool_bit_identical(rt, monkeypatch):
-    """At 8K UHD the steps of cinema that tile (vignette, grain) render in bands of 2^20
-    pixels: the same bits as whole frames.  With CLFX_POOL_MB=64 the pool's device peak
-    falls from 2065 to 1118 MiB (the process's, 2.2 GB, is the host frame's)."""
+    """At 8K UHD the steps of cinema that tile (chromatic aberration, distortion, vignette,
+    grain) render in bands of 2^20 pixels: the same bits as whole frames (the whole look,
+    with its steps that render whole, and its peaks: scripts/tile_8k.py).  With
+    CLFX_POOL_MB=64 vignette + grain's device peak fell from 2065 to 1118 MiB."""
     look = clfx.load_look("cinema")
     look = dataclasses.replace(look, steps=[s for s in look.steps
                                             if s.plugin.whole_frame is None])
-    assert [s.effect for s in look.steps] == ["vignette", "grain"]
+    assert [s.effect for s in look.steps] == ["chromatic_aberration", "distortion",
+                                              "vignette", "grain"]
     w, h = 7680, 4320
     whole, _ = render_frame(rt, look, cinema_frame(w, h), frame_number=5)
     tiled, report = render_frame(rt, look, cinema_frame(w, h), frame_number=5,

@@ -659,3 +659,24 @@ def moving_scene(width: int, height: int, max_speed_px: float = 60.0,
               opacity=0.9, velocity=(0.0, -0.2 * v), name="leaf"),
     )
     return Scene(width, height, layers, name="motion blur test scene")
+
+
+def synthetic_plate(w: int, h: int):
+    """A synthetic plate with depth, velocity and a few hot lights (no scene rasteriser:
+    cheap at 8K): what the tiled renders of the cinema look are checked and measured on
+    (tests/test_plan.py, scripts/tile_8k.py)."""
+    from clfx.core.frame import Frame
+
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    rgba = np.empty((h, w, 4), np.float32)
+    rgba[..., 0] = 0.3 + 0.2 * np.sin(x * 0.013) * np.cos(y * 0.011)
+    rgba[..., 1] = 0.3 + 0.2 * np.sin(x * 0.007 + 1.0)
+    rgba[..., 2] = 0.3 + 0.2 * np.cos(y * 0.009)
+    rgba[..., 3] = 1.0
+    for fx, fy in ((0.2, 0.3), (0.7, 0.6), (0.5, 0.5)):
+        cy, cx = int(fy * h), int(fx * w)
+        rgba[cy - 2:cy + 3, cx - 2:cx + 3, :3] = 400.0
+    depth = (1.0 + 20.0 * x / w + 3.0 * y / h).astype(np.float32)
+    vel = np.stack([np.full_like(x, 3.0), 1.0 + 2.0 * y / h], axis=2).astype(np.float32)
+    del x, y
+    return Frame.from_array(rgba, depth=depth, velocity=vel)

@@ -110,20 +110,29 @@ def band_window(window, y0: int, y1: int):
     return type(window)(window.x0, window.y0 + y0, window.x1, window.y0 + y1)
 
 
+def row_spans(rows: tuple[int, int], pitch: int) -> list[tuple[int, int]]:
+    """:func:`map_bands` of the output rows ``rows = (y0, y1)`` of a map (all of a whole
+    render's, a band of them in a tile: `CanvasRows`)."""
+    y0, y1 = rows
+    return [(y0 + a, y0 + b) for a, b in map_bands(y1 - y0, pitch)]
+
+
 def _upload_bands(rt, spans, make, records: dict):
     """A pooled buffer filled band by band with a map's entries: ``make(y0, y1)`` returns
     the band's entries (an array of the same bytes per row for every band), its records by
-    key (flat quad indices of the band in column 0, offset here by the band's first quad)
-    and the quads per row; ``records`` collects the records."""
+    key (flat quad indices of the band in column 0, offset here by the band's first quad,
+    so they count from the canvas's first row) and the quads per row; ``records`` collects
+    the records.  The buffer holds the rows of ``spans`` from the first one's."""
     holder = per_row = None
+    first = spans[0][0]
     for y0, y1 in spans:
         cancel.check()      # a map prepared ahead of need stops here once cancelled
         entries, recs, quads_per_row = make(y0, y1)
         if holder is None:
             per_row = entries.nbytes // max(y1 - y0, 1)
-            holder = rt.buffer(max(spans[-1][1], 1) * per_row)
+            holder = rt.buffer(max(spans[-1][1] - first, 1) * per_row)
         rt.cl.enqueue_copy(rt.queue, holder.buffer, np.ascontiguousarray(entries),
-                           dst_offset=y0 * per_row)   # blocking: the band may go now
+                           dst_offset=(y0 - first) * per_row)   # blocking: the band may go now
         for key, rec in recs.items():
             rec[:, 0] += y0 * quads_per_row
             records.setdefault(key, []).append(rec)
@@ -326,15 +335,18 @@ class PackedMap:
 
     TAPS = {FILTER_CODE[f]: taps for f, taps in FILTER_TAPS.items()}
 
-    def __init__(self, points, width: int, height: int, pitch: int):
+    def __init__(self, points, width: int, height: int, pitch: int, first_row: int = 0):
         rows, quads = max(points[0][0].shape[0], 1), pitch // 4
         entries, coords = [], []
         bad = {code: np.zeros((rows, quads), bool) for code in self.TAPS}
+        # where the fast kernel reads for an undefined point (its quad is re-rendered): the
+        # output pixel itself, rows first_row.. of the image, inside a tile's buffer too
+        own_x, own_y = np.meshgrid(np.arange(pitch) + 0.5, np.arange(rows) + 0.5 + first_row)
         for sx, sy in points:
             px, py = _padded(sx, pitch, 0.5), _padded(sy, pitch, 0.5)
             finite = np.isfinite(px) & np.isfinite(py) & (np.abs(px) < 1e7) & (np.abs(py) < 1e7)
-            ix, tx = _split(np.where(finite, px, 0.5))
-            iy, ty = _split(np.where(finite, py, 0.5))
+            ix, tx = _split(np.where(finite, px, own_x))
+            iy, ty = _split(np.where(finite, py, own_y))
             for code, taps in self.TAPS.items():
                 off = taps // 2 - 1
                 inside = finite & (ix - off >= 0) & (ix - off + taps <= width) \
@@ -376,17 +388,20 @@ class PackedMap:
         return DevicePackedMap(entries, fix, fast_possible, maps)
 
     @classmethod
-    def device(cls, rt, points_of, width: int, height: int, pitch: int) -> "DevicePackedMap":
+    def device(cls, rt, points_of, width: int, height: int, pitch: int,
+               rows: tuple[int, int] | None = None) -> "DevicePackedMap":
         """The map built and uploaded in bands of rows (:func:`map_bands`), the same as
         ``PackedMap(points_of(0, height), ...).upload(rt)``: ``points_of(y0, y1)`` gives
-        the points of output rows ``y0 <= y < y1``.  Host memory is one band's."""
-        spans = map_bands(height, pitch)
-        if len(spans) == 1:
-            return cls(points_of(0, height), width, height, pitch).upload(rt)
+        the points of output rows ``y0 <= y < y1``.  Host memory is one band's.  ``rows``:
+        only those output rows (a tile's band, `CanvasRows`; its fix-up records count quads
+        from the canvas's first row)."""
+        spans = row_spans(rows or (0, height), pitch)
+        if len(spans) == 1 and spans[0][0] == 0:
+            return cls(points_of(*spans[0]), width, height, pitch).upload(rt)
         quads, found = pitch // 4, {}
 
         def make(y0, y1):
-            m = cls(points_of(y0, y1), width, height, pitch)
+            m = cls(points_of(y0, y1), width, height, pitch, y0)
             found["maps"], found["fast"] = m.entries.shape[2] // 12, m.fast_possible
             return m.entries, m.fixups, quads
 
@@ -539,7 +554,7 @@ class FootprintMap:
     """
 
     def __init__(self, sx, sy, jac, filter_name: str, width: int, height: int, pitch: int,
-                 border: str = "black"):
+                 border: str = "black", first_row: int = 0):
         fp = FOOTPRINTS[filter_name]
         taps, ints = fp.taps, fp.entry_ints
         rows, quads = max(sx.shape[0], 1), pitch // 4
@@ -567,7 +582,10 @@ class FootprintMap:
         base = (np.clip(iy, 0, None) * pitch + np.clip(ix, 0, None)) * 4
         h2 = np.stack([hx, hy], -1).astype(np.float16).view(np.int32)[..., 0]
         e = np.empty((rows, quads, ints // 4, 4), np.int32)
-        e[:, :, 0] = np.where(fast, base, 0).reshape(rows, quads, 4)   # 0: a window that fits
+        # a window that fits, for pixels not on the fast path (read, then not used): at the
+        # map's first row (``first_row``, of the image), inside a tile's buffer too
+        fits = (min(max(first_row, 0), max(height - taps, 0)) * pitch) * 4
+        e[:, :, 0] = np.where(fast, base, fits).reshape(rows, quads, 4)
         if fp.half_f:       # (f_x of the 4 pixels, f_y of the 4) as 8 float16
             f16 = np.concatenate([fx.reshape(rows, quads, 4), fy.reshape(rows, quads, 4)], 2)
             e[:, :, 1] = f16.astype(np.float16).view(np.int32)
@@ -605,17 +623,20 @@ class FootprintMap:
 
     @classmethod
     def device(cls, rt, points_of, filter_name: str, width: int, height: int, pitch: int,
-               border: str = "black") -> "DeviceFootprintMap":
+               border: str = "black", rows: tuple[int, int] | None = None
+               ) -> "DeviceFootprintMap":
         """The map built and uploaded in bands of rows (:func:`map_bands`), the same as
         ``FootprintMap(*points_of(0, height), ...).upload(rt)``: ``points_of(y0, y1)``
-        gives ``(sx, sy, jac)`` of output rows ``y0 <= y < y1``.  Host memory is one band's."""
-        spans = map_bands(height, pitch)
-        if len(spans) == 1:
-            return cls(*points_of(0, height), filter_name, width, height, pitch, border).upload(rt)
+        gives ``(sx, sy, jac)`` of output rows ``y0 <= y < y1``.  Host memory is one band's.
+        ``rows``: only those output rows (a tile's band, `CanvasRows`)."""
+        spans = row_spans(rows or (0, height), pitch)
+        if len(spans) == 1 and spans[0][0] == 0:
+            return cls(*points_of(*spans[0]), filter_name, width, height, pitch,
+                       border).upload(rt)
         quads, counts = pitch // 4, {"fast": 0.0, "zero": 0.0}
 
         def make(y0, y1):
-            m = cls(*points_of(y0, y1), filter_name, width, height, pitch, border)
+            m = cls(*points_of(y0, y1), filter_name, width, height, pitch, border, y0)
             before = sum(len(r) for r in records.get("records", ()))
             checked = m.entries[..., 0] == -1          # record indices count from the band's
             m.entries[..., 1][checked] += before        # first: make them the whole map's
@@ -627,7 +648,7 @@ class FootprintMap:
         records: dict = {}
         entries = _upload_bands(rt, spans, make, records)
         rec = np.concatenate(records["records"])
-        total = max(max(height, 1) * quads, 1)
+        total = max(max(spans[-1][1] - spans[0][0], 1) * quads, 1)
         fractions = {"fast": counts["fast"] / total, "zero": counts["zero"] / total,
                      "checked": len(rec) / total}
         return DeviceFootprintMap(entries, rt.to_device(rec) if len(rec) else None, len(rec),
@@ -676,12 +697,13 @@ def elliptical_spread(jac):
     return jc, n
 
 
-def elliptical_map(rt, sx, sy, jac, pitch: int):
+def elliptical_map(rt, sx, sy, jac, pitch: int, row0: int = 0):
     """The reference level's float64 map (kernels/distortion.cl ``distortion_ewa_f64``): per
     pixel the displacement (dx, dy) from its centre, the columns of ``jc`` and ``n``
-    (:func:`elliptical_spread`), 8 doubles, rows of ``pitch`` pixels."""
+    (:func:`elliptical_spread`), 8 doubles, rows of ``pitch`` pixels; ``row0``: the first
+    row's index in the canvas (a tile's band, `CanvasRows`)."""
     h, w = sx.shape
-    ox, oy = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    ox, oy = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5 + row0)
     jc, n = elliptical_spread(jac)
     host = np.zeros((max(h, 1), pitch, 8))
     host[:h, :w, 0] = sx - ox
@@ -804,19 +826,94 @@ def canvas_stand_in(window):
                            pitch=max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX))
 
 
+@dataclass(frozen=True)
+class CanvasRows:
+    """The rows of a warp's canvas one render computes, and how its kernels address them.
+
+    A warp's arithmetic (the maps' source points, the texel indices and fractions, the
+    border rule) is in the coordinates of its ``canvas`` (`warp_canvas`) whatever part of
+    it renders: a tile of a tiled render (`on_canvas`) computes output rows ``first <=
+    y < first + count`` (relative to the canvas's top) from a source buffer holding canvas
+    rows from ``shift`` on, and writes an output of the same rows as its source; kernels
+    address both buffers in canvas rows (``buffer - shift`` rows), so each pixel of the
+    band gets the whole render's bits.  A whole render: every row, ``shift`` 0."""
+
+    canvas: object
+    first: int
+    count: int
+    shift: int = 0
+
+    @classmethod
+    def whole(cls, canvas) -> "CanvasRows":
+        return cls(canvas, 0, canvas.height)
+
+    @property
+    def tiled(self) -> bool:
+        return (self.first, self.count, self.shift) != (0, self.canvas.height, 0)
+
+    @property
+    def key(self) -> tuple:
+        """What a map of these rows adds to its cache key (nothing for a whole render's)."""
+        return (self.first, self.count) if self.tiled else ()
+
+    @property
+    def span(self) -> tuple[int, int]:
+        return self.first, self.first + self.count
+
+    def context(self, ctx):
+        """``ctx`` as the maps see it: over (a stand-in of) the whole canvas."""
+        return ctx if ctx.source.window == self.canvas else ctx.over(
+            source=canvas_stand_in(self.canvas))
+
+
+TILE_MARGIN_ROWS = 8
+"""Rows a tile's source holds beyond its band's region of interest (see `on_canvas`)."""
+
+
 def on_canvas(plugin, rt, p, ctx, border: str, render):
-    """Render a warp over its canvas (`warp_canvas`): ``render(canvas_ctx, sanitise)`` sees
-    a context whose source is the frame on the canvas (its maps are built for the canvas's
-    pixels and cached under its window); the result is cut to the output window.
-    ``sanitise``: the frame has non-finite pixels (asked of the frame's own analysis)."""
+    """Render a warp over its canvas (`warp_canvas`): ``render(canvas_ctx, sanitise, rows)``
+    sees a context whose source is the frame on the canvas (its maps are built for the
+    canvas's pixels and cached under its window) and the `CanvasRows` to compute; the result
+    is cut to the output window.  ``sanitise``: the frame has non-finite pixels (asked of
+    the frame's own analysis).
+
+    In a tile of a tiled render (``ctx.tiling``) the canvas is the whole render's, the
+    source the canvas rows the band's region of interest covers (with
+    ``TILE_MARGIN_ROWS``), filled as the whole render fills them (`warp_source`), and only
+    the band's rows are computed; the result covers the band."""
     name = plugin.descriptor.name
     sanitise = needs_sanitising(ctx, name)
+    if ctx.tiling is not None:
+        return _tile_on_canvas(plugin, rt, p, ctx, border, render, sanitise)
     canvas, out = warp_canvas(plugin, p, ctx, border)
+    rows = CanvasRows.whole(canvas)
     if canvas == ctx.source.window:
-        img = render(ctx, sanitise)
+        img = render(ctx, sanitise, rows)
     else:
-        img = render(ctx.with_source(warp_source(rt, ctx, canvas, border)), sanitise)
+        img = render(ctx.with_source(warp_source(rt, ctx, canvas, border)), sanitise, rows)
     return rt.reframe(img, out, "zero")
+
+
+def _tile_on_canvas(plugin, rt, p, ctx, border, render, sanitise):
+    """`on_canvas` of a tile (``ctx.tiling``): the band's rows of the whole render."""
+    band = ctx.tiling.band
+    whole = ctx.over(source=canvas_stand_in(ctx.tiling.whole), tiling=None)
+    canvas, _ = warp_canvas(plugin, p, whole, border)
+    roi = plugin.region_of_interest(p, whole, band)
+    y0 = max(canvas.y0, min(roi.y0, band.y0) - TILE_MARGIN_ROWS)
+    y1 = min(canvas.y1, max(roi.y1, band.y1) + TILE_MARGIN_ROWS)
+    part = type(canvas)(canvas.x0, y0, canvas.x1, y1)
+    frame = warp_frame(whole)
+    if border == "edge" and not (canvas == frame or _inside(whole.source.window, frame)):
+        # the rows past the frame repeat its edge rows: bring the ones they repeat
+        top = min(max(y0, frame.y0), frame.y1 - 1)
+        bottom = max(min(y1, frame.y1), top + 1)
+        rows_of = type(canvas)(frame.x0, top, frame.x1, bottom)
+        source = rt.reframe(rt.reframe(ctx.source, rows_of, "zero"), part, "clamp")
+    else:
+        source = rt.reframe(ctx.source, part, "zero")
+    rows = CanvasRows(canvas, band.y0 - canvas.y0, band.height, y0 - canvas.y0)
+    return render(ctx.over(source=source), sanitise, rows)
 
 
 def canvas_context(plugin, p, ctx, border: str):

@@ -52,7 +52,8 @@ import numpy as np
 from clfx.core.camera import image_distance
 from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
 from clfx.core.rect import Rect
-from clfx.fx.resample import (ResampleLevel, elliptical_spread, footprint_defines,
+from clfx.fx.resample import (TILE_MARGIN_ROWS, CanvasRows, ResampleLevel, canvas_stand_in,
+                              elliptical_spread, footprint_defines,
                               footprint_spread, needs_sanitising)
 from clfx.host import Plugin, StepPlan, register
 
@@ -129,7 +130,7 @@ class BreathingPlan(StepPlan):
 
 @register
 class Breathing(Plugin):
-    whole_frame = ("its scale maps source-window coordinates (float32 rounding differs per tile)")
+    whole_frame = None   # a tile computes its band's rows with the whole render's geometry
     descriptor = Descriptor(
         name="breathing", label="Lens breathing", group="Lens", kernel="breathing.cl",
         summary="Focusing changes the field of view: with an animated focus distance the frame "
@@ -225,39 +226,54 @@ class Breathing(Plugin):
 
     def render(self, rt, p, ctx):
         lvl = self.level(ctx)
-        m, warnings = self.scale(p, ctx)
-        out_win = self.output_window(p, ctx)
+        # a tile (ctx.tiling) renders its band's rows of the whole render, from the whole
+        # render's geometry (`clfx.fx.resample.CanvasRows`)
+        whole = ctx if ctx.tiling is None else ctx.over(
+            source=canvas_stand_in(ctx.tiling.whole), tiling=None)
+        m, warnings = self.scale(p, whole)
+        out_win = self.output_window(p, whole)
         # Inside the display window, pixels outside the data window are transparent black (an
         # element's bounding box): read as 0.  Past the display window's edge, where the data
         # window ends there, nothing was rendered: the edge repeats (and a warning says so).
-        need = self.region_of_interest(p, ctx, out_win)
-        src = rt.reframe(ctx.source, ctx.source.window.union(need.intersect(ctx.display_window)),
-                         "zero")
-        line = self._overhang_warning(p, ctx, m, src.window, out_win)
+        need = self.region_of_interest(p, whole, out_win)
+        read = whole.source.window.union(need.intersect(ctx.display_window))
+        rows = CanvasRows.whole(out_win)
+        part = read
+        if ctx.tiling is not None:
+            band = ctx.tiling.band
+            roi = self.region_of_interest(p, whole, band)
+            part = Rect(read.x0, max(read.y0, roi.y0 - TILE_MARGIN_ROWS), read.x1,
+                        min(read.y1, roi.y1 + TILE_MARGIN_ROWS))
+            rows = CanvasRows(out_win, band.y0 - out_win.y0, band.height, part.y0 - read.y0)
+            out_win = band
+        src = rt.reframe(ctx.source, part, "zero")
+        line = self._overhang_warning(p, ctx, m, read, rows.canvas)
         ctx.warnings.extend(warnings + ([line] if line else []))
         ctx.notes.append(f"breathing: scale {m:.6f}")
         double = rt.use_fp64(lvl.fp64)
         cx, cy = centre(p, ctx.display_window)
         inv = 1.0 / m
         # output pixel x of out_win reads x * inv + a (source-window coordinates)
-        ax = cx + (out_win.x0 + 0.5 - cx) * inv - src.window.x0
-        ay = cy + (out_win.y0 + 0.5 - cy) * inv - src.window.y0
+        ax = cx + (rows.canvas.x0 + 0.5 - cx) * inv - read.x0
+        ay = cy + (rows.canvas.y0 + 0.5 - cy) * inv - read.y0
         jac = np.array([[[inv, 0.0], [0.0, inv]]])
         defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"))
         dst = rt.image(out_win, 4)
         i32 = np.int32
-        head = (src, dst, i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch),
+        head = (src, dst, i32(src.pitch), i32(read.width), i32(read.height), i32(dst.pitch),
                 i32(dst.height))
+        at = (i32(rows.first), i32(rows.shift))
         size = (dst.pitch // 4, max(dst.height, 1))
         if double:
             jc, n = elliptical_spread(jac)
             knl = rt.kernel("breathing.cl", "breathing_ewa_f64", fp64=lvl.fp64, **defines)
             rt.launch(knl, size, *head, np.float64(ax), np.float64(ay), np.float64(inv),
-                      np.float64(jc[0, 0, 0]), i32(n[0]))
+                      np.float64(jc[0, 0, 0]), i32(n[0]), *at)
             return dst
         hx, hy, n = footprint_spread(jac, lvl.filter)
         knl = rt.kernel("breathing.cl", "breathing_footprint",
                         CLFX_STREAM_STORES=int(rt.streams_stores(dst.nbytes)), **defines)
         f32 = np.float32
-        rt.launch(knl, size, *head, f32(ax), f32(ay), f32(inv), f32(hx[0]), f32(hy[0]), i32(n[0]))
+        rt.launch(knl, size, *head, f32(ax), f32(ay), f32(inv), f32(hx[0]), f32(hy[0]), i32(n[0]),
+                  *at)
         return dst

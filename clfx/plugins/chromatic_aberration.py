@@ -54,7 +54,7 @@ from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec
 from clfx.fx import spectral
 from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, band_window,
                               canvas_context, check_fold, fold_radius, frame_key,
-                              kernel_defines, launch_packed, lut_lookup, on_canvas,
+                              CanvasRows, kernel_defines, launch_packed, lut_lookup, on_canvas,
                               pixel_centres, radial_lut, warp_region)
 from clfx.host import Plugin, register
 
@@ -203,7 +203,7 @@ def channel_points(p, display_window, window, pixel_aspect, rows=None, rgb_to_xy
 
 @register
 class ChromaticAberration(Plugin):
-    whole_frame = ("its maps are built over the source window (float32 rounding differs per tile)")
+    whole_frame = None   # a tile computes its band's rows of the whole canvas (`on_canvas`)
     descriptor = Descriptor(
         name="chromatic_aberration", label="Chromatic aberration", group="Lens",
         kernel="chromatic_aberration.cl",
@@ -248,21 +248,24 @@ class ChromaticAberration(Plugin):
                                              ctx.rgb_to_xyz))
         return window.grown(math.ceil(far.max() * dev / max(1.0 - dev, 1e-3)) + 4)
 
-    def packed_maps(self, rt, p, ctx):
+    def packed_maps(self, rt, p, ctx, rows=None):
         """Three-bin float levels: the red and blue bins' source points as a packed map on
-        the device, and the bins' weights, kept in ``rt.cache``."""
+        the device, and the bins' weights, kept in ``rt.cache``; ``rows``: the
+        `CanvasRows` of ``ctx.source``'s window (the canvas) to map (default all)."""
         src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
 
         def build():
             _, weights = channel_bins(p.amount, ctx.rgb_to_xyz)
             points_of = lambda y0, y1: channel_points(p, ctx.display_window, src.window,
                                                       ctx.pixel_aspect, rows=(y0, y1),
                                                       rgb_to_xyz=ctx.rgb_to_xyz)
-            return (PackedMap.device(rt, points_of, src.width, src.height, src.pitch),
+            return (PackedMap.device(rt, points_of, src.width, src.height, src.pitch,
+                                     rows.span),
                     rt.to_device(weights.astype(np.float32)))
 
         return rt.cache.get(("chromatic_aberration.packed",) + frame_key(p, ctx)
-                            + ctx.colour_key, build)
+                            + ctx.colour_key + rows.key, build)
 
     def is_identity(self, p, ctx):
         if p.amount == 0.0:
@@ -306,14 +309,18 @@ class ChromaticAberration(Plugin):
         # over the window the data window's content lands in (`on_canvas`); the spectral
         # model is defined in linear Rec.709; other working spaces are carried into it and
         # back (clfx.fx.spectral.in_reference_basis)
-        return on_canvas(self, rt, p, ctx, p.border, lambda c, sanitise: (
+        return on_canvas(self, rt, p, ctx, p.border, lambda c, sanitise, rows: (
             spectral.in_reference_basis(
-                rt, c, lambda cc: self.render_reference(rt, p, cc, sanitise))))
+                rt, c, lambda cc: self.render_reference(rt, p, cc, sanitise, rows))))
 
-    def render_reference(self, rt, p, ctx, sanitise=True):
+    def render_reference(self, rt, p, ctx, sanitise=True, rows=None):
         """The effect on pixels in the reference basis (linear Rec.709), over
-        ``ctx.source``'s window; ``sanitise``: the frame has non-finite pixels."""
+        ``ctx.source``'s window (the canvas, or the part of it a tile holds: ``rows``, the
+        `CanvasRows` to compute, default all); ``sanitise``: the frame has non-finite
+        pixels."""
         src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
+        geo, canvas = rows.context(ctx), rows.canvas
         lvl = self.level(ctx)
         n = lvl.wavelengths if p.spectral else 3
         double = rt.use_fp64(lvl.fp64)
@@ -321,32 +328,37 @@ class ChromaticAberration(Plugin):
         defines.update(NWAVE=n, NWP=padded_count(n), LUTN=LUT_SIZE, GREEN_IN_PLACE=int(n == 3))
         dst = src.like()
         i32 = np.int32
+        at = (i32(canvas.width), i32(canvas.height), i32(rows.first), i32(rows.count),
+              i32(rows.shift))
         if n == 3 and not double:
-            dmap, wbuf = self.packed_maps(rt, p, ctx)
+            dmap, wbuf = self.packed_maps(rt, p, geo, rows)
             name = "chromatic_aberration_packed"
             launch_packed(rt, rt.kernel("chromatic_aberration.cl", name, fp64=lvl.fp64,
                                         CA_FAST=1, **defines),
                           rt.kernel("chromatic_aberration.cl", name + "_fix", fp64=lvl.fp64,
                                     CA_FAST=1, **defines),
-                          dmap, lvl.filter, src.pitch // 4, src.height, (src, dst),
-                          (wbuf, i32(src.pitch), i32(src.width), i32(src.height)))
+                          dmap, lvl.filter, src.pitch // 4, rows.count, (src, dst),
+                          (wbuf, i32(src.pitch)) + at)
             return dst
-        luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, ctx, n, double)
+        luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, geo, n, double)
         real = np.float64 if double else np.float32
-        args = (src, dst, luts, weights, i32(src.pitch), i32(src.width), i32(src.height),
-                i32(src.window.x0), i32(src.window.y0), real(cx), real(cy), real(ax), real(ay))
-        quads, rows = src.pitch // 4, max(src.height, 1)
-        inner = None if double else interior_quads(shift, FILTER_TAPS[lvl.filter], src.width,
-                                                   src.height)
-        checked = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
-                            fp64=lvl.fp64, CA_FAST=0, **defines)
-        for qx0, y0, nq, nr in ring(quads, rows, inner):
-            rt.launch(checked, (nq, nr), *args, i32(qx0), i32(y0), i32(nq), i32(nr))
-        if inner is not None:
-            fast = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
-                             fp64=lvl.fp64, CA_FAST=1, **defines)
-            qx0, y0, nq, nr = inner
-            rt.launch(fast, (nq, nr), *args, i32(qx0), i32(y0), i32(nq), i32(nr))
+        args = (src, dst, luts, weights, i32(src.pitch), i32(canvas.width), i32(canvas.height),
+                i32(canvas.x0), i32(canvas.y0), real(cx), real(cy), real(ax), real(ay))
+        quads = src.pitch // 4
+        inner = None if double else interior_quads(shift, FILTER_TAPS[lvl.filter],
+                                                   canvas.width, canvas.height)
+        # the whole canvas's ring and interior (each pixel takes one path whatever the
+        # tile), cut to the rows computed
+        parts = [(0, r) for r in ring(quads, max(canvas.height, 1), inner)]
+        parts += [(1, inner)] if inner is not None else []
+        for fast, (qx0, y0, nq, nr) in parts:
+            y1, y0 = min(y0 + nr, rows.first + rows.count), max(y0, rows.first)
+            if y1 <= y0 and rows.tiled:
+                continue
+            knl = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
+                            fp64=lvl.fp64, CA_FAST=fast, **defines)
+            rt.launch(knl, (nq, max(y1 - y0, 1)), *args, i32(qx0), i32(y0), i32(nq),
+                      i32(y1 - y0), i32(rows.shift))
         return dst
 
 

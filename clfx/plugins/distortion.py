@@ -67,7 +67,7 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, FootprintMap, ResampleLevel, band_window, canvas_context,
+from clfx.fx.resample import (BORDERS, CanvasRows, FootprintMap, ResampleLevel, band_window, canvas_context,
                               check_fold, elliptical_map, fit_scale, fold_radius,
                               footprint_defines, frame_key, launch_footprint, map_bands,
                               on_canvas, pixel_centres, rect_boundary, WARP_REACH_TEXELS,
@@ -164,6 +164,7 @@ def undistort(xd, yd, k, r_hi: float, fx: float):
     with np.errstate(invalid="ignore", divide="ignore"):
         s = np.where(r_d > 0, r_u / np.where(r_d > 0, r_d, 1.0), 1.0)
     x, y = xd * s, yd * s
+    active = np.ones(np.shape(x), bool)
     for _ in range(NEWTON_STEPS):
         r2 = x * x + y * y
         radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -178,11 +179,13 @@ def undistort(xd, yd, k, r_hi: float, fx: float):
         with np.errstate(invalid="ignore", divide="ignore"):
             step_x = (j22 * ex - j12 * ey) / det
             step_y = (j11 * ey - j21 * ex) / det
-        x = x - step_x
-        y = y - step_y
-        # quadratic convergence: stop once every step is far below the tolerance
-        if not (np.nanmax(np.abs(step_x), initial=0.0) * fx > 1e-9
-                or np.nanmax(np.abs(step_y), initial=0.0) * fx > 1e-9):
+        x = np.where(active, x - step_x, x)
+        y = np.where(active, y - step_y, y)
+        # quadratic convergence: a point stops once its step is far below the tolerance (each
+        # point's own, so a point's source is the same whatever else is mapped with it: the
+        # bands of a tiled render)
+        active &= (np.abs(step_x) * fx > 1e-9) | (np.abs(step_y) * fx > 1e-9)
+        if not active.any():
             break
     ex, ey = project(x, y, k)
     residual = np.hypot(ex - xd, ey - yd) * fx
@@ -302,7 +305,7 @@ def _reach(k, r_needed: float) -> float:
 
 @register
 class Distortion(Plugin):
-    whole_frame = ("its maps are built over the source window (float32 rounding differs per tile)")
+    whole_frame = None   # a tile computes its band's rows of the whole canvas (`on_canvas`)
     descriptor = Descriptor(
         name="distortion", label="Lens distortion", group="Lens", kernel="distortion.cl",
         summary="Brown-Conrady barrel/pincushion/tangential distortion with OpenCV's "
@@ -378,15 +381,20 @@ class Distortion(Plugin):
 
         return rt.cache.get(("distortion.host_map",) + frame_key(p, ctx), build)
 
-    def device_map(self, rt, p, ctx, filter_name, double):
+    def device_map(self, rt, p, ctx, filter_name, double, rows=None):
         """The device map of one level, kept in ``rt.cache``: ``(map, info)``; float levels a
         :class:`clfx.fx.resample.DeviceFootprintMap` of their footprint filter; ``double``
-        (reference) the float64 elliptical map (:func:`clfx.fx.resample.elliptical_map`)."""
+        (reference) the float64 elliptical map (:func:`clfx.fx.resample.elliptical_map`).
+        ``rows``: the `CanvasRows` of ``ctx.source``'s window (the canvas) to map (default
+        all: a tile maps its band's)."""
         src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
 
         def build():
-            if not double and len(map_bands(src.height, src.pitch)) > 1:
-                return self.banded_map(rt, p, ctx, filter_name)
+            if rows.tiled or (not double and len(map_bands(src.height, src.pitch)) > 1):
+                if double:
+                    return self.banded_map(rt, p, ctx, None, rows)
+                return self.banded_map(rt, p, ctx, filter_name, rows)
             sx, sy, jac, info = self.host_map(rt, p, ctx)
             if double:
                 return elliptical_map(rt, sx, sy, jac, src.pitch), info
@@ -394,7 +402,7 @@ class Distortion(Plugin):
                                 p.border).upload(rt), info
 
         key = "elliptical" if double else filter_name
-        return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (key,), build)
+        return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (key,) + rows.key, build)
 
     def prepare(self, rt, p, ctx):
         if not self.is_identity(p, ctx):
@@ -402,10 +410,11 @@ class Distortion(Plugin):
             self.device_map(rt, p, canvas_context(self, p, ctx, p.border), lvl.filter,
                             rt.use_fp64(lvl.fp64))
 
-    def banded_map(self, rt, p, ctx, filter_name):
-        """A frame larger than one band (``clfx.fx.resample.map_bands``): the footprint map
-        built band by band from the same geometry (no float64 map of the whole frame is
-        kept): ``(map, info)``."""
+    def banded_map(self, rt, p, ctx, filter_name, rows):
+        """A frame larger than one band (``clfx.fx.resample.map_bands``), or a tile's band
+        of rows (``rows``): the footprint map built band by band from the same geometry (no
+        float64 map of the whole frame is kept), or with ``filter_name`` None the reference's
+        elliptical map of ``rows``: ``(map, info)``."""
         src = ctx.source
         g = _geometry(p, ctx.camera, ctx.display_window, src.window, ctx.pixel_aspect,
                       "distortion")
@@ -417,22 +426,28 @@ class Distortion(Plugin):
             no_source += int(np.count_nonzero(~np.isfinite(sx)))
             return sx - src.window.x0, sy - src.window.y0, jac
 
-        dmap = FootprintMap.device(rt, points_of, filter_name, src.width, src.height,
-                                   src.pitch, p.border)
+        if filter_name is None:
+            dmap = elliptical_map(rt, *points_of(*rows.span), src.pitch, rows.first)
+        else:
+            dmap = FootprintMap.device(rt, points_of, filter_name, src.width, src.height,
+                                       src.pitch, p.border, rows.span)
         info = dict(fx=g["fx"], fy=g["fy"], cx=g["cx"], cy=g["cy"], k=g["k"],
                     fit_scale=g["fit_scale"], no_source=no_source, r_fold=g["r_fold"])
         return dmap, info
 
     def render(self, rt, p, ctx):
         return on_canvas(self, rt, p, ctx, p.border,
-                         lambda c, sanitise: self.render_canvas(rt, p, c, sanitise))
+                         lambda c, sanitise, rows: self.render_canvas(rt, p, c, sanitise, rows))
 
-    def render_canvas(self, rt, p, ctx, sanitise):
-        """The warp over ``ctx.source``'s window (the canvas: `on_canvas`)."""
+    def render_canvas(self, rt, p, ctx, sanitise, rows=None):
+        """The warp over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
+        a tile holds: ``rows``, the `CanvasRows` to compute, default all)."""
         src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
+        canvas = rows.canvas
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
-        dmap, info = self.device_map(rt, p, ctx, lvl.filter, double)
+        dmap, info = self.device_map(rt, p, rows.context(ctx), lvl.filter, double, rows)
         if info["no_source"]:
             ctx.notes.append(f"distortion: {info['no_source']} px beyond the lens's reach "
                              f"left transparent")
@@ -441,11 +456,12 @@ class Distortion(Plugin):
         if not double:
             defines["CLFX_STREAM_STORES"] = int(rt.streams_stores(dst.nbytes))
         i32 = np.int32
-        tail = (i32(src.pitch), i32(src.width), i32(src.height), i32(dst.pitch), i32(dst.height))
+        tail = (i32(src.pitch), i32(canvas.width), i32(canvas.height), i32(dst.pitch),
+                i32(rows.count), i32(rows.first), i32(rows.shift))
         if double:
             knl = rt.kernel("distortion.cl", "distortion_ewa_f64", fp64=lvl.fp64, **defines)
-            rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, dmap, *tail)
+            rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, dmap, *tail)
             return dst
         launch_footprint(rt, rt.kernel("distortion.cl", "distortion_footprint", **defines),
-                         dmap, src.pitch // 4, src.height, (src, dst), tail)
+                         dmap, src.pitch // 4, rows.count, (src, dst), tail)
         return dst

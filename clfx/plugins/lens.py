@@ -37,7 +37,7 @@ import numpy as np
 from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
 from clfx.fx import lensdb
-from clfx.fx.resample import (BORDERS, DevicePackedMap, PackedMap, ResampleLevel, band_window,
+from clfx.fx.resample import (BORDERS, CanvasRows, DevicePackedMap, PackedMap, ResampleLevel, band_window,
                               canvas_context, check_fold, fit_scale, fold_radius, frame_key,
                               kernel_defines, launch_packed, lut_lookup, map_bands, on_canvas,
                               pixel_centres, radial_inverse, radial_inverse_fast, radial_lut,
@@ -192,7 +192,7 @@ def channel_points(cal, norm, display_window, window, fit="none", distortion=Tru
 
 @register
 class Lens(Plugin):
-    whole_frame = ("its lensfun maps are built over the source window (float32 rounding differs per tile)")
+    whole_frame = None   # a tile computes its band's rows of the whole canvas (`on_canvas`)
     descriptor = Descriptor(
         name="lens", label="Real lens (lensfun)", group="Lens", kernel="lens.cl",
         summary="Distortion, transverse CA and vignetting of a real lens from the lensfun "
@@ -340,12 +340,14 @@ class Lens(Plugin):
                    flags=(use_map, use_tca, use_vig), notes=notes)
         return geo
 
-    def device_buffers(self, rt, p, ctx, double):
+    def device_buffers(self, rt, p, ctx, double, rows=None):
         """Device data, kept in ``rt.cache``: reference (``double``) ``(map, luts)``, float64
         buffers; float levels a :class:`clfx.fx.resample.DevicePackedMap` of green (and red,
         blue with TCA), built band by band (`PackedMap.device`), with ``maps`` = 0 when
-        nothing moves (vignetting only)."""
+        nothing moves (vignetting only).  ``rows``: the `CanvasRows` of ``ctx.source``'s
+        window (the canvas) to map (default all)."""
         src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
 
         def build():
             geo = self.host_geometry(rt, p, ctx)
@@ -354,15 +356,16 @@ class Lens(Plugin):
                 if not use_map:
                     return rt.to_device(np.zeros(2)), rt.to_device(
                         geo["luts"] if use_tca else np.zeros(2))
-                ux, uy = pixel_centres(src.window, frame_origin=False)
-                gx, gy = geo["points"](0, src.height)[0]
-                return (upload_map(rt, gx - ux, gy - uy, src.pitch, True),
+                ux, uy = pixel_centres(band_window(src.window, *rows.span), frame_origin=False)
+                gx, gy = geo["points"](*rows.span)[0]
+                return (upload_map(rt, gx - ux, gy - (uy + rows.first), src.pitch, True),
                         rt.to_device(geo["luts"] if use_tca else np.zeros(2)))
             if not (use_map or use_tca):      # vignetting only: the source is read in place
                 return DevicePackedMap(rt.to_device(np.zeros(4, np.int32)), {}, {}, 0)
-            return PackedMap.device(rt, geo["points"], src.width, src.height, src.pitch)
+            return PackedMap.device(rt, geo["points"], src.width, src.height, src.pitch,
+                                    rows.span)
 
-        return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (double,), build)
+        return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (double,) + rows.key, build)
 
     def prepare(self, rt, p, ctx):
         if not self.is_identity(p, ctx):
@@ -372,15 +375,18 @@ class Lens(Plugin):
 
     def render(self, rt, p, ctx):
         return on_canvas(self, rt, p, ctx, p.border,
-                         lambda c, sanitise: self.render_canvas(rt, p, c, sanitise))
+                         lambda c, sanitise, rows: self.render_canvas(rt, p, c, sanitise, rows))
 
-    def render_canvas(self, rt, p, ctx, sanitise):
-        """The lens over ``ctx.source``'s window (the canvas: `on_canvas`)."""
+    def render_canvas(self, rt, p, ctx, sanitise, rows=None):
+        """The lens over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
+        a tile holds: ``rows``, the `CanvasRows` to compute, default all)."""
         src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
+        canvas = rows.canvas
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
-        bufs = self.device_buffers(rt, p, ctx, double)
-        geo = self.host_geometry(rt, p, ctx)
+        bufs = self.device_buffers(rt, p, rows.context(ctx), double, rows)
+        geo = self.host_geometry(rt, p, rows.context(ctx))
         use_map, use_tca, use_vig = geo["flags"]
         ctx.notes.extend(geo["notes"])
         defines = kernel_defines(lvl.filter, p.border, sanitise)
@@ -388,21 +394,21 @@ class Lens(Plugin):
                        LUTN=LUT_SIZE)
         dst = src.like()
         i32 = np.int32
+        at = (i32(src.pitch), i32(canvas.width), i32(canvas.height), i32(rows.first),
+              i32(rows.count), i32(rows.shift))
         if double:
             map_buf, lut_buf = bufs
             knl = rt.kernel("lens.cl", "lens_apply", fp64=lvl.fp64, **defines)
-            rt.launch(knl, (src.pitch // 4, max(src.height, 1)), src, dst, map_buf, lut_buf,
-                      i32(src.pitch), i32(src.width), i32(src.height), i32(src.window.x0),
-                      i32(src.window.y0), *[np.float64(c) for c in geo["consts"]])
+            rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, map_buf, lut_buf,
+                      *at, *[np.float64(c) for c in geo["consts"]])
             return dst
         defines.update(LENS_MAPS=bufs.maps)
         ccx, ccy, _, vig_scale, vk1, vk2, vk3 = geo["consts"]
-        tail = (i32(src.pitch), i32(src.width), i32(src.height)) + tuple(
-            np.float32(c) for c in (ccx, ccy, vig_scale, vk1, vk2, vk3))
+        tail = at + tuple(np.float32(c) for c in (ccx, ccy, vig_scale, vk1, vk2, vk3))
         fast = rt.kernel("lens.cl", "lens_packed", fp64=lvl.fp64, **defines)
         if bufs.maps == 0:
-            rt.launch(fast, (src.pitch // 4, max(src.height, 1)), src, dst, bufs.entries, *tail)
+            rt.launch(fast, (src.pitch // 4, max(rows.count, 1)), src, dst, bufs.entries, *tail)
             return dst
         launch_packed(rt, fast, rt.kernel("lens.cl", "lens_packed_fix", fp64=lvl.fp64, **defines),
-                      bufs, lvl.filter, src.pitch // 4, src.height, (src, dst), tail)
+                      bufs, lvl.filter, src.pitch // 4, rows.count, (src, dst), tail)
         return dst

@@ -46,7 +46,9 @@ from clfx.host import Plugin, register
 
 @register
 class MotionBlur(Plugin):
-    whole_frame = ("its gather runs in source-window coordinates (float32 rounding differs per tile)")
+    whole_frame = ("its velocity tiles (tile max, neighbour max) lie on a grid from the source "
+                   "window's origin and its gather samples at window-relative float32 "
+                   "positions (float32 rounding differs per tile)")
     descriptor = Descriptor(
         name="motion_blur", label="Motion blur", group="Camera", kernel="motion_blur.cl",
         summary="Object motion blur reconstructed from the velocity pass (McGuire 2012 "

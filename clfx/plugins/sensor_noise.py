@@ -98,6 +98,8 @@ from clfx.host import Plugin, register
 
 SENSOR_SALT = 0x73656E73  # "sens"
 PRNU_SALT = 0x70726E75    # "prnu"
+DEMOSAIC_REACH = 2
+"""Pixels the Malvar-He-Cutler demosaic reads on each side (its 5 x 5 neighbourhood)."""
 
 
 @dataclass(frozen=True)
@@ -151,7 +153,7 @@ def noise_variance(v, p, camera, channel=1, reference: float = MID_GREY):
 class SensorNoise(Plugin):
     """Photon shot noise, read noise and PRNU; see the module docstring for the model."""
 
-    whole_frame = ("its noise is seeded by source-window pixel indices")
+    whole_frame = None   # noise hashed on frame coordinates, pixel by pixel
     descriptor = Descriptor(
         name="sensor_noise", label="Sensor noise", group="Camera", kernel="sensor_noise.cl",
         summary="Poisson shot noise and Gaussian read noise in linear light from the ISO, a "
@@ -204,6 +206,11 @@ class SensorNoise(Plugin):
         ),
         quality=LEVELS,
     )
+
+    def region_of_interest(self, p, ctx, window):
+        # every value is hashed on the pixel's frame coordinates (the same for a crop at the
+        # same place); the Bayer demosaic reads 2 photosites around each pixel
+        return window.grown(DEMOSAIC_REACH) if p.mosaic == "bayer" else window
 
     def is_identity(self, p, ctx):
         if not p.shot_noise and p.read_noise == 0.0 and p.prnu == 0.0:

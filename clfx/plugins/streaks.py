@@ -309,7 +309,10 @@ def streak_parts(mode: str) -> tuple[tuple[float, float], ...]:
 
 @register
 class Streaks(Plugin):
-    whole_frame = ("its rays start from the scene analysis' per-tile light peaks (whole-frame statistics)")
+    whole_frame = ("its rays are recursive passes over a downsampled copy of the whole frame, "
+                   "not drawn from a list of lights: a band needs the source a ray's length "
+                   "(5% of the diagonal in cinema, 440 px at 8K) above and below it and the "
+                   "frame's downsampling grid, so small bands would redo many times their rows")
     descriptor = Descriptor(
         name="streaks", label="Streaks (star filter)", group="Glare", kernel="streaks.cl",
         summary="Star-filter streaks or aperture diffraction spikes from the highlights, "

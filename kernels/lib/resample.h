@@ -42,6 +42,11 @@
 #define RS_TAPS 6
 #endif
 
+/* A tile of a tiled render (clfx.fx.resample.CanvasRows): `p` holds the canvas rows from
+ * `shift` on (rows of `pitch` RGBA pixels); from here on it is addressed in canvas rows, as
+ * in the whole render (whose shift is 0), and only rows the buffer holds are touched. */
+#define RS_TILE(p, pitch, shift) ((p) -= (shift) * (pitch) * 4)
+
 /* Non-finite lanes (exponent bits all ones) become 0; a vector select, no branches. */
 inline float4 rs_sanitise(float4 v)
 {
