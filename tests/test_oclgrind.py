@@ -218,7 +218,7 @@ def test_effect_every_level_under_oclgrind(groups, effect):
     records, findings, _ = groups("effect", effect, ",".join(QUALITY_LEVELS))
     _check(records, findings, len(QUALITY_LEVELS) + 2 + len(child.EXTRA.get(effect, ())))
     for r in records:   # the effect did its work: the test's parameters are not an identity
-        if r["size"] == [48, 32]:
+        if r["size"] == [child.W, child.H]:
             assert r["ran"] == [effect], r
 
 
