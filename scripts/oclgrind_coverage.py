@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Which kernels each group of tests/test_oclgrind.py launches, run on the default device
-(PoCL: seconds, not Oclgrind's minutes), and which kernels of kernels/ no group launches.
+(PoCL: seconds, not Oclgrind's minutes), and which kernels of kernels/ no group launches:
+exit status 1 if there is any (every kernel runs under Oclgrind; cover a new kernel in
+``tests/oclgrind_child.py``'s ``PARAMS``, ``EXTRA`` or ``FX``, or delete a dead one).
 
     PYTHONPATH=. .venv/bin/python scripts/oclgrind_coverage.py [--size WxH] [--json F]
 
@@ -40,7 +42,7 @@ def recording(self, knl, *a, **kw):
 
 type(rt).launch = recording
 groups = {}
-for kind in ("effect", "look"):
+for kind in ("effect", "look", "fx"):
     for name in _builtin(kind):
         launched.clear()
         for level in QUALITY_LEVELS if kind == "effect" else ["draft"]:
@@ -54,7 +56,9 @@ for macro, arg, body in re.findall(r"#define (\w+)\((\w+)\)((?:.*\\\n)*.*)", sou
     for name in re.findall(rf"^{macro}\((\w+)\)", source, re.M) if suffixes else ():
         declared |= {name + s for s in suffixes}
 used = set().union(*groups.values())
-print(f"{len(used)} of {len(declared)} kernels launched; never: "
-      f"{', '.join(sorted(declared - used)) or '-'}", file=sys.stderr)
+never = sorted(declared - used)
+print(f"{len(used & declared)} of {len(declared)} kernels launched; never: "
+      f"{', '.join(never) or '-'}", file=sys.stderr)
 if args.json:
     Path(args.json).write_text(json.dumps(groups, indent=1))
+sys.exit(1 if never else 0)

@@ -3,6 +3,7 @@ environment selects; `tests/test_oclgrind.py` runs this under Oclgrind and reads
 
     python tests/oclgrind_child.py effect NAME LEVEL[,LEVEL...]
     python tests/oclgrind_child.py look NAME LEVEL[,LEVEL...]
+    python tests/oclgrind_child.py fx NAME LEVEL       (a helper of clfx.fx, ``FX``)
     python tests/oclgrind_child.py kernel FILE.cl     (one kernel ``k(global float *x, int n)``)
 
 Prints one JSON line per render on stdout: what ran, on which device, and whether the output
@@ -55,6 +56,29 @@ PARAMS = {
     "lens_flare": {"threshold": 5.0, "cull": 0.0, "gain": 100.0},
 }
 
+EXTRA = {
+    # (level, frame, params, options): one more render in the effect's group, for the kernels
+    # that PARAMS on the main frames never reach (scripts/oclgrind_coverage.py fails on any
+    # kernel no group launches).  options: "working_space" renders in another space,
+    # "keep_overscan" keeps what the effects grow, "before" (effect, params) runs first.
+    # r = 11 px > bleed's fused radius (10): bleed_highlights -> FFT -> bleed_mix; preview's
+    # split gathers the 1e4 lights exactly (fftconv_count_bright, _compact_bright, _gather)
+    "bleed": [("preview", (106, 8), {"size": 0.1}, {})],
+    # trucking/dolly: camera_blur_velocity
+    "camera_blur": [("draft", ODD, {"length": 0.05, "truck": [0.01, 0.0], "dolly": 0.01}, {})],
+    # first ring >= 2 x 4 px: the pattern at reduced resolution (corona_down); ACEScg: the
+    # spectral model carried into Rec.709 and back (image_rgb_matrix)
+    "corona": [("draft", (W, H), {"size": 0.2, "extent": 1.5}, {"working_space": "ACEScg"})],
+    # sigma past the direct passes: the pyramid (blur_gather_h, _v)
+    "defocus": [("draft", (W, H), {"size": 0.25}, {})],
+    # CoC radius > 16 px: the lattice over the prefiltered colour (dof_prefilter); bleed with
+    # the overscan kept grows the window first, so depth is reframed to it (image_reframe)
+    "dof": [("draft", (32, 16), {"coc_source": "max_blur", "max_blur": 0.25, "max_coc": 1.0,
+                                "focus_distance": 100.0},
+             {"before": ("bleed", {"size": 0.02}), "keep_overscan": True})],
+    "lens_flare": [("draft", (W, H), {"model": "artistic", "threshold": 5.0}, {})],
+}
+
 
 def scene(w: int, h: int):
     """RGBA with 1e4 lights (one on the edge), depth with near/far edges and a sky at +inf,
@@ -89,15 +113,18 @@ def tiles(name: str) -> bool:
     return get_plugin(name).whole_frame is None
 
 
-def effect_look(name: str, masked: bool) -> dict:
-    step = {"effect": name, "params": PARAMS.get(name, {})}
+def effect_look(name: str, masked: bool, params: dict | None = None,
+                before: tuple[str, dict] | None = None) -> dict:
+    step = {"effect": name, "params": PARAMS.get(name, {}) if params is None else params}
     if masked:
         step["mask"] = {"channel": "m"}
+    steps = [{"effect": before[0], "params": before[1]}] if before else []
     return {"name": f"oclgrind-{name}", "schema": 1, "camera": CAMERA, "seed": 3,
-            "effects": [step]}
+            "effects": steps + [step]}
 
 
-def render(look, level: str, size, label: str, tile_pixels: int = 0) -> dict:
+def render(look, level: str, size, label: str, tile_pixels: int = 0,
+           working_space: str | None = None, keep_overscan: bool = False) -> dict:
     from clfx import api
     from clfx.device.runtime import Runtime
 
@@ -105,7 +132,8 @@ def render(look, level: str, size, label: str, tile_pixels: int = 0) -> dict:
     rgba, depth, vel, channels = scene(*size)
     os.environ["CLFX_TILE_PIXELS"] = str(tile_pixels)   # 0: whole frames
     res = api.render_array(rgba, look, depth=depth, velocity=vel, channels=channels,
-                           quality=level, frame=1)
+                           quality=level, frame=1, working_space=working_space,
+                           keep_overscan=keep_overscan)
     rt = Runtime.get()
     rt.finish()
     rep = res.report.as_dict()
@@ -113,6 +141,35 @@ def render(look, level: str, size, label: str, tile_pixels: int = 0) -> dict:
             "ran": rep.get("ran"), "skipped": rep.get("skipped"),
             "finite": bool(np.isfinite(res.rgba).all()),
             "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def sanitizers(level: str) -> dict:
+    """The NaN/Inf scrubbers of ``clfx.fx.blur`` (defocus) and ``clfx.fx.motion`` (camera_blur,
+    motion_blur, rolling_shutter) on an odd-sized frame holding NaN, +Inf and -Inf.  A render
+    never reaches them with the first effect: the upload scrubs the frame once
+    (``clfx.pipeline.look._upload``); they run when an earlier step wrote a non-finite value."""
+    from clfx.device.runtime import Runtime
+    from clfx.fx.blur import sanitize_nonfinite
+    from clfx.fx.motion import sanitized_copy
+
+    t0 = time.perf_counter()
+    rt = Runtime.get()
+    rgba = scene(*ODD)[0]
+    rgba[1, 2, 0], rgba[3, 12, 3], rgba[6, 5, 1:3] = np.nan, np.inf, -np.inf
+    want = np.where(np.isfinite(rgba), rgba, 0.0)
+    src = rt.upload(rgba)
+    blur, n_bad = sanitize_nonfinite(rt, src)
+    got = [rt.download(blur), rt.download(sanitized_copy(rt, src))]
+    rt.finish()
+    return {"render": "sanitizers", "level": level, "size": list(ODD), "device": rt.description,
+            "ran": ["blur_sanitize", "motion_sanitize"], "skipped": None,
+            "finite": all(bool(np.isfinite(g).all()) for g in got),
+            "exact": n_bad == 3 and all(np.array_equal(g, want) for g in got),
+            "seconds": round(time.perf_counter() - t0, 2)}
+
+
+FX = {"sanitizers": sanitizers}
+"""Helpers of clfx.fx whose kernels no render of these frames reaches, by name."""
 
 
 def run_kernel(path: str) -> dict:
@@ -139,19 +196,29 @@ def main(argv) -> int:
         print(json.dumps(run_kernel(name)), flush=True)
         return 0
     levels = argv[2].split(",")
+    if kind == "fx":
+        for level in levels:
+            print(json.dumps(FX[name](level)), flush=True)
+        return 0
     for level in levels:
         if kind == "effect":
             runs = [(effect_look(name, masked=False), (W, H), f"{name}@{level}")]
             if level == "draft":   # the mask and an odd size, at the cheapest level
                 runs += [(effect_look(name, masked=True), ODD, f"{name}@{level}+mask {ODD}"),
                          (effect_look(name, masked=False), ODD, f"{name}@{level} {ODD}")]
+            for lvl, size, params, opts in EXTRA.get(name, ()):
+                if lvl == level:
+                    look = effect_look(name, False, params, opts.get("before"))
+                    runs.append((look, size, f"{name}@{level} {size} {params} {opts}",
+                                 {k: v for k, v in opts.items() if k != "before"}))
             if tiles(name):        # and in bands of 8 rows (`clfx.pipeline.look.render_tiled`)
                 runs += [(effect_look(name, masked=False), (W, H), f"{name}@{level} tiled",
-                          W * TILE_ROWS)]
+                          {"tile_pixels": W * TILE_ROWS})]
         else:
             runs = [(name, LOOK_SIZE, f"look {name}@{level}")]
-        for look, size, label, *tile_pixels in runs:
-            print(json.dumps(render(look, level, size, label, *tile_pixels)), flush=True)
+        for look, size, label, *opts in runs:
+            print(json.dumps(render(look, level, size, label, **(opts[0] if opts else {}))),
+                  flush=True)
     return 0
 
 

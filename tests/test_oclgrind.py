@@ -9,8 +9,10 @@ process): Oclgrind is the only OpenCL platform there, through a private ICD fold
 errors go to ``OCLGRIND_LOG``; API errors (``OCLGRIND_CHECK_API``) to stderr.  Both are read.
 
 Frames are tiny (effects: 40x24 at every level, and in bands of 8 rows for an effect that
-tiles; a 13x7 frame with and without a mask at ``draft``; looks: 48x32 at ``draft``; see
-``tests/oclgrind_child.py``).  Programs are built with ``-cl-opt-disable`` (``CLFX_TEST_OPT_DISABLE``):
+tiles; a 13x7 frame with and without a mask at ``draft``; looks: 48x32 at ``draft``; the
+renders of ``EXTRA`` (at most 106x8) reach the paths those frames miss, and the ``FX`` helpers
+run on 13x7; see ``tests/oclgrind_child.py``; ``scripts/oclgrind_coverage.py`` fails when a
+kernel of kernels/ is in no group).  Programs are built with ``-cl-opt-disable`` (``CLFX_TEST_OPT_DISABLE``):
 Oclgrind 21.10 mis-executes some of the ``-Oz`` code it makes itself (grain's and
 sensor_noise's polynomial log, ``clfx_log8`` in kernels/lib/fastmath.h, returned 175.3 for
 log(0.4676) there, -0.760 unoptimised and on PoCL: NaN noise), and its uninitialised-value
@@ -56,6 +58,8 @@ def _icd_library() -> str | None:
 
 
 def _builtin(kind: str) -> list[str]:
+    if kind == "fx":
+        return sorted(child.FX)
     if kind == "effect":
         from clfx.plugins import discover
 
@@ -174,7 +178,8 @@ def _check(records, findings, expect_runs):
 
 
 GROUP_TESTS = {"test_effect_every_level_under_oclgrind": ("effect", ",".join(QUALITY_LEVELS)),
-               "test_builtin_look_under_oclgrind": ("look", "draft")}
+               "test_builtin_look_under_oclgrind": ("look", "draft"),
+               "test_fx_helper_under_oclgrind": ("fx", "draft")}
 """The tests that each run one group: their parameter is the effect or look name."""
 
 
@@ -213,8 +218,10 @@ def groups(request, tmp_path_factory):
 @pytest.mark.parametrize("effect", _builtin("effect"))
 def test_effect_every_level_under_oclgrind(groups, effect):
     records, findings, _ = groups("effect", effect, ",".join(QUALITY_LEVELS))
+    # each level tiled too, for an effect that tiles
     tiled = len(QUALITY_LEVELS) if get_plugin(effect).whole_frame is None else 0
-    _check(records, findings, len(QUALITY_LEVELS) + 2 + tiled)   # each level tiled too
+    _check(records, findings,
+           len(QUALITY_LEVELS) + 2 + tiled + len(child.EXTRA.get(effect, ())))
     for r in records:   # the effect did its work: the test's parameters are not an identity
         if r["size"] == [child.W, child.H]:
             assert r["ran"] == [effect], r
@@ -225,6 +232,14 @@ def test_builtin_look_under_oclgrind(groups, look):
     records, findings, _ = groups("look", look, "draft")
     _check(records, findings, 1)
     assert records[0]["ran"], records
+
+
+@pytest.mark.parametrize("fx", _builtin("fx"))
+def test_fx_helper_under_oclgrind(groups, fx):
+    """The helpers no render of the test frames reaches (``oclgrind_child.FX``)."""
+    records, findings, _ = groups("fx", fx, "draft")
+    _check(records, findings, 1)
+    assert records[0]["exact"], records
 
 
 BROKEN = {

@@ -1,7 +1,7 @@
 """Device Gaussian blur and pyramid steps: a reusable, cost-flat separable blur.
 
-Public API (``defocus`` blurs with it, ``dof`` halves its resolution with it)
------------------------------------------------------------------------------
+Public API (``defocus`` blurs with it)
+--------------------------------------
 ``gaussian_blur(rt, img, sigma_x, sigma_y=None, *, quality="final", border="clamp", out=None)``
     Blur a :class:`~clfx.device.runtime.DeviceImage` (1, 2 or 4 channels) by a Gaussian with standard
     deviations ``sigma_x``, ``sigma_y`` in pixels.  Returns a new DeviceImage, or ``out``.
@@ -10,9 +10,6 @@ Public API (``defocus`` blurs with it, ``dof`` halves its resolution with it)
     declares them as its own).
 ``sanitize_nonfinite(rt, img)``
     A copy with NaN/Inf set to 0, and the number of pixels that had one.
-``box_downsample2x(rt, img, out, *, scale)``
-    The 2 x 2 box to half resolution (energy kept with ``scale`` 1/4 of the sum = the mean):
-    the pyramid step of effects that gather at half resolution (dof).
 ``downsample(rt, img, factor, ...)``, ``upsample(rt, coarse, factor, out)``,
 ``downsample2x``, ``upsample2x``
     Gaussian-prefiltered decimation and B-spline reconstruction (the blur's own pyramid
@@ -557,22 +554,6 @@ def sanitize_nonfinite(rt, img):
 
 
 # -- pyramid helpers ------------------------------------------------------------------------
-def box_downsample2x(rt, img, out, *, scale: float = 0.25):
-    """``out`` = ``scale`` times the 2 x 2 box sums of ``img`` (``scale`` 1/4: the mean).
-
-    Pixel ``(x, y)`` of ``out`` (every pixel of its rows, padding included) sums ``img``'s
-    pixels ``2x .. 2x + 1``, ``2y .. 2y + 1`` (window-relative, padding included); blocks past
-    the last full one read it (odd sizes).  Same channels; ``img`` at least 2 x 2 pixels of
-    pitch and rows.  Returns ``out``, enqueued.
-    """
-    if out.channels != img.channels:
-        raise ValueError(f"box_downsample2x: out has {out.channels} channels, img {img.channels}")
-    knl = rt.kernel(KERNEL_FILE, "blur_box_down2", CH=img.channels)
-    rt.launch(knl, (out.pitch, out.height), img, np.int32(img.pitch), np.int32(img.height), out,
-              np.int32(out.pitch), np.int32(out.height), np.float32(scale))
-    return out
-
-
 def downsample(rt, img, factor: int, *, prefilter: float = 0.8, border: str = "clamp",
                truncate: float = 5.5):
     """Decimate by an integer ``factor`` with a Gaussian prefilter.

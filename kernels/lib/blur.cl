@@ -22,8 +22,6 @@
  *   blur_gather_h  out[y][j] = sum_t w[j][t] * in[y][idx[j][t]]  (tables from the host:
  *                  pyramid decimation, coarse blur, B-spline upsampling, window changes)
  *   blur_gather_v  out[j][x] = sum_t w[j][t] * in[idx[j][t]][x]  (4 pixels share taps)
- *   blur_box_down2 2 x 2 box (times a scale) to half resolution: the energy-keeping pyramid
- *                  step of effects that gather at half resolution (dof).
  *   blur_sanitize  copy with non-finite values set to 0; counts bad pixels per row.
  */
 #include "lib/common.h"
@@ -197,22 +195,6 @@ BLUR_UNROLL
   for(int t = 0; t < TAPS; ++t)
     acc += w0[t] * TO_REALQ(LOADQ((size_t)i0[t] * pitch, col));
   STOREQ(TO_FLOATQ(acc), (size_t)j * pitch + q * 4, dst);
-}
-
-/* 2 x 2 box to half resolution: dst(x, y) = scale * the sum of src's pixels (2x, 2y) ..
- * (2x + 1, 2y + 1), over every pixel of dst's rows (padding included); blocks past src's
- * last full block read its last one (src_pitch, src_rows >= 2).  scale 1/4: the mean. */
-kernel void blur_box_down2(global const float *src, const int src_pitch, const int src_rows,
-                           global float *dst, const int dst_pitch, const int dst_rows,
-                           const float scale)
-{
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= dst_pitch || y >= dst_rows) return;
-  const int fx = min(2 * x, src_pitch - 2), fy = min(2 * y, src_rows - 2);
-  const size_t i = (size_t)fy * src_pitch + fx;
-  const pix_t sum = LOADP(i, src) + LOADP(i + 1, src) + LOADP(i + src_pitch, src)
-                    + LOADP(i + src_pitch + 1, src);
-  STOREP(scale * sum, (size_t)y * dst_pitch + x, dst);
 }
 
 /* One work-item per row: copy with every non-finite float set to 0 (exponent-bit test, so it

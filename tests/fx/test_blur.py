@@ -191,23 +191,6 @@ def test_bad_arguments_raise(rt):
         B.gaussian_blur(rt, img, 2.0, out=rt.image(img.window, 1))
 
 
-@pytest.mark.parametrize("channels", [1, 4])
-def test_box_downsample2x_is_the_mean_of_each_block(rt, rng, channels):
-    """The 2 x 2 box dof gathers its far-out-of-focus tiles from (one shared pyramid step)."""
-    shape = (7, 10) if channels == 1 else (7, 10, 4)
-    src = rng.uniform(-1.0, 4.0, shape).astype(np.float32)
-    img = rt.upload(src)                       # pitch 12: the padding columns are read too
-    out = B.box_downsample2x(rt, img, rt.image(Rect.from_size(8, 5), channels), scale=0.25)
-    got = out.download()
-    padded = np.zeros((7, img.pitch) + shape[2:], np.float64)
-    padded[:, :10] = src
-    for y in range(5):
-        for x in range(8):
-            fx, fy = min(2 * x, img.pitch - 2), min(2 * y, 7 - 2)
-            want = 0.25 * padded[fy:fy + 2, fx:fx + 2].sum(axis=(0, 1))
-            np.testing.assert_allclose(got[y, x], want, rtol=1e-6, atol=1e-6)
-
-
 def test_levels_are_data_defocus_declares():
     """The blur's quality levels are Level data, and defocus declares exactly them."""
     from clfx.core.plugin import Level
