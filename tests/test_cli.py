@@ -195,9 +195,11 @@ def test_usage_error_exit_code_2():
     (["render", "a.exr", "b.exr", "-q"], ["-q goes before the command (clfx -q render ...)"]),
     (["render", "a.exr", "b.exr", "--device", "0:0"], ["--device goes before the command"]),
 ])
-def test_usage_errors_are_one_line_before_anything_runs(tmp_path, args, fragments):
+def test_usage_errors_are_one_line_before_anything_runs(tmp_path, monkeypatch, args,
+                                                        fragments):
     """Checked before anything renders or measures (a bad --only rendered the whole gallery,
     a bad --looks ran every effect's bench first): one ``clfx: error:`` line, exit 2."""
+    monkeypatch.chdir(tmp_path)   # the gallery's relative ``out`` lands here if it is made
     r = CliRunner().invoke(cli, args, catch_exceptions=False)
     assert r.exit_code == 2, r.output
     one_line_error(r, *fragments)

@@ -37,7 +37,6 @@ from pathlib import Path
 import pytest
 
 from clfx.core.plugin import QUALITY_LEVELS
-from clfx.plugins import get_plugin
 from tests import oclgrind_child as child
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -219,7 +218,7 @@ def groups(request, tmp_path_factory):
 def test_effect_every_level_under_oclgrind(groups, effect):
     records, findings, _ = groups("effect", effect, ",".join(QUALITY_LEVELS))
     # each level tiled too, for an effect that tiles
-    tiled = len(QUALITY_LEVELS) if get_plugin(effect).whole_frame is None else 0
+    tiled = len(QUALITY_LEVELS) if child.tiles(effect) else 0
     _check(records, findings,
            len(QUALITY_LEVELS) + 2 + tiled + len(child.EXTRA.get(effect, ())))
     for r in records:   # the effect did its work: the test's parameters are not an identity

@@ -109,8 +109,7 @@ def test_plans_are_per_step_and_per_source(rt):
     first = fx.planned(p, ctx)
     assert fx.planned(p, ctx.over(frame=3)) is first
     assert fx.planned(p, ctx.grown_to(Rect(-2, -2, 10, 10))) is first
-    assert fx.planned(p.replace(amount=0.5) if hasattr(p, "replace") else
-                      get_plugin("vignette").params(amount=0.5), ctx) is not first
+    assert fx.planned(get_plugin("vignette").params(amount=0.5), ctx) is not first
     assert fx.planned(p, ctx.for_step("final")) is not first
     assert fx.planned(p, ctx.with_source(rt.upload(np.zeros((8, 8, 4), np.float32)))) is not first
     assert len(built) == 4
@@ -201,8 +200,7 @@ def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
     look = clfx.load_look("cinema")
     frame = cinema_frame(480, 270)
     whole, _ = render_frame(rt, look, frame, frame_number=5, tile_pixels=None)
-    tiled, _ = render_frame(rt, look, cinema_frame(480, 270), frame_number=5,
-                            tile_pixels=480 * 64)
+    tiled, _ = render_frame(rt, look, frame, frame_number=5, tile_pixels=480 * 64)
     assert whole.data_window == tiled.data_window
     assert np.array_equal(whole.rgba.view(np.uint32), tiled.rgba.view(np.uint32))
 

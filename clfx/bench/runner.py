@@ -35,18 +35,12 @@ import time
 
 from clfx.bench import cases
 from clfx.bench.cache import case_label
-from clfx.bench.effects import EffectResult, bench_effect
-from clfx.bench.looks import analysis_frames, bench_analysis, bench_look, bench_sequence, demo_frame
-from clfx.bench.metrics import error_metrics
-from clfx.bench.plots import pareto_plot
-from clfx.bench.report import losing_levels, markdown, summary_markdown, truth_markdown
+from clfx.bench.effects import bench_effect
+from clfx.bench.looks import bench_analysis, bench_look, bench_sequence, demo_frame
+from clfx.bench.report import losing_levels
 from clfx.plugins import discover
 
-__all__ = ["EffectResult", "analysis_frames", "bench_effect", "error_metrics", "markdown",
-           "pareto_plot", "run_bench", "summary_markdown", "truth_markdown"]
-"""What callers of the one-module bench imported from here: each now lives in its own
-module (`clfx.bench.effects`, ``looks``, ``metrics``, ``report``, ``plots``, ``timing``,
-``cache``, ``cases.shared``)."""
+__all__ = ["run_bench"]
 
 
 def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5,

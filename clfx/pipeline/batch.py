@@ -31,7 +31,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import os
-import pickle
 import sys
 import threading
 import time
@@ -510,11 +509,9 @@ class BatchPlan:
         return replace(self, jobs=tuple(j.absolute() for j in self.jobs),
                        reads=tuple((role, os.path.abspath(p)) for role, p in self.reads))
 
-    def key(self, blob: bytes | None = None) -> str:
+    def key(self, blob: bytes) -> str:
         """Identifies the plan in a worker's cache: the look's params hash and a hash of the
-        whole plan (``blob``: the plan pickled, when the caller has it already)."""
-        if blob is None:
-            blob = pickle.dumps(self, protocol=pickle.HIGHEST_PROTOCOL)
+        whole plan (``blob``: the plan pickled, as it is shipped)."""
         return f"{self.look.params_hash()}-{hashlib.sha1(blob).hexdigest()[:12]}"
 
     def read_paths(self) -> list[str]:

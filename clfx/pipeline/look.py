@@ -371,13 +371,6 @@ def read_image_rgba(path: str):
     return read_frame(path).rgba
 
 
-def read_lens_dict(name: str) -> dict:
-    """A lens prescription by name or path (``presets/lenses``), as a plain dict, read now
-    (`clfx.io.lenses.read_lens`): the reader for a look built in code; a loaded look hands
-    effects the lenses it resolved (:attr:`Look.lenses`)."""
-    return lens_io.read_lens(name)
-
-
 def working_rgb_to_xyz(space: str | None):
     """The working space's RGB -> XYZ matrix from OCIO (`clfx.io.colour.working_rgb_to_xyz`),
     handed to effects as data on the render context (None: Rec.709, the default)."""
@@ -401,12 +394,6 @@ def _limit(data: Rect, display: Rect, keep_overscan: bool) -> Rect:
     return limit
 
 
-def _geometry(window: Rect):
-    """A stand-in source for `prepare`: a window and the row pitch a device image of it
-    has (`clfx.device.runtime.Runtime.image`), no pixels."""
-    return resample.canvas_stand_in(window)
-
-
 def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspect: float = 1.0,
             *, frame_number: int = 0, quality: str | None = None,
             keep_overscan: bool = False, cancel=None) -> None:
@@ -426,7 +413,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
     for what, win in (("display window", display_window), ("data window", data_window)):
         check_pixels(win.width, win.height, f"prepared frame: {what}", FrameTooLarge)
     look = look.at(frame_number)
-    ctx = RenderContext(rt, _geometry(data_window), display_window=display_window,
+    ctx = RenderContext(rt, resample.canvas_stand_in(data_window), display_window=display_window,
                         pixel_aspect=pixel_aspect, frame=frame_number, seed=look.seed,
                         camera=look.camera, quality=quality or DEFAULT_QUALITY,
                         output_limit=_limit(data_window, display_window, keep_overscan))
@@ -442,7 +429,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
                 return
             except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
                 continue
-            ctx = ctx.over(source=_geometry(window))
+            ctx = ctx.over(source=resample.canvas_stand_in(window))
 
 
 class FrameTooLarge(ClfxError):
@@ -552,7 +539,7 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
                         display_referred=frame.display_referred,
                         output_limit=output_limit(frame, keep_overscan),
                         read_image=read_image_rgba,
-                        read_lens=read_lens_dict if look.lenses is None else look.lenses.read,
+                        read_lens=lens_io.read_lens if look.lenses is None else look.lenses.read,
                         reference_camera=reference_camera,
                         rgb_to_xyz=working_rgb_to_xyz(frame.colorspace))
     if nonfinite:
@@ -623,9 +610,11 @@ def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect
     effect's own buffers are band-sized.  The step's plan is the frame's (built before, on
     the whole frame); the pixels are the whole render's (tests/contract/test_tiles.py)."""
     bands = [] if plugin.whole_frame else tile_bands(window, tile_pixels)
+    if len(bands) < 2:
+        return plugin.render(rt, p, ctx)
     rois = [plugin.region_of_interest(p, ctx, band).intersect(ctx.source.window)
             for band in bands]
-    if len(bands) < 2 or any(roi.empty for roi in rois):   # no light reaches a band: whole
+    if any(roi.empty for roi in rois):   # no light reaches a band: whole
         return plugin.render(rt, p, ctx)
     out = rt.image(window, ctx.source.channels)
     name = plugin.descriptor.name

@@ -204,9 +204,10 @@ class Reporter:
                 record["worker"] = result.worker
             if o.as_json and not self.data_on_stdout:
                 print(json.dumps(record), flush=True)
+            text = report.explain() if o.explain or self._log is not None else ""
             if o.explain:
-                self.err(report.explain())
-            self.log(record, report.explain())
+                self.err(text)
+            self.log(record, text)
             if result.skipped:
                 self.skipped.append(result.frame)
                 if self.verbosity > 0:

@@ -12,7 +12,8 @@ import functools
 
 import numpy as np
 
-from clfx.pipeline.look import read_image_rgba, read_lens_dict
+from clfx.io.lenses import read_lens
+from clfx.pipeline.look import read_image_rgba
 from clfx.core.camera import Camera
 from clfx.core.plugin import QUALITY_LEVELS, BoolParam, FloatParam, IntParam
 from clfx.core.rect import Rect
@@ -98,7 +99,7 @@ def clip_names(name: str) -> set[str]:
     return {c.name for c in discover()[name].descriptor.clips if c.name != "source"}
 
 
-READERS = {"read_lens": read_lens_dict, "read_image": read_image_rgba}
+READERS = {"read_lens": read_lens, "read_image": read_image_rgba}
 """What the pipeline hands every effect (lens prescriptions, kernel images), as a look does."""
 
 

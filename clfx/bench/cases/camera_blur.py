@@ -37,6 +37,7 @@ from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.metrics import edge_band
 from clfx.bench.scene import Scene, moving_scene, render_sharp
 from clfx.core.camera import Camera
 
@@ -84,14 +85,8 @@ def make(width: int, height: int, rng=None, *, truth: bool = True,
     gt = make_case(scene, CAMERA, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS)
     case = case_dict(gt, PARAMS, scene=scene.name)
     case["velocity"] = None   # camera_blur reads the camera's motion, not a velocity pass
-    case["edge_mask"] = _edge_band(gt.sharp.depth, gt.sharp.velocity)
+    case["edge_mask"] = edge_band(gt.sharp.depth, gt.sharp.velocity)
     return case
-
-
-def _edge_band(depth, velocity):
-    from clfx.bench.metrics import EDGE_BAND_PX, edge_band
-
-    return edge_band(depth, velocity, EDGE_BAND_PX)
 
 
 def image_velocity(depth: np.ndarray, params, camera: Camera) -> np.ndarray:

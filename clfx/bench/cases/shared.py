@@ -14,7 +14,8 @@ import numpy as np
 from clfx.core.camera import Camera
 from clfx.core.rect import Rect
 from clfx.host import RenderContext
-from clfx.pipeline.look import read_image_rgba, read_lens_dict
+from clfx.io.lenses import read_lens
+from clfx.pipeline.look import read_image_rgba
 
 
 # -- a case's render context ---------------------------------------------------------------
@@ -33,7 +34,7 @@ def case_context(rt, case: dict, quality: str) -> RenderContext:
                          pixel_aspect=case.get("pixel_aspect", 1.0), frame=case.get("frame", 1),
                          seed=case.get("seed", 0), camera=case.get("camera") or Camera(),
                          quality=quality, display_referred=case.get("display_referred", False),
-                         read_image=read_image_rgba, read_lens=read_lens_dict)
+                         read_image=read_image_rgba, read_lens=read_lens)
 
 
 # -- distortion's procedural texture (the warps' cases) ----------------------------------
