@@ -392,9 +392,7 @@ class Distortion(Plugin):
 
         def build():
             if rows.tiled or (not double and len(map_bands(src.height, src.pitch)) > 1):
-                if double:
-                    return self.banded_map(rt, p, ctx, None, rows)
-                return self.banded_map(rt, p, ctx, filter_name, rows)
+                return self.banded_map(rt, p, ctx, None if double else filter_name, rows)
             sx, sy, jac, info = self.host_map(rt, p, ctx)
             if double:
                 return elliptical_map(rt, sx, sy, jac, src.pitch), info

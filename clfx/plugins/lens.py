@@ -385,8 +385,9 @@ class Lens(Plugin):
         canvas = rows.canvas
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
-        bufs = self.device_buffers(rt, p, rows.context(ctx), double, rows)
-        geo = self.host_geometry(rt, p, rows.context(ctx))
+        cctx = rows.context(ctx)
+        bufs = self.device_buffers(rt, p, cctx, double, rows)
+        geo = self.host_geometry(rt, p, cctx)
         use_map, use_tca, use_vig = geo["flags"]
         ctx.notes.extend(geo["notes"])
         defines = kernel_defines(lvl.filter, p.border, sanitise)

@@ -431,7 +431,8 @@ class Streaks(Plugin):
         """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
         position (a fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows,
         x and y at the light's centroid in the working buffer's pixels, light divided by
-        ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered."""
+        ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered.
+        ``peak``: (the per-tile peak map on the device, tiles across, tiles down)."""
         src = ctx.source
         (peak, tiles_x, tiles_y), radius = peak, self.seed_radius(ctx)
         npx = src.width * src.height
@@ -444,7 +445,7 @@ class Streaks(Plugin):
                         **ctx.luminance_defines)
         i32, f32 = np.int32, np.float32
         rt.launch(knl, (src.width, src.height), src, i32(src.pitch), i32(src.width),
-                  i32(src.height), f32(p.threshold), rt.to_device(peak), i32(tiles_x),
+                  i32(src.height), f32(p.threshold), peak, i32(tiles_x),
                   i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
                   i32(radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
         dilate = rt.kernel("streaks.cl", "streaks_dilate")
@@ -507,7 +508,7 @@ class Streaks(Plugin):
 
         peak, tiles_x, tiles_y = self.peak_map(p, ctx)
         peak_buf = rt.to_device(peak)
-        points, gathered = self.seed_points(rt, p, ctx, (peak, tiles_x, tiles_y), ox, oy,
+        points, gathered = self.seed_points(rt, p, ctx, (peak_buf, tiles_x, tiles_y), ox, oy,
                                             factor)
         starts, members = bin_points(points, wp, lo_h, BIN)
         points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
