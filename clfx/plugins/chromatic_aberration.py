@@ -231,10 +231,13 @@ class ChromaticAberration(Plugin):
     )
 
     def region_of_definition(self, p, ctx):
-        # every wavelength's image of the data window (the bins' centres lie in 380-720 nm)
-        return warp_region(lambda xs, ys: forward_points(p, ctx.display_window,
-                                                         ctx.pixel_aspect, xs, ys,
-                                                         ctx.rgb_to_xyz), ctx, p.border)
+        # every wavelength's image of the data window (the bins' centres lie in 380-720 nm);
+        # kept in ``rt.cache`` (host time asked several times a frame, the same all shot long)
+        return ctx.runtime.cache.get(
+            ("chromatic_aberration.rod",) + frame_key(p, ctx) + (ctx.colour_key,),
+            lambda: warp_region(lambda xs, ys: forward_points(p, ctx.display_window,
+                                                              ctx.pixel_aspect, xs, ys,
+                                                              ctx.rgb_to_xyz), ctx, p.border))
 
     def region_of_interest(self, p, ctx, window):
         # a pixel reads c + v S with |S - 1| <= |m - 1| / (1 - |m - 1|) of the band's ends

@@ -353,20 +353,30 @@ class Distortion(Plugin):
     def region_of_definition(self, p, ctx):
         # Output pixels read up to ~0.75 |J| + 4 texels from their source points (footprints
         # widen where the lens compresses: |J| = 50 near a strong barrel's fold), so the data
-        # window grown by that, mapped forward, bounds where its content lands.
-        g = self.geometry(p, ctx)
-        widest = _widest(g, ctx.source.window.union(ctx.output_limit))
-        reach = math.ceil(0.75 * widest) + WARP_REACH_TEXELS - 4
-        if corner_radius(ctx.source.window.grown(reach + 4), g["fx"], g["fy"], g["cx"],
-                         g["cy"]) >= g["r_fold"]:
-            return ctx.source.window.union(warp_frame(ctx))   # near the fold: anywhere
-        return warp_region(lambda xs, ys: [forward_points(g, xs, ys)], ctx, p.border,
-                           reach=reach)
+        # window grown by that, mapped forward, bounds where its content lands.  Kept in
+        # ``rt.cache`` with the maps: the Jacobian survey costs tens of milliseconds of host
+        # time, asked several times a frame and the same for every frame of a shot.
+        def build():
+            g = self.geometry(p, ctx)
+            widest = _widest(g, ctx.source.window.union(ctx.output_limit))
+            reach = math.ceil(0.75 * widest) + WARP_REACH_TEXELS - 4
+            if corner_radius(ctx.source.window.grown(reach + 4), g["fx"], g["fy"], g["cx"],
+                             g["cy"]) >= g["r_fold"]:
+                return ctx.source.window.union(warp_frame(ctx))   # near the fold: anywhere
+            return warp_region(lambda xs, ys: [forward_points(g, xs, ys)], ctx, p.border,
+                               reach=reach)
+
+        return ctx.runtime.cache.get(("distortion.rod",) + frame_key(p, ctx)
+                                     + (ctx.output_limit,), build)
 
     def region_of_interest(self, p, ctx, window):
-        g = self.geometry(p, ctx)
-        return warp_interest(lambda x, y: [_points(g, x, y, False)], window,
-                             4 + math.ceil(0.75 * _widest(g, window)))
+        def build():
+            g = self.geometry(p, ctx)
+            return warp_interest(lambda x, y: [_points(g, x, y, False)], window,
+                                 4 + math.ceil(0.75 * _widest(g, window)))
+
+        return ctx.runtime.cache.get(("distortion.roi",) + frame_key(p, ctx) + (window,),
+                                     build)
 
     def host_map(self, rt, p, ctx):
         """The float64 source points of ``ctx.source``'s pixels (source-window coordinates,

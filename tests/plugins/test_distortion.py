@@ -243,6 +243,29 @@ def test_map_is_built_once_and_kept_in_the_runtime_cache(rt, rng, monkeypatch):
     assert rt.cache.stats()["owners"]["distortion.map"] > 0
 
 
+def test_regions_are_surveyed_once_a_shot(rt, rng, monkeypatch):
+    """The region of definition's Jacobian survey (tens of ms of host time) is asked several
+    times a frame (identity, output window, the tiler): it runs once for a shot whose
+    geometry does not change, and again when the geometry does."""
+    import clfx.plugins.distortion as module
+    from clfx.host import RenderContext
+
+    surveys = []
+    widest = module._widest
+    monkeypatch.setattr(module, "_widest", lambda *a, **kw: surveys.append(a) or widest(*a, **kw))
+    p = Distortion.params(k1=-0.1 - rng.uniform(0, 1e-6))    # a key no other test used
+    src = rt.upload(rng.uniform(0.0, 1.0, (12, 16, 4)).astype(np.float32))
+    windows = set()
+    for frame in range(3):
+        ctx = RenderContext(rt, src, frame=frame, camera=CAM)
+        windows |= {Distortion().output_window(p, ctx) for _ in range(2)}
+    assert len(surveys) == 1 and len(windows) == 1
+    ctx = RenderContext(rt, src, frame=0, camera=CAM,
+                        display_window=Rect(-4, -4, 20, 16))   # another geometry: surveyed
+    Distortion().output_window(p, ctx)
+    assert len(surveys) == 2
+
+
 def test_amount_moves_the_corner_by_that_fraction_of_its_radius():
     from clfx.plugins.distortion import corner_radius, project
     win = Rect(0, 0, 160, 90)
