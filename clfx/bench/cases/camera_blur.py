@@ -36,7 +36,7 @@ import numpy as np
 from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
-from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.groundtruth import JITTER_SEED, RENDER_SS, case_dict, make_case
 from clfx.bench.metrics import edge_band
 from clfx.bench.scene import Scene, moving_scene, render_sharp
 from clfx.core.camera import Camera
@@ -79,10 +79,12 @@ def make(width: int, height: int, rng=None, *, truth: bool = True,
     """A handheld-style pan with a slight roll and trucking, with its ground truth."""
     scene = camera_scene(width, height)
     if not truth:
-        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre")
+        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre", jitter_seed=JITTER_SEED,
+                         samples=truth_samples)
         return dict(source=f.rgba, depth=f.depth, velocity=None, params=dict(PARAMS),
                     camera=CAMERA)
-    gt = make_case(scene, CAMERA, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS)
+    gt = make_case(scene, CAMERA, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS,
+                   jitter_seed=JITTER_SEED, noise_floor=True)
     case = case_dict(gt, PARAMS, scene=scene.name)
     case["velocity"] = None   # camera_blur reads the camera's motion, not a velocity pass
     case["edge_mask"] = edge_band(gt.sharp.depth, gt.sharp.velocity)

@@ -1,9 +1,12 @@
 """Bench cases of motion_blur: renderer-like frames against a multisample ground truth.
 
-Every case is a layered scene (:mod:`clfx.bench.scene`) rendered the way a renderer writes
-it (beauty supersampled 4 x 4 per pixel, depth and velocity from the surface at the pixel
-centre: :func:`clfx.bench.groundtruth.make_case` with ``ss = RENDER_SS``) and its truth,
-the average of many renders over the open shutter through the same pixel filter.
+Every case is a layered scene (:mod:`clfx.bench.scene`) rendered the way a path tracer writes
+it (beauty from ``truth_samples`` rays per pixel at stratified jittered sub-pixel points, 4 x
+4 strata, depth and velocity from the surface at the pixel centre:
+:func:`clfx.bench.groundtruth.make_case` with ``ss = RENDER_SS`` and ``jitter_seed``) and its
+truth, as many rays per pixel, each at its own jittered point and shutter instant
+(:func:`clfx.bench.groundtruth.jittered_truth`); the case carries the truth's noise floor
+(``truth_floor``: a second truth, another seed, against it).
 
 ``CASE`` is the representative hard case (``layers``).  ``CASES`` lists every case of the
 effect, ``{name: make}``, each ``make(width, height, rng, *, truth=True, truth_samples=...)``
@@ -33,7 +36,7 @@ import numpy as np
 from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
-from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.groundtruth import JITTER_SEED, RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, moving_scene, render_sharp
 from clfx.core.camera import Camera
 from clfx.fx.motion import shutter_from
@@ -47,10 +50,12 @@ CENTRED_180 = Camera(shutter_angle=180.0, shutter_offset="centered")
 
 def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int) -> dict:
     if not truth:
-        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre")
+        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre", jitter_seed=JITTER_SEED,
+                         samples=truth_samples)
         return dict(source=f.rgba, depth=f.depth, velocity=f.velocity, params={},
                     camera=camera)
-    gt = make_case(scene, camera, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS)
+    gt = make_case(scene, camera, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS,
+                   jitter_seed=JITTER_SEED, noise_floor=True)
     return case_dict(gt, scene=scene.name)
 
 
