@@ -156,8 +156,11 @@ def test_finite_extremes_stay_finite(rt, quality, truck):
 
 
 def test_case_beats_naive_and_input_on_ground_truth(rt):
-    """The bench case (pan, roll, trucking) against its multisample truth: draft and final end
-    closer to it than the per-pixel line blur and the unblurred input (log-PSNR)."""
+    """The bench case (pan, roll, trucking) against its multisample truth (sampled as a
+    renderer samples, issue 24): draft and final end closer to it than the unblurred input
+    and by at least 0.5 dB closer than the per-pixel line blur (log-PSNR; measured at
+    320x180, 128 rays: draft 37.03, final 37.04, naive 35.73, input 23.41 dB, the truth's
+    noise floor 40.6 dB)."""
     from clfx.bench.cases import camera_blur as cb
     from clfx.bench.metrics import error_metrics
 
@@ -171,15 +174,16 @@ def test_case_beats_naive_and_input_on_ground_truth(rt):
     naive, unblurred = psnr(cb.naive(c, p, ctx)), psnr(c["source"])
     for q in ("draft", "final"):
         got = psnr(run(rt, c["source"], q, depth=c["depth"], camera=c["camera"], **c["params"]))
-        assert got > naive and got > unblurred, (q, got, naive, unblurred)
+        assert got > naive + 0.5 and got > unblurred, (q, got, naive, unblurred)
 
 
 def test_case_edge_band_beats_naive_by_a_margin(rt):
     """Where the camera's parallax occludes and reveals (the bench case's 4 px band around
-    depth and velocity edges), final and draft end at least 3% closer to the truth (RMSE) than
-    the per-pixel line blur: measured 5.3% at 240x135 (0.0226 vs 0.0239), 10% at 480x270.
-    Elsewhere the line blur along each pixel's exact camera velocity is what the gather does
-    too (see clfx.bench.cases.camera_blur: what limits the score)."""
+    depth and velocity edges), final and draft end at least 10% closer to the truth (RMSE)
+    than the per-pixel line blur: measured 16% at 240x135, 128 rays (0.0188 vs 0.0225), 22%
+    at 480x270, 256 rays (0.0137 vs 0.0176).  Elsewhere the line blur along each pixel's
+    exact camera velocity is what the gather does too (see clfx.bench.cases.camera_blur:
+    what limits the score)."""
     from clfx.bench.cases import camera_blur as cb
     from clfx.bench.metrics import error_metrics
 
@@ -194,7 +198,7 @@ def test_case_edge_band_beats_naive_by_a_margin(rt):
     for q in ("draft", "final"):
         got = edge_rmse(run(rt, c["source"], q, depth=c["depth"], camera=c["camera"],
                             **c["params"]))
-        assert got < 0.97 * naive, (q, got, naive)
+        assert got < 0.90 * naive, (q, got, naive)
 
 
 def test_roll_while_trucking_follows_the_arcs(rt, rng):

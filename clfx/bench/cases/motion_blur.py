@@ -10,7 +10,8 @@ truth, as many rays per pixel, each at its own jittered point and shutter instan
 
 ``CASE`` is the representative hard case (``layers``).  ``CASES`` lists every case of the
 effect, ``{name: make}``, each ``make(width, height, rng, *, truth=True, truth_samples=...)``
-with the :class:`clfx.bench.cases.Case` ``make`` protocol:
+with the :class:`clfx.bench.cases.Case` ``make`` protocol (``noise_floor=False``: no
+second truth, no ``truth_floor``):
 
 - ``layers``: a drifting wall with a light, a fast striped ball, a card moving diagonally and
   a near leaf (moving up to 60 px/frame at 1920 px wide), 180 degree shutter;
@@ -48,14 +49,15 @@ TRUTH_SAMPLES = 256
 CENTRED_180 = Camera(shutter_angle=180.0, shutter_offset="centered")
 
 
-def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int) -> dict:
+def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int,
+          noise_floor: bool = True) -> dict:
     if not truth:
         f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre", jitter_seed=JITTER_SEED,
                          samples=truth_samples)
         return dict(source=f.rgba, depth=f.depth, velocity=f.velocity, params={},
                     camera=camera)
     gt = make_case(scene, camera, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS,
-                   jitter_seed=JITTER_SEED, noise_floor=True)
+                   jitter_seed=JITTER_SEED, noise_floor=noise_floor)
     return case_dict(gt, scene=scene.name)
 
 
@@ -77,13 +79,13 @@ def _wall(width: int, height: int, *, velocity=(0.0, 0.0), lights=True) -> Layer
 
 # -- the cases -------------------------------------------------------------------------------
 def make_layers(width: int, height: int, rng=None, *, truth: bool = True,
-                truth_samples: int = TRUTH_SAMPLES, moving_fraction=None,
+                truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True, moving_fraction=None,
                 camera: Camera = CENTRED_180) -> dict:
     """Layers at several depths moving up to 60 px/frame at 1920 px wide (scaled with the
     width); with ``moving_fraction`` only a small ball moves (see
     :func:`clfx.bench.scene.moving_scene`)."""
     scene = moving_scene(width, height, 60.0 * width / 1920.0, moving_fraction)
-    return _case(scene, camera, truth, truth_samples)
+    return _case(scene, camera, truth, truth_samples, noise_floor)
 
 
 def crossing_scene(width: int, height: int) -> Scene:
@@ -105,9 +107,9 @@ def crossing_scene(width: int, height: int) -> Scene:
 
 
 def make_crossing(width: int, height: int, rng=None, *, truth: bool = True,
-                  truth_samples: int = TRUTH_SAMPLES) -> dict:
+                  truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """Two objects at different depths crossing (58 and 29 px/frame at 1920 wide)."""
-    return _case(crossing_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(crossing_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 def spin_scene(width: int, height: int) -> Scene:
@@ -130,9 +132,9 @@ def spin_scene(width: int, height: int) -> Scene:
 
 
 def make_spin(width: int, height: int, rng=None, *, truth: bool = True,
-              truth_samples: int = TRUTH_SAMPLES) -> dict:
+              truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """A spinning bar and wheel: velocity varies across each object."""
-    return _case(spin_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(spin_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 def fast_light_scene(width: int, height: int) -> Scene:
@@ -157,15 +159,16 @@ def fast_light_scene(width: int, height: int) -> Scene:
 
 
 def make_fast_light(width: int, height: int, rng=None, *, truth: bool = True,
-                    truth_samples: int = TRUTH_SAMPLES) -> dict:
+                    truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """Small HDR lights streaking across (the bright one partly behind a static post)."""
-    return _case(fast_light_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(fast_light_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 def make_shutter_270(width: int, height: int, rng=None, *, truth: bool = True,
-                     truth_samples: int = TRUTH_SAMPLES) -> dict:
+                     truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """``layers`` through a 270 degree shutter (centred)."""
     return make_layers(width, height, rng, truth=truth, truth_samples=truth_samples,
+                       noise_floor=noise_floor,
                        camera=Camera(shutter_angle=270.0, shutter_offset="centered"))
 
 
@@ -185,9 +188,9 @@ def slow_stripes_scene(width: int, height: int) -> Scene:
 
 
 def make_slow_stripes(width: int, height: int, rng=None, *, truth: bool = True,
-                      truth_samples: int = TRUTH_SAMPLES) -> dict:
+                      truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """Fine stripes moving 2 px/frame (180 degree shutter: a one-pixel blur)."""
-    return _case(slow_stripes_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(slow_stripes_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 CASES = {
