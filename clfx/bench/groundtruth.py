@@ -65,6 +65,15 @@ and depth / velocity from one sample at the pixel centre.  :func:`make_case` wit
 :func:`clfx.bench.scene.render_sharp` (``passes="centre"``) and the truth from
 :func:`render_truth`, both through the same pixel filter.  ``ss = 1`` keeps the
 single-sample mode (beauty, depth and velocity from the one centre sample).
+
+That accumulation buffer shares one sub-pixel position (and one shutter instant) between
+all pixels of a render, and the sharp frame samples the same ``ss x ss`` grid: sub-pixel
+texture then carries one offset in the input and in the truth, which no renderer has
+(issue 24).  ``make_case(jitter_seed=...)`` (the motion cases, :data:`JITTER_SEED`) samples
+both as a path tracer does instead: every pixel its own jittered points in the ``ss x ss``
+strata, and for the truth its own shutter instants (:func:`jittered_truth`); with
+``noise_floor`` the truth is rendered again with another seed and its log-PSNR against the
+truth kept (``floor``, the bench's ``truth_floor``).  Depth of field keeps the grid.
 """
 from __future__ import annotations
 
