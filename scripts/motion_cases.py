@@ -5,7 +5,8 @@
 
 Prints, per case, the log-PSNR (dB) and edge-band RMSE of every quality level, the case
 module's naive baseline and the unchanged input against the multisample truth
-(clfx.bench.metrics.error_metrics; edge band: clfx.bench.metrics.edge_band, 4 px).
+(clfx.bench.metrics.error_metrics; edge band: clfx.bench.metrics.edge_band, 4 px), and the
+truth's own noise floor (a second truth, another seed, against it).
 """
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ def main():
     rt = Runtime.get()
     cls = get_plugin(a.effect)
     cols = list(QUALITY_LEVELS) + ["naive", "input"]
-    print(f"{a.effect} at {w}x{h}, truth {a.samples} renders at 4x4 sub-pixel positions")
+    print(f"{a.effect} at {w}x{h}, truth {a.samples} rays per pixel (jittered points and instants)")
     print("| case | " + " | ".join(cols) + " |")
     print("|---|" + "---|" * len(cols))
     for name in names:
@@ -62,7 +63,9 @@ def main():
         for c in cols:
             m = error_metrics(outs[c], truth, edge)
             cells.append(f"{m['psnr_log']:.2f} / {m.get('edge_rmse', float('nan')):.4f}")
-        print(f"| {name} | " + " | ".join(cells) + f" |  ({time.perf_counter() - t0:.0f} s)",
+        floor = case.get("truth_floor")
+        floor = "" if floor is None else f", truth's noise floor {floor:.2f} dB"
+        print(f"| {name} | " + " | ".join(cells) + f" |  ({time.perf_counter() - t0:.0f} s{floor})",
               flush=True)
 
 

@@ -302,9 +302,11 @@ def test_render_rows_are_the_rows_of_the_whole_render():
 
     for scene in (pan_scene(96, 54), demo_scene(1, 96, 54)):
         for t in (0.0, 0.37):
-            full = render_sharp(scene, t, ss=2).rgba
-            for y0, y1 in ((0, 1), (13, 20), (53, 54)):
-                assert np.array_equal(render_rows(scene, t, y0, y1, ss=2), full[y0:y1])
+            for jitter in (dict(), dict(jitter_seed=5, samples=8)):
+                full = render_sharp(scene, t, ss=2, **jitter).rgba
+                for y0, y1 in ((0, 1), (13, 20), (53, 54)):
+                    assert np.array_equal(render_rows(scene, t, y0, y1, ss=2, **jitter),
+                                          full[y0:y1])
 
 
 def test_every_pixel_position_integrates_the_whole_shutter():
@@ -321,3 +323,90 @@ def test_every_pixel_position_integrates_the_whole_shutter():
         for m in range(k):
             strata = np.floor(u[m::k] * (n // k)).astype(int)
             assert sorted(strata) == list(range(n // k)), (n, k, m)
+
+
+# -- renderer-like jittered sampling (issue 24) ----------------------------------------------
+def edge_scene(x_edge, w=24, h=8, velocity=(0.0, 0.0)):
+    """A white half plane right of ``x_edge`` (at t = 0) over black."""
+    half = Layer(depth=5.0, texture=Texture("flat", (1.0, 1.0, 1.0)), shape="rect",
+                 center=(x_edge + 500.0, h / 2), size=(1000.0, 4.0 * h), velocity=velocity)
+    return Scene(w, h, (half,), background=((0, 0, 0), (0, 0, 0)))
+
+
+def test_jittered_points_fill_their_strata_and_repeat_per_seed():
+    from clfx.bench.scene import jittered_grid
+
+    x, y = jittered_grid(3, 5, 40, 30, 4, seed=7)
+    gy, gx = np.mgrid[0:120, 0:160]
+    assert ((x >= 3 + gx / 4) & (x < 3 + (gx + 1) / 4)).all()       # one point per stratum
+    assert ((y >= 5 + gy / 4) & (y < 5 + (gy + 1) / 4)).all()
+    u = (x - 3) * 4 - gx
+    assert abs(u.mean() - 0.5) < 0.01 and abs(u.std() - math.sqrt(1 / 12)) < 0.01   # uniform
+    assert abs(np.corrcoef(u.ravel(), ((y - 5) * 4 - gy).ravel())[0, 1]) < 0.02
+    # the same pixel gets the same points in any region; another seed or pass other points
+    x2, _ = jittered_grid(13, 5, 4, 4, 4, seed=7)
+    assert np.array_equal(x2, x[:16, 40:56])
+    assert not np.array_equal(jittered_grid(3, 5, 40, 30, 4, seed=8)[0], x)
+    assert not np.array_equal(jittered_grid(3, 5, 40, 30, 4, seed=7, index=1)[0], x)
+
+
+def test_jittered_sharp_frame_has_no_sub_pixel_grid():
+    # An edge 0.2 px into a pixel: the 4 x 4 grid (sub-samples at 0.125, 0.375, ...) covers
+    # a quarter of the pixel at any offset from 0.125 to 0.375; jittered points cover 0.2.
+    sc = edge_scene(10.8)
+    grid = render_sharp(sc, ss=4).rgba[4, 10, 0]
+    jit = render_sharp(sc, ss=4, jitter_seed=3, samples=1024).rgba[4, 10, 0]
+    assert grid == pytest.approx(0.25, abs=1e-6)
+    assert jit == pytest.approx(0.2, abs=0.015)
+    with pytest.raises(ValueError):
+        render_sharp(sc, ss=4, jitter_seed=3, pixel_filter="blackman-harris")
+
+
+def test_jittered_motion_truth_is_the_exact_box_blur_of_a_moving_edge():
+    # An edge at x = 10.3 moving 4 px/frame through a centred 180 degree shutter sweeps
+    # [9.3, 11.3]: pixel X averages clamp((x - 9.3) / 2, 0, 1) over [X, X + 1].
+    from clfx.bench.groundtruth import jittered_truth
+
+    cam = Camera(shutter_angle=180.0, shutter_offset="centered")
+    sc = edge_scene(10.3, velocity=(4.0, 0.0))
+    xs = np.linspace(0.0, 24.0, 24 * 2000, endpoint=False) + 0.5 / 2000
+    want = np.clip((xs - 9.3) / 2.0, 0.0, 1.0).reshape(24, 2000).mean(axis=1)
+    a = jittered_truth(sc, cam, samples=256, ss=4, seed=1)
+    b = jittered_truth(sc, cam, samples=256, ss=4, seed=2)
+    assert np.array_equal(a, jittered_truth(sc, cam, samples=256, ss=4, seed=1))   # seeded
+    assert not np.array_equal(a, b)
+    for img in (a, b):
+        assert np.abs(img[:, :, 0] - want[None]).max() < 0.02
+    # the accumulation buffer's truth rounds each shift to its 4 x 4 grid
+    grid = render_truth(sc, cam, samples=256, dof=False, motion=True, ss=4, exact_below_px=0.0)
+    assert np.abs(grid[:, :, 0] - want[None]).max() > 0.02
+
+
+def test_jittered_truth_of_a_thin_bar_is_its_exact_streak():
+    # A bar half a pixel wide (narrower than a stratum pair) moving 8 px/frame: every pixel
+    # of its streak averages its own points and instants to the exact coverage, unbiased.
+    from clfx.bench.groundtruth import jittered_truth
+
+    cam = Camera(shutter_angle=180.0, shutter_offset="centered")
+    bar = Layer(depth=5.0, texture=Texture("flat", (1.0, 1.0, 1.0)), shape="rect",
+                center=(16.0, 16.0), size=(0.5, 64.0), velocity=(8.0, 0.0))
+    sc = Scene(32, 32, (bar,), background=((0, 0, 0), (0, 0, 0)))
+    img = jittered_truth(sc, cam, samples=256, ss=4, seed=4)[..., 0]
+    # the bar sweeps 4 px, [13.75, 18.25]: 0.5 / 4 of each pixel in [14, 18)
+    assert np.abs(img[:, 14:18] - 0.125).max() < 0.06                 # 256 rays' noise
+    assert np.abs(img[:, 14:18].mean(axis=0) - 0.125).max() < 0.012    # and no bias
+    assert img[:, :13].max() == 0.0 and img[:, 19:].max() == 0.0
+
+
+def test_make_case_jittered_with_noise_floor():
+    cam = Camera(shutter_angle=180.0, shutter_offset="centered")
+    sc = Scene(48, 32, (Layer(depth=4.0, texture=Texture("checker", period=3.0),
+                              velocity=(3.0, 1.0)),))
+    case = make_case(sc, cam, samples=64, dof=False, motion=True, ss=4, jitter_seed=1,
+                     noise_floor=True)
+    again = render_truth(sc, cam, samples=64, dof=False, motion=True, ss=4, jitter_seed=2)
+    assert case.floor == pytest.approx(metrics.error_metrics(again, case.truth)["psnr_log"])
+    assert 25.0 < case.floor < 60.0
+    assert case.sharp.velocity[..., 0].min() == 3.0          # passes at the pixel centre
+    with pytest.raises(ValueError):
+        render_truth(sc, cam, samples=64, dof=True, ss=4, jitter_seed=1)

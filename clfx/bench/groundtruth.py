@@ -65,6 +65,15 @@ and depth / velocity from one sample at the pixel centre.  :func:`make_case` wit
 :func:`clfx.bench.scene.render_sharp` (``passes="centre"``) and the truth from
 :func:`render_truth`, both through the same pixel filter.  ``ss = 1`` keeps the
 single-sample mode (beauty, depth and velocity from the one centre sample).
+
+That accumulation buffer shares one sub-pixel position (and one shutter instant) between
+all pixels of a render, and the sharp frame samples the same ``ss x ss`` grid: sub-pixel
+texture then carries one offset in the input and in the truth, which no renderer has
+(issue 24).  ``make_case(jitter_seed=...)`` (the motion cases, :data:`JITTER_SEED`) samples
+both as a path tracer does instead: every pixel its own jittered points in the ``ss x ss``
+strata, and for the truth its own shutter instants (:func:`jittered_truth`); with
+``noise_floor`` the truth is rendered again with another seed and its log-PSNR against the
+truth kept (``floor``, the bench's ``truth_floor``).  Depth of field keeps the grid.
 """
 from __future__ import annotations
 
@@ -80,8 +89,10 @@ from clfx.bench.scene import (
     background_rgba,
     filter_margin,
     filter_taps,
+    hash_uniform,
     rasterise_layer,
     render_sharp,
+    sample_layer,
 )
 from clfx.core.camera import (
     Camera,
@@ -230,7 +241,8 @@ def _composite(out: np.ndarray, sprites: list, px: float, py: float, ts: float, 
 def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
                  dof: bool = True, motion: bool = True, ss: int = 1,
                  pixel_filter: str = "box", filter_width: float | None = None,
-                 exact_below_px: float = 4.0, progress=None) -> np.ndarray:
+                 exact_below_px: float = 4.0, progress=None,
+                 jitter_seed: int | None = None) -> np.ndarray:
     """Multisample render of ``scene`` through ``camera``: the ground truth.
 
     Every sample render is the whole frame for one lens point, one shutter instant and one
@@ -270,6 +282,10 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
         Its width in px (default: 1 for the box, 1.5 for Blackman-Harris).
     progress : callable, optional
         Called as ``progress(done, total)``.
+    jitter_seed : int, optional
+        Sample like a path tracer instead (:func:`jittered_truth`, motion without depth of
+        field, box filter): every pixel its own jittered sub-pixel points and shutter
+        instants, seeded by this seed.
 
     Returns
     -------
@@ -284,6 +300,14 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     rasterisation of the exact layers (about 0.5 s per render for a full-frame textured
     layer at 1920x1080).
     """
+    if jitter_seed is not None:
+        if dof:
+            raise ValueError("the jittered truth integrates the shutter only: render depth of "
+                             "field with jitter_seed=None (the accumulation buffer)")
+        if pixel_filter != "box" or filter_width not in (None, 1.0):
+            raise ValueError("the jittered truth is implemented for the one-pixel box filter only")
+        return jittered_truth(scene, camera, t=t, samples=samples, motion=motion, ss=ss,
+                              seed=jitter_seed, progress=progress)
     w, h = scene.width, scene.height
     jx, jy, fw = pixel_positions(ss, pixel_filter, filter_width)
     k = len(fw)
@@ -388,9 +412,91 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     return acc.astype(np.float32)
 
 
+_TRUTH_KEY = 10
+"""Dimension keys of the jittered truth's random numbers (10 ...: apart from the sharp
+frame's 0 and 1, :func:`clfx.bench.scene.jittered_grid`, so one seed gives both independent
+streams)."""
+
+
+def jittered_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
+                   motion: bool = True, ss: int = 4, seed: int = 1,
+                   progress=None) -> np.ndarray:
+    """Motion-blurred render of ``scene`` sampled as a path tracer samples a pixel.
+
+    Every pixel draws its own ``samples`` camera rays (rounded up to a multiple of ``ss x
+    ss``): render ``i`` gives each pixel one uniform random point in the sub-pixel stratum
+    ``i mod ss^2`` (visited in a scrambled order) and one instant in a stratum of the shutter
+    (``n`` strata, their order a per-pixel permutation ``i -> (a_p i + b_p) mod n``, ``a_p``
+    prime to ``n``), both jittered within their strata.  So no sub-pixel position is tied
+    to an instant (each pixel pairs them differently; each position still meets instants
+    spread over the whole shutter), and no two pixels share their positions: unlike the
+    accumulation buffer of :func:`render_truth`, no fixed sub-pixel grid is common to the
+    input and the truth.  Each ray sees the layers, moved (and turned) to its own instant,
+    evaluated exactly (:func:`clfx.bench.scene.sample_layer`) and composited "over"; the
+    pixel is the mean of its rays (a one-pixel box filter).  All random numbers hash
+    (``seed``, pixel, render, dimension) (:func:`clfx.bench.scene.hash_uniform`): the same
+    call gives the same image; another ``seed`` an independent render of the same truth.
+
+    ``motion=False``: ``ss x ss`` renders at t, the jittered sharp frame (another sequence
+    than :func:`clfx.bench.scene.render_sharp`'s with the same seed).
+
+    Returns (height, width, 4) float32 premultiplied RGBA.
+    """
+    w, h = scene.width, scene.height
+    jx, jy, _ = pixel_positions(ss)
+    k = len(jx)
+    n = -(-max(1, int(samples)) // k) * k if motion else k
+    t0, t1 = camera.shutter_interval() if motion else (0.0, 0.0)
+    pos = np.random.default_rng(0x5EED).permutation(k)[np.arange(n) % k]
+    yy, xx = np.mgrid[0:h, 0:w]
+    pixel = yy * 65536 + xx
+    units = np.array([a for a in range(1, n + 1) if math.gcd(a, n) == 1], np.int64)
+    key = _TRUTH_KEY
+    a_p = units[(hash_uniform(seed, key, pixel) * len(units)).astype(np.int64)]
+    b_p = (hash_uniform(seed, key + 1, pixel) * n).astype(np.int64)
+    boxes = []   # each layer's pixels over the shutter (its box at both ends, and between)
+    for layer in scene.layers:
+        lo, hi = layer.bounds(t + t0, margin=1.0), layer.bounds(t + t1, margin=1.0)
+        if lo is None:
+            boxes.append((0, 0, w, h))
+            continue
+        x0, y0 = max(math.floor(min(lo[0], hi[0])), 0), max(math.floor(min(lo[1], hi[1])), 0)
+        x1, y1 = min(math.ceil(max(lo[2], hi[2])), w), min(math.ceil(max(lo[3], hi[3])), h)
+        boxes.append((x0, y0, x1, y1) if x1 > x0 and y1 > y0 else None)
+    acc = np.zeros((h, w, 4), np.float64)
+    for i in range(n):
+        xs = xx + (jx[pos[i]] + hash_uniform(seed, i, key + 2, pixel)) / ss
+        ys = yy + (jy[pos[i]] + hash_uniform(seed, i, key + 3, pixel)) / ss
+        if motion:
+            stratum = (a_p * i + b_p) % n
+            ts = t + t0 + (t1 - t0) * (stratum + hash_uniform(seed, i, key + 4, pixel)) / n
+        else:
+            ts = np.full((h, w), float(t))
+        out = background_rgba(scene, 0, 0, w, h, ys=ys)
+        for layer, box in zip(scene.layers, boxes):
+            if box is None:
+                continue
+            x0, y0, x1, y1 = box
+            sl = np.s_[y0:y1, x0:x1]
+            src = sample_layer(layer, xs[sl], ys[sl], ts[sl], rim_px=1.0 / ss)
+            dst = out[sl]
+            dst *= 1.0 - src[..., 3:4]
+            dst += src
+        acc += out
+        if progress is not None:
+            progress(i + 1, n)
+    return (acc / n).astype(np.float32)
+
+
 # -- cases -----------------------------------------------------------------------------------
 RENDER_SS = 4
 """Sub-samples per pixel and axis of renderer-like cases (4 x 4 = 16 positions per pixel)."""
+
+JITTER_SEED = 1
+"""Seed of the renderer-like motion cases (``make_case(jitter_seed=...)``): their sharp frame
+and truth sampled at jittered points, no grid shared by the two; the noise floor's second
+truth uses ``JITTER_SEED + 1``.  Depth of field keeps the accumulation buffer's grid: its
+truths take 16384 renders, which the jittered sampler cannot afford."""
 
 
 @dataclass
@@ -404,12 +510,16 @@ class GroundTruthCase:
     samples: int
     seconds: float           # wall time of the truth render
     settings: dict = field(default_factory=dict)
+    floor: float | None = None
+    """log-PSNR (dB) of a second truth (another seed) against ``truth``: its own noise
+    floor, for jittered truths rendered with ``noise_floor``."""
 
 
 def make_case(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 256,
               dof: bool = True, motion: bool = False, ss: int = 1,
               pixel_filter: str = "box", filter_width: float | None = None,
-              passes: str = "centre") -> GroundTruthCase:
+              passes: str = "centre", jitter_seed: int | None = None,
+              noise_floor: bool = False) -> GroundTruthCase:
     """Render the sharp frame and the ground truth of ``scene`` through the same pixel filter.
 
     Parameters
@@ -426,6 +536,15 @@ def make_case(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 25
     passes : {"centre", "coverage"}
         How the sharp frame's depth and velocity are written (``centre``: as a renderer,
         from the surface at the pixel centre; see :func:`clfx.bench.scene.render_sharp`).
+    jitter_seed : int, optional
+        Render both as a path tracer samples (motion only, box filter): the sharp frame at
+        ``samples`` stratified jittered points per pixel (:func:`clfx.bench.scene.render_sharp`;
+        as many as the truth's rays, so the input is no noisier than the truth), the truth
+        with :func:`jittered_truth`, both from this seed (independent streams).  None: both on
+        the regular ``ss x ss`` grid (the accumulation buffer; depth of field needs it).
+    noise_floor : bool
+        With ``jitter_seed``, render the truth a second time (seed ``jitter_seed + 1``) and
+        keep its log-PSNR against the truth as ``floor`` (doubles the truth's time).
 
     Returns
     -------
@@ -433,20 +552,32 @@ def make_case(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 25
         ``sharp`` (a Frame with rgba, depth, velocity) is the effects' input, ``truth``
         the (h, w, 4) float32 multisample render to compare with.
     """
+    from clfx.bench.metrics import error_metrics
+
     sharp = render_sharp(scene, t, ss=ss, pixel_filter=pixel_filter, filter_width=filter_width,
-                         passes=passes)
+                         passes=passes, jitter_seed=jitter_seed,
+                         samples=None if jitter_seed is None else samples)
     t0 = time.perf_counter()
-    truth = render_truth(scene, camera, t=t, samples=samples, dof=dof, motion=motion, ss=ss,
-                         pixel_filter=pixel_filter, filter_width=filter_width)
-    return GroundTruthCase(scene, camera, sharp, truth, samples, time.perf_counter() - t0,
+    kw = dict(t=t, samples=samples, dof=dof, motion=motion, ss=ss, pixel_filter=pixel_filter,
+              filter_width=filter_width)
+    truth = render_truth(scene, camera, jitter_seed=jitter_seed, **kw)
+    seconds = time.perf_counter() - t0
+    floor = None
+    if noise_floor and jitter_seed is not None:
+        again = render_truth(scene, camera, jitter_seed=jitter_seed + 1, **kw)
+        floor = error_metrics(again, truth)["psnr_log"]
+    return GroundTruthCase(scene, camera, sharp, truth, samples, seconds,
                            dict(t=t, dof=dof, motion=motion, ss=ss, pixel_filter=pixel_filter,
-                                filter_width=filter_width, passes=passes))
+                                filter_width=filter_width, passes=passes,
+                                jitter_seed=jitter_seed), floor)
 
 
 def case_dict(case: GroundTruthCase, params: dict | None = None, **extra) -> dict:
     """A bench case (:mod:`clfx.bench.cases`) from a ground-truth case: source, passes,
     camera, truth and the truth's render time."""
     f = case.sharp
+    if case.floor is not None:
+        extra.setdefault("truth_floor", case.floor)
     return dict(source=f.rgba, depth=f.depth, velocity=f.velocity, params=dict(params or {}),
                 camera=case.camera, truth=case.truth, truth_seconds=case.seconds, **extra)
 

@@ -134,16 +134,18 @@ def markdown(results: dict) -> str:
 
 
 def truth_markdown(results: dict) -> list[str]:
-    """The cases rendered by a path tracer, one row each: log-PSNR (dB) of the input, the
-    naive method, every peer image (Blender's Vector Blur), each level, and the truth's own
-    noise floor (a second render with another seed, against the truth)."""
+    """The cases whose truth is rendered with a seed (a path tracer's, or the layered scenes'
+    jittered renders), one row each: log-PSNR (dB) of the input, the naive method, every peer
+    image (Blender's Vector Blur), each level, and the truth's own noise floor (a second
+    render with another seed, against the truth)."""
     cases = [e for e in results.get("effects", []) if e.get("truth_floor") is not None
              or str(e.get("scene", "")).startswith("cycles:")
              or any(b["baseline"] == "peer" for b in e.get("baselines", []))]
     if not cases:
         return []
-    lines = ["", "Against a path tracer's render (log-PSNR dB; noise floor: the same render with "
-                 "another seed, against the truth):", "",
+    lines = ["", "Against a truth rendered with a seed (a path tracer's or the layered scenes' "
+                 "jittered render; log-PSNR dB; noise floor: the same render with another seed, "
+                 "against the truth):", "",
              "| case | input | naive | peer | " + " | ".join(QUALITY_LEVELS)
              + " | noise floor | final beats input / naive / peer |",
              "|---|---|---|---|" + "---|" * len(QUALITY_LEVELS) + "---|---|"]

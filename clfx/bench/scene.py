@@ -261,6 +261,25 @@ def _shape_alpha(layer: Layer, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return inside.astype(np.float32)
 
 
+def _unturn(u, v, angle):
+    """Screen offsets ``u, v`` from a layer's centre into its own (unturned) frame, for a
+    layer turned by ``angle`` radians (a scalar or one per point)."""
+    ca, sa = np.float32(np.cos(angle)), np.float32(np.sin(angle))
+    return ca * u + sa * v, -sa * u + ca * v
+
+
+def _shade_surface(layer: Layer, u, v, out: np.ndarray) -> None:
+    """The layer's shape times its texture (premultiplied RGBA) at layer-frame ``u, v``,
+    written into ``out`` (zeros; lights are added by the caller)."""
+    alpha = _shape_alpha(layer, u, v) * np.float32(layer.opacity)
+    if layer.shape != "none" and alpha.any():
+        m = texture_mix(layer.texture, u, v)[..., None]
+        c0 = np.asarray(layer.texture.color, np.float32)
+        c1 = np.asarray(layer.texture.color2, np.float32)
+        out[..., :3] = (c0 + (c1 - c0) * m) * alpha[..., None]
+        out[..., 3] = alpha
+
+
 def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
                     ss: int = 2, t: float = 0.0, *, rim_px: float | None = None) -> np.ndarray:
     """Premultiplied RGBA (height*ss, width*ss, 4) float32 of ``layer`` at time ``t``.
@@ -278,16 +297,8 @@ def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
     ys = (y0 + (np.arange(height * ss, dtype=np.float64) + 0.5) / ss - lay.center[1]).astype(np.float32)
     u, v = np.meshgrid(xs, ys)
     if lay.angle != 0.0:   # into the layer's own (unturned) frame
-        a = math.radians(lay.angle)
-        ca, sa = np.float32(math.cos(a)), np.float32(math.sin(a))
-        u, v = ca * u + sa * v, -sa * u + ca * v
-    alpha = _shape_alpha(lay, u, v) * np.float32(lay.opacity)
-    if lay.shape != "none" and alpha.any():
-        m = texture_mix(lay.texture, u, v)[..., None]
-        c0 = np.asarray(lay.texture.color, np.float32)
-        c1 = np.asarray(lay.texture.color2, np.float32)
-        out[..., :3] = (c0 + (c1 - c0) * m) * alpha[..., None]
-        out[..., 3] = alpha
+        u, v = _unturn(u, v, math.radians(lay.angle))
+    _shade_surface(lay, u, v, out)
     for lt in lay.lights:
         # Evaluate each light only over its own few sub-samples (scenes hold many lights).
         ox, oy = lt.offset
@@ -304,7 +315,7 @@ def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
         # Antialiased disk: coverage falls from 1 to 0 across one sample spacing at the rim.
         d = np.hypot(u[j0:j1, i0:i1] - np.float32(lt.offset[0]),
                      v[j0:j1, i0:i1] - np.float32(lt.offset[1]))
-        cov = np.clip((lt.radius - d) * sharp + 0.5, 0.0, 1.0).astype(np.float32)[..., None]
+        cov = _light_cover(d, lt.radius, sharp)
         col = np.asarray(lt.color, np.float32)
         o = out[j0:j1, i0:i1]
         o[..., :3] = o[..., :3] * (1 - cov) + col * cov
@@ -312,19 +323,105 @@ def rasterise_layer(layer: Layer, x0: float, y0: float, width: int, height: int,
     return out
 
 
+def sample_layer(layer: Layer, x: np.ndarray, y: np.ndarray, t=0.0, *,
+                 rim_px: float = 0.25) -> np.ndarray:
+    """Premultiplied RGBA (``x.shape + (4,)``) float32 of ``layer`` point-sampled at screen
+    positions ``x, y`` (float arrays of one shape), each at its own time ``t`` (frames; a
+    scalar or an array of that shape): what a path tracer's camera ray sees of the layer.
+
+    The same evaluation as :func:`rasterise_layer` (shape, texture, lights antialiased over
+    ``rim_px``), at arbitrary positions and times instead of a regular grid at one instant.
+    """
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    t = np.asarray(t, np.float64)   # a scalar stays one: one angle for every point
+    out = np.zeros(x.shape + (4,), np.float32)
+    if x.size == 0:
+        return out
+    vx, vy = layer.velocity
+    u = (x - (layer.center[0] + vx * t)).astype(np.float32)
+    v = (y - (layer.center[1] + vy * t)).astype(np.float32)
+    if layer.turned:   # into the layer's own (unturned) frame, each point at its own angle
+        u, v = _unturn(u, v, np.radians(layer.angle + layer.spin * t))
+    _shade_surface(layer, u, v, out)
+    for lt in layer.lights:
+        # only the points near the light (in the layer's frame: u, v are already turned)
+        reach = lt.radius + 1.0
+        near = np.nonzero((np.abs(u - np.float32(lt.offset[0])) < reach)
+                          & (np.abs(v - np.float32(lt.offset[1])) < reach))
+        if not near[0].size:
+            continue
+        d = np.hypot(u[near] - np.float32(lt.offset[0]), v[near] - np.float32(lt.offset[1]))
+        cov = _light_cover(d, lt.radius, 1.0 / float(rim_px))
+        o = out[near]
+        o[:, :3] = o[:, :3] * (1 - cov) + np.asarray(lt.color, np.float32) * cov
+        o[:, 3:] = o[:, 3:] * (1 - cov) + cov
+        out[near] = o
+    return out
+
+
+def _light_cover(d: np.ndarray, radius: float, sharp: float) -> np.ndarray:
+    """An antialiased disk's coverage at distances ``d``: 1 to 0 across ``1 / sharp`` px at
+    the rim, shaped (..., 1) float32."""
+    return np.clip((radius - d) * sharp + 0.5, 0.0, 1.0).astype(np.float32)[..., None]
+
+
 def background_rgba(scene: Scene, x0: float, y0: float, width: int, height: int,
-                    ss: int = 2) -> np.ndarray:
-    """The background gradient (premultiplied RGBA) over a region, sampled like a layer."""
-    ys = y0 + (np.arange(height * ss, dtype=np.float64) + 0.5) / ss
-    f = np.clip(ys / max(scene.height, 1), 0.0, 1.0).astype(np.float32)[:, None, None]
+                    ss: int = 2, *, ys: np.ndarray | None = None) -> np.ndarray:
+    """The background gradient (premultiplied RGBA) over a region, sampled like a layer
+    (or, given ``ys``, an array of screen rows, at those rows: shaped ``ys.shape + (4,)``)."""
+    if ys is None:
+        ys = (y0 + (np.arange(height * ss, dtype=np.float64) + 0.5) / ss)[:, None]
+        shape = (height * ss, width * ss)
+    else:
+        shape = np.shape(ys)
+    f = np.clip(np.asarray(ys) / max(scene.height, 1), 0.0, 1.0).astype(np.float32)[..., None]
     top = np.asarray(scene.background[0], np.float32)
     bottom = np.asarray(scene.background[1], np.float32)
     a = np.float32(scene.background_alpha)
     rgb = (top + (bottom - top) * f) * a
-    out = np.empty((height * ss, width * ss, 4), np.float32)
+    out = np.empty(shape + (4,), np.float32)
     out[..., :3] = rgb
     out[..., 3] = a
     return out
+
+
+# -- stratified jittered sampling (renderer-like) ----------------------------------------------
+def _mix32(h: np.ndarray) -> np.ndarray:
+    """lowbias32 finaliser of a uint32 array (Wellons' integer hash)."""
+    h = h ^ (h >> np.uint32(16))
+    h = h * np.uint32(0x7FEB352D)
+    h = h ^ (h >> np.uint32(15))
+    h = h * np.uint32(0x846CA68B)
+    return h ^ (h >> np.uint32(16))
+
+
+def hash_uniform(*keys) -> np.ndarray:
+    """Uniform [0, 1) float64 from integer keys (scalars or broadcastable arrays), each key
+    mixed in turn: deterministic per (seed, pixel, sample, dimension), uncorrelated across
+    any of them."""
+    shape = np.broadcast_shapes(*(np.shape(k) for k in keys)) or (1,)
+    h = np.array(0x9E3779B9, np.uint32)   # grows to the keys' shape (scalar keys first: cheap)
+    with np.errstate(over="ignore"):   # uint32 arithmetic wraps, as a hash wants
+        for k in keys:
+            h = _mix32(h ^ (np.asarray(k, np.int64) & 0xFFFFFFFF).astype(np.uint32))
+    h = np.broadcast_to(h, shape)
+    return (h >> np.uint32(8)).astype(np.float64) * (1.0 / 16777216.0)
+
+
+def jittered_grid(x0: int, y0: int, width: int, height: int, ss: int, seed: int,
+                  index: int = 0):
+    """Screen positions ``(x, y)`` ((height ss, width ss) float64) of a stratified jittered
+    pixel sampling of a region: one uniform random point in each of the ``ss x ss`` strata
+    of every pixel, hashed from ``seed``, the pass ``index``, the frame pixel and the stratum
+    (the same pixel gets the same points in any region)."""
+    gy, gx = np.mgrid[0:height * ss, 0:width * ss]
+    X, Y = x0 + gx // ss, y0 + gy // ss
+    pixel = (Y & 0xFFFF) * 65536 + (X & 0xFFFF)
+    key = (gy % ss) * ss + gx % ss
+    x = X + ((gx % ss) + hash_uniform(seed, index, 0, pixel, key)) / ss
+    y = Y + ((gy % ss) + hash_uniform(seed, index, 1, pixel, key)) / ss
+    return x, y
 
 
 PIXEL_FILTERS = ("box", "blackman-harris")
@@ -436,7 +533,8 @@ layer whose alpha at the pixel centre exceeds ``pass_alpha`` (one point: never a
 
 def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str = "box",
                  filter_width: float | None = None, passes: str = "coverage",
-                 pass_alpha: float = 0.5):
+                 pass_alpha: float = 0.5, jitter_seed: int | None = None,
+                 samples: int | None = None):
     """Render the pinhole (all-sharp, instantaneous) frame at time ``t`` with its passes.
 
     Parameters
@@ -456,6 +554,14 @@ def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str
         renderer writes beside a filtered beauty: the surface at the pixel centre.
     pass_alpha : float
         Alpha (coverage or at the centre) above which a layer owns the pixel's passes.
+    jitter_seed : int, optional
+        Sample the beauty as a renderer does, at one jittered point in each of the ``ss x ss``
+        strata of a pixel (:func:`jittered_grid`, seeded per pixel and stratum by this seed)
+        instead of at the strata's centres (box filter only).  The passes stay the layers at
+        the pixel centre (or their coverage of the regular grid).
+    samples : int, optional
+        With ``jitter_seed``: points per pixel, rounded up to a multiple of ``ss x ss`` (that
+        many jittered passes over the strata, averaged; default one pass, ``ss x ss``).
 
     Returns
     -------
@@ -473,24 +579,24 @@ def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str
     taps, weights = filter_taps(ss, pixel_filter, filter_width)
     m = filter_margin(ss, taps)
     plain_box = m == 0 and len(taps) == ss and np.all(taps == np.arange(ss))
-    acc = background_rgba(scene, -m, -m, w + 2 * m, h + 2 * m, ss)
+    if jitter_seed is not None and not plain_box:
+        raise ValueError("jittered sampling is implemented for the one-pixel box filter only, "
+                         f"not {pixel_filter!r} of width {filter_width!r}")
+    if jitter_seed is None:
+        acc = _beauty_samples(scene, t, ss, (-m, -m, w + m, h + m))
+    else:
+        passes_n = max(1, -(-int(samples or ss * ss) // (ss * ss)))
+        acc = sum(_beauty_samples(scene, t, ss, (0, 0, w, h), (jitter_seed, p))
+                  for p in range(passes_n)) / np.float32(passes_n)
     depth = np.full((h, w), np.inf, np.float32)
     velocity = np.zeros((h, w, 2), np.float32)
     for layer in scene.layers:   # far to near: nearer layers overwrite the passes
-        bounds = layer.bounds(t, margin=1.0)
-        box = _clip_box(bounds, w + m, h + m, -m, -m)
-        if box is None:
-            continue
-        x0, y0, x1, y1 = box
-        rgba = rasterise_layer(layer, x0, y0, x1 - x0, y1 - y0, ss, t)
-        sl = np.s_[(y0 + m) * ss:(y1 + m) * ss, (x0 + m) * ss:(x1 + m) * ss]
-        acc[sl] = rgba + acc[sl] * (1 - rgba[..., 3:4])
-        fb = _clip_box(bounds, w, h)
+        fb = _clip_box(layer.bounds(t, margin=1.0), w, h)
         if fb is None:
             continue
         fx0, fy0, fx1, fy1 = fb
         if passes == "coverage":
-            sub = rgba[(fy0 - y0) * ss:(fy1 - y0) * ss, (fx0 - x0) * ss:(fx1 - x0) * ss, 3]
+            sub = rasterise_layer(layer, fx0, fy0, fx1 - fx0, fy1 - fy0, ss, t)[..., 3]
             cover = box_downsample(sub, ss) > pass_alpha
         else:
             cover = rasterise_layer(layer, fx0, fy0, fx1 - fx0, fy1 - fy0, 1, t,
@@ -509,21 +615,42 @@ def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str
     return Frame.from_array(rgba.astype(np.float32), depth=depth, velocity=velocity)
 
 
-def render_rows(scene: Scene, t: float, y0: int, y1: int, *, ss: int = 2) -> np.ndarray:
-    """Rows ``[y0, y1)`` of :func:`render_sharp`'s box-filtered beauty at time ``t`` (the same
-    samples, rendered over those rows only: a rolling shutter's truth renders each row at its
-    own time without rendering the whole frame per row)."""
-    w = scene.width
-    acc = background_rgba(scene, 0, y0, w, y1 - y0, ss)
+def _beauty_samples(scene: Scene, t: float, ss: int, region, jitter=None) -> np.ndarray:
+    """The composited sub-samples (``ss`` per pixel and axis, premultiplied RGBA) of the
+    pixel ``region`` (x0, y0, x1, y1) at time ``t``: on the regular grid, or with ``jitter``
+    = (seed, pass) at that pass's stratified jittered points (:func:`jittered_grid`)."""
+    rx0, ry0, rx1, ry1 = region
+    if jitter is None:
+        acc = background_rgba(scene, rx0, ry0, rx1 - rx0, ry1 - ry0, ss)
+    else:
+        xs, ys = jittered_grid(rx0, ry0, rx1 - rx0, ry1 - ry0, ss, *jitter)
+        acc = background_rgba(scene, rx0, ry0, rx1 - rx0, ry1 - ry0, ss, ys=ys)
     for layer in scene.layers:   # far to near
-        box = _clip_box(layer.bounds(t, margin=1.0), w, y1, 0, y0)
+        box = _clip_box(layer.bounds(t, margin=1.0), rx1, ry1, rx0, ry0)
         if box is None:
             continue
-        bx0, by0, bx1, by1 = box
-        rgba = rasterise_layer(layer, bx0, by0, bx1 - bx0, by1 - by0, ss, t)
-        sl = np.s_[(by0 - y0) * ss:(by1 - y0) * ss, bx0 * ss:bx1 * ss]
+        x0, y0, x1, y1 = box
+        sl = np.s_[(y0 - ry0) * ss:(y1 - ry0) * ss, (x0 - rx0) * ss:(x1 - rx0) * ss]
+        if jitter is None:
+            rgba = rasterise_layer(layer, x0, y0, x1 - x0, y1 - y0, ss, t)
+        else:
+            rgba = sample_layer(layer, xs[sl], ys[sl], t, rim_px=1.0 / ss)
         acc[sl] = rgba + acc[sl] * (1 - rgba[..., 3:4])
-    return box_downsample(acc, ss).astype(np.float32)
+    return acc
+
+
+def render_rows(scene: Scene, t: float, y0: int, y1: int, *, ss: int = 2,
+                jitter_seed: int | None = None, samples: int | None = None) -> np.ndarray:
+    """Rows ``[y0, y1)`` of :func:`render_sharp`'s box-filtered beauty at time ``t`` (the same
+    samples, ``jitter_seed`` and ``samples`` included, rendered over those rows only: a
+    rolling shutter's truth renders each row at its own time without rendering the whole
+    frame per row)."""
+    region = (0, y0, scene.width, y1)
+    if jitter_seed is None:
+        return box_downsample(_beauty_samples(scene, t, ss, region), ss).astype(np.float32)
+    passes_n = max(1, -(-int(samples or ss * ss) // (ss * ss)))
+    acc = sum(_beauty_samples(scene, t, ss, region, (jitter_seed, p)) for p in range(passes_n))
+    return box_downsample(acc / np.float32(passes_n), ss).astype(np.float32)
 
 
 # -- the built-in demo -----------------------------------------------------------------------

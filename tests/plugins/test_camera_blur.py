@@ -64,12 +64,12 @@ def test_trucking_constant_depth_is_line_blur(rt, rng):
     src = smooth_texture(rng, 40, 64)
     depth = np.full((40, 64), 2.0, np.float32)
     f_px = 35.0 * 64 / 36.0
-    v = (-f_px * 0.2 / 2.0, 0.0)   # camera right by 0.2 m at 2 m: content moves left
-    # a 3.1 px blur: longer than CAMERA_CUBIC_MAX_PX (shorter than motion_blur's
-    # CUBIC_MAX_PX), trucking's gather reads bilinearly
-    assert CAMERA_CUBIC_MAX_PX < abs(v[0]) * 0.5 < CUBIC_MAX_PX
+    v = (-f_px * 0.6 / 2.0, 0.0)   # camera right by 0.6 m at 2 m: content moves left
+    # a 9.3 px blur: longer than CAMERA_CUBIC_MAX_PX (motion_blur's CUBIC_MAX_PX since the
+    # truth samples like a renderer, issue 24), trucking's gather reads bilinearly
+    assert CAMERA_CUBIC_MAX_PX == CUBIC_MAX_PX < abs(v[0]) * 0.5
     want = line_blur(src, v, t0=-0.25, t1=0.25, n=256)
-    got = run(rt, src, "reference", depth=depth, truck=(0.2, 0.0), max_blur=0.25)
+    got = run(rt, src, "reference", depth=depth, truck=(0.6, 0.0), max_blur=0.25)
     # motion_blur's reference level on a uniform field: midpoint quadrature, as above
     assert np.abs(got - want).max() < 2e-3
 
@@ -156,8 +156,11 @@ def test_finite_extremes_stay_finite(rt, quality, truck):
 
 
 def test_case_beats_naive_and_input_on_ground_truth(rt):
-    """The bench case (pan, roll, trucking) against its multisample truth: draft and final end
-    closer to it than the per-pixel line blur and the unblurred input (log-PSNR)."""
+    """The bench case (pan, roll, trucking) against its multisample truth (sampled as a
+    renderer samples, issue 24): draft and final end closer to it than the unblurred input
+    and by at least 0.5 dB closer than the per-pixel line blur (log-PSNR; measured at
+    320x180, 128 rays: draft 37.03, final 37.04, naive 35.73, input 23.41 dB, the truth's
+    noise floor 40.6 dB)."""
     from clfx.bench.cases import camera_blur as cb
     from clfx.bench.metrics import error_metrics
 
@@ -171,15 +174,16 @@ def test_case_beats_naive_and_input_on_ground_truth(rt):
     naive, unblurred = psnr(cb.naive(c, p, ctx)), psnr(c["source"])
     for q in ("draft", "final"):
         got = psnr(run(rt, c["source"], q, depth=c["depth"], camera=c["camera"], **c["params"]))
-        assert got > naive and got > unblurred, (q, got, naive, unblurred)
+        assert got > naive + 0.5 and got > unblurred, (q, got, naive, unblurred)
 
 
 def test_case_edge_band_beats_naive_by_a_margin(rt):
     """Where the camera's parallax occludes and reveals (the bench case's 4 px band around
-    depth and velocity edges), final and draft end at least 3% closer to the truth (RMSE) than
-    the per-pixel line blur: measured 5.3% at 240x135 (0.0226 vs 0.0239), 10% at 480x270.
-    Elsewhere the line blur along each pixel's exact camera velocity is what the gather does
-    too (see clfx.bench.cases.camera_blur: what limits the score)."""
+    depth and velocity edges), final and draft end at least 10% closer to the truth (RMSE)
+    than the per-pixel line blur: measured 16% at 240x135, 128 rays (0.0188 vs 0.0225), 22%
+    at 480x270, 256 rays (0.0137 vs 0.0176).  Elsewhere the line blur along each pixel's
+    exact camera velocity is what the gather does too (see clfx.bench.cases.camera_blur:
+    what limits the score)."""
     from clfx.bench.cases import camera_blur as cb
     from clfx.bench.metrics import error_metrics
 
@@ -194,7 +198,7 @@ def test_case_edge_band_beats_naive_by_a_margin(rt):
     for q in ("draft", "final"):
         got = edge_rmse(run(rt, c["source"], q, depth=c["depth"], camera=c["camera"],
                             **c["params"]))
-        assert got < 0.97 * naive, (q, got, naive)
+        assert got < 0.90 * naive, (q, got, naive)
 
 
 def test_roll_while_trucking_follows_the_arcs(rt, rng):

@@ -5,26 +5,33 @@ The camera's motion is turned into the motion of every layer of the scene
 (:mod:`clfx.bench.scene`): a layer at depth ``z`` moves with the pan, the trucking parallax
 ``-f_px truck / z`` and the roll about the frame centre (its centre on the tangent of the
 arc, the layer spinning with the roll: the arc's sagitta over half a frame is far below a
-thousandth of a pixel here).  The truth is rendered like the motion_blur cases (beauty
-supersampled 4 x 4, depth from the pixel centre; :func:`clfx.bench.groundtruth.make_case`).
+thousandth of a pixel here).  The truth is rendered like the motion_blur cases (beauty and
+truth at jittered sub-pixel points, depth from the pixel centre;
+:func:`clfx.bench.groundtruth.make_case`).
 
 ``naive(case, params, ctx)`` (``LINE_BLUR_LABEL``): every pixel averaged along its own image
 velocity under the camera motion (:func:`clfx.bench.cases.shared.line_blur_per_pixel`).
 
 What limits the score (issue 24, measured with ``scripts/motion_cases.py --effect
-camera_blur``): the naive blur is given each pixel's exact camera velocity (it equals the
-scene's own to 1e-6 px/frame), and on 85% of the frame (the wall's interior) that line blur is
-what the gather does too, so camera_blur can only win in the 4 px edge band around the
-parallax (6% of the pixels; final's edge RMSE 0.0172 vs 0.0191 at 480x270) and on the frame
-border, whose incoming content is outside the source (clamp, mirror or dropped reads score
-within 0.05 dB of each other).  Replacing final's edge band by the truth gives 36.81 dB at
-480x270 against the naive's 36.28: no edge handling can win by 1 dB here.  The wall's
-interior error is set by the 4 x 4 sub-pixel grid of both renders (:data:`clfx.bench.groundtruth.RENDER_SS`): its
-0.4-0.6 px gaps between "words" are covered in quarter pixels by the sharp frame but in
-every phase by the moving truth, so input, naive and final carry one mean offset on the wall
-(+0.009 at 320x180, -0.0065 at 480x270) and the ranking of the reads flips with the size:
-Catmull-Rom line blur vs bilinear +2.6 dB at 320x180, -1.9 at 480x270, -0.5 at 240x135
-(sharp frame at 16 x 16: Catmull-Rom half blended in +1.2 dB at 480x270).
+camera_blur`` and the case at 256 rays): the naive blur is given each pixel's exact camera
+velocity (it equals the scene's own to 1e-6 px/frame), and on 85% of the frame (the wall's
+interior) that line blur is what the gather does too, so camera_blur wins mostly in the 4 px
+edge band around the parallax (6% of the pixels) and through its read of short blurs.  The
+truth used to be sampled on the sharp frame's own 4 x 4 sub-pixel grid: the wall's 0.4-0.6 px
+gaps between "words" were covered in quarter pixels by the sharp frame but in every phase by
+the moving truth, so input, naive and final carried one mean offset on the wall and the
+ranking of the reads flipped with the frame size (final 36.37 vs naive 36.28 dB at 480x270,
+32.66 vs 33.30 at 240x135).  Both renders are now sampled as a path tracer samples
+(:func:`clfx.bench.groundtruth.jittered_truth`, :data:`clfx.bench.groundtruth.JITTER_SEED`):
+the wall's mean offset is gone (naive and final within 0.0003 of the truth's mean on the
+wall interior at 480x270, log units; -0.0065 before), and the clamped
+cubic up to 8 px (:data:`clfx.plugins.camera_blur.CAMERA_CUBIC_MAX_PX`, 2 px before) wins:
+final 39.37 vs naive 38.67 dB at 480x270 (edge band RMSE 0.0137 vs 0.0176; the truth's noise
+floor 45.2 dB), 37.69 vs 36.19 at 320x180 (floor 43.7).  At 240x135 the wall's "words" are
+1.5 px cells with 0.3 px gaps, past the pixel grid's Nyquist limit: the input aliases them,
+and the bilinear line blur's extra smoothing of the aliases ends closer to the truth on the
+wall (final 32.86 vs naive 32.89 dB; bilinear everywhere 32.96, which costs 1.4 dB at
+320x180 and 0.5 at 480x270), while final's edge band stays 17% closer (0.0181 vs 0.0218).
 """
 from __future__ import annotations
 
@@ -36,7 +43,7 @@ import numpy as np
 from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
-from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.groundtruth import JITTER_SEED, RENDER_SS, case_dict, make_case
 from clfx.bench.metrics import edge_band
 from clfx.bench.scene import Scene, moving_scene, render_sharp
 from clfx.core.camera import Camera
@@ -79,10 +86,12 @@ def make(width: int, height: int, rng=None, *, truth: bool = True,
     """A handheld-style pan with a slight roll and trucking, with its ground truth."""
     scene = camera_scene(width, height)
     if not truth:
-        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre")
+        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre", jitter_seed=JITTER_SEED,
+                         samples=truth_samples)
         return dict(source=f.rgba, depth=f.depth, velocity=None, params=dict(PARAMS),
                     camera=CAMERA)
-    gt = make_case(scene, CAMERA, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS)
+    gt = make_case(scene, CAMERA, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS,
+                   jitter_seed=JITTER_SEED, noise_floor=True)
     case = case_dict(gt, PARAMS, scene=scene.name)
     case["velocity"] = None   # camera_blur reads the camera's motion, not a velocity pass
     case["edge_mask"] = edge_band(gt.sharp.depth, gt.sharp.velocity)

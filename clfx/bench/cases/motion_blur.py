@@ -1,13 +1,17 @@
 """Bench cases of motion_blur: renderer-like frames against a multisample ground truth.
 
-Every case is a layered scene (:mod:`clfx.bench.scene`) rendered the way a renderer writes
-it (beauty supersampled 4 x 4 per pixel, depth and velocity from the surface at the pixel
-centre: :func:`clfx.bench.groundtruth.make_case` with ``ss = RENDER_SS``) and its truth,
-the average of many renders over the open shutter through the same pixel filter.
+Every case is a layered scene (:mod:`clfx.bench.scene`) rendered the way a path tracer writes
+it (beauty from ``truth_samples`` rays per pixel at stratified jittered sub-pixel points, 4 x
+4 strata, depth and velocity from the surface at the pixel centre:
+:func:`clfx.bench.groundtruth.make_case` with ``ss = RENDER_SS`` and ``jitter_seed``) and its
+truth, as many rays per pixel, each at its own jittered point and shutter instant
+(:func:`clfx.bench.groundtruth.jittered_truth`); the case carries the truth's noise floor
+(``truth_floor``: a second truth, another seed, against it).
 
 ``CASE`` is the representative hard case (``layers``).  ``CASES`` lists every case of the
 effect, ``{name: make}``, each ``make(width, height, rng, *, truth=True, truth_samples=...)``
-with the :class:`clfx.bench.cases.Case` ``make`` protocol:
+with the :class:`clfx.bench.cases.Case` ``make`` protocol (``noise_floor=False``: no
+second truth, no ``truth_floor``):
 
 - ``layers``: a drifting wall with a light, a fast striped ball, a card moving diagonally and
   a near leaf (moving up to 60 px/frame at 1920 px wide), 180 degree shutter;
@@ -33,7 +37,7 @@ import numpy as np
 from clfx.bench import cycles
 from clfx.bench.cases import Case, Naive
 from clfx.bench.cases.shared import LINE_BLUR_LABEL, line_blur_per_pixel
-from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.groundtruth import JITTER_SEED, RENDER_SS, case_dict, make_case
 from clfx.bench.scene import Layer, Light, Scene, Texture, moving_scene, render_sharp
 from clfx.core.camera import Camera
 from clfx.fx.motion import shutter_from
@@ -45,12 +49,15 @@ TRUTH_SAMPLES = 256
 CENTRED_180 = Camera(shutter_angle=180.0, shutter_offset="centered")
 
 
-def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int) -> dict:
+def _case(scene: Scene, camera: Camera, truth: bool, truth_samples: int,
+          noise_floor: bool = True) -> dict:
     if not truth:
-        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre")
+        f = render_sharp(scene, 0.0, ss=RENDER_SS, passes="centre", jitter_seed=JITTER_SEED,
+                         samples=truth_samples)
         return dict(source=f.rgba, depth=f.depth, velocity=f.velocity, params={},
                     camera=camera)
-    gt = make_case(scene, camera, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS)
+    gt = make_case(scene, camera, samples=truth_samples, dof=False, motion=True, ss=RENDER_SS,
+                   jitter_seed=JITTER_SEED, noise_floor=noise_floor)
     return case_dict(gt, scene=scene.name)
 
 
@@ -72,13 +79,13 @@ def _wall(width: int, height: int, *, velocity=(0.0, 0.0), lights=True) -> Layer
 
 # -- the cases -------------------------------------------------------------------------------
 def make_layers(width: int, height: int, rng=None, *, truth: bool = True,
-                truth_samples: int = TRUTH_SAMPLES, moving_fraction=None,
+                truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True, moving_fraction=None,
                 camera: Camera = CENTRED_180) -> dict:
     """Layers at several depths moving up to 60 px/frame at 1920 px wide (scaled with the
     width); with ``moving_fraction`` only a small ball moves (see
     :func:`clfx.bench.scene.moving_scene`)."""
     scene = moving_scene(width, height, 60.0 * width / 1920.0, moving_fraction)
-    return _case(scene, camera, truth, truth_samples)
+    return _case(scene, camera, truth, truth_samples, noise_floor)
 
 
 def crossing_scene(width: int, height: int) -> Scene:
@@ -100,9 +107,9 @@ def crossing_scene(width: int, height: int) -> Scene:
 
 
 def make_crossing(width: int, height: int, rng=None, *, truth: bool = True,
-                  truth_samples: int = TRUTH_SAMPLES) -> dict:
+                  truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """Two objects at different depths crossing (58 and 29 px/frame at 1920 wide)."""
-    return _case(crossing_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(crossing_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 def spin_scene(width: int, height: int) -> Scene:
@@ -125,9 +132,9 @@ def spin_scene(width: int, height: int) -> Scene:
 
 
 def make_spin(width: int, height: int, rng=None, *, truth: bool = True,
-              truth_samples: int = TRUTH_SAMPLES) -> dict:
+              truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """A spinning bar and wheel: velocity varies across each object."""
-    return _case(spin_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(spin_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 def fast_light_scene(width: int, height: int) -> Scene:
@@ -152,15 +159,16 @@ def fast_light_scene(width: int, height: int) -> Scene:
 
 
 def make_fast_light(width: int, height: int, rng=None, *, truth: bool = True,
-                    truth_samples: int = TRUTH_SAMPLES) -> dict:
+                    truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """Small HDR lights streaking across (the bright one partly behind a static post)."""
-    return _case(fast_light_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(fast_light_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 def make_shutter_270(width: int, height: int, rng=None, *, truth: bool = True,
-                     truth_samples: int = TRUTH_SAMPLES) -> dict:
+                     truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """``layers`` through a 270 degree shutter (centred)."""
     return make_layers(width, height, rng, truth=truth, truth_samples=truth_samples,
+                       noise_floor=noise_floor,
                        camera=Camera(shutter_angle=270.0, shutter_offset="centered"))
 
 
@@ -180,9 +188,9 @@ def slow_stripes_scene(width: int, height: int) -> Scene:
 
 
 def make_slow_stripes(width: int, height: int, rng=None, *, truth: bool = True,
-                      truth_samples: int = TRUTH_SAMPLES) -> dict:
+                      truth_samples: int = TRUTH_SAMPLES, noise_floor: bool = True) -> dict:
     """Fine stripes moving 2 px/frame (180 degree shutter: a one-pixel blur)."""
-    return _case(slow_stripes_scene(width, height), CENTRED_180, truth, truth_samples)
+    return _case(slow_stripes_scene(width, height), CENTRED_180, truth, truth_samples, noise_floor)
 
 
 CASES = {

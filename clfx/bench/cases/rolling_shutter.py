@@ -7,7 +7,9 @@ Ground truth
 The layered scene renderer (:func:`clfx.bench.scene.render_sharp`) evaluates the scene at any
 instant exactly, so the rolling-shutter frame is assembled row by row: row ``y`` is row ``y``
 of the sharp render at that row's time ``t(y)`` (the effect's own row-time formula,
-:meth:`RollingShutter.row_times`).  Nothing is reconstructed: occlusion, what a moving edge
+:meth:`RollingShutter.row_times`).  Both the sharp frame and the truth are sampled as a
+renderer samples (jittered points in 2 x 2 strata, 64 a pixel, each render its own seed): no
+sub-pixel grid is shared by the input and the truth.  Nothing is reconstructed: occlusion, what a moving edge
 uncovers and the frame edges all come out of the renders.
 
 Peers
@@ -23,6 +25,8 @@ import numpy as np
 
 from clfx.bench import cycles
 from clfx.bench.cases import Case
+from clfx.bench.groundtruth import JITTER_SEED
+from clfx.bench.metrics import error_metrics
 from clfx.bench.scene import Layer, Scene, Texture, render_rows, render_sharp
 from clfx.core.camera import Camera
 from clfx.core.rect import Rect
@@ -62,29 +66,50 @@ def time_map(width: int, height: int, params: dict) -> np.ndarray:
     return t.at(xx, yy)
 
 
-def row_time_truth(scene: Scene, times: np.ndarray, ss: int = 2) -> np.ndarray:
+SS = 2
+"""Strata per pixel and axis of the case's renders."""
+
+SAMPLES = 64
+"""Jittered points per pixel of the sharp frame and of every row of the truth (16 passes
+over the 2 x 2 strata)."""
+
+TRUTH_SEED = JITTER_SEED + 2
+"""The truth's seed: another render than the sharp frame's (``JITTER_SEED``), as a renderer
+would write it; ``TRUTH_SEED + 1`` renders it again for the noise floor."""
+
+
+def row_time_truth(scene: Scene, times: np.ndarray, ss: int = SS,
+                   jitter_seed: int | None = None, samples: int | None = None) -> np.ndarray:
     """The rolling-shutter frame: each row (or column, for sideways readouts) of the sharp
-    render at that row's time ``times`` (a per-pixel map, constant along rows or columns)."""
+    render at that row's time ``times`` (a per-pixel map, constant along rows or columns),
+    with :func:`clfx.bench.scene.render_sharp`'s ``jitter_seed`` and ``samples``."""
     by_rows = bool(np.all(times == times[:, :1]))
     lines = times[:, 0] if by_rows else times[0]
     out = np.empty((scene.height, scene.width, 4), np.float32)
     for i, t in enumerate(lines):
         if by_rows:        # only the row itself: O(pixels), not O(rows x pixels)
-            out[i] = render_rows(scene, float(t), i, i + 1, ss=ss)[0]
+            out[i] = render_rows(scene, float(t), i, i + 1, ss=ss, jitter_seed=jitter_seed,
+                                 samples=samples)[0]
         else:
-            out[:, i] = render_sharp(scene, float(t), ss=ss).rgba[:, i]
+            out[:, i] = render_sharp(scene, float(t), ss=ss, jitter_seed=jitter_seed,
+                                     samples=samples).rgba[:, i]
     return out
 
 
 def make(width: int, height: int, rng, *, truth: bool = True, params: dict | None = None) -> dict:
-    """The pan scene's sharp frame with its passes and (``truth``) the per-row-time truth."""
+    """The pan scene's sharp frame with its passes and (``truth``) the per-row-time truth,
+    both sampled as a renderer does (:data:`SAMPLES` jittered points per pixel, independent
+    seeds), with the truth's noise floor (``truth_floor``: a second truth, another seed)."""
     params = dict(PARAMS if params is None else params)
     scene = pan_scene(width, height)
-    sharp = render_sharp(scene, 0.0, ss=2)
+    sharp = render_sharp(scene, 0.0, ss=SS, jitter_seed=JITTER_SEED, samples=SAMPLES)
     case = dict(source=sharp.rgba, depth=sharp.depth, velocity=sharp.velocity, params=params,
                 camera=Camera(focal_length=4.3, f_number=1.8, sensor_width=5.6))
     if truth:
-        case["truth"] = row_time_truth(scene, time_map(width, height, params))
+        times = time_map(width, height, params)
+        case["truth"] = row_time_truth(scene, times, jitter_seed=TRUTH_SEED, samples=SAMPLES)
+        again = row_time_truth(scene, times, jitter_seed=TRUTH_SEED + 1, samples=SAMPLES)
+        case["truth_floor"] = error_metrics(again, case["truth"])["psnr_log"]
     return case
 
 
