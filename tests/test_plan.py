@@ -92,6 +92,30 @@ def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, mon
     assert set(calls) == {"gather_radii"} and len(calls) <= 2, calls
 
 
+def test_dof_bands_derive_nothing_frame_wide_again(rt, monkeypatch):
+    """A tiled dof renders its bands from the frame's plan: the tile radii, the lattice
+    levels (the largest's and every tile's) and the tap tables are derived as often as in a
+    whole render (the review found the per-tile lattice levels recomputed per band)."""
+    look = clfx.load_look({"name": "d", "schema": 1, "camera": {"f_number": 1.4},
+                           "effects": [{"effect": "dof", "params": {"focus_distance": 1.0}}]})
+    calls = Counter()
+    for name in ("lattice_level", "quantised_radius", "dilate_tiles"):
+        real = getattr(dof_module, name)
+        monkeypatch.setattr(dof_module, name, lambda *a, real=real, name=name:
+                            calls.update([name]) or real(*a))
+    real_tables = dof_module.Dof.tap_tables
+    monkeypatch.setattr(dof_module.Dof, "tap_tables", lambda self, *a, **k:
+                        calls.update(["tap_tables"]) or real_tables(self, *a, **k))
+    counts = []
+    for tiles in (None, 80 * 6):
+        calls.clear()
+        out, report = render_frame(rt, look, scene(), frame_number=1, tile_pixels=tiles)
+        assert report.steps[0].ran
+        counts.append((dict(calls), out.rgba))
+    assert counts[0][0] == counts[1][0] and counts[0][0]["tap_tables"] >= 1
+    assert np.array_equal(counts[0][1].view(np.uint32), counts[1][1].view(np.uint32))
+
+
 def test_plans_are_per_step_and_per_source(rt):
     """A step's contexts share its plan (derived with `over`, `grown_to`); a new step
     (`for_step`) or another source (`with_source`) plans afresh."""
