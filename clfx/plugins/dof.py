@@ -641,6 +641,8 @@ class Dof(Plugin):
         return plan.frame["frame"]
 
     def _make_frame(self, rt, p, ctx) -> DofFrame:
+        """The :class:`DofFrame` of the whole frame ``ctx`` (its window, tiles, caps, one
+        gather plan per channel offset, the notes and the clamp warning)."""
         lens = self.lens(p, ctx)
         warning = self.clamp_warning(p, ctx)
         window = self.output_window(p, ctx)
