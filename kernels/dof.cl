@@ -161,9 +161,14 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
   }
 }
 
-kernel void dof_tile_cap(global const float *col, const int ppitch, const int pad,
-                         const int width, const int height, const int tile,
-                         const int tiles_x, const int tiles_y, global float *out)
+/* Per tile of the whole render's window (`width` x `height`, the grid the gather's tiles
+ * use), from the source `src` whose pixel (0, 0) is the window's pixel (ox, oy) (`sw` x
+ * `sh`; the window may be larger: transparent black there), sanitised as dof_prepare does:
+ * computed once per frame, so a band of a tiled render reads the whole frame's caps. */
+kernel void dof_tile_cap(global const float *src, const int pitch, const int ox,
+                         const int oy, const int sw, const int sh, const int width,
+                         const int height, const int tile, const int tiles_x,
+                         const int tiles_y, global float *out)
 {
   const int tx = get_global_id(0), ty = get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
@@ -174,9 +179,12 @@ kernel void dof_tile_cap(global const float *col, const int ppitch, const int pa
   for(int y = y0; y < y1; y += 4)   /* every 4th pixel and row: an estimate suffices */
   {
     float row = 0.0f;
+    const int sy = y - oy;
     for(int x = x0; x < x1; x += 4)
     {
-      const float4 c = vload4((y + pad) * ppitch + x + pad, col);
+      const int sx = x - ox;
+      const float4 c = sx >= 0 && sx < sw && sy >= 0 && sy < sh
+                       ? clfx_finite4_or_zero(vload4(sy * pitch + sx, src)) : (float4)(0.0f);
       row += native_log(1.0f + fmax(clfx_luminance(c), 0.0f));
       n++;
     }
@@ -378,19 +386,22 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
 
-/* Bilinear sample of the half-resolution result at full-resolution pixel (x, y); `lmin`,
- * `lmax`: the luminance range of the 4 half-resolution pixels it reads, widened. */
+/* Bilinear sample of the half-resolution result at full-resolution pixel (x, y) of the
+ * whole render's grid (`hwidth` x `hheight`: the whole render's half-resolution size; `hres`
+ * holds its rows from `hy0`, columns from `hx0`); `lmin`, `lmax`: the luminance range of
+ * the 4 half-resolution pixels it reads, widened. */
 inline float4 dof_upsample(global const float *hres, const int hpitch, const int hwidth,
-                           const int hheight, const int x, const int y, float *lmin,
-                           float *lmax)
+                           const int hheight, const int hx0, const int hy0, const int x,
+                           const int y, float *lmin, float *lmax)
 {
   const float hx = clamp(0.5f * ((float)x + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
   const float hy = clamp(0.5f * ((float)y + 0.5f) - 0.5f, 0.0f, (float)(hheight - 1));
   const int x0 = (int)hx, y0 = (int)hy;
   const int x1 = min(x0 + 1, hwidth - 1), y1 = min(y0 + 1, hheight - 1);
   const float fx = hx - (float)x0, fy = hy - (float)y0;
-  const float4 c00 = vload4(y0 * hpitch + x0, hres), c01 = vload4(y0 * hpitch + x1, hres);
-  const float4 c10 = vload4(y1 * hpitch + x0, hres), c11 = vload4(y1 * hpitch + x1, hres);
+  const int r0 = (y0 - hy0) * hpitch - hx0, r1 = (y1 - hy0) * hpitch - hx0;
+  const float4 c00 = vload4(r0 + x0, hres), c01 = vload4(r0 + x1, hres);
+  const float4 c10 = vload4(r1 + x0, hres), c11 = vload4(r1 + x1, hres);
   const float4 l = (float4)(clfx_luminance(c00), clfx_luminance(c01), clfx_luminance(c10),
                             clfx_luminance(c11));
   *lmin = fmin(*lmin, fmin(fmin(l.x, l.y), fmin(l.z, l.w)));
@@ -423,7 +434,12 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
  * `cateye` (used with DOF_CATEYE): the barrel centre of buffer pixel (x, y) is
  * (s0 (x + 0.5) + s1, s2 (y + 0.5) + s3) aperture radii (the host folds in the strength,
  * the optical centre, the half diagonal, the pixel aspect and the buffer's scale).
- * `plane`: pixels between the planes of `col`'s prefilter pyramid (dof_prefilter). */
+ * `plane`: pixels between the planes of `col`'s prefilter pyramid (dof_prefilter).
+ * `place`: where the buffers sit on the grid of the whole render's window (the tiles, the
+ * cat-eye centres, the half-resolution sampling): dst pixel (x, y) is grid pixel
+ * (x + s0, y + s1), `col` / `coc` pixel (x, y) grid pixel (x + s2, y + s3); `hplace.s01`:
+ * the grid pixel (half resolution) of `hres` pixel (0, 0).  A whole render: all 0; a band of
+ * a tiled render: its rows of the whole render's grid (clfx/plugins/dof.py). */
 kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
                        const int pad, global float *dst, const int pitch,
                        const int width, const int height, global const float *taps,
@@ -431,15 +447,17 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
                        const int hwidth, const int hheight, const float refine,
-                       const float low_r, const float4 cateye, const int plane)
+                       const float low_r, const float4 cateye, const int plane,
+                       const int4 place, const int4 hplace)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  const int x = qx * 4;
-  if(y >= height || x >= width) return;
+  const int qx = get_global_id(0), yd = get_global_id(1);
+  const int xd = qx * 4;
+  if(yd >= height || xd >= width) return;
+  const int x = xd + place.s0, y = yd + place.s1;   /* the whole render's grid */
   const int tx = x / tile, ty = y / tile;
   const int8 info = vload8(ty * tiles_x + tx, tile_info);
-  const int base = (y + pad) * ppitch + x + pad;
-  global float *out = dst + (y * pitch + x) * 4;
+  const int base = (y - place.s3 + pad) * ppitch + x - place.s2 + pad;
+  global float *out = dst + (yd * pitch + xd) * 4;
   if(info.s1 == 0)
   {  /* the sanitised source */
     vstore16(vload16(0, col + base * 4), 0, out);
@@ -457,10 +475,11 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   {
     float lmin = INFINITY, lmax = -INFINITY;
     float16 up;
-    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, x, y, &lmin, &lmax);
-    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, x + 1, y, &lmin, &lmax);
-    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, x + 2, y, &lmin, &lmax);
-    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, x + 3, y, &lmin, &lmax);
+    const int hx0 = hplace.s0, hy0 = hplace.s1;
+    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x, y, &lmin, &lmax);
+    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 1, y, &lmin, &lmax);
+    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 2, y, &lmin, &lmax);
+    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 3, y, &lmin, &lmax);
     /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
     if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
                          <= refine)

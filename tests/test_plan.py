@@ -56,7 +56,7 @@ def test_one_plan_and_one_lens_per_step_per_frame(rt, monkeypatch):
     monkeypatch.setattr(dof_module, "Lens",
                         lambda *a, **k: lenses.update(["dof"]) or real_lens(*a, **k))
     monkeypatch.setattr(dof_module.Dof, "_tile_radii", staticmethod(
-        lambda lens, ctx, offset: radii.update([ctx.source.window]) or real_radii(lens, ctx, offset)))
+        lambda lens, tiles, offset: radii.update([tiles.window]) or real_radii(lens, tiles, offset)))
     frames = (2, 3)
     for n in frames:
         _, report = render_frame(rt, look, scene(), frame_number=n)
@@ -90,6 +90,30 @@ def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, mon
     assert report.steps[0].ran and np.isfinite(out.rgba).all()
     # once over the source window and once over the window dof grows to (as the radii)
     assert set(calls) == {"gather_radii"} and len(calls) <= 2, calls
+
+
+def test_dof_bands_derive_nothing_frame_wide_again(rt, monkeypatch):
+    """A tiled dof renders its bands from the frame's plan: the tile radii, the lattice
+    levels (the largest's and every tile's) and the tap tables are derived as often as in a
+    whole render (the review found the per-tile lattice levels recomputed per band)."""
+    look = clfx.load_look({"name": "d", "schema": 1, "camera": {"f_number": 1.4},
+                           "effects": [{"effect": "dof", "params": {"focus_distance": 1.0}}]})
+    calls = Counter()
+    for name in ("lattice_level", "quantised_radius", "dilate_tiles"):
+        real = getattr(dof_module, name)
+        monkeypatch.setattr(dof_module, name, lambda *a, real=real, name=name:
+                            calls.update([name]) or real(*a))
+    real_tables = dof_module.Dof.tap_tables
+    monkeypatch.setattr(dof_module.Dof, "tap_tables", lambda self, *a, **k:
+                        calls.update(["tap_tables"]) or real_tables(self, *a, **k))
+    counts = []
+    for tiles in (None, 80 * 6):
+        calls.clear()
+        out, report = render_frame(rt, look, scene(), frame_number=1, tile_pixels=tiles)
+        assert report.steps[0].ran
+        counts.append((dict(calls), out.rgba))
+    assert counts[0][0] == counts[1][0] and counts[0][0]["tap_tables"] >= 1
+    assert np.array_equal(counts[0][1].view(np.uint32), counts[1][1].view(np.uint32))
 
 
 def test_plans_are_per_step_and_per_source(rt):
@@ -207,14 +231,14 @@ def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
 
 @pytest.mark.slow
 def test_8k_renders_tiled_within_a_small_pool_bit_identical(rt, monkeypatch):
-    """At 8K UHD the steps of cinema that tile (chromatic aberration, distortion, vignette,
-    grain) render in bands of 2^20 pixels: the same bits as whole frames (the whole look,
+    """At 8K UHD the steps of cinema that tile (depth of field, chromatic aberration,
+    distortion, vignette, grain) render in bands of 2^20 pixels: the same bits as whole frames (the whole look,
     with its steps that render whole, and its peaks: scripts/tile_8k.py).  With
     CLFX_POOL_MB=64 vignette + grain's device peak fell from 2065 to 1118 MiB."""
     look = clfx.load_look("cinema")
     look = dataclasses.replace(look, steps=[s for s in look.steps
                                             if s.plugin.whole_frame is None])
-    assert [s.effect for s in look.steps] == ["chromatic_aberration", "distortion",
+    assert [s.effect for s in look.steps] == ["dof", "chromatic_aberration", "distortion",
                                               "vignette", "grain"]
     w, h = 7680, 4320
     whole, _ = render_frame(rt, look, cinema_frame(w, h), frame_number=5)

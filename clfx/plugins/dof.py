@@ -97,6 +97,15 @@ frame's depth range can produce (the tiles of the shared scene analysis; the ``m
 clamp without them).  When the output window is larger than the source window (a data window
 tighter than the display window), the beauty is extended with transparent black and the
 depth by its edge values, and the tiles are taken over the grown window.
+
+Tiled renders (`clfx.pipeline.look.render_tiled`) give the whole render's bits: everything
+frame-wide is computed once, on the whole frame, in the step's plan (:class:`DofFrame`: the
+tile radii, lattice levels, half-resolution choice, tap and tile tables, the tiles' caps, on
+a grid anchored at the rendered window's origin), and a band gathers only its own rows,
+from band-sized buffers over the rows its pixels read (:meth:`DofFrame.rows`: the largest
+reach of a tap, its prefilter tent and the edge-aware radii's row, and of the
+half-resolution pixels its upsampling reads, starting on an even row so the 2 x 2 boxes
+pair the whole render's rows).
 """
 from __future__ import annotations
 
@@ -110,10 +119,12 @@ from clfx.core.camera import BLADES_WHY, NO_POLYGON, aperture_radius, coc_signed
 from clfx.core.errors import ParamError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
 from clfx.core.rect import Rect
-from clfx.fx.analysis import TILE  # dof's tiles are the shared analysis's
+from clfx.fx.analysis import TILE, analyse  # dof's tiles are the shared analysis's
 from clfx.host import Plugin, StepPlan, register
 
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
+BAND_PIXELS = 1 << 22
+"""Pixels per band of the analysis of a frame grown past its data window (`Dof.frame`)."""
 
 
 class Lens(NamedTuple):
@@ -135,13 +146,87 @@ class Lens(NamedTuple):
 
 @dataclass(frozen=True)
 class DofPlan(StepPlan):
-    """dof's plan for one step of a frame: the lens (built once), and per source window and
+    """dof's plan for one step of a frame: the lens (built once); per analysis window and
     channel offset the tile radii (`Dof.tile_radii`) and the gather's radii with the lattice
-    level of the largest (`Dof.gather_radii`), computed on first use."""
+    level of the largest (`Dof.gather_radii`), computed on first use; and the frame's
+    :class:`DofFrame` (`Dof.frame`), built once on the whole frame."""
 
     lens: Lens | None = None
     radii: dict = field(default_factory=dict, compare=False, repr=False)
     gathers: dict = field(default_factory=dict, compare=False, repr=False)
+    frame: dict = field(default_factory=dict, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class DepthTiles:
+    """What dof reads of a window's scene analysis (`clfx.fx.analysis`): per 32 px tile of
+    ``window`` the depth range and invalid-depth count, and the frame's non-finite pixels."""
+
+    window: Rect
+    min_depth: np.ndarray | None
+    max_depth: np.ndarray | None
+    bad_depth: np.ndarray | None
+    nonfinite_count: int = 0
+
+
+@dataclass(frozen=True)
+class DofGather:
+    """One gather (one channel radius offset) of a frame, on the tile grid of the whole
+    render's window: everything a band of a tiled render reads instead of deriving it again
+    (:meth:`Dof.frame`)."""
+
+    offset: float
+    levels: np.ndarray        # per tile: the gather's radius (quantised, px; 0: copied)
+    full_l: int               # lattice level of the largest: the prefilter pyramid's depth
+    half: np.ndarray          # per tile: gathered at half resolution
+    half_l: int               # the half-resolution pyramid's depth
+    pad: int                  # the padded buffers' border (px)
+    taps: object              # device tap table and per-tile table of the full-res gather
+    tiles: object
+    htaps: object             # ... of the half-resolution gather (None without)
+    htiles: object
+    reach: int                # rows a full-res pixel reads around it (taps, prefilter, edges)
+    hreach: int               # half-res rows a half-res pixel reads around it (0: none)
+    note: str
+
+
+@dataclass(frozen=True)
+class DofFrame:
+    """Frame-wide values of one step, computed once on the whole frame (`Dof.frame`) and read
+    by the whole render and by every band of a tiled one: the window rendered (``window``,
+    the tile grid's origin), its tiles' hidden-background caps (``log_mean``, on the
+    device), one :class:`DofGather` per channel offset, the report's lines."""
+
+    window: Rect
+    tiles_x: int
+    tiles_y: int
+    log_mean: object
+    gathers: dict
+    notes: tuple
+    warning: str | None
+
+    def rows(self, y0: int, y1: int) -> tuple[int, int]:
+        """The rows (frame coordinates, not cut to the window) a band's render reads to give
+        rows ``y0``..``y1`` of the whole render: each gather's reach around them, and around
+        the half-resolution rows their upsampling reads (a 2 x 2 box of rows each, with the
+        edge-aware radii's row beyond), widened to even rows of the grid (the
+        half-resolution pixels pair the whole render's rows)."""
+        top, bottom = y0 - self.window.y0, y1 - self.window.y0
+        lo, hi = top, bottom
+        for g in self.gathers.values():
+            lo, hi = min(lo, top - g.reach), max(hi, bottom + g.reach)
+            if g.hreach:
+                h0, h1 = self.half_rows(top, bottom)
+                lo = min(lo, 2 * (h0 - g.hreach) - 1)
+                hi = max(hi, 2 * (h1 + g.hreach) + 1)
+        lo, hi = lo // 2 * 2, -(-hi // 2) * 2
+        return self.window.y0 + lo, self.window.y0 + hi
+
+    @staticmethod
+    def half_rows(top: int, bottom: int) -> tuple[int, int]:
+        """The half-resolution rows (grid, from 0) that the bilinear upsampling of rows
+        ``top``..``bottom`` (grid) reads (``dof_upsample``), not cut to the frame."""
+        return (top - 1) // 2, (bottom + 1) // 2 + 1
 
 
 @dataclass(frozen=True)
@@ -308,7 +393,7 @@ def prefilter(rt, col, pheight: int, levels: int) -> None:
 
 @register
 class Dof(Plugin):
-    whole_frame = ("its CoC radii and half-resolution choice come from the whole frame's depth statistics (scene-analysis tiles)")
+    whole_frame = None   # tiles: the frame-wide tile tables are the step's (`Dof.frame`)
     descriptor = Descriptor(
         name="dof", label="Depth of field", group="Lens", kernel="dof.cl",
         summary="Thin-lens depth of field from a depth pass: gather with separate near and "
@@ -404,32 +489,42 @@ class Dof(Plugin):
         return (np.float32(k * scale), np.float32(k * (window.x0 - cx)),
                 np.float32(k * scale / aspect), np.float32(k * (window.y0 - cy) / aspect))
 
-    def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None):
+    def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None,
+                   tiles: DepthTiles | None = None):
         """Per 32 px tile: the largest CoC radius any pixel within reach can have (px); with
         ``with_near`` also the smallest radius of the tile's own pixels and the largest
         radius of a pixel in front of the focus plane within reach (0 if none).  ``offset``:
-        one channel's axial-CA radius offset; None: the largest over the channels."""
+        one channel's axial-CA radius offset; None: the largest over the channels.
+        ``tiles``: the depth tiles of the window (default: the frame's scene analysis)."""
         plan = self.planned(p, ctx)
+        tiles = tiles or self.depth_tiles(ctx)
         if offset is None:
-            out = [self.tile_radii(p, ctx, with_near=with_near, offset=o)
+            out = [self.tile_radii(p, ctx, with_near=with_near, offset=o, tiles=tiles)
                    for o in plan.lens.offsets()]
             if with_near:
                 return tuple(np.maximum.reduce(list(t)) if i != 1 else np.minimum.reduce(list(t))
                              for i, t in enumerate(zip(*out)))
             return np.maximum.reduce(out)
-        key = (ctx.source.window, offset)
+        key = (tiles.window, offset)
         if key not in plan.radii:    # once per window and channel offset in a step
-            plan.radii[key] = self._tile_radii(plan.lens, ctx, offset)
+            plan.radii[key] = self._tile_radii(plan.lens, tiles, offset)
         r_max, r_min, near = plan.radii[key]
         return (r_max, r_min, near) if with_near else r_max
 
     @staticmethod
-    def _tile_radii(lens: Lens, ctx, offset: float):
+    def depth_tiles(ctx) -> DepthTiles:
+        """The :class:`DepthTiles` of the frame's scene analysis (in a tile of a tiled
+        render, the whole frame's)."""
+        an = ctx.analysis
+        return DepthTiles(an.window, an.min_depth, an.max_depth, an.bad_depth,
+                          an.nonfinite_count)
+
+    @staticmethod
+    def _tile_radii(lens: Lens, an: DepthTiles, offset: float):
         """(r_max, r_min, near) of :meth:`tile_radii` for one channel offset."""
         k_half, focus, clamp_r = lens[:3]
-        src = ctx.source
-        ty, tx = max(1, -(-src.height // TILE)), max(1, -(-src.width // TILE))
-        an = ctx.analysis
+        w = an.window
+        ty, tx = max(1, -(-w.height // TILE)), max(1, -(-w.width // TILE))
         if an.min_depth is None:
             full = np.full((ty, tx), clamp_r, np.float32)  # no tile statistics: no skipping
             return full, np.zeros_like(full), full
@@ -461,15 +556,17 @@ class Dof(Plugin):
         rx, ry = lattice_reach(r, level, lens.squeeze, ctx.pixel_aspect)
         return int(math.ceil(rx)) + 1, int(math.ceil(ry)) + 1
 
-    def gather_radii(self, p, ctx, offset: float = 0.0) -> tuple[np.ndarray, int]:
+    def gather_radii(self, p, ctx, offset: float = 0.0,
+                     tiles: DepthTiles | None = None) -> tuple[np.ndarray, int]:
         """Per tile the gather's radius (:func:`quantised_radius` of :meth:`tile_radii` for
         the channel ``offset``) and the :func:`lattice_level` of the largest, which sets the
         padding, the prefilter pyramid's depth and the reach: once per window and offset in
-        a step (the plan's), read by the regions (:meth:`spread_px`) and the render."""
+        a step (the plan's), read by the regions (:meth:`spread_px`) and :meth:`frame`."""
         plan = self.planned(p, ctx)
-        key = (ctx.source.window, offset)
+        tiles = tiles or self.depth_tiles(ctx)
+        key = (tiles.window, offset)
         if key not in plan.gathers:
-            levels = quantised_radius(self.tile_radii(p, ctx, offset=offset))
+            levels = quantised_radius(self.tile_radii(p, ctx, offset=offset, tiles=tiles))
             lvl = self.level(ctx)
             r_max = float(levels.max()) if levels.size else 0.0
             plan.gathers[key] = (levels, lattice_level(r_max, lvl.lattice, lvl.dense_radius))
@@ -523,59 +620,96 @@ class Dof(Plugin):
         return ctx.source.window.grown(*self.spread_px(p, ctx))
 
     def region_of_interest(self, p, ctx, window):
-        return window.grown(*self.spread_px(p, ctx))
+        # the rows a band's render reads (`DofFrame.rows`), over the whole width: each band
+        # gathers full rows of the whole render's tile grid
+        frame = self.frame(p, ctx)
+        rx = self.spread_px(p, ctx)[0]
+        y0, y1 = frame.rows(window.y0, window.y1)
+        return Rect(min(window.x0 - rx, frame.window.x0), min(y0, window.y0),
+                    max(window.x1 + rx, frame.window.x1), max(y1, window.y1))
 
-    # -- render ----------------------------------------------------------------------------
-    def render(self, rt, p, ctx):
-        warning = self.clamp_warning(p, ctx)
-        if warning and warning not in ctx.warnings:  # stderr: "frame N: dof: <warning>"
-            ctx.warnings.append(warning)
-            ctx.notes.append(warning)
-        window = self.output_window(p, ctx)
-        if window != ctx.source.window:
-            # Light leaves the data window: render over the grown window, outside it nothing
-            # (transparent black) at the edge's depth.  A copy of the context, so the scene
-            # analysis (the tiles) is taken over the grown window; notes stay shared.
-            ctx = ctx.grown_to(window)
-            ctx.notes.append(f"dof: grown to {window}")
+    # -- the frame -------------------------------------------------------------------------
+    def frame(self, p, ctx) -> DofFrame:
+        """The step's :class:`DofFrame`: built once, on the whole frame (a tiled render's
+        regions ask for it before any band renders), then read by every band."""
+        plan = self.planned(p, ctx)
+        if "frame" not in plan.frame:
+            if ctx.tiling is not None:
+                raise RuntimeError("dof: a band renders before its frame's plan was made "
+                                   "on the whole frame")
+            plan.frame["frame"] = self._make_frame(ctx.runtime, p, ctx)
+        return plan.frame["frame"]
+
+    def _make_frame(self, rt, p, ctx) -> DofFrame:
+        """The :class:`DofFrame` of the whole frame ``ctx`` (its window, tiles, caps, one
+        gather plan per channel offset, the notes and the clamp warning)."""
         lens = self.lens(p, ctx)
-        offsets = lens.offsets()
+        warning = self.clamp_warning(p, ctx)
+        window = self.output_window(p, ctx)
         notes = []
-        outs = {}
-        for off in offsets:   # one gather per distinct channel radius (axial CA)
-            outs[off] = self._render_pass(rt, p, ctx, lens, off, notes if off == 0.0 else [])
-        if len(offsets) == 1:
-            dst = outs[0.0]
-        else:
-            dst = ctx.source.like()
-            r, b = (outs[o] for o in lens.ca)
-            rt.launch(rt.kernel("dof.cl", "dof_merge_channels"), (dst.width, dst.height),
-                      r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
-                      np.int32(dst.height), local=(16, 4))
-            notes.append(f"axial CA: red {2 * lens.ca[0]:+.2f} px, blue {2 * lens.ca[1]:+.2f} px "
-                         f"of CoC, {len(offsets)} gathers")
+        if window != ctx.source.window:
+            # Light leaves the data window: the render covers the grown window, outside the
+            # data window nothing (transparent black) at the edge's depth; its tiles are
+            # taken over the grown window.
+            notes.append(f"dof: grown to {window}")
+        tiles = self._window_tiles(rt, ctx, window)
+        ty, tx = max(1, -(-window.height // TILE)), max(1, -(-window.width // TILE))
+        log_mean = rt.buffer(tx * ty * 4)
+        src, i32 = ctx.source, np.int32
+        rt.launch(rt.kernel("dof.cl", "dof_tile_cap", fp64=self.level(ctx).fp64,
+                            **ctx.luminance_defines), (tx, ty),
+                  src, i32(src.pitch), i32(src.window.x0 - window.x0),
+                  i32(src.window.y0 - window.y0), i32(src.width), i32(src.height),
+                  i32(window.width), i32(window.height), i32(TILE), i32(tx), i32(ty), log_mean)
+        offsets = lens.offsets()
+        gathers = {off: self._plan_gather(rt, p, ctx, lens, tiles, off) for off in offsets}
+        said = [gathers[0.0].note]
+        if len(offsets) > 1:
+            said.append(f"axial CA: red {2 * lens.ca[0]:+.2f} px, blue {2 * lens.ca[1]:+.2f} px "
+                        f"of CoC, {len(offsets)} gathers")
         if lens.cateye:
-            notes.append(f"optical vignetting {lens.cateye:g} (cat-eye bokeh)")
+            said.append(f"optical vignetting {lens.cateye:g} (cat-eye bokeh)")
         if lens.squeeze != 1.0:
-            notes.append(f"anamorphic squeeze {lens.squeeze:g}")
-        an = ctx.analysis
-        if an.nonfinite_count:
-            notes.insert(0, f"{an.nonfinite_count} non-finite pixels set to 0")
-        if an.bad_depth is not None and int(an.bad_depth.sum()):
-            notes.insert(1 if an.nonfinite_count else 0,
-                         f"{int(an.bad_depth.sum())} invalid depths treated as in focus")
-        ctx.notes.append("dof: " + "; ".join(notes))
-        return dst
+            said.append(f"anamorphic squeeze {lens.squeeze:g}")
+        if tiles.nonfinite_count:
+            said.insert(0, f"{tiles.nonfinite_count} non-finite pixels set to 0")
+        if tiles.bad_depth is not None and int(tiles.bad_depth.sum()):
+            said.insert(1 if tiles.nonfinite_count else 0,
+                        f"{int(tiles.bad_depth.sum())} invalid depths treated as in focus")
+        notes.append("dof: " + "; ".join(said))
+        return DofFrame(window, tx, ty, log_mean, gathers, tuple(notes), warning)
 
-    def _render_pass(self, rt, p, ctx, lens: Lens, offset: float, notes: list):
-        """The gather of every channel with the signed CoC radii offset by ``offset`` px (one
-        channel's axial CA; 0 without)."""
-        src, depth = ctx.source, ctx.depth
+    def _window_tiles(self, rt, ctx, window: Rect) -> DepthTiles:
+        """The :class:`DepthTiles` of ``window``: the frame's analysis, or (a window grown
+        past the data window: the beauty extended with transparent black, the depth by its
+        edge values) the analysis of the grown frame, taken in bands of whole tile rows so
+        no grown copy of the frame exists at once (a tile's statistics read its own pixels
+        only: the same values as over the whole grown frame)."""
+        if window == ctx.source.window:
+            return self.depth_tiles(ctx)
+        rows = max(1, BAND_PIXELS // max(window.width, 1) // TILE) * TILE
+        parts = []
+        for y in range(window.y0, window.y1, rows):
+            band = Rect(window.x0, y, window.x1, min(y + rows, window.y1))
+            depth = None if ctx.depth is None else rt.reframe(ctx.depth, band, "clamp")
+            an = analyse(rt, rt.reframe(ctx.source, band, "zero"), depth=depth,
+                         luminance_defines=ctx.luminance_defines)
+            parts.append((an.min_depth, an.max_depth, an.bad_depth, an.nonfinite_count))
+        if ctx.depth is None:
+            stacked = (None, None, None)
+        else:
+            stacked = tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
+        return DepthTiles(window, *stacked, sum(part[3] for part in parts))
+
+    def _plan_gather(self, rt, p, ctx, lens: Lens, tiles: DepthTiles,
+                     offset: float) -> DofGather:
+        """The :class:`DofGather` of the channel radius ``offset`` over ``tiles``' window."""
         lvl = self.level(ctx)
-        k_half, focus, clamp_r, blades, first = lens[:5]
         aspect = ctx.pixel_aspect
-        radii, r_min, near = self.tile_radii(p, ctx, with_near=True, offset=offset)
-        levels, full_l = self.gather_radii(p, ctx, offset)
+        blades, first = lens[3:5]
+        radii, r_min, near = self.tile_radii(p, ctx, with_near=True, offset=offset,
+                                             tiles=tiles)
+        levels, full_l = self.gather_radii(p, ctx, offset, tiles=tiles)
         # Tiles whose every pixel is far out of focus are gathered at half resolution.
         half = (r_min >= lvl.half_res_radius) & (levels > 0)
         r_max = float(levels.max())
@@ -583,6 +717,91 @@ class Dof(Plugin):
         s_max = 1 << full_l
         reach = r_max + (0.5 * s_max if s_max > 1 else 0.0)
         pad = int(math.ceil((reach * max(1.0, aspect) + 2) / 8.0) * 8)
+        common = (lvl, aspect, blades, first, p.roundness, lens.squeeze)
+        htaps = htiles = None
+        half_l = hrows = 0
+        if half.any():
+            hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))
+            half_l = lattice_level(float(hlevels.max()), lvl.lattice, lvl.dense_radius)
+            htaps, htiles, hrows = self._tile_table(rt, hlevels, hlevels, None, *common)
+            hrows += (1 << half_l) - 1     # the half-resolution prefilter's tent
+        # full resolution: sharp pixels gather over their own reach and the near field's,
+        # out-of-focus ones take the half-resolution result where it is smooth
+        sharp = np.where(levels > 0, quantised_radius(np.maximum(near, lvl.half_res_radius)
+                                                      if math.isfinite(lvl.half_res_radius)
+                                                      else radii), 0.0)
+        sharp = np.minimum(sharp, levels)
+        mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
+        taps, tile_info, rows = self._tile_table(rt, levels, sharp, mode, *common)
+        # rows a pixel reads: its farthest tap's, the prefilter's tent around it, or the
+        # edge-aware radius's row beyond it (its 3 x 3 neighbours)
+        rows += max((1 << full_l) - 1, 1)
+        note = (f"{int((levels == 0).sum())}/{radii.size} tiles in focus (copied), "
+                f"{int(half.sum())} at half resolution")
+        return DofGather(offset, levels, full_l, half, half_l, pad, taps, tile_info, htaps,
+                         htiles, rows, hrows, note)
+
+    def _tile_table(self, rt, levels, sharp, mode, lvl, aspect, blades, first, roundness,
+                    squeeze):
+        """``dof_gather``'s tap table and per-tile table (on the device): per tile the table
+        of radius ``levels``, that of radius ``sharp`` for pixels in focus, ``mode`` (bit 0:
+        take the half-resolution result where it is smooth, bit 1: gather again where it is
+        not) and the two tables' lattice levels; and the farthest row offset of a tap."""
+        table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
+                                      roundness, squeeze)
+        tiles = np.zeros(levels.shape + (8,), np.int32)
+        tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
+        tiles[..., 4] = 0 if mode is None else mode
+        level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
+        tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
+        return rt.to_device(table), rt.to_device(tiles), int(np.abs(table[:, 1]).max())
+
+    # -- render ----------------------------------------------------------------------------
+    def render(self, rt, p, ctx):
+        frame = self.frame(p, ctx)
+        if frame.warning and frame.warning not in ctx.warnings:  # "frame N: dof: <warning>"
+            ctx.warnings.append(frame.warning)
+            ctx.notes.append(frame.warning)
+        whole = frame.window
+        if ctx.tiling is None:
+            band = work = whole
+        else:
+            # a band of a tiled render: the rows of the whole render's grid it reads, from
+            # the tile's source (its region of interest), filled past the data window as
+            # the whole render fills them
+            band = ctx.tiling.band
+            y0, y1 = frame.rows(band.y0, band.y1)
+            work = Rect(whole.x0, y0, whole.x1, y1).intersect(whole)
+            have = ctx.source.window
+            if not have.contains(work.intersect(ctx.tiling.whole)):
+                raise RuntimeError(f"dof: a band {band} reads {work}; its source holds {have}")
+        src = rt.reframe(ctx.source, work, "zero")
+        depth = rt.reframe(ctx.depth, work, "clamp")
+        lens = self.lens(p, ctx)
+        outs = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gathers[off], src,
+                                       depth, band)
+                for off in lens.offsets()}
+        if len(outs) == 1:
+            dst = outs[0.0]
+        else:
+            dst = outs[0.0].like()
+            r, b = (outs[o] for o in lens.ca)
+            rt.launch(rt.kernel("dof.cl", "dof_merge_channels"), (dst.width, dst.height),
+                      r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
+                      np.int32(dst.height), local=(16, 4))
+        ctx.notes.extend(frame.notes)
+        return dst
+
+    def _render_pass(self, rt, p, ctx, lens: Lens, frame: DofFrame, g: DofGather, src,
+                     depth, band: Rect):
+        """The gather of every channel with the signed CoC radii offset by ``g.offset`` px
+        (one channel's axial CA; 0 without) over the rows ``band`` of the whole render,
+        from ``src`` and ``depth`` over the rows it reads (the whole window in a whole
+        render)."""
+        lvl = self.level(ctx)
+        k_half, focus, clamp_r = lens[:3]
+        whole = frame.window
+        pad, full_l = g.pad, g.full_l
         w, h = src.width, src.height
         padded = Rect.from_size(-(-(w + 2 * pad + 4) // 4) * 4, h + 2 * pad)
         # the colour, then its prefiltered copies for the sparse taps (planes 1..L)
@@ -593,75 +812,56 @@ class Dof(Plugin):
         prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64, **luma)
         rt.launch(prep, (col.pitch // 4, padded.height), src, depth, i32(src.pitch), i32(w),
                   i32(h), col, coc0, i32(col.pitch), i32(padded.height), i32(pad), f32(k_half),
-                  f32(focus), f32(clamp_r), f32(offset))
+                  f32(focus), f32(clamp_r), f32(g.offset))
         prefilter(rt, col, padded.height, full_l)
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
                   col, coc0, coc, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h),
                   local=(8, 4))
         del coc0
-        # mean log luminance per tile: the caps of the hidden background
-        ty, tx = radii.shape
-        log_mean = rt.buffer(tx * ty * 4)
-        rt.launch(rt.kernel("dof.cl", "dof_tile_cap", fp64=lvl.fp64, **luma), (tx, ty), col,
-                  i32(col.pitch), i32(pad), i32(w), i32(h), i32(TILE), i32(tx), i32(ty),
-                  log_mean)
         variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
         gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant, **luma)
-        common = (lvl, aspect, blades, first, p.roundness, log_mean, lens.squeeze)
-        hdst = None
-        if half.any():
+        # where the buffers sit on the whole render's grid (its window's origin)
+        top, row0 = band.y0 - whole.y0, src.window.y0 - whole.y0
+        half_size = (-(-whole.width // 2), -(-whole.height // 2))
+        hres = None
+        if g.htaps is not None:
             hw, hh, hpad = -(-w // 2), -(-h // 2), pad // 2
             hpadded = Rect.from_size(-(-(hw + 2 * hpad + 4) // 4) * 4, hh + 2 * hpad)
-            hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))
-            half_l = lattice_level(float(hlevels.max()), lvl.lattice, lvl.dense_radius)
-            colh = rt.image(Rect.from_size(hpadded.width, hpadded.height * (1 + half_l)), 4)
+            colh = rt.image(Rect.from_size(hpadded.width, hpadded.height * (1 + g.half_l)), 4)
             coch = rt.image(hpadded, 1)
             rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
                       (colh.pitch, hpadded.height), col, coc, i32(col.pitch), i32(padded.height),
                       colh, coch, i32(colh.pitch), i32(hpadded.height))
-            prefilter(rt, colh, hpadded.height, half_l)
-            hdst = rt.image((hh, hw), 4)
-            self._gather(rt, gather, colh, coch, hpad, hdst, hlevels, hlevels, None, *common,
-                         self.cateye_args(lens, ctx, src.window, 2), tile=TILE // 2,
-                         plane=colh.pitch * hpadded.height)
-        # full resolution: sharp pixels gather over their own reach and the near field's,
-        # out-of-focus ones take the half-resolution result where it is smooth
-        sharp = np.where(levels > 0, quantised_radius(np.maximum(near, lvl.half_res_radius)
-                                                      if math.isfinite(lvl.half_res_radius)
-                                                      else radii), 0.0)
-        sharp = np.minimum(sharp, levels)
-        mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
-        dst = src.like()
-        self._gather(rt, gather, col, coc, pad, dst, levels, sharp, mode, *common,
-                     self.cateye_args(lens, ctx, src.window), hres=hdst,
-                     plane=col.pitch * padded.height)
-        skipped = int((levels == 0).sum())
-        notes.append(f"{skipped}/{radii.size} tiles in focus (copied), "
-                     f"{int(half.sum())} at half resolution")
+            prefilter(rt, colh, hpadded.height, g.half_l)
+            # the half-resolution rows this band's upsampling reads (row0 is even:
+            # `DofFrame.rows`)
+            h0, h1 = DofFrame.half_rows(top, top + band.height)
+            h0, h1 = max(h0, 0), min(h1, half_size[1])
+            hres = rt.image((h1 - h0, hw), 4)
+            self._gather(rt, gather, colh, coch, hpad, hres, g.htaps, g.htiles, frame, lvl,
+                         self.cateye_args(lens, ctx, whole, 2), (0, h0, 0, row0 // 2),
+                         tile=TILE // 2, plane=colh.pitch * hpadded.height)
+            del colh, coch
+        dst = rt.image(band, 4)
+        self._gather(rt, gather, col, coc, pad, dst, g.taps, g.tiles, frame, lvl,
+                     self.cateye_args(lens, ctx, whole), (0, top, 0, row0),
+                     hres=hres, hplace=(0, h0 if hres is not None else 0),
+                     half_size=half_size, plane=col.pitch * padded.height)
         return dst
 
-    def _gather(self, rt, knl, col, coc, pad, dst, levels, sharp, mode, lvl, aspect, blades,
-                first, roundness, log_mean, squeeze, cateye, *, tile=TILE, hres=None,
-                plane=0):
-        """Launch ``dof_gather`` over ``dst``: per tile the table of radius ``levels``, that
-        of radius ``sharp`` for pixels in focus, ``mode`` (bit 0: take ``hres`` where it is
-        smooth, bit 1: gather again where it is not); ``plane``: pixels between the planes of
+    def _gather(self, rt, knl, col, coc, pad, dst, taps, tiles, frame: DofFrame, lvl, cateye,
+                place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0):
+        """Launch ``dof_gather`` over ``dst`` with the tables ``taps``, ``tiles``
+        (:meth:`_tile_table`) and the frame's caps; ``place``: (dst x, dst y, buffer x,
+        buffer y) on the whole render's grid, ``hres``: the half-resolution result (rows from
+        ``hplace``, ``half_size`` its whole size); ``plane``: pixels between the planes of
         ``col``'s prefilter pyramid (:func:`prefilter`)."""
-        table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
-                                      roundness, squeeze)
-        tiles = np.zeros(levels.shape + (8,), np.int32)
-        tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
-        tiles[..., 4] = 0 if mode is None else mode
-        level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
-        tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
-        taps, tile_info = rt.to_device(table), rt.to_device(tiles)
         i32, f32 = np.int32, np.float32
-        hres_args = ((hres, i32(hres.pitch), i32(hres.width), i32(hres.height)) if hres is not None
-                     else (dst, i32(dst.pitch), i32(1), i32(1)))
+        hres_args = ((hres, i32(hres.pitch), i32(half_size[0]), i32(half_size[1]))
+                     if hres is not None else (dst, i32(dst.pitch), i32(1), i32(1)))
         rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, i32(col.pitch), i32(pad),
-                  dst, i32(dst.pitch), i32(dst.width), i32(dst.height), taps, tile_info,
-                  log_mean, i32(levels.shape[1]), i32(levels.shape[0]), i32(tile),
+                  dst, i32(dst.pitch), i32(dst.width), i32(dst.height), taps, tiles,
+                  frame.log_mean, i32(frame.tiles_x), i32(frame.tiles_y), i32(tile),
                   f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
-                  np.array(cateye, np.float32), i32(plane), local=LOCAL)
-        # (the pooled tables may be dropped now: the in-order queue uses them before any
-        # later command could overwrite a reused buffer)
+                  np.array(cateye, np.float32), i32(plane), np.array(place, np.int32),
+                  np.array((*hplace, 0, 0), np.int32), local=LOCAL)

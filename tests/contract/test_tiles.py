@@ -125,3 +125,44 @@ def test_breathing_tiles_in_every_window(rt, reference_focus, layout, quality):
     p = effects.params("breathing", reference_focus=reference_focus)
     assert_tiles_give_the_whole_render(rt, "breathing", p, quality, effects.scene((70, 90)),
                                        rows=7, window=window, display_window=display)
+
+
+DOF_LENSES = {
+    "camera": ({}, 1.0),
+    # CoC radii past the dense taps: the lattice over the prefiltered colour, half resolution
+    "lattice": ({"coc_source": "max_blur", "max_blur": 0.25, "max_coc": 1.0}, 1.0),
+    # three gathers (axial CA), cat-eye bokeh, an anamorphic squeeze
+    "ca-cateye-squeeze": ({"axial_ca_red": 60.0, "axial_ca_blue": -40.0,
+                           "optical_vignetting": 1.0, "anamorphic_squeeze": 1.5}, 1.0),
+    # tall pixels: the reach in rows doubles
+    "pixel-aspect": ({"coc_source": "max_blur", "max_blur": 0.05, "optical_vignetting": 0.7},
+                     2.0),
+}
+"""dof's lenses for the tiling test: (params, pixel aspect)."""
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("layout", ["frame"] + sorted(LAYOUTS))
+@pytest.mark.parametrize("lens", sorted(DOF_LENSES))
+def test_dof_tiles_with_every_lens_and_window(rt, lens, layout, quality, monkeypatch):
+    """dof's bands give its whole render bit for bit, its frame-wide tables (tile radii,
+    lattice levels, half-resolution choice, caps) made once on the whole frame: bands of 7
+    rows, far less than the CoC's reach, in frames whose data window lies inside the display
+    window (dof grows it) or past it."""
+    from clfx.plugins.dof import Dof
+
+    made = []
+    real = Dof._make_frame
+    monkeypatch.setattr(Dof, "_make_frame", lambda self, *a: made.append(1) or real(self, *a))
+    kw, aspect = DOF_LENSES[lens]
+    p = effects.params("dof", **kw)
+    window, display = LAYOUTS.get(layout, (None, None))
+    where = {"window": window, "display_window": display} if window else {}
+    assert_tiles_give_the_whole_render(rt, "dof", p, quality, effects.scene((70, 90)), rows=7,
+                                       pixel_aspect=aspect, **where)
+    assert len(made) == 2            # once for the whole render, once for the tiled one
+    if lens == "lattice" and quality == "draft":   # the paths a band must rebuild exactly
+        ctx = effects.context(rt, "dof", effects.scene((70, 90)), quality=quality,
+                              **where).for_step(quality)
+        frame = effects.plugin("dof").frame(p, ctx)
+        assert frame.gathers[0.0].full_l >= 1 and frame.gathers[0.0].half.any()
