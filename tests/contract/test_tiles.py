@@ -125,3 +125,61 @@ def test_breathing_tiles_in_every_window(rt, reference_focus, layout, quality):
     p = effects.params("breathing", reference_focus=reference_focus)
     assert_tiles_give_the_whole_render(rt, "breathing", p, quality, effects.scene((70, 90)),
                                        rows=7, window=window, display_window=display)
+
+
+MOTION_SHUTTERS = {
+    # (shutter params, layout): centred on the frame's own place; opening over two frames with
+    # the data window inside the display window (the smear grows the window); closing short
+    # with overscan
+    "centred-180": ({"shutter_angle": 180.0, "shutter_offset": "centered"}, None),
+    "opening-360-inside": ({"shutter_angle": 360.0, "shutter_offset": "opening"}, "inside"),
+    "closing-90-overscan": ({"shutter_angle": 90.0, "shutter_offset": "closing"}, "overscan"),
+}
+"""Shutter shapes (and frame layouts) of the blurs of motion's tiled renders."""
+
+
+def backward_pass(shape):
+    """The other half of the vector pass: the swirl turned a little against the forward
+    motion, so paths are arcs (`clfx.fx.motion.path`)."""
+    v = effects.velocity_pass(shape).astype(np.float64)
+    c, s = np.cos(0.3), np.sin(0.3)
+    return np.ascontiguousarray(np.stack([c * v[..., 0] - s * v[..., 1],
+                                          s * v[..., 0] + c * v[..., 1]], axis=2), np.float32)
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("halves", [1, 2])
+@pytest.mark.parametrize("shutter", sorted(MOTION_SHUTTERS))
+def test_motion_blur_tiles_at_every_shutter_and_path(rt, shutter, halves, quality):
+    # bands of 7 rows: a band's samples reach past its neighbours, its tiles of the velocity
+    # grid straddle bands (the grid and neighbour max are the frame's, built once)
+    params, layout = MOTION_SHUTTERS[shutter]
+    window, display = LAYOUTS[layout] if layout else (None, None)
+    src = effects.scene((70, 90))
+    where = dict(window=window, display_window=display)
+    if halves == 2:
+        where["velocity_back"] = rt.upload(backward_pass((70, 90)),
+                                           window or Rect.from_size(90, 70))
+    assert_tiles_give_the_whole_render(rt, "motion_blur", effects.params("motion_blur", **params),
+                                       quality, src, rows=7, **where)
+
+
+CAMERA_MOTIONS = {
+    "pan-roll-zoom": {},                                   # the exact path gather
+    "tilt": {"length": 0.06, "direction": 100.0, "roll": 0.0, "zoom": 0.0},
+    "truck": {"truck": (0.3, 0.2), "roll": 0.0, "zoom": 0.0},          # the motion gather
+    "truck-roll": {"truck": (0.3, 0.2), "roll": 3.0},     # both halves: arcs
+    "dolly": {"dolly": 0.3, "roll": 0.0},
+}
+"""camera_blur's motions (over the contract's active pan, roll and zoom)."""
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("shutter", sorted(MOTION_SHUTTERS))
+@pytest.mark.parametrize("motion", sorted(CAMERA_MOTIONS))
+def test_camera_blur_tiles_with_every_motion(rt, motion, shutter, quality):
+    params, layout = MOTION_SHUTTERS[shutter]
+    window, display = LAYOUTS[layout] if layout else (None, None)
+    p = effects.params("camera_blur", **params, **CAMERA_MOTIONS[motion])
+    assert_tiles_give_the_whole_render(rt, "camera_blur", p, quality, effects.scene((70, 90)),
+                                       rows=7, window=window, display_window=display)
