@@ -257,6 +257,15 @@ def sanitized_copy(rt, src):
     return out
 
 
+def aligned_passes(ctx):
+    """``ctx``'s depth pass and the backward half of its vector pass where they cover the
+    source window, else None (an effect then renders without them)."""
+    src = ctx.source
+    depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
+    back = getattr(ctx, "velocity_back", None)
+    return depth, (back if back is not None and back.window == src.window else None)
+
+
 # -- tiled renders -----------------------------------------------------------------------------
 GRID_CHUNK_PIXELS = 1 << 20
 """A tiled render builds the frame's velocity tiles (:func:`tile_grid`) from rows of about

@@ -28,7 +28,10 @@ there a roll gives both halves of a vector pass (``v +- a/2``, ``a`` the second 
 the similarity at the frame time), so the gather's paths are ``v t + a t^2 / 2``, the roll's
 arcs to second order (the tangent alone was a straight line).
 
-Reads outside the source window clamp to its edge (the blur does not grow the frame).
+Reads outside the source window clamp to its edge (the blur does not grow the frame).  The
+effect tiles: a band samples its paths at the whole render's coordinates, from the rows its
+look-ups reach (its region of interest); trucking reads the frame's velocity tiles (the
+step's plan) as motion_blur does.
 Non-finite input pixels are set to 0 before they are spread (counted in ``ctx.notes``); finite
 input stays finite, however large (a sum that overflows float32 is taken again with each
 sample scaled first).

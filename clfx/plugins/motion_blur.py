@@ -20,6 +20,11 @@ the passes by their edge values, so a moving object's smear continues past the d
 instead of stopping at a hard edge.  Without a depth pass all pixels count as one depth (no
 occlusion ordering).
 
+The effect tiles (`clfx.pipeline.look.render_tiled`): the velocity tiles are the frame's,
+built once in the step's plan (`clfx.fx.motion.tile_grid`), and a band reconstructs its rows
+of the whole render's canvas from the rows its farthest sample reaches (its region of
+interest, `clfx.fx.motion.band_margin`), its positions the whole render's.
+
 References
 ----------
 M. McGuire, P. Hennessy, M. Bukowski, B. Osman, "A reconstruction filter for plausible motion
@@ -41,6 +46,7 @@ from clfx.fx.motion import (
     MIN_BLUR_PX,
     SHUTTER_OFFSETS,
     FrameGrid,
+    aligned_passes,
     band_margin,
     reach_px,
     reconstruct,
@@ -141,7 +147,7 @@ class MotionBlur(Plugin):
         src, vel = ctx.source, ctx.velocity
         if vel is None or vel.window != src.window:
             return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=src.window)
-        depth, back = self._passes(ctx)
+        depth, back = aligned_passes(ctx)
         a = ctx.analysis
         canvas = self.output_window(p, ctx)
         radius = reach_px(a.peak_speed, t0, t1, max_radius)
@@ -154,14 +160,6 @@ class MotionBlur(Plugin):
         return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=canvas,
                           margin=band_margin(t0, t1, radius, back is not None), grid=grid)
 
-    @staticmethod
-    def _passes(ctx):
-        """(depth, velocity_back) where they cover the source window, else None."""
-        src = ctx.source
-        depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
-        back = getattr(ctx, "velocity_back", None)
-        return depth, (back if back is not None and back.window == src.window else None)
-
     def region_of_interest(self, p, ctx, window):
         # the farthest sample of the gather and the taps around it (the frame's reach)
         return window.grown(self.planned(p, ctx).margin)
@@ -172,7 +170,7 @@ class MotionBlur(Plugin):
             raise ClipError("motion_blur: the velocity pass must cover the source window "
                             f"{src.window} (it covers {None if vel is None else vel.window})")
         plan = self.planned(p, ctx)
-        depth, back = self._passes(ctx)
+        depth, back = aligned_passes(ctx)
         a = ctx.analysis
         canvas, tiled = plan.canvas, ctx.tiling is not None
         window = canvas

@@ -265,7 +265,7 @@ inline float4 mb_arc_da(const float4 t, const float4 w)
 { return select((float4)(1.0f), ARC_DA(float4, t, w), MB_CURVED(w)); }
 inline float4 mb_arc_dc(const float4 t, const float4 w)
 { return select(2.0f * t, ARC_DC(float4, t, w), MB_CURVED(w)); }
-#define MB_ARC(f, b, t, w) (mb_arc_a(t, w) * 0.5f * ((f) + (b)) + mb_arc_c(t, w) * 0.5f * ((f) - (b)))
+#define MB_ARC(f, b, t, w) ARC_PATH(float4, mb_arc_a(t, w), mb_arc_c(t, w), (f) + (b), (f) - (b))
 #define MB_ARC_TANGENT(f, b, t, w) \
   (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
 #define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)

@@ -147,23 +147,6 @@ def backward_pass(shape):
                                           s * v[..., 0] + c * v[..., 1]], axis=2), np.float32)
 
 
-@pytest.mark.parametrize("quality", effects.QUALITIES)
-@pytest.mark.parametrize("halves", [1, 2])
-@pytest.mark.parametrize("shutter", sorted(MOTION_SHUTTERS))
-def test_motion_blur_tiles_at_every_shutter_and_path(rt, shutter, halves, quality):
-    # bands of 7 rows: a band's samples reach past its neighbours, its tiles of the velocity
-    # grid straddle bands (the grid and neighbour max are the frame's, built once)
-    params, layout = MOTION_SHUTTERS[shutter]
-    window, display = LAYOUTS[layout] if layout else (None, None)
-    src = effects.scene((70, 90))
-    where = dict(window=window, display_window=display)
-    if halves == 2:
-        where["velocity_back"] = rt.upload(backward_pass((70, 90)),
-                                           window or Rect.from_size(90, 70))
-    assert_tiles_give_the_whole_render(rt, "motion_blur", effects.params("motion_blur", **params),
-                                       quality, src, rows=7, **where)
-
-
 CAMERA_MOTIONS = {
     "pan-roll-zoom": {},                                   # the exact path gather
     "tilt": {"length": 0.06, "direction": 100.0, "roll": 0.0, "zoom": 0.0},
@@ -183,3 +166,38 @@ def test_camera_blur_tiles_with_every_motion(rt, motion, shutter, quality):
     p = effects.params("camera_blur", **params, **CAMERA_MOTIONS[motion])
     assert_tiles_give_the_whole_render(rt, "camera_blur", p, quality, effects.scene((70, 90)),
                                        rows=7, window=window, display_window=display)
+
+
+ROLLING_READOUTS = {
+    # (params, layout): rows read top-down from the first; bottom-up about the middle row with
+    # the data window inside the display window; columns left-right, t = 0 at the last, with
+    # overscan; right-left about the middle over a long readout (large shifts)
+    "top-down-first": ({}, None),
+    "bottom-up-centre-inside": ({"direction": "bottom-up", "reference": "centre"}, "inside"),
+    "left-right-last-overscan": ({"direction": "left-right", "reference": "last"}, "overscan"),
+    "right-left-centre-long": ({"direction": "right-left", "reference": "centre",
+                                "readout_fraction": 2.0}, None),
+}
+"""rolling_shutter's readouts (and frame layouts) of its tiled renders."""
+
+
+MOTION_CASES = ([("motion_blur", k, *v) for k, v in sorted(MOTION_SHUTTERS.items())]
+                + [("rolling_shutter", k, *v) for k, v in sorted(ROLLING_READOUTS.items())])
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("halves", [1, 2])
+@pytest.mark.parametrize("name,case,params,layout", MOTION_CASES,
+                         ids=[f"{n}-{c}" for n, c, *_ in MOTION_CASES])
+def test_velocity_effects_tile_at_every_shutter_and_path(rt, name, case, params, layout, halves,
+                                                         quality):
+    # bands of 7 rows: a band's samples reach past its neighbours, the tiles of its velocity
+    # grid straddle bands (the grid and neighbour max are the frame's, built once); positions
+    # and row times are the whole render's
+    window, display = LAYOUTS[layout] if layout else (None, None)
+    where = dict(window=window, display_window=display)
+    if halves == 2:
+        where["velocity_back"] = rt.upload(backward_pass((70, 90)),
+                                           window or Rect.from_size(90, 70))
+    assert_tiles_give_the_whole_render(rt, name, effects.params(name, **params), quality,
+                                       effects.scene((70, 90)), rows=7, **where)
