@@ -365,8 +365,8 @@ def _prepared(rt, col, velocity, depth, back, defines, vmax, duration):
 
 def _geometry(t0, t1, max_radius_px, peak_speed):
     """(radius px, tile size, clamped speed px/frame) of a reconstruction."""
-    radius = reach_px(peak_speed, t0, t1, max_radius_px)
-    return radius, tile_size(radius), radius / reach_factor(t0, t1)
+    radius, reach_t = reach_px(peak_speed, t0, t1, max_radius_px), reach_factor(t0, t1)
+    return radius, tile_size(radius), (radius / reach_t if reach_t > 0.0 else 0.0)
 
 
 def _grid_buffers(rt, w, h, k, curved):
