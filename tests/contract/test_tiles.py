@@ -160,7 +160,10 @@ CAMERA_MOTIONS = {
 @pytest.mark.parametrize("quality", effects.QUALITIES)
 @pytest.mark.parametrize("shutter", sorted(MOTION_SHUTTERS))
 @pytest.mark.parametrize("motion", sorted(CAMERA_MOTIONS))
-def test_camera_blur_tiles_with_every_motion(rt, motion, shutter, quality):
+def test_camera_blur_tiles_with_every_motion(rt, monkeypatch, motion, shutter, quality):
+    from clfx.fx import motion as motion_fx
+
+    monkeypatch.setattr(motion_fx, "GRID_CHUNK_PIXELS", 1)   # one row of tiles at a time
     params, layout = MOTION_SHUTTERS[shutter]
     window, display = LAYOUTS[layout] if layout else (None, None)
     p = effects.params("camera_blur", **params, **CAMERA_MOTIONS[motion])
@@ -189,11 +192,17 @@ MOTION_CASES = ([("motion_blur", k, *v) for k, v in sorted(MOTION_SHUTTERS.items
 @pytest.mark.parametrize("halves", [1, 2])
 @pytest.mark.parametrize("name,case,params,layout", MOTION_CASES,
                          ids=[f"{n}-{c}" for n, c, *_ in MOTION_CASES])
-def test_velocity_effects_tile_at_every_shutter_and_path(rt, name, case, params, layout, halves,
-                                                         quality):
+def test_velocity_effects_tile_at_every_shutter_and_path(rt, monkeypatch, name, case, params,
+                                                         layout, halves, quality):
     # bands of 7 rows: a band's samples reach past its neighbours, the tiles of its velocity
-    # grid straddle bands (the grid and neighbour max are the frame's, built once); positions
-    # and row times are the whole render's
+    # grid straddle bands (the grid and neighbour max are the frame's, built once, here from
+    # one row of tiles at a time: the dilation's rows past each chunk); positions and row
+    # times are the whole render's
+    from clfx.fx import motion
+    from clfx.plugins import rolling_shutter
+
+    for module in (motion, rolling_shutter):
+        monkeypatch.setattr(module, "GRID_CHUNK_PIXELS", 1)
     window, display = LAYOUTS[layout] if layout else (None, None)
     where = dict(window=window, display_window=display)
     if halves == 2:
