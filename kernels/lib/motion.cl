@@ -339,8 +339,8 @@ inline float4 mb_short_smear(const float4 pm2, const float4 pm1, const float4 p0
  * neighbourhood is x's own layer or behind it (a tap in front of x pulls it to 0). */
 inline float4 mb_short_at(global const float *col, global const float *aux, const int pitch,
                           const int w, const int row0, const int row1, const float px,
-                          const float py, const float ux, const float uy, const float4 p0, const float z0,
-                          const float len, const float scale, float *q)
+                          const float py, const float ux, const float uy, const float4 p0,
+                          const float z0, const float len, const float scale, float *q)
 {
   float4 tap[4];
   float keep = 1.0f;

@@ -23,9 +23,9 @@
 #define MG_ROWS(p, pitch, ch, row0) ((p) -= (size_t)(row0) * (size_t)(pitch) * (ch))
 
 /* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge (rows
- * row0 <= y < row1), times `scale`.  The float index is clamped before the int conversion so far-off positions cannot
- * overflow; the corners are scaled before they are interpolated, so with scale <= 1/2 no
- * difference of finite colours can overflow either. */
+ * row0 <= y < row1), times `scale`.  The float index is clamped before the int conversion
+ * so far-off positions cannot overflow; the corners are scaled before they are
+ * interpolated, so with scale <= 1/2 no difference of finite colours can overflow either. */
 inline float4 mg_fetch_scaled(global const float *col, const int pitch, const int w,
                               const int row0, const int row1, const float px, const float py,
                               const float scale)
