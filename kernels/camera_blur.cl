@@ -16,7 +16,8 @@
 /* Sum over the n instants t0 + (i + jit) dt of the sharp image at the 4 lanes' positions at
  * time t (relative to the centre: qx0, qy0), each sample times `scale`. */
 inline REAL16 cb_path_sum(global const float *col, const int pitch, const int width,
-                          const int height, const int x0, const int y0, const float cx,
+                          const int row0, const int row1, const int x0, const int y0,
+                          const float cx,
                           const float cy, const float4 qx0, const float qy0, const float sx,
                           const float sy, const float roll, const float zoom, const float t0,
                           const float dt, const float4 jit, const int n, const float scale)
@@ -32,50 +33,58 @@ inline REAL16 cb_path_sum(global const float *col, const int pitch, const int wi
     /* inverse rotation, then inverse scale, back to window coordinates */
     const float4 rx = (c * qx + s * qy) * inv_k + cx - (float)x0;
     const float4 ry = (-s * qx + c * qy) * inv_k + cy - (float)y0;
-    const float16 v = (float16)(mg_fetch_scaled(col, pitch, width, height, rx.x, ry.x, scale),
-                                mg_fetch_scaled(col, pitch, width, height, rx.y, ry.y, scale),
-                                mg_fetch_scaled(col, pitch, width, height, rx.z, ry.z, scale),
-                                mg_fetch_scaled(col, pitch, width, height, rx.w, ry.w, scale));
+    const float16 v = (float16)(mg_fetch_scaled(col, pitch, width, row0, row1, rx.x, ry.x, scale),
+                                mg_fetch_scaled(col, pitch, width, row0, row1, rx.y, ry.y, scale),
+                                mg_fetch_scaled(col, pitch, width, row0, row1, rx.z, ry.z, scale),
+                                mg_fetch_scaled(col, pitch, width, row0, row1, rx.w, ry.w, scale));
     acc += TO_REAL16(v);
   }
   return acc;
 }
 
-/* (x0, y0): the window's origin in the frame; (cx, cy): the motion's centre in the frame;
- * roll in radians per frame (+ turns +x towards +y); zoom: scale growth per frame.  `col` holds
- * finite colours (the host sanitises NaN/Inf first); a float32 sum of huge ones that overflows
- * is taken again with every sample halved and divided by n first, so the output stays finite. */
+/* (x0, y0): the window's origin in the frame (the whole render's: positions are the whole
+ * render's in every band of a tiled render); `col` holds its rows row0 <= y < row1 (MG_ROWS),
+ * `dst` the rows band0 <= y < band1 that this launch computes (from its first row);
+ * (cx, cy): the motion's centre in the frame; roll in radians per frame (+ turns +x towards
+ * +y); zoom: scale growth per frame.  `col` holds finite colours (the host sanitises NaN/Inf
+ * first); a float32 sum of huge ones that overflows is taken again with every sample halved
+ * and divided by n first, so the output stays finite. */
 kernel void camera_blur_similarity(global const float *col, global float *dst, const int pitch,
-                                   const int width, const int height, const int x0,
+                                   const int width, const int row0, const int row1,
+                                   const int band0, const int band1, const int x0,
                                    const int y0, const float cx, const float cy,
                                    const float sx, const float sy, const float roll,
                                    const float zoom, const float t0, const float t1,
                                    const int n, const int frame)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= height || qx * 4 >= pitch) return;
+  const int qx = get_global_id(0), y = band0 + get_global_id(1);
+  if(y >= band1 || qx * 4 >= pitch) return;
+  MG_ROWS(col, pitch, 4, row0);
   const float4 lane = (float4)(qx * 4) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
   const float fy = (float)y;
   const float4 qx0 = lane + 0.5f + (float)x0 - cx;         /* relative to the centre */
   const float qy0 = fy + 0.5f + (float)y0 - cy;
   const float dt = (t1 - t0) / (float)n;
   const float4 jit = mg_jitter(lane, fy, frame);
-  float16 out = TO_FLOAT16(cb_path_sum(col, pitch, width, height, x0, y0, cx, cy, qx0, qy0,
-                                       sx, sy, roll, zoom, t0, dt, jit, n, 1.0f) / (REAL)n);
+  float16 out = TO_FLOAT16(cb_path_sum(col, pitch, width, row0, row1, x0, y0, cx, cy, qx0,
+                                       qy0, sx, sy, roll, zoom, t0, dt, jit, n, 1.0f) / (REAL)n);
   if(any((as_int16(out) & 0x7f800000) == 0x7f800000))
   {
-    const float16 half_mean = TO_FLOAT16(cb_path_sum(col, pitch, width, height, x0, y0, cx,
-                                                     cy, qx0, qy0, sx, sy, roll, zoom, t0, dt,
-                                                     jit, n, 0.5f / (float)n));
+    const float16 half_mean = TO_FLOAT16(cb_path_sum(col, pitch, width, row0, row1, x0, y0,
+                                                     cx, cy, qx0, qy0, sx, sy, roll, zoom, t0,
+                                                     dt, jit, n, 0.5f / (float)n));
     out = clamp(2.0f * half_mean, -FLT_MAX, FLT_MAX);
   }
-  vstore16(out, 0, dst + (y * pitch + qx * 4) * 4);
+  vstore16(out, 0, dst + ((y - band0) * pitch + qx * 4) * 4);
 }
 
-/* Velocity (px/frame) of the camera motion at each pixel; depth (if HAS_DEPTH) scales the
- * trucking terms: lateral -f_px * truck / z, dolly (p - c) * dolly / (z - dolly). */
+/* Velocity (px/frame) of the camera motion at each pixel of the rows from `row0` on (the
+ * buffers' first row; (x0, y0): the whole render's origin, as in camera_blur_similarity); depth
+ * (if HAS_DEPTH) scales the trucking terms: lateral -f_px * truck / z, dolly
+ * (p - c) * dolly / (z - dolly). */
 kernel void camera_blur_velocity(global const float *depth, global float *vel, const int pitch,
-                                 const int width, const int height, const int x0, const int y0,
+                                 const int width, const int height, const int row0,
+                                 const int x0, const int y0,
                                  const float cx, const float cy, const float sx,
                                  const float sy, const float roll, const float zoom,
                                  const float truck_px_x, const float truck_px_y,
@@ -85,17 +94,21 @@ kernel void camera_blur_velocity(global const float *depth, global float *vel, c
   if(y >= height || qx * 4 >= pitch) return;
   const int i = y * pitch + qx * 4;
   const float4 px = (float4)(qx * 4) + (float4)(0.0f, 1.0f, 2.0f, 3.0f) + 0.5f + (float)x0 - cx;
-  const float py = (float)y + 0.5f + (float)y0 - cy;
-  float4 vx = sx + zoom * px - roll * py;      /* d/dt of R(roll t)(p - c): roll x perp */
-  float4 vy = sy + zoom * py + roll * px;
-  /* chord = +-1: the chords of (1 + zoom t) R(roll t)(p - c) to t = +-1, as the forward and
-   * backward halves of a vector pass: the motion gather's path through them is then the arc
-   * at the roll's turn rate (lib/motion.cl MB_ARC), exact for a roll without zoom */
+  const float py = (float)(row0 + y) + 0.5f + (float)y0 - cy;
+  float4 vx, vy;
   if(chord != 0.0f)
   {
+    /* chord = +-1: the chords of (1 + zoom t) R(roll t)(p - c) to t = +-1, as the forward and
+     * backward halves of a vector pass: the motion gather's path through them is then the arc
+     * at the roll's turn rate (lib/motion.cl MB_ARC), exact for a roll without zoom */
     const float c = cos(chord * roll), s = sin(chord * roll), m = 1.0f + chord * zoom;
     vx = sx + chord * (m * (c * px - s * py) - px);
     vy = sy + chord * (m * (s * px + c * py) - py);
+  }
+  else                                         /* the tangent: d/dt at t = 0 */
+  {
+    vx = sx + zoom * px - roll * py;           /* d/dt of R(roll t)(p - c): roll x perp */
+    vy = sy + zoom * py + roll * px;
   }
 #if HAS_DEPTH
   const float4 z = vload4(0, depth + i);

@@ -26,9 +26,14 @@
  * straight path; f, b: forward and backward motion), in the fixed-point iteration, its test
  * and the disocclusion fill.
  * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
+ * Tiles lie on a grid of K x K pixels from the canvas's origin (the whole render's source
+ * window) and positions and row times are the whole render's: a band of a tiled render passes
+ * buffers holding canvas rows row0 <= y < row1 (MG_ROWS), reads clamp to them (the canvas's
+ * edges where the band reaches them), and writes its rows band0 <= y < band1.
  */
 #include "lib/arc.h"
 #include "lib/common.h"
+#include "lib/motion_gather.h"
 #include "lib/precision.h"
 
 #ifndef HAS_DEPTH
@@ -72,11 +77,13 @@ inline void rs_keep(float4 *best, const float2 v, const float key)
 }
 
 kernel void rolling_shutter_tiles(global const float *aux, global float *tiles, const int pitch,
-                                  const int width, const int height, const int tiles_x,
-                                  const int tiles_y, const int k)
+                                  const int width, const int height, const int row0,
+                                  const int tiles_x, const int tiles_y, const int ty0,
+                                  const int k)
 {
-  const int tx = get_global_id(0), ty = get_global_id(1);
+  const int tx = get_global_id(0), ty = ty0 + get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
+  MG_ROWS(aux, pitch, 4, row0);
   const int x1 = min(tx * k + k, width), y1 = min(ty * k + k, height);
   float4 fast = RS_NONE, back = RS_NONE, near = RS_NONE;
   for(int y = ty * k; y < y1; y++)
@@ -118,25 +125,25 @@ kernel void rolling_shutter_neighbors(global const float *tiles, global float *n
 
 /* --- gather ------------------------------------------------------------------------------ */
 /* The aux record of the pixel containing q (clamped to the image). */
-inline float4 rs_aux(global const float *aux, const int pitch, const int w, const int h,
-                     const REAL2 q)
+inline float4 rs_aux(global const float *aux, const int pitch, const int w, const int row0,
+                     const int row1, const REAL2 q)
 {
   const int x = clamp((int)floor(clamp(q.x, (REAL)(-1), (REAL)w)), 0, w - 1);
-  const int y = clamp((int)floor(clamp(q.y, (REAL)(-1), (REAL)h)), 0, h - 1);
+  const int y = clamp((int)floor(clamp(q.y, (REAL)(row0 - 1), (REAL)row1)), row0, row1 - 1);
   return vload4((size_t)y * pitch + x, aux);
 }
 
 /* Colour at continuous position q (pixel centres at +0.5), bilinear, reads clamped to the
  * image.  A weighted sum (no differences of colours: +-1e38 neighbours stay finite). */
-inline float4 rs_colour(global const float *col, const int pitch, const int w, const int h,
-                        const REAL2 q)
+inline float4 rs_colour(global const float *col, const int pitch, const int w, const int row0,
+                        const int row1, const REAL2 q)
 {
   const REAL u = clamp(q.x, (REAL)(-1), (REAL)(w + 1)) - (REAL)0.5;
-  const REAL v = clamp(q.y, (REAL)(-1), (REAL)(h + 1)) - (REAL)0.5;
+  const REAL v = clamp(q.y, (REAL)(row0 - 1), (REAL)(row1 + 1)) - (REAL)0.5;
   const REAL fu = floor(u), fv = floor(v);
   const REAL ax = u - fu, ay = v - fv;
   const int xa = clamp((int)fu, 0, w - 1), xb = clamp((int)fu + 1, 0, w - 1);
-  const int ya = clamp((int)fv, 0, h - 1), yb = clamp((int)fv + 1, 0, h - 1);
+  const int ya = clamp((int)fv, row0, row1 - 1), yb = clamp((int)fv + 1, row0, row1 - 1);
   const REAL4 c = TO_REAL4(vload4((size_t)ya * pitch + xa, col)) * ((1 - ax) * (1 - ay))
                 + TO_REAL4(vload4((size_t)ya * pitch + xb, col)) * (ax * (1 - ay))
                 + TO_REAL4(vload4((size_t)yb * pitch + xa, col)) * ((1 - ax) * ay)
@@ -145,23 +152,23 @@ inline float4 rs_colour(global const float *col, const int pitch, const int w, c
 }
 
 /* Displacement by time t of a point moving with forward f and backward b: the arc at a
- * constant turn rate w through -b, 0 and f (lib/arc.h, as lib/motion.cl's MB_ARC, in REAL). */
+ * constant turn rate w through -b, 0 and f (lib/arc.h's ARC_PATH, as lib/motion.cl's MB_ARC,
+ * in REAL; the quadratic on a straight path). */
 inline REAL2 rs_path(const REAL2 f, const REAL2 b, const REAL t)
 {
   const REAL2 s = f + b, e = f - b;
   const REAL w = ARC_TURN(REAL, s.x, s.y, e.x, e.y);
-  if(w <= (REAL)ARC_MIN_TURN)
-    return t * (REAL)0.5 * s + t * t * (REAL)0.5 * e;
-  const REAL r = ARC_R(REAL, t, w);
-  return ARC_A(REAL, t, w) * (REAL)0.5 * s + r * r * (REAL)0.5 * e;
+  const int curved = w > (REAL)ARC_MIN_TURN;
+  const REAL r = curved ? ARC_R(REAL, t, w) : t;
+  return ARC_PATH(REAL, curved ? ARC_A(REAL, t, w) : t, r * r, s, e);
 }
 
 /* Displacement by time t of the point at q moving with forward f (CURVED: and backward b). */
-inline REAL2 rs_disp(global const float *auxb, const int pitch, const int w, const int h,
-                     const REAL2 q, const float2 f, const REAL t)
+inline REAL2 rs_disp(global const float *auxb, const int pitch, const int w, const int row0,
+                     const int row1, const REAL2 q, const float2 f, const REAL t)
 {
 #if CURVED
-  return rs_path(TO_REAL2(f), TO_REAL2(rs_aux(auxb, pitch, w, h, q).xy), t);
+  return rs_path(TO_REAL2(f), TO_REAL2(rs_aux(auxb, pitch, w, row0, row1, q).xy), t);
 #else
   return TO_REAL2(f) * t;
 #endif
@@ -171,14 +178,14 @@ inline REAL2 rs_disp(global const float *auxb, const int pitch, const int w, con
  * curved path).  Returns whether it converged; *q, *a: the final position and its aux
  * record. */
 inline int rs_solve(global const float *aux, global const float *auxb, const int pitch,
-                    const int w, const int h, const REAL2 p, const REAL t, const float2 v0,
-                    REAL2 *q, float4 *a)
+                    const int w, const int row0, const int row1, const REAL2 p, const REAL t,
+                    const float2 v0, REAL2 *q, float4 *a)
 {
   REAL2 s = p - TO_REAL2(v0) * t;
   for(int i = 0; i < ITERATIONS; i++)
-    s = p - rs_disp(auxb, pitch, w, h, s, rs_aux(aux, pitch, w, h, s).xy, t);
-  const float4 r = rs_aux(aux, pitch, w, h, s);
-  const REAL2 d = p - rs_disp(auxb, pitch, w, h, s, r.xy, t) - s;
+    s = p - rs_disp(auxb, pitch, w, row0, row1, s, rs_aux(aux, pitch, w, row0, row1, s).xy, t);
+  const float4 r = rs_aux(aux, pitch, w, row0, row1, s);
+  const REAL2 d = p - rs_disp(auxb, pitch, w, row0, row1, s, r.xy, t) - s;
   *q = s;
   *a = r;
   return dot(d, d) <= (REAL)(TOL * TOL);
@@ -197,14 +204,15 @@ inline int rs_in_front(const float z, const float s, const float zb, const float
  * neighbour's direction) by a pixel or more by the time |t|.  Renderers write the velocity of
  * the surface at the pixel centre, so such a rim carries the background's motion but part of
  * the occluder's colour; kept, it stays behind as an outline of where the occluder was. */
-inline int rs_trailing_rim(global const float *aux, const int pitch, const int w, const int h,
-                           const REAL2 q, const float4 a, const float tabs)
+inline int rs_trailing_rim(global const float *aux, const int pitch, const int w,
+                           const int row0, const int row1, const REAL2 q, const float4 a,
+                           const float tabs)
 {
   for(int k = 0; k < 4; k++)
   {
     const float2 e = k == 0 ? (float2)(1.0f, 0.0f) : k == 1 ? (float2)(-1.0f, 0.0f)
                    : k == 2 ? (float2)(0.0f, 1.0f) : (float2)(0.0f, -1.0f);
-    const float4 nb = rs_aux(aux, pitch, w, h, q + TO_REAL2(e));
+    const float4 nb = rs_aux(aux, pitch, w, row0, row1, q + TO_REAL2(e));
     const float2 dv = nb.xy - a.xy;
     const float ln = length(dv);
     if(ln * tabs >= 1.0f && dot(e, dv) > 0.5f * ln && rs_in_front(nb.z, nb.w, a.z, a.w))
@@ -216,12 +224,18 @@ inline int rs_trailing_rim(global const float *aux, const int pitch, const int w
 kernel void rolling_shutter_gather(global const float *col, global const float *aux,
                                    global const float *auxb,
                                    global const float *nbr, global float *dst, const int pitch,
-                                   const int width, const int height, const int tiles_x,
+                                   const int width, const int row0, const int row1,
+                                   const int band0, const int band1, const int tiles_x,
                                    const int k, const float tx, const float ty, const float xr,
                                    const float yr)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= width || y >= height) return;
+  const int x = get_global_id(0), y = band0 + get_global_id(1);
+  if(x >= width || y >= band1) return;
+  MG_ROWS(col, pitch, 4, row0);
+  MG_ROWS(aux, pitch, 4, row0);
+#if CURVED
+  MG_ROWS(auxb, pitch, 4, row0);
+#endif
   const REAL t = (REAL)tx * ((REAL)x - (REAL)xr) + (REAL)ty * ((REAL)y - (REAL)yr);
   const REAL2 p = (REAL2)((REAL)x + (REAL)0.5, (REAL)y + (REAL)0.5);
   const size_t ti = 3 * (size_t)((y / k) * tiles_x + x / k);
@@ -244,14 +258,15 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
     if(seen) continue;
     REAL2 q;
     float4 a;
-    if(rs_solve(aux, auxb, pitch, width, height, p, t, starts[c], &q, &a)
+    if(rs_solve(aux, auxb, pitch, width, row0, row1, p, t, starts[c], &q, &a)
        && (best < 0 || rs_in_front(a.z, a.w, zb, sb)))
     {
       best = c; qb = q; zb = a.z; sb = a.w;
     }
   }
-  if(best >= 0 && rs_trailing_rim(aux, pitch, width, height, qb,
-                                   (float4)(rs_aux(aux, pitch, width, height, qb).xy, zb, sb),
+  if(best >= 0 && rs_trailing_rim(aux, pitch, width, row0, row1, qb,
+                                   (float4)(rs_aux(aux, pitch, width, row0, row1, qb).xy, zb,
+                                            sb),
                                    (float)fabs(t)))
     best = -1;                    /* an occluder's rim left behind: what it uncovered */
   if(best < 0)
@@ -266,9 +281,9 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
      * the relative motion (away from o first). */
     const REAL2 q0 = p - TO_REAL2(vb) * t;
     const float tabs = (float)fabs(t);
-    float2 vo = rs_aux(aux, pitch, width, height, q0).xy;
+    float2 vo = rs_aux(aux, pitch, width, row0, row1, q0).xy;
 #if CURVED
-    float2 bo = rs_aux(auxb, pitch, width, height, q0).xy;
+    float2 bo = rs_aux(auxb, pitch, width, row0, row1, q0).xy;
 #else
     float2 bo = vo;
 #endif
@@ -285,10 +300,10 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
       for(int sgn = -1; sgn <= (j ? 1 : -1) && !found; sgn += 2)
       {
         const REAL2 q = q1 + dir * (REAL)(sgn * j);
-        const float2 d = rs_aux(aux, pitch, width, height, q).xy - vb;
+        const float2 d = rs_aux(aux, pitch, width, row0, row1, q).xy - vb;
         if(length(d) * tabs <= TOL) { qb = q; found = 1; }
       }
 #endif
   }
-  vstore4(rs_colour(col, pitch, width, height, qb), (size_t)y * pitch + x, dst);
+  vstore4(rs_colour(col, pitch, width, row0, row1, qb), (size_t)(y - band0) * pitch + x, dst);
 }

@@ -591,7 +591,9 @@ class Runtime:
         """``img`` moved into ``window``: covered pixels copied, the rest ``border``-filled.
 
         ``border``: ``"zero"`` (transparent black) or ``"clamp"`` (nearest edge pixel, used to
-        extend depth and velocity passes when an effect grows the beauty's window).
+        extend depth and velocity passes when an effect grows the beauty's window).  The row
+        padding is zero, as an upload's: kernels that read whole quads of 4 pixels (the blurs
+        of motion) see the same padding in a tile of a tiled render as in the whole render.
         """
         if window == img.window:
             return img
@@ -599,7 +601,7 @@ class Runtime:
         knl = self.kernel("lib/image.cl", "image_reframe", CH=img.channels,
                           BORDER={"zero": 0, "clamp": 1}[border])
         dx, dy = window.x0 - img.window.x0, window.y0 - img.window.y0
-        self.launch(knl, (window.width, window.height), img, np.int32(img.pitch),
+        self.launch(knl, (dst.pitch, window.height), img, np.int32(img.pitch),
                     np.int32(img.width), np.int32(img.height), dst, np.int32(dst.pitch),
                     np.int32(window.width), np.int32(window.height), np.int32(dx), np.int32(dy),
                     local=None)

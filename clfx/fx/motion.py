@@ -257,9 +257,193 @@ def sanitized_copy(rt, src):
     return out
 
 
+def aligned_passes(ctx):
+    """``ctx``'s depth pass and the backward half of its vector pass where they cover the
+    source window, else None (an effect then renders without them)."""
+    src = ctx.source
+    depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
+    back = getattr(ctx, "velocity_back", None)
+    return depth, (back if back is not None and back.window == src.window else None)
+
+
+# -- tiled renders -----------------------------------------------------------------------------
+GRID_CHUNK_PIXELS = 1 << 20
+"""A tiled render builds the frame's velocity tiles (:func:`tile_grid`) from rows of about
+this many pixels at a time."""
+
+REACH_MARGIN_ROWS = 5
+"""Rows a band's buffers hold beyond the farthest sample (:func:`band_margin`): the clamped
+cubic's taps (2), the sub-pixel closed form's (2 along the path, bilinear), the dilation's
+neighbour (1)."""
+
+
+def path_reach(t0: float, t1: float, curved: bool) -> float:
+    """The farthest any sample of the gather lies from its pixel, in units of the clamped
+    speed ``vmax`` (px/frame): ``max |t|`` over the shutter on straight paths; on arcs
+    (:func:`path`, forward and backward motion each at most ``vmax``) an upper bound of
+    ``|A(t)| + |C(t)|`` over the shutter, its mirror ``-t`` (x's own samples) and every turn
+    rate up to :data:`MAX_TURN` (a grid, 2 % slack)."""
+    reach_t = reach_factor(t0, t1)
+    if not curved:
+        return reach_t
+    w = np.linspace(0.0, MAX_TURN, 521)[:, None]
+    t = np.linspace(-reach_t, reach_t, 401)[None, :]
+    ws = np.where(w > MIN_TURN, w, 1.0)
+    a = np.where(w > MIN_TURN, np.sin(ws * t) / np.sin(ws), t)
+    c = np.where(w > MIN_TURN, (np.sin(0.5 * ws * t) / np.sin(0.5 * ws)) ** 2, t * t)
+    return float((np.abs(a) + np.abs(c)).max()) * 1.02
+
+
+def band_margin(t0: float, t1: float, radius: float, curved: bool) -> int:
+    """Rows beyond a band that its reconstruction reads (its region of interest): the
+    farthest sample (:func:`path_reach` at the clamped speed ``radius / reach``) and
+    :data:`REACH_MARGIN_ROWS`; 0 when nothing moves."""
+    reach_t = reach_factor(t0, t1)
+    if reach_t <= 0.0 or radius * (t1 - t0) / reach_t < MIN_BLUR_PX:
+        return 0
+    return int(math.ceil(path_reach(t0, t1, curved) * radius / reach_t)) + REACH_MARGIN_ROWS
+
+
+@dataclass
+class TileGrid:
+    """The frame's velocity tiles (TileMax, NeighborMax on a grid of ``k`` px from the canvas's
+    origin) and the host's classification of the moving ones: what every band of a tiled
+    render reads (built once a frame, :func:`tile_grid`), or a whole render builds from its
+    own buffers.  ``nmax_b``: the backward motion of each NeighborMax record's pixel."""
+
+    k: int
+    tiles_x: int
+    tiles_y: int
+    nmax: object
+    nmax_b: object
+    xs: np.ndarray
+    ys: np.ndarray
+    n: np.ndarray
+    jitter: np.ndarray
+    length: np.ndarray
+    stats: BlurStats
+
+
+def _static(t0, t1, radius) -> bool:
+    reach_t = reach_factor(t0, t1)
+    return reach_t <= 0.0 or radius * (t1 - t0) / reach_t < MIN_BLUR_PX
+
+
+def _defines(level, has_depth: bool, curved: bool) -> dict:
+    return dict(BILINEAR=int(level.bilinear), JITTER=int(level.jitter),
+                HAS_DEPTH=int(has_depth), MIN_BLUR=f"{MIN_BLUR_PX!r}f",
+                fp64=level.fp64, **({"CURVED": 1} if curved else {}))
+
+
+def _prepared(rt, col, velocity, depth, back, defines, vmax, duration):
+    """The aux records (vx, vy, z, |v|) of ``velocity`` (and ``back``'s: dummy without it),
+    clamped to ``vmax``, dilated with a depth pass; over the rows the images hold."""
+    i32, f32 = np.int32, np.float32
+    pitch, w, h = col.pitch, col.width, col.height
+    dummy = rt.buffer(16)
+    aux = rt.image(col.window, 4)
+    rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), velocity,
+              depth if depth is not None else dummy, aux, i32(pitch), i32(h), f32(vmax))
+    auxb = dummy
+    if back is not None:    # (bx, by, z, |b|), clamped like the forward motion
+        auxb = rt.image(col.window, 4)
+        rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), back,
+                  depth if depth is not None else dummy, auxb, i32(pitch), i32(h), f32(vmax))
+    if depth is not None:   # rims of small bright moving surfaces move with them
+        dilated = rt.image(col.window, 4)
+        extra = ()
+        if back is not None:   # the backward records follow the same choices
+            dilated_b = rt.image(col.window, 4)
+            extra = (auxb, dilated_b)
+        rt.launch(rt.kernel(KERNEL, "motion_dilate", **defines), (pitch // 4, h), aux, col,
+                  dilated, i32(pitch), i32(w), i32(h), f32(duration), *extra)
+        aux = dilated
+        if back is not None:
+            auxb = dilated_b
+    return aux, auxb
+
+
+def _geometry(t0, t1, max_radius_px, peak_speed):
+    """(radius px, tile size, clamped speed px/frame) of a reconstruction."""
+    radius, reach_t = reach_px(peak_speed, t0, t1, max_radius_px), reach_factor(t0, t1)
+    return radius, tile_size(radius), (radius / reach_t if reach_t > 0.0 else 0.0)
+
+
+def _grid_buffers(rt, w, h, k, curved):
+    tx, ty = -(-w // k), -(-h // k)
+    pair = (rt.buffer(tx * ty * 16), rt.buffer(tx * ty * 8) if curved else rt.buffer(16))
+    return tx, ty, pair
+
+
+def _tilemax(rt, defines, aux, auxb, tiles, pitch, w, h, row0, tx, ty, ty0, ty1, k):
+    i32 = np.int32
+    rt.launch(rt.kernel(KERNEL, "motion_tilemax", **defines), (tx, ty1 - ty0), aux, auxb,
+              tiles[0], tiles[1], i32(pitch), i32(w), i32(h), i32(row0), i32(tx), i32(ty),
+              i32(ty0), i32(k))
+
+
+def _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved) -> TileGrid:
+    """NeighborMax of the TileMax grid ``tiles`` and the moving tiles' sample counts."""
+    i32 = np.int32
+    nmax = rt.buffer(tx * ty * 16)
+    nmax_b = rt.buffer(tx * ty * 8) if curved else rt.buffer(16)
+    rt.launch(rt.kernel(KERNEL, "motion_neighbormax", **defines), (tx, ty), tiles[0],
+              tiles[1], nmax, nmax_b, i32(tx), i32(ty))
+    # Classification on the host: a few thousand floats, the only read-back.
+    nm = rt.from_device(nmax, np.float32, tx * ty * 4).reshape(ty, tx, 4)
+    length = nm[..., 2].astype(np.float64) * (t1 - t0)     # blur length of the tile's v_n
+    ys, xs = np.nonzero(length >= MIN_BLUR_PX)
+    length = length[ys, xs]
+    n = np.clip(np.ceil(length / level.spacing), 2, level.max_samples).astype(np.int32)
+    jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
+    stats = BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()) if n.size else 0)
+    return TileGrid(k, tx, ty, nmax, nmax_b, xs, ys, n, jitter, length, stats)
+
+
+def tile_grid(rt, rows_of, *, width: int, height: int, t0: float, t1: float,
+              max_radius_px: float, peak_speed: float, level: MotionLevel, has_depth: bool,
+              curved: bool) -> TileGrid | None:
+    """The frame's :class:`TileGrid` over a canvas of ``width`` x ``height`` px, built from
+    rows of it at a time (about :data:`GRID_CHUNK_PIXELS`, whole tile rows): ``rows_of(r0,
+    r1)`` gives ``(colour, velocity, depth, back)`` images over the canvas rows ``r0 <= y <
+    r1`` as the whole render fills them (colour sanitised; depth and back None where the
+    render has none), and each chunk holds a row more on each side for the dilation, so its
+    records are the whole render's.  None when nothing moves (every band is a copy)."""
+    radius, k, vmax = _geometry(t0, t1, max_radius_px, peak_speed)
+    if width == 0 or height == 0 or _static(t0, t1, radius):
+        return None
+    defines = _defines(level, has_depth, curved)
+    tx, ty, tiles = _grid_buffers(rt, width, height, k, curved)
+    step = max(1, GRID_CHUNK_PIXELS // max(width * k, 1))     # tile rows a chunk
+    for ty0 in range(0, ty, step):
+        ty1 = min(ty0 + step, ty)
+        r0, r1 = max(ty0 * k - 1, 0), min(ty1 * k + 1, height)
+        col, vel, depth, back = rows_of(r0, r1)
+        aux, auxb = _prepared(rt, col, vel, depth if has_depth else None,
+                              back if curved else None, defines, vmax, t1 - t0)
+        _tilemax(rt, defines, aux, auxb, tiles, col.pitch, width, height, r0, tx, ty, ty0, ty1,
+                 k)
+        del col, vel, depth, back, aux, auxb
+    return _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved)
+
+
+class FrameGrid:
+    """A frame's :class:`TileGrid`, built by ``build()`` when a band first asks (`get`), then
+    the same for every band (a step's plan holds it; a whole render builds its own)."""
+
+    def __init__(self, build):
+        self._build, self._grid, self._built = build, None, False
+
+    def get(self) -> TileGrid | None:
+        if not self._built:
+            self._grid, self._built, self._build = self._build(), True, None
+        return self._grid
+
+
 def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radius_px: float,
                 peak_speed: float, level: MotionLevel, frame: int = 0, nonfinite: int = 0,
-                velocity_back=None):
+                velocity_back=None, grid: TileGrid | None = None, row0: int = 0,
+                band: tuple[int, int] | None = None):
     """Motion blur of ``src`` from a velocity field (and optional depth) on the device.
 
     Parameters
@@ -288,75 +472,47 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         Backward motion, px/frame (current - previous position, +y down), same window: with
         it every path is the arc through the previous, current and next positions at a
         constant turn rate (:func:`path`); without it, the straight line along ``velocity``.
+    grid, row0, band
+        A band of a tiled render: the images hold the canvas rows from ``row0`` on (the
+        band's rows ``band = (y0, y1)`` and :func:`band_margin` rows around them, as the whole
+        render fills them), ``grid`` is the frame's (:func:`tile_grid`); the band's rows are
+        the whole render's, the rest of the output is the (sanitised) input.  Default: the
+        images are the whole canvas, and its grid is built from them.
 
     Returns
     -------
     (DeviceImage, BlurStats)
     """
     w, h, pitch = src.width, src.height, src.pitch
-    reach_t = reach_factor(t0, t1)
-    radius = reach_px(peak_speed, t0, t1, max_radius_px)
+    radius, k, vmax = _geometry(t0, t1, max_radius_px, peak_speed)
     col = sanitized_copy(rt, src) if nonfinite else src
     dst = rt.copy(col)
-    if w == 0 or h == 0 or reach_t <= 0.0 or radius * (t1 - t0) / reach_t < MIN_BLUR_PX:
+    if w == 0 or h == 0 or _static(t0, t1, radius):
         return dst, BlurStats(0, radius, 0, 0, 0)
-    k = tile_size(radius)
-    vmax = radius / reach_t
     curved = velocity_back is not None
-    defines = dict(BILINEAR=int(level.bilinear), JITTER=int(level.jitter),
-                   HAS_DEPTH=int(depth is not None), MIN_BLUR=f"{MIN_BLUR_PX!r}f",
-                   fp64=level.fp64, **({"CURVED": 1} if curved else {}))
+    defines = _defines(level, depth is not None, curved)
+    aux, auxb = _prepared(rt, col, velocity, depth, velocity_back, defines, vmax, t1 - t0)
+    if grid is None:
+        tx, ty, tiles = _grid_buffers(rt, w, h, k, curved)
+        _tilemax(rt, defines, aux, auxb, tiles, pitch, w, h, 0, tx, ty, 0, ty, k)
+        grid = _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved)
+        del tiles
+    k = grid.k
+    y0, y1 = band if band is not None else (row0, row0 + h)
     i32, f32 = np.int32, np.float32
-
-    aux = rt.image(src.window, 4)
-    dummy = rt.buffer(16)
-    rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), velocity,
-              depth if depth is not None else dummy, aux, i32(pitch), i32(h), f32(vmax))
-    auxb = dummy
-    if curved:              # (bx, by, z, |b|), clamped like the forward motion
-        auxb = rt.image(src.window, 4)
-        rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h),
-                  velocity_back, depth if depth is not None else dummy, auxb, i32(pitch),
-                  i32(h), f32(vmax))
-    if depth is not None:   # rims of small bright moving surfaces move with them
-        dilated = rt.image(src.window, 4)
-        extra = ()
-        if curved:          # the backward records follow the same choices
-            dilated_b = rt.image(src.window, 4)
-            extra = (auxb, dilated_b)
-        rt.launch(rt.kernel(KERNEL, "motion_dilate", **defines), (pitch // 4, h), aux, col,
-                  dilated, i32(pitch), i32(w), i32(h), f32(t1 - t0), *extra)
-        aux = dilated
-        if curved:
-            auxb = dilated_b
-
-    tx, ty = -(-w // k), -(-h // k)
-    tmax = rt.buffer(tx * ty * 16)
-    nmax = rt.buffer(tx * ty * 16)
-    rt.launch(rt.kernel(KERNEL, "motion_tilemax", **defines), (tx, ty), aux, tmax,
-              i32(pitch), i32(w), i32(h), i32(tx), i32(ty), i32(k))
-    rt.launch(rt.kernel(KERNEL, "motion_neighbormax", **defines), (tx, ty), tmax, nmax,
-              i32(tx), i32(ty))
-
-    # Classification on the host: a few thousand floats, the only read-back.
-    nm = rt.from_device(nmax, np.float32, tx * ty * 4).reshape(ty, tx, 4)
-    length = nm[..., 2].astype(np.float64) * (t1 - t0)     # blur length of the tile's v_n
-    ys, xs = np.nonzero(length >= MIN_BLUR_PX)
-    if xs.size == 0:
-        return dst, BlurStats(k, radius, tx * ty, 0, 0)
-    length = length[ys, xs]
-    n = np.clip(np.ceil(length / level.spacing), 2, level.max_samples).astype(np.int32)
-    jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
+    sel = (grid.ys * k < y1) & ((grid.ys + 1) * k > y0)     # the moving tiles of the band
+    if not sel.any():
+        return dst, grid.stats
+    short = grid.length < level.cubic_max_px
     qpt = k * k // 4
-    moving = int(xs.size)
-    short = length < level.cubic_max_px
-    for sel, cubic in ((short, 1), (~short, 0)):   # one launch per fetch filter
-        if not sel.any():
+    for part, cubic in ((sel & short, 1), (sel & ~short, 0)):
+        if not part.any():       # one launch per fetch filter
             continue
-        table = rt.to_device(np.stack([xs[sel], ys[sel], n[sel], jitter[sel]],
-                                      axis=1).astype(np.int32).ravel())
-        count = int(sel.sum())
+        table = rt.to_device(np.stack([grid.xs[part], grid.ys[part], grid.n[part],
+                                       grid.jitter[part]], axis=1).astype(np.int32).ravel())
+        count = int(part.sum())
         rt.launch(rt.kernel(KERNEL, "motion_gather", CUBIC=cubic, **defines),
-                  (count * qpt,), col, aux, auxb, nmax, table, i32(count), dst, i32(pitch), i32(w),
-                  i32(h), i32(tx), i32(k), f32(t0), f32(t1), i32(frame), local=(LOCAL,))
-    return dst, BlurStats(k, radius, tx * ty, moving, int(n.max()) if n.size else 0)
+                  (count * qpt,), col, aux, auxb, grid.nmax, grid.nmax_b, table, i32(count),
+                  dst, i32(pitch), i32(w), i32(row0), i32(row0 + h), i32(y0), i32(y1),
+                  i32(grid.tiles_x), i32(k), f32(t0), f32(t1), i32(frame), local=(LOCAL,))
+    return dst, grid.stats

@@ -28,7 +28,10 @@ there a roll gives both halves of a vector pass (``v +- a/2``, ``a`` the second 
 the similarity at the frame time), so the gather's paths are ``v t + a t^2 / 2``, the roll's
 arcs to second order (the tangent alone was a straight line).
 
-Reads outside the source window clamp to its edge (the blur does not grow the frame).
+Reads outside the source window clamp to its edge (the blur does not grow the frame).  The
+effect tiles: a band samples its paths at the whole render's coordinates, from the rows its
+look-ups reach (its region of interest); trucking reads the frame's velocity tiles (the
+step's plan) as motion_blur does.
 Non-finite input pixels are set to 0 before they are spread (counted in ``ctx.notes``); finite
 input stays finite, however large (a sum that overflows float32 is taken again with each
 sample scaled first).
@@ -36,22 +39,28 @@ sample scaled first).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Vec2Param
+from clfx.core.rect import Rect
 from clfx.fx.motion import (
     CUBIC_MAX_PX,
     LEVELS,
     MAX_RADIUS_PX,
     SHUTTER_OFFSETS,
+    FrameGrid,
+    band_margin,
+    reach_px,
     reconstruct,
     sanitized_copy,
     shutter_from,
+    tile_grid,
 )
-from clfx.host import Plugin, register
+from clfx.host import Plugin, StepPlan, register
 
 KERNEL = "camera_blur.cl"
 
@@ -99,6 +108,40 @@ def peak_speed_bound(m, window, min_depth) -> float:
     return v
 
 
+def path_reach_px(m, window, t0: float, t1: float) -> tuple[float, float]:
+    """The farthest (px, in x and in y) the similarity's look-ups lie from their pixels over
+    ``window`` and the open shutter: the inverse of ``p -> c + (1 + zoom t) R(roll t)(p - c) +
+    shift t``, ``q - p``, is affine in ``p`` (largest at a corner) and smooth in ``t``
+    (sampled finely, 1 % and a pixel of slack)."""
+    t = np.linspace(t0, t1, 513)[:, None]
+    px = np.array([window.x0, window.x1, window.x0, window.x1], np.float64)[None, :] - m["cx"]
+    py = np.array([window.y0, window.y0, window.y1, window.y1], np.float64)[None, :] - m["cy"]
+    qx, qy = px - m["sx"] * t, py - m["sy"] * t
+    c, s = np.cos(m["roll"] * t), np.sin(m["roll"] * t)
+    inv_k = 1.0 / np.maximum(1.0 + m["zoom"] * t, 1e-3)
+    dx = (c * qx + s * qy) * inv_k - px
+    dy = (-s * qx + c * qy) * inv_k - py
+    return (float(np.abs(dx).max()) * 1.01 + 1.0, float(np.abs(dy).max()) * 1.01 + 1.0)
+
+
+GATHER_TAP_ROWS = 2
+"""Rows past a look-up the path gather reads (the bilinear taps, the floor)."""
+
+
+@dataclass(frozen=True)
+class CameraPlan(StepPlan):
+    """camera_blur's plan for one step of a frame: the shutter, the motion, the path gather's
+    samples (no trucking), how far a band's look-ups reach (x, y; its region of interest)
+    and, with trucking, the frame's velocity tiles for the bands of a tiled render."""
+
+    t0: float = 0.0
+    t1: float = 0.0
+    motion: Any = None
+    samples: int = 0
+    reach: tuple = (0, 0)
+    grid: Any = None
+
+
 CAMERA_CUBIC_MAX_PX = CUBIC_MAX_PX
 """Trucking: tiles whose blur is shorter than this read through the clamped cubic, longer
 ones bilinearly: motion_blur's threshold (8 px).  It was 2 px, tuned against a truth sampled
@@ -142,7 +185,7 @@ QUALITY = {name: _quality(name, lvl) for name, lvl in _BASE_LEVELS.items()}
 
 @register
 class CameraBlur(Plugin):
-    whole_frame = ("its path is sampled in source-window coordinates (float32 rounding differs per tile)")
+    whole_frame = None   # a band samples its paths at the whole render's coordinates
     descriptor = Descriptor(
         name="camera_blur", label="Camera blur", group="Camera", kernel=KERNEL,
         summary="Blur of the camera's pan, tilt, roll, zoom and trucking during the shutter "
@@ -192,58 +235,119 @@ class CameraBlur(Plugin):
             return "camera motion below half a pixel over the shutter"
         return None
 
-    def render(self, rt, p, ctx):
-        src = ctx.source
+    def plan(self, p, ctx) -> CameraPlan:
         t0, t1 = shutter_from(p, ctx.camera)
         m = camera_motion(p, ctx)
         level = self.level(ctx)
+        src = ctx.source
+        if not needs_depth(p):
+            length = peak_speed_bound(m, src.window, None) * (t1 - t0)
+            n = int(np.clip(math.ceil(length / level.spacing), 2, level.max_samples))
+            rx, ry = path_reach_px(m, src.window, t0, t1)
+            return CameraPlan(t0=t0, t1=t1, motion=m, samples=n,
+                              reach=(math.ceil(rx) + GATHER_TAP_ROWS,
+                                     math.ceil(ry) + GATHER_TAP_ROWS))
+        depth = ctx.depth
+        if depth is None or depth.window != src.window:
+            return CameraPlan(t0=t0, t1=t1, motion=m)
+        a = ctx.analysis
+        peak = self._peak(m, src.window, a)
+        max_radius = self.max_radius_px(p, ctx)
+        curved = m["roll"] != 0.0
+        rt, window, nonfinite = ctx.runtime, src.window, a.nonfinite_count
+
+        def rows_of(r0, r1):
+            rows = Rect(window.x0, window.y0 + r0, window.x1, window.y0 + r1)
+            col, z = rt.reframe(src, rows), rt.reframe(depth, rows)
+            vel, back = self._velocities(rt, z, m, window, r0, curved)
+            return (sanitized_copy(rt, col) if nonfinite else col), vel, z, back
+
+        grid = FrameGrid(lambda: tile_grid(
+            rt, rows_of, width=window.width, height=window.height, t0=t0, t1=t1,
+            max_radius_px=max_radius, peak_speed=peak, level=CAMERA_LEVELS[ctx.quality],
+            has_depth=True, curved=curved))
+        margin = band_margin(t0, t1, reach_px(peak, t0, t1, max_radius), curved)
+        return CameraPlan(t0=t0, t1=t1, motion=m, reach=(margin, margin), grid=grid)
+
+    def max_radius_px(self, p, ctx) -> float:
+        return min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX)
+
+    @staticmethod
+    def _peak(m, window, analysis) -> float:
+        """The trucking's speed bound over ``window`` from the frame's nearest depth."""
+        a = analysis
+        finite = a.min_depth[np.isfinite(a.min_depth)] if a.min_depth is not None else None
+        zmin = float(finite.min()) if finite is not None and finite.size else math.inf
+        return peak_speed_bound(m, window, zmin)
+
+    @staticmethod
+    def _velocities(rt, depth, m, whole, row0: int, curved: bool):
+        """(forward, backward or None) velocity fields of the camera motion over ``depth``'s
+        rows, the rows ``row0`` on of the whole render's ``whole`` window (its coordinates):
+        with a roll the chords to the positions a frame after and before (the gather's paths
+        follow the arcs), else the tangent."""
+        i32, f32 = np.int32, np.float32
+        fields = []
+        for chord in ((1.0, -1.0) if curved else (0.0,)):
+            vel = rt.image(depth.window, 2)
+            rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
+                      (depth.pitch // 4, depth.height), depth, vel, i32(depth.pitch),
+                      i32(depth.width), i32(depth.height), i32(row0), i32(whole.x0),
+                      i32(whole.y0), f32(m["cx"]), f32(m["cy"]), f32(m["sx"]), f32(m["sy"]),
+                      f32(m["roll"]), f32(m["zoom"]), f32(m["truck_x"]), f32(m["truck_y"]),
+                      f32(m["dolly"]), f32(chord))
+            fields.append(vel)
+        return fields[0], (fields[1] if curved else None)
+
+    def region_of_interest(self, p, ctx, window):
+        # the farthest look-up of a band's paths (and the taps around it)
+        rx, ry = self.planned(p, ctx).reach
+        return window.grown(rx, ry)
+
+    def render(self, rt, p, ctx):
+        src = ctx.source
+        plan = self.planned(p, ctx)
+        t0, t1, m = plan.t0, plan.t1, plan.motion
         i32, f32 = np.int32, np.float32
         nonfinite = ctx.analysis.nonfinite_count
         if nonfinite:
             ctx.notes.append(f"camera_blur: {nonfinite} non-finite pixels set to 0")
+        whole = ctx.tiling.whole if ctx.tiling is not None else src.window
+        band = ctx.tiling.band if ctx.tiling is not None else src.window
         if not needs_depth(p):
+            level = self.level(ctx)
             col = sanitized_copy(rt, src) if nonfinite else src
-            length = peak_speed_bound(m, src.window, None) * (t1 - t0)
-            n = int(np.clip(math.ceil(length / level.spacing), 2, level.max_samples))
-            dst = src.like()
+            dst = rt.image(band, 4)
+            r0 = src.window.y0 - whole.y0
             rt.launch(rt.kernel(KERNEL, "camera_blur_similarity", BILINEAR=int(level.bilinear),
                                 JITTER=int(level.jitter), fp64=level.fp64),
-                      (src.pitch // 4, src.height), col, dst, i32(src.pitch), i32(src.width),
-                      i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
+                      (src.pitch // 4, band.height), col, dst, i32(src.pitch), i32(src.width),
+                      i32(r0), i32(r0 + src.height), i32(band.y0 - whole.y0),
+                      i32(band.y1 - whole.y0), i32(whole.x0), i32(whole.y0), f32(m["cx"]),
                       f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]), f32(m["zoom"]),
-                      f32(t0), f32(t1), i32(n), i32(ctx.frame))
-            ctx.notes.append(f"camera_blur: direct path gather, {n} samples")
+                      f32(t0), f32(t1), i32(plan.samples), i32(ctx.frame))
+            ctx.notes.append(f"camera_blur: direct path gather, {plan.samples} samples")
             return dst
         depth = ctx.depth
         if depth is None or depth.window != src.window:
             raise ClipError("camera_blur: truck/dolly need a depth pass covering the source "
                             f"window {src.window}")
-        # with a roll, the chords to the positions one frame after and before as the two
-        # halves of a vector pass: the gather's paths follow the arcs; else the tangent
         curved = m["roll"] != 0.0
-        fields = []
-        for chord in ((1.0, -1.0) if curved else (0.0,)):
-            vel = rt.image(src.window, 2)
-            rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
-                      (src.pitch // 4, src.height), depth, vel, i32(src.pitch), i32(src.width),
-                      i32(src.height), i32(src.window.x0), i32(src.window.y0), f32(m["cx"]),
-                      f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]),
-                      f32(m["zoom"]), f32(m["truck_x"]), f32(m["truck_y"]), f32(m["dolly"]),
-                      f32(chord))
-            fields.append(vel)
-        vel, back = fields[0], (fields[1] if curved else None)
+        tiled = ctx.tiling is not None
+        if tiled:   # the band's rows and the margin its samples read
+            rows = Rect(whole.x0, max(band.y0 - plan.reach[1], whole.y0), whole.x1,
+                        min(band.y1 + plan.reach[1], whole.y1))
+            src, depth = rt.reframe(src, rows), rt.reframe(depth, rows)
+        vel, back = self._velocities(rt, depth, m, whole, src.window.y0 - whole.y0, curved)
         a = ctx.analysis
-        finite = a.min_depth[np.isfinite(a.min_depth)] if a.min_depth is not None else None
-        zmin = float(finite.min()) if finite is not None and finite.size else math.inf
-        peak = peak_speed_bound(m, src.window, zmin)
-        out, stats = reconstruct(rt, src, vel, depth, t0=t0, t1=t1,
-                                 max_radius_px=min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX),
-                                 peak_speed=peak, level=CAMERA_LEVELS[ctx.quality],
-                                 frame=ctx.frame,
-                                 nonfinite=nonfinite, velocity_back=back)
+        out, stats = reconstruct(
+            rt, src, vel, depth, t0=t0, t1=t1, max_radius_px=self.max_radius_px(p, ctx),
+            peak_speed=self._peak(m, whole, a), level=CAMERA_LEVELS[ctx.quality],
+            frame=ctx.frame, nonfinite=nonfinite, velocity_back=back,
+            **(dict(grid=plan.grid.get(), row0=src.window.y0 - whole.y0,
+                    band=(band.y0 - whole.y0, band.y1 - whole.y0)) if tiled else {}))
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
                          + ("the roll along its arcs (circular paths through the previous, "
                             "current and next positions)" if curved else "straight paths"))
         return out
-

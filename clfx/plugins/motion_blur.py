@@ -20,6 +20,11 @@ the passes by their edge values, so a moving object's smear continues past the d
 instead of stopping at a hard edge.  Without a depth pass all pixels count as one depth (no
 occlusion ordering).
 
+The effect tiles (`clfx.pipeline.look.render_tiled`): the velocity tiles are the frame's,
+built once in the step's plan (`clfx.fx.motion.tile_grid`), and a band reconstructs its rows
+of the whole render's canvas from the rows its farthest sample reaches (its region of
+interest, `clfx.fx.motion.band_margin`), its positions the whole render's.
+
 References
 ----------
 M. McGuire, P. Hennessy, M. Bukowski, B. Osman, "A reconstruction filter for plausible motion
@@ -29,26 +34,61 @@ Warfare", SIGGRAPH 2014 course.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any
 
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam
+from clfx.core.rect import Rect
 from clfx.fx.motion import (
     LEVELS,
     MAX_RADIUS_PX,
     MIN_BLUR_PX,
     SHUTTER_OFFSETS,
+    FrameGrid,
+    aligned_passes,
+    band_margin,
     reach_px,
     reconstruct,
+    sanitized_copy,
     shutter_from,
+    tile_grid,
 )
-from clfx.host import Plugin, register
+from clfx.host import Plugin, StepPlan, register
+
+
+@dataclass(frozen=True)
+class MotionPlan(StepPlan):
+    """motion_blur's plan for one step of a frame: the shutter, the canvas the whole render
+    reconstructs over (the output window), the rows a band reads beyond itself, and the
+    frame's velocity tiles for the bands of a tiled render (built when the first asks, from
+    the whole frame's images)."""
+
+    t0: float = 0.0
+    t1: float = 0.0
+    max_radius_px: float = 0.0
+    canvas: Rect | None = None
+    margin: int = 0
+    grid: Any = None
+
+
+def canvas_rows(rt, canvas: Rect, src, vel, depth, back, nonfinite: int):
+    """``rows_of(r0, r1)`` of :func:`clfx.fx.motion.tile_grid`: the canvas rows ``r0 <= y <
+    r1`` (from the canvas's top) of the images as the whole render fills the canvas (colour
+    with transparent black past the data window, sanitised; passes by their edges)."""
+    def rows_of(r0, r1):
+        rows = Rect(canvas.x0, canvas.y0 + r0, canvas.x1, canvas.y0 + r1)
+        col = rt.reframe(src, rows, "zero")
+        return ((sanitized_copy(rt, col) if nonfinite else col),
+                rt.reframe(vel, rows, "clamp"),
+                None if depth is None else rt.reframe(depth, rows, "clamp"),
+                None if back is None else rt.reframe(back, rows, "clamp"))
+    return rows_of
 
 
 @register
 class MotionBlur(Plugin):
-    whole_frame = ("its velocity tiles (tile max, neighbour max) lie on a grid from the source "
-                   "window's origin and its gather samples at window-relative float32 "
-                   "positions (float32 rounding differs per tile)")
+    whole_frame = None   # a band reads the frame's velocity tiles (the plan's) and its rows
     descriptor = Descriptor(
         name="motion_blur", label="Motion blur", group="Camera", kernel="motion_blur.cl",
         summary="Object motion blur reconstructed from the velocity pass (McGuire 2012 "
@@ -101,30 +141,56 @@ class MotionBlur(Plugin):
     def region_of_definition(self, p, ctx):
         return ctx.source.window.grown(self.reach(p, ctx))
 
+    def plan(self, p, ctx) -> MotionPlan:
+        t0, t1 = shutter_from(p, ctx.camera)
+        max_radius = self.max_radius_px(p, ctx)
+        src, vel = ctx.source, ctx.velocity
+        if vel is None or vel.window != src.window:
+            return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=src.window)
+        depth, back = aligned_passes(ctx)
+        a = ctx.analysis
+        canvas = self.output_window(p, ctx)
+        radius = reach_px(a.peak_speed, t0, t1, max_radius)
+        grid = FrameGrid(lambda: tile_grid(
+            ctx.runtime, canvas_rows(ctx.runtime, canvas, src, vel, depth, back,
+                                     a.nonfinite_count),
+            width=canvas.width, height=canvas.height, t0=t0, t1=t1, max_radius_px=max_radius,
+            peak_speed=a.peak_speed, level=self.level(ctx), has_depth=depth is not None,
+            curved=back is not None))
+        return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=canvas,
+                          margin=band_margin(t0, t1, radius, back is not None), grid=grid)
+
     def region_of_interest(self, p, ctx, window):
-        return window.grown(int(math.ceil(self.max_radius_px(p, ctx))))
+        # the farthest sample of the gather and the taps around it (the frame's reach)
+        return window.grown(self.planned(p, ctx).margin)
 
     def render(self, rt, p, ctx):
         src, vel = ctx.source, ctx.velocity
         if vel is None or vel.window != src.window:
             raise ClipError("motion_blur: the velocity pass must cover the source window "
                             f"{src.window} (it covers {None if vel is None else vel.window})")
-        depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
-        back = getattr(ctx, "velocity_back", None)
-        back = back if back is not None and back.window == src.window else None
-        window = self.output_window(p, ctx)
+        plan = self.planned(p, ctx)
+        depth, back = aligned_passes(ctx)
+        a = ctx.analysis
+        canvas, tiled = plan.canvas, ctx.tiling is not None
+        window = canvas
+        if tiled:   # the band's rows of the canvas and the margin its samples read
+            band = ctx.tiling.band
+            window = Rect(canvas.x0, max(band.y0 - plan.margin, canvas.y0), canvas.x1,
+                          min(band.y1 + plan.margin, canvas.y1))
         if window != src.window:
             # past the data window: nothing (transparent black), moving like the edge
             src = rt.reframe(src, window, "zero")
             vel = rt.reframe(vel, window, "clamp")
             depth = None if depth is None else rt.reframe(depth, window, "clamp")
             back = None if back is None else rt.reframe(back, window, "clamp")
-        t0, t1 = shutter_from(p, ctx.camera)
-        a = ctx.analysis
         out, stats = reconstruct(
-            rt, src, vel, depth, t0=t0, t1=t1, max_radius_px=self.max_radius_px(p, ctx),
+            rt, src, vel, depth, t0=plan.t0, t1=plan.t1, max_radius_px=plan.max_radius_px,
             peak_speed=a.peak_speed, level=self.level(ctx), frame=ctx.frame,
-            nonfinite=a.nonfinite_count, velocity_back=back)
+            nonfinite=a.nonfinite_count, velocity_back=back,
+            **(dict(grid=plan.grid.get(), row0=window.y0 - canvas.y0,
+                    band=(band.y0 - canvas.y0, band.y1 - canvas.y0)) if tiled else {}))
+        whole = ctx.tiling.whole if tiled else ctx.source.window
         ctx.notes.append(f"motion_blur: {stats.moving_tiles}/{stats.tiles} tiles of "
                          f"{stats.tile} px moving, radius {stats.radius_px:.1f} px, "
                          f"<= {stats.max_samples} samples, "
@@ -134,5 +200,5 @@ class MotionBlur(Plugin):
                             "pass)")
                          + (f", {a.nonfinite_count} non-finite pixels zeroed"
                             if a.nonfinite_count else "")
-                         + (f", grown to {window}" if window != ctx.source.window else ""))
+                         + (f", grown to {canvas}" if canvas != whole else ""))
         return out

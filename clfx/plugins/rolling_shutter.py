@@ -58,22 +58,30 @@ own time).  Flash banding (a flash lighting part of the rows) is not modelled.  
 uncovered from behind a nearer one is filled with the neighbourhood's background, which is
 wrong where a middle layer was hidden (a car behind a passing pole).
 
-The region of definition is the source window; the region of interest grows by the largest
-shift.  Identity: a readout of 0, or rows that move less than half a pixel.
+The region of definition is the source window; the region of interest grows by how far a
+pixel's look-ups reach: the largest shift (on arcs, a bound of the path over the row times),
+then the uncovered background's search (up to twice the shift) and the taps around it.  The
+effect tiles (`clfx.pipeline.look.render_tiled`): the velocity tiles are the frame's, built
+once in the step's plan from rows of the passes at a time, and a band's row times, positions
+and tile indices are the whole render's (its buffers addressed in canvas rows).  Identity: a
+readout of 0, or rows that move less than half a pixel.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Level
 from clfx.core.rect import Rect
+from clfx.fx.motion import (GRID_CHUNK_PIXELS, MAX_RADIUS_PX, FrameGrid, aligned_passes,
+                             path_reach)
 from clfx.fx.motion import KERNEL as MOTION_KERNEL
-from clfx.fx.motion import MAX_RADIUS_PX, sanitized_copy, tile_size
-from clfx.host import Plugin, register
+from clfx.fx.motion import sanitized_copy, tile_size
+from clfx.host import Plugin, StepPlan, register
 
 DIRECTIONS = ("top-down", "bottom-up", "left-right", "right-left")
 REFERENCES = {"first": 0.0, "centre": 0.5, "last": 1.0}
@@ -117,9 +125,25 @@ class RowTimes:
         return self.tx * (x - self.xr) + self.ty * (y - self.yr)
 
 
+@dataclass(frozen=True)
+class RollingPlan(StepPlan):
+    """rolling_shutter's plan for one step of a frame: the row times over the whole source
+    window, the largest shift, the rows a band reads beyond itself and, for the bands of a
+    tiled render, the frame's velocity tiles (built when the first asks)."""
+
+    times: RowTimes | None = None
+    shift: float = 0.0
+    margin: int = 0
+    grid: Any = None
+
+
+SEARCH_TAP_ROWS = 3
+"""Rows past the farthest look-up the gather reads (a rim's 4-neighbours, bilinear taps)."""
+
+
 @register
 class RollingShutter(Plugin):
-    whole_frame = ("its row times are in source-window coordinates (float32 rounding differs per tile)")
+    whole_frame = None   # a band: the frame's tiles (the plan's), the whole render's row times
     descriptor = Descriptor(
         name="rolling_shutter", label="Rolling shutter", group="Camera",
         kernel="rolling_shutter.cl",
@@ -199,52 +223,110 @@ class RollingShutter(Plugin):
                     f"px/frame, largest row time {self.row_times(p, ctx.display_window, ctx.source.window).t_max:.3g} frame)")
         return None
 
+    def plan(self, p, ctx) -> RollingPlan:
+        src, vel = ctx.source, ctx.velocity
+        times = self.row_times(p, ctx.display_window, src.window)
+        shift = self.max_shift_px(p, ctx)
+        if vel is None or vel.window != src.window or times.t_max <= 0.0:
+            return RollingPlan(times=times, shift=shift)
+        depth, back = aligned_passes(ctx)
+        vmax = shift / times.t_max
+        # the farthest fixed-point look-up, then the uncovered background's search along the
+        # relative motion of two clamped velocities (and the reads around where it ends)
+        reach = path_reach(-times.t_max, times.t_max, back is not None) * vmax
+        search = min(math.ceil(2.0 * shift) + 1, self.level(ctx).max_search)
+        margin = math.ceil(reach) + search + SEARCH_TAP_ROWS
+        rt, window, level = ctx.runtime, src.window, self.level(ctx)
+        grid = FrameGrid(lambda: self._tiles(rt, vel, depth, back is not None, window, vmax,
+                                             shift, level, GRID_CHUNK_PIXELS))
+        return RollingPlan(times=times, shift=shift, margin=margin, grid=grid)
+
+    def _defines(self, lvl, has_depth: bool, curved: bool) -> dict:
+        return dict(HAS_DEPTH=int(has_depth), ITERATIONS=lvl.iterations,
+                    MAX_SEARCH=lvl.max_search, fp64=lvl.fp64, **({"CURVED": 1} if curved else {}))
+
+    def _aux(self, rt, vel, depth, vmax):
+        """motion_prepare's records (vx, vy, z, |v|) of ``vel`` over its window."""
+        i32, f32 = np.int32, np.float32
+        aux = rt.image(vel.window, 4)
+        rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=int(depth is not None)),
+                  (vel.pitch // 4, vel.height), vel, depth if depth is not None else
+                  rt.buffer(16), aux, i32(vel.pitch), i32(vel.height), f32(vmax))
+        return aux
+
+    def _tiles(self, rt, vel, depth, curved: bool, window: Rect, vmax, shift, lvl,
+               chunk_pixels=None, aux=None):
+        """(tile size, tiles across, the 3 x 3 neighbourhoods' records) of the frame's tile
+        grid over ``window``: from ``aux`` (the whole window's records), or built from rows of
+        about ``chunk_pixels`` of the passes at a time."""
+        i32 = np.int32
+        w, h = window.width, window.height
+        k = tile_size(shift)
+        ntx, nty = -(-w // k), -(-h // k)
+        defines = self._defines(lvl, depth is not None, curved)
+        kfile = self.descriptor.kernel
+        tiles, nbr = rt.buffer(ntx * nty * 48), rt.buffer(ntx * nty * 48)   # 3 float4 a tile
+        step = nty if aux is not None else max(1, chunk_pixels // max(w * k, 1))
+        for ty0 in range(0, nty, step):
+            ty1 = min(ty0 + step, nty)
+            r0, r1 = ty0 * k, min(ty1 * k, h)
+            part = aux
+            if part is None:
+                rows = Rect(window.x0, window.y0 + r0, window.x1, window.y0 + r1)
+                part = self._aux(rt, rt.reframe(vel, rows),
+                                 None if depth is None else rt.reframe(depth, rows), vmax)
+            rt.launch(rt.kernel(kfile, "rolling_shutter_tiles", **defines), (ntx, ty1 - ty0),
+                      part, tiles, i32(part.pitch), i32(w), i32(h), i32(0 if aux is not None
+                                                                        else r0),
+                      i32(ntx), i32(nty), i32(ty0), i32(k))
+        rt.launch(rt.kernel(kfile, "rolling_shutter_neighbors", **defines), (ntx, nty), tiles,
+                  nbr, i32(ntx), i32(nty))
+        return k, ntx, nbr
+
     def region_of_interest(self, p, ctx, window):
-        return window.grown(int(math.ceil(self.max_shift_px(p, ctx))) + 1)
+        # the farthest look-up of the band's solves and searches (the frame's largest shift)
+        return window.grown(self.planned(p, ctx).margin)
 
     def render(self, rt, p, ctx):
         src, vel = ctx.source, ctx.velocity
         if vel is None or vel.window != src.window:
             raise ClipError("rolling_shutter: the velocity pass must cover the source window "
                             f"{src.window} (it covers {None if vel is None else vel.window})")
-        depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
+        plan = self.planned(p, ctx)
+        depth, back = aligned_passes(ctx)
         lvl = self.level(ctx)
-        times = self.row_times(p, ctx.display_window, ctx.source.window)
-        shift = self.max_shift_px(p, ctx)
+        times, shift = plan.times, plan.shift
         a = ctx.analysis
+        whole = ctx.tiling.whole if ctx.tiling is not None else src.window
+        band = ctx.tiling.band if ctx.tiling is not None else src.window
+        if ctx.tiling is not None:   # the band's rows and the margin its look-ups read
+            rows = Rect(whole.x0, max(band.y0 - plan.margin, whole.y0), whole.x1,
+                        min(band.y1 + plan.margin, whole.y1))
+            src, vel = rt.reframe(src, rows), rt.reframe(vel, rows)
+            depth = None if depth is None else rt.reframe(depth, rows)
+            back = None if back is None else rt.reframe(back, rows)
         col = sanitized_copy(rt, src) if a.nonfinite_count else src
-        dst = rt.image(src.window, 4)
+        dst = rt.image(band, 4)
         w, h, pitch = src.width, src.height, src.pitch
         if w == 0 or h == 0:
             return dst
         i32, f32 = np.int32, np.float32
-        has_depth = int(depth is not None)
-        aux, dummy = rt.image(src.window, 4), rt.buffer(16)
         vmax = shift / times.t_max if times.t_max > 0 else 0.0
-        rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=has_depth),
-                  (pitch // 4, h), vel, depth if depth is not None else dummy, aux,
-                  i32(pitch), i32(h), f32(vmax))
-        back = getattr(ctx, "velocity_back", None)
-        back = back if back is not None and back.window == src.window else None
-        auxb = dummy
+        aux = self._aux(rt, vel, depth, vmax)
+        auxb = rt.buffer(16)
         if back is not None:   # (bx, by, z, |b|), clamped like the forward motion
-            auxb = rt.image(src.window, 4)
-            rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=has_depth),
-                      (pitch // 4, h), back, depth if depth is not None else dummy, auxb,
-                      i32(pitch), i32(h), f32(vmax))
-        k = tile_size(shift)
-        ntx, nty = -(-w // k), -(-h // k)
-        kfile = self.descriptor.kernel
-        defines = dict(HAS_DEPTH=has_depth, ITERATIONS=lvl.iterations, MAX_SEARCH=lvl.max_search, fp64=lvl.fp64,
-                       **({"CURVED": 1} if back is not None else {}))
-        tiles, nbr = rt.buffer(ntx * nty * 48), rt.buffer(ntx * nty * 48)   # 3 float4 a tile
-        rt.launch(rt.kernel(kfile, "rolling_shutter_tiles", **defines), (ntx, nty), aux, tiles,
-                  i32(pitch), i32(w), i32(h), i32(ntx), i32(nty), i32(k))
-        rt.launch(rt.kernel(kfile, "rolling_shutter_neighbors", **defines), (ntx, nty), tiles,
-                  nbr, i32(ntx), i32(nty))
-        rt.launch(rt.kernel(kfile, "rolling_shutter_gather", **defines), (w, h), col, aux, auxb, nbr,
-                  dst, i32(pitch), i32(w), i32(h), i32(ntx), i32(k), f32(times.tx),
-                  f32(times.ty), f32(times.xr), f32(times.yr))
+            auxb = self._aux(rt, back, depth, vmax)
+        if ctx.tiling is None:
+            k, ntx, nbr = self._tiles(rt, vel, depth, back is not None, src.window, vmax, shift,
+                                      lvl, aux=aux)
+        else:
+            k, ntx, nbr = plan.grid.get()
+        defines = self._defines(lvl, depth is not None, back is not None)
+        row0, b0 = src.window.y0 - whole.y0, band.y0 - whole.y0
+        rt.launch(rt.kernel(self.descriptor.kernel, "rolling_shutter_gather", **defines),
+                  (w, band.height), col, aux, auxb, nbr, dst, i32(pitch), i32(w), i32(row0),
+                  i32(row0 + h), i32(b0), i32(b0 + band.height), i32(ntx), i32(k),
+                  f32(times.tx), f32(times.ty), f32(times.xr), f32(times.yr))
         ctx.notes.append(f"rolling_shutter: readout {self.readout(p):.3g} frame "
                          f"({p.direction}, t = 0 at the {p.reference} row), largest shift "
                          f"{shift:.1f} px, {k} px tiles, "

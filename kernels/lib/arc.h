@@ -20,6 +20,8 @@
   fmin((T)2 * atan2(fabs((sx) * (ey) - (sy) * (ex)), (sx) * (sx) + (sy) * (sy)), (T)ARC_MAX_TURN)
 #define ARC_A(T, t, w) (sin((w) * (t)) / sin(w))
 #define ARC_R(T, t, w) (sin((T)0.5 * (w) * (t)) / sin((T)0.5 * (w)))
+/* d(t) from its factors A and C = R^2 and s = f + b, e = f - b (T: the factors' type) */
+#define ARC_PATH(T, A, C, s, e) ((A) * (T)0.5 * (s) + (C) * (T)0.5 * (e))
 /* time derivatives of A and C */
 #define ARC_DA(T, t, w) ((w) * cos((w) * (t)) / sin(w))
 #define ARC_DC(T, t, w) ((w) * sin((w) * (t)) / ((T)2 * sin((T)0.5 * (w)) * sin((T)0.5 * (w))))

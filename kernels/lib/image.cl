@@ -2,7 +2,8 @@
  *
  * image_reframe copies an image into a different window: pixels of the destination that the
  * source covers are copied, the others are filled by the border mode (BORDER 0 = zero,
- * 1 = clamp to the nearest source pixel).  dx, dy = origin of dst minus origin of src.
+ * 1 = clamp to the nearest source pixel), the row padding is zero.  dx, dy = origin of dst
+ * minus origin of src.
  * One work-item per destination pixel: this runs rarely (window changes), not per effect.
  */
 #include "lib/common.h"
@@ -12,7 +13,13 @@ kernel void image_reframe(global const float *src, const int src_pitch, const in
                           const int dst_w, const int dst_h, const int dx, const int dy)
 {
   const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= dst_w || y >= dst_h) return;
+  if(x >= dst_pitch || y >= dst_h) return;
+  if(x >= dst_w)      /* the row's padding: zeros, as an upload's (kernels that read whole */
+  {                   /* quads of 4 pixels see the same padding in every render) */
+    for(int c = 0; c < CH; c++)
+      dst[(y * dst_pitch + x) * CH + c] = 0.0f;
+    return;
+  }
   int sx = x + dx, sy = y + dy;
   const int inside = sx >= 0 && sy >= 0 && sx < src_w && sy < src_h;
   sx = clfx_clampi(sx, 0, max(src_w - 1, 0));

@@ -195,39 +195,57 @@ kernel void motion_sanitize(global const float *src, global float *dst, const in
 }
 
 /* --- tile classification ---------------------------------------------------------------- */
-kernel void motion_tilemax(global const float *aux, global float *tiles, const int pitch,
-                           const int width, const int height, const int tiles_x,
-                           const int tiles_y, const int k)
+/* Tiles lie on a grid of K x K pixels from the canvas's origin (the whole render's window,
+ * whatever part of it `aux` holds: canvas rows from row0 on, MG_ROWS); this launch computes
+ * the tile rows from ty0 on, whose pixel rows the buffer holds.  A record: (vx, vy, |v|, 0)
+ * of the tile's fastest pixel (the first in scan order among equals), and in `tiles_b` its
+ * backward motion (bx, by) from `auxb` (CURVED; else unused). */
+kernel void motion_tilemax(global const float *aux, global const float *auxb,
+                           global float *tiles, global float *tiles_b, const int pitch,
+                           const int width, const int height, const int row0,
+                           const int tiles_x, const int tiles_y, const int ty0, const int k)
 {
-  const int tx = get_global_id(0), ty = get_global_id(1);
+  const int tx = get_global_id(0), ty = ty0 + get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
+  MG_ROWS(aux, pitch, 4, row0);
   const int x0 = tx * k, y0 = ty * k;
   const int x1 = min(x0 + k, width), y1 = min(y0 + k, height);
   float4 best = (float4)(0.0f);
+  int at = -1;
   for(int y = y0; y < y1; y++)
     for(int x = x0; x < x1; x++)
     {
-      const float4 a = vload4(y * pitch + x, aux);
-      if(a.w > best.z) best = (float4)(a.x, a.y, a.w, as_float(y * pitch + x));  /* .w: its index */
+      const float4 a = vload4((size_t)y * pitch + x, aux);
+      if(a.w > best.z) { best = (float4)(a.x, a.y, a.w, 0.0f); at = y * pitch + x; }
     }
   vstore4(best, ty * tiles_x + tx, tiles);
+#if CURVED
+  MG_ROWS(auxb, pitch, 4, row0);
+  vstore2(at >= 0 ? vload2(0, auxb + 4 * (size_t)at) : (float2)(0.0f), ty * tiles_x + tx,
+          tiles_b);
+#endif
 }
 
-kernel void motion_neighbormax(global const float *tiles, global float *nmax,
-                               const int tiles_x, const int tiles_y)
+kernel void motion_neighbormax(global const float *tiles, global const float *tiles_b,
+                               global float *nmax, global float *nmax_b, const int tiles_x,
+                               const int tiles_y)
 {
   const int tx = get_global_id(0), ty = get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
   float4 best = (float4)(0.0f);
+  int at = -1;
   for(int dy = -1; dy <= 1; dy++)
     for(int dx = -1; dx <= 1; dx++)
     {
       const int x = tx + dx, y = ty + dy;
       if(x < 0 || y < 0 || x >= tiles_x || y >= tiles_y) continue;
       const float4 t = vload4(y * tiles_x + x, tiles);
-      if(t.z > best.z) best = t;
+      if(t.z > best.z) { best = t; at = y * tiles_x + x; }
     }
   vstore4(best, ty * tiles_x + tx, nmax);
+#if CURVED
+  vstore2(at >= 0 ? vload2(at, tiles_b) : (float2)(0.0f), ty * tiles_x + tx, nmax_b);
+#endif
 }
 
 /* --- gather ----------------------------------------------------------------------------- */
@@ -247,7 +265,7 @@ inline float4 mb_arc_da(const float4 t, const float4 w)
 { return select((float4)(1.0f), ARC_DA(float4, t, w), MB_CURVED(w)); }
 inline float4 mb_arc_dc(const float4 t, const float4 w)
 { return select(2.0f * t, ARC_DC(float4, t, w), MB_CURVED(w)); }
-#define MB_ARC(f, b, t, w) (mb_arc_a(t, w) * 0.5f * ((f) + (b)) + mb_arc_c(t, w) * 0.5f * ((f) - (b)))
+#define MB_ARC(f, b, t, w) ARC_PATH(float4, mb_arc_a(t, w), mb_arc_c(t, w), (f) + (b), (f) - (b))
 #define MB_ARC_TANGENT(f, b, t, w) \
   (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
 #define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
@@ -320,9 +338,9 @@ inline float4 mb_short_smear(const float4 pm2, const float4 pm1, const float4 p0
  * `scale`), depth z0: the four taps read bilinearly, times `scale`; *q: how much of the
  * neighbourhood is x's own layer or behind it (a tap in front of x pulls it to 0). */
 inline float4 mb_short_at(global const float *col, global const float *aux, const int pitch,
-                          const int w, const int h, const float px, const float py,
-                          const float ux, const float uy, const float4 p0, const float z0,
-                          const float len, const float scale, float *q)
+                          const int w, const int row0, const int row1, const float px,
+                          const float py, const float ux, const float uy, const float4 p0,
+                          const float z0, const float len, const float scale, float *q)
 {
   float4 tap[4];
   float keep = 1.0f;
@@ -330,9 +348,10 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
   {
     const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
     const float x = px + o * ux, y = py + o * uy;
-    tap[k] = mg_fetch_scaled(col, pitch, w, h, x, y, scale);
+    tap[k] = mg_fetch_scaled(col, pitch, w, row0, row1, x, y, scale);
     const int ix = clfx_clampi((int)clamp(floor(x), -1.0f, (float)w), 0, w - 1);
-    const int iy = clfx_clampi((int)clamp(floor(y), -1.0f, (float)h), 0, h - 1);
+    const int iy = clfx_clampi((int)clamp(floor(y), (float)(row0 - 1), (float)row1), row0,
+                               row1 - 1);
     const float z = vload4(iy * pitch + ix, aux).z;
     keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
   }
@@ -346,19 +365,21 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
  * to a quarter pixel more (as much again as a one-pixel smear), the cubic keeps the detail;
  * the clamp stops its negative lobes ringing around HDR lights. */
 inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int w,
-                             const int h, const float px, const float py, const float scale,
+                             const int row0, const int row1, const float px, const float py,
+                             const float scale,
                              const float beta)
 {
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
   const float4 wx = mb_cubic_weights(u - fu, beta), wy = mb_cubic_weights(v - fv, beta);
-  const int iu = (int)clamp(fu, -2.0f, (float)w), iv = (int)clamp(fv, -2.0f, (float)h);
+  const int iu = (int)clamp(fu, -2.0f, (float)w);
+  const int iv = (int)clamp(fv, (float)(row0 - 2), (float)row1);
   const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
   const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
   float4 acc = (float4)(0.0f), lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
   for(int j = 0; j < 4; j++)
   {
-    const int row = clfx_clampi(iv - 1 + j, 0, h - 1) * pitch;
+    const int row = clfx_clampi(iv - 1 + j, row0, row1 - 1) * pitch;
     const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
     const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
     if(j == 1 || j == 2)
@@ -376,14 +397,14 @@ inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int
  * offset: the 4 x 7 pixels the lanes' taps cover are loaded once (28 loads, not 64) and the
  * weights computed once. */
 inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
-                                   const int h, const float px, const float py,
-                                   const float scale, const float beta)
+                                   const int row0, const int row1, const float px,
+                                   const float py, const float scale, const float beta)
 {
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
   const float4 wx = mb_cubic_weights(u - fu, beta), wy = mb_cubic_weights(v - fv, beta);
   const int iu = (int)clamp(fu, -8.0f, (float)w + 8.0f);
-  const int iv = (int)clamp(fv, -2.0f, (float)h);
+  const int iv = (int)clamp(fv, (float)(row0 - 2), (float)row1);
   const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
   const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
   const int x4 = clfx_clampi(iu + 3, 0, w - 1), x5 = clfx_clampi(iu + 4, 0, w - 1);
@@ -391,7 +412,7 @@ inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, con
   float16 acc = (float16)(0.0f), lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
   for(int j = 0; j < 4; j++)
   {
-    const int row = clfx_clampi(iv - 1 + j, 0, h - 1) * pitch;
+    const int row = clfx_clampi(iv - 1 + j, row0, row1 - 1) * pitch;
     const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
     const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
     const float4 c4 = vload4(row + x4, col) * scale, c5 = vload4(row + x5, col) * scale;
@@ -413,16 +434,17 @@ inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, con
 /* Bilinear (BILINEAR) or nearest at the 4 positions (px + k, py) of a quad sharing one
  * offset: 2 x 5 loads (4 for nearest), as mg_fetch_scaled per lane. */
 inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
-                                    const int h, const float px, const float py,
-                                    const float scale, const float beta)
+                                    const int row0, const int row1, const float px,
+                                    const float py, const float scale, const float beta)
 {
 #if BILINEAR
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
   const float ax = u - fu, ay = v - fv;
   const int iu = (int)clamp(fu, -8.0f, (float)w + 8.0f);
-  const int iv = (int)clamp(fv, -1.0f, (float)h);
-  const int ya = clfx_clampi(iv, 0, h - 1) * pitch, yb = clfx_clampi(iv + 1, 0, h - 1) * pitch;
+  const int iv = (int)clamp(fv, (float)(row0 - 1), (float)row1);
+  const int ya = clfx_clampi(iv, row0, row1 - 1) * pitch;
+  const int yb = clfx_clampi(iv + 1, row0, row1 - 1) * pitch;
   const int x0 = clfx_clampi(iu, 0, w - 1), x1 = clfx_clampi(iu + 1, 0, w - 1);
   const int x2 = clfx_clampi(iu + 2, 0, w - 1), x3 = clfx_clampi(iu + 3, 0, w - 1);
   const int x4 = clfx_clampi(iu + 4, 0, w - 1);
@@ -438,7 +460,7 @@ inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, co
   return tt + (bb - tt) * ay;
 #else
   const int x = (int)clamp(floor(px), -8.0f, (float)w + 8.0f);
-  const int row = (int)clamp(floor(py), 0.0f, (float)(h - 1)) * pitch;
+  const int row = (int)clamp(floor(py), (float)row0, (float)(row1 - 1)) * pitch;
   return (float16)(vload4(row + clfx_clampi(x, 0, w - 1), col) * scale,
                    vload4(row + clfx_clampi(x + 1, 0, w - 1), col) * scale,
                    vload4(row + clfx_clampi(x + 2, 0, w - 1), col) * scale,
@@ -448,10 +470,11 @@ inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, co
 
 /* mg_fetch_scaled with the (unused) blend of the cubic fetch's signature */
 inline float4 mb_fetch_linear(global const float *col, const int pitch, const int w,
-                              const int h, const float px, const float py, const float scale,
+                              const int row0, const int row1, const float px, const float py,
+                              const float scale,
                               const float beta)
 {
-  return mg_fetch_scaled(col, pitch, w, h, px, py, scale);
+  return mg_fetch_scaled(col, pitch, w, row0, row1, px, py, scale);
 }
 
 #if CUBIC
@@ -466,11 +489,11 @@ inline float4 mb_fetch_linear(global const float *col, const int pitch, const in
  * `same` (runtime): the lanes share one offset and blend, i.e. the positions are
  * (px.x + k, py.x). */
 #define MB_FETCH4(px, py, same, beta) \
-  ((same) ? MB_FETCH_QUAD(col, pitch, width, height, (px).x, (py).x, scale, (beta).x) : \
-   (float16)(MB_FETCH(col, pitch, width, height, (px).x, (py).x, scale, (beta).x), \
-             MB_FETCH(col, pitch, width, height, (px).y, (py).y, scale, (beta).y), \
-             MB_FETCH(col, pitch, width, height, (px).z, (py).z, scale, (beta).z), \
-             MB_FETCH(col, pitch, width, height, (px).w, (py).w, scale, (beta).w)))
+  ((same) ? MB_FETCH_QUAD(col, pitch, width, row0, row1, (px).x, (py).x, scale, (beta).x) : \
+   (float16)(MB_FETCH(col, pitch, width, row0, row1, (px).x, (py).x, scale, (beta).x), \
+             MB_FETCH(col, pitch, width, row0, row1, (px).y, (py).y, scale, (beta).y), \
+             MB_FETCH(col, pitch, width, row0, row1, (px).z, (py).z, scale, (beta).z), \
+             MB_FETCH(col, pitch, width, row0, row1, (px).w, (py).w, scale, (beta).w)))
 
 /* The gather of the 4 pixels of one work-item (lanes `lane`, row fy; centre colours cc, own
  * velocities (vxx, vxy), depths zx), every colour sample times `scale` (the result too).
@@ -488,8 +511,8 @@ inline float4 mb_fetch_linear(global const float *col, const int pitch, const in
 inline REAL16 motion_gather_quad(global const float *col, global const float *aux,
                                  global const float *auxb, const float2 bn,
                                  const float4 bxx, const float4 bxy,
-                                 const int pitch, const int width, const int height,
-                                 const float4 vn, const float4 lane, const float fy,
+                                 const int pitch, const int width, const int row0,
+                                 const int row1, const float4 vn, const float4 lane, const float fy,
                                  const float16 cc, const float4 vxx, const float4 vxy,
                                  const float4 zx, const int any_moving, const float t0,
                                  const float t1, const float dt, const int n, const float ell,
@@ -527,7 +550,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 #endif
       const float4 px = lane + 0.5f - dx, py = fy + 0.5f - dy;
       const int4 ix = clamp(convert_int4(floor(px)), (int4)(0), (int4)(width - 1));
-      const int4 iy = clamp(convert_int4(floor(py)), (int4)(0), (int4)(height - 1));
+      const int4 iy = clamp(convert_int4(floor(py)), (int4)(row0), (int4)(row1 - 1));
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 f = clamp(rel, 0.0f, 1.0f);
@@ -577,7 +600,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
       const int4 ix = clamp(convert_int4(floor(px)), (int4)(0), (int4)(width - 1));
-      const int4 iy = clamp(convert_int4(floor(py)), (int4)(0), (int4)(height - 1));
+      const int4 iy = clamp(convert_int4(floor(py)), (int4)(row0), (int4)(row1 - 1));
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 ws = 1.0f - clamp(rel, 0.0f, 1.0f);
@@ -621,7 +644,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     {
       if(wl[l] <= 0.0f) continue;
       float q;
-      const float4 c = mb_short_at(col, aux, pitch, width, height, lane.x + (float)l + 0.5f,
+      const float4 c = mb_short_at(col, aux, pitch, width, row0, row1,
+                                   lane.x + (float)l + 0.5f,
                                    fy + 0.5f, gxl[l] / gl[l], gyl[l] / gl[l], vload4(l, cl),
                                    zl[l], sl[l], scale, &q);
       vstore4((c - vload4(l, ol)) * (wl[l] * q), l, dl);
@@ -635,16 +659,20 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 
 /* tiles: (tx, ty, samples, jitter) per moving tile (jitter 0: the midpoint rule, exact for the
  * few, dense samples of a short blur; 1: per-pixel jitter where samples are sparse);
- * k: tile size (multiple of 4); qpt = k * k / 4.
+ * k: tile size (multiple of 4); qpt = k * k / 4.  The buffers hold the canvas rows
+ * row0 <= y < row1 (MG_ROWS: a band of a tiled render and its margin; 0 and the canvas's
+ * height in a whole render); the rows band0 <= y < band1 are written.  nmax_b: the
+ * backward motion of each NeighborMax record's pixel (CURVED).
  * `col` holds finite colours (the host sanitises NaN/Inf first); a float32 sum of huge ones
  * that overflows is taken again with every colour halved and divided by n first, so finite
  * input gives finite output. */
 kernel void motion_gather(global const float *col, global const float *aux,
                           global const float *auxb,
-                          global const float *nmax, global const int *tiles,
-                          const int ntiles, global float *dst, const int pitch,
-                          const int width, const int height, const int tiles_x,
-                          const int k, const float t0, const float t1, const int frame)
+                          global const float *nmax, global const float *nmax_b,
+                          global const int *tiles, const int ntiles, global float *dst,
+                          const int pitch, const int width, const int row0, const int row1,
+                          const int band0, const int band1, const int tiles_x, const int k,
+                          const float t0, const float t1, const int frame)
 {
   const int gid = get_global_id(0);
   const int qpt = k * k / 4;
@@ -654,7 +682,13 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const int tx = tiles[4 * tile], ty = tiles[4 * tile + 1], n = tiles[4 * tile + 2];
   const int jittered = tiles[4 * tile + 3];
   const int x = tx * k + (r % qrow) * 4, y = ty * k + r / qrow;
-  if(y >= height || x >= pitch) return;
+  if(y < band0 || y >= band1 || x >= pitch) return;
+  MG_ROWS(col, pitch, 4, row0);
+  MG_ROWS(aux, pitch, 4, row0);
+  MG_ROWS(dst, pitch, 4, row0);
+#if CURVED
+  MG_ROWS(auxb, pitch, 4, row0);
+#endif
 
   const float4 vn = vload4(ty * tiles_x + tx, nmax);   /* dominant velocity, |v| in .z */
   const float4 lane = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
@@ -666,8 +700,8 @@ kernel void motion_gather(global const float *col, global const float *aux,
 #if CURVED
   const float16 bc = vload16(0, auxb + base * 4);
   const float4 bxx = bc.s048c, bxy = bc.s159d;
-  /* the tile's dominant path: the backward motion of its fastest pixel (index in .w) */
-  const float2 bn = vn.z > 0.0f ? vload2(0, auxb + 4 * (size_t)as_int(vn.w)) : (float2)(0.0f);
+  /* the tile's dominant path: the backward motion of its fastest pixel */
+  const float2 bn = vload2(ty * tiles_x + tx, nmax_b);
 #else
   const float4 bxx = vxx, bxy = vxy;
   const float2 bn = vn.xy;
@@ -682,7 +716,7 @@ kernel void motion_gather(global const float *col, global const float *aux,
   float16 out;
   for(int pass = 0; pass < 2; pass++)   /* the second pass only after an overflow */
   {
-    out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, height,
+    out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
                                         vn, lane, fy, cc, vxx,
                                         vxy, zx, any_moving, t0, t1, dt, n, ell, hell, jit,
                                         scale));

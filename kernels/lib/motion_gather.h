@@ -14,20 +14,30 @@
 #define JITTER 1
 #endif
 
-/* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge, times
- * `scale`.  The float index is clamped before the int conversion so far-off positions cannot
- * overflow; the corners are scaled before they are interpolated, so with scale <= 1/2 no
- * difference of finite colours can overflow either. */
+/* A band of a tiled render (clfx.fx.motion.Rows): the buffer `p` (rows of `pitch` pixels of
+ * `ch` floats) holds the canvas rows from `row0` on; from here on it is addressed in canvas
+ * rows, as in the whole render (row0 0), so positions take the whole render's coordinates
+ * and only the band's offset is in the addressing.  Reads clamp to the rows the buffer holds
+ * (row0 <= y < row1): the canvas's edges where the buffer reaches them, elsewhere never hit
+ * (the band's margin covers every read). */
+#define MG_ROWS(p, pitch, ch, row0) ((p) -= (size_t)(row0) * (size_t)(pitch) * (ch))
+
+/* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge (rows
+ * row0 <= y < row1), times `scale`.  The float index is clamped before the int conversion
+ * so far-off positions cannot overflow; the corners are scaled before they are
+ * interpolated, so with scale <= 1/2 no difference of finite colours can overflow either. */
 inline float4 mg_fetch_scaled(global const float *col, const int pitch, const int w,
-                              const int h, const float px, const float py, const float scale)
+                              const int row0, const int row1, const float px, const float py,
+                              const float scale)
 {
 #if BILINEAR
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
   const float ax = u - fu, ay = v - fv;
-  const int iu = (int)clamp(fu, -1.0f, (float)w), iv = (int)clamp(fv, -1.0f, (float)h);
+  const int iu = (int)clamp(fu, -1.0f, (float)w);
+  const int iv = (int)clamp(fv, (float)(row0 - 1), (float)row1);
   const int xa = clfx_clampi(iu, 0, w - 1), xb = clfx_clampi(iu + 1, 0, w - 1);
-  const int ya = clfx_clampi(iv, 0, h - 1), yb = clfx_clampi(iv + 1, 0, h - 1);
+  const int ya = clfx_clampi(iv, row0, row1 - 1), yb = clfx_clampi(iv + 1, row0, row1 - 1);
   const float4 c00 = vload4(ya * pitch + xa, col) * scale;
   const float4 c10 = vload4(ya * pitch + xb, col) * scale;
   const float4 c01 = vload4(yb * pitch + xa, col) * scale;
@@ -36,16 +46,16 @@ inline float4 mg_fetch_scaled(global const float *col, const int pitch, const in
   return top + (bot - top) * ay;
 #else
   const int x = (int)clamp(floor(px), 0.0f, (float)(w - 1));
-  const int y = (int)clamp(floor(py), 0.0f, (float)(h - 1));
+  const int y = (int)clamp(floor(py), (float)row0, (float)(row1 - 1));
   return vload4(y * pitch + x, col) * scale;
 #endif
 }
 
 /* Colour at continuous position (px, py): mg_fetch_scaled unscaled. */
-inline float4 mg_fetch(global const float *col, const int pitch, const int w, const int h,
-                       const float px, const float py)
+inline float4 mg_fetch(global const float *col, const int pitch, const int w, const int row0,
+                       const int row1, const float px, const float py)
 {
-  return mg_fetch_scaled(col, pitch, w, h, px, py, 1.0f);
+  return mg_fetch_scaled(col, pitch, w, row0, row1, px, py, 1.0f);
 }
 
 /* Interleaved gradient noise (Jimenez 2014): a jitter in [0, 1) whose pattern has no low

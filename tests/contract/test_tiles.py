@@ -166,3 +166,88 @@ def test_dof_tiles_with_every_lens_and_window(rt, lens, layout, quality, monkeyp
                               **where).for_step(quality)
         frame = effects.plugin("dof").frame(p, ctx)
         assert frame.gathers[0.0].full_l >= 1 and frame.gathers[0.0].half.any()
+
+
+MOTION_SHUTTERS = {
+    # (shutter params, layout): centred on the frame's own place; opening over two frames with
+    # the data window inside the display window (the smear grows the window); closing short
+    # with overscan
+    "centred-180": ({"shutter_angle": 180.0, "shutter_offset": "centered"}, None),
+    "opening-360-inside": ({"shutter_angle": 360.0, "shutter_offset": "opening"}, "inside"),
+    "closing-90-overscan": ({"shutter_angle": 90.0, "shutter_offset": "closing"}, "overscan"),
+}
+"""Shutter shapes (and frame layouts) of the blurs of motion's tiled renders."""
+
+
+def backward_pass(shape):
+    """The other half of the vector pass: the swirl turned a little against the forward
+    motion, so paths are arcs (`clfx.fx.motion.path`)."""
+    v = effects.velocity_pass(shape).astype(np.float64)
+    c, s = np.cos(0.3), np.sin(0.3)
+    return np.ascontiguousarray(np.stack([c * v[..., 0] - s * v[..., 1],
+                                          s * v[..., 0] + c * v[..., 1]], axis=2), np.float32)
+
+
+CAMERA_MOTIONS = {
+    "pan-roll-zoom": {},                                   # the exact path gather
+    "tilt": {"length": 0.06, "direction": 100.0, "roll": 0.0, "zoom": 0.0},
+    "truck": {"truck": (0.3, 0.2), "roll": 0.0, "zoom": 0.0},          # the motion gather
+    "truck-roll": {"truck": (0.3, 0.2), "roll": 3.0},     # both halves: arcs
+    "dolly": {"dolly": 0.3, "roll": 0.0},
+}
+"""camera_blur's motions (over the contract's active pan, roll and zoom)."""
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("shutter", sorted(MOTION_SHUTTERS))
+@pytest.mark.parametrize("motion", sorted(CAMERA_MOTIONS))
+def test_camera_blur_tiles_with_every_motion(rt, monkeypatch, motion, shutter, quality):
+    from clfx.fx import motion as motion_fx
+
+    monkeypatch.setattr(motion_fx, "GRID_CHUNK_PIXELS", 1)   # one row of tiles at a time
+    params, layout = MOTION_SHUTTERS[shutter]
+    window, display = LAYOUTS[layout] if layout else (None, None)
+    p = effects.params("camera_blur", **params, **CAMERA_MOTIONS[motion])
+    assert_tiles_give_the_whole_render(rt, "camera_blur", p, quality, effects.scene((70, 90)),
+                                       rows=7, window=window, display_window=display)
+
+
+ROLLING_READOUTS = {
+    # (params, layout): rows read top-down from the first; bottom-up about the middle row with
+    # the data window inside the display window; columns left-right, t = 0 at the last, with
+    # overscan; right-left about the middle over a long readout (large shifts)
+    "top-down-first": ({}, None),
+    "bottom-up-centre-inside": ({"direction": "bottom-up", "reference": "centre"}, "inside"),
+    "left-right-last-overscan": ({"direction": "left-right", "reference": "last"}, "overscan"),
+    "right-left-centre-long": ({"direction": "right-left", "reference": "centre",
+                                "readout_fraction": 2.0}, None),
+}
+"""rolling_shutter's readouts (and frame layouts) of its tiled renders."""
+
+
+MOTION_CASES = ([("motion_blur", k, *v) for k, v in sorted(MOTION_SHUTTERS.items())]
+                + [("rolling_shutter", k, *v) for k, v in sorted(ROLLING_READOUTS.items())])
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("halves", [1, 2])
+@pytest.mark.parametrize("name,case,params,layout", MOTION_CASES,
+                         ids=[f"{n}-{c}" for n, c, *_ in MOTION_CASES])
+def test_velocity_effects_tile_at_every_shutter_and_path(rt, monkeypatch, name, case, params,
+                                                         layout, halves, quality):
+    # bands of 7 rows: a band's samples reach past its neighbours, the tiles of its velocity
+    # grid straddle bands (the grid and neighbour max are the frame's, built once, here from
+    # one row of tiles at a time: the dilation's rows past each chunk); positions and row
+    # times are the whole render's
+    from clfx.fx import motion
+    from clfx.plugins import rolling_shutter
+
+    for module in (motion, rolling_shutter):
+        monkeypatch.setattr(module, "GRID_CHUNK_PIXELS", 1)
+    window, display = LAYOUTS[layout] if layout else (None, None)
+    where = dict(window=window, display_window=display)
+    if halves == 2:
+        where["velocity_back"] = rt.upload(backward_pass((70, 90)),
+                                           window or Rect.from_size(90, 70))
+    assert_tiles_give_the_whole_render(rt, name, effects.params(name, **params), quality,
+                                       effects.scene((70, 90)), rows=7, **where)
