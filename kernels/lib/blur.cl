@@ -10,8 +10,8 @@
  *   TAPS        a rung of the tap-count ladder (clfx/fx/blur.py): the most taps the program
  *               takes, its tap loops fully unrolled with the taps past the real count (a
  *               runtime argument, `taps`) skipped, never read or weighted by 0 (0 * Inf is
- *               NaN); 0 or undefined: any count, a plain loop (long kernels; huge unrolled
- *               loops build slowly).  Direct kernels take 2 * radius + 1 taps.
+ *               NaN); 0 or undefined: any count, a plain loop (unrolled loops are what
+ *               costs to compile).  Direct kernels take 2 * radius + 1 taps.
  *   (border mode: a runtime argument of the direct kernels, only read near the borders:
  *    0 = zero (black outside), 1 = clamp to edge, 2 = mirror (reflect-101, periodic: any
  *    index stays in bounds); the gathers get mapped indices from the host)
