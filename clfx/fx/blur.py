@@ -31,9 +31,10 @@ The output may cover a different window than the input (``out``): a blur that sp
 past the frame renders into a window grown by ~3 sigma.  Each axis is handled independently:
 
 ``copy``    sigma < 0.3 px: the Gaussian's tails are below 4e-3 of the centre tap.
-``direct``  separable passes with a compile-time radius ``ceil(truncate * sigma)``, weights
-            precomputed on the host, 4 pixels per work-item (one float16 for RGBA), and no
-            index arithmetic inside the loop except near the borders.
+``direct``  separable passes of radius ``ceil(truncate * sigma)``, weights precomputed on the
+            host, 4 pixels per work-item (one float16 for RGBA), short tap loops unrolled to
+            a rung of :data:`TAP_RUNGS` (a few programs for every radius), and no index
+            arithmetic inside the loop except near the borders.
 ``pyramid`` cost independent of sigma: decimate by ``F = 2^k`` with a Gaussian prefilter of
             ``sigma_p = c * F`` fine pixels, blur at low resolution, and reconstruct with the
             cubic B-spline (variance ``F^2 / 3``).  Variances add:
@@ -57,7 +58,8 @@ final      4.0       0.8   2.0     float32; ~1e-4
 reference  6.0       --    inf     float64 direct (never a pyramid), error ~1e-7 (float32 I/O)
 =========  ========  ====  ======  =======================================================
 
-The kernels do not sanitise: NaN/Inf spread over the footprint.  Call
+The kernels do not sanitise: NaN/Inf spread over the footprint (no further: no tap past
+the kernel is read).  Call
 :func:`sanitize_nonfinite` first where inputs may hold them.
 
 References
@@ -180,18 +182,21 @@ def _quality(quality: "str | BlurLevel") -> BlurLevel:
 
 
 # -- host-side weight and index tables ------------------------------------------------------
-def _bucket_taps(taps: int) -> int:
-    """Round a tap count up so few programs are built (zero weights pad the rest)."""
-    if taps <= 17:
-        return taps
-    step = 4 if taps <= 65 else 16 if taps <= 257 else 64
-    return -(-taps // step) * step
+TAP_RUNGS = (8, 16)
+"""The tap-count ladder: a pass of ``n`` taps runs the program built for the smallest rung
+``>= n`` (its loops unrolled to the rung, the taps past ``n`` skipped at run time), or above
+the top rung the one with a plain loop (no ``TAPS`` define).  A few programs per channel count
+and precision cover every sigma, where each tap count had one (an animated blur size compiled
+a program per new count).  Unrolling is what costs to compile, and buys little beyond short
+kernels: tests/fx/test_blur.py on a cold kernel cache took 91 s of CPU with a program per
+count (64 programs), 82 s with rungs up to 64 (22), 23 s with these (13) and 14 s with none
+(6); warm, 960x540 passes of every rung choice timed within the noise (+-15%) of the exact
+counts, the plain loop included."""
 
 
-def _bucket_odd(taps: int) -> int:
-    """Like _bucket_taps for the direct kernels, whose tap count is odd (2R + 1)."""
-    b = _bucket_taps(taps)
-    return b if b % 2 else b + 1
+def _tap_rung(taps: int) -> int:
+    """The ``TAPS`` define of the program that runs ``taps`` taps (0: a plain loop)."""
+    return next((r for r in TAP_RUNGS if taps <= r), 0)
 
 
 def gaussian_weights(sigma: float, radius: int) -> np.ndarray:
@@ -323,20 +328,13 @@ def _rounded_weights(w: np.ndarray, dtype) -> np.ndarray:
 
 
 def _device_table(rt, table: _Table, rows: int, double: bool):
-    """(taps, idx buffer, weight buffer) with the tap count bucketed and rows padded."""
-    taps = _bucket_taps(table.idx.shape[1])
-    idx = np.zeros((rows, taps), np.int32)
+    """(taps, idx buffer, weight buffer) with rows padded to ``rows``."""
     dtype = _wdtype(double)
-    w = np.zeros((rows, taps), dtype)
-    src_idx = _pad_rows(table.idx, rows)
-    src_w = _rounded_weights(_pad_rows(table.w, rows), dtype)
+    idx = np.ascontiguousarray(_pad_rows(table.idx, rows)[:rows], np.int32)
+    w = _rounded_weights(_pad_rows(table.w, rows), dtype)
     if table.inside is not None:
-        src_w = src_w * _pad_rows(table.inside, rows).astype(dtype)
-    idx[:, :src_idx.shape[1]] = src_idx[:rows]
-    # padding taps read the first tap's pixel with weight 0 (always a valid index)
-    idx[:, src_idx.shape[1]:] = src_idx[:rows, :1]
-    w[:, :src_w.shape[1]] = src_w[:rows]
-    return taps, rt.to_device(idx), rt.to_device(w)
+        w = w * _pad_rows(table.inside, rows).astype(dtype)
+    return idx.shape[1], rt.to_device(idx), rt.to_device(np.ascontiguousarray(w[:rows]))
 
 
 # -- passes ---------------------------------------------------------------------------------
@@ -350,30 +348,32 @@ class _Pass:
 
 
 def _kernel(rt, name, channels, taps, double):
-    return rt.kernel(KERNEL_FILE, name, fp64=double, CH=channels, TAPS=taps)
+    rung = _tap_rung(taps)   # the plain-loop program is blur_sanitize's (no TAPS define)
+    taps_define = {"TAPS": rung} if rung else {}
+    return rt.kernel(KERNEL_FILE, name, fp64=double, CH=channels, **taps_define)
 
 
-def _direct_weights(rt, plan, taps, double):
+def _direct_weights(rt, plan, double):
     def make():
-        r = plan.radius
-        w = _rounded_weights(gaussian_weights(plan.sigma, r)[None, :], _wdtype(double))[0]
-        return rt.to_device(np.pad(w, (taps // 2 - r,)))
-    return _cached(rt, ("wdirect", plan.sigma, plan.truncate, taps, double), make)
+        w = gaussian_weights(plan.sigma, plan.radius)[None, :]
+        return rt.to_device(_rounded_weights(w, _wdtype(double))[0])
+    return _cached(rt, ("wdirect", plan.sigma, plan.truncate, double), make)
 
 
 def _direct(rt, axis, plan, ch, double, border, n_in, offset, rows, cols):
     """A direct Gaussian pass along x (``axis`` "h": ``n_in`` input columns) or y ("v":
     ``n_in`` input rows) into ``rows`` x ``cols`` pixels, output index j reading input
     j + ``offset``."""
-    taps = _bucket_odd(2 * plan.radius + 1)
-    wbuf = _direct_weights(rt, plan, taps, double)
+    taps = 2 * plan.radius + 1
+    wbuf = _direct_weights(rt, plan, double)
     knl = _kernel(rt, f"blur_direct_{axis}", ch, taps, double)
     i32 = np.int32
 
     def run(src, dst):
         head = ((src, i32(src.pitch), i32(n_in), dst, i32(dst.pitch), i32(rows)) if axis == "h"
                 else (src, i32(n_in), dst, i32(rows), i32(dst.pitch)))
-        rt.launch(knl, (dst.pitch // 4, rows), *head, i32(offset), wbuf, i32(BORDERS[border]))
+        rt.launch(knl, (dst.pitch // 4, rows), *head, i32(offset), wbuf, i32(taps),
+                  i32(BORDERS[border]))
     return _Pass(rows, cols, run)
 
 
@@ -383,7 +383,7 @@ LONG_SUM_TAPS = 64
 
 
 def _table_buffers(rt, t: _Table, rows: int, double: bool):
-    dbl = double or rt.use_fp64(_bucket_taps(t.idx.shape[1]) > LONG_SUM_TAPS)
+    dbl = double or rt.use_fp64(t.idx.shape[1] > LONG_SUM_TAPS)
     return (t.n_out, dbl) + _device_table(rt, t, rows, dbl)
 
 
@@ -397,7 +397,7 @@ def _gather_h(rt, key, make_table, ch, double, rows):
 
     def run(src, dst):
         rt.launch(knl, (dst.pitch // 4, rows), src, np.int32(src.pitch), dst,
-                  np.int32(dst.pitch), np.int32(rows), ibuf, wbuf)
+                  np.int32(dst.pitch), np.int32(rows), ibuf, wbuf, np.int32(taps))
     return _Pass(rows, cols, run)
 
 
@@ -410,7 +410,7 @@ def _gather_v(rt, key, make_table, ch, double, cols):
 
     def run(src, dst):
         rt.launch(knl, (dst.pitch // 4, rows), src, dst, np.int32(dst.pitch), np.int32(rows),
-                  ibuf, wbuf)
+                  ibuf, wbuf, np.int32(taps))
     return _Pass(rows, cols, run)
 
 

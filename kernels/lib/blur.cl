@@ -7,7 +7,11 @@
  *
  * Defines
  *   CH          channels per pixel (1, 2, 4)
- *   TAPS        taps per output (compile-time, so loops unroll); direct kernels: 2 * RADIUS + 1
+ *   TAPS        a rung of the tap-count ladder (clfx/fx/blur.py): the most taps the program
+ *               takes, its tap loops fully unrolled with the taps past the real count (a
+ *               runtime argument, `taps`) skipped, never read or weighted by 0 (0 * Inf is
+ *               NaN); 0 or undefined: any count, a plain loop (unrolled loops are what
+ *               costs to compile).  Direct kernels take 2 * radius + 1 taps.
  *   (border mode: a runtime argument of the direct kernels, only read near the borders:
  *    0 = zero (black outside), 1 = clamp to edge, 2 = mirror (reflect-101, periodic: any
  *    index stays in bounds); the gathers get mapped indices from the host)
@@ -31,15 +35,15 @@
 #define CH 4
 #endif
 #ifndef TAPS
-#define TAPS 1
+#define TAPS 0
 #endif
-/* Unroll short loops only: thousands of unrolled taps make huge, slow builds. */
-#if TAPS <= 64
-#define BLUR_UNROLL _Pragma("unroll")
+/* TAP_LOOP(t, n): for t = 0 .. n - 1, in order (the sums are the same as with n exactly
+ * compiled in).  With a rung, unrolled to TAPS guarded steps; without, a runtime loop. */
+#if TAPS > 0
+#define TAP_LOOP(t, n) _Pragma("unroll") for(int t = 0; t < TAPS; ++t) if(t < (n))
 #else
-#define BLUR_UNROLL
+#define TAP_LOOP(t, n) for(int t = 0; t < (n); ++t)
 #endif
-#define RADIUS ((TAPS - 1) / 2)
 
 typedef REAL wtype;
 
@@ -98,24 +102,24 @@ inline wtype blur_inside(int i, int n, int border)
 /* Gaussian along rows.  dst column j is src column j + offset; `rows` rows of both. */
 kernel void blur_direct_h(global const float *src, const int src_pitch, const int src_width,
                           global float *dst, const int dst_pitch, const int rows,
-                          const int offset, global const wtype *weights, const int border)
+                          const int offset, global const wtype *weights, const int taps,
+                          const int border)
 {
   const int q = get_global_id(0), y = get_global_id(1);
   if(y >= rows || q * 4 >= dst_pitch) return;
   global const float *row = src + (size_t)y * src_pitch * CH;
-  const int first = q * 4 + offset - RADIUS;   /* input index of tap 0 of lane 0 */
+  const int first = q * 4 + offset - (taps - 1) / 2;   /* input index of tap 0 of lane 0 */
   realq_t acc = (realq_t)(0);
-  if(first >= 0 && first + 3 + 2 * RADIUS < src_width)
+  if(first >= 0 && first + 2 + taps < src_width)
   {
     /* interior: every tap is a contiguous load of the 4 pixels, no index arithmetic */
-BLUR_UNROLL
-    for(int t = 0; t < TAPS; ++t)
+    TAP_LOOP(t, taps)
       acc += weights[t] * TO_REALQ(LOADQ(first + t, row));
   }
   else
   {
     realp_t a0 = (realp_t)(0), a1 = (realp_t)(0), a2 = (realp_t)(0), a3 = (realp_t)(0);
-    for(int t = 0; t < TAPS; ++t)
+    for(int t = 0; t < taps; ++t)
     {
       const wtype w = weights[t];
       const int i = first + t;
@@ -132,22 +136,21 @@ BLUR_UNROLL
 /* Gaussian along columns.  dst row j is src row j + offset; both have `pitch` pixels. */
 kernel void blur_direct_v(global const float *src, const int src_rows, global float *dst,
                           const int dst_rows, const int pitch, const int offset,
-                          global const wtype *weights, const int border)
+                          global const wtype *weights, const int taps, const int border)
 {
   const int q = get_global_id(0), j = get_global_id(1);
   if(j >= dst_rows || q * 4 >= pitch) return;
-  const int first = j + offset - RADIUS;
+  const int first = j + offset - (taps - 1) / 2;
   global const float *col = src + (size_t)q * 4 * CH;
   realq_t acc = (realq_t)(0);
-  if(first >= 0 && first + 2 * RADIUS < src_rows)
+  if(first >= 0 && first + taps <= src_rows)
   {
-BLUR_UNROLL
-    for(int t = 0; t < TAPS; ++t)
+    TAP_LOOP(t, taps)
       acc += weights[t] * TO_REALQ(LOADQ((size_t)(first + t) * pitch, col));
   }
   else
   {
-    for(int t = 0; t < TAPS; ++t)
+    for(int t = 0; t < taps; ++t)
     {
       const int i = first + t;
       const wtype w = weights[t] * blur_inside(i, src_rows, border);
@@ -157,42 +160,41 @@ BLUR_UNROLL
   STOREQ(TO_FLOATQ(acc), (size_t)j * pitch + q * 4, dst);
 }
 
-/* Table-driven gather along rows: out[y][j] = sum_t w[j*TAPS+t] * in[y][idx[j*TAPS+t]].
+/* Table-driven gather along rows: out[y][j] = sum_t w[j*taps+t] * in[y][idx[j*taps+t]].
  * The tables cover dst_pitch columns (padding columns point at valid pixels). */
 kernel void blur_gather_h(global const float *src, const int src_pitch, global float *dst,
                           const int dst_pitch, const int rows, global const int *idx,
-                          global const wtype *wtab)
+                          global const wtype *wtab, const int taps)
 {
   const int q = get_global_id(0), y = get_global_id(1);
   if(y >= rows || q * 4 >= dst_pitch) return;
   global const float *row = src + (size_t)y * src_pitch * CH;
   const int j = q * 4;
-  global const int *i0 = idx + (size_t)j * TAPS;
-  global const wtype *w0 = wtab + (size_t)j * TAPS;
+  global const int *i0 = idx + (size_t)j * taps;
+  global const wtype *w0 = wtab + (size_t)j * taps;
   realp_t a0 = (realp_t)(0), a1 = (realp_t)(0), a2 = (realp_t)(0), a3 = (realp_t)(0);
-BLUR_UNROLL
-  for(int t = 0; t < TAPS; ++t)
+  TAP_LOOP(t, taps)
   {
     a0 += w0[t] * TO_REALP(LOADP(i0[t], row));
-    a1 += w0[TAPS + t] * TO_REALP(LOADP(i0[TAPS + t], row));
-    a2 += w0[2 * TAPS + t] * TO_REALP(LOADP(i0[2 * TAPS + t], row));
-    a3 += w0[3 * TAPS + t] * TO_REALP(LOADP(i0[3 * TAPS + t], row));
+    a1 += w0[taps + t] * TO_REALP(LOADP(i0[taps + t], row));
+    a2 += w0[2 * taps + t] * TO_REALP(LOADP(i0[2 * taps + t], row));
+    a3 += w0[3 * taps + t] * TO_REALP(LOADP(i0[3 * taps + t], row));
   }
   STOREQ(TO_FLOATQ(((realq_t)(a0, a1, a2, a3))), (size_t)y * dst_pitch + j, dst);
 }
 
-/* Table-driven gather along columns: out[j][x] = sum_t w[j*TAPS+t] * in[idx[j*TAPS+t]][x]. */
+/* Table-driven gather along columns: out[j][x] = sum_t w[j*taps+t] * in[idx[j*taps+t]][x]. */
 kernel void blur_gather_v(global const float *src, global float *dst, const int pitch,
-                          const int dst_rows, global const int *idx, global const wtype *wtab)
+                          const int dst_rows, global const int *idx, global const wtype *wtab,
+                          const int taps)
 {
   const int q = get_global_id(0), j = get_global_id(1);
   if(j >= dst_rows || q * 4 >= pitch) return;
   global const float *col = src + (size_t)q * 4 * CH;
-  global const int *i0 = idx + (size_t)j * TAPS;
-  global const wtype *w0 = wtab + (size_t)j * TAPS;
+  global const int *i0 = idx + (size_t)j * taps;
+  global const wtype *w0 = wtab + (size_t)j * taps;
   realq_t acc = (realq_t)(0);
-BLUR_UNROLL
-  for(int t = 0; t < TAPS; ++t)
+  TAP_LOOP(t, taps)
     acc += w0[t] * TO_REALQ(LOADQ((size_t)i0[t] * pitch, col));
   STOREQ(TO_FLOATQ(acc), (size_t)j * pitch + q * 4, dst);
 }

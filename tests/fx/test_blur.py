@@ -163,6 +163,47 @@ def test_sanitize_nonfinite_counts_pixels(rt):
     assert (got[3, 4] == 0).all()
 
 
+def test_nonfinite_stays_in_the_kernel_footprint(rt):
+    """A NaN reaches exactly the pixels within the kernel's radius, and an Inf gives Inf,
+    never NaN: no tap past the real kernel is read, not even with weight 0 (0 * Inf is NaN;
+    the tap-count ladder skips the rung's spare taps)."""
+    n, at = 400, 200
+    for sigma, quality in ((2.3, "final"), (2.0, "draft"), (3.0, "reference"), (12.0, "reference")):
+        radius = B.blur_plan(sigma, quality).radius
+        src = np.zeros((1, n), np.float32)
+        src[0, at] = np.nan
+        got = blur(rt, src, sigma, 0.0, quality=quality)[0]
+        x = np.arange(n)
+        assert (np.isnan(got) == (abs(x - at) <= radius)).all(), (sigma, quality, radius)
+    for sigma in (9.0, 30.0):   # pyramids: decimation, coarse blur and B-spline gathers
+        src = np.zeros((1, n), np.float32)
+        src[0, at] = np.inf
+        got = blur(rt, src, sigma, 0.0)[0]
+        assert not np.isnan(got).any() and np.isposinf(got[at]), sigma
+
+
+def test_few_programs_cover_every_sigma(rt, monkeypatch):
+    """Tap counts share a ladder of programs (B.TAP_RUNGS): a cold kernel cache compiles a
+    handful for blurs of every size, not one per tap count (an animated size rebuilt)."""
+    programs, taps = set(), set()
+    kernel = rt.kernel
+
+    def spy(file, name, fp64=False, **defines):
+        if file == B.KERNEL_FILE:
+            programs.add((fp64, tuple(sorted(defines.items()))))
+        return kernel(file, name, fp64=fp64, **defines)
+
+    monkeypatch.setattr(rt, "kernel", spy)
+    img = rt.upload(np.ones((9, 70, 4), np.float32))
+    for sigma in np.linspace(0.3, 30.0, 45):
+        B.gaussian_blur(rt, img, float(sigma), quality="final")
+        taps.add(2 * B.blur_plan(float(sigma), "final").radius + 1)
+    assert len(taps) > 2 * len(programs)
+    for fp64 in (False, True):   # gathers of over LONG_SUM_TAPS taps sum in float64
+        rungs = [p for p in programs if p[0] == fp64]
+        assert len(rungs) <= len(B.TAP_RUNGS) + 1, sorted(programs)
+
+
 def test_pyramid_helpers(rt, rng):
     src = np.full((37, 50, 4), 2.5, np.float32)
     coarse = B.downsample2x(rt, rt.upload(src))
