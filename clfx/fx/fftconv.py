@@ -57,8 +57,9 @@ Every level keeps its semantics in blocks: "direct" blocks give the same bits as
 FFT blocks (float64, float32 + split) differ from one grid by FFT rounding, the split's bright
 pixels are counted over the whole support first (the float64 fallback is one decision per
 frame), and "half" blocks start at even offsets from the support, so their half-resolution
-pixels are the one grid's.  Below the cap (every 1080p and 4K glare, every 960x540 effect)
-the one-grid path runs unchanged, with the same bits as before blocks.
+pixels are the one grid's.  Below the cap (every 960x540 and 1080p effect; at 4K a glare
+whose highlights leave a margin, the 2160 x 3840 frame's full grid is 3500 x 5184 = 1.08 x the
+cap, two blocks) the one-grid path runs unchanged, with the same bits as before blocks.
 
 Why blocks inside the effect rather than the look's band tiler (``whole_frame`` stays set):
 a band renders from its region of interest, the band plus the PSF radius above and below
@@ -572,9 +573,8 @@ def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, h
 # -- blocks: overlap-save over output blocks --------------------------------------------------
 MAX_BLOCK_CELLS = 2 ** 24
 """Most cells (N1 x N2) of one block's FFT grid: 128 MiB per float64 plane, 256 MiB for the
-block's RGBA input.  A convolution whose one-grid FFT fits runs as one block (1080p and 4K
-glare, every 960x540 effect); a larger one is cut into output blocks
-(:func:`convolve_blocks`)."""
+block's RGBA input.  A convolution whose one-grid FFT fits runs as one block (every 960x540
+and 1080p effect); a larger one is cut into output blocks (:func:`convolve_blocks`)."""
 MIN_BLOCK = 256
 """Smallest block side kept by a PSF so large that :data:`MAX_BLOCK_CELLS` leaves less (the
 grid then grows past the cap rather than spending the transform on overlap)."""
