@@ -44,8 +44,9 @@ Non-finite input values are treated as 0 (the caller counts them; ``SceneAnalysi
 
 Blocks (:func:`convolve_blocks`, what :func:`spread` runs)
 -------------------------------------------------------------
-A convolution whose one FFT grid would exceed :data:`MAX_BLOCK_CELLS` cells (8K glare:
-6960 x 10320, 575 MB per float64 plane, the grid and the PSF spectrum each) is cut into
+A convolution whose one FFT grid would exceed :data:`MAX_BLOCK_CELLS` cells (8K glare
+with highlights all over the frame: 6960 x 10320, 548 MiB per float64 plane, the grid and the
+PSF spectrum each) is cut into
 output blocks (overlap-save): each block's grid is the block plus the PSF (smooth sizes,
 :func:`block_shape` picks the fewest transformed cells under the cap), its input the pixels
 that reach it (:func:`reach`), its result the exact linear convolution there; one grid, plan
@@ -57,9 +58,9 @@ Every level keeps its semantics in blocks: "direct" blocks give the same bits as
 FFT blocks (float64, float32 + split) differ from one grid by FFT rounding, the split's bright
 pixels are counted over the whole support first (the float64 fallback is one decision per
 frame), and "half" blocks start at even offsets from the support, so their half-resolution
-pixels are the one grid's.  Below the cap (every 960x540 and 1080p effect; at 4K a glare
-whose highlights leave a margin, the 2160 x 3840 frame's full grid is 3500 x 5184 = 1.08 x the
-cap, two blocks) the one-grid path runs unchanged, with the same bits as before blocks.
+pixels are the one grid's.  Below the cap (every 960x540, 1080p and 4K frame) the one-grid
+path runs unchanged, with the same bits as before blocks, and still no frame-sized highlight
+image: only the support's highlights are loaded, and the output is made after the transform.
 
 Why blocks inside the effect rather than the look's band tiler (``whole_frame`` stays set):
 a band renders from its region of interest, the band plus the PSF radius above and below
@@ -571,10 +572,14 @@ def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, h
 
 
 # -- blocks: overlap-save over output blocks --------------------------------------------------
-MAX_BLOCK_CELLS = 2 ** 24
-"""Most cells (N1 x N2) of one block's FFT grid: 128 MiB per float64 plane, 256 MiB for the
-block's RGBA input.  A convolution whose one-grid FFT fits runs as one block (every 960x540
-and 1080p effect); a larger one is cut into output blocks (:func:`convolve_blocks`)."""
+MAX_BLOCK_CELLS = 2 ** 25
+"""Most cells (N1 x N2) of one block's FFT grid: 256 MiB per float64 plane, 512 MiB for the
+block's RGBA input.  A convolution whose one-grid FFT fits runs as one block (every 960x540,
+1080p and 4K effect, and glare on the 8K synthetic plate, whose highlights span 3904 x 1344
+px: 4000 x 6720 cells); a larger one is cut into output blocks (:func:`convolve_blocks`).
+The cap trades memory for transform work: blocks of a 2645 px PSF under 2^24 cells are 11 %
+output, so the 8K plate's glare took 15 blocks, 8.9x the one grid's cells, for 1366 MiB of
+device peak instead of about 1520."""
 MIN_BLOCK = 256
 """Smallest block side kept by a PSF so large that :data:`MAX_BLOCK_CELLS` leaves less (the
 grid then grows past the cap rather than spending the transform on overlap)."""

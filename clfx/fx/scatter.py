@@ -144,7 +144,8 @@ class ScatterPlugin(SpreadRegions):
         :data:`clfx.fx.fftconv.MAX_BLOCK_CELLS`)."""
         src = ctx.source
         out_window = self.output_window(p, ctx)
-        dst = rt.image(out_window, 4)
+        out = []                             # the output, made by the first block (one block:
+                                             # after its transform's buffers are freed)
 
         def load(rect):
             if rect == src.window:
@@ -156,18 +157,20 @@ class ScatterPlugin(SpreadRegions):
             return sub
 
         def emit(rect, g):
+            if not out:
+                out.append(rt.image(out_window, 4))
             if rect == out_window:
-                mix(g, dst, rect)
+                mix(g, out[0], rect)
                 return
             mix(g, g, rect)                  # in place: a work-item reads g, then writes it
-            rt.paste(g, dst, rect)
+            rt.paste(g, out[0], rect)
 
         info = fftconv.ConvolveInfo()
         fftconv.spread(rt, load, k, self.level(ctx), out_window=out_window,
                        support=self.highlight_support(p, ctx), split_level=split, info=info,
                        emit=emit)
         ctx.notes.extend(f"{self.descriptor.name}: {note}" for note in info.notes)
-        return dst
+        return out[0]
 
     def render(self, rt, p, ctx):
         name, kfile = self.descriptor.name, self.descriptor.kernel

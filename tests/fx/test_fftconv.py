@@ -245,12 +245,13 @@ def test_blocks_fall_back_to_float64_once_for_many_bright_pixels(rt, rng, monkey
 
 def test_block_shape_bounds_the_grid_and_keeps_small_frames_whole():
     assert fftconv.block_shape(540, 960, 331, 331) == (540, 960)
-    for h, w, k in ((4320, 7680, 2641), (4320, 7680, 331), (2160, 3840, 1323), (50, 9000, 31)):
+    for h, w, k in ((4320, 7680, 2641), (4320, 7680, 331), (8640, 15360, 2641),
+                    (50, 90000, 31)):
         b1, b2 = fftconv.block_shape(h, w, k, k)
         n1, n2 = fftconv.fft_size(b1 + k - 1), fftconv.fft_size(b2 + k - 1, even=True)
         assert n1 * n2 <= fftconv.MAX_BLOCK_CELLS and b1 <= h and b2 <= w
         assert min(b1, b2) >= min(fftconv.MIN_BLOCK, h, w)
     # a PSF too large for the cap keeps MIN_BLOCK sides: the smallest such grid, past the cap
-    b1, b2 = fftconv.block_shape(9000, 9000, 4001, 4001)
-    n = fftconv.fft_size(4000 + fftconv.MIN_BLOCK)
-    assert n * n > fftconv.MAX_BLOCK_CELLS and b1 == n - 4000 and b1 >= fftconv.MIN_BLOCK
+    b1, b2 = fftconv.block_shape(12000, 12000, 6001, 6001)
+    n = fftconv.fft_size(6000 + fftconv.MIN_BLOCK)
+    assert n * n > fftconv.MAX_BLOCK_CELLS and b1 == n - 6000 and b1 >= fftconv.MIN_BLOCK
