@@ -42,9 +42,36 @@ Algorithms
 
 Non-finite input values are treated as 0 (the caller counts them; ``SceneAnalysis`` does).
 
+Blocks (:func:`convolve_blocks`, what :func:`spread` runs)
+-------------------------------------------------------------
+A convolution whose one FFT grid would exceed :data:`MAX_BLOCK_CELLS` cells (8K glare
+with highlights all over the frame: 6960 x 10320, 548 MiB per float64 plane, the grid and the
+PSF spectrum each) is cut into
+output blocks (overlap-save): each block's grid is the block plus the PSF (smooth sizes,
+:func:`block_shape` picks the fewest transformed cells under the cap), its input the pixels
+that reach it (:func:`reach`), its result the exact linear convolution there; one grid, plan
+and PSF spectrum serve every block of the call.  The input may be a loader and the output a
+consumer (``emit``), so the glare family (``clfx.fx.scatter.ScatterPlugin.spread_mixed``)
+computes each block's highlights from the source and mixes each output block into the frame
+at once: beside the step's source and output, only one block's buffers are on the device.
+Every level keeps its semantics in blocks: "direct" blocks give the same bits as one gather,
+FFT blocks (float64, float32 + split) differ from one grid by FFT rounding, the split's bright
+pixels are counted over the whole support first (the float64 fallback is one decision per
+frame), and "half" blocks start at even offsets from the support, so their half-resolution
+pixels are the one grid's.  Below the cap (every 960x540, 1080p and 4K frame) the one-grid
+path runs unchanged, with the same bits as before blocks, and still no frame-sized highlight
+image: only the support's highlights are loaded, and the output is made after the transform.
+
+Why blocks inside the effect rather than the look's band tiler (``whole_frame`` stays set):
+a band renders from its region of interest, the band plus the PSF radius above and below
+(8K glare: a 101-row band reads 2741 rows, a 337 MB copy of the source, and its output as
+large), and each band re-transforms the blocks it crosses; internal blocks read each input
+pixel only for the blocks it reaches, keep no band-sized copies, and the untiled render is
+the only render, so "tiled" and "whole" are the same bits by construction.
+
 Notes
 -----
-Memory: the work buffer holds ``B x N1 x (N2 + 2)`` reals (B = channels per batch); channels
+Memory (one block, or the one grid): the work buffer holds ``B x N1 x (N2 + 2)`` reals (B = channels per batch); channels
 are processed one at a time when a batch would exceed :data:`MAX_BATCH_BYTES`.  At 3840x2160
 with a PSF radius of a quarter diagonal the float64 grid is ~3300 x 4950: ~130 MB per plane.
 The PSF is placed on the grid on the device (its wrapped quadrants copied into the zeroed
@@ -54,6 +81,7 @@ References: Spencer et al. 1995 (glare PSF, see ``clfx.fx.psf``); VkFFT (Tolmach
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from dataclasses import dataclass, field, fields
@@ -89,6 +117,7 @@ class ConvolveInfo:
     grid: tuple[int, int] | None = None
     bright_pixels: int = 0
     fallback: str = ""
+    blocks: int = 1
     notes: list[str] = field(default_factory=list)
 
 
@@ -261,6 +290,21 @@ def clear_caches(rt) -> None:
 
 
 # -- public API ----------------------------------------------------------------------------
+def _checked(rt, psf, method: str, precision: str, info: ConvolveInfo | None):
+    """The PSF as (kh, kw, planes) float64, the precision granted, and the info to fill;
+    raises ValueError on a bad PSF, method or precision."""
+    k = _as_psf(psf)
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r} is not one of {PRECISIONS}")
+    if method not in METHODS:
+        raise ValueError(f"method {method!r} is not one of {METHODS}")
+    if precision == "float64" and not rt.use_fp64(True):   # says so once on stderr
+        precision = "float32"
+    info = info if info is not None else ConvolveInfo()
+    info.method, info.precision = method, precision
+    return k, precision, info
+
+
 def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | None = None,
              precision: str = "float64", threshold_split: float | None = None,
              split_max_points: int = 256, method: str = "fft", info: ConvolveInfo | None = None):
@@ -307,18 +351,20 @@ def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | No
     --------
     >>> out = convolve(rt, highlights, psf, out_window=rod, precision="float64")  # doctest: +SKIP
     """
-    k = _as_psf(psf)
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision {precision!r} is not one of {PRECISIONS}")
-    if method not in METHODS:
-        raise ValueError(f"method {method!r} is not one of {METHODS}")
-    if precision == "float64" and not rt.use_fp64(True):   # says so once on stderr
-        precision = "float32"
-    info = info if info is not None else ConvolveInfo()
-    info.method, info.precision = method, precision
+    k, precision, info = _checked(rt, psf, method, precision, info)
     kh, kw = k.shape[:2]
     support = img.window if support is None else support.intersect(img.window)
     out_window = out_window or full_region(support, kh, kw)
+    return _convolve(rt, img, k, support, out_window, method, precision, threshold_split,
+                     split_max_points, info)
+
+
+def _convolve(rt, img, k, support, out_window, method, precision, split, max_points, info,
+              grid=None, spectrum=None, half=None):
+    """:func:`convolve` once its arguments are checked; ``grid``, ``spectrum`` (the PSF's,
+    on that grid) and ``half`` (the half-resolution block) are a block's
+    (:func:`convolve_blocks`): the same for every block of a frame."""
+    kh, kw = k.shape[:2]
     dst = rt.image(out_window, img.channels)
     effective = out_window.intersect(full_region(support, kh, kw))
     if support.empty or effective.empty:
@@ -326,14 +372,15 @@ def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | No
     if method == "direct":
         _direct(rt, img, k, support, effective, dst, precision)
     elif method == "half":
-        _half(rt, img, k, support, effective, dst, info)
+        _half(rt, img, k, support, effective, dst, info, grid, spectrum, half)
     else:
-        _fft(rt, img, k, support, effective, dst, precision, threshold_split,
-             split_max_points, info)
+        _fft(rt, img, k, support, effective, dst, precision, split, max_points, info, grid,
+             spectrum)
     return dst
 
 
-def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info):
+def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info, grid=None,
+         spectrum=None):
     kh, kw, planes = k.shape
     if split is not None and precision == "float32":
         bright = _bright_pixels(rt, img, support, float(split), max_points)
@@ -348,13 +395,16 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
     else:
         split, bright = None, None
     info.precision = precision
-    n1, n2 = fft_grid(support, effective, kh, kw)
+    need = fft_grid(support, effective, kh, kw)
+    n1, n2 = grid or need
+    if n1 < need[0] or n2 < need[1]:
+        raise ValueError(f"FFT grid {grid} is smaller than the {need} this block needs")
     info.grid = (n1, n2)
     nch = 1 if img.channels == 1 else 3
     real = _real(precision)
     itemsize = np.dtype(real).itemsize
     batch = nch if nch * n1 * (n2 + 2) * itemsize <= MAX_BATCH_BYTES else 1
-    spec, spec_planes = psf_spectrum(rt, k, n1, n2, precision)
+    spec, spec_planes = spectrum or psf_spectrum(rt, k, n1, n2, precision)
     work = rt.buffer(batch * n1 * (n2 + 2) * itemsize)
     shape = (batch, n1, n2 + 2)
     app = _plan(rt, shape, precision)
@@ -387,14 +437,8 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
 def _bright_pixels(rt, img, support, split, max_points):
     """Positions and values of the support's pixels above ``split`` (row order), or None if
     there are more than ``max_points``."""
-    i32 = np.int32
-    sx, sy = support.offset_in(img.window)
+    n, args = _bright_rows(rt, img, support, split)
     sh = support.height
-    counts = rt.buffer(4 * sh)
-    args = (img, i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
-            i32(sh), np.float32(split))
-    rt.launch(_kernel(rt, "fftconv_count_bright"), (sh,), *args, counts)
-    n = rt.from_device(counts, np.int32, sh)
     total = int(n.sum())
     if total > max_points:
         return None
@@ -405,6 +449,18 @@ def _bright_pixels(rt, img, support, split, max_points):
     val = rt.buffer(16 * total)
     rt.launch(_kernel(rt, "fftconv_compact_bright"), (sh,), *args, offsets, pos, val)
     return (pos, val, total)
+
+
+def _bright_rows(rt, img, support, split):
+    """Per support row, how many pixels have a largest channel above ``split`` (and the
+    kernel arguments that found them)."""
+    i32 = np.int32
+    sx, sy = support.offset_in(img.window)
+    counts = rt.buffer(4 * support.height)
+    args = (img, i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
+            i32(support.height), np.float32(split))
+    rt.launch(_kernel(rt, "fftconv_count_bright"), (support.height,), *args, counts)
+    return rt.from_device(counts, np.int32, support.height), args
 
 
 def _psf_planes_padded(k: np.ndarray, pad: int) -> np.ndarray:
@@ -471,23 +527,41 @@ def tent_downsample(k: np.ndarray) -> np.ndarray:
     return np.stack([ay @ k[..., p] @ ax.T for p in range(k.shape[2])], axis=2)
 
 
-def _half(rt, img, k, support, effective, dst, info):
-    i32 = np.int32
-    hw, hh = -(-support.width // 2), -(-support.height // 2)
-    half_in = rt.image(Rect(0, 0, hw, hh), 4)
-    sx, sy = support.offset_in(img.window)
-    rt.launch(_kernel(rt, "fftconv_down2"), (half_in.pitch, hh), img,
-              i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
-              i32(support.height), half_in, i32(half_in.pitch), i32(hw), i32(hh))
+def half_window(support: Rect, effective: Rect) -> Rect:
+    """The half-resolution pixels (coordinates: support origin halved) that the bilinear
+    upsampling of ``effective`` reads."""
     # output pixel x (support coords) samples half-res u = (x - 0.5) / 2 and u + 1
     ax0, ay0 = effective.x0 - support.x0, effective.y0 - support.y0
     ax1, ay1 = effective.x1 - support.x0, effective.y1 - support.y0
-    hout = Rect(math.floor((ax0 - 0.5) / 2), math.floor((ay0 - 0.5) / 2),
+    return Rect(math.floor((ax0 - 0.5) / 2), math.floor((ay0 - 0.5) / 2),
                 math.floor((ax1 - 1.5) / 2) + 2, math.floor((ay1 - 1.5) / 2) + 2)
-    # the half-resolution PSF once per PSF (host matrix products: 40 ms for a 397 px PSF)
-    kh2 = rt.cache.get(("fftconv.spectrum", "half psf", psf_digest(k)), lambda: tent_downsample(k))
+
+
+def half_psf(rt, k: np.ndarray) -> np.ndarray:
+    """The half-resolution PSF, once per PSF (host matrix products: 40 ms for a 397 px PSF)."""
+    return rt.cache.get(("fftconv.spectrum", "half psf", psf_digest(k)),
+                        lambda: tent_downsample(k))
+
+
+def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, hi=None):
+    """One pyramid level; ``hi``: the half-resolution pixels to build (a block's; default
+    all of the support's), from the full-resolution pixels of ``img`` they sum."""
+    i32 = np.int32
+    hw, hh = -(-support.width // 2), -(-support.height // 2)
+    hi = hi or Rect(0, 0, hw, hh)
+    half_in = rt.image(hi, 4)
+    sx, sy = support.offset_in(img.window)
+    sx, sy = sx + 2 * hi.x0, sy + 2 * hi.y0
+    rt.launch(_kernel(rt, "fftconv_down2"), (half_in.pitch, hi.height), img,
+              i32(img.pitch), i32(img.channels), i32(sx), i32(sy),
+              i32(min(support.width - 2 * hi.x0, 2 * hi.width)),
+              i32(min(support.height - 2 * hi.y0, 2 * hi.height)), half_in,
+              i32(half_in.pitch), i32(hi.width), i32(hi.height))
+    hout = half_window(support, effective)
+    kh2 = half_psf(rt, k)
     sub = ConvolveInfo()
-    half_out = convolve(rt, half_in, kh2, out_window=hout, precision="float32", info=sub)
+    half_out = _convolve(rt, half_in, _as_psf(kh2), hi, hout, "fft", "float32", None, 0, sub,
+                         grid, spectrum)
     info.grid = sub.grid
     ex0, ey0 = effective.offset_in(dst.window)
     rt.launch(_kernel(rt, "fftconv_up2"), (dst.pitch, dst.height), half_out,
@@ -495,6 +569,225 @@ def _half(rt, img, k, support, effective, dst, info):
               i32(hout.y0), dst, i32(dst.pitch), i32(dst.channels), i32(dst.width),
               i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
               i32(ex0), i32(ey0), i32(ex0 + effective.width), i32(ey0 + effective.height))
+
+
+# -- blocks: overlap-save over output blocks --------------------------------------------------
+MAX_BLOCK_CELLS = 2 ** 25
+"""Most cells (N1 x N2) of one block's FFT grid: 256 MiB per float64 plane, 512 MiB for the
+block's RGBA input.  A convolution whose one-grid FFT fits runs as one block (every 960x540,
+1080p and 4K effect, and glare on the 8K synthetic plate, whose highlights span 3904 x 1344
+px: 4000 x 6720 cells); a larger one is cut into output blocks (:func:`convolve_blocks`).
+The cap trades memory for transform work: blocks of a 2645 px PSF under 2^24 cells are 11 %
+output, so the 8K plate's glare took 15 blocks, 8.9x the one grid's cells, for 1366 MiB of
+device peak instead of about 1520."""
+MIN_BLOCK = 256
+"""Smallest block side kept by a PSF so large that :data:`MAX_BLOCK_CELLS` leaves less (the
+grid then grows past the cap rather than spending the transform on overlap)."""
+
+
+def reach(rect: Rect, kh: int, kw: int) -> Rect:
+    """The input pixels whose light reaches ``rect`` through a (kh, kw) PSF."""
+    cx, cy = kw // 2, kh // 2
+    return Rect(rect.x0 - (kw - 1 - cx), rect.y0 - (kh - 1 - cy), rect.x1 + cx, rect.y1 + cy)
+
+
+@functools.lru_cache(maxsize=64)
+def _smooth_sizes(lo: int, hi: int, even: bool = False) -> list[int]:
+    out, n = [], fft_size(lo, even=even)
+    while n <= hi:
+        out.append(n)
+        n = fft_size(n + 1, even=even)
+    return out or [fft_size(lo, even=even)]
+
+
+def block_shape(height: int, width: int, kh: int, kw: int,
+                cells: int | None = None) -> tuple[int, int]:
+    """(rows, columns) of the output blocks covering ``height`` x ``width`` with a (kh, kw)
+    PSF: the FFT grid (block + PSF - 1, smooth sizes) of at most ``cells`` (default
+    :data:`MAX_BLOCK_CELLS`) that transforms the fewest cells in all (grid cells x log x
+    blocks); each block side at least :data:`MIN_BLOCK` (or the whole side)."""
+    cells = cells or MAX_BLOCK_CELLS
+    lo1, lo2 = kh - 1 + min(MIN_BLOCK, height), kw - 1 + min(MIN_BLOCK, width)
+    hi1, hi2 = fft_size(height + kh - 1), fft_size(width + kw - 1, even=True)
+    best = None
+    for n1 in _smooth_sizes(lo1, hi1):
+        for n2 in _smooth_sizes(lo2, hi2, even=True):
+            if n1 * n2 > cells and best is not None:
+                break
+            b1, b2 = min(n1 - kh + 1, height), min(n2 - kw + 1, width)
+            cost = (-(-height // b1) * -(-width // b2) * n1 * n2 * math.log2(n1 * n2),
+                    n1 * n2)
+            if best is None or cost < best[0] or (best[2] > cells and n1 * n2 <= cells):
+                best = (cost, (b1, b2), n1 * n2)
+    return best[1]
+
+
+def _one_grid_cells(rt, method, k, support, effective, out_window) -> int:
+    """Cells of the one work grid a single-block convolution would use."""
+    kh, kw = k.shape[:2]
+    if method == "direct":
+        return (out_window.width + kw + 3) * (out_window.height + kh - 1)
+    if method == "half":
+        hs = Rect(0, 0, -(-support.width // 2), -(-support.height // 2))
+        k2 = _as_psf(half_psf(rt, k)).shape[:2]
+        hout = half_window(support, effective)
+        n1, n2 = fft_grid(hs, hout.intersect(full_region(hs, *k2)), *k2)
+        return n1 * n2
+    n1, n2 = fft_grid(support, effective, kh, kw)
+    return n1 * n2
+
+
+def _block_rects(out_window: Rect, anchor: tuple[int, int], b1: int, b2: int) -> list[Rect]:
+    """``out_window`` cut into blocks of b1 rows x b2 columns on a grid through ``anchor``."""
+    ax, ay = anchor
+    x_first = ax + math.floor((out_window.x0 - ax) / b2) * b2
+    y_first = ay + math.floor((out_window.y0 - ay) / b1) * b1
+    return [Rect(x, y, x + b2, y + b1).intersect(out_window)
+            for y in range(y_first, out_window.y1, b1)
+            for x in range(x_first, out_window.x1, b2)]
+
+
+def convolve_blocks(rt, img, psf, *, out_window: Rect, support: Rect | None = None,
+                    method: str = "fft", precision: str = "float64",
+                    threshold_split: float | None = None, split_max_points: int = 256,
+                    info: ConvolveInfo | None = None, emit=None):
+    """:func:`convolve` in output blocks, so its device memory is bounded by the block
+    (:data:`MAX_BLOCK_CELLS`), not by the frame.
+
+    Each output block gets the exact linear convolution of the input pixels that reach it
+    (:func:`reach`; overlap-save): one FFT grid, plan and PSF spectrum serve every block of
+    the call.  A convolution whose one-grid work fits the cap is one block, exactly
+    :func:`convolve`.  ``"direct"`` blocks give :func:`convolve`'s bits (each output pixel
+    sums the same taps in the same order); FFT blocks differ from one large FFT by FFT
+    rounding only.  ``"half"`` blocks are cut at even offsets from the support, so their
+    half-resolution pixels are the whole grid's.  The split's bright pixels are counted over
+    the whole support first, so the float64 fallback is decided once for all blocks.
+
+    Parameters
+    ----------
+    img : DeviceImage or callable
+        The input, or ``load(rect) -> DeviceImage`` giving it (RGBA) over at least ``rect``
+        (then ``support`` is required): only a block's input is ever on the device.
+    emit : callable, optional
+        ``emit(rect, g)`` receives each block's result (``rect``: blocks cover
+        ``out_window`` once, in row order; a block no light reaches gets zeros); default:
+        assembled into one image, returned.
+    Others : as :func:`convolve`.
+
+    Returns
+    -------
+    DeviceImage or None
+        The result over ``out_window`` (None when ``emit`` took the blocks).
+    """
+    k, precision, info = _checked(rt, psf, method, precision, info)
+    if callable(img):
+        if support is None:
+            raise ValueError("convolve_blocks: a loaded input needs its support")
+        load, channels = img, 4
+    else:
+        support = img.window if support is None else support.intersect(img.window)
+        load, channels = (lambda rect: img), img.channels
+    kept = _Assembled(rt, out_window, channels) if emit is None else None
+    emit = emit or kept
+    kh, kw = k.shape[:2]
+    effective = out_window.intersect(full_region(support, kh, kw))
+    if support.empty or effective.empty:
+        emit(out_window, rt.fill(rt.image(out_window, channels), 0.0))
+        return kept and kept.image
+    if _one_grid_cells(rt, method, k, support, effective, out_window) <= MAX_BLOCK_CELLS:
+        info.blocks = 1
+        emit(out_window, _convolve(rt, load(support), k, support, out_window, method,
+                                   precision, threshold_split, split_max_points, info))
+        return kept and kept.image
+    _blocked(rt, load, k, support, effective, out_window, method, precision, threshold_split,
+             split_max_points, info, emit, channels)
+    return kept and kept.image
+
+
+class _Assembled:
+    """The default ``emit`` of :func:`convolve_blocks`: blocks pasted into one image (a single
+    block is the image)."""
+
+    def __init__(self, rt, window: Rect, channels: int):
+        self.rt, self.window, self.channels, self.image = rt, window, channels, None
+
+    def __call__(self, rect: Rect, g) -> None:
+        if rect == self.window:
+            self.image = g
+            return
+        if self.image is None:
+            self.image = self.rt.image(self.window, self.channels)
+        self.rt.paste(g, self.image, rect)
+
+
+def _blocked(rt, load, k, support, effective, out_window, method, precision, split,
+             max_points, info, emit, channels):
+    """The blocks of :func:`convolve_blocks` (the one-grid work is over the cap)."""
+    kh, kw = k.shape[:2]
+    anchor = (effective.x0, effective.y0)
+    if method == "half":
+        k2 = _as_psf(half_psf(rt, k))
+        hh, hw = k2.shape[:2]
+        half_all = Rect(0, 0, -(-support.width // 2), -(-support.height // 2))
+        b1, b2 = block_shape(-(-effective.height // 2) + 2, -(-effective.width // 2) + 2,
+                             hh + 2, hw + 2)
+        b1, b2 = 2 * b1, 2 * b2
+        # blocks start at even offsets from the support: a block's half-resolution pixels
+        # are the whole grid's
+        anchor = (effective.x0 - (effective.x0 - support.x0) % 2,
+                  effective.y0 - (effective.y0 - support.y0) % 2)
+    else:
+        b1, b2 = block_shape(effective.height, effective.width, kh, kw)
+    blocks = []
+    for rect in _block_rects(out_window, anchor, b1, b2):
+        eff = rect.intersect(effective)
+        if eff.empty:
+            blocks.append((rect, None, None, None))
+        elif method == "half":
+            hout = half_window(support, eff)
+            hi = reach(hout, hh, hw).intersect(half_all)
+            need = fft_grid(hi, hout.intersect(full_region(hi, hh, hw)), hh, hw)
+            full = Rect(support.x0 + 2 * hi.x0, support.y0 + 2 * hi.y0,
+                        support.x0 + 2 * hi.x1, support.y0 + 2 * hi.y1).intersect(support)
+            blocks.append((rect, full, hi, need))
+        else:
+            src = reach(rect, kh, kw).intersect(support)
+            blocks.append((rect, src, None, fft_grid(src, eff, kh, kw)))
+    live = [b for b in blocks if b[1] is not None]
+    info.blocks = len(live)
+    grid = (max(b[3][0] for b in live), max(b[3][1] for b in live))
+    spectrum = None
+    if method == "fft" and split is not None and precision == "float32":
+        bright = sum(_count_bright(rt, load(t), t, split)
+                     for t in _block_rects(support, (support.x0, support.y0), b1, b2))
+        if bright > max_points:
+            info.fallback = (f"more than {max_points} pixels above the split level "
+                             f"{split:g}: float64 FFT instead")
+            info.notes.append(info.fallback)
+            precision = "float64" if rt.use_fp64(True) else "float32"
+            split = None
+        info.bright_pixels, max_points = bright, bright
+    info.precision = precision
+    if method == "fft":
+        spectrum = psf_spectrum(rt, k, *grid, precision)   # held for every block
+    elif method == "half":
+        spectrum = psf_spectrum(rt, k2, *grid, "float32")
+    sub = ConvolveInfo()
+    for rect, src, hi, _ in blocks:
+        if src is None:   # no light reaches this block
+            emit(rect, rt.fill(rt.image(rect, channels), 0.0))
+            continue
+        part_support = support if method == "half" else src
+        emit(rect, _convolve(rt, load(src), k, part_support, rect, method, precision, split,
+                             max_points, sub, grid if method != "direct" else None, spectrum,
+                             hi))
+    info.grid = grid
+    info.notes.append(f"{info.blocks} blocks of {b2}x{b1} px (FFT grid {grid[1]}x{grid[0]})"
+                      if method != "direct" else f"{info.blocks} blocks of {b2}x{b1} px")
+
+
+def _count_bright(rt, img, rect: Rect, split: float) -> int:
+    return int(_bright_rows(rt, img, rect, split)[0].sum()) if not rect.empty else 0
 
 
 # -- quality levels ------------------------------------------------------------------------
@@ -552,28 +845,32 @@ def _fp(wanted: bool) -> str:
 
 
 def spread(rt, img, psf, level: SpreadLevel, *, out_window: Rect, support: Rect | None = None,
-           split_level: float | None = None, info: ConvolveInfo | None = None):
+           split_level: float | None = None, info: ConvolveInfo | None = None, emit=None):
     """Convolve with the algorithm a quality ``level`` (:data:`LEVELS`) calls for.
 
     PSFs of at most 21 x 21 taps: direct gather (float32; float64 with ``small_fp64``).
     Larger: ``method`` "half" (half-resolution float32 FFT; approximate), "split" (float32
     FFT with bright pixels, largest channel > ``split_level``, gathered exactly; falls back to
     float64 when there are more than 64), "fft" (float64 with ``fp64``), or a direct gather
-    when output px x taps <= ``direct_max_work``.
+    when output px x taps <= ``direct_max_work``.  In output blocks past
+    :data:`MAX_BLOCK_CELLS` (:func:`convolve_blocks`: ``img`` may be a loader, ``emit`` take
+    the blocks).
     """
     k = _as_psf(psf)
     taps = k.shape[0] * k.shape[1]
-    common = dict(out_window=out_window, support=support, info=info)
+    common = dict(out_window=out_window, support=support, info=info, emit=emit)
     if taps <= DIRECT_MAX_TAPS:
         # small kernels: a direct gather beats any transform
-        return convolve(rt, img, k, method="direct", precision=_fp(level.small_fp64), **common)
+        return convolve_blocks(rt, img, k, method="direct", precision=_fp(level.small_fp64),
+                               **common)
     if level.method == "half":
-        return convolve(rt, img, k, method="half", precision="float32", **common)
+        return convolve_blocks(rt, img, k, method="half", precision="float32", **common)
     if level.method == "split":
         # the exact gather costs (output px x bright px): beyond 64 bright pixels the
         # float64 FFT (1.0-1.3x float32 on PoCL) is cheaper
-        return convolve(rt, img, k, precision="float32", threshold_split=split_level,
-                        split_max_points=PREVIEW_SPLIT_MAX_POINTS, **common)
+        return convolve_blocks(rt, img, k, precision="float32", threshold_split=split_level,
+                               split_max_points=PREVIEW_SPLIT_MAX_POINTS, **common)
     if out_window.width * out_window.height * taps <= level.direct_max_work:
-        return convolve(rt, img, k, method="direct", precision=_fp(level.fp64), **common)
-    return convolve(rt, img, k, precision=_fp(level.fp64), **common)
+        return convolve_blocks(rt, img, k, method="direct", precision=_fp(level.fp64),
+                               **common)
+    return convolve_blocks(rt, img, k, precision=_fp(level.fp64), **common)

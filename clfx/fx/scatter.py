@@ -56,6 +56,9 @@ class SpreadRegions:
     """
 
     strength_param: ClassVar[str] = "strength"
+    whole_frame: ClassVar[str | None] = (
+        "its FFT convolution runs in output blocks of bounded memory (clfx.fx.fftconv: "
+        "overlap-save), cheaper than bands that each re-read the PSF radius around them")
 
     def strength(self, p) -> float:
         return getattr(p, self.strength_param)
@@ -129,32 +132,69 @@ class ScatterPlugin(SpreadRegions):
                              f"to 0 before the {taps[1]}x{taps[0]} PSF")
 
     # -- render ---------------------------------------------------------------------------
+    def spread_mixed(self, rt, p, ctx, k: np.ndarray, highlights, mix, split: float):
+        """The effect's output: highlights spread by ``k`` and mixed back, block by block.
+
+        ``highlights(src, h)`` launches the effect's highlight kernel (``h`` may be ``src``:
+        the kernel works in place), ``mix(g, dst, rect)`` its mix over ``rect`` (``dst`` may
+        be ``g``).  :func:`clfx.fx.fftconv.spread` loads each block's highlights from the
+        source and hands back each output block, mixed into the output at once: beside the
+        source and the output only one block's buffers are on the device (one block, and
+        the whole-frame highlight and spread images of old, when the one-grid FFT fits
+        :data:`clfx.fx.fftconv.MAX_BLOCK_CELLS`)."""
+        src = ctx.source
+        out_window = self.output_window(p, ctx)
+        out = []                             # the output, made by the first block (one block:
+                                             # after its transform's buffers are freed)
+
+        def load(rect):
+            if rect == src.window:
+                h = rt.image(src.window, 4)
+                highlights(src, h)
+                return h
+            sub = rt.reframe(src, rect)      # a copy, replaced by its highlights in place
+            highlights(sub, sub)
+            return sub
+
+        def emit(rect, g):
+            if not out:
+                out.append(rt.image(out_window, 4))
+            if rect == out_window:
+                mix(g, out[0], rect)
+                return
+            mix(g, g, rect)                  # in place: a work-item reads g, then writes it
+            rt.paste(g, out[0], rect)
+
+        info = fftconv.ConvolveInfo()
+        fftconv.spread(rt, load, k, self.level(ctx), out_window=out_window,
+                       support=self.highlight_support(p, ctx), split_level=split, info=info,
+                       emit=emit)
+        ctx.notes.extend(f"{self.descriptor.name}: {note}" for note in info.notes)
+        return out[0]
+
     def render(self, rt, p, ctx):
         name, kfile = self.descriptor.name, self.descriptor.kernel
         src = ctx.source
         k = self.psf(p, ctx)
         boost = self.boost(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
-        h = rt.image(src.window, 4)
         f32, i32 = np.float32, np.int32
-        rt.launch(rt.kernel(kfile, f"{name}_highlights", **ctx.luminance_defines),
-                  (src.pitch // 4, max(src.height, 1)),
-                  src, h, i32(src.pitch), i32(src.height), f32(p.threshold), f32(p.knee),
-                  f32(boost))
-        out_window = self.output_window(p, ctx)
-        split = max(4.0 * p.threshold, SPLIT_RATIO * ctx.analysis.peak_luminance)
-        info = fftconv.ConvolveInfo()
-        g = fftconv.spread(rt, h, k, self.level(ctx), out_window=out_window,
-                           support=self.highlight_support(p, ctx), split_level=split, info=info)
-        ctx.notes.extend(f"{name}: {note}" for note in info.notes)
-        dst = rt.image(out_window, 4)
         from pyopencl import cltypes
 
         tint = cltypes.make_float4(*p.tint, 0.0)
-        dx, dy = out_window.offset_in(src.window)
-        rt.launch(rt.kernel(kfile, f"{name}_mix", **ctx.luminance_defines),
-                  (dst.pitch // 4, max(dst.height, 1)),
-                  src, i32(src.pitch), i32(src.width), i32(src.height), g, dst,
-                  i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(self.strength(p)),
-                  tint, f32(p.threshold), f32(p.knee), f32(boost), i32(boost > 0.0))
-        return dst
+        hl = rt.kernel(kfile, f"{name}_highlights", **ctx.luminance_defines)
+        mx = rt.kernel(kfile, f"{name}_mix", **ctx.luminance_defines)
+
+        def highlights(img, h):
+            rt.launch(hl, (img.pitch // 4, max(img.height, 1)), img, h, i32(img.pitch),
+                      i32(img.height), f32(p.threshold), f32(p.knee), f32(boost))
+
+        def mix(g, dst, rect):
+            dx, dy = rect.offset_in(src.window)
+            rt.launch(mx, (dst.pitch // 4, max(dst.height, 1)),
+                      src, i32(src.pitch), i32(src.width), i32(src.height), g, dst,
+                      i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(self.strength(p)),
+                      tint, f32(p.threshold), f32(p.knee), f32(boost), i32(boost > 0.0))
+
+        split = max(4.0 * p.threshold, SPLIT_RATIO * ctx.analysis.peak_luminance)
+        return self.spread_mixed(rt, p, ctx, k, highlights, mix, split)

@@ -102,7 +102,8 @@ def separable_psf_error(k: np.ndarray, rank: int) -> float:
 
 @register
 class Bleed(ScatterPlugin, Plugin):
-    whole_frame = ("an FFT convolution over the whole frame")
+    whole_frame = ("its FFT path runs in output blocks of bounded memory (clfx.fx.fftconv); "
+                   "its fused small-radius gather is not shown to give the same pixels in tiles")
     descriptor = Descriptor(
         name="bleed", label="Bleed", group="Sensor", kernel="bleed.cl",
         summary="Sensor crosstalk: bright pixels leak a little light into their neighbours.",

@@ -242,7 +242,6 @@ def spectral_psf(r0_px: float, extent: float, blades: int, rotation_deg: float,
 
 @register
 class Corona(SpreadRegions, Plugin):
-    whole_frame = ("an FFT convolution over the whole frame")
     descriptor = Descriptor(
         name="corona", label="Corona (spectral diffraction)", group="Glare",
         kernel="corona.cl",

@@ -46,7 +46,6 @@ from clfx.host import Plugin, register
 
 @register
 class Glare(ScatterPlugin, Plugin):
-    whole_frame = ("a global FFT convolution over the whole frame")
     descriptor = Descriptor(
         name="glare", label="Glare", group="Lens", kernel="glare.cl",
         summary="Highlights scattered by a large point spread function (Spencer eye PSF, "

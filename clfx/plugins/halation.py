@@ -209,7 +209,6 @@ class Settings:
 
 @register
 class Halation(ScatterPlugin, Plugin):
-    whole_frame = ("an FFT convolution over the whole frame")
     descriptor = Descriptor(
         name="halation", label="Halation", group="Film", kernel="halation.cl",
         summary="Film halation: light reflected off the base re-exposes the red layer, a "
@@ -282,28 +281,25 @@ class Halation(ScatterPlugin, Plugin):
         k = self.psf(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
         f32, i32 = np.float32, np.int32
-        h = rt.image(src.window, 4)
-        rt.launch(rt.kernel(kfile, "halation_highlights", **ctx.luminance_defines),
-                  (src.pitch // 4, max(src.height, 1)), src, h, i32(src.pitch), i32(src.height),
-                  f32(p.threshold), f32(p.knee))
-        out_window = self.output_window(p, ctx)
-        info = fftconv.ConvolveInfo()
+        from pyopencl import cltypes
+
+        tint = cltypes.make_float4(*s.tint, 0.0)
+        hl = rt.kernel(kfile, "halation_highlights", **ctx.luminance_defines)
+        mx = rt.kernel(kfile, "halation_mix", CONSERVE=int(p.conserve), **ctx.luminance_defines)
+
+        def highlights(img, h):
+            rt.launch(hl, (img.pitch // 4, max(img.height, 1)), img, h, i32(img.pitch),
+                      i32(img.height), f32(p.threshold), f32(p.knee))
+
+        def mix(g, dst, rect):
+            dx, dy = rect.offset_in(src.window)
+            rt.launch(mx, (dst.pitch // 4, max(dst.height, 1)), src, i32(src.pitch),
+                      i32(src.width), i32(src.height), g, dst, i32(dst.pitch), i32(dst.height),
+                      i32(dx), i32(dy), f32(s.strength), tint, f32(p.threshold), f32(p.knee))
+
         split = max(4.0 * p.threshold, 1e-3 * ctx.analysis.peak_luminance)
-        g = fftconv.spread(rt, h, k, self.level(ctx), out_window=out_window,
-                           support=self.highlight_support(p, ctx), split_level=split, info=info)
-        ctx.notes.extend(f"halation: {note}" for note in info.notes)
+        dst = self.spread_mixed(rt, p, ctx, k, highlights, mix, split)
         ctx.notes.append(f"halation: {p.stock}, strength {s.strength:g}, PSF radius "
                          f"{s.radius_px} px ({'bare back' if s.bare_back else 'backed'}), "
                          f"{'conserved' if p.conserve else 'added'}")
-        from pyopencl import cltypes
-
-        dst = rt.image(out_window, 4)
-        dx, dy = out_window.offset_in(src.window)
-        rt.launch(rt.kernel(kfile, "halation_mix", CONSERVE=int(p.conserve),
-                            **ctx.luminance_defines),
-                  (dst.pitch // 4, max(dst.height, 1)), src, i32(src.pitch), i32(src.width),
-                  i32(src.height), g, dst, i32(dst.pitch), i32(dst.height), i32(dx), i32(dy),
-                  f32(s.strength), cltypes.make_float4(*s.tint, 0.0), f32(p.threshold),
-                  f32(p.knee))
         return dst
-

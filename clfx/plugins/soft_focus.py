@@ -28,7 +28,6 @@ from clfx.host import Plugin, register
 
 @register
 class SoftFocus(ScatterPlugin, Plugin):
-    whole_frame = ("an FFT convolution over the whole frame")
     descriptor = Descriptor(
         name="soft_focus", label="Soft focus", group="Lens", kernel="soft_focus.cl",
         summary="Diffusion filter: an exponential glow from all moderately bright pixels, "

@@ -3,6 +3,7 @@ import pytest
 
 from clfx.fx import fftconv
 from clfx.core.rect import Rect
+from tests.fx.blocks import force_blocks
 from tests.reference.glare import convolve as reference
 
 CASES = [
@@ -191,3 +192,66 @@ def test_psf_placed_on_the_grid_without_a_grid_sized_host_plane(rt, rng, monkeyp
     for p in range(planes):
         np.add.at(want[p], (ys[:, None], xs[None, :]), k[..., p])
     assert np.array_equal(got, want.astype(real))
+
+
+BLOCK_CASES = [("fft", "float64", None), ("fft", "float32", 100.0), ("direct", "float32", None),
+               ("direct", "float64", None), ("half", "float32", None)]
+
+
+@pytest.mark.parametrize("method,precision,split", BLOCK_CASES)
+def test_blocks_give_the_one_grid_convolution(rt, rng, monkeypatch, method, precision, split):
+    """Output blocks (overlap-save) give the exact linear convolution: direct blocks the same
+    bits as one gather, FFT blocks the same up to FFT rounding, also from a loader."""
+    src = rng.uniform(0.0, 1.0, (60, 90, 4)).astype(np.float32)
+    src[20, 30, :3] = 500.0                       # one pixel above the split
+    win = Rect(3, -2, 93, 58)
+    psf = rng.uniform(0.0, 1.0, (41, 37))
+    psf /= psf.sum()
+    out = fftconv.full_region(win, 41, 37).intersect(Rect(-10, -10, 100, 50))
+    img = rt.upload(src, win)
+    kw = dict(method=method, precision=precision, threshold_split=split)
+    one = fftconv.convolve(rt, img, psf, out_window=out, **kw).download()
+    calls = force_blocks(monkeypatch, cells=900)
+    info = fftconv.ConvolveInfo()
+    got = fftconv.convolve_blocks(rt, img, psf, out_window=out, info=info, **kw).download()
+    loaded = fftconv.convolve_blocks(rt, lambda r: rt.reframe(img, r), psf, support=win,
+                                     out_window=out, **kw).download()
+    assert len(calls) == 2 and info.blocks > 20 and info.precision == precision
+    assert np.array_equal(loaded.view(np.uint32), got.view(np.uint32))
+    if method == "direct":
+        assert np.array_equal(got.view(np.uint32), one.view(np.uint32))
+    else:   # FFT rounding: float32 transforms ~1e-7 of the peak, float64 below float32 output
+        np.testing.assert_allclose(got, one, rtol=0, atol=1e-6 * one.max())
+    if method != "half":
+        want = reference(src[..., :3], psf, (win.x0, win.y0), (out.x0, out.y0, out.x1, out.y1))
+        np.testing.assert_allclose(got[..., :3], want, rtol=0, atol=3e-6 * want.max())
+    if split:
+        assert info.bright_pixels == 1 and not info.fallback
+
+
+def test_blocks_fall_back_to_float64_once_for_many_bright_pixels(rt, rng, monkeypatch):
+    src, psf = hdr_scene(rng)
+    win = Rect.from_size(src.shape[1], src.shape[0])
+    img = rt.upload(src, win)
+    force_blocks(monkeypatch, cells=12000, min_block=16)
+    info = fftconv.ConvolveInfo()
+    got = fftconv.convolve_blocks(rt, img, psf, out_window=win, precision="float32",
+                                  threshold_split=1e-3, info=info).download()
+    f64 = fftconv.convolve_blocks(rt, img, psf, out_window=win, precision="float64").download()
+    assert info.fallback and info.precision == "float64" and info.blocks > 1
+    assert info.bright_pixels == src.shape[0] * src.shape[1]   # counted over every block
+    assert np.array_equal(got, f64)
+
+
+def test_block_shape_bounds_the_grid_and_keeps_small_frames_whole():
+    assert fftconv.block_shape(540, 960, 331, 331) == (540, 960)
+    for h, w, k in ((4320, 7680, 2641), (4320, 7680, 331), (8640, 15360, 2641),
+                    (50, 90000, 31)):
+        b1, b2 = fftconv.block_shape(h, w, k, k)
+        n1, n2 = fftconv.fft_size(b1 + k - 1), fftconv.fft_size(b2 + k - 1, even=True)
+        assert n1 * n2 <= fftconv.MAX_BLOCK_CELLS and b1 <= h and b2 <= w
+        assert min(b1, b2) >= min(fftconv.MIN_BLOCK, h, w)
+    # a PSF too large for the cap keeps MIN_BLOCK sides: the smallest such grid, past the cap
+    b1, b2 = fftconv.block_shape(12000, 12000, 6001, 6001)
+    n = fftconv.fft_size(6000 + fftconv.MIN_BLOCK)
+    assert n * n > fftconv.MAX_BLOCK_CELLS and b1 == n - 6000 and b1 >= fftconv.MIN_BLOCK

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
-
 from clfx.host import RenderContext
 from clfx.plugins.bleed import Bleed
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
+from tests.fx.blocks import assert_blocks_match
 from tests.reference.bleed import bleed as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
@@ -146,3 +146,10 @@ def test_bleed_reference_float64_and_final_agree_tightly(rt, rng):
     assert (np.abs(ref - want)[m] / want[m]).max() <= 2e-6
     # float32 weights and sums next to a 1e5 pixel: ~1e-7 of the peak's leaked light
     assert np.abs(fin - want).max() <= 1e-6 * 0.3 * 1e5
+
+
+def test_bleed_in_blocks_is_the_one_grid_bleed(rt, rng, monkeypatch):
+    src = rng.uniform(0.0, 0.2, (90, 120, 4)).astype(np.float32)
+    src[30, 40, :3] = 50.0
+    p = Bleed.params(strength=0.3, size=0.1)           # radius 15 px > 10: FFT path
+    assert_blocks_match(rt, monkeypatch, Bleed(), p, src, "final", cells=1500)

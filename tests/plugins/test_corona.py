@@ -2,7 +2,6 @@ import math
 
 import numpy as np
 import pytest
-
 from clfx.fx import spectral
 from clfx.core.camera import Camera
 from clfx.host import RenderContext
@@ -10,6 +9,7 @@ from clfx.plugins.corona import (Corona, PSFGeometry, aperture, far_field,
                                  monochromatic_psf, spectral_psf)
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
+from tests.fx.blocks import assert_blocks_match
 from tests.reference.corona import corona as reference
 
 PARAMS = dict(threshold=2.0, intensity=0.5, size=0.05, extent=4.0)
@@ -373,3 +373,10 @@ def test_default_corona_around_a_candle_is_not_a_flat_white_disc(rt):
     glow = tonemap_preview(out, e)[h // 2, w // 2 + int(3 * r0), 1]
     room = tonemap_preview(src, e)[h // 2, w // 2 + int(3 * r0), 1]
     assert glow > room + 0.05, (glow, room)
+
+
+@pytest.mark.parametrize("quality", ["final", "reference"])
+def test_corona_in_blocks_is_the_one_grid_corona(rt, rng, monkeypatch, quality):
+    src = scene(rng, (60, 80))
+    p = Corona.params(**PARAMS)
+    assert_blocks_match(rt, monkeypatch, Corona(), p, src, quality, cells=1500)

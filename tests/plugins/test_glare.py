@@ -7,6 +7,7 @@ from clfx.host import RenderContext
 from clfx.plugins.glare import Glare
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
+from tests.fx.blocks import assert_blocks_match
 from tests.reference.glare import glare as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
@@ -248,3 +249,17 @@ def test_glare_of_a_flame_in_a_dark_room_fades_without_a_rim(rt):
     seg = drop[int(0.3 * radius):int(radius) + 2]
     assert np.diff(seg).max() <= 2e-5, np.round(seg * 1e3, 2)
     assert row[int(0.3 * radius)] > row[-1] + 0.05        # and the glow shows
+
+
+@pytest.mark.parametrize("quality", LEVELS)
+def test_glare_in_blocks_is_the_one_grid_glare(rt, rng, monkeypatch, quality):
+    """8K's path on a small frame: output blocks (overlap-save) give the one-grid glare up to
+    FFT rounding at every level, and the float64 levels still match the oracle."""
+    src = scene(rng, 64, 96)
+    p = Glare.params(strength=0.1, size=0.5)
+    got = assert_blocks_match(rt, monkeypatch, Glare(), p, src, quality, cells=1500)
+    if quality in ("final", "reference"):
+        want = oracle(src, p)
+        assert np.abs(got - want).max() <= 1e-6 * want.max()
+        m = want[..., :3] >= 1e-3                 # hard-cases.md case 1, as one grid
+        assert (np.abs(got - want)[..., :3][m] / want[..., :3][m]).max() <= 1e-4

@@ -2,13 +2,13 @@ import math
 
 import numpy as np
 import pytest
-
 from clfx.core.camera import Camera
 from clfx.core.errors import ParamError
 from clfx.core.rect import Rect
 from clfx.host import RenderContext
 from clfx.plugins.halation import STOCKS, Halation, halation_profile, halation_psf, supersample
 from tests.conftest import hard_shapes
+from tests.fx.blocks import assert_blocks_match
 from tests.reference.halation import halation as reference
 from tests.reference.halation import psf as reference_psf
 
@@ -189,3 +189,13 @@ def test_point_light_halation_fades_smoothly_before_its_support_ends(rt, stock, 
     assert support >= 8
     assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support, start=3,
                        what=f"halation {stock} {size}")
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
+@pytest.mark.parametrize("conserve", [False, True])
+def test_halation_in_blocks_is_the_one_grid_halation(rt, rng, monkeypatch, conserve, quality):
+    src = rng.uniform(0.005, 0.02, (60, 80, 4)).astype(np.float32)
+    src[25:28, 30:34, :3] = 1e4
+    src[50, 70, :3] = (40.0, 5.0, 1.0)
+    p = Halation.params(radius=0.15, strength=0.3, conserve=conserve)   # r = 15 px: FFT
+    assert_blocks_match(rt, monkeypatch, Halation(), p, src, quality, cells=1500)

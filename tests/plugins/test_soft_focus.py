@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
-
 from clfx.host import RenderContext
 from clfx.plugins.soft_focus import SoftFocus
 from tests.conftest import hard_shapes
+from tests.fx.blocks import assert_blocks_match
 from tests.reference.soft_focus import soft_focus as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
@@ -71,3 +71,11 @@ def test_point_light_diffusion_fades_smoothly_before_its_support_ends(rt, size):
     support = round(3.0 * size * np.hypot(w, h))
     assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support,
                        what=f"soft_focus size {size}")
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
+def test_soft_focus_in_blocks_is_the_one_grid_soft_focus(rt, rng, monkeypatch, quality):
+    src = rng.uniform(0.0, 1.0, (50, 70, 4)).astype(np.float32)
+    src[20, 30, :3] = 30.0
+    p = SoftFocus.params(size=0.1)
+    assert_blocks_match(rt, monkeypatch, SoftFocus(), p, src, quality, cells=600)
