@@ -8,10 +8,11 @@ peak: the largest resident set, ``ru_maxrss``; the SHA-256 of the output's float
 steps tiled) and exits 1 unless both outputs are bit-identical.
 
     python scripts/tile_8k.py [--size 7680x4320] [--pool-mb 64] [--tile-pixels 1048576]
-                              [--tiling-steps]
+                              [--tiling-steps] [--steps NAME,...]
 
 ``--tiling-steps`` keeps only the look's steps that tile (what tiling itself saves: the
-whole look's peaks are those of its steps that render whole).
+whole look's peaks are those of its steps that render whole); ``--steps`` only the named
+ones (one effect's peaks: ``--steps streaks``).
 
 A kernel compile counts in the first process's wall time, not in its peaks (PoCL caches
 binaries across processes; the README's "Memory" section has what a cold cache adds).
@@ -29,7 +30,8 @@ import sys
 import time
 
 
-def child(size: tuple[int, int], tile_pixels: int, tiling_steps: bool = False) -> dict:
+def child(size: tuple[int, int], tile_pixels: int, tiling_steps: bool = False,
+          steps: tuple[str, ...] = ()) -> dict:
     import clfx
     from clfx.bench.scene import synthetic_plate
     from clfx.device.runtime import Runtime
@@ -40,6 +42,8 @@ def child(size: tuple[int, int], tile_pixels: int, tiling_steps: bool = False) -
     if tiling_steps:
         look = dataclasses.replace(look, steps=[s for s in look.steps
                                                 if s.plugin.whole_frame is None])
+    if steps:
+        look = dataclasses.replace(look, steps=[s for s in look.steps if s.effect in steps])
     frame = synthetic_plate(*size)
     rt.cache.reset_peak()
     t0 = time.perf_counter()
@@ -66,18 +70,21 @@ def main(argv=None) -> int:
                     help="the tiled render's band size in pixels")
     ap.add_argument("--tiling-steps", action="store_true",
                     help="only the look's steps that tile")
+    ap.add_argument("--steps", default="", help="only these steps (effect names, commas)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     size = tuple(int(v) for v in args.size.lower().split("x"))
     if args.child is not None:
-        print(json.dumps(child(size, args.child, args.tiling_steps)), flush=True)
+        steps = tuple(n for n in args.steps.split(",") if n)
+        print(json.dumps(child(size, args.child, args.tiling_steps, steps)), flush=True)
         return 0
     env = {**os.environ, "CLFX_POOL_MB": str(args.pool_mb)}
     env.pop("CLFX_TILE_PIXELS", None)
     results = []
     for tiles in (0, args.tile_pixels):
         proc = subprocess.run([sys.executable, __file__, "--size", args.size, "--child",
-                               str(tiles)] + ["--tiling-steps"] * args.tiling_steps, env=env,
+                               str(tiles)] + ["--tiling-steps"] * args.tiling_steps
+                              + ["--steps", args.steps] * bool(args.steps), env=env,
                               capture_output=True, text=True)
         lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
         if proc.returncode or not lines:
