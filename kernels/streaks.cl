@@ -20,8 +20,8 @@
  * RING = 1 (large frames, CHECKED = 1): the frame streams through in chunks of rows and
  * each buffer a pass reads holds only the rows the next passes still need: absolute row y
  * lives at row y % rows of it (`rows` its height), so a chunk's kernels address rows by
- * their frame row (`y0`: the chunk's first) and compute the same floats as over whole
- * buffers.
+ * their frame row (`y0`: the chunk's first; streaks_wrap) and compute the same floats as
+ * over whole buffers.
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{T 4^(N-1)-1} a^k delta(x + k d) exactly (each k has one base-4 expansion; the
  * last pass has T <= 4 taps of non-zero weight).
@@ -43,9 +43,23 @@
 #if !CHECKED
 #error "RING buffers need CHECKED taps"
 #endif
-#define STREAKS_ROW(y, rows) ((y) % (rows))
+/* Row y of a ring (x: a multiple of its height y at or below the chunk's first row, y: its
+ * height): y % height for the rows a chunk reads (within one height of the chunk), without a
+ * division per load; a tap of weight 0 past them reads some held row (finite, times 0). */
+inline int streaks_wrap(int y, int2 ring)
+{
+  int r = y - ring.x;
+  r = r < 0 ? r + ring.y : r;
+  r = r >= ring.y ? r - ring.y : r;
+  return clamp(r, 0, ring.y - 1);
+}
+inline int2 streaks_ring(int y0, int rows)
+{
+  return (int2)(y0 - y0 % rows, rows);
+}
+#define STREAKS_ROW(y, ring) streaks_wrap((y), (ring))
 #else
-#define STREAKS_ROW(y, rows) (y)
+#define STREAKS_ROW(y, ring) (y)
 #endif
 
 #ifndef PEAK_TILE
@@ -190,9 +204,9 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
   return acc;
 }
 
-/* One work-item per low-resolution pixel (rows from y0): the box average of the streaking light no seed
- * gathered (extended lights), plus the seeds' points splatted bilinearly.  `points`:
- * (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
+/* One work-item per low-resolution pixel (rows from y0): the box average of the streaking
+ * light no seed gathered (extended lights), plus the seeds' points splatted bilinearly.
+ * `points`: (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
  * divided by FACTOR^2; `bin_start` (bins_x * bins_y + 1) and `bin_seed` list, per BIN x BIN
  * block of low-resolution pixels, the seeds whose splat touches it, in seed order. */
 kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
@@ -224,46 +238,49 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
                     * fmax(1.0f - fabs(s.s1 - (float)y), 0.0f);
     acc += (float4)(s.s2, s.s3, s.s4, 0.0f) * w;
   }
-  clfx_store4(dst, dst_pitch, x, STREAKS_ROW(y, rows), fmin(acc, (float4)SCATTER_FLT_MAX));
+#if RING
+  const int2 ring = streaks_ring(y0, rows);
+#endif
+  clfx_store4(dst, dst_pitch, x, STREAKS_ROW(y, ring), fmin(acc, (float4)SCATTER_FLT_MAX));
 }
 
 /* Reads relative to the interior origin; `wp` = interior pitch, `h` = interior rows.  With
  * CHECKED = 0 every tap lies inside the margin (the host sized it), so no test is needed. */
 #if CHECKED
-inline float4 streaks_at(global const float *img, int pitch, int wp, int h, int rows, int x,
+inline float4 streaks_at(global const float *img, int pitch, int wp, int h, int2 ring, int x,
                          int y)
 {
   if(x < 0 || x >= wp || y < 0 || y >= h) return (float4)0.0f;
-  return vload4(STREAKS_ROW(y, rows) * pitch + x, img);
+  return vload4(STREAKS_ROW(y, ring) * pitch + x, img);
 }
 #endif
 
-inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, int rows, int x,
+inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, int2 ring, int x,
                            int y)
 {
 #if CHECKED
   if(y < 0 || y >= h || x < 0 || x + 4 > wp)
-    return (float16)(streaks_at(img, pitch, wp, h, rows, x, y),
-                     streaks_at(img, pitch, wp, h, rows, x + 1, y),
-                     streaks_at(img, pitch, wp, h, rows, x + 2, y),
-                     streaks_at(img, pitch, wp, h, rows, x + 3, y));
+    return (float16)(streaks_at(img, pitch, wp, h, ring, x, y),
+                     streaks_at(img, pitch, wp, h, ring, x + 1, y),
+                     streaks_at(img, pitch, wp, h, ring, x + 2, y),
+                     streaks_at(img, pitch, wp, h, ring, x + 3, y));
 #endif
-  return vload16(0, img + (STREAKS_ROW(y, rows) * pitch + x) * 4);
+  return vload16(0, img + (STREAKS_ROW(y, ring) * pitch + x) * 4);
 }
 
 /* Bilinear sample of 4 consecutive pixels shifted by (dx, dy): the weights are the same for
  * all four, so it is four float16 loads and four vector multiply-adds. */
-inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int rows, int x,
+inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int2 ring, int x,
                            int y, float dx, float dy)
 {
   const float fx0 = floor(dx), fy0 = floor(dy);
   const int ix = x + (int)fx0, iy = y + (int)fy0;
   const float fx = dx - fx0, fy = dy - fy0;
-  float16 top = streaks_at4(img, pitch, wp, h, rows, ix, iy) * (1.0f - fx);
-  if(fx > 0.0f) top += streaks_at4(img, pitch, wp, h, rows, ix + 1, iy) * fx;
+  float16 top = streaks_at4(img, pitch, wp, h, ring, ix, iy) * (1.0f - fx);
+  if(fx > 0.0f) top += streaks_at4(img, pitch, wp, h, ring, ix + 1, iy) * fx;
   if(fy <= 0.0f) return top;
-  float16 bot = streaks_at4(img, pitch, wp, h, rows, ix, iy + 1) * (1.0f - fx);
-  if(fx > 0.0f) bot += streaks_at4(img, pitch, wp, h, rows, ix + 1, iy + 1) * fx;
+  float16 bot = streaks_at4(img, pitch, wp, h, ring, ix, iy + 1) * (1.0f - fx);
+  if(fx > 0.0f) bot += streaks_at4(img, pitch, wp, h, ring, ix + 1, iy + 1) * fx;
   return top * (1.0f - fy) + bot * fy;
 }
 
@@ -293,11 +310,16 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
   const int x = qx * 4;
   in += 4 * org;
   out += 4 * org;
-  REAL16 sum = streaks_term(vload16(0, in + (STREAKS_ROW(y, in_rows) * pitch + x) * 4), w0);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, in_rows, x, y, step_x, step_y), w1);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, in_rows, x, y, 2.0f * step_x,
+#if RING
+  const int2 ring = streaks_ring(y0, in_rows), ring_out = streaks_ring(y0, out_rows);
+#else
+  const int2 ring = (int2)(0, 0), ring_out = ring;
+#endif
+  REAL16 sum = streaks_term(vload16(0, in + (STREAKS_ROW(y, ring) * pitch + x) * 4), w0);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, ring, x, y, step_x, step_y), w1);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, ring, x, y, 2.0f * step_x,
                                   2.0f * step_y), w2);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, in_rows, x, y, 3.0f * step_x,
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, ring, x, y, 3.0f * step_x,
                                   3.0f * step_y), w3);
   sum = fmin(sum, (REAL)SCATTER_FLT_MAX);  /* saturate: finite input, finite output */
   if(x + 4 > w)  /* padding stays zero: it stands for "outside the image" */
@@ -306,7 +328,7 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
                               (float)(x + 3 < w));
     sum *= TO_REAL16((float16)(m.xxxx, m.yyyy, m.zzzz, m.wwww));
   }
-  out += (STREAKS_ROW(y, out_rows) * pitch + x) * 4;
+  out += (STREAKS_ROW(y, ring_out) * pitch + x) * 4;
 #if ACCUM
   sum += TO_REAL16(vload16(0, out));
 #endif

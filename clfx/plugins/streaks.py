@@ -93,6 +93,20 @@ Quality levels run the passes at 1/4 (draft), 1/2 (preview) or full (final, refe
 resolution (points splatted on the coarser grid, steps scaled, bilinear upsample on compose);
 every tap is interpolated (taps rounded to whole pixels in long passes made a thin ray wander
 by half a pixel per pass, a staircase along it).
+
+Memory and tiles (issue 26)
+---------------------------
+The frame-wide part (seeds, bright pixels, every ray's passes, their sum at working
+resolution) is computed once per frame in the step's plan; the render, whole or one band of
+a tiled render, adds its rows of that sum to its rows of the source (a band's region of
+interest is itself).  A working frame over ``STREAM_PIXELS`` streams through the passes in
+chunks of rows: a ray sweeps the frame against its taps' direction (a pass reads rows at
+``y + s 4^n sy``, all on one side), each pass's input held as a ring of the chunk and the
+rows the later passes still read (about the support, ``TAIL L``, in all), and the sum waits
+on the host, composed in pieces.  The whole passes needed three frame-sized buffers: at 8K
+UHD (cinema, 4 rays of 440 px) 1519 MiB against 352 MiB of rings and a chunk.  Every pixel
+takes the same floats either way: a tap past a ring's rows has weight 0 (the last pass's
+unused taps) and reads a finite non-negative value, as every held value is.
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
