@@ -207,15 +207,15 @@ def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
 
 @pytest.mark.slow
 def test_8k_renders_tiled_within_a_small_pool_bit_identical(rt, monkeypatch):
-    """At 8K UHD the steps of cinema that tile (chromatic aberration, distortion, vignette,
-    grain) render in bands of 2^20 pixels: the same bits as whole frames (the whole look,
+    """At 8K UHD the steps of cinema that tile (streaks, chromatic aberration, distortion,
+    vignette, grain) render in bands of 2^20 pixels: the same bits as whole frames (the whole look,
     with its steps that render whole, and its peaks: scripts/tile_8k.py).  With
     CLFX_POOL_MB=64 vignette + grain's device peak fell from 2065 to 1118 MiB."""
     look = clfx.load_look("cinema")
     look = dataclasses.replace(look, steps=[s for s in look.steps
                                             if s.plugin.whole_frame is None])
-    assert [s.effect for s in look.steps] == ["chromatic_aberration", "distortion",
-                                              "vignette", "grain"]
+    assert [s.effect for s in look.steps] == ["streaks", "chromatic_aberration",
+                                              "distortion", "vignette", "grain"]
     w, h = 7680, 4320
     whole, _ = render_frame(rt, look, cinema_frame(w, h), frame_number=5)
     tiled, report = render_frame(rt, look, cinema_frame(w, h), frame_number=5,
