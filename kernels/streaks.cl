@@ -17,6 +17,11 @@
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
  *                    taps, zero outside the buffer; ACCUM adds the result to `out`
  *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
+ * RING = 1 (large frames, CHECKED = 1): the frame streams through in chunks of rows and
+ * each buffer a pass reads holds only the rows the next passes still need: absolute row y
+ * lives at row y % rows of it (`rows` its height), so a chunk's kernels address rows by
+ * their frame row (`y0`: the chunk's first; streaks_wrap) and compute the same floats as
+ * over whole buffers.
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{T 4^(N-1)-1} a^k delta(x + k d) exactly (each k has one base-4 expansion; the
  * last pass has T <= 4 taps of non-zero weight).
@@ -29,6 +34,32 @@
 #endif
 #ifndef CHECKED
 #define CHECKED 1
+#endif
+
+#ifndef RING
+#define RING 0
+#endif
+#if RING
+#if !CHECKED
+#error "RING buffers need CHECKED taps"
+#endif
+/* Row y of a ring (x: a multiple of its height y at or below the chunk's first row, y: its
+ * height): y % height for the rows a chunk reads (within one height of the chunk), without a
+ * division per load; a tap of weight 0 past them reads some held row (finite, times 0). */
+inline int streaks_wrap(int y, int2 ring)
+{
+  int r = y - ring.x;
+  r = r < 0 ? r + ring.y : r;
+  r = r >= ring.y ? r - ring.y : r;
+  return clamp(r, 0, ring.y - 1);
+}
+inline int2 streaks_ring(int y0, int rows)
+{
+  return (int2)(y0 - y0 % rows, rows);
+}
+#define STREAKS_ROW(y, ring) streaks_wrap((y), (ring))
+#else
+#define STREAKS_ROW(y, ring) (y)
 #endif
 
 #ifndef PEAK_TILE
@@ -173,9 +204,9 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
   return acc;
 }
 
-/* One work-item per low-resolution pixel: the box average of the streaking light no seed
- * gathered (extended lights), plus the seeds' points splatted bilinearly.  `points`:
- * (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
+/* One work-item per low-resolution pixel (rows from y0): the box average of the streaking
+ * light no seed gathered (extended lights), plus the seeds' points splatted bilinearly.
+ * `points`: (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
  * divided by FACTOR^2; `bin_start` (bins_x * bins_y + 1) and `bin_seed` list, per BIN x BIN
  * block of low-resolution pixels, the seeds whose splat touches it, in seed order. */
 kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
@@ -186,9 +217,10 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
                            const float core, const float source_color,
                            const float core_power, global const uchar *gathered,
                            global const float *points, global const int *bin_start,
-                           global const int *bin_seed, const int bins_x, const int bin)
+                           global const int *bin_seed, const int bins_x, const int bin,
+                           const int y0, const int rows)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
+  const int x = get_global_id(0), y = get_global_id(1) + y0;
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
   float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
@@ -206,43 +238,49 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
                     * fmax(1.0f - fabs(s.s1 - (float)y), 0.0f);
     acc += (float4)(s.s2, s.s3, s.s4, 0.0f) * w;
   }
-  clfx_store4(dst, dst_pitch, x, y, fmin(acc, (float4)SCATTER_FLT_MAX));
+#if RING
+  const int2 ring = streaks_ring(y0, rows);
+#endif
+  clfx_store4(dst, dst_pitch, x, STREAKS_ROW(y, ring), fmin(acc, (float4)SCATTER_FLT_MAX));
 }
 
 /* Reads relative to the interior origin; `wp` = interior pitch, `h` = interior rows.  With
  * CHECKED = 0 every tap lies inside the margin (the host sized it), so no test is needed. */
 #if CHECKED
-inline float4 streaks_at(global const float *img, int pitch, int wp, int h, int x, int y)
+inline float4 streaks_at(global const float *img, int pitch, int wp, int h, int2 ring, int x,
+                         int y)
 {
   if(x < 0 || x >= wp || y < 0 || y >= h) return (float4)0.0f;
-  return vload4(y * pitch + x, img);
+  return vload4(STREAKS_ROW(y, ring) * pitch + x, img);
 }
 #endif
 
-inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, int x, int y)
+inline float16 streaks_at4(global const float *img, int pitch, int wp, int h, int2 ring, int x,
+                           int y)
 {
 #if CHECKED
   if(y < 0 || y >= h || x < 0 || x + 4 > wp)
-    return (float16)(streaks_at(img, pitch, wp, h, x, y), streaks_at(img, pitch, wp, h, x + 1, y),
-                     streaks_at(img, pitch, wp, h, x + 2, y),
-                     streaks_at(img, pitch, wp, h, x + 3, y));
+    return (float16)(streaks_at(img, pitch, wp, h, ring, x, y),
+                     streaks_at(img, pitch, wp, h, ring, x + 1, y),
+                     streaks_at(img, pitch, wp, h, ring, x + 2, y),
+                     streaks_at(img, pitch, wp, h, ring, x + 3, y));
 #endif
-  return vload16(0, img + (y * pitch + x) * 4);
+  return vload16(0, img + (STREAKS_ROW(y, ring) * pitch + x) * 4);
 }
 
 /* Bilinear sample of 4 consecutive pixels shifted by (dx, dy): the weights are the same for
  * all four, so it is four float16 loads and four vector multiply-adds. */
-inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int x, int y,
-                           float dx, float dy)
+inline float16 streaks_tap(global const float *img, int pitch, int wp, int h, int2 ring, int x,
+                           int y, float dx, float dy)
 {
   const float fx0 = floor(dx), fy0 = floor(dy);
   const int ix = x + (int)fx0, iy = y + (int)fy0;
   const float fx = dx - fx0, fy = dy - fy0;
-  float16 top = streaks_at4(img, pitch, wp, h, ix, iy) * (1.0f - fx);
-  if(fx > 0.0f) top += streaks_at4(img, pitch, wp, h, ix + 1, iy) * fx;
+  float16 top = streaks_at4(img, pitch, wp, h, ring, ix, iy) * (1.0f - fx);
+  if(fx > 0.0f) top += streaks_at4(img, pitch, wp, h, ring, ix + 1, iy) * fx;
   if(fy <= 0.0f) return top;
-  float16 bot = streaks_at4(img, pitch, wp, h, ix, iy + 1) * (1.0f - fx);
-  if(fx > 0.0f) bot += streaks_at4(img, pitch, wp, h, ix + 1, iy + 1) * fx;
+  float16 bot = streaks_at4(img, pitch, wp, h, ring, ix, iy + 1) * (1.0f - fx);
+  if(fx > 0.0f) bot += streaks_at4(img, pitch, wp, h, ring, ix + 1, iy + 1) * fx;
   return top * (1.0f - fy) + bot * fy;
 }
 
@@ -259,21 +297,30 @@ inline REAL16 streaks_term(float16 v, float4 w)
 }
 
 /* One pass of one direction.  w0..w3 are the per-channel tap weights (alpha weight 0).
- * Each work-item produces 4 pixels of a row.  ACCUM = 1: out += result (last pass). */
+ * Each work-item produces 4 pixels of a row (rows from y0; `in_rows`, `out_rows`: the
+ * buffers' heights with RING).  ACCUM = 1: out += result (last pass). */
 kernel void streaks_pass(global const float *in, global float *out, const int org,
                          const int pitch, const int wp, const int w, const int h,
                          const float step_x, const float step_y,
-                         const float4 w0, const float4 w1, const float4 w2, const float4 w3)
+                         const float4 w0, const float4 w1, const float4 w2, const float4 w3,
+                         const int y0, const int in_rows, const int out_rows)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
+  const int qx = get_global_id(0), y = get_global_id(1) + y0;
   if(qx * 4 >= wp || y >= h) return;
   const int x = qx * 4;
   in += 4 * org;
   out += 4 * org;
-  REAL16 sum = streaks_term(vload16(0, in + (y * pitch + x) * 4), w0);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, step_x, step_y), w1);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 2.0f * step_x, 2.0f * step_y), w2);
-  sum += streaks_term(streaks_tap(in, pitch, wp, h, x, y, 3.0f * step_x, 3.0f * step_y), w3);
+#if RING
+  const int2 ring = streaks_ring(y0, in_rows), ring_out = streaks_ring(y0, out_rows);
+#else
+  const int2 ring = (int2)(0, 0), ring_out = ring;
+#endif
+  REAL16 sum = streaks_term(vload16(0, in + (STREAKS_ROW(y, ring) * pitch + x) * 4), w0);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, ring, x, y, step_x, step_y), w1);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, ring, x, y, 2.0f * step_x,
+                                  2.0f * step_y), w2);
+  sum += streaks_term(streaks_tap(in, pitch, wp, h, ring, x, y, 3.0f * step_x,
+                                  3.0f * step_y), w3);
   sum = fmin(sum, (REAL)SCATTER_FLT_MAX);  /* saturate: finite input, finite output */
   if(x + 4 > w)  /* padding stays zero: it stands for "outside the image" */
   {
@@ -281,31 +328,43 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
                               (float)(x + 3 < w));
     sum *= TO_REAL16((float16)(m.xxxx, m.yyyy, m.zzzz, m.wwww));
   }
+  out += (STREAKS_ROW(y, ring_out) * pitch + x) * 4;
 #if ACCUM
-  sum += TO_REAL16(vload16(0, out + (y * pitch + x) * 4));
+  sum += TO_REAL16(vload16(0, out));
 #endif
-  vstore16(fmin(TO_FLOAT16(sum), SCATTER_FLT_MAX), 0, out + (y * pitch + x) * 4);
+  vstore16(fmin(TO_FLOAT16(sum), SCATTER_FLT_MAX), 0, out);
 }
 
 /* out = sanitised source (zero outside its window) + streaks, where the streak buffer has
- * FACTOR-times lower resolution (bilinear, pixel centres aligned, clamped at its edges). */
+ * FACTOR-times lower resolution (bilinear, pixel centres aligned, clamped at its edges).
+ * `out` is the part of the output window from (dx0, dy0) (full-resolution pixels), its rows
+ * from row0 here; `streak` holds rows r0.. of the lo_w x lo_h streak sum. */
 kernel void streaks_compose(global const float *src, const int src_pitch, const int src_w,
                             const int src_h, const int ox, const int oy,
                             global const float *streak, const int org, const int lo_pitch,
-                            const int lo_w, const int lo_h, global float *dst,
-                            const int dst_pitch, const int dst_w, const int dst_h)
+                            const int lo_w, const int lo_h, const int r0, global float *dst,
+                            const int dst_pitch, const int dst_w, const int dst_h,
+                            const int dx0, const int dy0, const int row0)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
+  const int x = get_global_id(0), y = get_global_id(1) + row0;
   streak += 4 * org;
   if(x >= dst_pitch || y >= dst_h) return;
   if(x >= dst_w) { clfx_store4(dst, dst_pitch, x, y, (float4)0.0f); return; }
   const float4 c = scatter_source(src, src_pitch, src_w, src_h, x - ox, y - oy);
+  const int sx = x + dx0, sy = y + dy0;
 #if FACTOR == 1
-  const float4 s = clfx_load4(streak, lo_pitch, x, y);
+  const float4 s = clfx_load4(streak, lo_pitch, sx, sy - r0);
 #else
-  const float4 s = scatter_bilinear(streak, lo_pitch, lo_w, lo_h,
-                                    ((float)x + 0.5f) / FACTOR - 0.5f,
-                                    ((float)y + 0.5f) / FACTOR - 0.5f);
+  /* scatter_bilinear's arithmetic, rows clamped to the whole sum's and held from r0 */
+  const float u = ((float)sx + 0.5f) / FACTOR - 0.5f, v = ((float)sy + 0.5f) / FACTOR - 0.5f;
+  const float u0 = floor(u), v0 = floor(v);
+  const float fu = u - u0, fv = v - v0;
+  const int i0 = clfx_clampi((int)u0, 0, lo_w - 1), i1 = clfx_clampi((int)u0 + 1, 0, lo_w - 1);
+  const int j0 = clfx_clampi((int)v0, 0, lo_h - 1) - r0;
+  const int j1 = clfx_clampi((int)v0 + 1, 0, lo_h - 1) - r0;
+  const float4 a = vload4(j0 * lo_pitch + i0, streak), b = vload4(j0 * lo_pitch + i1, streak);
+  const float4 d = vload4(j1 * lo_pitch + i0, streak), e = vload4(j1 * lo_pitch + i1, streak);
+  const float4 s = (a * (1.0f - fu) + b * fu) * (1.0f - fv) + (d * (1.0f - fu) + e * fu) * fv;
 #endif
   clfx_store4(dst, dst_pitch, x, y, scatter_add(c, s));
 }

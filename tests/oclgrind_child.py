@@ -77,6 +77,8 @@ EXTRA = {
                                 "focus_distance": 100.0},
              {"before": ("bleed", {"size": 0.02}), "keep_overscan": True})],
     "lens_flare": [("draft", (W, H), {"model": "artistic", "threshold": 5.0}, {})],
+    # streaks' passes streamed in chunks of 3 rows through ring buffers, as at 8K (RING = 1)
+    "streaks": [("final", (W, H), {}, {"streaks_streamed": True})],
 }
 
 
@@ -124,16 +126,24 @@ def effect_look(name: str, masked: bool, params: dict | None = None,
 
 
 def render(look, level: str, size, label: str, tile_pixels: int = 0,
-           working_space: str | None = None, keep_overscan: bool = False) -> dict:
+           working_space: str | None = None, keep_overscan: bool = False,
+           streaks_streamed: bool = False) -> dict:
     from clfx import api
     from clfx.device.runtime import Runtime
+    import clfx.plugins.streaks as streaks
 
     t0 = time.perf_counter()
     rgba, depth, vel, channels = scene(*size)
     os.environ["CLFX_TILE_PIXELS"] = str(tile_pixels)   # 0: whole frames
-    res = api.render_array(rgba, look, depth=depth, velocity=vel, channels=channels,
-                           quality=level, frame=1, working_space=working_space,
-                           keep_overscan=keep_overscan)
+    kept = streaks.streams, streaks.CHUNK_PIXELS
+    if streaks_streamed:
+        streaks.streams, streaks.CHUNK_PIXELS = (lambda *a: True), 3 * size[0]
+    try:
+        res = api.render_array(rgba, look, depth=depth, velocity=vel, channels=channels,
+                               quality=level, frame=1, working_space=working_space,
+                               keep_overscan=keep_overscan)
+    finally:
+        streaks.streams, streaks.CHUNK_PIXELS = kept
     rt = Runtime.get()
     rt.finish()
     rep = res.report.as_dict()

@@ -93,6 +93,20 @@ Quality levels run the passes at 1/4 (draft), 1/2 (preview) or full (final, refe
 resolution (points splatted on the coarser grid, steps scaled, bilinear upsample on compose);
 every tap is interpolated (taps rounded to whole pixels in long passes made a thin ray wander
 by half a pixel per pass, a staircase along it).
+
+Memory and tiles (issue 26)
+---------------------------
+The frame-wide part (seeds, bright pixels, every ray's passes, their sum at working
+resolution) is computed once per frame in the step's plan; the render, whole or one band of
+a tiled render, adds its rows of that sum to its rows of the source (a band's region of
+interest is itself).  A working frame over ``STREAM_PIXELS`` streams through the passes in
+chunks of rows: a ray sweeps the frame against its taps' direction (a pass reads rows at
+``y + s 4^n sy``, all on one side), each pass's input held as a ring of the chunk and the
+rows the later passes still read (about the support, ``TAIL L``, in all), and the sum waits
+on the host, composed in pieces.  The whole passes needed three frame-sized buffers: at 8K
+UHD (cinema, 4 rays of 440 px) 1519 MiB against 352 MiB of rings and a chunk.  Every pixel
+takes the same floats either way: a tap past a ring's rows has weight 0 (the last pass's
+unused taps) and reads a finite non-negative value, as every held value is.
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -104,7 +118,8 @@ import numpy as np
 
 from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, RGBParam
-from clfx.host import Plugin, register
+from clfx.core.rect import Rect
+from clfx.host import Plugin, StepPlan, register
 
 TAPS = 4
 """Taps per pass; pass n steps 4^n pixels, so N passes cover 4^N - 1 pixels."""
@@ -307,12 +322,100 @@ def streak_parts(mode: str) -> tuple[tuple[float, float], ...]:
     return {"anamorphic": ANAMORPHIC_PARTS, "aperture": APERTURE_PARTS}.get(mode, ((1.0, 1.0),))
 
 
+STREAM_PIXELS = 1 << 22
+"""A working frame of more pixels than this (4K UHD at final quality) streams through the
+passes in chunks of rows (`Streaks.streak_sum`) where that holds fewer rows on the device
+than the three frame-sized buffers of the whole passes; its streak sum waits on the host."""
+
+CHUNK_PIXELS = 1 << 20
+"""Pixels (whole rows) of a streamed chunk, and of a piece of a streamed compose."""
+
+SEEDS_READ = 1024
+"""Seed points read with their count (one wait); a frame with more lights reads them all."""
+
+
+@dataclass(frozen=True)
+class Ray:
+    """One ray's Kawase chain: step (sx, sy) per pass-0 tap, ``passes``, ``top`` taps of
+    non-zero weight in the last pass, per-pass weights (`pass_weights`)."""
+
+    sx: float
+    sy: float
+    passes: int
+    top: int
+    weights: list
+
+
+def ray_rows(ray: Ray, chunk: int, height: int) -> list[int]:
+    """Rows a streamed ray keeps of the input of each of its passes (pass n's taps reach
+    ``(taps - 1) 4^n |sy|`` rows, plus the bilinear row): a chunk and the rows the pass
+    reads past it, at most the frame's ``height``."""
+    out = []
+    for n in range(ray.passes):
+        taps = ray.top if n == ray.passes - 1 else TAPS
+        reach = math.ceil((taps - 1) * TAPS ** n * abs(ray.sy)) + 1
+        out.append(min(height, chunk + reach))
+    return out
+
+
+def ring_rows(rays, chunk: int, height: int) -> list[int]:
+    """Rows of each held buffer of a streamed frame: the most any ray keeps at that pass."""
+    per_ray = [ray_rows(r, chunk, height) for r in rays]
+    return [max(r[n] for r in per_ray if n < len(r))
+            for n in range(max(len(r) for r in per_ray))]
+
+
+def streams(width: int, height: int, rings: list[int], chunk: int) -> bool:
+    """Whether a ``width`` x ``height`` working frame streams (`Streaks.streak_sum`): it is
+    over ``STREAM_PIXELS`` and its held rows (``rings``, the chunk's sum) are fewer than the
+    whole passes' three frame-sized buffers less one."""
+    return width * height > STREAM_PIXELS and sum(rings) + chunk < 2 * height
+
+
+@dataclass(frozen=True)
+class StreaksFrame:
+    """The frame-wide inputs of a streaks step, taken from its whole context when the plan
+    is built: the source, the output window, the level, the rays, the per-tile peak map
+    (map, tiles across, tiles down)."""
+
+    source: object
+    out_win: Rect
+    level: StreaksLevel
+    rays: tuple
+    peak: tuple
+    analysis_tile: int
+    radius: int
+    luminance_defines: dict
+    notes: list
+    nonfinite: int
+
+
+@dataclass(frozen=True)
+class StreaksPlan(StepPlan):
+    """The frame's inputs and its streak sum (`Streaks.streak_sum`), computed in the plan so
+    the sum's buffers come and go before the step's output is allocated."""
+
+    frame: StreaksFrame | None = None
+    total: "StreakSum | None" = None
+
+
+@dataclass
+class StreakSum:
+    """A frame's streaks at working resolution (``lo_w`` x ``lo_h``, RGBA float32): on the
+    device (``device``, interior at ``org``, rows ``pitch`` apart) or on the host
+    (``host``, lo_h x (lo_w rounded up to 4) x 4)."""
+
+    lo_w: int
+    lo_h: int
+    device: object = None
+    org: int = 0
+    pitch: int = 0
+    host: np.ndarray | None = None
+
+
 @register
 class Streaks(Plugin):
-    whole_frame = ("its rays are recursive passes over a downsampled copy of the whole frame, "
-                   "not drawn from a list of lights: a band needs the source a ray's length "
-                   "(5% of the diagonal in cinema, 440 px at 8K) above and below it and the "
-                   "frame's downsampling grid, so small bands would redo many times their rows")
+    whole_frame = None   # bands compose their rows from the plan's streak sum of the frame
     descriptor = Descriptor(
         name="streaks", label="Streaks (star filter)", group="Glare", kernel="streaks.cl",
         summary="Star-filter streaks or aperture diffraction spikes from the highlights, "
@@ -397,7 +500,19 @@ class Streaks(Plugin):
         return int(math.ceil(reach)) + 2 * factor
 
     # cheap questions ------------------------------------------------------------------
-    def is_identity(self, p, ctx):
+    def plan(self, p, ctx) -> StreaksPlan:
+        """Whether the step has work and, if so, the frame's streak sum (built on the
+        step's whole context: a tile cannot see the frame its rays cross)."""
+        if ctx.tiling is not None:
+            raise RuntimeError("streaks: the plan is the whole frame's; build it (planned) on "
+                               "the step's context before rendering tiles")
+        identity = self.identity(p, ctx)
+        if identity:
+            return StreaksPlan(identity=identity)
+        fr = self.frame(p, ctx)
+        return StreaksPlan(frame=fr, total=self.streak_sum(ctx.runtime, p, fr))
+
+    def identity(self, p, ctx) -> str | None:
         if p.intensity == 0.0:
             return "intensity is 0"
         if p.mode == "aperture" and not self.angles(p, ctx):
@@ -413,7 +528,9 @@ class Streaks(Plugin):
         return ctx.source.window.grown(self.spread_px(p, ctx, LEVELS["final"].factor))
 
     def region_of_interest(self, p, ctx, window):
-        return window.grown(self.spread_px(p, ctx, LEVELS["final"].factor))
+        # the rays come from the plan's streak sum over the whole frame: a band composes its
+        # rows from it and reads only its own rows of the source
+        return window
 
     @staticmethod
     def peak_map(p, ctx):
@@ -427,37 +544,62 @@ class Streaks(Plugin):
         """Half-width (px) of the window a light's peak gathers its streaking light from."""
         return max(1, round(SEED_RADIUS * ctx.diagonal_px))
 
-    def seed_points(self, rt, p, ctx, peak, ox: int, oy: int, factor: int):
+    def frame(self, p, ctx) -> StreaksFrame:
+        """What the streak sum reads of ``ctx`` (the step's whole context)."""
+        lvl = self.level(ctx)
+        factor = lvl.factor
+        angles, colour = self.angles(p, ctx), self.colour(p)
+        rays = []
+        for fraction, share in streak_parts(p.mode):
+            lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift,
+                                      p.mode) / factor
+            gain = p.intensity * share * colour / len(angles)
+            for a in angles:
+                sx, sy, step_len = grid_step(a)
+                passes, top = pass_plan(float(lengths.max()) / step_len)
+                rays.append(Ray(sx, sy, passes, top,
+                                pass_weights(lengths / step_len, passes, gain, top)))
+        return StreaksFrame(ctx.source, self.output_window(p, ctx), lvl, tuple(rays),
+                            self.peak_map(p, ctx), ctx.analysis.tile, self.seed_radius(ctx),
+                            dict(ctx.luminance_defines), ctx.notes,
+                            ctx.analysis.nonfinite_count)
+
+    def seed_points(self, rt, p, fr: StreaksFrame, peak):
         """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
         position (a fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows,
         x and y at the light's centroid in the working buffer's pixels, light divided by
         ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered.
-        ``peak``: (the per-tile peak map on the device, tiles across, tiles down)."""
-        src = ctx.source
-        (peak, tiles_x, tiles_y), radius = peak, self.seed_radius(ctx)
+        ``peak``: the per-tile peak map on the device.  One wait for the count and the first
+        ``SEEDS_READ`` points; a second read only for a frame with more lights."""
+        src, factor = fr.source, fr.level.factor
+        ox, oy = src.window.offset_in(fr.out_win)
+        _, tiles_x, tiles_y = fr.peak
         npx = src.width * src.height
         flags = [rt.buffer(max(npx, 16)) for _ in range(2)]
         for f in flags:
             rt.cl.enqueue_fill_buffer(rt.queue, f.buffer, np.uint8(0), 0, max(npx, 16))
         count = rt.to_device(np.zeros(1, np.int32))
         seeds = rt.buffer(MAX_SEEDS * 32)
-        knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=ctx.analysis.tile,
-                        **ctx.luminance_defines)
+        knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=fr.analysis_tile,
+                        **fr.luminance_defines)
         i32, f32 = np.int32, np.float32
         rt.launch(knl, (src.width, src.height), src, i32(src.pitch), i32(src.width),
                   i32(src.height), f32(p.threshold), peak, i32(tiles_x),
                   i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
-                  i32(radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
+                  i32(fr.radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
         dilate = rt.kernel("streaks.cl", "streaks_dilate")
         for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
             rt.launch(dilate, (src.width, src.height), flags[a], flags[b], i32(src.width),
-                      i32(src.height), i32(radius), i32(sx), i32(sy))
-        n = int(rt.from_device(count, np.int32, 1)[0])
+                      i32(src.height), i32(fr.radius), i32(sx), i32(sy))
+        n_host, first = np.zeros(1, np.int32), np.empty((SEEDS_READ, 8), np.float32)
+        rt.cl.enqueue_copy(rt.queue, n_host, count.buffer, is_blocking=False)
+        rt.cl.enqueue_copy(rt.queue, first, seeds.buffer, is_blocking=True)
+        n = int(n_host[0])
         if n > MAX_SEEDS:
-            ctx.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
+            fr.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
             n = MAX_SEEDS
-        rows = rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8) if n else \
-            np.zeros((0, 8), np.float32)
+        rows = first[:n] if n <= SEEDS_READ else \
+            rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8)
         rows = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
         out = np.zeros((n, 8), np.float32)
         # source pixel -> output window pixel -> working pixel (centres aligned)
@@ -467,85 +609,145 @@ class Streaks(Plugin):
         return out, flags[0]
 
     # render ---------------------------------------------------------------------------
-    def render(self, rt, p, ctx):
-        src = ctx.source
-        lvl = self.level(ctx)
-        factor = lvl.factor
-        out_win = self.output_window(p, ctx)
-        ox, oy = src.window.offset_in(out_win)
-        lo_w, lo_h = -(-out_win.width // factor), -(-out_win.height // factor)
-        i32, f32 = np.int32, np.float32
-        defines = {"FACTOR": factor, "fp64": lvl.fp64, **ctx.luminance_defines}
-
-        angles = self.angles(p, ctx)
-        colour = self.colour(p)
-        plans = []
-        for fraction, share in streak_parts(p.mode):
-            lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift,
-                                      p.mode) / factor
-            gain = p.intensity * share * colour / len(angles)
-            for a in angles:
-                sx, sy, step_len = grid_step(a)
-                passes, top = pass_plan(float(lengths.max()) / step_len)
-                plans.append((sx, sy, passes, pass_weights(lengths / step_len, passes, gain,
-                                                           top)))
-        # zero margin wide enough for every tap (no bounds tests), unless the rays are so long
-        # that the margin would cost more than the tests
-        reach = 3 * TAPS ** (max(n for _, _, n, _ in plans) - 1) + 2
-        margin = -(-reach // 4) * 4
-        checked = margin > MAX_MARGIN
-        if checked:
-            margin = 0
+    def streak_sum(self, rt, p, fr: StreaksFrame) -> StreakSum:
+        """The frame's streaks at working resolution, computed once per plan: the Kawase
+        passes of every ray over the whole frame's light, summed.  Small frames run each
+        pass over frame-sized buffers (zero margins where the taps fit them); a working frame
+        over ``STREAM_PIXELS`` pixels streams through in chunks of rows when that holds
+        fewer rows on the device (`ring_rows`), and its sum waits on the host.  Both compute
+        every pixel with the same float operations."""
+        src, lvl, factor = fr.source, fr.level, fr.level.factor
+        ox, oy = src.window.offset_in(fr.out_win)
+        lo_w, lo_h = -(-fr.out_win.width // factor), -(-fr.out_win.height // factor)
         wp = -(-lo_w // 4) * 4
+        i32, f32 = np.int32, np.float32
+        chunk = max(1, CHUNK_PIXELS // wp)
+        rings = ring_rows(fr.rays, chunk, lo_h)
+        stream = streams(wp, lo_h, rings, chunk)
+        if stream:
+            checked, margin = True, 0
+        else:
+            # zero margin wide enough for every tap (no bounds tests), unless the rays are so
+            # long that the margin would cost more than the tests
+            reach = 3 * TAPS ** (max(r.passes for r in fr.rays) - 1) + 2
+            margin = -(-reach // 4) * 4
+            checked = margin > MAX_MARGIN
+            if checked:
+                margin = 0
         pitch = wp + 2 * margin
         org = margin * pitch + margin
-        nbytes = pitch * (lo_h + 2 * margin) * 16
-        work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total
-        for buf in work:
-            rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
-        ping, pong, total = work
-        defines["CHECKED"] = int(checked)
+        defines = {"FACTOR": factor, "fp64": lvl.fp64, "CHECKED": int(checked),
+                   "RING": int(stream), **fr.luminance_defines}
 
-        peak, tiles_x, tiles_y = self.peak_map(p, ctx)
-        peak_buf = rt.to_device(peak)
-        points, gathered = self.seed_points(rt, p, ctx, (peak_buf, tiles_x, tiles_y), ox, oy,
-                                            factor)
+        peak_buf = rt.to_device(fr.peak[0])
+        points, gathered = self.seed_points(rt, p, fr, peak_buf)
         starts, members = bin_points(points, wp, lo_h, BIN)
         points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
             points if len(points) else np.zeros((1, 8), np.float32), starts,
             members if len(members) else np.zeros(1, np.int32)))
-        bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
+        bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=fr.analysis_tile,
                                **defines)
-        bins_x = -(-wp // BIN)
+        _, tiles_x, tiles_y = fr.peak
+        bright_args = (src, i32(src.pitch), i32(src.width), i32(src.height))
+        bright_tail = (i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
+                       i32(tiles_y), f32(p.core), f32(p.source_color),
+                       f32(self.core_power(p)), gathered, points_buf, starts_buf, members_buf,
+                       i32(-(-wp // BIN)), i32(BIN))
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
-        for sx, sy, passes, weights in plans:
-            # each ray starts from the bright pixels, extracted again into pong (cheaper than
-            # a fourth frame-sized buffer; passes write inside the zero margins only)
-            rt.launch(bright_knl, (wp, lo_h), src, i32(src.pitch), i32(src.width),
-                      i32(src.height), pong, i32(org), i32(pitch), i32(wp), i32(lo_h),
-                      i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
-                      i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
-                      gathered, points_buf, starts_buf, members_buf, i32(bins_x), i32(BIN))
-            cur = pong
-            for n in range(passes):
-                last = n == passes - 1
-                dst = total if last else (ping if cur is not ping else pong)
-                b = TAPS ** n
-                w = [w4.astype(np.float32) for w4 in weights[n]]
-                rt.launch(accum_knl if last else step_knl, (wp // 4, lo_h), cur, dst, i32(org),
-                          i32(pitch), i32(wp), i32(lo_w), i32(lo_h), f32(sx * b), f32(sy * b),
-                          *w, local=LOCAL)
-                cur = dst
-        del work, ping, pong
 
-        out = rt.image(out_win)
-        rt.launch(rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor,
-                            **ctx.luminance_defines),
-                  (out.pitch, out_win.height), src, i32(src.pitch), i32(src.width),
-                  i32(src.height), i32(ox), i32(oy), total, i32(org), i32(pitch), i32(lo_w),
-                  i32(lo_h), out, i32(out.pitch), i32(out_win.width), i32(out_win.height))
-        bad = ctx.analysis.nonfinite_count
-        if bad:
-            ctx.notes.append(f"streaks: {bad} non-finite pixels set to 0")
+        def bright(dst, y0, rows, ring):   # the bright pixels and points of rows y0..
+            rt.launch(bright_knl, (wp, rows), *bright_args, dst, i32(org), i32(pitch), i32(wp),
+                      i32(lo_h), *bright_tail, i32(y0), i32(ring))
+
+        def run_pass(ray, n, src_buf, dst_buf, y0, rows, in_rows, out_rows):
+            b = TAPS ** n
+            rt.launch(accum_knl if n == ray.passes - 1 else step_knl, (wp // 4, rows), src_buf,
+                      dst_buf, i32(org), i32(pitch), i32(wp), i32(lo_w), i32(lo_h),
+                      f32(ray.sx * b), f32(ray.sy * b),
+                      *[w4.astype(np.float32) for w4 in ray.weights[n]],
+                      i32(y0), i32(in_rows), i32(out_rows), local=LOCAL)
+
+        if not stream:
+            nbytes = pitch * (lo_h + 2 * margin) * 16
+            work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total
+            for buf in work:
+                rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
+            ping, pong, total = work
+            for ray in fr.rays:
+                # each ray starts from the bright pixels, extracted again into pong (cheaper
+                # than a fourth frame-sized buffer; passes write inside the zero margins only)
+                bright(pong, 0, lo_h, 0)
+                cur = pong
+                for n in range(ray.passes):
+                    dst = total if n == ray.passes - 1 else (ping if cur is not ping else pong)
+                    run_pass(ray, n, cur, dst, 0, lo_h, 0, 0)
+                    cur = dst
+            result = StreakSum(lo_w, lo_h, device=total, org=org, pitch=pitch)
+        else:
+            # each buffer a pass reads keeps the rows the passes after it still read (rows
+            # y % its height); a ray sweeps the frame against its taps' direction, so the
+            # rows a chunk reads are this chunk's or ones swept before it
+            held = [rt.buffer(r * wp * 16) for r in rings]
+            for buf, r in zip(held, rings):
+                rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, r * wp * 16)
+            part = rt.buffer(chunk * wp * 16)
+            host = np.empty((lo_h, wp, 4), np.float32)
+            for i, ray in enumerate(fr.rays):
+                heights = ray_rows(ray, chunk, lo_h)
+                starts_y = range(0, lo_h, chunk)
+                for y0 in (reversed(starts_y) if ray.sy > 0 else starts_y):
+                    rows = min(chunk, lo_h - y0)
+                    if i == 0:
+                        rt.cl.enqueue_fill_buffer(rt.queue, part.buffer, np.float32(0.0), 0,
+                                                  chunk * wp * 16)
+                    else:
+                        rt.cl.enqueue_copy(rt.queue, part.buffer, host[y0:y0 + rows],
+                                           is_blocking=False)
+                    bright(held[0], y0, rows, heights[0])
+                    for n in range(ray.passes):
+                        last = n == ray.passes - 1
+                        run_pass(ray, n, held[n], part if last else held[n + 1], y0, rows,
+                                 heights[n], chunk if last else heights[n + 1])
+                    rt.cl.enqueue_copy(rt.queue, host[y0:y0 + rows], part.buffer,
+                                       is_blocking=False)
+            rt.finish()
+            result = StreakSum(lo_w, lo_h, host=host)
+        return result
+
+    def render(self, rt, p, ctx):
+        plan = self.planned(p, ctx)
+        fr, total = plan.frame, plan.total
+        if total is None:   # rendered although the plan found nothing to do
+            fr = self.frame(p, ctx)
+            total = self.streak_sum(rt, p, fr)
+        src, factor = ctx.source, fr.level.factor
+        band = ctx.tiling.band if ctx.tiling is not None else fr.out_win
+        ox, oy = src.window.offset_in(band)
+        dx0, dy0 = band.offset_in(fr.out_win)
+        out = rt.image(band)
+        knl = rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor, **fr.luminance_defines)
+        i32 = np.int32
+
+        def compose(buf, org, pitch, r0, row0, rows):
+            rt.launch(knl, (out.pitch, rows), src, i32(src.pitch), i32(src.width),
+                      i32(src.height), i32(ox), i32(oy), buf, i32(org), i32(pitch),
+                      i32(total.lo_w), i32(total.lo_h), i32(r0), out, i32(out.pitch),
+                      i32(band.width), i32(row0 + rows), i32(dx0), i32(dy0), i32(row0))
+
+        if total.host is None:
+            compose(total.device, total.org, total.pitch, 0, 0, band.height)
+        else:   # the rows of the sum a piece of the band reads, uploaded piece by piece
+            rows = max(1, CHUNK_PIXELS // out.pitch)
+            wp = total.host.shape[1]
+            buf = rt.buffer((rows // factor + 5) * wp * 16)
+            for row0 in range(0, band.height, rows):
+                n = min(rows, band.height - row0)
+                y0, y1 = dy0 + row0, dy0 + row0 + n
+                r0 = min(max(y0 // factor - 1, 0), total.lo_h - 1)
+                r1 = min((y1 - 1) // factor + 2, total.lo_h)
+                rt.cl.enqueue_copy(rt.queue, buf.buffer, total.host[r0:r1], is_blocking=False)
+                compose(buf, 0, wp, r0, row0, n)
+        if fr.nonfinite:
+            ctx.notes.append(f"streaks: {fr.nonfinite} non-finite pixels set to 0")
         return out

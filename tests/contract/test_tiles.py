@@ -251,3 +251,23 @@ def test_velocity_effects_tile_at_every_shutter_and_path(rt, monkeypatch, name, 
                                            window or Rect.from_size(90, 70))
     assert_tiles_give_the_whole_render(rt, name, effects.params(name, **params), quality,
                                        effects.scene((70, 90)), rows=7, **where)
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("layout", ["frame", "overscan"])
+@pytest.mark.parametrize("streamed", [False, True], ids=["whole-passes", "streamed"])
+@pytest.mark.parametrize("mode", ["star", "anamorphic"])
+def test_streaks_tiles_from_the_frames_streak_sum(rt, monkeypatch, mode, streamed, layout,
+                                                  quality):
+    # the plan's streak sum is the whole frame's (its passes over frame-sized buffers, or
+    # streamed through in chunks of 3 rows as an 8K frame is); a band composes its rows of it
+    # (a band reads only its rows of the source: one past the data window makes
+    # render_tiled render whole, so "inside" is not a layout here)
+    import clfx.plugins.streaks as mod
+    if streamed:
+        monkeypatch.setattr(mod, "streams", lambda *a: True)
+        monkeypatch.setattr(mod, "CHUNK_PIXELS", 3 * 96)
+    window, display = LAYOUTS.get(layout, (None, None))
+    p = effects.params("streaks", mode=mode, angle=30.0, length=0.3, streaks=5)
+    assert_tiles_give_the_whole_render(rt, "streaks", p, quality, effects.scene((70, 90)),
+                                       rows=7, window=window, display_window=display)

@@ -174,6 +174,73 @@ def test_bounds_tested_taps_match_reference(rt, rng, monkeypatch):
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
 
 
+def lights(rng, shape):
+    """``scene`` with an extended light (a 12 x 20 px pane) and a light at the corner."""
+    src = scene(rng, shape)
+    h, w = shape
+    src[h // 2:h // 2 + 12, 3 * w // 4:3 * w // 4 + 20, :3] = 6.0
+    src[2, 3, :3] = 300.0
+    return src
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final", "reference"])
+@pytest.mark.parametrize("kw", [dict(angle=30.0, length=0.3), dict(angle=-60.0, length=0.3),
+                                dict(mode="anamorphic", angle=10.0),
+                                dict(mode="aperture", blades=5, length=0.2),
+                                dict(streaks=6, angle=17.0, length=1.5)],
+                         ids=["30", "-60", "anamorphic", "aperture", "long"])
+def test_streamed_passes_give_the_whole_passes_bits(rt, rng, monkeypatch, quality, kw):
+    # a large frame streams through the passes in chunks of rows, each pass's input held as
+    # a ring of the rows the later passes still read: every pixel takes the same floats
+    import clfx.plugins.streaks as mod
+    src = lights(rng, (61, 133))
+    p = Streaks.params(**{**PARAMS, **kw})
+    cam = Camera(blades=5)
+    whole = Streaks().apply(rt, p, src, quality=quality, camera=cam)
+    monkeypatch.setattr(mod, "streams", lambda *a: True)
+    for chunk_rows in (1, 5):
+        monkeypatch.setattr(mod, "CHUNK_PIXELS", chunk_rows * 136)
+        got = Streaks().apply(rt, p, src, quality=quality, camera=cam)
+        assert np.array_equal(got.view(np.uint32), whole.view(np.uint32)), chunk_rows
+
+
+def test_an_8k_frame_streams_in_a_fraction_of_the_whole_passes_memory():
+    # cinema's streaks at 8K UHD final: 4 rays of 440 px; the held rows and the chunk's sum
+    # are about 3000 rows of the frame's width, the whole passes' three buffers 3 x 4320
+    import clfx.plugins.streaks as mod
+    lengths = mod.channel_lengths(0.05 * math.hypot(7680, 4320), 0.0)
+    rays = []
+    for a in mod.streak_angles("star", 4, 45.0, 0, 0.0):
+        sx, sy, step = mod.grid_step(a)
+        passes, top = mod.pass_plan(float(lengths.max()) / step)
+        rays.append(mod.Ray(sx, sy, passes, top, []))
+    chunk = mod.CHUNK_PIXELS // 7680
+    rings = mod.ring_rows(rays, chunk, 4320)
+    assert mod.streams(7680, 4320, rings, chunk)
+    assert sum(rings) + chunk < 0.25 * 3 * 4320
+    assert not mod.streams(960, 540, mod.ring_rows(rays, 1092, 540), 1092)
+
+
+def test_many_lights_read_after_the_first_wait(rt, rng, monkeypatch):
+    # the count and the first SEEDS_READ points come in one wait; more lights, a second read
+    import clfx.plugins.streaks as mod
+    src = lights(rng, (48, 64))
+    src[5:45:8, 4:60:9, :3] = 500.0
+    p = Streaks.params(**PARAMS)
+    want = Streaks().apply(rt, p, src)
+    monkeypatch.setattr(mod, "SEEDS_READ", 2)
+    got = Streaks().apply(rt, p, src)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+def test_a_tile_cannot_plan_the_frame(rt, rng):
+    from clfx.host import RenderContext
+    ctx = RenderContext(rt, rt.upload(scene(rng, (20, 30))))
+    tile = ctx.tile(Rect(0, 5, 30, 12))
+    with pytest.raises(RuntimeError, match="whole frame"):
+        Streaks().render(rt, Streaks.params(**PARAMS), tile)
+
+
 # -- what a user sees -------------------------------------------------------------------------
 def flame(h=270, w=480, glow=40.0, core=3000.0):
     """A synthetic flame: a small very bright core (6 x 6 px) in a large dim glow (an ellipse
