@@ -148,7 +148,8 @@ def _is_image(path: str) -> bool:
                                                  ".jpeg", ".dpx", ".hdr")
 
 
-def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False) -> Look:
+def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
+                    level: str | None = None) -> Look:
     """The look an output of clfx was rendered with (its ``clfx:lookJSON`` header
     attribute), to render a shot again from the file alone.
 
@@ -156,6 +157,8 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False) -> Look:
     renders the same pixels whatever level the render asked for.  ``relevel``: the steps
     that took the render's level (``clfx:quality``) take the next render's instead (``clfx
     render --look-from FILE --quality LEVEL``); steps with their own level keep it.
+    ``level``: that stamp when the caller has read it already (`stamped_quality`); None:
+    read here.
 
     Raises
     ------
@@ -177,7 +180,7 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False) -> Look:
 
     look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
     if relevel:
-        level = header_attribute(path, "clfx:quality")
+        level = level if level is not None else stamped_quality(path)
         look = replace(look, steps=[replace(s, quality=None) if s.quality == level else s
                                     for s in look.steps])
     return replace(look, source=os.fspath(path), files=(os.fspath(path),))

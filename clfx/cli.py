@@ -518,10 +518,14 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
 
     from clfx.api import load_look, look_from_stamp, stamped_quality
 
-    if look_from and not options.quality:      # the level FILE was rendered at
-        options = replace(options, quality=stamped_quality(look_from))
-    lk = look_from_stamp(look_from, relevel=bool(options.quality)) if look_from \
-        else (look_name or "default")
+    lk = look_name or "default"
+    if look_from:
+        stamped = stamped_quality(look_from)      # the level FILE was rendered at, read once
+        if not options.quality:
+            options = replace(options, quality=stamped)
+        # no stamp: no step took the render's level, nothing to relevel
+        lk = look_from_stamp(look_from, relevel=bool(options.quality) and stamped is not None,
+                             level=stamped)
     lk = load_look(lk, set=assignments)
     _run_batch(ctx, lk, input_path, output_path, options, runtime,
                scale if runtime is None else None)

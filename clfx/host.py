@@ -28,11 +28,13 @@ class _SharedAnalysis:
     """The frame's scene analysis, shared by a look's context and every per-step context
     made from it (:meth:`RenderContext.for_step`), with the seconds spent computing it."""
 
-    __slots__ = ("seconds", "value")
+    __slots__ = ("seconds", "value", "alpha_is_coverage")
 
-    def __init__(self, value=None):
+    def __init__(self, value=None, alpha_is_coverage=None):
         self.value = value
         self.seconds = 0.0
+        self.alpha_is_coverage = alpha_is_coverage
+        """The verdict of the frame's first analysis (`RenderContext.alpha_is_coverage`)."""
 
 
 class _FrameAnalysis(_SharedAnalysis):
@@ -204,7 +206,20 @@ class RenderContext:
                                    display_window=self.display_window,
                                    luminance_defines=self.luminance_defines)
             shared.seconds += shared.value.seconds
+            if shared.alpha_is_coverage is None:
+                shared.alpha_is_coverage = shared.value.alpha_is_coverage()
         return shared.value
+
+    def alpha_is_coverage(self) -> bool:
+        """Whether the frame's alpha reads as coverage (`SceneAnalysis.alpha_is_coverage`:
+        no light where alpha <= 0), as the frame's first scene analysis found it: the look's
+        input whenever an earlier step read the analysis (every resampling, glare-family,
+        blur and motion effect does), not the image after effects that put light where
+        alpha is 0 on purpose (chromatic aberration's fringes, glare), which would turn a CG
+        element on an empty background into "a matte"."""
+        analysis = self.analysis
+        verdict = self.shared.alpha_is_coverage
+        return analysis.alpha_is_coverage() if verdict is None else verdict
 
     @property
     def analysis_seconds(self) -> float:
@@ -255,7 +270,7 @@ class RenderContext:
         notes, and the whole frame's scene analysis (computed now if not yet), not the
         tile's; ``tiling`` says the whole source window and the ``band`` of the output the
         tile renders (default ``window``)."""
-        frame = _FrameAnalysis(self.analysis)
+        frame = _FrameAnalysis(self.analysis, self.alpha_is_coverage())
         whole = self.tiling.whole if self.tiling else self.source.window
         return replace(self.grown_to(window), shared=frame,
                        tiling=Tiling(whole, band if band is not None else window))

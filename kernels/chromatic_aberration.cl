@@ -41,8 +41,7 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
                                        const int qx0, const int row0, const int nqx,
                                        const int nrows, const int shift)
 {
-  RS_TILE(src, pitch, shift);
-  RS_TILE(dst, pitch, shift);
+  RS_TILES(src, pitch, dst, pitch, shift);
   /* the launch covers quads [qx0, qx0 + nqx) x rows [row0, row0 + nrows) */
   if(get_global_id(0) >= nqx || get_global_id(1) >= nrows) return;
   const int qx = get_global_id(0) + qx0, y = get_global_id(1) + row0;
@@ -151,11 +150,8 @@ kernel void chromatic_aberration_packed(global const float *src, global float *d
                                         const int pitch, const int w, const int h,
                                         const int row0, const int rows, const int shift)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= rows || qx * 4 >= pitch) return;
-  RS_TILE(src, pitch, shift);
-  RS_TILE(dst, pitch, shift);
-  const int entry = y * (pitch / 4) + qx, quad = entry + row0 * (pitch / 4);
+  RS_BAND_PROLOGUE(src, pitch, dst, pitch, rows, row0, shift);
+  const int entry = my * (pitch / 4) + qx, quad = y * (pitch / 4) + qx;
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fast_quad(src, pitch, w, h, map + 24 * entry, &r0, &r1, &r2, &r3);
   rs_fast_quad(src, pitch, w, h, map + 24 * entry + 12, &b0, &b1, &b2, &b3);
@@ -169,10 +165,7 @@ kernel void chromatic_aberration_packed_fix(global const float *src, global floa
                                             const int w, const int h, const int row0,
                                             const int rows, const int shift)
 {
-  const int n = get_global_id(0);
-  if(n >= count) return;
-  RS_TILE(src, pitch, shift);
-  RS_TILE(dst, pitch, shift);
+  RS_RECORD_PROLOGUE(src, dst, pitch, count, shift);
   global const int *rec = records + 20 * n;
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fix_quad(src, pitch, w, h, rec + 4, &r0, &r1, &r2, &r3);

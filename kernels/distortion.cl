@@ -64,8 +64,7 @@ kernel void distortion_footprint(global const float *src, global float *dst,
 {
   /* launched over exactly (dst_pitch / 4, dst_h): a bounds test here made PoCL keep each
    * work-item's values in stack arrays (15% slower) */
-  RS_TILE(src, src_pitch, shift);
-  RS_TILE(dst, dst_pitch, shift);
+  RS_TILES(src, src_pitch, dst, dst_pitch, shift);
   const int quads = dst_pitch / 4, entry = get_global_id(1) * quads + get_global_id(0);
   const int quad = entry + row0 * quads;
   fp_prefetch_quad(src, src_pitch, map + FP_Q_INTS * min(entry + FP_PREFETCH_AHEAD,
@@ -89,10 +88,7 @@ kernel void distortion_ewa_f64(global const float *src, global float *dst,
                                const int src_h, const int dst_pitch, const int dst_h,
                                const int row0, const int shift)
 {
-  const int qx = get_global_id(0), my = get_global_id(1), y = my + row0;
-  if(my >= dst_h || qx * 4 >= dst_pitch) return;
-  RS_TILE(src, src_pitch, shift);
-  RS_TILE(dst, dst_pitch, shift);
+  RS_BAND_PROLOGUE(src, src_pitch, dst, dst_pitch, dst_h, row0, shift);
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {
     const int x = qx * 4 + k;

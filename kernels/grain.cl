@@ -11,13 +11,15 @@
  *
  * Each work-item handles 4 consecutive pixels as one 16-lane vector (rows are padded to 4
  * pixels), so PoCL runs hashing, Box-Muller and the taps as vectors.  Lane 4k+3 (alpha)
- * carries zero noise and alpha is copied bit for bit.
+ * carries zero noise and alpha is copied bit for bit.  COVERAGE=1 (clfx/fx/noise.py's
+ * coverage resolved to alpha) weights the grain by alpha.
  *
  * A build with CLFX_FP64 (the reference level, kernels/lib/precision.h) generates the noise,
  * stores the intermediate buffers and accumulates the taps in double precision.
  */
 #include "lib/common.h"
 #include "lib/precision.h"
+#include "lib/coverage.h"
 
 #ifndef RADIUS
 #define RADIUS 0
@@ -42,6 +44,10 @@
 #define GRAIN_VALUE_CAP 1e30
 #define GRAIN_EXP_MIN (-87)
 #define GRAIN_EXP_MAX 80
+
+#ifndef COVERAGE
+#define COVERAGE 0          /* 1: weight the grain by alpha (lib/coverage.h) */
+#endif
 
 #ifndef RESPONSE_MODE
 #define RESPONSE_MODE 3     /* 0: response 0, 1: 0.5 (Nutting), 2: 1, 3: any (pow) */
@@ -81,8 +87,10 @@ inline REAL16 grain_white16(uint seed, int frame, int x, int y)
  *   D   = FOG + GAMMA log10(1 + e / TOE)  density on the characteristic curve
  *   s   = amt_c (D / D(1))^response       log-exposure deviation (Nutting: response 0.5)
  *   out = v + E (e_c + TOE) (exp(s n - s^2 / 2) - 1)
- * Non-finite values become 0 first (they must not spread); alpha is copied unchanged (0 if
- * it was not finite); the result is clamped to the float range. */
+ * COVERAGE: out = v + alpha (out - v) where alpha < 1 (clfx_cover16), so the empty
+ * background of a CG element stays empty.  Non-finite values become 0 first (they must not
+ * spread); alpha is copied unchanged (0 if it was not finite); the result is clamped to the
+ * float range. */
 inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, const REAL response,
                            const REAL grey, const REAL inv_grey)
 {
@@ -126,7 +134,11 @@ inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, con
   const float16 f = clfx_exp16(clamp(ex, (float)GRAIN_EXP_MIN, (float)GRAIN_EXP_MAX));
 #endif
   const REAL16 dev = grey * (e + (REAL)GRAIN_TOE) * (f - (REAL)1);
+#if COVERAGE
+  const REAL16 o = clamp(clfx_cover16(cs, cs + dev, c0), (REAL)(-FLT_MAX), (REAL)FLT_MAX);
+#else
   const REAL16 o = clamp(cs + dev, (REAL)(-FLT_MAX), (REAL)FLT_MAX);
+#endif
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
   return select(TO_FLOAT16(o), c0, alpha);
 }

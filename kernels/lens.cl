@@ -56,10 +56,7 @@ kernel void lens_packed(global const float *src, global float *dst, global const
                         const float ccy, const float vig_scale, const float vk1,
                         const float vk2, const float vk3)
 {
-  const int qx = get_global_id(0), my = get_global_id(1), y = my + row0;
-  if(my >= rows || qx * 4 >= pitch) return;
-  RS_TILE(src, pitch, shift);
-  RS_TILE(dst, pitch, shift);
+  RS_BAND_PROLOGUE(src, pitch, dst, pitch, rows, row0, shift);
   const int entry = my * (pitch / 4) + qx, quad = y * (pitch / 4) + qx;
   float4 c0, c1, c2, c3;
 #if LENS_MAPS == 0
@@ -86,10 +83,7 @@ kernel void lens_packed_fix(global const float *src, global float *dst,
                             const float vig_scale, const float vk1, const float vk2,
                             const float vk3)
 {
-  const int n = get_global_id(0);
-  if(n >= count) return;
-  RS_TILE(src, pitch, shift);
-  RS_TILE(dst, pitch, shift);
+  RS_RECORD_PROLOGUE(src, dst, pitch, count, shift);
   global const int *rec = records + (4 + 8 * LENS_MAPS) * n;
   const int quad = rec[0];
   float4 c0, c1, c2, c3;
@@ -110,10 +104,7 @@ kernel void lens_apply(global const float *src, global float *dst, global const 
                        const REAL lut_scale, const REAL vig_scale, const REAL vk1,
                        const REAL vk2, const REAL vk3)
 {
-  const int qx = get_global_id(0), my = get_global_id(1), y = my + row0;
-  if(my >= rows || qx * 4 >= pitch) return;
-  RS_TILE(src, pitch, shift);
-  RS_TILE(dst, pitch, shift);
+  RS_BAND_PROLOGUE(src, pitch, dst, pitch, rows, row0, shift);
   map -= (size_t)row0 * pitch * 2;    /* the map holds rows row0 .. row0 + rows */
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {

@@ -53,6 +53,7 @@
 #define U_CAP 4e-6
 
 #include "lib/precision.h"
+#include "lib/coverage.h"
 #if REAL_IS_DOUBLE
 #define MASK16 long16
 #define MASK8 long8
@@ -246,13 +247,9 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   vstore4((float4)(dev[c0], dev[4 + c1], dev[8 + c0], dev[12 + c1]), 0, dst + (size_t)y * pitch + x);
 #else
 #if COVERAGE
-  {
-    /* the deviation weighted by alpha in [0, 1]: transparent pixels stay as they were, opaque
-     * ones keep the full deviation bit for bit */
-    const REAL16 cov = TO_REAL16(clamp((float16)(cs.s3333, cs.s7777, cs.sbbbb, cs.sffff),
-                                       0.0f, 1.0f));
-    out = select(v_clean + cov * (out - v_clean), out, cov >= (REAL)1);
-  }
+  /* the deviation weighted by alpha in [0, 1]: transparent pixels stay as they were, opaque
+   * ones keep the full deviation bit for bit */
+  out = clfx_cover16(v_clean, out, cs);
 #endif
   const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
   vstore16(select(TO_FLOAT16(out), cs, alpha), 0, dst + i);
@@ -391,11 +388,7 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
   }
 #endif
 #if COVERAGE
-  {
-    const float cov = clamp(alpha, 0.0f, 1.0f);      /* transparent pixels stay empty */
-    if(cov < 1.0f)
-      out = v + cov * (out - v);
-  }
+  out = clfx_cover4(v, out, alpha);                    /* transparent pixels stay empty */
 #endif
   out = clamp(out, -FLT_MAX, FLT_MAX);
   out.w = alpha;

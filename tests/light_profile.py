@@ -19,6 +19,19 @@ def point_light(h: int = 180, w: int = 320, value: float = 1e4) -> np.ndarray:
     return src
 
 
+def flame_in_a_dark_room(h: int, w: int, room: float, spread_x: float, spread_y: float,
+                         nits: float = 200.0) -> np.ndarray:
+    """An RGBA frame, alpha 1: a dark room (every colour ``room``) with a flame at (h // 2,
+    w // 2), a light of ``nits`` falling off as exp(-(dx^2 / spread_x + dy^2 / spread_y))
+    (issue 25: CandleGlass's candle, ~3 x 6 px at 640 px wide)."""
+    y, x = np.mgrid[0:h, 0:w]
+    src = np.full((h, w, 4), room, np.float32)
+    src[..., 3] = 1.0
+    src[..., :3] += (nits * np.exp(-((x - w // 2) ** 2 / spread_x
+                                     + (y - h // 2) ** 2 / spread_y)))[..., None]
+    return src
+
+
 def ray(img: np.ndarray, y: int, x: int, dx: int, dy: int, n: int) -> np.ndarray:
     """``n`` green samples from (y, x) in whole-pixel steps (dx, dy) (float64)."""
     return np.array([img[y + i * dy, x + i * dx, 1] for i in range(n)], np.float64)

@@ -12,14 +12,9 @@ import pytest
 from click.testing import CliRunner
 
 from clfx.cli import cli
+from tests.clirun import run
 
 BEACH = "Beachball/singlepart.{:04d}.exr"
-
-
-def run(*args, code=0):
-    result = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-    assert result.exit_code == code, (result.exit_code, result.output, result.stderr)
-    return result
 
 
 def one_line_error(result, *fragments):

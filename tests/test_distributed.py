@@ -238,6 +238,30 @@ def test_several_local_workers_do_not_pin_pocl_threads(monkeypatch):
     assert "POCL_AFFINITY" not in worker_env(2, cores=2)
 
 
+def masked_batch(folder, mask_file: str, monkeypatch):
+    """A prepared one-frame batch in ``folder`` (the working directory from now on): in.exr
+    through a look (masked.yaml) whose vignette is masked by the file ``mask_file``, given
+    relative to ``folder``."""
+    import numpy as np
+
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+    from clfx.pipeline.batch import Batch, RenderOptions
+    from clfx.pipeline.presets import load_look
+
+    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
+    write_frame(Frame.from_array(rgba), folder / "in.exr")
+    (folder / mask_file).parent.mkdir(parents=True, exist_ok=True)
+    write_frame(Frame.from_array(np.full((16, 24, 4), 0.5, np.float32)), folder / mask_file)
+    (folder / "masked.yaml").write_text(
+        f"name: m\neffects:\n  - effect: vignette\n    mask: {{file: {mask_file}}}\n")
+    monkeypatch.chdir(folder)
+    batch = Batch(look=load_look("masked.yaml"), input_path="in.exr", output_path="out.exr",
+                  options=RenderOptions(), verbosity=0)
+    batch.prepare()
+    return batch
+
+
 def test_workers_protect_mask_files_as_one_process_does(tmp_path, monkeypatch):
     """A worker writes with the plan's list of every file the render reads, mask files
     included: an output that is a mask file is refused on the worker (the client refuses it
@@ -245,25 +269,10 @@ def test_workers_protect_mask_files_as_one_process_does(tmp_path, monkeypatch):
     a worker renders comes back as a typed `FrameResult` with its `FrameReport`."""
     from dataclasses import replace
 
-    import numpy as np
-
-    from clfx.core.frame import Frame
-    from clfx.io.write import write_frame
-    from clfx.pipeline.batch import Batch, RenderOptions
     from clfx.pipeline.distributed import ShippedPlan, connect, render_chunk
     from clfx.pipeline.look import FrameReport
-    from clfx.pipeline.presets import load_look
 
-    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
-    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
-    write_frame(Frame.from_array(np.full((16, 24, 4), 0.5, np.float32)), tmp_path / "mask.exr")
-    (tmp_path / "masked.yaml").write_text(
-        "name: m\neffects:\n  - effect: vignette\n    mask: {file: mask.exr}\n")
-    monkeypatch.chdir(tmp_path)
-    batch = Batch(look=load_look("masked.yaml"), input_path="in.exr", output_path="out.exr",
-                  options=RenderOptions(), verbosity=0)
-    batch.prepare()
-    plan = batch.plan
+    plan = masked_batch(tmp_path, "mask.exr", monkeypatch).plan
     assert ("mask", "mask.exr") in plan.reads
     onto_mask = replace(plan, jobs=(replace(plan.jobs[0], output="mask.exr"),),
                         io=replace(plan.io, overwrite=True))
@@ -278,6 +287,29 @@ def test_workers_protect_mask_files_as_one_process_does(tmp_path, monkeypatch):
     assert done[0].error is None and isinstance(done[0].report, FrameReport)
     assert [s.effect for s in done[0].report.steps if s.ran] == ["vignette"]
     assert (tmp_path / "out.exr").is_file()
+
+
+def test_relative_mask_files_resolve_against_the_submission_folder(tmp_path, monkeypatch, rt):
+    """A look's relative ``mask: {file: ...}`` is resolved when the plan is shipped, against
+    the folder the render was submitted from (as a render in one process reads it), not the
+    worker's working directory: a worker elsewhere reads the same mask."""
+    import numpy as np
+
+    from clfx.pipeline.distributed import ShippedPlan
+
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    batch = masked_batch(shot, "mattes/m.exr", monkeypatch)
+    local = batch.plan.render(rt, batch.jobs[0], batch.plan.read(batch.jobs[0]))[0]
+    shipped = ShippedPlan.of(batch.plan).plan()
+    assert shipped.look.steps[0].mask.file == str(shot / "mattes" / "m.exr")
+    assert ("mask", str(shot / "mattes" / "m.exr")) in shipped.reads
+    worker_cwd = tmp_path / "worker"
+    worker_cwd.mkdir()
+    monkeypatch.chdir(worker_cwd)                 # where a worker process runs
+    job = shipped.jobs[0]
+    remote = shipped.render(rt, job, shipped.read(job))[0]
+    np.testing.assert_array_equal(remote.rgba, local.rgba)
 
 
 def test_quiet_workers_say_nothing_on_a_cold_compiler_cache(tmp_path):

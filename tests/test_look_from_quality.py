@@ -5,13 +5,11 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
-
-from clfx.cli import cli
 from clfx.core.frame import Frame
 from clfx.io.probe import header_attribute
 from clfx.io.read import read_frame
 from clfx.io.write import write_frame
+from tests import clirun
 
 
 @pytest.fixture
@@ -27,9 +25,7 @@ def small(tmp_path, monkeypatch):
 
 
 def run(*args):
-    r = CliRunner().invoke(cli, ["-q", *map(str, args)])
-    assert r.exit_code == 0, r.output
-    return r
+    return clirun.run("-q", *args)
 
 
 def test_look_from_reproduces_every_pixel_at_each_quality(small):

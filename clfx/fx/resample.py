@@ -894,15 +894,46 @@ def on_canvas(plugin, rt, p, ctx, border: str, render):
     return rt.reframe(img, out, "zero")
 
 
+def whole_context(ctx):
+    """``ctx`` as the whole render sees it: in a tile of a tiled render (``ctx.tiling``) over
+    a stand-in of the whole source window (the geometry, maps and canvas of the whole
+    render), else ``ctx`` itself."""
+    return ctx if ctx.tiling is None else ctx.over(
+        source=canvas_stand_in(ctx.tiling.whole), tiling=None)
+
+
+def band_rows(read, roi, band, canvas) -> tuple:
+    """What a tile computing the rows ``band`` of the output ``canvas`` reads and renders.
+
+    Parameters
+    ----------
+    read : Rect
+        The whole render's source window (the frame on the warp's canvas, or what a scale
+        reads).
+    roi : Rect
+        The band's region of interest.
+    band, canvas : Rect
+        The band and the whole render's output canvas.
+
+    Returns
+    -------
+    (Rect, CanvasRows)
+        The rows of ``read`` the tile's source holds (the region of interest and the band,
+        ``TILE_MARGIN_ROWS`` more each side, within ``read``) and the band's `CanvasRows`.
+    """
+    y0 = max(read.y0, min(roi.y0, band.y0) - TILE_MARGIN_ROWS)
+    y1 = min(read.y1, max(roi.y1, band.y1) + TILE_MARGIN_ROWS)
+    return (type(read)(read.x0, y0, read.x1, y1),
+            CanvasRows(canvas, band.y0 - canvas.y0, band.height, y0 - read.y0))
+
+
 def _tile_on_canvas(plugin, rt, p, ctx, border, render, sanitise):
     """`on_canvas` of a tile (``ctx.tiling``): the band's rows of the whole render."""
     band = ctx.tiling.band
-    whole = ctx.over(source=canvas_stand_in(ctx.tiling.whole), tiling=None)
+    whole = whole_context(ctx)
     canvas, _ = warp_canvas(plugin, p, whole, border)
-    roi = plugin.region_of_interest(p, whole, band)
-    y0 = max(canvas.y0, min(roi.y0, band.y0) - TILE_MARGIN_ROWS)
-    y1 = min(canvas.y1, max(roi.y1, band.y1) + TILE_MARGIN_ROWS)
-    part = type(canvas)(canvas.x0, y0, canvas.x1, y1)
+    part, rows = band_rows(canvas, plugin.region_of_interest(p, whole, band), band, canvas)
+    y0, y1 = part.y0, part.y1
     frame = warp_frame(whole)
     if border == "edge" and not (canvas == frame or _inside(whole.source.window, frame)):
         # the rows past the frame repeat its edge rows: bring the ones they repeat
@@ -912,7 +943,6 @@ def _tile_on_canvas(plugin, rt, p, ctx, border, render, sanitise):
         source = rt.reframe(rt.reframe(ctx.source, rows_of, "zero"), part, "clamp")
     else:
         source = rt.reframe(ctx.source, part, "zero")
-    rows = CanvasRows(canvas, band.y0 - canvas.y0, band.height, y0 - canvas.y0)
     return render(ctx.over(source=source), sanitise, rows)
 
 

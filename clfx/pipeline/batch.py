@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING
 
 from clfx.core.errors import ClfxError, ImageIOError, SequenceError
 from clfx.core.frame import Frame
+from clfx.core import limits
 from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
 from clfx.pipeline.look import Look, RunStats, render_frame
 
@@ -201,12 +202,13 @@ class PassOptions:
 
 @dataclass(frozen=True)
 class RenderSettings:
-    """What the device does with each frame: the quality level of every step without its own
-    (None: ``final``; resolved once, `resolve_quality`) and whether light spread past the
-    display window is kept."""
+    """What the device does with each frame besides the quality level (resolved once against
+    the look: `BatchPlan.quality`): whether light spread past the display window is kept,
+    and the band size of tiled steps (``CLFX_TILE_PIXELS``, read once when the plan is made
+    and shipped with it; 0: whole frames)."""
 
-    quality: str | None = None
     keep_overscan: bool = False
+    tile_pixels: int = 0
 
 
 @dataclass(frozen=True)
@@ -241,9 +243,10 @@ class IOOptions:
 @dataclass(frozen=True)
 class RenderOptions(IOOptions):
     """Everything ``clfx render`` and ``clfx apply`` set besides the look (the CLI builds it),
-    as keywords: the `IOOptions`, and the fields a render splits off into its
-    `RenderSettings` (``quality``, ``keep_overscan``) and its
-    `clfx.pipeline.report.ReportOptions` (``explain``, ``as_json``, ``log_path``).
+    as keywords: the `IOOptions`, the ``quality`` a plan resolves against the look
+    (`BatchPlan.of`), and the fields a render splits off into its `RenderSettings`
+    (``keep_overscan``) and its `clfx.pipeline.report.ReportOptions` (``explain``,
+    ``as_json``, ``log_path``).
 
     Attributes
     ----------
@@ -299,9 +302,10 @@ class RenderOptions(IOOptions):
     log_path: str | None = None
 
     def render_settings(self) -> RenderSettings:
-        """What the device does with each frame (the quality level resolved later, once,
-        against the look: `BatchPlan.of`)."""
-        return RenderSettings(quality=self.quality, keep_overscan=self.keep_overscan)
+        """What the device does with each frame (the quality level resolved apart, once,
+        against the look: `BatchPlan.of`); ``CLFX_TILE_PIXELS`` read here, once."""
+        return RenderSettings(keep_overscan=self.keep_overscan,
+                              tile_pixels=limits.tile_pixels() or 0)
 
     def io_options(self) -> IOOptions:
         """What is read and written, and how."""
@@ -505,8 +509,13 @@ class BatchPlan:
                    raw_size=raw_size)
 
     def for_workers(self) -> BatchPlan:
-        """This plan with absolute paths (workers need not share the client's folder)."""
-        return replace(self, jobs=tuple(j.absolute() for j in self.jobs),
+        """This plan with absolute paths (workers need not share the client's folder): the
+        jobs, the files read and the look's mask files, resolved against this process's
+        folder (the submission's) as a render here resolves them, not the worker's."""
+        steps = [replace(s, mask=replace(s.mask, file=os.path.abspath(s.mask.file)))
+                 if s.mask is not None and s.mask.file else s for s in self.look.steps]
+        return replace(self, look=replace(self.look, steps=steps),
+                       jobs=tuple(j.absolute() for j in self.jobs),
                        reads=tuple((role, os.path.abspath(p)) for role, p in self.reads))
 
     def key(self, blob: bytes) -> str:
@@ -565,7 +574,7 @@ class BatchPlan:
                 rt, self.look, frame_in, frame_number=job.frame, quality=self.quality,
                 keep_overscan=self.settings.keep_overscan and not raw,
                 analysis_summary=self.analysis, stats=stats, masks=masks,
-                release_input=not raw))
+                release_input=not raw, tile_pixels=self.settings.tile_pixels))
         frame_out, report = outs[0]
         if not raw:
             report.input, report.output = job.input, job.output
@@ -785,8 +794,9 @@ class Batch:
     """A look over INPUT to OUTPUT: ``prepare`` checks everything and makes the `plan`,
     ``run`` renders it (`render_stream`), its `reporter` says what happened.
 
-    ``jobs``, ``skipped_existing``, ``passes``, ``raw_size`` and ``plan`` are filled by
-    ``prepare``; ``stats`` holds the steps' running costs over this batch's frames.
+    ``skipped_existing`` and ``plan`` are filled by ``prepare`` (``jobs``, ``passes``,
+    ``raw_size`` and ``reads`` are the plan's); ``stats`` holds the steps' running costs over
+    this batch's frames.
     """
 
     look: Look
@@ -794,20 +804,36 @@ class Batch:
     output_path: str
     options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
-    jobs: list[Job] = field(default_factory=list, init=False)
     skipped_existing: list[int] = field(default_factory=list, init=False)
-    passes: PassSpec | None = field(default=None, init=False)  # what frames are read with
-    raw_size: tuple[int, int] | None = field(default=None, init=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
-    reads: list[tuple[str, str]] = field(default_factory=list, init=False)  # (role, path) read
     plan: BatchPlan | None = field(default=None, init=False)
     _read_index: tuple | None = field(default=None, init=False, repr=False)
     on_frame: object = field(default=None, repr=False)  # callable(done, total, report): progress
     _reporter: object = field(default=None, init=False, repr=False)
     _pool: ThreadPoolExecutor | None = field(default=None, init=False, repr=False)
     _first_read: Future | None = field(default=None, init=False, repr=False)
+
+    @property
+    def jobs(self) -> tuple[Job, ...]:
+        """The frames to render (the plan's; none before `prepare`)."""
+        return self.plan.jobs if self.plan is not None else ()
+
+    @property
+    def passes(self) -> PassSpec | None:
+        """What frames are read with (the plan's)."""
+        return self.plan.passes if self.plan is not None else None
+
+    @property
+    def raw_size(self) -> tuple[int, int] | None:
+        """The size of raw pipe frames (the plan's)."""
+        return self.plan.raw_size if self.plan is not None else None
+
+    @property
+    def reads(self) -> tuple[tuple[str, str], ...]:
+        """(role, path) of every file the render reads (the plan's: `_reads`)."""
+        return self.plan.reads if self.plan is not None else ()
 
     @property
     def reporter(self):
@@ -860,25 +886,24 @@ class Batch:
         from clfx.io.sequence import check_input_file
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_masks(jobs)
-        self.reads = self._reads(jobs)
+        self.plan = BatchPlan.of(self.look, o, reads=self._reads(jobs))   # what is read: checked
         self._check_outputs(jobs)
         self._check_log(jobs)
-        self.jobs = [j for j in jobs if j.frame not in self.skipped_existing]
-        if self.jobs:   # before anything is set up for it (device, first read, maps)
-            first_frame_geometry(self.jobs[0].input)
-        self.passes = o.passes.spec(self._radial_depth_focal_px())
-        self.plan = BatchPlan.of(self.look, o, jobs=self.jobs, passes=self.passes,
-                                 reads=self.reads)
+        jobs = tuple(j for j in jobs if j.frame not in self.skipped_existing)
+        if jobs:   # before anything is set up for it (device, first read, maps)
+            first_frame_geometry(jobs[0].input)
+        self.plan = replace(self.plan, jobs=jobs,
+                            passes=o.passes.spec(self._radial_depth_focal_px(jobs)))
 
-    def _radial_depth_focal_px(self) -> float | None:
+    def _radial_depth_focal_px(self, jobs) -> float | None:
         """Focal length in pixels for --depth-mode distance, from the look's camera block and
         the first input's display width (square pixels assumed, as the camera block does)."""
         p = self.options.passes
-        if p.depth_mode != "distance" or p.focal_length_px or not self.jobs:
+        if p.depth_mode != "distance" or p.focal_length_px or not jobs:
             return None
         from clfx.io.probe import probe as probe_file
 
-        info = probe_file(self.jobs[0].input)
+        info = probe_file(jobs[0].input)
         width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
         return self.look.camera.focal_length_px(width)
 
@@ -1043,7 +1068,7 @@ class Batch:
                                 "as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
         from clfx.io.raw import parse_size
 
-        self.raw_size = parse_size(size)  # two positive whole numbers within the pixel limit
+        raw_size = parse_size(size)  # two positive whole numbers within the pixel limit
         if self.input_path != RAW or self.output_path != RAW:
             raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
         for clip, effects in self.look.required_clips().items():
@@ -1056,10 +1081,9 @@ class Batch:
                                     "and raw pipes carry RGB only (use a mask file:)")
         from clfx.io.raw import check_stream_size
 
-        check_stream_size(sys.stdin.buffer, self.raw_size)
+        check_stream_size(sys.stdin.buffer, raw_size)
         self.look_files = [p for _, p in look_files(self.look)]
         self.mask_files = sorted({f for _, m in self.look.masks() for f in [m.file] if f})
-        self.reads = self._reads([])
+        self.plan = BatchPlan.of(self.look, self.options, reads=self._reads([]),
+                                 raw_size=raw_size)
         self._check_log()
-        self.plan = BatchPlan.of(self.look, self.options, reads=self.reads,
-                                 raw_size=self.raw_size)

@@ -52,9 +52,9 @@ import numpy as np
 from clfx.core.camera import image_distance
 from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
 from clfx.core.rect import Rect
-from clfx.fx.resample import (TILE_MARGIN_ROWS, CanvasRows, ResampleLevel, canvas_stand_in,
-                              elliptical_spread, footprint_defines,
-                              footprint_spread, needs_sanitising)
+from clfx.fx.resample import (CanvasRows, ResampleLevel, band_rows, elliptical_spread,
+                              footprint_defines, footprint_spread, needs_sanitising,
+                              whole_context)
 from clfx.host import Plugin, StepPlan, register
 
 MACRO = 2.0
@@ -228,8 +228,7 @@ class Breathing(Plugin):
         lvl = self.level(ctx)
         # a tile (ctx.tiling) renders its band's rows of the whole render, from the whole
         # render's geometry (`clfx.fx.resample.CanvasRows`)
-        whole = ctx if ctx.tiling is None else ctx.over(
-            source=canvas_stand_in(ctx.tiling.whole), tiling=None)
+        whole = whole_context(ctx)
         m, warnings = self.scale(p, whole)
         out_win = self.output_window(p, whole)
         # Inside the display window, pixels outside the data window are transparent black (an
@@ -241,10 +240,7 @@ class Breathing(Plugin):
         part = read
         if ctx.tiling is not None:
             band = ctx.tiling.band
-            roi = self.region_of_interest(p, whole, band)
-            part = Rect(read.x0, max(read.y0, roi.y0 - TILE_MARGIN_ROWS), read.x1,
-                        min(read.y1, roi.y1 + TILE_MARGIN_ROWS))
-            rows = CanvasRows(out_win, band.y0 - out_win.y0, band.height, part.y0 - read.y0)
+            part, rows = band_rows(read, self.region_of_interest(p, whole, band), band, out_win)
             out_win = band
         src = rt.reframe(ctx.source, part, "zero")
         line = self._overhang_warning(p, ctx, m, read, rows.canvas)

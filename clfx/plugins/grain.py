@@ -74,6 +74,16 @@ rendered alone, in a batch, cropped or with overscan gives the same noise at the
 pixel, and every frame differs.  Alpha is kept bit for bit; non-finite inputs become 0 first.
 Values are clamped to +-1e30 before the grain and the result to the float range.
 
+Coverage (``coverage``, as ``sensor_noise``'s: `clfx.fx.noise.alpha_is_coverage`).  With
+``"alpha"`` the grain is weighted by the pixel's alpha clamped to [0, 1], ``out = v + alpha
+(grainy - v)``: the empty, alpha-0 background of a CG element with a tight data window
+(OpenEXR's Beachball) stays empty instead of showing a rectangle of grain (the fog's grain
+lands on black too), and a half-covered edge gets half the grain.  Opaque pixels (alpha >=
+1, every pixel of a plate without alpha) get the grain bit for bit.  ``"ignore"`` grains
+every pixel of the data window; ``"auto"`` (the default) is alpha unless the scene analysis
+of the look's input finds light where alpha is 0 (a matte in a photograph's alpha; the
+fringes and glow earlier effects put there do not count), and says so in ``--explain``.
+
 Migration from version 1 (pixel-sized grain in absolute linear units):
 
 * ``size`` (px at 2K, a Gaussian standard deviation) is still read when >= 0 (default -1 =
@@ -104,7 +114,7 @@ import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
 from clfx.fx.analysis import exposure_reference
-from clfx.fx.noise import SEED_PARAM, effect_seed
+from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
 from clfx.host import Plugin, register
 
 REFERENCE_WIDTH = 2048
@@ -275,7 +285,7 @@ class Grain(Plugin):
     whole_frame = None   # tiles: the same pixels band by band (tests/contract/test_tiles.py)
     descriptor = Descriptor(
         name="grain", label="Film grain", group="Film", kernel="grain.cl",
-        version=(2, 0),
+        version=(2, 1),   # 2.1: coverage (alpha weights the grain)
         summary="Film grain as Poisson dye clouds of a stated diameter on the negative (um, "
                 "through the camera's format width), a Gaussian Wiener spectrum, Selwyn's "
                 "law for the pixel's area, and a density-dependent amplitude (Nutting) on a "
@@ -314,6 +324,7 @@ class Grain(Plugin):
                        hint="Legacy (version 1) grain size: Gaussian sigma in pixels of a "
                             "2048-wide scan of the format; when >= 0 it replaces diameter "
                             "(diameter = 4 x size x sensor_width / 2048); -1 = unset."),
+            COVERAGE_PARAM,
             SEED_PARAM,
         ),
         quality=LEVELS,
@@ -344,8 +355,10 @@ class Grain(Plugin):
         lvl = self.level(ctx)
         use64 = rt.use_fp64(lvl.fp64)
         mode = {0.0: 0, 0.5: 1, 1.0: 2}.get(p.response, 3)   # build variants: no pow
-        defines = {"MONO": int(mono), "RESPONSE_MODE": mode, "GRAIN_GAMMA": repr(GAMMA), "GRAIN_FOG": repr(FOG),
+        defines = {"MONO": int(mono), "RESPONSE_MODE": mode, "GRAIN_GAMMA": repr(GAMMA),
+                   "GRAIN_FOG": repr(FOG),
                    "GRAIN_TOE": repr(TOE), "GRAIN_D_GREY": repr(D_GREY),
+                   "COVERAGE": int(alpha_is_coverage(p.coverage, ctx, "grain")),
                    **ctx.luminance_defines}
         seed = np.uint32(effect_seed(p.seed, ctx.seed, GRAIN_SALT))
         frame = np.int32(ctx.frame)

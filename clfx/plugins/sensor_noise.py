@@ -73,7 +73,8 @@ visible rectangle around a tight-windowed element (OpenEXR's Beachball), and the
 add it on top of the plate's own noise.  Opaque pixels (alpha >= 1, and every pixel of a
 plate without alpha) get the full model bit for bit.  ``"ignore"`` adds noise to every
 pixel of the data window.  ``"auto"`` (the default) reads alpha as coverage when the scene
-analysis finds no light in a pixel whose alpha is <= 0 (premultiplied, empty background),
+analysis of the look's input (before earlier effects' fringes and glow) finds no light in
+a pixel whose alpha is <= 0 (premultiplied, empty background),
 else ignores it (a photograph whose alpha is a matte, ScanLines' CandleGlass: light where
 alpha is 0; an additive element), and says so in ``--explain``.  Either way nothing is
 added outside the data window.
@@ -93,7 +94,7 @@ import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
 from clfx.fx.analysis import MID_GREY, exposure_reference
-from clfx.fx.noise import SEED_PARAM, effect_seed
+from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
 from clfx.host import Plugin, register
 
 SENSOR_SALT = 0x73656E73  # "sens"
@@ -195,13 +196,7 @@ class SensorNoise(Plugin):
             FloatParam("chroma_size", 0.02, min=1e-4, max=1.0,
                        hint="Grid spacing of the chroma blotches as a fraction of the frame "
                             "diagonal."),
-            ChoiceParam("coverage", "auto", choices=("auto", "alpha", "ignore"),
-                        hint="alpha: noise weighted by the pixel's alpha, so the transparent "
-                             "part of a CG element stays empty (no noise rectangle over the "
-                             "data window; the plate it is comped over has its own noise); "
-                             "ignore: noise over every pixel of the data window; auto: alpha "
-                             "when no pixel with alpha 0 holds light (premultiplied, empty "
-                             "background), else ignore (a matte in a photograph's alpha)."),
+            COVERAGE_PARAM,
             SEED_PARAM,
         ),
         quality=LEVELS,
@@ -216,16 +211,6 @@ class SensorNoise(Plugin):
         if not p.shot_noise and p.read_noise == 0.0 and p.prnu == 0.0:
             return "shot noise is off, read noise and prnu are 0"
         return None
-
-    def alpha_is_coverage(self, p, ctx) -> bool:
-        """``coverage`` resolved for this frame ("auto": from the scene analysis)."""
-        if p.coverage != "auto":
-            return p.coverage == "alpha"
-        if ctx.analysis.alpha_is_coverage():
-            return True
-        ctx.notes.append("sensor_noise: light where alpha is 0 (a matte, not coverage): "
-                         "noise over the whole data window")
-        return False
 
     def prnu_pattern(self, rt, p, ctx, fp64):
         """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, kept in ``rt.cache`` per
@@ -281,7 +266,7 @@ class SensorNoise(Plugin):
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
         # bayer: the first pass writes each photosite's deviation (one float per pixel)
         dst = rt.buffer(src.pitch * src.height * 4) if demosaic else src.like()
-        coverage = int(self.alpha_is_coverage(p, ctx))
+        coverage = int(alpha_is_coverage(p.coverage, ctx, "sensor_noise"))
         last = not (demosaic or chroma)          # the apply pass writes the output itself
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64,
                         MOSAIC=int(demosaic), COVERAGE=coverage * int(last), **defines)

@@ -46,6 +46,26 @@
  * `shift` on (rows of `pitch` RGBA pixels); from here on it is addressed in canvas rows, as
  * in the whole render (whose shift is 0), and only rows the buffer holds are touched. */
 #define RS_TILE(p, pitch, shift) ((p) -= (shift) * (pitch) * 4)
+/* Both buffers of a band kernel to canvas rows. */
+#define RS_TILES(src, src_pitch, dst, dst_pitch, shift)                                     \
+  RS_TILE(src, src_pitch, shift);                                                           \
+  RS_TILE(dst, dst_pitch, shift)
+
+/* The prologue of a kernel that renders canvas rows row0 .. row0 + rows, 4 output pixels (a
+ * quad) per work-item: declares qx (the quad), my (the row within the band) and y (its
+ * canvas row), returns past the band or the pitch (the global size is rounded up), then
+ * RS_TILES. */
+#define RS_BAND_PROLOGUE(src, src_pitch, dst, dst_pitch, rows, row0, shift)                 \
+  const int qx = get_global_id(0), my = get_global_id(1), y = my + (row0);                  \
+  if(my >= (rows) || qx * 4 >= (dst_pitch)) return;                                         \
+  RS_TILES(src, src_pitch, dst, dst_pitch, shift)
+
+/* The prologue of a kernel over `count` records (the checked quads of a band): declares n,
+ * the record, returns past count, then RS_TILES. */
+#define RS_RECORD_PROLOGUE(src, dst, pitch, count, shift)                                   \
+  const int n = get_global_id(0);                                                           \
+  if(n >= (count)) return;                                                                  \
+  RS_TILES(src, pitch, dst, pitch, shift)
 
 /* Non-finite lanes (exponent bits all ones) become 0; a vector select, no branches. */
 inline float4 rs_sanitise(float4 v)

@@ -354,13 +354,10 @@ def test_default_corona_around_a_candle_is_not_a_flat_white_disc(rt):
     # 0.05, the default now: 13 px).  The near-white run stays within 4 px of the flame's.
     from clfx.demo import tonemap_preview
     from clfx.gallery import exposure_for
+    from tests.light_profile import flame_in_a_dark_room
 
     h, w = 200, 320
-    y, x = np.mgrid[0:h, 0:w]
-    src = np.full((h, w, 4), 0.001, np.float32)
-    src[..., 3] = 1.0
-    src[..., :3] += (200.0 * np.exp(-((x - w // 2) ** 2 / 4.5 + (y - h // 2) ** 2 / 18.0)))[
-        ..., None]
+    src = flame_in_a_dark_room(h, w, 0.001, 4.5, 18.0)
     e = exposure_for(src)
 
     def white_run(img):

@@ -234,13 +234,10 @@ def test_glare_of_a_flame_in_a_dark_room_fades_without_a_rim(rt):
     # +2.6e-4 of display white per px; the taper from half the radius: none)
     from clfx.demo import tonemap_preview
     from clfx.gallery import exposure_for
+    from tests.light_profile import flame_in_a_dark_room
 
     h, w = 260, 480
-    y, x = np.mgrid[0:h, 0:w]
-    src = np.full((h, w, 4), 4e-4, np.float32)
-    src[..., 3] = 1.0
-    src[..., :3] += (200.0 * np.exp(-((x - w // 2) ** 2 / 8.0 + (y - h // 2) ** 2 / 32.0)))[
-        ..., None]
+    src = flame_in_a_dark_room(h, w, 4e-4, 8.0, 32.0)
     p = Glare.params(strength=0.04, threshold=2.0, knee=1.0, size=0.2, psf="spencer")
     out = Glare().apply(rt, p, src).astype(np.float64)
     radius = p.size * math.hypot(w, h)

@@ -228,7 +228,9 @@ def test_same_look_at_any_exposure(rt):
     kw = dict(stock="medium-250d", amount=0.05, seed=3, frame=2)
     base, _ = run(rt, src, **kw)
     for k in (0.01, 10.0):
-        got, _ = run(rt, src * np.float32(k), **kw)
+        scaled = src.copy()
+        scaled[..., :3] *= np.float32(k)     # the light, not the alpha (coverage stays 1)
+        got, _ = run(rt, scaled, **kw)
         # float32 rounding of the scaled inputs and the meter (rel. ~1e-6 each) move the
         # grain by ~1e-6 relative; 1e-5 leaves margin
         np.testing.assert_allclose(got[..., :3] / k, base[..., :3], rtol=1e-5,
@@ -336,6 +338,115 @@ def test_crop_gives_same_values_at_same_frame_coordinates(rt, rng, quality):
     crop_src = full_src[7:28, 13:43]
     crop, _ = run(rt, crop_src, quality, frame=7, data_window=Rect(113, 57, 143, 78), **kw)
     assert crop.tobytes() == np.ascontiguousarray(full[7:28, 13:43]).tobytes()
+
+
+# -- coverage ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("quality", LEVELS)
+def test_transparent_pixels_get_no_grain_and_partial_alpha_its_share(rt, rng, quality):
+    # Beachball: a premultiplied element on an empty, alpha-0 background.  Grain there (the
+    # fog's grain lands on black too) drew a rectangle over the data window; weighted by
+    # coverage the background stays 0 and a pixel of alpha a gets a times the grain
+    # "ignore" gives it, as sensor_noise weights its noise.
+    h, w = 40, 64
+    alpha = np.zeros((h, w), np.float32)
+    alpha[:, 16:32] = rng.uniform(0.05, 0.95, (h, 16))
+    alpha[:, 32:48] = 1.0
+    alpha[:, 48:] = 1.5                          # above 1: opaque too
+    src = np.zeros((h, w, 4), np.float32)
+    src[..., :3] = rng.uniform(0.05, 0.4, (h, w, 3)) * np.minimum(alpha, 1.0)[..., None]
+    src[..., 3] = alpha
+    kw = dict(amount=0.1, size=1.5, seed=6)
+    ignore, _ = run(rt, src, quality, frame=2, coverage="ignore", **kw)
+    assert ignore[:, :16, :3].std() > 0          # without coverage the background has grain
+    for coverage in ("auto", "alpha"):
+        got, _ = run(rt, src, quality, frame=2, coverage=coverage, **kw)
+        assert (got[:, :16, :3] == 0).all()
+        # the partial band: (got - v) = a (ignore - v); float32 rounding of v + a d (|v| <=
+        # 0.4, ulp 3e-8) and of a d itself: a few 1e-8 absolute
+        v, a = src[:, 16:32, :3], alpha[:, 16:32, None]
+        np.testing.assert_allclose(got[:, 16:32, :3] - v, a * (ignore[:, 16:32, :3] - v),
+                                   rtol=1e-5, atol=1e-7)
+        assert got[:, 32:].tobytes() == ignore[:, 32:].tobytes()   # opaque: bit for bit
+        np.testing.assert_array_equal(got[..., 3], src[..., 3])
+    ref = want(src, Grain.params(coverage="alpha", **kw), frame=2, truncation=TRUNCATION[quality])
+    np.testing.assert_allclose(got, ref, rtol=2e-6, atol=2e-6)   # as the oracle test
+
+
+@pytest.mark.parametrize("quality", LEVELS)
+def test_opaque_frames_render_as_without_coverage(rt, rng, quality):
+    # alpha >= 1 everywhere (and a plate read without alpha: 1): coverage changes no bit, so
+    # an opaque frame renders exactly as before coverage existed (the COVERAGE=0 build is
+    # the earlier kernel)
+    src = rng.uniform(0.0, 2.0, (29, 45, 4)).astype(np.float32)
+    src[..., 3] = 1.0
+    src[:8, :8, 3] = 2.0
+    src[3, 4, :3] = (np.nan, np.inf, -3.0)
+    kw = dict(stock="fast-500t", amount=0.1, diameter=60.0, seed=2)
+    ignore, _ = run(rt, src, quality, frame=4, coverage="ignore", **kw)
+    for coverage in ("auto", "alpha"):
+        got, _ = run(rt, src, quality, frame=4, coverage=coverage, **kw)
+        assert got.tobytes() == ignore.tobytes()
+
+
+def test_auto_coverage_reads_a_matte_as_no_coverage(rt):
+    # light where alpha is 0 (a photograph's matte, an additive element): auto grains every
+    # pixel as "ignore" does
+    inside = np.zeros((48, 48, 1), bool)
+    inside[16:32, 16:32] = True
+    src = np.where(inside, (0.1, 0.1, 0.1, 1.0), (0.1, 0.1, 0.1, 0.0)).astype(np.float32)
+    auto, p = run(rt, src, amount=0.1, seed=4)
+    ignore, _ = run(rt, src, amount=0.1, seed=4, coverage="ignore")
+    assert auto.tobytes() == ignore.tobytes() and auto[:8, :8, :3].std() > 0
+    np.testing.assert_allclose(auto, want(src, p, truncation=4.0), rtol=2e-6, atol=2e-6)
+
+
+def test_auto_coverage_is_judged_on_the_looks_input(rt):
+    # chromatic aberration before grain leaves colour fringes where alpha is 0 (so do a
+    # resampling filter's lobes, glare, halation): judged on grain's own input the element
+    # read as "a matte" and the whole window got grain (the cinema look on Beachball); judged
+    # on the look's input the empty background stays empty
+    import clfx
+    from clfx.core.frame import Frame
+    from clfx.pipeline.look import render_frame
+
+    # a tight data window in a larger display window, as Beachball: the fringes grow the
+    # window, so grain's input is analysed afresh
+    yy, xx = np.mgrid[0:72, 0:72]
+    disc = ((xx - 36) ** 2 + (yy - 36) ** 2 < 33 ** 2).astype(np.float32)
+    src = np.zeros((72, 72, 4), np.float32)
+    src[..., 0], src[..., 1], src[..., 2], src[..., 3] = 0.8 * disc, 0.3 * disc, 0.5 * disc, disc
+
+    def frame():
+        return Frame(src.copy(), Rect(40, 20, 112, 92), Rect(0, 0, 160, 112))
+
+    def look(amount):
+        return clfx.load_look({"name": "then-grain", "schema": 1, "effects": [
+            {"effect": "chromatic_aberration", "params": {"amount": 0.01, "spectral": False}},
+            {"effect": "grain", "params": {"amount": amount, "seed": 2}}]})
+
+    before, _ = render_frame(rt, look(0.0), frame())                   # grain skipped
+    fringe = (before.rgba[..., 3] <= 0) & (before.rgba[..., :3] != 0).any(-1)
+    assert fringe.sum() > 20                     # light where alpha is 0: what grain sees
+    out, report = render_frame(rt, look(0.1), frame())
+    assert report.steps[-1].ran and out.data_window == before.data_window != frame().data_window
+    empty = before.rgba[..., 3] <= 0
+    np.testing.assert_array_equal(out.rgba[empty], before.rgba[empty])
+    assert (out.rgba[~empty, :3] != before.rgba[~empty, :3]).mean() > 0.9
+
+
+def test_beachball_background_stays_empty(rt, exr_images):
+    from clfx.io.read import read_frame
+
+    fr = read_frame(exr_images / "Beachball/singlepart.0001.exr")
+    src = fr.rgba
+    kw = dict(amount=0.05, seed=1, data_window=fr.data_window, display=fr.display_window)
+    out, _ = run(rt, src, "draft", **kw)
+    empty = (src[..., 3] <= 0) & (src[..., :3] == 0).all(axis=-1)
+    moved = np.abs(out[..., :3] - src[..., :3]).max(axis=-1)
+    assert empty.mean() > 0.2 and (moved[empty] == 0).all()
+    assert (moved[src[..., 3] >= 1] > 0).mean() > 0.9            # the ball keeps its grain
+    ignore, _ = run(rt, src, "draft", coverage="ignore", **kw)
+    assert (np.abs(ignore[..., :3] - src[..., :3]).max(axis=-1)[empty] > 0).mean() > 0.9
 
 
 # -- hard cases -------------------------------------------------------------------------------

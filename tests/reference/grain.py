@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from clfx.plugins.grain import STOCKS  # data only: the stocks' per-channel ratios
+from tests.reference.noise import cover
 
 M32 = 0xFFFFFFFF
 
@@ -128,8 +129,8 @@ def meter(src, tile=32):
 
 
 def grain(src, *, stock, amount, diameter, middle_grey, response, channel_amount,
-          channel_size, monochrome, size, seed, frame=0, look_seed=0, data_origin=(0, 0),
-          display_width=None, sensor_width=36.0, truncation=6.0):
+          channel_size, monochrome, size, seed, coverage="auto", frame=0, look_seed=0,
+          data_origin=(0, 0), display_width=None, sensor_width=36.0, truncation=6.0):
     """Film grain on ``src`` (h, w, 4) float64; same parameters as the plugin."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
@@ -163,9 +164,11 @@ def grain(src, *, stock, amount, diameter, middle_grey, response, channel_amount
     density = FOG + GAMMA * np.log10(1 + ed / TOE)
     d_grey = FOG + GAMMA * np.log10(1 + 1 / TOE)
     out = np.where(finite, src, 0.0)
+    grainy = np.empty_like(v)
     for c in range(3):
         s = amt[c] * (density[..., c] / d_grey) ** response
         factor = np.exp(np.clip(s * n[..., c] - s * s / 2, -87, 80))
-        out[..., c] = np.clip(v[..., c] + grey * (e[..., c] + TOE) * (factor - 1),
-                              -3.4028234663852886e38, 3.4028234663852886e38)
+        grainy[..., c] = v[..., c] + grey * (e[..., c] + TOE) * (factor - 1)
+    out[..., :3] = np.clip(cover(src, v, grainy, coverage),
+                           -3.4028234663852886e38, 3.4028234663852886e38)
     return out

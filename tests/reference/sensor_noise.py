@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from tests.reference.grain import effect_seed, meter, uniform
+from tests.reference.noise import cover
 
 SENSOR_SALT = 0x73656E73
 PRNU_SALT = 0x70726E75
@@ -160,13 +161,6 @@ def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, dia
         out[..., 0] += dr
         out[..., 2] += db
         out[..., 1] -= (0.2126 * dr + 0.0722 * db) / 0.7152
-    if coverage == "auto":       # alpha is coverage unless a pixel with alpha <= 0 holds light
-        finite = np.isfinite(src).all(axis=-1)
-        stray = finite & (src[..., 3] <= 0) & (src[..., :3] != 0).any(axis=-1)
-        coverage = "ignore" if stray.any() else "alpha"
-    if coverage == "alpha":
-        a = src[..., 3]
-        cov = np.clip(np.where(np.isfinite(a), a, 0.0), 0.0, 1.0)[..., None]
-        out[..., :3] = np.where(cov < 1.0, v + cov * (out[..., :3] - v), out[..., :3])
+    out[..., :3] = cover(src, v, out[..., :3], coverage)
     out[..., :3] = np.clip(out[..., :3], -3.4028234663852886e38, 3.4028234663852886e38)
     return out
