@@ -201,3 +201,18 @@ def test_per_step_contexts_share_the_frame_analysis(rt):
     computed = step.analysis
     assert ctx.analysis is computed and ctx.for_step("final").analysis is computed
     assert ctx.analysis_seconds == pytest.approx(computed.seconds)
+
+
+def test_setting_a_param_says_how_to_make_new_ones():
+    from clfx.plugins import discover
+
+    glare = discover()["glare"]
+    p = glare.params(strength=0.1)
+    with pytest.raises(AttributeError) as err:
+        p.strength = 0.2
+    said = str(err.value)
+    assert "immutable" in said and "params(strength=" in said
+    # what it says works, and validates
+    assert glare.params(strength=0.2).strength == 0.2
+    with pytest.raises(ParamError):
+        glare.params(strength=-1.0)

@@ -282,7 +282,9 @@ class Params:
             raise AttributeError(f"{self._plugin} has no parameter {name!r}") from None
 
     def __setattr__(self, name, value):
-        raise AttributeError("Params are immutable; use .replace(...)")
+        raise AttributeError(f"{self._plugin} params are immutable: make new ones with the "
+                             f"effect's params(**values), e.g. clfx.plugins.discover()"
+                             f"[{self._plugin!r}].params({name}=...), which validates them")
 
     def __eq__(self, other):
         return isinstance(other, Params) and self._values == other._values
