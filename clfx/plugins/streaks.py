@@ -172,18 +172,24 @@ BIN = 16
 """Working pixels per side of the blocks the seed points are listed by."""
 
 
-def bin_points(points: np.ndarray, width: int, height: int, size: int):
+def bin_points(points: np.ndarray, width: int, height: int, size: int,
+               spread: tuple[int, int] = (0, 0)):
     """(starts, members) int32: for each ``size`` x ``size`` block of a ``width`` x ``height``
-    grid (row-major), the indices of the points whose bilinear splat (the 2 x 2 pixels
-    around the point) touches it, ``members[starts[b]:starts[b + 1]]``, in point order."""
+    grid (row-major), the indices of the points whose splat touches it,
+    ``members[starts[b]:starts[b + 1]]``, in point order.  The splat: the 2 x 2 pixels around
+    the point grown by ``spread`` (x, y) pixels each side (a ray-aligned grid's splat moves
+    across the ray by up to the reduction factor)."""
     bx, by = -(-width // size), -(-height // size)
     pairs = []
+    ex, ey = spread
     for i, (x, y) in enumerate(points[:, :2].astype(np.float64)):
         x0, y0 = math.floor(x), math.floor(y)
-        blocks = {(min(max(u, 0), width - 1) // size, min(max(v, 0), height - 1) // size)
-                  for u in (x0, x0 + 1) for v in (y0, y0 + 1)
-                  if 0 <= u < width and 0 <= v < height}
-        pairs += [(v * bx + u, i) for u, v in blocks]
+        u0, u1 = max(x0 - ex, 0), min(x0 + 1 + ex, width - 1)
+        v0, v1 = max(y0 - ey, 0), min(y0 + 1 + ey, height - 1)
+        if u0 > u1 or v0 > v1:
+            continue
+        pairs += [(v * bx + u, i) for v in range(v0 // size, v1 // size + 1)
+                  for u in range(u0 // size, u1 // size + 1)]
     pairs.sort()
     counts = np.bincount([b for b, _ in pairs], minlength=bx * by) if pairs else \
         np.zeros(bx * by, np.int64)
@@ -197,6 +203,36 @@ bounds-tested taps instead."""
 
 LOCAL = (64, 1)
 """Work-group of the pass kernel (measured fastest on PoCL here: 16 vs 20 ms per pass)."""
+
+
+@dataclass(frozen=True)
+class WorkLayout:
+    """Pass buffers of the rays on one working grid: interior ``wp`` (width rounded up to 4)
+    x ``h`` pixels at pixel ``org`` of rows ``pitch`` apart, zero margins wide enough for
+    every tap in x and in y (no bounds tests) unless the rays are so long that the margins
+    would cost more than the tests (``checked``: no margins)."""
+
+    wp: int
+    h: int
+    pitch: int
+    org: int
+    nbytes: int
+    checked: bool
+
+    @classmethod
+    def of(cls, rays: list[tuple[RayGrid, int]]) -> "WorkLayout":
+        """The layout of (grid, passes) rays of one grid."""
+        grid = rays[0][0]
+        margins = []
+        for axis in ("sx", "sy"):
+            reach = max(math.ceil(3 * TAPS ** (n - 1) * abs(getattr(g, axis))) + 2
+                        for g, n in rays)
+            margins.append(-(-reach // 4) * 4)
+        checked = max(margins) > MAX_MARGIN
+        mx, my = (0, 0) if checked else margins
+        wp = -(-grid.w // 4) * 4
+        pitch = wp + 2 * mx
+        return cls(wp, grid.h, pitch, my * pitch + mx, pitch * (grid.h + 2 * my) * 16, checked)
 
 
 def streak_angles(mode: str, streaks: int, angle: float, blades: int,
@@ -239,6 +275,70 @@ def grid_step(angle_deg: float) -> tuple[float, float, float]:
     dx, dy = direction(angle_deg)
     major = max(abs(dx), abs(dy))
     return dx / major, dy / major, 1.0 / major
+
+
+@dataclass(frozen=True)
+class RayGrid:
+    """The working grid of a ray (``kernels/streaks.cl``, "Ray-aligned working grids"):
+    ``w`` x ``h`` working pixels of ``fx`` x ``fy`` output pixels, reduced along the ray's
+    major axis only (fx = fy = 1 at full resolution); ``shear``: the ray's change across per
+    pixel along that axis (0 at full resolution: no offsets); (``sx``, ``sy``): one step in
+    working pixels, one working pixel along the reduced axis; ``step_px``: its length in
+    output pixels."""
+
+    fx: int
+    fy: int
+    shear: float
+    w: int
+    h: int
+    sx: float
+    sy: float
+    step_px: float
+
+    @property
+    def lead(self) -> int:
+        """Pixels along the reduced axis (+x or +y) the light of a working pixel comes from
+        ahead of its centre: half a working pixel in the ray's step direction, the streak
+        being drawn backwards from the light (a tap at +k steps)."""
+        f = max(self.fx, self.fy)
+        return int(math.copysign(f // 2, self.sx if self.fx > 1 else self.sy))
+
+    @property
+    def layout(self) -> tuple[int, int]:
+        return self.fx, self.fy
+
+    @property
+    def line(self) -> tuple[int, int, float]:
+        """Rays of one line (a ray and its opposite) share their working light and sum."""
+        return self.fx, self.fy, round(self.shear, 9)
+
+
+def ray_grid(angle_deg: float, factor: int, width: int, height: int) -> RayGrid:
+    """The working grid of a ray over a ``width`` x ``height`` output window: full
+    resolution for ``factor`` 1, else reduced ``factor`` times along the ray's major axis
+    (x when |cos| >= |sin|), full resolution across it, so the ray stays a pixel thin."""
+    sx, sy, step_len = grid_step(angle_deg)
+    if factor == 1:
+        return RayGrid(1, 1, 0.0, width, height, sx, sy, step_len)
+    if abs(sx) >= abs(sy):
+        return RayGrid(factor, 1, sy / sx, -(-width // factor), height, sx, factor * sy,
+                       factor * step_len)
+    return RayGrid(1, factor, sx / sy, width, -(-height // factor), factor * sx, sy,
+                   factor * step_len)
+
+
+def grid_points(rows: np.ndarray, ox: int, oy: int, fx: int, fy: int) -> np.ndarray:
+    """(x, y, r, g, b, 0, 0, 0) float32 rows of `Streaks.seed_points`' lights on a working
+    grid of ``fx`` x ``fy`` output pixels: the centroid in working pixels (centres aligned),
+    the light divided by fx fy (a working pixel's light is the mean of its output pixels').
+    Working pixel X is centred on output pixel ``f X + f // 2`` (a whole pixel)."""
+    out = np.zeros((len(rows), 8), np.float32)
+    # source pixel -> output window pixel -> working pixel: (x - f // 2) / f, written for
+    # f = 1 as it always was (x + 0.5) / 1 - 0.5 (final's points unchanged to the bit)
+    out[:, 0] = (rows[:, 2] + ox + 0.5 * (fx % 2)) / fx - 0.5
+    out[:, 1] = (rows[:, 3] + oy + 0.5 * (fy % 2)) / fy - 0.5
+    out[:, 2:5] = rows[:, 4:7] / np.float32(fx * fy)
+    return out
 
 
 def channel_lengths(length_px: float, color_shift: float, mode: str = "star") -> np.ndarray:
@@ -427,11 +527,11 @@ class Streaks(Plugin):
         """Half-width (px) of the window a light's peak gathers its streaking light from."""
         return max(1, round(SEED_RADIUS * ctx.diagonal_px))
 
-    def seed_points(self, rt, p, ctx, peak, ox: int, oy: int, factor: int):
+    def seed_points(self, rt, p, ctx, peak):
         """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
-        position (a fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows,
-        x and y at the light's centroid in the working buffer's pixels, light divided by
-        ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered.
+        position (a fixed order whatever the device's): the kernel's float32 rows (peak x, y,
+        centroid x, y in source pixels, r, g, b, 0; `grid_points` places them on a working
+        grid); and the source-sized uint8 device flags of the pixels they gathered.
         ``peak``: (the per-tile peak map on the device, tiles across, tiles down)."""
         src = ctx.source
         (peak, tiles_x, tiles_y), radius = peak, self.seed_radius(ctx)
@@ -458,13 +558,7 @@ class Streaks(Plugin):
             n = MAX_SEEDS
         rows = rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8) if n else \
             np.zeros((0, 8), np.float32)
-        rows = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
-        out = np.zeros((n, 8), np.float32)
-        # source pixel -> output window pixel -> working pixel (centres aligned)
-        out[:, 0] = (rows[:, 2] + ox + 0.5) / factor - 0.5
-        out[:, 1] = (rows[:, 3] + oy + 0.5) / factor - 0.5
-        out[:, 2:5] = rows[:, 4:7] / np.float32(factor * factor)
-        return out, flags[0]
+        return rows[np.lexsort((rows[:, 0], rows[:, 1]))], flags[0]
 
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
@@ -473,78 +567,98 @@ class Streaks(Plugin):
         factor = lvl.factor
         out_win = self.output_window(p, ctx)
         ox, oy = src.window.offset_in(out_win)
-        lo_w, lo_h = -(-out_win.width // factor), -(-out_win.height // factor)
         i32, f32 = np.int32, np.float32
-        defines = {"FACTOR": factor, "fp64": lvl.fp64, **ctx.luminance_defines}
+        defines = {"fp64": lvl.fp64, **ctx.luminance_defines}
 
         angles = self.angles(p, ctx)
         colour = self.colour(p)
         plans = []
         for fraction, share in streak_parts(p.mode):
             lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift,
-                                      p.mode) / factor
+                                      p.mode)
             gain = p.intensity * share * colour / len(angles)
             for a in angles:
-                sx, sy, step_len = grid_step(a)
-                passes, top = pass_plan(float(lengths.max()) / step_len)
-                plans.append((sx, sy, passes, pass_weights(lengths / step_len, passes, gain,
-                                                           top)))
-        # zero margin wide enough for every tap (no bounds tests), unless the rays are so long
-        # that the margin would cost more than the tests
-        reach = 3 * TAPS ** (max(n for _, _, n, _ in plans) - 1) + 2
-        margin = -(-reach // 4) * 4
-        checked = margin > MAX_MARGIN
-        if checked:
-            margin = 0
-        wp = -(-lo_w // 4) * 4
-        pitch = wp + 2 * margin
-        org = margin * pitch + margin
-        nbytes = pitch * (lo_h + 2 * margin) * 16
-        work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total
+                grid = ray_grid(a, factor, out_win.width, out_win.height)
+                passes, top = pass_plan(float(lengths.max()) / grid.step_px)
+                plans.append((grid, passes, pass_weights(lengths / grid.step_px, passes, gain,
+                                                         top)))
+        if factor > 1:
+            # the rays of one line share a working sum, upsampled along them once
+            plans.sort(key=lambda plan: plan[0].line)
+        layouts = {grid.layout: WorkLayout.of([(g, n) for g, n, _ in plans
+                                               if g.layout == grid.layout])
+                   for grid, _, _ in plans}
+        nbytes = max(lay.nbytes for lay in layouts.values())
+        work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total (one line's)
         for buf in work:
             rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
         ping, pong, total = work
-        defines["CHECKED"] = int(checked)
+        if factor > 1:       # the streak sum at full resolution, the lines' sums upsampled
+            full_pitch = -(-out_win.width // 4) * 4
+            full = rt.buffer(full_pitch * out_win.height * 16)
+            rt.cl.enqueue_fill_buffer(rt.queue, full.buffer, np.float32(0.0), 0,
+                                      full_pitch * out_win.height * 16)
 
         peak, tiles_x, tiles_y = self.peak_map(p, ctx)
         peak_buf = rt.to_device(peak)
-        points, gathered = self.seed_points(rt, p, ctx, (peak_buf, tiles_x, tiles_y), ox, oy,
-                                            factor)
-        starts, members = bin_points(points, wp, lo_h, BIN)
-        points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
-            points if len(points) else np.zeros((1, 8), np.float32), starts,
-            members if len(members) else np.zeros(1, np.int32)))
-        bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
-                               **defines)
-        bins_x = -(-wp // BIN)
-        step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
-        accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
-        for sx, sy, passes, weights in plans:
+        rows, gathered = self.seed_points(rt, p, ctx, (peak_buf, tiles_x, tiles_y))
+        seeds = {}
+        for (fx, fy), lay in layouts.items():
+            points = grid_points(rows, ox, oy, fx, fy)
+            starts, members = bin_points(points, lay.wp, lay.h, BIN,
+                                         (1 + 2 * factor * (fy > 1), 1 + 2 * factor * (fx > 1)))
+            seeds[fx, fy] = [rt.to_device(a) for a in (
+                points if len(points) else np.zeros((1, 8), np.float32), starts,
+                members if len(members) else np.zeros(1, np.int32))]
+        last_layout = None
+        for k, (grid, passes, weights) in enumerate(plans):
+            lay = layouts[grid.layout]
+            if last_layout not in (None, lay):    # other margins: clear what the last wrote
+                for buf in (ping, pong):
+                    rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
+            last_layout = lay
+            kdefs = {**defines, "CHECKED": int(lay.checked)}
+            bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
+                                   **kdefs)
+            step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **kdefs)
+            accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **kdefs)
             # each ray starts from the bright pixels, extracted again into pong (cheaper than
             # a fourth frame-sized buffer; passes write inside the zero margins only)
-            rt.launch(bright_knl, (wp, lo_h), src, i32(src.pitch), i32(src.width),
-                      i32(src.height), pong, i32(org), i32(pitch), i32(wp), i32(lo_h),
-                      i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
-                      i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
-                      gathered, points_buf, starts_buf, members_buf, i32(bins_x), i32(BIN))
+            rt.launch(bright_knl, (lay.wp, lay.h), src, i32(src.pitch), i32(src.width),
+                      i32(src.height), pong, i32(lay.org), i32(lay.pitch), i32(lay.wp),
+                      i32(lay.h), i32(grid.fx), i32(grid.fy), f32(grid.shear),
+                      i32(grid.lead), i32(ox),
+                      i32(oy), f32(p.threshold), peak_buf, i32(tiles_x), i32(tiles_y),
+                      f32(p.core), f32(p.source_color), f32(self.core_power(p)), gathered,
+                      *seeds[grid.layout], i32(-(-lay.wp // BIN)), i32(BIN))
             cur = pong
             for n in range(passes):
                 last = n == passes - 1
                 dst = total if last else (ping if cur is not ping else pong)
                 b = TAPS ** n
                 w = [w4.astype(np.float32) for w4 in weights[n]]
-                rt.launch(accum_knl if last else step_knl, (wp // 4, lo_h), cur, dst, i32(org),
-                          i32(pitch), i32(wp), i32(lo_w), i32(lo_h), f32(sx * b), f32(sy * b),
-                          *w, local=LOCAL)
+                rt.launch(accum_knl if last else step_knl, (lay.wp // 4, lay.h), cur, dst,
+                          i32(lay.org), i32(lay.pitch), i32(lay.wp), i32(grid.w), i32(lay.h),
+                          f32(grid.sx * b), f32(grid.sy * b), *w, local=LOCAL)
                 cur = dst
+            if factor > 1 and (k + 1 == len(plans) or plans[k + 1][0].line != grid.line):
+                rt.launch(rt.kernel("streaks.cl", "streaks_expand", ALONG_X=int(grid.fx > 1)),
+                          (out_win.width, out_win.height), total, i32(lay.org),
+                          i32(lay.pitch), i32(grid.w), i32(grid.h), i32(factor),
+                          f32(grid.shear), full, i32(full_pitch), i32(out_win.width),
+                          i32(out_win.height), local=LOCAL)
+                rt.cl.enqueue_fill_buffer(rt.queue, total.buffer, np.float32(0.0), 0, nbytes)
         del work, ping, pong
+        if factor > 1:
+            total, org, pitch = full, 0, full_pitch
+        else:
+            org, pitch = last_layout.org, last_layout.pitch
 
         out = rt.image(out_win)
-        rt.launch(rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor,
-                            **ctx.luminance_defines),
+        rt.launch(rt.kernel("streaks.cl", "streaks_compose", **ctx.luminance_defines),
                   (out.pitch, out_win.height), src, i32(src.pitch), i32(src.width),
-                  i32(src.height), i32(ox), i32(oy), total, i32(org), i32(pitch), i32(lo_w),
-                  i32(lo_h), out, i32(out.pitch), i32(out_win.width), i32(out_win.height))
+                  i32(src.height), i32(ox), i32(oy), total, i32(org), i32(pitch), out,
+                  i32(out.pitch), i32(out_win.width), i32(out_win.height))
         bad = ctx.analysis.nonfinite_count
         if bad:
             ctx.notes.append(f"streaks: {bad} non-finite pixels set to 0")
