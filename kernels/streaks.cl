@@ -1,10 +1,11 @@
 /* streaks.cl: star-filter streaks and aperture diffraction spikes (clfx/plugins/streaks.py).
  *
- * Working buffers (bright, ping, pong, total) are RGBA float32 with a zero margin of MARGIN
- * pixels on every side: interior pixel (x, y) lives at pixel index (y + M) * P + x + M, where
- * P = interior pitch (a multiple of 4) + 2M.  Kernels receive the interior origin as `org`
- * (= M * P + M).  When every tap fits in the margin (CHECKED = 0) taps need no bounds test;
- * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
+ * Working buffers (bright, ping, pong, total) are RGBA float32 with zero margins of MX
+ * pixels left and right and MY above and below: interior pixel (x, y) lives at pixel index
+ * (y + MY) * P + x + MX, where P = interior pitch (a multiple of 4) + 2 MX.  Kernels receive
+ * the interior origin as `org` (= MY * P + MX).  When every tap fits in the margins
+ * (CHECKED = 0) taps need no bounds test; otherwise (very long rays) MX = MY = 0 and each tap
+ * checks the buffer's extent.  Margins and the
  * interior's padding columns stay zero: they stand for "outside the image".
  * Pipeline:
  *   streaks_seeds    each compact light's streaking light (thresholded, weighted by
@@ -315,11 +316,12 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
   vstore16(fmin(TO_FLOAT16(sum), SCATTER_FLT_MAX), 0, out + (y * pitch + x) * 4);
 }
 
-/* A ray-aligned working buffer (interior lo_w x lo_h, reduced F times in x for ALONG_X = 1,
- * in y for ALONG_X = 0) added to the full-resolution streak sum `acc` (pitch acc_pitch,
- * w x h): each output pixel interpolates linearly between the two working columns (rows)
- * around it along the reduced axis (clamped at the ends), and in each at the row (column)
- * where the ray through the pixel crosses it (shear x the distance), linearly across; zero
+/* A ray-aligned working buffer (interior lo_w x lo_h, reduced f times in x for ALONG_X = 1,
+ * in y for ALONG_X = 0; the output window starts `ext` pixels into its reduced axis) added to
+ * the full-resolution streak sum `acc` (pitch acc_pitch, w x h): each output pixel
+ * interpolates linearly between the two working columns (rows) around it along the reduced
+ * axis (clamped at the ends), and in each at the row (column) where the ray through the
+ * pixel crosses it (shear x the distance), linearly across; zero
  * outside the interior. */
 #ifndef ALONG_X
 #define ALONG_X 1
@@ -344,16 +346,17 @@ inline float4 streaks_cross(global const float *lo, int pitch, int u, int cross_
 }
 
 kernel void streaks_expand(global const float *lo, const int org, const int pitch,
-                           const int lo_w, const int lo_h, const int f, const float shear,
-                           global float *acc, const int acc_pitch, const int w, const int h)
+                           const int lo_w, const int lo_h, const int f, const int ext,
+                           const float shear, global float *acc, const int acc_pitch,
+                           const int w, const int h)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= w || y >= h) return;
   lo += 4 * org;
 #if ALONG_X
-  const int a = x, c = y, n = lo_w, cross_n = lo_h;
+  const int a = x + ext, c = y, n = lo_w, cross_n = lo_h;
 #else
-  const int a = y, c = x, n = lo_h, cross_n = lo_w;
+  const int a = y + ext, c = x, n = lo_h, cross_n = lo_w;
 #endif
   const int mid = f / 2;
   const float t = (float)(a - mid) / (float)f, t0 = floor(t), wt = t - t0;
