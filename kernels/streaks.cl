@@ -12,8 +12,10 @@
  *                    (L / peak)^core_power) gathered into one point: its peak's window, at
  *                    the light's centroid (source pixels; a list), the peaks flagged
  *   streaks_dilate   the flags grown to the windows the seeds gathered (x, then y)
+ *   streaks_extended (draft, preview) the streaking light no seed gathered, once a frame
  *   streaks_bright   the streaking light no seed gathered (extended lights), summed over
- *                    the FX x FY source pixels of a working pixel, plus the points splatted
+ *                    the FX x FY source pixels of a working pixel (EXTENDED = 1: from
+ *                    streaks_extended's image), plus the points splatted
  *                    bilinearly (placed in the output window; the host bins the seeds)
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
  *                    taps, zero outside the buffer; ACCUM adds the result to `out`
@@ -38,6 +40,9 @@
 
 #ifndef CHECKED
 #define CHECKED 1
+#endif
+#ifndef EXTENDED
+#define EXTENDED 0
 #endif
 
 #ifndef PEAK_TILE
@@ -156,6 +161,17 @@ kernel void streaks_dilate(global const uchar *in, global uchar *out, const int 
   out[y * w + x] = m;
 }
 
+/* The streaking light of source pixel (sx, sy). */
+inline float4 streaks_ext(global const float *src, int src_pitch, int sx, int sy,
+                          float threshold, global const float *peak, int tiles_x, int tiles_y,
+                          float core, float source_color, float core_power)
+{
+  const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
+  const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
+  return streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
+                       pk);
+}
+
 /* scale x the sum of the streaking light of the fx x fy source pixels of working pixel
  * (x, y) that no seed gathered (`gathered`: source-sized flags): the run along the reduced
  * axis `lead` pixels ahead of the working pixel's centre, each pixel taken from the nearest
@@ -179,14 +195,33 @@ inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int
       const int off = (int)floor(shear * (float)a + 0.5f);
       const int sx = x * fx + (fx > 1 ? centre + a : i) + (fy > 1 ? off : 0) - ox;
       const int sy = y * fy + (fy > 1 ? centre + a : j) + (fx > 1 ? off : 0) - oy;
+#if EXTENDED      /* src holds the light already (streaks_extended) */
+      if(sy < 0 || sy >= src_h || sx < 0 || sx >= src_w) continue;
+      acc += clfx_load4(src, src_pitch, sx, sy) * scale;
+#else
       if(sy < 0 || sy >= src_h || sx < 0 || sx >= src_w || gathered[sy * src_w + sx]) continue;
-      const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
-      const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
-      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
-                           pk) * scale;
+      acc += streaks_ext(src, src_pitch, sx, sy, threshold, peak, tiles_x, tiles_y, core,
+                         source_color, core_power) * scale;
+#endif
     }
   }
   return acc;
+}
+
+/* One work-item per source pixel: its streaking light if no seed gathered it, else 0 (the
+ * terms of streaks_box, once a frame for the reduced grids of draft and preview, whose rays
+ * each gather them again). */
+kernel void streaks_extended(global const float *src, const int src_pitch, const int src_w,
+                             const int src_h, const float threshold, global const float *peak,
+                             const int tiles_x, const int tiles_y, const float core,
+                             const float source_color, const float core_power,
+                             global const uchar *gathered, global float *ext)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= src_w || y >= src_h) return;
+  clfx_store4(ext, src_w, x, y, gathered[y * src_w + x] ? (float4)0.0f
+              : streaks_ext(src, src_pitch, x, y, threshold, peak, tiles_x, tiles_y, core,
+                            source_color, core_power));
 }
 
 /* One work-item per working pixel: the average of the streaking light no seed gathered

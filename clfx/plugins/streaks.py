@@ -635,6 +635,15 @@ class Streaks(Plugin):
             seeds[g.layout] = [rt.to_device(a) for a in (
                 points if len(points) else np.zeros((1, 8), np.float32), starts,
                 members if len(members) else np.zeros(1, np.int32))]
+        light = (src, i32(src.pitch))
+        if factor > 1:     # the streaking light of the pixels no seed gathered, once a frame
+            ext = rt.buffer(max(src.width * src.height, 1) * 16)
+            rt.launch(rt.kernel("streaks.cl", "streaks_extended", PEAK_TILE=ctx.analysis.tile,
+                                **defines), (src.width, src.height), src, i32(src.pitch),
+                      i32(src.width), i32(src.height), f32(p.threshold), peak_buf,
+                      i32(tiles_x), i32(tiles_y), f32(p.core), f32(p.source_color),
+                      f32(self.core_power(p)), gathered, ext)
+            light = (ext, i32(src.width))
         last_layout = None
         for k, (grid, passes, weights) in enumerate(plans):
             lay = layouts[grid.layout]
@@ -644,12 +653,12 @@ class Streaks(Plugin):
             last_layout = lay
             kdefs = {**defines, "CHECKED": int(lay.checked)}
             bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=ctx.analysis.tile,
-                                   **kdefs)
+                                   EXTENDED=int(factor > 1), **kdefs)
             step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **kdefs)
             accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **kdefs)
             # each ray starts from the bright pixels, extracted again into pong (cheaper than
             # a fourth frame-sized buffer; passes write inside the zero margins only)
-            rt.launch(bright_knl, (lay.wp, lay.h), src, i32(src.pitch), i32(src.width),
+            rt.launch(bright_knl, (lay.wp, lay.h), *light, i32(src.width),
                       i32(src.height), pong, i32(lay.org), i32(lay.pitch), i32(lay.wp),
                       i32(lay.h), i32(grid.fx), i32(grid.fy), f32(grid.shear),
                       i32(grid.lead), i32(ox + grid.ex), i32(oy + grid.ey), f32(p.threshold),
