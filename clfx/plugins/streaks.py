@@ -89,7 +89,7 @@ ray, L = 100 px, 12 lights), max error / peak against the exact line kernel: ref
 drops 1e-5 of the infinite exponential's energy (the kernel is renormalised).
 
 Quality levels: final and reference run the passes at full resolution.  Draft and preview
-run each ray on a grid reduced 4 (draft) or 2 (preview) times along the ray's major axis
+run each ray on a grid reduced 8 (draft) or 4 (preview) times along the ray's major axis
 only, full resolution across it (`ray_grid`): a ray is a line a pixel or two wide, and
 passes at 1/4 or 1/2 resolution in both axes drew it 4-8 px wide at a fraction of its
 amplitude, further from the reference in log-PSNR than no ray at all (bench, 960 x 540:
@@ -103,12 +103,16 @@ is one working pixel along the axis, its part across interpolated linearly at fu
 resolution, as final's; the rays of one line (a ray and its opposite) sum on their grid,
 which is upsampled along the line (linear between the two working columns around a pixel,
 linear across in each) into a full-resolution streak sum.  The passes cost 1 / factor of
-final's (not 1 / factor^2), plus one full-resolution upsample per line.  The oracle computes
-these grids in float64 (``factor``).  Measured at 960 x 540 (bench): draft 67.9, preview
-69.0 dB against the input's 29.5; at 320 x 180 42.6, 45.6 against 20.3; along a thin ray
-the width (1.1-2.4 px FWHM) and the straightness (0.07-0.13 px) of final's.  Every tap is
-interpolated (taps rounded to whole pixels in long passes made a thin ray wander by half a
-pixel per pass, a staircase along it).
+final's (not 1 / factor^2), plus one full-resolution upsample per line; the streaking light
+of the pixels no seed gathered is computed once a frame (``streaks_extended``), each ray's
+grid gathers it.  The oracle computes these grids in float64 (``factor``).  Measured (bench
+case, log-PSNR against the reference level): 320 x 180 draft 35.9, preview 42.6 dB, input
+20.3; 960 x 540 61.4, 67.9, input 29.5; 1920 x 1080 75.6, 77.7, input 34.8 (factors 4 and
+2: 42.6, 45.6; 67.9, 69.0; 77.7, 79.4, but preview's passes then cost nearly final's time
+on PoCL: CPU time at 960 x 540, one PoCL thread, 128-147 ms against final's 138-157 and
+100-108 at factor 4).  Along a thin ray the width (1.1-2.4 px FWHM) and the straightness
+(0.06-0.11 px) of final's.  Every tap is interpolated (taps rounded to whole pixels in long
+passes made a thin ray wander by half a pixel per pass, a staircase along it).
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -163,11 +167,11 @@ class StreaksLevel(Level):
 
 
 LEVELS = {
-    "draft": StreaksLevel("Kawase passes at 1/4 resolution along each ray, full resolution "
+    "draft": StreaksLevel("Kawase passes at 1/8 resolution along each ray, full resolution "
                           "across it (a ray stays a pixel thin), upsampled along the rays, "
-                          "float32", factor=4),
-    "preview": StreaksLevel("Kawase passes at 1/2 resolution along each ray, full resolution "
-                            "across it, float32", factor=2),
+                          "float32", factor=8),
+    "preview": StreaksLevel("Kawase passes at 1/4 resolution along each ray, full resolution "
+                            "across it, float32", factor=4),
     "final": StreaksLevel("Kawase passes at full resolution, float32"),
     "reference": StreaksLevel("Kawase passes at full resolution, float64 tap sums (exactly "
                               "the oracle's composed kernel)", fp64=True),
