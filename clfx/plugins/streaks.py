@@ -105,14 +105,15 @@ which is upsampled along the line (linear between the two working columns around
 linear across in each) into a full-resolution streak sum.  The passes cost 1 / factor of
 final's (not 1 / factor^2), plus one full-resolution upsample per line; the streaking light
 of the pixels no seed gathered is computed once a frame (``streaks_extended``), each ray's
-grid gathers it.  The oracle computes these grids in float64 (``factor``).  Measured (bench
-case, log-PSNR against the reference level): 320 x 180 draft 35.9, preview 42.6 dB, input
-20.3; 960 x 540 61.4, 67.9, input 29.5; 1920 x 1080 75.6, 77.7, input 34.8 (factors 4 and
-2: 42.6, 45.6; 67.9, 69.0; 77.7, 79.4, but preview's passes then cost nearly final's time
-on PoCL: CPU time at 960 x 540, one PoCL thread, 128-147 ms against final's 138-157 and
-100-108 at factor 4).  Along a thin ray the width (1.1-2.4 px FWHM) and the straightness
-(0.06-0.11 px) of final's.  Every tap is interpolated (taps rounded to whole pixels in long
-passes made a thin ray wander by half a pixel per pass, a staircase along it).
+grid gathers it.  The oracle computes these grids in float64 (``factor``).  Measured
+(``clfx bench --effects streaks``, log-PSNR against the reference level): 320 x 180 draft
+35.7, preview 41.7 dB, input 18.9; 960 x 540 62.5, 67.8, input 29.8; 1920 x 1080 70.3,
+77.8, input 35.7 (factors 4 and 2: 41.7, 46.0; 67.8, 68.9; 77.8, 79.7, but preview's passes
+then cost nearly final's time on PoCL: CPU time at 960 x 540, one PoCL thread, 128-147 ms
+against final's 138-157 and 100-108 at factor 4).  Along a thin ray the width (1.1-2.4 px
+FWHM) and the straightness (0.06-0.11 px) of final's.  Every tap is interpolated (taps
+rounded to whole pixels in long passes made a thin ray wander by half a pixel per pass, a
+staircase along it).
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -336,7 +337,7 @@ class RayGrid:
 
     @property
     def line(self) -> tuple[int, int, float]:
-        """Rays of one line (a ray and its opposite) share their working light and sum."""
+        """Rays of one line (a ray and its opposite) share a working sum, upsampled once."""
         return self.fx, self.fy, round(self.shear, 9)
 
 
