@@ -1,27 +1,41 @@
 /* streaks.cl: star-filter streaks and aperture diffraction spikes (clfx/plugins/streaks.py).
  *
- * Working buffers (bright, ping, pong, total) are RGBA float32 with a zero margin of MARGIN
- * pixels on every side: interior pixel (x, y) lives at pixel index (y + M) * P + x + M, where
- * P = interior pitch (a multiple of 4) + 2M.  Kernels receive the interior origin as `org`
- * (= M * P + M).  When every tap fits in the margin (CHECKED = 0) taps need no bounds test;
- * otherwise (very long rays) M = 0 and each tap checks the buffer's extent.  Margins and the
+ * Working buffers (bright, ping, pong, total) are RGBA float32 with zero margins of MX
+ * pixels left and right and MY above and below: interior pixel (x, y) lives at pixel index
+ * (y + MY) * P + x + MX, where P = interior pitch (a multiple of 4) + 2 MX.  Kernels receive
+ * the interior origin as `org` (= MY * P + MX).  When every tap fits in the margins
+ * (CHECKED = 0) taps need no bounds test; otherwise (very long rays) MX = MY = 0 and each tap
+ * checks the buffer's extent.  Margins and the
  * interior's padding columns stay zero: they stand for "outside the image".
  * Pipeline:
  *   streaks_seeds    each compact light's streaking light (thresholded, weighted by
  *                    (L / peak)^core_power) gathered into one point: its peak's window, at
  *                    the light's centroid (source pixels; a list), the peaks flagged
  *   streaks_dilate   the flags grown to the windows the seeds gathered (x, then y)
- *   streaks_bright   the streaking light no seed gathered (extended lights), box-averaged
- *                    over FACTOR x FACTOR source pixels, plus the points splatted bilinearly
- *                    (placed in the output window; the host bins the seeds)
+ *   streaks_extended (draft, preview) the streaking light no seed gathered, once a frame
+ *   streaks_bright   the streaking light no seed gathered (extended lights), summed over
+ *                    the FX x FY source pixels of a working pixel (EXTENDED = 1: from
+ *                    streaks_extended's image), plus the points splatted
+ *                    bilinearly (placed in the output window; the host bins the seeds)
  *   streaks_pass     one Kawase pass: out(x) = sum_{s=0..3} w_s * in(x + s * step), bilinear
  *                    taps, zero outside the buffer; ACCUM adds the result to `out`
- *   streaks_compose  output = sanitised source + bilinear upsample of the streak sum
- * RING = 1 (large frames, CHECKED = 1): the frame streams through in chunks of rows and
- * each buffer a pass reads holds only the rows the next passes still need: absolute row y
- * lives at row y % rows of it (`rows` its height), so a chunk's kernels address rows by
- * their frame row (`y0`: the chunk's first; streaks_wrap) and compute the same floats as
- * over whole buffers.
+ *   streaks_expand   (draft, preview) a ray-aligned working buffer upsampled along its rays
+ *                    and added to the full-resolution streak sum
+ *   streaks_compose  output = sanitised source + the streak sum
+ * Ray-aligned working grids (draft, preview): a ray whose major axis is x runs on a grid
+ * reduced FX = factor times in x only (FY = 1), a y-major ray on one reduced in y; working
+ * pixel (X, Y) stands for the FX x FY run of output pixels along the ray through its centre
+ * (FX X + FX / 2, FY Y + FY / 2), integer division: a whole pixel, so a ray through a pixel
+ * centre crosses a 45-degree grid's columns at pixel centres: no interpolation across it):
+ * each pixel of the run is moved across the ray by round(shear x its distance along the axis
+ * from the centre), `shear` = the ray's cross change per pixel along its major axis.  So a
+ * thin ray stays one pixel thin; only its length is sampled every FX (FY) pixels.  At final
+ * FX = FY = 1 (no offset).
+ * RING = 1 (frames over STREAM_PIXELS at final and reference, CHECKED = 1): the frame
+ * streams through in chunks of rows and each buffer a pass reads holds only the rows the
+ * next passes still need: absolute row y lives at row y % rows of it (`rows` its height), so
+ * a chunk's kernels address rows by their frame row (`y0`: the chunk's first; streaks_wrap)
+ * and compute the same floats as over whole buffers.
  * Passes n = 0..N-1 with step 4^n * direction compose to the line kernel
  * sum_{k=0}^{T 4^(N-1)-1} a^k delta(x + k d) exactly (each k has one base-4 expansion; the
  * last pass has T <= 4 taps of non-zero weight).
@@ -29,11 +43,11 @@
 #include "lib/scatter.h"
 #include "lib/precision.h"
 
-#ifndef FACTOR
-#define FACTOR 1
-#endif
 #ifndef CHECKED
 #define CHECKED 1
+#endif
+#ifndef EXTENDED
+#define EXTENDED 0
 #endif
 
 #ifndef RING
@@ -178,40 +192,84 @@ kernel void streaks_dilate(global const uchar *in, global uchar *out, const int 
   out[y * w + x] = m;
 }
 
-/* scale x the sum of the streaking light of the FACTOR x FACTOR source pixels under
- * low-resolution pixel (x, y) that no seed gathered (`gathered`: source-sized flags);
- * (ox, oy) = source window origin inside the output window, full-resolution pixels. */
+/* The streaking light of source pixel (sx, sy). */
+inline float4 streaks_ext(global const float *src, int src_pitch, int sx, int sy,
+                          float threshold, global const float *peak, int tiles_x, int tiles_y,
+                          float core, float source_color, float core_power)
+{
+  const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
+  const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
+  return streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
+                       pk);
+}
+
+/* scale x the sum of the streaking light of the fx x fy source pixels of working pixel
+ * (x, y) that no seed gathered (`gathered`: source-sized flags): the run along the reduced
+ * axis `lead` pixels ahead of the working pixel's centre, each pixel taken from the nearest
+ * pixel across of the ray's line through that centre (`shear`: the ray's cross change per
+ * pixel along the reduced axis; fx = fy = 1, lead = 0: the pixel itself); (ox, oy) = source
+ * window origin inside the output window, full-resolution pixels. */
 inline float4 streaks_box(global const float *src, int src_pitch, int src_w, int src_h, int x,
-                          int y, int ox, int oy, float threshold, float scale,
-                          global const float *peak, int tiles_x, int tiles_y, float core,
-                          float source_color, float core_power, global const uchar *gathered)
+                          int y, int fx, int fy, float shear, int lead, int ox, int oy,
+                          float threshold,
+                          float scale, global const float *peak, int tiles_x, int tiles_y,
+                          float core, float source_color, float core_power,
+                          global const uchar *gathered)
 {
   float4 acc = (float4)0.0f;
-  for(int j = 0; j < FACTOR; j++)
+  const int centre = max(fx, fy) / 2;
+  for(int j = 0; j < fy; j++)
   {
-    const int sy = y * FACTOR + j - oy;
-    if(sy < 0 || sy >= src_h) continue;
-    for(int i = 0; i < FACTOR; i++)
+    for(int i = 0; i < fx; i++)
     {
-      const int sx = x * FACTOR + i - ox;
-      if(sx < 0 || sx >= src_w || gathered[sy * src_w + sx]) continue;
-      const float level = streaks_level(peak, tiles_x, tiles_y, sx, sy, threshold, core);
-      const float pk = core_power > 0.0f ? streaks_peak(peak, tiles_x, tiles_y, sx, sy) : 0.0f;
-      acc += streaks_light(clfx_load4(src, src_pitch, sx, sy), level, source_color, core_power,
-                           pk) * scale;
+      const int a = (fx > 1 ? i : j) - centre + lead;  /* along the axis from the centre */
+      const int off = (int)floor(shear * (float)a + 0.5f);
+      const int sx = x * fx + (fx > 1 ? centre + a : i) + (fy > 1 ? off : 0) - ox;
+      const int sy = y * fy + (fy > 1 ? centre + a : j) + (fx > 1 ? off : 0) - oy;
+#if EXTENDED      /* src holds the light already (streaks_extended) */
+      if(sy < 0 || sy >= src_h || sx < 0 || sx >= src_w) continue;
+      acc += clfx_load4(src, src_pitch, sx, sy) * scale;
+#else
+      if(sy < 0 || sy >= src_h || sx < 0 || sx >= src_w || gathered[sy * src_w + sx]) continue;
+      acc += streaks_ext(src, src_pitch, sx, sy, threshold, peak, tiles_x, tiles_y, core,
+                         source_color, core_power) * scale;
+#endif
     }
   }
   return acc;
 }
 
-/* One work-item per low-resolution pixel (rows from y0): the box average of the streaking
- * light no seed gathered (extended lights), plus the seeds' points splatted bilinearly.
- * `points`: (x, y, r, g, b, 0, 0, 0) per seed, low-resolution output-window pixels, light already
- * divided by FACTOR^2; `bin_start` (bins_x * bins_y + 1) and `bin_seed` list, per BIN x BIN
- * block of low-resolution pixels, the seeds whose splat touches it, in seed order. */
+/* One work-item per source pixel: its streaking light if no seed gathered it, else 0 (the
+ * terms of streaks_box, once a frame for the reduced grids of draft and preview, whose rays
+ * each gather them again). */
+kernel void streaks_extended(global const float *src, const int src_pitch, const int src_w,
+                             const int src_h, const float threshold, global const float *peak,
+                             const int tiles_x, const int tiles_y, const float core,
+                             const float source_color, const float core_power,
+                             global const uchar *gathered, global float *ext)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= src_w || y >= src_h) return;
+  clfx_store4(ext, src_w, x, y, gathered[y * src_w + x] ? (float4)0.0f
+              : streaks_ext(src, src_pitch, x, y, threshold, peak, tiles_x, tiles_y, core,
+                            source_color, core_power));
+}
+
+/* One work-item per working pixel (rows from y0; `rows`: dst's height with RING): the
+ * average of the streaking light no seed gathered (extended lights; streaks_box), plus the
+ * seeds' points splatted bilinearly along the ray: in the column (row) the point lies
+ * between, and in each of those at the row (column) where the ray through the point crosses
+ * it (shear x its distance).  Light is moved `lead` pixels
+ * back along the reduced axis (on the ray's line): half a working pixel towards the streak,
+ * so a working pixel stands for the run of the streak it is the middle of (not half of it
+ * behind the light: the line kernel is one-sided).  `points`: (x, y, r, g, b, 0,
+ * 0, 0) per seed, working pixels, light already divided by fx x fy; `bin_start` (bins_x *
+ * bins_y + 1) and `bin_seed` list, per BIN x BIN block of working pixels, the seeds whose
+ * splat touches it, in seed order. */
 kernel void streaks_bright(global const float *src, const int src_pitch, const int src_w,
                            const int src_h, global float *dst, const int org,
                            const int dst_pitch, const int dst_wp, const int dst_h,
+                           const int fx, const int fy, const float shear, const int lead,
                            const int ox, const int oy, const float threshold,
                            global const float *peak, const int tiles_x, const int tiles_y,
                            const float core, const float source_color,
@@ -223,19 +281,26 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
   const int x = get_global_id(0), y = get_global_id(1) + y0;
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
-  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold, 1.0f, peak,
-                           tiles_x, tiles_y, core, source_color, core_power, gathered)
-               * (1.0f / (FACTOR * FACTOR));
+  const float inv = 1.0f / (float)(fx * fy);
+  float4 acc = streaks_box(src, src_pitch, src_w, src_h, x, y, fx, fy, shear, lead, ox, oy,
+                           threshold, 1.0f, peak, tiles_x, tiles_y, core, source_color,
+                           core_power, gathered) * inv;
   if(!scatter_pixel_finite(acc))  /* the sum passed FLT_MAX: average term by term instead */
-    acc = streaks_box(src, src_pitch, src_w, src_h, x, y, ox, oy, threshold,
-                      1.0f / (FACTOR * FACTOR), peak, tiles_x, tiles_y, core, source_color,
-                      core_power, gathered);
+    acc = streaks_box(src, src_pitch, src_w, src_h, x, y, fx, fy, shear, lead, ox, oy, threshold,
+                      inv, peak, tiles_x, tiles_y, core, source_color, core_power, gathered);
   const int b = (y / bin) * bins_x + x / bin;
   for(int k = bin_start[b]; k < bin_start[b + 1]; k++)
   {
-    const float8 s = vload8(bin_seed[k], points);
-    const float w = fmax(1.0f - fabs(s.s0 - (float)x), 0.0f)
-                    * fmax(1.0f - fabs(s.s1 - (float)y), 0.0f);
+    float8 s = vload8(bin_seed[k], points);
+    if(lead)        /* moved `lead` pixels back along the ray's line */
+    {
+      s.s0 -= fx > 1 ? (float)lead / (float)fx : shear * (float)lead;
+      s.s1 -= fy > 1 ? (float)lead / (float)fy : shear * (float)lead;
+    }
+    const float cx = fy > 1 ? s.s0 + shear * (float)fy * ((float)y - s.s1) : s.s0;
+    const float cy = fx > 1 ? s.s1 + shear * (float)fx * ((float)x - s.s0) : s.s1;
+    const float w = fmax(1.0f - fabs(cx - (float)x), 0.0f)
+                    * fmax(1.0f - fabs(cy - (float)y), 0.0f);
     acc += (float4)(s.s2, s.s3, s.s4, 0.0f) * w;
   }
 #if RING
@@ -335,36 +400,73 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
   vstore16(fmin(TO_FLOAT16(sum), SCATTER_FLT_MAX), 0, out);
 }
 
-/* out = sanitised source (zero outside its window) + streaks, where the streak buffer has
- * FACTOR-times lower resolution (bilinear, pixel centres aligned, clamped at its edges).
- * `out` is the part of the output window from (dx0, dy0) (full-resolution pixels), its rows
- * from row0 here; `streak` holds rows r0.. of the lo_w x lo_h streak sum. */
+/* A ray-aligned working buffer (interior lo_w x lo_h, reduced f times in x for ALONG_X = 1,
+ * in y for ALONG_X = 0; the output window starts `ext` pixels into its reduced axis) added to
+ * the full-resolution streak sum `acc` (pitch acc_pitch, w x h): each output pixel
+ * interpolates linearly between the two working columns (rows) around it along the reduced
+ * axis (clamped at the ends), and in each at the row (column) where the ray through the
+ * pixel crosses it (shear x the distance), linearly across; zero
+ * outside the interior. */
+#ifndef ALONG_X
+#define ALONG_X 1
+#endif
+inline float4 streaks_line_at(global const float *lo, int pitch, int u, int v)
+{
+#if ALONG_X
+  return clfx_load4(lo, pitch, u, v);
+#else
+  return clfx_load4(lo, pitch, v, u);
+#endif
+}
+
+inline float4 streaks_cross(global const float *lo, int pitch, int u, int cross_n, float r)
+{
+  const float r0 = floor(r), fr = r - r0;
+  const int v0 = (int)r0, v1 = v0 + 1;
+  const float w0 = (v0 >= 0 && v0 < cross_n) ? 1.0f - fr : 0.0f;
+  const float w1 = (v1 >= 0 && v1 < cross_n) ? fr : 0.0f;
+  return streaks_line_at(lo, pitch, u, clamp(v0, 0, cross_n - 1)) * w0
+         + streaks_line_at(lo, pitch, u, clamp(v1, 0, cross_n - 1)) * w1;
+}
+
+kernel void streaks_expand(global const float *lo, const int org, const int pitch,
+                           const int lo_w, const int lo_h, const int f, const int ext,
+                           const float shear, global float *acc, const int acc_pitch,
+                           const int w, const int h)
+{
+  const int x = get_global_id(0), y = get_global_id(1);
+  if(x >= w || y >= h) return;
+  lo += 4 * org;
+#if ALONG_X
+  const int a = x + ext, c = y, n = lo_w, cross_n = lo_h;
+#else
+  const int a = y + ext, c = x, n = lo_h, cross_n = lo_w;
+#endif
+  const int mid = f / 2;
+  const float t = (float)(a - mid) / (float)f, t0 = floor(t), wt = t - t0;
+  const int u0 = clamp((int)t0, 0, n - 1), u1 = clamp((int)t0 + 1, 0, n - 1);
+  const float4 s = streaks_cross(lo, pitch, u0, cross_n,
+                                 (float)c + shear * (float)(u0 * f + mid - a)) * (1.0f - wt)
+                   + streaks_cross(lo, pitch, u1, cross_n,
+                                   (float)c + shear * (float)(u1 * f + mid - a)) * wt;
+  clfx_store4(acc, acc_pitch, x, y, clfx_load4(acc, acc_pitch, x, y) + s);
+}
+
+/* out = sanitised source (zero outside its window) + the full-resolution streak sum.  `out`
+ * is the part of the output window from (dx0, dy0), its rows from row0 here; `streak` holds
+ * rows r0.. of the streak sum (pitch s_pitch). */
 kernel void streaks_compose(global const float *src, const int src_pitch, const int src_w,
                             const int src_h, const int ox, const int oy,
-                            global const float *streak, const int org, const int lo_pitch,
-                            const int lo_w, const int lo_h, const int r0, global float *dst,
-                            const int dst_pitch, const int dst_w, const int dst_h,
-                            const int dx0, const int dy0, const int row0)
+                            global const float *streak, const int org, const int s_pitch,
+                            const int r0, global float *dst, const int dst_pitch,
+                            const int dst_w, const int dst_h, const int dx0, const int dy0,
+                            const int row0)
 {
   const int x = get_global_id(0), y = get_global_id(1) + row0;
   streak += 4 * org;
   if(x >= dst_pitch || y >= dst_h) return;
   if(x >= dst_w) { clfx_store4(dst, dst_pitch, x, y, (float4)0.0f); return; }
   const float4 c = scatter_source(src, src_pitch, src_w, src_h, x - ox, y - oy);
-  const int sx = x + dx0, sy = y + dy0;
-#if FACTOR == 1
-  const float4 s = clfx_load4(streak, lo_pitch, sx, sy - r0);
-#else
-  /* scatter_bilinear's arithmetic, rows clamped to the whole sum's and held from r0 */
-  const float u = ((float)sx + 0.5f) / FACTOR - 0.5f, v = ((float)sy + 0.5f) / FACTOR - 0.5f;
-  const float u0 = floor(u), v0 = floor(v);
-  const float fu = u - u0, fv = v - v0;
-  const int i0 = clfx_clampi((int)u0, 0, lo_w - 1), i1 = clfx_clampi((int)u0 + 1, 0, lo_w - 1);
-  const int j0 = clfx_clampi((int)v0, 0, lo_h - 1) - r0;
-  const int j1 = clfx_clampi((int)v0 + 1, 0, lo_h - 1) - r0;
-  const float4 a = vload4(j0 * lo_pitch + i0, streak), b = vload4(j0 * lo_pitch + i1, streak);
-  const float4 d = vload4(j1 * lo_pitch + i0, streak), e = vload4(j1 * lo_pitch + i1, streak);
-  const float4 s = (a * (1.0f - fu) + b * fu) * (1.0f - fv) + (d * (1.0f - fu) + e * fu) * fv;
-#endif
+  const float4 s = clfx_load4(streak, s_pitch, x + dx0, y + dy0 - r0);
   clfx_store4(dst, dst_pitch, x, y, scatter_add(c, s));
 }

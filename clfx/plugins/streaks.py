@@ -85,28 +85,55 @@ identical energy; identical kernels at multiples of 45 degrees; at 30 degrees a 
 difference of 0.25 and an rms width across the ray of 0.47 px against 0.35 px: the Kawase
 streak is a fraction of a pixel wider, never longer or brighter. At 1080p (one 30-degree
 ray, L = 100 px, 12 lights), max error / peak against the exact line kernel: reference
-3.7e-2, final 4.7e-2, preview 0.22, draft 0.47 (reduced resolution widens the ray; measured
-before the support reached 2.5 L). Truncation at S > 2.5 L' drops 1e-5 of the infinite
-exponential's energy (the kernel is renormalised).
+3.7e-2, final 4.7e-2 (measured before the support reached 2.5 L). Truncation at S > 2.5 L'
+drops 1e-5 of the infinite exponential's energy (the kernel is renormalised).
 
-Quality levels run the passes at 1/4 (draft), 1/2 (preview) or full (final, reference)
-resolution (points splatted on the coarser grid, steps scaled, bilinear upsample on compose);
-every tap is interpolated (taps rounded to whole pixels in long passes made a thin ray wander
-by half a pixel per pass, a staircase along it).
+Quality levels: final and reference run the passes at full resolution.  Draft and preview
+run each ray on a grid reduced 8 (draft) or 4 (preview) times along the ray's major axis
+only, full resolution across it (`ray_grid`): a ray is a line a pixel or two wide, and
+passes at 1/4 or 1/2 resolution in both axes drew it 4-8 px wide at a fraction of its
+amplitude, further from the reference in log-PSNR than no ray at all (bench, 960 x 540:
+draft 26.0, preview 27.2 dB, the unchanged input 29.8).  A working pixel stands for the run
+of ``factor`` pixels along the ray's line through its centre, a whole pixel (each pixel of
+the run taken from the nearest pixel across the line); a light's point splats bilinearly
+along the line onto the two working columns around it and across in each; both are moved
+half a working pixel towards the streak (`RayGrid.lead`: a working pixel then stands for the
+run of the one-sided streak it is the middle of, not half of it behind the light).  A step
+is one working pixel along the axis, its part across interpolated linearly at full
+resolution, as final's; the rays of one line (a ray and its opposite) sum on their grid,
+which is upsampled along the line (linear between the two working columns around a pixel,
+linear across in each) into a full-resolution streak sum.  The passes cost 1 / factor of
+final's (not 1 / factor^2), plus one full-resolution upsample per line; the streaking light
+of the pixels no seed gathered is computed once a frame (``streaks_extended``), each ray's
+grid gathers it.  The oracle computes these grids in float64 (``factor``).  Measured
+(``clfx bench --effects streaks``, log-PSNR against the reference level): 320 x 180 draft
+35.7, preview 41.7 dB, input 18.9; 960 x 540 62.5, 67.8, input 29.8; 1920 x 1080 70.3,
+77.8, input 35.7 (factors 4 and 2: 41.7, 46.0; 67.8, 68.9; 77.8, 79.7, but preview's passes
+then cost nearly final's time on PoCL: CPU time at 960 x 540, one PoCL thread, 128-147 ms
+against final's 138-157 and 100-108 at factor 4).  Along a thin ray the width (1.1-2.4 px
+FWHM) and the straightness (0.06-0.11 px) of final's.  Every tap is interpolated (taps
+rounded to whole pixels in long passes made a thin ray wander by half a pixel per pass, a
+staircase along it).
 
 Memory and tiles (issue 26)
 ---------------------------
-The frame-wide part (seeds, bright pixels, every ray's passes, their sum at working
-resolution) is computed once per frame in the step's plan; the render, whole or one band of
-a tiled render, adds its rows of that sum to its rows of the source (a band's region of
-interest is itself).  A working frame over ``STREAM_PIXELS`` streams through the passes in
-chunks of rows: a ray sweeps the frame against its taps' direction (a pass reads rows at
+The frame-wide part (seeds, bright pixels, every ray's passes, their full-resolution sum) is
+computed once per frame in the step's plan; the render, whole or one band of a tiled
+render, adds its rows of that sum to its rows of the source (a band's region of interest is
+itself).  At final and reference a frame over ``STREAM_PIXELS`` streams through the passes
+in chunks of rows: a ray sweeps the frame against its taps' direction (a pass reads rows at
 ``y + s 4^n sy``, all on one side), each pass's input held as a ring of the chunk and the
 rows the later passes still read (about the support, ``TAIL L``, in all), and the sum waits
 on the host, composed in pieces.  The whole passes needed three frame-sized buffers: at 8K
 UHD (cinema, 4 rays of 440 px) 1519 MiB against 352 MiB of rings and a chunk.  Every pixel
 takes the same floats either way: a tap past a ring's rows has weight 0 (the last pass's
-unused taps) and reads a finite non-negative value, as every held value is.
+unused taps) and reads a finite non-negative value, as every held value is.  Draft and
+preview do not stream: their rays' working buffers are reduced 8 or 4 times along one axis
+(three of them, the largest grid's), and the frame holds the once-a-frame extended light
+(source-sized) and the full-resolution sum on the device; at 8K UHD (7680 x 4320, RGBA
+float32) that is 506 MiB each for the sum and the extended light plus three working
+buffers of about 64 (draft) or 127 MiB (preview) and their zero margins: 1.2-1.4 GiB, against
+final's 352 MiB (computed from the sizes, not measured).
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -153,17 +180,20 @@ GLASS_INDEX = 1.52
 
 @dataclass(frozen=True)
 class StreaksLevel(Level):
-    """A streaks quality level: the passes run at 1 / ``factor`` resolution, every tap
-    interpolated (whole-pixel taps made a thin ray wander by half a pixel per long pass: a
-    staircase); ``fp64``: float64 tap sums."""
+    """A streaks quality level: the passes run at 1 / ``factor`` resolution along each
+    ray's major axis, full resolution across it (`ray_grid`), every tap interpolated
+    (whole-pixel taps made a thin ray wander by half a pixel per long pass: a staircase);
+    ``fp64``: float64 tap sums."""
 
     factor: int = 1
 
 
 LEVELS = {
-    "draft": StreaksLevel("Kawase passes at 1/4 resolution (bilinear splat of each light's "
-                          "point, bilinear upsample), float32", factor=4),
-    "preview": StreaksLevel("Kawase passes at 1/2 resolution, float32", factor=2),
+    "draft": StreaksLevel("Kawase passes at 1/8 resolution along each ray, full resolution "
+                          "across it (a ray stays a pixel thin), upsampled along the rays, "
+                          "float32", factor=8),
+    "preview": StreaksLevel("Kawase passes at 1/4 resolution along each ray, full resolution "
+                            "across it, float32", factor=4),
     "final": StreaksLevel("Kawase passes at full resolution, float32"),
     "reference": StreaksLevel("Kawase passes at full resolution, float64 tap sums (exactly "
                               "the oracle's composed kernel)", fp64=True),
@@ -187,18 +217,24 @@ BIN = 16
 """Working pixels per side of the blocks the seed points are listed by."""
 
 
-def bin_points(points: np.ndarray, width: int, height: int, size: int):
+def bin_points(points: np.ndarray, width: int, height: int, size: int,
+               spread: tuple[int, int] = (0, 0)):
     """(starts, members) int32: for each ``size`` x ``size`` block of a ``width`` x ``height``
-    grid (row-major), the indices of the points whose bilinear splat (the 2 x 2 pixels
-    around the point) touches it, ``members[starts[b]:starts[b + 1]]``, in point order."""
+    grid (row-major), the indices of the points whose splat touches it,
+    ``members[starts[b]:starts[b + 1]]``, in point order.  The splat: the 2 x 2 pixels around
+    the point grown by ``spread`` (x, y) pixels each side (a ray-aligned grid's splat moves
+    across the ray by up to the reduction factor)."""
     bx, by = -(-width // size), -(-height // size)
     pairs = []
+    ex, ey = spread
     for i, (x, y) in enumerate(points[:, :2].astype(np.float64)):
         x0, y0 = math.floor(x), math.floor(y)
-        blocks = {(min(max(u, 0), width - 1) // size, min(max(v, 0), height - 1) // size)
-                  for u in (x0, x0 + 1) for v in (y0, y0 + 1)
-                  if 0 <= u < width and 0 <= v < height}
-        pairs += [(v * bx + u, i) for u, v in blocks]
+        u0, u1 = max(x0 - ex, 0), min(x0 + 1 + ex, width - 1)
+        v0, v1 = max(y0 - ey, 0), min(y0 + 1 + ey, height - 1)
+        if u0 > u1 or v0 > v1:
+            continue
+        pairs += [(v * bx + u, i) for v in range(v0 // size, v1 // size + 1)
+                  for u in range(u0 // size, u1 // size + 1)]
     pairs.sort()
     counts = np.bincount([b for b, _ in pairs], minlength=bx * by) if pairs else \
         np.zeros(bx * by, np.int64)
@@ -212,6 +248,36 @@ bounds-tested taps instead."""
 
 LOCAL = (64, 1)
 """Work-group of the pass kernel (measured fastest on PoCL here: 16 vs 20 ms per pass)."""
+
+
+@dataclass(frozen=True)
+class WorkLayout:
+    """Pass buffers of the rays on one working grid: interior ``wp`` (width rounded up to 4)
+    x ``h`` pixels at pixel ``org`` of rows ``pitch`` apart, zero margins wide enough for
+    every tap in x and in y (no bounds tests) unless the rays are so long that the margins
+    would cost more than the tests (``checked``: no margins)."""
+
+    wp: int
+    h: int
+    pitch: int
+    org: int
+    nbytes: int
+    checked: bool
+
+    @classmethod
+    def of(cls, rays: list[tuple[RayGrid, int]]) -> "WorkLayout":
+        """The layout of (grid, passes) rays of one grid."""
+        grid = rays[0][0]
+        margins = []
+        for axis in ("sx", "sy"):
+            reach = max(math.ceil(3 * TAPS ** (n - 1) * abs(getattr(g, axis))) + 2
+                        for g, n in rays)
+            margins.append(-(-reach // 4) * 4)
+        checked = max(margins) > MAX_MARGIN
+        mx, my = (0, 0) if checked else margins
+        wp = -(-grid.w // 4) * 4
+        pitch = wp + 2 * mx
+        return cls(wp, grid.h, pitch, my * pitch + mx, pitch * (grid.h + 2 * my) * 16, checked)
 
 
 def streak_angles(mode: str, streaks: int, angle: float, blades: int,
@@ -254,6 +320,74 @@ def grid_step(angle_deg: float) -> tuple[float, float, float]:
     dx, dy = direction(angle_deg)
     major = max(abs(dx), abs(dy))
     return dx / major, dy / major, 1.0 / major
+
+
+@dataclass(frozen=True)
+class RayGrid:
+    """The working grid of a ray (``kernels/streaks.cl``, "Ray-aligned working grids"):
+    ``w`` x ``h`` working pixels of ``fx`` x ``fy`` output pixels, reduced along the ray's
+    major axis only (fx = fy = 1 at full resolution); ``shear``: the ray's change across per
+    pixel along that axis (0 at full resolution: no offsets); (``sx``, ``sy``): one step in
+    working pixels, one working pixel along the reduced axis; ``step_px``: its length in
+    output pixels; the output window starts (``ex``, ``ey``) pixels into the grid (one working
+    pixel along the reduced axis, where `lead` moves the light of the window's first and last
+    pixels)."""
+
+    fx: int
+    fy: int
+    shear: float
+    w: int
+    h: int
+    sx: float
+    sy: float
+    step_px: float
+    ex: int = 0
+    ey: int = 0
+
+    @property
+    def lead(self) -> int:
+        """Pixels along the reduced axis (+x or +y) the light of a working pixel comes from
+        ahead of its centre: half a working pixel in the ray's step direction, the streak
+        being drawn backwards from the light (a tap at +k steps)."""
+        f = max(self.fx, self.fy)
+        return int(math.copysign(f // 2, self.sx if self.fx > 1 else self.sy))
+
+    @property
+    def layout(self) -> tuple[int, int]:
+        return self.fx, self.fy
+
+    @property
+    def line(self) -> tuple[int, int, float]:
+        """Rays of one line (a ray and its opposite) share a working sum, upsampled once."""
+        return self.fx, self.fy, round(self.shear, 9)
+
+
+def ray_grid(angle_deg: float, factor: int, width: int, height: int) -> RayGrid:
+    """The working grid of a ray over a ``width`` x ``height`` output window: full
+    resolution for ``factor`` 1, else reduced ``factor`` times along the ray's major axis
+    (x when |cos| >= |sin|), full resolution across it, so the ray stays a pixel thin."""
+    sx, sy, step_len = grid_step(angle_deg)
+    if factor == 1:
+        return RayGrid(1, 1, 0.0, width, height, sx, sy, step_len)
+    if abs(sx) >= abs(sy):
+        return RayGrid(factor, 1, sy / sx, -(-width // factor) + 2, height, sx, factor * sy,
+                       factor * step_len, ex=factor)
+    return RayGrid(1, factor, sx / sy, width, -(-height // factor) + 2, factor * sx, sy,
+                   factor * step_len, ey=factor)
+
+
+def grid_points(rows: np.ndarray, ox: int, oy: int, fx: int, fy: int) -> np.ndarray:
+    """(x, y, r, g, b, 0, 0, 0) float32 rows of `Streaks.seed_points`' lights on a working
+    grid of ``fx`` x ``fy`` output pixels: the centroid in working pixels (centres aligned),
+    the light divided by fx fy (a working pixel's light is the mean of its output pixels').
+    Working pixel X is centred on output pixel ``f X + f // 2`` (a whole pixel)."""
+    out = np.zeros((len(rows), 8), np.float32)
+    # source pixel -> output window pixel -> working pixel: (x - f // 2) / f, written for
+    # f = 1 as it always was (x + 0.5) / 1 - 0.5 (final's points unchanged to the bit)
+    out[:, 0] = (rows[:, 2] + ox + 0.5 * (fx % 2)) / fx - 0.5
+    out[:, 1] = (rows[:, 3] + oy + 0.5 * (fy % 2)) / fy - 0.5
+    out[:, 2:5] = rows[:, 4:7] / np.float32(fx * fy)
+    return out
 
 
 def channel_lengths(length_px: float, color_shift: float, mode: str = "star") -> np.ndarray:
@@ -323,7 +457,7 @@ def streak_parts(mode: str) -> tuple[tuple[float, float], ...]:
 
 
 STREAM_PIXELS = 1 << 22
-"""A working frame of more pixels than this (4K UHD at final quality) streams through the
+"""A frame of more pixels than this (4K UHD) streams through final and reference's
 passes in chunks of rows (`Streaks.streak_sum`) where that holds fewer rows on the device
 than the three frame-sized buffers of the whole passes; its streak sum waits on the host."""
 
@@ -337,13 +471,15 @@ SEEDS_READ = 1024
 @dataclass(frozen=True)
 class Ray:
     """One ray's Kawase chain: step (sx, sy) per pass-0 tap, ``passes``, ``top`` taps of
-    non-zero weight in the last pass, per-pass weights (`pass_weights`)."""
+    non-zero weight in the last pass, per-pass weights (`pass_weights`), its working
+    grid (`ray_grid`; sx, sy are its steps)."""
 
     sx: float
     sy: float
     passes: int
     top: int
     weights: list
+    grid: RayGrid | None = None
 
 
 def ray_rows(ray: Ray, chunk: int, height: int) -> list[int]:
@@ -401,12 +537,10 @@ class StreaksPlan(StepPlan):
 
 @dataclass
 class StreakSum:
-    """A frame's streaks at working resolution (``lo_w`` x ``lo_h``, RGBA float32): on the
-    device (``device``, interior at ``org``, rows ``pitch`` apart) or on the host
-    (``host``, lo_h x (lo_w rounded up to 4) x 4)."""
+    """A frame's streaks over its output window at full resolution (RGBA float32): on the
+    device (``device``, interior at ``org``, rows ``pitch`` apart) or on the host (``host``,
+    rows x (width rounded up to 4) x 4)."""
 
-    lo_w: int
-    lo_h: int
     device: object = None
     org: int = 0
     pitch: int = 0
@@ -547,32 +681,31 @@ class Streaks(Plugin):
     def frame(self, p, ctx) -> StreaksFrame:
         """What the streak sum reads of ``ctx`` (the step's whole context)."""
         lvl = self.level(ctx)
-        factor = lvl.factor
+        out_win = self.output_window(p, ctx)
         angles, colour = self.angles(p, ctx), self.colour(p)
         rays = []
         for fraction, share in streak_parts(p.mode):
             lengths = channel_lengths(fraction * self.length_px(p, ctx), p.color_shift,
-                                      p.mode) / factor
+                                      p.mode)
             gain = p.intensity * share * colour / len(angles)
             for a in angles:
-                sx, sy, step_len = grid_step(a)
-                passes, top = pass_plan(float(lengths.max()) / step_len)
-                rays.append(Ray(sx, sy, passes, top,
-                                pass_weights(lengths / step_len, passes, gain, top)))
-        return StreaksFrame(ctx.source, self.output_window(p, ctx), lvl, tuple(rays),
+                grid = ray_grid(a, lvl.factor, out_win.width, out_win.height)
+                passes, top = pass_plan(float(lengths.max()) / grid.step_px)
+                rays.append(Ray(grid.sx, grid.sy, passes, top,
+                                pass_weights(lengths / grid.step_px, passes, gain, top), grid))
+        return StreaksFrame(ctx.source, out_win, lvl, tuple(rays),
                             self.peak_map(p, ctx), ctx.analysis.tile, self.seed_radius(ctx),
                             dict(ctx.luminance_defines), ctx.notes,
                             ctx.analysis.nonfinite_count)
 
     def seed_points(self, rt, p, fr: StreaksFrame, peak):
         """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
-        position (a fixed order whatever the device's): (x, y, r, g, b, 0, 0, 0) float32 rows,
-        x and y at the light's centroid in the working buffer's pixels, light divided by
-        ``factor``^2; and the source-sized uint8 device flags of the pixels they gathered.
+        position (a fixed order whatever the device's): the kernel's float32 rows (peak x, y,
+        centroid x, y in source pixels, r, g, b, 0; `grid_points` places them on a working
+        grid); and the source-sized uint8 device flags of the pixels they gathered.
         ``peak``: the per-tile peak map on the device.  One wait for the count and the first
         ``SEEDS_READ`` points; a second read only for a frame with more lights."""
-        src, factor = fr.source, fr.level.factor
-        ox, oy = src.window.offset_in(fr.out_win)
+        src = fr.source
         _, tiles_x, tiles_y = fr.peak
         npx = src.width * src.height
         flags = [rt.buffer(max(npx, 16)) for _ in range(2)]
@@ -600,30 +733,27 @@ class Streaks(Plugin):
             n = MAX_SEEDS
         rows = first[:n] if n <= SEEDS_READ else \
             rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8)
-        rows = rows[np.lexsort((rows[:, 0], rows[:, 1]))]
-        out = np.zeros((n, 8), np.float32)
-        # source pixel -> output window pixel -> working pixel (centres aligned)
-        out[:, 0] = (rows[:, 2] + ox + 0.5) / factor - 0.5
-        out[:, 1] = (rows[:, 3] + oy + 0.5) / factor - 0.5
-        out[:, 2:5] = rows[:, 4:7] / np.float32(factor * factor)
-        return out, flags[0]
+        return rows[np.lexsort((rows[:, 0], rows[:, 1]))], flags[0]
 
     # render ---------------------------------------------------------------------------
     def streak_sum(self, rt, p, fr: StreaksFrame) -> StreakSum:
-        """The frame's streaks at working resolution, computed once per plan: the Kawase
-        passes of every ray over the whole frame's light, summed.  Small frames run each
-        pass over frame-sized buffers (zero margins where the taps fit them); a working frame
-        over ``STREAM_PIXELS`` pixels streams through in chunks of rows when that holds
-        fewer rows on the device (`ring_rows`), and its sum waits on the host.  Both compute
-        every pixel with the same float operations."""
-        src, lvl, factor = fr.source, fr.level, fr.level.factor
+        """The frame's full-resolution streaks, computed once per plan: the Kawase passes of
+        every ray over the whole frame's light, summed.  Draft and preview: `grid_sum`.
+        Final and reference: small frames run each pass over frame-sized buffers (zero
+        margins where the taps fit them); a frame over ``STREAM_PIXELS`` pixels streams
+        through in chunks of rows when that holds fewer rows on the device (`ring_rows`), and
+        its sum waits on the host.  Both compute every pixel with the same float
+        operations."""
+        if fr.level.factor > 1:
+            return self.grid_sum(rt, p, fr)
+        src, lvl = fr.source, fr.level
         ox, oy = src.window.offset_in(fr.out_win)
-        lo_w, lo_h = -(-fr.out_win.width // factor), -(-fr.out_win.height // factor)
-        wp = -(-lo_w // 4) * 4
+        w, h = fr.out_win.width, fr.out_win.height
+        wp = -(-w // 4) * 4
         i32, f32 = np.int32, np.float32
         chunk = max(1, CHUNK_PIXELS // wp)
-        rings = ring_rows(fr.rays, chunk, lo_h)
-        stream = streams(wp, lo_h, rings, chunk)
+        rings = ring_rows(fr.rays, chunk, h)
+        stream = streams(wp, h, rings, chunk)
         if stream:
             checked, margin = True, 0
         else:
@@ -636,12 +766,13 @@ class Streaks(Plugin):
                 margin = 0
         pitch = wp + 2 * margin
         org = margin * pitch + margin
-        defines = {"FACTOR": factor, "fp64": lvl.fp64, "CHECKED": int(checked),
-                   "RING": int(stream), **fr.luminance_defines}
+        defines = {"fp64": lvl.fp64, "CHECKED": int(checked), "RING": int(stream),
+                   **fr.luminance_defines}
 
         peak_buf = rt.to_device(fr.peak[0])
-        points, gathered = self.seed_points(rt, p, fr, peak_buf)
-        starts, members = bin_points(points, wp, lo_h, BIN)
+        rows, gathered = self.seed_points(rt, p, fr, peak_buf)
+        points = grid_points(rows, ox, oy, 1, 1)
+        starts, members = bin_points(points, wp, h, BIN)
         points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
             points if len(points) else np.zeros((1, 8), np.float32), starts,
             members if len(members) else np.zeros(1, np.int32)))
@@ -649,8 +780,8 @@ class Streaks(Plugin):
                                **defines)
         _, tiles_x, tiles_y = fr.peak
         bright_args = (src, i32(src.pitch), i32(src.width), i32(src.height))
-        bright_tail = (i32(ox), i32(oy), f32(p.threshold), peak_buf, i32(tiles_x),
-                       i32(tiles_y), f32(p.core), f32(p.source_color),
+        bright_tail = (i32(1), i32(1), f32(0.0), i32(0), i32(ox), i32(oy), f32(p.threshold),
+                       peak_buf, i32(tiles_x), i32(tiles_y), f32(p.core), f32(p.source_color),
                        f32(self.core_power(p)), gathered, points_buf, starts_buf, members_buf,
                        i32(-(-wp // BIN)), i32(BIN))
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
@@ -658,18 +789,18 @@ class Streaks(Plugin):
 
         def bright(dst, y0, rows, ring):   # the bright pixels and points of rows y0..
             rt.launch(bright_knl, (wp, rows), *bright_args, dst, i32(org), i32(pitch), i32(wp),
-                      i32(lo_h), *bright_tail, i32(y0), i32(ring))
+                      i32(h), *bright_tail, i32(y0), i32(ring))
 
         def run_pass(ray, n, src_buf, dst_buf, y0, rows, in_rows, out_rows):
             b = TAPS ** n
             rt.launch(accum_knl if n == ray.passes - 1 else step_knl, (wp // 4, rows), src_buf,
-                      dst_buf, i32(org), i32(pitch), i32(wp), i32(lo_w), i32(lo_h),
+                      dst_buf, i32(org), i32(pitch), i32(wp), i32(w), i32(h),
                       f32(ray.sx * b), f32(ray.sy * b),
                       *[w4.astype(np.float32) for w4 in ray.weights[n]],
                       i32(y0), i32(in_rows), i32(out_rows), local=LOCAL)
 
         if not stream:
-            nbytes = pitch * (lo_h + 2 * margin) * 16
+            nbytes = pitch * (h + 2 * margin) * 16
             work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total
             for buf in work:
                 rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
@@ -677,13 +808,13 @@ class Streaks(Plugin):
             for ray in fr.rays:
                 # each ray starts from the bright pixels, extracted again into pong (cheaper
                 # than a fourth frame-sized buffer; passes write inside the zero margins only)
-                bright(pong, 0, lo_h, 0)
+                bright(pong, 0, h, 0)
                 cur = pong
                 for n in range(ray.passes):
                     dst = total if n == ray.passes - 1 else (ping if cur is not ping else pong)
-                    run_pass(ray, n, cur, dst, 0, lo_h, 0, 0)
+                    run_pass(ray, n, cur, dst, 0, h, 0, 0)
                     cur = dst
-            result = StreakSum(lo_w, lo_h, device=total, org=org, pitch=pitch)
+            result = StreakSum(device=total, org=org, pitch=pitch)
         else:
             # each buffer a pass reads keeps the rows the passes after it still read (rows
             # y % its height); a ray sweeps the frame against its taps' direction, so the
@@ -692,12 +823,12 @@ class Streaks(Plugin):
             for buf, r in zip(held, rings):
                 rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, r * wp * 16)
             part = rt.buffer(chunk * wp * 16)
-            host = np.empty((lo_h, wp, 4), np.float32)
+            host = np.empty((h, wp, 4), np.float32)
             for i, ray in enumerate(fr.rays):
-                heights = ray_rows(ray, chunk, lo_h)
-                starts_y = range(0, lo_h, chunk)
+                heights = ray_rows(ray, chunk, h)
+                starts_y = range(0, h, chunk)
                 for y0 in (reversed(starts_y) if ray.sy > 0 else starts_y):
-                    rows = min(chunk, lo_h - y0)
+                    rows = min(chunk, h - y0)
                     if i == 0:
                         rt.cl.enqueue_fill_buffer(rt.queue, part.buffer, np.float32(0.0), 0,
                                                   chunk * wp * 16)
@@ -712,8 +843,97 @@ class Streaks(Plugin):
                     rt.cl.enqueue_copy(rt.queue, host[y0:y0 + rows], part.buffer,
                                        is_blocking=False)
             rt.finish()
-            result = StreakSum(lo_w, lo_h, host=host)
+            result = StreakSum(host=host)
         return result
+
+    def grid_sum(self, rt, p, fr: StreaksFrame) -> StreakSum:
+        """Draft and preview's streak sum: each ray's passes on its ray-aligned working grid
+        (`ray_grid`), the rays of one line summed there and upsampled along the line into the
+        full-resolution sum, which stays on the device (the grids are not streamed: they are
+        reduced along one axis; see "Memory and tiles")."""
+        src, lvl, out_win = fr.source, fr.level, fr.out_win
+        factor = lvl.factor
+        ox, oy = src.window.offset_in(out_win)
+        i32, f32 = np.int32, np.float32
+        defines = {"fp64": lvl.fp64, **fr.luminance_defines}
+        # the rays of one line share a working sum, upsampled along them once
+        plans = sorted(((r.grid, r.passes, r.weights) for r in fr.rays),
+                       key=lambda plan: plan[0].line)
+        layouts = {grid.layout: WorkLayout.of([(g, n) for g, n, _ in plans
+                                               if g.layout == grid.layout])
+                   for grid, _, _ in plans}
+        nbytes = max(lay.nbytes for lay in layouts.values())
+        work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total (one line's)
+        for buf in work:
+            rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
+        ping, pong, total = work
+        full_pitch = -(-out_win.width // 4) * 4
+        full = rt.buffer(full_pitch * out_win.height * 16)
+        rt.cl.enqueue_fill_buffer(rt.queue, full.buffer, np.float32(0.0), 0,
+                                  full_pitch * out_win.height * 16)
+
+        peak_buf = rt.to_device(fr.peak[0])
+        _, tiles_x, tiles_y = fr.peak
+        rows, gathered = self.seed_points(rt, p, fr, peak_buf)
+        seeds = {}
+        for g in {grid.layout: grid for grid, _, _ in plans}.values():
+            points = grid_points(rows, ox + g.ex, oy + g.ey, g.fx, g.fy)
+            # a point's splat moves across by up to `factor` (shear x a working pixel), and
+            # `lead` moves it by half a working pixel more
+            starts, members = bin_points(points, layouts[g.layout].wp, g.h, BIN,
+                                         (1 + 2 * g.ey, 1 + 2 * g.ex))
+            seeds[g.layout] = [rt.to_device(a) for a in (
+                points if len(points) else np.zeros((1, 8), np.float32), starts,
+                members if len(members) else np.zeros(1, np.int32))]
+        # the streaking light of the pixels no seed gathered, once a frame
+        ext = rt.buffer(max(src.width * src.height, 1) * 16)
+        rt.launch(rt.kernel("streaks.cl", "streaks_extended", PEAK_TILE=fr.analysis_tile,
+                            **defines), (src.width, src.height), src, i32(src.pitch),
+                  i32(src.width), i32(src.height), f32(p.threshold), peak_buf,
+                  i32(tiles_x), i32(tiles_y), f32(p.core), f32(p.source_color),
+                  f32(self.core_power(p)), gathered, ext)
+        last_layout = None
+        for k, (grid, passes, weights) in enumerate(plans):
+            lay = layouts[grid.layout]
+            if last_layout not in (None, lay):    # other margins: clear what the last wrote
+                for buf in (ping, pong):
+                    rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
+            last_layout = lay
+            kdefs = {**defines, "CHECKED": int(lay.checked)}
+            bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=fr.analysis_tile,
+                                   EXTENDED=1, **kdefs)
+            step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **kdefs)
+            accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **kdefs)
+            # each ray starts from the bright pixels, extracted again into pong (cheaper than
+            # a fourth working buffer; passes write inside the zero margins only)
+            rt.launch(bright_knl, (lay.wp, lay.h), ext, i32(src.width), i32(src.width),
+                      i32(src.height), pong, i32(lay.org), i32(lay.pitch), i32(lay.wp),
+                      i32(lay.h), i32(grid.fx), i32(grid.fy), f32(grid.shear),
+                      i32(grid.lead), i32(ox + grid.ex), i32(oy + grid.ey), f32(p.threshold),
+                      peak_buf, i32(tiles_x), i32(tiles_y),
+                      f32(p.core), f32(p.source_color), f32(self.core_power(p)), gathered,
+                      *seeds[grid.layout], i32(-(-lay.wp // BIN)), i32(BIN), i32(0), i32(0))
+            cur = pong
+            for n in range(passes):
+                last = n == passes - 1
+                dst = total if last else (ping if cur is not ping else pong)
+                b = TAPS ** n
+                w = [w4.astype(np.float32) for w4 in weights[n]]
+                rt.launch(accum_knl if last else step_knl, (lay.wp // 4, lay.h), cur, dst,
+                          i32(lay.org), i32(lay.pitch), i32(lay.wp), i32(grid.w), i32(lay.h),
+                          f32(grid.sx * b), f32(grid.sy * b), *w, i32(0), i32(0), i32(0),
+                          local=LOCAL)
+                cur = dst
+            if k + 1 == len(plans) or plans[k + 1][0].line != grid.line:
+                rt.launch(rt.kernel("streaks.cl", "streaks_expand", ALONG_X=int(grid.fx > 1)),
+                          (out_win.width, out_win.height), total, i32(lay.org),
+                          i32(lay.pitch), i32(grid.w), i32(grid.h), i32(factor),
+                          i32(grid.ex + grid.ey), f32(grid.shear), full, i32(full_pitch),
+                          i32(out_win.width), i32(out_win.height), local=LOCAL)
+                if k + 1 < len(plans):
+                    rt.cl.enqueue_fill_buffer(rt.queue, total.buffer, np.float32(0.0), 0,
+                                              nbytes)
+        return StreakSum(device=full, org=0, pitch=full_pitch)
 
     def render(self, rt, p, ctx):
         plan = self.planned(p, ctx)
@@ -721,18 +941,18 @@ class Streaks(Plugin):
         if total is None:   # rendered although the plan found nothing to do
             fr = self.frame(p, ctx)
             total = self.streak_sum(rt, p, fr)
-        src, factor = ctx.source, fr.level.factor
+        src = ctx.source
         band = ctx.tiling.band if ctx.tiling is not None else fr.out_win
         ox, oy = src.window.offset_in(band)
         dx0, dy0 = band.offset_in(fr.out_win)
         out = rt.image(band)
-        knl = rt.kernel("streaks.cl", "streaks_compose", FACTOR=factor, **fr.luminance_defines)
+        knl = rt.kernel("streaks.cl", "streaks_compose", **fr.luminance_defines)
         i32 = np.int32
 
         def compose(buf, org, pitch, r0, row0, rows):
             rt.launch(knl, (out.pitch, rows), src, i32(src.pitch), i32(src.width),
                       i32(src.height), i32(ox), i32(oy), buf, i32(org), i32(pitch),
-                      i32(total.lo_w), i32(total.lo_h), i32(r0), out, i32(out.pitch),
+                      i32(r0), out, i32(out.pitch),
                       i32(band.width), i32(row0 + rows), i32(dx0), i32(dy0), i32(row0))
 
         if total.host is None:
@@ -740,13 +960,12 @@ class Streaks(Plugin):
         else:   # the rows of the sum a piece of the band reads, uploaded piece by piece
             rows = max(1, CHUNK_PIXELS // out.pitch)
             wp = total.host.shape[1]
-            buf = rt.buffer((rows // factor + 5) * wp * 16)
+            buf = rt.buffer(rows * wp * 16)
             for row0 in range(0, band.height, rows):
                 n = min(rows, band.height - row0)
-                y0, y1 = dy0 + row0, dy0 + row0 + n
-                r0 = min(max(y0 // factor - 1, 0), total.lo_h - 1)
-                r1 = min((y1 - 1) // factor + 2, total.lo_h)
-                rt.cl.enqueue_copy(rt.queue, buf.buffer, total.host[r0:r1], is_blocking=False)
+                r0 = dy0 + row0
+                rt.cl.enqueue_copy(rt.queue, buf.buffer, total.host[r0:r0 + n],
+                                   is_blocking=False)
                 compose(buf, 0, wp, r0, row0, n)
         if fr.nonfinite:
             ctx.notes.append(f"streaks: {fr.nonfinite} non-finite pixels set to 0")

@@ -64,6 +64,41 @@ def test_error_falls_with_quality(rt, rng):
     assert errs[0] >= errs[1] >= errs[2] >= errs[3] - 1e-9 * want.max(), errs
 
 
+@pytest.mark.parametrize("case", ["star30", "star75", "anamorphic", "extended"])
+def test_draft_and_preview_match_reference(rt, rng, case):
+    # draft and preview run each ray on a grid reduced along its major axis only (x-major
+    # at 30 degrees, y-major at 75); the oracle computes that grid, its passes and the
+    # upsampling along the ray in float64
+    src = bright_pane(rng) if case == "extended" else scene(rng, (48, 64))
+    kw = {"star30": {}, "star75": dict(angle=75.0, streaks=5),
+          "anamorphic": dict(mode="anamorphic", angle=10.0, core=0.3, source_color=0.0),
+          "extended": dict(core=0.5, angle=15.0, streaks=4, length=0.3)}[case]
+    for quality in ("draft", "preview"):
+        got, p = run(rt, src, quality, **kw)
+        want = reference(src, **p.as_dict(), factor=Streaks.descriptor.level(quality).factor)
+        # measured 6e-8 of the largest value
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+def test_draft_and_preview_beat_the_input_on_thin_rays(rt):
+    # the bench's case at 480 x 270: 12 compact lights, each a point streaking 4 thin rays
+    # at 45 degrees.  Passes at 1/4 and 1/2 resolution in both axes drew a ray 4-8 px wide
+    # at a fraction of its amplitude, worse in log-PSNR than no ray at all: draft 23.0,
+    # preview 24.1 dB against the unchanged input's 26.9.  Reduced along each ray only
+    # (8 and 4 times), they keep it a pixel wide (measured 50.2 and 56.9 dB)
+    from clfx.bench.cases.streaks import make
+    from clfx.bench.metrics import psnr_log
+
+    case = make(480, 270, np.random.default_rng(0))
+    p = Streaks.params(**case["params"])
+    src, camera = case["source"], case["camera"]
+    want = Streaks().apply(rt, p, src, quality="reference", camera=camera)
+    floor = psnr_log(src, want)
+    for quality in ("draft", "preview"):
+        got = psnr_log(Streaks().apply(rt, p, src, quality=quality, camera=camera), want)
+        assert got > floor + 20.0, (quality, got, floor)
+
+
 def test_axis_aligned_kawase_equals_exact_line_kernel():
     # integer taps: the base-4 passes compose to the exponential line kernel exactly
     src = np.zeros((20, 70, 4))
@@ -465,18 +500,21 @@ def streak_fwhm(lum, cx, cy, angle_deg, r):
     return above.max() - above.min() + 0.1
 
 
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
 @pytest.mark.parametrize("mode,angle", [("star", 15.0), ("star", 45.0), ("anamorphic", 0.0)])
-def test_streak_width_does_not_follow_the_light_size(rt, mode, angle):
+def test_streak_width_does_not_follow_the_light_size(rt, mode, angle, quality):
     # issue 25: a star filter's ray is a diffraction line; spreading every pixel of a light
     # drew it as wide as the light (a candle's flame: a bar).  Lights of sigma 1, 3 and 6 px
     # at 640 x 360: the ray's width near the light is the same thin line (measured 1.1-2.2
-    # px; the light of sigma 6 px spread pixel by pixel was wider by 5 px or more)
+    # px; the light of sigma 6 px spread pixel by pixel was wider by 5 px or more).  Draft
+    # and preview too: their grids are reduced along each ray only (at 1/4 and 1/2 in both
+    # axes a ray was 4-8 px wide)
     p = Streaks.params(mode=mode, streaks=4, angle=angle, length=0.3, threshold=1.0)
     widths = []
     for sigma in (1.0, 3.0, 6.0):
         src = spot(h=360, w=640, sigma=sigma)
         h, w = src.shape[:2]
-        out = Streaks().apply(rt, p, src).astype(np.float64)
+        out = Streaks().apply(rt, p, src, quality=quality).astype(np.float64)
         lum = (out[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
         widths.append([streak_fwhm(lum, w // 2, h // 2, angle, r) for r in (40, 80)])
     widths = np.array(widths)
@@ -487,13 +525,15 @@ def test_streak_width_does_not_follow_the_light_size(rt, mode, angle):
 def test_thin_ray_has_no_staircase(rt):
     # issue 25: taps rounded to whole pixels in the long passes made a thin ray at 15 degrees
     # wander by up to half a pixel per pass (a staircase along it); every tap interpolated,
-    # the ray's centre stays on the straight line within 0.25 px along its length
+    # the ray's centre stays on the straight line within 0.25 px along its length, at every
+    # level (draft was allowed 1 px when it ran at 1/4 resolution in both axes; on its
+    # ray-aligned grid measured 0.06 px, preview 0.07, final 0.08)
     from scipy import ndimage
 
     src = spot(h=240, w=480, sigma=1.0)
     h, w = src.shape[:2]
     angle = 15.0
-    for quality in ("draft", "final"):
+    for quality in ("draft", "preview", "final"):
         p = Streaks.params(mode="star", streaks=1, angle=angle, length=0.6, threshold=1.0)
         out = Streaks().apply(rt, p, src, quality=quality).astype(np.float64)
         lum = (out[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
@@ -506,8 +546,7 @@ def test_thin_ray_has_no_staircase(rt):
                                               w // 2 + r * ux - s * uy], order=1)
             off.append((v * s).sum() / v.sum())
         off = np.array(off)
-        assert np.abs(off - off.mean()).max() <= 0.25 * (4 if quality == "draft" else 1), \
-            (quality, np.round(off, 2))
+        assert np.abs(off - off.mean()).max() <= 0.25, (quality, np.round(off, 2))
 
 
 def bright_pane(rng, h=90, w=200):

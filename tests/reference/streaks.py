@@ -52,17 +52,39 @@ def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
 
 def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radius=1,
                 ring_share=0.1):
+    """Each compact light's streaking light gathered into one point (`seed_list`), splatted
+    bilinearly at its centroid; the streaking light of pixels in no such window stays where
+    it is.  Returns the image that streaks (float64) and the sanitised source."""
+    points, out, c = seed_list(src, threshold, core, source_color, core_power, radius,
+                               ring_share)
+    return splat(points, out), c
+
+
+def splat(points, img):
+    """``img`` plus the points [(x, y, rgb)] splatted bilinearly (in place)."""
+    h, w = img.shape[:2]
+    for cx, cy, e in points:
+        ix, iy = int(np.floor(cx)), int(np.floor(cy))
+        for u in (ix, ix + 1):
+            for v in (iy, iy + 1):
+                if 0 <= u < w and 0 <= v < h:
+                    img[v, u, :3] += e * max(1 - abs(cx - u), 0) * max(1 - abs(cy - v), 0)
+    return img
+
+
+def seed_list(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radius=1,
+              ring_share=0.1):
     """Each compact light's streaking light gathered into one point: a pixel with streaking
     light whose luminance is the highest within ``radius`` (Chebyshev; ties to the earlier
     pixel in raster order) and whose window's border ring has none above ``ring_share`` of
-    its own takes the window's streaking light to its weighted centroid, splatted
-    bilinearly; the streaking light of pixels in no such window stays where it is.  Returns
-    the image that streaks (float64) and the sanitised source."""
+    its own takes the window's streaking light to its weighted centroid.  Returns the points
+    [(x, y, rgb)], the streaking light of the pixels no point gathered (an image) and the
+    sanitised source."""
     hl, c = highlights(src, threshold, core, source_color, core_power)
     h, w = c.shape[:2]
     lum = c[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
     hlum = hl[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
-    out = np.zeros_like(hl)
+    points = []
     gathered = np.zeros((h, w), bool)
     order = np.arange(h * w).reshape(h, w)
     for y, x in zip(*np.nonzero((hl[..., :3] > 0).any(axis=2))):
@@ -79,15 +101,11 @@ def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radi
         e = hl[y0:y1, x0:x1, :3].reshape(-1, 3).sum(axis=0)
         wt = hlum[y0:y1, x0:x1]
         ys, xs = np.mgrid[y0:y1, x0:x1]
-        cx, cy = ((wt * xs).sum() / wt.sum(), (wt * ys).sum() / wt.sum()) if wt.sum() > 0 \
-            else (x, y)
-        ix, iy = int(np.floor(cx)), int(np.floor(cy))
-        for u in (ix, ix + 1):
-            for v in (iy, iy + 1):
-                if 0 <= u < w and 0 <= v < h:
-                    out[v, u, :3] += e * max(1 - abs(cx - u), 0) * max(1 - abs(cy - v), 0)
-    out[~gathered, :3] += hl[~gathered, :3]
-    return out, c
+        points.append(((wt * xs).sum() / wt.sum(), (wt * ys).sum() / wt.sum(), e)
+                      if wt.sum() > 0 else (x, y, e))
+    out = np.zeros_like(hl)
+    out[~gathered, :3] = hl[~gathered, :3]
+    return points, out, c
 
 
 def shifted(img, dx, dy):
@@ -163,11 +181,78 @@ def _unit(angle):
     return dx / major, dy / major, 1.0 / major
 
 
+def _ray_grid_chain(points, ext, sx, sy, f, a, n, top, gain):
+    """One ray (x-major: |sx| = 1 >= |sy|) on its ray-aligned working grid, reduced ``f``
+    times in x (clfx/plugins/streaks.py `ray_grid`): the light gathered onto the grid, the
+    Kawase passes there, upsampled along the ray to the canvas (float64).  ``points``: [(x,
+    y, rgb)] canvas pixels; ``ext``: the rest of the streaking light (canvas image)."""
+    h, w = ext.shape[:2]
+    shear = float(np.float32(sy / sx))          # as the device holds it
+    wl, mid, ex = -(-w // f) + 2, f // 2, f      # the grid has a working pixel each side
+    lead = int(math.copysign(mid, sx))
+    grid = np.zeros((h, wl, 4))
+    # run of f canvas pixels along the ray's line through each working pixel's centre,
+    # `lead` pixels ahead; each taken from the nearest row of that line
+    X, Y = np.meshgrid(np.arange(wl), np.arange(h))
+    for i in range(f):
+        along = i - mid + lead
+        off = int(np.floor(np.float32(shear) * np.float32(along) + np.float32(0.5)))
+        xs, ys = X * f + mid + along - ex, Y + off
+        ok = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+        grid[ok, :3] += ext[ys[ok], xs[ok], :3] / f
+    for px, py, e in points:                     # moved `lead` back along the line
+        gx, gy = (px + ex + 0.5 * (f % 2)) / f - 0.5 - lead / f, py - shear * lead
+        for u in (math.floor(gx), math.floor(gx) + 1):
+            cy = gy + shear * f * (u - gx)
+            for v in (math.floor(cy), math.floor(cy) + 1):
+                wt = max(1 - abs(gx - u), 0) * max(1 - abs(cy - v), 0)
+                if 0 <= u < wl and 0 <= v < h and wt > 0:
+                    grid[v, u, :3] += np.asarray(e) / f * wt
+    cur = grid
+    for p in range(n):
+        b = 4 ** p
+        nxt = np.zeros_like(cur)
+        for s in range(top if p == n - 1 else 4):
+            nxt[..., :3] += a ** (s * b) * shifted(cur, s * b * sx, s * b * f * sy)[..., :3]
+        cur = nxt
+    support = top * 4 ** (n - 1)
+    cur[..., :3] *= gain / ((1 - a ** support) / (1 - a))
+    # along the ray: linear between the two working columns around each pixel (clamped at
+    # the grid's ends), in each at the row where the ray through the pixel crosses it
+    out = np.zeros((h, w, 4))
+    ys, xs = np.mgrid[0:h, 0:w]
+    t = (xs + ex - mid) / f
+    t0 = np.floor(t)
+    for k, wk in ((0, 1 - (t - t0)), (1, t - t0)):
+        u = np.clip(t0.astype(int) + k, 0, wl - 1)
+        r = ys + shear * (u * f + mid - xs - ex)
+        r0 = np.floor(r)
+        for j, wv in ((0, 1 - (r - r0)), (1, r - r0)):
+            v = r0.astype(int) + j
+            ok = (v >= 0) & (v < h)
+            out[ok, :3] += (wk * wv)[ok, None] * cur[v[ok], u[ok], :3]
+    return out
+
+
+def ray_grid_streak(points, ext, dx, dy, f, a, n, top, gain):
+    """`_ray_grid_chain` for a ray of either major axis (a y-major ray is an x-major one of
+    the transposed canvas: the grid is reduced in y)."""
+    if abs(dx) >= abs(dy):
+        return _ray_grid_chain(points, ext, dx, dy, f, a, n, top, gain)
+    tp = [(py, px, e) for px, py, e in points]
+    return _ray_grid_chain(tp, ext.transpose(1, 0, 2), dy, dx, f, a, n, top,
+                           gain).transpose(1, 0, 2)
+
+
 def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, tint,
             color_shift, core=0.0, source_color=1.0, core_power=-1.0, coating_nm=740.0,
             coating="v-coat",
-            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, seed_radius=0.012):
+            diagonal=None, blade_rotation=0.0, pad=0, line_kernel=False, seed_radius=0.012,
+            factor=1):
     """Output over the source grown by ``pad`` pixels on every side (float64).
+
+    ``factor`` > 1: draft / preview, each ray on its ray-aligned working grid reduced
+    ``factor`` times along its major axis (`ray_grid_streak`).
 
     mode "anamorphic": rays at angle and angle + 180, colour tint x coating_tint(coating_nm),
     two exponentials (1 % at 0.15 length with 70 % of the light, at length with 30 %),
@@ -180,8 +265,10 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
     if core_power < 0:
         core_power = 3.0 if mode == "anamorphic" else 0.0
     radius = max(1, round(seed_radius * diagonal))
-    bright, clean = seed_points(src, threshold, core, source_color, core_power, radius)
-    bright = np.pad(bright, ((pad, pad), (pad, pad), (0, 0)))
+    points, ext, clean = seed_list(src, threshold, core, source_color, core_power, radius)
+    bright = np.pad(splat(points, ext.copy()), ((pad, pad), (pad, pad), (0, 0)))
+    points = [(x + pad, y + pad, e) for x, y, e in points]
+    ext = np.pad(ext, ((pad, pad), (pad, pad), (0, 0)))
     out = np.pad(clean, ((pad, pad), (pad, pad), (0, 0)))
     rays = angles_of(mode, streaks, angle, blades, blade_rotation)
     colour = np.asarray(tint, np.float64)
@@ -197,6 +284,11 @@ def streaks(src, *, threshold, intensity, mode, streaks, angle, blades, length, 
     for (fraction, share), ang in [(pt, ang) for pt in parts for ang in rays]:
         gain = intensity * share * colour / len(rays)
         dx, dy, step_len = _unit(ang)
+        if factor > 1:
+            a, n, top = _setup(fraction * length, diagonal, color_shift, step_len * factor,
+                               scale)
+            out += ray_grid_streak(points, ext, dx, dy, factor, a, n, top, gain)
+            continue
         a, n, top = _setup(fraction * length, diagonal, color_shift, step_len, scale)
         support = top * 4 ** (n - 1)
         total = (1 - a ** support) / (1 - a)
