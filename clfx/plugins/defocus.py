@@ -48,7 +48,8 @@ def defocus_sigmas(p, ctx) -> tuple[float, float]:
 
 @register
 class Defocus(Plugin):
-    whole_frame = ("an FFT convolution over the whole frame at large sizes")
+    whole_frame = ("large sigmas blur through a decimation pyramid (clfx.fx.blur) whose levels "
+                   "lie on the whole frame's grid")
     descriptor = Descriptor(
         name="defocus", label="Defocus", group="Lens", kernel="defocus.cl",
         summary="Uniform Gaussian softness from 0.3 px to hundreds of pixels, resolution-"
