@@ -5,9 +5,11 @@ from click.testing import CliRunner
 from clfx.cli import cli
 
 
-def run(*args, code=0):
-    """``clfx ARGS`` in this process; asserts the exit code is ``code`` (the output and
-    stderr in the message) and returns click's `Result`.  Exceptions propagate."""
-    result = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+def run(*args, code=0, input=None):
+    """``clfx ARGS`` in this process (``input``: its stdin); asserts the exit code is ``code``
+    (the output and stderr in the message) and returns click's `Result`.  Exceptions
+    propagate."""
+    result = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False,
+                                input=input)
     assert result.exit_code == code, (result.exit_code, result.output, result.stderr)
     return result

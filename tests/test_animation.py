@@ -5,12 +5,11 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 import clfx
-from clfx.cli import cli
 from clfx.core.errors import PresetError
 from clfx.pipeline import animation
+from tests.clirun import run
 
 RACK = """\
 name: rack
@@ -22,12 +21,6 @@ effects:
     params:
       amount: {interp: smooth, keys: {1001: 0.1, 1011: 0.5}}
 """
-
-
-def run(*args, code=0):
-    r = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-    assert r.exit_code == code, (r.exit_code, r.output, r.stderr)
-    return r
 
 
 def test_linear_smooth_and_held():

@@ -12,19 +12,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from clfx.cli import cli
+from tests.clirun import run
 
 ROOT = Path(__file__).resolve().parents[1]
 CLFX = [sys.executable, "-m", "clfx.cli"]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
-
-
-def run(*args, code=0, input=None):
-    r = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False, input=input)
-    assert r.exit_code == code, (r.exit_code, r.output, r.stderr)
-    return r
 
 
 def small_sequence(folder: Path, frames=(1, 2), size=(24, 16)):

@@ -379,17 +379,22 @@ def _convolve(rt, img, k, support, out_window, method, precision, split, max_poi
     return dst
 
 
+def _too_many_bright(rt, info, split, max_points):
+    """preview's exact gather has more than ``max_points`` bright pixels to do: the float64
+    FFT instead (said in ``info``); returns the (precision, split) to go on with."""
+    info.fallback = (f"more than {max_points} pixels above the split level "
+                     f"{split:g}: float64 FFT instead")
+    info.notes.append(info.fallback)
+    return ("float64" if rt.use_fp64(True) else "float32"), None
+
+
 def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info, grid=None,
          spectrum=None):
     kh, kw, planes = k.shape
     if split is not None and precision == "float32":
         bright = _bright_pixels(rt, img, support, float(split), max_points)
         if bright is None:
-            info.fallback = (f"more than {max_points} pixels above the split level "
-                             f"{split:g}: float64 FFT instead")
-            info.notes.append(info.fallback)
-            precision = "float64" if rt.use_fp64(True) else "float32"
-            split = None
+            precision, split = _too_many_bright(rt, info, split, max_points)
         else:
             info.bright_pixels = bright[2]
     else:
@@ -577,9 +582,9 @@ MAX_BLOCK_CELLS = 2 ** 25
 block's RGBA input.  A convolution whose one-grid FFT fits runs as one block (every 960x540,
 1080p and 4K effect, and glare on the 8K synthetic plate, whose highlights span 3904 x 1344
 px: 4000 x 6720 cells); a larger one is cut into output blocks (:func:`convolve_blocks`).
-The cap trades memory for transform work: blocks of a 2645 px PSF under 2^24 cells are 11 %
-output, so the 8K plate's glare took 15 blocks, 8.9x the one grid's cells, for 1366 MiB of
-device peak instead of about 1520."""
+The cap trades memory for transform work: measured with the cap at 2^24 instead, blocks of
+a 2645 px PSF were 11 % output, so the 8K plate's glare took 15 blocks, 8.9x the one grid's
+cells, for 1366 MiB of device peak; at this cap it is one grid, about 1520 MiB."""
 MIN_BLOCK = 256
 """Smallest block side kept by a PSF so large that :data:`MAX_BLOCK_CELLS` leaves less (the
 grid then grows past the cap rather than spending the transform on overlap)."""
@@ -761,11 +766,7 @@ def _blocked(rt, load, k, support, effective, out_window, method, precision, spl
         bright = sum(_count_bright(rt, load(t), t, split)
                      for t in _block_rects(support, (support.x0, support.y0), b1, b2))
         if bright > max_points:
-            info.fallback = (f"more than {max_points} pixels above the split level "
-                             f"{split:g}: float64 FFT instead")
-            info.notes.append(info.fallback)
-            precision = "float64" if rt.use_fp64(True) else "float32"
-            split = None
+            precision, split = _too_many_bright(rt, info, split, max_points)
         info.bright_pixels, max_points = bright, bright
     info.precision = precision
     if method == "fft":

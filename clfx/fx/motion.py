@@ -298,10 +298,10 @@ def band_margin(t0: float, t1: float, radius: float, curved: bool) -> int:
     """Rows beyond a band that its reconstruction reads (its region of interest): the
     farthest sample (:func:`path_reach` at the clamped speed ``radius / reach``) and
     :data:`REACH_MARGIN_ROWS`; 0 when nothing moves."""
-    reach_t = reach_factor(t0, t1)
-    if reach_t <= 0.0 or radius * (t1 - t0) / reach_t < MIN_BLUR_PX:
+    if _static(t0, t1, radius):
         return 0
-    return int(math.ceil(path_reach(t0, t1, curved) * radius / reach_t)) + REACH_MARGIN_ROWS
+    return (int(math.ceil(path_reach(t0, t1, curved) * radius / reach_factor(t0, t1)))
+            + REACH_MARGIN_ROWS)
 
 
 @dataclass

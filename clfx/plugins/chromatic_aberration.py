@@ -234,7 +234,7 @@ class ChromaticAberration(Plugin):
         # every wavelength's image of the data window (the bins' centres lie in 380-720 nm);
         # kept in ``rt.cache`` (host time asked several times a frame, the same all shot long)
         return ctx.runtime.cache.get(
-            ("chromatic_aberration.rod",) + frame_key(p, ctx) + (ctx.colour_key,),
+            ("chromatic_aberration.rod",) + frame_key(p, ctx) + ctx.colour_key,
             lambda: warp_region(lambda xs, ys: forward_points(p, ctx.display_window,
                                                               ctx.pixel_aspect, xs, ys,
                                                               ctx.rgb_to_xyz), ctx, p.border))

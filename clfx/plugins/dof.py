@@ -176,7 +176,6 @@ class DofGather:
     (:meth:`Dof.frame`)."""
 
     offset: float
-    levels: np.ndarray        # per tile: the gather's radius (quantised, px; 0: copied)
     full_l: int               # lattice level of the largest: the prefilter pyramid's depth
     half: np.ndarray          # per tile: gathered at half resolution
     half_l: int               # the half-resolution pyramid's depth
@@ -738,7 +737,7 @@ class Dof(Plugin):
         rows += max((1 << full_l) - 1, 1)
         note = (f"{int((levels == 0).sum())}/{radii.size} tiles in focus (copied), "
                 f"{int(half.sum())} at half resolution")
-        return DofGather(offset, levels, full_l, half, half_l, pad, taps, tile_info, htaps,
+        return DofGather(offset, full_l, half, half_l, pad, taps, tile_info, htaps,
                          htiles, rows, hrows, note)
 
     def _tile_table(self, rt, levels, sharp, mode, lvl, aspect, blades, first, roundness,

@@ -266,7 +266,7 @@ class RollingShutter(Plugin):
         defines = self._defines(lvl, depth is not None, curved)
         kfile = self.descriptor.kernel
         tiles, nbr = rt.buffer(ntx * nty * 48), rt.buffer(ntx * nty * 48)   # 3 float4 a tile
-        step = nty if aux is not None else max(1, chunk_pixels // max(w * k, 1))
+        step = nty if aux is not None else max(1, chunk_pixels // max(w * k, 1))   # aux: r0 0
         for ty0 in range(0, nty, step):
             ty1 = min(ty0 + step, nty)
             r0, r1 = ty0 * k, min(ty1 * k, h)
@@ -276,8 +276,7 @@ class RollingShutter(Plugin):
                 part = self._aux(rt, rt.reframe(vel, rows),
                                  None if depth is None else rt.reframe(depth, rows), vmax)
             rt.launch(rt.kernel(kfile, "rolling_shutter_tiles", **defines), (ntx, ty1 - ty0),
-                      part, tiles, i32(part.pitch), i32(w), i32(h), i32(0 if aux is not None
-                                                                        else r0),
+                      part, tiles, i32(part.pitch), i32(w), i32(h), i32(r0),
                       i32(ntx), i32(nty), i32(ty0), i32(k))
         rt.launch(rt.kernel(kfile, "rolling_shutter_neighbors", **defines), (ntx, nty), tiles,
                   nbr, i32(ntx), i32(nty))

@@ -550,6 +550,7 @@ class StreakSum:
 @register
 class Streaks(Plugin):
     whole_frame = None   # bands compose their rows from the plan's streak sum of the frame
+    # (region of interest: the band itself, the base class's; the rays come from that sum)
     descriptor = Descriptor(
         name="streaks", label="Streaks (star filter)", group="Glare", kernel="streaks.cl",
         summary="Star-filter streaks or aperture diffraction spikes from the highlights, "
@@ -624,14 +625,15 @@ class Streaks(Plugin):
         tint = np.asarray(p.tint, np.float64)
         return tint * coating_tint(p.coating_nm, p.coating) if p.mode == "anamorphic" else tint
 
-    def spread_px(self, p, ctx, factor: int = 1) -> int:
-        """How far light travels: the truncated kernel's support plus the bilinear footprint."""
+    def spread_px(self, p, ctx) -> int:
+        """How far light travels: the truncated kernel's support plus the bilinear footprint
+        (at full resolution: the reduced levels' grids reach no further)."""
         longest = float(channel_lengths(self.length_px(p, ctx), p.color_shift, p.mode).max())
         reach = 0.0
         for a in self.angles(p, ctx) or [0.0]:
             step = grid_step(a)[2]
-            reach = max(reach, support_steps(longest / factor / step) * step * factor)
-        return int(math.ceil(reach)) + 2 * factor
+            reach = max(reach, support_steps(longest / step) * step)
+        return int(math.ceil(reach)) + 2
 
     # cheap questions ------------------------------------------------------------------
     def plan(self, p, ctx) -> StreaksPlan:
@@ -659,12 +661,7 @@ class Streaks(Plugin):
         return None
 
     def region_of_definition(self, p, ctx):
-        return ctx.source.window.grown(self.spread_px(p, ctx, LEVELS["final"].factor))
-
-    def region_of_interest(self, p, ctx, window):
-        # the rays come from the plan's streak sum over the whole frame: a band composes its
-        # rows from it and reads only its own rows of the source
-        return window
+        return ctx.source.window.grown(self.spread_px(p, ctx))
 
     @staticmethod
     def peak_map(p, ctx):
@@ -709,8 +706,8 @@ class Streaks(Plugin):
         _, tiles_x, tiles_y = fr.peak
         npx = src.width * src.height
         flags = [rt.buffer(max(npx, 16)) for _ in range(2)]
-        for f in flags:
-            rt.cl.enqueue_fill_buffer(rt.queue, f.buffer, np.uint8(0), 0, max(npx, 16))
+        # the seeds mark flags[0]; the dilation writes every pixel of the other
+        rt.cl.enqueue_fill_buffer(rt.queue, flags[0].buffer, np.uint8(0), 0, max(npx, 16))
         count = rt.to_device(np.zeros(1, np.int32))
         seeds = rt.buffer(MAX_SEEDS * 32)
         knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=fr.analysis_tile,

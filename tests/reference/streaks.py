@@ -50,16 +50,6 @@ def highlights(src, threshold, core=0.0, source_color=1.0, core_power=0.0):
     return out, c
 
 
-def seed_points(src, threshold, core=0.0, source_color=1.0, core_power=0.0, radius=1,
-                ring_share=0.1):
-    """Each compact light's streaking light gathered into one point (`seed_list`), splatted
-    bilinearly at its centroid; the streaking light of pixels in no such window stays where
-    it is.  Returns the image that streaks (float64) and the sanitised source."""
-    points, out, c = seed_list(src, threshold, core, source_color, core_power, radius,
-                               ring_share)
-    return splat(points, out), c
-
-
 def splat(points, img):
     """``img`` plus the points [(x, y, rgb)] splatted bilinearly (in place)."""
     h, w = img.shape[:2]
