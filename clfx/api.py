@@ -22,7 +22,6 @@ Examples
 from __future__ import annotations
 
 import os
-import warnings
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Mapping
@@ -32,14 +31,9 @@ import numpy as np
 from clfx.core.errors import ParamError, SequenceError
 from clfx.core.frame import Frame
 from clfx.core.rect import Rect
-from clfx.device.runtime import KernelBuildWarning
 from clfx.pipeline.batch import Batch, ClusterOptions, PassOptions, RenderOptions, resolve_quality
 from clfx.pipeline.look import FrameReport, Look, RunStats, render_frame
 
-warnings.filterwarnings("ignore", category=KernelBuildWarning, append=True)
-"""The OpenCL compiler's warnings (hundreds of lines on a cold PoCL cache) stay quiet, as on
-the command line without -v; appended, so a filter of the caller's own (``-W``,
-``warnings.simplefilter``) still shows them."""
 
 __all__ = ["Look", "FrameReport", "RenderOptions", "PassOptions", "ClusterOptions", "ArrayResult", "RenderResult",
            "load_look", "runtime", "render_array", "render_file", "render_sequence", "render"]

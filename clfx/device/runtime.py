@@ -56,6 +56,12 @@ class KernelBuildWarning(UserWarning):
     build log).  The command line shows these only with ``-v``."""
 
 
+warnings.filterwarnings("ignore", category=KernelBuildWarning, append=True)
+"""The OpenCL compiler's warnings (hundreds of lines on a cold PoCL cache) stay quiet wherever
+clfx is used from, as on the command line without -v; appended, so a filter of the caller's
+own (``-W``, ``warnings.simplefilter``) still shows them."""
+
+
 _COMPILER_SUMMARY = re.compile(r"^\s*\d+ (warning|error)s?( and \d+ (warning|error)s?)? generated\.\s*$")
 
 
