@@ -88,8 +88,8 @@ def links(path: Path):
             yield lineno, target
 
 
-def test_relative_links_reach_files_and_headings():
-    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+def broken_links(pages: list[Path], root: Path) -> list[str]:
+    """``page:line: target (why)`` for each relative link that reaches no file or heading."""
     bad = []
     for page in pages:
         for lineno, target in links(page):
@@ -97,12 +97,29 @@ def test_relative_links_reach_files_and_headings():
                 continue  # https:, mailto:
             file, _, anchor = target.partition("#")
             dest = (page.parent / file).resolve() if file else page
-            where = f"{page.relative_to(ROOT)}:{lineno}: {target}"
+            where = f"{page.relative_to(root)}:{lineno}: {target}"
             if not dest.exists():
                 bad.append(f"{where} (no such file)")
             elif anchor and dest.suffix == ".md" and anchor not in anchors(dest):
                 bad.append(f"{where} (no heading #{anchor} in {dest.name})")
+    return bad
+
+
+def test_relative_links_reach_files_and_headings():
+    bad = broken_links([ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))], ROOT)
     assert not bad, "broken links:\n" + "\n".join(bad)
+
+
+def test_broken_links_are_found(tmp_path):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "a.md").write_text("# A page\n\n## Masks: per-object effects\n")
+    readme = tmp_path / "README.md"
+    readme.write_text("[ok](docs/a.md) [ok](docs/a.md#masks-per-object-effects) [ok](#top)\n"
+                      "# Top\n`[not a link](nowhere.md)`\n[gone](docs/b.md) "
+                      "[no anchor](docs/a.md#masks) [web](https://example.com/x.md)\n")
+    bad = broken_links([readme], tmp_path)
+    assert bad == ["README.md:4: docs/b.md (no such file)",
+                   "README.md:4: docs/a.md#masks (no heading #masks in a.md)"], bad
 
 
 def test_slugs_follow_github():
