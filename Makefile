@@ -11,7 +11,7 @@ PYTEST_ARGS ?=
 # names (SPLIT_ACROSS_WORKERS) one test at a time.  0 runs the suite in one process.
 PYTEST_WORKERS ?= 2
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench docs clean
 
 setup:
 	@bash scripts/setup.sh
@@ -24,6 +24,10 @@ test: setup
 
 bench: setup
 	$(CLFX) bench --size 1920x1080 --markdown bench.md --json > bench.jsonl
+
+# The generated reference pages: docs/effects/*.md and the looks table in docs/looks.md.
+docs: setup
+	$(PY) -m clfx.docsgen
 
 clean:
 	rm -rf $(DEMO_OUT) build dist *.egg-info .pytest_cache

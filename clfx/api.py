@@ -2,7 +2,7 @@
 
 ``import clfx`` exposes these names; the ``clfx`` command line is a thin layer over them.
 
-Conventions (the same as the command line's, see the README):
+Conventions (the same as the command line's, docs/pipeline.md, "Conventions"):
 
 - ``rgba``: float32 (h, w, 4) scene-linear, premultiplied, in the working space (linear
   Rec.709 unless told otherwise); (h, w, 3) gets alpha 1, (h, w) is grey.

@@ -15,7 +15,7 @@ whole look's peaks are those of its steps that render whole); ``--steps`` keeps 
 named effects (one step's peaks, e.g. ``--steps dof``).
 
 A kernel compile counts in the first process's wall time, not in its peaks (PoCL caches
-binaries across processes; the README's "Memory" section has what a cold cache adds).
+binaries across processes; docs/performance.md's "Memory" has what a cold cache adds).
 """
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
 """The Python API (issue 13): `import clfx` loads looks and renders arrays, files and
-sequences; the README's example runs as written; the CLI goes through the same functions."""
+sequences; the examples of the README and docs/api.md run as written; the CLI goes through
+the same functions."""
 import os
 import re
 from pathlib import Path
@@ -12,13 +13,27 @@ import clfx
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def readme_example() -> str:
-    text = (ROOT / "README.md").read_text()
-    section = text[text.index("## Python API"):]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+def python_example(page: str) -> str:
+    """The first Python block of ``page`` (a path from the repository root)."""
+    text = (ROOT / page).read_text()
+    return re.search(r"```python\n(.*?)```", text, re.S).group(1)
 
 
-def test_readme_example_runs(rt, tmp_path, monkeypatch, capsys):
+def test_readme_example_runs(rt, capsys):
+    code = python_example("README.md")
+    exec(compile(code, "README.md", "exec"), {})
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("(90, 160, 4) [") and "'dof'" in out[0], out
+
+
+def test_examples_give_opaque_frames():
+    """An example's frame is opaque: alpha is coverage, never the grey of the pixels."""
+    for page in ("README.md", "docs/api.md"):
+        code = python_example(page)
+        assert re.search(r"rgba\[\.\.\., 3\] = 1\.0", code), page
+
+
+def test_api_page_example_runs(rt, tmp_path, monkeypatch, capsys):
     from clfx.core.frame import Frame
     from clfx.io.write import write_frame
 
@@ -26,7 +41,7 @@ def test_readme_example_runs(rt, tmp_path, monkeypatch, capsys):
     img[..., 3] = 1.0
     write_frame(Frame.from_array(img), tmp_path / "shot.exr")
     monkeypatch.chdir(tmp_path)
-    exec(compile(readme_example(), "README.md", "exec"), {})
+    exec(compile(python_example("docs/api.md"), "docs/api.md", "exec"), {})
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("(90, 160, 4) {'camera.focus_distance': ")
     assert "dof" in out[1] and out[2].startswith("1 ")

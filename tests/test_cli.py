@@ -318,7 +318,7 @@ def test_raw_pipe_round_trip(rt):
 
 
 def test_raw_pipe_needs_a_size():
-    """A usage error (exit 2, as the README says), before anything is read."""
+    """A usage error (exit 2, as docs/reliability.md says), before anything is read."""
     r = run("render", "-", "-", code=2)
     assert "--raw WxH" in r.stderr
     assert "both INPUT and OUTPUT" in run("render", "-", "out.exr", "--raw", "4x4", code=2).stderr

@@ -1,5 +1,5 @@
 """Issue 10 item 8: what used to end in a traceback is one line and the documented exit code
-(README: 0 ok, 1 processing error, 2 usage error, 130 SIGINT, 143 SIGTERM)."""
+(docs/reliability.md: 0 ok, 1 processing error, 2 usage error, 130 SIGINT, 143 SIGTERM)."""
 import os
 import subprocess
 import sys

@@ -1,8 +1,8 @@
 """Issue 10 item 10: bounded memory.  A 1920x1080 frame of the demo scene through the cinema
-look, in a fresh process with PoCL's kernel cache warm, peaks below the README's budget
+look, in a fresh process with PoCL's kernel cache warm, peaks below the documented budget
 (``clfx.core.limits.memory_budget_mib``: 600 MiB + CLFX_POOL_MB + 72 bytes per pixel); the
-peaks at 1080p, 4K UHD and 8K UHD, measured with ``/usr/bin/time -v``, are in the README's
-table (8K: under 4 GB)."""
+peaks at 1080p, 4K UHD and 8K UHD, measured with ``/usr/bin/time -v``, are in the table of
+docs/performance.md (8K: under 4 GB)."""
 import os
 import subprocess
 import sys

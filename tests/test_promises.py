@@ -1,6 +1,6 @@
-"""The README's reliability promises and the tests that check them stay together: every
-promise cites tests, and every cited test exists (issue 10: "the README's reliability
-promises match what the tests check")."""
+"""The reliability promises (docs/reliability.md) and the tests that check them stay together:
+every promise cites tests, and every cited test exists (issue 10: "the README's reliability
+promises match what the tests check"; issue 36 moved them from the README to docs/)."""
 import ast
 import re
 from pathlib import Path
@@ -10,9 +10,8 @@ CITE = re.compile(r"`(tests/[\w/]+\.py)::(\w+)`")
 
 
 def promises() -> list[tuple[str, str]]:
-    """(promise title, its text) for every bullet of the README's Reliability section."""
-    text = (ROOT / "README.md").read_text()
-    section = text.split("\n## Reliability\n", 1)[1].split("\n## ", 1)[0]
+    """(promise title, its text) for every bullet of docs/reliability.md."""
+    section = (ROOT / "docs" / "reliability.md").read_text().split("\n## ", 1)[0]
     bullets = re.split(r"\n- ", "\n" + section.split("\n- ", 1)[1])
     out = []
     for b in bullets:

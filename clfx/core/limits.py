@@ -64,7 +64,7 @@ def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> f
     ``pixels`` through the cinema look, with ``CLFX_POOL_MB`` = ``pool_mib``, in MiB:
     ``MEMORY_BASE_MIB + CLFX_POOL_MB + MEMORY_BYTES_PER_PIXEL x pixels``, plus
     ``MEMORY_OVERLAP_BYTES_PER_PIXEL x pixels`` for a ``sequence`` of frames up to
-    :data:`OVERLAP_MAX_PIXELS` (README, "Memory")."""
+    :data:`OVERLAP_MAX_PIXELS` (docs/performance.md, "Memory")."""
     per_pixel = MEMORY_BYTES_PER_PIXEL
     if sequence and pixels <= OVERLAP_MAX_PIXELS:
         per_pixel += MEMORY_OVERLAP_BYTES_PER_PIXEL

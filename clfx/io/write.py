@@ -89,7 +89,7 @@ EXR_COMPRESSIONS = ("none", "zip", "zips", "piz", "dwaa", "dwab", "pxr24", "b44"
 DEFAULT_EXR_COMPRESSION = "zips"
 """EXR compression when neither the caller nor an EXR input says: lossless, as small as zip
 and no dearer to write and read (1-scanline zip; Nuke's default), measured on this machine
-(README, "EXR compression"): none and rle cost 40-60 % less CPU but write files 1.3-24x
+(docs/pipeline.md, "EXR compression"): none and rle cost 40-60 % less CPU but write files 1.3-24x
 larger, which a shared file server pays for (docs/scaling.md)."""
 TIFF_COMPRESSIONS = ("none", "zip", "lzw", "packbits")
 

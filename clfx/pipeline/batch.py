@@ -59,7 +59,7 @@ IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
 """Overlap only: nice increment of the write thread, half of it for the read thread (Linux:
 per thread; ``CLFX_IO_NICE``), so that on a CPU device I/O gives way to the effects.  0
 leaves the threads alone.  Phased streams do not lower priorities: that stalls when other
-processes want the CPU (README, "Sequences on one machine")."""
+processes want the CPU (docs/pipeline.md, "Sequences on one machine")."""
 
 
 def available_cores() -> int:

@@ -14,7 +14,7 @@ pays neither device set-up nor look loading; effects keep their one-off set-up i
 runtime's cache as in one process.  Inside a task the next frame is read and the previous one
 written on I/O threads while the device renders (at nice 10/5 on a CPU device: the overlapped
 stream of `clfx.pipeline.batch`; workers keep it, measured faster for them than the single
-process's phases, README "Scaling out"); across tasks, a worker runs `TASK_THREADS` of them
+process's phases, docs/scaling.md); across tasks, a worker runs `TASK_THREADS` of them
 at once and a per-process device lock lets one render while the others read or write, so
 single-frame tasks overlap their I/O too.
 

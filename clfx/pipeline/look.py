@@ -453,8 +453,8 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     (`clfx.pipeline.masks.read_masks`; read here from the frame's files when None and a
     step is masked), each uploaded once.  ``release_input``: the caller hands ``frame``
     over, and its host beauty (and passes, when the frame has a file layout to copy them
-    from) are dropped once on the device, so a frame is not held twice (see "Memory" in the
-    README).  Device passes are dropped after the last step that reads them.
+    from) are dropped once on the device, so a frame is not held twice (see "Memory" in
+    docs/performance.md).  Device passes are dropped after the last step that reads them.
     ``tile_pixels``: steps that tile render in bands of at most this many pixels, each from
     its region of interest, with the same pixels (`render_tiled`; default
     ``CLFX_TILE_PIXELS``, `clfx.core.limits.tile_pixels`; None there: whole frames).
