@@ -253,15 +253,25 @@ def rect_radius(rect, cx: float, cy: float, dx, dy):
     return np.minimum(tx, ty)
 
 
+FITS = ("crop", "none", "fit-all", "fill")
+"""A warp's ``fit`` choices (distortion, lens): ``crop`` (the default) scales up just enough
+that no output pixel of the display window reads past the plate, ``none`` keeps the scale,
+``fit-all`` keeps the whole source visible, ``fill`` makes the imaged source touch the frame."""
+
+
 def fit_scale(mode: str, rect, cx: float, cy: float, boundary_x, boundary_y) -> float:
-    """Scale s of output coordinates about (cx, cy) for ``fit`` = none / fit-all / fill.
+    """Scale s of output coordinates about (cx, cy) for ``fit`` = none / fit-all / fill /
+    crop (`FITS`).
 
     ``boundary_x, boundary_y`` are where the lens images the source frame's outline (frame
     coordinates, distorted).  The output pixel u then shows the distorted point
     c + s (u - c): ``fit-all`` picks the largest ratio of imaged outline to frame outline
     along each direction (the whole source stays visible, touching the frame), ``fill`` the
-    smallest (no output pixel reads outside the source).  Assumes the imaged outline is
-    star-shaped about c, which holds for the monotonic radial maps accepted here.
+    smallest (no output pixel reads outside the source), ``crop`` the smallest but never
+    above 1 (scales up only where the lens would read past the source: with the plate's
+    overscan as the outline, a margin the plate has is used before anything is cropped).
+    Assumes the imaged outline is star-shaped about c, which holds for the monotonic radial
+    maps accepted here.
     """
     if mode == "none":
         return 1.0
@@ -274,6 +284,8 @@ def fit_scale(mode: str, rect, cx: float, cy: float, boundary_x, boundary_y) -> 
     ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
     if ratio.size == 0:
         return 1.0
+    if mode == "crop":
+        return min(1.0, float(ratio.min()))
     return float(ratio.max() if mode == "fit-all" else ratio.min())
 
 
@@ -729,6 +741,13 @@ def warp_frame(ctx):
     where it is larger (overscan).  Inside it, pixels outside the data window are
     transparent black (an element's bounding box), not an edge to repeat."""
     return ctx.source.window.union(ctx.display_window)
+
+
+def plate_frame(ctx):
+    """The frame a warp's plate covers (`warp_frame`) as the whole render sees it (a tile's
+    context gives the whole render's): the outline ``fit=crop`` fills the display window
+    with.  Asked of the step's context, never of a canvas's (`on_canvas`)."""
+    return warp_frame(whole_context(ctx))
 
 
 def bounding_rect(xs, ys, margin: int, fallback):
