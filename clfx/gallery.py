@@ -17,16 +17,24 @@ Reinhard curve and the sRGB encoding; nothing is boosted, and each effect and lo
 shipped (an effect that needs a choice to do anything, ``lens``, gets the real-lens look's
 lens: `EFFECT_SETTINGS`).
 
-Every effect runs alone at its default parameters (``clfx apply EFFECT``), options that are
-off by default on their own (`VARIANTS`: cat-eye, anamorphic and chromatic bokeh, a pulled
+Every effect runs alone at its default parameters (``clfx apply EFFECT``; one whose defaults
+change nothing, camera_blur and distortion, at the `DEMO_VALUES` its label and caption
+name), options that are off by default on their own (`VARIANTS`: cat-eye, anamorphic and chromatic bokeh, a pulled
 focus breathing), every built-in look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
 is skipped, and the tile says so.  Written to OUTDIR:
 
 - ``<image>/sheet.png``: the input (``before``) then every effect and look (``after``), each
   tile labelled and captioned with one sentence (`CAPTIONS`: what the defect is and where
   to look), tone-mapped with one exposure per image (so tiles compare);
-- ``<image>/<kind>-<name>.png``: each tile at full gallery resolution;
-- ``index.json``: what was rendered, skipped and how long it took.
+- ``<image>/<kind>-<name>.png``: each tile at full gallery resolution (`tile_filename`:
+  letters, digits, ``.``, ``_`` and ``-`` only, so ``dof:cat-eye`` is
+  ``effect-dof-cat-eye.png``: SMB and Windows shares refuse ``:``);
+- ``index.json``: what was rendered (each tile's file and settings), skipped and how long it
+  took.
+
+Every file is written atomically through `clfx.io.write` (never through a symbolic link);
+without ``overwrite`` (``--overwrite``) a file of an earlier gallery is an error before
+anything renders.
 """
 from __future__ import annotations
 
@@ -249,7 +257,7 @@ from lensfun: the real-lens look's)."""
 DEMO_VALUES = {
     # effects whose defaults are 0 (no change): the tile shows them at these values, said on
     # its label and caption
-    "camera_blur": ["length=0.01", "direction=20", "roll=0.3"],
+    "camera_blur": ["length=0.01", "roll=0.3"],     # short enough for a thumbnail's label
     "distortion": ["k1=-0.08"],
 }
 """Demonstration values of effects that change nothing at their defaults: their tiles would
@@ -263,8 +271,8 @@ CAPTIONS = {
              "soft spill.",
     "breathing": "Focus breathing, still focus: nothing changes (the frame scales only while "
                  "the focus moves).",
-    "camera_blur": "Camera shake (length=0.01 direction=20 roll=0.3; default 0): every edge "
-                   "smeared the same way, lights in short trails.",
+    "camera_blur": "Camera shake (length=0.01 roll=0.3; default 0): every edge smeared the "
+                   "same way, the lights drawn into short trails.",
     "chromatic_aberration": "Lateral colour: red and blue fringes on edges towards the "
                             "corners, none at the centre.",
     "corona": "Diffraction corona: rainbow rings around the strongest lights only.",

@@ -91,7 +91,8 @@ def test_effects_at_zero_defaults_get_demonstration_values_on_their_tiles(tmp_pa
             assert all(v in tile["caption"] for v in values), tile["caption"]
             img = cv2.imread(str(tmp_path / "g" / tile["file"])).astype(float)
             body = slice(40, None)                        # below the label (72 rows)
-            assert np.abs(img[body] - before[body]).mean() > 0.5, (entry["image"], tile["name"])
+            diff = np.abs(img[body] - before[body])       # was 0: the input itself
+            assert diff.mean() > 0.1 and diff.max() > 10, (entry["image"], tile["name"])
 
 
 def test_tile_file_names_are_portable():

@@ -53,6 +53,10 @@ Atomic, checked, exclusive
    line naming the output.  An output that resolves to one of the ``protect`` paths (the
    inputs) is refused even with ``overwrite``.
 
+Text files (`write_text`: the gallery's index.json) are published the same way, and
+`output_folder` creates an output folder (a file there, or a link out of the folder the
+outputs belong in, is one error line).
+
 A process killed mid-write leaves its temp file; `sweep_stale_temps` removes those whose
 process is gone (``clfx render --skip-existing`` calls it).  On shared storage a farm task may
 be retried on another machine, where the dead writer's PID means nothing: temp names carry a
