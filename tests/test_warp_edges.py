@@ -93,3 +93,19 @@ def test_crop_uses_the_plates_overscan_before_scaling(rt):
     # a pincushion reads inside the plate anyway
     _, _, info = build_map(cls.params(k1=0.1), CAMERA, display, display, 1.0)
     assert info["fit_scale"] == 1.0
+
+
+def test_lens_crop_scales_a_barrel_lens_and_uses_overscan(rt):
+    from clfx.fx import lensdb
+    from clfx.plugins.lens import simulation_geometry
+
+    w, h = 120, 80
+    lens = lensdb.get_lens("Canon", "Canon EF 24-70mm f/2.8L II USM", 1.0)
+    cal = lensdb.calibration(lens, 24.0, 2.8, 1000.0)       # a barrel at 24 mm
+    norm = lensdb.Normalisation.for_image(cal, 1.0, w, h)
+    win = Rect(0, 0, w, h)
+    gx, gy, info = simulation_geometry(cal, norm, win, win, "crop", plate=win)
+    assert info["fit_scale"] < 1.0
+    assert gx.min() >= -1e-3 and gx.max() <= w + 1e-3 and gy.min() >= -1e-3 and gy.max() <= h + 1e-3
+    _, _, info = simulation_geometry(cal, norm, win, win, "crop", plate=win.grown(10))
+    assert info["fit_scale"] == 1.0
