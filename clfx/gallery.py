@@ -19,9 +19,10 @@ lens: `EFFECT_SETTINGS`).
 
 Every effect runs alone at its default parameters (``clfx apply EFFECT``; one whose defaults
 change nothing, camera_blur and distortion, at the `DEMO_VALUES` its label and caption
-name), options that are off by default on their own (`VARIANTS`: cat-eye, anamorphic and chromatic bokeh, a pulled
-focus breathing), every built-in look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
-is skipped, and the tile says so.  Written to OUTDIR:
+name), options that are off by default on their own (`VARIANTS`: cat-eye, anamorphic and
+chromatic bokeh, a pulled focus breathing), every built-in look as shipped; an effect or
+look step that needs a depth or velocity pass the image lacks is skipped, and the tile says
+so.  Written to OUTDIR:
 
 - ``<image>/sheet.png``: the input (``before``) then every effect and look (``after``), each
   tile labelled and captioned with one sentence (`CAPTIONS`: what the defect is and where

@@ -913,6 +913,15 @@ def on_canvas(plugin, rt, p, ctx, border: str, render):
     return rt.reframe(img, out, "zero")
 
 
+def on_plate_canvas(plugin, rt, p, ctx, border: str):
+    """`on_canvas` for a warp whose maps depend on the plate it reads (``fit=crop``:
+    distortion, lens): ``plugin.render_canvas(rt, p, canvas_ctx, sanitise, plate, rows)``
+    with ``plate`` the step's `plate_frame` (a canvas's context no longer knows it)."""
+    plate = plate_frame(ctx)
+    return on_canvas(plugin, rt, p, ctx, border, lambda c, sanitise, rows:
+                     plugin.render_canvas(rt, p, c, sanitise, plate, rows))
+
+
 def whole_context(ctx):
     """``ctx`` as the whole render sees it: in a tile of a tiled render (``ctx.tiling``) over
     a stand-in of the whole source window (the geometry, maps and canvas of the whole

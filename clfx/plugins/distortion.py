@@ -79,12 +79,12 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, FITS, CanvasRows, FootprintMap, ResampleLevel, band_window, canvas_context,
-                              check_fold, elliptical_map, fit_scale, fold_radius,
-                              footprint_defines, frame_key, launch_footprint, map_bands,
-                              on_canvas, pixel_centres, plate_frame, rect_boundary,
-                              WARP_REACH_TEXELS,
-                              warp_frame, warp_interest, warp_region)
+from clfx.fx.resample import (BORDERS, FITS, CanvasRows, FootprintMap, ResampleLevel,
+                              band_window, canvas_context, check_fold, elliptical_map,
+                              fit_scale, fold_radius, footprint_defines, frame_key,
+                              launch_footprint, map_bands, on_plate_canvas, pixel_centres,
+                              plate_frame, rect_boundary, WARP_REACH_TEXELS, warp_frame,
+                              warp_interest, warp_region)
 from clfx.host import Plugin, register
 
 NEWTON_STEPS = 8
@@ -470,14 +470,12 @@ class Distortion(Plugin):
         return dmap, info
 
     def render(self, rt, p, ctx):
-        plate = plate_frame(ctx)
-        return on_canvas(self, rt, p, ctx, p.border, lambda c, sanitise, rows:
-                         self.render_canvas(rt, p, c, sanitise, plate, rows))
+        return on_plate_canvas(self, rt, p, ctx, p.border)
 
     def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
         """The warp over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
         a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the
-        frame the plate covers (`plate_frame` of the step's context)."""
+        frame the plate covers (`on_plate_canvas`)."""
         src = ctx.source
         rows = rows or CanvasRows.whole(src.window)
         canvas = rows.canvas

@@ -46,9 +46,9 @@ from clfx.fx import lensdb
 from clfx.fx.resample import (BORDERS, FITS, CanvasRows, DevicePackedMap, PackedMap,
                               ResampleLevel, band_window, canvas_context, check_fold, fit_scale,
                               fold_radius, frame_key, kernel_defines, launch_packed, lut_lookup,
-                              map_bands, on_canvas, pixel_centres, plate_frame, radial_inverse,
-                              radial_inverse_fast, radial_lut, rect_boundary, upload_map,
-                              warp_interest, warp_region)
+                              map_bands, on_plate_canvas, pixel_centres, plate_frame,
+                              radial_inverse, radial_inverse_fast, radial_lut, rect_boundary,
+                              upload_map, warp_interest, warp_region)
 from clfx.host import Plugin, register
 
 LUT_SIZE = 1024
@@ -395,14 +395,12 @@ class Lens(Plugin):
                                 rt.use_fp64(lvl.fp64), plate_frame(ctx))
 
     def render(self, rt, p, ctx):
-        plate = plate_frame(ctx)
-        return on_canvas(self, rt, p, ctx, p.border, lambda c, sanitise, rows:
-                         self.render_canvas(rt, p, c, sanitise, plate, rows))
+        return on_plate_canvas(self, rt, p, ctx, p.border)
 
     def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
         """The lens over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
         a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the
-        frame the plate covers (`plate_frame` of the step's context)."""
+        frame the plate covers (`on_plate_canvas`)."""
         src = ctx.source
         rows = rows or CanvasRows.whole(src.window)
         canvas = rows.canvas
