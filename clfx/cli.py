@@ -677,18 +677,21 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 
 @cli.command()
 @click.argument("outdir", default="clfx-gallery", required=False)
-@click.option("--width", default=640, show_default=True, help="Width the images are scaled to.")
+@click.option("--width", default=640, show_default=True, type=click.IntRange(min=1),
+              help="Width the images are scaled to (pixels, at least 1).")
 @click.option("--only", default=None, metavar="A,B", callback=lambda c, p, v: _gallery_names(v),
               help="Only these effects and looks.")
 @quality_option
+@click.option("--overwrite", is_flag=True,
+              help="Replace files of an earlier gallery in OUTDIR (default: refuse, like demo).")
 @click.pass_context
-def gallery(ctx, outdir, width, only, quality):
+def gallery(ctx, outdir, width, only, quality, overwrite):
     """Every effect and built-in look on the demo scene, CandleGlass.exr and Desk.exr: a
     labelled before/after contact sheet per image in OUTDIR."""
     from clfx.gallery import run_gallery
 
     run_gallery(_runtime(ctx), outdir, width=width, quality=quality, only=only,
-                verbosity=ctx.obj.get("verbosity", 1))
+                overwrite=overwrite, verbosity=ctx.obj.get("verbosity", 1))
 
 
 def _gallery_names(value: str | None) -> set[str] | None:

@@ -81,7 +81,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     scene files with the same look renders the same frames (written as float there, the
     input's type).  Each preview is the output as written."""
     from clfx.core.errors import ImageIOError
-    from clfx.io.write import write_frame
+    from clfx.io.write import output_folder, write_frame
     from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
     from clfx.pipeline.presets import load_look
 
@@ -92,7 +92,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
             more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
             raise ImageIOError(f"{there[0]} exists{more}; use --overwrite to replace the "
                                f"demo in {outdir}, or another folder")
-    os.makedirs(outdir, exist_ok=True)
+    output_folder(outdir)          # a file or a broken link there: one error line
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-demo") as pool:
         list(pool.map(lambda n: write_scene(outdir, n, width, height, overwrite), range(1, count + 1)))

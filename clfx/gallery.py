@@ -17,22 +17,32 @@ Reinhard curve and the sRGB encoding; nothing is boosted, and each effect and lo
 shipped (an effect that needs a choice to do anything, ``lens``, gets the real-lens look's
 lens: `EFFECT_SETTINGS`).
 
-Every effect runs alone at its default parameters (``clfx apply EFFECT``), options that are
-off by default on their own (`VARIANTS`: cat-eye, anamorphic and chromatic bokeh, a pulled
-focus breathing), every built-in look as shipped; an effect or look step that needs a depth or velocity pass the image lacks
-is skipped, and the tile says so.  Written to OUTDIR:
+Every effect runs alone at its default parameters (``clfx apply EFFECT``; one whose defaults
+change nothing, camera_blur and distortion, at the `DEMO_VALUES` its label and caption
+name), options that are off by default on their own (`VARIANTS`: cat-eye, anamorphic and
+chromatic bokeh, a pulled focus breathing), every built-in look as shipped; an effect or
+look step that needs a depth or velocity pass the image lacks is skipped, and the tile says
+so.  Written to OUTDIR:
 
 - ``<image>/sheet.png``: the input (``before``) then every effect and look (``after``), each
   tile labelled and captioned with one sentence (`CAPTIONS`: what the defect is and where
   to look), tone-mapped with one exposure per image (so tiles compare);
-- ``<image>/<kind>-<name>.png``: each tile at full gallery resolution;
-- ``index.json``: what was rendered, skipped and how long it took.
+- ``<image>/<kind>-<name>.png``: each tile at full gallery resolution (`tile_filename`:
+  letters, digits, ``.``, ``_`` and ``-`` only, so ``dof:cat-eye`` is
+  ``effect-dof-cat-eye.png``: SMB and Windows shares refuse ``:``);
+- ``index.json``: what was rendered (each tile's file and settings), skipped and how long it
+  took.
+
+Every file is written atomically through `clfx.io.write` (never through a symbolic link);
+without ``overwrite`` (``--overwrite``) a file of an earlier gallery is an error before
+anything renders.
 """
 from __future__ import annotations
 
 import json
 import math
 import os
+import re
 import sys
 import textwrap
 import time
@@ -192,6 +202,12 @@ def sun_scene(width: int, height: int) -> Frame:
     return Frame.from_array(rgba.astype(np.float32))
 
 
+def gallery_image_names() -> list[str]:
+    """The names of the gallery's images (`gallery_inputs`'s, in order), without reading
+    them: the built-in two and the shared test images found."""
+    return ["demo", "sun"] + [n for n in SCANLINES if find_scanline_image(n) is not None]
+
+
 def gallery_inputs(width: int, log=print) -> list[tuple[str, Frame]]:
     """(name, frame) of every gallery image found, downscaled to ``width`` pixels."""
     from clfx.bench.scene import demo_scene, render_sharp
@@ -239,6 +255,15 @@ EFFECT_SETTINGS = {
 """Settings the gallery gives an effect that needs one to run at all (``lens`` needs a lens
 from lensfun: the real-lens look's)."""
 
+DEMO_VALUES = {
+    # effects whose defaults are 0 (no change): the tile shows them at these values, said on
+    # its label and caption
+    "camera_blur": ["length=0.01", "roll=0.3"],     # short enough for a thumbnail's label
+    "distortion": ["k1=-0.08"],
+}
+"""Demonstration values of effects that change nothing at their defaults: their tiles would
+be the input itself under a caption promising the effect."""
+
 CAPTIONS = {
     "before": "The input, exposed as every tile of this sheet: log-average to middle grey, "
               "no grade.",
@@ -247,13 +272,14 @@ CAPTIONS = {
              "soft spill.",
     "breathing": "Focus breathing, still focus: nothing changes (the frame scales only while "
                  "the focus moves).",
-    "camera_blur": "Camera shake over the shutter: every edge smeared the same way, the lights "
-                   "drawn into short trails.",
+    "camera_blur": "Camera shake (length=0.01 roll=0.3; default 0): every edge smeared the "
+                   "same way, the lights drawn into short trails.",
     "chromatic_aberration": "Lateral colour: red and blue fringes on edges towards the "
                             "corners, none at the centre.",
     "corona": "Diffraction corona: rainbow rings around the strongest lights only.",
     "defocus": "Uniform defocus: the whole frame evenly soft, lights into small discs.",
-    "distortion": "Barrel distortion: straight lines near the edges bow outwards.",
+    "distortion": "Barrel distortion (k1=-0.08; default 0): straight lines near the edges "
+                  "bow outwards.",
     "dof": "Depth of field from the depth pass: the focus plane sharp, near and far soft, "
            "lights into aperture-shaped bokeh.",
     "glare": "Veiling glare: a faint wide glow around the brightest lights, lifting the dark "
@@ -333,13 +359,29 @@ def gallery_looks(only=None):
     from clfx.pipeline.presets import available_looks, load_look, single_effect_look
     from clfx.plugins import discover
 
-    items = [("effect", e, single_effect_look(e, EFFECT_SETTINGS.get(e, [])))
+    items = [("effect", e, single_effect_look(e, EFFECT_SETTINGS.get(e, [])
+                                              + DEMO_VALUES.get(e, [])))
              for e in discover()]
     items += [("effect", name, single_effect_look(effect, settings))
               for name, (effect, settings) in VARIANTS.items()]
     items += [("look", name, load_look(str(path))) for name, (origin, path)
               in available_looks().items() if origin == "built-in"]
     return [it for it in items if only is None or it[1] in only]
+
+
+def tile_filename(kind: str, name: str) -> str:
+    """The file name of a tile: ``<kind>-<name>.png`` with every character but letters,
+    digits, ``.``, ``_`` and ``-`` as ``-`` (``dof:cat-eye`` -> ``effect-dof-cat-eye.png``:
+    SMB and Windows shares refuse ``:``)."""
+    return re.sub(r"[^A-Za-z0-9._-]", "-", f"{kind}-{name}") + ".png"
+
+
+def gallery_files(outdir: str, images, items) -> list[str]:
+    """Every file a gallery of ``images`` (names) and ``items`` (`gallery_looks`) writes
+    into ``outdir``."""
+    tiles = ["before.png", "sheet.png"] + [tile_filename(kind, name) for kind, name, _ in items]
+    return [os.path.join(outdir, image, t) for image in images for t in tiles] + [
+        os.path.join(outdir, "index.json")]
 
 
 def _runnable(look, frame: Frame):
@@ -351,16 +393,32 @@ def _runnable(look, frame: Frame):
 
 
 def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | None = None,
-                only=None, columns: int = 6, thumb_width: int = 320,
+                only=None, columns: int = 6, thumb_width: int = 320, overwrite: bool = False,
                 verbosity: int = 1) -> dict:
     """Render the gallery into ``outdir``; returns the index written to ``index.json``.
 
     Not a read/render/write loop (`clfx.pipeline.batch.render_stream` is the one): each
     input is read once and resized in memory, every look renders that frame in memory, and
     what is written is a labelled, tone-mapped sRGB tile about the render, never a rendered
-    frame."""
+    frame.  Every file goes through clfx's atomic writers (`clfx.io.write`: a temp file,
+    then published; never through a symbolic link).  Without ``overwrite``, a file of an
+    earlier gallery in ``outdir`` is an error before anything renders.
+
+    Raises
+    ------
+    ParamError
+        ``width`` or ``thumb_width`` below 1, ``columns`` below 1.
+    ImageIOError
+        ``outdir`` (or an image's folder in it) is a file or a symbolic link; a file the
+        gallery writes exists and ``overwrite`` is off.
+    """
+    from clfx.core.errors import ParamError
     from clfx.core.frame import crop_to
-    from clfx.io.write import write_frame
+    from clfx.io.write import OutputExistsError, output_folder, write_frame, write_text
+
+    for what, value in (("width", width), ("thumb_width", thumb_width), ("columns", columns)):
+        if int(value) < 1:
+            raise ParamError(f"gallery: {what} must be at least 1, got {value}")
 
     def log(msg):
         if verbosity > 0:
@@ -369,15 +427,25 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
     def save(img, *parts):
         path = os.path.join(outdir, *parts)
         write_frame(Frame.from_array(np.ascontiguousarray(img, np.float32)), path,
-                    overwrite=True)
+                    overwrite=overwrite)
         return path
 
     t0 = time.perf_counter()
-    os.makedirs(outdir, exist_ok=True)
     items = gallery_looks(only)
+    images = gallery_image_names()
+    output_folder(outdir, create=False)       # a file there: one error, nothing written
+    for name in images:                       # never written through a link to elsewhere
+        output_folder(os.path.join(outdir, name), inside=outdir, create=False)
+    if not overwrite:
+        there = [p for p in gallery_files(outdir, images, items) if os.path.lexists(p)]
+        if there:
+            more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
+            raise OutputExistsError(f"{there[0]} exists{more}; use --overwrite to replace the "
+                                    f"gallery in {outdir}, or another folder")
+    output_folder(outdir)
     index = {"width": width, "quality": quality or "final", "images": []}
     for name, frame in gallery_inputs(width, log):
-        os.makedirs(os.path.join(outdir, name), exist_ok=True)
+        output_folder(os.path.join(outdir, name), inside=outdir)
         exposure = exposure_for(frame.rgba)
         before = tonemap(frame.rgba, exposure)
         save(label(before, f"{name}: before"), name, "before.png")
@@ -389,6 +457,8 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
         for kind, item, look in items:
             runnable, missing = _runnable(look, frame)
             lines = [f"{kind}: {item}"]
+            if item in DEMO_VALUES:
+                lines.append(" ".join(DEMO_VALUES[item]))
             if missing:
                 lines.append("no pass: " + ",".join(missing) + " skipped")
             t1 = time.perf_counter()
@@ -404,10 +474,12 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
                                 exposure)
                 warnings = [w for s in report.steps for w in s.warnings]
             ms = (time.perf_counter() - t1) * 1e3
-            save(label(after, lines), name, f"{kind}-{item}.png")
+            file = save(label(after, lines), name, tile_filename(kind, item))
             text = CAPTIONS.get(item, "")
             thumbs.append(caption(label(thumbnail(after, thumb_width), lines), text))
             entry["tiles"].append({"kind": kind, "name": item, "caption": text,
+                                   "file": os.path.relpath(file, outdir),
+                                   "settings": DEMO_VALUES.get(item, []),
                                    "ms": round(ms, 1),
                                    "skipped_steps": missing, "warnings": warnings,
                                    "error": error})
@@ -416,6 +488,6 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
         index["images"].append(entry)
         log(f"clfx gallery: contact sheet {entry['sheet']}")
     index["wall_s"] = round(time.perf_counter() - t0, 1)
-    with open(os.path.join(outdir, "index.json"), "w") as f:
-        json.dump(index, f, indent=1)
+    write_text(json.dumps(index, indent=1) + "\n", os.path.join(outdir, "index.json"),
+               overwrite=overwrite)
     return index

@@ -64,10 +64,95 @@ def test_option_variants_are_tiles_of_their_own(tmp_path, monkeypatch):
     run("-q", "gallery", tmp_path / "g", "--width", "128", "--only",
         "dof,dof:cat-eye,breathing,breathing:pull-focus")
     demo = tmp_path / "g" / "demo"
-    tile = {n: cv2.imread(str(demo / f"effect-{n}.png")).astype(float)
+    tile = {n: cv2.imread(str(demo / gallery.tile_filename("effect", n))).astype(float)
             for n in ("dof", "dof:cat-eye", "breathing", "breathing:pull-focus")}
     before = cv2.imread(str(demo / "before.png")).astype(float)
     body = slice(40, None)                    # below the labels
     assert np.abs(tile["breathing"][body] - before[body]).max() == 0   # static focus: identity
     assert np.abs(tile["breathing:pull-focus"][body] - before[body]).mean() > 1
     assert np.abs(tile["dof:cat-eye"][body] - tile["dof"][body]).mean() > 0.1
+
+
+def test_effects_at_zero_defaults_get_demonstration_values_on_their_tiles(tmp_path, monkeypatch):
+    """camera_blur and distortion change nothing at their defaults (0): their tiles show them
+    at `DEMO_VALUES`, said on the label and the caption, never the input under a caption
+    promising the effect (issue 34)."""
+    import cv2
+
+    monkeypatch.setattr(gallery, "shared_data_dirs", lambda: [tmp_path / "nowhere"])
+    run("-q", "gallery", tmp_path / "g", "--width", "128", "--only", "camera_blur,distortion")
+    index = json.loads((tmp_path / "g" / "index.json").read_text())
+    for entry in index["images"]:
+        folder = tmp_path / "g" / entry["image"]
+        before = cv2.imread(str(folder / "before.png")).astype(float)
+        for tile in entry["tiles"]:
+            values = gallery.DEMO_VALUES[tile["name"]]
+            assert tile["settings"] == values
+            assert all(v in tile["caption"] for v in values), tile["caption"]
+            img = cv2.imread(str(tmp_path / "g" / tile["file"])).astype(float)
+            body = slice(40, None)                        # below the label (72 rows)
+            diff = np.abs(img[body] - before[body])       # was 0: the input itself
+            assert diff.mean() > 0.1 and diff.max() > 10, (entry["image"], tile["name"])
+
+
+def test_tile_file_names_are_portable():
+    """No ``:`` (SMB and Windows shares refuse it) nor any other character past
+    [A-Za-z0-9._-] in any name the gallery writes; every tile has its own file."""
+    import re
+
+    items = gallery.gallery_looks()
+    files = gallery.gallery_files("OUT", ["demo", "sun", "CandleGlass", "Desk"], items)
+    names = [p.split("/", 1)[1] for p in files]
+    assert len(set(files)) == len(files)
+    assert any(":" in name for _, name, _ in items)         # variants are named with one
+    for name in names:
+        assert all(re.fullmatch(r"[A-Za-z0-9._-]+", part) for part in name.split("/")), name
+    assert gallery.tile_filename("effect", "dof:cat-eye") == "effect-dof-cat-eye.png"
+
+
+def _one_error_line(result):
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("clfx: error: "), result.stderr
+    return lines[0]
+
+
+def test_gallery_never_writes_through_a_link_nor_replaces_without_overwrite(tmp_path,
+                                                                          monkeypatch):
+    monkeypatch.setattr(gallery, "shared_data_dirs", lambda: [tmp_path / "nowhere"])
+    outside = tmp_path / "outside.txt"
+    outside.write_text("keep")
+    out = tmp_path / "g"
+    out.mkdir()
+    (out / "index.json").symlink_to(outside)
+    args = ("-q", "gallery", out, "--width", "32", "--only", "vignette")
+    line = _one_error_line(run(*args, code=1))
+    assert "index.json exists" in line and "--overwrite" in line
+    assert sorted(p.name for p in out.iterdir()) == ["index.json"]   # nothing rendered
+    run(*args, "--overwrite")
+    assert outside.read_text() == "keep"                   # the link was replaced, not followed
+    assert not (out / "index.json").is_symlink()
+    assert json.loads((out / "index.json").read_text())["width"] == 32
+    # an earlier gallery (its index and tiles) is not replaced without --overwrite
+    stamp = (out / "index.json").stat().st_mtime_ns
+    _one_error_line(run(*args, code=1))
+    assert (out / "index.json").stat().st_mtime_ns == stamp
+    # an image folder linked elsewhere is refused, even with --overwrite
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (out / "sun").rename(tmp_path / "sun-old")
+    (out / "sun").symlink_to(elsewhere)
+    assert "symbolic link" in _one_error_line(run(*args, "--overwrite", code=1))
+    assert list(elsewhere.iterdir()) == []
+
+
+def test_gallery_and_demo_refuse_bad_width_and_a_file_as_outdir(tmp_path):
+    for width in ("0", "-5"):
+        r = run("gallery", tmp_path / "g", "--width", width, code=2)
+        assert "--width" in _one_error_line(r)
+    assert not (tmp_path / "g").exists()
+    a_file = tmp_path / "a-file"
+    a_file.write_text("x")
+    for cmd in (("gallery", a_file, "--width", "32", "--only", "vignette"),
+                ("demo", a_file, "--frames", "1", "--size", "32x18")):
+        assert "not a folder" in _one_error_line(run(*cmd, code=1))
+        assert a_file.read_text() == "x"

@@ -419,3 +419,33 @@ def test_depth_only_exr_is_refused_naming_its_channels(tmp_path):
     beauty = tmp_path / "beauty.exr"
     write_frame(noisy(16, 8), beauty)
     assert np.all(read_frame(beauty, depth_path=path).depth == 5.0)   # fine as a depth file
+
+
+def test_write_text_never_follows_a_link_and_is_exclusive(tmp_path, monkeypatch):
+    """Issue 34: `clfx gallery` wrote index.json with open(..., "w") through a link to a file
+    outside its folder.  `write_text` is the frames' atomic, exclusive publish for text."""
+    from clfx.io.write import output_folder, write_text
+
+    outside = tmp_path / "outside.txt"
+    outside.write_text("keep")
+    link = tmp_path / "index.json"
+    link.symlink_to(outside)
+    with pytest.raises(OutputExistsError, match="index.json"):
+        write_text("{}", link)
+    write_text("{}\n", link, overwrite=True)
+    assert outside.read_text() == "keep" and not link.is_symlink()
+    assert link.read_text() == "{}\n"
+    # a failed write leaves nothing at the path nor under a temp name
+    monkeypatch.setattr(io_write.os, "write", lambda fd, data: (_ for _ in ()).throw(
+        OSError(errno.ENOSPC, "No space left on device")))
+    with pytest.raises(ImageIOError, match=r"new\.json: No space left"):
+        write_text("x", tmp_path / "new.json")
+    monkeypatch.undo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["index.json", "outside.txt"]
+    with pytest.raises(ImageIOError, match="not a folder"):
+        output_folder(outside)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "sub").symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(ImageIOError, match="symbolic link"):
+        output_folder(tmp_path / "sub", inside=tmp_path)
+    assert output_folder(tmp_path / "sub") == str(tmp_path / "sub")   # no `inside`: allowed

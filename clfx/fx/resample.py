@@ -253,15 +253,25 @@ def rect_radius(rect, cx: float, cy: float, dx, dy):
     return np.minimum(tx, ty)
 
 
+FITS = ("crop", "none", "fit-all", "fill")
+"""A warp's ``fit`` choices (distortion, lens): ``crop`` (the default) scales up just enough
+that no output pixel of the display window reads past the plate, ``none`` keeps the scale,
+``fit-all`` keeps the whole source visible, ``fill`` makes the imaged source touch the frame."""
+
+
 def fit_scale(mode: str, rect, cx: float, cy: float, boundary_x, boundary_y) -> float:
-    """Scale s of output coordinates about (cx, cy) for ``fit`` = none / fit-all / fill.
+    """Scale s of output coordinates about (cx, cy) for ``fit`` = none / fit-all / fill /
+    crop (`FITS`).
 
     ``boundary_x, boundary_y`` are where the lens images the source frame's outline (frame
     coordinates, distorted).  The output pixel u then shows the distorted point
     c + s (u - c): ``fit-all`` picks the largest ratio of imaged outline to frame outline
     along each direction (the whole source stays visible, touching the frame), ``fill`` the
-    smallest (no output pixel reads outside the source).  Assumes the imaged outline is
-    star-shaped about c, which holds for the monotonic radial maps accepted here.
+    smallest (no output pixel reads outside the source), ``crop`` the smallest but never
+    above 1 (scales up only where the lens would read past the source: with the plate's
+    overscan as the outline, a margin the plate has is used before anything is cropped).
+    Assumes the imaged outline is star-shaped about c, which holds for the monotonic radial
+    maps accepted here.
     """
     if mode == "none":
         return 1.0
@@ -274,6 +284,8 @@ def fit_scale(mode: str, rect, cx: float, cy: float, boundary_x, boundary_y) -> 
     ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
     if ratio.size == 0:
         return 1.0
+    if mode == "crop":
+        return min(1.0, float(ratio.min()))
     return float(ratio.max() if mode == "fit-all" else ratio.min())
 
 
@@ -731,6 +743,13 @@ def warp_frame(ctx):
     return ctx.source.window.union(ctx.display_window)
 
 
+def plate_frame(ctx):
+    """The frame a warp's plate covers (`warp_frame`) as the whole render sees it (a tile's
+    context gives the whole render's): the outline ``fit=crop`` fills the display window
+    with.  Asked of the step's context, never of a canvas's (`on_canvas`)."""
+    return warp_frame(whole_context(ctx))
+
+
 def bounding_rect(xs, ys, margin: int, fallback):
     """The pixels covering the finite points ``(xs, ys)`` (frame coordinates), grown by
     ``margin``; ``fallback`` when none is finite."""
@@ -892,6 +911,15 @@ def on_canvas(plugin, rt, p, ctx, border: str, render):
     else:
         img = render(ctx.with_source(warp_source(rt, ctx, canvas, border)), sanitise, rows)
     return rt.reframe(img, out, "zero")
+
+
+def on_plate_canvas(plugin, rt, p, ctx, border: str):
+    """`on_canvas` for a warp whose maps depend on the plate it reads (``fit=crop``:
+    distortion, lens): ``plugin.render_canvas(rt, p, canvas_ctx, sanitise, plate, rows)``
+    with ``plate`` the step's `plate_frame` (a canvas's context no longer knows it)."""
+    plate = plate_frame(ctx)
+    return on_canvas(plugin, rt, p, ctx, border, lambda c, sanitise, rows:
+                     plugin.render_canvas(rt, p, c, sanitise, plate, rows))
 
 
 def whole_context(ctx):

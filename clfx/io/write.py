@@ -53,6 +53,10 @@ Atomic, checked, exclusive
    line naming the output.  An output that resolves to one of the ``protect`` paths (the
    inputs) is refused even with ``overwrite``.
 
+Text files (`write_text`: the gallery's index.json) are published the same way, and
+`output_folder` creates an output folder (a file there, or a link out of the folder the
+outputs belong in, is one error line).
+
 A process killed mid-write leaves its temp file; `sweep_stale_temps` removes those whose
 process is gone (``clfx render --skip-existing`` calls it).  On shared storage a farm task may
 be retried on another machine, where the dead writer's PID means nothing: temp names carry a
@@ -482,6 +486,73 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart]
     finally:
         with contextlib.suppress(OSError):
             os.remove(tmp)
+
+
+def write_text(text: str, path, *, overwrite: bool = False, protect: Iterable = ()) -> None:
+    """Write a text file (UTF-8) as `write_frame` writes an image: a temp file in the same
+    folder, written and flushed in full, then published (hard link without ``overwrite``,
+    ``os.replace`` with it).  Nothing is ever written through a symbolic link at ``path``:
+    without ``overwrite`` it is an existing file (`OutputExistsError`), with it the link
+    itself is replaced, never its target.  On any failure nothing is left at ``path``.
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists (even as a dangling link), or appeared while writing, and
+        ``overwrite`` is off.
+    ImageIOError
+        ``path`` is a folder or an input (``protect``), its folder is missing or not
+        writable, or a write failed (full disk).
+    """
+    path = os.fspath(path)
+    folder = _check_destination(path, overwrite, protect)
+    tmp = _temp_path(path, folder)
+    try:
+        fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+    except OSError as e:
+        raise ImageIOError(f"cannot write {path}: folder {folder} is not writable "
+                           f"({e.strerror})") from None
+    try:
+        try:
+            view = memoryview(text.encode("utf-8"))
+            while view:
+                view = view[os.write(fd, view):]
+        finally:
+            os.close(fd)
+        _publish(tmp, path, overwrite)
+    except OSError as e:
+        raise fail(path, "cannot write", e.strerror or str(e)) from None
+    finally:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+
+
+def output_folder(path, *, inside=None, create: bool = True) -> str:
+    """Create the folder ``path`` (and its parents) for outputs and return it; with
+    ``create`` off only check that it could be one (a folder, or nothing yet).
+
+    ``inside``: a folder ``path`` must stay in: ``path`` being a symbolic link (e.g.
+    ``OUT/demo`` pointing elsewhere) is refused, so nothing is written outside ``inside``.
+
+    Raises
+    ------
+    ImageIOError
+        ``path`` exists and is not a folder, is a link out of ``inside``, or cannot be
+        created.
+    """
+    path = os.fspath(path)
+    if inside is not None and os.path.islink(path):
+        raise ImageIOError(f"cannot write into {path}: it is a symbolic link "
+                           f"({os.readlink(path)}); outputs stay in {os.fspath(inside)}")
+    if os.path.lexists(path) and not os.path.isdir(path):
+        raise ImageIOError(f"cannot write into {path}: it exists and is not a folder")
+    if not create:
+        return path
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise ImageIOError(f"cannot create folder {path}: {e.strerror or e}") from None
+    return path
 
 
 def _alive(pid: int) -> bool:

@@ -47,15 +47,27 @@ is larger) are filled by ``border`` at the frame's edge.  Inside the frame, pixe
 the data window (an element's tight bounding box) are transparent black, never an edge to
 repeat.
 
+The frame's edge (issue 32): a barrel reads past the plate towards the frame's edge (cinema's
+k1 = -0.02 by 1-3 px on a 1000 px frame), and a filter centred near the edge reaches past it
+with its outer taps.  Until ``fit`` and ``border`` defaulted to ``crop`` and ``edge`` both
+read transparent black there: a 1-2 px dark frame round every render (CandleGlass through
+cinema: column 0 at ~0, column 1 at 44 % of the interior).  ``crop`` scales the output up
+just enough that the display window reads inside the plate (overscan included, so a plate
+with margin keeps its scale; a pincushion never scales), and ``edge`` gives the taps past the
+edge the edge texel, so the border is as bright as the interior.  ``fit=none,
+border=black`` renders the lens model unscaled with a transparent outside.
+
 Windows: the output covers where the data window's content lands (``region_of_definition``:
 the data window's outline, grown by the filters' reach, mapped forward), within the output
 limit, so a magnified element grows its window instead of being cut at it; a window whose
 content shrinks (barrel, fit) keeps the data window.  The map is built for that window's
 pixels (``clfx.fx.resample.on_canvas``).
 
-``fit``: ``none`` keeps the scale; ``fit-all`` scales the output so the whole source frame
-stays visible (its imaged outline touches the frame); ``fill`` so that no output pixel reads
-outside the source frame (no undefined border).
+``fit``: ``crop`` (default) scales up just enough that no pixel of the display window reads
+past the plate (``fill`` with the plate's outline, overscan included, and never below 1);
+``none`` keeps the scale; ``fit-all`` scales the output so the whole source frame stays
+visible (its imaged outline touches the frame); ``fill`` so that the imaged display window
+touches the frame (no undefined border; a pincushion is scaled down to touch it).
 
 References: D. C. Brown, "Decentering distortion of lenses", 1966; OpenCV camera
 calibration documentation (calib3d).
@@ -67,11 +79,12 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, CanvasRows, FootprintMap, ResampleLevel, band_window, canvas_context,
-                              check_fold, elliptical_map, fit_scale, fold_radius,
-                              footprint_defines, frame_key, launch_footprint, map_bands,
-                              on_canvas, pixel_centres, rect_boundary, WARP_REACH_TEXELS,
-                              warp_frame, warp_interest, warp_region)
+from clfx.fx.resample import (BORDERS, FITS, CanvasRows, FootprintMap, ResampleLevel,
+                              band_window, canvas_context, check_fold, elliptical_map,
+                              fit_scale, fold_radius, footprint_defines, frame_key,
+                              launch_footprint, map_bands, on_plate_canvas, pixel_centres,
+                              plate_frame, rect_boundary, WARP_REACH_TEXELS, warp_frame,
+                              warp_interest, warp_region)
 from clfx.host import Plugin, register
 
 NEWTON_STEPS = 8
@@ -195,9 +208,12 @@ def undistort(xd, yd, k, r_hi: float, fx: float):
     return x, y
 
 
-def _geometry(p, camera, display_window, window, pixel_aspect, name):
+def _geometry(p, camera, display_window, window, pixel_aspect, name, plate=None):
     """Intrinsics, coefficients, fit scale and the radial bracket [0, r_hi] for output
-    points inside ``display_window`` and ``window``.  Raises ParamError on a fold."""
+    points inside ``display_window`` and ``window``.  ``plate``: the frame the source's
+    pixels cover (`clfx.fx.resample.warp_frame`; default ``display_window`` and ``window``),
+    whose imaged outline ``fit=crop`` fills the display window with.  Raises ParamError on
+    a fold."""
     fx, fy, cx, cy = intrinsics(p, camera, display_window, pixel_aspect)
     k = coefficients(p, camera, display_window, pixel_aspect)
     frame = display_window.union(window)
@@ -205,8 +221,10 @@ def _geometry(p, camera, display_window, window, pixel_aspect, name):
     r_fold = monotonic_range(k, r_corner)
     check_fold(name, f"k1={k[0]:.6g}, k2={k[1]:.6g}, k3={k[2]:.6g}", r_fold, r_corner,
                "normalised by the focal length in pixels")
-    # The source frame's outline as the lens images it, for the fit scale.
-    bx, by = rect_boundary(display_window)
+    # The source frame's outline as the lens images it, for the fit scale (crop: the
+    # plate's, overscan included, so a margin the plate has is used before it scales).
+    bx, by = rect_boundary(frame if plate is None else plate) if p.fit == "crop" \
+        else rect_boundary(display_window)
     dxn, dyn = project((bx - cx) / fx, (by - cy) / fy, k)
     s_fit = fit_scale(p.fit, display_window, cx, cy, dxn * fx + cx, dyn * fy + cy)
     r_hi = r_fold if math.isfinite(r_fold) else _reach(k, r_corner * s_fit)
@@ -235,12 +253,12 @@ def _jacobian(x, y, g):
 
 
 def map_points(p, camera, display_window, window, pixel_aspect, ox, oy, *,
-               name="distortion", jacobian=False):
+               name="distortion", jacobian=False, plate=None):
     """Source points (frame coordinates, float64; NaN = no source) of output points
     ``(ox, oy)`` (frame coordinates, anywhere inside ``display_window`` or ``window``), and
     with ``jacobian`` their Jacobians d(source) / d(output) (..., 2, 2)."""
-    return _points(_geometry(p, camera, display_window, window, pixel_aspect, name), ox, oy,
-                   jacobian)
+    return _points(_geometry(p, camera, display_window, window, pixel_aspect, name, plate),
+                   ox, oy, jacobian)
 
 
 def _points(g, ox, oy, jacobian):
@@ -274,16 +292,16 @@ def _widest(g, rect, n: int = 33) -> float:
 
 
 def build_map(p, camera, display_window, window, pixel_aspect, *, name="distortion",
-              jacobian=False):
+              jacobian=False, plate=None):
     """Source points (frame coordinates, float64) for the pixel centres of ``window``.
 
     Returns ``(sx, sy, info)``; ``info`` holds the intrinsics, coefficients, fit scale, the
     count of output pixels without a source and, with ``jacobian``, the map's Jacobian
     d(source) / d(output) per pixel (``info["jacobian"]``, (h, w, 2, 2), analytic: the
     inverse of the model's Jacobian at the source point).  Raises ParamError if the radial
-    map folds over inside the frame.
+    map folds over inside the frame.  ``plate``: as in `_geometry`.
     """
-    g = _geometry(p, camera, display_window, window, pixel_aspect, name)
+    g = _geometry(p, camera, display_window, window, pixel_aspect, name, plate)
     out = _points(g, *pixel_centres(window), jacobian)
     sx, sy = out[:2]
     info = dict(fx=g["fx"], fy=g["fy"], cx=g["cx"], cy=g["cy"], k=g["k"],
@@ -330,13 +348,18 @@ class Distortion(Plugin):
             FloatParam("cy", 0.0, min=-1e6, max=1e6,
                        hint="Principal point y in OpenCV pixels from the display window's top; "
                             "0 = display window centre."),
-            ChoiceParam("fit", "none", choices=("none", "fit-all", "fill"),
-                        hint="none; fit-all = the whole source stays visible; fill = no "
-                             "undefined border."),
-            ChoiceParam("border", "black", choices=BORDERS,
-                        hint="What points outside the frame (display window) read: black "
-                             "(transparent), edge (clamp), mirror; inside the frame, outside "
-                             "the data window is transparent black."),
+            ChoiceParam("fit", "crop", choices=FITS,
+                        hint="crop = scale up just enough that no pixel of the display window "
+                             "reads past the plate (its overscan used first; 1 for a "
+                             "pincushion); none = keep the scale (a barrel reads past the "
+                             "plate: border); fit-all = the whole source stays visible; "
+                             "fill = the imaged source touches the frame."),
+            ChoiceParam("border", "edge", choices=BORDERS,
+                        hint="What points and filter taps outside the frame (display window, "
+                             "or the overscan where larger) read: edge (the edge texel "
+                             "repeated), mirror, black (transparent: darkens the frame's "
+                             "edge); inside the frame, outside the data window is transparent "
+                             "black."),
         ),
         quality=LEVELS,
     )
@@ -348,7 +371,7 @@ class Distortion(Plugin):
 
     def geometry(self, p, ctx):
         return _geometry(p, ctx.camera, ctx.display_window, ctx.source.window,
-                         ctx.pixel_aspect, "distortion")
+                         ctx.pixel_aspect, "distortion", plate_frame(ctx))
 
     def region_of_definition(self, p, ctx):
         # Output pixels read up to ~0.75 |J| + 4 texels from their source points (footprints
@@ -378,54 +401,57 @@ class Distortion(Plugin):
         return ctx.runtime.cache.get(("distortion.roi",) + frame_key(p, ctx) + (window,),
                                      build)
 
-    def host_map(self, rt, p, ctx):
+    def host_map(self, rt, p, ctx, plate):
         """The float64 source points of ``ctx.source``'s pixels (source-window coordinates,
         NaN = no source), their Jacobians and the map's info, kept in ``rt.cache`` (shared by
-        every level's device map)."""
+        every level's device map).  ``plate``: the frame the plate covers (`plate_frame` of
+        the step's context: ``ctx`` is the canvas's)."""
         src = ctx.source
 
         def build():
             sx, sy, info = build_map(p, ctx.camera, ctx.display_window, src.window,
-                                     ctx.pixel_aspect, jacobian=True)
+                                     ctx.pixel_aspect, jacobian=True, plate=plate)
             return sx - src.window.x0, sy - src.window.y0, info.pop("jacobian"), info
 
-        return rt.cache.get(("distortion.host_map",) + frame_key(p, ctx), build)
+        return rt.cache.get(("distortion.host_map",) + frame_key(p, ctx) + (plate,), build)
 
-    def device_map(self, rt, p, ctx, filter_name, double, rows=None):
+    def device_map(self, rt, p, ctx, filter_name, double, plate, rows=None):
         """The device map of one level, kept in ``rt.cache``: ``(map, info)``; float levels a
         :class:`clfx.fx.resample.DeviceFootprintMap` of their footprint filter; ``double``
         (reference) the float64 elliptical map (:func:`clfx.fx.resample.elliptical_map`).
         ``rows``: the `CanvasRows` of ``ctx.source``'s window (the canvas) to map (default
-        all: a tile maps its band's)."""
+        all: a tile maps its band's); ``plate`` as in `host_map`."""
         src = ctx.source
         rows = rows or CanvasRows.whole(src.window)
 
         def build():
             if rows.tiled or (not double and len(map_bands(src.height, src.pitch)) > 1):
-                return self.banded_map(rt, p, ctx, None if double else filter_name, rows)
-            sx, sy, jac, info = self.host_map(rt, p, ctx)
+                return self.banded_map(rt, p, ctx, None if double else filter_name, rows,
+                                       plate)
+            sx, sy, jac, info = self.host_map(rt, p, ctx, plate)
             if double:
                 return elliptical_map(rt, sx, sy, jac, src.pitch), info
             return FootprintMap(sx, sy, jac, filter_name, src.width, src.height, src.pitch,
                                 p.border).upload(rt), info
 
         key = "elliptical" if double else filter_name
-        return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (key,) + rows.key, build)
+        return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (plate, key) + rows.key,
+                            build)
 
     def prepare(self, rt, p, ctx):
         if not self.is_identity(p, ctx):
             lvl = self.level(ctx)
             self.device_map(rt, p, canvas_context(self, p, ctx, p.border), lvl.filter,
-                            rt.use_fp64(lvl.fp64))
+                            rt.use_fp64(lvl.fp64), plate_frame(ctx))
 
-    def banded_map(self, rt, p, ctx, filter_name, rows):
+    def banded_map(self, rt, p, ctx, filter_name, rows, plate):
         """A frame larger than one band (``clfx.fx.resample.map_bands``), or a tile's band
         of rows (``rows``): the footprint map built band by band from the same geometry (no
         float64 map of the whole frame is kept), or with ``filter_name`` None the reference's
         elliptical map of ``rows``: ``(map, info)``."""
         src = ctx.source
         g = _geometry(p, ctx.camera, ctx.display_window, src.window, ctx.pixel_aspect,
-                      "distortion")
+                      "distortion", plate)
         no_source = 0
 
         def points_of(y0, y1):
@@ -444,18 +470,18 @@ class Distortion(Plugin):
         return dmap, info
 
     def render(self, rt, p, ctx):
-        return on_canvas(self, rt, p, ctx, p.border,
-                         lambda c, sanitise, rows: self.render_canvas(rt, p, c, sanitise, rows))
+        return on_plate_canvas(self, rt, p, ctx, p.border)
 
-    def render_canvas(self, rt, p, ctx, sanitise, rows=None):
+    def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
         """The warp over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
-        a tile holds: ``rows``, the `CanvasRows` to compute, default all)."""
+        a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the
+        frame the plate covers (`on_plate_canvas`)."""
         src = ctx.source
         rows = rows or CanvasRows.whole(src.window)
         canvas = rows.canvas
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
-        dmap, info = self.device_map(rt, p, rows.context(ctx), lvl.filter, double, rows)
+        dmap, info = self.device_map(rt, p, rows.context(ctx), lvl.filter, double, plate, rows)
         if info["no_source"]:
             ctx.notes.append(f"distortion: {info['no_source']} px beyond the lens's reach "
                              f"left transparent")

@@ -23,6 +23,12 @@ the device, border quads through a second, checked kernel); the reference level 
 float64 displacement map and float64 tables in the kernel.  Vignetting is evaluated in the
 kernels (a short polynomial per pixel).
 
+The frame's edge: ``fit`` defaults to ``crop`` (as distortion's): a barrel lens reads past
+the plate towards the frame's edge, so the output is scaled up just enough that the display
+window reads inside the plate (overscan included; never below 1, so a pincushion keeps
+lensfun's scale 1), and ``border=edge`` gives filter taps past the edge the edge texel: no
+dark and no repeated rows at the border.  ``fit=none`` is lensfun's scale 1.
+
 The calibration is interpolated by lensfun itself (``lensfunpy.Lens.interpolate_*``) at the
 focal length, aperture and distance (0 = from the camera block); the crop factor comes from
 the camera block's sensor size.  The tests check the coordinates against lensfunpy's
@@ -37,11 +43,12 @@ import numpy as np
 from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
 from clfx.fx import lensdb
-from clfx.fx.resample import (BORDERS, CanvasRows, DevicePackedMap, PackedMap, ResampleLevel, band_window,
-                              canvas_context, check_fold, fit_scale, fold_radius, frame_key,
-                              kernel_defines, launch_packed, lut_lookup, map_bands, on_canvas,
-                              pixel_centres, radial_inverse, radial_inverse_fast, radial_lut,
-                              rect_boundary, upload_map, warp_interest, warp_region)
+from clfx.fx.resample import (BORDERS, FITS, CanvasRows, DevicePackedMap, PackedMap,
+                              ResampleLevel, band_window, canvas_context, check_fold, fit_scale,
+                              fold_radius, frame_key, kernel_defines, launch_packed, lut_lookup,
+                              map_bands, on_plate_canvas, pixel_centres, plate_frame,
+                              radial_inverse, radial_inverse_fast, radial_lut, rect_boundary,
+                              upload_map, warp_interest, warp_region)
 from clfx.host import Plugin, register
 
 LUT_SIZE = 1024
@@ -93,9 +100,11 @@ def settings(p, camera):
 
 
 def simulation_geometry(cal, norm, display_window, window, fit="none", distortion=True,
-                        points=None):
+                        points=None, plate=None):
     """Green source points (frame coordinates) for ``window``'s pixel centres (or for the
-    output ``points`` (xs, ys), frame coordinates), and info.
+    output ``points`` (xs, ys), frame coordinates), and info.  ``plate``: the frame the
+    source's pixels cover (`clfx.fx.resample.plate_frame`; default the display window),
+    whose imaged outline ``fit=crop`` fills the display window with.
 
     lensfun works in pixel-index coordinates of the display window (centres at integers):
     p = u - 0.5 - origin.  Returns ``(sx, sy, info)`` with sx = NaN where no source exists;
@@ -115,7 +124,9 @@ def simulation_geometry(cal, norm, display_window, window, fit="none", distortio
     name, terms = cal.distortion
     check_fold("lens", f"{name} distortion {tuple(round(t, 6) for t in terms)}", r_fold,
                r_corner, "lensfun: 1 = half the short side")
-    bx, by = rect_boundary(display_window)
+    # the imaged outline the fit scale fills the frame with (crop: the plate's, overscan
+    # included, so a margin the plate has is used before it scales)
+    bx, by = rect_boundary(plate if fit == "crop" and plate is not None else display_window)
     br = np.hypot(bx - ccx, by - ccy) * norm.scale
     with np.errstate(invalid="ignore", divide="ignore"):
         bs = np.where(br > 0, fwd(br) / np.where(br > 0, br, 1), 1.0)
@@ -130,12 +141,14 @@ def simulation_geometry(cal, norm, display_window, window, fit="none", distortio
     return ccx + dx * s, ccy + dy * s, info
 
 
-def forward_points(cal, norm, display_window, sx, sy, fit="none", distortion=True, tca=True):
+def forward_points(cal, norm, display_window, sx, sy, fit="none", distortion=True, tca=True,
+                   plate=None):
     """Where the output shows the source points ``(sx, sy)`` (frame coordinates) in each
     channel that moves differently: green (and alpha) through the distortion model, red and
     blue through their TCA model, then the distortion (the kernels' maps inverted)."""
     _, _, info = simulation_geometry(cal, norm, display_window, display_window, fit,
-                                     distortion, points=(np.zeros(1), np.zeros(1)))
+                                     distortion, points=(np.zeros(1), np.zeros(1)),
+                                     plate=plate)
     ccx, ccy = info["center"]
     dist = distortion_model(*cal.distortion) if distortion and cal.distortion else None
 
@@ -170,12 +183,12 @@ def tca_luts(cal, r_max):
 
 
 def channel_points(cal, norm, display_window, window, fit="none", distortion=True, tca=True,
-                   points=None):
+                   points=None, plate=None):
     """Host twin of the kernel's coordinates: {'red','green','blue'} -> (sx, sy) in frame
     coordinates, by direct bisection (no table), of ``window``'s pixel centres or of the
     output ``points``.  Used by the tests against lensfunpy and for regions of interest."""
     gx, gy, info = simulation_geometry(cal, norm, display_window, window, fit, distortion,
-                                       points)
+                                       points, plate)
     out = {"green": (gx, gy)}
     ccx, ccy = info["center"]
     for name, model in zip(("red", "blue"), tca_models(*cal.tca) if (tca and cal.tca) else []):
@@ -210,9 +223,12 @@ class Lens(Plugin):
             BoolParam("distortion", True, hint="Apply the lens's geometric distortion."),
             BoolParam("tca", True, hint="Apply its transverse chromatic aberration."),
             BoolParam("vignetting", True, hint="Apply its vignetting."),
-            ChoiceParam("fit", "none", choices=("none", "fit-all", "fill"),
-                        hint="none (lensfun scale 1); fit-all = whole source visible; fill = "
-                             "no undefined border."),
+            ChoiceParam("fit", "crop", choices=FITS,
+                        hint="crop = scale up just enough that no pixel of the display window "
+                             "reads past the plate (its overscan used first; 1 for a "
+                             "pincushion); none = lensfun scale 1 (a barrel reads past the "
+                             "plate: border); fit-all = whole source visible; fill = the "
+                             "imaged source touches the frame."),
             ChoiceParam("border", "edge", choices=BORDERS,
                         hint="What reads outside the frame (display window) return: black, edge "
                              "(clamp), mirror; inside the frame, outside the data window is "
@@ -231,7 +247,7 @@ class Lens(Plugin):
             return "distortion, tca and vignetting are all off"
         return None
 
-    def host_geometry(self, rt, p, ctx):
+    def host_geometry(self, rt, p, ctx, plate):
         """The geometry of this parameter set and frame (kept in ``rt.cache``): the kernel
         constants, the TCA tables and how to make every channel's source points for any
         band of rows; no whole-frame point array is kept (at 8K one is 265 MB a channel).
@@ -240,10 +256,11 @@ class Lens(Plugin):
         red and blue source points of output rows ``y0 <= y < y1``, source-window
         coordinates, texel centres at +0.5, NaN = no source), ``luts``, ``consts`` (ccx,
         ccy, lut_scale, vig_scale, vk1, vk2, vk3; centre in source-window coordinates),
-        ``flags`` (use_map, use_tca, use_vig) and ``notes``.
+        ``flags`` (use_map, use_tca, use_vig) and ``notes``.  ``plate``: the frame the
+        plate covers (`plate_frame` of the step's context: ``ctx`` is the canvas's).
         """
-        return rt.cache.get(("lens.geometry",) + frame_key(p, ctx),
-                            lambda: self._geometry(p, ctx))
+        return rt.cache.get(("lens.geometry",) + frame_key(p, ctx) + (plate,),
+                            lambda: self._geometry(p, ctx, plate))
 
     def calibration(self, p, ctx):
         """``(lens, cal, norm, focal)``: the lens, its calibration at this frame's settings
@@ -262,8 +279,9 @@ class Lens(Plugin):
             return ctx.source.window        # vignetting only: nothing moves
         # lensfun's models compress the source by well under 2x inside the frame: the
         # filters' reach covers their windows
+        plate = plate_frame(ctx)
         return warp_region(lambda xs, ys: forward_points(cal, norm, ctx.display_window, xs, ys,
-                                                         p.fit, use_map, use_tca),
+                                                         p.fit, use_map, use_tca, plate),
                            ctx, p.border)
 
     def region_of_interest(self, p, ctx, window):
@@ -272,14 +290,16 @@ class Lens(Plugin):
         if not (use_map or use_tca):
             return window
 
+        plate = plate_frame(ctx)
+
         def inverse(xs, ys):
             chans, _ = channel_points(cal, norm, ctx.display_window, window, p.fit, use_map,
-                                      use_tca, points=(xs, ys))
+                                      use_tca, points=(xs, ys), plate=plate)
             return list(chans.values())
 
         return warp_interest(inverse, window, 5)
 
-    def _geometry(self, p, ctx):
+    def _geometry(self, p, ctx, plate):
         src = ctx.source
         dw = ctx.display_window
         lens, cal, norm, focal = self.calibration(p, ctx)
@@ -299,11 +319,11 @@ class Lens(Plugin):
 
         def green(b0, b1):      # frame coordinates; the same numbers as a whole-frame call
             gx, gy, _ = simulation_geometry(cal, norm, dw, band_window(win, b0, b1), p.fit,
-                                            use_map)
+                                            use_map, plate=plate)
             return gx, gy
 
         _, _, info = simulation_geometry(cal, norm, dw, band_window(win, 0, min(1, win.height)),
-                                         p.fit, use_map)   # fold check, centre, fit scale
+                                         p.fit, use_map, plate=plate)   # fold, centre, fit
         ccx, ccy = info["center"]
         geo = dict(luts=None, lut_scale=0.0)
         if use_tca:
@@ -340,17 +360,17 @@ class Lens(Plugin):
                    flags=(use_map, use_tca, use_vig), notes=notes)
         return geo
 
-    def device_buffers(self, rt, p, ctx, double, rows=None):
+    def device_buffers(self, rt, p, ctx, double, plate, rows=None):
         """Device data, kept in ``rt.cache``: reference (``double``) ``(map, luts)``, float64
         buffers; float levels a :class:`clfx.fx.resample.DevicePackedMap` of green (and red,
         blue with TCA), built band by band (`PackedMap.device`), with ``maps`` = 0 when
         nothing moves (vignetting only).  ``rows``: the `CanvasRows` of ``ctx.source``'s
-        window (the canvas) to map (default all)."""
+        window (the canvas) to map (default all); ``plate`` as in `host_geometry`."""
         src = ctx.source
         rows = rows or CanvasRows.whole(src.window)
 
         def build():
-            geo = self.host_geometry(rt, p, ctx)
+            geo = self.host_geometry(rt, p, ctx, plate)
             use_map, use_tca, _ = geo["flags"]
             if double:
                 if not use_map:
@@ -365,29 +385,30 @@ class Lens(Plugin):
             return PackedMap.device(rt, geo["points"], src.width, src.height, src.pitch,
                                     rows.span)
 
-        return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (double,) + rows.key, build)
+        return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (plate, double) + rows.key,
+                            build)
 
     def prepare(self, rt, p, ctx):
         if not self.is_identity(p, ctx):
             lvl = self.level(ctx)
             self.device_buffers(rt, p, canvas_context(self, p, ctx, p.border),
-                                rt.use_fp64(lvl.fp64))
+                                rt.use_fp64(lvl.fp64), plate_frame(ctx))
 
     def render(self, rt, p, ctx):
-        return on_canvas(self, rt, p, ctx, p.border,
-                         lambda c, sanitise, rows: self.render_canvas(rt, p, c, sanitise, rows))
+        return on_plate_canvas(self, rt, p, ctx, p.border)
 
-    def render_canvas(self, rt, p, ctx, sanitise, rows=None):
+    def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
         """The lens over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
-        a tile holds: ``rows``, the `CanvasRows` to compute, default all)."""
+        a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the
+        frame the plate covers (`on_plate_canvas`)."""
         src = ctx.source
         rows = rows or CanvasRows.whole(src.window)
         canvas = rows.canvas
         lvl = self.level(ctx)
         double = rt.use_fp64(lvl.fp64)
         cctx = rows.context(ctx)
-        bufs = self.device_buffers(rt, p, cctx, double, rows)
-        geo = self.host_geometry(rt, p, cctx)
+        bufs = self.device_buffers(rt, p, cctx, double, plate, rows)
+        geo = self.host_geometry(rt, p, cctx, plate)
         use_map, use_tca, use_vig = geo["flags"]
         ctx.notes.extend(geo["notes"])
         defines = kernel_defines(lvl.filter, p.border, sanitise)

@@ -87,7 +87,7 @@ def oracle_args(p, w, h, pixel_aspect=1.0, camera=CAM):
 ])
 def test_map_agrees_with_opencv(coeffs):
     w, h = 640, 360
-    p = Distortion.params(**coeffs)
+    p = Distortion.params(fit="none", **coeffs)   # the model itself, unscaled
     win = Rect(0, 0, w, h)
     sx, sy, info = build_map(p, CAM, win, win, 1.0)
     fx, fy, cx, cy = info["fx"], info["fy"], info["cx"], info["cy"]
@@ -190,8 +190,11 @@ def test_fill_leaves_no_undefined_border_and_fit_all_keeps_everything(rt):
     sx, sy, _ = build_map(Distortion.params(amount=0.2, fit="fit-all"), Camera(), win, win, 1.0)
     # the whole source is visible: the sampled area reaches every source edge
     assert sx.min() <= 0.5 + 1e-6 or sx.max() >= w - 0.5 - 1e-6
-    none = Distortion().apply(rt, Distortion.params(amount=-0.2), src, quality="draft")
-    assert none[0, 0, 0] < 0.5                       # barrel without fit: black corners
+    none = Distortion().apply(rt, Distortion.params(amount=-0.2, fit="none", border="black"),
+                              src, quality="draft")
+    assert none[0, 0, 0] < 0.5                       # barrel without fit, black border: black
+    crop = Distortion().apply(rt, Distortion.params(amount=-0.2), src, quality="draft")
+    assert crop.min() > 0.999                        # the default (crop, edge): none
 
 
 def test_hdr_edge_does_not_ring(rt):
