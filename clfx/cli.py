@@ -122,8 +122,35 @@ class ClfxUsageError(click.UsageError):
         click.echo(f"clfx: error: {' '.join(self.format_message().split())}{where}", err=True)
 
 
-GROUP_OPTIONS = ("-q", "--quiet", "-v", "--verbose", "-vv", "--device")
-"""Options of the ``clfx`` group itself: given after a command, they are named as such."""
+GROUP_OPTIONS = ("--device",)
+"""Options of the ``clfx`` group itself that only it takes: given after a command, they are
+named as such.  ``-q`` and ``-v`` are taken anywhere (`_verbosity_options`)."""
+
+
+def _set_verbosity(ctx: click.Context, param, value) -> None:
+    """``-q`` / ``-v`` given after a command (``clfx render A B -q``): the same as before it.
+    Any ``-q`` wins over ``-v``."""
+    if not value:
+        return
+    obj = ctx.find_root().ensure_object(dict)
+    if param.name == "quiet":
+        obj["quiet"] = True
+    else:
+        obj["verbose"] = obj.get("verbose", 0) + value
+    obj["verbosity"] = 0 if obj.get("quiet") else 1 + obj.get("verbose", 0)
+    _compiler_messages(obj["verbosity"])
+
+
+def _verbosity_options(command: click.Command) -> None:
+    """Give ``command`` the group's ``-q`` and ``-v`` (hidden in its help), unless it has
+    options of those names itself."""
+    taken = {o for p in command.params for o in getattr(p, "opts", ())}
+    if not taken & {"-q", "--quiet"}:
+        command.params.append(click.Option(["-q", "--quiet"], is_flag=True, hidden=True,
+                                           expose_value=False, callback=_set_verbosity))
+    if not taken & {"-v", "--verbose"}:
+        command.params.append(click.Option(["-v", "--verbose"], count=True, hidden=True,
+                                           expose_value=False, callback=_set_verbosity))
 
 
 def _one_line_usage(exc: click.UsageError) -> click.UsageError:
@@ -142,6 +169,10 @@ def _one_line_usage(exc: click.UsageError) -> click.UsageError:
 class ClfxGroup(click.Group):
     """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1; the
     root group keeps the arguments it was given (stamped into outputs)."""
+
+    def add_command(self, cmd, name=None):
+        _verbosity_options(cmd)
+        super().add_command(cmd, name)
 
     def make_context(self, info_name, args, parent=None, **extra):
         argv = list(args)
@@ -203,6 +234,7 @@ def cli(ctx, verbose, quiet, device):
     """clfx: camera-defect effects (depth of field, motion blur, glare, grain, ...) for
     image sequences, on OpenCL."""
     ctx.ensure_object(dict)
+    ctx.obj.update(quiet=quiet, verbose=verbose)
     ctx.obj["verbosity"] = 0 if quiet else 1 + verbose
     ctx.obj["device"] = device
     _compiler_messages(ctx.obj["verbosity"])
@@ -659,7 +691,7 @@ def _progress(show: bool):
 @click.option("--size", default="640x360", show_default=True, help="WxH.")
 @click.option("--look", "look_name", default="default", show_default=True)
 @quality_option
-@click.option("--overwrite", is_flag=True,
+@click.option("-y", "--overwrite", is_flag=True,
               help="Replace files of an earlier demo in OUTDIR (default: refuse, like render).")
 @click.option("--explain", is_flag=True)
 @click.option("--json", "as_json", is_flag=True)

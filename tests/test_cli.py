@@ -187,7 +187,6 @@ def test_usage_error_exit_code_2():
     (["bench", "--looks", "cinma"], ["--looks", "unknown look 'cinma'"]),
     (["render", "a.exr", "b.exr", "--velocity-channels", "u"], ["--velocity-channels",
                                                                 "two channel names"]),
-    (["render", "a.exr", "b.exr", "-q"], ["-q goes before the command (clfx -q render ...)"]),
     (["render", "a.exr", "b.exr", "--device", "0:0"], ["--device goes before the command"]),
 ])
 def test_usage_errors_are_one_line_before_anything_runs(tmp_path, monkeypatch, args,

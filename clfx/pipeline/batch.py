@@ -556,7 +556,7 @@ class BatchPlan:
                                 and io.passes_mode != "drop",
                                 colorspace=io.colorspace, working_space=io.working_space,
                                 depth_path=job.depth, velocity_path=job.velocity,
-                                notify=lambda m, k: notes.append(("notice", m, k)))
+                                notify=lambda m, k: notes.append(("warning", m, k)))
         masks = [read_masks(self.look, f, job.frame,
                             notify=lambda m, k: notes.append(("warning", m, k)))
                  if self.look.masks() or self.raw_size is None else None for f in frames]
@@ -904,7 +904,8 @@ class Batch:
         from clfx.io.probe import probe as probe_file
 
         info = probe_file(jobs[0].input)
-        width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
+        part = info["beauty"]["part"] if info["beauty"] else 0   # pass-only: read refuses it
+        width = info["parts"][part]["display_window"]["width"]
         return self.look.camera.focal_length_px(width)
 
     def _check_masks(self, jobs: list[Job]) -> None:

