@@ -531,7 +531,7 @@ RAW = "-"
 @click.pass_context
 def render(ctx, input_path, output_path, look_name, look_from, assignments, workers, scheduler,
            chunk, fail_fast, **kw):
-    """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
+    """Render INPUT (file or sequence pattern like shot.#.exr) through a look to OUTPUT."""
     if look_name and look_from:
         raise click.UsageError("give --look or --look-from, not both")
     _check_raw_usage(input_path, output_path, kw.get("raw_size"))

@@ -65,3 +65,22 @@ def test_probe_shows_a_pass_only_file(tmp_path):
     # a render still refuses it, naming what it is
     r = run("render", path, tmp_path / "o.exr", code=1)
     assert "no beauty channels" in r.stderr and "depth pass only" in r.stderr
+
+
+# -- item 2: frame patterns ------------------------------------------------------------------
+def test_frame_patterns_on_the_command_line(rt, tmp_path):
+    """oiiotool's padding (# = 4 digits, @ = 1), the file a missing frame was looked for, and
+    one line for a Nuke-style ``####`` (16 digits here)."""
+    for f in (1, 2):
+        write_exr(tmp_path / f"in.{f:04d}.exr", rgba(seed=f))
+    run("apply", "vignette", tmp_path / "in.@@@@.exr", tmp_path / "o.#@.exr", "-q")
+    assert sorted(p.name for p in tmp_path.glob("o.*")) == ["o.00001.exr", "o.00002.exr"]
+    r = run("apply", "vignette", tmp_path / "in.#.exr", tmp_path / "p.#.exr", "--frames",
+            "1-3", code=1)
+    assert f"missing frame 3 of {tmp_path / 'in.#.exr'}: no file {tmp_path / 'in.0003.exr'}" \
+        in r.stderr, r.stderr
+    r = run("apply", "vignette", tmp_path / "in.####.exr", tmp_path / "q.#.exr", code=1)
+    assert "in.0000000000000001.exr" in r.stderr and "@@@@ or %04d" in r.stderr, r.stderr
+    r = run("-q", "apply", "vignette", tmp_path / "in.#.exr", tmp_path / "s.##.exr")
+    assert "s.##.exr: each # is 4 digits" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert (tmp_path / "s.00000001.exr").is_file()

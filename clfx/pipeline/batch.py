@@ -865,7 +865,9 @@ class Batch:
         pout = Pattern.parse(self.output_path)
         if pin.is_sequence and not pout.is_sequence:
             raise SequenceError(f"input {self.input_path} is a sequence but output "
-                                f"{self.output_path} has no frame token (use e.g. out.####.exr)")
+                                f"{self.output_path} has no frame token (use e.g. out.#.exr)")
+        self._say_padding(pin, pout, *(Pattern.parse(p) for p in (o.depth_path, o.velocity_path)
+                                       if p))
         inputs = resolve_inputs(pin, frames, skip_missing=o.skip_missing)
         if not inputs:
             raise SequenceError(f"no input frames found for {self.input_path}")
@@ -894,6 +896,16 @@ class Batch:
             first_frame_geometry(jobs[0].input)
         self.plan = replace(self.plan, jobs=jobs,
                             passes=o.passes.spec(self._radial_depth_focal_px(jobs)))
+
+    def _say_padding(self, *patterns) -> None:
+        """One line for each pattern whose ``#`` count differs from Nuke's meaning
+        (`clfx.io.sequence.hash_notice`: ``shot.####.exr`` is 16 digits here)."""
+        from clfx.io.sequence import hash_notice
+
+        for pattern in patterns:
+            message = hash_notice(pattern)
+            if message:
+                self.reporter.assumed(message, f"padding:{pattern.text}")
 
     def _radial_depth_focal_px(self, jobs) -> float | None:
         """Focal length in pixels for --depth-mode distance, from the look's camera block and
@@ -995,7 +1007,7 @@ class Batch:
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
-                                f"(add a frame token such as #### to the output)")
+                                f"(add a frame token such as # to the output)")
         folder = os.path.dirname(os.path.abspath(outs[0]))
         if not os.path.isdir(folder):
             try:
