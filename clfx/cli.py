@@ -367,16 +367,19 @@ def look():
 @click.option("--set", "assignments", multiple=True, metavar="K=V")
 @click.option("--frame", type=int, default=None, metavar="N",
               help="Resolve keyframed values at frame N.")
+@quality_option
 @click.option("--json", "as_json", is_flag=True)
-def look_show(name, assignments, frame, as_json):
+def look_show(name, assignments, frame, quality, as_json):
     """Print the resolved look (inheritance applied, defaults filled in); NAME is a look, a
-    YAML file or an output clfx rendered (its stamped look)."""
+    YAML file or an output clfx rendered (its stamped look).  Its params hash is the
+    ``clfx:paramsHash`` a render at ``--quality`` (default final) stamps."""
     from clfx.api import load_look
 
     full = load_look(name, set=assignments)
     lk = full if frame is None else full.at(frame)
     d = lk.describe()
-    d["params_hash"] = full.params_hash()
+    d["params_hash"] = full.params_hash(quality)
+    d["quality"] = quality or "final"
     if frame is not None:
         d["frame"] = frame
         d["values"] = full.values_at(frame)
@@ -385,7 +388,7 @@ def look_show(name, assignments, frame, as_json):
         return
     click.echo(f"{lk.name}: {lk.description}")
     click.echo(f"  file: {lk.source}" + (f"   base: {lk.base}" if lk.base else ""))
-    click.echo(f"  seed: {lk.seed}   params hash: {d['params_hash']}")
+    click.echo(f"  seed: {lk.seed}   params hash: {d['params_hash']} (at {d['quality']})")
     if frame is not None:
         click.echo(f"  at frame {frame}" + (": " + ", ".join(
             f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}"

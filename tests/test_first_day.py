@@ -84,3 +84,52 @@ def test_frame_patterns_on_the_command_line(rt, tmp_path):
     r = run("-q", "apply", "vignette", tmp_path / "in.#.exr", tmp_path / "s.##.exr")
     assert "s.##.exr: each # is 4 digits" in r.stderr and r.stderr.count("\n") == 1, r.stderr
     assert (tmp_path / "s.00000001.exr").is_file()
+
+
+# -- item 8: one hash for a look ---------------------------------------------------------------
+def stamp(path, name="clfx:paramsHash"):
+    from clfx.io.probe import header_attribute
+
+    return header_attribute(path, name)
+
+
+def test_look_show_prints_the_hash_renders_are_stamped_with(rt, tmp_path):
+    """The hash ``look show`` prints is the ``clfx:paramsHash`` of a render with the look (at
+    the same quality level), the one ``--json`` and ``--explain`` say, and the one of the
+    look read back from the output; the file's formatting does not change it."""
+    look = tmp_path / "grade.yaml"
+    look.write_text("name: grade\nseed: 3\neffects:\n  - effect: vignette\n"
+                    "    params: {amount: 0.4}\n  - effect: grain\n    quality: draft\n")
+    shown = json.loads(run("look", "show", look, "--json").stdout)["params_hash"]
+    src = write_exr(tmp_path / "in.exr", rgba())
+    r = run("render", src, tmp_path / "o.exr", "--look", look, "--json", "--explain")
+    assert stamp(tmp_path / "o.exr") == shown
+    summary = json.loads(r.stdout.splitlines()[-1])
+    assert summary["params_hash"] == shown and summary["quality"] == "final"
+    assert f"params hash {shown}" in r.stderr
+    # read back from the output: the same hash, and the same again through --look-from
+    assert json.loads(run("look", "show", tmp_path / "o.exr", "--json").stdout)[
+        "params_hash"] == shown
+    run("render", src, tmp_path / "again.exr", "--look-from", tmp_path / "o.exr", "-q")
+    assert stamp(tmp_path / "again.exr") == shown
+    # at another level: another hash, the same on both sides
+    draft = json.loads(run("look", "show", look, "--quality", "draft", "--json").stdout)
+    assert draft["params_hash"] != shown
+    run("render", src, tmp_path / "d.exr", "--look", look, "--quality", "draft", "-q")
+    assert stamp(tmp_path / "d.exr") == draft["params_hash"]
+    # the file's formatting (key order, a default spelt out, comments) is not hashed
+    same = tmp_path / "same.yaml"
+    same.write_text("# approved\nseed: 3\nname: other-name\neffects:\n  - effect: vignette\n"
+                    "    params: {amount: 0.4}\n  - {effect: grain, quality: draft}\n")
+    assert json.loads(run("look", "show", same, "--json").stdout)["params_hash"] == shown
+
+
+def test_look_show_cinema_hash_is_its_render_stamp():
+    """cinema's shown hash was 6ffbc746... and its renders' d836a463... (issue 33 item 8):
+    the look as shown and as a render resolves it hash the same."""
+    from clfx.pipeline.batch import resolve_quality
+    from clfx.pipeline.presets import load_look
+
+    look = load_look("cinema")
+    shown = json.loads(run("look", "show", "cinema", "--json").stdout)["params_hash"]
+    assert shown == resolve_quality(look, None)[0].params_hash() == look.params_hash("final")

@@ -455,13 +455,10 @@ def resolve_quality(look: Look, quality: str | None) -> tuple[Look, str]:
     """The render's quality level (``quality``, else ``final``) and ``look`` with every
     step's level resolved (its own override, else the render's): the one place a batch
     resolves it, so the stamped look (``clfx:lookJSON``) renders the same pixels again."""
-    from dataclasses import replace as copy
-
     from clfx.pipeline.look import DEFAULT_QUALITY
 
     level = quality or DEFAULT_QUALITY
-    steps = [s if s.quality else copy(s, quality=level) for s in look.steps]
-    return copy(look, steps=steps), level
+    return look.at_quality(level), level
 
 
 @dataclass(frozen=True)
@@ -889,6 +886,7 @@ class Batch:
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_masks(jobs)
         self.plan = BatchPlan.of(self.look, o, reads=self._reads(jobs))   # what is read: checked
+        self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_outputs(jobs)
         self._check_log(jobs)
         jobs = tuple(j for j in jobs if j.frame not in self.skipped_existing)
@@ -1099,4 +1097,5 @@ class Batch:
         self.mask_files = sorted({f for _, m in self.look.masks() for f in [m.file] if f})
         self.plan = BatchPlan.of(self.look, self.options, reads=self._reads([]),
                                  raw_size=raw_size)
+        self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_log()

@@ -137,6 +137,14 @@ class Reporter:
         self._said: set[str] = set()       # warning texts and notice keys said
         self._log = None
         self._t0 = time.perf_counter()
+        self.params_hash: str | None = None    # the stamped clfx:paramsHash (`stamped`)
+        self.quality: str | None = None
+        self._headed = False
+
+    def stamped(self, params_hash: str, quality: str) -> None:
+        """The look's hash as every output is stamped with it (`Look.params_hash`, the
+        render's level resolved) and that level: said by ``--explain`` and the summary."""
+        self.params_hash, self.quality = params_hash, quality
 
     def start(self, total: int | None) -> None:
         """The render starts now (its wall time counts from here), ``total`` frames."""
@@ -214,6 +222,10 @@ class Reporter:
                 print(json.dumps(record), flush=True)
             text = report.explain() if o.explain or self._log is not None else ""
             if o.explain:
+                if not self._headed and self.params_hash:
+                    self._headed = True
+                    self.err(f"look {self.look.name!r} at {self.quality}: params hash "
+                             f"{self.params_hash}")
                 self.err(text)
             self.log(record, text)
             if result.skipped:
@@ -235,7 +247,8 @@ class Reporter:
         wall = time.perf_counter() - self._t0
         render_s = wall - (cluster.startup_s if cluster else 0.0)
         n = len(reports)
-        summary = {"summary": True, "look": self.look.name, "frames": n,
+        summary = {"summary": True, "look": self.look.name, "params_hash": self.params_hash,
+                   "quality": self.quality, "frames": n,
                    "skipped_existing": skipped_existing + len(self.skipped),
                    "wall_s": round(wall, 3),
                    "fps": round(n / render_s, 3) if render_s > 0 and n else None,
