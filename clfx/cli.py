@@ -380,6 +380,10 @@ def look_show(name, assignments, frame, quality, as_json):
     d = lk.describe()
     d["params_hash"] = full.params_hash(quality)
     d["quality"] = quality or "final"
+    for step, shown in zip(lk.steps, d["effects"]):
+        shown["from"] = step.origin or lk.name
+        if step.changed_in:
+            shown["changed_in"] = list(step.changed_in)
     if frame is not None:
         d["frame"] = frame
         d["values"] = full.values_at(frame)
@@ -397,14 +401,26 @@ def look_show(name, assignments, frame, quality, as_json):
     for i, s in enumerate(d["effects"], 1):
         q = f" (quality {s['quality']})" if "quality" in s else ""
         off = " (disabled)" if s.get("enabled") is False else ""
-        click.echo(f"  {i}. {s.get('id', s['effect'])}: {s['effect']}{q}{off}"
-                   if "id" in s else f"  {i}. {s['effect']}{q}{off}")
+        click.echo((f"  {i}. {s.get('id', s['effect'])}: {s['effect']}{q}{off}"
+                    if "id" in s else f"  {i}. {s['effect']}{q}{off}") + _step_origin(s, lk.name))
         if "mask" in s:
             click.echo(f"       mask: {s['mask']}")
         if s.get("missing_passes") == "skip":
             click.echo("       missing passes: skip")
         for k, v in s["params"].items():
             click.echo(f"       {k} = {v!r}")
+
+
+def _step_origin(shown: dict, name: str) -> str:
+    """``look show``'s mark of a step: ``[own]``, ``[inherited from BASE]``, ``[from BASE,
+    changed here]``."""
+    changed = [c for c in shown.get("changed_in", ()) if c != shown["from"]]
+    if shown["from"] == name:
+        return "  [own]"
+    if not changed:
+        return f"  [inherited from {shown['from']}]"
+    where = ", ".join("here" if c == name else f"in {c}" for c in changed)
+    return f"  [inherited from {shown['from']}, changed {where}]"
 
 
 @cli.command()

@@ -133,3 +133,62 @@ def test_look_show_cinema_hash_is_its_render_stamp():
     look = load_look("cinema")
     shown = json.loads(run("look", "show", "cinema", "--json").stdout)["params_hash"]
     assert shown == resolve_quality(look, None)[0].params_hash() == look.params_hash("final")
+
+
+# -- item 3: placing a step in an inherited look ---------------------------------------------
+def look_file(tmp_path, name, text):
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    return path
+
+
+def steps_of(path):
+    return [(s["effect"] if "id" not in s else s["id"], s["from"])
+            for s in json.loads(run("look", "show", path, "--json").stdout)["effects"]]
+
+
+def test_before_and_after_place_a_step_in_an_inherited_look(tmp_path):
+    child = look_file(tmp_path, "child", "name: child\nbase: cinema\neffects:\n"
+                      "  - effect: halation\n    before: grain\n"
+                      "  - effect: vignette\n    params: {amount: 0.2}\n"
+                      "  - effect: dof\n    after: distortion\n"
+                      "  - effect: glare\n    enabled: false\n")
+    got = steps_of(child)
+    assert [s for s, _ in got] == ["motion_blur", "streaks", "chromatic_aberration",
+                                   "distortion", "dof", "vignette", "halation", "grain"]
+    assert dict(got)["halation"] == "child" and dict(got)["grain"] == "cinema"
+    text = run("look", "show", child).stdout
+    assert "halation  [own]" in text and "grain  [inherited from cinema]" in text
+    assert "vignette  [inherited from cinema, changed here]" in text
+    # the moved step keeps its parameters
+    from clfx.pipeline.presets import load_look
+
+    base, moved = load_look("cinema"), load_look(str(child))
+    dof = lambda look: next(s for s in look.steps if s.effect == "dof")  # noqa: E731
+    assert dof(moved).params == dof(base).params
+
+
+@pytest.mark.parametrize("entries, fragments", [
+    ("  - effect: halation\n    before: halo\n",
+     [":5: effects[0].before: no step 'halo'", "(steps: dof,"]),
+    ("  - {effect: halation, before: grain, after: dof}\n",
+     [":4: effects[0].after: give before: or after:, not both"]),
+    ("  - effect: halation\n    enabled: false\n",
+     [":5: effects[0].enabled: enabled: false drops nothing", "no step 'halation'"]),
+])
+def test_placing_a_step_names_the_key_and_line(tmp_path, entries, fragments):
+    child = look_file(tmp_path, "child", "name: child\nbase: cinema\neffects:\n" + entries)
+    r = run("look", "show", child, code=1)
+    for fragment in fragments:
+        assert fragment in r.stderr, r.stderr
+
+
+def test_a_step_named_by_an_effect_two_steps_have_is_ambiguous(tmp_path):
+    look_file(tmp_path, "stars", "name: stars\neffects:\n"
+              "  - {effect: streaks, id: star}\n  - {effect: streaks, id: spikes}\n")
+    child = look_file(tmp_path, "child", f"name: child\nbase: {tmp_path / 'stars.yaml'}\n"
+                      "effects:\n  - effect: halation\n    after: streaks\n")
+    r = run("look", "show", child, code=1)
+    assert ":5: effects[0].after: 'streaks' is ambiguous: steps star, spikes" in r.stderr
+    child.write_text(child.read_text().replace("after: streaks", "after: star"))
+    assert [s for s, _ in steps_of(child)] == ["star", "halation", "spikes"]

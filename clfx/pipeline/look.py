@@ -74,6 +74,10 @@ class Step:
         the first key, :meth:`at` the values of a frame.
     plugin : Plugin
         The effect (made from ``effect`` unless given, e.g. an unregistered test plugin).
+    origin : str
+        The look whose file added the step ("" when built in code); ``changed_in``: the
+        looks inheriting it that changed it, in order (``clfx look show`` marks them).
+        Neither is part of the step's value (nor of the look's hash).
     """
 
     effect: str
@@ -85,6 +89,8 @@ class Step:
     mask: MaskSpec | None = None
     animated: tuple[tuple[str, Animated], ...] = ()
     plugin: Plugin | None = field(default=None, compare=False, repr=False)
+    origin: str = field(default="", compare=False, repr=False)
+    changed_in: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     def __post_init__(self):
         if self.missing_passes not in MISSING_PASSES:
