@@ -246,8 +246,10 @@ def _compiler_messages(verbosity: int) -> None:
     whole build log."""
     import warnings
 
+    from clfx.device import runtime
     from clfx.device.runtime import KernelBuildWarning
 
+    runtime.cold_build_notice = _cold_build_notice if verbosity > 0 else None
     if verbosity >= 2:
         os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "1")
         warnings.filterwarnings("always", category=KernelBuildWarning)
@@ -256,6 +258,23 @@ def _compiler_messages(verbosity: int) -> None:
         # pyopencl's own category, without importing pyopencl (slow) before it is needed
         warnings.filterwarnings("ignore", message=r"(?s).*(Non-empty compiler output|"
                                 r"From-source build succeeded|Built kernel retrieved)")
+
+
+COLD_BUILD_S_PER_STEP = 7
+"""Seconds a cold kernel cache adds per step of a look, roughly (the cinema look's 8 steps at
+1920x1080: 65 s cold, 7.3 s warm, on the 2-core PoCL machine): the ``~N s`` of the notice."""
+
+_cold_steps: list[int] = []   # steps of the look this command renders (`_run_batch`)
+
+
+def _cold_build_notice(rt) -> None:
+    """Said once per process, before its first compile on a cold kernel cache (not with -q):
+    why the first render is slow and where the compiled kernels are kept."""
+    where = rt.kernel_cache_dir
+    kept = f"cached in {where}" if where else "cached by the OpenCL driver"
+    eta = f": ~{COLD_BUILD_S_PER_STEP * _cold_steps[-1]} s" if _cold_steps else ""
+    click.echo(f"clfx: compiling kernels for {rt.description} once ({kept}){eta}; "
+               f"`clfx prebuild` does it ahead of renders", err=True)
 
 
 # -- inspection ----------------------------------------------------------------------------
@@ -640,6 +659,7 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
     from clfx.api import render as render_api
 
     verbosity = ctx.obj.get("verbosity", 1)
+    _cold_steps.append(max(1, len(lk.active_steps())))
     show = verbosity > 0 and sys.stderr.isatty() and not options.as_json
     with _progress(show) as on_frame:
         render_api(input_path, output_path, lk, options=options, verbosity=verbosity,
@@ -824,6 +844,44 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
         click.echo(json.dumps(results, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
     else:
         click.echo(table)
+
+
+@cli.command()
+@click.option("--looks", default="all", show_default=True, metavar="A,B|all",
+              help="Looks (names or files); all: every look `clfx looks` lists.")
+@click.option("--quality", "levels", default="final", show_default=True,
+              metavar="LEVEL,...|all", help="Quality levels: draft, preview, final, reference.")
+@click.option("--size", default="640x360", show_default=True,
+              help="WxH of the frame rendered: the plates' size also warms PoCL's "
+                   "work-group code for it.")
+@click.pass_context
+def prebuild(ctx, looks, levels, size):
+    """Compile the kernels of looks at quality levels into the kernel cache, ahead of renders
+    (e.g. when a farm node's image is built): renders one demo frame through each."""
+    import time
+
+    from clfx.device import runtime
+    from clfx.pipeline.presets import available_looks
+    from clfx.prebuild import levels_of, prebuild as run_prebuild
+
+    w, h = _parse_size(size)
+    try:
+        level_list = levels_of(levels)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--quality") from None
+    names = list(available_looks()) if looks == "all" else looks.split(",")
+    _bench_looks(ctx, None, ",".join(names))
+    rt = _runtime(ctx)
+    runtime.cold_build_notice = None      # compiling is what it is asked to do: said below
+    where = rt.kernel_cache_dir or "the OpenCL driver's cache"
+    click.echo(f"clfx prebuild: {len(names)} look(s) at {', '.join(level_list)}, {w}x{h}, "
+               f"on {rt.description}, into {where}")
+    t0 = time.perf_counter()
+    rows = run_prebuild(rt, names, level_list, w, h, log=click.echo)
+    total = time.perf_counter() - t0
+    click.echo(f"clfx prebuild: {sum(r['compiled'] for r in rows)} program(s) compiled, "
+               f"{sum(r['programs'] - r['compiled'] for r in rows)} already cached, "
+               f"in {total:.1f} s")
 
 
 def _parse_size(text: str) -> tuple[int, int]:

@@ -192,3 +192,77 @@ def test_a_step_named_by_an_effect_two_steps_have_is_ambiguous(tmp_path):
     assert ":5: effects[0].after: 'streaks' is ambiguous: steps star, spikes" in r.stderr
     child.write_text(child.read_text().replace("after: streaks", "after: star"))
     assert [s for s, _ in steps_of(child)] == ["star", "halation", "spikes"]
+
+
+# -- item 1: the kernel cache ----------------------------------------------------------------
+COLD = "clfx: compiling kernels for "
+
+
+def clfx_cold(cache, *args):
+    """``clfx ARGS`` in a subprocess whose kernel cache is ``cache`` (PoCL's work-group
+    specialisation as a render has it, not the suite's)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k != "POCL_WORK_GROUP_SPECIALIZATION"}
+    env.update(PYTHONPATH=str(root), POCL_CACHE_DIR=str(cache))
+    proc = subprocess.run([sys.executable, "-m", "clfx.cli", *map(str, args)],
+                          capture_output=True, text=True, env=env, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def kernel_binaries(cache) -> set:
+    """PoCL's compiled work-group code in ``cache`` (PROGRAM/KERNEL/VARIANT/KERNEL.so)."""
+    return {str(p.relative_to(cache)) for p in cache.rglob("*.so")}
+
+
+def test_a_cold_kernel_cache_is_said_once_and_a_warm_one_not(rt, tmp_path):
+    src = write_exr(tmp_path / "in.exr", rgba())
+    cache = tmp_path / "cache"
+    cold = clfx_cold(cache, "apply", "vignette", src, tmp_path / "a.exr")
+    lines = [ln for ln in cold.stderr.splitlines() if ln.startswith(COLD)]
+    assert len(lines) == 1 and f"(cached in {cache})" in lines[0], cold.stderr
+    warm = clfx_cold(cache, "apply", "vignette", src, tmp_path / "b.exr")
+    assert COLD not in warm.stderr, warm.stderr
+    quiet = clfx_cold(tmp_path / "other", "apply", "vignette", src, tmp_path / "c.exr", "-q")
+    assert quiet.stderr == ""
+
+
+def test_prebuild_then_render_at_another_size_compiles_nothing(rt, tmp_path):
+    """``clfx prebuild`` fills the kernel cache: a render after it says nothing about
+    compiling and adds no program and no work-group code, at another frame size too."""
+    look = tmp_path / "vig.yaml"
+    look.write_text("name: vig\neffects:\n  - effect: vignette\n    params: {amount: 0.3}\n")
+    cache = tmp_path / "cache"
+    built = clfx_cold(cache, "prebuild", "--looks", look, "--quality", "final,draft",
+                      "--size", "48x32")
+    assert "vig" in built.stdout and "final" in built.stdout and "draft" in built.stdout
+    assert "program(s) compiled" in built.stdout and COLD not in built.stderr
+    before = kernel_binaries(cache)
+    for h, w in ((12, 16), (37, 53)):
+        src = write_exr(tmp_path / f"in{w}.exr", rgba(h, w))
+        r = clfx_cold(cache, "render", src, tmp_path / f"o{w}.exr", "--look", look)
+        assert COLD not in r.stderr, r.stderr
+    assert kernel_binaries(cache) == before
+
+
+def test_no_program_is_built_for_a_second_frame_size(rt):
+    """A look's programs do not depend on the frame's size: a second size builds none.
+    (Some effects pick an algorithm by size class, each its own program: glare's small PSFs
+    gather directly, large ones take the FFT; a few such variants, not one per size.)"""
+    import clfx
+
+    look = {"effects": [{"effect": "vignette"}, {"effect": "grain"},
+                        {"effect": "chromatic_aberration"}]}
+    sizes = [(24, 40), (45, 71)]
+    counts = []
+    for h, w in sizes:
+        first = len(rt.builds)
+        px = np.random.default_rng(h).uniform(0.0, 8.0, (h, w, 4)).astype(np.float32)
+        clfx.render_array(px, look)
+        counts.append(rt.builds[first:])
+    assert counts[1] == [], counts[1]
