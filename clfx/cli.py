@@ -249,7 +249,8 @@ def _compiler_messages(verbosity: int) -> None:
     from clfx.device import runtime
     from clfx.device.runtime import KernelBuildWarning
 
-    runtime.cold_build_notice = _cold_build_notice if verbosity > 0 else None
+    said = verbosity > 0 and os.environ.get("CLFX_COLD_NOTICE", "1") != "0"
+    runtime.cold_build_notice = _cold_build_notice if said else None
     if verbosity >= 2:
         os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "1")
         warnings.filterwarnings("always", category=KernelBuildWarning)
@@ -268,8 +269,9 @@ _cold_steps: list[int] = []   # steps of the look this command renders (`_run_ba
 
 
 def _cold_build_notice(rt) -> None:
-    """Said once per process, before its first compile on a cold kernel cache (not with -q):
-    why the first render is slow and where the compiled kernels are kept."""
+    """Said once per process, before its first compile on a cold kernel cache (not with -q,
+    nor with ``CLFX_COLD_NOTICE=0``): why the first render is slow and where the compiled
+    kernels are kept."""
     where = rt.kernel_cache_dir
     kept = f"cached in {where}" if where else "cached by the OpenCL driver"
     eta = f": ~{COLD_BUILD_S_PER_STEP * _cold_steps[-1]} s" if _cold_steps else ""

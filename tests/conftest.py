@@ -12,6 +12,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("CLFX_SHARED_DATA", ROOT.parent / "shared" / "data"))
 EXR_IMAGES = SHARED_DATA / "openexr-images"
 
+os.environ.setdefault("CLFX_COLD_NOTICE", "0")
+"""The command line's "compiling kernels ... once" line stays out of the in-process CLI tests'
+stderr on CI's cold kernel cache (tests/test_first_day.py checks it in subprocesses)."""
 os.environ.setdefault("POCL_WORK_GROUP_SPECIALIZATION", "0")
 """PoCL compiles one work-group function per kernel for any local size, not one per local size
 and grid class: the suite renders the same kernels at many frame sizes (odd shapes, crops,

@@ -208,7 +208,7 @@ def clfx_cold(cache, *args):
 
     root = Path(__file__).resolve().parents[1]
     env = {k: v for k, v in os.environ.items() if k != "POCL_WORK_GROUP_SPECIALIZATION"}
-    env.update(PYTHONPATH=str(root), POCL_CACHE_DIR=str(cache))
+    env.update(PYTHONPATH=str(root), POCL_CACHE_DIR=str(cache), CLFX_COLD_NOTICE="1")
     proc = subprocess.run([sys.executable, "-m", "clfx.cli", *map(str, args)],
                           capture_output=True, text=True, env=env, timeout=900)
     assert proc.returncode == 0, proc.stderr
