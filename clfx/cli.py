@@ -8,7 +8,9 @@ stdin or stdout, or a write to stdout that fails (a full disk), is one error lin
 code 1.
 
 stdout carries only data (``--json`` lines, listings); progress and logs go to stderr, and
-progress is shown only when stderr is a terminal and ``-q`` is not given.
+progress is shown only when stderr is a terminal and ``-q`` is not given.  ``-q`` and ``-v``
+may come before or after the command (``clfx render A B -q``); ``-q`` keeps the warnings
+about what clfx assumed (a depth pass's "no hit" convention, ``####`` as 16 digits).
 """
 from __future__ import annotations
 
