@@ -21,7 +21,7 @@ Example::
 
     import clfx
     look = clfx.load_look("cinema", set=["camera.focus_distance=1001:2.0,1040:5.5"])
-    result = clfx.render_sequence("shot.####.exr", "out/shot.####.exr", look,
+    result = clfx.render_sequence("shot.#.exr", "out/shot.#.exr", look,
                                   frames="1001-1040", overwrite=True)
     print(result.summary["fps"], result.reports[0].as_dict()["ran"])
 

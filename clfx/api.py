@@ -329,7 +329,7 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     Parameters
     ----------
     input, output : str or path
-        Files or patterns (``shot.####.exr``, ``shot.%04d.exr``, ``shot.$F4.exr``); ``"-"``
+        Files or patterns (``shot.#.exr``, ``shot.%04d.exr``, ``shot.$F4.exr``); ``"-"``
         for raw gbrpf32le frames on stdin/stdout (``raw_size="WxH"``).
     look : str, dict or Look
         See :func:`load_look`; ``set`` applies overrides to it.
@@ -396,7 +396,7 @@ def render_file(input, output, look: str | dict | Look = "default", **kw) -> Ren
 
 def render_sequence(input, output, look: str | dict | Look = "default", *,
                     frames: str | None = None, **kw) -> RenderResult:
-    """Render a frame sequence (``shot.####.exr`` -> ``out/shot.####.exr``), ``frames``
+    """Render a frame sequence (``shot.#.exr`` -> ``out/shot.#.exr``), ``frames``
     like ``"1001-1100"`` (default: every frame on disk).  Keywords: see :func:`render`."""
     if frames is not None:
         kw["frames"] = frames

@@ -8,7 +8,9 @@ stdin or stdout, or a write to stdout that fails (a full disk), is one error lin
 code 1.
 
 stdout carries only data (``--json`` lines, listings); progress and logs go to stderr, and
-progress is shown only when stderr is a terminal and ``-q`` is not given.
+progress is shown only when stderr is a terminal and ``-q`` is not given.  ``-q`` and ``-v``
+may come before or after the command (``clfx render A B -q``); ``-q`` keeps the warnings
+about what clfx assumed (a depth pass's "no hit" convention, ``####`` as 16 digits).
 """
 from __future__ import annotations
 
@@ -122,8 +124,35 @@ class ClfxUsageError(click.UsageError):
         click.echo(f"clfx: error: {' '.join(self.format_message().split())}{where}", err=True)
 
 
-GROUP_OPTIONS = ("-q", "--quiet", "-v", "--verbose", "-vv", "--device")
-"""Options of the ``clfx`` group itself: given after a command, they are named as such."""
+GROUP_OPTIONS = ("--device",)
+"""Options of the ``clfx`` group itself that only it takes: given after a command, they are
+named as such.  ``-q`` and ``-v`` are taken anywhere (`_verbosity_options`)."""
+
+
+def _set_verbosity(ctx: click.Context, param, value) -> None:
+    """``-q`` / ``-v`` given after a command (``clfx render A B -q``): the same as before it.
+    Any ``-q`` wins over ``-v``."""
+    if not value:
+        return
+    obj = ctx.find_root().ensure_object(dict)
+    if param.name == "quiet":
+        obj["quiet"] = True
+    else:
+        obj["verbose"] = obj.get("verbose", 0) + value
+    obj["verbosity"] = 0 if obj.get("quiet") else 1 + obj.get("verbose", 0)
+    _compiler_messages(obj["verbosity"])
+
+
+def _verbosity_options(command: click.Command) -> None:
+    """Give ``command`` the group's ``-q`` and ``-v`` (hidden in its help), unless it has
+    options of those names itself."""
+    taken = {o for p in command.params for o in getattr(p, "opts", ())}
+    if not taken & {"-q", "--quiet"}:
+        command.params.append(click.Option(["-q", "--quiet"], is_flag=True, hidden=True,
+                                           expose_value=False, callback=_set_verbosity))
+    if not taken & {"-v", "--verbose"}:
+        command.params.append(click.Option(["-v", "--verbose"], count=True, hidden=True,
+                                           expose_value=False, callback=_set_verbosity))
 
 
 def _one_line_usage(exc: click.UsageError) -> click.UsageError:
@@ -142,6 +171,10 @@ def _one_line_usage(exc: click.UsageError) -> click.UsageError:
 class ClfxGroup(click.Group):
     """Turns every ClfxError raised by a subcommand into a one-line error, exit code 1; the
     root group keeps the arguments it was given (stamped into outputs)."""
+
+    def add_command(self, cmd, name=None):
+        _verbosity_options(cmd)
+        super().add_command(cmd, name)
 
     def make_context(self, info_name, args, parent=None, **extra):
         argv = list(args)
@@ -203,6 +236,7 @@ def cli(ctx, verbose, quiet, device):
     """clfx: camera-defect effects (depth of field, motion blur, glare, grain, ...) for
     image sequences, on OpenCL."""
     ctx.ensure_object(dict)
+    ctx.obj.update(quiet=quiet, verbose=verbose)
     ctx.obj["verbosity"] = 0 if quiet else 1 + verbose
     ctx.obj["device"] = device
     _compiler_messages(ctx.obj["verbosity"])
@@ -214,8 +248,11 @@ def _compiler_messages(verbosity: int) -> None:
     whole build log."""
     import warnings
 
+    from clfx.device import runtime
     from clfx.device.runtime import KernelBuildWarning
 
+    said = verbosity > 0 and os.environ.get("CLFX_COLD_NOTICE", "1") != "0"
+    runtime.cold_build_notice = _cold_build_notice if said else None
     if verbosity >= 2:
         os.environ.setdefault("PYOPENCL_COMPILER_OUTPUT", "1")
         warnings.filterwarnings("always", category=KernelBuildWarning)
@@ -224,6 +261,24 @@ def _compiler_messages(verbosity: int) -> None:
         # pyopencl's own category, without importing pyopencl (slow) before it is needed
         warnings.filterwarnings("ignore", message=r"(?s).*(Non-empty compiler output|"
                                 r"From-source build succeeded|Built kernel retrieved)")
+
+
+COLD_BUILD_S_PER_STEP = 7
+"""Seconds a cold kernel cache adds per step of a look, roughly (the cinema look's 8 steps at
+1920x1080: 65 s cold, 7.3 s warm, on the 2-core PoCL machine): the ``~N s`` of the notice."""
+
+_cold_steps: list[int] = []   # steps of the look this command renders (`_run_batch`)
+
+
+def _cold_build_notice(rt) -> None:
+    """Said once per process, before its first compile on a cold kernel cache (not with -q,
+    nor with ``CLFX_COLD_NOTICE=0``): why the first render is slow and where the compiled
+    kernels are kept."""
+    where = rt.kernel_cache_dir
+    kept = f"cached in {where}" if where else "cached by the OpenCL driver"
+    eta = f": ~{COLD_BUILD_S_PER_STEP * _cold_steps[-1]} s" if _cold_steps else ""
+    click.echo(f"clfx: compiling kernels for {rt.description} once ({kept}){eta}; "
+               f"`clfx prebuild` does it ahead of renders", err=True)
 
 
 # -- inspection ----------------------------------------------------------------------------
@@ -335,16 +390,23 @@ def look():
 @click.option("--set", "assignments", multiple=True, metavar="K=V")
 @click.option("--frame", type=int, default=None, metavar="N",
               help="Resolve keyframed values at frame N.")
+@quality_option
 @click.option("--json", "as_json", is_flag=True)
-def look_show(name, assignments, frame, as_json):
+def look_show(name, assignments, frame, quality, as_json):
     """Print the resolved look (inheritance applied, defaults filled in); NAME is a look, a
-    YAML file or an output clfx rendered (its stamped look)."""
+    YAML file or an output clfx rendered (its stamped look).  Its params hash is the
+    ``clfx:paramsHash`` a render at ``--quality`` (default final) stamps."""
     from clfx.api import load_look
 
     full = load_look(name, set=assignments)
     lk = full if frame is None else full.at(frame)
     d = lk.describe()
-    d["params_hash"] = full.params_hash()
+    d["params_hash"] = full.params_hash(quality)
+    d["quality"] = quality or "final"
+    for step, shown in zip(lk.steps, d["effects"]):
+        shown["from"] = step.origin or lk.name
+        if step.changed_in:
+            shown["changed_in"] = list(step.changed_in)
     if frame is not None:
         d["frame"] = frame
         d["values"] = full.values_at(frame)
@@ -353,7 +415,7 @@ def look_show(name, assignments, frame, as_json):
         return
     click.echo(f"{lk.name}: {lk.description}")
     click.echo(f"  file: {lk.source}" + (f"   base: {lk.base}" if lk.base else ""))
-    click.echo(f"  seed: {lk.seed}   params hash: {d['params_hash']}")
+    click.echo(f"  seed: {lk.seed}   params hash: {d['params_hash']} (at {d['quality']})")
     if frame is not None:
         click.echo(f"  at frame {frame}" + (": " + ", ".join(
             f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}"
@@ -362,14 +424,26 @@ def look_show(name, assignments, frame, as_json):
     for i, s in enumerate(d["effects"], 1):
         q = f" (quality {s['quality']})" if "quality" in s else ""
         off = " (disabled)" if s.get("enabled") is False else ""
-        click.echo(f"  {i}. {s.get('id', s['effect'])}: {s['effect']}{q}{off}"
-                   if "id" in s else f"  {i}. {s['effect']}{q}{off}")
+        click.echo((f"  {i}. {s.get('id', s['effect'])}: {s['effect']}{q}{off}"
+                    if "id" in s else f"  {i}. {s['effect']}{q}{off}") + _step_origin(s, lk.name))
         if "mask" in s:
             click.echo(f"       mask: {s['mask']}")
         if s.get("missing_passes") == "skip":
             click.echo("       missing passes: skip")
         for k, v in s["params"].items():
             click.echo(f"       {k} = {v!r}")
+
+
+def _step_origin(shown: dict, name: str) -> str:
+    """``look show``'s mark of a step: ``[own]``, ``[inherited from BASE]``, ``[from BASE,
+    changed here]``."""
+    changed = [c for c in shown.get("changed_in", ()) if c != shown["from"]]
+    if shown["from"] == name:
+        return "  [own]"
+    if not changed:
+        return f"  [inherited from {shown['from']}]"
+    where = ", ".join("here" if c == name else f"in {c}" for c in changed)
+    return f"  [inherited from {shown['from']}, changed {where}]"
 
 
 @cli.command()
@@ -499,7 +573,7 @@ RAW = "-"
 @click.pass_context
 def render(ctx, input_path, output_path, look_name, look_from, assignments, workers, scheduler,
            chunk, fail_fast, **kw):
-    """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
+    """Render INPUT (file or sequence pattern like shot.#.exr) through a look to OUTPUT."""
     if look_name and look_from:
         raise click.UsageError("give --look or --look-from, not both")
     _check_raw_usage(input_path, output_path, kw.get("raw_size"))
@@ -589,6 +663,7 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
     from clfx.api import render as render_api
 
     verbosity = ctx.obj.get("verbosity", 1)
+    _cold_steps.append(max(1, len(lk.active_steps())))
     show = verbosity > 0 and sys.stderr.isatty() and not options.as_json
     with _progress(show) as on_frame:
         render_api(input_path, output_path, lk, options=options, verbosity=verbosity,
@@ -659,7 +734,7 @@ def _progress(show: bool):
 @click.option("--size", default="640x360", show_default=True, help="WxH.")
 @click.option("--look", "look_name", default="default", show_default=True)
 @quality_option
-@click.option("--overwrite", is_flag=True,
+@click.option("-y", "--overwrite", is_flag=True,
               help="Replace files of an earlier demo in OUTDIR (default: refuse, like render).")
 @click.option("--explain", is_flag=True)
 @click.option("--json", "as_json", is_flag=True)
@@ -776,6 +851,44 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
         click.echo(json.dumps(results, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
     else:
         click.echo(table)
+
+
+@cli.command()
+@click.option("--looks", default="all", show_default=True, metavar="A,B|all",
+              help="Looks (names or files); all: every look `clfx looks` lists.")
+@click.option("--quality", "levels", default="final", show_default=True,
+              metavar="LEVEL,...|all", help="Quality levels: draft, preview, final, reference.")
+@click.option("--size", default="640x360", show_default=True,
+              help="WxH of the frame rendered: the plates' size also warms PoCL's "
+                   "work-group code for it.")
+@click.pass_context
+def prebuild(ctx, looks, levels, size):
+    """Compile the kernels of looks at quality levels into the kernel cache, ahead of renders
+    (e.g. when a farm node's image is built): renders one demo frame through each."""
+    import time
+
+    from clfx.device import runtime
+    from clfx.pipeline.presets import available_looks
+    from clfx.prebuild import levels_of, prebuild as run_prebuild
+
+    w, h = _parse_size(size)
+    try:
+        level_list = levels_of(levels)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--quality") from None
+    names = list(available_looks()) if looks == "all" else looks.split(",")
+    _bench_looks(ctx, None, ",".join(names))
+    rt = _runtime(ctx)
+    runtime.cold_build_notice = None      # compiling is what it is asked to do: said below
+    where = rt.kernel_cache_dir or "the OpenCL driver's cache"
+    click.echo(f"clfx prebuild: {len(names)} look(s) at {', '.join(level_list)}, {w}x{h}, "
+               f"on {rt.description}, into {where}")
+    t0 = time.perf_counter()
+    rows = run_prebuild(rt, names, level_list, w, h, log=click.echo)
+    total = time.perf_counter() - t0
+    click.echo(f"clfx prebuild: {sum(r['compiled'] for r in rows)} program(s) compiled, "
+               f"{sum(r['programs'] - r['compiled'] for r in rows)} already cached, "
+               f"in {total:.1f} s")
 
 
 def _parse_size(text: str) -> tuple[int, int]:

@@ -128,7 +128,7 @@ render_options = stack(
                  help="Write the EXR beauty as 32-bit float (default: the input's type)."),
     click.option("--compression", default=None,
                  help="EXR compression: zip, piz, dwaa, none, ... (default: an EXR input's, else zips)."),
-    click.option("--overwrite", is_flag=True, help="Replace existing outputs."),
+    click.option("-y", "--overwrite", is_flag=True, help="Replace existing outputs."),
     click.option("--skip-existing", is_flag=True,
                  help="Skip frames whose output exists (resume a batch)."),
     click.option("--skip-missing", is_flag=True, help="Skip missing input frames instead of failing."),

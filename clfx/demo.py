@@ -5,10 +5,10 @@ textured surfaces at several depths, moving objects) is rendered sharp with exac
 velocity passes and written; the look then runs over those files through ``clfx render``'s
 own pipeline.  Written to OUTDIR:
 
-- ``scene.####.exr``  the sharp input with its ``Z`` and ``forward.u/v`` passes (feed it to
+- ``scene.#.exr``  the sharp input with its ``Z`` and ``forward.u/v`` passes (feed it to
   ``clfx render`` to try other looks);
-- ``demo.####.exr``   the look's output (half float, scene-linear);
-- ``demo.####.png``   a tone-mapped sRGB preview of each output;
+- ``demo.#.exr``   the look's output (half float, scene-linear);
+- ``demo.#.png``   a tone-mapped sRGB preview of each output;
 - ``contact_sheet.png`` every preview on one sheet.
 """
 from __future__ import annotations
@@ -75,7 +75,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     """Render the demo scene into ``outdir``.  Without ``overwrite``, files of an earlier
     demo there are an error before anything is rendered (like ``clfx render``).
 
-    The scene's frames are written first (``scene.####.exr``, float); the look then runs over
+    The scene's frames are written first (``scene.#.exr``, float); the look then runs over
     them through `clfx render`'s own pipeline (`clfx.pipeline.batch.render_stream`: read,
     render, write; half-float output stamped like a render's), so ``clfx render`` of the
     scene files with the same look renders the same frames (written as float there, the
@@ -96,8 +96,8 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="clfx-demo") as pool:
         list(pool.map(lambda n: write_scene(outdir, n, width, height, overwrite), range(1, count + 1)))
-    batch = Batch(look=look, input_path=os.path.join(outdir, "scene.####.exr"),
-                  output_path=os.path.join(outdir, "demo.####.exr"),
+    batch = Batch(look=look, input_path=os.path.join(outdir, "scene.#.exr"),
+                  output_path=os.path.join(outdir, "demo.#.exr"),
                   options=RenderOptions(frames=f"1-{count}", quality=quality, bit_depth="half",
                                         overwrite=overwrite, as_json=as_json),
                   verbosity=0)
@@ -139,7 +139,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
 
 def write_scene(outdir: str, frame_no: int, width: int, height: int, overwrite: bool) -> str:
     """Frame ``frame_no`` of the demo scene, sharp with its depth and velocity passes, as
-    ``scene.####.exr`` (float) in ``outdir``; its path."""
+    ``scene.#.exr`` (float) in ``outdir``; its path."""
     from clfx.bench.scene import demo_scene, render_sharp
     from clfx.io.write import write_frame
 

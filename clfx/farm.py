@@ -6,7 +6,7 @@ locally).  Its one step has a frame-range parameter space cut into chunks of ``c
 (the ``TASK_CHUNKING`` extension's ``CHUNK[INT]`` parameter, or explicit chunk ranges for
 schedulers without it), and each task runs::
 
-    clfx render IN/NAME.####.exr OUT/NAME.####.exr --look LOOK --frames A-B --skip-existing
+    clfx render IN/NAME.#.exr OUT/NAME.#.exr --look LOOK --frames A-B --skip-existing
 
 so a retried or resumed task re-renders only the frames whose output is missing, and writes
 are atomic (a killed task leaves no partial frame).  Chunks are written as ``a-b`` or
@@ -72,7 +72,7 @@ def openjd_template(input_path: str, output_path: str, *, look: str = "default",
     Parameters
     ----------
     input_path, output_path : str
-        Frame patterns (``shot.####.exr``); made absolute, then split into a folder and a
+        Frame patterns (``shot.#.exr``); made absolute, then split into a folder and a
         file pattern (job parameters ``InputDir``, ``InputName``, ``OutputDir``,
         ``OutputName``).
     look : str
@@ -114,7 +114,7 @@ def openjd_template(input_path: str, output_path: str, *, look: str = "default",
     for path in (input_path, output_path):
         if not Pattern.parse(path).is_sequence:
             raise SequenceError(f"{path} has no frame token; a farm job renders a sequence "
-                                f"(use e.g. shot.####.exr)")
+                                f"(use e.g. shot.#.exr)")
     apply_overrides(load_look(look), list(assignments))
     frame_list = resolve_frames(input_path, frames)
     in_dir, in_name = os.path.split(os.path.abspath(input_path))

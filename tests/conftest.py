@@ -12,13 +12,16 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("CLFX_SHARED_DATA", ROOT.parent / "shared" / "data"))
 EXR_IMAGES = SHARED_DATA / "openexr-images"
 
+os.environ.setdefault("CLFX_COLD_NOTICE", "0")
+"""The command line's "compiling kernels ... once" line stays out of the in-process CLI tests'
+stderr on CI's cold kernel cache (tests/test_first_day.py checks it in subprocesses)."""
 os.environ.setdefault("POCL_WORK_GROUP_SPECIALIZATION", "0")
 """PoCL compiles one work-group function per kernel for any local size, not one per local size
 and grid class: the suite renders the same kernels at many frame sizes (odd shapes, crops,
 windows), and on CI's empty kernel cache those compiles were most of its time (a cold run of
-four effects at five sizes: 29.6 -> 17.5 CPU s; warm renders cost the same).  The kernels'
-source and semantics are those of a specialised build; tests/test_memory.py measures the
-default (specialised) build.  Set it to 1 to run the suite as a render does."""
+four effects at five sizes: 29.6 -> 17.5 CPU s; warm renders cost the same).  Renders do
+the same since issue 33 (`clfx.device.runtime._ensure_generic_work_groups`); set it to 1 to
+run the suite with PoCL's specialised build."""
 
 
 @pytest.fixture(scope="session")

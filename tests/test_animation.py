@@ -99,7 +99,7 @@ def test_outputs_stamp_the_values_used(rt, tmp_path):
     look = {"name": "anim", "effects": [{"effect": "vignette",
                                          "params": {"natural": 0.0,
                                                     "amount": {1001: 0.0, 1003: 0.8}}}]}
-    res = clfx.render_sequence(tmp_path / "in.####.exr", tmp_path / "out.####.exr", look,
+    res = clfx.render_sequence(tmp_path / "in.#.exr", tmp_path / "out.#.exr", look,
                                as_float=True)
     assert [r.values for r in res.reports] == [{"vignette.amount": v} for v in (0.0, 0.4, 0.8)]
     stamped = [json.loads(header_attribute(tmp_path / f"out.{f}.exr", "clfx:values"))

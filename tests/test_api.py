@@ -111,13 +111,13 @@ def test_render_sequence_returns_reports_and_checks_first(rt, tmp_path):
     for f in (1, 2, 3):
         write_frame(Frame.from_array(img), tmp_path / f"in.{f:04d}.exr")
     seen = []
-    res = clfx.render_sequence(tmp_path / "in.####.exr", tmp_path / "out.####.exr",
+    res = clfx.render_sequence(tmp_path / "in.#.exr", tmp_path / "out.#.exr",
                                "film-35mm", frames="1-2",
                                on_frame=lambda done, total, rep: seen.append((done, total)))
     assert res.summary["frames"] == 2 and seen == [(1, 2), (2, 2)]
     assert [r.frame for r in res.reports] == [1, 2] and len(res.outputs) == 2
     with pytest.raises(ImageIOError, match="exists"):
-        clfx.render_sequence(tmp_path / "in.####.exr", tmp_path / "out.####.exr", "film-35mm")
+        clfx.render_sequence(tmp_path / "in.#.exr", tmp_path / "out.#.exr", "film-35mm")
     with pytest.raises(TypeError, match="RenderOptions"):
         clfx.render_file(tmp_path / "in.0001.exr", tmp_path / "x.exr", no_such_option=1)
 

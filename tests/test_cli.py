@@ -60,8 +60,8 @@ def test_probe_beachball(exr_images):
 def test_render_beachball_sequence_keeps_windows_and_resumes(rt, exr_images, tmp_path):
     from clfx.io.read import read_frame
 
-    pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
-    out = tmp_path / "out.####.exr"
+    pattern = str(exr_images / "Beachball" / "singlepart.#.exr")
+    out = tmp_path / "out.#.exr"
     r = run("render", pattern, out, "--look", "default", "--json")
     lines = [json.loads(line) for line in r.stdout.splitlines()]
     assert [rec["frame"] for rec in lines[:-1]] == list(range(1, 9))
@@ -80,15 +80,15 @@ def test_render_beachball_sequence_keeps_windows_and_resumes(rt, exr_images, tmp
     (tmp_path / "out.0005.exr").unlink()
     r = run("render", pattern, out, "--skip-existing", "--json")
     assert [json.loads(x)["frame"] for x in r.stdout.splitlines()[:-1]] == [5]
-    r = run("render", pattern, tmp_path / "sub.####.exr", "--frames", "2-6x2", "--json")
+    r = run("render", pattern, tmp_path / "sub.#.exr", "--frames", "2-6x2", "--json")
     assert [json.loads(x)["frame"] for x in r.stdout.splitlines()[:-1]] == [2, 4, 6]
 
 
 def test_frame_alone_equals_frame_in_batch(rt, exr_images, tmp_path):
     from clfx.io.read import read_frame
 
-    pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
-    run("render", pattern, tmp_path / "batch.####.exr", "--frames", "1-4", "--float")
+    pattern = str(exr_images / "Beachball" / "singlepart.#.exr")
+    run("render", pattern, tmp_path / "batch.#.exr", "--frames", "1-4", "--float")
     run("render", exr_images / BEACH.format(3), tmp_path / "alone.exr", "--float")
     a = read_frame(tmp_path / "batch.0003.exr").rgba
     b = read_frame(tmp_path / "alone.exr").rgba
@@ -136,10 +136,10 @@ def test_missing_frames_named_or_skipped(rt, exr_images, tmp_path):
 
     for f in (1, 2, 5):
         shutil.copy(exr_images / BEACH.format(f), tmp_path / f"s.{f:04d}.exr")
-    r = run("render", tmp_path / "s.####.exr", tmp_path / "o.####.exr", "--frames", "1-5", code=1)
+    r = run("render", tmp_path / "s.#.exr", tmp_path / "o.#.exr", "--frames", "1-5", code=1)
     one_line_error(r, "missing", "3-4")
     assert not list(tmp_path.glob("o.*"))
-    r = run("render", tmp_path / "s.####.exr", tmp_path / "o.####.exr", "--frames", "1-5",
+    r = run("render", tmp_path / "s.#.exr", tmp_path / "o.#.exr", "--frames", "1-5",
             "--skip-missing", "--json")
     assert [json.loads(x)["frame"] for x in r.stdout.splitlines()[:-1]] == [1, 2, 5]
 
@@ -187,7 +187,6 @@ def test_usage_error_exit_code_2():
     (["bench", "--looks", "cinma"], ["--looks", "unknown look 'cinma'"]),
     (["render", "a.exr", "b.exr", "--velocity-channels", "u"], ["--velocity-channels",
                                                                 "two channel names"]),
-    (["render", "a.exr", "b.exr", "-q"], ["-q goes before the command (clfx -q render ...)"]),
     (["render", "a.exr", "b.exr", "--device", "0:0"], ["--device goes before the command"]),
 ])
 def test_usage_errors_are_one_line_before_anything_runs(tmp_path, monkeypatch, args,
@@ -229,10 +228,10 @@ def test_progress_counts_elapsed_time_from_the_start_of_the_render():
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_a_signal_leaves_no_partial_file(rt, exr_images, tmp_path, sig, code):
     """SIGTERM exits 143 and SIGINT (Ctrl-C) 130, with every file present complete."""
-    pattern = str(exr_images / "Beachball" / "singlepart.####.exr")
+    pattern = str(exr_images / "Beachball" / "singlepart.#.exr")
     env = dict(os.environ)
     proc = subprocess.Popen([sys.executable, "-m", "clfx.cli", "render", pattern,
-                             str(tmp_path / "o.####.exr"), "--float", "--compression", "zip"],
+                             str(tmp_path / "o.#.exr"), "--float", "--compression", "zip"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.time() + 60
     while time.time() < deadline and not list(tmp_path.glob("o.*.exr")):

@@ -264,7 +264,7 @@ def test_api_render_names_bad_quality_and_look(small):
         clfx.render_file(small / "in.exr", small / "o.exr", 5)
 
 
-@pytest.mark.parametrize("pattern", ["o.####.####.exr", "o.%04d.$F4.exr", "o_####_v2.####.exr"])
+@pytest.mark.parametrize("pattern", ["o.#.#.exr", "o.%04d.$F4.exr", "o_#_v2.#.exr"])
 def test_two_frame_tokens_in_a_pattern_are_refused(small, pattern):
     r = CliRunner().invoke(cli, ["render", str(small / "in.exr"), str(small / pattern),
                                  "--look", str(small / "look.yaml")])
@@ -304,7 +304,7 @@ def test_zero_bytes_of_raw_stdin_is_an_error(rt):
     (("render", "-", "o.exr"), "'-' as INPUT or OUTPUT needs --raw WxH"),
     (("render", "-", "o.exr", "--raw", "8x4"), "raw pipes need '-' for both INPUT and OUTPUT"),
     (("render", "i.exr", "o.exr", "--raw", "8x4"), "--raw WxH is for raw pipes"),
-    (("render", "i.exr", "o.####.exr", "--workers", "2", "--scheduler", "tcp://h:1"),
+    (("render", "i.exr", "o.#.exr", "--workers", "2", "--scheduler", "tcp://h:1"),
      "give --workers N (a local cluster) or --scheduler ADDRESS"),
     (("render", "i.exr", "o.exr", "--bogus"), "No such option '--bogus'"),
     (("--bogus",), "No such option '--bogus'"),

@@ -143,7 +143,7 @@ def test_once_per_sequence_and_override_on_the_command_line(tmp_path, rt):
     rgba, inside = ball()
     for f in (1, 2, 3):
         write_exr(tmp_path / f"zb.{f:04d}.exr", {**rgba, "Z": np.where(inside, 5.0, 0.0)})
-    args = ["apply", "dof", str(tmp_path / "zb.####.exr"), str(tmp_path / "o.####.exr"), *CAMERA]
+    args = ["apply", "dof", str(tmp_path / "zb.#.exr"), str(tmp_path / "o.#.exr"), *CAMERA]
     r = CliRunner().invoke(cli, args)
     assert r.exit_code == 0, r.output
     lines = [ln for ln in r.stderr.splitlines() if NO_HIT in ln]
@@ -213,13 +213,13 @@ def test_beachball_dof_widens_the_ball_edge_with_one_notice(tmp_path, rt):
     ys, xs = np.nonzero(a)
     centre = (xs.mean() + src.data_window.x0, ys.mean() + src.data_window.y0)
     radius = float(np.sqrt(a.sum() / np.pi))
-    args = ["apply", "dof", str(BEACHBALL / "multipart.####.exr"), str(tmp_path / "dof.####.exr"),
+    args = ["apply", "dof", str(BEACHBALL / "multipart.#.exr"), str(tmp_path / "dof.#.exr"),
             *CAMERA, "--frames", "1-2"]
     r = CliRunner().invoke(cli, args)
     assert r.exit_code == 0, r.output
     lines = [ln for ln in r.stderr.splitlines() if NO_HIT in ln]
     assert len(lines) == 1 and "multipart.0001.exr" in lines[0] and "depth Z" in lines[0], r.stderr
-    r = CliRunner().invoke(cli, [*args[:3], str(tmp_path / "hard.####.exr"), *CAMERA,
+    r = CliRunner().invoke(cli, [*args[:3], str(tmp_path / "hard.#.exr"), *CAMERA,
                                  "--frames", "1", "--depth-zero", "invalid"])
     assert r.exit_code == 0, r.output
 

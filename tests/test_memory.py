@@ -55,7 +55,7 @@ def test_cinema_1080p_peak_memory_stays_below_the_documented_budget(rt, tmp_path
     cinema_frame(tmp_path / "in.exr", w, h)
     env = {**os.environ, "CLFX_POOL_MB": str(pool),
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    env.pop("POCL_WORK_GROUP_SPECIALIZATION", None)   # PoCL's default build, as clfx renders
+    env.pop("POCL_WORK_GROUP_SPECIALIZATION", None)   # clfx's default build, as it renders
     args = ["-q", "render", tmp_path / "in.exr", tmp_path / "out.exr", "--look", "cinema",
             "--overwrite"]
     peak_mib(args, env)           # the first render on a machine compiles the kernels

@@ -9,22 +9,47 @@ from clfx.io.sequence import (FrameSpec, Pattern, check_input_file, output_path,
 
 
 @pytest.mark.parametrize("text, frame, want", [
-    ("shot.####.exr", 7, "shot.0007.exr"),        # one digit per # when there are several
-    ("shot.#.exr", 7, "shot.0007.exr"),           # a lone # is 4 digits (fileseq default)
-    ("shot.##.exr", 7, "shot.07.exr"),
+    # oiiotool's padding (fileseq's PAD_STYLE_HASH4): each # four digits, each @ one
+    ("shot.#.exr", 7, "shot.0007.exr"),
+    ("shot.##.exr", 7, "shot.00000007.exr"),
+    ("shot.####.exr", 7, "shot.0000000000000007.exr"),
+    ("shot.@.exr", 7, "shot.7.exr"),
+    ("shot.@@@.exr", 7, "shot.007.exr"),
+    ("shot.@@@@.exr", 7, "shot.0007.exr"),
+    ("shot.#@.exr", 7, "shot.00007.exr"),         # mixed: 4 + 1
+    ("shot.@#@.exr", 7, "shot.000007.exr"),       # 1 + 4 + 1
     ("shot.%04d.exr", 7, "shot.0007.exr"),
     ("shot.%d.exr", 7, "shot.7.exr"),
     ("shot.$F4.exr", 7, "shot.0007.exr"),
-    ("shot.@.exr", 7, "shot.7.exr"),
-    ("shot.@@@@.exr", 7, "shot.0007.exr"),
-    ("/renders/a/shot.####.exr", 1001, "/renders/a/shot.1001.exr"),
-    ("shot.####.exr", 12345, "shot.12345.exr"),   # wider than the padding: written in full
+    ("shot.$F.exr", 7, "shot.7.exr"),
+    ("/renders/a/shot.#.exr", 1001, "/renders/a/shot.1001.exr"),
+    ("shot.#.exr", 12345, "shot.12345.exr"),      # wider than the padding: written in full
 ])
 def test_pattern_tokens(text, frame, want):
     p = Pattern.parse(text)
     assert p.is_sequence
     assert p.path(frame) == want
     assert output_path(p, frame) == want
+
+
+def test_patterns_match_oiiotool():
+    """The same names as oiiotool's own expansion of each token (OpenImageIO 3.2:
+    ``oiiotool --frames 7 ... -o x.<token>.exr``): #=0007, ##=00000007, ####=16 digits,
+    @@@=007, #@=00007."""
+    for token, name in (("#", "x.0007.exr"), ("##", "x.00000007.exr"),
+                        ("####", "x.0000000000000007.exr"), ("@@@", "x.007.exr"),
+                        ("#@", "x.00007.exr")):
+        assert Pattern.parse(f"x.{token}.exr").path(7) == name
+
+
+def test_several_hashes_are_said():
+    """A Nuke user's ``####`` is 16 digits here: said, with what to write for 4."""
+    from clfx.io.sequence import hash_notice
+
+    assert hash_notice(Pattern.parse("shot.#.exr")) is None
+    assert hash_notice(Pattern.parse("shot.@@@@.exr")) is None
+    text = hash_notice(Pattern.parse("shot.####.exr"))
+    assert "16 digits" in text and "@@@@" in text and "%04d" in text
 
 
 @pytest.mark.parametrize("text", ["shot.exr", "shot.0042.exr", "/a/b/plate.tif", "-"])
@@ -85,13 +110,13 @@ def test_bad_range_says_why():
 
 
 @pytest.mark.parametrize("text", ["o.$F999999999.exr", "o.%0999999999d.exr", "o.%17d.exr",
-                                  "o." + "#" * 17 + ".exr", "o.@@@@@@@@@@@@@@@@@.exr"])
+                                  "o." + "#" * 5 + ".exr", "o.@@@@@@@@@@@@@@@@@.exr"])
 def test_absurd_padding_refused_at_once(text):
     with pytest.raises(SequenceError, match="at most 16") as info:
         Pattern.parse(text)
     assert "\n" not in str(info.value)
     assert Pattern.parse(text.replace("999999999", "16").replace("17", "16")
-                         .replace("#" * 17, "#" * 16).replace("@" * 17, "@" * 16)).is_sequence
+                         .replace("#" * 5, "#" * 4).replace("@" * 17, "@" * 16)).is_sequence
 
 
 def test_frame_spec():
@@ -104,34 +129,38 @@ def test_frame_spec():
 def shots(tmp_path):
     for f in (1, 2, 5, 6, 7, 10):
         (tmp_path / f"shot.{f:04d}.exr").write_bytes(b"x")
-    (tmp_path / "shot.8.exr").write_bytes(b"x")          # wrong padding: not part of ####
+    (tmp_path / "shot.8.exr").write_bytes(b"x")          # wrong padding: not part of #
     (tmp_path / "other.0003.exr").write_bytes(b"x")
     return tmp_path
 
 
-@pytest.mark.parametrize("token", ["####", "#", "%04d", "$F4", "@@@@"])
+@pytest.mark.parametrize("token", ["#", "%04d", "$F4", "@@@@"])
 def test_existing_frames(shots, token):
     p = Pattern.parse(str(shots / f"shot.{token}.exr"))
     assert p.existing_frames() == [1, 2, 5, 6, 7, 10]
 
 
 def test_existing_frames_none(tmp_path):
-    assert Pattern.parse(str(tmp_path / "none.####.exr")).existing_frames() == []
+    assert Pattern.parse(str(tmp_path / "none.#.exr")).existing_frames() == []
 
 
 def test_resolve_inputs_all_on_disk(shots):
-    p = Pattern.parse(str(shots / "shot.####.exr"))
+    p = Pattern.parse(str(shots / "shot.#.exr"))
     got = resolve_inputs(p, None, skip_missing=False)
     assert [f for f, _ in got] == [1, 2, 5, 6, 7, 10]
     assert got[0][1] == str(shots / "shot.0001.exr")
 
 
 def test_missing_frames_listed_compactly(shots):
-    p = Pattern.parse(str(shots / "shot.####.exr"))
+    p = Pattern.parse(str(shots / "shot.#.exr"))
     with pytest.raises(SequenceError) as info:
         resolve_inputs(p, parse_frames("1-10"), skip_missing=False)
     assert "missing frames 3-4,8-9 of" in str(info.value)
-    assert "shot.####.exr" in str(info.value)
+    # the files looked for: the first by its whole path, and how many more
+    assert f"no file {shots / 'shot.0003.exr'}, nor 3 more up to shot.0009.exr" in str(info.value)
+    with pytest.raises(SequenceError) as info:
+        resolve_inputs(p, [4], skip_missing=False)
+    assert str(info.value) == f"missing frame 4 of {p.text}: no file {shots / 'shot.0004.exr'}"
     got = resolve_inputs(p, parse_frames("1-10"), skip_missing=True)
     assert [f for f, _ in got] == [1, 2, 5, 6, 7, 10]
 
@@ -151,8 +180,8 @@ def test_fifo_input_refused_not_opened(tmp_path):
     """Issue 10 item 5: a FIFO as an input frame is refused by name; nothing opens it."""
     fifo = tmp_path / "pipe.0001.exr"
     os.mkfifo(fifo)
-    for pattern, frames in ((fifo, None), (tmp_path / "pipe.####.exr", None),
-                            (tmp_path / "pipe.####.exr", [1])):
+    for pattern, frames in ((fifo, None), (tmp_path / "pipe.#.exr", None),
+                            (tmp_path / "pipe.#.exr", [1])):
         with pytest.raises(ImageIOError, match="not a regular file \\(a FIFO\\)") as info:
             resolve_inputs(Pattern.parse(str(pattern)), frames, skip_missing=False)
         assert "pipe.0001.exr" in str(info.value) and "\n" not in str(info.value)
@@ -163,6 +192,6 @@ def test_fifo_input_refused_not_opened(tmp_path):
 
 
 def test_no_frames_on_disk(tmp_path):
-    p = Pattern.parse(str(tmp_path / "none.####.exr"))
+    p = Pattern.parse(str(tmp_path / "none.#.exr"))
     with pytest.raises(SequenceError, match="no frames"):
         resolve_inputs(p, None, skip_missing=False)

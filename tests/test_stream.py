@@ -136,8 +136,8 @@ def _timeline(tmp_path, rt, monkeypatch, stream):
     for i in range(1, 5):
         write_frame(_frame(np.random.default_rng(i)), tmp_path / f"in.{i:04d}.exr")
     monkeypatch.setattr(batch_mod, "STREAM", stream)
-    b = Batch(look=load_look("cinema"), input_path=str(tmp_path / "in.####.exr"),
-              output_path=str(tmp_path / stream / "o.####.exr"),
+    b = Batch(look=load_look("cinema"), input_path=str(tmp_path / "in.#.exr"),
+              output_path=str(tmp_path / stream / "o.#.exr"),
               options=RenderOptions(), verbosity=0)
     b.prepare()
     spans, lock = [], threading.Lock()
@@ -225,15 +225,15 @@ def test_stream_pixels_match_frames_rendered_alone(tmp_path, rng, rt):
     for i in (1, 2, 3):
         write_frame(_frame(np.random.default_rng(i), 48, 80), tmp_path / f"in.{i:04d}.exr")
     look = load_look("cinema")
-    b = Batch(look=look, input_path=str(tmp_path / "in.####.exr"),
-              output_path=str(tmp_path / "out" / "o.####.exr"),
+    b = Batch(look=look, input_path=str(tmp_path / "in.#.exr"),
+              output_path=str(tmp_path / "out" / "o.#.exr"),
               options=RenderOptions(), verbosity=0)
     b.prepare()
     with b.reading():
         b.run(rt)
     rt.cache.clear()
-    alone = Batch(look=look, input_path=str(tmp_path / "in.####.exr"),
-                  output_path=str(tmp_path / "alone" / "o.####.exr"),
+    alone = Batch(look=look, input_path=str(tmp_path / "in.#.exr"),
+                  output_path=str(tmp_path / "alone" / "o.#.exr"),
                   options=RenderOptions(frames="2"), verbosity=0)
     alone.prepare()
     alone.run(rt)

@@ -98,8 +98,8 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
         for i in range(1, frames + 1):
             write_frame(render_sharp(demo_scene(i, width, height)),
                         os.path.join(tmp, f"in.{i:04d}.exr"), bit_depth="float")
-        batch = Batch(look=look, input_path=os.path.join(tmp, "in.####.exr"),
-                      output_path=os.path.join(tmp, "out.####.exr"),
+        batch = Batch(look=look, input_path=os.path.join(tmp, "in.#.exr"),
+                      output_path=os.path.join(tmp, "out.#.exr"),
                       options=RenderOptions(overwrite=True), verbosity=0)
         batch.prepare()
         job = batch.jobs[0]

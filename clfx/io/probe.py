@@ -22,14 +22,16 @@ def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
         JSON-able: ``file``, ``format``, ``parts`` (name, view, channels, windows, pixel
         aspect), ``view``, ``beauty``, ``depth`` and ``velocity`` (channel, part, mode or
         convention, ``why``; depth also ``no_hit``: how 0 and huge values were read) or None,
-        ``ignored_other_views``, ``views`` (views with a beauty, hero first: all rendered by
+        ``rgb`` (False for a pass-only file: ``beauty`` None, its passes planned as a
+        ``--depth`` / ``--velocity`` file's), ``ignored_other_views``, ``views`` (views with a beauty, hero first: all rendered by
         default), ``encoding``, ``colorspace`` (``from`` the file's space, ``to`` the working
         space, ``why``),
         ``search_order``.
     """
     plan = plan_read(path, passes, colorspace, depth_path, velocity_path, part, working_space,
-                     view)
+                     view, passes_only=True)
     f = plan.file
+    b = plan.beauty
     info = {
         "file": f.path,
         "format": f.format,
@@ -40,8 +42,9 @@ def probe(path, *, passes: PassSpec = PassSpec(), colorspace: str | None = None,
                    "display_window": win_json(p.display_window),
                    "pixel_aspect": p.pixel_aspect, "deep": p.deep} for p in f.parts],
         "view": plan.view,
-        "beauty": {"part": plan.beauty.part, "channels": plan.beauty.channels,
-                   "grey": plan.beauty.grey, "why": plan.beauty.why},
+        "beauty": b and {"part": b.part, "channels": b.channels, "grey": b.grey,
+                         "why": b.why},
+        "rgb": b is not None,
         "depth": None,
         "velocity": None,
         "ignored_other_views": ch.other_view_channels(f.dicts(), plan.view),
@@ -93,7 +96,11 @@ def format_probe(info: dict) -> str:
                      + (" DEEP" if p["deep"] else ""))
         lines.append(f"    channels: {', '.join(p['channels'])}")
     b = info["beauty"]
-    lines.append(f"beauty: part {b['part']} {', '.join(b['channels'])}  ({b['why']})")
+    if b is None:
+        lines.append("beauty: none (no R,G,B or grey channels): a pass-only file; render "
+                     "it as --depth or --velocity beside a beauty")
+    else:
+        lines.append(f"beauty: part {b['part']} {', '.join(b['channels'])}  ({b['why']})")
     if info.get("view"):
         lines.append(f"view: {info['view']}  (views with a beauty: "
                      f"{', '.join(info['views']) or 'none'}; all are rendered unless --view)")

@@ -484,7 +484,11 @@ def _input_colorspace(f: _File, beauty: ch.BeautyChoice, colorspace: str | None
 
 
 def plan_read(path, passes: PassSpec, colorspace, depth_path, velocity_path, part,
-              working_space: str | None = None, view: str | None = None) -> ReadPlan:
+              working_space: str | None = None, view: str | None = None, *,
+              passes_only: bool = False) -> ReadPlan:
+    """How ``path`` will be read.  ``passes_only`` (``probe``): a file without a beauty
+    (a depth or velocity pass on its own) gives a plan with ``beauty`` None and its passes
+    planned as a pass file's, instead of an `ImageIOError`."""
     working = colour.resolve(working_space or colour.DEFAULT_WORKING, "working space")
     if not colour.is_linear(working) or working == colour.RAW:
         raise ImageIOError(f"working space {working_space!r} must be a linear colour space "
@@ -496,6 +500,11 @@ def plan_read(path, passes: PassSpec, colorspace, depth_path, velocity_path, par
         raise ImageIOError(f"view {view!r} not in {f.path}; views with a beauty: "
                            f"{', '.join(v for v in views if v) or 'none (not multi-view)'}")
     beauty = ch.find_beauty(f.dicts(), part=only, view=view)
+    if beauty is None and passes_only:
+        hero = view or ch.hero_view(f.dicts())
+        return ReadPlan(f, None, hero, _plan_depth(f, passes, hero, only, True),
+                        _plan_velocity(f, passes, hero, only, True), colour.RAW, "linear",
+                        working, "a pass-only file: no colour")
     if beauty is None:
         where = f"part {only} of " if only is not None else ""
         passes_only = ""
@@ -586,6 +595,10 @@ def depth_no_hit(plan: ReadPlan, passes: PassSpec) -> ch.NoHit | None:
     if plan.depth is None:
         return None
     b = plan.beauty
+    if b is None:          # a pass-only file: the pass's own windows, no alpha
+        dpart = plan.depth.part
+        return _read_depth(plan, passes, dpart.data_window, dpart.display_window,
+                           dpart.pixel_aspect, None)[1]
     bpart = plan.file.parts[b.part]
     alpha = None
     if b.alpha:

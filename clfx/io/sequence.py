@@ -1,22 +1,29 @@
-"""Frame patterns (``shot.####.exr``, parsed with fileseq), frame ranges (``1001-1100x2``) and
+"""Frame patterns (``shot.#.exr``, parsed with fileseq), frame ranges (``1001-1100x2``) and
 the input files on disk.
 
 Padding tokens
 --------------
-==================  ======================================  ============================
-token               digits                                  frame 7 of ``shot.<t>.exr``
-==================  ======================================  ============================
-``#`` (alone)       4 (fileseq's default, oiiotool meaning)  ``shot.0007.exr``
-``##``, ``####``    one per ``#`` (Nuke/Blender meaning)    ``shot.07.exr``, ``shot.0007.exr``
-``@``, ``@@@@``     one per ``@``                           ``shot.7.exr``, ``shot.0007.exr``
-``%04d``, ``%d``    printf width                            ``shot.0007.exr``, ``shot.7.exr``
-``$F4``, ``$F``     Houdini width                           ``shot.0007.exr``, ``shot.7.exr``
-==================  ======================================  ============================
+One convention, oiiotool's (``oiiotool --frames``, OpenImageIO's ``Filesystem::parse_pattern``),
+which is fileseq's ``PAD_STYLE_HASH4``: **each ``#`` is four digits of padding, each ``@``
+one**, and they add up in a token that mixes them.
 
-A lone ``#`` is four digits (fileseq's ``PAD_STYLE_HASH4``); two or more ``#`` count one digit
-each (``PAD_STYLE_HASH1``), so ``####`` is four digits, not sixteen.  Frames wider than the
-padding are written in full (``shot.####.exr``, frame 12345 -> ``shot.12345.exr``); negative
-frames follow fileseq (``shot.-007.exr``: the sign counts in the width).
+==================  ==============================  ============================
+token               digits                          frame 7 of ``shot.<t>.exr``
+==================  ==============================  ============================
+``#``               4                               ``shot.0007.exr``
+``##``              8                               ``shot.00000007.exr``
+``####``            16 (not 4: write ``#``)         ``shot.0000000000000007.exr``
+``@``, ``@@@``      1, 3                            ``shot.7.exr``, ``shot.007.exr``
+``#@``, ``@@#``     5, 6 (4 per ``#`` + 1 per ``@``)  ``shot.00007.exr``, ``shot.000007.exr``
+``%04d``, ``%d``    printf width                    ``shot.0007.exr``, ``shot.7.exr``
+``$F4``, ``$F``     Houdini width                   ``shot.0007.exr``, ``shot.7.exr``
+==================  ==============================  ============================
+
+Nuke and Blender count one digit per ``#``; a token of several ``#`` is read oiiotool's way
+and said once on stderr (`hash_notice`), since a Nuke user's ``shot.####.exr`` means 16
+digits here.  Frames wider than the padding are written in full (``shot.#.exr``, frame
+12345 -> ``shot.12345.exr``); negative frames follow fileseq (``shot.-007.exr``: the sign
+counts in the width).
 
 A path without a token is a plain file (``is_sequence`` False).  Its frame number is the one
 fileseq finds before the extension (``shot.0042.exr`` -> 42), else 1.  ``-`` (stdin/stdout) is
@@ -184,17 +191,24 @@ def compact(frames) -> str:
     return str(fileseq.FrameSet(frames)) if frames else ""
 
 
-FRAME_TOKEN = re.compile(r"#+|@+|%0?\d*d|\$F\d*")
-"""A frame token: ``#``..., ``@``..., ``%04d``, ``$F4``."""
+FRAME_TOKEN = re.compile(r"[#@]+|%0?\d*d|\$F\d*")
+"""A frame token: ``#`` and ``@`` (mixed too: ``#@``), ``%04d``, ``$F4``."""
 
 
-def _pad_style(path: str):
-    """HASH4 for a lone ``#``, HASH1 when the token has several ``#`` (see module docs)."""
-    probe = fileseq.FileSequence(path, pad_style=fileseq.PAD_STYLE_HASH4)
-    token = probe.padding()
-    if token.count("#") > 1:
-        return fileseq.PAD_STYLE_HASH1
-    return fileseq.PAD_STYLE_HASH4
+PAD_STYLE = fileseq.PAD_STYLE_HASH4
+"""oiiotool's padding: ``#`` four digits, ``@`` one (see the module docs)."""
+
+
+def hash_notice(pattern: "Pattern") -> str | None:
+    """One line for a pattern whose token has several ``#`` (``shot.####.exr``: 16 digits
+    here, 4 in Nuke), else None."""
+    token = pattern.token
+    n = token.count("#")
+    if n < 2:
+        return None
+    return (f"{pattern.text}: each # is 4 digits of padding (oiiotool's convention), so "
+            f"{token} is {pattern.padding} digits ({os.path.basename(pattern.path(1))}); for "
+            f"{n} digits write {'@' * n} or %0{n}d")
 
 
 @dataclass(frozen=True)
@@ -216,7 +230,7 @@ class Pattern:
 
     @classmethod
     def parse(cls, path) -> "Pattern":
-        """Parse ``"shot.####.exr"``, ``"shot.%04d.exr"``, ``"shot.$F4.exr"``,
+        """Parse ``"shot.#.exr"``, ``"shot.%04d.exr"``, ``"shot.$F4.exr"``,
         ``"shot.@.exr"``, ``"shot.#.exr"`` or a plain file path.
 
         Raises
@@ -232,7 +246,7 @@ class Pattern:
             raise SequenceError(f"invalid frame pattern {text!r}: {len(tokens)} frame tokens "
                                 f"({', '.join(tokens)}); give one")
         try:
-            style = _pad_style(text)
+            style = PAD_STYLE
             seq = fileseq.FileSequence(text, pad_style=style)
         except Exception as e:
             raise SequenceError(f"invalid frame pattern {text!r}: {' '.join(str(e).split())}") \
@@ -242,6 +256,16 @@ class Pattern:
             raise SequenceError(f"invalid frame pattern {text!r}: {seq.zfill()} digits of "
                                 f"padding; at most {MAX_PADDING}")
         return cls(text, is_seq, seq, style)
+
+    @property
+    def token(self) -> str:
+        """The frame token as written (``####``, ``@@@``, ``%04d``, ``$F4``; "" for a file)."""
+        return self._seq.padding() if self.is_sequence else ""
+
+    @property
+    def padding(self) -> int:
+        """Digits of padding the token asks for (0 for a plain file)."""
+        return self._seq.zfill() if self.is_sequence else 0
 
     def path(self, frame: int) -> str:
         """The file name of ``frame`` (the path itself for a plain file)."""
@@ -260,7 +284,7 @@ class Pattern:
     def existing_frames(self) -> list[int]:
         """Frames of this pattern present on disk, ascending ([] if none).
 
-        Padding is strict: for ``shot.####.exr``, ``shot.0007.exr`` counts but ``shot.7.exr``
+        Padding is strict: for ``shot.#.exr``, ``shot.0007.exr`` counts but ``shot.7.exr``
         does not; frames wider than the padding (``shot.12345.exr``) count.
         """
         if not self.is_sequence:
@@ -298,7 +322,9 @@ def resolve_inputs(pattern: Pattern, frames: list[int] | None, *,
     Raises
     ------
     SequenceError
-        ``"missing frames 3-5,9 of shot.####.exr"``; no frames on disk; missing plain file.
+        ``"missing frame 3 of shot.#.exr: no file /shots/a/shot.0003.exr"`` (several: the
+        frames, the first file's whole path, how many more); no frames on disk; missing
+        plain file.
     ImageIOError
         An input is there but is not a regular file (a FIFO, a folder).
     """
@@ -312,14 +338,26 @@ def resolve_inputs(pattern: Pattern, frames: list[int] | None, *,
     if frames is None:
         on_disk = pattern.existing_frames()
         if not on_disk and not skip_missing:
-            raise SequenceError(f"no frames of {pattern.text} on disk")
+            hint = hash_notice(pattern)
+            raise SequenceError(f"no frames of {pattern.text} on disk (looked for files like "
+                                f"{pattern.path(1)})" + (f"; {hint}" if hint else ""))
         return [(f, check_input_file(pattern.path(f))) for f in on_disk]
     pairs = [(int(f), pattern.path(f)) for f in frames]
-    missing = [f for f, p in pairs if not _present(p)]
+    missing = [(f, p) for f, p in pairs if not _present(p)]
     if missing and not skip_missing:
-        raise SequenceError(f"missing frames {compact(missing)} of {pattern.text}")
-    gone = set(missing)
+        raise SequenceError(missing_message(pattern, missing))
+    gone = {f for f, _ in missing}
     return [(f, p) for f, p in pairs if f not in gone]
+
+
+def missing_message(pattern: Pattern, missing: list[tuple[int, str]]) -> str:
+    """The frames missing, by the files looked for: ``missing frame 3 of shot.#.exr: no
+    file /shots/a/shot.0003.exr`` (several: the first file's whole path, the last's name)."""
+    (first, path), last = missing[0], missing[-1][1]
+    if len(missing) == 1:
+        return f"missing frame {first} of {pattern.text}: no file {path}"
+    return (f"missing frames {compact(f for f, _ in missing)} of {pattern.text}: no file "
+            f"{path}, nor {len(missing) - 1} more up to {os.path.basename(last)}")
 
 
 def output_path(pattern: Pattern, frame: int) -> str:

@@ -455,13 +455,10 @@ def resolve_quality(look: Look, quality: str | None) -> tuple[Look, str]:
     """The render's quality level (``quality``, else ``final``) and ``look`` with every
     step's level resolved (its own override, else the render's): the one place a batch
     resolves it, so the stamped look (``clfx:lookJSON``) renders the same pixels again."""
-    from dataclasses import replace as copy
-
     from clfx.pipeline.look import DEFAULT_QUALITY
 
     level = quality or DEFAULT_QUALITY
-    steps = [s if s.quality else copy(s, quality=level) for s in look.steps]
-    return copy(look, steps=steps), level
+    return look.at_quality(level), level
 
 
 @dataclass(frozen=True)
@@ -556,7 +553,7 @@ class BatchPlan:
                                 and io.passes_mode != "drop",
                                 colorspace=io.colorspace, working_space=io.working_space,
                                 depth_path=job.depth, velocity_path=job.velocity,
-                                notify=lambda m, k: notes.append(("notice", m, k)))
+                                notify=lambda m, k: notes.append(("warning", m, k)))
         masks = [read_masks(self.look, f, job.frame,
                             notify=lambda m, k: notes.append(("warning", m, k)))
                  if self.look.masks() or self.raw_size is None else None for f in frames]
@@ -865,7 +862,9 @@ class Batch:
         pout = Pattern.parse(self.output_path)
         if pin.is_sequence and not pout.is_sequence:
             raise SequenceError(f"input {self.input_path} is a sequence but output "
-                                f"{self.output_path} has no frame token (use e.g. out.####.exr)")
+                                f"{self.output_path} has no frame token (use e.g. out.#.exr)")
+        self._say_padding(pin, pout, *(Pattern.parse(p) for p in (o.depth_path, o.velocity_path)
+                                       if p))
         inputs = resolve_inputs(pin, frames, skip_missing=o.skip_missing)
         if not inputs:
             raise SequenceError(f"no input frames found for {self.input_path}")
@@ -887,6 +886,7 @@ class Batch:
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_masks(jobs)
         self.plan = BatchPlan.of(self.look, o, reads=self._reads(jobs))   # what is read: checked
+        self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_outputs(jobs)
         self._check_log(jobs)
         jobs = tuple(j for j in jobs if j.frame not in self.skipped_existing)
@@ -894,6 +894,16 @@ class Batch:
             first_frame_geometry(jobs[0].input)
         self.plan = replace(self.plan, jobs=jobs,
                             passes=o.passes.spec(self._radial_depth_focal_px(jobs)))
+
+    def _say_padding(self, *patterns) -> None:
+        """One line for each pattern whose ``#`` count differs from Nuke's meaning
+        (`clfx.io.sequence.hash_notice`: ``shot.####.exr`` is 16 digits here)."""
+        from clfx.io.sequence import hash_notice
+
+        for pattern in patterns:
+            message = hash_notice(pattern)
+            if message:
+                self.reporter.assumed(message, f"padding:{pattern.text}")
 
     def _radial_depth_focal_px(self, jobs) -> float | None:
         """Focal length in pixels for --depth-mode distance, from the look's camera block and
@@ -904,7 +914,8 @@ class Batch:
         from clfx.io.probe import probe as probe_file
 
         info = probe_file(jobs[0].input)
-        width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
+        part = info["beauty"]["part"] if info["beauty"] else 0   # pass-only: read refuses it
+        width = info["parts"][part]["display_window"]["width"]
         return self.look.camera.focal_length_px(width)
 
     def _check_masks(self, jobs: list[Job]) -> None:
@@ -994,7 +1005,7 @@ class Batch:
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
-                                f"(add a frame token such as #### to the output)")
+                                f"(add a frame token such as # to the output)")
         folder = os.path.dirname(os.path.abspath(outs[0]))
         if not os.path.isdir(folder):
             try:
@@ -1086,4 +1097,5 @@ class Batch:
         self.mask_files = sorted({f for _, m in self.look.masks() for f in [m.file] if f})
         self.plan = BatchPlan.of(self.look, self.options, reads=self._reads([]),
                                  raw_size=raw_size)
+        self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_log()

@@ -74,6 +74,10 @@ class Step:
         the first key, :meth:`at` the values of a frame.
     plugin : Plugin
         The effect (made from ``effect`` unless given, e.g. an unregistered test plugin).
+    origin : str
+        The look whose file added the step ("" when built in code); ``changed_in``: the
+        looks inheriting it that changed it, in order (``clfx look show`` marks them).
+        Neither is part of the step's value (nor of the look's hash).
     """
 
     effect: str
@@ -85,6 +89,8 @@ class Step:
     mask: MaskSpec | None = None
     animated: tuple[tuple[str, Animated], ...] = ()
     plugin: Plugin | None = field(default=None, compare=False, repr=False)
+    origin: str = field(default="", compare=False, repr=False)
+    changed_in: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     def __post_init__(self):
         if self.missing_passes not in MISSING_PASSES:
@@ -213,11 +219,27 @@ class Look:
             out.update({f"{s.id}.{k}": a.at(frame) for k, a in s.animated})
         return out
 
-    def params_hash(self) -> str:
-        """A short hash of everything that determines the output (stamped into files): the
-        seed, the camera and the enabled steps, keyframes and masks included (not the name,
-        description or file, so a look read back from an output hashes the same)."""
-        doc = self.document()
+    def at_quality(self, quality: str | None) -> "Look":
+        """This look with every step's quality level resolved: its own, else ``quality``
+        (else ``final``), as a render at ``quality`` runs it."""
+        level = quality or DEFAULT_QUALITY
+        return replace(self, steps=[s if s.quality else replace(s, quality=level)
+                                    for s in self.steps])
+
+    def params_hash(self, quality: str | None = None) -> str:
+        """The look's hash: what a TD compares to confirm a render used an approved look.
+
+        One value wherever it is shown: ``clfx look show NAME [--quality LEVEL]``, a
+        render's ``--explain`` and ``--json`` summary, and the ``clfx:paramsHash`` stamped
+        into every output (and a look read back with ``--look-from`` hashes the same).
+
+        It covers what determines the pixels: the seed, the camera and the enabled steps in
+        order, each with every parameter's value (defaults filled in, keyframes and masks
+        included) and its quality level resolved as a render at ``quality`` (default
+        ``final``) runs it.  Not the look's name, description, file, base or how the file
+        is written (order of keys, comments, values left at their defaults or spelt out),
+        nor disabled steps.  16 hex digits of the SHA-1 of that, as sorted JSON."""
+        doc = self.at_quality(quality).document()
         blob = json.dumps({k: doc[k] for k in ("seed", "camera", "effects")},
                           sort_keys=True, default=str)
         return hashlib.sha1(blob.encode()).hexdigest()[:16]

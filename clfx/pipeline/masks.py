@@ -8,7 +8,7 @@ In a look, any step may take a ``mask``::
       - effect: glare
         mask: {cryptomatte: CryptoObject, names: [lamp, sun]}   # objects by name
       - effect: dof
-        mask: {file: mattes/hero.####.exr, channel: A, invert: true, feather: 4px}
+        mask: {file: mattes/hero.#.exr, channel: A, invert: true, feather: 4px}
 
 Sources (exactly one of ``channel`` and ``cryptomatte``, or a ``file``):
 

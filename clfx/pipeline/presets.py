@@ -17,11 +17,17 @@ A look file::
         enabled: true        # optional; false removes an inherited effect
         missing_passes: skip # optional: skip (with a reason) on frames lacking the depth or
                              # velocity pass this effect needs; default "error"
+      - effect: halation
+        before: grain        # optional: where the step goes (or after: STEP)
 
 Inheritance: the base's camera is updated key by key; a step the base already has (same
 ``id``, which defaults to the effect's name) is updated in place (its params merged), a new
-one is appended, ``enabled: false`` drops it.  Give steps distinct ``id``s to use one effect
-twice (e.g. star streaks and aperture spikes); ``--set ID.param=value`` addresses a step.
+one is appended, ``enabled: false`` drops it.  ``before: STEP`` / ``after: STEP`` place a
+new step, or move an inherited one, next to another step of the look so far (named by its
+``id``, or by its effect when one step has it; a name that is missing or that several steps
+answer to is an error naming the key and line).  Give steps distinct ``id``s to use one
+effect twice (e.g. star streaks and aperture spikes); ``--set ID.param=value`` addresses a
+step.  ``clfx look show`` marks each step as the look's own or inherited (and from where).
 
 Search order for a name: a path to a file; each folder on ``CLFX_PRESET_PATH`` (os.pathsep
 separated); the user folder ``<config>/clfx/looks`` (XDG, ``click.get_app_dir``); the built-in
@@ -54,7 +60,7 @@ from clfx.plugins import get_plugin
 SCHEMA = 1
 TOP_KEYS = ("name", "description", "schema", "base", "camera", "seed", "effects")
 STEP_KEYS = ("effect", "id", "params", "quality", "enabled", "version", "missing_passes",
-             "mask")
+             "mask", "before", "after")
 ANIMATABLE = ("double", "int", "rgb", "double2d")
 """Parameter kinds that may be keyframed (numbers and vectors of numbers)."""
 DEFAULT_LOOK = "default"
@@ -132,7 +138,7 @@ def _build(doc: _Located, default_name: str, source: str, chain: tuple) -> Look:
         if isinstance(data["seed"], bool) or not isinstance(data["seed"], int):
             doc.fail(("seed",), f"{data['seed']!r} is not an integer")
         look.seed = data["seed"]
-    look.steps = _steps(doc, data.get("effects"), look.steps)
+    look.steps = _steps(doc, data.get("effects"), look.steps, look.name, base is not None)
     if len(chain) <= 1:     # the look itself, not a base: its lenses, read and validated now
         try:
             look.lenses = lens_io.resolve(look.steps)
@@ -199,7 +205,31 @@ def _step_params(cls, name: str, merged: dict, fail) -> tuple[Params, tuple]:
     return cls.params(**validated), tuple(keyed.items())
 
 
-def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
+def _place(doc: _Located, at: tuple, entry: dict, steps: list[Step], step: Step) -> list[Step]:
+    """``steps`` with ``step`` placed as the entry's ``before:`` / ``after:`` says (moved, if
+    it is there already)."""
+    keys = [k for k in ("before", "after") if k in entry]
+    if len(keys) > 1:
+        doc.fail(at + ("after",), "give before: or after:, not both")
+    key = keys[0]
+    name = entry[key]
+    rest = [s for s in steps if s.id != step.id]
+    target = [s for s in rest if s.id == name] or [s for s in rest if s.effect == name]
+    if not isinstance(name, str) or not target:
+        known = ", ".join(s.id for s in rest) or "none"
+        doc.fail(at + (key,), f"no step {name!r} in the look to place {step.id!r} {key} "
+                 f"(steps: {known})")
+    if len(target) > 1:
+        doc.fail(at + (key,), f"{name!r} is ambiguous: steps {', '.join(s.id for s in target)} "
+                 f"are {name!r} effects; name one by its id")
+    i = rest.index(target[0]) + (key == "after")
+    return rest[:i] + [step] + rest[i:]
+
+
+def _steps(doc: _Located, effects, inherited: list[Step], origin: str = "",
+           has_base: bool = False) -> list[Step]:
+    """The look's steps: ``inherited`` (its base's) with ``effects`` (its file's entries)
+    applied; steps it adds or changes are marked with ``origin`` (its name)."""
     steps = list(inherited)
     if effects is None:
         return steps
@@ -240,6 +270,9 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
         if existing is not None and existing.effect != name:
             doc.fail(at + ("effect",), f"step id {sid!r} already names a {existing.effect!r} step")
         if entry.get("enabled", True) is False:
+            if existing is None and has_base:
+                doc.fail(at + ("enabled",), f"enabled: false drops nothing: the base look has "
+                         f"no step {sid!r} (steps: {', '.join(s.id for s in steps) or 'none'})")
             steps = [s for s in steps if s is not existing]
             continue
         merged = {**(existing.param_values() if existing else {}), **params}
@@ -254,11 +287,15 @@ def _steps(doc: _Located, effects, inherited: list[Step]) -> list[Step]:
             except ValueError as exc:
                 doc.fail(at + ("mask",), str(exc))
         step = Step(name, p, quality or (existing.quality if existing else None), id=sid,
-                    missing_passes=when_missing, mask=mask, animated=keyed)
+                    missing_passes=when_missing, mask=mask, animated=keyed,
+                    origin=existing.origin if existing else origin,
+                    changed_in=existing.changed_in + (origin,) if existing else ())
         if existing:
             steps[steps.index(existing)] = step
         else:
             steps.append(step)
+        if "before" in entry or "after" in entry:
+            steps = _place(doc, at, entry, steps, step)
     return steps
 
 

@@ -60,7 +60,8 @@ class FrameResult:
         ``host:pid`` of the Dask worker that rendered it; None in this process.
     notices : list of (kind, message, key)
         What the reader assumed while reading the frame (``"notice"``: said once per batch
-        and key unless ``-q``; ``"warning"``: said once per batch and key whatever ``-q``).
+        and key unless ``-q``; ``"warning"``: said once per batch and key whatever ``-q``
+        says, e.g. how a depth pass marks "no hit").
     skipped : bool
         Its output appeared meanwhile and ``--skip-existing`` left it (rendered, not written).
     """
@@ -136,6 +137,14 @@ class Reporter:
         self._said: set[str] = set()       # warning texts and notice keys said
         self._log = None
         self._t0 = time.perf_counter()
+        self.params_hash: str | None = None    # the stamped clfx:paramsHash (`stamped`)
+        self.quality: str | None = None
+        self._headed = False
+
+    def stamped(self, params_hash: str, quality: str) -> None:
+        """The look's hash as every output is stamped with it (`Look.params_hash`, the
+        render's level resolved) and that level: said by ``--explain`` and the summary."""
+        self.params_hash, self.quality = params_hash, quality
 
     def start(self, total: int | None) -> None:
         """The render starts now (its wall time counts from here), ``total`` frames."""
@@ -152,17 +161,24 @@ class Reporter:
     def notice(self, message: str, key: str) -> None:
         """What the reader assumed (e.g. depth 0 = no hit): one line per batch and key,
         not with ``-q``."""
-        if key.startswith("depth") and "depth" not in self.look.clips_used():
-            return                       # no step reads the depth: its conventions are moot
+        if self._moot(key):
+            return
         if key not in self._said:
             self._said.add(key)
             self.log({"notice": message}, f"clfx: {message}")
             if self.verbosity > 0:
                 self.err(f"clfx: {message}")
 
+    def _moot(self, key: str) -> bool:
+        """A depth convention is not worth a line when no step reads the depth."""
+        return key.startswith("depth") and "depth" not in self.look.clips_used()
+
     def assumed(self, message: str, key: str) -> None:
         """What clfx had to assume about an input (a NaN mask, a Cryptomatte without
-        manifest): one warning line per batch and key, whatever ``-q`` says."""
+        manifest, the depth "no hit" convention a pass was read with): one warning line per
+        batch and key, whatever ``-q`` says."""
+        if self._moot(key):
+            return
         if key not in self._said:
             self._said.add(key)
             self.log({"warning": message}, f"clfx: warning: {message}")
@@ -206,6 +222,10 @@ class Reporter:
                 print(json.dumps(record), flush=True)
             text = report.explain() if o.explain or self._log is not None else ""
             if o.explain:
+                if not self._headed and self.params_hash:
+                    self._headed = True
+                    self.err(f"look {self.look.name!r} at {self.quality}: params hash "
+                             f"{self.params_hash}")
                 self.err(text)
             self.log(record, text)
             if result.skipped:
@@ -227,7 +247,8 @@ class Reporter:
         wall = time.perf_counter() - self._t0
         render_s = wall - (cluster.startup_s if cluster else 0.0)
         n = len(reports)
-        summary = {"summary": True, "look": self.look.name, "frames": n,
+        summary = {"summary": True, "look": self.look.name, "params_hash": self.params_hash,
+                   "quality": self.quality, "frames": n,
                    "skipped_existing": skipped_existing + len(self.skipped),
                    "wall_s": round(wall, 3),
                    "fps": round(n / render_s, 3) if render_s > 0 and n else None,

@@ -248,7 +248,7 @@ def test_hdr_point_is_not_rung_and_alpha_kept(rt):
 
 
 def test_keyframed_cli_render(rt, rng, tmp_path):
-    """`clfx render in.####.exr out.####.exr --look X --set camera.focus_distance=1:2.0,8:5.5
+    """`clfx render in.#.exr out.#.exr --look X --set camera.focus_distance=1:2.0,8:5.5
     --set camera.breathing=1`: each frame scaled by its focus, one warning line per widened
     frame without overscan, the values stamped."""
     import json
@@ -264,8 +264,8 @@ def test_keyframed_cli_render(rt, rng, tmp_path):
         write_frame(Frame.from_array(a), tmp_path / f"in.{f:04d}.exr", bit_depth="float")
     (tmp_path / "rack.yaml").write_text("name: rack\nschema: 1\ncamera: {focal_length: 50}\n"
                                         "effects:\n  - effect: breathing\n")
-    r = CliRunner().invoke(cli, ["render", str(tmp_path / "in.####.exr"),
-                                 str(tmp_path / "out.####.exr"), "--look",
+    r = CliRunner().invoke(cli, ["render", str(tmp_path / "in.#.exr"),
+                                 str(tmp_path / "out.#.exr"), "--look",
                                  str(tmp_path / "rack.yaml"), "--float",
                                  "--set", "camera.focus_distance=1:2.0,8:5.5",
                                  "--set", "camera.breathing=1"], catch_exceptions=False)

@@ -489,7 +489,7 @@ def test_a_clamp_warning_reaches_stderr_once_naming_effect_frame_and_coc(tmp_pat
     write_frame(frame, tmp_path / "in.0001.exr", write_passes=True)
     write_frame(frame, tmp_path / "in.0002.exr", write_passes=True)
     r = subprocess.run([sys.executable, "-m", "clfx.cli", "-q", "render",
-                        str(tmp_path / "in.####.exr"), str(tmp_path / "out.####.exr"),
+                        str(tmp_path / "in.#.exr"), str(tmp_path / "out.#.exr"),
                         "--look", "default", "--set", "dof.max_coc=0.1",
                         "--set", "camera.sensor_width=1"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
