@@ -106,7 +106,10 @@ colour_options = stack(
     click.option("--working-space", default=None, metavar="SPACE",
                  help="Linear space effects work in: lin_rec709 (default), ACEScg, ..."),
     click.option("--view", default=None, metavar="NAME",
-                 help="Multi-view input: render this view only (default: every view)."),
+                 help="Multi-view EXR input: render view NAME only, the others copied "
+                      "through.  Default: every view renders (an EXR output with --passes "
+                      "keep; other outputs: the hero view); --explain, --json and the "
+                      "summary name the views."),
 )
 
 render_options = stack(

@@ -575,7 +575,10 @@ class BatchPlan:
                 keep_overscan=self.settings.keep_overscan and not raw,
                 analysis_summary=self.analysis, stats=stats, masks=masks,
                 release_input=not raw, tile_pixels=self.settings.tile_pixels))
+        for (_, r), frame_in in zip(outs, read.views):
+            r.view = frame_in.layout.view if frame_in.layout is not None else None
         frame_out, report = outs[0]
+        report.other_views = [r for _, r in outs[1:]]
         if not raw:
             report.input, report.output = job.input, job.output
         report.read_ms = read.read_ms

@@ -172,12 +172,11 @@ class Reporter:
         """Say a frame's warnings on stderr, each distinct text once per batch (naming the
         first frame that said it: a pass missing from every frame is one line, not one per
         frame)."""
-        prefix = f"clfx: warning: frame {report.frame}: "
-        for line in report.warnings():
-            text = "warning:" + line.removeprefix(prefix)
-            if text not in self._said:
-                self._said.add(text)
-                self.err(line)
+        for where, text in report.warning_items():
+            key = "warning:" + where.removeprefix(f"frame {report.frame}") + text
+            if key not in self._said:
+                self._said.add(key)
+                self.err(f"clfx: warning: {where}: {text}")
 
     # -- frames -------------------------------------------------------------------------
     def frame(self, result: FrameResult) -> None:
@@ -231,20 +230,26 @@ class Reporter:
                    "skipped_existing": skipped_existing + len(self.skipped),
                    "wall_s": round(wall, 3),
                    "fps": round(n / render_s, 3) if render_s > 0 and n else None,
-                   "device_ms_mean": round(sum(r.total_ms for r in reports) / n, 2) if n else None,
+                   "device_ms_mean": round(sum(r.total_ms + sum(o.total_ms for o in r.other_views)
+                                             for r in reports) / n, 2) if n else None,
                    "saved_ms_estimate": round(sum(r.saved_ms or 0.0 for r in reports), 1)}
+        views = list(dict.fromkeys(v for r in reports for v in r.views))
+        if views:      # a multi-view input: which views each frame rendered
+            summary["views"] = views
+        what = (f"{n} frame(s) ({len(views)} views each: {', '.join(views)})" if len(views) > 1
+                else f"{n} frame(s) (view {views[0]})" if views else f"{n} frame(s)")
         if raw:
             line = f"clfx: {n} raw frame(s) rendered in {wall:.2f} s"
         elif cluster:
             summary.update(failed=[r.frame for r in self.failed],
                            startup_s=round(cluster.startup_s, 3), workers=cluster.workers,
                            chunk=cluster.chunk, scheduler=cluster.scheduler or "local")
-            line = (f"clfx: {n} frame(s) rendered with look {self.look.name!r} on "
+            line = (f"clfx: {what} rendered with look {self.look.name!r} on "
                     f"{cluster.workers} worker(s) in {wall:.2f} s"
                     + (f" ({summary['fps']} fps after {cluster.startup_s:.1f} s start-up)"
                        if summary["fps"] else ""))
         else:
-            line = (f"clfx: {n} frame(s) rendered with look {self.look.name!r} in "
+            line = (f"clfx: {what} rendered with look {self.look.name!r} in "
                     f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
         self.log(summary, line)
         if not raw:
