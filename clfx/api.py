@@ -203,8 +203,10 @@ class ArrayResult:
     Attributes
     ----------
     rgba : ndarray
-        float32 (h, w, 4) over ``window`` (the input's window unless ``keep_overscan`` let
-        light spread past it).
+        float32 over ``window`` (the input's window unless ``keep_overscan`` let light spread
+        past it), with the input's channels: (h, w, 4) RGBA, (h, w, 3) RGB (the
+        premultiplied colour, alpha dropped) or (h, w) grey (BT.709 luminance of the
+        rendered RGB; exact where it stayed grey).
     window : Rect
         The pixels ``rgba`` covers, in the input's coordinates ((0, 0) is its top left).
     report : FrameReport
@@ -297,7 +299,10 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     masks = read_masks(lk.at(frame), frm, frame, channels=channels) if lk.masks() else None
     out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=level,
                                keep_overscan=keep_overscan, stats=stats, masks=masks)
-    return ArrayResult(out.rgba, out.data_window, report)
+    from clfx.io.channels import beauty_out
+
+    pixels = beauty_out(out.rgba, arr.shape[2] if arr.ndim == 3 else 1)   # channels in = out
+    return ArrayResult(pixels[..., 0] if arr.ndim == 2 else pixels, out.data_window, report)
 
 
 @dataclass
