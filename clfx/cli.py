@@ -24,7 +24,7 @@ import click
 from clfx._version import __version__
 from clfx.cli_options import (check_frames, colour_options, pass_options, quality_option,
                                render_options)
-from clfx.core.errors import ClfxError
+from clfx.core.errors import ClfxError, speak
 
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
@@ -203,6 +203,8 @@ def cli(ctx, verbose, quiet, device):
     """clfx: camera-defect effects (depth of field, motion blur, glare, grain, ...) for
     image sequences, on OpenCL."""
     ctx.ensure_object(dict)
+    speak("cli")      # errors name options as flags (--overwrite), not API keywords
+    ctx.call_on_close(lambda: speak("api"))
     ctx.obj["verbosity"] = 0 if quiet else 1 + verbose
     ctx.obj["device"] = device
     _compiler_messages(ctx.obj["verbosity"])

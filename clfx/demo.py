@@ -80,7 +80,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     render, write; half-float output stamped like a render's), so ``clfx render`` of the
     scene files with the same look renders the same frames (written as float there, the
     input's type).  Each preview is the output as written."""
-    from clfx.core.errors import ImageIOError
+    from clfx.core.errors import ImageIOError, option
     from clfx.io.write import write_frame
     from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
     from clfx.pipeline.presets import load_look
@@ -90,7 +90,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
         there = [p for p in demo_files(outdir, count) if os.path.lexists(p)]
         if there:
             more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
-            raise ImageIOError(f"{there[0]} exists{more}; use --overwrite to replace the "
+            raise ImageIOError(f"{there[0]} exists{more}; use {option('--overwrite')} to replace the "
                                f"demo in {outdir}, or another folder")
     os.makedirs(outdir, exist_ok=True)
     t0 = time.perf_counter()

@@ -39,7 +39,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING
 
-from clfx.core.errors import ClfxError, ImageIOError, SequenceError
+from clfx.core.errors import ClfxError, ImageIOError, SequenceError, option
 from clfx.core.frame import Frame
 from clfx.core import limits
 from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
@@ -970,26 +970,26 @@ class Batch:
             return
         role = self._read_by(path)
         if role is not None:
-            raise ImageIOError(f"--log {path} is an input of this render ({role}); clfx never "
-                               f"overwrites its inputs")
+            raise ImageIOError(f"{option('--log')} {path} is an input of this render ({role}); "
+                               f"clfx never overwrites its inputs")
         real = os.path.realpath(path)
         if any(os.path.realpath(j.output) == real for j in (jobs or [])):
-            raise ImageIOError(f"--log {path} is an output of this render")
+            raise ImageIOError(f"{option('--log')} {path} is an output of this render")
         try:
             mode = os.stat(path).st_mode
         except FileNotFoundError:
             mode = None
         except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
         if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISCHR(mode)):
             kind = "a folder" if stat.S_ISDIR(mode) else \
                 "not a regular file (a FIFO)" if stat.S_ISFIFO(mode) else "not a regular file"
-            raise ImageIOError(f"cannot write --log {path}: {kind}")
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {kind}")
         try:
             with open(path, "w", encoding="utf-8"):
                 pass
         except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
 
     def _check_outputs(self, jobs: list[Job]) -> None:
         from clfx.io.write import check_output_format
@@ -1019,8 +1019,11 @@ class Batch:
                 if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
                 elif not self.options.overwrite:
-                    raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
-                                       f"or --skip-existing to resume)")
+                    from clfx.io.write import OutputExistsError
+
+                    raise OutputExistsError(f"output {j.output} exists (use {option('--overwrite')} "
+                                            f"to replace it, or {option('--skip-existing')} to "
+                                            f"resume)")
         check_output_format(outs[0], self.options.out_bit_depth(),
                             self.options.compression)    # not after the first render
 
@@ -1076,8 +1079,8 @@ class Batch:
             raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
         for clip, effects in self.look.required_clips().items():
             raise SequenceError(f"effect {effects[0]!r} needs a {clip} pass, which raw pipes "
-                                f"do not carry (--set {effects[0]}.enabled=false drops it, "
-                                f"--set {effects[0]}.missing_passes=skip skips it)")
+                                f"do not carry ({option('--set', f'{effects[0]}.enabled=false')} drops it, "
+                                f"{option('--set', f'{effects[0]}.missing_passes=skip')} skips it)")
         for step, mask in self.look.masks():
             if not mask.file:
                 raise SequenceError(f"effect {step.id!r} is masked by a channel of the frame "

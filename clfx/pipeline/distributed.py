@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from clfx.core.errors import ClfxError, ClusterError, SequenceError
+from clfx.core.errors import ClfxError, ClusterError, SequenceError, option
 from clfx.device.runtime import KernelBuildWarning, user_set_pocl_affinity
 from clfx.pipeline.batch import (RAW, Batch, BatchPlan, ClusterOptions, Job, available_cores,
                                  render_stream)
@@ -263,7 +263,7 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     from distributed.comm import registry
     from distributed.comm.addressing import parse_address, parse_host_port
 
-    what = f"--scheduler {address!r}"
+    what = option("--scheduler", address)
     try:
         scheme, loc = parse_address(address.strip(), strict=False)
     except (ValueError, TypeError) as exc:
@@ -301,8 +301,8 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
     threads each) or on the cluster at ``scheduler``; the `ClfxWorker` plugin is registered on every
     worker, present and future."""
     if scheduler and workers:
-        raise ClusterError("give --workers N (a local cluster) or --scheduler ADDRESS "
-                           "(an existing one), not both")
+        raise ClusterError(f"give {option('--workers', 'N')} (a local cluster) or "
+                           f"{option('--scheduler', 'ADDRESS')} (an existing one), not both")
     level = logging.ERROR if quiet else logging.WARNING
     with ExitStack() as stack:
         try:
@@ -312,7 +312,7 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
                                                     timeout=CONNECT_TIMEOUT_S))
             else:
                 if workers < 1:
-                    raise ClusterError(f"--workers {workers}: expected 1 or more")
+                    raise ClusterError(f"{option('--workers', workers)}: expected 1 or more")
                 cluster = stack.enter_context(LocalCluster(
                     n_workers=workers, threads_per_worker=TASK_THREADS, processes=True,
                     dashboard_address=None, silence_logs=level, env=worker_env(workers)))
@@ -349,10 +349,10 @@ def render_distributed(batch: Batch, cluster: ClusterOptions, *,
         frames are rendered unless ``fail_fast``.
     """
     if batch.input_path == RAW or batch.output_path == RAW:
-        raise SequenceError("raw pipes ('-') render in one process; --workers and "
-                            "--scheduler render files")
+        raise SequenceError(f"raw pipes ('-') render in one process; {option('--workers')} "
+                            f"and {option('--scheduler')} render files")
     if cluster.chunk < 1:
-        raise SequenceError(f"--chunk {cluster.chunk}: expected 1 or more frames per task")
+        raise SequenceError(f"{option('--chunk', cluster.chunk)}: expected 1 or more frames per task")
     reporter = batch.reporter
     jobs = batch.jobs
     reporter.start(len(jobs))

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
-from clfx.core.errors import ClfxError, ImageIOError
+from clfx.core.errors import ClfxError, ImageIOError, option
 from clfx.pipeline.look import FrameReport
 
 
@@ -270,7 +270,7 @@ class Reporter:
         try:
             f = open(path, "a", encoding="utf-8")     # noqa: SIM115 (closed below)
         except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
         self._log = f
         try:
             yield
@@ -297,4 +297,4 @@ class Reporter:
                 log.close()
             except OSError:
                 pass
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror or exc}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror or exc}") from None
