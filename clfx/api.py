@@ -341,7 +341,10 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     ----------
     input, output : str or path
         Files or patterns (``shot.####.exr``, ``shot.%04d.exr``, ``shot.$F4.exr``); ``"-"``
-        for raw gbrpf32le frames on stdin/stdout (``raw_size="WxH"``).
+        for raw frames on stdin (``raw_size="WxH"``) or stdout, ``raw_format`` their layout
+        (``"gbrpf32le"``: planes G, B, R; ``"gbrapf32le"``, ``"rgbf32le"``, ``"rgbaf32le"``;
+        `clfx.io.raw`).  Either side may be files: raw frames to ``out.####.exr``, or a
+        sequence to raw frames.
     look : str, dict or Look
         See :func:`load_look`; ``set`` applies overrides to it.
     options : RenderOptions, optional

@@ -449,6 +449,7 @@ def _render_options(kw: dict):
 
     passes = set(PassOptions.names())
     rest = {k: v for k, v in kw.items() if k not in passes}
+    rest["raw_format"] = rest.get("raw_format") or RenderOptions.raw_format   # the default
     return RenderOptions(passes=_pass_options(kw), command=_command_line(), **rest)
 
 
@@ -461,18 +462,19 @@ def _command_line() -> str:
     return shlex.join(["clfx", *map(str, args)])
 
 
-def _check_raw_usage(input_path: str, output_path: str, raw_size) -> None:
-    """'-' needs --raw WxH, '-' on both sides, and --raw needs '-': usage errors (exit 2)
-    before anything."""
-    if RAW in (input_path, output_path):
-        if not raw_size:
-            raise click.UsageError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le "
-                                   "frames, as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
-        if input_path != output_path:
-            raise click.UsageError("raw pipes need '-' for both INPUT and OUTPUT")
-    elif raw_size:
-        raise click.UsageError("--raw WxH is for raw pipes ('-' as INPUT and OUTPUT); "
-                               "INPUT and OUTPUT here are files")
+def _check_raw_usage(input_path: str, output_path: str, raw_size, raw_format=None) -> None:
+    """'-' as INPUT needs --raw WxH; --raw and --raw-format need a '-': usage errors (exit 2)
+    before anything.  '-' as OUTPUT alone takes the frames' size from the first input."""
+    if input_path == RAW and not raw_size:
+        raise click.UsageError("'-' as INPUT needs --raw WxH, the size of the raw frames on "
+                               "stdin (--raw-format says their layout; default gbrpf32le)")
+    if RAW not in (input_path, output_path):
+        if raw_size:
+            raise click.UsageError("--raw WxH is for raw pipes ('-' as INPUT or OUTPUT); "
+                                   "INPUT and OUTPUT here are files")
+        if raw_format:
+            raise click.UsageError("--raw-format is for raw pipes ('-' as INPUT or OUTPUT); "
+                                   "INPUT and OUTPUT here are files")
 
 
 RAW = "-"
@@ -504,7 +506,7 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     """Render INPUT (file or sequence pattern like shot.####.exr) through a look to OUTPUT."""
     if look_name and look_from:
         raise click.UsageError("give --look or --look-from, not both")
-    _check_raw_usage(input_path, output_path, kw.get("raw_size"))
+    _check_raw_usage(input_path, output_path, kw.get("raw_size"), kw.get("raw_format"))
     if workers and ctx.get_parameter_source("scheduler") == click.core.ParameterSource.ENVIRONMENT:
         scheduler = None  # an explicit --workers wins over CLFX_SCHEDULER
     if workers and scheduler:
@@ -576,7 +578,7 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
 @click.pass_context
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
-    _check_raw_usage(input_path, output_path, kw.get("raw_size"))
+    _check_raw_usage(input_path, output_path, kw.get("raw_size"), kw.get("raw_format"))
     options = _render_options(kw)
     _check_first_frame(input_path, options)
     runtime = _runtime_soon(ctx)

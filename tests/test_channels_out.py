@@ -20,7 +20,7 @@ def write_exr(path, names, px, fmt="half"):
 
 def channels(path):
     inp = oiio.ImageInput.open(str(path))
-    names, px = tuple(inp.spec().channelnames), np.asarray(inp.read_image(0, 0, 0, -1, "float"))
+    names, px = tuple(inp.spec().channelnames), np.asarray(inp.read_image("float"))
     inp.close()
     return names, px
 

@@ -704,9 +704,10 @@ GREY_FORMATS = ("openexr", "tiff", "png", "jpeg")
 
 def _out_channel_count(frame: Frame, fmt: _OutFormat) -> int:
     """How many beauty channels a written-afresh output holds: the input's (its layout's
-    beauty: 4 RGBA, 3 RGB, 2 grey + alpha, 1 grey; 4 for frames made in memory), less the
+    beauty: 4 RGBA, 3 RGB, 2 grey + alpha, 1 grey; else ``frame.channels``, a raw stream's;
+    4 for frames made in memory), less the
     alpha a format cannot store, grey as RGB where the format has no grey."""
-    count = len(frame.layout.beauty) if frame.layout is not None else 4
+    count = len(frame.layout.beauty) if frame.layout is not None else frame.channels or 4
     if not fmt.alpha and count in (2, 4):
         count -= 1
     if count < 3 and fmt.oiio_name not in GREY_FORMATS:
