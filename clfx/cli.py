@@ -603,10 +603,13 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
 class _Progress:
     """Frames done/total, frames per second, elapsed time and ETA on stderr (rich), only
     on a terminal and never with -q: `clfx.api.render`'s ``on_frame`` (in this process or
-    on a cluster).  Elapsed time counts from when the render was asked for (device set-up
-    and the first frame included); frames per second from the first frame's start."""
+    on a cluster, where frames count as they finish).  Elapsed time counts from when the
+    render was asked for (device set-up included); frames per second from when frames
+    start rendering (`timing`: after a cluster's start-up), as the summary's do (told no
+    time, from the first frame's start: it began about its own time ago).  Lines said
+    meanwhile are not wrapped; `close` (before the summary) takes the bar away."""
 
-    def __init__(self, clock=None):
+    def __init__(self, clock=None, console=None):
         import time
 
         from rich.console import Console
@@ -618,25 +621,37 @@ class _Progress:
                             TextColumn("frames  {task.fields[fps]}"),
                             TextColumn("{task.fields[elapsed]}"),
                             TextColumn("ETA"), TimeRemainingColumn(),
-                            console=Console(file=sys.stderr), transient=True)
+                            console=console or Console(file=sys.stderr, soft_wrap=True),
+                            transient=True)
         self.task = None
         self.t_start = self.clock()
         self.t0 = None
+        self.closed = False
+
+    def timing(self, t0: float) -> None:
+        """Frames render from ``t0`` (the clock's time) on."""
+        self.t0 = t0
+
+    def fps(self, done: int) -> float:
+        """Frames per second so far (since `timing`'s ``t0``, else since the bar began)."""
+        return done / max(self.clock() - (self.t_start if self.t0 is None else self.t0), 1e-9)
 
     def __call__(self, done: int, total: int | None, report) -> None:
-        now = self.clock()
-        if self.task is None:   # the first frame began about its own time ago
-            took = (report.total_ms + report.read_ms) / 1e3 if report is not None else 0.0
-            self.t0 = max(self.t_start, now - max(took, 1e-3))
+        if self.closed:
+            return
+        if self.task is None:
+            if self.t0 is None:      # no timing: the first frame began about its own time ago
+                took = (report.total_ms + report.read_ms) / 1e3 if report is not None else 0.0
+                self.t0 = max(self.t_start, self.clock() - max(took, 1e-3))
             self.bar.start()
             self.task = self.bar.add_task("render", total=total, fps="", elapsed="")
-        fps = done / max(now - self.t0, 1e-9)
-        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps",
-                        elapsed=_clock_text(now - self.t_start))
+        self.bar.update(self.task, completed=done, total=total, fps=f"{self.fps(done):.2f} fps",
+                        elapsed=_clock_text(self.clock() - self.t_start))
 
     def close(self) -> None:
-        if self.task is not None:
+        if self.task is not None and not self.closed:
             self.bar.stop()
+        self.closed = True
 
 
 def _clock_text(seconds: float) -> str:

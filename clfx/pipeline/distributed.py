@@ -370,6 +370,7 @@ def render_distributed(batch: Batch, cluster: ClusterOptions, *,
                 if cluster.scheduler:
                     nworkers = len(client.scheduler_info()["workers"])
                 startup = time.perf_counter() - t0
+                reporter.rendering(t0 + startup)
                 ended = _collect(reporter, client, shipped, jobs, chunks, cluster.fail_fast)
         finally:
             if ended or not cluster.scheduler:   # a local cluster's workers are gone by now
@@ -387,9 +388,9 @@ def render_distributed(batch: Batch, cluster: ClusterOptions, *,
 
 def _collect(reporter: Reporter, client, shipped: ShippedPlan, jobs: list[Job],
              chunks: list[tuple[int, int]], fail_fast: bool) -> bool:
-    """Submit one task per chunk, report results in frame order as tasks finish; True when
-    every task ended (False when ``fail_fast`` cancelled the rest).  Results name the files
-    as ``jobs`` do (tasks saw absolute paths)."""
+    """Submit one task per chunk, count its frames as it finishes (progress) and report
+    results in frame order; True when every task ended (False when ``fail_fast`` cancelled
+    the rest).  Results name the files as ``jobs`` do (tasks saw absolute paths)."""
     run = uuid.uuid4().hex[:8]
     futures = {client.submit(render_chunk, shipped, a, b, fail_fast, pure=False, retries=0,
                              key=f"clfx-render-{jobs[a].frame}-{jobs[b - 1].frame}-{run}"): i
@@ -406,10 +407,11 @@ def _collect(reporter: Reporter, client, shipped: ShippedPlan, jobs: list[Job],
         else:
             results[i] = future.result()
         future.release()
+        reporter.finished(results[i])   # progress: as tasks finish, in any order
         while emitted in results:   # frame order
             for r in results.pop(emitted):
                 job = given[r.frame]
-                reporter.frame(r.named(job.input, job.output))
+                reporter.frame(r.named(job.input, job.output), progress=False)
             emitted += 1
         if fail_fast and reporter.failed:
             client.cancel(list(futures))

@@ -115,7 +115,11 @@ class Reporter:
         is not worth a notice when no step reads depth).
     options : ReportOptions
     on_frame : callable(done, total, report), optional
-        Progress, after each frame (``report`` None for a failed frame).
+        Progress, after each frame (``report`` None for a failed frame); frames count as they
+        finish, wherever they rendered (a cluster's in any order).  If it has them,
+        ``on_frame.timing(t0)`` is told when rendering starts (a ``time.perf_counter`` time,
+        after a cluster's start-up: the origin of the summary's frames per second) and
+        ``on_frame.close()`` is called before the summary is said.
     total : int or None
         Frames to render (None: a raw stream, unknown).
     data_on_stdout : bool
@@ -136,10 +140,27 @@ class Reporter:
         self._said: set[str] = set()       # warning texts and notice keys said
         self._log = None
         self._t0 = time.perf_counter()
+        self._done = 0                     # frames finished (rendered or failed), any order
 
     def start(self, total: int | None) -> None:
         """The render starts now (its wall time counts from here), ``total`` frames."""
         self._t0, self.total = time.perf_counter(), total
+        self.rendering(self._t0)
+
+    def rendering(self, t0: float) -> None:
+        """Frames render from ``t0`` on (`start`; after a cluster's start-up): the progress
+        display's frames per second count from here, as the summary's do."""
+        timing = getattr(self.on_frame, "timing", None)
+        if timing is not None:
+            timing(t0)
+
+    def finished(self, results) -> None:
+        """``results`` (`FrameResult` s) are done: progress counts them now, before they are
+        said in frame order (`frame` with ``progress=False``)."""
+        results = list(results)
+        self._done += len(results)
+        if self.on_frame is not None and results:
+            self.on_frame(self._done, self.total, results[-1].report)
 
     @property
     def verbosity(self) -> int:
@@ -179,8 +200,9 @@ class Reporter:
                 self.err(f"clfx: warning: {where}: {text}")
 
     # -- frames -------------------------------------------------------------------------
-    def frame(self, result: FrameResult) -> None:
-        """Everything a finished frame says, in frame order."""
+    def frame(self, result: FrameResult, progress: bool = True) -> None:
+        """Everything a finished frame says, in frame order; ``progress``: and count it (not
+        when `finished` counted it already)."""
         for kind, message, key in result.notices:
             (self.assumed if kind == "warning" else self.notice)(message, key)
         o = self.options
@@ -213,8 +235,8 @@ class Reporter:
                     self.err(f"clfx: frame {result.frame}: {result.output} appeared "
                              f"meanwhile; skipped")
             self.reports.append(report)
-        if self.on_frame is not None:
-            self.on_frame(len(self.reports) + len(self.failed), self.total, result.report)
+        if progress:
+            self.finished([result])
 
     # -- the end ------------------------------------------------------------------------
     def summary(self, *, skipped_existing: int = 0, cluster: ClusterInfo | None = None,
@@ -252,6 +274,9 @@ class Reporter:
             line = (f"clfx: {what} rendered with look {self.look.name!r} in "
                     f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
         self.log(summary, line)
+        close = getattr(self.on_frame, "close", None)
+        if close is not None:       # the progress display goes first: the summary follows it
+            close()
         if not raw:
             if self.options.as_json:
                 print(json.dumps(summary), flush=True)
