@@ -11,9 +11,9 @@ from clfx.core.frame import Frame
 from clfx.core.rect import Rect
 from clfx.io.read import read_frame, read_views
 from clfx.io.write import write_frame
-from tests.conftest import EXR_IMAGES as DATA
+from tests.conftest import EXR_IMAGES as DATA, needs_exr_images
 
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="openexr-images test data not found")
+needs_data = needs_exr_images
 BEACHBALL = DATA / "Beachball"
 VIGNETTE = ("vignette", "amount=0.8")
 QUIET = {"notify": lambda message, key: None}

@@ -95,3 +95,18 @@ def test_api_errors_name_keywords_and_the_cli_flags(tmp_path, rt):
     with pytest.raises(clfx.ImageIOError, match=r"cannot write log_path"):   # after the CLI
         clfx.render_file(tmp_path / "in.exr", tmp_path / "o2.exr", "default",
                          log_path=str(tmp_path))
+
+
+def test_missing_test_images_skip_naming_the_folder_and_the_variable(tmp_path):
+    """Issue 33: the skip said "openexr-images test data not found" without where it looked
+    or how to point elsewhere."""
+    env = {**os.environ, "CLFX_SHARED_DATA": str(tmp_path / "nowhere"),
+           "PYTHONPATH": str(ROOT)}
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider",
+                          "-n", "0", "tests/test_io.py::test_pixel_aspect_files",
+                          "tests/test_io_depth.py", "-k", "aspect or beachball"],
+                         cwd=ROOT, env=env, capture_output=True, text=True)
+    skips = [ln for ln in out.stdout.splitlines() if ln.startswith("SKIPPED")]
+    assert skips and out.returncode == 0, out.stdout + out.stderr
+    for line in skips:
+        assert str(tmp_path / "nowhere" / "openexr-images") in line and "CLFX_SHARED_DATA" in line
