@@ -110,3 +110,39 @@ def test_missing_test_images_skip_naming_the_folder_and_the_variable(tmp_path):
     assert skips and out.returncode == 0, out.stdout + out.stderr
     for line in skips:
         assert str(tmp_path / "nowhere" / "openexr-images") in line and "CLFX_SHARED_DATA" in line
+
+
+def test_setup_says_one_line_per_step(tmp_path):
+    """Issue 33: `make demo` printed ~130 lines of setup (pip's and setuptools' output, every
+    OpenCL device).  An installed venv (stubs): one line per step, nothing else."""
+    import hashlib
+    import shutil
+    import stat
+
+    venv = tmp_path / "venv"
+    (venv / "bin").mkdir(parents=True)
+    stubs = {"python": "#!/bin/sh\nexit 0\n",
+             "clfx": "#!/bin/sh\necho '  [0:0] other device: not chosen'\n"
+                     "echo '* [1:0] pthread-cpu (cpu, OpenCL 3.0): chosen'\n"
+                     "echo '  [2:0] another: not chosen'\n"}
+    for name, text in stubs.items():
+        (venv / "bin" / name).write_text(text)
+        (venv / "bin" / name).chmod(stat.S_IRWXU)
+    want = hashlib.sha1((ROOT / "pyproject.toml").read_bytes()
+                        + (ROOT / "scripts" / "setup.sh").read_bytes()).hexdigest()
+    (venv / ".clfx-installed").write_text(want + "\n")
+    bin_dir = tmp_path / "bin"          # a PATH without dpkg-query: no system packages step
+    bin_dir.mkdir()
+    for tool in ("dirname", "cat", "sha1sum", "cut", "mkdir", "sed", "head", "printf", "id"):
+        found = shutil.which(tool)
+        if found:
+            (bin_dir / tool).symlink_to(found)
+    out = subprocess.run([shutil.which("bash"), str(ROOT / "scripts" / "setup.sh")],
+                         capture_output=True,
+                         text=True, env={"PATH": str(bin_dir), "VENV": str(venv),
+                                         "HOME": str(tmp_path)})
+    assert out.returncode == 0, out.stderr
+    lines = out.stderr.splitlines()
+    assert out.stdout == "" and all(ln.startswith("clfx setup: ") for ln in lines), lines
+    assert lines[-2:] == [f"clfx setup: Python packages in {venv}: up to date",
+                          "clfx setup: OpenCL device: [1:0] pthread-cpu (cpu, OpenCL 3.0): chosen"]
