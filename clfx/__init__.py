@@ -25,16 +25,30 @@ Example::
                                   frames="1001-1040", overwrite=True)
     print(result.summary["fps"], result.reports[0].as_dict()["ran"])
 
+Errors: every error clfx reports is a ``clfx.ClfxError`` (one line naming the file, frame,
+channel or key): ``ParamError``, ``ClipError``, ``PresetError``, ``SequenceError``,
+``ImageIOError`` (``OutputExistsError``: an output exists and ``overwrite=True`` was not
+given), ``KernelBuildError``, ``DeviceError``, ``ClusterError``::
+
+    try:
+        clfx.render_file("in.exr", "out.exr", "cinema")
+    except clfx.OutputExistsError:
+        ...
+
 Names are imported on first use, so ``import clfx`` stays cheap (no OpenCL, no OpenImageIO).
 """
 from clfx._version import __version__
+from clfx.core.errors import (ClfxError, ClipError, ClusterError, DeviceError, ImageIOError,
+                              KernelBuildError, ParamError, PresetError, SequenceError)
 
 _API = ("ArrayResult", "ClusterOptions", "FrameReport", "Look", "PassOptions", "RenderOptions",
         "RenderResult",
         "load_look", "look_from_stamp", "render", "render_array", "render_file",
         "render_sequence", "runtime")
+_ERRORS = ("ClfxError", "ClipError", "ClusterError", "DeviceError", "ImageIOError",
+           "KernelBuildError", "ParamError", "PresetError", "SequenceError")
 
-__all__ = ["__version__", *_API]
+__all__ = ["__version__", *_API, *_ERRORS, "OutputExistsError"]
 
 
 def __getattr__(name: str):
@@ -42,8 +56,12 @@ def __getattr__(name: str):
         from clfx import api
 
         return getattr(api, name)
+    if name == "OutputExistsError":     # lives with the writer (OpenImageIO): on first use
+        from clfx.io.write import OutputExistsError
+
+        return OutputExistsError
     raise AttributeError(f"module 'clfx' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(list(globals()) + list(_API))
+    return sorted(list(globals()) + list(_API) + ["OutputExistsError"])

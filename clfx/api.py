@@ -197,8 +197,10 @@ class ArrayResult:
     Attributes
     ----------
     rgba : ndarray
-        float32 (h, w, 4) over ``window`` (the input's window unless ``keep_overscan`` let
-        light spread past it).
+        float32 over ``window`` (the input's window unless ``keep_overscan`` let light spread
+        past it), with the input's channels: (h, w, 4) RGBA, (h, w, 3) RGB (the
+        premultiplied colour, alpha dropped) or (h, w) grey (BT.709 luminance of the
+        rendered RGB; exact where it stayed grey).
     window : Rect
         The pixels ``rgba`` covers, in the input's coordinates ((0, 0) is its top left).
     report : FrameReport
@@ -291,7 +293,10 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     masks = read_masks(lk.at(frame), frm, frame, channels=channels) if lk.masks() else None
     out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=level,
                                keep_overscan=keep_overscan, stats=stats, masks=masks)
-    return ArrayResult(out.rgba, out.data_window, report)
+    from clfx.io.channels import beauty_out
+
+    pixels = beauty_out(out.rgba, arr.shape[2] if arr.ndim == 3 else 1)   # channels in = out
+    return ArrayResult(pixels[..., 0] if arr.ndim == 2 else pixels, out.data_window, report)
 
 
 @dataclass
@@ -330,7 +335,10 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     ----------
     input, output : str or path
         Files or patterns (``shot.#.exr``, ``shot.%04d.exr``, ``shot.$F4.exr``); ``"-"``
-        for raw gbrpf32le frames on stdin/stdout (``raw_size="WxH"``).
+        for raw frames on stdin (``raw_size="WxH"``) or stdout, ``raw_format`` their layout
+        (``"gbrpf32le"``: planes G, B, R; ``"gbrapf32le"``, ``"rgbf32le"``, ``"rgbaf32le"``;
+        `clfx.io.raw`).  Either side may be files: raw frames to ``out.#.exr``, or a
+        sequence to raw frames.
     look : str, dict or Look
         See :func:`load_look`; ``set`` applies overrides to it.
     options : RenderOptions, optional

@@ -26,7 +26,7 @@ import click
 from clfx._version import __version__
 from clfx.cli_options import (check_frames, colour_options, pass_options, quality_option,
                                render_options)
-from clfx.core.errors import ClfxError
+from clfx.core.errors import ClfxError, speak
 
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
@@ -237,6 +237,8 @@ def cli(ctx, verbose, quiet, device):
     image sequences, on OpenCL."""
     ctx.ensure_object(dict)
     ctx.obj.update(quiet=quiet, verbose=verbose)
+    speak("cli")      # errors name options as flags (--overwrite), not API keywords
+    ctx.call_on_close(lambda: speak("api"))
     ctx.obj["verbosity"] = 0 if quiet else 1 + verbose
     ctx.obj["device"] = device
     _compiler_messages(ctx.obj["verbosity"])
@@ -521,6 +523,7 @@ def _render_options(kw: dict):
 
     passes = set(PassOptions.names())
     rest = {k: v for k, v in kw.items() if k not in passes}
+    rest["raw_format"] = rest.get("raw_format") or RenderOptions.raw_format   # the default
     return RenderOptions(passes=_pass_options(kw), command=_command_line(), **rest)
 
 
@@ -533,18 +536,19 @@ def _command_line() -> str:
     return shlex.join(["clfx", *map(str, args)])
 
 
-def _check_raw_usage(input_path: str, output_path: str, raw_size) -> None:
-    """'-' needs --raw WxH, '-' on both sides, and --raw needs '-': usage errors (exit 2)
-    before anything."""
-    if RAW in (input_path, output_path):
-        if not raw_size:
-            raise click.UsageError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le "
-                                   "frames, as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
-        if input_path != output_path:
-            raise click.UsageError("raw pipes need '-' for both INPUT and OUTPUT")
-    elif raw_size:
-        raise click.UsageError("--raw WxH is for raw pipes ('-' as INPUT and OUTPUT); "
-                               "INPUT and OUTPUT here are files")
+def _check_raw_usage(input_path: str, output_path: str, raw_size, raw_format=None) -> None:
+    """'-' as INPUT needs --raw WxH; --raw and --raw-format need a '-': usage errors (exit 2)
+    before anything.  '-' as OUTPUT alone takes the frames' size from the first input."""
+    if input_path == RAW and not raw_size:
+        raise click.UsageError("'-' as INPUT needs --raw WxH, the size of the raw frames on "
+                               "stdin (--raw-format says their layout; default gbrpf32le)")
+    if RAW not in (input_path, output_path):
+        if raw_size:
+            raise click.UsageError("--raw WxH is for raw pipes ('-' as INPUT or OUTPUT); "
+                                   "INPUT and OUTPUT here are files")
+        if raw_format:
+            raise click.UsageError("--raw-format is for raw pipes ('-' as INPUT or OUTPUT); "
+                                   "INPUT and OUTPUT here are files")
 
 
 RAW = "-"
@@ -576,7 +580,7 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     """Render INPUT (file or sequence pattern like shot.#.exr) through a look to OUTPUT."""
     if look_name and look_from:
         raise click.UsageError("give --look or --look-from, not both")
-    _check_raw_usage(input_path, output_path, kw.get("raw_size"))
+    _check_raw_usage(input_path, output_path, kw.get("raw_size"), kw.get("raw_format"))
     if workers and ctx.get_parameter_source("scheduler") == click.core.ParameterSource.ENVIRONMENT:
         scheduler = None  # an explicit --workers wins over CLFX_SCHEDULER
     if workers and scheduler:
@@ -648,7 +652,7 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
 @click.pass_context
 def apply(ctx, effect, input_path, output_path, assignments, **kw):
     """Apply one EFFECT to INPUT with PARAM=VALUE settings (camera.key=value too)."""
-    _check_raw_usage(input_path, output_path, kw.get("raw_size"))
+    _check_raw_usage(input_path, output_path, kw.get("raw_size"), kw.get("raw_format"))
     options = _render_options(kw)
     _check_first_frame(input_path, options)
     runtime = _runtime_soon(ctx)
@@ -674,10 +678,13 @@ def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
 class _Progress:
     """Frames done/total, frames per second, elapsed time and ETA on stderr (rich), only
     on a terminal and never with -q: `clfx.api.render`'s ``on_frame`` (in this process or
-    on a cluster).  Elapsed time counts from when the render was asked for (device set-up
-    and the first frame included); frames per second from the first frame's start."""
+    on a cluster, where frames count as they finish).  Elapsed time counts from when the
+    render was asked for (device set-up included); frames per second from when frames
+    start rendering (`timing`: after a cluster's start-up), as the summary's do (told no
+    time, from the first frame's start: it began about its own time ago).  Lines said
+    meanwhile are not wrapped; `close` (before the summary) takes the bar away."""
 
-    def __init__(self, clock=None):
+    def __init__(self, clock=None, console=None):
         import time
 
         from rich.console import Console
@@ -689,25 +696,37 @@ class _Progress:
                             TextColumn("frames  {task.fields[fps]}"),
                             TextColumn("{task.fields[elapsed]}"),
                             TextColumn("ETA"), TimeRemainingColumn(),
-                            console=Console(file=sys.stderr), transient=True)
+                            console=console or Console(file=sys.stderr, soft_wrap=True),
+                            transient=True)
         self.task = None
         self.t_start = self.clock()
         self.t0 = None
+        self.closed = False
+
+    def timing(self, t0: float) -> None:
+        """Frames render from ``t0`` (the clock's time) on."""
+        self.t0 = t0
+
+    def fps(self, done: int) -> float:
+        """Frames per second so far (since `timing`'s ``t0``, else since the bar began)."""
+        return done / max(self.clock() - (self.t_start if self.t0 is None else self.t0), 1e-9)
 
     def __call__(self, done: int, total: int | None, report) -> None:
-        now = self.clock()
-        if self.task is None:   # the first frame began about its own time ago
-            took = (report.total_ms + report.read_ms) / 1e3 if report is not None else 0.0
-            self.t0 = max(self.t_start, now - max(took, 1e-3))
+        if self.closed:
+            return
+        if self.task is None:
+            if self.t0 is None:      # no timing: the first frame began about its own time ago
+                took = (report.total_ms + report.read_ms) / 1e3 if report is not None else 0.0
+                self.t0 = max(self.t_start, self.clock() - max(took, 1e-3))
             self.bar.start()
             self.task = self.bar.add_task("render", total=total, fps="", elapsed="")
-        fps = done / max(now - self.t0, 1e-9)
-        self.bar.update(self.task, completed=done, total=total, fps=f"{fps:.2f} fps",
-                        elapsed=_clock_text(now - self.t_start))
+        self.bar.update(self.task, completed=done, total=total, fps=f"{self.fps(done):.2f} fps",
+                        elapsed=_clock_text(self.clock() - self.t_start))
 
     def close(self) -> None:
-        if self.task is not None:
+        if self.task is not None and not self.closed:
             self.bar.stop()
+        self.closed = True
 
 
 def _clock_text(seconds: float) -> str:

@@ -106,7 +106,10 @@ colour_options = stack(
     click.option("--working-space", default=None, metavar="SPACE",
                  help="Linear space effects work in: lin_rec709 (default), ACEScg, ..."),
     click.option("--view", default=None, metavar="NAME",
-                 help="Multi-view input: render this view only (default: every view)."),
+                 help="Multi-view EXR input: render view NAME only, the others copied "
+                      "through.  Default: every view renders (an EXR output with --passes "
+                      "keep; other outputs: the hero view); --explain, --json and the "
+                      "summary name the views."),
 )
 
 render_options = stack(
@@ -134,7 +137,17 @@ render_options = stack(
     click.option("--skip-missing", is_flag=True, help="Skip missing input frames instead of failing."),
     click.option("--keep-overscan", is_flag=True, help="Keep light spread past the display window."),
     click.option("--raw", "raw_size", default=None, metavar="WxH", callback=check_raw_size,
-                 help="With '-' as INPUT/OUTPUT: raw gbrpf32le frames on stdin/stdout (ffmpeg)."),
+                 help="'-' as INPUT: raw frames of this size on stdin (ffmpeg -f rawvideo), "
+                      "to '-' (stdout) or to files (OUT.#.exr, numbered from --frames, "
+                      "default 1).  '-' as OUTPUT alone: files to raw frames on stdout, "
+                      "sized as the first input's display window (--raw must match it)."),
+    click.option("--raw-format", "raw_format", default=None,
+                 type=click.Choice(["gbrpf32le", "gbrapf32le", "rgbf32le", "rgbaf32le"]),
+                 help="Layout of raw frames (ffmpeg -pix_fmt; little-endian float32): "
+                      "gbrpf32le (default) planar G, B, R: planes in that order, not R, G, B; "
+                      "gbrapf32le planar G, B, R, A; rgbf32le packed R, G, B per pixel; "
+                      "rgbaf32le packed R, G, B, A.  Without alpha: alpha 1 in, "
+                      "premultiplied colour out."),
     click.option("--explain", is_flag=True,
                  help="Per frame: which effects ran, which were skipped and why."),
     click.option("--json", "as_json", is_flag=True,

@@ -9,12 +9,12 @@ own pipeline.  Written to OUTDIR:
   ``clfx render`` to try other looks);
 - ``demo.#.exr``   the look's output (half float, scene-linear);
 - ``demo.#.png``   a tone-mapped sRGB preview of each output;
-- ``contact_sheet.png`` every preview on one sheet.
+- ``contact_sheet.png`` each frame's input (before) beside its output (after), labelled
+  with the frame and the look, tone-mapped alike.
 """
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time
@@ -37,15 +37,20 @@ def tonemap_preview(rgba: np.ndarray, exposure: float = PREVIEW_EXPOSURE) -> np.
     return rgb / (1.0 + rgb)
 
 
-def contact_sheet(previews: list[np.ndarray], columns: int = 6, thumb_width: int = 320,
-                  gap: int = 4) -> np.ndarray:
-    """Tile display-linear RGB previews into one image (box-downscaled thumbnails)."""
-    h, w = previews[0].shape[:2]
-    step = max(1, int(math.ceil(w / thumb_width)))
-    thumbs = [p[: h - h % step or h, : w - w % step or w] for p in previews]
-    thumbs = [t.reshape(t.shape[0] // step, step, t.shape[1] // step, step, 3).mean(axis=(1, 3))
-              if step > 1 else t for t in thumbs]
-    return tile_sheet(thumbs, columns, gap)
+def contact_sheet(pairs: list[tuple[int, np.ndarray, np.ndarray]], look_name: str,
+                  columns: int = 6, thumb_width: int = 320) -> np.ndarray:
+    """Each frame's ``(number, before, after)`` previews (display-linear RGB) side by side,
+    box-downscaled and labelled ``frame N`` / ``before`` or ``after: LOOK`` (the gallery's
+    labels), pairs kept on one row."""
+    from clfx.gallery import label, thumbnail     # the gallery's sheet code (same layer)
+
+    tiles = []
+    for number, before, after in pairs:
+        for img, what in ((before, "before"), (after, f"after: {look_name}")):
+            thumb = thumbnail(img, thumb_width)
+            tiles.append(label(thumb, [f"frame {number}", what],
+                               scale=2 if thumb.shape[1] >= 240 else 1))
+    return tile_sheet(tiles, max(2, columns - columns % 2))
 
 
 def tile_sheet(tiles: list[np.ndarray], columns: int = 6, gap: int = 4) -> np.ndarray:
@@ -80,7 +85,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     render, write; half-float output stamped like a render's), so ``clfx render`` of the
     scene files with the same look renders the same frames (written as float there, the
     input's type).  Each preview is the output as written."""
-    from clfx.core.errors import ImageIOError
+    from clfx.core.errors import ImageIOError, option
     from clfx.io.write import output_folder, write_frame
     from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
     from clfx.pipeline.presets import load_look
@@ -90,7 +95,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
         there = [p for p in demo_files(outdir, count) if os.path.lexists(p)]
         if there:
             more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
-            raise ImageIOError(f"{there[0]} exists{more}; use --overwrite to replace the "
+            raise ImageIOError(f"{there[0]} exists{more}; use {option('--overwrite')} to replace the "
                                f"demo in {outdir}, or another folder")
     output_folder(outdir)          # a file or a broken link there: one error line
     t0 = time.perf_counter()
@@ -102,13 +107,14 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
                                         overwrite=overwrite, as_json=as_json),
                   verbosity=0)
     batch.prepare()
-    previews, reports = [], []
+    pairs, reports = [], []
 
     def frame_done(result):
         report = result.report
         reports.append(report)
-        previews.append(preview_of(result.output))
-        write_frame(Frame.from_array(previews[-1]), os.path.splitext(result.output)[0] + ".png",
+        after = preview_of(result.output)
+        pairs.append((result.frame, preview_of(result.input), after))
+        write_frame(Frame.from_array(after), os.path.splitext(result.output)[0] + ".png",
                     overwrite=overwrite)
         if explain:
             print(report.explain(), file=sys.stderr)
@@ -122,7 +128,7 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     if verbosity > 0 and sys.stderr.isatty() and not as_json:
         print("", file=sys.stderr)
     sheet_path = os.path.join(outdir, "contact_sheet.png")
-    write_frame(Frame.from_array(contact_sheet(previews)), sheet_path, overwrite=overwrite)
+    write_frame(Frame.from_array(contact_sheet(pairs, look.name)), sheet_path, overwrite=overwrite)
     wall = time.perf_counter() - t0
     summary = {"summary": True, "look": look.name, "frames": count, "size": [width, height],
                "outdir": outdir, "contact_sheet": sheet_path, "wall_s": round(wall, 2),

@@ -12,6 +12,10 @@
 #   - .venv with clfx installed editable plus its [test] extras, and pyvkfft built from source
 #     with its OpenCL backend (VKFFT_BACKEND=opencl).  Never PyPI's pocl-binary-distribution:
 #     it fails on these CPUs ("unknown target CPU 'generic'").
+#
+# Quiet: one line per step on stderr; a step that fails shows its own output (the last lines,
+# and where the whole log is).  The editable install is a plain path entry (pyproject's
+# package-dir), so `import clfx` works from any folder, the clone's parent included.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,6 +24,20 @@ VENV=${VENV:-.venv}
 APT_PKGS=(pocl-opencl-icd ocl-icd-opencl-dev ocl-icd-libopencl1 python3-venv clinfo oclgrind)
 
 say() { printf 'clfx setup: %s\n' "$*" >&2; }
+
+# Run a step's command with its output kept aside; on failure show it and stop.
+quietly() {
+  local log
+  log=$(mktemp "${TMPDIR:-/tmp}/clfx-setup.XXXXXX")
+  if "$@" >"$log" 2>&1; then
+    rm -f "$log"
+    return 0
+  fi
+  say "failed: $*"
+  tail -n 40 "$log" >&2
+  say "the whole output: $log"
+  exit 1
+}
 
 missing_debs() {
   local p
@@ -42,15 +60,15 @@ install_system_packages() {
     fi
   fi
   say "installing Debian packages: $need"
-  $sudo env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  quietly $sudo env DEBIAN_FRONTEND=noninteractive apt-get update -qq
   # shellcheck disable=SC2086
-  $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $need >/dev/null
+  quietly $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $need
 }
 
 create_venv() {
   if [ ! -x "$VENV/bin/python" ]; then
     say "creating $VENV"
-    "$PYTHON" -m venv "$VENV"
+    quietly "$PYTHON" -m venv "$VENV"
   fi
 }
 
@@ -58,14 +76,16 @@ install_python_packages() {
   local stamp="$VENV/.clfx-installed" want
   want=$(cat pyproject.toml scripts/setup.sh | sha1sum | cut -c1-40)
   if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ] && "$VENV/bin/python" -c 'import clfx, pyvkfft.opencl' 2>/dev/null; then
+    say "Python packages in $VENV: up to date"
     return 0
   fi
   say "installing Python packages into $VENV"
-  "$VENV/bin/python" -m pip install -q --upgrade pip wheel setuptools
-  "$VENV/bin/python" -m pip install -q -e '.[test]'
+  quietly "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip wheel setuptools
+  quietly "$VENV/bin/python" -m pip install -q --disable-pip-version-check -e '.[test]'
   if ! "$VENV/bin/python" -c 'import pyvkfft.opencl' 2>/dev/null; then
     say "building pyvkfft with its OpenCL backend (one-off, a few minutes)"
-    VKFFT_BACKEND=opencl "$VENV/bin/python" -m pip install -q --no-build-isolation pyvkfft
+    quietly env VKFFT_BACKEND=opencl "$VENV/bin/python" -m pip install -q --disable-pip-version-check \
+      --no-build-isolation pyvkfft
   fi
   echo "$want" > "$stamp"
 }
@@ -76,4 +96,9 @@ install_python_packages
 # PoCL keeps compiled kernels here; persistent so the next run starts warm.
 export POCL_CACHE_DIR="${POCL_CACHE_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/clfx/pocl}"
 mkdir -p "$POCL_CACHE_DIR"
-"$VENV/bin/clfx" devices >&2 || { say "no usable OpenCL device (see above)"; exit 1; }
+if ! devices=$("$VENV/bin/clfx" devices 2>&1); then
+  printf '%s\n' "$devices" >&2
+  say "no usable OpenCL device (see above)"
+  exit 1
+fi
+say "OpenCL device: $(printf '%s\n' "$devices" | sed -n 's/^\* //p' | head -n 1)"

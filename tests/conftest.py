@@ -11,6 +11,11 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("CLFX_SHARED_DATA", ROOT.parent / "shared" / "data"))
 EXR_IMAGES = SHARED_DATA / "openexr-images"
+NO_EXR_IMAGES = (f"OpenEXR test images not found at {EXR_IMAGES}: put a copy of "
+                 f"github.com/AcademySoftwareFoundation/openexr-images there, or set "
+                 f"CLFX_SHARED_DATA to the folder that holds openexr-images/")
+"""Why tests of the real plates skip: the exact folder looked in and how to point elsewhere."""
+needs_exr_images = pytest.mark.skipif(not EXR_IMAGES.is_dir(), reason=NO_EXR_IMAGES)
 
 os.environ.setdefault("CLFX_COLD_NOTICE", "0")
 """The command line's "compiling kernels ... once" line stays out of the in-process CLI tests'
@@ -45,7 +50,7 @@ def rng():
 @pytest.fixture(scope="session")
 def exr_images():
     if not EXR_IMAGES.is_dir():
-        pytest.skip(f"shared test data not found at {EXR_IMAGES}")
+        pytest.skip(NO_EXR_IMAGES)
     return EXR_IMAGES
 
 

@@ -320,7 +320,8 @@ def test_raw_pipe_needs_a_size():
     """A usage error (exit 2, as docs/reliability.md says), before anything is read."""
     r = run("render", "-", "-", code=2)
     assert "--raw WxH" in r.stderr
-    assert "both INPUT and OUTPUT" in run("render", "-", "out.exr", "--raw", "4x4", code=2).stderr
+    # raw frames to files (issue 33): a sequence pattern, said before anything is read
+    assert "has no frame token" in run("render", "-", "out.exr", "--raw", "4x4", code=1).stderr
 
 
 def test_pass_options_are_declared_once_for_every_command():
@@ -353,3 +354,91 @@ def test_batch_options_are_typed_and_its_state_declared(tmp_path):
     assert set(vars(batch)) <= declared
     batch.prepare()
     assert set(vars(batch)) <= declared and batch.raw_size == (8, 4)
+
+
+def test_cluster_progress_counts_frames_as_they_finish_and_agrees_with_the_summary(monkeypatch):
+    """Issue 33: with --workers the bar jumped 0/4 -> 4/4 (frames were counted only as they
+    were said in frame order) and said 1.06 fps against the summary's 0.36 (it timed from
+    the first frame's own start, the summary from the end of the cluster's start-up).  Chunks
+    finishing 3, 1, 2: the bar counts 1, 2, 3 as they finish; its frames per second count
+    from when rendering began, as the summary's; the bar is gone before the summary."""
+    from types import SimpleNamespace
+
+    import clfx.pipeline.distributed as dist
+    from clfx.cli import _Progress
+    from clfx.pipeline.batch import Job
+    from clfx.pipeline.look import FrameReport
+    from clfx.pipeline.report import FrameResult, Reporter, ReportOptions
+
+    now = [0.0]
+    events = []
+
+    class Bar(_Progress):
+        def __call__(self, done, total, report):
+            events.append(("bar", done))
+            super().__call__(done, total, report)
+
+        def close(self):
+            events.append(("close",))
+            super().close()
+
+    jobs = [Job(f, f"i.{f}.exr", f"o.{f}.exr") for f in (1, 2, 3)]
+
+    class Future:
+        def __init__(self, i):
+            self.i, self.status = i, "finished"
+
+        def result(self):
+            now[0] += 10.0                           # each chunk finishes 10 s after the last
+            return [FrameResult(jobs[self.i].frame, report=FrameReport(jobs[self.i].frame))]
+
+        def release(self):
+            pass
+
+    client = SimpleNamespace(loop=None, submit=lambda fn, shipped, a, b, *args, **kw: Future(a))
+    monkeypatch.setattr(dist, "as_completed", lambda futures, loop=None: sorted(
+        futures, key=lambda f: [2, 0, 1].index(f.i)))
+    bar = Bar(clock=lambda: now[0])
+    reporter = Reporter(SimpleNamespace(name="x", clips_used=lambda: set()),
+                        ReportOptions(verbosity=1), on_frame=bar)
+    monkeypatch.setattr(dist.time, "perf_counter", lambda: now[0])
+    monkeypatch.setattr("clfx.pipeline.report.time.perf_counter", lambda: now[0])
+    monkeypatch.setattr(reporter, "err", lambda line, end="\n": events.append(("say", line)))
+    try:
+        reporter.start(3)
+        now[0] = 5.0                                 # the cluster's start-up
+        reporter.rendering(5.0)
+        dist._collect(reporter, client, None, jobs, [(0, 1), (1, 2), (2, 3)], False)
+        assert [e[1] for e in events if e[0] == "bar"] == [1, 2, 3]
+        assert bar.bar.tasks[0].fields["fps"] == "0.10 fps"          # 3 frames in 30 s
+        summary = reporter.summary(cluster=dist.ClusterInfo(2, 1, None, 5.0))
+        assert summary["fps"] == 0.1
+        assert events[-2] == ("close",) and events[-1][0] == "say"   # the bar, then the line
+    finally:
+        bar.close()
+
+
+def test_demo_contact_sheet_is_labelled_before_and_after(rt, tmp_path):
+    """Issue 33: the demo's sheet had neither labels nor the input; now each frame's input
+    (before) sits beside its output (after), each tile labelled with the frame and which."""
+    import OpenImageIO as oiio
+
+    from clfx.gallery import text_mask
+
+    run("-q", "demo", tmp_path / "d", "--frames", "2", "--size", "160x90")
+    inp = oiio.ImageInput.open(str(tmp_path / "d" / "contact_sheet.png"))
+    sheet = np.asarray(inp.read_image("uint8"))
+    inp.close()
+    gap, tw, th = 4, 160, 90
+    assert sheet.shape[:2] == (th + 2 * gap, 4 * (tw + gap) + gap)     # 2 frames x 2 tiles
+    tiles = []
+    for k, (frame, what) in enumerate([(1, "before"), (1, "after: default"),
+                                       (2, "before"), (2, "after: default")]):
+        x = gap + k * (tw + gap)
+        tile = sheet[gap:gap + th, x:x + tw, :3]
+        for row, text in ((1, f"frame {frame}"), (10, what)):
+            mask = text_mask(text, 1)
+            cut = tile[row:row + mask.shape[0], 1:1 + mask.shape[1]]
+            assert np.all(cut[mask[:, :cut.shape[1]]] == 255), (k, text)   # the label, in white
+        tiles.append(tile[20:].astype(int))
+    assert np.abs(tiles[0] - tiles[1]).mean() > 1 and np.abs(tiles[2] - tiles[3]).mean() > 1

@@ -301,8 +301,8 @@ def test_zero_bytes_of_raw_stdin_is_an_error(rt):
 
 
 @pytest.mark.parametrize("args,message", [
-    (("render", "-", "o.exr"), "'-' as INPUT or OUTPUT needs --raw WxH"),
-    (("render", "-", "o.exr", "--raw", "8x4"), "raw pipes need '-' for both INPUT and OUTPUT"),
+    (("render", "-", "o.exr"), "'-' as INPUT needs --raw WxH"),
+    (("render", "i.exr", "o.exr", "--raw-format", "rgbf32le"), "--raw-format is for raw pipes"),
     (("render", "i.exr", "o.exr", "--raw", "8x4"), "--raw WxH is for raw pipes"),
     (("render", "i.exr", "o.#.exr", "--workers", "2", "--scheduler", "tcp://h:1"),
      "give --workers N (a local cluster) or --scheduler ADDRESS"),

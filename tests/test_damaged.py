@@ -6,7 +6,7 @@ import pytest
 from clfx.core.errors import ImageIOError
 from clfx.io.probe import probe
 from clfx.io.read import read_frame
-from tests.conftest import EXR_IMAGES
+from tests.conftest import EXR_IMAGES, NO_EXR_IMAGES
 
 DAMAGED = EXR_IMAGES / "Damaged"
 FILES = sorted(p for p in DAMAGED.iterdir() if p.is_file() and not p.name.endswith(".rst")) \
@@ -32,7 +32,7 @@ def run_with_timeout(fn, *args, timeout=TIMEOUT_S):
     return result.get("error")
 
 
-@pytest.mark.skipif(not FILES, reason="openexr-images/Damaged not found")
+@pytest.mark.skipif(not FILES, reason=f"{NO_EXR_IMAGES} (Damaged/)")
 @pytest.mark.parametrize("path", FILES, ids=[p.name[:60] for p in FILES])
 def test_damaged_file_raises_image_io_error(path):
     err = run_with_timeout(read_frame, path)
@@ -42,7 +42,7 @@ def test_damaged_file_raises_image_io_error(path):
     assert "\n" not in msg
 
 
-@pytest.mark.skipif(not FILES, reason="openexr-images/Damaged not found")
+@pytest.mark.skipif(not FILES, reason=f"{NO_EXR_IMAGES} (Damaged/)")
 def test_damaged_files_probe_never_crashes():
     # probe reads headers only, so a file with a valid header may probe fine;
     # anything else must be an ImageIOError.

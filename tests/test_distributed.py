@@ -21,7 +21,7 @@ pytest.importorskip("distributed")
 def beachball(exr_images):
     pattern = exr_images / "Beachball" / "multipart.#.exr"
     if not (exr_images / "Beachball" / "multipart.0008.exr").is_file():
-        pytest.skip("Beachball sequence not found")
+        pytest.skip(f"Beachball sequence not found in {exr_images / 'Beachball'}")
     return str(pattern)
 
 

@@ -19,7 +19,7 @@ CLFX = VENV_BIN / "clfx"
 @pytest.fixture(scope="module")
 def beachball(exr_images):
     if not (exr_images / "Beachball" / "multipart.0004.exr").is_file():
-        pytest.skip("Beachball sequence not found")
+        pytest.skip(f"Beachball sequence not found in {exr_images / 'Beachball'}")
     return str(exr_images / "Beachball" / "multipart.#.exr")
 
 

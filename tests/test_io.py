@@ -19,8 +19,8 @@ from clfx.io.write import encoding_for, write_frame
 from clfx.io.probe import format_probe, probe
 from clfx.core.rect import Rect
 
-from tests.conftest import EXR_IMAGES as DATA
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="openexr-images test data not found")
+from tests.conftest import EXR_IMAGES as DATA, needs_exr_images
+needs_data = needs_exr_images
 
 HALF_EPS = 2.0 ** -10          # half has a 10-bit mantissa: relative rounding <= 2**-11
 

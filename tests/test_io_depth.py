@@ -13,10 +13,10 @@ from clfx.cli import cli
 from clfx.io import channels as ch
 from clfx.io.probe import format_probe, probe
 from clfx.io.read import DepthConventionWarning, PassSpec, read_frame
-from tests.conftest import EXR_IMAGES as DATA
+from tests.conftest import EXR_IMAGES as DATA, needs_exr_images
 
 BEACHBALL = DATA / "Beachball"
-needs_data = pytest.mark.skipif(not BEACHBALL.is_dir(), reason="openexr-images test data not found")
+needs_data = needs_exr_images
 NO_HIT = "read as no hit"
 # cinema's camera: 35 mm f/2 on Super 35 focused at 3 m; the ball (Z 9..11) is out of focus
 # (CoC ~11 px), the background (+inf) more so (~17 px)

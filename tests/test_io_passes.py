@@ -11,9 +11,9 @@ from clfx.core.frame import Frame
 from clfx.core.rect import Rect
 from clfx.io.read import read_frame, read_views
 from clfx.io.write import write_frame
-from tests.conftest import EXR_IMAGES as DATA
+from tests.conftest import EXR_IMAGES as DATA, needs_exr_images
 
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="openexr-images test data not found")
+needs_data = needs_exr_images
 BEACHBALL = DATA / "Beachball"
 VIGNETTE = ("vignette", "amount=0.8")
 QUIET = {"notify": lambda message, key: None}
@@ -229,3 +229,27 @@ def test_grown_beauty_pads_the_other_channels(tmp_path, rng):
     np.testing.assert_array_equal(mask[1:1 + h, 2:2 + w], px[..., 5].astype(np.float32))
     assert mask[0].max() == 0 and mask[:, :2].max() == 0 and mask[:, 2 + w:].max() == 0
     assert np.all(b["px"]["R"] == 1.0)
+
+
+def test_stereo_explain_json_and_summary_name_every_view(tmp_path, rng, rt):
+    """Issue 33: both eyes render, and --explain, --json and the summary say so (they used
+    to report the hero's steps without naming the view)."""
+    import json
+
+    src, _ = stereo_singlepart(tmp_path / "st.exr", rng)
+    r = run("apply", *VIGNETTE[:1], src, tmp_path / "o.exr", *VIGNETTE[1:], "--explain")
+    assert "frame 1 (view right):" in r.stderr and "frame 1 (view left):" in r.stderr, r.stderr
+    assert "(2 views each: right, left)" in r.stderr, r.stderr
+    r = run("apply", *VIGNETTE[:1], src, tmp_path / "j.exr", *VIGNETTE[1:], "--json")
+    frame, summary = [json.loads(ln) for ln in r.stdout.splitlines()]
+    assert frame["view"] == "right" and frame["ran"] == ["vignette"]
+    assert [o["view"] for o in frame["other_views"]] == ["left"]
+    assert frame["other_views"][0]["ran"] == ["vignette"]
+    assert summary["views"] == ["right", "left"]
+    r = run("apply", *VIGNETTE[:1], src, tmp_path / "l.exr", *VIGNETTE[1:], "--json",
+            "--view", "left")
+    frame, summary = [json.loads(ln) for ln in r.stdout.splitlines()]
+    assert frame["view"] == "left" and "other_views" not in frame and summary["views"] == ["left"]
+    from clfx.cli import cli
+    assert "Default: every view renders" in " ".join(
+        CliRunner().invoke(cli, ["render", "--help"]).output.split())

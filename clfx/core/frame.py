@@ -78,6 +78,9 @@ class Frame:
     velocity_back: np.ndarray | None = None
     """The other half of the vector pass where the renderer writes both (Blender's Vector
     XY beside ZW): backward motion, current - previous position, px/frame, +y down."""
+    channels: int | None = None
+    """Beauty channels of a source without a file layout (a raw stream: 3 RGB, 4 RGBA), what
+    an output of it holds; None: the layout's beauty, else RGBA."""
 
     def __post_init__(self):
         h, w = self.data_window.shape

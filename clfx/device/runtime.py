@@ -177,11 +177,12 @@ def release_freed_heap() -> None:
 
 def kernel_dir() -> Path:
     """Folder holding the ``.cl`` files: ``clfx/kernels`` in an installed wheel, or the
-    repository's top-level ``kernels/`` in a source checkout (editable install)."""
+    repository's top-level ``kernels/`` in a source checkout (editable install; there
+    ``clfx/kernels`` links to it, resolved: one spelling of the path)."""
     here = Path(__file__).resolve().parent.parent  # the clfx package
     for path in (here / "kernels", here.parent / "kernels"):
         if (path / "lib" / "common.h").is_file():
-            return path
+            return path.resolve()
     raise KernelBuildError(f"cannot find clfx's kernels folder next to {here} "
                            f"(is the package installed correctly?)")
 

@@ -693,3 +693,36 @@ def no_hit(z: np.ndarray, alpha: np.ndarray | None = None, *, zero: str = "auto"
                                 ("" if transparent is None else
                                  f", alpha 0 on only {transparent:.0%} of them"))
     return NoHit(mode, share, transparent, why, huge, float(far_threshold), half)
+
+
+# --------------------------------------------------------------------------------------------
+# Channels out = channels in
+
+def beauty_out(rgba: np.ndarray, count: int) -> np.ndarray:
+    """The rendered ``rgba`` (h, w, 4) as the ``count`` beauty channels its input had, so an
+    RGB input gives RGB and a grey one grey: 4 R,G,B,A; 3 R,G,B (alpha dropped: the
+    premultiplied colour over black); 2 grey and alpha; 1 grey.  Grey is the BT.709
+    luminance of the rendered RGB, exactly R where R = G = B (a grey picture through
+    colour-neutral effects comes back bit for bit).
+
+    Examples
+    --------
+    >>> beauty_out(np.full((1, 1, 4), 0.5, np.float32), 1).shape
+    (1, 1, 1)
+    """
+    if count >= 4:
+        return rgba
+    if count == 3:
+        return rgba[..., :3]
+    from clfx.core.colour import REC709_LUMINANCE
+
+    r, g, b = rgba[..., 0], rgba[..., 1], rgba[..., 2]
+    lum = (r * np.float32(REC709_LUMINANCE[0]) + g * np.float32(REC709_LUMINANCE[1])
+           + b * np.float32(REC709_LUMINANCE[2]))
+    grey = np.where((r == g) & (g == b), r, lum).astype(rgba.dtype)[..., None]
+    return grey if count == 1 else np.concatenate([grey, rgba[..., 3:4]], axis=-1)
+
+
+def beauty_out_names(count: int) -> tuple[str, ...]:
+    """Channel names of `beauty_out`'s ``count`` channels in a file written afresh."""
+    return {4: ("R", "G", "B", "A"), 3: ("R", "G", "B"), 2: ("Y", "A"), 1: ("Y",)}[count]

@@ -24,11 +24,12 @@ MAX_INT_DIGITS = 20
 """Most digits of an integer in a look (a 64-bit seed has 20)."""
 
 def builtin_dir() -> Path:
-    """The built-in looks: ``clfx/presets`` in a wheel, or the repository's ``presets/``."""
+    """The built-in looks: ``clfx/presets`` in a wheel, or the repository's ``presets/``
+    (``clfx/presets`` links to it in a checkout, resolved: one spelling of the path)."""
     here = Path(__file__).resolve().parent.parent  # the clfx package
     for path in (here / "presets", here.parent / "presets"):
         if path.is_dir() and any(path.glob("*.yaml")):
-            return path
+            return path.resolve()
     return here.parent / "presets"
 
 

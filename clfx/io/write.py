@@ -13,6 +13,10 @@ extension         bit depths          default    alpha    windows
 .hdr              float               float      no       display window
 ================  ==================  =========  =======  ==========================
 
+- Channels out = channels in: an output holds the beauty channels its input had (RGBA, RGB,
+  grey ``Y`` with or without alpha, under their own names in an EXR that keeps its parts;
+  `clfx.io.channels.beauty_out`), less an alpha the format cannot store; DPX and HDR have no
+  grey (RGB).  Frames made in memory are written RGBA.
 - "display window" outputs hold the display window; pixels outside the data window are
   black with alpha 0, data outside the display window is cropped.  TIFF keeps the windows
   when the display window starts at (0, 0), the data window lies inside it and pixels are
@@ -84,6 +88,7 @@ from clfx.core.frame import Frame, Layout, SourcePart, crop_to
 from clfx.core.rect import Rect
 from clfx.io import colour
 from clfx.io._oiio import carry, check_window, fail, geterror, set_attribute
+from clfx.io.channels import beauty_out, beauty_out_names
 from clfx.io.sequence import check_input_file
 
 HALF_MAX = 65504.0
@@ -635,16 +640,10 @@ _EXR_TYPES = {"half": "half", "float": "float", "double": "float", "uint": "uint
 
 
 def _beauty_names(layout: Layout) -> tuple[tuple[str, ...], set[str]]:
-    """(R, G, B, A names an output writes a view's beauty under, the names it replaces).
-
-    RGB beauties keep their names (``left.R``, ``ViewLayer.Combined.R``); a missing alpha is
-    added beside them (``<layer>.A``); a grey beauty (``Y``) becomes ``<layer>.R, G, B``."""
-    b = layout.beauty
-    first = b[0]
-    prefix = first[:first.rfind(".") + 1]
-    rgb = b[:3] if len(b) >= 3 and len(b) != 2 else tuple(prefix + c for c in "RGB")
-    alpha = b[-1] if len(b) in (2, 4) else prefix + "A"
-    return rgb + (alpha,), set(b)
+    """(names an output writes a view's beauty under, the names it replaces): the input's
+    own, so channels in = channels out (``left.R, left.G, left.B`` stay RGB, ``Y`` stays
+    grey, an alpha stays; `clfx.io.channels.beauty_out` makes the pixels)."""
+    return tuple(layout.beauty), set(layout.beauty)
 
 
 class _Source:
@@ -698,7 +697,8 @@ def _layout_parts(frame: Frame, views: list[Frame], fmt: _OutFormat, bit_depth: 
     rendered: dict[int, list] = {}
     for fr in [frame] + views:
         names, replaced = _beauty_names(fr.layout)
-        pixels = _encode(fr.rgba, fr.colorspace, target, False, bit_depth, path)
+        pixels = beauty_out(_encode(fr.rgba, fr.colorspace, target, False, bit_depth, path),
+                            len(names))
         rendered.setdefault(fr.layout.beauty_part, []).append((fr, names, replaced, pixels))
     out = []
     for i, sp in enumerate(lay.parts):
@@ -710,7 +710,7 @@ def _layout_parts(frame: Frame, views: list[Frame], fmt: _OutFormat, bit_depth: 
         for fr, *_ in subs:
             window = window.union(fr.data_window)
         names = [n for _, ns, _, _ in subs for n in ns] + [c for c, _ in carried]
-        formats = [bit_depth] * (4 * len(subs)) + [f for _, f in carried]
+        formats = [bit_depth] * sum(len(ns) for _, ns, _, _ in subs) + [f for _, f in carried]
         if not names:
             continue
         spec = _new_spec(window, frame.display_window, names, formats, frame.pixel_aspect)
@@ -742,17 +742,21 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
     dtype = np.float64 if any(f in ("uint", "int") for c, f in zip(sp.channels, sp.formats)
                               if c in carried) else np.float32
 
+    beauty = sum(len(names) for _, names, _, _ in subs)
+
     def rows(y0, y1):
-        block = np.zeros((y1 - y0, window.width, 4 * len(subs) + len(carried)), dtype)
-        for k, (fr, _, _, pixels) in enumerate(subs):
-            _place(block, y0, window, pixels, fr.data_window, slice(4 * k, 4 * k + 4))
+        block = np.zeros((y1 - y0, window.width, beauty + len(carried)), dtype)
+        k = 0
+        for fr, names, _, pixels in subs:
+            _place(block, y0, window, pixels, fr.data_window, slice(k, k + len(names)))
+            k += len(names)
         if carried:
             w = sp.data_window
             a, b = max(y0, w.y0), min(y1, w.y1)
             if a < b:
                 got = source.rows(sp, a, b, dtype, carried)
                 x = w.x0 - window.x0
-                block[a - y0:b - y0, x:x + w.width, 4 * len(subs):] = got
+                block[a - y0:b - y0, x:x + w.width, beauty:] = got
         return block
     return rows
 
@@ -763,6 +767,23 @@ def _place(block, y0, window: Rect, pixels, win: Rect, channels: slice) -> None:
     if a < b:
         x = win.x0 - window.x0
         block[a - y0:b - y0, x:x + win.width, channels] = pixels[a - win.y0:b - win.y0]
+
+
+GREY_FORMATS = ("openexr", "tiff", "png", "jpeg")
+"""Formats an output keeps a grey input grey in (DPX and Radiance HDR get RGB)."""
+
+
+def _out_channel_count(frame: Frame, fmt: _OutFormat) -> int:
+    """How many beauty channels a written-afresh output holds: the input's (its layout's
+    beauty: 4 RGBA, 3 RGB, 2 grey + alpha, 1 grey; else ``frame.channels``, a raw stream's;
+    4 for frames made in memory), less the
+    alpha a format cannot store, grey as RGB where the format has no grey."""
+    count = len(frame.layout.beauty) if frame.layout is not None else frame.channels or 4
+    if not fmt.alpha and count in (2, 4):
+        count -= 1
+    if count < 3 and fmt.oiio_name not in GREY_FORMATS:
+        count = 3
+    return count
 
 
 def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
@@ -825,11 +846,12 @@ def write_frame(frame: Frame, path, *, bit_depth: str | None = None,
             source.close()
         return
     rgba, data, display_win = _beauty_pixels(frame, fmt, path)
+    count = _out_channel_count(frame, fmt)
     if not fmt.alpha:          # composite over black: encode the premultiplied colour as is
         rgba = np.concatenate([rgba[..., :3], np.ones(rgba.shape[:2] + (1,), np.float32)], -1)
     rgba = _encode(rgba, frame.colorspace, target, display, bit_depth, path)
-    planes = [rgba if fmt.alpha else rgba[..., :3]]
-    names = ["R", "G", "B"] + (["A"] if fmt.alpha else [])
+    planes = [beauty_out(rgba, count)]
+    names = list(beauty_out_names(count))
     pass_count = 0
     if write_passes and fmt.passes and data == frame.data_window:
         if frame.depth is not None:

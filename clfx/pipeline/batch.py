@@ -39,7 +39,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING
 
-from clfx.core.errors import ClfxError, ImageIOError, SequenceError
+from clfx.core.errors import ClfxError, ImageIOError, SequenceError, option
 from clfx.core.frame import Frame
 from clfx.core import limits
 from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
@@ -232,6 +232,7 @@ class IOOptions:
     skip_existing: bool = False
     skip_missing: bool = False
     raw_size: str | None = None
+    raw_format: str = "gbrpf32le"
     command: str | None = None
 
     def out_bit_depth(self) -> str | None:
@@ -283,7 +284,12 @@ class RenderOptions(IOOptions):
     keep_overscan : bool
         Keep light spread past the display window.
     raw_size : str or None
-        ``WxH`` of raw gbrpf32le frames when INPUT and OUTPUT are ``-``.
+        ``WxH`` of the raw frames on stdin when INPUT is ``-``; with only OUTPUT ``-``
+        (files to a raw stream), optional: the display window every frame must have.
+    raw_format : str
+        Layout of raw frames (ffmpeg's ``-pix_fmt``, `clfx.io.raw.FORMATS`): gbrpf32le
+        (planar G, B, R), gbrapf32le (planar G, B, R, A), rgbf32le (packed R, G, B),
+        rgbaf32le (packed R, G, B, A).
     explain : bool
         Per frame, say on stderr which effects ran and why others were skipped.
     as_json : bool
@@ -482,7 +488,10 @@ class BatchPlan:
     analysis : bool
         Reports carry the frame analysis summary (``--json``).
     raw_size : (int, int) or None
-        Frames are raw gbrpf32le on stdin/stdout of this size (jobs are frame indices).
+        Frames are read raw from stdin, of this size (``io.raw_format``).
+    raw_out : (int, int) or None
+        Frames are written raw to stdout, of this size (a raw input's, or the first input
+        file's display window).
     """
 
     look: Look
@@ -494,16 +503,17 @@ class BatchPlan:
     io: IOOptions = field(default_factory=IOOptions)
     analysis: bool = False
     raw_size: tuple[int, int] | None = None
+    raw_out: tuple[int, int] | None = None
 
     @classmethod
     def of(cls, look: Look, options: RenderOptions, *, jobs=(), passes=None, reads=(),
-           raw_size=None) -> BatchPlan:
+           raw_size=None, raw_out=None) -> BatchPlan:
         """The plan of rendering ``jobs`` through ``look`` with ``options``."""
         resolved, level = resolve_quality(look, options.quality)
         return cls(look=resolved, quality=level, jobs=tuple(jobs), passes=passes,
                    reads=tuple(reads), settings=options.render_settings(),
-                   io=options.io_options(), analysis=options.as_json and raw_size is None,
-                   raw_size=raw_size)
+                   io=options.io_options(), analysis=options.as_json and raw_out is None,
+                   raw_size=raw_size, raw_out=raw_out)
 
     def for_workers(self) -> BatchPlan:
         """This plan with absolute paths (workers need not share the client's folder): the
@@ -541,7 +551,8 @@ class BatchPlan:
             from clfx.io.raw import read_raw
 
             frame = read_raw(sys.stdin.buffer, self.raw_size, job.frame,
-                             colorspace=io.colorspace, working_space=io.working_space)
+                             colorspace=io.colorspace, working_space=io.working_space,
+                             pix_fmt=io.raw_format)
             if frame is None:
                 return None
             frames = [frame]
@@ -569,14 +580,20 @@ class BatchPlan:
         for frame_in, masks in zip(read.views, read.masks):
             outs.append(render_frame(
                 rt, self.look, frame_in, frame_number=job.frame, quality=self.quality,
-                keep_overscan=self.settings.keep_overscan and not raw,
+                keep_overscan=self.settings.keep_overscan and not raw and self.raw_out is None,
                 analysis_summary=self.analysis, stats=stats, masks=masks,
                 release_input=not raw, tile_pixels=self.settings.tile_pixels))
+        for (_, r), frame_in in zip(outs, read.views):
+            r.view = frame_in.layout.view if frame_in.layout is not None else None
         frame_out, report = outs[0]
-        if not raw:
+        report.other_views = [r for _, r in outs[1:]]
+        if not (raw and self.raw_out is not None):
             report.input, report.output = job.input, job.output
         report.read_ms = read.read_ms
-        rest = read.views[0].data_window if raw else [f for f, _ in outs[1:]]
+        if self.raw_out is not None:    # the window a raw frame holds: the input's frame
+            rest = read.views[0].data_window if raw else read.views[0].display_window
+        else:
+            rest = [f for f, _ in outs[1:]]
         return frame_out, report, rest
 
     def write(self, frame: Frame, job: Job, report, rest=()) -> bool:
@@ -584,10 +601,16 @@ class BatchPlan:
         ``--skip-existing`` left an output another writer published meanwhile."""
         t0 = time.perf_counter()
         io, skipped = self.io, False
-        if self.raw_size is not None:
+        if self.raw_out is not None:
             from clfx.io.raw import write_raw
 
-            write_raw(sys.stdout.buffer, frame, rest, colorspace=io.out_colorspace)
+            if (rest.width, rest.height) != self.raw_out:
+                w, h = self.raw_out
+                raise ImageIOError(f"{job.input}: display window {rest.width}x{rest.height}, "
+                                   f"but the raw frames on stdout are {w}x{h} (one size for "
+                                   f"every frame of a raw stream)")
+            write_raw(sys.stdout.buffer, frame, rest, colorspace=io.out_colorspace,
+                      pix_fmt=io.raw_format)
         else:
             from clfx.io.write import OutputExistsError, write_frame
 
@@ -595,7 +618,8 @@ class BatchPlan:
                 write_frame(frame, job.output, bit_depth=io.out_bit_depth(),
                             compression=io.compression, colorspace=io.out_colorspace,
                             overwrite=io.overwrite, attributes=self.stamp(job.frame),
-                            protect=[p for p in (job.input, job.depth, job.velocity) if p]
+                            protect=[p for p in (job.input, job.depth, job.velocity)
+                                     if p and p != RAW]
                             + self.read_paths(),
                             write_passes=io.passes_mode != "drop", views=rest)
             except OutputExistsError:
@@ -786,6 +810,18 @@ def _stream(rt, plan, job, jobs, sink, stats, first, keep_going, fail_fast, devi
     return failed
 
 
+def _check_output_folder(output: str) -> None:
+    """The folder of ``output`` exists (created now if need be) and can be written."""
+    folder = os.path.dirname(os.path.abspath(output))
+    if not os.path.isdir(folder):
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as exc:
+            raise ImageIOError(f"cannot create output folder {folder}: {exc.strerror}") from exc
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ImageIOError(f"output folder {folder} is not writable")
+
+
 @dataclass
 class Batch:
     """A look over INPUT to OUTPUT: ``prepare`` checks everything and makes the `plan`,
@@ -841,7 +877,7 @@ class Batch:
 
             self._reporter = Reporter(self.look, self.options.report_options(self.verbosity),
                                       on_frame=self.on_frame,
-                                      data_on_stdout=RAW in (self.input_path, self.output_path))
+                                      data_on_stdout=self.output_path == RAW)
         return self._reporter
 
     # -- checks -------------------------------------------------------------------------
@@ -854,13 +890,14 @@ class Batch:
 
         o = self.options
         check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
-        if self.input_path == RAW or self.output_path == RAW:
+        if self.input_path == RAW:
             self._prepare_raw()
             return
+        raw_out = self.output_path == RAW        # files to a raw stream on stdout
         frames = parse_frames(o.frames) if o.frames else None
         pin = Pattern.parse(self.input_path)
         pout = Pattern.parse(self.output_path)
-        if pin.is_sequence and not pout.is_sequence:
+        if pin.is_sequence and not pout.is_sequence and not raw_out:
             raise SequenceError(f"input {self.input_path} is a sequence but output "
                                 f"{self.output_path} has no frame token (use e.g. out.#.exr)")
         self._say_padding(pin, pout, *(Pattern.parse(p) for p in (o.depth_path, o.velocity_path)
@@ -878,7 +915,8 @@ class Batch:
                 aux[name] = (pat, found)
         jobs = []
         for frame, path in inputs:
-            out = output_path(pout, frame) if pout.is_sequence else self.output_path
+            out = output_path(pout, frame) if pout.is_sequence and not raw_out else \
+                self.output_path
             passes = {name: found[frame] if pat.is_sequence else next(iter(found.values()))
                       for name, (pat, found) in aux.items()}
             jobs.append(Job(frame, path, out, **passes))
@@ -887,23 +925,48 @@ class Batch:
         self._check_masks(jobs)
         self.plan = BatchPlan.of(self.look, o, reads=self._reads(jobs))   # what is read: checked
         self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
-        self._check_outputs(jobs)
+        if raw_out:
+            from clfx.io.raw import check_format
+
+            check_format(o.raw_format)
+        else:
+            self._check_outputs(jobs)
         self._check_log(jobs)
         jobs = tuple(j for j in jobs if j.frame not in self.skipped_existing)
+        size = None
         if jobs:   # before anything is set up for it (device, first read, maps)
-            first_frame_geometry(jobs[0].input)
-        self.plan = replace(self.plan, jobs=jobs,
+            _, display, _ = first_frame_geometry(jobs[0].input)
+            size = (display.width, display.height)
+        if raw_out:
+            size = self._raw_out_size(jobs[0].input, size)
+        self.plan = replace(self.plan, jobs=jobs, raw_out=size if raw_out else None,
                             passes=o.passes.spec(self._radial_depth_focal_px(jobs)))
 
     def _say_padding(self, *patterns) -> None:
         """One line for each pattern whose ``#`` count differs from Nuke's meaning
-        (`clfx.io.sequence.hash_notice`: ``shot.####.exr`` is 16 digits here)."""
+        (`clfx.io.sequence.hash_notice`: ``shot.#.exr`` is 16 digits here)."""
         from clfx.io.sequence import hash_notice
 
         for pattern in patterns:
             message = hash_notice(pattern)
             if message:
                 self.reporter.assumed(message, f"padding:{pattern.text}")
+
+    def _raw_out_size(self, first: str, size: tuple[int, int]) -> tuple[int, int]:
+        """The size of the raw frames written to stdout: the first input's display window,
+        which ``--raw WxH``, when given, must match; said once on stderr (ffmpeg's ``-s``)."""
+        from clfx.io.raw import parse_size
+
+        if self.options.raw_size:
+            want = parse_size(self.options.raw_size)
+            if want != size:
+                raise SequenceError(f"{option('--raw', self.options.raw_size)}: {first} has a "
+                                    f"{size[0]}x{size[1]} display window (the raw frames' size)")
+        fmt = self.options.raw_format
+        self.reporter.notice(f"writing raw {fmt} frames of {size[0]}x{size[1]} to stdout "
+                             f"(ffmpeg -f rawvideo -pix_fmt {fmt} -s {size[0]}x{size[1]} -i -)",
+                             "raw")
+        return size
 
     def _radial_depth_focal_px(self, jobs) -> float | None:
         """Focal length in pixels for --depth-mode distance, from the look's camera block and
@@ -978,26 +1041,26 @@ class Batch:
             return
         role = self._read_by(path)
         if role is not None:
-            raise ImageIOError(f"--log {path} is an input of this render ({role}); clfx never "
-                               f"overwrites its inputs")
+            raise ImageIOError(f"{option('--log')} {path} is an input of this render ({role}); "
+                               f"clfx never overwrites its inputs")
         real = os.path.realpath(path)
         if any(os.path.realpath(j.output) == real for j in (jobs or [])):
-            raise ImageIOError(f"--log {path} is an output of this render")
+            raise ImageIOError(f"{option('--log')} {path} is an output of this render")
         try:
             mode = os.stat(path).st_mode
         except FileNotFoundError:
             mode = None
         except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
         if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISCHR(mode)):
             kind = "a folder" if stat.S_ISDIR(mode) else \
                 "not a regular file (a FIFO)" if stat.S_ISFIFO(mode) else "not a regular file"
-            raise ImageIOError(f"cannot write --log {path}: {kind}")
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {kind}")
         try:
             with open(path, "w", encoding="utf-8"):
                 pass
         except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
 
     def _check_outputs(self, jobs: list[Job]) -> None:
         from clfx.io.write import check_output_format
@@ -1006,14 +1069,7 @@ class Batch:
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
                                 f"(add a frame token such as # to the output)")
-        folder = os.path.dirname(os.path.abspath(outs[0]))
-        if not os.path.isdir(folder):
-            try:
-                os.makedirs(folder, exist_ok=True)
-            except OSError as exc:
-                raise ImageIOError(f"cannot create output folder {folder}: {exc.strerror}") from exc
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise ImageIOError(f"output folder {folder} is not writable")
+        _check_output_folder(outs[0])
         if self.options.skip_existing:
             from clfx.io.write import sweep_stale_temps
             sweep_stale_temps(outs)   # temp files of killed runs (their process is gone)
@@ -1027,8 +1083,11 @@ class Batch:
                 if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
                 elif not self.options.overwrite:
-                    raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
-                                       f"or --skip-existing to resume)")
+                    from clfx.io.write import OutputExistsError
+
+                    raise OutputExistsError(f"output {j.output} exists (use {option('--overwrite')} "
+                                            f"to replace it, or {option('--skip-existing')} to "
+                                            f"resume)")
         check_output_format(outs[0], self.options.out_bit_depth(),
                             self.options.compression)    # not after the first render
 
@@ -1050,12 +1109,12 @@ class Batch:
         """Render every job (`render_stream`); return the summary (with ``reports``: each
         frame's `FrameReport`).  The first failing frame stops the batch (its output is not
         written; frames already written stay, so --skip-existing resumes)."""
-        raw = self.input_path == RAW or self.output_path == RAW
+        raw = self.input_path == RAW
         reporter = self.reporter
         reporter.start(None if raw else len(self.jobs))
         with reporter.logging(), io_threads(codec_threads_for(rt)):
             if raw:
-                jobs = (Job(i, RAW, RAW) for i in itertools.count())
+                jobs = self._raw_jobs()
             else:
                 jobs = self.jobs
                 if self.skipped_existing and self.verbosity > 0:
@@ -1063,39 +1122,85 @@ class Batch:
                                  f"output exists")
             first, self._first_read = self._first_read, None
             render_stream(rt, self.plan, jobs, reporter.frame, stats=self.stats, first=first)
-            if raw and not reporter.reports:   # an empty stream is an error, not 0 frames
+            if raw and not reporter.reports and not reporter.failed:   # an empty stream is an
+                from clfx.io.raw import frame_bytes                     # error, not 0 frames
+
                 w, h = self.raw_size
-                raise SequenceError(f"stdin: no raw frames (0 bytes; --raw {w}x{h} frames are "
-                                    f"{w * h * 12} bytes each, gbrpf32le)")
-            summary = reporter.summary(skipped_existing=len(self.skipped_existing), raw=raw)
+                fmt = self.options.raw_format
+                raise SequenceError(f"stdin: no raw frames (0 bytes; {option('--raw', f'{w}x{h}')} "
+                                    f"{fmt} frames are {frame_bytes((w, h), fmt)} bytes each)")
+            summary = reporter.summary(skipped_existing=len(self.skipped_existing),
+                                       raw=self.output_path == RAW)
         self.skipped_existing += reporter.skipped
         return {**summary, "reports": reporter.reports}
 
-    # -- raw pipes (ffmpeg gbrpf32le) ---------------------------------------------------
-    def _prepare_raw(self) -> None:
-        size = self.options.raw_size
-        if not size:
-            raise SequenceError("'-' as INPUT or OUTPUT needs --raw WxH (raw gbrpf32le frames, "
-                                "as ffmpeg's -f rawvideo -pix_fmt gbrpf32le)")
-        from clfx.io.raw import parse_size
+    # -- raw pipes (ffmpeg -f rawvideo: clfx.io.raw) -------------------------------------
+    def _raw_jobs(self):
+        """A raw input's jobs, unbounded (the stream's end stops them): to stdout, frame
+        indices 0, 1, ...; to files, the frames of ``--frames`` in order (default 1, 2, ...),
+        each with its output."""
+        if self.output_path == RAW:
+            return (Job(i, RAW, RAW) for i in itertools.count())
+        from clfx.io.sequence import Pattern, output_path, parse_frames
 
-        raw_size = parse_size(size)  # two positive whole numbers within the pixel limit
-        if self.input_path != RAW or self.output_path != RAW:
-            raise SequenceError("raw pipes need '-' for both INPUT and OUTPUT")
+        pout = Pattern.parse(self.output_path)
+        numbers = parse_frames(self.options.frames) if self.options.frames else itertools.count(1)
+        return (Job(n, RAW, output_path(pout, n)) for n in numbers)
+
+    def _prepare_raw(self) -> None:
+        """Raw frames on stdin, to stdout or to a file sequence: checked as far as a stream
+        of unknown length can be before it is read."""
+        o = self.options
+        from clfx.io.raw import check_format, check_stream_size, parse_size
+
+        check_format(o.raw_format)
+        if not o.raw_size:
+            raise SequenceError(f"'-' as INPUT needs {option('--raw', 'WxH')}, the size of the "
+                                f"raw frames on stdin ({o.raw_format}, as ffmpeg's -f rawvideo "
+                                f"-pix_fmt {o.raw_format})")
+        raw_size = parse_size(o.raw_size)  # two positive whole numbers within the pixel limit
         for clip, effects in self.look.required_clips().items():
             raise SequenceError(f"effect {effects[0]!r} needs a {clip} pass, which raw pipes "
-                                f"do not carry (--set {effects[0]}.enabled=false drops it, "
-                                f"--set {effects[0]}.missing_passes=skip skips it)")
+                                f"do not carry ({option('--set', f'{effects[0]}.enabled=false')} drops it, "
+                                f"{option('--set', f'{effects[0]}.missing_passes=skip')} skips it)")
         for step, mask in self.look.masks():
             if not mask.file:
                 raise SequenceError(f"effect {step.id!r} is masked by a channel of the frame "
-                                    "and raw pipes carry RGB only (use a mask file:)")
-        from clfx.io.raw import check_stream_size
-
-        check_stream_size(sys.stdin.buffer, raw_size)
+                                    "and raw pipes carry colour only (use a mask file:)")
+        check_stream_size(sys.stdin.buffer, raw_size, o.raw_format)
         self.look_files = [p for _, p in look_files(self.look)]
         self.mask_files = sorted({f for _, m in self.look.masks() for f in [m.file] if f})
-        self.plan = BatchPlan.of(self.look, self.options, reads=self._reads([]),
-                                 raw_size=raw_size)
+        self.plan = BatchPlan.of(self.look, o, reads=self._reads([]), raw_size=raw_size,
+                                 raw_out=raw_size if self.output_path == RAW else None)
+        if self.output_path != RAW:
+            self._check_raw_outputs()
         self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_log()
+
+    def _check_raw_outputs(self) -> None:
+        """A raw input's file outputs: a sequence pattern (a stream holds any number of
+        frames) in a writable folder and format; outputs already on disk (of ``--frames``,
+        else any frame of the pattern) are refused unless overwritten or skipped, and none
+        is a file the render reads."""
+        from clfx.io.sequence import Pattern, parse_frames, resolve_inputs
+        from clfx.io.write import OutputExistsError, check_output_format
+
+        o = self.options
+        pout = Pattern.parse(self.output_path)
+        if not pout.is_sequence:
+            raise SequenceError(f"output {self.output_path} has no frame token: raw frames on "
+                                f"stdin are a sequence (use e.g. out.#.exr)")
+        _check_output_folder(self.output_path)
+        check_output_format(self.output_path, o.out_bit_depth(), o.compression)
+        frames = parse_frames(o.frames) if o.frames else None
+        there = resolve_inputs(pout, frames, skip_missing=True)
+        for _, path in there:
+            role = self._read_by(path)
+            if role is not None:
+                raise ImageIOError(f"output {path} is an input of this render ({role}); clfx "
+                                   f"never overwrites its inputs")
+        if there and not (o.overwrite or o.skip_existing):
+            more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
+            raise OutputExistsError(f"output {there[0][1]} exists{more} (use "
+                                    f"{option('--overwrite')} to replace it, or "
+                                    f"{option('--skip-existing')} to keep it)")

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from distributed import Client, LocalCluster, as_completed, get_worker
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from clfx.core.errors import ClfxError, ClusterError, SequenceError
+from clfx.core.errors import ClfxError, ClusterError, SequenceError, option
 from clfx.device.runtime import KernelBuildWarning, user_set_pocl_affinity
 from clfx.pipeline.batch import (RAW, Batch, BatchPlan, ClusterOptions, Job, available_cores,
                                  render_stream)
@@ -263,7 +263,7 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     from distributed.comm import registry
     from distributed.comm.addressing import parse_address, parse_host_port
 
-    what = f"--scheduler {address!r}"
+    what = option("--scheduler", address)
     try:
         scheme, loc = parse_address(address.strip(), strict=False)
     except (ValueError, TypeError) as exc:
@@ -301,8 +301,8 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
     threads each) or on the cluster at ``scheduler``; the `ClfxWorker` plugin is registered on every
     worker, present and future."""
     if scheduler and workers:
-        raise ClusterError("give --workers N (a local cluster) or --scheduler ADDRESS "
-                           "(an existing one), not both")
+        raise ClusterError(f"give {option('--workers', 'N')} (a local cluster) or "
+                           f"{option('--scheduler', 'ADDRESS')} (an existing one), not both")
     level = logging.ERROR if quiet else logging.WARNING
     with ExitStack() as stack:
         try:
@@ -312,7 +312,7 @@ def connect(*, workers: int | None = None, scheduler: str | None = None,
                                                     timeout=CONNECT_TIMEOUT_S))
             else:
                 if workers < 1:
-                    raise ClusterError(f"--workers {workers}: expected 1 or more")
+                    raise ClusterError(f"{option('--workers', workers)}: expected 1 or more")
                 cluster = stack.enter_context(LocalCluster(
                     n_workers=workers, threads_per_worker=TASK_THREADS, processes=True,
                     dashboard_address=None, silence_logs=level, env=worker_env(workers)))
@@ -349,10 +349,10 @@ def render_distributed(batch: Batch, cluster: ClusterOptions, *,
         frames are rendered unless ``fail_fast``.
     """
     if batch.input_path == RAW or batch.output_path == RAW:
-        raise SequenceError("raw pipes ('-') render in one process; --workers and "
-                            "--scheduler render files")
+        raise SequenceError(f"raw pipes ('-') render in one process; {option('--workers')} "
+                            f"and {option('--scheduler')} render files")
     if cluster.chunk < 1:
-        raise SequenceError(f"--chunk {cluster.chunk}: expected 1 or more frames per task")
+        raise SequenceError(f"{option('--chunk', cluster.chunk)}: expected 1 or more frames per task")
     reporter = batch.reporter
     jobs = batch.jobs
     reporter.start(len(jobs))
@@ -370,6 +370,7 @@ def render_distributed(batch: Batch, cluster: ClusterOptions, *,
                 if cluster.scheduler:
                     nworkers = len(client.scheduler_info()["workers"])
                 startup = time.perf_counter() - t0
+                reporter.rendering(t0 + startup)
                 ended = _collect(reporter, client, shipped, jobs, chunks, cluster.fail_fast)
         finally:
             if ended or not cluster.scheduler:   # a local cluster's workers are gone by now
@@ -387,9 +388,9 @@ def render_distributed(batch: Batch, cluster: ClusterOptions, *,
 
 def _collect(reporter: Reporter, client, shipped: ShippedPlan, jobs: list[Job],
              chunks: list[tuple[int, int]], fail_fast: bool) -> bool:
-    """Submit one task per chunk, report results in frame order as tasks finish; True when
-    every task ended (False when ``fail_fast`` cancelled the rest).  Results name the files
-    as ``jobs`` do (tasks saw absolute paths)."""
+    """Submit one task per chunk, count its frames as it finishes (progress) and report
+    results in frame order; True when every task ended (False when ``fail_fast`` cancelled
+    the rest).  Results name the files as ``jobs`` do (tasks saw absolute paths)."""
     run = uuid.uuid4().hex[:8]
     futures = {client.submit(render_chunk, shipped, a, b, fail_fast, pure=False, retries=0,
                              key=f"clfx-render-{jobs[a].frame}-{jobs[b - 1].frame}-{run}"): i
@@ -406,10 +407,11 @@ def _collect(reporter: Reporter, client, shipped: ShippedPlan, jobs: list[Job],
         else:
             results[i] = future.result()
         future.release()
+        reporter.finished(results[i])   # progress: as tasks finish, in any order
         while emitted in results:   # frame order
             for r in results.pop(emitted):
                 job = given[r.frame]
-                reporter.frame(r.named(job.input, job.output))
+                reporter.frame(r.named(job.input, job.output), progress=False)
             emitted += 1
         if fail_fast and reporter.failed:
             client.cancel(list(futures))

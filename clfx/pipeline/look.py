@@ -331,6 +331,8 @@ class FrameReport:
     write_ms: float = 0.0
     frame_warnings: list[str] = field(default_factory=list)  # the frame's own (not a step's)
     values: dict = field(default_factory=dict)  # keyframed values used, by camera.K / STEP.P
+    view: str | None = None     # the view rendered (multi-view files), None for a plain frame
+    other_views: list[FrameReport] = field(default_factory=list)  # the same frame's other views
 
     def as_dict(self) -> dict:
         d = {"frame": self.frame, "input": self.input, "output": self.output,
@@ -349,18 +351,44 @@ class FrameReport:
             d["warnings"] = self.frame_warnings
         if self.values:
             d["values"] = self.values
+        if self.view is not None:
+            d["view"] = self.view
+        if self.other_views:      # each view's own steps and times (the hero's are above)
+            d["other_views"] = [{k: v for k, v in o.as_dict().items()
+                                 if k not in ("frame", "input", "output", "read_ms", "write_ms")}
+                                for o in self.other_views]
         return d
+
+    @property
+    def views(self) -> list[str]:
+        """The views this frame rendered, hero first (empty for a plain frame)."""
+        return [r.view for r in (self, *self.other_views) if r.view is not None]
+
+    def warning_items(self) -> list[tuple[str, str]]:
+        """(where, text) of every warning of this frame and its other views: ``where`` is
+        ``"frame N"`` or ``"frame N (view V)"``."""
+        items = []
+        for r in (self, *self.other_views):
+            where = f"frame {r.frame}" + (f" (view {r.view})" if r.view else "")
+            items += [(where, w) for w in r.frame_warnings]
+            items += [(where, f"{s.effect}: {w}") for s in r.steps for w in s.warnings]
+        return items
 
     def warnings(self) -> list[str]:
         """The lines this frame must say on stderr whatever the verbosity (a clamp that bit,
-        a convention guessed, a request that could not be honoured), each naming the frame."""
-        said = list(self.frame_warnings) + [f"{s.effect}: {w}" for s in self.steps
-                                            for w in s.warnings]
-        return [f"clfx: warning: frame {self.frame}: {w}" for w in said]
+        a convention guessed, a request that could not be honoured), each naming the frame
+        (and the view, for a multi-view frame)."""
+        return [f"clfx: warning: {where}: {w}" for where, w in self.warning_items()]
 
     def explain(self) -> str:
-        """Human-readable lines: what ran, what was skipped and why."""
-        lines = [f"frame {self.frame}: {self.total_ms:.1f} ms on device "
+        """Human-readable lines: what ran, what was skipped and why (per view, for a
+        multi-view frame)."""
+        own = self._explain_one()
+        return "\n".join([own] + [o._explain_one() for o in self.other_views])
+
+    def _explain_one(self) -> str:
+        view = f" (view {self.view})" if self.view else ""
+        lines = [f"frame {self.frame}{view}: {self.total_ms:.1f} ms on device "
                  f"(upload {self.upload_ms:.1f}, analysis {self.analysis_ms:.1f}, "
                  f"download {self.download_ms:.1f})"]
         if self.values:

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
 
-from clfx.core.errors import ClfxError, ImageIOError
+from clfx.core.errors import ClfxError, ImageIOError, option
 from clfx.pipeline.look import FrameReport
 
 
@@ -116,7 +116,11 @@ class Reporter:
         is not worth a notice when no step reads depth).
     options : ReportOptions
     on_frame : callable(done, total, report), optional
-        Progress, after each frame (``report`` None for a failed frame).
+        Progress, after each frame (``report`` None for a failed frame); frames count as they
+        finish, wherever they rendered (a cluster's in any order).  If it has them,
+        ``on_frame.timing(t0)`` is told when rendering starts (a ``time.perf_counter`` time,
+        after a cluster's start-up: the origin of the summary's frames per second) and
+        ``on_frame.close()`` is called before the summary is said.
     total : int or None
         Frames to render (None: a raw stream, unknown).
     data_on_stdout : bool
@@ -137,6 +141,7 @@ class Reporter:
         self._said: set[str] = set()       # warning texts and notice keys said
         self._log = None
         self._t0 = time.perf_counter()
+        self._done = 0                     # frames finished (rendered or failed), any order
         self.params_hash: str | None = None    # the stamped clfx:paramsHash (`stamped`)
         self.quality: str | None = None
         self._headed = False
@@ -149,6 +154,22 @@ class Reporter:
     def start(self, total: int | None) -> None:
         """The render starts now (its wall time counts from here), ``total`` frames."""
         self._t0, self.total = time.perf_counter(), total
+        self.rendering(self._t0)
+
+    def rendering(self, t0: float) -> None:
+        """Frames render from ``t0`` on (`start`; after a cluster's start-up): the progress
+        display's frames per second count from here, as the summary's do."""
+        timing = getattr(self.on_frame, "timing", None)
+        if timing is not None:
+            timing(t0)
+
+    def finished(self, results) -> None:
+        """``results`` (`FrameResult` s) are done: progress counts them now, before they are
+        said in frame order (`frame` with ``progress=False``)."""
+        results = list(results)
+        self._done += len(results)
+        if self.on_frame is not None and results:
+            self.on_frame(self._done, self.total, results[-1].report)
 
     @property
     def verbosity(self) -> int:
@@ -188,16 +209,16 @@ class Reporter:
         """Say a frame's warnings on stderr, each distinct text once per batch (naming the
         first frame that said it: a pass missing from every frame is one line, not one per
         frame)."""
-        prefix = f"clfx: warning: frame {report.frame}: "
-        for line in report.warnings():
-            text = "warning:" + line.removeprefix(prefix)
-            if text not in self._said:
-                self._said.add(text)
-                self.err(line)
+        for where, text in report.warning_items():
+            key = "warning:" + where.removeprefix(f"frame {report.frame}") + text
+            if key not in self._said:
+                self._said.add(key)
+                self.err(f"clfx: warning: {where}: {text}")
 
     # -- frames -------------------------------------------------------------------------
-    def frame(self, result: FrameResult) -> None:
-        """Everything a finished frame says, in frame order."""
+    def frame(self, result: FrameResult, progress: bool = True) -> None:
+        """Everything a finished frame says, in frame order; ``progress``: and count it (not
+        when `finished` counted it already)."""
         for kind, message, key in result.notices:
             (self.assumed if kind == "warning" else self.notice)(message, key)
         o = self.options
@@ -234,8 +255,8 @@ class Reporter:
                     self.err(f"clfx: frame {result.frame}: {result.output} appeared "
                              f"meanwhile; skipped")
             self.reports.append(report)
-        if self.on_frame is not None:
-            self.on_frame(len(self.reports) + len(self.failed), self.total, result.report)
+        if progress:
+            self.finished([result])
 
     # -- the end ------------------------------------------------------------------------
     def summary(self, *, skipped_existing: int = 0, cluster: ClusterInfo | None = None,
@@ -252,22 +273,31 @@ class Reporter:
                    "skipped_existing": skipped_existing + len(self.skipped),
                    "wall_s": round(wall, 3),
                    "fps": round(n / render_s, 3) if render_s > 0 and n else None,
-                   "device_ms_mean": round(sum(r.total_ms for r in reports) / n, 2) if n else None,
+                   "device_ms_mean": round(sum(r.total_ms + sum(o.total_ms for o in r.other_views)
+                                             for r in reports) / n, 2) if n else None,
                    "saved_ms_estimate": round(sum(r.saved_ms or 0.0 for r in reports), 1)}
+        views = list(dict.fromkeys(v for r in reports for v in r.views))
+        if views:      # a multi-view input: which views each frame rendered
+            summary["views"] = views
+        what = (f"{n} frame(s) ({len(views)} views each: {', '.join(views)})" if len(views) > 1
+                else f"{n} frame(s) (view {views[0]})" if views else f"{n} frame(s)")
         if raw:
             line = f"clfx: {n} raw frame(s) rendered in {wall:.2f} s"
         elif cluster:
             summary.update(failed=[r.frame for r in self.failed],
                            startup_s=round(cluster.startup_s, 3), workers=cluster.workers,
                            chunk=cluster.chunk, scheduler=cluster.scheduler or "local")
-            line = (f"clfx: {n} frame(s) rendered with look {self.look.name!r} on "
+            line = (f"clfx: {what} rendered with look {self.look.name!r} on "
                     f"{cluster.workers} worker(s) in {wall:.2f} s"
                     + (f" ({summary['fps']} fps after {cluster.startup_s:.1f} s start-up)"
                        if summary["fps"] else ""))
         else:
-            line = (f"clfx: {n} frame(s) rendered with look {self.look.name!r} in "
+            line = (f"clfx: {what} rendered with look {self.look.name!r} in "
                     f"{wall:.2f} s" + (f" ({summary['fps']} fps)" if summary["fps"] else ""))
         self.log(summary, line)
+        close = getattr(self.on_frame, "close", None)
+        if close is not None:       # the progress display goes first: the summary follows it
+            close()
         if not raw:
             if self.options.as_json:
                 print(json.dumps(summary), flush=True)
@@ -286,7 +316,7 @@ class Reporter:
         try:
             f = open(path, "a", encoding="utf-8")     # noqa: SIM115 (closed below)
         except OSError as exc:
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
         self._log = f
         try:
             yield
@@ -313,4 +343,4 @@ class Reporter:
                 log.close()
             except OSError:
                 pass
-            raise ImageIOError(f"cannot write --log {path}: {exc.strerror or exc}") from None
+            raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror or exc}") from None
