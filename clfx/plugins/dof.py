@@ -261,6 +261,8 @@ LEVELS = {
 }
 
 CAP_FACTOR = 4.0
+MIXED_NOTE = " mixed edge pixels split"
+"""The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 """Background hidden behind a blurred foreground pixel is filled in from the visible
 background around, its colours capped at this many times the geometric mean luminance of
 the tiles around (so a light beside a blurred bar does not shine through it)."""
@@ -777,9 +779,10 @@ class Dof(Plugin):
         src = rt.reframe(ctx.source, work, "zero")
         depth = rt.reframe(ctx.depth, work, "clamp")
         lens = self.lens(p, ctx)
-        outs = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gathers[off], src,
-                                       depth, band)
-                for off in lens.offsets()}
+        passes = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gathers[off], src,
+                                         depth, band)
+                  for off in lens.offsets()}
+        outs = {off: out for off, (out, _) in passes.items()}
         if len(outs) == 1:
             dst = outs[0.0]
         else:
@@ -789,7 +792,18 @@ class Dof(Plugin):
                       r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
                       np.int32(dst.height), local=(16, 4))
         ctx.notes.extend(frame.notes)
+        self._note_mixed(rt, p, ctx, passes[0.0][1])
         return dst
+
+    def _note_mixed(self, rt, p, ctx, count) -> None:
+        """The report's line of the mixed edge pixels split (green's gather's device
+        ``count`` of its band's rows; the bands of a tiled render add theirs up, the line
+        said once, with the frame's total)."""
+        frame = self.planned(p, ctx).frame
+        total = int(rt.from_device(count, np.int32, 1)[0]) + (frame.get("mixed", 0) if ctx.tiling is not None else 0)
+        frame["mixed"] = total
+        ctx.notes[:] = [s for s in ctx.notes if not s.endswith(MIXED_NOTE)]
+        ctx.notes.append(f"dof: {total}{MIXED_NOTE}")
 
     def _render_pass(self, rt, p, ctx, lens: Lens, frame: DofFrame, g: DofGather, src,
                      depth, band: Rect):
@@ -816,6 +830,8 @@ class Dof(Plugin):
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
                   col, coc0, coc, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h),
                   local=(8, 4))
+        mix, count = self._mixed(rt, col, coc0, padded, pad, w, h, band.y0 - src.window.y0,
+                                 band.height)
         del coc0
         variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
         gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant, **luma)
@@ -839,22 +855,38 @@ class Dof(Plugin):
             hres = rt.image((h1 - h0, hw), 4)
             self._gather(rt, gather, colh, coch, hpad, hres, g.htaps, g.htiles, frame, lvl,
                          self.cateye_args(lens, ctx, whole, 2), (0, h0, 0, row0 // 2),
-                         tile=TILE // 2, plane=colh.pitch * hpadded.height)
+                         tile=TILE // 2, plane=colh.pitch * hpadded.height, mix=None)
             del colh, coch
         dst = rt.image(band, 4)
         self._gather(rt, gather, col, coc, pad, dst, g.taps, g.tiles, frame, lvl,
                      self.cateye_args(lens, ctx, whole), (0, top, 0, row0),
                      hres=hres, hplace=(0, h0 if hres is not None else 0),
-                     half_size=half_size, plane=col.pitch * padded.height)
-        return dst
+                     half_size=half_size, plane=col.pitch * padded.height, mix=mix)
+        return dst, count
+
+    def _mixed(self, rt, col, coc0, padded: Rect, pad: int, w: int, h: int, y0: int,
+               rows: int):
+        """``dof_mixed`` over the padded colour ``col`` (plane 0) and radii ``coc0`` of a
+        ``w`` x ``h`` image: the mixed edge pixels' near coverage, radii and colour
+        difference ((mixa, mixr, mixd) on the device) and the device count of those in its
+        rows ``y0``..``y0 + rows`` (the band a render gives)."""
+        mixa, mixr, mixd = (rt.image(padded, n) for n in (1, 2, 4))
+        count = rt.to_device(np.zeros(1, np.int32))
+        i32 = np.int32
+        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (w, h), col, coc0, mixa, mixr, mixd,
+                  i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h), i32(y0),
+                  i32(y0 + rows), count, local=(16, 4))
+        return (mixa, mixr, mixd), count
 
     def _gather(self, rt, knl, col, coc, pad, dst, taps, tiles, frame: DofFrame, lvl, cateye,
-                place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0):
+                place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0,
+                mix=None):
         """Launch ``dof_gather`` over ``dst`` with the tables ``taps``, ``tiles``
         (:meth:`_tile_table`) and the frame's caps; ``place``: (dst x, dst y, buffer x,
         buffer y) on the whole render's grid, ``hres``: the half-resolution result (rows from
         ``hplace``, ``half_size`` its whole size); ``plane``: pixels between the planes of
-        ``col``'s prefilter pyramid (:func:`prefilter`)."""
+        ``col``'s prefilter pyramid (:func:`prefilter`); ``mix``: the mixed edge pixels
+        (:meth:`_mixed`) the gather splits, None: none (the half-resolution gather)."""
         i32, f32 = np.int32, np.float32
         hres_args = ((hres, i32(hres.pitch), i32(half_size[0]), i32(half_size[1]))
                      if hres is not None else (dst, i32(dst.pitch), i32(1), i32(1)))
@@ -863,4 +895,5 @@ class Dof(Plugin):
                   frame.log_mean, i32(frame.tiles_x), i32(frame.tiles_y), i32(tile),
                   f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
                   np.array(cateye, np.float32), i32(plane), np.array(place, np.int32),
-                  np.array((*hplace, 0, 0), np.int32), local=LOCAL)
+                  np.array((*hplace, 0, 0), np.int32), *(mix or (coc, coc, coc)),
+                  i32(mix is not None), local=LOCAL)
