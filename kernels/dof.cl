@@ -169,7 +169,7 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
 /* Mixed edge pixels: a renderer filters the beauty over the pixel but takes the depth at its
  * centre, so on a depth edge a pixel's colour mixes two layers under one layer's depth (the
  * card's edge row under the sky's: gathered with the sky's radius it makes a soft copy of
- * the card above its edge).  Per image pixel (x, y) whose 3 x 3 radii (dof_prepare's)
+ * the card above its edge).  Per image pixel (x, y) whose 3 x 3 radii (dof_edges')
  * span EDGE_PX or more: its neighbours split at the mid-range radius into a near layer
  * (smaller signed radius: closer to the camera) and a far one; for every pair of a near
  * neighbour n and a far one f the pixel's colour C is projected onto the segment f -> n:

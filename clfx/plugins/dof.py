@@ -103,7 +103,7 @@ frame-wide is computed once, on the whole frame, in the step's plan (:class:`Dof
 tile radii, lattice levels, half-resolution choice, tap and tile tables, the tiles' caps, on
 a grid anchored at the rendered window's origin), and a band gathers only its own rows,
 from band-sized buffers over the rows its pixels read (:meth:`DofFrame.rows`: the largest
-reach of a tap, its prefilter tent and the edge-aware radii's row, and of the
+reach of a tap, its prefilter tent or the two rows its mixed-pixel split reads, and of the
 half-resolution pixels its upsampling reads, starting on an even row so the 2 x 2 boxes
 pair the whole render's rows).
 """
@@ -735,8 +735,9 @@ class Dof(Plugin):
         mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
         taps, tile_info, rows = self._tile_table(rt, levels, sharp, mode, *common)
         # rows a pixel reads: its farthest tap's, the prefilter's tent around it, or the
-        # edge-aware radius's row beyond it (its 3 x 3 neighbours)
-        rows += max((1 << full_l) - 1, 1)
+        # rows beyond it that a tap's mixed-pixel split reads (its 3 x 3 neighbours' edge-aware
+        # radii, each from its own 3 x 3 neighbours)
+        rows += max((1 << full_l) - 1, 2)
         note = (f"{int((levels == 0).sum())}/{radii.size} tiles in focus (copied), "
                 f"{int(half.sum())} at half resolution")
         return DofGather(offset, full_l, half, half_l, pad, taps, tile_info, htaps,
@@ -830,9 +831,9 @@ class Dof(Plugin):
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
                   col, coc0, coc, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h),
                   local=(8, 4))
-        mix, count = self._mixed(rt, col, coc0, padded, pad, w, h, band.y0 - src.window.y0,
-                                 band.height)
         del coc0
+        mix, count = self._mixed(rt, col, coc, padded, pad, w, h, band.y0 - src.window.y0,
+                                 band.height)
         variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
         gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant, **luma)
         # where the buffers sit on the whole render's grid (its window's origin)
@@ -864,16 +865,16 @@ class Dof(Plugin):
                      half_size=half_size, plane=col.pitch * padded.height, mix=mix)
         return dst, count
 
-    def _mixed(self, rt, col, coc0, padded: Rect, pad: int, w: int, h: int, y0: int,
+    def _mixed(self, rt, col, coc, padded: Rect, pad: int, w: int, h: int, y0: int,
                rows: int):
-        """``dof_mixed`` over the padded colour ``col`` (plane 0) and radii ``coc0`` of a
+        """``dof_mixed`` over the padded colour ``col`` (plane 0) and edge-aware radii ``coc`` of a
         ``w`` x ``h`` image: the mixed edge pixels' near coverage, radii and colour
         difference ((mixa, mixr, mixd) on the device) and the device count of those in its
         rows ``y0``..``y0 + rows`` (the band a render gives)."""
         mixa, mixr, mixd = (rt.image(padded, n) for n in (1, 2, 4))
         count = rt.to_device(np.zeros(1, np.int32))
         i32 = np.int32
-        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (w, h), col, coc0, mixa, mixr, mixd,
+        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (w, h), col, coc, mixa, mixr, mixd,
                   i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h), i32(y0),
                   i32(y0 + rows), count, local=(16, 4))
         return (mixa, mixr, mixd), count

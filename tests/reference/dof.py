@@ -120,8 +120,8 @@ def prefilter_pyramid(src, levels, pad=0):
 
 
 def mixed_pixels(src, r):
-    """Mixed edge pixels (``dof_mixed``): per pixel whose 3 x 3 radii ``r`` (the depth's, not
-    edge-aware) span >= 1 px, with its neighbours (clamp-to-edge) split into a near layer
+    """Mixed edge pixels (``dof_mixed``): per pixel whose 3 x 3 radii ``r`` (edge-aware:
+    :func:`edge_radius`) span >= 1 px, with its neighbours (clamp-to-edge) split into a near layer
     (radius below the mid-range) and a far one: over every pair (near n, far f), in row
     order of n then f, C = f + a (n - f) + e (RGBA); a pair explains C when
     MIX_MIN < a < 1 - MIX_MIN and |e| <= MIX_TOL min(|C - f|, |C - n|); the explaining pair
@@ -189,8 +189,8 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     """
     src = np.asarray(src, np.float64)
     src = np.where(np.isfinite(src), src, 0.0)
-    r_depth = coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r, offset=offset)
-    r = edge_radius(src, r_depth)
+    r = edge_radius(src, coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r,
+                                    offset=offset))
     taps = np.asarray(taps, np.float64)
     # the pyramid of the image extended past every tap (the kernel's padded buffer): a tap
     # outside reads the prefiltered extension, not the prefiltered image's edge
@@ -200,7 +200,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     cap = hidden_caps(src)
     h, w = r.shape
     ys, xs = np.mgrid[0:h, 0:w]
-    mix_a, mix_rn, mix_rf, mix_d = mixed_pixels(src, r_depth)
+    mix_a, mix_rn, mix_rf, mix_d = mixed_pixels(src, r)
     if level > 0:
         mix_a = np.zeros_like(mix_a)
     if cateye is not None:
