@@ -42,6 +42,7 @@
 #define EDGE_TAU 0.5f    /* log-luminance distance from its own layer that makes a pixel odd */
 #define MIX_MIN 0.02f    /* a mixed pixel's smallest coverage of either layer */
 #define MIX_TOL 0.25f    /* a mixed pixel's colour off the segment between its layers' */
+#define MIX_GAP 2.0f     /* a depth edge's gap over the rest of its 3 x 3 radii's range */
 #define OVERFLOW_SCALE 5.421010862427522e-20f   /* 2^-64 */
 #ifndef DOF_CATEYE
 #define DOF_CATEYE 0
@@ -169,8 +170,10 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
 /* Mixed edge pixels: a renderer filters the beauty over the pixel but takes the depth at its
  * centre, so on a depth edge a pixel's colour mixes two layers under one layer's depth (the
  * card's edge row under the sky's: gathered with the sky's radius it makes a soft copy of
- * the card above its edge).  Per image pixel (x, y) whose 3 x 3 radii (dof_edges')
- * span EDGE_PX or more: its neighbours split at the mid-range radius into a near layer
+ * the card above its edge).  Per image pixel (x, y) on a depth edge, whose 3 x 3 radii
+ * (dof_edges') have a gap of EDGE_PX or more that is MIX_GAP times the rest of their range
+ * or more (two layers; a steep ramp of depth is no edge): its neighbours split at the
+ * mid-range radius (in the gap) into a near layer
  * (smaller signed radius: closer to the camera) and a far one; for every pair of a near
  * neighbour n and a far one f the pixel's colour C is projected onto the segment f -> n:
  * C = f + a (n - f) + e.  A pair explains the pixel when a lies in (MIX_MIN, 1 - MIX_MIN)
@@ -201,9 +204,20 @@ kernel void dof_mixed(global const float *col, global const float *coc, global f
     rmin = fmin(rmin, r[j]);
     rmax = fmax(rmax, r[j]);
   }
+  /* a discontinuity: the largest gap between the sorted radii, >= EDGE_PX and >= MIX_GAP
+     times the rest of their range (two layers, not a steep depth ramp) */
+  float sr[9];
+  for(int j = 0; j < 9; j++)
+  {
+    int k = j;
+    for(; k > 0 && sr[k - 1] > r[j]; k--) sr[k] = sr[k - 1];
+    sr[k] = r[j];
+  }
+  float gap = 0.0f;
+  for(int k = 0; k < 8; k++) gap = fmax(gap, sr[k + 1] - sr[k]);
   float a = 0.0f, rn = 0.0f, rf = 0.0f;
   float4 d = (float4)(0.0f);
-  if(rmax - rmin >= EDGE_PX)
+  if(gap >= EDGE_PX && gap >= MIX_GAP * (rmax - rmin - gap))
   {
     const float mid = 0.5f * (rmin + rmax);
     float best = 0.0f;

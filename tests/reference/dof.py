@@ -17,6 +17,7 @@ EDGE_PX = 1.0
 EDGE_TAU = 0.5
 MIX_MIN = 0.02
 MIX_TOL = 0.25
+MIX_GAP = 2.0
 CAP_FACTOR = 4.0
 TILE = 32
 
@@ -121,7 +122,8 @@ def prefilter_pyramid(src, levels, pad=0):
 
 def mixed_pixels(src, r):
     """Mixed edge pixels (``dof_mixed``): per pixel whose 3 x 3 radii ``r`` (edge-aware:
-    :func:`edge_radius`) span >= 1 px, with its neighbours (clamp-to-edge) split into a near layer
+    :func:`edge_radius`) have a gap (sorted) >= 1 px and >= MIX_GAP times the rest of
+    their range, with its neighbours (clamp-to-edge) split into a near layer
     (radius below the mid-range) and a far one: over every pair (near n, far f), in row
     order of n then f, C = f + a (n - f) + e (RGBA); a pair explains C when
     MIX_MIN < a < 1 - MIX_MIN and |e| <= MIX_TOL min(|C - f|, |C - n|); the explaining pair
@@ -136,7 +138,9 @@ def mixed_pixels(src, r):
     offs = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
     R = np.stack([_clamped(r, ys + dy, xs + dx) for dy, dx in offs])
     C = np.stack([_clamped(src, ys + dy, xs + dx) for dy, dx in offs])
-    for y, x in zip(*np.nonzero(R.max(0) - R.min(0) >= EDGE_PX)):
+    gap = np.diff(np.sort(R, axis=0), axis=0).max(axis=0)
+    edge = (gap >= EDGE_PX) & (gap >= MIX_GAP * (R.max(0) - R.min(0) - gap))
+    for y, x in zip(*np.nonzero(edge)):
         rr, cc = R[:, y, x], C[:, y, x]
         mid = 0.5 * (rr.min() + rr.max())
         best = 0.0
