@@ -43,6 +43,7 @@
 #define MIX_MIN 0.02f    /* a mixed pixel's smallest coverage of either layer */
 #define MIX_TOL 0.25f    /* a mixed pixel's colour off the segment between its layers' */
 #define MIX_GAP 2.0f     /* a depth edge's gap over the rest of its 3 x 3 radii's range */
+#define MIX_TILE 32      /* dof_mixed's flag tiles (px) */
 #define OVERFLOW_SCALE 5.421010862427522e-20f   /* 2^-64 */
 #ifndef DOF_CATEYE
 #define DOF_CATEYE 0
@@ -184,23 +185,22 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
  * far part's C - a (n - f) (they mix back to C; the residual stays in both).  RGBA
  * (premultiplied: the beauty mixes linearly in every channel).  Border pixels also fill
  * their part of the padding (clamp-to-edge, as dof_edges); `count` counts the mixed pixels
- * of rows y0..y1. */
-kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
-                      global float *mixr, global float *mixd, const int ppitch,
-                      const int pheight, const int pad, const int width, const int height,
-                      const int y0, const int y1, global int *count)
+ * of rows y0..y1; `flags` (zeroed, `ftiles_x` per row) flags the MIX_TILE px tiles of the
+ * image holding one (the gather reads the split data only within reach of a flagged tile). */
+/* The split of image pixel (x, y) on a depth edge (see dof_mixed): its near coverage (0: not
+ * mixed), with `rn`, `rf`, `d` set when mixed. */
+inline float dof_mix_split(global const float *col, global const float *coc, const int ppitch,
+                           const int pad, const int width, const int height, const int x,
+                           const int y, float *rn, float *rf, float4 *d)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= width || y >= height) return;
+  int at[9];
   float r[9];
-  float4 c[9];
   float rmin = INFINITY, rmax = -INFINITY;
   for(int j = 0; j < 9; j++)
   {
-    const int i = (clfx_clampi(y + j / 3 - 1, 0, height - 1) + pad) * ppitch
-                  + clfx_clampi(x + j % 3 - 1, 0, width - 1) + pad;
-    r[j] = coc[i];
-    c[j] = vload4(i, col);
+    at[j] = (clfx_clampi(y + j / 3 - 1, 0, height - 1) + pad) * ppitch
+            + clfx_clampi(x + j % 3 - 1, 0, width - 1) + pad;
+    r[j] = coc[at[j]];
     rmin = fmin(rmin, r[j]);
     rmax = fmax(rmax, r[j]);
   }
@@ -215,45 +215,87 @@ kernel void dof_mixed(global const float *col, global const float *coc, global f
   }
   float gap = 0.0f;
   for(int k = 0; k < 8; k++) gap = fmax(gap, sr[k + 1] - sr[k]);
-  float a = 0.0f, rn = 0.0f, rf = 0.0f;
-  float4 d = (float4)(0.0f);
-  if(gap >= EDGE_PX && gap >= MIX_GAP * (rmax - rmin - gap))
+  if(!(gap >= EDGE_PX && gap >= MIX_GAP * (rmax - rmin - gap))) return 0.0f;
+  const float mid = 0.5f * (rmin + rmax);
+  const float4 c4 = vload4(at[4], col);
+  float best = 0.0f, a = 0.0f;
+  for(int jn = 0; jn < 9; jn++)
   {
-    const float mid = 0.5f * (rmin + rmax);
-    float best = 0.0f;
-    for(int jn = 0; jn < 9; jn++)
+    if(jn == 4 || !(r[jn] < mid)) continue;
+    const float4 cn = vload4(at[jn], col), en = c4 - cn;
+    for(int jf = 0; jf < 9; jf++)
     {
-      if(jn == 4 || !(r[jn] < mid)) continue;
-      const float4 en = c[4] - c[jn];
-      for(int jf = 0; jf < 9; jf++)
-      {
-        if(jf == 4 || r[jf] < mid) continue;
-        const float4 dd = c[jn] - c[jf], ef = c[4] - c[jf];
-        const float l2 = dot(dd, dd);
-        if(!(l2 > best && l2 <= FLT_MAX)) continue;
-        const float t = dot(ef, dd) / l2;
-        if(!(t > MIX_MIN && t < 1.0f - MIX_MIN)) continue;
-        const float4 e = ef - t * dd;
-        if(dot(e, e) > MIX_TOL * MIX_TOL * fmin(dot(ef, ef), dot(en, en))) continue;
-        best = l2;
-        a = t;
-        d = dd;
-        rn = r[jn];
-        rf = r[jf];
-      }
+      if(jf == 4 || r[jf] < mid) continue;
+      const float4 cf = vload4(at[jf], col);
+      const float4 dd = cn - cf, ef = c4 - cf;
+      const float l2 = dot(dd, dd);
+      if(!(l2 > best && l2 <= FLT_MAX)) continue;
+      const float t = dot(ef, dd) / l2;
+      if(!(t > MIX_MIN && t < 1.0f - MIX_MIN)) continue;
+      const float4 e = ef - t * dd;
+      if(dot(e, e) > MIX_TOL * MIX_TOL * fmin(dot(ef, ef), dot(en, en))) continue;
+      best = l2;
+      a = t;
+      *d = dd;
+      *rn = r[jn];
+      *rf = r[jf];
     }
   }
-  if(a > 0.0f && y >= y0 && y < y1) atomic_inc(count);
-  const int bx0 = x == 0 ? 0 : x + pad, bx1 = x == width - 1 ? ppitch - 1 : x + pad;
-  const int by0 = y == 0 ? 0 : y + pad, by1 = y == height - 1 ? pheight - 1 : y + pad;
-  for(int py = by0; py <= by1; py++)
-    for(int px = bx0; px <= bx1; px++)
+  return a;
+}
+
+kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
+                      global float *mixr, global float *mixd, const int ppitch,
+                      const int pheight, const int pad, const int width, const int height,
+                      const int y0, const int y1, global int *count, global int *flags,
+                      const int ftiles_x)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  const int x = qx * 4;
+  if(x >= width || y >= height) return;
+  /* the 4 pixels' 3 x 3 radius ranges (as dof_edges): only a range of EDGE_PX or more can
+     hold an edge */
+  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY);
+  for(int dy = -1; dy <= 1; dy++)
+  {
+    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
+    float v[6];
+    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
+    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
+    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
+    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
+    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
+  }
+  const int4 edge = rmax - rmin >= EDGE_PX;
+  const int is_edge[4] = {edge.s0, edge.s1, edge.s2, edge.s3};
+  for(int l = 0; l < 4 && x + l < width; l++)
+  {
+    const int xl = x + l;
+    float rn = 0.0f, rf = 0.0f;
+    float4 d = (float4)(0.0f);
+    const float a = is_edge[l] ? dof_mix_split(col, coc, ppitch, pad, width, height, xl, y,
+                                               &rn, &rf, &d) : 0.0f;
+    if(a > 0.0f)
     {
-      const int i = py * ppitch + px;
-      mixa[i] = a;
-      vstore2((float2)(rn, rf), i, mixr);
-      vstore4(d, i, mixd);
+      flags[y / MIX_TILE * ftiles_x + xl / MIX_TILE] = 1;   /* every writer writes 1 */
+      if(y >= y0 && y < y1) atomic_inc(count);
     }
+    /* border pixels also fill their part of the padding; mixr and mixd are read only where
+       mixa > 0 */
+    const int bx0 = xl == 0 ? 0 : xl + pad, bx1 = xl == width - 1 ? ppitch - 1 : xl + pad;
+    const int by0 = y == 0 ? 0 : y + pad, by1 = y == height - 1 ? pheight - 1 : y + pad;
+    for(int py = by0; py <= by1; py++)
+      for(int px = bx0; px <= bx1; px++)
+      {
+        const int i = py * ppitch + px;
+        mixa[i] = a;
+        if(a > 0.0f)
+        {
+          vstore2((float2)(rn, rf), i, mixr);
+          vstore4(d, i, mixd);
+        }
+      }
+  }
 }
 
 /* Per tile of the whole render's window (`width` x `height`, the grid the gather's tiles
@@ -374,7 +416,7 @@ typedef struct
  * dof_tap adds one tap of colour `c` and signed radius `rq` standing for the fraction `frac`
  * of its pixel (1; a part of a mixed edge pixel: its coverage, dof_mixed) to the sums of the
  * 4 pixels whose radii are `r0` (`p_near`: r0 < -NEAR_EPS, `any_near`: any of them). */
-inline void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
+inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
                     const float8 tp, const float inv_s, const float4 r0, const int4 p_near,
                     const int any_near, const float cap_s CATEYE_ARGS)
 {
@@ -483,10 +525,11 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float16 d = vload16(0, mixd + at * 4) * scale;
     float4 an = aq;
     if(layer && i == first) an = select(an, (float4)(layer == 2 ? 1.0f : 0.0f), sq);
-    dof_tap(&s, c - d * LANES(aq), select(rq, rr.s1357, sq), one - an, tp, inv_s, r0, p_near,
-            any_near, cap_s CATEYE_PASS);
-    dof_tap(&s, c + d * LANES(one - aq), select(rq, rr.s0246, sq), an, tp, inv_s, r0, p_near,
-            any_near, cap_s CATEYE_PASS);
+    const int16 sq16 = LANES(sq);
+    dof_tap(&s, select(c, c - d * LANES(aq), sq16), select(rq, rr.s1357, sq), one - an, tp,
+            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
+    dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
+            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
   }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
   const REAL4 tiny = (REAL4)(1e-20);
@@ -562,8 +605,9 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
   return cap_factor * (exp(g) - 1.0f);
 }
 
-/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, 0): the
- * lattice levels of the two tables (tap_table's column 7, one per table); count 0 copies the
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
+ * the lattice levels of the two tables (tap_table's column 7, one per table), the farthest
+ * x or y offset of a tap of the first (px); count 0 copies the
  * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
  * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
@@ -588,7 +632,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const int hwidth, const int hheight, const float refine,
                        const float low_r, const float4 cateye, const int plane,
                        const int4 place, const int4 hplace, global const float *mixa,
-                       global const float *mixr, global const float *mixd, const int mix)
+                       global const float *mixr, global const float *mixd,
+                       global const int *mflags, const int mtiles_x, const int mtiles_y)
 {
   const int qx = get_global_id(0), yd = get_global_id(1);
   const int xd = qx * 4;
@@ -604,15 +649,28 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     return;
   }
   const float4 r = vload4(0, coc + base);
-  /* mixed edge pixels (dof_mixed): gathered twice, as their far and as their near part;
-     the table must serve both radii */
+  /* mixed edge pixels (dof_mixed) within the reach of the tile's table (info.s7, px; the
+     flag tiles of the buffer's image, clamped to it as the padding is): the taps split
+     them, and the 4 pixels are gathered twice, as their far and as their near part (the
+     table must serve both radii) */
+  int mix = 0;
+  if(mtiles_x > 0)
+  {
+    const int bx = x - place.s2, by = y - place.s3, rch = info.s7;
+    const int fx0 = clfx_clampi(max(bx - rch, 0) / MIX_TILE, 0, mtiles_x - 1);
+    const int fx1 = clfx_clampi((bx + 3 + rch) / MIX_TILE, 0, mtiles_x - 1);
+    const int fy0 = clfx_clampi(max(by - rch, 0) / MIX_TILE, 0, mtiles_y - 1);
+    const int fy1 = clfx_clampi((by + rch) / MIX_TILE, 0, mtiles_y - 1);
+    for(int fy = fy0; fy <= fy1 && !mix; fy++)
+      for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
+  }
   const float4 am = mix ? vload4(0, mixa + base) : (float4)(0.0f);
   const int4 sm = am > 0.0f;
   const int split = any(sm);
   float4 rn = r, rf = r;
   if(split)
   {
-    const float8 rr = vload8(0, mixr + base * 2);
+    const float8 rr = vload8(0, mixr + base * 2);   /* read where mixa > 0 only */
     rn = select(r, rr.s0246, sm);
     rf = select(r, rr.s1357, sm);
   }
@@ -666,13 +724,15 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   /* a mixed pixel: its far part's gather (at the far layer's radius) and its near part's,
      blended by its coverage */
   const float16 dm = vload16(0, mixd + base * 4);
+  const int16 sm16 = LANES(sm);
   const float16 o_far = dof_gather_safe(col, coc, ppitch, tcol, inv_s, base,
-                                        c0 - dm * LANES(am), rf, taps, first, count, cap,
-                                        mixa, mixr, mixd, 1, 1 CATEYE_PASS);
+                                        select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
+                                        count, cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
   const float16 o_near = dof_gather_safe(col, coc, ppitch, tcol, inv_s, base,
-                                         c0 + dm * LANES(1.0f - am), rn, taps, first, count,
-                                         cap, mixa, mixr, mixd, 1, 2 CATEYE_PASS);
-  vstore16(select(o_far, o_far * LANES(1.0f - am) + o_near * LANES(am), LANES(sm)), 0, out);
+                                         select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
+                                         taps, first, count, cap, mixa, mixr, mixd, 1, 2
+                                         CATEYE_PASS);
+  vstore16(select(o_far, o_far * LANES(1.0f - am) + o_near * LANES(am), sm16), 0, out);
 }
 
 /* Axial chromatic aberration: red, green and blue from the gathers of their own radius

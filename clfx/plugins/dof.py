@@ -748,7 +748,8 @@ class Dof(Plugin):
         """``dof_gather``'s tap table and per-tile table (on the device): per tile the table
         of radius ``levels``, that of radius ``sharp`` for pixels in focus, ``mode`` (bit 0:
         take the half-resolution result where it is smooth, bit 1: gather again where it is
-        not) and the two tables' lattice levels; and the farthest row offset of a tap."""
+        not), the two tables' lattice levels and the farthest offset (x or y, px) of a tap of
+        the first (sharp <= levels); and the farthest row offset of a tap."""
         table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
                                       roundness, squeeze)
         tiles = np.zeros(levels.shape + (8,), np.int32)
@@ -756,6 +757,10 @@ class Dof(Plugin):
         tiles[..., 4] = 0 if mode is None else mode
         level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
         tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
+        for start, n in {tuple(v) for v in info[0, ..., :2].reshape(-1, 2).tolist()}:
+            if n:
+                reach = int(np.abs(table[start:start + n, :2]).max())
+                tiles[..., 7][(info[0, ..., 0] == start) & (info[0, ..., 1] == n)] = reach
         return rt.to_device(table), rt.to_device(tiles), int(np.abs(table[:, 1]).max())
 
     # -- render ----------------------------------------------------------------------------
@@ -867,17 +872,20 @@ class Dof(Plugin):
 
     def _mixed(self, rt, col, coc, padded: Rect, pad: int, w: int, h: int, y0: int,
                rows: int):
-        """``dof_mixed`` over the padded colour ``col`` (plane 0) and edge-aware radii ``coc`` of a
-        ``w`` x ``h`` image: the mixed edge pixels' near coverage, radii and colour
-        difference ((mixa, mixr, mixd) on the device) and the device count of those in its
+        """``dof_mixed`` over the padded colour ``col`` (plane 0) and edge-aware radii ``coc``
+        of a ``w`` x ``h`` image: ``dof_gather``'s mixed-pixel arguments (the mixed edge
+        pixels' near coverage, radii and colour difference, the flags of the image's 32 px
+        tiles holding one and their counts in x and y) and the device count of those in its
         rows ``y0``..``y0 + rows`` (the band a render gives)."""
         mixa, mixr, mixd = (rt.image(padded, n) for n in (1, 2, 4))
         count = rt.to_device(np.zeros(1, np.int32))
+        tx, ty = -(-w // TILE), -(-h // TILE)
+        flags = rt.to_device(np.zeros(tx * ty, np.int32))
         i32 = np.int32
-        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (w, h), col, coc, mixa, mixr, mixd,
-                  i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h), i32(y0),
-                  i32(y0 + rows), count, local=(16, 4))
-        return (mixa, mixr, mixd), count
+        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (-(-w // 4), h), col, coc, mixa, mixr,
+                  mixd, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h), i32(y0),
+                  i32(y0 + rows), count, flags, i32(tx), local=(8, 4))
+        return (mixa, mixr, mixd, flags, i32(tx), i32(ty)), count
 
     def _gather(self, rt, knl, col, coc, pad, dst, taps, tiles, frame: DofFrame, lvl, cateye,
                 place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0,
@@ -896,5 +904,5 @@ class Dof(Plugin):
                   frame.log_mean, i32(frame.tiles_x), i32(frame.tiles_y), i32(tile),
                   f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
                   np.array(cateye, np.float32), i32(plane), np.array(place, np.int32),
-                  np.array((*hplace, 0, 0), np.int32), *(mix or (coc, coc, coc)),
-                  i32(mix is not None), local=LOCAL)
+                  np.array((*hplace, 0, 0), np.int32),
+                  *(mix or (coc, coc, coc, coc, i32(0), i32(0))), local=LOCAL)
