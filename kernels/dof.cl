@@ -124,6 +124,26 @@ inline float dof_edge_radius(global const float *col, global const float *coc,
   return d_own > EDGE_TAU && fabs(r_oth) < fabs(rp) ? r_oth : rp;
 }
 
+/* Image pixels (x..x + 3, y): whether their 3 x 3 radii span EDGE_PX or more (a depth edge),
+ * and their own radii (`centre`); neighbours clamp to the image. */
+inline int4 dof_edge4(global const float *coc, const int ppitch, const int pad, const int width,
+                      const int height, const int x, const int y, float4 *centre)
+{
+  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY);
+  for(int dy = -1; dy <= 1; dy++)
+  {
+    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
+    float v[6];
+    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
+    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
+    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
+    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
+    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
+    if(dy == 0) *centre = m;
+  }
+  return rmax - rmin >= EDGE_PX;
+}
+
 /* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 4 image pixels per work-item (the
  * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
  * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
@@ -140,19 +160,8 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
   const int qx = get_global_id(0), y = get_global_id(1);
   const int x = qx * 4;
   if(x >= width || y >= height) return;
-  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY), centre = (float4)(0.0f);
-  for(int dy = -1; dy <= 1; dy++)
-  {
-    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
-    float v[6];
-    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
-    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
-    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
-    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
-    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
-    if(dy == 0) centre = m;
-  }
-  const int4 edge = rmax - rmin >= EDGE_PX;
+  float4 centre;
+  const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
   float res[4] = {centre.s0, centre.s1, centre.s2, centre.s3};
   const int is_edge[4] = {edge.s0, edge.s1, edge.s2, edge.s3};
   for(int l = 0; l < 4 && x + l < width; l++)
@@ -253,20 +262,9 @@ kernel void dof_mixed(global const float *col, global const float *coc, global f
   const int qx = get_global_id(0), y = get_global_id(1);
   const int x = qx * 4;
   if(x >= width || y >= height) return;
-  /* the 4 pixels' 3 x 3 radius ranges (as dof_edges): only a range of EDGE_PX or more can
-     hold an edge */
-  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY);
-  for(int dy = -1; dy <= 1; dy++)
-  {
-    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
-    float v[6];
-    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
-    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
-    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
-    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
-    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
-  }
-  const int4 edge = rmax - rmin >= EDGE_PX;
+  /* only a 3 x 3 radius range of EDGE_PX or more can hold a depth edge */
+  float4 centre;
+  const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
   const int is_edge[4] = {edge.s0, edge.s1, edge.s2, edge.s3};
   for(int l = 0; l < 4 && x + l < width; l++)
   {

@@ -55,13 +55,29 @@ Warfare", simplified for offline use)
    log luminance is far (> 0.5) from the median of its own layer's neighbours takes the
    radius of the other layer's neighbour that looks most like it, when that layer is the
    sharper one: the light stays a sharp light, partly covered by the bar's blur.
-3. Tiles (32 px, the shared scene analysis): the largest CoC radius a tile's depth range can
+3. ``dof_mixed``: mixed edge pixels.  The same antialiased beauty over a centre-sampled depth
+   puts the in-focus card's edge row (part card, part sky) under the sky's depth; gathered
+   with the sky's radius, its card part makes a soft copy of the card in the sky beyond the
+   edge (issue 32).  A pixel on a depth discontinuity (its 3 x 3 edge-aware radii have a gap
+   of a pixel or more, twice the rest of their range: two layers, not a steep ramp) whose
+   colour lies between a near neighbour's and a far neighbour's (projected on the segment
+   between them: coverage ``a`` in (0.02, 0.98), off it by at most a quarter of its
+   distance to either end; of such pairs the one farthest apart in colour) is split: its
+   near part ``C + (1 - a)(n - f)`` with the near neighbour's radius standing for ``a`` of
+   the pixel, its far part ``C - a (n - f)`` with the far one's for ``1 - a`` (they mix back
+   to ``C``).  In the dense gathers each part is a tap of its own radius weighted by its
+   coverage, and a mixed pixel is gathered twice, as its far part and as its near part (at
+   its own centre only that part), blended by ``a``: an in-focus edge stays sharp, the sky
+   behind it stays clean.  The gather reads the split data only within reach of a 32 px
+   tile holding a mixed pixel; the report says how many were split.  (The sparse lattice and
+   the half-resolution gather read prefiltered colours and do not split.)
+4. Tiles (32 px, the shared scene analysis): the largest CoC radius a tile's depth range can
    produce, dilated on the host over as many tiles as the largest radius reaches (3 x 3 for
    radii up to a tile); tiles whose neighbourhood maximum is below half a pixel are copied
    (and the whole frame is an identity when every tile is).  Per tile also the largest
    radius of a pixel in front of the focus plane within reach: pixels in focus (or nearly)
    gather over only that and their own radius.
-4. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
+5. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
    the level's ``dense_radius`` (a single bright pixel spreads into an evenly lit disk with
    an antialiased rim), beyond that a lattice of every 2nd, 4th, ... pixel (at most the
    level's ``lattice`` taps per radius) over a copy of the image prefiltered with the tent
@@ -79,7 +95,7 @@ Warfare", simplified for offline use)
      geometric mean luminance of the tiles around (``dof_tile_cap``), so a sharp light does
      not shine through a blurred bar beside it.
    ``out = far (1 - alpha) + near alpha``.  Every tap rejected falls back to the centre pixel.
-5. Tiles whose every pixel is far out of focus (CoC radius above the level's
+6. Tiles whose every pixel is far out of focus (CoC radius above the level's
    ``half_res_radius``) are also gathered at half resolution (``dof_down2``: 2 x 2 box of
    colour, mean radius halved; the same gather with half the radius) and upsampled
    bilinearly, except where the half-resolution pixels span more than the level's
