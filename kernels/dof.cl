@@ -648,9 +648,10 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   }
   const float4 r = vload4(0, coc + base);
   /* mixed edge pixels (dof_mixed) within the reach of the tile's table (info.s7, px; the
-     flag tiles of the buffer's image, clamped to it as the padding is): the taps split
-     them, and the 4 pixels are gathered twice, as their far and as their near part (the
-     table must serve both radii) */
+     flag tiles of the buffer's image, clamped to it as the padding is): a dense table's
+     taps split them, and the 4 pixels are gathered twice, as their far and as their near
+     part (the table must serve both radii; a dense table's gather, not the half-resolution
+     result, where one of them is mixed) */
   int mix = 0;
   if(mtiles_x > 0)
   {
@@ -673,13 +674,26 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     rf = select(r, rr.s1357, sm);
   }
   int first = info.s0, count = info.s1, level = info.s5;
-  if(all(fmin(r, fmin(rn, rf)) >= -NEAR_EPS && fmax(r, fmax(rn, rf)) < low_r))
+  /* a mixed pixel among the 4 is gathered twice with a dense table serving both its radii:
+     the sharp one if both are in focus or nearly, else the full one; otherwise (a sparse
+     table) as any pixel, at its own radius */
+  int twice = 0;
+  if(split && all(fmin(rn, rf) >= -NEAR_EPS && fmax(rn, rf) < low_r) && info.s6 == 0)
+  {
+    first = info.s2;
+    count = info.s3;
+    level = info.s6;
+    twice = 1;
+  }
+  else if(split && info.s5 == 0)
+    twice = 1;
+  else if(all(r >= -NEAR_EPS && r < low_r))
   {
     first = info.s2;
     count = info.s3;
     level = info.s6;
   }
-  else if(!split && (info.s4 & 1) && all(fabs(r) >= low_r))
+  else if((info.s4 & 1) && all(fabs(r) >= low_r))
   {
     float lmin = INFINITY, lmax = -INFINITY;
     float16 up;
@@ -713,7 +727,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   /* mixed pixels are split over the image's own pixels: dense tables only */
   const int dense = mix && level == 0;
   const float16 c0 = vload16(0, col + base * 4);
-  if(!(dense && split))
+  if(!twice)
   {
     vstore16(dof_gather_safe(col, coc, ppitch, tcol, inv_s, base, c0, r, taps, first, count,
                              cap, mixa, mixr, mixd, dense, 0 CATEYE_PASS), 0, out);
