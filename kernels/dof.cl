@@ -4,6 +4,9 @@
  *   radius in x pixels (< 0 in front of the focus plane), clamped to clamp_r.  The padded
  *   image (`pad` pixels each side, clamp-to-edge) lets the gather read without bounds tests.
  * dof_edges: the radii made edge-aware (see there).
+ * dof_mixed: mixed edge pixels (a filtered beauty over a point-sampled depth), their
+ *   coverage of the near layer and the two layers' radii and colours (see there); the
+ *   gather splits each into its near and far part.
  * dof_tile_cap: per tile, the mean of log(1 + luminance) over every 4th pixel and row: the
  *   gather turns it into the cap of the colours that fill in the background hidden behind a
  *   blurred foreground (dof_cap).
@@ -37,6 +40,10 @@
 #define NEAR_EPS 0.25f   /* |radius| below this is in focus: never a near-field pixel */
 #define EDGE_PX 1.0f     /* radius range over 3 x 3 that makes a depth edge */
 #define EDGE_TAU 0.5f    /* log-luminance distance from its own layer that makes a pixel odd */
+#define MIX_MIN 0.02f    /* a mixed pixel's smallest coverage of either layer */
+#define MIX_TOL 0.25f    /* a mixed pixel's colour off the segment between its layers' */
+#define MIX_GAP 2.0f     /* a depth edge's gap over the rest of its 3 x 3 radii's range */
+#define MIX_TILE 32      /* dof_mixed's flag tiles (px) */
 #define OVERFLOW_SCALE 5.421010862427522e-20f   /* 2^-64 */
 #ifndef DOF_CATEYE
 #define DOF_CATEYE 0
@@ -117,6 +124,26 @@ inline float dof_edge_radius(global const float *col, global const float *coc,
   return d_own > EDGE_TAU && fabs(r_oth) < fabs(rp) ? r_oth : rp;
 }
 
+/* Image pixels (x..x + 3, y): whether their 3 x 3 radii span EDGE_PX or more (a depth edge),
+ * and their own radii (`centre`); neighbours clamp to the image. */
+inline int4 dof_edge4(global const float *coc, const int ppitch, const int pad, const int width,
+                      const int height, const int x, const int y, float4 *centre)
+{
+  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY);
+  for(int dy = -1; dy <= 1; dy++)
+  {
+    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
+    float v[6];
+    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
+    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
+    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
+    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
+    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
+    if(dy == 0) *centre = m;
+  }
+  return rmax - rmin >= EDGE_PX;
+}
+
 /* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 4 image pixels per work-item (the
  * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
  * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
@@ -133,19 +160,8 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
   const int qx = get_global_id(0), y = get_global_id(1);
   const int x = qx * 4;
   if(x >= width || y >= height) return;
-  float4 rmin = (float4)(INFINITY), rmax = (float4)(-INFINITY), centre = (float4)(0.0f);
-  for(int dy = -1; dy <= 1; dy++)
-  {
-    const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
-    float v[6];
-    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
-    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
-    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
-    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
-    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
-    if(dy == 0) centre = m;
-  }
-  const int4 edge = rmax - rmin >= EDGE_PX;
+  float4 centre;
+  const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
   float res[4] = {centre.s0, centre.s1, centre.s2, centre.s3};
   const int is_edge[4] = {edge.s0, edge.s1, edge.s2, edge.s3};
   for(int l = 0; l < 4 && x + l < width; l++)
@@ -158,6 +174,125 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
     for(int py = y0; py <= y1; py++)
       for(int px = x0; px <= x1; px++)
         out[py * ppitch + px] = res[l];
+  }
+}
+
+/* Mixed edge pixels: a renderer filters the beauty over the pixel but takes the depth at its
+ * centre, so on a depth edge a pixel's colour mixes two layers under one layer's depth (the
+ * card's edge row under the sky's: gathered with the sky's radius it makes a soft copy of
+ * the card above its edge).  Per image pixel (x, y) on a depth edge, whose 3 x 3 radii
+ * (dof_edges') have a gap of EDGE_PX or more that is MIX_GAP times the rest of their range
+ * or more (two layers; a steep ramp of depth is no edge): its neighbours split at the
+ * mid-range radius (in the gap) into a near layer
+ * (smaller signed radius: closer to the camera) and a far one; for every pair of a near
+ * neighbour n and a far one f the pixel's colour C is projected onto the segment f -> n:
+ * C = f + a (n - f) + e.  A pair explains the pixel when a lies in (MIX_MIN, 1 - MIX_MIN)
+ * and the residual e is within MIX_TOL of the distances from C to both ends (C lies between
+ * them, on the segment); of those the pair farthest apart in colour (the purest ends)
+ * wins.  Written: `mixa` the near layer's coverage a (0: not mixed), `mixr` (r_n, r_f) the
+ * two neighbours' radii, `mixd` n - f: the near part's colour is C + (1 - a)(n - f), the
+ * far part's C - a (n - f) (they mix back to C; the residual stays in both).  RGBA
+ * (premultiplied: the beauty mixes linearly in every channel).  Border pixels also fill
+ * their part of the padding (clamp-to-edge, as dof_edges); `count` counts the mixed pixels
+ * of rows y0..y1; `flags` (zeroed, `ftiles_x` per row) flags the MIX_TILE px tiles of the
+ * image holding one (the gather reads the split data only within reach of a flagged tile). */
+/* The split of image pixel (x, y) on a depth edge (see dof_mixed): its near coverage (0: not
+ * mixed), with `rn`, `rf`, `d` set when mixed. */
+inline float dof_mix_split(global const float *col, global const float *coc, const int ppitch,
+                           const int pad, const int width, const int height, const int x,
+                           const int y, float *rn, float *rf, float4 *d)
+{
+  int at[9];
+  float r[9];
+  float rmin = INFINITY, rmax = -INFINITY;
+  for(int j = 0; j < 9; j++)
+  {
+    at[j] = (clfx_clampi(y + j / 3 - 1, 0, height - 1) + pad) * ppitch
+            + clfx_clampi(x + j % 3 - 1, 0, width - 1) + pad;
+    r[j] = coc[at[j]];
+    rmin = fmin(rmin, r[j]);
+    rmax = fmax(rmax, r[j]);
+  }
+  /* a discontinuity: the largest gap between the sorted radii, >= EDGE_PX and >= MIX_GAP
+     times the rest of their range (two layers, not a steep depth ramp) */
+  float sr[9];
+  for(int j = 0; j < 9; j++)
+  {
+    int k = j;
+    for(; k > 0 && sr[k - 1] > r[j]; k--) sr[k] = sr[k - 1];
+    sr[k] = r[j];
+  }
+  float gap = 0.0f;
+  for(int k = 0; k < 8; k++) gap = fmax(gap, sr[k + 1] - sr[k]);
+  if(!(gap >= EDGE_PX && gap >= MIX_GAP * (rmax - rmin - gap))) return 0.0f;
+  const float mid = 0.5f * (rmin + rmax);
+  const float4 c4 = vload4(at[4], col);
+  float best = 0.0f, a = 0.0f;
+  for(int jn = 0; jn < 9; jn++)
+  {
+    if(jn == 4 || !(r[jn] < mid)) continue;
+    const float4 cn = vload4(at[jn], col), en = c4 - cn;
+    for(int jf = 0; jf < 9; jf++)
+    {
+      if(jf == 4 || r[jf] < mid) continue;
+      const float4 cf = vload4(at[jf], col);
+      const float4 dd = cn - cf, ef = c4 - cf;
+      const float l2 = dot(dd, dd);
+      if(!(l2 > best && l2 <= FLT_MAX)) continue;
+      const float t = dot(ef, dd) / l2;
+      if(!(t > MIX_MIN && t < 1.0f - MIX_MIN)) continue;
+      const float4 e = ef - t * dd;
+      if(dot(e, e) > MIX_TOL * MIX_TOL * fmin(dot(ef, ef), dot(en, en))) continue;
+      best = l2;
+      a = t;
+      *d = dd;
+      *rn = r[jn];
+      *rf = r[jf];
+    }
+  }
+  return a;
+}
+
+kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
+                      global float *mixr, global float *mixd, const int ppitch,
+                      const int pheight, const int pad, const int width, const int height,
+                      const int y0, const int y1, global int *count, global int *flags,
+                      const int ftiles_x)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  const int x = qx * 4;
+  if(x >= width || y >= height) return;
+  /* only a 3 x 3 radius range of EDGE_PX or more can hold a depth edge */
+  float4 centre;
+  const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
+  const int is_edge[4] = {edge.s0, edge.s1, edge.s2, edge.s3};
+  for(int l = 0; l < 4 && x + l < width; l++)
+  {
+    const int xl = x + l;
+    float rn = 0.0f, rf = 0.0f;
+    float4 d = (float4)(0.0f);
+    const float a = is_edge[l] ? dof_mix_split(col, coc, ppitch, pad, width, height, xl, y,
+                                               &rn, &rf, &d) : 0.0f;
+    if(a > 0.0f)
+    {
+      flags[y / MIX_TILE * ftiles_x + xl / MIX_TILE] = 1;   /* every writer writes 1 */
+      if(y >= y0 && y < y1) atomic_inc(count);
+    }
+    /* border pixels also fill their part of the padding; mixr and mixd are read only where
+       mixa > 0 */
+    const int bx0 = xl == 0 ? 0 : xl + pad, bx1 = xl == width - 1 ? ppitch - 1 : xl + pad;
+    const int by0 = y == 0 ? 0 : y + pad, by1 = y == height - 1 ? pheight - 1 : y + pad;
+    for(int py = by0; py <= by1; py++)
+      for(int px = bx0; px <= bx1; px++)
+      {
+        const int i = py * ppitch + px;
+        mixa[i] = a;
+        if(a > 0.0f)
+        {
+          vstore2((float2)(rn, rf), i, mixr);
+          vstore4(d, i, mixd);
+        }
+      }
   }
 }
 
@@ -245,6 +380,22 @@ inline float4 dof_lum4(float16 c)
   return (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
 }
 
+#if DOF_CATEYE
+#define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 ce_frac
+#define CATEYE_PASS , ce_x, ce_y, ce_frac
+#else
+#define CATEYE_ARGS
+#define CATEYE_PASS
+#endif
+
+/* The gather's running sums of 4 pixels: near and far fields' colours and weights, the
+ * near field's coverage. */
+typedef struct
+{
+  REAL16 fn, ff;
+  REAL4 wn_sum, wf_sum, alpha;
+} dof_sums;
+
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
  * aperture area the tap stands for (px^2); the offset in aperture space (x times the
@@ -256,104 +407,137 @@ inline float4 dof_lum4(float16 c)
  * `ce_frac` the open fraction of their apertures: a point at lens position l (aperture
  * radii) is seen only if |l - c| <= 1; a tap q whose light lands at p = q - o comes through
  * l = -o / r_q (signed radius), so its coverage is also that of |o + c r_q| <= |r_q|.  The
- * near field's weights (a tap's light over its own bokeh) divide by the clipped area.  Returns the 4 pixels at `base` (padded index),
- * colours times `scale`; `cap`: the largest luminance a colour may have where it fills in
- * the background hidden behind a blurred foreground pixel (beyond its own CoC's reach). */
+ * near field's weights (a tap's light over its own bokeh) divide by the clipped area.
+ * `cap_s`: the largest luminance a colour may have where it fills in the background hidden
+ * behind a blurred foreground pixel (beyond its own CoC's reach).
+ *
+ * dof_tap adds one tap of colour `c` and signed radius `rq` standing for the fraction `frac`
+ * of its pixel (1; a part of a mixed edge pixel: its coverage, dof_mixed) to the sums of the
+ * 4 pixels whose radii are `r0` (`p_near`: r0 < -NEAR_EPS, `any_near`: any of them). */
+inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
+                    const float8 tp, const float inv_s, const float4 r0, const int4 p_near,
+                    const int any_near, const float cap_s CATEYE_ARGS)
+{
+  const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
+  const float4 arq = fabs(rq);
+  const int4 q_near = rq < -NEAR_EPS;
+  /* near field: scatter-as-gather, the tap's light spread over its own CoC area */
+#if DOF_CATEYE
+  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
+  float4 wn = (float4)(0.0f);
+  if(any(q_near))
+  {
+    const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
+    const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f),
+                              clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f,
+                                    0.0f, 1.0f));
+    wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
+  }
+#else
+  const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
+  float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);
+#endif
+  wn *= frac;
+  /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
+     near p the far field is the background hidden behind it, estimated from the
+     visible background within p's radius */
+  const float4 rf = select(select(arq, fmin(arq, fmax(r0, 0.0f)), rq > r0), fmax(arq, fabs(r0)),
+                           p_near);
+#if DOF_CATEYE
+  const float4 efx = ax + ce_x * rf, efy = ay + ce_y * rf;
+  const float4 cov_f = fmin(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
+                            clamp((rf - sqrt(efx * efx + efy * efy)) * inv_s + 0.5f,
+                                  0.0f, 1.0f));
+#else
+  const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
+#endif
+  const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near)
+                      * frac;
+  float4 wf = cov_f * norm;
+  s->fn += TO_REAL16(c * LANES(wn));
+  if(any_near && any(p_near & ~q_near))
+  {
+    /* behind a near p, the part of the coverage the tap's own CoC does not give is a
+       guess at hidden background: its highlights are capped (a light beside a blurred
+       bar must not shine through it) */
+#if DOF_CATEYE
+    const float4 eqx = ax + ce_x * arq, eqy = ay + ce_y * arq;
+    const float4 cov_q = fmin(fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
+                                   clamp((arq - sqrt(eqx * eqx + eqy * eqy)) * inv_s + 0.5f,
+                                         0.0f, 1.0f)),
+                              cov_f);
+#else
+    const float4 cov_q = fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), cov_f);
+#endif
+    const float4 w_fill = select((float4)(0.0f), (cov_f - cov_q) * norm, p_near);
+    const float4 lum = dof_lum4(c);
+    const float4 k = fmin(1.0f, cap_s / fmax(lum, 1e-30f));
+    wf -= w_fill;
+    s->ff += TO_REAL16(c * LANES(wf + w_fill * k));
+    wf += w_fill;
+  }
+  else
+    s->ff += TO_REAL16(c * LANES(wf));
+  s->wn_sum += TO_REAL4(wn);
+  s->wf_sum += TO_REAL4(wf);
+  s->alpha += TO_REAL4(wn * area);
+}
+/* The gather of 4 pixels at `base` (padded index) whose radii are `r0`, colours times
+ * `scale`; `c0`: their colours, the result where every tap is rejected.  With `mix` (a
+ * dense table over the full-resolution image), mixed edge pixels among the taps are split
+ * into their near and far parts (dof_mixed: near coverage `mixa`, near and far radii
+ * `mixr`, near minus far colour `mixd`), each part a tap of its own radius standing for its
+ * coverage; `layer` 1 (2): at the centre tap a mixed pixel stands for its far (near) part
+ * only (the two gathers of a mixed pixel, dof_gather). */
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
                           global const float *tcol, const float inv_s, const int base,
-                          global const float *taps, const int first, const int count,
-                          const float cap, const float scale
-#if DOF_CATEYE
-                          , const float4 ce_x, const float4 ce_y, const float4 ce_frac
-#endif
-                          )
+                          const float16 c0_in, const float4 r0, global const float *taps,
+                          const int first, const int count, const float cap,
+                          const float scale, global const float *mixa,
+                          global const float *mixr, global const float *mixd, const int mix,
+                          const int layer CATEYE_ARGS)
 {
-  const float16 c0 = vload16(0, col + base * 4) * scale;
-  const float4 r0 = vload4(0, coc + base);
+  const float16 c0 = c0_in * scale;
   const int4 p_near = r0 < -NEAR_EPS;
   const int any_near = any(p_near);
-  const float4 ar0 = fabs(r0);
-  const float4 r0_far = fmax(r0, 0.0f);
   const float cap_s = cap * scale;
-
-  REAL16 fn = (REAL16)(0), ff = (REAL16)(0);
-  REAL4 wn_sum = (REAL4)(0), wf_sum = (REAL4)(0), alpha = (REAL4)(0);
+  const float4 one = (float4)(1.0f);
+  dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
   for(int i = first; i < first + count; i++)
   {
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
-    const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
     const float16 c = vload16(0, tcol + at * 4) * scale;
     const float4 rq = vload4(0, coc + at);
-    const float4 arq = fabs(rq);
-    const int4 q_near = rq < -NEAR_EPS;
-    /* near field: scatter-as-gather, the tap's light spread over its own CoC area */
-#if DOF_CATEYE
-    const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
-    float4 wn = (float4)(0.0f);
-    if(any(q_near))
+    const float4 aq = mix ? vload4(0, mixa + at) : (float4)(0.0f);
+    if(!any(aq > 0.0f))
     {
-      const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-      const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f),
-                                clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f,
-                                      0.0f, 1.0f));
-      wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
+      dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
+      continue;
     }
-#else
-    const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
-    const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);
-#endif
-    /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
-       near p the far field is the background hidden behind it, estimated from the
-       visible background within p's radius */
-    const float4 rf = select(select(arq, fmin(arq, r0_far), rq > r0), fmax(arq, ar0), p_near);
-#if DOF_CATEYE
-    const float4 efx = ax + ce_x * rf, efy = ay + ce_y * rf;
-    const float4 cov_f = fmin(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
-                              clamp((rf - sqrt(efx * efx + efy * efy)) * inv_s + 0.5f,
-                                    0.0f, 1.0f));
-#else
-    const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
-#endif
-    const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near);
-    float4 wf = cov_f * norm;
-    fn += TO_REAL16(c * LANES(wn));
-    if(any_near && any(p_near & ~q_near))
-    {
-      /* behind a near p, the part of the coverage the tap's own CoC does not give is a
-         guess at hidden background: its highlights are capped (a light beside a blurred
-         bar must not shine through it) */
-#if DOF_CATEYE
-      const float4 eqx = ax + ce_x * arq, eqy = ay + ce_y * arq;
-      const float4 cov_q = fmin(fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
-                                     clamp((arq - sqrt(eqx * eqx + eqy * eqy)) * inv_s + 0.5f,
-                                           0.0f, 1.0f)),
-                                cov_f);
-#else
-      const float4 cov_q = fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), cov_f);
-#endif
-      const float4 w_fill = select((float4)(0.0f), (cov_f - cov_q) * norm, p_near);
-      const float4 lum = dof_lum4(c);
-      const float4 k = fmin(1.0f, cap_s / fmax(lum, 1e-30f));
-      wf -= w_fill;
-      ff += TO_REAL16(c * LANES(wf + w_fill * k));
-      wf += w_fill;
-    }
-    else
-      ff += TO_REAL16(c * LANES(wf));
-    wn_sum += TO_REAL4(wn);
-    wf_sum += TO_REAL4(wf);
-    alpha += TO_REAL4(wn * area);
+    /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
+       C + (1 - a) d at the near layer's, each standing for its coverage (the first tap is
+       the centre: in one of a mixed pixel's two gathers only that gather's part) */
+    const int4 sq = aq > 0.0f;
+    const float8 rr = vload8(0, mixr + at * 2);
+    const float16 d = vload16(0, mixd + at * 4) * scale;
+    float4 an = aq;
+    if(layer && i == first) an = select(an, (float4)(layer == 2 ? 1.0f : 0.0f), sq);
+    const int16 sq16 = LANES(sq);
+    dof_tap(&s, select(c, c - d * LANES(aq), sq16), select(rq, rr.s1357, sq), one - an, tp,
+            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
+    dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
+            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
   }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
   const REAL4 tiny = (REAL4)(1e-20);
-  const REAL4 a = clamp(alpha, (REAL4)(0), (REAL4)(1));
-  const REAL4 inv_n = select((REAL4)(0), (REAL4)(1) / wn_sum, wn_sum > tiny);
-  const REAL4 inv_f = select((REAL4)(0), (REAL4)(1) / wf_sum, wf_sum > tiny);
+  const REAL4 a = clamp(s.alpha, (REAL4)(0), (REAL4)(1));
+  const REAL4 inv_n = select((REAL4)(0), (REAL4)(1) / s.wn_sum, s.wn_sum > tiny);
+  const REAL4 inv_f = select((REAL4)(0), (REAL4)(1) / s.wf_sum, s.wf_sum > tiny);
   const REAL16 centre = TO_REAL16(c0);
-  const REAL16 near = select(centre, fn * LANES(inv_n), LANES(wn_sum > tiny));
-  const REAL16 far = select(near, ff * LANES(inv_f), LANES(wf_sum > tiny));
-  const REAL16 mix_a = LANES(select(a, (REAL4)(1), wf_sum <= tiny));
+  const REAL16 near = select(centre, s.fn * LANES(inv_n), LANES(s.wn_sum > tiny));
+  const REAL16 far = select(near, s.ff * LANES(inv_f), LANES(s.wf_sum > tiny));
+  const REAL16 mix_a = LANES(select(a, (REAL4)(1), s.wf_sum <= tiny));
   return far * ((REAL16)(1) - mix_a) + near * mix_a;   /* no difference: stays finite */
 }
 
@@ -363,25 +547,21 @@ inline int dof_all_finite16(float16 v)
 }
 
 /* The gather of 4 pixels, taken again with scaled colours if float sums overflowed. */
-#if DOF_CATEYE
-#define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 ce_frac
-#define CATEYE_PASS , ce_x, ce_y, ce_frac
-#else
-#define CATEYE_ARGS
-#define CATEYE_PASS
-#endif
 
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                const int ppitch, global const float *tcol,
-                               const float inv_s, const int base, global const float *taps,
-                               const int first, const int count, const float cap CATEYE_ARGS)
+                               const float inv_s, const int base, const float16 c0,
+                               const float4 r0, global const float *taps, const int first,
+                               const int count, const float cap, global const float *mixa,
+                               global const float *mixr, global const float *mixd,
+                               const int mix, const int layer CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap,
-                                 1.0f CATEYE_PASS);
+  const REAL16 out = dof_gather4(col, coc, ppitch, tcol, inv_s, base, c0, r0, taps, first,
+                                 count, cap, 1.0f, mixa, mixr, mixd, mix, layer CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap,
-                               OVERFLOW_SCALE
+  const REAL16 s = dof_gather4(col, coc, ppitch, tcol, inv_s, base, c0, r0, taps, first,
+                               count, cap, OVERFLOW_SCALE, mixa, mixr, mixd, mix, layer
                                CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
@@ -423,8 +603,9 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
   return cap_factor * (exp(g) - 1.0f);
 }
 
-/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, 0): the
- * lattice levels of the two tables (tap_table's column 7, one per table); count 0 copies the
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
+ * the lattice levels of the two tables (tap_table's column 7, one per table), the farthest
+ * x or y offset of a tap of the first (px); count 0 copies the
  * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
  * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
@@ -448,7 +629,9 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const float cap_factor, global const float *hres, const int hpitch,
                        const int hwidth, const int hheight, const float refine,
                        const float low_r, const float4 cateye, const int plane,
-                       const int4 place, const int4 hplace)
+                       const int4 place, const int4 hplace, global const float *mixa,
+                       global const float *mixr, global const float *mixd,
+                       global const int *mflags, const int mtiles_x, const int mtiles_y)
 {
   const int qx = get_global_id(0), yd = get_global_id(1);
   const int xd = qx * 4;
@@ -464,8 +647,47 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     return;
   }
   const float4 r = vload4(0, coc + base);
+  /* mixed edge pixels (dof_mixed) within the reach of the tile's table (info.s7, px; the
+     flag tiles of the buffer's image, clamped to it as the padding is): a dense table's
+     taps split them, and the 4 pixels are gathered twice, as their far and as their near
+     part (the table must serve both radii; a dense table's gather, not the half-resolution
+     result, where one of them is mixed) */
+  int mix = 0;
+  if(mtiles_x > 0)
+  {
+    const int bx = x - place.s2, by = y - place.s3, rch = info.s7;
+    const int fx0 = clfx_clampi(max(bx - rch, 0) / MIX_TILE, 0, mtiles_x - 1);
+    const int fx1 = clfx_clampi((bx + 3 + rch) / MIX_TILE, 0, mtiles_x - 1);
+    const int fy0 = clfx_clampi(max(by - rch, 0) / MIX_TILE, 0, mtiles_y - 1);
+    const int fy1 = clfx_clampi((by + rch) / MIX_TILE, 0, mtiles_y - 1);
+    for(int fy = fy0; fy <= fy1 && !mix; fy++)
+      for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
+  }
+  const float4 am = mix ? vload4(0, mixa + base) : (float4)(0.0f);
+  const int4 sm = am > 0.0f;
+  const int split = any(sm);
+  float4 rn = r, rf = r;
+  if(split)
+  {
+    const float8 rr = vload8(0, mixr + base * 2);   /* read where mixa > 0 only */
+    rn = select(r, rr.s0246, sm);
+    rf = select(r, rr.s1357, sm);
+  }
   int first = info.s0, count = info.s1, level = info.s5;
-  if(all(r >= -NEAR_EPS && r < low_r))
+  /* a mixed pixel among the 4 is gathered twice with a dense table serving both its radii:
+     the sharp one if both are in focus or nearly, else the full one; otherwise (a sparse
+     table) as any pixel, at its own radius */
+  int twice = 0;
+  if(split && all(fmin(rn, rf) >= -NEAR_EPS && fmax(rn, rf) < low_r) && info.s6 == 0)
+  {
+    first = info.s2;
+    count = info.s3;
+    level = info.s6;
+    twice = 1;
+  }
+  else if(split && info.s5 == 0)
+    twice = 1;
+  else if(all(r >= -NEAR_EPS && r < low_r))
   {
     first = info.s2;
     count = info.s3;
@@ -502,8 +724,27 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   /* the table's lattice level: its plane of the prefilter pyramid, its ramps' width */
   global const float *tcol = col + (size_t)level * (size_t)plane * 4;
   const float inv_s = 1.0f / (float)(1 << level);
-  vstore16(dof_gather_safe(col, coc, ppitch, tcol, inv_s, base, taps, first, count, cap
-                           CATEYE_PASS), 0, out);
+  /* mixed pixels are split over the image's own pixels: dense tables only */
+  const int dense = mix && level == 0;
+  const float16 c0 = vload16(0, col + base * 4);
+  if(!twice)
+  {
+    vstore16(dof_gather_safe(col, coc, ppitch, tcol, inv_s, base, c0, r, taps, first, count,
+                             cap, mixa, mixr, mixd, dense, 0 CATEYE_PASS), 0, out);
+    return;
+  }
+  /* a mixed pixel: its far part's gather (at the far layer's radius) and its near part's,
+     blended by its coverage */
+  const float16 dm = vload16(0, mixd + base * 4);
+  const int16 sm16 = LANES(sm);
+  const float16 o_far = dof_gather_safe(col, coc, ppitch, tcol, inv_s, base,
+                                        select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
+                                        count, cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
+  const float16 o_near = dof_gather_safe(col, coc, ppitch, tcol, inv_s, base,
+                                         select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
+                                         taps, first, count, cap, mixa, mixr, mixd, 1, 2
+                                         CATEYE_PASS);
+  vstore16(select(o_far, o_far * LANES(1.0f - am) + o_near * LANES(am), sm16), 0, out);
 }
 
 /* Axial chromatic aberration: red, green and blue from the gathers of their own radius

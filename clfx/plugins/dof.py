@@ -55,13 +55,29 @@ Warfare", simplified for offline use)
    log luminance is far (> 0.5) from the median of its own layer's neighbours takes the
    radius of the other layer's neighbour that looks most like it, when that layer is the
    sharper one: the light stays a sharp light, partly covered by the bar's blur.
-3. Tiles (32 px, the shared scene analysis): the largest CoC radius a tile's depth range can
+3. ``dof_mixed``: mixed edge pixels.  The same antialiased beauty over a centre-sampled depth
+   puts the in-focus card's edge row (part card, part sky) under the sky's depth; gathered
+   with the sky's radius, its card part makes a soft copy of the card in the sky beyond the
+   edge (issue 32).  A pixel on a depth discontinuity (its 3 x 3 edge-aware radii have a gap
+   of a pixel or more, twice the rest of their range: two layers, not a steep ramp) whose
+   colour lies between a near neighbour's and a far neighbour's (projected on the segment
+   between them: coverage ``a`` in (0.02, 0.98), off it by at most a quarter of its
+   distance to either end; of such pairs the one farthest apart in colour) is split: its
+   near part ``C + (1 - a)(n - f)`` with the near neighbour's radius standing for ``a`` of
+   the pixel, its far part ``C - a (n - f)`` with the far one's for ``1 - a`` (they mix back
+   to ``C``).  In the dense gathers each part is a tap of its own radius weighted by its
+   coverage, and a mixed pixel is gathered twice, as its far part and as its near part (at
+   its own centre only that part), blended by ``a``: an in-focus edge stays sharp, the sky
+   behind it stays clean.  The gather reads the split data only within reach of a 32 px
+   tile holding a mixed pixel; the report says how many were split.  (The sparse lattice and
+   the half-resolution gather read prefiltered colours and do not split.)
+4. Tiles (32 px, the shared scene analysis): the largest CoC radius a tile's depth range can
    produce, dilated on the host over as many tiles as the largest radius reaches (3 x 3 for
    radii up to a tile); tiles whose neighbourhood maximum is below half a pixel are copied
    (and the whole frame is an identity when every tile is).  Per tile also the largest
    radius of a pixel in front of the focus plane within reach: pixels in focus (or nearly)
    gather over only that and their own radius.
-4. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
+5. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
    the level's ``dense_radius`` (a single bright pixel spreads into an evenly lit disk with
    an antialiased rim), beyond that a lattice of every 2nd, 4th, ... pixel (at most the
    level's ``lattice`` taps per radius) over a copy of the image prefiltered with the tent
@@ -79,7 +95,7 @@ Warfare", simplified for offline use)
      geometric mean luminance of the tiles around (``dof_tile_cap``), so a sharp light does
      not shine through a blurred bar beside it.
    ``out = far (1 - alpha) + near alpha``.  Every tap rejected falls back to the centre pixel.
-5. Tiles whose every pixel is far out of focus (CoC radius above the level's
+6. Tiles whose every pixel is far out of focus (CoC radius above the level's
    ``half_res_radius``) are also gathered at half resolution (``dof_down2``: 2 x 2 box of
    colour, mean radius halved; the same gather with half the radius) and upsampled
    bilinearly, except where the half-resolution pixels span more than the level's
@@ -103,7 +119,7 @@ frame-wide is computed once, on the whole frame, in the step's plan (:class:`Dof
 tile radii, lattice levels, half-resolution choice, tap and tile tables, the tiles' caps, on
 a grid anchored at the rendered window's origin), and a band gathers only its own rows,
 from band-sized buffers over the rows its pixels read (:meth:`DofFrame.rows`: the largest
-reach of a tap, its prefilter tent and the edge-aware radii's row, and of the
+reach of a tap, its prefilter tent or the two rows its mixed-pixel split reads, and of the
 half-resolution pixels its upsampling reads, starting on an even row so the 2 x 2 boxes
 pair the whole render's rows).
 """
@@ -261,6 +277,8 @@ LEVELS = {
 }
 
 CAP_FACTOR = 4.0
+MIXED_NOTE = " mixed edge pixels split"
+"""The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 """Background hidden behind a blurred foreground pixel is filled in from the visible
 background around, its colours capped at this many times the geometric mean luminance of
 the tiles around (so a light beside a blurred bar does not shine through it)."""
@@ -733,8 +751,9 @@ class Dof(Plugin):
         mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
         taps, tile_info, rows = self._tile_table(rt, levels, sharp, mode, *common)
         # rows a pixel reads: its farthest tap's, the prefilter's tent around it, or the
-        # edge-aware radius's row beyond it (its 3 x 3 neighbours)
-        rows += max((1 << full_l) - 1, 1)
+        # rows beyond it that a tap's mixed-pixel split reads (its 3 x 3 neighbours' edge-aware
+        # radii, each from its own 3 x 3 neighbours)
+        rows += max((1 << full_l) - 1, 2)
         note = (f"{int((levels == 0).sum())}/{radii.size} tiles in focus (copied), "
                 f"{int(half.sum())} at half resolution")
         return DofGather(offset, full_l, half, half_l, pad, taps, tile_info, htaps,
@@ -745,7 +764,8 @@ class Dof(Plugin):
         """``dof_gather``'s tap table and per-tile table (on the device): per tile the table
         of radius ``levels``, that of radius ``sharp`` for pixels in focus, ``mode`` (bit 0:
         take the half-resolution result where it is smooth, bit 1: gather again where it is
-        not) and the two tables' lattice levels; and the farthest row offset of a tap."""
+        not), the two tables' lattice levels and the farthest offset (x or y, px) of a tap of
+        the first (sharp <= levels); and the farthest row offset of a tap."""
         table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
                                       roundness, squeeze)
         tiles = np.zeros(levels.shape + (8,), np.int32)
@@ -753,6 +773,10 @@ class Dof(Plugin):
         tiles[..., 4] = 0 if mode is None else mode
         level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
         tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
+        for start, n in {tuple(v) for v in info[0, ..., :2].reshape(-1, 2).tolist()}:
+            if n:
+                reach = int(np.abs(table[start:start + n, :2]).max())
+                tiles[..., 7][(info[0, ..., 0] == start) & (info[0, ..., 1] == n)] = reach
         return rt.to_device(table), rt.to_device(tiles), int(np.abs(table[:, 1]).max())
 
     # -- render ----------------------------------------------------------------------------
@@ -777,9 +801,10 @@ class Dof(Plugin):
         src = rt.reframe(ctx.source, work, "zero")
         depth = rt.reframe(ctx.depth, work, "clamp")
         lens = self.lens(p, ctx)
-        outs = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gathers[off], src,
-                                       depth, band)
-                for off in lens.offsets()}
+        passes = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gathers[off], src,
+                                         depth, band)
+                  for off in lens.offsets()}
+        outs = {off: out for off, (out, _) in passes.items()}
         if len(outs) == 1:
             dst = outs[0.0]
         else:
@@ -789,7 +814,18 @@ class Dof(Plugin):
                       r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
                       np.int32(dst.height), local=(16, 4))
         ctx.notes.extend(frame.notes)
+        self._note_mixed(rt, p, ctx, passes[0.0][1])
         return dst
+
+    def _note_mixed(self, rt, p, ctx, count) -> None:
+        """The report's line of the mixed edge pixels split (green's gather's device
+        ``count`` of its band's rows; the bands of a tiled render add theirs up, the line
+        said once, with the frame's total)."""
+        frame = self.planned(p, ctx).frame
+        total = int(rt.from_device(count, np.int32, 1)[0]) + (frame.get("mixed", 0) if ctx.tiling is not None else 0)
+        frame["mixed"] = total
+        ctx.notes[:] = [s for s in ctx.notes if not s.endswith(MIXED_NOTE)]
+        ctx.notes.append(f"dof: {total}{MIXED_NOTE}")
 
     def _render_pass(self, rt, p, ctx, lens: Lens, frame: DofFrame, g: DofGather, src,
                      depth, band: Rect):
@@ -817,6 +853,8 @@ class Dof(Plugin):
                   col, coc0, coc, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h),
                   local=(8, 4))
         del coc0
+        mix, count = self._mixed(rt, col, coc, padded, pad, w, h, band.y0 - src.window.y0,
+                                 band.height)
         variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
         gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant, **luma)
         # where the buffers sit on the whole render's grid (its window's origin)
@@ -839,22 +877,41 @@ class Dof(Plugin):
             hres = rt.image((h1 - h0, hw), 4)
             self._gather(rt, gather, colh, coch, hpad, hres, g.htaps, g.htiles, frame, lvl,
                          self.cateye_args(lens, ctx, whole, 2), (0, h0, 0, row0 // 2),
-                         tile=TILE // 2, plane=colh.pitch * hpadded.height)
+                         tile=TILE // 2, plane=colh.pitch * hpadded.height, mix=None)
             del colh, coch
         dst = rt.image(band, 4)
         self._gather(rt, gather, col, coc, pad, dst, g.taps, g.tiles, frame, lvl,
                      self.cateye_args(lens, ctx, whole), (0, top, 0, row0),
                      hres=hres, hplace=(0, h0 if hres is not None else 0),
-                     half_size=half_size, plane=col.pitch * padded.height)
-        return dst
+                     half_size=half_size, plane=col.pitch * padded.height, mix=mix)
+        return dst, count
+
+    def _mixed(self, rt, col, coc, padded: Rect, pad: int, w: int, h: int, y0: int,
+               rows: int):
+        """``dof_mixed`` over the padded colour ``col`` (plane 0) and edge-aware radii ``coc``
+        of a ``w`` x ``h`` image: ``dof_gather``'s mixed-pixel arguments (the mixed edge
+        pixels' near coverage, radii and colour difference, the flags of the image's 32 px
+        tiles holding one and their counts in x and y) and the device count of those in its
+        rows ``y0``..``y0 + rows`` (the band a render gives)."""
+        mixa, mixr, mixd = (rt.image(padded, n) for n in (1, 2, 4))
+        count = rt.to_device(np.zeros(1, np.int32))
+        tx, ty = -(-w // TILE), -(-h // TILE)
+        flags = rt.to_device(np.zeros(tx * ty, np.int32))
+        i32 = np.int32
+        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (-(-w // 4), h), col, coc, mixa, mixr,
+                  mixd, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h), i32(y0),
+                  i32(y0 + rows), count, flags, i32(tx), local=(8, 4))
+        return (mixa, mixr, mixd, flags, i32(tx), i32(ty)), count
 
     def _gather(self, rt, knl, col, coc, pad, dst, taps, tiles, frame: DofFrame, lvl, cateye,
-                place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0):
+                place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0,
+                mix=None):
         """Launch ``dof_gather`` over ``dst`` with the tables ``taps``, ``tiles``
         (:meth:`_tile_table`) and the frame's caps; ``place``: (dst x, dst y, buffer x,
         buffer y) on the whole render's grid, ``hres``: the half-resolution result (rows from
         ``hplace``, ``half_size`` its whole size); ``plane``: pixels between the planes of
-        ``col``'s prefilter pyramid (:func:`prefilter`)."""
+        ``col``'s prefilter pyramid (:func:`prefilter`); ``mix``: the mixed edge pixels
+        (:meth:`_mixed`) the gather splits, None: none (the half-resolution gather)."""
         i32, f32 = np.int32, np.float32
         hres_args = ((hres, i32(hres.pitch), i32(half_size[0]), i32(half_size[1]))
                      if hres is not None else (dst, i32(dst.pitch), i32(1), i32(1)))
@@ -863,4 +920,5 @@ class Dof(Plugin):
                   frame.log_mean, i32(frame.tiles_x), i32(frame.tiles_y), i32(tile),
                   f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
                   np.array(cateye, np.float32), i32(plane), np.array(place, np.int32),
-                  np.array((*hplace, 0, 0), np.int32), local=LOCAL)
+                  np.array((*hplace, 0, 0), np.int32),
+                  *(mix or (coc, coc, coc, coc, i32(0), i32(0))), local=LOCAL)

@@ -168,6 +168,50 @@ def test_dof_tiles_with_every_lens_and_window(rt, lens, layout, quality, monkeyp
         assert frame.gathers[0.0].full_l >= 1 and frame.gathers[0.0].half.any()
 
 
+def layered_aa(shape, ss=4):
+    """A renderer's frame of three layers: the contract's textured frame as a far wall at
+    20 m, a striped card in focus (2 m) and a bar at 0.7 m in front, with slanted edges; the
+    beauty the ``ss x ss`` box mean of sub-samples (edge pixels mix two layers), the depth
+    the surface at each pixel centre: (rgba, depth)."""
+    h, w = shape
+    wall = np.repeat(np.repeat(effects.scene(shape), ss, 0), ss, 1)
+    y, x = (np.mgrid[0:h * ss, 0:w * ss] + 0.5) / ss
+    card = (np.abs(x - 0.45 * w + 0.1 * y) < 0.25 * w) & (np.abs(y - 0.5 * h) < 0.3 * h)
+    bar = np.abs(x - 0.8 * w - 0.15 * y + 0.1 * h) < 3.3
+    stripes = np.where((x // 5) % 2 == 0, 0.9, 0.08)[..., None] * np.array([1.0, 0.9, 0.7])
+    sub = wall.copy()
+    sub[card, :3] = stripes[card]
+    sub[bar, :3] = (0.6, 0.2, 0.1)
+    z = np.where(bar, 0.7, np.where(card, 2.0, 20.0)).astype(np.float32)
+    rgba = sub.reshape(h, ss, w, ss, 4).mean(axis=(1, 3)).astype(np.float32)
+    return rgba, np.ascontiguousarray(z[ss // 2::ss, ss // 2::ss])
+
+
+@pytest.mark.parametrize("quality", effects.QUALITIES)
+@pytest.mark.parametrize("lens", ["camera", "ca-cateye-squeeze", "pixel-aspect"])
+def test_dof_bands_split_mixed_edge_pixels_as_the_whole_render(rt, lens, quality, monkeypatch):
+    """Antialiased depth edges: the mixed pixels a band splits (from its own rows and the
+    two beyond) and the gathers that read them are the whole render's, bit for bit, and the
+    bands' counts add up to the whole render's report line."""
+    from clfx.plugins.dof import MIXED_NOTE
+
+    src, depth = layered_aa((70, 90))
+    monkeypatch.setattr(effects, "depth_pass", lambda shape: depth)
+    kw, aspect = DOF_LENSES[lens]
+    p = effects.params("dof", **kw)
+    assert_tiles_give_the_whole_render(rt, "dof", p, quality, src, rows=7, pixel_aspect=aspect)
+    plugin = effects.plugin("dof")
+    said = []
+    for rows in (None, 7):
+        ctx = effects.context(rt, "dof", src, quality=quality,
+                              pixel_aspect=aspect).for_step(quality)
+        window = plugin.output_window(p, ctx)
+        render_tiled(rt, plugin, p, ctx, window, rows and window.width * rows)
+        said.append([n for n in ctx.notes if n.endswith(MIXED_NOTE)])
+    assert said[0] == said[1] and len(said[0]) == 1, said
+    assert int(said[0][0].split()[1]) > 100, said
+
+
 MOTION_SHUTTERS = {
     # (shutter params, layout): centred on the frame's own place; opening over two frames with
     # the data window inside the display window (the smear grows the window); closing short

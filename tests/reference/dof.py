@@ -15,6 +15,9 @@ import numpy as np
 NEAR_EPS = 0.25
 EDGE_PX = 1.0
 EDGE_TAU = 0.5
+MIX_MIN = 0.02
+MIX_TOL = 0.25
+MIX_GAP = 2.0
 CAP_FACTOR = 4.0
 TILE = 32
 
@@ -117,6 +120,50 @@ def prefilter_pyramid(src, levels, pad=0):
     return planes
 
 
+def mixed_pixels(src, r):
+    """Mixed edge pixels (``dof_mixed``): per pixel whose 3 x 3 radii ``r`` (edge-aware:
+    :func:`edge_radius`) have a gap (sorted) >= 1 px and >= MIX_GAP times the rest of
+    their range, with its neighbours (clamp-to-edge) split into a near layer
+    (radius below the mid-range) and a far one: over every pair (near n, far f), in row
+    order of n then f, C = f + a (n - f) + e (RGBA); a pair explains C when
+    MIX_MIN < a < 1 - MIX_MIN and |e| <= MIX_TOL min(|C - f|, |C - n|); the explaining pair
+    with the largest |n - f| (strictly) wins.  Returns (a, rn, rf, d = n - f); a = 0: not
+    mixed."""
+    h, w = r.shape
+    a = np.zeros((h, w))
+    rn = np.zeros((h, w))
+    rf = np.zeros((h, w))
+    d = np.zeros((h, w, 4))
+    ys, xs = np.mgrid[0:h, 0:w]
+    offs = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    R = np.stack([_clamped(r, ys + dy, xs + dx) for dy, dx in offs])
+    C = np.stack([_clamped(src, ys + dy, xs + dx) for dy, dx in offs])
+    gap = np.diff(np.sort(R, axis=0), axis=0).max(axis=0)
+    edge = (gap >= EDGE_PX) & (gap >= MIX_GAP * (R.max(0) - R.min(0) - gap))
+    for y, x in zip(*np.nonzero(edge)):
+        rr, cc = R[:, y, x], C[:, y, x]
+        mid = 0.5 * (rr.min() + rr.max())
+        best = 0.0
+        for jn in range(9):
+            if jn == 4 or not rr[jn] < mid:
+                continue
+            for jf in range(9):
+                if jf == 4 or rr[jf] < mid:
+                    continue
+                dd, ef, en = cc[jn] - cc[jf], cc[4] - cc[jf], cc[4] - cc[jn]
+                l2 = dd @ dd
+                if not l2 > best:
+                    continue
+                t = (ef @ dd) / l2
+                if not MIX_MIN < t < 1 - MIX_MIN:
+                    continue
+                e = ef - t * dd
+                if e @ e > MIX_TOL ** 2 * min(ef @ ef, en @ en):
+                    continue
+                best, a[y, x], d[y, x], rn[y, x], rf[y, x] = l2, t, dd, rr[jn], rr[jf]
+    return a, rn, rf, d
+
+
 def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area,
     aperture-space ox, oy, level L).  A tap of level L reads plane L of
@@ -135,6 +182,14 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     takes q's colour capped at :func:`hidden_caps` in luminance.
     out = far (1 - a) + near a, a = clamp(alpha, 0, 1), each field normalised; empty fields
     fall back to the other field, then to the centre pixel.
+
+    Mixed edge pixels (:func:`mixed_pixels` of the depth's radii; dense taps, L = 0, only):
+    a mixed tap q (coverage a_q, radii rn_q, rf_q, d_q) is two taps, its far part
+    C_q - a_q d_q of radius rf_q weighing 1 - a_q and its near part C_q + (1 - a_q) d_q of
+    radius rn_q weighing a_q (every weight above times its part's weight).  A mixed pixel p
+    is gathered twice, as its far part (r_p = rf_p, centre C_p - a_p d_p, its own centre tap
+    only its far part with weight 1) and as its near part (likewise): (1 - a_p) far + a_p
+    near.
     """
     src = np.asarray(src, np.float64)
     src = np.where(np.isfinite(src), src, 0.0)
@@ -144,61 +199,88 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     # the pyramid of the image extended past every tap (the kernel's padded buffer): a tap
     # outside reads the prefiltered extension, not the prefiltered image's edge
     pad = int(np.abs(taps[:, :2]).max()) + 1 if len(taps) else 0
-    planes = prefilter_pyramid(src, int(taps[:, 7].max()) if len(taps) else 0, pad)
-    lums = [0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2] for c in planes]
+    level = int(taps[:, 7].max()) if len(taps) else 0
+    planes = prefilter_pyramid(src, level, pad)
     cap = hidden_caps(src)
     h, w = r.shape
     ys, xs = np.mgrid[0:h, 0:w]
-    p_near = r < -NEAR_EPS
-    fn = np.zeros(src.shape)
-    ff = np.zeros(src.shape)
-    wn_sum = np.zeros((h, w))
-    wf_sum = np.zeros((h, w))
-    alpha = np.zeros((h, w))
+    mix_a, mix_rn, mix_rf, mix_d = mixed_pixels(src, r)
+    if level > 0:
+        mix_a = np.zeros_like(mix_a)
     if cateye is not None:
         cx, cy = (np.asarray(v, np.float64) for v in cateye)
         frac = open_fraction(np.hypot(cx, cy))
 
-    def barrel(rad, ax, ay, sign):   # coverage of the barrel circle for radius rad
-        return ramp(rad - np.hypot(ax + sign * cx * rad, ay + sign * cy * rad))
+    def gather(r0, c0, layer):
+        """Both fields of every pixel with radii ``r0`` (centre colours ``c0``); ``layer`` 1
+        (2): a mixed pixel's own centre tap is only its far (near) part."""
+        p_near = r0 < -NEAR_EPS
+        fn = np.zeros(src.shape)
+        ff = np.zeros(src.shape)
+        wn_sum = np.zeros((h, w))
+        wf_sum = np.zeros((h, w))
+        alpha = np.zeros((h, w))
+        for ox, oy, d_near, d_far, area, ax, ay, lv in taps:
+            inv_s = 2.0 ** -lv
 
-    for ox, oy, d_near, d_far, area, ax, ay, lv in taps:
-        inv_s = 2.0 ** -lv
+            def ramp(v):   # the coverage ramp of this tap's lattice
+                return np.clip(v * inv_s + 0.5, 0, 1)
 
-        def ramp(v):   # noqa: E306 (the coverage ramp of this tap's lattice)
-            return np.clip(v * inv_s + 0.5, 0, 1)
+            def barrel(rad, sign):   # coverage of the barrel circle for radius rad
+                return ramp(rad - np.hypot(ax + sign * cx * rad, ay + sign * cy * rad))
 
-        c = _clamped(planes[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
-        rq = _clamped(r, ys + int(oy), xs + int(ox))
-        arq = np.abs(rq)
-        q_near = rq < -NEAR_EPS
-        rf = np.where(p_near, np.maximum(arq, np.abs(r)),
-                      np.where(rq > r, np.minimum(arq, np.maximum(r, 0)), arq))
-        cov_n = ramp(arq - d_near)
-        cov_f = ramp(rf - d_far)
-        cov_q = ramp(arq - d_far)
-        area_n = math.pi * arq ** 2
-        if cateye is not None:
-            cov_n = np.minimum(cov_n, barrel(arq, ax, ay, -1))
-            cov_f = np.minimum(cov_f, barrel(rf, ax, ay, +1))
-            cov_q = np.minimum(cov_q, barrel(arq, ax, ay, +1))
-            area_n = area_n * frac
-        wn = np.where(q_near, cov_n / np.maximum(area_n, 1), 0)
-        norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1))
-        wf = cov_f * norm
-        fill = np.where(p_near, cov_f - np.minimum(cov_q, cov_f), 0) * norm
-        lq = _clamped(lums[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
-        k = np.minimum(1.0, cap / np.maximum(lq, 1e-30))   # pixel p's cap, tap q's luminance
-        fn += c * wn[..., None]
-        ff += c * (wf - fill + fill * k)[..., None]
-        wn_sum += wn
-        wf_sum += wf
-        alpha += wn * area
-    tiny = 1e-20
-    near = np.where((wn_sum > tiny)[..., None], fn / np.maximum(wn_sum, tiny)[..., None], src)
-    far = np.where((wf_sum > tiny)[..., None], ff / np.maximum(wf_sum, tiny)[..., None], near)
-    a = np.where(wf_sum > tiny, np.clip(alpha, 0, 1), 1.0)[..., None]
-    return far * (1 - a) + near * a
+            c = _clamped(planes[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
+            rq = _clamped(r, ys + int(oy), xs + int(ox))
+            aq = _clamped(mix_a, ys + int(oy), xs + int(ox))
+            dq = _clamped(mix_d, ys + int(oy), xs + int(ox))
+            sq = aq > 0
+            an = aq
+            if layer and ox == 0 and oy == 0:
+                an = np.where(sq, 1.0 if layer == 2 else 0.0, aq)
+            parts = ((c - dq * aq[..., None],
+                      np.where(sq, _clamped(mix_rf, ys + int(oy), xs + int(ox)), rq), 1 - an),
+                     (c + dq * (1 - aq)[..., None],
+                      np.where(sq, _clamped(mix_rn, ys + int(oy), xs + int(ox)), rq), an))
+            for cp, rp, fp in parts:
+                arq = np.abs(rp)
+                q_near = rp < -NEAR_EPS
+                rf = np.where(p_near, np.maximum(arq, np.abs(r0)),
+                              np.where(rp > r0, np.minimum(arq, np.maximum(r0, 0)), arq))
+                cov_n = ramp(arq - d_near)
+                cov_f = ramp(rf - d_far)
+                cov_q = ramp(arq - d_far)
+                area_n = math.pi * arq ** 2
+                if cateye is not None:
+                    cov_n = np.minimum(cov_n, barrel(arq, -1))
+                    cov_f = np.minimum(cov_f, barrel(rf, +1))
+                    cov_q = np.minimum(cov_q, barrel(arq, +1))
+                    area_n = area_n * frac
+                wn = np.where(q_near, cov_n / np.maximum(area_n, 1), 0) * fp
+                norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1)) * fp
+                wf = cov_f * norm
+                fill = np.where(p_near, cov_f - np.minimum(cov_q, cov_f), 0) * norm
+                lq = 0.2126 * cp[..., 0] + 0.7152 * cp[..., 1] + 0.0722 * cp[..., 2]
+                k = np.minimum(1.0, cap / np.maximum(lq, 1e-30))   # p's cap, the part's lum
+                fn += cp * wn[..., None]
+                ff += cp * (wf - fill + fill * k)[..., None]
+                wn_sum += wn
+                wf_sum += wf
+                alpha += wn * area
+        tiny = 1e-20
+        near = np.where((wn_sum > tiny)[..., None], fn / np.maximum(wn_sum, tiny)[..., None],
+                        c0)
+        far = np.where((wf_sum > tiny)[..., None], ff / np.maximum(wf_sum, tiny)[..., None],
+                       near)
+        a = np.where(wf_sum > tiny, np.clip(alpha, 0, 1), 1.0)[..., None]
+        return far * (1 - a) + near * a
+
+    split = mix_a > 0
+    if not split.any():
+        return gather(r, src, 0)
+    am = mix_a[..., None]
+    out_f = gather(np.where(split, mix_rf, r), src - mix_d * am, 1)
+    out_n = gather(np.where(split, mix_rn, r), src + mix_d * (1 - am), 2)
+    return np.where(split[..., None], out_f * (1 - am) + out_n * am, out_f)
 
 
 def dof_chromatic(src, depth, *, offsets, **kw):
