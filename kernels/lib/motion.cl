@@ -379,7 +379,7 @@ inline float4 mb_step_smear(const float4 pm2, const float4 pm1, const float4 p0,
  * between neighbouring taps (summed RGB) is under STEP_KAPPA of the largest (a plateau beside
  * an edge), 0 where every neighbour differs (smooth or pre-filtered texture: a camera's or
  * Cycles' wider pixel filter, where the step model over-sharpens). */
-#define STEP_KAPPA 0.02f
+#define STEP_KAPPA 0.001f
 #define STEP_MAX_PX 1.5f    /* smears up to a pixel take the step model, fading out by 1.5 px */
 inline float mb_stepness(const float4 pm2, const float4 pm1, const float4 p0, const float4 pp1,
                          const float4 pp2)
@@ -402,7 +402,7 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
                           float4 *step, float *st)
 {
   float4 tap[4];
-  float keep = 1.0f;
+  float keep = 1.0f, behind[4];
   for(int k = 0; k < 4; k++)
   {
     const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
@@ -412,10 +412,15 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
     const int iy = clfx_clampi((int)clamp(floor(y), (float)(row0 - 1), (float)row1), row0,
                                row1 - 1);
     const float z = vload4(iy * pitch + ix, aux).z;
-    keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
+    const float rel = (z0 - z) / (SOFT_Z * fmin(z0, z));
+    keep *= 1.0f - clamp(rel, 0.0f, 1.0f);
+    behind[k] = clamp(-rel, 0.0f, 1.0f);
   }
   *q = keep;
-  *step = mb_step_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
+  /* a neighbour behind x is what x's moving edge reveals: it enters flat, as it is (its far
+   * tap is taken as its own value), not as a step continuing x's surface */
+  *step = mb_step_smear(tap[0] + (tap[1] - tap[0]) * behind[1], tap[1], p0, tap[2],
+                        tap[3] + (tap[2] - tap[3]) * behind[2], len);
   *st = mb_stepness(tap[0], tap[1], p0, tap[2], tap[3]);
   return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
 }
