@@ -391,10 +391,41 @@ inline float mb_stepness(const float4 pm2, const float4 pm1, const float4 p0, co
   return clamp(1.0f - lo / fmax(STEP_KAPPA * hi, FLT_MIN), 0.0f, 1.0f);
 }
 
+/* The step model along one pixel axis (dx, dy) = (1, 0) or (0, 1) from the pixel (ix, iy):
+ * the five pixels p-2 .. p2 (clamped to the image, times `scale`), a neighbour behind x
+ * (depth z0) flattened (what x's moving edge reveals enters as it is, not as a step
+ * continuing x's surface); *st: its stepness.  Returns the change of p0 under a box of
+ * `len` px along the axis (0 when len is negligible). */
+inline float4 mb_step_axis(global const float *col, global const float *aux, const int pitch,
+                           const int w, const int row0, const int row1, const int ix,
+                           const int iy, const int dx, const int dy, const float4 p0,
+                           const float z0, const float len, const float scale, float *st)
+{
+  float4 tap[4];
+  float behind[4];
+  for(int k = 0; k < 4; k++)
+  {
+    const int o = k < 2 ? k - 2 : k - 1;                          /* -2, -1, 1, 2 */
+    const int i = clfx_clampi(iy + o * dy, row0, row1 - 1) * pitch
+                  + clfx_clampi(ix + o * dx, 0, w - 1);
+    tap[k] = vload4(i, col) * scale;
+    const float z = vload4(i, aux).z;
+    behind[k] = clamp((z - z0) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
+  }
+  *st = mb_stepness(tap[0], tap[1], p0, tap[2], tap[3]);
+  if(len < 1e-3f)
+    return (float4)(0.0f);
+  return mb_step_smear(tap[0] + (tap[1] - tap[0]) * behind[1], tap[1], p0, tap[2],
+                       tap[3] + (tap[2] - tap[3]) * behind[2], len) - p0;
+}
+
 /* The closed forms at the pixel centre (px, py) along (ux, uy), its colour p0 (times
  * `scale`), depth z0: the four taps read bilinearly, times `scale`; *q: how much of the
- * neighbourhood is x's own layer or behind it (a tap in front of x pulls it to 0); *step: the
- * step model's smear (mb_step_smear), *st: its weight (mb_stepness).  Returns mb_short_smear. */
+ * neighbourhood is x's own layer or behind it (a tap in front of x pulls it to 0).  Returns
+ * mb_short_smear.  *step: the step model's smear, taken along the pixel axes (the smear's
+ * parts len |ux| and len |uy|, their changes added: exact for edges along the pixel grid,
+ * whatever the motion's direction, where taps read along u between pixels would mix the
+ * patches), *st: its weight (the axes' stepness, weighted by their parts). */
 inline float4 mb_short_at(global const float *col, global const float *aux, const int pitch,
                           const int w, const int row0, const int row1, const float px,
                           const float py, const float ux, const float uy, const float4 p0,
@@ -402,7 +433,7 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
                           float4 *step, float *st)
 {
   float4 tap[4];
-  float keep = 1.0f, behind[4];
+  float keep = 1.0f;
   for(int k = 0; k < 4; k++)
   {
     const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
@@ -412,16 +443,20 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
     const int iy = clfx_clampi((int)clamp(floor(y), (float)(row0 - 1), (float)row1), row0,
                                row1 - 1);
     const float z = vload4(iy * pitch + ix, aux).z;
-    const float rel = (z0 - z) / (SOFT_Z * fmin(z0, z));
-    keep *= 1.0f - clamp(rel, 0.0f, 1.0f);
-    behind[k] = clamp(-rel, 0.0f, 1.0f);
+    keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
   }
   *q = keep;
-  /* a neighbour behind x is what x's moving edge reveals: it enters flat, as it is (its far
-   * tap is taken as its own value), not as a step continuing x's surface */
-  *step = mb_step_smear(tap[0] + (tap[1] - tap[0]) * behind[1], tap[1], p0, tap[2],
-                        tap[3] + (tap[2] - tap[3]) * behind[2], len);
-  *st = mb_stepness(tap[0], tap[1], p0, tap[2], tap[3]);
+  const int ix = clfx_clampi((int)clamp(floor(px), 0.0f, (float)(w - 1)), 0, w - 1);
+  const int iy = clfx_clampi((int)clamp(floor(py), (float)row0, (float)(row1 - 1)), row0,
+                             row1 - 1);
+  const float lx = len * fabs(ux), ly = len * fabs(uy);
+  float sx, sy;
+  const float4 ex = mb_step_axis(col, aux, pitch, w, row0, row1, ix, iy, 1, 0, p0, z0, lx,
+                                 scale, &sx);
+  const float4 ey = mb_step_axis(col, aux, pitch, w, row0, row1, ix, iy, 0, 1, p0, z0, ly,
+                                 scale, &sy);
+  *step = p0 + ex + ey;
+  *st = (lx * sx + ly * sy) / fmax(lx + ly, FLT_MIN);
   return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
 }
 
