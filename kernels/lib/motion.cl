@@ -399,7 +399,8 @@ inline float mb_stepness(const float4 pm2, const float4 pm1, const float4 p0, co
 inline float4 mb_step_axis(global const float *col, global const float *aux, const int pitch,
                            const int w, const int row0, const int row1, const int ix,
                            const int iy, const int dx, const int dy, const float4 p0,
-                           const float z0, const float len, const float scale, float *st)
+                           const float z0, const float len, const float scale, float *st,
+                           float4 *nm, float4 *np)
 {
   float4 tap[4];
   float behind[4];
@@ -413,6 +414,8 @@ inline float4 mb_step_axis(global const float *col, global const float *aux, con
     behind[k] = clamp((z - z0) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
   }
   *st = mb_stepness(tap[0], tap[1], p0, tap[2], tap[3]);
+  *nm = tap[1];
+  *np = tap[2];
   if(len < 1e-3f)
     return (float4)(0.0f);
   return mb_step_smear(tap[0] + (tap[1] - tap[0]) * behind[1], tap[1], p0, tap[2],
@@ -451,11 +454,22 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
                              row1 - 1);
   const float lx = len * fabs(ux), ly = len * fabs(uy);
   float sx, sy;
+  float4 xm, xp, ym, yp;
   const float4 ex = mb_step_axis(col, aux, pitch, w, row0, row1, ix, iy, 1, 0, p0, z0, lx,
-                                 scale, &sx);
+                                 scale, &sx, &xm, &xp);
   const float4 ey = mb_step_axis(col, aux, pitch, w, row0, row1, ix, iy, 0, 1, p0, z0, ly,
-                                 scale, &sy);
-  *step = p0 + ex + ey;
+                                 scale, &sy, &ym, &yp);
+  /* the cross term of a diagonal smear (the pixel's box moved along the line overlaps the
+   * diagonal neighbour ahead, and the one behind, by lx ly / 24 on average): without it a
+   * corner of a checker took the colour across both edges twice */
+  const int ox = ux >= 0.0f ? 1 : -1, oy = uy >= 0.0f ? 1 : -1;
+  const float4 da = vload4(clfx_clampi(iy + oy, row0, row1 - 1) * pitch
+                           + clfx_clampi(ix + ox, 0, w - 1), col) * scale;
+  const float4 db = vload4(clfx_clampi(iy - oy, row0, row1 - 1) * pitch
+                           + clfx_clampi(ix - ox, 0, w - 1), col) * scale;
+  const float4 xa = ox > 0 ? xp : xm, xb = ox > 0 ? xm : xp;
+  const float4 ya = oy > 0 ? yp : ym, yb = oy > 0 ? ym : yp;
+  *step = p0 + ex + ey + (lx * ly / 24.0f) * ((da - xa - ya + p0) + (db - xb - yb + p0));
   *st = (lx * sx + ly * sy) / fmax(lx + ly, FLT_MIN);
   return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
 }
