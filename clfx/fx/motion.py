@@ -155,13 +155,17 @@ def _summary(lvl: MotionLevel) -> str:
 
 
 SHORT_SPACING_PX = 1.0
-"""Sample spacing (px) on the tiles read through the clamped cubic (blurs under
-:data:`CUBIC_MAX_PX`), at every level: each read through the cubic smooths the texture a
-little (most at half-pixel offsets), and more samples at more offsets summed more of it, so
-finer levels ended further from the truth on short blurs (issue 35: Cycles' slow scene, rel.
+"""Sample spacing (px) at every level on tiles whose blur is under :data:`SHORT_MAX_PX` (read
+through the clamped cubic): each read through the cubic smooths the texture a little (most
+at half-pixel offsets), and more samples at more offsets summed more of it, so finer levels
+ended further from the truth on short blurs (issue 35: Cycles' slow scene at 320x180, rel.
 error 0.0243 draft, 0.0244 final, 0.0270 reference at spacings 1, 1/2, 1/4 px; 0.0243 at
-every level with a sample per pixel; the layered case 39.35 -> 39.88 dB, crossing 59.78 ->
-60.38 dB at final).  Longer blurs keep the level's own spacing (Cycles' truck: 0.0806 final,
+every level with a sample per pixel)."""
+
+SHORT_MAX_PX = 2.0
+"""Blurs (px) under which tiles take :data:`SHORT_SPACING_PX`; longer ones keep the level's
+spacing: small HDR lights streaking 6.7 px (``fast_light`` at 320x180) need their samples
+(final 49.22 dB with them, 47.59 at a sample per pixel), as do Cycles' truck (0.0806 final,
 0.0785 reference)."""
 
 
@@ -410,8 +414,8 @@ def _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved) ->
     length = nm[..., 2].astype(np.float64) * (t1 - t0)     # blur length of the tile's v_n
     ys, xs = np.nonzero(length >= MIN_BLUR_PX)
     length = length[ys, xs]
-    spacing = np.where(length < level.cubic_max_px, level.short_spacing or level.spacing,
-                       level.spacing)
+    spacing = np.where(length < min(level.cubic_max_px, SHORT_MAX_PX),
+                       level.short_spacing or level.spacing, level.spacing)
     n = np.clip(np.ceil(length / spacing), 2, level.max_samples).astype(np.int32)
     jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
     stats = BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()) if n.size else 0)
