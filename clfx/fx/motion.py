@@ -147,7 +147,7 @@ class MotionLevel(Level):
 def _summary(lvl: MotionLevel) -> str:
     return (f"up to {lvl.max_samples} samples per pixel (one per {lvl.spacing:g} px of the "
             f"tile's blur length, {lvl.short_spacing or lvl.spacing:g} px under "
-            f"{CUBIC_MAX_PX:g} px), {'bilinear' if lvl.bilinear else 'nearest'} colour fetches "
+            f"{SHORT_MAX_PX:g} px), {'bilinear' if lvl.bilinear else 'nearest'} colour fetches "
             f"(clamped cubic under {CUBIC_MAX_PX:g} px), "
             f"{'float64' if lvl.fp64 else 'float32'} accumulation, midpoint rule"
             f"{f' (per-pixel jitter where samples are over {JITTER_SPACING_PX:g} px apart)' if lvl.jitter else ''}; "
