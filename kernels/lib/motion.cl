@@ -378,17 +378,25 @@ inline float4 mb_step_smear(const float4 pm2, const float4 pm1, const float4 p0,
 /* How much the taps look like flat patches with hard edges: 1 where the smallest step
  * between neighbouring taps (summed RGB) is under STEP_KAPPA of the largest (a plateau beside
  * an edge), 0 where every neighbour differs (smooth or pre-filtered texture: a camera's or
- * Cycles' wider pixel filter, where the step model over-sharpens). */
+ * Cycles' wider pixel filter, where the step model over-sharpens) and where three steps in a
+ * row go the same way by more than STEP_RAMP of the largest (a ramp: an edge slanted across
+ * the axis, or a soft one, spans more than the one pixel a hard edge covers). */
 #define STEP_KAPPA 0.001f
+#define STEP_RAMP 0.1f
 #define STEP_MAX_PX 1.5f    /* smears up to a pixel take the step model, fading out by 1.5 px */
 inline float mb_stepness(const float4 pm2, const float4 pm1, const float4 p0, const float4 pp1,
                          const float4 pp2)
 {
   const float3 one = (float3)(1.0f);
-  const float d0 = fabs(dot(pm1.xyz - pm2.xyz, one)), d1 = fabs(dot(p0.xyz - pm1.xyz, one));
-  const float d2 = fabs(dot(pp1.xyz - p0.xyz, one)), d3 = fabs(dot(pp2.xyz - pp1.xyz, one));
-  const float lo = fmin(fmin(d0, d1), fmin(d2, d3)), hi = fmax(fmax(d0, d1), fmax(d2, d3));
-  return clamp(1.0f - lo / fmax(STEP_KAPPA * hi, FLT_MIN), 0.0f, 1.0f);
+  const float d0 = dot(pm1.xyz - pm2.xyz, one), d1 = dot(p0.xyz - pm1.xyz, one);
+  const float d2 = dot(pp1.xyz - p0.xyz, one), d3 = dot(pp2.xyz - pp1.xyz, one);
+  const float a0 = fabs(d0), a1 = fabs(d1), a2 = fabs(d2), a3 = fabs(d3);
+  const float lo = fmin(fmin(a0, a1), fmin(a2, a3)), hi = fmax(fmax(a0, a1), fmax(a2, a3));
+  const float s1 = d1 >= 0.0f ? 1.0f : -1.0f, s2 = d2 >= 0.0f ? 1.0f : -1.0f;
+  const float ramp = fmax(fmin(fmin(s1 * d0, a1), s1 * d2), fmin(fmin(s2 * d1, a2), s2 * d3));
+  const float scale = fmax(hi, FLT_MIN);
+  return clamp(1.0f - lo / fmax(STEP_KAPPA * hi, FLT_MIN), 0.0f, 1.0f)
+         * clamp(1.0f - fmax(ramp, 0.0f) / (STEP_RAMP * scale), 0.0f, 1.0f);
 }
 
 /* The step model along one pixel axis (dx, dy) = (1, 0) or (0, 1) from the pixel (ix, iy):
@@ -428,7 +436,7 @@ inline float4 mb_step_axis(global const float *col, global const float *aux, con
  * mb_short_smear.  *step: the step model's smear, taken along the pixel axes (the smear's
  * parts len |ux| and len |uy|, their changes added: exact for edges along the pixel grid,
  * whatever the motion's direction, where taps read along u between pixels would mix the
- * patches), *st: its weight (the axes' stepness, weighted by their parts). */
+ * patches), *st: its weight (the stepness of the axes that carry a fair part of it). */
 inline float4 mb_short_at(global const float *col, global const float *aux, const int pitch,
                           const int w, const int row0, const int row1, const float px,
                           const float py, const float ux, const float uy, const float4 p0,
@@ -470,7 +478,10 @@ inline float4 mb_short_at(global const float *col, global const float *aux, cons
   const float4 xa = ox > 0 ? xp : xm, xb = ox > 0 ? xm : xp;
   const float4 ya = oy > 0 ? yp : ym, yb = oy > 0 ? ym : yp;
   *step = p0 + ex + ey + (lx * ly / 24.0f) * ((da - xa - ya + p0) + (db - xb - yb + p0));
-  *st = (lx * sx + ly * sy) / fmax(lx + ly, FLT_MIN);
+  /* both axes that carry a fair part of the smear must look like steps */
+  const float gx = clamp(4.0f * lx / fmax(lx + ly, FLT_MIN), 0.0f, 1.0f);
+  const float gy = clamp(4.0f * ly / fmax(lx + ly, FLT_MIN), 0.0f, 1.0f);
+  *st = fmin(1.0f - gx * (1.0f - sx), 1.0f - gy * (1.0f - sy));
   return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
 }
 

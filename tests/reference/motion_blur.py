@@ -114,6 +114,7 @@ def short_smear(src, velocity, *, t0, t1):
 
 
 STEP_KAPPA = 0.001    # a plateau: neighbouring pixels within this fraction of the largest step
+STEP_RAMP = 0.1      # three steps the same way, each over this fraction of the largest: a ramp
 STEP_MAX_PX = 1.5     # the step model fades out between 1 px and this smear
 
 
@@ -147,10 +148,18 @@ def _step_along(p, length):
 
 def _stepness(p):
     """1 where the smallest step between neighbouring pixels (summed RGB) is under
-    ``STEP_KAPPA`` of the largest (a plateau beside an edge), falling to 0 at it."""
-    d = np.stack([np.abs((p[k + 1] - p[k])[..., :3].sum(-1)) for k in (-2, -1, 0, 1)])
+    ``STEP_KAPPA`` of the largest (a plateau beside an edge), falling to 0 at it; times 0
+    where three steps in a row go the same way by ``STEP_RAMP`` of the largest (a ramp)."""
+    d = [(p[k + 1] - p[k])[..., :3].sum(-1) for k in (-2, -1, 0, 1)]
+    a = np.abs(np.stack(d))
+    lo, hi = a.min(0), a.max(0)
+    s1, s2 = np.where(d[1] >= 0, 1.0, -1.0), np.where(d[2] >= 0, 1.0, -1.0)
+    ramp = np.maximum(np.minimum(np.minimum(s1 * d[0], a[1]), s1 * d[2]),
+                      np.minimum(np.minimum(s2 * d[1], a[2]), s2 * d[3]))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.clip(1.0 - d.min(0) / np.maximum(STEP_KAPPA * d.max(0), 1e-300), 0.0, 1.0)
+        plateau = np.clip(1.0 - lo / np.maximum(STEP_KAPPA * hi, 1e-300), 0.0, 1.0)
+        return plateau * np.clip(1.0 - np.maximum(ramp, 0.0) / (STEP_RAMP * np.maximum(
+            hi, 1e-300)), 0.0, 1.0)
 
 
 def step_smear(src, velocity, *, t0, t1):
@@ -158,8 +167,8 @@ def step_smear(src, velocity, *, t0, t1):
     smear's parts ``L |ux|`` and ``L |uy|`` along the pixel axes (:func:`_step_along`, the
     pixels at +-1 and +-2, clamp-to-edge) added, plus the cross term of a diagonal smear
     (``Lx Ly / 24`` times the mixed differences with the diagonal neighbours ahead and
-    behind); and its weight (the axes' stepness weighted by their parts).  Returns (smear,
-    weight)."""
+    behind); and its weight (the stepness of each axis carrying over a quarter of the smear,
+    the least of them; an axis with less counts in proportion).  Returns (smear, weight)."""
     src = _sanitise(src)
     h, w = src.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w]
@@ -177,7 +186,8 @@ def step_smear(src, velocity, *, t0, t1):
     ox, oy = (1 if ux >= 0 else -1), (1 if uy >= 0 else -1)
     cross = ((at(ox, oy) - px[ox] - py[oy] + src) + (at(-ox, -oy) - px[-ox] - py[-oy] + src))
     out = src + _step_along(px, lx) + _step_along(py, ly) + (lx * ly / 24.0) * cross
-    weight = (lx * _stepness(px) + ly * _stepness(py)) / max(lx + ly, 1e-300)
+    gx, gy = (min(max(4.0 * part / max(lx + ly, 1e-300), 0.0), 1.0) for part in (lx, ly))
+    weight = np.minimum(1.0 - gx * (1.0 - _stepness(px)), 1.0 - gy * (1.0 - _stepness(py)))
     return out, weight
 
 
