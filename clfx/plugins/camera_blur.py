@@ -177,7 +177,7 @@ texture left draft 0.08 dB below the naive per-pixel line blur (39.07 vs 39.14 d
 
 def _quality(name, lvl):
     bilinear = lvl.bilinear and name not in FAST_LEVELS
-    return replace(lvl, bilinear=bilinear, summary=(
+    return replace(lvl, bilinear=bilinear, short_spacing=0.0, summary=(
         f"pan/roll/zoom: exact path gather, up to {lvl.max_samples} samples (one per "
         f"{lvl.spacing:g} px of the longest path), {'bilinear' if bilinear else 'nearest'}, "
         f"{'float64' if lvl.fp64 else 'float32'} accumulation"

@@ -15,7 +15,8 @@
  *                            on the host): N samples along the neighbourhood's dominant
  *                            velocity, depth-aware scatter-as-gather weights; built with
  *                            CUBIC=1 for the short tiles (clamped cubic / tent reads; under
- *                            3/8 px of own smear the closed form mb_short_smear instead)
+ *                            3/8 px of own smear the closed form mb_short_smear instead;
+ *                            under 1.5 px the step model mb_step_smear, by its stepness)
  *
  * Sample model of the gather (see clfx/fx/motion.py): the output pixel x collects the
  * colours of samples y_i = x - v_n t_i, t_i stratified over the open shutter [t0, t1] at the
