@@ -153,11 +153,19 @@ on Cycles' truck (48.6 vs 48.5; pan level)."""
 
 _BASE_LEVELS = dict(LEVELS, draft=replace(LEVELS["draft"], max_samples=10))
 
+CAMERA_SPACING = {"draft": 0.5, "preview": 0.5, "final": 0.25, "reference": 0.25}
+"""Trucking's sample spacing (px of blur) per level, short blurs included.  ``final`` used
+half a pixel like the faster levels and ended the worst level on Cycles' pan (rel. error
+0.0477 against draft's 0.0459 and reference's 0.0437, 320x180): its samples half a pixel
+apart along the pan's 10 px blur read the texture at two sub-pixel offsets, both blurred by
+the bilinear read; a quarter pixel scores 0.0437 (truck 0.0416 -> 0.0414, issue 35)."""
+
 CAMERA_LEVELS = {name: replace(lvl, cubic_max_px=CAMERA_CUBIC_MAX_PX,
-                               spacing=min(lvl.spacing, 0.5))
+                               spacing=CAMERA_SPACING[name], short_spacing=0.0)
                  for name, lvl in _BASE_LEVELS.items()}
 """The motion gather's levels (:data:`clfx.fx.motion.LEVELS`) for trucking, with the cubic
-only under :data:`CAMERA_CUBIC_MAX_PX`, a sample per half pixel of blur at every level (the
+only under :data:`CAMERA_CUBIC_MAX_PX`, a sample per half pixel of blur or less at every level
+(:data:`CAMERA_SPACING`; short blurs too: motion_blur's ``short_spacing`` is not used; the
 background's blurs of a few pixels took 3 samples at draft and preview, which ended below the
 naive line blur's 5: 36.1 vs 36.3 dB at 480x270; 36.4 with them, the cap still bounding
 long blurs) and 10 samples at most for draft instead of 8: on the bench case
@@ -169,13 +177,13 @@ texture left draft 0.08 dB below the naive per-pixel line blur (39.07 vs 39.14 d
 
 def _quality(name, lvl):
     bilinear = lvl.bilinear and name not in FAST_LEVELS
-    return replace(lvl, bilinear=bilinear, summary=(
+    return replace(lvl, bilinear=bilinear, short_spacing=0.0, summary=(
         f"pan/roll/zoom: exact path gather, up to {lvl.max_samples} samples (one per "
         f"{lvl.spacing:g} px of the longest path), {'bilinear' if bilinear else 'nearest'}, "
         f"{'float64' if lvl.fp64 else 'float32'} accumulation"
         f"{'' if lvl.jitter else ', midpoint rule'}; trucking: the motion gather "
         f"(motion_blur's), up to {lvl.max_samples} samples (one per "
-        f"{min(lvl.spacing, 0.5):g} px), clamped cubic under {CAMERA_CUBIC_MAX_PX:g} px, "
+        f"{CAMERA_SPACING[name]:g} px), clamped cubic under {CAMERA_CUBIC_MAX_PX:g} px, "
         f"bilinear above"))
 
 

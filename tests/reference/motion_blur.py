@@ -7,9 +7,11 @@ positions (pixel centres at +0.5), over ``n`` instants of the open shutter ``[t0
 - ``line_blur``: one constant velocity (the exact box line blur; camera pan); ``interp =
   "cubic"`` reads through the clamped Catmull-Rom the gather uses on short blurs (``beta``:
   its blend with the tent, as ``mb_beta``).
-- ``short_smear``: the closed form of a sub-pixel smear along one velocity (``mb_short_smear``)
-  and ``short_blur``: what the gather makes of one velocity under a pixel of smear through a
-  centred shutter, the closed form blended with the cubic line blur by the smear's length.
+- ``short_smear``: the closed form of a sub-pixel smear along one velocity (``mb_short_smear``),
+  ``step_smear``: the step model of flat patches with hard edges (``mb_step_smear`` along the
+  pixel axes) and its weight, and ``short_blur``: what the gather makes of one velocity under
+  1.5 px of smear through a centred shutter, the closed form blended with the cubic line blur
+  by the smear's length, the step model over both by its weight.
 - ``naive_blur``: the naive baseline — each pixel blurred along its *own* velocity (no
   tiles, no depth, no scatter): what a per-pixel directional blur does.
 - ``similarity_blur``: the camera's image-plane motion ``p(t) = c + (1 + zoom t) R(roll t)
@@ -111,15 +113,98 @@ def short_smear(src, velocity, *, t0, t1):
     return src + (smooth + alt * (0.125 * length - smooth)) * d2
 
 
+STEP_KAPPA = 0.001    # a plateau: neighbouring pixels within this fraction of the largest step
+STEP_RAMP = 0.1      # three steps the same way, each over this fraction of the largest: a ramp
+STEP_MAX_PX = 1.5     # the step model fades out between 1 px and this smear
+
+
+def _step_mean(pm, pk, pp, a, b):
+    """Mean over ``[a, b]`` (cell coordinates -1/2 .. 1/2) of the running integral, from the
+    cell's left side, of the cell ``pk`` rebuilt as a step between its neighbours ``pm`` and
+    ``pp`` (monotone cells; extrema and plateaus stay flat), the step placed so that the cell
+    keeps its mean."""
+    mono = (pm - pk) * (pk - pp) > 0.0
+    left, right = np.where(mono, pm, pk), np.where(mono, pp, pk)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xe = np.where(mono, (right - pk) / np.where(mono, right - left, 1.0) - 0.5, 0.0)
+    ra, rb = np.maximum(a - xe, 0.0), np.maximum(b - xe, 0.0)
+    return (left * ((b + 0.5) ** 2 - (a + 0.5) ** 2) / 2 + (right - left) * (rb ** 2 - ra ** 2)
+            / 2) / (b - a)
+
+
+def _step_along(p, length):
+    """Change of ``p[0]`` under a centred box of ``length`` <= 1 px along one axis, every
+    cell a step (:func:`_step_mean`): the mean over ``tau`` in ``[0, length / 2]`` of the
+    row moved by ``+tau`` and by ``-tau``."""
+    if length < 1e-3:
+        return 0.0 * p[0]
+    h = 0.5 * min(length, 1.0)
+    plus = (p[-1] - _step_mean(p[-2], p[-1], p[0], 0.5 - h, 0.5)
+            + _step_mean(p[-1], p[0], p[1], 0.5 - h, 0.5))
+    minus = (_step_mean(p[0], p[1], p[2], -0.5, h - 0.5) + p[0]
+             - _step_mean(p[-1], p[0], p[1], -0.5, h - 0.5))
+    return 0.5 * (plus + minus) - p[0]
+
+
+def _stepness(p):
+    """1 where the smallest step between neighbouring pixels (summed RGB) is under
+    ``STEP_KAPPA`` of the largest (a plateau beside an edge), falling to 0 at it; times 0
+    where three steps in a row go the same way by ``STEP_RAMP`` of the largest (a ramp)."""
+    d = [(p[k + 1] - p[k])[..., :3].sum(-1) for k in (-2, -1, 0, 1)]
+    a = np.abs(np.stack(d))
+    lo, hi = a.min(0), a.max(0)
+    s1, s2 = np.where(d[1] >= 0, 1.0, -1.0), np.where(d[2] >= 0, 1.0, -1.0)
+    ramp = np.maximum(np.minimum(np.minimum(s1 * d[0], a[1]), s1 * d[2]),
+                      np.minimum(np.minimum(s2 * d[1], a[2]), s2 * d[3]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        plateau = np.clip(1.0 - lo / np.maximum(STEP_KAPPA * hi, 1e-300), 0.0, 1.0)
+        return plateau * np.clip(1.0 - np.maximum(ramp, 0.0) / (STEP_RAMP * np.maximum(
+            hi, 1e-300)), 0.0, 1.0)
+
+
+def step_smear(src, velocity, *, t0, t1):
+    """The step model of a sub-pixel smear of flat patches with hard edges, one depth: the
+    smear's parts ``L |ux|`` and ``L |uy|`` along the pixel axes (:func:`_step_along`, the
+    pixels at +-1 and +-2, clamp-to-edge) added, plus the cross term of a diagonal smear
+    (``Lx Ly / 24`` times the mixed differences with the diagonal neighbours ahead and
+    behind); and its weight (the stepness of each axis carrying over a quarter of the smear,
+    the least of them; an axis with less counts in proportion).  Returns (smear, weight)."""
+    src = _sanitise(src)
+    h, w = src.shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w]
+    v = np.asarray(velocity, np.float64)
+    speed = math.hypot(v[0], v[1])
+    length = speed * (t1 - t0)
+    ux, uy = v[0] / speed, v[1] / speed
+    lx, ly = length * abs(ux), length * abs(uy)
+
+    def at(dx, dy):
+        return src[np.clip(ys + dy, 0, h - 1), np.clip(xs + dx, 0, w - 1)]
+
+    px = {k: at(k, 0) for k in (-2, -1, 0, 1, 2)}
+    py = {k: at(0, k) for k in (-2, -1, 0, 1, 2)}
+    ox, oy = (1 if ux >= 0 else -1), (1 if uy >= 0 else -1)
+    cross = ((at(ox, oy) - px[ox] - py[oy] + src) + (at(-ox, -oy) - px[-ox] - py[-oy] + src))
+    out = src + _step_along(px, lx) + _step_along(py, ly) + (lx * ly / 24.0) * cross
+    gx, gy = (min(max(4.0 * part / max(lx + ly, 1e-300), 0.0), 1.0) for part in (lx, ly))
+    weight = np.minimum(1.0 - gx * (1.0 - _stepness(px)), 1.0 - gy * (1.0 - _stepness(py)))
+    return out, weight
+
+
 def short_blur(src, velocity, *, t0, t1, n):
-    """The gather on one velocity whose smear ``L`` is under half a pixel, centred shutter:
-    the closed form :func:`short_smear` where the fetch would be the tent (``L`` <= 3/8 px),
-    the line blur of ``n`` midpoint samples read through the tent-blended cubic from 1/2 px
-    on, linearly between (``beta = clip((L - 3/8) 8, 0, 1)``)."""
+    """The gather on one velocity whose smear ``L`` is under 1.5 px, centred shutter, one
+    depth: the closed form :func:`short_smear` where the fetch would be the tent (``L`` <=
+    3/8 px), the line blur of ``n`` midpoint samples read through the tent-blended cubic from
+    1/2 px on, linearly between (``beta = clip((L - 3/8) 8, 0, 1)``); then the step model
+    (:func:`step_smear`) blended in by its weight, in full up to a pixel of smear and fading
+    out by ``STEP_MAX_PX``."""
     length = math.hypot(*velocity) * (t1 - t0)
     beta = min(max((length - 0.375) * 8.0, 0.0), 1.0)
     line = line_blur(src, velocity, t0=t0, t1=t1, n=n, interp="cubic", beta=beta)
-    return line + (1.0 - beta) * (short_smear(src, velocity, t0=t0, t1=t1) - line)
+    base = line + (1.0 - beta) * (short_smear(src, velocity, t0=t0, t1=t1) - line)
+    step, weight = step_smear(src, velocity, t0=t0, t1=t1)
+    fade = min(max((STEP_MAX_PX - length) / (STEP_MAX_PX - 1.0), 0.0), 1.0)
+    return base + (weight * fade)[..., None] * (step - base)
 
 
 def naive_blur(src, velocity, *, t0, t1, n=256):
