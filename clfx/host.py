@@ -20,7 +20,7 @@ from clfx.core.errors import ClipError, ParamError
 from clfx.core.frame import crop_to
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Descriptor, Level, Params
 from clfx.core.rect import Rect
-from clfx.fx.analysis import analyse
+from clfx.fx.analysis import MID_GREY, analyse
 
 
 # -- render context ------------------------------------------------------------------------
@@ -62,6 +62,15 @@ class StepPlan:
     derive).  ``identity``: the reason the step has nothing to do on this frame, or None."""
 
     identity: str | None = None
+
+
+@dataclass(frozen=True)
+class ExposurePlan(StepPlan):
+    """The plan of an effect relative to the plate's exposure (grain, sensor noise): its
+    middle grey, stated or metered on the whole frame (`clfx.fx.analysis.exposure_reference`)
+    once per step, so every band of a tiled render uses the frame's."""
+
+    middle_grey: float = MID_GREY
 
 
 @dataclass(frozen=True)

@@ -93,9 +93,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
-from clfx.fx.analysis import MID_GREY, exposure_reference
+from clfx.fx.analysis import MID_GREY, MIDDLE_GREY_AUTO, exposure_reference
 from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
-from clfx.host import Plugin, register
+from clfx.host import ExposurePlan, Plugin, register
 
 SENSOR_SALT = 0x73656E73  # "sens"
 PRNU_SALT = 0x70726E75    # "prnu"
@@ -144,10 +144,12 @@ def electrons_per_unit(p, camera, reference: float = MID_GREY) -> tuple[float, f
 
 
 def noise_variance(v, p, camera, channel=1, reference: float = MID_GREY):
-    """The model's variance of the output at linear value ``v`` (PRNU aside)."""
+    """The model's variance of the output at clean linear value ``v``: shot noise and PRNU
+    below the full well (a full site reads full: neither at or above it), read noise."""
     g = 1.0 / electrons_per_unit(p, camera, reference)[channel]
-    shot = g * np.maximum(v, 0.0) if p.shot_noise else 0.0
-    return shot + (g * p.read_noise) ** 2
+    below = np.where(np.asarray(v) >= p.full_well * g, 0.0, np.maximum(v, 0.0))
+    shot = g * below if p.shot_noise else 0.0
+    return shot + (g * p.read_noise) ** 2 + (p.prnu * below) ** 2
 
 
 @register
@@ -169,13 +171,15 @@ class SensorNoise(Plugin):
                        hint="ISO at which the sensor collects full_well electrons per unit "
                             "of linear value (unity analogue gain)."),
             FloatParam("full_well", 10000.0, min=1.0, max=1e7, units="e-",
-                       hint="Electrons collected for a scene-linear value of 1.0 at base ISO "
-                            "on a plate whose middle grey is 0.18 (see middle_grey)."),
-            FloatParam("middle_grey", MID_GREY, min=0.0, max=1e6,
+                       hint="A photosite's capacity: the electrons it collects for a "
+                            "scene-linear value of 1.0 at base ISO on a plate whose middle grey "
+                            "is 0.18 (see middle_grey); a full site reads full (no shot "
+                            "noise above it)."),
+            FloatParam("middle_grey", 0.0, min=0.0, max=1e6, auto=MIDDLE_GREY_AUTO,
                        hint="Scene-linear value the camera exposed as middle grey: electrons "
                             "scale by 0.18 / middle_grey, so a plate at any exposure gets the "
-                            "same noise; 0 = meter each frame (log-average luminance, as "
-                            "grain's)."),
+                            "same noise; auto (or 0) = meter each frame as grain does "
+                            "(--explain prints the value)."),
             BoolParam("shot_noise", True,
                       hint="Poisson photon noise (variance proportional to the signal)."),
             FloatParam("read_noise", 3.0, min=0.0, max=1e4, units="e-",
@@ -211,6 +215,9 @@ class SensorNoise(Plugin):
         if not p.shot_noise and p.read_noise == 0.0 and p.prnu == 0.0:
             return "shot noise is off, read noise and prnu are 0"
         return None
+
+    def plan(self, p, ctx):
+        return ExposurePlan(middle_grey=exposure_reference(p, ctx, "sensor_noise"))
 
     def prnu_pattern(self, rt, p, ctx, fp64):
         """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, kept in ``rt.cache`` per
@@ -260,7 +267,8 @@ class SensorNoise(Plugin):
                    "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT}
         pattern = self.prnu_pattern(rt, p, ctx, lvl.fp64) if p.prnu > 0 else src  # src: unread
         kr, kg, kb = (np.float32(k) for k in
-                      electrons_per_unit(p, ctx.camera, exposure_reference(p, ctx)))
+                      electrons_per_unit(p, ctx.camera, self.planned(p, ctx).middle_grey))
+        well, prnu, read = np.float32(p.full_well), np.float32(p.prnu), np.float32(p.read_noise)
         seed = np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT))
         x0, y0 = np.int32(src.window.x0), np.int32(src.window.y0)
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
@@ -272,15 +280,16 @@ class SensorNoise(Plugin):
                         MOSAIC=int(demosaic), COVERAGE=coverage * int(last), **defines)
         rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
                   np.int32(src.height), x0, y0, seed, np.int32(ctx.frame),
-                  kr, kg, kb, np.float32(p.read_noise))
+                  kr, kg, kb, read, well, prnu)
         if last:
             return dst
         out = src.like()
         cell = max(p.chroma_size * ctx.diagonal_px, 1.0)
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_demosaic", DEMOSAIC=int(demosaic),
-                        CHROMA=int(chroma), COVERAGE=coverage, **ctx.luminance_defines)
+                        CHROMA=int(chroma), COVERAGE=coverage, SHOT=defines["SHOT"],
+                        **ctx.luminance_defines)
         rt.launch(knl, (src.pitch, src.height), src, dst, out, np.int32(src.pitch),
                   np.int32(src.window.width), np.int32(src.height), x0, y0, seed,
-                  np.int32(ctx.frame), np.float32(1.0 / float(kg)), np.float32(p.read_noise),
+                  np.int32(ctx.frame), kr, kg, kb, read, prnu, well,
                   np.float32(p.chroma_noise), np.float32(1.0 / cell))
         return out
