@@ -366,6 +366,15 @@ class Plugin:
         """Enqueue the effect; return a DeviceImage (the source itself must not be changed)."""
         raise NotImplementedError
 
+    def passes_after(self, rt, p: Params, ctx: RenderContext, out, later: set) -> dict:
+        """Passes realigned with this step's output ``out`` for the steps after it that read
+        them (``later``: the clip names they read), by name (``"velocity"``...), each over
+        ``out.window``: an effect that moves colour (motion blur's smear) moves what the
+        passes say about it, so a later effect (rolling shutter) reads passes that describe
+        the image it gets.  The pipeline extends the passes not returned by their edges, as
+        for any step that grows the window.  Default: none."""
+        return {}
+
     def prepare(self, rt, p: Params, ctx: RenderContext) -> None:
         """Build, through ``rt.cache``, what ``render`` will ask the cache for and that depends
         only on the parameters and the frame's geometry (maps, tables), so a sequence's first
