@@ -20,7 +20,7 @@ from clfx.core.errors import ClipError, ParamError
 from clfx.core.frame import crop_to
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Descriptor, Level, Params
 from clfx.core.rect import Rect
-from clfx.fx.analysis import analyse
+from clfx.fx.analysis import MID_GREY, analyse
 
 
 # -- render context ------------------------------------------------------------------------
@@ -62,6 +62,15 @@ class StepPlan:
     derive).  ``identity``: the reason the step has nothing to do on this frame, or None."""
 
     identity: str | None = None
+
+
+@dataclass(frozen=True)
+class ExposurePlan(StepPlan):
+    """The plan of an effect relative to the plate's exposure (grain, sensor noise): its
+    middle grey, stated or metered on the whole frame (`clfx.fx.analysis.exposure_reference`)
+    once per step, so every band of a tiled render uses the frame's."""
+
+    middle_grey: float = MID_GREY
 
 
 @dataclass(frozen=True)
@@ -356,6 +365,15 @@ class Plugin:
     def render(self, rt, p: Params, ctx: RenderContext):
         """Enqueue the effect; return a DeviceImage (the source itself must not be changed)."""
         raise NotImplementedError
+
+    def passes_after(self, rt, p: Params, ctx: RenderContext, out, later: set) -> dict:
+        """Passes realigned with this step's output ``out`` for the steps after it that read
+        them (``later``: the clip names they read), by name (``"velocity"``...), each over
+        ``out.window``: an effect that moves colour (motion blur's smear) moves what the
+        passes say about it, so a later effect (rolling shutter) reads passes that describe
+        the image it gets.  The pipeline extends the passes not returned by their edges, as
+        for any step that grows the window.  Default: none."""
+        return {}
 
     def prepare(self, rt, p: Params, ctx: RenderContext) -> None:
         """Build, through ``rt.cache``, what ``render`` will ask the cache for and that depends

@@ -135,6 +135,22 @@ kernel void sensor_noise_prnu(global float *pattern, const int pitch, const int 
            pattern + (size_t)(y * pitch + x) * 4);
 }
 
+/* The model's deviation of the output at clean linear values v (g: linear units per
+ * electron, vsat: the full well in linear units): shot noise below the well (none at or
+ * above: a full well reads full), read noise, PRNU below the well.  sn_sigma4 below is the
+ * same for one float4 pixel. */
+inline REAL16 sn_sigma16(const REAL16 v, const REAL16 g, const REAL16 vsat, const REAL read_e,
+                         const REAL prnu)
+{
+  const REAL zero = (REAL)0;
+  const REAL16 below = select(max(v, zero), (REAL16)zero, v >= vsat);
+  REAL16 var = (read_e * g) * (read_e * g) + (prnu * below) * (prnu * below);
+#if SHOT
+  var += g * below;
+#endif
+  return sqrt(var);
+}
+
 /* CFA colour of frame pixel (X, Y): 0 R, 1 G, 2 B (RGGB) */
 inline int sn_cfa(int fx, int fy)
 {
@@ -147,7 +163,7 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
                                const int height, const int fx0, const int fy0,
                                const uint seed, const int frame,
                                const float kr, const float kg, const float kb,
-                               const float read_e)
+                               const float read_e, const float well, const float prnu)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
@@ -166,10 +182,18 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
   const REAL16 k16 = (REAL16)(kr, kg, kb, zero, kr, kg, kb, zero,
                               kr, kg, kb, zero, kr, kg, kb, zero);
   const REAL16 g16 = select((REAL16)zero, (REAL)1 / k16, k16 > zero);
+  /* the full well: a site holds at most `well` electrons (vsat in linear units); a full
+   * well reads full, whatever more light fell on it and whatever its gain error */
+  const REAL16 vsat = (REAL)well * g16;
 
 #if PRNU
   /* photo-response non-uniformity: a fixed per-pixel, per-channel gain 1 + prnu z */
-  v *= (REAL)1 + TO_REAL16(vload16(0, pattern + i));
+  {
+    const REAL16 vc = v;
+    v *= (REAL)1 + TO_REAL16(vload16(0, pattern + i));
+    /* at the well: the reading changes only by what stays below it */
+    v = select(v, vc + (min(v, vsat) - min(vc, vsat)), max(v, vc) >= vsat);
+  }
 #endif
 
   REAL16 out = v;
@@ -231,6 +255,8 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
       dev = select(dev, (n - ls) * g16, small);
     }
 #endif
+    /* the count cannot pass the well: a site at or above it reads exactly full */
+    dev = select(min(dev, vsat - vpos), (REAL16)zero, vpos >= vsat);
     out += dev;
   }
 #endif
@@ -240,9 +266,12 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
 #endif
 
 #if MOSAIC
-  /* one float per pixel: the deviation (PRNU, shot, read) of the pixel's CFA colour, the
-   * photosite's own noise (sensor_noise_demosaic interpolates the rest) */
-  const float16 dev = TO_FLOAT16(out - v_clean);
+  /* one float per pixel: the deviation (PRNU, shot, read) of the pixel's CFA colour in
+   * units of the model's deviation there (sn_sigma16), the photosite's own noise as a unit
+   * field (sensor_noise_demosaic interpolates it and scales each pixel's colours by their
+   * own deviation) */
+  const REAL16 sd = sn_sigma16(v_clean, g16, vsat, (REAL)read_e, (REAL)prnu);
+  const float16 dev = TO_FLOAT16(select((REAL16)zero, (out - v_clean) / sd, sd > zero));
   const int c0 = sn_cfa(fx, fy), c1 = sn_cfa(fx + 1, fy);   /* colours alternate in a row */
   vstore4((float4)(dev[c0], dev[4 + c1], dev[8 + c0], dev[12 + c1]), 0, dst + (size_t)y * pitch + x);
 #else
@@ -278,6 +307,24 @@ kernel void sensor_noise_apply(global const float *src, global float *dst,
 #ifndef CHROMA
 #define CHROMA 0
 #endif
+
+/* 1 / the norm of each interpolating filter of Malvar-He-Cutler (its coefficients / 8):
+ * R or B at a green site (5, 4, 4, -1 x 4, -1/2... : sum of squares 63.5 / 64), green at a
+ * red or blue site (36 / 64), blue at red or red at blue (61 / 64) */
+#define SN_NORM_HV 0.12549116102763172f     /* 1 / sqrt(63.5) */
+#define SN_NORM_G 0.16666666666666666f      /* 1 / sqrt(36) */
+#define SN_NORM_O 0.12803687993289598f      /* 1 / sqrt(61) */
+
+inline float4 sn_sigma4(const float4 v, const float4 g, const float4 vsat, const float read_e,
+                        const float prnu)
+{
+  const float4 below = select(max(v, 0.0f), (float4)0.0f, v >= vsat);
+  float4 var = (read_e * g) * (read_e * g) + (prnu * below) * (prnu * below);
+#if SHOT
+  var += g * below;
+#endif
+  return sqrt(var);
+}
 
 inline int sn_mirror(int i, int n)
 {
@@ -319,8 +366,10 @@ inline float sn_value_noise(uint seed, int frame, float px, float py, int stream
 kernel void sensor_noise_demosaic(global const float *src, global const float *noisy,
                                   global float *dst, const int pitch, const int width,
                                   const int height, const int fx0, const int fy0,
-                                  const uint seed, const int frame, const float g_green,
-                                  const float read_e, const float chroma, const float inv_cell)
+                                  const uint seed, const int frame, const float kr,
+                                  const float kg, const float kb, const float read_e,
+                                  const float prnu, const float well, const float chroma,
+                                  const float inv_cell)
 {
   const int x = get_global_id(0), y = get_global_id(1);
   if(x >= pitch || y >= height) return;
@@ -333,6 +382,10 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
   const float4 raw = vload4(0, src + i);
   const float4 v = select((float4)0.0f, clamp(raw, -1e38f, 1e38f), isfinite(raw));
   const float alpha = isfinite(raw.w) ? raw.w : 0.0f;  /* bit for bit where finite */
+  /* linear units per electron, the full well and the model's deviation per channel */
+  const float4 g = (float4)(1.0f / kr, 1.0f / kg, 1.0f / kb, 0.0f);
+  const float4 vsat = well * g;
+  const float4 sd = sn_sigma4(v, g, vsat, read_e, prnu);
   float4 d;
 #if DEMOSAIC
   const int fx = fx0 + x, fy = fy0 + y, c = sn_cfa(fx, fy);
@@ -358,21 +411,27 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
     dg = S(-1, -1) + S(1, -1) + S(-1, 1) + S(1, 1);                  /* diagonals */
 #undef S
   }
-  /* Malvar-He-Cutler, coefficients / 8 */
+  /* Malvar-He-Cutler on the unit field of site deviations, each interpolated colour
+   * divided by its filter's norm (the deviation it gives unit white noise: sqrt(63.5) / 8,
+   * 6 / 8, sqrt(61) / 8), so every colour of every pixel has unit variance (no period-2
+   * lattice of noise amplitude), then scaled by the pixel's own deviation for that colour:
+   * a dark pixel beside a light, or the green of a saturated red, gets its own noise, not
+   * its neighbours' (MHC's Laplacian term would carry a red site's noise into its green) */
   if(c == 1)
   {
     /* green site: the horizontal neighbours are R in an R row (even Y), B in a B row */
-    const float hor = (5.0f * s0 + 4.0f * ax - bx - dg + 0.5f * by) / 8.0f;
-    const float ver = (5.0f * s0 + 4.0f * ay - by - dg + 0.5f * bx) / 8.0f;
+    const float hor = (5.0f * s0 + 4.0f * ax - bx - dg + 0.5f * by) * SN_NORM_HV;
+    const float ver = (5.0f * s0 + 4.0f * ay - by - dg + 0.5f * bx) * SN_NORM_HV;
     const int rrow = (fy & 1) == 0;
     d = (float4)(rrow ? hor : ver, s0, rrow ? ver : hor, 0.0f);
   }
   else
   {
-    const float g = (4.0f * s0 + 2.0f * (ax + ay) - (bx + by)) / 8.0f;
-    const float o = (6.0f * s0 + 2.0f * dg - 1.5f * (bx + by)) / 8.0f;  /* the other colour */
-    d = c == 0 ? (float4)(s0, g, o, 0.0f) : (float4)(o, g, s0, 0.0f);
+    const float gi = (4.0f * s0 + 2.0f * (ax + ay) - (bx + by)) * SN_NORM_G;
+    const float o = (6.0f * s0 + 2.0f * dg - 1.5f * (bx + by)) * SN_NORM_O;  /* the other colour */
+    d = c == 0 ? (float4)(s0, gi, o, 0.0f) : (float4)(o, gi, s0, 0.0f);
   }
+  d *= sd;
 #else
   d = vload4(0, noisy + i) - v;                        /* each pixel's own deviations */
 #endif
@@ -382,8 +441,7 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
     const float px = (float)(fx0 + x) * inv_cell, py = (float)(fy0 + y) * inv_cell;
     const float a = sn_value_noise(seed, frame, px, py, 12);
     const float b = sn_value_noise(seed, frame, px, py, 14);
-    const float sd = sqrt(g_green * max(v.y, 0.0f) + g_green * g_green * read_e * read_e);
-    const float dr = chroma * sd * a, db = chroma * sd * b;
+    const float dr = chroma * sd.y * a, db = chroma * sd.y * b;
     out += (float4)(dr, -((CLFX_LUMA_R) * dr + (CLFX_LUMA_B) * db) / (CLFX_LUMA_G), db, 0.0f);
   }
 #endif

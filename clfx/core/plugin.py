@@ -107,11 +107,17 @@ class FloatParam(Param):
     max: float = math.inf
     display_min: float | None = None
     display_max: float | None = None
+    auto: str = ""
+    """What the value ``"auto"`` means, for a param that has one (e.g. a metered middle
+    grey): ``"auto"`` is stored as 0.0, which the effect reads as auto (so a look file's
+    0 means the same); ``describe`` names it."""
     kind: ClassVar[str] = "double"
 
     def validate(self, value, where=""):
+        if self.auto and isinstance(value, str) and value.strip().lower() == "auto":
+            return 0.0
         if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            self._fail(where, value, "a number")
+            self._fail(where, value, "a number or 'auto'" if self.auto else "a number")
         value = float(value)
         if math.isnan(value):
             self._fail(where, value, "a number (NaN given)")
@@ -119,14 +125,20 @@ class FloatParam(Param):
         return value
 
     def parse(self, text, where=""):
+        if self.auto and str(text).strip().lower() == "auto":
+            return 0.0
         try:
             return self.validate(float(text), where)
         except ValueError:
-            self._fail(where, text, "a number")
+            self._fail(where, text, "a number or 'auto'" if self.auto else "a number")
 
     def describe(self):
         d = super().describe()
         d.update(min=_jsonable(self.min), max=_jsonable(self.max))
+        if self.auto:
+            d["auto"] = self.auto
+            if self.default == 0.0:
+                d["default"] = "auto"
         if self.display_min is not None:
             d["display_range"] = [self.display_min, self.display_max]
         return d

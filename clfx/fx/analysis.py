@@ -24,31 +24,76 @@ STATS = 9
 
 
 MID_GREY = 0.18
-"""The exposure reference when an effect's ``middle_grey`` is 0 and the frame has no
-positive light."""
+"""Middle grey of a scene-referred plate normalised to 18 % grey: the scale the noise models
+state their amounts at, and the exposure reference when a frame has no positive light."""
 
-METER_FLOOR = 1e-3
-"""The meter floors each tile's mean luminance at this fraction of their arithmetic mean, so
-black tiles count as 10 stops under, not as minus infinity."""
+METER_TRIM = 0.25
+"""The meter clamps the log of each tile's mean luminance to the quartiles of its frame's
+(``METER_TRIM`` of the tiles at either end): lights and black borders do not move it."""
+
+MIDDLE_GREY_AUTO = ("meter the frame: the mean of the log of its 32 x 32 tile mean "
+                    "luminances, each clamped to their quartiles (lights, empty background "
+                    "and black borders excluded)")
+"""What ``middle_grey: auto`` means (`FloatParam.auto` of the noise effects)."""
 
 
 def meter(mean_lum) -> float:
-    """Metered middle grey: the log-average of tile mean luminances, each floored at
-    ``METER_FLOOR`` x their arithmetic mean; ``MID_GREY`` when nothing is positive."""
+    """Metered middle grey of a frame from its tile mean luminances: a winsorised
+    log-average.
+
+    Tiles without light (mean <= 0: the empty background of a CG element, a black border)
+    are left out; the log of every other tile's mean is clamped to the 25th-75th
+    percentiles of theirs (the lights and the darkest quarter are counted at the quartile),
+    and the mean of those logs is exponentiated.  So the meter is robust (a candle flame in
+    a few tiles, or a letterbox, moves it by nothing; a pixel's noise by ~1e-4 of itself),
+    continuous in the content (no jump as the ball of a moving shot crosses a tile), and
+    scale-equivariant (k times the plate gives k times the grey).  ``MID_GREY`` when no
+    tile holds light.  The analysis that supplies the tiles is the whole frame's, also when
+    the effect renders in bands (`RenderContext.tile`).
+
+    Parameters
+    ----------
+    mean_lum : array_like
+        Per-tile mean luminance (`SceneAnalysis.mean_lum`); non-finite entries are ignored.
+
+    Returns
+    -------
+    float
+        The scene-linear luminance taken as middle grey.
+    """
     m = np.asarray(mean_lum, np.float64).ravel()
-    m = m[np.isfinite(m)]
-    avg = float(m.mean()) if m.size else 0.0
-    if not avg > 0.0:
+    m = m[np.isfinite(m) & (m > 0.0)]
+    if not m.size:
         return MID_GREY
-    return float(np.exp(np.mean(np.log(np.maximum(m, METER_FLOOR * avg)))))
+    logs = np.log(m)
+    lo, hi = np.percentile(logs, [100 * METER_TRIM, 100 * (1 - METER_TRIM)])
+    return float(np.exp(np.mean(np.clip(logs, lo, hi))))
 
 
-def exposure_reference(p, ctx) -> float:
+def exposure_reference(p, ctx, effect: str) -> float:
     """The scene-linear value an exposure-relative effect (grain, sensor noise) takes as
-    middle grey: its ``middle_grey`` param, or (0) metered from the frame's analysis."""
+    middle grey: its ``middle_grey`` param, or (0, "auto") `meter` on the frame's analysis
+    (the whole frame's, in bands too).  Metered, a note for ``--explain`` says the value,
+    so a shot whose light changes can pin it (``middle_grey: <that value>``).
+
+    Parameters
+    ----------
+    p : Params
+        Has ``middle_grey``.
+    ctx : RenderContext
+        Its analysis is metered; its ``notes`` get the metered value.
+    effect : str
+        The effect's name, for the note.
+    """
     if p.middle_grey > 0.0:
         return float(p.middle_grey)
-    return meter(ctx.analysis.mean_lum)
+    analysis = ctx.analysis
+    grey = meter(analysis.mean_lum)
+    lit = bool(np.any(np.asarray(analysis.mean_lum) > 0.0))
+    ctx.notes.append(f"{effect}: middle grey metered at {grey:.4g} "
+                     f"({math.log2(grey / MID_GREY):+.1f} stops from 0.18)" if lit else
+                     f"{effect}: no light to meter: middle grey {MID_GREY}")
+    return grey
 
 
 @dataclass

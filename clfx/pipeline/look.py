@@ -547,13 +547,15 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         if not analysis_summary:          # the summary's analysis may read the passes
             ctx = _drop_unread_passes(ctx, steps[n:])
         timing = stats.timing(index)
-        step_report, out = _run_step(rt, step, ctx, step.quality or quality or DEFAULT_QUALITY,
-                                     have, timing, frame_masks, tiles)
+        later = {c.name for _, s in steps[n + 1:] for c in s.plugin.descriptor.clips}
+        step_report, out, moved = _run_step(rt, step, ctx,
+                                            step.quality or quality or DEFAULT_QUALITY, have,
+                                            timing, frame_masks, tiles, later)
         report.steps.append(step_report)
         if out is None:
             saved += timing.mean_ms or 0.0
         else:
-            ctx = _advance(rt, ctx, out)
+            ctx = _advance(rt, ctx, out, moved)
     t_dl = time.perf_counter()
     rgba, window = _download(rt, ctx)
     report.download_ms = (time.perf_counter() - t_dl) * 1e3
@@ -598,10 +600,13 @@ def _upload(rt, look: Look, frame: Frame, *, frame_number: int, quality: str | N
 
 
 def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bool],
-              timing: StepTiming, masks: FrameMasks, tile_pixels: int | None = None):
-    """Run one step at ``level`` unless it has nothing to do; returns its report and its
-    output (None when skipped).  A masked step blends its output with the source by its
-    mask, or renders from the masked source (`clfx.pipeline.masks`)."""
+              timing: StepTiming, masks: FrameMasks, tile_pixels: int | None = None,
+              later: set = frozenset()):
+    """Run one step at ``level`` unless it has nothing to do; returns its report, its
+    output (None when skipped) and the passes it realigned with its output for the later
+    steps, which read the clips ``later`` (`Plugin.passes_after`; none for a masked step,
+    whose output is partly its input).  A masked step blends its output with the source by
+    its mask, or renders from the masked source (`clfx.pipeline.masks`)."""
     step_ctx = ctx.for_step(level)
     missing = step.absent_passes(have)
     reason = f"no {' or '.join(missing)} pass in the input" if missing else None
@@ -621,7 +626,7 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
         reason = step.plugin.is_identity(step.params, step_ctx)
     if reason:
         return StepReport(step.id, False, reason, quality=level,
-                          warnings=list(step_ctx.warnings)), None
+                          warnings=list(step_ctx.warnings)), None, {}
     step.plugin.planned(step.params, step_ctx)  # once per step: the regions and render read it
     grown = step.plugin.output_window(step.params, step_ctx)
     check_pixels(grown.width, grown.height, f"frame grown by {step.id}", FrameTooLarge)
@@ -631,6 +636,7 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
         out = mask_fx.mix(rt, ctx.source, out, mask)
     elif mode == "sources":
         out = mask_fx.spread(rt, ctx.source, masked, out)
+    moved = {} if mode else step.plugin.passes_after(rt, step.params, step_ctx, out, later)
     rt.finish()
     ms = (time.perf_counter() - t0) * 1e3
     timing.add(ms)
@@ -638,7 +644,7 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     if mode:
         notes.append(f"masked by {step.mask.label()} ({mode})")
     return StepReport(step.id, True, ms=ms, quality=level, notes=notes,
-                      warnings=list(step_ctx.warnings)), out
+                      warnings=list(step_ctx.warnings)), out, moved
 
 
 def tile_bands(window: Rect, tile_pixels: int | None) -> list[Rect]:
@@ -695,15 +701,17 @@ def _drop_unread_passes(ctx: RenderContext, steps) -> RenderContext:
     return ctx.over(**drop) if drop else ctx
 
 
-def _advance(rt, ctx: RenderContext, out) -> RenderContext:
-    """The context with a step's output as the current source; when its window grew, the
+def _advance(rt, ctx: RenderContext, out, moved: dict | None = None) -> RenderContext:
+    """The context with a step's output as the current source, and the passes the step
+    realigned with it (``moved``, `Plugin.passes_after`); when its window grew, the other
     passes extended to it by edge clamping so later effects see aligned passes."""
+    moved = dict(moved or {})
     passes = {}
     if out.window != ctx.source.window:
         passes = {name: rt.reframe(getattr(ctx, name), out.window, "clamp")
                   for name in ("depth", "velocity", "velocity_back")
-                  if getattr(ctx, name) is not None}
-    return ctx.over(source=out, **passes)
+                  if getattr(ctx, name) is not None and name not in moved}
+    return ctx.over(source=out, **passes, **moved)
 
 
 def _download(rt, ctx: RenderContext):

@@ -78,10 +78,15 @@ class CoronaLevel(fftconv.SpreadLevel):
 
 
 LEVELS = {
+    # draft: the pattern's own reduction is the cheap step, so the convolution runs on its
+    # grid (a plain float32 FFT, no exact bright pixels).  spread's draft halved it again
+    # ("half"): with 4 px a ring that left 2, and the splat and upsampling tents (~f px)
+    # blurred the rings into a plain white glow; at 4 px a ring without the halving the
+    # first ring still drowned in them, at 6 it stands as at final
     "draft": fftconv.spread_level(
-        CoronaLevel, "draft", "16 wavelengths; pattern at reduced resolution (>= 4 px per "
-        "first-ring radius); half-resolution float32 FFT (one pyramid level)",
-        wavelengths=16, ring_px=4.0),
+        CoronaLevel, "draft", "16 wavelengths; pattern at reduced resolution (>= 6 px per "
+        "first-ring radius); plain float32 FFT on that grid", wavelengths=16, ring_px=6.0,
+        method="fft"),
     "preview": fftconv.spread_level(
         CoronaLevel, "preview", "24 wavelengths; pattern at reduced resolution (>= 6 px per "
         "first-ring radius); float32 FFT with the brightest pixels gathered exactly",

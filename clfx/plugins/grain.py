@@ -55,13 +55,18 @@ grainier relative to its signal, never coloured speckle).  Scaling a plate by k 
 ``middle_grey`` by k scales the output by k exactly: **the same look at any exposure**.
 
 **Exposure reference.**  ``middle_grey`` > 0 states the scene-linear value the negative was
-exposed for as middle grey (0.18 for a scene-referred plate normalised to 18 % grey).  0
-(the default) meters the frame as an averaging camera meter would: the log-average of the
-shared scene analysis' 32 x 32 tile mean luminances (each floored at 1e-3 of their
-arithmetic mean; a frame with no positive light falls back to 0.18).  The meter is
-scale-equivariant (k times the plate gives k times the reference) but reads each frame (and
-a crop meters itself): state ``middle_grey`` for a shot whose light changes, so the grain
-does not follow the content.
+exposed for as middle grey (0.18 for a scene-referred plate normalised to 18 % grey).
+``auto`` (or 0; the default) meters the frame (`clfx.fx.analysis.meter`, shared with
+``sensor_noise``): the mean of the log of the shared scene analysis' 32 x 32 tile mean
+luminances, each clamped to the quartiles of the frame's (lights, empty background and black
+borders do not count; a frame with no light falls back to 0.18).  The meter reads the whole
+frame once per step (its plan), also when the effect renders in bands; it is
+scale-equivariant (k times the plate gives k times the reference), deterministic (a frame
+alone meters as in a batch) and robust, so a static shot's frames meter alike (the plate's
+own noise moves it by ~1e-4) and a moving one drifts smoothly with its content (OpenEXR's
+Beachball: ~3 % a frame).  It meters each frame, as a camera's auto exposure would: for a
+shot whose light changes (a lamp switched on) state ``middle_grey`` (``--explain`` prints
+the metered value), so the grain does not follow the content.
 
 ``A_c`` and per-channel diameters come from a film ``stock`` (blue-sensitive layers of a
 colour negative have the largest, most visible clouds) times ``channel_amount`` /
@@ -113,9 +118,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
-from clfx.fx.analysis import exposure_reference
+from clfx.fx.analysis import MIDDLE_GREY_AUTO, exposure_reference
 from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
-from clfx.host import Plugin, register
+from clfx.host import ExposurePlan, Plugin, register
 
 REFERENCE_WIDTH = 2048
 """``amount`` is stated for a pixel of a scan this wide (of the same format); the legacy
@@ -305,10 +310,11 @@ class Grain(Plugin):
                        hint="Dye-cloud diameter on the negative (equivalent disc, 4 x the "
                             "Gaussian cloud's sigma) in micrometres; pixels follow from the "
                             "camera's sensor_width; 0 = the stock's."),
-            FloatParam("middle_grey", 0.0, min=0.0, max=1e6,
+            FloatParam("middle_grey", 0.0, min=0.0, max=1e6, auto=MIDDLE_GREY_AUTO,
                        hint="Scene-linear value exposed as middle grey (0.18 for a plate "
-                            "normalised to 18 % grey); 0 = meter each frame (log-average "
-                            "luminance)."),
+                            "normalised to 18 % grey); auto (or 0) = meter each frame "
+                            "(--explain prints the value, to pin it for a shot whose light "
+                            "changes)."),
             FloatParam("response", 0.5, min=0.0, max=1.0,
                        hint="Exponent of density in the grain's density deviation: 0.5 = "
                             "Nutting's Poisson-grain law, 0 = the same in density everywhere, "
@@ -338,6 +344,9 @@ class Grain(Plugin):
             return "every channel amount is 0"
         return None
 
+    def plan(self, p, ctx):
+        return ExposurePlan(middle_grey=exposure_reference(p, ctx, "grain"))
+
     # render ------------------------------------------------------------------------------
     def _device_weights(self, rt, sigmas, truncation, use64):
         """(radius, device buffer) of the tap table, kept in ``rt.cache`` per size and
@@ -364,7 +373,7 @@ class Grain(Plugin):
         frame = np.int32(ctx.frame)
         fmt = ctx.camera.sensor_width
         ar, ag, ab = (np.float32(a) for a in grain_amounts(p, ctx.width_px, fmt))
-        grey = exposure_reference(p, ctx)
+        grey = self.planned(p, ctx).middle_grey
         tone = (np.float32(p.response), np.float32(grey), np.float32(1.0 / grey))
         i32 = np.int32
         dst = src.like()

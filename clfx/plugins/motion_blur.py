@@ -25,6 +25,20 @@ built once in the step's plan (`clfx.fx.motion.tile_grid`), and a band reconstru
 of the whole render's canvas from the rows its farthest sample reaches (its region of
 interest, `clfx.fx.motion.band_margin`), its positions the whole render's.
 
+The passes after the blur (`passes_after`).  The blur moves a surface's colour off its
+silhouette (a ball's smear over the empty background around it), while the velocity and depth
+passes still describe the sharp frame: there they say "background, static".  An effect after
+this one that moves pixels along the velocity (rolling shutter, which phone-pan puts after
+the blur so each row's smear moves to the row's time) then left the smear behind while the
+ball moved on: a detached arc a few pixels outside the ball, and a dark gap between (issue
+32).  So when a later step reads them, the blur realigns the passes with its output: the same
+reconstruction gathers, with the beauty's tiles and weights, the velocity (and depth) of the
+surfaces that move (at least half a pixel over the shutter, the ones it smears), and each
+pixel takes the average of what moved into it (where nothing moving did, its own pass,
+extended by the edge past the data window): the smear moves with its surface.  A static
+background inside the smear (at most the blur's length) moves with it too: one velocity per
+pixel cannot split a mixed pixel.
+
 References
 ----------
 M. McGuire, P. Hennessy, M. Bukowski, B. Osman, "A reconstruction filter for plausible motion
@@ -54,6 +68,8 @@ from clfx.fx.motion import (
     shutter_from,
     tile_grid,
 )
+import numpy as np
+
 from clfx.host import Plugin, StepPlan, register
 
 
@@ -159,6 +175,33 @@ class MotionBlur(Plugin):
             curved=back is not None))
         return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=canvas,
                           margin=band_margin(t0, t1, radius, back is not None), grid=grid)
+
+    def passes_after(self, rt, p, ctx, out, later):
+        """The velocity (and depth) the blurred frame shows, for a later step that reads them
+        (module docstring, "The passes after the blur"): the velocity and depth of the
+        moving surfaces gathered as the colour was, over ``out.window``."""
+        vel, depth = ctx.velocity, ctx.depth
+        if "velocity" not in later or vel is None or vel.window != ctx.source.window:
+            return {}
+        plan = self.planned(p, ctx)
+        v = rt.download(vel).astype(np.float64)
+        moving = np.hypot(v[..., 0], v[..., 1]) * (plan.t1 - plan.t0) >= MIN_BLUR_PX
+        with_depth = "depth" in later and depth is not None and depth.window == vel.window
+        z = rt.download(depth).astype(np.float64) if with_depth else np.zeros(moving.shape)
+        m = moving.astype(np.float64)
+        carried = np.stack([v[..., 0] * m, v[..., 1] * m, np.where(moving, z, 0.0), m], -1)
+        spread = rt.download(self.render(rt, p, ctx.over(source=rt.upload(carried, vel.window),
+                                                         notes=[], warnings=[])))
+        weight = spread[..., 3:4].astype(np.float64)
+        took = weight > 1e-6           # something moving reached the pixel
+        own = rt.download(rt.reframe(vel, out.window, "clamp"))
+        moved = {"velocity": rt.upload(np.where(took, spread[..., :2] / np.where(took, weight, 1.0),
+                                                own), out.window)}
+        if with_depth:
+            own_z = rt.download(rt.reframe(depth, out.window, "clamp"))
+            moved["depth"] = rt.upload(np.where(took[..., 0], spread[..., 2] / np.where(
+                took[..., 0], weight[..., 0], 1.0), own_z), out.window)
+        return moved
 
     def region_of_interest(self, p, ctx, window):
         # the farthest sample of the gather and the taps around it (the frame's reach)

@@ -20,6 +20,14 @@ so ``E[out] = v_p`` (mean preserved; negative inputs keep their value) and::
 
     Var[out] = g_c * max(v_p, 0) + (g_c * read)^2,     g_c = 1 / k_c = G / (full_well s_c)
 
+Full well.  A photosite holds at most ``full_well`` electrons (``v_sat = full_well g_c`` in
+linear units: 1.0 at base ISO on a plate at 0.18, ``G`` times that at gain ``G``).  A site at
+or above it reads exactly full: no shot noise and no PRNU (a saturated light is clean, as a
+camera's clipped highlight), only read noise; below it the count is capped at the well.  The
+output keeps the plate's value (HDR above the well stays for the comp): the well limits the
+noise, not the image.  Without it a 1e3 light carried shot noise of ~30 x its surroundings'
+and the demosaic spread it into coloured, negative rings round every light (issue 32).
+
 i.e. in linear units, variance = gain * signal + read^2 with gain ``g_c`` and read noise
 ``g_c * read`` (read noise is given in electrons at the sensor, so its linear size grows
 with ISO, as in a real camera's output).  The Poisson count is sampled exactly by CDF
@@ -33,10 +41,15 @@ Exposure.  A real camera is exposed for its ISO: middle grey lands on the same f
 the full well whatever the scene's light, so its noise depends on the ISO, not on how bright
 the scene was.  A scene-linear plate has no such scale (a night plate may sit at 0.01), so
 ``k_c`` is stated for a plate whose middle grey is 0.18 and scaled by ``0.18 / E``, with ``E``
-= ``middle_grey`` (default 0.18: the plate is taken as it is) or, with ``middle_grey = 0``,
-metered from the frame as grain meters it (`clfx.fx.analysis.meter`).  Metered, scaling a
-plate by any factor scales the output (noise included) by that factor: the same look at any
-exposure.
+= ``middle_grey`` when stated, or (``auto``, the default; 0 means the same) metered from the
+frame as grain meters it (`clfx.fx.analysis.meter`: the mean log of the tile mean
+luminances, each clamped to the frame's quartiles, so lights and black borders do not count;
+once per step from the whole frame, bands included; ``--explain`` prints the value).
+Metered, scaling a plate by any factor scales the output (noise included) by that factor:
+the same look at any exposure.  The meter reads each frame (deterministic, stable to ~1e-4
+on a static shot); state ``middle_grey`` for a shot whose light changes.  Taking 0.18 as
+middle grey, as the default did, buried ScanLines' CandleGlass (mean 0.0004, ~9 stops under)
+in saturated colour noise four times its signal.
 
 Mosaic and demosaic (``mosaic = "bayer"``, the default).  A camera measures one colour per
 photosite (an RGGB Bayer pattern at frame coordinates: R at even X and even Y, B at odd X
@@ -45,10 +58,18 @@ CFA colour (with that colour's electrons and gain); the mosaic of deviations is 
 demosaiced with Malvar, He and Cutler's gradient-corrected bilinear filters (5 x 5, each
 interpolated colour corrected by the centre site's Laplacian), and added to the clean
 plate (the signal is not demosaiced: the plate keeps its detail).  So a pixel's colours are
-correlated and neighbouring pixels are correlated: on a flat field with equal site
-variances the exact linear model gives channel correlations R-G 0.63, G-B 0.63, R-B 0.60,
-lag-1 autocorrelations 0.38 (R, B) and 0.32 (G), and variances 0.98 (R, B) and 0.78 (G) of
-the sites'; at a site its own colour follows the photon-transfer model above.  Sites
+correlated and neighbouring pixels are correlated.  The filters interpolate the *unit*
+field of site deviations (each divided by the model's deviation at its site, with the full
+well), each interpolated colour is divided by its filter's norm (its deviation on unit
+white noise: sqrt(63.5) / 8 for R or B at a green site, 6 / 8 for green at R or B, sqrt(61)
+/ 8 for B at R or R at B) and then scaled by the pixel's own model deviation for that colour.
+So every colour of every pixel has exactly the photon-transfer variance of its own value: no
+period-2 lattice of noise amplitude (plain MHC gave green 0.56 of the site variance at red
+and blue sites; over a saturated red its Laplacian term carried the red sites' noise into
+their green and blue, a lattice of dots every other pixel), and a dark pixel beside a light
+gets its own noise, not the light's.  On a flat field the exact linear model gives channel
+correlations R-G 0.64, G-B 0.64, R-B 0.60 and lag-1 autocorrelations 0.38 (R, B) and 0.33
+(G); at a site its own colour is its photosite's deviation.  Sites
 outside the data window are mirrored about its edge, so within 2 px of the edge a crop
 differs from a full render (elsewhere they agree).  ``mosaic = "none"`` keeps the
 per-pixel, per-channel independent noise.
@@ -59,7 +80,8 @@ processing).  Two value-noise fields ``a, b`` (unit Gaussians at the nodes of a 
 ``chroma_size`` x the frame diagonal, in frame coordinates and new every frame, blended with
 smoothstep weights) shift the colour without changing luminance: ``dR = k a``,
 ``dB = k b``, ``dG = -(wR dR + wB dB) / wG`` with ``k = chroma_noise x`` the model's green
-deviation at the pixel (so blotches follow the noise: strongest in the shadows at high ISO).
+deviation at the pixel (so blotches follow the noise: strongest in the shadows at high ISO,
+none past the well).
 
 Random numbers come from ``clfx_uniform(seed, frame, X, Y, c)`` at frame coordinates, so
 the noise is identical for a frame rendered alone, in a batch, cropped, or on any thread
@@ -93,9 +115,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
-from clfx.fx.analysis import MID_GREY, exposure_reference
+from clfx.fx.analysis import MID_GREY, MIDDLE_GREY_AUTO, exposure_reference
 from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
-from clfx.host import Plugin, register
+from clfx.host import ExposurePlan, Plugin, register
 
 SENSOR_SALT = 0x73656E73  # "sens"
 PRNU_SALT = 0x70726E75    # "prnu"
@@ -144,10 +166,12 @@ def electrons_per_unit(p, camera, reference: float = MID_GREY) -> tuple[float, f
 
 
 def noise_variance(v, p, camera, channel=1, reference: float = MID_GREY):
-    """The model's variance of the output at linear value ``v`` (PRNU aside)."""
+    """The model's variance of the output at clean linear value ``v``: shot noise and PRNU
+    below the full well (a full site reads full: neither at or above it), read noise."""
     g = 1.0 / electrons_per_unit(p, camera, reference)[channel]
-    shot = g * np.maximum(v, 0.0) if p.shot_noise else 0.0
-    return shot + (g * p.read_noise) ** 2
+    below = np.where(np.asarray(v) >= p.full_well * g, 0.0, np.maximum(v, 0.0))
+    shot = g * below if p.shot_noise else 0.0
+    return shot + (g * p.read_noise) ** 2 + (p.prnu * below) ** 2
 
 
 @register
@@ -157,10 +181,13 @@ class SensorNoise(Plugin):
     whole_frame = None   # noise hashed on frame coordinates, pixel by pixel
     descriptor = Descriptor(
         name="sensor_noise", label="Sensor noise", group="Camera", kernel="sensor_noise.cl",
-        summary="Poisson shot noise and Gaussian read noise in linear light from the ISO, a "
-                "fixed photo-response non-uniformity pattern, a Bayer mosaic demosaiced by "
-                "Malvar-He-Cutler (colour noise correlated across channels and neighbours) "
-                "and optional low-frequency chroma blotches.",
+        summary="Poisson shot noise and Gaussian read noise in linear light from the ISO, "
+                "relative to the plate's own exposure (metered, or a stated middle grey), "
+                "up to the full well (saturated lights are clean), a fixed photo-response "
+                "non-uniformity pattern, a Bayer mosaic demosaiced by Malvar-He-Cutler "
+                "(colour noise correlated across channels and neighbours, each pixel with "
+                "its own value's variance: no lattice, no rings round lights) and optional "
+                "low-frequency chroma blotches.",
         frame_varying=True,
         params=(
             FloatParam("iso", 0.0, min=0.0, max=1e6,
@@ -169,13 +196,15 @@ class SensorNoise(Plugin):
                        hint="ISO at which the sensor collects full_well electrons per unit "
                             "of linear value (unity analogue gain)."),
             FloatParam("full_well", 10000.0, min=1.0, max=1e7, units="e-",
-                       hint="Electrons collected for a scene-linear value of 1.0 at base ISO "
-                            "on a plate whose middle grey is 0.18 (see middle_grey)."),
-            FloatParam("middle_grey", MID_GREY, min=0.0, max=1e6,
+                       hint="A photosite's capacity: the electrons it collects for a "
+                            "scene-linear value of 1.0 at base ISO on a plate whose middle grey "
+                            "is 0.18 (see middle_grey); a full site reads full (no shot "
+                            "noise above it)."),
+            FloatParam("middle_grey", 0.0, min=0.0, max=1e6, auto=MIDDLE_GREY_AUTO,
                        hint="Scene-linear value the camera exposed as middle grey: electrons "
                             "scale by 0.18 / middle_grey, so a plate at any exposure gets the "
-                            "same noise; 0 = meter each frame (log-average luminance, as "
-                            "grain's)."),
+                            "same noise; auto (or 0) = meter each frame as grain does "
+                            "(--explain prints the value)."),
             BoolParam("shot_noise", True,
                       hint="Poisson photon noise (variance proportional to the signal)."),
             FloatParam("read_noise", 3.0, min=0.0, max=1e4, units="e-",
@@ -211,6 +240,9 @@ class SensorNoise(Plugin):
         if not p.shot_noise and p.read_noise == 0.0 and p.prnu == 0.0:
             return "shot noise is off, read noise and prnu are 0"
         return None
+
+    def plan(self, p, ctx):
+        return ExposurePlan(middle_grey=exposure_reference(p, ctx, "sensor_noise"))
 
     def prnu_pattern(self, rt, p, ctx, fp64):
         """The fixed pattern ``prnu * z`` on ``ctx.source``'s window, kept in ``rt.cache`` per
@@ -260,7 +292,8 @@ class SensorNoise(Plugin):
                    "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT}
         pattern = self.prnu_pattern(rt, p, ctx, lvl.fp64) if p.prnu > 0 else src  # src: unread
         kr, kg, kb = (np.float32(k) for k in
-                      electrons_per_unit(p, ctx.camera, exposure_reference(p, ctx)))
+                      electrons_per_unit(p, ctx.camera, self.planned(p, ctx).middle_grey))
+        well, prnu, read = np.float32(p.full_well), np.float32(p.prnu), np.float32(p.read_noise)
         seed = np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT))
         x0, y0 = np.int32(src.window.x0), np.int32(src.window.y0)
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
@@ -272,15 +305,16 @@ class SensorNoise(Plugin):
                         MOSAIC=int(demosaic), COVERAGE=coverage * int(last), **defines)
         rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
                   np.int32(src.height), x0, y0, seed, np.int32(ctx.frame),
-                  kr, kg, kb, np.float32(p.read_noise))
+                  kr, kg, kb, read, well, prnu)
         if last:
             return dst
         out = src.like()
         cell = max(p.chroma_size * ctx.diagonal_px, 1.0)
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_demosaic", DEMOSAIC=int(demosaic),
-                        CHROMA=int(chroma), COVERAGE=coverage, **ctx.luminance_defines)
+                        CHROMA=int(chroma), COVERAGE=coverage, SHOT=defines["SHOT"],
+                        **ctx.luminance_defines)
         rt.launch(knl, (src.pitch, src.height), src, dst, out, np.int32(src.pitch),
                   np.int32(src.window.width), np.int32(src.height), x0, y0, seed,
-                  np.int32(ctx.frame), np.float32(1.0 / float(kg)), np.float32(p.read_noise),
+                  np.int32(ctx.frame), kr, kg, kb, read, prnu, well,
                   np.float32(p.chroma_noise), np.float32(1.0 / cell))
         return out

@@ -1,7 +1,9 @@
 /* analysis.cl: one cheap pass per frame, shared by every effect (clfx/analysis.py).
  *
  * Per TILE x TILE tile it records, over finite values only:
- *   stats[t*8 + 0] max luminance      1 mean luminance     2 count of non-finite RGBA pixels
+ *   stats[t*8 + 0] max luminance      1 mean luminance (a non-finite channel counts as 0,
+ *     as effects read it: the metered middle grey of a frame with a NaN in one channel is
+ *     that of the frame with a 0 there)                     2 count of non-finite RGBA pixels
  *   3 max |velocity| (px/frame)       4 min valid depth    5 max valid depth (inf allowed)
  *   6 count of pixels with depth <= 0 or NaN               7 max alpha
  *   8 count of finite pixels with light but no alpha (alpha <= 0, some RGB != 0): a frame
@@ -41,7 +43,11 @@ kernel void analysis_rows(global const float *src, const int pitch, const int wi
     const int4 ok = analysis_finite4(c) & inside;
     const float4 l = (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
     max_lum = select(max_lum, fmax(max_lum, l), ok);
-    sum_lum += select((float4)0.0f, l, ok);
+    const float16 cz = select((float16)0.0f, c,
+                              (as_int16(c) & 0x7f800000) != 0x7f800000);   /* NaN, Inf -> 0 */
+    const float4 lz = (CLFX_LUMA_R) * cz.s048c + (CLFX_LUMA_G) * cz.s159d
+                      + (CLFX_LUMA_B) * cz.s26ae;
+    sum_lum += select((float4)0.0f, lz, inside);
     max_alpha = select(max_alpha, fmax(max_alpha, c.s37bf), ok);
     bad += select((float4)0.0f, (float4)1.0f, inside & ~ok);
     const int4 lit = (c.s048c != 0.0f) | (c.s159d != 0.0f) | (c.s26ae != 0.0f);

@@ -78,3 +78,33 @@ def test_coc_tiles_bracket_the_focus_plane(rt):
 def test_static_frame_has_no_moving_tiles(rt):
     a = run(rt, np.ones((40, 40, 4), np.float32), velocity=np.zeros((40, 40, 2), np.float32))
     assert not a.moving_tiles().any() and a.peak_speed == 0.0
+
+
+def test_meter_ignores_lights_and_black_and_is_stable(rt, rng):
+    """The metered middle grey (shared by grain and sensor noise) of a plate at 0.05 is 0.05
+    with a 1e3 light over a few tiles and a black letterbox (before: 0.079, the log-average
+    counting both), it scales with the plate, and the plate's own noise moves it
+    by < 0.1 % from frame to frame (no flicker on a static shot)."""
+    from clfx.fx.analysis import meter
+
+    src = np.full((256, 320, 4), 0.05, np.float32)
+    src[..., 3] = 1
+    src[100:140, 150:200, :3] = 1e3
+    src[:32, :, :3] = 0.0
+    src[-32:, :, :3] = 0.0
+    got = meter(analyse(rt, rt.upload(src, Rect(0, 0, 320, 256))).mean_lum)
+    assert got == pytest.approx(0.05, rel=1e-6)
+    for k in (1e-3, 40.0):
+        scaled = src.copy()
+        scaled[..., :3] *= k
+        assert meter(analyse(rt, rt.upload(scaled, Rect(0, 0, 320, 256))).mean_lum) == \
+            pytest.approx(0.05 * k, rel=1e-5)
+    plate = np.full((256, 320, 4), 1.0, np.float32)
+    plate[..., :3] = rng.uniform(0.01, 0.3, (1, 320, 3))     # vertical stripes of colour
+    metered = []
+    for _ in range(4):
+        frame = plate.copy()
+        frame[..., :3] *= 1 + 0.05 * rng.standard_normal((256, 320, 3))
+        metered.append(meter(analyse(rt, rt.upload(frame, Rect(0, 0, 320, 256))).mean_lum))
+    assert max(metered) / min(metered) - 1 < 1e-3, metered
+    assert meter(np.zeros((4, 5))) == 0.18

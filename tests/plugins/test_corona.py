@@ -377,3 +377,28 @@ def test_corona_in_blocks_is_the_one_grid_corona(rt, rng, monkeypatch, quality):
     src = scene(rng, (60, 80))
     p = Corona.params(**PARAMS)
     assert_blocks_match(rt, monkeypatch, Corona(), p, src, quality, cells=1500)
+
+
+@pytest.mark.parametrize("size", [0.012, 0.03])
+def test_draft_keeps_the_rings(rt, size, quality="draft"):
+    """A point light at draft, at the default size and sunny-flare's: each
+    channel's radial profile still has at least two rings (local maxima standing 10 % over
+    the dark rings beside them), where they are at final, within a reduced pixel
+    (draft used to compute the pattern at >= 4 px per first-ring radius and then convolve
+    at half that again: 2 px a ring, which the resampling blurred into a plain white glow)."""
+    w, h = 640, 360
+    src = np.full((h, w, 4), 0.01, np.float32)
+    src[..., 3] = 1.0
+    src[h // 2, w // 2, :3] = 2000.0
+    p = Corona.params(size=size)
+    r0 = size * math.hypot(w, h)
+    want = radial_profiles(Corona().apply(rt, p, src, quality="final")[..., :3] - 0.01,
+                           w / 2 + 0.5, h / 2 + 0.5)
+    got = radial_profiles(Corona().apply(rt, p, src, quality=quality)[..., :3] - 0.01,
+                          w / 2 + 0.5, h / 2 + 0.5)
+    f = Corona().factor(p, RenderContext(rt, rt.upload(src), quality=quality))
+    for c in range(3):
+        rings = ring_maxima(got[:, c], int(0.7 * r0))
+        assert len(rings) >= 2, (quality, c, rings)
+        ref = ring_maxima(want[:, c], int(0.7 * r0))
+        assert abs(rings[0] - ref[0]) <= max(f, 1) + 1, (rings, ref)

@@ -15,7 +15,7 @@ from clfx.plugins.sensor_noise import (SensorNoise, electrons_per_unit,
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import wide_range_image
-from tests.reference.sensor_noise import demosaic_deviation
+from tests.reference.sensor_noise import demosaic_unit
 from tests.reference.sensor_noise import sensor_noise as reference
 
 LEVELS = ("draft", "preview", "final", "reference")
@@ -26,6 +26,7 @@ CAMERA = Camera(iso=3200.0)   # gain 32: 312.5 electrons per unit of linear valu
 def run(rt, src, quality="final", frame=0, look_seed=0, data_window=None, camera=CAMERA,
         display=None, **kw):
     kw.setdefault("mosaic", "none")   # the photon-transfer model per site; demosaic below
+    kw.setdefault("middle_grey", 0.18)  # the model's own scale (auto meters: tests below)
     p = SensorNoise.params(**kw)
     out = SensorNoise().apply(rt, p, src, quality=quality, frame=frame, seed=look_seed,
                               data_window=data_window, camera=camera, display_window=display)
@@ -75,7 +76,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
     # expected counts 0-60 electrons: both the inversion and the normal branch run
     src = rng.uniform(0.0, 0.2, (48, 64, 4)).astype(np.float32)
     src[..., 3] = 1.0           # opaque: the levels differ in the model, not in the coverage
-    kw = dict(read_noise=2.0, seed=6)
+    kw = dict(read_noise=2.0, seed=6, middle_grey=0.18)
     p = SensorNoise.params(**kw)
     want = reference(src, **p.as_dict(), frame=3, camera_iso=3200.0)
     errors = [np.abs(run(rt, src, q, frame=3, **kw)[0] - want)[..., :3].mean() for q in LEVELS]
@@ -84,7 +85,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
 
 # -- statistics -------------------------------------------------------------------------------
 # expected electrons per pixel: Poisson inversion below 30, normal approximation above
-ELECTRONS = (0.5, 3.0, 12.0, 29.0, 31.0, 100.0, 1e4)
+ELECTRONS = (0.5, 3.0, 12.0, 29.0, 31.0, 100.0, 5e3)   # the well holds 1e4
 
 
 @pytest.mark.parametrize("read_noise", [0.0, 3.0])
@@ -311,7 +312,8 @@ def demosaic_covariance(var_site, lag):
     """Exact covariance (3 x 3 channels) of the demosaiced deviation between pixels lag
     (dx, dy) apart, averaged over the four CFA phases: the demosaic is linear, so it is the
     reference demosaic applied to unit impulses at every site of a period, weighted by the
-    site colour's variance."""
+    site colour's variance (the model's demosaic scales each pixel's colours by their own
+    deviation, constant on a flat field)."""
     n = 16
     cov = np.zeros((3, 3))
     imp = np.zeros((n, n, 3))
@@ -323,7 +325,8 @@ def demosaic_covariance(var_site, lag):
         for i in range(4, 12):
             imp[:] = 0
             imp[j, i, colours[j, i]] = 1.0
-            resp[(j, i)] = demosaic_deviation(imp) * math.sqrt(var_site[colours[j, i]])
+            sd = np.broadcast_to(np.sqrt(var_site), imp.shape)
+            resp[(j, i)] = demosaic_unit(imp * sd, sd)
     dx, dy = lag
     for py in (7, 8):
         for px in (7, 8):
@@ -453,3 +456,104 @@ def test_auto_coverage_on_real_files(rt, exr_images, image, covered):
     else:         # CandleGlass: its alpha is a matte; the dark room around it is noisy
         assert (src[..., 3] <= 0).mean() > 0.5
         assert (moved[src[..., 3] <= 0] > 0).mean() > 0.9
+
+
+# -- exposure: the plate's own middle grey by default (issue 32, item 3) ---------------------
+def test_default_meters_a_dark_plate(rt, exr_images):
+    """CandleGlass (mean 0.0004, ~8.6 stops under 0.18) at the defaults: the noise at the
+    plate's metered middle grey is the model's at grey (~5 % at ISO 400: 2 x 0.018^-1/2 %
+    shot noise of ~1800 e-), not 4x the signal as when 0.18 was taken as middle grey."""
+    from clfx.io.read import read_frame
+    from tests.reference.grain import meter
+
+    fr = read_frame(exr_images / "ScanLines" / "CandleGlass.exr")
+    src = np.ascontiguousarray(fr.rgba[300:600, 0:400])      # the candle and the room
+    grey = meter(src.astype(np.float64))
+    assert 1e-4 < grey < 2e-3
+    p = SensorNoise.params()
+    assert p.middle_grey == 0.0    # auto
+    out = SensorNoise().apply(rt, p, src, camera=Camera(), seed=3)
+    lum = src[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    near = np.abs(np.log2(np.maximum(lum, 1e-12) / grey)) < 0.25       # within 1/4 stop
+    assert near.sum() > 1000
+    rel = (out[..., 1] - src[..., 1])[near] / src[..., 1][near]
+    want = math.sqrt(noise_variance(grey, p, Camera(), 1, grey)) / grey
+    assert 0.02 < want < 0.08
+    # the band: the demosaic keeps each colour's variance; green near grey varies +-1/4 stop
+    assert 0.7 * want < rel.std() < 1.4 * want, (rel.std(), want)
+
+
+def test_middle_grey_auto_or_stated_and_explained(tmp_path, exr_images):
+    """``middle_grey: auto`` (the default) meters, and --explain says the metered value; a
+    stated value is used as it is (no note); anything else is refused in one line."""
+    from clfx.core.errors import ParamError
+    from tests.clirun import run as cli_run
+
+    assert SensorNoise.params(middle_grey="auto").middle_grey == 0.0
+    assert SensorNoise.descriptor.param("middle_grey").describe()["default"] == "auto"
+    with pytest.raises(ParamError, match="a number or 'auto'"):
+        SensorNoise.params(middle_grey="bright")
+    src = exr_images / "ScanLines" / "CandleGlass.exr"
+    r = cli_run("apply", "sensor_noise", src, tmp_path / "a.exr", "--frames", "1",
+                "--explain", "--quality", "draft")
+    assert "middle grey metered at 0.000" in r.stderr, r.stderr
+    r = cli_run("apply", "sensor_noise", src, tmp_path / "b.exr", "middle_grey=0.0005",
+                "--explain", "--quality", "draft")
+    assert "metered" not in r.stderr
+
+
+# -- the full well and the demosaic (issue 32, items 4 and 5) --------------------------------
+def preset_params(look):
+    from clfx.pipeline.presets import load_look
+
+    lk = load_look(look)
+    step = next(s for s in lk.steps if s.effect == "sensor_noise")
+    return step.params, lk.camera
+
+
+@pytest.mark.parametrize("look", ["high-iso", "phone-pan"])
+def test_lights_above_the_full_well_leave_no_demosaic_ring(rt, look):
+    """A 1e3 light on grey and on black through the looks' sensor noise: a full site reads
+    full (no shot noise past the well), and each pixel's colours get their own noise, so no
+    pixel falls below black by more than its read noise (5 sigma) and the pixels just
+    outside the light are as noisy as the rest of the grey (before: -11 beside the light at
+    ISO 12800, coloured)."""
+    from tests.reference.grain import meter
+
+    p, cam = preset_params(look)
+    h = w = 160
+    src = flat(h, w, 0.18)
+    yy, xx = np.mgrid[:h, :w]
+    r = np.hypot(xx - 60.3, yy - 50.6)
+    src[r < 6.0, :3] = 1e3
+    src[100:, 80:, :3] = 0.0                      # black, with a light on it
+    src[120:130, 100:112, :3] = 1e3
+    out = SensorNoise().apply(rt, p, src, camera=cam, seed=5, frame=1)
+    g = 1 / np.array(electrons_per_unit(p, cam, meter(src.astype(np.float64))))
+    read_sd = p.read_noise * g                    # per channel
+    dev = out[..., :3] - src[..., :3]
+    black = (src[..., :3] == 0).all(-1)
+    assert (out[..., :3][black] >= -5 * read_sd).all(), (out[..., :3][black].min(0), read_sd)
+    ring = (r > 6.5) & (r < 9.5)
+    rest = (r > 14) & ~black & (yy < 95)
+    sd_ring, sd_rest = dev[ring].std(0), dev[rest].std(0)
+    assert (sd_ring < 1.3 * sd_rest).all(), (sd_ring, sd_rest)
+    assert (np.abs(dev[ring].mean(0)) < 4 * sd_rest / math.sqrt(ring.sum() / 25)).all()
+
+
+@pytest.mark.parametrize("look", ["high-iso", "phone-pan"])
+@pytest.mark.parametrize("colour", [(0.5, 0.002, 0.002), (0.05, 0.05, 0.05)])
+def test_no_bayer_lattice_in_the_noise(rt, look, colour):
+    """Over a saturated red (and a grey) flat, each channel's noise has the same amplitude
+    at the four phases of the 2 x 2 CFA (before: green and blue 5x as noisy at red sites
+    over the red, MHC's Laplacian carrying the red site's noise into them; green's variance
+    0.56 at red and blue sites on grey: a lattice of dots every other pixel)."""
+    p, cam = preset_params(look)
+    src = flat(96, 96, 0.0)
+    src[..., :3] = colour
+    out = SensorNoise().apply(rt, p, src, camera=cam, seed=2, frame=1)
+    d = (out - src)[4:-4, 4:-4, :3]
+    for c in range(3):
+        phases = np.array([d[i::2, j::2, c].std() for i in (0, 1) for j in (0, 1)])
+        # 4 x 1936 samples: the standard error of a phase's std is ~1.6 %
+        assert phases.max() / phases.min() < 1.12, (c, phases)

@@ -3,7 +3,7 @@ import numpy as np
 
 
 def tile_stats(rgba, depth=None, velocity=None, tile=32):
-    """Per tile: max luminance, mean luminance (over finite pixels / tile area), non-finite
+    """Per tile: max luminance, mean luminance (non-finite channels as 0 / tile area), non-finite
     count, max speed, min / max valid depth, invalid-depth count, max alpha."""
     rgba = np.asarray(rgba, np.float64)
     h, w = rgba.shape[:2]
@@ -16,7 +16,9 @@ def tile_stats(rgba, depth=None, velocity=None, tile=32):
             ok = np.isfinite(c).all(axis=-1)
             lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
             out[j, i, 0] = max(0.0, lum[ok].max()) if ok.any() else 0.0
-            out[j, i, 1] = lum[ok].sum() / max(c.shape[0] * c.shape[1], 1)
+            cz = np.where(np.isfinite(c), c, 0.0)
+            lum_z = 0.2126 * cz[..., 0] + 0.7152 * cz[..., 1] + 0.0722 * cz[..., 2]
+            out[j, i, 1] = lum_z.sum() / max(c.shape[0] * c.shape[1], 1)
             out[j, i, 2] = (~ok).sum()
             out[j, i, 7] = max(0.0, c[..., 3][ok].max()) if ok.any() else 0.0
             if velocity is not None:

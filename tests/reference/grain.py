@@ -115,17 +115,21 @@ def selwyn(sigma, ref):
 
 
 def meter(src, tile=32):
-    """Log-average of 32 x 32 tile mean luminances (non-finite pixels count as 0), each
-    floored at 1e-3 of their mean; 0.18 when nothing is positive."""
+    """Metered middle grey: the mean of the log of the 32 x 32 tile mean luminances
+    (non-finite pixels count as 0) over the tiles with light (mean > 0), each log clamped to
+    the 25th-75th percentiles of theirs; 0.18 when no tile has light."""
     h, w = src.shape[:2]
     rgb = np.where(np.isfinite(src).all(-1, keepdims=True), src[..., :3], 0.0)
     lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
     means = [lum[y:y + tile, x:x + tile].mean() for y in range(0, h, tile)
              for x in range(0, w, tile)]
     m = np.array(means)
-    if not m.mean() > 0:
+    m = m[m > 0]
+    if not m.size:
         return 0.18
-    return float(np.exp(np.mean(np.log(np.maximum(m, 1e-3 * m.mean())))))
+    logs = np.log(m)
+    lo, hi = np.percentile(logs, 25), np.percentile(logs, 75)
+    return float(np.exp(np.mean(np.clip(logs, lo, hi))))
 
 
 def grain(src, *, stock, amount, diameter, middle_grey, response, channel_amount,

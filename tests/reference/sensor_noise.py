@@ -28,7 +28,7 @@ def poisson_by_inversion(lam, u, max_count=200, u_cap=4e-6):
     return n
 
 
-def electrons(src, *, iso, base_iso, full_well, camera_iso=400.0, middle_grey=0.18, **_):
+def electrons(src, *, iso, base_iso, full_well, camera_iso=400.0, middle_grey=0.0, **_):
     """Electrons per unit of linear value before channel sensitivity: ``full_well`` at base
     ISO for a plate whose middle grey is 0.18, scaled by 0.18 / the plate's middle grey
     (``middle_grey``, or 0: the frame metered as grain meters it)."""
@@ -39,9 +39,12 @@ def electrons(src, *, iso, base_iso, full_well, camera_iso=400.0, middle_grey=0.
 
 def site_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
                channel_sensitivity, seed, frame=0, look_seed=0, data_origin=(0, 0),
-               camera_iso=400.0, switch=30.0, middle_grey=0.18):
+               camera_iso=400.0, switch=30.0, middle_grey=0.0):
     """Per-site sensor noise on ``src`` (h, w, 4) float64 (every pixel, every channel
-    independent: mosaic "none"); ``switch`` None = normal approximation only."""
+    independent: mosaic "none"); ``switch`` None = normal approximation only.  A site holds
+    at most ``full_well`` electrons (``vsat = full_well / k`` in linear units): at or above
+    it the site reads exactly full (no shot noise, no PRNU), below it the count is capped
+    there."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     k_unit = electrons(src, iso=iso, base_iso=base_iso, full_well=full_well,
@@ -55,10 +58,14 @@ def site_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
     for c in range(3):
         k = k_unit * channel_sensitivity[c]
         g = 1.0 / k
+        vsat = full_well * g
         v = np.clip(np.where(np.isfinite(src[..., c]), src[..., c], 0.0), -1e38, 1e38)
         if prnu > 0:
             fa, fb = uniform(s_prnu, 0, x, y, c), uniform(s_prnu, 0, x, y, c + 4)
+            vc = v
             v = v * (1 + prnu * np.sqrt(-2 * np.log(fa)) * np.cos(2 * np.pi * fb))
+            v = np.where(np.maximum(v, vc) >= vsat,
+                         vc + np.minimum(v, vsat) - np.minimum(vc, vsat), v)
         ua, ub = uniform(s_main, frame, x, y, c), uniform(s_main, frame, x, y, c + 4)
         r = np.sqrt(-2 * np.log(ua))
         res = v.copy()
@@ -70,11 +77,22 @@ def site_noise(src, *, iso, base_iso, full_well, shot_noise, read_noise, prnu,
                 uc = uniform(s_main, frame, x, y, c + 8)
                 for j, i in zip(*np.nonzero(lam <= switch)):
                     dev[j, i] = (poisson_by_inversion(lam[j, i], uc[j, i]) - lam[j, i]) * g
+            dev = np.where(vpos >= vsat, 0.0, np.minimum(dev, vsat - vpos))
             res = res + dev
         if read_noise > 0:
             res = res + read_noise * g * r * np.sin(2 * np.pi * ub)
         out[..., c] = res
     return out
+
+
+def sigma(v, *, g, full_well, read_noise, prnu, shot_noise=True):
+    """The model's deviation of the output at clean linear values ``v`` of a channel with
+    ``g`` linear units per electron: shot noise and PRNU below the full well, read noise."""
+    below = np.where(v >= full_well * g, 0.0, np.maximum(v, 0.0))
+    var = (read_noise * g) ** 2 + (prnu * below) ** 2
+    if shot_noise:
+        var = var + g * below
+    return np.sqrt(var)
 
 
 def cfa(fx, fy):
@@ -91,7 +109,8 @@ def mirror(i, n):
 
 def demosaic_deviation(dev, data_origin=(0, 0)):
     """Malvar-He-Cutler demosaic of the site mosaic of ``dev`` (h, w, 3): each pixel keeps
-    its CFA colour's deviation; sites outside the window mirrored about its edge."""
+    its CFA colour's deviation; sites outside the window mirrored about its edge.  The plain
+    filters: the model's demosaic is `demosaic_unit`."""
     h, w = dev.shape[:2]
     y, x = np.mgrid[0:h, 0:w]
     fx, fy = x + data_origin[0], y + data_origin[1]
@@ -116,6 +135,24 @@ def demosaic_deviation(dev, data_origin=(0, 0)):
     out[..., 1] = np.where(c == 1, s0, g)
     out[..., 2] = np.where(c == 2, s0, np.where(c == 0, o, np.where(rrow, ver, hor)))
     return out
+
+
+def demosaic_unit(dev, sd, data_origin=(0, 0)):
+    """The model's demosaic: the site deviations over the model's deviation at each site (a
+    unit field), demosaiced, each interpolated colour divided by its filter's norm (R or B
+    at a green site sqrt(63.5) / 8, green at R or B 6 / 8, B at R or R at B sqrt(61) / 8),
+    times the pixel's own deviation ``sd`` (h, w, 3) per colour."""
+    unit = np.where(sd > 0, dev / np.where(sd > 0, sd, 1.0), 0.0)
+    d = demosaic_deviation(unit, data_origin)
+    h, w = dev.shape[:2]
+    y, x = np.mgrid[0:h, 0:w]
+    c = cfa(x + data_origin[0], y + data_origin[1])
+    norm = np.ones((h, w, 3))
+    green = c == 1
+    norm[..., 0] = np.where(green, 8 / math.sqrt(63.5), np.where(c == 2, 8 / math.sqrt(61), 1))
+    norm[..., 2] = np.where(green, 8 / math.sqrt(63.5), np.where(c == 0, 8 / math.sqrt(61), 1))
+    norm[..., 1] = np.where(green, 1.0, 8 / 6)
+    return d * norm * sd
 
 
 def value_noise(seed, frame, px, py, stream):
@@ -144,20 +181,22 @@ def sensor_noise(src, *, mosaic="bayer", chroma_noise=0.0, chroma_size=0.02, dia
     v = np.clip(np.where(np.isfinite(src[..., :3]), src[..., :3], 0.0), -1e38, 1e38)
     dev = noisy[..., :3] - v
     x0, y0 = kw.get("data_origin", (0, 0))
+    k_unit = electrons(src, **kw)
+    sd = np.stack([sigma(v[..., c], g=1.0 / (k_unit * kw["channel_sensitivity"][c]),
+                         full_well=kw["full_well"], read_noise=kw["read_noise"],
+                         prnu=kw["prnu"], shot_noise=kw["shot_noise"]) for c in range(3)], -1)
     if mosaic == "bayer":
-        dev = demosaic_deviation(dev, (x0, y0))
+        dev = demosaic_unit(dev, sd, (x0, y0))
     out = noisy.copy()
     out[..., :3] = v + dev
     if chroma_noise > 0:
-        g = 1.0 / (electrons(src, **kw) * kw["channel_sensitivity"][1])
         cell = max(chroma_size * (diagonal or np.hypot(w, h)), 1.0)
         y, x = np.mgrid[0:h, 0:w]
         seed = effect_seed(kw["seed"], kw.get("look_seed", 0), SENSOR_SALT)
         px, py = (x + x0) / cell, (y + y0) / cell
         a = value_noise(seed, kw.get("frame", 0), px, py, 12)
         b = value_noise(seed, kw.get("frame", 0), px, py, 14)
-        sd = np.sqrt(g * np.maximum(v[..., 1], 0) + (g * kw["read_noise"]) ** 2)
-        dr, db = chroma_noise * sd * a, chroma_noise * sd * b
+        dr, db = chroma_noise * sd[..., 1] * a, chroma_noise * sd[..., 1] * b
         out[..., 0] += dr
         out[..., 2] += db
         out[..., 1] -= (0.2126 * dr + 0.0722 * db) / 0.7152
