@@ -751,11 +751,18 @@ def _bench_looks(ctx, param, value):
 def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path, md_path):
     """What accuracy costs in time: every effect at every quality level against its reference
     (with OpenCV/SciPy peers), whole looks, sequence throughput, and scene-analysis skipping."""
-    from clfx.bench.plots import pareto_plot
+    from clfx.bench.plots import check_plot_path, pareto_plot
     from clfx.bench.report import markdown
     from clfx.bench.runner import run_bench
+    from clfx.core.limits import check_pixels
 
     w, h = _parse_size(size)
+    check_pixels(w, h, "--size")
+    if plot_path:
+        check_plot_path(plot_path)
+    for option, path in (("--markdown", md_path), ("--plot", plot_path)):
+        if path:
+            _check_writable(path, option)
     look_list = None if looks is None else ([] if looks == "none" else looks.split(","))
     verbose = ctx.obj.get("verbosity", 1) > 0
     effect_list = None if effects is None else ([] if effects == "none" else effects.split(","))
@@ -764,15 +771,50 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
                         sequence_frames=sequence_frames,
                         log=(lambda m: click.echo(m, err=True)) if verbose else (lambda m: None))
     table = markdown(results)
-    if md_path:
-        with open(md_path, "w") as f:
-            f.write(table)
-    if plot_path:
-        pareto_plot(results, plot_path)
+    try:
+        if md_path:
+            with open(md_path, "w") as f:
+                f.write(table)
+        if plot_path:
+            pareto_plot(results, plot_path)
+    except OSError as exc:
+        raise ClfxError(f"cannot write {exc.filename or md_path}: {exc.strerror or exc}") \
+            from None
     if as_json:
         click.echo(json.dumps(results, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
     else:
         click.echo(table)
+
+
+def _check_writable(path: str, option: str) -> None:
+    """Refuse, before a long run, an output file that cannot take what it will be given: a
+    folder, a FIFO (it would block), a missing or read-only folder, a device that refuses a
+    byte (/dev/full) or a file system without a free block."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise ClfxError(f"cannot write {option} {path}: {exc.strerror}") from None
+    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISCHR(mode)):
+        raise ClfxError(f"cannot write {option} {path}: "
+                        f"{'a folder' if stat.S_ISDIR(mode) else 'not a regular file'}")
+    try:
+        if mode is not None and stat.S_ISCHR(mode):
+            with open(path, "wb", buffering=0) as f:
+                f.write(b"\n")                   # /dev/null takes it, /dev/full does not
+            return
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            raise FileNotFoundError(2, f"no folder {folder}")
+        if not os.access(folder, os.W_OK) or (mode is not None and not os.access(path, os.W_OK)):
+            raise PermissionError(13, "Permission denied")
+        if os.statvfs(folder).f_bavail == 0:
+            raise OSError(28, "No space left on device")
+    except OSError as exc:
+        raise ClfxError(f"cannot write {option} {path}: {exc.strerror or exc}") from None
 
 
 def _parse_size(text: str) -> tuple[int, int]:

@@ -5,14 +5,37 @@ light-spreading effect's grown window, an FFT grid); ``CLFX_MAX_PIXELS`` overrid
 """
 from __future__ import annotations
 
+import math
 import os
 
 from clfx.core.errors import ClfxError
 
+def env_int(name: str, default: int, *, minimum: int | None = None) -> int:
+    """The whole number in environment variable ``name`` (``default`` when unset or empty).
+    ``1e3`` reads as 1000; anything else that is not a whole number (``abc``, ``1.5``), or one
+    below ``minimum``, is a `ClfxError` naming the variable, in one line."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = int(text)
+    except ValueError:
+        try:
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not (math.isfinite(number) and number.is_integer()):
+            raise ClfxError(f"{name}={text!r} is not a whole number (e.g. {default})") from None
+        value = int(number)
+    if minimum is not None and value < minimum:
+        raise ClfxError(f"{name}={text!r} is below {minimum}")
+    return value
+
+
 MAX_SIDE = 65536
 """Largest width or height of any window, in pixels."""
 
-MAX_PIXELS = int(os.environ.get("CLFX_MAX_PIXELS", str(8192 * 8192)))
+MAX_PIXELS = env_int("CLFX_MAX_PIXELS", 8192 * 8192, minimum=1)
 """Largest area of any window or derived buffer, in pixels (``CLFX_MAX_PIXELS``; default
 8192 x 8192, a 1 GiB float RGBA frame: 8K DCI fits, a claimed 16384^2 does not)."""
 
@@ -55,7 +78,7 @@ the next frame read and the last one written while the device renders."""
 def tile_pixels() -> int | None:
     """The most pixels a step that tiles renders at once (`clfx.pipeline.look.render_tiled`):
     ``CLFX_TILE_PIXELS`` (unset or 0: whole frames)."""
-    value = int(os.environ.get("CLFX_TILE_PIXELS", "0") or 0)
+    value = env_int("CLFX_TILE_PIXELS", 0)
     return value if value > 0 else None
 
 

@@ -33,9 +33,11 @@ from typing import Callable, Hashable, TypeVar
 
 import numpy as np
 
+from clfx.core.limits import env_int
+
 T = TypeVar("T")
 
-DEFAULT_BUDGET_BYTES = int(os.environ.get("CLFX_POOL_MB", "512")) * 2 ** 20
+DEFAULT_BUDGET_BYTES = env_int("CLFX_POOL_MB", 512, minimum=0) * 2 ** 20
 """Bytes kept by idle pooled buffers and cached values together (``CLFX_POOL_MB``).  A 1080p
 look's buffers and spectra all fit, so a sequence allocates nothing after its first frame; at
 4K the largest FFT work buffers and spectra are released, bounding memory."""

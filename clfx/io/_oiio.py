@@ -140,8 +140,23 @@ def carry(name: str) -> bool:
     return name not in _SKIP_NAMES and not name.startswith(_SKIP_PREFIXES)
 
 
+def _utf8(text: str) -> str:
+    """``text`` as OpenImageIO can store it (UTF-8): what is not (a file name's non-UTF-8
+    bytes on the command line, a lone surrogate) as backslash escapes."""
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def set_attribute(spec, name: str, value) -> None:
-    """Set one JSON-able attribute on an output spec, guessing its type."""
+    """Set one JSON-able attribute on an output spec, guessing its type (text that is not
+    UTF-8 stamped with backslash escapes)."""
+    if isinstance(value, str):
+        value = _utf8(value)
+    elif isinstance(value, (list, tuple)) and any(isinstance(v, str) for v in value):
+        value = [_utf8(v) if isinstance(v, str) else v for v in value]
     if isinstance(value, bool):
         spec.attribute(name, int(value))
     elif isinstance(value, (int, float, str)):

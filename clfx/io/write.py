@@ -80,7 +80,7 @@ from clfx.core.frame import Frame, Layout, SourcePart, crop_to
 from clfx.core.rect import Rect
 from clfx.io import colour
 from clfx.io._oiio import carry, check_window, fail, geterror, set_attribute
-from clfx.io.sequence import check_input_file
+from clfx.io.sequence import check_input_file, check_name
 
 HALF_MAX = 65504.0
 
@@ -154,7 +154,7 @@ def check_output_format(path, bit_depth: str | None = None,
     ImageIOError
         Unsupported extension, bit depth or compression (the allowed ones listed).
     """
-    path = os.fspath(path)
+    path = check_name(path, "cannot write")
     fmt = _out_format(path)
     if bit_depth is not None and bit_depth not in fmt.bit_depths:
         raise ImageIOError(f"cannot write {path}: bit depth {bit_depth!r} not supported; "

@@ -55,7 +55,7 @@ STREAM = os.environ.get("CLFX_STREAM", "auto")
 then write and read side by side), "overlap" (read and write while the device renders) or
 "auto": phased where the device is the CPU, overlap elsewhere (`stream_mode`)."""
 
-IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
+IO_NICE = limits.env_int("CLFX_IO_NICE", 10, minimum=0)
 """Overlap only: nice increment of the write thread, half of it for the read thread (Linux:
 per thread; ``CLFX_IO_NICE``), so that on a CPU device I/O gives way to the effects.  0
 leaves the threads alone.  Phased streams do not lower priorities: that stalls when other
