@@ -9,6 +9,7 @@ import OpenImageIO as oiio
 from clfx.core.errors import ImageIOError
 from clfx.core.limits import check_pixels
 from clfx.core.rect import Rect
+from clfx.io.sequence import shown
 
 # Attributes that describe the old file's layout or that writers reject: never carried over.
 _SKIP_NAMES = {
@@ -142,12 +143,12 @@ def carry(name: str) -> bool:
 
 def _utf8(text: str) -> str:
     """``text`` as OpenImageIO can store it (UTF-8): what is not (a file name's non-UTF-8
-    bytes on the command line, a lone surrogate) as backslash escapes."""
+    bytes on the command line, a lone surrogate) as backslash escapes (`shown`)."""
     try:
         text.encode("utf-8")
         return text
     except UnicodeEncodeError:
-        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+        return shown(text)
 
 
 def set_attribute(spec, name: str, value) -> None:

@@ -995,6 +995,8 @@ class Batch:
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
                                 f"(add a frame token such as #### to the output)")
+        check_output_format(outs[0], self.options.out_bit_depth(),
+                            self.options.compression)    # not after the first render
         folder = os.path.dirname(os.path.abspath(outs[0]))
         if not os.path.isdir(folder):
             try:
@@ -1018,8 +1020,6 @@ class Batch:
                 elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
-        check_output_format(outs[0], self.options.out_bit_depth(),
-                            self.options.compression)    # not after the first render
 
     # -- running ------------------------------------------------------------------------
     @contextmanager

@@ -1,0 +1,172 @@
+"""Issue 34 (red team v3): hostile names, environment values, scheduler replies, YAML and
+stamps through the real command line: one ``clfx: error:`` line (or one warning), never a
+traceback, a hang or a silent reinterpretation."""
+import os
+import socket
+import subprocess
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+CLFX = [sys.executable, "-m", "clfx.cli"]
+
+
+def one_line(stderr, *fragments) -> str:
+    err = (stderr.decode(errors="backslashreplace") if isinstance(stderr, bytes) else stderr).strip()
+    assert err.startswith("clfx: error:") and "\n" not in err, err
+    for f in fragments:
+        assert f in err, err
+    return err
+
+
+def clfx(*args, env=None, cwd=None, timeout=120):
+    """The real entry point in a subprocess; arguments may be bytes (names that are not
+    UTF-8)."""
+    return subprocess.run(CLFX + [a if isinstance(a, bytes) else str(a) for a in args],
+                          capture_output=True, timeout=timeout, check=False, cwd=cwd,
+                          env=dict(os.environ, **(env or {})))
+
+
+@pytest.fixture
+def small(tmp_path):
+    """A 24x16 EXR ``in.exr`` and a one-effect look ``look.yaml`` in ``tmp_path``."""
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
+    rgba[..., 3] = 1
+    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
+    (tmp_path / "look.yaml").write_text("name: t\neffects:\n  - effect: vignette\n")
+    return tmp_path
+
+
+# -- environment values ------------------------------------------------------------------------
+@pytest.mark.parametrize("var", ["CLFX_TILE_PIXELS", "CLFX_POOL_MB", "CLFX_MAX_PIXELS",
+                                 "CLFX_IO_NICE"])
+def test_an_integer_environment_variable_that_is_not_one_is_one_line(small, var):
+    """Were ValueError tracebacks."""
+    r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look", small / "look.yaml",
+             env={var: "abc"})
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, f"{var}='abc' is not a whole number")
+    assert not (small / "o.exr").exists()
+
+
+def test_env_int_reads_whole_numbers_in_exponent_form(monkeypatch):
+    from clfx.core.errors import ClfxError
+    from clfx.core.limits import env_int
+
+    monkeypatch.setenv("CLFX_X", "1e3")
+    assert env_int("CLFX_X", 5) == 1000
+    monkeypatch.setenv("CLFX_X", " ")
+    assert env_int("CLFX_X", 5) == 5
+    for bad in ("1.5", "inf", "nan", "0x10"):
+        monkeypatch.setenv("CLFX_X", bad)
+        with pytest.raises(ClfxError, match="is not a whole number"):
+            env_int("CLFX_X", 5)
+    monkeypatch.setenv("CLFX_X", "-1")
+    with pytest.raises(ClfxError, match="is below 0"):
+        env_int("CLFX_X", 5, minimum=0)
+
+
+# -- names that are not UTF-8 --------------------------------------------------------------------
+def test_an_input_name_that_is_not_utf8_is_one_line(small):
+    os.rename(small / "in.exr", os.fsencode(small) + b"/caf\xe9.exr")
+    r = clfx("-q", "apply", "vignette", os.fsencode(small) + b"/caf\xe9.exr", small / "o.exr")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, "caf\\xe9.exr: the name is not UTF-8 text")
+
+
+@pytest.mark.parametrize("folder", [False, True])
+def test_an_output_name_that_is_not_utf8_is_refused_before_rendering(small, folder):
+    out = os.fsencode(small) + (b"/d\xe9/o.exr" if folder else b"/o\xe9.exr")
+    r = clfx("-q", "apply", "vignette", small / "in.exr", out)
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, "cannot write", "\\xe9", "the name is not UTF-8 text")
+    assert sorted(os.listdir(small)) == ["in.exr", "look.yaml"]
+
+
+def test_a_log_name_that_is_not_utf8_is_written_and_stamped_escaped(small):
+    """The command line was stamped into the output after rendering: RuntimeError."""
+    import OpenImageIO as oiio
+
+    log = os.fsencode(small) + b"/l\xe9.txt"
+    r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look", small / "look.yaml",
+             "--log", log)
+    assert r.returncode == 0, r.stderr
+    assert os.path.getsize(log) > 0
+    inp = oiio.ImageInput.open(str(small / "o.exr"))
+    stamped = " ".join(str(a.value) for a in inp.spec().extra_attribs)
+    inp.close()
+    assert "l\\xe9.txt" in stamped
+
+
+def test_a_look_named_with_a_lone_surrogate_is_stamped_escaped(small):
+    """Was a RuntimeError after rendering, when its name was stamped."""
+    (small / "sur.yaml").write_text('name: "\\ud800"\neffects:\n  - effect: vignette\n')
+    r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look", small / "sur.yaml")
+    assert r.returncode == 0, r.stderr
+    r = clfx("-q", "render", small / "in.exr", small / "o2.exr", "--look-from", small / "o.exr")
+    assert r.returncode == 0, r.stderr
+
+
+# -- hostile scheduler replies -------------------------------------------------------------------
+@pytest.fixture
+def banner_port():
+    """A TCP port on 127.0.0.1 that greets every connection with an SSH banner (not Dask),
+    for at most 60 s."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    srv.settimeout(60)
+
+    def serve():
+        while True:
+            try:
+                conn = srv.accept()[0]
+            except OSError:
+                return
+            with conn:
+                conn.sendall(b"SSH-2.0-OpenSSH_9.6\r\n")
+                conn.settimeout(2)
+                try:
+                    conn.recv(1024)
+                except OSError:
+                    pass
+
+    threading.Thread(target=serve, daemon=True).start()
+    yield srv.getsockname()[1]
+    srv.close()
+
+
+def test_a_port_that_answers_a_banner_is_not_a_scheduler(small, banner_port):
+    """Was 20 s, then 'Unable to allocate 3.01 EiB' and a Client timeout traceback."""
+    r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look", small / "look.yaml",
+             "--scheduler", f"tcp://127.0.0.1:{banner_port}", timeout=60)
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, "is not a Dask scheduler (it said 'SSH-2.0-OpenSSH_9.6')")
+    assert not (small / "o.exr").exists()
+
+
+# -- bench outputs and sizes ---------------------------------------------------------------------
+BENCH = ("bench", "--effects", "vignette", "--looks", "none", "--size", "16x8", "--repeat", "1",
+         "--sequence-frames", "0")
+
+
+@pytest.mark.parametrize("args,message", [
+    (("--markdown", "/dev/full"), "cannot write --markdown /dev/full: No space left on device"),
+    (("--markdown", "/nonexistent-clfx/t.md"), "cannot write --markdown /nonexistent-clfx/t.md"),
+    (("--plot", "x.xyz"), "--plot x.xyz: .xyz is not a format matplotlib writes"),
+    (("--size", "70000x70000"), "--size is 70000x70000; the limit is"),
+])
+def test_bench_refuses_what_it_cannot_do_before_running(tmp_path, args, message):
+    """/dev/full and .xyz failed after the whole bench; 70000x70000 printed 'FAILED:
+    MemoryError' and exited 0."""
+    if args[1] == "/dev/full" and not os.path.exists("/dev/full"):
+        pytest.skip("needs /dev/full")
+    r = clfx(*BENCH, *args, cwd=tmp_path)
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, message)
+    assert not r.stdout
