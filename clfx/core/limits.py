@@ -114,11 +114,16 @@ def json_nesting(text: str) -> int:
     return deepest
 
 
+class _DuplicateKey(ValueError):
+    """A JSON object names a key twice."""
+
+
 def load_json(text: str, what: str, exc: type[ClfxError] = ClfxError, *,
-              max_bytes: int | None = None, max_depth: int = MAX_JSON_NESTING):
+              max_bytes: int | None = None, max_depth: int = MAX_JSON_NESTING, unique_keys: bool = False):
     """``json.loads(text)``, refusing in one line (``exc`` naming ``what``) text over
-    ``max_bytes`` (UTF-8), nested deeper than ``max_depth``, or not JSON (an integer of more
-    than Python's 4300 digits included)."""
+    ``max_bytes`` (UTF-8), nested deeper than ``max_depth``, with a key twice in one object
+    (``unique_keys``: as look files refuse), or not JSON (an integer of more than Python's 4300 digits
+    included)."""
     import json
 
     if max_bytes is not None and len(text) > max_bytes // 4 and len(text.encode()) > max_bytes:
@@ -126,7 +131,18 @@ def load_json(text: str, what: str, exc: type[ClfxError] = ClfxError, *,
     depth = json_nesting(text)
     if depth > max_depth:
         raise exc(f"{what} is nested {depth} levels deep; the limit is {max_depth}")
+    def unique(pairs):
+        out = {}
+        for key, value in pairs:
+            if key in out:
+                raise _DuplicateKey(key)
+            out[key] = value
+        return out
+
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=unique if unique_keys else None)
+    except _DuplicateKey as e:
+        raise exc(f"{what} has the key {e.args[0]!r} twice (JSON would keep the last one)") \
+            from None
     except (ValueError, RecursionError) as e:
         raise exc(f"{what} is not JSON ({' '.join(str(e).split())[:200]})") from None

@@ -805,6 +805,8 @@ class Batch:
     options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
     skipped_existing: list[int] = field(default_factory=list, init=False)
+    kept_other: list[tuple[int, str | None]] = field(default_factory=list, init=False)
+    _hash: str | None = field(default=None, init=False, repr=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
@@ -988,6 +990,37 @@ class Batch:
         except OSError as exc:
             raise ImageIOError(f"cannot write --log {path}: {exc.strerror}") from None
 
+    def _check_kept(self, job: Job) -> None:
+        """Note a frame --skip-existing keeps that another look or other parameters rendered
+        (its stamped ``clfx:paramsHash`` differs from this look's, or it has none)."""
+        from clfx.io.probe import header_attribute
+
+        try:
+            stamped = header_attribute(job.output, "clfx:paramsHash")
+            name = header_attribute(job.output, "clfx:look") if stamped else None
+        except ClfxError:
+            stamped = name = None               # unreadable: its render failed half-way?
+        if stamped != self._stamped_hash():
+            self.kept_other.append((job.frame, name))
+
+    def _stamped_hash(self) -> str:
+        """The ``clfx:paramsHash`` this render stamps (its look, quality levels resolved)."""
+        if self._hash is None:
+            self._hash = resolve_quality(self.look, self.options.quality)[0].params_hash()
+        return self._hash
+
+    def _kept_other_warning(self) -> str | None:
+        """One line for the frames kept from another look (`_check_kept`), or None."""
+        if not self.kept_other:
+            return None
+        from clfx.io.sequence import compact
+
+        names = sorted({n or "no clfx stamp" for _, n in self.kept_other})
+        return (f"clfx: warning: --skip-existing keeps frame(s) "
+                f"{compact(f for f, _ in self.kept_other)} rendered with another look or other "
+                f"parameters ({', '.join(map(repr, names))}; this render: {self.look.name!r}); "
+                f"use --overwrite to render them again")
+
     def _check_outputs(self, jobs: list[Job]) -> None:
         from clfx.io.write import check_output_format
 
@@ -1017,6 +1050,7 @@ class Batch:
             if os.path.lexists(j.output):   # a dangling symlink counts
                 if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
+                    self._check_kept(j)
                 elif not self.options.overwrite:
                     raise ImageIOError(f"output {j.output} exists (use --overwrite to replace it, "
                                        f"or --skip-existing to resume)")
@@ -1050,6 +1084,8 @@ class Batch:
                 if self.skipped_existing and self.verbosity > 0:
                     reporter.err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose "
                                  f"output exists")
+                if self._kept_other_warning():
+                    reporter.err(self._kept_other_warning())
             first, self._first_read = self._first_read, None
             render_stream(rt, self.plan, jobs, reporter.frame, stats=self.stats, first=first)
             if raw and not reporter.reports:   # an empty stream is an error, not 0 frames

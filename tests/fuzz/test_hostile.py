@@ -170,3 +170,118 @@ def test_bench_refuses_what_it_cannot_do_before_running(tmp_path, args, message)
     assert r.returncode == 1, r.stderr
     one_line(r.stderr, message)
     assert not r.stdout
+
+
+# -- YAML read as YAML 1.2 -----------------------------------------------------------------------
+def look_show(path, text):
+    path.write_text("name: y\n" + text)
+    return clfx("look", "show", path, "--json")
+
+
+@pytest.mark.parametrize("text,message", [
+    ("camera: {focus_distance: 1:2.5}\n",
+     "camera.focus_distance: '1:2.5' is not a number; keyframes in a look file are a mapping: "
+     "{1: 2.5}"),
+    ("seed: 190:20:30\n", "seed: '190:20:30' is not an integer"),
+    ("seed: yes\n", "seed: 'yes' is not an integer"),
+    ("seed: !!int abc\n", "'abc' is not an integer"),
+])
+def test_yaml_base60_and_yes_are_not_numbers(tmp_path, text, message):
+    """YAML 1.1 read 1:2.5 as 62.5 and 190:20:30 as 685230, without a word."""
+    r = look_show(tmp_path / "y.yaml", text)
+    assert r.returncode == 1, r.stdout
+    one_line(r.stderr, message)
+
+
+@pytest.mark.parametrize("text,key,value", [
+    ("effects: [{effect: glare, params: {size: 1e-3}}]\n", ("effects", 0, "params", "size"), 1e-3),
+    ("seed: 0777\n", ("seed",), 777),          # YAML 1.1: octal 511
+    ("seed: 0o17\n", ("seed",), 15),
+    ("seed: 0x1F\n", ("seed",), 31),
+    ("camera: {focus_distance: {1: 2.0, 10: 5.0e+0}}\n", ("camera", "focus_distance", "10"), 5.0),
+])
+def test_yaml_numbers_read_as_yaml_1_2(tmp_path, text, key, value):
+    """1e-3 was 'not a number' (text in YAML 1.1)."""
+    import json
+
+    r = look_show(tmp_path / "y.yaml", text)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout)
+    for k in key:
+        got = got[k]
+    assert got == value
+
+
+# -- keyframes ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("how", ["set", "yaml"])
+def test_keyframed_blades_may_not_pass_through_refused_counts(small, how):
+    """blades 0 -> 6 rendered frames with 1 and 2 blades, which a fixed value refuses."""
+    if how == "set":
+        r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look", small / "look.yaml",
+                 "--set", "camera.blades=1:0,10:6")
+    else:
+        (small / "k.yaml").write_text("name: k\ncamera: {blades: {1: 0, 10: 6}}\n"
+                                      "effects:\n  - effect: vignette\n")
+        r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look", small / "k.yaml")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, "blades at frame 2 (between the keys at frames 1 and 10): 1 is not "
+                       "allowed")
+    assert not (small / "o.exr").exists()
+
+
+def test_integer_keys_far_apart_are_checked_value_by_value():
+    from clfx.core.camera import Camera
+    from clfx.pipeline import animation
+
+    def check(v, where):
+        try:
+            return Camera.validate("blades", v)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+
+    with pytest.raises(ValueError, match="between the keys at frames 1 and 1000000000"):
+        animation.parse({1: 0, 10 ** 9: 6}, check, "camera.blades", integer=True)
+    assert animation.parse({1: 3, 10 ** 9: 6}, check, "camera.blades", integer=True).at(5) == 3
+
+
+# -- stamps -------------------------------------------------------------------------------------
+def stamped(path, look_json: str):
+    """An EXR whose clfx:lookJSON attribute is ``look_json``."""
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec(8, 4, 4, "float")
+    spec.attribute("clfx:lookJSON", look_json)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec), oiio.geterror()
+    assert out.write_image(np.zeros((4, 8, 4), np.float32))
+    out.close()
+
+
+def test_a_stamp_with_a_key_twice_is_refused_as_a_look_file_is(small):
+    """Last one won in a stamp; a look file refuses it."""
+    stamped(small / "stamp.exr", '{"name": "x", "seed": 1, "seed": 2, "effects": []}')
+    r = clfx("-q", "render", small / "in.exr", small / "o.exr", "--look-from", small / "stamp.exr")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, "clfx:lookJSON has the key 'seed' twice")
+
+
+# -- --skip-existing ----------------------------------------------------------------------------
+def test_skip_existing_says_when_it_keeps_frames_of_another_look(small):
+    """Frames 1-2 of 'default' and 3-4 of 'cinema' side by side, both exit 0, no word."""
+    for f in range(1, 5):
+        os.link(small / "in.exr", small / f"in.{f:04d}.exr")
+    seq = (small / "in.####.exr", small / "o.####.exr")
+    r = clfx("-q", "render", *seq, "--look", small / "look.yaml", "--frames", "1-2")
+    assert r.returncode == 0, r.stderr
+    (small / "other.yaml").write_text("name: other\neffects:\n  - effect: vignette\n"
+                                      "    params: {radius: 0.25}\n")
+    r = clfx("-q", "render", *seq, "--look", small / "other.yaml", "--frames", "1-4",
+             "--skip-existing")
+    assert r.returncode == 0, r.stderr
+    warned = [ln for ln in r.stderr.decode().splitlines() if "--skip-existing keeps" in ln]
+    assert warned == ["clfx: warning: --skip-existing keeps frame(s) 1-2 rendered with another "
+                      "look or other parameters ('t'; this render: 'other'); use --overwrite "
+                      "to render them again"], r.stderr
+    r = clfx("-q", "render", *seq, "--look", small / "look.yaml", "--frames", "1-2",
+             "--skip-existing")
+    assert r.returncode == 0 and b"keeps" not in r.stderr, r.stderr
