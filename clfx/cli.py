@@ -261,6 +261,18 @@ def plugins(as_json):
         click.echo(f"{name:<22} {d.group:<10} v{d.version[0]}.{d.version[1]}  {d.summary}")
 
 
+def _check_render_args(args) -> None:
+    """Options passed through to every farm task (after ``--``) are parsed as ``clfx
+    render`` parses them, so an unknown option or a bad value fails here, not on every task
+    of the farm."""
+    try:
+        render.make_context("render", ["IN.####.exr", "OUT.####.exr", *args],
+                            parent=click.get_current_context(silent=True))
+    except click.UsageError as exc:
+        raise click.UsageError(f"after '--' (clfx render options for every task): "
+                               f"{exc.format_message()}") from None
+
+
 @cli.command()
 @click.argument("effect")
 @click.option("--json", "as_json", is_flag=True)
@@ -559,6 +571,7 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
     """Print an Open Job Description template whose tasks run `clfx render` on chunks."""
     from clfx.farm import openjd_template, openjd_yaml
 
+    _check_render_args(render_args)
     click.echo(openjd_yaml(openjd_template(
         input_path, output_path, look=look_name, assignments=assignments, frames=frames,
         chunk=chunk, quality=quality, render_args=render_args, name=name, clfx=clfx_command,

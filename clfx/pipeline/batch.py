@@ -860,6 +860,11 @@ class Batch:
         o = self.options
         check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
         if self.input_path == RAW or self.output_path == RAW:
+            given = [f"--{n}" for n in ("depth", "velocity") if getattr(o, f"{n}_path")]
+            if given:       # a raw pipe is RGB only, numbered from 0: no frame to match
+                raise ClfxError(f"{' and '.join(given)} cannot go with raw pipes ('-': RGB "
+                                f"frames only, numbered from 0); render EXR files with "
+                                f"{'those passes' if len(given) > 1 else 'that pass'} instead")
             self._prepare_raw()
             return
         frames = parse_frames(o.frames) if o.frames else None

@@ -285,3 +285,75 @@ def test_skip_existing_says_when_it_keeps_frames_of_another_look(small):
     r = clfx("-q", "render", *seq, "--look", small / "look.yaml", "--frames", "1-2",
              "--skip-existing")
     assert r.returncode == 0 and b"keeps" not in r.stderr, r.stderr
+
+
+# -- raw pipes ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("option", ["--depth", "--velocity"])
+def test_passes_with_raw_pipes_are_refused_not_ignored(small, option):
+    """'dof skipped: no depth pass' although --depth was given."""
+    r = subprocess.run(CLFX + ["-q", "render", "-", "-", "--raw", "8x4", "--look", "cinema",
+                               option, str(small / "in.exr")],
+                       input=np.zeros((3, 4, 8), np.float32).tobytes(), capture_output=True,
+                       timeout=60, check=False)
+    assert r.returncode == 1 and not r.stdout, r.stderr
+    one_line(r.stderr, f"{option} cannot go with raw pipes")
+
+
+# -- OpenJD export ------------------------------------------------------------------------------
+@pytest.fixture
+def shot(small):
+    for f in range(1, 4):
+        os.link(small / "in.exr", small / f"in.{f:04d}.exr")
+    return small / "in.####.exr", small / "o.####.exr"
+
+
+def test_openjd_keeps_user_text_with_braces_literal(shot, tmp_path):
+    """``--log {{Param.ClfxCommand}}.txt`` was expanded by the farm at run time."""
+    import yaml
+
+    r = clfx("farm", "openjd", *shot, "--set", "vignette.radius=0.3", "--",
+             "--log", "{{Param.ClfxCommand}}.txt")
+    assert r.returncode == 0, r.stderr
+    template = yaml.safe_load(r.stdout)
+    args = template["steps"][0]["script"]["actions"]["onRun"]["args"]
+    assert args[-2:] == ["--log", "{{Param.Arg1}}"]
+    assert args.count("--skip-existing") == 1 and "vignette.radius=0.3" in args
+    arg1 = next(p for p in template["parameterDefinitions"] if p["name"] == "Arg1")
+    assert arg1["default"] == "{{Param.ClfxCommand}}.txt"
+    (tmp_path / "job.yaml").write_text(r.stdout.decode())
+    check = subprocess.run([os.path.join(os.path.dirname(sys.executable), "openjd"), "check",
+                            str(tmp_path / "job.yaml")], capture_output=True, timeout=60)
+    assert check.returncode == 0, check.stdout + check.stderr
+
+
+@pytest.mark.parametrize("args,message", [
+    (("--name", "a {{bogus}}"), "name: Variable bogus does not exist"),
+    (("--name", "x" * 300), "name must be at most 128 characters long"),
+])
+def test_an_invalid_openjd_template_is_refused_not_printed(shot, args, message):
+    """Printed with exit 0; `openjd check` refused it."""
+    r = clfx("farm", "openjd", *shot, *args)
+    assert r.returncode == 1 and not r.stdout, r.stderr
+    one_line(r.stderr, "the OpenJD template would be invalid", message)
+
+
+def test_a_look_path_with_braces_makes_a_valid_template(shot, small):
+    import yaml
+
+    folder = small / "lk{{Param.Look}}"
+    folder.mkdir()
+    (folder / "l{{Param.Look}}.yaml").write_text("name: l\neffects: []\n")
+    r = clfx("farm", "openjd", *shot, "--look", folder / "l{{Param.Look}}.yaml")
+    assert r.returncode == 0, r.stderr
+    assert "{" not in yaml.safe_load(r.stdout)["name"]
+
+
+@pytest.mark.parametrize("args,message", [
+    (("--bogus-opt", "1"), "No such option '--bogus-opt'"),
+    (("--quality", "ultra"), "'ultra' is not one of"),
+])
+def test_openjd_pass_through_options_are_checked_as_render_options(shot, args, message):
+    """``-- --bogus-opt 1`` was copied into every task."""
+    r = clfx("farm", "openjd", *shot, "--", *args)
+    assert r.returncode == 2 and not r.stdout, r.stderr
+    one_line(r.stderr, "after '--' (clfx render options for every task)", message)
