@@ -43,12 +43,18 @@ def meter(mean_lum) -> float:
     return float(np.exp(np.mean(np.log(np.maximum(m, METER_FLOOR * avg)))))
 
 
+EXPOSURE_MIN = 1e-30
+"""The least exposure reference: below it (a plate of denormals metered, a stated 1e-40) the
+effects' per-unit gains (``1 / E``) would overflow float32; no plate with an image is near it."""
+
+
 def exposure_reference(p, ctx) -> float:
     """The scene-linear value an exposure-relative effect (grain, sensor noise) takes as
-    middle grey: its ``middle_grey`` param, or (0) metered from the frame's analysis."""
+    middle grey: its ``middle_grey`` param, or (0) metered from the frame's analysis; at
+    least `EXPOSURE_MIN`."""
     if p.middle_grey > 0.0:
-        return float(p.middle_grey)
-    return meter(ctx.analysis.mean_lum)
+        return max(float(p.middle_grey), EXPOSURE_MIN)
+    return max(meter(ctx.analysis.mean_lum), EXPOSURE_MIN)
 
 
 @dataclass
@@ -121,7 +127,10 @@ class SceneAnalysis:
         sources = []
         for lab in range(1, labels.max() + 1):
             ys, xs = np.nonzero(labels == lab)
-            w = self.mean_lum[ys, xs] * self.tile ** 2
+            w = self.mean_lum[ys, xs].astype(np.float64) * self.tile ** 2
+            energy = float(w.sum())
+            if not math.isfinite(energy):   # tiles near 3e38 overflowed their float32 mean:
+                w = np.isinf(w).astype(np.float64)     # they dominate, equally
             cx = self.window.x0 + (xs + 0.5) * self.tile
             cy = self.window.y0 + (ys + 0.5) * self.tile
             wsum = float(w.sum()) or 1.0
@@ -132,7 +141,7 @@ class SceneAnalysis:
             if bbox.intersect(near).empty:
                 continue
             sources.append(LightSource(float((w * cx).sum() / wsum), float((w * cy).sum() / wsum),
-                                       bbox, float(self.max_lum[ys, xs].max()), float(w.sum()),
+                                       bbox, float(self.max_lum[ys, xs].max()), energy,
                                        not bbox.intersect(self.display_window).empty))
         return sorted(sources, key=lambda s: -s.energy)
 

@@ -357,3 +357,43 @@ def test_openjd_pass_through_options_are_checked_as_render_options(shot, args, m
     r = clfx("farm", "openjd", *shot, "--", *args)
     assert r.returncode == 2 and not r.stdout, r.stderr
     one_line(r.stderr, "after '--' (clfx render options for every task)", message)
+
+
+# -- Cryptomatte --------------------------------------------------------------------------------
+def test_a_manifest_id_no_pixel_carries_is_said(tmp_path, rt, capfd):
+    """A manifest mapping a name to a number (read as hex: an id no pixel has) selected
+    nothing, said only by --explain."""
+    import json
+
+    import clfx
+    from tests.test_mask_refusals import _crypto_file, masked
+
+    _crypto_file(tmp_path / "in.exr", json.dumps({"boxA": 12345, "boxB": "0"}))
+    clfx.render_file(tmp_path / "in.exr", tmp_path / "o.exr",
+                     masked({"cryptomatte": "CryptoObject", "names": ["boxA"]}))
+    err = [ln for ln in capfd.readouterr().err.splitlines() if "selects no pixel" in ln]
+    assert len(err) == 1 and err[0].startswith("clfx: warning: mask cryptomatte "
+                                               "CryptoObject[boxA]: selects no pixel of frame"), err
+
+
+# -- numbers at the ends of float32 -------------------------------------------------------------
+@pytest.mark.parametrize("effect,value,args", [
+    ("lens_flare", 3e38, ()),
+    ("grain", 1e-40, ()),
+    ("sensor_noise", 1e-40, ("middle_grey=0",)),
+    ("sensor_noise", 1e-40, ("middle_grey=1e-40",)),
+])
+def test_extreme_values_leak_no_numpy_warning(tmp_path, effect, value, args):
+    """A NaN light centre (3e38) and 1/grey overflowing float32 (denormals) were numpy
+    RuntimeWarnings with no clfx message."""
+    import OpenImageIO as oiio
+
+    rgba = np.full((16, 24, 4), value, np.float32)
+    rgba[..., 3] = 1
+    out = oiio.ImageOutput.create(str(tmp_path / "in.exr"))
+    out.open(str(tmp_path / "in.exr"), oiio.ImageSpec(24, 16, 4, "float"))
+    out.write_image(rgba)
+    out.close()
+    r = clfx("-q", "apply", effect, tmp_path / "in.exr", tmp_path / "o.exr", *args,
+             env={"PYTHONWARNINGS": "error::RuntimeWarning"})
+    assert r.returncode == 0 and b"Warning" not in r.stderr, r.stderr
