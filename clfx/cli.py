@@ -668,7 +668,8 @@ def _progress(show: bool):
 
 @cli.command()
 @click.argument("outdir", default="clfx-demo", required=False)
-@click.option("--frames", "count", default=24, show_default=True, help="Number of frames.")
+@click.option("--frames", "count", type=click.IntRange(min=1), default=24, show_default=True,
+              help="Number of frames.")
 @click.option("--size", default="640x360", show_default=True, help="WxH.")
 @click.option("--look", "look_name", default="default", show_default=True)
 @quality_option

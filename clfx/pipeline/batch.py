@@ -876,6 +876,8 @@ class Batch:
         inputs = resolve_inputs(pin, frames, skip_missing=o.skip_missing)
         if not inputs:
             raise SequenceError(f"no input frames found for {self.input_path}")
+        if frames is None and pin.is_sequence:
+            self._say_gaps([f for f, _ in inputs])
         aux = {}
         for name in ("depth", "velocity"):
             path = getattr(o, f"{name}_path")
@@ -913,6 +915,22 @@ class Batch:
         info = probe_file(jobs[0].input)
         width = info["parts"][info["beauty"]["part"]]["display_window"]["width"]
         return self.look.camera.focal_length_px(width)
+
+    def _say_gaps(self, found: list[int]) -> None:
+        """One notice when the frames found on disk (no --frames) skip some: a missing frame
+        is not rendered, and the output has the same hole.  Evenly stepped frames (every
+        other frame on disk) are a sequence, not a gap."""
+        steps = {b - a for a, b in zip(found, found[1:])}
+        if len(steps) < 2:
+            return
+        step = min(steps)
+        gaps = [(a + step, b - step) for a, b in zip(found, found[1:]) if b - a > step]
+        shown = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in gaps[:5])
+        more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
+        self.reporter.notice(f"{self.input_path} has gaps on disk: frame(s) {shown}{more} "
+                             f"missing between {found[0]} and {found[-1]}; rendering the "
+                             f"{len(found)} there (--frames {found[0]}-{found[-1]} would "
+                             f"refuse)", "gaps")
 
     def _check_masks(self, jobs: list[Job]) -> None:
         """Every masked step's mask can be made: its files exist, its channel, layer and

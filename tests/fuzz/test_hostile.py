@@ -397,3 +397,57 @@ def test_extreme_values_leak_no_numpy_warning(tmp_path, effect, value, args):
     r = clfx("-q", "apply", effect, tmp_path / "in.exr", tmp_path / "o.exr", *args,
              env={"PYTHONWARNINGS": "error::RuntimeWarning"})
     assert r.returncode == 0 and b"Warning" not in r.stderr, r.stderr
+
+
+# -- minor --------------------------------------------------------------------------------------
+def test_a_gap_in_a_sequence_on_disk_is_one_notice(small):
+    for f in (1, 2, 4, 5):
+        os.link(small / "in.exr", small / f"in.{f:04d}.exr")
+    r = clfx("render", small / "in.####.exr", small / "o.####.exr", "--look", small / "look.yaml")
+    assert r.returncode == 0, r.stderr
+    said = [ln for ln in r.stderr.decode().splitlines() if "gaps" in ln]
+    assert len(said) == 1 and "frame(s) 3 missing between 1 and 5; rendering the 4 there" \
+        in said[0], r.stderr
+    for f in (1, 3, 5):      # evenly stepped: a sequence, not a gap
+        os.link(small / "in.exr", small / f"s.{f:04d}.exr")
+    r = clfx("render", small / "s.####.exr", small / "t.####.exr", "--look", small / "look.yaml")
+    assert r.returncode == 0 and b"gaps" not in r.stderr, r.stderr
+
+
+def test_a_truncated_png_is_clfx_line_alone(tmp_path):
+    """libpng printed 'libpng error: ...' on stderr before clfx's line."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(tmp_path / "p.png"))
+    out.open(str(tmp_path / "p.png"), oiio.ImageSpec(64, 64, 3, "uint8"))
+    out.write_image(np.random.default_rng(2).random((64, 64, 3), np.float32))
+    out.close()
+    data = (tmp_path / "p.png").read_bytes()
+    (tmp_path / "t.png").write_bytes(data[:len(data) // 2])
+    r = clfx("-q", "apply", "vignette", tmp_path / "t.png", tmp_path / "o.exr")
+    assert r.returncode == 1, r.stderr
+    one_line(r.stderr, "cannot read", "t.png")
+
+
+@pytest.mark.parametrize("where", ["input", "look-from", "depth"])
+def test_a_link_to_a_file_that_is_no_image_is_not_quoted(small, where):
+    """OpenEXR's error named the linked file's first 8 bytes (a key, a password file)."""
+    (small / "secret.txt").write_text("hunter2-secret\n")
+    os.symlink(small / "secret.txt", small / "lnk.exr")
+    args = {"input": ("apply", "vignette", small / "lnk.exr", small / "o.exr"),
+            "look-from": ("render", small / "in.exr", small / "o.exr", "--look-from",
+                          small / "lnk.exr"),
+            "depth": ("render", small / "in.exr", small / "o.exr", "--look", "cinema",
+                      "--depth", small / "lnk.exr")}[where]
+    r = clfx("-q", *args)
+    assert r.returncode == 1, r.stderr
+    err = one_line(r.stderr, "lnk.exr", "not an OpenEXR file")
+    assert "0x" not in err and "magic 0" not in err
+    assert not (small / "o.exr").exists()
+
+
+def test_demo_frames_zero_names_the_value_given():
+    """Said "invalid frame range '1-0'"."""
+    r = clfx("demo", "--frames", "0")
+    assert r.returncode == 2, r.stderr
+    one_line(r.stderr, "'--frames': 0 is not in the range x>=1")
