@@ -841,9 +841,50 @@ def _parse_size(text: str) -> tuple[int, int]:
         raise click.BadParameter(f"{text!r} is not WxH (e.g. 1920x1080)") from None
 
 
+SIGNAL_GRACE_S = 0.5
+"""After SIGTERM or SIGINT, how long the main thread has to stop by itself (its handler runs
+between Python statements) before the process ends regardless: a thread that hears the
+signal removes the temp files being written and exits 143 / 130 (the main thread may be
+inside one long call: an FFT plan, a device wait, numpy on a large array)."""
+
+
+def _watch_signals() -> None:
+    """Hear SIGTERM / SIGINT on a thread (Python's wakeup descriptor) whatever the main
+    thread is doing, and end the process `SIGNAL_GRACE_S` later if it is still running."""
+    import threading
+    import time
+
+    try:
+        r, w = os.pipe()
+        os.set_blocking(w, False)
+        signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+    except (OSError, ValueError):       # not the main thread (embedded): the handlers alone
+        return
+
+    def watch():
+        while True:
+            try:
+                data = os.read(r, 64)
+            except OSError:
+                return
+            for signum in data:
+                if signum in (signal.SIGTERM, signal.SIGINT):
+                    time.sleep(SIGNAL_GRACE_S)
+                    write = sys.modules.get("clfx.io.write")
+                    if write is not None:
+                        write.abandon_writes()
+                    term = signum == signal.SIGTERM
+                    with contextlib.suppress(Exception):
+                        os.write(2, b"clfx: terminated\n" if term else b"clfx: interrupted\n")
+                    os._exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED)
+
+    threading.Thread(target=watch, name="clfx-signals", daemon=True).start()
+
+
 def main(argv=None):
     """Entry point: ClfxError -> one line and exit 1; interrupts -> no partial files."""
     signal.signal(signal.SIGTERM, _on_sigterm)
+    _watch_signals()
     saved = sys.stdin, sys.stdout, sys.stderr
     sys.stdin = sys.stdin if sys.stdin is not None else _GuardedStream(None, "stdin")
     sys.stdout = _GuardedStream(sys.stdout, "stdout")

@@ -68,6 +68,7 @@ import os
 import re
 import secrets
 import socket
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
@@ -460,6 +461,22 @@ def _publish(tmp: str, path: str, overwrite: bool) -> None:
         os.unlink(tmp)
 
 
+_IN_FLIGHT: set[str] = set()
+"""Temp files being written now (`abandon_writes` removes them)."""
+_PUBLISHING = threading.Lock()
+"""Held while a temp file is moved into place, and for ever by `abandon_writes`."""
+
+
+def abandon_writes(timeout: float = 2.0) -> None:
+    """For a process about to end at once (a SIGTERM its main thread did not answer in
+    time): wait for a file being moved into place, then remove every temp file being
+    written and publish nothing more (the lock is kept)."""
+    _PUBLISHING.acquire(timeout=timeout)
+    for tmp in list(_IN_FLIGHT):
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+
+
 def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart],
                   overwrite: bool) -> None:
     tmp = _temp_path(path, folder)
@@ -469,10 +486,12 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart]
     except OSError as e:
         raise ImageIOError(f"cannot write {path}: folder {folder} is not writable "
                            f"({e.strerror})") from None
+    _IN_FLIGHT.add(tmp)
     try:
         _encode_file(tmp, path, fmt, parts)
         _verify(tmp, path, fmt, [p.spec for p in parts])
-        _publish(tmp, path, overwrite)
+        with _PUBLISHING:
+            _publish(tmp, path, overwrite)
     except OSError as e:
         raise fail(path, "cannot write", e.strerror or str(e)) from None
     except ImageIOError as e:
@@ -480,6 +499,7 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart]
             raise
         raise type(e)(str(e).replace(tmp, path)) from None    # name the output, not the temp
     finally:
+        _IN_FLIGHT.discard(tmp)
         with contextlib.suppress(OSError):
             os.remove(tmp)
 

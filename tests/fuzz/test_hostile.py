@@ -451,3 +451,38 @@ def test_demo_frames_zero_names_the_value_given():
     r = clfx("demo", "--frames", "0")
     assert r.returncode == 2, r.stderr
     one_line(r.stderr, "'--frames': 0 is not in the range x>=1")
+
+
+# -- signals ------------------------------------------------------------------------------------
+STUCK = """
+import signal, sys, time
+import clfx.cli as cli
+from clfx.io import write
+for s in (signal.SIGTERM, signal.SIGINT):         # a main thread that never gets to react
+    signal.signal(s, lambda *a: None)
+cli._watch_signals()
+open(sys.argv[1], "w").close()
+write._IN_FLIGHT.add(sys.argv[1])                 # a frame being written
+print("ready", flush=True)
+time.sleep(120)
+"""
+
+
+@pytest.mark.parametrize("sig,code", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_signal_ends_the_process_while_the_main_thread_is_stuck(tmp_path, sig, code):
+    """A 65535x1 frame under a look ignored SIGTERM for minutes: the main thread was inside
+    one long call (a PSF build, an FFT plan) and Python's handler never ran."""
+    import signal
+
+    tmp = tmp_path / ".o.exr.tmp-1-00000000-00000000.exr"
+    proc = subprocess.Popen([sys.executable, "-c", STUCK, str(tmp)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    try:
+        assert proc.stdout.readline() == b"ready\n"
+        proc.send_signal(getattr(signal, sig))
+        _, err = proc.communicate(timeout=60)       # without the watcher: 120 s
+    finally:
+        proc.kill()
+    assert proc.returncode == code, err
+    assert err.decode().strip() == ("clfx: terminated" if code == 143 else "clfx: interrupted")
+    assert not tmp.exists()
