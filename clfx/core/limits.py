@@ -94,6 +94,24 @@ def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> f
     return MEMORY_BASE_MIB + pool_mib + per_pixel * pixels / 2 ** 20
 
 
+DERIVED_MIN_BYTES = 256 * 2 ** 20
+"""The least a derived buffer may take whatever the frame (a PSF for a small frame)."""
+
+
+def check_derived(cells: int, bytes_per_cell: int, frame_w: int, frame_h: int,
+                  pool_bytes: int, what: str, exc: type[ClfxError] = ClfxError) -> None:
+    """Refuse, before allocating, a buffer derived from a ``frame_w`` x ``frame_h`` frame
+    (a PSF sized from its diagonal: a thin 65535x1 frame's is 19661^2) whose ``cells`` x
+    ``bytes_per_cell`` exceed the frame's share of the memory budget: ``CLFX_POOL_MB`` (at
+    least 256 MiB) + `MEMORY_BYTES_PER_PIXEL` x its pixels."""
+    need = cells * bytes_per_cell
+    budget = max(pool_bytes, DERIVED_MIN_BYTES) + MEMORY_BYTES_PER_PIXEL * frame_w * frame_h
+    if need > budget:
+        raise exc(f"{what} would take {need / 2 ** 30:.1f} GiB; the memory budget of a "
+                  f"{frame_w}x{frame_h} frame allows {budget / 2 ** 30:.2f} GiB (CLFX_POOL_MB "
+                  f"+ {MEMORY_BYTES_PER_PIXEL} bytes a pixel): lower its size")
+
+
 MAX_JSON_NESTING = 32
 """Deepest nesting of JSON arrays and objects clfx reads (a stamped look needs 5, a Cryptomatte
 manifest 1); deeper text is refused before parsing (Python's parser recurses per level)."""
