@@ -169,7 +169,7 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
         raise PresetError(f"{os.fspath(path)}: no clfx:lookJSON attribute (not rendered by clfx "
                           "with a stamped look)")
     data = load_json(text, f"{os.fspath(path)}: clfx:lookJSON", PresetError,
-                     max_bytes=MAX_LOOK_BYTES)     # the same limits as a look file
+                     max_bytes=MAX_LOOK_BYTES, unique_keys=True)   # as a look file
     from dataclasses import replace
 
     look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")

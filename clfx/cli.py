@@ -318,6 +318,18 @@ def plugins(as_json):
         click.echo(f"{name:<22} {d.group:<10} v{d.version[0]}.{d.version[1]}  {d.summary}")
 
 
+def _check_render_args(args) -> None:
+    """Options passed through to every farm task (after ``--``) are parsed as ``clfx
+    render`` parses them, so an unknown option or a bad value fails here, not on every task
+    of the farm."""
+    try:
+        render.make_context("render", ["IN.####.exr", "OUT.####.exr", *args],
+                            parent=click.get_current_context(silent=True))
+    except click.UsageError as exc:
+        raise click.UsageError(f"after '--' (clfx render options for every task): "
+                               f"{exc.format_message()}") from None
+
+
 @cli.command()
 @click.argument("effect")
 @click.option("--json", "as_json", is_flag=True)
@@ -637,6 +649,7 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
     """Print an Open Job Description template whose tasks run `clfx render` on chunks."""
     from clfx.farm import openjd_template, openjd_yaml
 
+    _check_render_args(render_args)
     click.echo(openjd_yaml(openjd_template(
         input_path, output_path, look=look_name, assignments=assignments, frames=frames,
         chunk=chunk, quality=quality, render_args=render_args, name=name, clfx=clfx_command,
@@ -749,7 +762,8 @@ def _progress(show: bool):
 
 @cli.command()
 @click.argument("outdir", default="clfx-demo", required=False)
-@click.option("--frames", "count", default=24, show_default=True, help="Number of frames.")
+@click.option("--frames", "count", type=click.IntRange(min=1), default=24, show_default=True,
+              help="Number of frames.")
 @click.option("--size", default="640x360", show_default=True, help="WxH.")
 @click.option("--look", "look_name", default="default", show_default=True)
 @quality_option
@@ -848,11 +862,18 @@ def _bench_looks(ctx, param, value):
 def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path, md_path):
     """What accuracy costs in time: every effect at every quality level against its reference
     (with OpenCV/SciPy peers), whole looks, sequence throughput, and scene-analysis skipping."""
-    from clfx.bench.plots import pareto_plot
+    from clfx.bench.plots import check_plot_path, pareto_plot
     from clfx.bench.report import markdown
     from clfx.bench.runner import run_bench
+    from clfx.core.limits import check_pixels
 
     w, h = _parse_size(size)
+    check_pixels(w, h, "--size")
+    if plot_path:
+        check_plot_path(plot_path)
+    for option, path in (("--markdown", md_path), ("--plot", plot_path)):
+        if path:
+            _check_writable(path, option)
     look_list = None if looks is None else ([] if looks == "none" else looks.split(","))
     verbose = ctx.obj.get("verbosity", 1) > 0
     effect_list = None if effects is None else ([] if effects == "none" else effects.split(","))
@@ -861,11 +882,15 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
                         sequence_frames=sequence_frames,
                         log=(lambda m: click.echo(m, err=True)) if verbose else (lambda m: None))
     table = markdown(results)
-    if md_path:
-        with open(md_path, "w") as f:
-            f.write(table)
-    if plot_path:
-        pareto_plot(results, plot_path)
+    try:
+        if md_path:
+            with open(md_path, "w") as f:
+                f.write(table)
+        if plot_path:
+            pareto_plot(results, plot_path)
+    except OSError as exc:
+        raise ClfxError(f"cannot write {exc.filename or md_path}: {exc.strerror or exc}") \
+            from None
     if as_json:
         click.echo(json.dumps(results, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
     else:
@@ -910,6 +935,37 @@ def prebuild(ctx, looks, levels, size):
                f"in {total:.1f} s")
 
 
+def _check_writable(path: str, option: str) -> None:
+    """Refuse, before a long run, an output file that cannot take what it will be given: a
+    folder, a FIFO (it would block), a missing or read-only folder, a device that refuses a
+    byte (/dev/full) or a file system without a free block."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise ClfxError(f"cannot write {option} {path}: {exc.strerror}") from None
+    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISCHR(mode)):
+        raise ClfxError(f"cannot write {option} {path}: "
+                        f"{'a folder' if stat.S_ISDIR(mode) else 'not a regular file'}")
+    try:
+        if mode is not None and stat.S_ISCHR(mode):
+            with open(path, "wb", buffering=0) as f:
+                f.write(b"\n")                   # /dev/null takes it, /dev/full does not
+            return
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            raise FileNotFoundError(2, f"no folder {folder}")
+        if not os.access(folder, os.W_OK) or (mode is not None and not os.access(path, os.W_OK)):
+            raise PermissionError(13, "Permission denied")
+        if os.statvfs(folder).f_bavail == 0:
+            raise OSError(28, "No space left on device")
+    except OSError as exc:
+        raise ClfxError(f"cannot write {option} {path}: {exc.strerror or exc}") from None
+
+
 def _parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -920,9 +976,50 @@ def _parse_size(text: str) -> tuple[int, int]:
         raise click.BadParameter(f"{text!r} is not WxH (e.g. 1920x1080)") from None
 
 
+SIGNAL_GRACE_S = 0.5
+"""After SIGTERM or SIGINT, how long the main thread has to stop by itself (its handler runs
+between Python statements) before the process ends regardless: a thread that hears the
+signal removes the temp files being written and exits 143 / 130 (the main thread may be
+inside one long call: an FFT plan, a device wait, numpy on a large array)."""
+
+
+def _watch_signals() -> None:
+    """Hear SIGTERM / SIGINT on a thread (Python's wakeup descriptor) whatever the main
+    thread is doing, and end the process `SIGNAL_GRACE_S` later if it is still running."""
+    import threading
+    import time
+
+    try:
+        r, w = os.pipe()
+        os.set_blocking(w, False)
+        signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+    except (OSError, ValueError):       # not the main thread (embedded): the handlers alone
+        return
+
+    def watch():
+        while True:
+            try:
+                data = os.read(r, 64)
+            except OSError:
+                return
+            for signum in data:
+                if signum in (signal.SIGTERM, signal.SIGINT):
+                    time.sleep(SIGNAL_GRACE_S)
+                    write = sys.modules.get("clfx.io.write")
+                    if write is not None:
+                        write.abandon_writes()
+                    term = signum == signal.SIGTERM
+                    with contextlib.suppress(Exception):
+                        os.write(2, b"clfx: terminated\n" if term else b"clfx: interrupted\n")
+                    os._exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED)
+
+    threading.Thread(target=watch, name="clfx-signals", daemon=True).start()
+
+
 def main(argv=None):
     """Entry point: ClfxError -> one line and exit 1; interrupts -> no partial files."""
     signal.signal(signal.SIGTERM, _on_sigterm)
+    _watch_signals()
     saved = sys.stdin, sys.stdout, sys.stderr
     sys.stdin = sys.stdin if sys.stdin is not None else _GuardedStream(None, "stdin")
     sys.stdout = _GuardedStream(sys.stdout, "stdout")

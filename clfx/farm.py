@@ -19,7 +19,7 @@ import os
 
 import yaml
 
-from clfx.core.errors import SequenceError
+from clfx.core.errors import ClfxError, SequenceError
 from clfx.io.sequence import Pattern, compact, parse_frames
 from clfx.pipeline.presets import apply_overrides, load_look
 
@@ -148,16 +148,19 @@ def openjd_template(input_path: str, output_path: str, *, look: str = "default",
     else:
         frames_param = {"name": "Frames", "type": "STRING",
                         "range": chunk_ranges(frame_list, chunk)}
+    user = task_args("", "", "", "", assignments=assignments, quality=quality,
+                     render_args=render_args)[len(task_args("", "", "", "")):]
+    literal, user = _literal_args(user)
+    params += literal
     args = task_args("{{Param.InputDir}}/{{Param.InputName}}",
                      "{{Param.OutputDir}}/{{Param.OutputName}}",
                      "{{Param.LookFile}}" if look_file else "{{Param.Look}}",
-                     "{{Task.Param.Frames}}", assignments=assignments, quality=quality,
-                     render_args=render_args)
+                     "{{Task.Param.Frames}}") + user
     template = {"specificationVersion": SPEC_VERSION}
     if task_chunking:
         template["extensions"] = ["TASK_CHUNKING"]
     template.update({
-        "name": name or f"clfx {os.path.basename(look)} {in_name}",
+        "name": name or _plain(f"clfx {os.path.basename(look)} {in_name}")[:MAX_NAME],
         "description": f"clfx render {input_path} -> {output_path}, look {look}, "
                        f"{len(frame_list)} frame(s), {chunk} per task",
         "parameterDefinitions": params,
@@ -172,7 +175,52 @@ def openjd_template(input_path: str, output_path: str, *, look: str = "default",
             }}},
         }],
     })
+    check_template(template, path_params=path_params)
     return template
+
+
+MAX_NAME = 128
+"""OpenJD's longest job name."""
+
+
+def _plain(text: str) -> str:
+    """``text`` without braces: a default job name (a format string) built from file names."""
+    return text.replace("{", "").replace("}", "")
+
+
+def _literal_args(args: list[str]) -> tuple[list[dict], list[str]]:
+    """Task arguments are OpenJD format strings, which have no escape for ``{{``: each user
+    argument with a brace becomes a STRING job parameter (``Arg1``...; values are never
+    expanded) that the argument names.  Returns (those parameters, the arguments)."""
+    params, out = [], []
+    for a in args:
+        if "{" in a or "}" in a:
+            pname = f"Arg{len(params) + 1}"
+            params.append(_string_param(pname, a, "A clfx render argument, kept as written."))
+            a = "{{Param.%s}}" % pname
+        out.append(a)
+    return params, out
+
+
+def check_template(template: dict, *, path_params: bool = False) -> None:
+    """Refuse a template OpenJD would refuse (`openjd check`, and a job made from its
+    defaults), in one line naming what OpenJD says."""
+    from openjd.model import DecodeValidationError, create_job, decode_job_template
+
+    try:
+        decoded = decode_job_template(template=template,
+                                      supported_extensions=template.get("extensions", []))
+        if not path_params:       # PATH parameters have no defaults: given at submission
+            create_job(job_template=decoded, job_parameter_values={})
+    except (DecodeValidationError, ValueError) as exc:
+        lines = [line.strip() for line in str(exc).splitlines()[1:] if line.strip()]
+        what = "; ".join(f"{a} {b}" for a, b in zip(lines[::2], lines[1::2])) or \
+            " ".join(str(exc).split())
+        raise FarmError(f"the OpenJD template would be invalid: {what}") from None
+
+
+class FarmError(ClfxError):
+    """A job description a farm would refuse."""
 
 
 def openjd_yaml(template: dict) -> str:

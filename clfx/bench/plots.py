@@ -2,6 +2,25 @@
 from __future__ import annotations
 
 
+def check_plot_path(path: str) -> None:
+    """Refuse, before a bench runs, a --plot file matplotlib cannot write (its extension names
+    no format it has, or matplotlib is missing)."""
+    import os
+
+    from clfx.core.errors import ClfxError
+
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError as exc:
+        raise ClfxError("--plot needs matplotlib: pip install 'clfx[plot]'") from exc
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    if ext not in kinds:
+        raise ClfxError(f"--plot {path}: {('.' + ext) if ext else 'no extension'} is not a "
+                        f"format matplotlib writes; expected one of "
+                        f"{', '.join('.' + k for k in sorted(kinds))}")
+
+
 def pareto_plot(results: dict, path: str) -> None:
     """Time vs relative error, one line per effect (needs matplotlib: the [plot] extra)."""
     try:

@@ -5,14 +5,37 @@ light-spreading effect's grown window, an FFT grid); ``CLFX_MAX_PIXELS`` overrid
 """
 from __future__ import annotations
 
+import math
 import os
 
 from clfx.core.errors import ClfxError
 
+def env_int(name: str, default: int, *, minimum: int | None = None) -> int:
+    """The whole number in environment variable ``name`` (``default`` when unset or empty).
+    ``1e3`` reads as 1000; anything else that is not a whole number (``abc``, ``1.5``), or one
+    below ``minimum``, is a `ClfxError` naming the variable, in one line."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = int(text)
+    except ValueError:
+        try:
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not (math.isfinite(number) and number.is_integer()):
+            raise ClfxError(f"{name}={text!r} is not a whole number (e.g. {default})") from None
+        value = int(number)
+    if minimum is not None and value < minimum:
+        raise ClfxError(f"{name}={text!r} is below {minimum}")
+    return value
+
+
 MAX_SIDE = 65536
 """Largest width or height of any window, in pixels."""
 
-MAX_PIXELS = int(os.environ.get("CLFX_MAX_PIXELS", str(8192 * 8192)))
+MAX_PIXELS = env_int("CLFX_MAX_PIXELS", 8192 * 8192, minimum=1)
 """Largest area of any window or derived buffer, in pixels (``CLFX_MAX_PIXELS``; default
 8192 x 8192, a 1 GiB float RGBA frame: 8K DCI fits, a claimed 16384^2 does not)."""
 
@@ -55,7 +78,7 @@ the next frame read and the last one written while the device renders."""
 def tile_pixels() -> int | None:
     """The most pixels a step that tiles renders at once (`clfx.pipeline.look.render_tiled`):
     ``CLFX_TILE_PIXELS`` (unset or 0: whole frames)."""
-    value = int(os.environ.get("CLFX_TILE_PIXELS", "0") or 0)
+    value = env_int("CLFX_TILE_PIXELS", 0)
     return value if value > 0 else None
 
 
@@ -69,6 +92,24 @@ def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> f
     if sequence and pixels <= OVERLAP_MAX_PIXELS:
         per_pixel += MEMORY_OVERLAP_BYTES_PER_PIXEL
     return MEMORY_BASE_MIB + pool_mib + per_pixel * pixels / 2 ** 20
+
+
+DERIVED_MIN_BYTES = 256 * 2 ** 20
+"""The least a derived buffer may take whatever the frame (a PSF for a small frame)."""
+
+
+def check_derived(cells: int, bytes_per_cell: int, frame_w: int, frame_h: int,
+                  pool_bytes: int, what: str, exc: type[ClfxError] = ClfxError) -> None:
+    """Refuse, before allocating, a buffer derived from a ``frame_w`` x ``frame_h`` frame
+    (a PSF sized from its diagonal: a thin 65535x1 frame's is 19661^2) whose ``cells`` x
+    ``bytes_per_cell`` exceed the frame's share of the memory budget: ``CLFX_POOL_MB`` (at
+    least 256 MiB) + `MEMORY_BYTES_PER_PIXEL` x its pixels."""
+    need = cells * bytes_per_cell
+    budget = max(pool_bytes, DERIVED_MIN_BYTES) + MEMORY_BYTES_PER_PIXEL * frame_w * frame_h
+    if need > budget:
+        raise exc(f"{what} would take {need / 2 ** 30:.1f} GiB; the memory budget of a "
+                  f"{frame_w}x{frame_h} frame allows {budget / 2 ** 30:.2f} GiB (CLFX_POOL_MB "
+                  f"+ {MEMORY_BYTES_PER_PIXEL} bytes a pixel): lower its size")
 
 
 MAX_JSON_NESTING = 32
@@ -91,11 +132,16 @@ def json_nesting(text: str) -> int:
     return deepest
 
 
+class _DuplicateKey(ValueError):
+    """A JSON object names a key twice."""
+
+
 def load_json(text: str, what: str, exc: type[ClfxError] = ClfxError, *,
-              max_bytes: int | None = None, max_depth: int = MAX_JSON_NESTING):
+              max_bytes: int | None = None, max_depth: int = MAX_JSON_NESTING, unique_keys: bool = False):
     """``json.loads(text)``, refusing in one line (``exc`` naming ``what``) text over
-    ``max_bytes`` (UTF-8), nested deeper than ``max_depth``, or not JSON (an integer of more
-    than Python's 4300 digits included)."""
+    ``max_bytes`` (UTF-8), nested deeper than ``max_depth``, with a key twice in one object
+    (``unique_keys``: as look files refuse), or not JSON (an integer of more than Python's 4300 digits
+    included)."""
     import json
 
     if max_bytes is not None and len(text) > max_bytes // 4 and len(text.encode()) > max_bytes:
@@ -103,7 +149,18 @@ def load_json(text: str, what: str, exc: type[ClfxError] = ClfxError, *,
     depth = json_nesting(text)
     if depth > max_depth:
         raise exc(f"{what} is nested {depth} levels deep; the limit is {max_depth}")
+    def unique(pairs):
+        out = {}
+        for key, value in pairs:
+            if key in out:
+                raise _DuplicateKey(key)
+            out[key] = value
+        return out
+
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=unique if unique_keys else None)
+    except _DuplicateKey as e:
+        raise exc(f"{what} has the key {e.args[0]!r} twice (JSON would keep the last one)") \
+            from None
     except (ValueError, RecursionError) as e:
         raise exc(f"{what} is not JSON ({' '.join(str(e).split())[:200]})") from None

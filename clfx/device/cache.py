@@ -33,9 +33,12 @@ from typing import Callable, Hashable, TypeVar
 
 import numpy as np
 
+from clfx.core.errors import DeviceError
+from clfx.core.limits import env_int
+
 T = TypeVar("T")
 
-DEFAULT_BUDGET_BYTES = int(os.environ.get("CLFX_POOL_MB", "512")) * 2 ** 20
+DEFAULT_BUDGET_BYTES = env_int("CLFX_POOL_MB", 512, minimum=0) * 2 ** 20
 """Bytes kept by idle pooled buffers and cached values together (``CLFX_POOL_MB``).  A 1080p
 look's buffers and spectra all fit, so a sequence allocates nothing after its first frame; at
 4K the largest FFT work buffers and spectra are released, bounding memory."""
@@ -177,7 +180,18 @@ class DeviceCache:
                     return buf
             self.device_bytes += nbytes      # PoCL: host memory (device buffers count in RSS)
             self.device_peak = max(self.device_peak, self.device_bytes)
-        return cl.Buffer(self._ctx, cl.mem_flags.READ_WRITE, nbytes)
+        try:
+            most = min(d.max_mem_alloc_size for d in self._ctx.devices)
+            if nbytes > most:
+                raise cl.Error(f"over the device's {most} bytes a buffer")
+            return cl.Buffer(self._ctx, cl.mem_flags.READ_WRITE, nbytes)
+        except (cl.Error, MemoryError) as exc:
+            with self._lock:
+                self.device_bytes -= nbytes
+            raise DeviceError(f"cannot allocate a device buffer of {nbytes / 2 ** 30:.2f} GiB "
+                              f"({' '.join(str(exc).split())[:120]}): a buffer derived from "
+                              f"the frame (a blur sized from the diagonal of a thin frame?) "
+                              f"is too large for the device") from None
 
     def give(self, nbytes: int, buf) -> None:
         """Return a buffer nobody uses any more: kept idle for reuse, within the budget."""

@@ -70,10 +70,15 @@ def meter(mean_lum) -> float:
     return float(np.exp(np.mean(np.clip(logs, lo, hi))))
 
 
+EXPOSURE_MIN = 1e-30
+"""The least exposure reference: below it (a plate of denormals metered, a stated 1e-40) the
+effects' per-unit gains (``1 / E``) would overflow float32; no plate with an image is near it."""
+
+
 def exposure_reference(p, ctx, effect: str) -> float:
     """The scene-linear value an exposure-relative effect (grain, sensor noise) takes as
     middle grey: its ``middle_grey`` param, or (0, "auto") `meter` on the frame's analysis
-    (the whole frame's, in bands too).  Metered, a note for ``--explain`` says the value,
+    (the whole frame's, in bands too); at least `EXPOSURE_MIN`.  Metered, a note for ``--explain`` says the value,
     so a shot whose light changes can pin it (``middle_grey: <that value>``).
 
     Parameters
@@ -86,14 +91,14 @@ def exposure_reference(p, ctx, effect: str) -> float:
         The effect's name, for the note.
     """
     if p.middle_grey > 0.0:
-        return float(p.middle_grey)
+        return max(float(p.middle_grey), EXPOSURE_MIN)
     analysis = ctx.analysis
     grey = meter(analysis.mean_lum)
     lit = bool(np.any(np.asarray(analysis.mean_lum) > 0.0))
     ctx.notes.append(f"{effect}: middle grey metered at {grey:.4g} "
                      f"({math.log2(grey / MID_GREY):+.1f} stops from 0.18)" if lit else
                      f"{effect}: no light to meter: middle grey {MID_GREY}")
-    return grey
+    return max(grey, EXPOSURE_MIN)
 
 
 @dataclass
@@ -166,7 +171,10 @@ class SceneAnalysis:
         sources = []
         for lab in range(1, labels.max() + 1):
             ys, xs = np.nonzero(labels == lab)
-            w = self.mean_lum[ys, xs] * self.tile ** 2
+            w = self.mean_lum[ys, xs].astype(np.float64) * self.tile ** 2
+            energy = float(w.sum())
+            if not math.isfinite(energy):   # tiles near 3e38 overflowed their float32 mean:
+                w = np.isinf(w).astype(np.float64)     # they dominate, equally
             cx = self.window.x0 + (xs + 0.5) * self.tile
             cy = self.window.y0 + (ys + 0.5) * self.tile
             wsum = float(w.sum()) or 1.0
@@ -177,7 +185,7 @@ class SceneAnalysis:
             if bbox.intersect(near).empty:
                 continue
             sources.append(LightSource(float((w * cx).sum() / wsum), float((w * cy).sum() / wsum),
-                                       bbox, float(self.max_lum[ys, xs].max()), float(w.sum()),
+                                       bbox, float(self.max_lum[ys, xs].max()), energy,
                                        not bbox.intersect(self.display_window).empty))
         return sorted(sources, key=lambda s: -s.energy)
 

@@ -165,6 +165,30 @@ def full_region(support: Rect, kh: int, kw: int) -> Rect:
                 support.x1 + kw - 1 - cx, support.y1 + kh - 1 - cy)
 
 
+REACH_MARGIN = 2
+"""Taps kept past the farthest that can carry light from the support to the output
+(:func:`reachable`): the half-resolution method's tent filters reach one tap further."""
+
+
+def reachable(k: np.ndarray, support: Rect, out_window: Rect) -> np.ndarray:
+    """``k`` (centred, (kh, kw[, planes])) without the rows and columns that carry no light
+    from ``support`` to ``out_window``: a PSF sized from a thin frame's diagonal (65535x1:
+    19661 taps a side) only reaches the frame through its central rows, so the FFT grid
+    becomes (h + 2 r_eff) x (w + 2 r) with r_eff bounded by the frame's extent.  The same
+    ``k`` (no copy, the same bits) when everything can reach."""
+    kh, kw = k.shape[:2]
+    cy, cx = kh // 2, kw // 2
+    dy = max(out_window.y1 - 1 - support.y0, support.y1 - 1 - out_window.y0, 0) + REACH_MARGIN
+    dx = max(out_window.x1 - 1 - support.x0, support.x1 - 1 - out_window.x0, 0) + REACH_MARGIN
+    if dy >= kh - 1 - cy and dx >= kw - 1 - cx:
+        return k
+    if dy < kh - 1 - cy:
+        k = k[cy - dy:cy + dy + 1]
+    if dx < kw - 1 - cx:
+        k = k[:, cx - dx:cx + dx + 1]
+    return np.ascontiguousarray(k)
+
+
 def fft_grid(support: Rect, effective: Rect, kh: int, kw: int) -> tuple[int, int]:
     """(N1, N2) FFT grid for an input ``support`` and the output rectangle kept."""
     n1 = _axis_size(support.height, kh, kh // 2, effective.y0 - support.y0,
@@ -355,6 +379,7 @@ def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | No
     kh, kw = k.shape[:2]
     support = img.window if support is None else support.intersect(img.window)
     out_window = out_window or full_region(support, kh, kw)
+    k = reachable(k, support, out_window)
     return _convolve(rt, img, k, support, out_window, method, precision, threshold_split,
                      split_max_points, info)
 
@@ -858,6 +883,9 @@ def spread(rt, img, psf, level: SpreadLevel, *, out_window: Rect, support: Rect 
     the blocks).
     """
     k = _as_psf(psf)
+    window = support if support is not None else getattr(img, "window", None)
+    if window is not None:
+        k = reachable(k, window, out_window)
     taps = k.shape[0] * k.shape[1]
     common = dict(out_window=out_window, support=support, info=info, emit=emit)
     if taps <= DIRECT_MAX_TAPS:

@@ -89,6 +89,24 @@ class SpreadRegions:
         return ctx.analysis.highlight_bounds(self.raw_level(p, ctx))
 
 
+PSF_BYTES_PER_CELL = 48
+"""What building a PSF takes per cell of its (2r + 1)^2 grid: float64 coordinates, radii,
+values and the taper's terms (six arrays at the peak)."""
+
+
+def check_psf(name: str, radius: int, ctx) -> None:
+    """Refuse a PSF of ``radius`` px beyond the frame's memory budget, before building it
+    (`clfx.core.limits.check_derived`): a PSF is sized from the frame's diagonal, so a thin
+    frame (65535x1) asked for 19661^2 cells, 8 GB and more."""
+    from clfx.core.limits import check_derived
+
+    side = 2 * int(radius) + 1
+    win = ctx.source.window
+    check_derived(side * side, PSF_BYTES_PER_CELL, win.width, win.height,
+                  ctx.runtime.cache.max_bytes,
+                  f"{name}: its {side}x{side} PSF ({radius} px, from the frame's diagonal)")
+
+
 # -- the glare family ------------------------------------------------------------------
 class ScatterPlugin(SpreadRegions):
     """Shared machinery of glare, bleed and soft_focus: threshold -> PSF spread -> mix (a
@@ -113,6 +131,7 @@ class ScatterPlugin(SpreadRegions):
     def psf(self, p, ctx) -> np.ndarray:
         """The PSF for this parameter set and frame size (kept in the runtime's cache)."""
         r = self.radius_px(p, ctx)
+        check_psf(self.descriptor.name, r, ctx)
         key = (f"{self.descriptor.name}.psf", p.hash_hex(), r, ctx.width_px, ctx.camera)
         return ctx.runtime.cache.get(key, lambda: self.build_psf(p, ctx, r))
 

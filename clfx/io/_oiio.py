@@ -2,13 +2,19 @@
 limits, header attributes as plain values.  Private to `clfx.io`."""
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+import sys
+import tempfile
+import threading
 
 import OpenImageIO as oiio
 
 from clfx.core.errors import ImageIOError
 from clfx.core.limits import check_pixels
 from clfx.core.rect import Rect
+from clfx.io.sequence import shown
 
 # Attributes that describe the old file's layout or that writers reject: never carried over.
 _SKIP_NAMES = {
@@ -40,19 +46,27 @@ def oneline(msg: str) -> str:
     return " ".join(str(msg).split())
 
 
+_FILE_BYTES = re.compile(r"magic 0x[0-9A-Fa-f]+ \(-?\d+\) flags 0x[0-9A-Fa-f]+"
+                         r"(?: \(-?\d+\))?")
+"""OpenEXR's "not an OpenEXR file" names the file's first 8 bytes (as magic and flags): of a
+file that is no image (a link to a key, a password file), that is its content."""
+
+
 def geterror(obj=None) -> str:
     """OpenImageIO's pending error message (global or ``obj``'s), decoded even when a damaged
     file put invalid UTF-8 into it (the binding raises UnicodeDecodeError then)."""
     try:
-        return (obj.geterror() if obj is not None else oiio.geterror()) or ""
+        text = (obj.geterror() if obj is not None else oiio.geterror()) or ""
     except UnicodeDecodeError as e:
         raw = e.object if isinstance(e.object, bytes) else b""
-        return raw.decode("utf-8", "replace") or "undecodable error message"
+        text = raw.decode("utf-8", "replace") or "undecodable error message"
+    return _FILE_BYTES.sub("no OpenEXR magic number", text)
 
 
 def fail(path, what: str, detail: str = "") -> ImageIOError:
-    """``ImageIOError("<what> <path>: <detail>")`` on one line."""
-    detail = oneline(detail)
+    """``ImageIOError("<what> <path>: <detail>")`` on one line, never quoting the file's
+    own bytes."""
+    detail = _FILE_BYTES.sub("no OpenEXR magic number", oneline(detail))
     return ImageIOError(f"{what} {os.fspath(path)}" + (f": {detail}" if detail else ""))
 
 
@@ -140,8 +154,65 @@ def carry(name: str) -> bool:
     return name not in _SKIP_NAMES and not name.startswith(_SKIP_PREFIXES)
 
 
+_STDERR = threading.RLock()
+_quieted = 0
+
+
+@contextlib.contextmanager
+def codec_quiet(path: str):
+    """While a PNG is read, descriptor 2 goes to a temp file: libpng prints its errors on
+    stderr itself (``libpng error: IDAT: ...``) before OpenImageIO returns them, and clfx
+    says them in its own one line.  Whatever else was written meanwhile (other threads'
+    messages) is passed on afterwards; other formats are read as they are."""
+    global _quieted
+    try:
+        with open(path, "rb") as f:
+            png = f.read(8) == b"\x89PNG\r\n\x1a\n"
+    except OSError:
+        png = False
+    if not png:
+        yield
+        return
+    with _STDERR:
+        if _quieted:
+            yield
+            return
+        sys.stderr.flush()
+        saved = os.dup(2)
+        with tempfile.TemporaryFile() as held:
+            os.dup2(held.fileno(), 2)
+            _quieted += 1
+            try:
+                yield
+            finally:
+                _quieted -= 1
+                sys.stderr.flush()
+                os.dup2(saved, 2)
+                os.close(saved)
+                held.seek(0)
+                rest = [line for line in held.read().decode("utf-8", "replace").splitlines(True)
+                        if not line.startswith("libpng ")]
+                if rest:
+                    sys.stderr.write("".join(rest))
+
+
+def _utf8(text: str) -> str:
+    """``text`` as OpenImageIO can store it (UTF-8): what is not (a file name's non-UTF-8
+    bytes on the command line, a lone surrogate) as backslash escapes (`shown`)."""
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return shown(text)
+
+
 def set_attribute(spec, name: str, value) -> None:
-    """Set one JSON-able attribute on an output spec, guessing its type."""
+    """Set one JSON-able attribute on an output spec, guessing its type (text that is not
+    UTF-8 stamped with backslash escapes)."""
+    if isinstance(value, str):
+        value = _utf8(value)
+    elif isinstance(value, (list, tuple)) and any(isinstance(v, str) for v in value):
+        value = [_utf8(v) if isinstance(v, str) else v for v in value]
     if isinstance(value, bool):
         spec.attribute(name, int(value))
     elif isinstance(value, (int, float, str)):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -82,7 +83,13 @@ class LookLoader(yaml.SafeLoader):
         if digits > MAX_INT_DIGITS:      # Python refuses > 4300 digits with a ValueError
             raise Refused(f"an integer of {digits} digits (a look needs at most "
                            f"{MAX_INT_DIGITS})", node.start_mark)
-        return super().construct_yaml_int(node)
+        text = str(self.construct_scalar(node))
+        sign, body = (-1, text[1:]) if text[:1] == "-" else (1, text.lstrip("+"))
+        base = {"0o": 8, "0x": 16}.get(body[:2], 10)
+        try:                                        # YAML 1.2: 0777 is 777, not octal
+            return sign * int(body[2:] if base != 10 else body, base)
+        except ValueError:                          # an explicit !!int on text
+            raise Refused(f"{text!r} is not an integer", node.start_mark) from None
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
@@ -125,6 +132,26 @@ def read_text(path: Path) -> str:
 
 
 LookLoader.add_constructor("tag:yaml.org,2002:int", LookLoader.construct_yaml_int)
+
+# YAML 1.2 core schema for plain scalars (PyYAML resolves YAML 1.1): ``1:2.5`` is text, not
+# the base-60 number 62.5; ``0777`` is 777, not octal 511 (octal is ``0o777``); ``1e-3`` is a
+# number; only true/false (any case) are booleans, not yes/no/on/off/y/n; no ``1_000``.
+LookLoader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers
+            if tag not in ("tag:yaml.org,2002:bool", "tag:yaml.org,2002:int",
+                           "tag:yaml.org,2002:float")]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+LookLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+    list("tTfF"))
+LookLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:int", re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$"),
+    list("-+0123456789"))
+LookLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"),
+    list("-+.0123456789"))
 
 
 class Located:

@@ -71,7 +71,8 @@ from clfx.core.limits import OVERLAP_MAX_PIXELS
 from clfx.core.rect import Rect
 from clfx.io import channels as ch
 from clfx.io import colour
-from clfx.io._oiio import (check_window, fail, geterror, metadata, spec_data_window,
+from clfx.io._oiio import (check_window, codec_quiet, fail, geterror, metadata,
+                           spec_data_window,
                            spec_display_window, type_name)
 from clfx.io.sequence import check_input_file
 
@@ -212,13 +213,14 @@ class _File:
 def _open(path):
     """Open ``path`` with OpenImageIO; ImageIOError if missing or unreadable."""
     path = check_input_file(path)
-    inp = oiio.ImageInput.open(path)
-    if inp is None:
-        raise fail(path, "cannot read", geterror() or "unknown format or damaged file")
-    try:
-        yield inp
-    finally:
-        inp.close()
+    with codec_quiet(path):
+        inp = oiio.ImageInput.open(path)
+        if inp is None:
+            raise fail(path, "cannot read", geterror() or "unknown format or damaged file")
+        try:
+            yield inp
+        finally:
+            inp.close()
 
 
 def _part_from_spec(i: int, spec) -> _Part:

@@ -122,6 +122,33 @@ def parse_frames(spec: str) -> list[int]:
     return list(dict.fromkeys(f for r in ranges for f in r))
 
 
+def shown(path) -> str:
+    """``path`` as printable text: bytes that are not UTF-8 (a name from a Latin-1 file
+    system, ``caf\\xe9.exr``) and lone surrogates as backslash escapes."""
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        return text.decode("utf-8", "backslashreplace")
+    try:
+        return os.fsencode(text).decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("ascii")
+
+
+def check_name(path, verb: str = "cannot read") -> str:
+    """Refuse a file name OpenImageIO cannot take (it passes names as UTF-8 text): one whose
+    bytes are not UTF-8; return the path as a string."""
+    text = os.fspath(path)
+    try:
+        if isinstance(text, bytes):
+            text = text.decode("utf-8")
+        else:
+            text.encode("utf-8")
+    except UnicodeError:
+        raise ImageIOError(f"{verb} {shown(path)}: the name is not UTF-8 text, which "
+                           f"OpenImageIO cannot open; rename it") from None
+    return text
+
+
 def check_input_file(path, what: str = "input") -> str:
     """Refuse anything but an existing regular file, without opening it (a FIFO would block);
     return the path as a string.
@@ -132,8 +159,8 @@ def check_input_file(path, what: str = "input") -> str:
         ``cannot read <path>: no such file`` / ``it is a folder`` / ``not a regular file (a
         FIFO)``; ``what`` names the role (``"glare.kernel_path"``) when it is not a frame.
     """
-    path = os.fspath(path)
     role = "" if what == "input" else f" ({what})"
+    path = check_name(path)
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:

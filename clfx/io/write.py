@@ -76,6 +76,7 @@ import os
 import re
 import secrets
 import socket
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
@@ -89,7 +90,7 @@ from clfx.core.rect import Rect
 from clfx.io import colour
 from clfx.io._oiio import carry, check_window, fail, geterror, set_attribute
 from clfx.io.channels import beauty_out, beauty_out_names
-from clfx.io.sequence import check_input_file
+from clfx.io.sequence import check_input_file, check_name
 
 HALF_MAX = 65504.0
 
@@ -163,7 +164,7 @@ def check_output_format(path, bit_depth: str | None = None,
     ImageIOError
         Unsupported extension, bit depth or compression (the allowed ones listed).
     """
-    path = os.fspath(path)
+    path = check_name(path, "cannot write")
     fmt = _out_format(path)
     if bit_depth is not None and bit_depth not in fmt.bit_depths:
         raise ImageIOError(f"cannot write {path}: bit depth {bit_depth!r} not supported; "
@@ -469,6 +470,22 @@ def _publish(tmp: str, path: str, overwrite: bool) -> None:
         os.unlink(tmp)
 
 
+_IN_FLIGHT: set[str] = set()
+"""Temp files being written now (`abandon_writes` removes them)."""
+_PUBLISHING = threading.Lock()
+"""Held while a temp file is moved into place, and for ever by `abandon_writes`."""
+
+
+def abandon_writes(timeout: float = 2.0) -> None:
+    """For a process about to end at once (a SIGTERM its main thread did not answer in
+    time): wait for a file being moved into place, then remove every temp file being
+    written and publish nothing more (the lock is kept)."""
+    _PUBLISHING.acquire(timeout=timeout)
+    for tmp in list(_IN_FLIGHT):
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+
+
 def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart],
                   overwrite: bool) -> None:
     tmp = _temp_path(path, folder)
@@ -478,10 +495,12 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart]
     except OSError as e:
         raise ImageIOError(f"cannot write {path}: folder {folder} is not writable "
                            f"({e.strerror})") from None
+    _IN_FLIGHT.add(tmp)
     try:
         _encode_file(tmp, path, fmt, parts)
         _verify(tmp, path, fmt, [p.spec for p in parts])
-        _publish(tmp, path, overwrite)
+        with _PUBLISHING:
+            _publish(tmp, path, overwrite)
     except OSError as e:
         raise fail(path, "cannot write", e.strerror or str(e)) from None
     except ImageIOError as e:
@@ -489,6 +508,7 @@ def _atomic_write(path: str, folder: str, fmt: _OutFormat, parts: list[_OutPart]
             raise
         raise type(e)(str(e).replace(tmp, path)) from None    # name the output, not the temp
     finally:
+        _IN_FLIGHT.discard(tmp)
         with contextlib.suppress(OSError):
             os.remove(tmp)
 

@@ -14,11 +14,12 @@ may be keyframed by frame number instead of given one value::
   every key (a typo at frame 1040 is an error before any frame is read).
 - ``linear`` interpolates straight between neighbouring keys; ``smooth`` eases in and out of
   every key (smoothstep ``3t^2 - 2t^3`` between neighbours: zero slope at each key, no
-  overshoot).  Both stay between the neighbouring keys' values, so a value valid at every key
-  is valid at every frame.
+  overshoot).  Both stay between the neighbouring keys' values.
 - Before the first key the first value holds; after the last, the last (held outside).
 - Integer values (``blades``, sample counts) are rounded to the nearest whole number;
-  vectors and colours are interpolated per component.
+  vectors and colours are interpolated per component.  The whole numbers an integer value
+  passes through between keys are checked too (``blades`` keyed 0 then 6 would pass 1 and
+  2, which no blade count allows): one that is refused is an error naming its frame.
 - On the command line: ``--set camera.focus_distance=1001:2.0,1040:5.5`` (linear) or
   ``--set camera.focus_distance=smooth:1001:2.0,1040:5.5``.
 """
@@ -30,6 +31,9 @@ from typing import Any, Callable
 
 INTERPOLATIONS = ("linear", "smooth")
 MAX_KEYS = 10_000
+MAX_FRAMES_CHECKED = 100_000
+"""Integer values between keys further apart than this are checked value by value (every
+whole number between the keys' values), not frame by frame."""
 """More keys than frames in any shot: a look that needs more is a baked curve, not a look."""
 
 
@@ -129,7 +133,7 @@ def parse(value: dict, validate: Callable[[Any, str], Any], where: str, *,
         if isinstance(v, (dict, bool, str)) or v is None:
             raise ValueError(f"{where} at frame {frame}: {v!r} is not a number")
         parsed[frame] = validate(v, f"{where} at frame {frame}")
-    return Animated(tuple(sorted(parsed.items())), interp, integer)
+    return _checked(Animated(tuple(sorted(parsed.items())), interp, integer), validate, where)
 
 
 def parse_cli(text: str, parse_value: Callable[[str, str], Any], where: str, *,
@@ -150,7 +154,29 @@ def parse_cli(text: str, parse_value: Callable[[str, str], Any], where: str, *,
         if frame in keys:
             raise ValueError(f"{where}={text!r}: frame {frame} is keyed twice")
         keys[frame] = parse_value(v.strip(), f"{where} at frame {frame}")
-    return Animated(tuple(sorted(keys.items())), interp, integer)
+    return _checked(Animated(tuple(sorted(keys.items())), interp, integer),
+                    lambda v, w: parse_value(str(v), w), where)
+
+
+def _checked(anim: Animated, check: Callable[[Any, str], Any], where: str) -> Animated:
+    """``anim``, once every whole number an integer value reaches between its keys has
+    passed ``check(value, where)`` (the parameter's own validation)."""
+    if not anim.integer:
+        return anim
+    for (f0, v0), (f1, v1) in zip(anim.keys, anim.keys[1:]):
+        if abs(v1 - v0) < 2:
+            continue
+        between = f"between the keys at frames {f0} and {f1}"
+        if f1 - f0 <= MAX_FRAMES_CHECKED:
+            reached: dict[int, int] = {}
+            for frame in range(f0 + 1, f1):
+                reached.setdefault(anim.at(frame), frame)
+            for value, frame in reached.items():
+                check(value, f"{where} at frame {frame} ({between})")
+        else:
+            for value in range(min(v0, v1) + 1, max(v0, v1)):
+                check(value, f"{where} {between}")
+    return anim
 
 
 def looks_keyframed(text: str) -> bool:

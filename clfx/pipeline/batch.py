@@ -55,7 +55,7 @@ STREAM = os.environ.get("CLFX_STREAM", "auto")
 then write and read side by side), "overlap" (read and write while the device renders) or
 "auto": phased where the device is the CPU, overlap elsewhere (`stream_mode`)."""
 
-IO_NICE = int(os.environ.get("CLFX_IO_NICE", "10"))
+IO_NICE = limits.env_int("CLFX_IO_NICE", 10, minimum=0)
 """Overlap only: nice increment of the write thread, half of it for the read thread (Linux:
 per thread; ``CLFX_IO_NICE``), so that on a CPU device I/O gives way to the effects.  0
 leaves the threads alone.  Phased streams do not lower priorities: that stalls when other
@@ -838,6 +838,8 @@ class Batch:
     options: RenderOptions = field(default_factory=RenderOptions)
     verbosity: int = 1
     skipped_existing: list[int] = field(default_factory=list, init=False)
+    kept_other: list[tuple[int, str | None]] = field(default_factory=list, init=False)
+    _hash: str | None = field(default=None, init=False, repr=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
@@ -891,6 +893,11 @@ class Batch:
         o = self.options
         check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
         if self.input_path == RAW:
+            given = [f"--{n}" for n in ("depth", "velocity") if getattr(o, f"{n}_path")]
+            if given:       # raw frames on stdin are RGB only: no pass, no frame name to match
+                raise ClfxError(f"{' and '.join(given)} cannot go with raw frames on stdin ('-': "
+                                f"RGB only); render EXR files with "
+                                f"{'those passes' if len(given) > 1 else 'that pass'} instead")
             self._prepare_raw()
             return
         raw_out = self.output_path == RAW        # files to a raw stream on stdout
@@ -905,6 +912,8 @@ class Batch:
         inputs = resolve_inputs(pin, frames, skip_missing=o.skip_missing)
         if not inputs:
             raise SequenceError(f"no input frames found for {self.input_path}")
+        if frames is None and pin.is_sequence:
+            self._say_gaps([f for f, _ in inputs])
         aux = {}
         for name in ("depth", "velocity"):
             path = getattr(o, f"{name}_path")
@@ -980,6 +989,22 @@ class Batch:
         part = info["beauty"]["part"] if info["beauty"] else 0   # pass-only: read refuses it
         width = info["parts"][part]["display_window"]["width"]
         return self.look.camera.focal_length_px(width)
+
+    def _say_gaps(self, found: list[int]) -> None:
+        """One notice when the frames found on disk (no --frames) skip some: a missing frame
+        is not rendered, and the output has the same hole.  Evenly stepped frames (every
+        other frame on disk) are a sequence, not a gap."""
+        steps = {b - a for a, b in zip(found, found[1:])}
+        if len(steps) < 2:
+            return
+        step = min(steps)
+        gaps = [(a + step, b - step) for a, b in zip(found, found[1:]) if b - a > step]
+        shown = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in gaps[:5])
+        more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
+        self.reporter.notice(f"{self.input_path} has gaps on disk: frame(s) {shown}{more} "
+                             f"missing between {found[0]} and {found[-1]}; rendering the "
+                             f"{len(found)} there (--frames {found[0]}-{found[-1]} would "
+                             f"refuse)", "gaps")
 
     def _check_masks(self, jobs: list[Job]) -> None:
         """Every masked step's mask can be made: its files exist, its channel, layer and
@@ -1062,6 +1087,37 @@ class Batch:
         except OSError as exc:
             raise ImageIOError(f"cannot write {option('--log')} {path}: {exc.strerror}") from None
 
+    def _check_kept(self, job: Job) -> None:
+        """Note a frame --skip-existing keeps that another look or other parameters rendered
+        (its stamped ``clfx:paramsHash`` differs from this look's, or it has none)."""
+        from clfx.io.probe import header_attribute
+
+        try:
+            stamped = header_attribute(job.output, "clfx:paramsHash")
+            name = header_attribute(job.output, "clfx:look") if stamped else None
+        except ClfxError:
+            stamped = name = None               # unreadable: its render failed half-way?
+        if stamped != self._stamped_hash():
+            self.kept_other.append((job.frame, name))
+
+    def _stamped_hash(self) -> str:
+        """The ``clfx:paramsHash`` this render stamps (its look, quality levels resolved)."""
+        if self._hash is None:
+            self._hash = resolve_quality(self.look, self.options.quality)[0].params_hash()
+        return self._hash
+
+    def _kept_other_warning(self) -> str | None:
+        """One line for the frames kept from another look (`_check_kept`), or None."""
+        if not self.kept_other:
+            return None
+        from clfx.io.sequence import compact
+
+        names = sorted({n or "no clfx stamp" for _, n in self.kept_other})
+        return (f"clfx: warning: --skip-existing keeps frame(s) "
+                f"{compact(f for f, _ in self.kept_other)} rendered with another look or other "
+                f"parameters ({', '.join(map(repr, names))}; this render: {self.look.name!r}); "
+                f"use --overwrite to render them again")
+
     def _check_outputs(self, jobs: list[Job]) -> None:
         from clfx.io.write import check_output_format
 
@@ -1069,6 +1125,8 @@ class Batch:
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
                                 f"(add a frame token such as # to the output)")
+        check_output_format(outs[0], self.options.out_bit_depth(),
+                            self.options.compression)    # not after the first render
         _check_output_folder(outs[0])
         if self.options.skip_existing:
             from clfx.io.write import sweep_stale_temps
@@ -1082,14 +1140,13 @@ class Batch:
             if os.path.lexists(j.output):   # a dangling symlink counts
                 if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)
+                    self._check_kept(j)
                 elif not self.options.overwrite:
                     from clfx.io.write import OutputExistsError
 
                     raise OutputExistsError(f"output {j.output} exists (use {option('--overwrite')} "
                                             f"to replace it, or {option('--skip-existing')} to "
                                             f"resume)")
-        check_output_format(outs[0], self.options.out_bit_depth(),
-                            self.options.compression)    # not after the first render
 
     # -- running ------------------------------------------------------------------------
     @contextmanager
@@ -1120,6 +1177,8 @@ class Batch:
                 if self.skipped_existing and self.verbosity > 0:
                     reporter.err(f"clfx: skipping {len(self.skipped_existing)} frame(s) whose "
                                  f"output exists")
+                if self._kept_other_warning():
+                    reporter.err(self._kept_other_warning())
             first, self._first_read = self._first_read, None
             render_stream(rt, self.plan, jobs, reporter.frame, stats=self.stats, first=first)
             if raw and not reporter.reports and not reporter.failed:   # an empty stream is an

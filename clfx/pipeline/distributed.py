@@ -256,6 +256,36 @@ CONNECT_TIMEOUT_S = 10.0
 once); a port where something else listens is refused after this, not waited on."""
 
 
+HANDSHAKE_MAX_BYTES = 1 << 20
+"""A Dask scheduler's first message (its handshake: versions and options) is a few hundred
+bytes, announced by its length in 8 little-endian bytes; a listener whose first 8 bytes
+announce more is something else (an SSH or SMTP banner read as a length is exabytes)."""
+
+
+def _check_handshake(sock: socket.socket, address: str) -> None:
+    """Read the first 8 bytes a scheduler sends and refuse what cannot be Dask's handshake."""
+    import struct
+
+    head = b""
+    while len(head) < 8:
+        got = sock.recv(8 - len(head))
+        if not got:
+            raise ClusterError(f"cannot reach scheduler {address}: it closed the connection"
+                               f"{' after ' + repr(head) if head else ''} (not a Dask "
+                               f"scheduler?)")
+        head += got
+    (size,) = struct.unpack("<Q", head)
+    if not 0 < size <= HANDSHAKE_MAX_BYTES:
+        try:
+            sock.settimeout(0.2)
+            head += sock.recv(64)
+        except OSError:
+            pass
+        said = head.split(b"\n")[0].decode("ascii", "backslashreplace").strip()[:60]
+        raise ClusterError(f"cannot reach scheduler {address}: it is not a Dask scheduler "
+                           f"(it said {said!r})")
+
+
 def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     """Raise `ClusterError` in one line unless a Dask scheduler answers at ``address``
     within ``timeout`` seconds: an unknown protocol, a bad port or host, nothing listening,
@@ -283,9 +313,7 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     try:
         with socket.create_connection((host, port), timeout=timeout) as sock:
             sock.settimeout(timeout)
-            if not sock.recv(1):
-                raise ClusterError(f"cannot reach scheduler {address}: it closed the "
-                                   f"connection (not a Dask scheduler?)")
+            _check_handshake(sock, address)
     except socket.timeout:
         raise ClusterError(f"cannot reach scheduler {address}: no Dask scheduler answered "
                            f"within {timeout:g} s") from None

@@ -278,6 +278,10 @@ def read_mask(spec: MaskSpec, frame: Frame, frame_number: int, *,
             channel = spec.channel if (spec.channel or not spec.file) else None
             arr, window = mattes.read_channel(path, channel, view=view)
     check_feather(spec, frame.display_window, f"mask {spec.label()}")
+    if spec.cryptomatte and not np.any(arr > 0):    # e.g. a manifest id no pixel carries
+        _say(notify, f"mask {spec.label()}: selects no pixel of frame {frame_number} (no "
+             f"rank channel holds the id{'s' if len(spec.names) > 1 else ''} its manifest "
+             f"gives; `clfx probe` lists the layer's objects)", f"mask-empty:{spec.label()}")
     bad = int(np.count_nonzero(np.isnan(arr)))
     if bad:
         _say(notify, f"mask {spec.label()}: {bad} NaN pixel(s) counted as 0 (not masked)",

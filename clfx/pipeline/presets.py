@@ -161,6 +161,7 @@ def _camera(doc: _Located, block, camera: Camera, animated=()):
         if k not in names:
             doc.fail(("camera", k), f"unknown camera value{_suggest(k, names)}")
         try:
+            _not_cli_keyframes(v)
             if is_keyframed(v):
                 if k in Camera.CHOICES:
                     raise ValueError(f"camera.{k} is not numeric; it cannot be keyframed")
@@ -178,6 +179,16 @@ def _camera(doc: _Located, block, camera: Camera, animated=()):
         doc.fail(("camera",), str(exc))
 
 
+def _not_cli_keyframes(value) -> None:
+    """Refuse the command line's keyframe form (``1:2.5,10:4``) in a look file, where YAML
+    reads it as text (YAML 1.1 read ``1:2.5`` as the base-60 number 62.5)."""
+    if isinstance(value, str) and animation.looks_keyframed(value):
+        keys = ", ".join(": ".join(part.strip() for part in item.split(":", 1))
+                         for item in value.split(",") if ":" in item)
+        raise ValueError(f"{value!r} is not a number; keyframes in a look file are a "
+                         f"mapping: {{{keys}}}")
+
+
 def _camera_value(name: str, value, where: str):
     try:
         return Camera.validate(name, value)
@@ -191,6 +202,8 @@ def _step_params(cls, name: str, merged: dict, fail) -> tuple[Params, tuple]:
     for pname, value in merged.items():
         try:
             param = cls.descriptor.param(pname, name)
+            if param.kind in ANIMATABLE:
+                _not_cli_keyframes(value)
             if is_keyframed(value):
                 if param.kind not in ANIMATABLE:
                     raise ParamError(f"{name}.{pname} is a {param.kind} parameter; only "
