@@ -82,10 +82,12 @@ ABERRATION_BLUR = 0.5
 """Edge blur per radius and squared paraxial incidence (third-order estimate)."""
 FADE_FROM_RAD, FADE_TO_RAD = 0.5, 1.0
 """Ghosts fade out between these paraxial incidence angles."""
-VEIL_FROM, VEIL_TO = 0.1, 0.2
+VEIL_FROM, VEIL_TO = 0.05, 0.1
 """Ghosts whose radius exceeds ``VEIL_FROM`` of the frame's diagonal fade (linearly) to
 nothing at ``VEIL_TO``: paraxially a uniform polygon over the whole frame, in a real lens
-vignetted by the barrel and smeared by aberrations into veiling glare (the glare effect)."""
+vignetted by the barrel and smeared by aberrations into veiling glare (the glare effect).
+At 0.1 / 0.2 (until issue 32) a ghost of a sun 0.1 of the diagonal wide laid a pink veil
+disc round it and a candle's an orange veil beside CandleGlass's glass."""
 PEAK = 1.4
 FRESNEL_ASYMPTOTIC = 20.0
 """Beyond this argument Fresnel's integrals take their asymptotic form."""

@@ -51,7 +51,12 @@ class Glare(ScatterPlugin, Plugin):
         summary="Highlights scattered by a large point spread function (Spencer eye PSF, "
                 "Gaussian bloom or a kernel image), HDR-safe FFT convolution.  The Spencer "
                 "and Gaussian tails are below 1e-5 of the PSF one pixel out from 0.9 x size "
-                "and end (raised cosine) at size x the diagonal.",
+                "and end (raised cosine) at size x the diagonal.  At the defaults a "
+                "uniform bright field scatters 0.36 % of its light into a black spot 2 % "
+                "of the diagonal wide (ISO 9358's veiling glare index, the spot on axis): "
+                "added to the taking lens's own veil, which published VGIs of modern "
+                "multi-coated primes put at ~1-3 %, a plate stays within a real lens's "
+                "range; strength 0.14 alone makes a 1 % VGI.",
         spreads_light=True,
         params=(
             FloatParam("strength", 0.05, min=0.0, max=1.0,

@@ -119,6 +119,12 @@ MAX_RADIUS = 0.5
 """Largest PSF radius as a fraction of the frame diagonal (the ``radius`` parameter's maximum,
 and the clamp of a stock's physical radius)."""
 
+DEFAULT_STOCK = "vision3-500t"
+"""The stock of the default: the common motion-picture negative (rem-jet backed), whose
+halation in scans is a tight warm glow hugging highlights (half its light within ~0.1 mm of
+the light on the negative, a few % of it); CineStill 800T, the same emulsion with its
+rem-jet removed, is a stylised stock chosen on purpose, not a default."""
+
 FROM_STOCK = -1.0
 """Parameter value meaning "the stock's"."""
 
@@ -213,10 +219,15 @@ class Halation(ScatterPlugin, Plugin):
         name="halation", label="Halation", group="Film", kernel="halation.cl",
         summary="Film halation: light reflected off the base re-exposes the red layer, a "
                 "red-orange glow hugging bright edges (stock presets); the glow falls "
-                "roughly exponentially and ends smoothly at the radius.",
+                "roughly exponentially and ends smoothly at the radius.  Default stock "
+                "Kodak VISION3 500T (data sheet H-1-5219: rem-jet backed 0.13 mm acetate "
+                "base): half the halo within ~0.1 mm of the light on the negative (0.3 % "
+                "of a 36 mm frame's width), 2 % of the highlight's light, as film scans "
+                "show a tight warm glow of a few hundred micrometres; CineStill 800T "
+                "(rem-jet removed, 25 %, a wide red halo) is a stock to choose.",
         spreads_light=True,
         params=(
-            ChoiceParam("stock", "cinestill-800t", choices=tuple(sorted(STOCKS)),
+            ChoiceParam("stock", DEFAULT_STOCK, choices=tuple(sorted(STOCKS)),
                         hint="Film stock: base thickness, backing (rem-jet: a tight glow; "
                              "bare: a wide one), strength and tint (strengths and tints are "
                              "estimates)."),

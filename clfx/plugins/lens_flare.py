@@ -18,7 +18,7 @@ into and back, ``clfx.fx.spectral.in_reference_basis``: coloured fringes), a
 Fresnel-diffraction rim and edges blurred by the light's extent and the lens's aberrations,
 and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``), times ``gain`` (default
-``DEFAULT_GAIN`` = 500: the light a plate's recorded highlights leave out; 1 = the recorded
+``DEFAULT_GAIN`` = 50: the light a plate's recorded highlights leave out; 1 = the recorded
 flux alone) up to ``light_level``: a light recorded at peak ``P`` takes ``min(gain,
 max(GAIN_FLOOR, light_level / P))`` (``DEFAULT_LIGHT_LEVEL``: an unclipped sun or HDR flame
 is not brightened as a clipped lamp is; 0 = every light the whole gain).
@@ -108,29 +108,34 @@ Like a real zoom's ghosts they differ in size (0.011-0.13 of the diagonal), shar
 (0: flat, 0.9: a ring) and coating tint (green, magenta, amber, blue, olive, teal), at
 positions that do not mirror each other about the centre."""
 
-DEFAULT_GAIN = 500.0
-"""The physical model's default ``gain``.  The ghosts of two coated reflections carry 1e-4 to
-1e-6 of a light's flux; from the flux a plate records (a light 1000-2000 times the
-background, clipped or graded down) that leaves ghosts of ~1e-4 of the background: nothing
-to see.  A real lamp or sun is 1e4-1e6 times diffuse white, so a lens shows its ghosts
-plainly; 500 brings a 3 x 3 px light 2000 times the background to a brightest ghost of
-1.2-4.4 times the background and several at 5-30 % of it (f/2.8, the three shipped lenses
-multi-coated, ``tests/plugins/test_lens_flare.py``; multilayer stacks reflect 2-3 times less
-than the single MgF2 film 300 was set for).  ``gain: 1`` is the recorded flux alone."""
+DEFAULT_GAIN = 50.0
+"""The physical model's default ``gain``: the light a clipped highlight left out.  The
+ghosts of two coated reflections carry R1 R2 of a light's flux: 1e-5-2.5e-5 for multilayer
+coatings (0.3-0.5 % per surface), ~2e-4 single MgF2 (1.3-1.5 %), 1.6e-3 uncoated glass (4 %,
+Fresnel).  A clipped lamp recorded at 20 is really ~1e3 times diffuse white (a frosted bulb
+~5e4 cd/m^2 against a lit interior's white of 50-100 cd/m^2), so it takes 50: a 3 x 3 px
+light 2000 times a flat background gives a brightest ghost of 0.1-0.5 times that background
+and several at 0.5-3 % of it (f/2.8, the three shipped lenses multi-coated,
+``tests/plugins/test_lens_flare.py``), faint as a modern lens's ghosts of a lamp are.  Until
+issue 32 the default was 500 (ghosts 10 times brighter, an orange veil round a candle).
+``gain: 1`` is the recorded flux alone."""
 
-DEFAULT_LIGHT_LEVEL = 1e4
-"""The physical model's default ``light_level``: real lamps and the sun are 1e4-1e6 times
+DEFAULT_LIGHT_LEVEL = 1e3
+"""The physical model's default ``light_level`` (diffuse white = 1): a lamp is ~1e3 times
 diffuse white, so ``gain`` stands for light a plate left out only up to this level: a light
 recorded at peak ``P`` takes ``min(gain, max(GAIN_FLOOR, light_level / P))``.  A clipped
-lamp at 20 takes the whole default gain (500); CandleGlass's flame, recorded at 212 in an
-HDR merge, 47, so its ghosts come out as faint as the real ones in that photograph; a sun
-recorded at 1e5 ``GAIN_FLOOR``."""
+lamp at 20 takes the whole default gain (50); CandleGlass's flame, recorded unclipped at 212
+in an HDR merge, 4.7; a sun recorded at 1e5 ``GAIN_FLOOR``."""
 
-GAIN_FLOOR = 30.0
+GAIN_FLOOR = 3.0
 """The least gain a light takes however bright it was recorded (when ``gain`` is larger):
-CandleGlass's own ghosts (a flame recorded unclipped) match the model's at 30-50 times the
-paraxial table's energy, which leaves out what real ghosts gain at oblique incidence and from
-imperfect coatings, so even an unclipped sun keeps visible ghosts."""
+what real ghosts gain over the paraxial two-reflection energy at oblique incidence (Fresnel
+reflectance grows off-axis) and from worn or imperfect coatings (estimate).  At 3 the
+sunny-day sun's brightest ghost peaks at ~1.7e-5 of the sun's peak (1.7 times diffuse white:
+plain against dark ground, faint against the sky; at 30, until issue 32, 17 times).  On
+CandleGlass (480 px wide) the flame, recorded at 205 and so taking 1e3 / 205 = 4.9, now puts
+0.05 % of its light outside itself, its brightest ghost 6e-5 of its peak (0.9 % and 6e-4 at
+the gain of 47 before, an orange veil beside the glass)."""
 
 
 def light_gain(gain: float, light_level: float, peak: float) -> float:
@@ -380,7 +385,13 @@ class LensFlare(Plugin):
         summary="Ghosts of the aperture along the line through each light and the image "
                 "centre: every two-reflection ghost of a lens prescription, coloured and "
                 "as dim as its coatings make it (physical), or a ghost table and a halo "
-                "(artistic); lights just outside the frame flare too.",
+                "(artistic); lights just outside the frame flare too.  Defaults after "
+                "published reflectances (Fresnel 4 % per uncoated surface, 1.3-1.5 % MgF2, "
+                "0.3-0.5 % multilayer: a ghost carries R1 R2 = 1e-5-2.5e-5 of its light): "
+                "gain 50 for a clipped lamp (~1e3 x diffuse white), 3 for an unclipped sun "
+                "or flame, so a sun at 1e5 lays ghosts of ~2e-5 of its peak; ghosts wider "
+                "than 5 % of the diagonal fade out by 10 % (a real lens smears them into "
+                "veiling glare: the glare effect).",
         spreads_light=True,
         params=(
             FloatParam("threshold", 5.0, min=0.0, max=1e6,
@@ -398,7 +409,7 @@ class LensFlare(Plugin):
                             "the light a plate's clipped highlights leave out)."),
             FloatParam("light_level", DEFAULT_LIGHT_LEVEL, min=0.0, max=1e12,
                        hint="Physical: the luminance real lights have (diffuse white = 1): a "
-                            "light recorded at peak P takes min(gain, max(30, light_level / P)), "
+                            "light recorded at peak P takes min(gain, max(3, light_level / P)), "
                             "so an unclipped bright light (a sun at 1e5, an HDR candle at 200) "
                             "is not brightened as a clipped one; 0 = every light the whole "
                             "gain."),

@@ -122,7 +122,10 @@ def test_identity_reasons(rt):
     assert h.is_identity(Halation.params(radius=0.0), ctx) is None   # added where it left
     assert "conserved" in h.is_identity(Halation.params(radius=0.0, conserve=True), ctx)
     out = h.apply(rt, Halation.params(radius=0.0), hot)
-    assert out[8, 8, 0] == pytest.approx(100 + 0.25 * 99.0, rel=1e-6)   # h = c (L - t) / L
+    # h = c (L - t) / L, times the default stock's strength (vision3-500t's 0.02 since
+    # issue 32; CineStill 800T's 0.25 before) and its red tint 1
+    st = STOCKS[Halation.params().stock]
+    assert out[8, 8, 0] == pytest.approx(100 + st.strength * st.tint[0] * 99.0, rel=1e-6)
 
 
 def test_rod_grows_by_the_psf_radius(rt):
@@ -199,3 +202,21 @@ def test_halation_in_blocks_is_the_one_grid_halation(rt, rng, monkeypatch, conse
     src[50, 70, :3] = (40.0, 5.0, 1.0)
     p = Halation.params(radius=0.15, strength=0.3, conserve=conserve)   # r = 15 px: FFT
     assert_blocks_match(rt, monkeypatch, Halation(), p, src, quality, cells=1500)
+
+
+def test_default_is_a_tight_glow_of_a_few_percent():
+    """Issue 32 item 6: the default hugs highlights as film scans show (a rem-jet backed
+    motion-picture negative: half the halo's light within ~0.1 mm of the light on the
+    negative, 0.1-0.3 % of a 36 mm frame, a few % of the highlight's light); the default was
+    CineStill 800T (25 %, an orange blob round every point light)."""
+    p = Halation.params()
+    st = STOCKS[p.stock]
+    assert not st.bare_back and 0.01 <= st.strength <= 0.05
+    width_px = 2000                                      # a 36 mm frame (the camera default)
+    r = round((12 if st.bare_back else 8) * st.base_mm * width_px / 36.0)
+    k = halation_psf(r, st.bare_back)
+    c = np.arange(-r, r + 1)
+    d = np.hypot(c[None, :], c[:, None]).ravel()
+    order = np.argsort(d)
+    r50_mm = d[order][np.searchsorted(np.cumsum(k.ravel()[order]), 0.5)] * 36.0 / width_px
+    assert 0.03 <= r50_mm <= 0.15, r50_mm               # measured 0.114 mm (vision3-500t)

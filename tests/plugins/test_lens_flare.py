@@ -232,7 +232,9 @@ def test_physical_ghosts_match_reference(rt, lens):
     p = LensFlare.params(light_level=0.0, lens=lens, gain=100.0, cull=0.0)
     got = LensFlare().apply(rt, p, src, camera=CAM_P, quality="reference", read_lens=read_lens)
     _, (entries, levels, _, _) = planned(rt, p, src)
-    assert len(entries) > 10 and (levels == 0).all()        # reference: all at full resolution
+    # >= 10 drawn (the double Gauss's ten: ghosts wider than VEIL_FROM = 5 % of the diagonal
+    # fade out since issue 32); reference: all at full resolution
+    assert len(entries) >= 10 and (levels == 0).all()
     table = flare.edge_table()
     want = src[..., :3] + oracle.physical_ghosts(src.shape[:2], entries,
                                                  flare.aperture_normals(6, 10.0), table)
@@ -257,7 +259,9 @@ def test_physical_lights_match_reference(rt):
 def test_final_levels_close_to_full_resolution(rt):
     # final draws soft ghosts at reduced resolution: bilinear upsampling of edges at least
     # 2 px wide costs ~1 % of a ghost's brightness
-    src = physical_scene(96, 160)
+    # 144 x 240: since issue 32 ghosts wider than 5 % of the diagonal fade out, and at
+    # 96 x 160 none left was soft enough to be drawn at reduced resolution
+    src = physical_scene(144, 240)
     p = LensFlare.params(light_level=0.0, lens="zoom-80-200mm", gain=100.0, cull=0.0)
     ctx, (entries, levels, _, _) = planned(rt, p, src, camera=Camera(blades=6, f_number=2.8),
                                            quality="final")
@@ -301,6 +305,8 @@ def test_ghost_positions_and_energies_for_a_point_light(rt):
         r = (e[7:10] * e[22]).max() + flare.EDGE_REACH / e[10:13].min()
         if not (r < e[0] < w - r and r < e[1] < h - r):
             continue                                        # partly outside the frame
+        if e[7:10].max() > flare.VEIL_FROM * math.hypot(w, h):
+            continue                                        # fading: per-channel radii differ
         one = rt.download(plugin.draw(rt, ctx, entries[i:i + 1], levels[i:i + 1],
                                       ctx.source.window, 0, 0.0))[..., :3] - src[..., :3]
         power = flare.ghost_power(table, flare.Optics((cx, cy), w / 36.0, 0, lens.stop_index,
@@ -502,23 +508,30 @@ def test_physical_flare_is_visible_varied_and_veil_free_at_defaults(rt, lens):
     added = out[..., :3] - src[..., :3]
     ys, xs = np.mgrid[0:h, 0:w] + 0.5
     away = np.hypot(xs - lx - 0.5, ys - ly - 0.5) > 12      # not the light itself
-    # visible: the brightest ghost adds at least 0.3 of the background (+30 %: plainly seen;
-    # today 1.2-4.4x); not overwhelming: nowhere more than 10 times the background
+    # visible: the brightest ghost adds at least 0.1 of the background (+10 %: seen on a
+    # flat field; 0.19-0.45 at the defaults of issue 32, faint as a multi-coated lens's
+    # ghosts of a lamp; 1.2-4.4 at the gain 500 before); nowhere more than 10 times it
     peak = added[away].max()
-    assert 0.3 * bg <= peak <= 10 * bg
-    # at least 3 ghosts above 5 % of the background (a patch that much brighter than a flat
-    # field is seen), of clearly different tints (their power's channel shares differ by
-    # > 0.15: green or amber beside violet, magenta)
+    assert 0.1 * bg <= peak <= 10 * bg
     ctx, (entries, _, _, _) = planned(rt, p, src, camera=cam, quality="final")
-    seen = entries[entries[:, 13:16].max(axis=1) >= 0.05 * bg]
-    assert len(seen) >= 3
+    # at a strong gain (500 on every light, the default until issue 32) at least 2 ghosts
+    # above 5 % of the background (a patch that much brighter than a flat field is seen; 3
+    # before issue 32, when the double Gauss's ghosts wider than 5 % of the diagonal were
+    # drawn instead of fading into veiling glare), of clearly different tints (their power's
+    # channel shares differ by > 0.15: green or amber beside violet, magenta)
+    _, (strong, _, _, _) = planned(rt, LensFlare.params(lens=lens, gain=500.0, light_level=0.0),
+                                   src, camera=cam, quality="final")
+    seen = strong[strong[:, 13:16].max(axis=1) >= 0.05 * bg]
+    assert len(seen) >= 2
     power = seen[:, 13:16] * seen[:, 7:10] ** 2
     share = power / power.sum(axis=1, keepdims=True)
     distinct = [share[0]]
     for s in share[1:]:
         if all(np.abs(s - d).max() > 0.15 for d in distinct):
             distinct.append(s)
-    assert len(distinct) >= 2 and np.ptp(share, axis=0).max() > 0.2
+    # > 0.15 (the distinct tints' own margin; 0.2 when three or more ghosts were seen: the
+    # double Gauss's two differ by 0.198)
+    assert len(distinct) >= 2 and np.ptp(share, axis=0).max() > 0.15
     # no veil: every drawn ghost's radius is at most VEIL_TO (0.2) of the diagonal, and far
     # from the axis through the centre and the light (> 0.35 of the diagonal) nothing is added
     diag = math.hypot(w, h)
@@ -572,17 +585,18 @@ def test_artistic_ghosts_differ_in_size_sharpness_rim_and_tint(rt):
 
 
 def test_unclipped_bright_lights_take_less_gain(rt):
-    """A light recorded at peak P takes min(gain, max(30, light_level / P)) of the gain: a
-    clipped lamp at 20 the whole default gain, an HDR flame at 200 50, a sun at 1e5 30
+    """A light recorded at peak P takes min(gain, max(3, light_level / P)) of the gain: a
+    clipped lamp at 20 the whole default gain (50), an HDR flame at 200 5, a sun at 1e5 3
     (CandleGlass's flame at the whole gain laid ghosts far brighter than the real ghosts in
     that photograph)."""
     from clfx.plugins.lens_flare import DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, GAIN_FLOOR, light_gain
 
     assert DEFAULT_LIGHT_LEVEL / 20.0 >= DEFAULT_GAIN
     assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 20.0) == 1.0
-    assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 200.0) * DEFAULT_GAIN == pytest.approx(50)
+    # 1e3 / 200 since issue 32 (1e4 / 200 = 50 before: ghosts 10 times the real ones)
+    assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 200.0) * DEFAULT_GAIN == pytest.approx(5)
     assert light_gain(DEFAULT_GAIN, DEFAULT_LIGHT_LEVEL, 1e5) * DEFAULT_GAIN == GAIN_FLOOR
-    assert light_gain(10.0, DEFAULT_LIGHT_LEVEL, 1e5) == 1.0       # below the floor: all of it
+    assert light_gain(2.0, DEFAULT_LIGHT_LEVEL, 1e5) == 1.0        # below the floor: all of it
     assert light_gain(10.0, 0.0, 1e5) == 1.0                       # 0: the whole gain
     bg = 0.01
     added = []
@@ -594,3 +608,29 @@ def test_unclipped_bright_lights_take_less_gain(rt):
         assert len(lights) == 1
     # ten times the recorded light, a tenth of the gain: the same ghosts
     assert added[1] == pytest.approx(added[0], rel=1e-6)
+
+
+def test_defaults_on_a_sun_lay_faint_ghosts_and_no_veil_disc(rt):
+    """Issue 32 item 6: the gallery's sunny day at the defaults (through the production path)
+    laid a pink veil disc round the sun (a ghost 0.1 of the diagonal wide) and a ghost at 17
+    times diffuse white (1.7e-4 of the sun's peak: the gain floor 30).  A multi-coated
+    lens's ghost of an unclipped sun carries R1 R2 ~1e-5-2.5e-5 of its light (Fresnel, the
+    stacks' 0.3-0.5 % per surface): now at most 5e-5 of the sun's peak, still seen against
+    the dark ground (> 0.1 of diffuse white); no ghost wider than 10 % of the diagonal."""
+    from clfx.api import render_array
+    from clfx.gallery import sun_scene
+
+    w, h = 320, 180
+    src = sun_scene(w, h).rgba
+    out = render_array(src, {"name": "t", "schema": 1, "effects": [{"effect": "lens_flare"}]})
+    added = (out.rgba[..., :3] - src[..., :3]) @ np.array([0.2126, 0.7152, 0.0722])
+    lum = src[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    sun = np.hypot(xs - 0.78 * w, ys - 0.3 * h)
+    away = sun > 0.008 * w + 4
+    assert 0.1 <= added[away].max() <= 5e-5 * lum.max()
+    # the veil disc: the sky round the sun (1-6 % of the diagonal out) gained 168 %, now 8 %
+    ring = (sun > 0.01 * math.hypot(w, h)) & (sun < 0.06 * math.hypot(w, h))
+    assert np.median(added[ring] / lum[ring]) < 0.15
+    ctx, (entries, _, _, _) = planned(rt, LensFlare.params(), src, camera=Camera())
+    assert (entries[:, 7:10].max(axis=1) <= 0.1 * math.hypot(w, h)).all()
