@@ -16,6 +16,7 @@ from clfx.bench.timing import SHORT_RUNS, timed_pair
 from clfx.cli import cli
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins import discover
+from clfx.pipeline.presets import load_look
 
 SIZE = (192, 108)  # large enough that each effect differs between levels (CoC, rings)
 # Relative slack when comparing errors of neighbouring levels: two levels may be equally
@@ -246,3 +247,24 @@ def test_case_modules_import_only_the_shared_helpers():
                     bad.append(f"{path.name}:{node.lineno} imports {name}")
     assert not bad, bad
     assert {"distortion", "motion_blur", "dof"} <= effects   # the check sees the modules
+
+
+def test_bench_sequence_says_where_each_frames_time_and_cpu_went(rt, tmp_path):
+    """Issue 37: read, upload, every step (its host share), download and write, each with
+    wall and CPU ms alone and in the stream, and the stream's ratio to its I/O alone."""
+    r = CliRunner().invoke(cli, ["bench", "--size", "64x48", "--repeat", "1", "--effects", "none",
+                                 "--looks", "default", "--sequence-frames", "2", "--json",
+                                 "--markdown", str(tmp_path / "b.md")], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    seq = json.loads(r.stdout)["sequence"]
+    parts = [row["part"] for row in seq["rows"]]
+    steps = [s.id for s in load_look("default").steps]
+    assert parts == ["read", "upload", *steps, "download", "write", "look (device)"]
+    for row in seq["rows"]:
+        assert row["alone_cpu_ms"] is not None and row["alone_cpu_ms"] >= 0, row
+    for row in seq["rows"][2:-3]:
+        assert row["host_ms"] is not None and row["host_ms"] <= row["stream_ms"] + 1e-6, row
+    assert seq["io_ms"] > 0 and seq["stream_vs_io"] == pytest.approx(seq["ms_per_frame"] / seq["io_ms"])
+    md = (tmp_path / "b.md").read_text()
+    assert "| part | alone ms | in stream ms | in stream / alone | host ms |" in md
+    assert "| upload |" in md and "| download |" in md
