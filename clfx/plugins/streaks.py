@@ -701,7 +701,8 @@ class Streaks(Plugin):
         centroid x, y in source pixels, r, g, b, 0; `grid_points` places them on a working
         grid); and the source-sized uint8 device flags of the pixels they gathered.
         ``peak``: the per-tile peak map on the device.  One wait for the count and the first
-        ``SEEDS_READ`` points; a second read only for a frame with more lights."""
+        ``SEEDS_READ`` points (before the flags grow: a frame without seeds grows none); a
+        second read only for a frame with more lights."""
         src = fr.source
         _, tiles_x, tiles_y = fr.peak
         npx = src.width * src.height
@@ -717,14 +718,15 @@ class Streaks(Plugin):
                   i32(src.height), f32(p.threshold), peak, i32(tiles_x),
                   i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
                   i32(fr.radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
-        dilate = rt.kernel("streaks.cl", "streaks_dilate")
-        for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
-            rt.launch(dilate, (src.width, src.height), flags[a], flags[b], i32(src.width),
-                      i32(src.height), i32(fr.radius), i32(sx), i32(sy))
         n_host, first = np.zeros(1, np.int32), np.empty((SEEDS_READ, 8), np.float32)
         rt.cl.enqueue_copy(rt.queue, n_host, count.buffer, is_blocking=False)
         rt.cl.enqueue_copy(rt.queue, first, seeds.buffer, is_blocking=True)
         n = int(n_host[0])
+        if n:   # no seed: no flag to grow (the frame's flags stay 0)
+            dilate = rt.kernel("streaks.cl", "streaks_dilate")
+            for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
+                rt.launch(dilate, (src.height if sx else src.width,), flags[a], flags[b],
+                          i32(src.width), i32(src.height), i32(fr.radius), i32(sx), i32(sy))
         if n > MAX_SEEDS:
             fr.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
             n = MAX_SEEDS
