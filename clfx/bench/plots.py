@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
@@ -95,8 +96,10 @@ def pareto_figure(results: dict):
         ax.set_xlabel("ms per frame", fontsize=8)
         ax.set_ylabel("relative RMSE", fontsize=8)
         ax.tick_params(labelsize=7)
-    fig.suptitle(f"clfx: what accuracy costs ({w}x{h}); line: quality levels (the cheapest "
-                 f"labelled), hollow marker: the naive method, dotted: the unchanged input "
-                 f"(levels with error 0 not shown)", fontsize=8)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    title = textwrap.wrap(f"clfx: what accuracy costs ({w}x{h}). Line: an effect's quality "
+                          f"levels (the cheapest labelled); hollow marker: its naive method; "
+                          f"dotted: the unchanged input's error (levels with error 0 not "
+                          f"shown)", width=int(15 * 4.6 * cols))
+    fig.suptitle("\n".join(title), fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.035 * len(title) / rows))
     return fig
