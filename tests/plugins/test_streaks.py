@@ -314,6 +314,18 @@ def test_a_frame_without_seeds_grows_no_flags(rt, rng, monkeypatch):
     assert "streaks_seeds" in launched and "streaks_dilate" not in launched
 
 
+def test_the_rays_share_one_extraction_of_the_bright_pixels(rt, rng, monkeypatch):
+    # issue 37: 4 rays extracted the same bright pixels 4 times; now once, copied per ray
+    launched = []
+    real = rt.launch
+    monkeypatch.setattr(rt, "launch", lambda knl, *a, **kw: launched.append(knl.function_name)
+                        or real(knl, *a, **kw))
+    src = lights(rng, (48, 64))
+    p = Streaks.params(**{**PARAMS, "streaks": 4})
+    Streaks().apply(rt, p, src)     # its pixels: test_streaks_match_reference and the rest
+    assert launched.count("streaks_bright") == 1 and launched.count("streaks_pass") > 4
+
+
 def test_a_tile_cannot_plan_the_frame(rt, rng):
     from clfx.host import RenderContext
     ctx = RenderContext(rt, rt.upload(scene(rng, (20, 30))))
