@@ -265,6 +265,7 @@ def test_bench_sequence_says_where_each_frames_time_and_cpu_went(rt, tmp_path):
     for row in seq["rows"][2:-3]:
         assert row["host_ms"] is not None and row["host_ms"] <= row["stream_ms"] + 1e-6, row
     assert seq["io_ms"] > 0 and seq["stream_vs_io"] == pytest.approx(seq["ms_per_frame"] / seq["io_ms"])
+    assert seq["stream_cpu_vs_io"] == pytest.approx(seq["cpu_ms_per_frame"] / seq["io_cpu_ms"])
     md = (tmp_path / "b.md").read_text()
     assert "| part | alone ms | in stream ms | in stream / alone | host ms |" in md
     assert "| upload |" in md and "| download |" in md

@@ -167,6 +167,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
         a, b = r["alone_ms"], r["stream_ms"]
         r["ratio"] = b / a if a and b is not None and a > 0.5 else None
     io_ms = rows[0]["alone_ms"] + rows[-2]["alone_ms"]
+    io_cpu = rows[0]["alone_cpu_ms"] + rows[-2]["alone_cpu_ms"]   # the ratio a load moves less
     parts_ms = io_ms + rows[-1]["alone_ms"]
     parts_cpu = sum(med([x[2] for x in xs]) for xs in (renders, reads, writes))
     ms_per_frame = 1e3 * wall / max(len(reports), 1)
@@ -175,6 +176,8 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
             "ms_per_frame": ms_per_frame, "device_ms_mean": summary["device_ms_mean"],
             "parts_ms": parts_ms, "stream_vs_parts": ms_per_frame / parts_ms if parts_ms else None,
             "io_ms": io_ms, "stream_vs_io": ms_per_frame / io_ms if io_ms else None,
+            "io_cpu_ms": io_cpu, "stream_cpu_vs_io": 1e3 * cpu / max(len(reports), 1) / io_cpu
+            if io_cpu else None,
             "cpu_ms_per_frame": 1e3 * cpu / max(len(reports), 1), "parts_cpu_ms": parts_cpu,
             "cores": available_cores(),
             "load_avg": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,

@@ -175,12 +175,14 @@ def sequence_markdown(s: dict) -> list[str]:
     mode = f", {s['stream']} stream" if s.get("stream") else ""
     io = (f"; reading and writing a frame alone take {s['io_ms']:.0f} ms, the stream "
           f"{s['stream_vs_io']:.2f}x that") if s.get("stream_vs_io") else ""
+    io_cpu = (f" (CPU: {s['stream_cpu_vs_io']:.2f}x the {s['io_cpu_ms']:.0f} ms reading and "
+              f"writing take alone)") if s.get("stream_cpu_vs_io") else ""
     lines = [f"Sequence (look {s['look']}, {s['frames']} frames, EXR read and write included"
              f"{mode}{load}): {s['ms_per_frame']:.0f} ms/frame ({s['fps']} fps) end to end; the same "
              f"parts one after another take {s['parts_ms']:.0f} ms, so the stream takes "
              f"{s['stream_vs_parts']:.2f}x its parts' sum{io}.  CPU time: "
              f"{s['cpu_ms_per_frame']:.0f} ms per frame in the stream, {s['parts_cpu_ms']:.0f} ms "
-             f"for the parts alone.", "",
+             f"for the parts alone{io_cpu}.", "",
              "Per frame (medians): wall ms alone and in the stream; of a step's stream ms, "
              "the host's (planning, enqueueing, waiting on reads back); CPU ms of the whole "
              "process (a CPU device's threads included; a stream's read and write overlap "
