@@ -178,18 +178,29 @@ kernel void streaks_seeds(global const float *src, const int src_pitch, const in
 
 /* One pass of the seeds' windows: out(x, y) = max of in over (x + k sx, y + k sy), |k| <=
  * radius (run along x then y: the pixels a seed gathered, flagged 1). */
+/* out = in dilated by a line of 2 radius + 1 pixels along (sx, sy) (one of them 1, the other
+ * 0): 1 where a flag lies within `radius` pixels along the line, else 0.  One work-item per
+ * row (sx = 1) or column (sy = 1) keeps a running count of the flags in its window: each
+ * pixel costs two reads whatever the radius (a gather of the 2 radius + 1 pixels cost
+ * 0.29 s of CPU on an empty 1080p frame for the two passes). */
 kernel void streaks_dilate(global const uchar *in, global uchar *out, const int w, const int h,
                            const int radius, const int sx, const int sy)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= w || y >= h) return;
-  uchar m = 0;
-  for(int k = -radius; k <= radius && !m; k++)
+  const int line = get_global_id(0);
+  const int n = sx ? w : h;
+  if(line >= (sx ? h : w)) return;
+  const int step = sx ? 1 : w;
+  global const uchar *src = in + (sx ? line * w : line);
+  global uchar *dst = out + (sx ? line * w : line);
+  int count = 0;
+  for(int k = 0; k < min(radius, n); k++)   /* pixel 0's window less its last pixel */
+    count += src[k * step] != 0;
+  for(int i = 0; i < n; i++)
   {
-    const int u = x + k * sx, v = y + k * sy;
-    if(u >= 0 && u < w && v >= 0 && v < h) m = in[v * w + u];
+    if(i + radius < n) count += src[(i + radius) * step] != 0;
+    if(i - radius - 1 >= 0) count -= src[(i - radius - 1) * step] != 0;
+    dst[i * step] = count > 0 ? 1 : 0;
   }
-  out[y * w + x] = m;
 }
 
 /* The streaking light of source pixel (sx, sy). */

@@ -16,6 +16,7 @@ from clfx.bench.timing import SHORT_RUNS, timed_pair
 from clfx.cli import cli
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins import discover
+from clfx.pipeline.presets import load_look
 
 SIZE = (192, 108)  # large enough that each effect differs between levels (CoC, rings)
 # Relative slack when comparing errors of neighbouring levels: two levels may be equally
@@ -246,3 +247,57 @@ def test_case_modules_import_only_the_shared_helpers():
                     bad.append(f"{path.name}:{node.lineno} imports {name}")
     assert not bad, bad
     assert {"distortion", "motion_blur", "dof"} <= effects   # the check sees the modules
+
+
+def test_bench_sequence_says_where_each_frames_time_and_cpu_went(rt, tmp_path):
+    """Issue 37: read, upload, every step (its host share), download and write, each with
+    wall and CPU ms alone and in the stream, and the stream's ratio to its I/O alone."""
+    r = CliRunner().invoke(cli, ["bench", "--size", "64x48", "--repeat", "1", "--effects", "none",
+                                 "--looks", "default", "--sequence-frames", "2", "--json",
+                                 "--markdown", str(tmp_path / "b.md")], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    seq = json.loads(r.stdout)["sequence"]
+    parts = [row["part"] for row in seq["rows"]]
+    steps = [s.id for s in load_look("default").steps]
+    assert parts == ["read", "upload", *steps, "download", "write", "look (device)"]
+    for row in seq["rows"]:
+        assert row["alone_cpu_ms"] is not None and row["alone_cpu_ms"] >= 0, row
+    for row in seq["rows"][2:-3]:
+        assert row["host_ms"] is not None and row["host_ms"] <= row["stream_ms"] + 1e-6, row
+    assert seq["io_ms"] > 0 and seq["stream_vs_io"] == pytest.approx(seq["ms_per_frame"] / seq["io_ms"])
+    assert seq["stream_cpu_vs_io"] == pytest.approx(seq["cpu_ms_per_frame"] / seq["io_cpu_ms"])
+    md = (tmp_path / "b.md").read_text()
+    assert "| part | alone ms | in stream ms | in stream / alone | host ms |" in md
+    assert "| upload |" in md and "| download |" in md
+
+
+def test_pareto_plot_is_one_panel_per_family_with_naive_and_input_marked(tmp_path):
+    """Issue 37: small multiples per effect family, not every effect on one chart."""
+    from clfx.bench.plots import pareto_figure, pareto_plot
+
+    def effect(name, naive=True):
+        rows = [{"quality": q, "ms": 10.0 * (i + 1), "rel_rmse": 0.1 / (i + 1)}
+                for i, q in enumerate(("draft", "preview", "final"))]
+        rows.append({"quality": "reference", "ms": 99.0, "rel_rmse": 0.0})
+        base = [{"baseline": "input", "rel_rmse": 0.5}]
+        if naive:
+            base.insert(0, {"baseline": "naive", "ms": 50.0, "rel_rmse": 0.2})
+        return {"effect": name, "rows": rows, "baselines": base}
+
+    results = {"size": [64, 48], "effects": [effect("glare"), effect("streaks", naive=False),
+                                             effect("distortion:moustache"), effect("grain")]}
+    fig = pareto_figure(results)
+    panels = {ax.get_title(): ax for ax in fig.axes if ax.get_visible()}
+    assert set(panels) == {"Glare", "Lens", "Film"}
+    lens = panels["Lens"]     # glare is a lens effect (its descriptor's group)
+    assert sorted(t.get_text() for t in lens.get_legend().get_texts()) == \
+        ["distortion:moustache", "glare"]
+    assert [t.get_text() for t in panels["Glare"].get_legend().get_texts()] == ["streaks"]
+    hollow = [ln for ln in panels["Glare"].lines if ln.get_markerfacecolor() == "none"]
+    assert hollow == []           # streaks has no naive method here
+    hollow = [ln for ln in lens.lines if ln.get_markerfacecolor() == "none"]
+    assert len(hollow) == 2 and list(hollow[0].get_xydata()[0]) == [50.0, 0.2]  # naive
+    dotted = [ln for ln in lens.lines if ln.get_linestyle() == ":"]
+    assert len(dotted) == 2 and all(ln.get_ydata()[0] == 0.5 for ln in dotted)  # input
+    pareto_plot(results, str(tmp_path / "p.png"))
+    assert (tmp_path / "p.png").stat().st_size > 0

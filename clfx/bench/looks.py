@@ -134,27 +134,50 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
         values = [v for v in values if v is not None]
         return float(np.median(values)) if values else None
 
-    def step_ms(rep, effect):
-        return next((s.ms if s.ran else 0.0 for s in rep.steps if s.effect == effect), None)
+    def step(rep, effect, key="ms"):
+        return next((getattr(s, key) if s.ran else 0.0 for s in rep.steps
+                     if s.effect == effect), None)
 
-    rows = [{"part": e, "alone_ms": med([step_ms(r[0][1], e) for r in renders]),
-             "stream_ms": med([step_ms(r, e) for r in reports])} for e in effects]
-    rows += [{"part": "look (device)", "alone_ms": med([r[1] for r in renders]),
-              "stream_ms": med([r.total_ms for r in reports])},
-             {"part": "read", "alone_ms": med([r[1] for r in reads]),
-              "stream_ms": med([r.read_ms for r in reports])},
+    alone_reports = [r[0][1] for r in renders]
+    rows = [{"part": "read", "alone_ms": med([r[1] for r in reads]),
+             "stream_ms": med([r.read_ms for r in reports]),
+             "alone_cpu_ms": med([r[2] for r in reads]),
+             "stream_cpu_ms": med([r.read_cpu_ms for r in reports])},
+            {"part": "upload", "alone_ms": med([r.upload_ms for r in alone_reports]),
+             "stream_ms": med([r.upload_ms for r in reports]),
+             "alone_cpu_ms": med([r.upload_cpu_ms for r in alone_reports]),
+             "stream_cpu_ms": med([r.upload_cpu_ms for r in reports])}]
+    rows += [{"part": e, "alone_ms": med([step(r, e) for r in alone_reports]),
+              "stream_ms": med([step(r, e) for r in reports]),
+              "host_ms": med([step(r, e, "host_ms") for r in reports]),
+              "alone_cpu_ms": med([step(r, e, "cpu_ms") for r in alone_reports]),
+              "stream_cpu_ms": med([step(r, e, "cpu_ms") for r in reports])} for e in effects]
+    rows += [{"part": "download", "alone_ms": med([r.download_ms for r in alone_reports]),
+              "stream_ms": med([r.download_ms for r in reports]),
+              "alone_cpu_ms": med([r.download_cpu_ms for r in alone_reports]),
+              "stream_cpu_ms": med([r.download_cpu_ms for r in reports])},
              {"part": "write", "alone_ms": med([r[1] for r in writes]),
-              "stream_ms": med([r.write_ms for r in reports])}]
+              "stream_ms": med([r.write_ms for r in reports]),
+              "alone_cpu_ms": med([r[2] for r in writes]),
+              "stream_cpu_ms": med([r.write_cpu_ms for r in reports])},
+             {"part": "look (device)", "alone_ms": med([r[1] for r in renders]),
+              "stream_ms": med([r.total_ms for r in reports]),
+              "alone_cpu_ms": med([r[2] for r in renders])}]
     for r in rows:
         a, b = r["alone_ms"], r["stream_ms"]
         r["ratio"] = b / a if a and b is not None and a > 0.5 else None
-    parts_ms = sum(r["alone_ms"] for r in rows[-3:])
+    io_ms = rows[0]["alone_ms"] + rows[-2]["alone_ms"]
+    io_cpu = rows[0]["alone_cpu_ms"] + rows[-2]["alone_cpu_ms"]   # the ratio a load moves less
+    parts_ms = io_ms + rows[-1]["alone_ms"]
     parts_cpu = sum(med([x[2] for x in xs]) for xs in (renders, reads, writes))
     ms_per_frame = 1e3 * wall / max(len(reports), 1)
     return {"look": look_name, "frames": len(reports), "fps": summary["fps"],
             "stream": stream_mode(rt, width * height),
             "ms_per_frame": ms_per_frame, "device_ms_mean": summary["device_ms_mean"],
             "parts_ms": parts_ms, "stream_vs_parts": ms_per_frame / parts_ms if parts_ms else None,
+            "io_ms": io_ms, "stream_vs_io": ms_per_frame / io_ms if io_ms else None,
+            "io_cpu_ms": io_cpu, "stream_cpu_vs_io": 1e3 * cpu / max(len(reports), 1) / io_cpu
+            if io_cpu else None,
             "cpu_ms_per_frame": 1e3 * cpu / max(len(reports), 1), "parts_cpu_ms": parts_cpu,
             "cores": available_cores(),
             "load_avg": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,

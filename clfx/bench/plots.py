@@ -1,6 +1,40 @@
 """The bench's plots (matplotlib: the ``plot`` extra)."""
 from __future__ import annotations
 
+import math
+import textwrap
+
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
+def family(effect: str) -> str:
+    """The effect family a bench row belongs to: its plugin's descriptor group ("Lens",
+    "Glare", ...; a case variant "distortion:moustache" is its effect's), "Other" for a
+    name no plugin has."""
+    from clfx.plugins import get_plugin
+
+    try:
+        return get_plugin(effect.split(":", 1)[0]).descriptor.group or "Other"
+    except Exception:  # noqa: BLE001 - an unknown name still gets a panel
+        return "Other"
+
+
+def pareto_points(effect: dict) -> dict:
+    """An effect's points on the time/error plane: ``levels`` (ms, rel_rmse, quality) in
+    quality order, the ``naive`` method's (ms, rel_rmse) and the unchanged ``input``'s
+    relative RMSE (it costs nothing: a horizontal line).  Error 0 (a level identical to
+    the reference, or the reference itself) has no place on a log axis: left out."""
+    levels = [(r["ms"], r["rel_rmse"], r["quality"]) for r in effect["rows"]
+              if not r.get("identity") and r.get("rel_rmse", 0) > 0 and "ms" in r]
+    naive = inp = None
+    for b in effect.get("baselines") or ():
+        err = b.get("rel_rmse")
+        if b.get("baseline") == "naive" and "ms" in b and err and err > 0:
+            naive = (b["ms"], err)
+        elif b.get("baseline") == "input" and err and err > 0:
+            inp = err
+    return {"levels": levels, "naive": naive, "input": inp}
+
 
 def check_plot_path(path: str) -> None:
     """Refuse, before a bench runs, a --plot file matplotlib cannot write (its extension names
@@ -22,7 +56,19 @@ def check_plot_path(path: str) -> None:
 
 
 def pareto_plot(results: dict, path: str) -> None:
-    """Time vs relative error, one line per effect (needs matplotlib: the [plot] extra)."""
+    """`pareto_figure` of ``results`` as a PNG at ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = pareto_figure(results)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def pareto_figure(results: dict):
+    """Time vs relative error as small multiples, one panel per effect family (descriptor
+    group): each effect's quality levels as a line, its naive method as a hollow marker of
+    the same colour and the unchanged input's error as a dotted line (the error to beat at
+    no cost).  Needs matplotlib: the [plot] extra."""
     try:
         import matplotlib
 
@@ -32,23 +78,47 @@ def pareto_plot(results: dict, path: str) -> None:
         from clfx.core.errors import ClfxError
 
         raise ClfxError("--plot needs matplotlib: pip install 'clfx[plot]'") from exc
-    fig, ax = plt.subplots(figsize=(8, 5.5))
-    styles = [(ls, m) for ls in ("-", "--", ":") for m in ("o", "s", "^", "D", "v", "P")]
-    for i, e in enumerate(results["effects"]):
-        # error 0 (a level identical to the reference, or the reference itself) has no place
-        # on a log axis: such points are left out
-        pts = [(r["ms"], r["rel_rmse"]) for r in e["rows"]
-               if not r.get("identity") and r["rel_rmse"] > 0]
-        if pts:
-            xs, ys = zip(*pts)
-            ls, m = styles[i % len(styles)]
-            ax.plot(xs, ys, linestyle=ls, marker=m, label=e["effect"])
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("time per frame (ms)")
-    ax.set_ylabel("relative RMSE vs reference level / ground truth\n(levels with error 0 not shown)")
-    ax.set_title(f"clfx: what accuracy costs ({results['size'][0]}x{results['size'][1]})")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    groups: dict[str, list[dict]] = {}
+    for e in results["effects"]:
+        groups.setdefault(family(e["effect"]), []).append(e)
+    names = sorted(groups)
+    cols = min(3, max(1, len(names)))
+    rows = max(1, math.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.8 * rows), squeeze=False)
+    for ax in axes.ravel()[len(names):]:
+        ax.set_visible(False)
+    w, h = results["size"]
+    for ax, name in zip(axes.ravel(), names):
+        plotted = False
+        for i, e in enumerate(groups[name]):
+            pts = pareto_points(e)
+            colour = f"C{i % 10}"
+            if pts["levels"]:
+                xs, ys, qs = zip(*pts["levels"])
+                ax.plot(xs, ys, "-", marker=MARKERS[i % len(MARKERS)], color=colour,
+                        label=e["effect"])
+                ax.annotate(qs[0], (xs[0], ys[0]), fontsize=6, color=colour,
+                            textcoords="offset points", xytext=(3, 3))
+                plotted = True
+            if pts["naive"] is not None:
+                ax.plot(*pts["naive"], marker=MARKERS[i % len(MARKERS)], markersize=9,
+                        markerfacecolor="none", color=colour, linestyle="none")
+                plotted = True
+            if pts["input"] is not None:
+                ax.axhline(pts["input"], color=colour, linestyle=":", linewidth=1)
+        if plotted:
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.legend(fontsize=6, loc="best")
+        ax.set_title(name, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.set_xlabel("ms per frame", fontsize=8)
+        ax.set_ylabel("relative RMSE", fontsize=8)
+        ax.tick_params(labelsize=7)
+    title = textwrap.wrap(f"clfx: what accuracy costs ({w}x{h}). Line: an effect's quality "
+                          f"levels (the cheapest labelled); hollow marker: its naive method; "
+                          f"dotted: the unchanged input's error (levels with error 0 not "
+                          f"shown)", width=int(15 * 4.6 * cols))
+    fig.suptitle("\n".join(title), fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.035 * len(title) / rows))
+    return fig

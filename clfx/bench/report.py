@@ -166,19 +166,32 @@ def truth_markdown(results: dict) -> list[str]:
 
 
 def sequence_markdown(s: dict) -> list[str]:
-    """The sequence table: the stream end to end, then each part alone and in the stream."""
+    """The sequence tables: the stream end to end, then where a frame's time and CPU went,
+    part by part (read, upload, each step, download, write), alone and in the stream."""
     def ms(v):
         return "-" if v is None else f"{v:.0f}"
 
     load = f", load average {s['load_avg']:.1f} on {s['cores']} cores" if s.get("load_avg") is not None else ""
     mode = f", {s['stream']} stream" if s.get("stream") else ""
+    io = (f"; reading and writing a frame alone take {s['io_ms']:.0f} ms, the stream "
+          f"{s['stream_vs_io']:.2f}x that") if s.get("stream_vs_io") else ""
+    io_cpu = (f" (CPU: {s['stream_cpu_vs_io']:.2f}x the {s['io_cpu_ms']:.0f} ms reading and "
+              f"writing take alone)") if s.get("stream_cpu_vs_io") else ""
     lines = [f"Sequence (look {s['look']}, {s['frames']} frames, EXR read and write included"
              f"{mode}{load}): {s['ms_per_frame']:.0f} ms/frame ({s['fps']} fps) end to end; the same "
              f"parts one after another take {s['parts_ms']:.0f} ms, so the stream takes "
-             f"{s['stream_vs_parts']:.2f}x its parts' sum.  CPU time: {s['cpu_ms_per_frame']:.0f} ms "
-             f"per frame in the stream, {s['parts_cpu_ms']:.0f} ms for the parts alone.", "",
-             "| part | alone ms | in stream ms | in stream / alone |", "|---|---|---|---|"]
+             f"{s['stream_vs_parts']:.2f}x its parts' sum{io}.  CPU time: "
+             f"{s['cpu_ms_per_frame']:.0f} ms per frame in the stream, {s['parts_cpu_ms']:.0f} ms "
+             f"for the parts alone{io_cpu}.", "",
+             "Per frame (medians): wall ms alone and in the stream; of a step's stream ms, "
+             "the host's (planning, enqueueing, waiting on reads back); CPU ms of the whole "
+             "process (a CPU device's threads included; a stream's read and write overlap "
+             "each other, so their CPU holds both).  Read includes decoding, write encoding.",
+             "", "| part | alone ms | in stream ms | in stream / alone | host ms | "
+             "CPU ms alone | CPU ms in stream |", "|---|---|---|---|---|---|---|"]
     for r in s["rows"]:
         ratio = "-" if r["ratio"] is None else f"{r['ratio']:.2f}x"
-        lines.append(f"| {r['part']} | {ms(r['alone_ms'])} | {ms(r['stream_ms'])} | {ratio} |")
+        lines.append(f"| {r['part']} | {ms(r['alone_ms'])} | {ms(r['stream_ms'])} | {ratio} | "
+                     f"{ms(r.get('host_ms'))} | {ms(r.get('alone_cpu_ms'))} | "
+                     f"{ms(r.get('stream_cpu_ms'))} |")
     return lines

@@ -434,6 +434,7 @@ class FrameRead:
     masks: list[dict | None]
     read_ms: float
     notices: list = field(default_factory=list)
+    read_cpu_ms: float = 0.0     # process CPU meanwhile (a concurrent write's included)
 
     def pixels(self) -> int:
         """Pixels of the largest view's data window."""
@@ -545,7 +546,7 @@ class BatchPlan:
         hero first) with each view's masks; None at the end of a raw stream."""
         from clfx.pipeline.masks import read_masks
 
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         io, notes = self.io, []
         if self.raw_size is not None:
             from clfx.io.raw import read_raw
@@ -568,7 +569,8 @@ class BatchPlan:
         masks = [read_masks(self.look, f, job.frame,
                             notify=lambda m, k: notes.append(("warning", m, k)))
                  if self.look.masks() or self.raw_size is None else None for f in frames]
-        return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3, notes)
+        return FrameRead(frames, masks, (time.perf_counter() - t0) * 1e3, notes,
+                         (time.process_time() - c0) * 1e3)
 
     def render(self, rt, job: Job, read: FrameRead, stats: RunStats | None = None):
         """Render one job's frames (already read) through the look: the hero's output frame
@@ -589,7 +591,7 @@ class BatchPlan:
         report.other_views = [r for _, r in outs[1:]]
         if not (raw and self.raw_out is not None):
             report.input, report.output = job.input, job.output
-        report.read_ms = read.read_ms
+        report.read_ms, report.read_cpu_ms = read.read_ms, read.read_cpu_ms
         if self.raw_out is not None:    # the window a raw frame holds: the input's frame
             rest = read.views[0].data_window if raw else read.views[0].display_window
         else:
@@ -599,7 +601,7 @@ class BatchPlan:
     def write(self, frame: Frame, job: Job, report, rest=()) -> bool:
         """Write a rendered frame (atomically; never over one of `reads`); True when
         ``--skip-existing`` left an output another writer published meanwhile."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         io, skipped = self.io, False
         if self.raw_out is not None:
             from clfx.io.raw import write_raw
@@ -627,6 +629,7 @@ class BatchPlan:
                     raise
                 skipped = True
         report.write_ms = (time.perf_counter() - t0) * 1e3
+        report.write_cpu_ms = (time.process_time() - c0) * 1e3
         return skipped
 
 

@@ -301,11 +301,15 @@ class StepReport:
     quality: str = DEFAULT_QUALITY
     notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    host_ms: float = 0.0    # of ``ms``: planning and enqueueing, host reads included
+    cpu_ms: float = 0.0     # process CPU over the step (a CPU device's threads included)
 
     def as_dict(self) -> dict:
         d = {"effect": self.effect, "ran": self.ran, "quality": self.quality}
         if self.ran:
             d["ms"] = round(self.ms, 2)
+            d["host_ms"] = round(self.host_ms, 2)
+            d["cpu_ms"] = round(self.cpu_ms, 2)
         else:
             d["reason"] = self.reason
         if self.notes:
@@ -329,6 +333,10 @@ class FrameReport:
     output: str = ""
     read_ms: float = 0.0
     write_ms: float = 0.0
+    upload_cpu_ms: float = 0.0     # process CPU (time.process_time) of upload, download
+    download_cpu_ms: float = 0.0
+    read_cpu_ms: float = 0.0       # process CPU while the frame was read / written
+    write_cpu_ms: float = 0.0      # (other threads' work at the same time included)
     frame_warnings: list[str] = field(default_factory=list)  # the frame's own (not a step's)
     values: dict = field(default_factory=dict)  # keyframed values used, by camera.K / STEP.P
     view: str | None = None     # the view rendered (multi-view files), None for a plain frame
@@ -342,6 +350,11 @@ class FrameReport:
              "upload_ms": round(self.upload_ms, 2), "download_ms": round(self.download_ms, 2),
              "analysis_ms": round(self.analysis_ms, 2), "total_ms": round(self.total_ms, 2),
              "read_ms": round(self.read_ms, 2), "write_ms": round(self.write_ms, 2),
+             "cpu_ms": {"read": round(self.read_cpu_ms, 2),
+                        "upload": round(self.upload_cpu_ms, 2),
+                        "download": round(self.download_cpu_ms, 2),
+                        "write": round(self.write_cpu_ms, 2),
+                        **{s.effect: round(s.cpu_ms, 2) for s in self.steps if s.ran}},
              "steps": [s.as_dict() for s in self.steps]}
         if self.saved_ms is not None:
             d["saved_ms_estimate"] = round(self.saved_ms, 2)
@@ -523,7 +536,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     stamp = look.stamp(frame_number)
     reference_camera = look.camera   # keyframed values at their first keys
     look = look.at(frame_number)
-    t_start = time.perf_counter()
+    t_start, c_start = time.perf_counter(), time.process_time()
     look.check_clips(frame)
     if masks is None and look.masks():
         from clfx.pipeline.masks import read_masks
@@ -534,6 +547,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     ctx = _upload(rt, look, frame, frame_number=frame_number, quality=quality,
                   keep_overscan=keep_overscan, reference_camera=reference_camera)
     report.upload_ms = (time.perf_counter() - t_start) * 1e3
+    report.upload_cpu_ms = (time.process_time() - c_start) * 1e3
     report.frame_warnings = list(ctx.warnings)
     have = {"depth": frame.depth is not None, "velocity": frame.velocity is not None}
     if release_input:
@@ -556,9 +570,10 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
             saved += timing.mean_ms or 0.0
         else:
             ctx = _advance(rt, ctx, out, moved)
-    t_dl = time.perf_counter()
+    t_dl, c_dl = time.perf_counter(), time.process_time()
     rgba, window = _download(rt, ctx)
     report.download_ms = (time.perf_counter() - t_dl) * 1e3
+    report.download_cpu_ms = (time.process_time() - c_dl) * 1e3
     report.total_ms = (time.perf_counter() - t_start) * 1e3
     report.saved_ms = saved if any(not s.ran for s in report.steps) else None
     report.analysis_ms = ctx.analysis_seconds * 1e3
@@ -606,7 +621,9 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     output (None when skipped) and the passes it realigned with its output for the later
     steps, which read the clips ``later`` (`Plugin.passes_after`; none for a masked step,
     whose output is partly its input).  A masked step blends its output with the source by
-    its mask, or renders from the masked source (`clfx.pipeline.masks`)."""
+    its mask, or renders from the masked source (`clfx.pipeline.masks`).  Its time (``ms``)
+    runs from here: planning is part of a step's cost (streaks' plan waits for its seeds)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     step_ctx = ctx.for_step(level)
     missing = step.absent_passes(have)
     reason = f"no {' or '.join(missing)} pass in the input" if missing else None
@@ -630,13 +647,13 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     step.plugin.planned(step.params, step_ctx)  # once per step: the regions and render read it
     grown = step.plugin.output_window(step.params, step_ctx)
     check_pixels(grown.width, grown.height, f"frame grown by {step.id}", FrameTooLarge)
-    t0 = time.perf_counter()
     out = render_tiled(rt, step.plugin, step.params, step_ctx, grown, tile_pixels)
     if mode == "mix":
         out = mask_fx.mix(rt, ctx.source, out, mask)
     elif mode == "sources":
         out = mask_fx.spread(rt, ctx.source, masked, out)
     moved = {} if mode else step.plugin.passes_after(rt, step.params, step_ctx, out, later)
+    host_ms = (time.perf_counter() - t0) * 1e3
     rt.finish()
     ms = (time.perf_counter() - t0) * 1e3
     timing.add(ms)
@@ -644,7 +661,8 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     if mode:
         notes.append(f"masked by {step.mask.label()} ({mode})")
     return StepReport(step.id, True, ms=ms, quality=level, notes=notes,
-                      warnings=list(step_ctx.warnings)), out, moved
+                      warnings=list(step_ctx.warnings), host_ms=host_ms,
+                      cpu_ms=(time.process_time() - c0) * 1e3), out, moved
 
 
 def tile_bands(window: Rect, tile_pixels: int | None) -> list[Rect]:

@@ -504,7 +504,9 @@ def ring_rows(rays, chunk: int, height: int) -> list[int]:
 def streams(width: int, height: int, rings: list[int], chunk: int) -> bool:
     """Whether a ``width`` x ``height`` working frame streams (`Streaks.streak_sum`): it is
     over ``STREAM_PIXELS`` and its held rows (``rings``, the chunk's sum) are fewer than the
-    whole passes' three frame-sized buffers less one."""
+    whole passes' three frame-sized buffers less one (a fourth holds the bright pixels
+    the rays share where several start from them: a frame that streaks whole is under
+    ``STREAM_PIXELS``)."""
     return width * height > STREAM_PIXELS and sum(rings) + chunk < 2 * height
 
 
@@ -701,7 +703,8 @@ class Streaks(Plugin):
         centroid x, y in source pixels, r, g, b, 0; `grid_points` places them on a working
         grid); and the source-sized uint8 device flags of the pixels they gathered.
         ``peak``: the per-tile peak map on the device.  One wait for the count and the first
-        ``SEEDS_READ`` points; a second read only for a frame with more lights."""
+        ``SEEDS_READ`` points (before the flags grow: a frame without seeds grows none); a
+        second read only for a frame with more lights."""
         src = fr.source
         _, tiles_x, tiles_y = fr.peak
         npx = src.width * src.height
@@ -717,14 +720,15 @@ class Streaks(Plugin):
                   i32(src.height), f32(p.threshold), peak, i32(tiles_x),
                   i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
                   i32(fr.radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
-        dilate = rt.kernel("streaks.cl", "streaks_dilate")
-        for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
-            rt.launch(dilate, (src.width, src.height), flags[a], flags[b], i32(src.width),
-                      i32(src.height), i32(fr.radius), i32(sx), i32(sy))
         n_host, first = np.zeros(1, np.int32), np.empty((SEEDS_READ, 8), np.float32)
         rt.cl.enqueue_copy(rt.queue, n_host, count.buffer, is_blocking=False)
         rt.cl.enqueue_copy(rt.queue, first, seeds.buffer, is_blocking=True)
         n = int(n_host[0])
+        if n:   # no seed: no flag to grow (the frame's flags stay 0)
+            dilate = rt.kernel("streaks.cl", "streaks_dilate")
+            for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
+                rt.launch(dilate, (src.height if sx else src.width,), flags[a], flags[b],
+                          i32(src.width), i32(src.height), i32(fr.radius), i32(sx), i32(sy))
         if n > MAX_SEEDS:
             fr.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
             n = MAX_SEEDS
@@ -798,14 +802,20 @@ class Streaks(Plugin):
 
         if not stream:
             nbytes = pitch * (h + 2 * margin) * 16
-            work = [rt.buffer(nbytes) for _ in range(3)]      # ping, pong, total
+            shared = len(fr.rays) > 1
+            work = [rt.buffer(nbytes) for _ in range(3 + shared)]   # ping, pong, total(, bright)
             for buf in work:
                 rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
-            ping, pong, total = work
+            ping, pong, total = work[:3]
+            if shared:   # the bright pixels once for every ray (4 rays: 3 extractions saved,
+                bright(work[3], 0, h, 0)   # 39 ms of CPU at 960x540, for one more buffer)
             for ray in fr.rays:
-                # each ray starts from the bright pixels, extracted again into pong (cheaper
-                # than a fourth frame-sized buffer; passes write inside the zero margins only)
-                bright(pong, 0, h, 0)
+                # each ray starts from the bright pixels (passes write inside the zero
+                # margins only: a copy of the whole buffer is the extraction's every byte)
+                if shared:
+                    rt.cl.enqueue_copy(rt.queue, pong.buffer, work[3].buffer, byte_count=nbytes)
+                else:
+                    bright(pong, 0, h, 0)
                 cur = pong
                 for n in range(ray.passes):
                     dst = total if n == ray.passes - 1 else (ping if cur is not ping else pong)

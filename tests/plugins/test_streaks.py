@@ -268,6 +268,64 @@ def test_many_lights_read_after_the_first_wait(rt, rng, monkeypatch):
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 
+@pytest.mark.parametrize("shape,radius", [((1, 1), 1), ((1, 37), 3), ((31, 17), 5),
+                                          ((40, 70), 13), ((9, 6), 40)])
+def test_dilate_grows_flags_by_a_line_in_x_then_y(rt, rng, shape, radius):
+    """streaks_dilate (a running count per row, then per column) against the plain
+    definition: 1 where a flag lies within ``radius`` pixels along the line."""
+    h, w = shape
+    flags = (rng.uniform(size=shape) < 0.03).astype(np.uint8)
+    flags[rng.integers(h), rng.integers(w)] = 1
+    want = flags.astype(bool)
+    for axis in (1, 0):
+        n = want.shape[axis]
+        grown = np.zeros_like(want)
+        for k in range(-radius, radius + 1):
+            lo, hi = max(0, -k), min(n, n - k)
+            if lo < hi:
+                idx = [slice(None)] * 2
+                src = [slice(None)] * 2
+                idx[axis], src[axis] = slice(lo, hi), slice(lo + k, hi + k)
+                grown[tuple(idx)] |= want[tuple(src)]
+        want = grown
+    bufs = [rt.to_device(flags.ravel()), rt.buffer(flags.size)]
+    knl = rt.kernel("streaks.cl", "streaks_dilate")
+    for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
+        rt.launch(knl, (h if sx else w,), bufs[a], bufs[b], np.int32(w), np.int32(h),
+                  np.int32(radius), np.int32(sx), np.int32(sy))
+    got = rt.from_device(bufs[0], np.uint8, flags.size).reshape(shape)
+    assert np.array_equal(got, want.astype(np.uint8))
+
+
+def test_a_frame_without_seeds_grows_no_flags(rt, rng, monkeypatch):
+    # issue 37: the dilation is the streaks' fixed cost per frame; no seed, nothing to grow
+    launched = []
+    real = rt.launch
+
+    def spy(knl, *a, **kw):
+        launched.append(knl.function_name)
+        return real(knl, *a, **kw)
+
+    monkeypatch.setattr(rt, "launch", spy)
+    src = rng.uniform(0.0, 0.5, (32, 48, 4)).astype(np.float32)
+    src[4:28, 4:44, :3] = 50.0           # one extended light: no compact light to seed
+    p = Streaks.params(**PARAMS)
+    Streaks().apply(rt, p, src)
+    assert "streaks_seeds" in launched and "streaks_dilate" not in launched
+
+
+def test_the_rays_share_one_extraction_of_the_bright_pixels(rt, rng, monkeypatch):
+    # issue 37: 4 rays extracted the same bright pixels 4 times; now once, copied per ray
+    launched = []
+    real = rt.launch
+    monkeypatch.setattr(rt, "launch", lambda knl, *a, **kw: launched.append(knl.function_name)
+                        or real(knl, *a, **kw))
+    src = lights(rng, (48, 64))
+    p = Streaks.params(**{**PARAMS, "streaks": 4})
+    Streaks().apply(rt, p, src)     # its pixels: test_streaks_match_reference and the rest
+    assert launched.count("streaks_bright") == 1 and launched.count("streaks_pass") > 4
+
+
 def test_a_tile_cannot_plan_the_frame(rt, rng):
     from clfx.host import RenderContext
     ctx = RenderContext(rt, rt.upload(scene(rng, (20, 30))))
