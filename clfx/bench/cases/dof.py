@@ -15,6 +15,8 @@ wide); ``SCENES`` are the classes of the depth-of-field table of issue 11, each 
 - ``bar``: a thin foreground bar blurred ~15 px over a sharp background, lights beside it;
 - ``physical``: 85 mm f/1.35 focused at 1.2 m (40 px CoC), default settings;
 - ``lines``: 1-px lines at several depths;
+- ``large``: large CoC over each other (radii 22-45 px, 60 at infinity): a lit wall, a
+  sign and an in-focus subject crossed by two foreground posts;
 - ``cateye``, ``anamorphic``, ``axial_ca``: the lens geometry in the bokeh (issue 15): HDR
   point lights far out of focus over the whole frame, corners included, and a few in front
   of the focus plane (:func:`corners_scene`), through a lens with optical vignetting 1.0
@@ -194,6 +196,38 @@ def physical_scene(width: int, height: int) -> tuple[Scene, Camera]:
     return scene, cam
 
 
+def large_scene(width: int, height: int) -> tuple[Scene, Camera]:
+    """Large circles of confusion over each other: a sharp subject (3 m) between a lit wall
+    at 12 m (CoC radius 45 px), a sign at 6 m (30 px), and two foreground posts at 1.8 m
+    (-40 px) and 2.2 m (-22 px) crossing the subject and the background."""
+    s = width / 320.0
+    rng = np.random.default_rng(17)
+    wall = Layer(depth=12.0, texture=Texture("blocks", (0.16, 0.12, 0.09), (0.03, 0.03, 0.05),
+                                             period=10.0 * s, seed=6),
+                 shape="full", center=(0.5 * width, 0.5 * height), name="wall",
+                 lights=_lights(rng, 16, s, (-160, -90, 160, 90), lum=(30.0, 800.0),
+                                avoid=(-60, -50, 40, 70)))
+    sign = Layer(depth=6.0, texture=Texture("stripes", (0.8, 0.7, 0.3), (0.1, 0.15, 0.3),
+                                            period=14.0 * s, angle=30.0),
+                 shape="rect", center=(0.78 * width, 0.35 * height),
+                 size=(0.3 * width, 0.3 * height), name="sign")
+    card = Layer(depth=3.0, texture=Texture("checker", (0.75, 0.7, 0.6), (0.08, 0.07, 0.06),
+                                            period=8.0 * s, angle=6.0),
+                 shape="rounded", center=(0.45 * width, 0.55 * height),
+                 size=(0.3 * width, 0.6 * height), corner=10.0 * s, name="subject")
+    post = Layer(depth=1.8, texture=Texture("noise", (0.35, 0.1, 0.06), (0.1, 0.05, 0.03),
+                                            period=6.0 * s, seed=8),
+                 shape="rect", center=(0.3 * width, 0.5 * height),
+                 size=(0.07 * width, 1.2 * height), name="near post")
+    rail = Layer(depth=2.2, texture=Texture("noise", (0.1, 0.3, 0.35), (0.05, 0.1, 0.1),
+                                            period=6.0 * s, seed=9),
+                 shape="rect", center=(0.6 * width, 0.85 * height),
+                 size=(0.9 * width, 0.06 * height), name="rail")
+    scene = Scene(width, height, (wall, sign, card, post, rail),
+                  name="large CoC: 20-45 px over each other")
+    return scene, lens_for(120.0, width)
+
+
 def lines_scene(width: int, height: int) -> tuple[Scene, Camera]:
     """1-px lines (horizontal and vertical) at 1.5, 2, 3 (in focus), 6 and 30 m over a grey
     wall at infinity."""
@@ -252,7 +286,7 @@ def _with_camera(make, **camera):
 
 
 SCENES = {"subject": subject_scene, "bokeh": bokeh_scene, "bar": bar_scene,
-          "physical": physical_scene, "lines": lines_scene,
+          "physical": physical_scene, "lines": lines_scene, "large": large_scene,
           "cateye": _with_camera(corners_scene, optical_vignetting=1.0),
           "cateye_front": _with_camera(corners_scene, optical_vignetting_front=1.0),
           "cateye_both": _with_camera(corners_scene, optical_vignetting=0.7,
