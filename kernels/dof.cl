@@ -26,7 +26,9 @@
  *   DOF_CATEYE=1: optical vignetting; every tap's coverage is also clipped by the barrel
  *   circle, whose centre (aperture radii) grows linearly from the optical centre with the
  *   destination pixel's position (dof_gather's cateye arguments; the shape varies smoothly,
- *   so the destination pixel's barrel stands for its taps').
+ *   so the destination pixel's barrel stands for its taps').  DOF_CATEYE=2: two circles
+ *   (the rear rim's, shifted away from the optical centre, and the front rim's, towards
+ *   it): every coverage is clipped by both, a lemon pointed at both ends.
  * Anamorphic squeeze lives in the tap tables (offsets in aperture space) and axial
  * chromatic aberration in dof_prepare's per-channel radius offset (one gather per distinct
  * offset, dof_merge_channels): neither costs anything here.
@@ -380,7 +382,11 @@ inline float4 dof_lum4(float16 c)
   return (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
 }
 
-#if DOF_CATEYE
+#if DOF_CATEYE >= 2
+#define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 cf_x, \
+                    const float4 cf_y, const float4 ce_frac
+#define CATEYE_PASS , ce_x, ce_y, cf_x, cf_y, ce_frac
+#elif DOF_CATEYE
 #define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 ce_frac
 #define CATEYE_PASS , ce_x, ce_y, ce_frac
 #else
@@ -408,6 +414,7 @@ typedef struct
  * radii) is seen only if |l - c| <= 1; a tap q whose light lands at p = q - o comes through
  * l = -o / r_q (signed radius), so its coverage is also that of |o + c r_q| <= |r_q|.  The
  * near field's weights (a tap's light over its own bokeh) divide by the clipped area.
+ * DOF_CATEYE=2: `cf_x`, `cf_y` the second circle's centres, clipping the same way.
  * `cap_s`: the largest luminance a colour may have where it fills in the background hidden
  * behind a blurred foreground pixel (beyond its own CoC's reach).
  *
@@ -428,9 +435,13 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   if(any(q_near))
   {
     const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-    const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f),
-                              clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f,
-                                    0.0f, 1.0f));
+    float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
+#if DOF_CATEYE >= 2
+    const float4 gnx = ax - cf_x * arq, gny = ay - cf_y * arq;
+    clip_n = fmin(clip_n, clamp((arq - sqrt(gnx * gnx + gny * gny)) * inv_s + 0.5f, 0.0f,
+                                1.0f));
+#endif
+    const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
     wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
   }
 #else
@@ -445,9 +456,12 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
                            p_near);
 #if DOF_CATEYE
   const float4 efx = ax + ce_x * rf, efy = ay + ce_y * rf;
-  const float4 cov_f = fmin(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
-                            clamp((rf - sqrt(efx * efx + efy * efy)) * inv_s + 0.5f,
-                                  0.0f, 1.0f));
+  float4 clip_f = clamp((rf - sqrt(efx * efx + efy * efy)) * inv_s + 0.5f, 0.0f, 1.0f);
+#if DOF_CATEYE >= 2
+  const float4 gfx = ax + cf_x * rf, gfy = ay + cf_y * rf;
+  clip_f = fmin(clip_f, clamp((rf - sqrt(gfx * gfx + gfy * gfy)) * inv_s + 0.5f, 0.0f, 1.0f));
+#endif
+  const float4 cov_f = fmin(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_f);
 #else
   const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
 #endif
@@ -462,9 +476,13 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
        bar must not shine through it) */
 #if DOF_CATEYE
     const float4 eqx = ax + ce_x * arq, eqy = ay + ce_y * arq;
-    const float4 cov_q = fmin(fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f),
-                                   clamp((arq - sqrt(eqx * eqx + eqy * eqy)) * inv_s + 0.5f,
-                                         0.0f, 1.0f)),
+    float4 clip_q = clamp((arq - sqrt(eqx * eqx + eqy * eqy)) * inv_s + 0.5f, 0.0f, 1.0f);
+#if DOF_CATEYE >= 2
+    const float4 gqx = ax + cf_x * arq, gqy = ay + cf_y * arq;
+    clip_q = fmin(clip_q, clamp((arq - sqrt(gqx * gqx + gqy * gqy)) * inv_s + 0.5f, 0.0f,
+                                1.0f));
+#endif
+    const float4 cov_q = fmin(fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_q),
                               cov_f);
 #else
     const float4 cov_q = fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), cov_f);
@@ -613,8 +631,9 @@ inline float dof_cap(global const float *log_mean, const int tx, const int ty,
  * half-res pixels span more than `refine` in log luminance (a bokeh rim); every other
  * group gathers at full resolution with (first, count).
  * `cateye` (used with DOF_CATEYE): the barrel centre of buffer pixel (x, y) is
- * (s0 (x + 0.5) + s1, s2 (y + 0.5) + s3) aperture radii (the host folds in the strength,
- * the optical centre, the half diagonal, the pixel aspect and the buffer's scale).
+ * (s0 (x + 0.5) + s1, s2 (y + 0.5) + s3) aperture radii (the host folds in the signed
+ * strength, the optical centre, the half diagonal, the pixel aspect and the buffer's
+ * scale); with DOF_CATEYE=2 the second circle's from s4..s7.
  * `plane`: pixels between the planes of `col`'s prefilter pyramid (dof_prefilter).
  * `place`: where the buffers sit on the grid of the whole render's window (the tiles, the
  * cat-eye centres, the half-resolution sampling): dst pixel (x, y) is grid pixel
@@ -628,7 +647,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
                        const int hwidth, const int hheight, const float refine,
-                       const float low_r, const float4 cateye, const int plane,
+                       const float low_r, const float8 cateye, const int plane,
                        const int4 place, const int4 hplace, global const float *mixa,
                        global const float *mixr, global const float *mixd,
                        global const int *mflags, const int mtiles_x, const int mtiles_y)
@@ -715,8 +734,16 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float4 ce_x = cateye.s0 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s1;
   const float4 ce_y = (float4)(cateye.s2 * ((float)y + 0.5f) + cateye.s3);
   /* the open fraction of the unit aperture clipped by a unit circle d away:
-     (2 acos(d/2) - d/2 sqrt(4 - d^2)) / pi */
+     (2 acos(d/2) - d/2 sqrt(4 - d^2)) / pi; two circles on a line through the aperture's
+     centre, on either side of it: their intersection lies inside it, d their distance */
+#if DOF_CATEYE >= 2
+  const float4 cf_x = cateye.s4 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s5;
+  const float4 cf_y = (float4)(cateye.s6 * ((float)y + 0.5f) + cateye.s7);
+  const float4 d = fmin(sqrt((ce_x - cf_x) * (ce_x - cf_x) + (ce_y - cf_y) * (ce_y - cf_y)),
+                        2.0f);
+#else
   const float4 d = fmin(sqrt(ce_x * ce_x + ce_y * ce_y), 2.0f);
+#endif
   const float4 ce_frac = fmax((2.0f * acos(0.5f * d) - 0.5f * d * sqrt(4.0f - d * d))
                               * (1.0f / CLFX_PI), CATEYE_MIN_FRAC);
 #endif

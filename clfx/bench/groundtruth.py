@@ -37,8 +37,9 @@ chromatic aberration adds each channel's offset (:meth:`clfx.core.camera.Camera.
 to every layer's signed CoC, one composite per distinct offset (alpha from green's); optical
 vignetting accepts a lens point ``l`` at pixel ``x`` only inside the barrel circle
 ``|l - c(x)| <= 1`` (:func:`clfx.core.camera.optical_vignetting_centre`, the frame's centre
-and half diagonal): each pixel accumulates its accepted renders and their weights and is
-normalised by them (the clipped aperture; the darkening is not modelled, as in the effect).
+and half diagonal; ``optical_vignetting_front`` adds the front rim's circle, its centre
+that of minus its strength, shifted towards the frame's centre): each pixel accumulates its
+accepted renders and their weights and is normalised by them (the clipped aperture; the darkening is not modelled, as in the effect).
 
 Motion: at time ``t`` (frames) a layer is translated by ``velocity * t``.  The shutter is
 open for ``shutter_angle / 360`` of a frame, centred on the frame time, starting at it
@@ -373,12 +374,14 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
     # optical vignetting: a lens point l is seen by pixel x only inside the barrel circle
     # |l - c(x)| <= 1 (clfx.core.camera.optical_vignetting_centre); each pixel averages its
     # accepted renders (mask-weighted sums over the mask weights)
+    # (the rear rim's circle, shifted away from the centre) and |l - c_f(x)| <= 1 (the front
+    # rim's, c_f the centre of minus optical_vignetting_front: shifted towards it)
     cat = None
-    if dof and camera.optical_vignetting > 0.0:
+    rims = [k for k in (camera.optical_vignetting, -camera.optical_vignetting_front) if k]
+    if dof and rims:
         yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
-        cat = optical_vignetting_centre(xx, yy, strength=camera.optical_vignetting,
-                                        centre=(0.5 * w, 0.5 * h),
-                                        half_diagonal=0.5 * math.hypot(w, h))
+        cat = [optical_vignetting_centre(xx, yy, strength=k, centre=(0.5 * w, 0.5 * h),
+                                         half_diagonal=0.5 * math.hypot(w, h)) for k in rims]
         msum = np.zeros((h, w), np.float64)
         acc_all = np.zeros((h, w, 4), np.float64)
 
@@ -400,7 +403,10 @@ def render_truth(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int =
         if cat is None:
             acc += weights[i] * sample
         else:
-            m = weights[i] * (((px - cat[0]) ** 2 + (py - cat[1]) ** 2) <= 1.0)
+            inside = True
+            for cx, cy in cat:
+                inside = inside & (((px - cx) ** 2 + (py - cy) ** 2) <= 1.0)
+            m = weights[i] * inside
             acc += m[..., None] * sample
             msum += m
             acc_all += weights[i] * sample

@@ -138,6 +138,7 @@ class Camera:
     sensor_height: float | None = None  # mm; None = from the frame's aspect
     breathing: float = 0.0         # lens breathing: 0 none, 1 unit-focusing thin lens
     optical_vignetting: float = 0.0  # barrel offset at the frame corner, aperture radii (cat-eye)
+    optical_vignetting_front: float = 0.0  # front rim's offset at the corner (towards the centre)
     anamorphic_squeeze: float = 1.0  # 1 = spherical; 1.33, 1.8, 2: oval bokeh (height / width)
     axial_ca_red: float = 0.0      # um: focus of red behind green (longitudinal CA), sensor side
     axial_ca_blue: float = 0.0     # um: focus of blue behind green
@@ -147,7 +148,8 @@ class Camera:
         "focus_distance": (1e-4, 1e9), "shutter_angle": (0.0, 720.0), "iso": (1.0, 1e6),
         "blades": (0, 32), "blade_rotation": (-360.0, 360.0), "sensor_height": (0.5, 200.0),
         "breathing": (-2.0, 2.0),
-        "optical_vignetting": (0.0, 2.0), "anamorphic_squeeze": (1.0, 3.0),
+        "optical_vignetting": (0.0, 2.0), "optical_vignetting_front": (0.0, 2.0),
+        "anamorphic_squeeze": (1.0, 3.0),
         "axial_ca_red": (-1000.0, 1000.0), "axial_ca_blue": (-1000.0, 1000.0),
     }
     CHOICES = {"shutter_offset": SHUTTER_OFFSETS}

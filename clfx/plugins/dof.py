@@ -32,7 +32,12 @@ ground-truth renderer models the same optics):
   near field's weights divide by the clipped area, so a flat field stays flat: the
   darkening belongs to the ``vignette`` effect.  A point's light drifts by about
   ``strength * r / half diagonal`` of its energy (the destination's barrel standing for the
-  point's).  Build variant ``DOF_CATEYE``.
+  point's).  That circle is the rim behind the stop; ``Camera.optical_vignetting_front``
+  (``optical_vignetting_front``) is the front rim, the same strength with the circle shifted
+  towards the optical centre.  Both: the aperture cut by the two circles, a lemon pointed
+  at both ends (the two circles' intersection lies inside the aperture, so its area is one
+  lens of two unit circles ``(front + rear) * |pixel - centre| / half diagonal`` apart).
+  Build variant ``DOF_CATEYE`` (1: one circle, 2: both).
 - Anamorphic squeeze, ``Camera.anamorphic_squeeze`` (``anamorphic_squeeze``; 0 = the
   camera's): in the desqueezed image the bokeh is the thin-lens CoC high and CoC / squeeze
   wide (vertical ovals).  Radii stay in x pixels and the tap tables measure offsets in
@@ -154,6 +159,12 @@ class Lens(NamedTuple):
     squeeze: float = 1.0            # anamorphic squeeze: bokeh height / width
     cateye: float = 0.0             # optical vignetting: barrel offset at the corner, radii
     ca: tuple = (0.0, 0.0)          # red, blue signed CoC radius offsets (axial CA), px
+    cateye_front: float = 0.0       # front rim's offset at the corner (towards the centre)
+
+    def cateye_strengths(self) -> tuple:
+        """The signed strengths of the clipping circles (rear: +cateye, its circle shifted
+        away from the optical centre; front: -cateye_front, towards it), the ones in use."""
+        return tuple(k for k in (self.cateye, -self.cateye_front) if k)
 
     def offsets(self) -> tuple:
         """The distinct per-channel radius offsets, green's (0) first: one gather each."""
@@ -441,7 +452,17 @@ class Dof(Plugin):
             FloatParam("optical_vignetting", -1.0, min=-1.0, max=2.0, units="aperture radii",
                        hint="Cat-eye bokeh: offset of the lens barrel's circle at the frame "
                             "corner, growing linearly from the optical centre (0 = none, 1 = "
-                            "the corner's bokeh cut to a cat's eye); -1 = the camera block's."),
+                            "the corner's bokeh cut to a cat's eye); -1 = the camera block's. "
+                            "The rim behind the stop: the clip is shifted away from the frame "
+                            "centre."),
+            FloatParam("optical_vignetting_front", -1.0, min=-1.0, max=2.0,
+                       units="aperture radii",
+                       hint="Cat-eye bokeh from the front rim: as optical_vignetting, the "
+                            "clip shifted towards the frame centre; with both, the corner's "
+                            "bokeh is a pointed lemon (the aperture cut by two offset circles); "
+                            "-1 = the camera block's.  E.g. the double-Gauss 50 mm f/2 "
+                            "(lenses/double-gauss-50mm) wide open on full frame: rear 0.7, "
+                            "front 0.7 (its last and first surfaces, traced paraxially)."),
             FloatParam("anamorphic_squeeze", 0.0, min=0.0, max=3.0, units="x",
                        hint="Anamorphic oval bokeh: height / width of the bokeh in the "
                             "desqueezed image (1.33, 1.8, 2); 0 = the camera block's, 1 = "
@@ -484,6 +505,8 @@ class Dof(Plugin):
             raise ParamError(f"dof.anamorphic_squeeze = {squeeze:g}: expected 0 (the camera "
                              f"block's) or a squeeze in [1, 3]")
         cateye = cam.optical_vignetting if p.optical_vignetting < 0 else p.optical_vignetting
+        front = (cam.optical_vignetting_front if p.optical_vignetting_front < 0
+                 else p.optical_vignetting_front)
         ca = (0.0, 0.0)
         if p.axial_ca_red or p.axial_ca_blue or cam.axial_ca_red or cam.axial_ca_blue:
             # the chromatic focus shift over this effect's f-number (also with max_blur)
@@ -492,19 +515,24 @@ class Dof(Plugin):
                               axial_ca_blue=cam.axial_ca_blue + p.axial_ca_blue)
             ca = tuple(0.5 * v for v in eff.axial_ca_px(ctx.width_px))
         return Lens(k_half, focus_distance(p, cam), clamp_r, blades, first_blade_angle(rot),
-                    float(squeeze), float(cateye), ca)
+                    float(squeeze), float(cateye), ca, float(front))
 
     def cateye_args(self, lens: Lens, ctx, window, scale: int = 1):
-        """``dof_gather``'s cateye float4 for a buffer over ``window`` (``scale``: its pixels
-        per full-resolution pixel's): the barrel centre of buffer pixel (x, y) is
-        ``(s0 (x + 0.5) + s1, s2 (y + 0.5) + s3)`` aperture radii."""
+        """``dof_gather``'s cateye float8 for a buffer over ``window`` (``scale``: its pixels
+        per full-resolution pixel's): the centre of the first clipping circle
+        (:meth:`Lens.cateye_strengths`) of buffer pixel (x, y) is ``(s0 (x + 0.5) + s1,
+        s2 (y + 0.5) + s3)`` aperture radii, the second's (with both rims) likewise from
+        ``s4..s7``."""
         d = ctx.display_window
         aspect = ctx.pixel_aspect
         half_diag = 0.5 * math.hypot(d.width, d.height / aspect)
-        k = lens.cateye / half_diag
         cx, cy = d.center
-        return (np.float32(k * scale), np.float32(k * (window.x0 - cx)),
-                np.float32(k * scale / aspect), np.float32(k * (window.y0 - cy) / aspect))
+        out = []
+        for strength in (lens.cateye_strengths() + (0.0, 0.0))[:2]:
+            k = strength / half_diag
+            out += (np.float32(k * scale), np.float32(k * (window.x0 - cx)),
+                    np.float32(k * scale / aspect), np.float32(k * (window.y0 - cy) / aspect))
+        return tuple(out)
 
     def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None,
                    tiles: DepthTiles | None = None):
@@ -684,8 +712,10 @@ class Dof(Plugin):
         if len(offsets) > 1:
             said.append(f"axial CA: red {2 * lens.ca[0]:+.2f} px, blue {2 * lens.ca[1]:+.2f} px "
                         f"of CoC, {len(offsets)} gathers")
-        if lens.cateye:
-            said.append(f"optical vignetting {lens.cateye:g} (cat-eye bokeh)")
+        if lens.cateye or lens.cateye_front:
+            rims = [f"rear {lens.cateye:g}"] * bool(lens.cateye) + \
+                   [f"front {lens.cateye_front:g}"] * bool(lens.cateye_front)
+            said.append(f"optical vignetting {', '.join(rims)} (cat-eye bokeh)")
         if lens.squeeze != 1.0:
             said.append(f"anamorphic squeeze {lens.squeeze:g}")
         if tiles.nonfinite_count:
@@ -855,7 +885,8 @@ class Dof(Plugin):
         del coc0
         mix, count = self._mixed(rt, col, coc, padded, pad, w, h, band.y0 - src.window.y0,
                                  band.height)
-        variant = {"DOF_CATEYE": 1} if lens.cateye > 0 else {}
+        circles = len(lens.cateye_strengths())
+        variant = {"DOF_CATEYE": circles} if circles else {}
         gather = rt.kernel("dof.cl", "dof_gather", fp64=lvl.fp64, **variant, **luma)
         # where the buffers sit on the whole render's grid (its window's origin)
         top, row0 = band.y0 - whole.y0, src.window.y0 - whole.y0

@@ -137,6 +137,10 @@ DOF_LENSES = {
     # tall pixels: the reach in rows doubles
     "pixel-aspect": ({"coc_source": "max_blur", "max_blur": 0.05, "optical_vignetting": 0.7},
                      2.0),
+    # both rims (two clipping circles) and the front rim alone, the half-resolution gather
+    "both-rims": ({"coc_source": "max_blur", "max_blur": 0.25, "max_coc": 1.0,
+                   "optical_vignetting": 0.6, "optical_vignetting_front": 0.8}, 1.0),
+    "front-rim": ({"optical_vignetting_front": 1.2, "anamorphic_squeeze": 1.3}, 2.0),
 }
 """dof's lenses for the tiling test: (params, pixel aspect)."""
 
@@ -188,7 +192,7 @@ def layered_aa(shape, ss=4):
 
 
 @pytest.mark.parametrize("quality", effects.QUALITIES)
-@pytest.mark.parametrize("lens", ["camera", "ca-cateye-squeeze", "pixel-aspect"])
+@pytest.mark.parametrize("lens", ["camera", "ca-cateye-squeeze", "pixel-aspect", "both-rims"])
 def test_dof_bands_split_mixed_edge_pixels_as_the_whole_render(rt, lens, quality, monkeypatch):
     """Antialiased depth edges: the mixed pixels a band splits (from its own rows and the
     two beyond) and the gathers that read them are the whole render's, bit for bit, and the

@@ -51,8 +51,11 @@ def oracle(src, depth, quality, cam=CAM, **params):
                      -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
                      p.roundness, dense=lvl.dense_radius, squeeze=squeeze)
     ov = cam.optical_vignetting if p.optical_vignetting < 0 else p.optical_vignetting
+    fr = (cam.optical_vignetting_front if p.optical_vignetting_front < 0
+          else p.optical_vignetting_front)
     kw = dict(k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps,
-              cateye=reference.cateye_centres((h, w), ov) if ov > 0 else None)
+              cateye=reference.cateye_centres((h, w), ov) if ov > 0 else None,
+              cateye_front=reference.cateye_centres((h, w), -fr) if fr > 0 else None)
     if any(offsets):
         return reference.dof_chromatic(src, depth, offsets=offsets, **kw)
     return reference.dof(src, depth, **kw)
@@ -621,6 +624,8 @@ def test_bench_naive_is_the_reference_naive_gather(rt, rng):
 # -- lens geometry in the bokeh: cat-eye, anamorphic, axial chromatic aberration ------------
 OPTIONS = {
     "cateye": dict(optical_vignetting=1.2),
+    "cateye_front": dict(optical_vignetting_front=1.2),
+    "cateye_both": dict(optical_vignetting=0.9, optical_vignetting_front=0.8),
     "anamorphic": dict(anamorphic_squeeze=1.8),
     "axial_ca": dict(axial_ca_red=60.0, axial_ca_blue=45.0),
 }
@@ -630,7 +635,7 @@ OPTIONS = {
 @pytest.mark.parametrize("quality", ["preview", "reference"])
 def test_lens_geometry_options_match_reference(rt, rng, option, quality):
     src, depth = random_case(rng, (40, 52))
-    cam = CAM.updated(sensor_width=8.0, blades=6 if option == "cateye" else 0)
+    cam = CAM.updated(sensor_width=8.0, blades=6 if option.startswith("cateye") else 0)
     got = run(rt, src, depth, quality, cam, **OPTIONS[option])
     want = oracle(src, depth, quality, cam, **OPTIONS[option])
     tol = 1e-9 if quality == "reference" else 1e-4
@@ -723,6 +728,98 @@ def test_cateye_bokeh_is_round_at_the_centre_and_tangential_at_the_edges(rt):
     np.testing.assert_allclose(flat, 0.5, rtol=1e-6)
 
 
+def _bokeh_profile(img, y, x, rad):
+    """The bokeh of the light at pixel (y, x) in its radial / tangential frame (the radial
+    axis from the frame's centre): the half-maximum mask sampled every 1/4 px, its width
+    (px, across the tangential axis) per tangential position, those positions (px) and
+    the centroid's radial offset from the light (px, + away from the centre)."""
+    from scipy.ndimage import map_coordinates
+
+    h, w = img.shape[:2]
+    u = np.array([x + 0.5 - 0.5 * w, y + 0.5 - 0.5 * h])
+    u /= np.hypot(*u)
+    v = np.array([-u[1], u[0]])
+    t = np.arange(-rad, rad + 0.01, 0.25)
+    tt, ss = np.meshgrid(t, t, indexing="ij")       # [tangential, radial]
+    px = x + tt * v[0] + ss * u[0]
+    py = y + tt * v[1] + ss * u[1]
+    g = map_coordinates(img[..., 1].astype(np.float64), [py, px], order=1)
+    g = np.maximum(g - 0.01, 0.0)
+    mask = g > 0.5 * np.percentile(g[g > 0], 90)
+    radial = (g * ss).sum() / g.sum()
+    return mask.sum(axis=1) * 0.25, t, radial
+
+
+def test_both_rims_give_a_lemon_pointed_at_both_ends(rt):
+    """Rear and front rim together: the corner's bokeh is the aperture cut by two circles on
+    either side, a lemon whose width falls to a point at both ends (an ellipse keeps 60 %
+    of its width at 80 % of its half length, this lemon 42 %, 46 % once blurred by the
+    pixels), centred on the light;
+    the rear rim alone shifts the bokeh away from the frame's centre, the front rim alone
+    towards it."""
+    h, w, y, x = 120, 200, 30, 160
+    src = np.zeros((h, w, 4), np.float32)
+    src[..., :3] = 0.01
+    src[..., 3] = 1.0
+    src[y, x, :3] = 1e3
+    d = np.full((h, w), 200.0, np.float32)
+    cam = CAM.updated(sensor_width=3.5)                 # CoC radius ~16 px
+    both = run(rt, src, d, "reference", cam, optical_vignetting=1.0,
+               optical_vignetting_front=1.0)
+    width, t, radial = _bokeh_profile(both, y, x, 20)
+    inside = np.nonzero(width > 0)[0]
+    lo, hi = t[inside[0]], t[inside[-1]]
+    half, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
+    w0 = width[np.argmin(np.abs(t - mid))]
+    ends = [width[np.argmin(np.abs(t - (mid + k * 0.8 * half)))] for k in (-1, 1)]
+    assert half > 1.5 * w0 / 2, (half, w0)               # elongated across the radius
+    # measured 0.475 and 0.45 of w0 (a disk or an ellipse: 0.6), half 9.4 px, w0 10 px
+    assert max(ends) < 0.53 * w0 and min(ends) > 0.8 * max(ends), (ends, w0)
+    assert abs(radial) < 1.0, radial
+    _, _, rear = _bokeh_profile(run(rt, src, d, "reference", cam, optical_vignetting=1.0),
+                                y, x, 20)
+    _, _, front = _bokeh_profile(run(rt, src, d, "reference", cam,
+                                     optical_vignetting_front=1.0), y, x, 20)
+    assert rear > 2.0 and front < -2.0, (rear, front)
+
+
+def test_front_rim_matches_its_truth_better_than_a_round_gather(rt):
+    """The front rim's cat-eye against its thin-lens truth (the bench's ``cateye_front``
+    scene, small): clipping with the front rim beats the round aperture and the rear rim."""
+    from clfx.bench.cases.dof import make_scene
+
+    c = make_scene("cateye_front", 160, 90, ss=2, samples=1024)
+    assert c["camera"].optical_vignetting_front == 1.0
+    score = {k: metrics.psnr_log(run(rt, c["source"], c["depth"], "final", c["camera"], **kw),
+                                 c["truth"])
+             for k, kw in (("front", {}), ("round", dict(optical_vignetting_front=0.0)),
+                           ("rear", dict(optical_vignetting_front=0.0,
+                                         optical_vignetting=1.0)))}
+    assert score["front"] > score["round"] + 2.0 and score["front"] > score["rear"], score
+
+
+def test_front_rim_is_validated_and_plumbed_from_the_camera_block(rt, rng):
+    from clfx.core.errors import ParamError
+
+    with pytest.raises(ValueError):
+        Camera.validate("optical_vignetting_front", 2.5)
+    with pytest.raises(ParamError, match="optical_vignetting_front"):
+        Dof.params(optical_vignetting_front=2.5)
+    assert Camera().optical_vignetting_front == 0
+    src, depth = random_case(rng, (33, 45))
+    plain = CAM.updated(sensor_width=8.0)
+    cam = plain.updated(optical_vignetting_front=1.5)
+    got = run(rt, src, depth, "final", cam)
+    np.testing.assert_array_equal(got, run(rt, src, depth, "final", plain,
+                                           optical_vignetting_front=1.5))
+    np.testing.assert_allclose(got, oracle(src, depth, "final", cam), rtol=1e-4,
+                               atol=2e-3 * src.max())
+    assert np.abs(got - run(rt, src, depth, "final", plain)).max() > 0.05
+    # dof's 0 turns the camera's off: the round gather, bit for bit
+    np.testing.assert_array_equal(run(rt, src, depth, "final", cam, optical_vignetting_front=0.0),
+                                  run(rt, src, depth, "final", plain))
+
+
 def test_anamorphic_bokeh_is_a_vertical_oval_with_the_thin_lens_height(rt):
     src, d, pts = _lights_frame()
     cam = CAM.updated(sensor_width=4.0)
@@ -800,7 +897,8 @@ def test_options_grow_the_reach(rt):
     assert sq[0] < base[0] and sq[1] == base[1]
 
 
-@pytest.mark.parametrize("option", ["cateye", "anamorphic", "axial_ca"])
+@pytest.mark.parametrize("option", ["cateye", "cateye_front", "cateye_both", "anamorphic",
+                                    "axial_ca"])
 def test_lens_geometry_beats_naive_and_input_on_ground_truth(rt, option):
     """The bench's lens-geometry cases at 160x90: every level beats the naive gather (with
     the same aperture) and the unchanged input; final is within 1 dB of reference."""

@@ -4,7 +4,8 @@
 edge-aware radii, same near/far weights and hidden-background caps), for images small enough
 that one neighbourhood radius covers them.
 ``dof_chromatic``: axial chromatic aberration, ``dof`` once per channel radius offset.
-``cateye_centres``: the barrel circle's centre per pixel (optical vignetting).
+``cateye_centres``: the barrel circle's centre per pixel (optical vignetting; the front
+rim's with a negative strength).
 ``naive_dof``: the classic post-process baseline the plugin must beat against ground truth:
 every pixel averages the source over its own CoC disk (no near/far layering, no occlusion).
 """
@@ -164,7 +165,8 @@ def mixed_pixels(src, r):
     return a, rn, rf, d
 
 
-def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
+def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
+        cateye_front=None):
     """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area,
     aperture-space ox, oy, level L).  A tap of level L reads plane L of
     :func:`prefilter_pyramid` (colour and luminance) and every coverage ramp below is
@@ -173,6 +175,9 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     clipped by the barrel, near taps by clamp(|r_q| - |a - c |r_q|| + 0.5, 0, 1), far ones by
     clamp(rf - |a + c rf| + 0.5, 0, 1) (a: the tap's aperture-space offset), and the near
     weights divide by pi r_q^2 * :func:`open_fraction` (|c|) instead of pi r_q^2.
+    ``cateye_front``: the front rim's centres (:func:`cateye_centres` of minus its strength),
+    clipping every coverage the same way (alone, or with ``cateye``: the minimum of both
+    circles' coverages, the open fraction that of the two circles |c - c_front| apart).
 
     Per pixel p and tap q = p + o (clamp-to-edge), radii r (signed, px, :func:`edge_radius`):
     near taps (r_q < -0.25): w = clamp(|r_q| - d_near + 0.5, 0, 1) / max(pi r_q^2, 1),
@@ -207,9 +212,11 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
     mix_a, mix_rn, mix_rf, mix_d = mixed_pixels(src, r)
     if level > 0:
         mix_a = np.zeros_like(mix_a)
-    if cateye is not None:
-        cx, cy = (np.asarray(v, np.float64) for v in cateye)
-        frac = open_fraction(np.hypot(cx, cy))
+    circles = [tuple(np.asarray(v, np.float64) for v in c)
+               for c in (cateye, cateye_front) if c is not None]
+    if circles:
+        (cx, cy), (fx, fy) = circles[0], circles[-1] if len(circles) > 1 else (0.0, 0.0)
+        frac = open_fraction(np.hypot(cx - fx, cy - fy))
 
     def gather(r0, c0, layer):
         """Both fields of every pixel with radii ``r0`` (centre colours ``c0``); ``layer`` 1
@@ -226,8 +233,10 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
             def ramp(v):   # the coverage ramp of this tap's lattice
                 return np.clip(v * inv_s + 0.5, 0, 1)
 
-            def barrel(rad, sign):   # coverage of the barrel circle for radius rad
-                return ramp(rad - np.hypot(ax + sign * cx * rad, ay + sign * cy * rad))
+            def barrel(rad, sign):   # coverage of the clipping circles for radius rad
+                return np.minimum.reduce([ramp(rad - np.hypot(ax + sign * ux * rad,
+                                                              ay + sign * uy * rad))
+                                          for ux, uy in circles])
 
             c = _clamped(planes[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
             rq = _clamped(r, ys + int(oy), xs + int(ox))
@@ -250,7 +259,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None):
                 cov_f = ramp(rf - d_far)
                 cov_q = ramp(arq - d_far)
                 area_n = math.pi * arq ** 2
-                if cateye is not None:
+                if circles:
                     cov_n = np.minimum(cov_n, barrel(arq, -1))
                     cov_f = np.minimum(cov_f, barrel(rf, +1))
                     cov_q = np.minimum(cov_q, barrel(arq, +1))

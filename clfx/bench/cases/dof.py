@@ -15,12 +15,16 @@ wide); ``SCENES`` are the classes of the depth-of-field table of issue 11, each 
 - ``bar``: a thin foreground bar blurred ~15 px over a sharp background, lights beside it;
 - ``physical``: 85 mm f/1.35 focused at 1.2 m (40 px CoC), default settings;
 - ``lines``: 1-px lines at several depths;
+- ``large``: large CoC over each other (radii 22-45 px, 60 at infinity): a lit wall, a
+  sign and an in-focus subject crossed by two foreground posts;
 - ``cateye``, ``anamorphic``, ``axial_ca``: the lens geometry in the bokeh (issue 15): HDR
   point lights far out of focus over the whole frame, corners included, and a few in front
   of the focus plane (:func:`corners_scene`), through a lens with optical vignetting 1.0
   (cat-eye bokeh), an anamorphic squeeze of 1.8 (vertical ovals), or 80 um of axial
   chromatic aberration of red and blue behind green (an achromat: green rims behind the
-  focus plane, magenta in front).
+  focus plane, magenta in front);
+- ``cateye_front``, ``cateye_both``: the same lights clipped by the front rim (1.0, the
+  clip shifted towards the centre) and by both rims (rear 0.7, front 0.7: pointed lemons).
 
 ``naive(case, params, ctx)`` is the classic baseline (each pixel averages the source over the
 disk of its own CoC, no layering), with the same aperture model as the effect (squeeze,
@@ -192,6 +196,38 @@ def physical_scene(width: int, height: int) -> tuple[Scene, Camera]:
     return scene, cam
 
 
+def large_scene(width: int, height: int) -> tuple[Scene, Camera]:
+    """Large circles of confusion over each other: a sharp subject (3 m) between a lit wall
+    at 12 m (CoC radius 45 px), a sign at 6 m (30 px), and two foreground posts at 1.8 m
+    (-40 px) and 2.2 m (-22 px) crossing the subject and the background."""
+    s = width / 320.0
+    rng = np.random.default_rng(17)
+    wall = Layer(depth=12.0, texture=Texture("blocks", (0.16, 0.12, 0.09), (0.03, 0.03, 0.05),
+                                             period=10.0 * s, seed=6),
+                 shape="full", center=(0.5 * width, 0.5 * height), name="wall",
+                 lights=_lights(rng, 16, s, (-160, -90, 160, 90), lum=(30.0, 800.0),
+                                avoid=(-60, -50, 40, 70)))
+    sign = Layer(depth=6.0, texture=Texture("stripes", (0.8, 0.7, 0.3), (0.1, 0.15, 0.3),
+                                            period=14.0 * s, angle=30.0),
+                 shape="rect", center=(0.78 * width, 0.35 * height),
+                 size=(0.3 * width, 0.3 * height), name="sign")
+    card = Layer(depth=3.0, texture=Texture("checker", (0.75, 0.7, 0.6), (0.08, 0.07, 0.06),
+                                            period=8.0 * s, angle=6.0),
+                 shape="rounded", center=(0.45 * width, 0.55 * height),
+                 size=(0.3 * width, 0.6 * height), corner=10.0 * s, name="subject")
+    post = Layer(depth=1.8, texture=Texture("noise", (0.35, 0.1, 0.06), (0.1, 0.05, 0.03),
+                                            period=6.0 * s, seed=8),
+                 shape="rect", center=(0.3 * width, 0.5 * height),
+                 size=(0.07 * width, 1.2 * height), name="near post")
+    rail = Layer(depth=2.2, texture=Texture("noise", (0.1, 0.3, 0.35), (0.05, 0.1, 0.1),
+                                            period=6.0 * s, seed=9),
+                 shape="rect", center=(0.6 * width, 0.85 * height),
+                 size=(0.9 * width, 0.06 * height), name="rail")
+    scene = Scene(width, height, (wall, sign, card, post, rail),
+                  name="large CoC: 20-45 px over each other")
+    return scene, lens_for(120.0, width)
+
+
 def lines_scene(width: int, height: int) -> tuple[Scene, Camera]:
     """1-px lines (horizontal and vertical) at 1.5, 2, 3 (in focus), 6 and 30 m over a grey
     wall at infinity."""
@@ -250,8 +286,11 @@ def _with_camera(make, **camera):
 
 
 SCENES = {"subject": subject_scene, "bokeh": bokeh_scene, "bar": bar_scene,
-          "physical": physical_scene, "lines": lines_scene,
+          "physical": physical_scene, "lines": lines_scene, "large": large_scene,
           "cateye": _with_camera(corners_scene, optical_vignetting=1.0),
+          "cateye_front": _with_camera(corners_scene, optical_vignetting_front=1.0),
+          "cateye_both": _with_camera(corners_scene, optical_vignetting=0.7,
+                                      optical_vignetting_front=0.7),
           "anamorphic": _with_camera(corners_scene, anamorphic_squeeze=1.8),
           "axial_ca": _with_camera(corners_scene, axial_ca_red=80.0, axial_ca_blue=80.0)}
 
@@ -266,7 +305,7 @@ def make_scene(name: str, width: int = 320, height: int = 180, *, ss: int = SS,
 # -- the naive baseline ------------------------------------------------------------------------
 def naive_dof(src: np.ndarray, depth: np.ndarray, *, k_half: float, focus: float,
               clamp_r: float, squeeze: float = 1.0, cateye=None,
-              ca: tuple = (0.0, 0.0)) -> np.ndarray:
+              ca: tuple = (0.0, 0.0), cateye_front=None) -> np.ndarray:
     """Per-pixel-CoC gather without layering: the mean of the source over the pixel centres
     within ``|r| + 0.5`` of the pixel (``r`` its signed CoC radius; clamp-to-edge).
 
@@ -274,19 +313,20 @@ def naive_dof(src: np.ndarray, depth: np.ndarray, *, k_half: float, focus: float
     filter per distinct disk), so any radius runs in seconds.  With the lens geometry of
     the effect: ``squeeze`` (the disk ``squeeze`` times narrower than high), ``cateye`` =
     ``(cx, cy)`` barrel centres per pixel (aperture radii; the disk clipped as the effect's,
-    :func:`_naive_shaped`), ``ca``: red and blue radius offsets (px), one gather per channel.
+    :func:`_naive_shaped`), ``cateye_front``: the front rim's centres likewise, ``ca``: red
+    and blue radius offsets (px), one gather per channel.
     """
     import cv2
 
     src = np.asarray(src, np.float32)
     src = np.where(np.isfinite(src), src, 0.0).astype(np.float32)
-    if squeeze != 1.0 or cateye is not None or any(ca):
+    if squeeze != 1.0 or cateye is not None or cateye_front is not None or any(ca):
         out = None
         for chans, off in (((0, 1, 2, 3), 0.0), ((0,), ca[0]), ((2,), ca[1])):
             if out is not None and off == 0.0:
                 continue        # green's radius: already there
             r = np.clip(coc_signed(depth, 2.0 * k_half, focus) * 0.5 + off, -clamp_r, clamp_r)
-            res = _naive_shaped(src, r, squeeze, cateye)
+            res = _naive_shaped(src, r, squeeze, cateye, cateye_front)
             if out is None:
                 out = res
             else:
@@ -314,28 +354,31 @@ CATEYE_STEP = 0.05
 """The naive gather's barrel centres are rounded to this (aperture radii) to group pixels."""
 
 
-def _naive_shaped(src: np.ndarray, r: np.ndarray, squeeze: float, cateye) -> np.ndarray:
+def _naive_shaped(src: np.ndarray, r: np.ndarray, squeeze: float, cateye,
+                  cateye_front=None) -> np.ndarray:
     """The naive gather with the effect's aperture: pixel p averages the source over the
-    offsets o with ``|o'| <= |r| + 0.5`` and (cat-eye) ``|o' + c r| <= |r| + 0.5``, ``o' =
-    (o_x squeeze, o_y)`` (the bokeh of a point with p's radius, seen from p).  Pixels are
-    grouped by radius (rounded to 1/4 px) and barrel centre (rounded to
-    :data:`CATEYE_STEP`), one normalised filter each over the pixels' bounding box."""
+    offsets o with ``|o'| <= |r| + 0.5`` and (cat-eye) ``|o' + c r| <= |r| + 0.5`` for the
+    rear rim's centre c and the front rim's (``cateye_front``), ``o' = (o_x squeeze, o_y)``
+    (the bokeh of a point with p's radius, seen from p).  Pixels are grouped by radius
+    (rounded to 1/4 px) and circle centres (rounded to :data:`CATEYE_STEP`), one
+    normalised filter each over the pixels' bounding box."""
     import cv2
 
     h, w = r.shape
     rq = np.round(r * 4.0) / 4.0
-    if cateye is not None:
-        cx = np.round(np.asarray(cateye[0]) / CATEYE_STEP).astype(np.int64)
-        cy = np.round(np.asarray(cateye[1]) / CATEYE_STEP).astype(np.int64)
-    else:
-        cx = cy = np.zeros((h, w), np.int64)
+    cs = []
+    for c in (cateye, cateye_front):
+        if c is None:
+            cs += [np.zeros((h, w), np.int64)] * 2
+        else:
+            cs += [np.round(np.asarray(v) / CATEYE_STEP).astype(np.int64) for v in c]
     e = int(math.ceil(float(np.abs(rq).max()) + 0.5)) + 1 if rq.size else 1
     padded = cv2.copyMakeBorder(src, e, e, e, e, cv2.BORDER_REPLICATE)
-    keys = np.stack([rq.ravel(), cx.ravel(), cy.ravel()], axis=1)
+    keys = np.stack([rq.ravel()] + [c.ravel() for c in cs], axis=1)
     uniq, inv = np.unique(keys, axis=0, return_inverse=True)
     inv = inv.reshape(h, w)
     out = np.empty_like(src)
-    for k, (rad, bx, by) in enumerate(uniq):
+    for k, (rad, bx, by, fx, fy) in enumerate(uniq):
         ar = abs(rad)
         ey, ex = int(math.ceil(ar + 0.5)), int(math.ceil((ar + 0.5) / squeeze))
         oy, ox = np.mgrid[-ey:ey + 1, -ex:ex + 1].astype(np.float64)
@@ -343,6 +386,8 @@ def _naive_shaped(src: np.ndarray, r: np.ndarray, squeeze: float, cateye) -> np.
         kern = np.hypot(ax, oy) <= ar + 0.5
         if cateye is not None:
             kern &= np.hypot(ax + bx * CATEYE_STEP * rad, oy + by * CATEYE_STEP * rad) <= ar + 0.5
+        if cateye_front is not None:
+            kern &= np.hypot(ax + fx * CATEYE_STEP * rad, oy + fy * CATEYE_STEP * rad) <= ar + 0.5
         kern = kern.astype(np.float32)
         kern /= kern.sum()
         ys, xs = np.nonzero(inv == k)
@@ -360,19 +405,23 @@ def naive(case: dict, params, ctx) -> np.ndarray:
     from clfx.plugins.dof import Dof
 
     lens = Dof().lens(params, ctx)
-    cateye = None
-    if lens.cateye > 0:
-        d = ctx.display_window
-        h, w = np.asarray(case["depth"]).shape
-        win = ctx.source.window
-        ys, xs = np.mgrid[0:h, 0:w] + 0.5
-        cateye = optical_vignetting_centre(xs + win.x0, ys + win.y0, strength=lens.cateye,
-                                           centre=d.center,
-                                           half_diagonal=0.5 * math.hypot(
-                                               d.width, d.height / ctx.pixel_aspect),
-                                           pixel_aspect=ctx.pixel_aspect)
+    d = ctx.display_window
+    h, w = np.asarray(case["depth"]).shape
+    win = ctx.source.window
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+
+    def centres(strength):
+        if strength == 0:
+            return None
+        return optical_vignetting_centre(xs + win.x0, ys + win.y0, strength=strength,
+                                         centre=d.center,
+                                         half_diagonal=0.5 * math.hypot(
+                                             d.width, d.height / ctx.pixel_aspect),
+                                         pixel_aspect=ctx.pixel_aspect)
+
     return naive_dof(case["source"], case["depth"], k_half=lens.k_half, focus=lens.focus,
-                     clamp_r=lens.clamp_r, squeeze=lens.squeeze, cateye=cateye, ca=lens.ca)
+                     clamp_r=lens.clamp_r, squeeze=lens.squeeze, cateye=centres(lens.cateye),
+                     ca=lens.ca, cateye_front=centres(-lens.cateye_front))
 
 
 SCENE_SIZE = (320, 180)
