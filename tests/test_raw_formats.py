@@ -103,3 +103,13 @@ def test_raw_usage_errors():
     r = run("render", "a.exr", "b.exr", "--raw-format", "rgbf32le", code=2)
     assert "--raw-format is for raw pipes" in r.stderr
     assert "planes in that order, not R, G, B" in " ".join(run("render", "--help").output.split())
+
+
+def test_raw_in_to_a_nuke_style_pattern_says_its_padding(tmp_path, rt):
+    """Raw frames to ``o.##.exr`` are 8 digits (each # four, oiiotool's way): said once on
+    stderr, as for file inputs (`clfx.io.sequence.hash_notice`)."""
+    data = encode(pixels(seed=6, alpha=False), "gbrpf32le")
+    r = run("-q", "apply", *IDENTITY[:1], "-", tmp_path / "o.##.exr", *IDENTITY[1:], "--raw",
+            f"{W}x{H}", input=data)
+    assert "o.##.exr: each # is 4 digits" in r.stderr, r.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["o.00000001.exr"]

@@ -956,7 +956,7 @@ class Batch:
 
     def _say_padding(self, *patterns) -> None:
         """One line for each pattern whose ``#`` count differs from Nuke's meaning
-        (`clfx.io.sequence.hash_notice`: ``shot.#.exr`` is 16 digits here)."""
+        (`clfx.io.sequence.hash_notice`: ``shot.####.exr`` is 16 digits here)."""
         from clfx.io.sequence import hash_notice
 
         for pattern in patterns:
@@ -1252,6 +1252,7 @@ class Batch:
         if not pout.is_sequence:
             raise SequenceError(f"output {self.output_path} has no frame token: raw frames on "
                                 f"stdin are a sequence (use e.g. out.#.exr)")
+        self._say_padding(pout)
         _check_output_folder(self.output_path)
         check_output_format(self.output_path, o.out_bit_depth(), o.compression)
         frames = parse_frames(o.frames) if o.frames else None
