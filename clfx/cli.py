@@ -648,8 +648,13 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
                 quality, name, clfx_command, task_chunking, path_params):
     """Print an Open Job Description template whose tasks run `clfx render` on chunks."""
     from clfx.farm import openjd_template, openjd_yaml
+    from clfx.io.sequence import Pattern, hash_notice
 
     _check_render_args(render_args)
+    for path in dict.fromkeys((input_path, output_path)):   # as each task will say it
+        message = hash_notice(Pattern.parse(path))
+        if message:
+            click.echo(f"clfx: warning: {message}", err=True)
     click.echo(openjd_yaml(openjd_template(
         input_path, output_path, look=look_name, assignments=assignments, frames=frames,
         chunk=chunk, quality=quality, render_args=render_args, name=name, clfx=clfx_command,
