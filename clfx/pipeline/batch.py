@@ -582,7 +582,7 @@ class BatchPlan:
         for frame_in, masks in zip(read.views, read.masks):
             outs.append(render_frame(
                 rt, self.look, frame_in, frame_number=job.frame, quality=self.quality,
-                keep_overscan=self.settings.keep_overscan and not raw and self.raw_out is None,
+                keep_overscan=self.settings.keep_overscan and self.raw_out is None,
                 analysis_summary=self.analysis, stats=stats, masks=masks,
                 release_input=not raw, tile_pixels=self.settings.tile_pixels))
         for (_, r), frame_in in zip(outs, read.views):
@@ -896,7 +896,7 @@ class Batch:
         o = self.options
         check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
         if self.input_path == RAW:
-            given = [f"--{n}" for n in ("depth", "velocity") if getattr(o, f"{n}_path")]
+            given = [option(f"--{n}") for n in ("depth", "velocity") if getattr(o, f"{n}_path")]
             if given:       # raw frames on stdin are RGB only: no pass, no frame name to match
                 raise ClfxError(f"{' and '.join(given)} cannot go with raw frames on stdin ('-': "
                                 f"RGB only); render EXR files with "
@@ -941,6 +941,7 @@ class Batch:
             from clfx.io.raw import check_format
 
             check_format(o.raw_format)
+            self._say_no_overscan()
         else:
             self._check_outputs(jobs)
         self._check_log(jobs)
@@ -963,6 +964,14 @@ class Batch:
             message = hash_notice(pattern)
             if message:
                 self.reporter.assumed(message, f"padding:{pattern.text}")
+
+    def _say_no_overscan(self) -> None:
+        """One line when ``--keep-overscan`` cannot hold: raw frames on stdout are the
+        frame's size (a raw input's, a file's display window)."""
+        if self.options.keep_overscan:
+            self.reporter.assumed(f"{option('--keep-overscan')} ignored: raw frames on stdout "
+                                  f"hold the frame only (light spread past it is cropped)",
+                                  "overscan")
 
     def _raw_out_size(self, first: str, size: tuple[int, int]) -> tuple[int, int]:
         """The size of the raw frames written to stdout: the first input's display window,
@@ -1236,6 +1245,8 @@ class Batch:
                                  raw_out=raw_size if self.output_path == RAW else None)
         if self.output_path != RAW:
             self._check_raw_outputs()
+        else:
+            self._say_no_overscan()
         self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_log()
 

@@ -296,7 +296,7 @@ def test_passes_with_raw_pipes_are_refused_not_ignored(small, option):
                        input=np.zeros((3, 4, 8), np.float32).tobytes(), capture_output=True,
                        timeout=60, check=False)
     assert r.returncode == 1 and not r.stdout, r.stderr
-    one_line(r.stderr, f"{option} cannot go with raw pipes")
+    one_line(r.stderr, f"{option} cannot go with raw frames on stdin")
 
 
 # -- OpenJD export ------------------------------------------------------------------------------
