@@ -270,7 +270,7 @@ def test_skip_existing_says_when_it_keeps_frames_of_another_look(small):
     """Frames 1-2 of 'default' and 3-4 of 'cinema' side by side, both exit 0, no word."""
     for f in range(1, 5):
         os.link(small / "in.exr", small / f"in.{f:04d}.exr")
-    seq = (small / "in.####.exr", small / "o.####.exr")
+    seq = (small / "in.#.exr", small / "o.#.exr")
     r = clfx("-q", "render", *seq, "--look", small / "look.yaml", "--frames", "1-2")
     assert r.returncode == 0, r.stderr
     (small / "other.yaml").write_text("name: other\neffects:\n  - effect: vignette\n"
@@ -304,7 +304,7 @@ def test_passes_with_raw_pipes_are_refused_not_ignored(small, option):
 def shot(small):
     for f in range(1, 4):
         os.link(small / "in.exr", small / f"in.{f:04d}.exr")
-    return small / "in.####.exr", small / "o.####.exr"
+    return small / "in.#.exr", small / "o.#.exr"
 
 
 def test_openjd_keeps_user_text_with_braces_literal(shot, tmp_path):
@@ -403,14 +403,14 @@ def test_extreme_values_leak_no_numpy_warning(tmp_path, effect, value, args):
 def test_a_gap_in_a_sequence_on_disk_is_one_notice(small):
     for f in (1, 2, 4, 5):
         os.link(small / "in.exr", small / f"in.{f:04d}.exr")
-    r = clfx("render", small / "in.####.exr", small / "o.####.exr", "--look", small / "look.yaml")
+    r = clfx("render", small / "in.#.exr", small / "o.#.exr", "--look", small / "look.yaml")
     assert r.returncode == 0, r.stderr
     said = [ln for ln in r.stderr.decode().splitlines() if "gaps" in ln]
     assert len(said) == 1 and "frame(s) 3 missing between 1 and 5; rendering the 4 there" \
         in said[0], r.stderr
     for f in (1, 3, 5):      # evenly stepped: a sequence, not a gap
         os.link(small / "in.exr", small / f"s.{f:04d}.exr")
-    r = clfx("render", small / "s.####.exr", small / "t.####.exr", "--look", small / "look.yaml")
+    r = clfx("render", small / "s.#.exr", small / "t.#.exr", "--look", small / "look.yaml")
     assert r.returncode == 0 and b"gaps" not in r.stderr, r.stderr
 
 
