@@ -323,7 +323,7 @@ def _check_render_args(args) -> None:
     render`` parses them, so an unknown option or a bad value fails here, not on every task
     of the farm."""
     try:
-        render.make_context("render", ["IN.####.exr", "OUT.####.exr", *args],
+        render.make_context("render", ["IN.#.exr", "OUT.#.exr", *args],
                             parent=click.get_current_context(silent=True))
     except click.UsageError as exc:
         raise click.UsageError(f"after '--' (clfx render options for every task): "
