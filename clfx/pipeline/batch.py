@@ -842,7 +842,6 @@ class Batch:
     verbosity: int = 1
     skipped_existing: list[int] = field(default_factory=list, init=False)
     kept_other: list[tuple[int, str | None]] = field(default_factory=list, init=False)
-    _hash: str | None = field(default=None, init=False, repr=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
@@ -1109,14 +1108,8 @@ class Batch:
             name = header_attribute(job.output, "clfx:look") if stamped else None
         except ClfxError:
             stamped = name = None               # unreadable: its render failed half-way?
-        if stamped != self._stamped_hash():
+        if stamped != self.reporter.params_hash:    # the one this render stamps (`prepare`)
             self.kept_other.append((job.frame, name))
-
-    def _stamped_hash(self) -> str:
-        """The ``clfx:paramsHash`` this render stamps (its look, quality levels resolved)."""
-        if self._hash is None:
-            self._hash = resolve_quality(self.look, self.options.quality)[0].params_hash()
-        return self._hash
 
     def _kept_other_warning(self) -> str | None:
         """One line for the frames kept from another look (`_check_kept`), or None."""
