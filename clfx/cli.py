@@ -795,7 +795,7 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 @click.option("--only", default=None, metavar="A,B", callback=lambda c, p, v: _gallery_names(v),
               help="Only these effects and looks.")
 @quality_option
-@click.option("--overwrite", is_flag=True,
+@click.option("-y", "--overwrite", is_flag=True,
               help="Replace files of an earlier gallery in OUTDIR (default: refuse, like demo).")
 @click.pass_context
 def gallery(ctx, outdir, width, only, quality, overwrite):
