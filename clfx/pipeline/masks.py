@@ -209,8 +209,8 @@ def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str, notify=No
     file, a mask file of another size than the frames (display window), a feather wider than
     the frame, or (from the header of the first) a missing channel, layer or name.
     ``source`` is the first input file.  ``notify(message, key)`` hears what will be assumed
-    (a Cryptomatte without manifest, a pattern's ``#`` padding).  Returns the files the mask reads (inputs of the
-    render)."""
+    (a Cryptomatte without manifest, a pattern's ``#`` padding).  Returns the files the mask
+    reads (inputs of the render)."""
     from clfx.io import mattes
     from clfx.io.sequence import Pattern, hash_notice, resolve_inputs
 
