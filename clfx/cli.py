@@ -40,6 +40,16 @@ def _on_sigterm(signum, frame):
     raise _Terminated()
 
 
+_ENDED: list[bool] = []
+"""Not empty once the main thread has said how the process ends (`_say_end`): the signal
+watcher then ends it without a second line."""
+
+
+def _say_end(text: str) -> None:
+    click.echo(text, err=True)
+    _ENDED.append(True)
+
+
 class StdioError(ClfxError):
     """stdin or stdout is closed, or writing to stdout failed (a full disk, /dev/full)."""
 
@@ -1015,7 +1025,9 @@ def _watch_signals() -> None:
                         write.abandon_writes()
                     term = signum == signal.SIGTERM
                     with contextlib.suppress(Exception):
-                        os.write(2, b"clfx: terminated\n" if term else b"clfx: interrupted\n")
+                        if not _ENDED:      # else the main thread said it (`_say_end`)
+                            os.write(2, b"clfx: terminated\n" if term else
+                                     b"clfx: interrupted\n")
                     os._exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED)
 
     threading.Thread(target=watch, name="clfx-signals", daemon=True).start()
@@ -1041,7 +1053,7 @@ def _main(argv):
         cli.main(args=argv, prog_name="clfx", standalone_mode=False)
         sys.stdout.flush()  # a failed write still buffered is an error too
     except click.exceptions.Abort:
-        click.echo("clfx: interrupted", err=True)
+        _say_end("clfx: interrupted")
         sys.exit(EXIT_INTERRUPTED)
     except click.UsageError as exc:          # before a subcommand runs (clfx --bogus)
         _one_line_usage(exc).show()
@@ -1053,10 +1065,10 @@ def _main(argv):
         ClfxClickError(" ".join(str(exc).split())).show()
         sys.exit(1)
     except KeyboardInterrupt:
-        click.echo("clfx: interrupted", err=True)
+        _say_end("clfx: interrupted")
         sys.exit(EXIT_INTERRUPTED)
     except _Terminated:
-        click.echo("clfx: terminated", err=True)
+        _say_end("clfx: terminated")
         sys.exit(EXIT_TERMINATED)
     except BrokenPipeError:
         _to_devnull(sys.stdout)

@@ -486,3 +486,36 @@ def test_a_signal_ends_the_process_while_the_main_thread_is_stuck(tmp_path, sig,
     assert proc.returncode == code, err
     assert err.decode().strip() == ("clfx: terminated" if code == 143 else "clfx: interrupted")
     assert not tmp.exists()
+
+
+SLOW_EXIT = """
+import threading, time
+import clfx.cli as cli
+
+class Stuck:                                      # a render that Ctrl-C interrupts...
+    @staticmethod
+    def main(**kw):
+        threading.Thread(target=time.sleep, args=(5,)).start()   # ...while a thread finishes
+        print("ready", flush=True)
+        time.sleep(60)
+
+cli.cli = Stuck
+cli.main(["render"])
+"""
+
+
+def test_an_interrupt_the_main_thread_answers_is_said_once(tmp_path):
+    """'clfx: interrupted' twice: the main thread said it, then the watcher as well while
+    the process waited for a thread to finish."""
+    import signal
+
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_EXIT], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    try:
+        assert proc.stdout.readline() == b"ready\n"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert err.decode() == "clfx: interrupted\n"
