@@ -45,10 +45,9 @@ _API = ("ArrayResult", "ClusterOptions", "FrameReport", "Look", "PassOptions", "
         "RenderResult",
         "load_look", "look_from_stamp", "render", "render_array", "render_file",
         "render_sequence", "runtime")
-_ERRORS = ("ClfxError", "ClipError", "ClusterError", "DeviceError", "ImageIOError",
-           "KernelBuildError", "ParamError", "PresetError", "SequenceError")
-
-__all__ = ["__version__", *_API, *_ERRORS, "OutputExistsError"]
+__all__ = ["__version__", *_API,
+           "ClfxError", "ClipError", "ClusterError", "DeviceError", "ImageIOError",
+           "KernelBuildError", "ParamError", "PresetError", "SequenceError", "OutputExistsError"]
 
 
 def __getattr__(name: str):

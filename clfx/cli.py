@@ -40,6 +40,16 @@ def _on_sigterm(signum, frame):
     raise _Terminated()
 
 
+_ENDED: list[bool] = []
+"""Not empty once the main thread has said how the process ends (`_say_end`): the signal
+watcher then ends it without a second line."""
+
+
+def _say_end(text: str) -> None:
+    click.echo(text, err=True)
+    _ENDED.append(True)
+
+
 class StdioError(ClfxError):
     """stdin or stdout is closed, or writing to stdout failed (a full disk, /dev/full)."""
 
@@ -323,7 +333,7 @@ def _check_render_args(args) -> None:
     render`` parses them, so an unknown option or a bad value fails here, not on every task
     of the farm."""
     try:
-        render.make_context("render", ["IN.####.exr", "OUT.####.exr", *args],
+        render.make_context("render", ["IN.#.exr", "OUT.#.exr", *args],
                             parent=click.get_current_context(silent=True))
     except click.UsageError as exc:
         raise click.UsageError(f"after '--' (clfx render options for every task): "
@@ -648,8 +658,13 @@ def farm_openjd(input_path, output_path, render_args, look_name, assignments, fr
                 quality, name, clfx_command, task_chunking, path_params):
     """Print an Open Job Description template whose tasks run `clfx render` on chunks."""
     from clfx.farm import openjd_template, openjd_yaml
+    from clfx.io.sequence import Pattern, hash_notice
 
     _check_render_args(render_args)
+    for path in dict.fromkeys((input_path, output_path)):   # as each task will say it
+        message = hash_notice(Pattern.parse(path))
+        if message:
+            click.echo(f"clfx: warning: {message}", err=True)
     click.echo(openjd_yaml(openjd_template(
         input_path, output_path, look=look_name, assignments=assignments, frames=frames,
         chunk=chunk, quality=quality, render_args=render_args, name=name, clfx=clfx_command,
@@ -790,7 +805,7 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 @click.option("--only", default=None, metavar="A,B", callback=lambda c, p, v: _gallery_names(v),
               help="Only these effects and looks.")
 @quality_option
-@click.option("--overwrite", is_flag=True,
+@click.option("-y", "--overwrite", is_flag=True,
               help="Replace files of an earlier gallery in OUTDIR (default: refuse, like demo).")
 @click.pass_context
 def gallery(ctx, outdir, width, only, quality, overwrite):
@@ -1010,7 +1025,9 @@ def _watch_signals() -> None:
                         write.abandon_writes()
                     term = signum == signal.SIGTERM
                     with contextlib.suppress(Exception):
-                        os.write(2, b"clfx: terminated\n" if term else b"clfx: interrupted\n")
+                        if not _ENDED:      # else the main thread said it (`_say_end`)
+                            os.write(2, b"clfx: terminated\n" if term else
+                                     b"clfx: interrupted\n")
                     os._exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED)
 
     threading.Thread(target=watch, name="clfx-signals", daemon=True).start()
@@ -1036,7 +1053,7 @@ def _main(argv):
         cli.main(args=argv, prog_name="clfx", standalone_mode=False)
         sys.stdout.flush()  # a failed write still buffered is an error too
     except click.exceptions.Abort:
-        click.echo("clfx: interrupted", err=True)
+        _say_end("clfx: interrupted")
         sys.exit(EXIT_INTERRUPTED)
     except click.UsageError as exc:          # before a subcommand runs (clfx --bogus)
         _one_line_usage(exc).show()
@@ -1048,10 +1065,10 @@ def _main(argv):
         ClfxClickError(" ".join(str(exc).split())).show()
         sys.exit(1)
     except KeyboardInterrupt:
-        click.echo("clfx: interrupted", err=True)
+        _say_end("clfx: interrupted")
         sys.exit(EXIT_INTERRUPTED)
     except _Terminated:
-        click.echo("clfx: terminated", err=True)
+        _say_end("clfx: terminated")
         sys.exit(EXIT_TERMINATED)
     except BrokenPipeError:
         _to_devnull(sys.stdout)

@@ -20,7 +20,7 @@ import os
 import yaml
 
 from clfx.core.errors import ClfxError, SequenceError
-from clfx.io.sequence import Pattern, compact, parse_frames
+from clfx.io.sequence import Pattern, compact, hash_notice, parse_frames
 from clfx.pipeline.presets import apply_overrides, load_look
 
 SPEC_VERSION = "jobtemplate-2023-09"
@@ -44,9 +44,13 @@ def resolve_frames(input_path: str, frames: str | None) -> list[int]:
     """The frames to render: ``frames`` parsed, else every frame of ``input_path`` on disk."""
     if frames:
         return parse_frames(frames)
-    found = Pattern.parse(input_path).existing_frames()
+    pattern = Pattern.parse(input_path)
+    found = pattern.existing_frames()
     if not found:
-        raise SequenceError(f"no frames of {input_path} found here; give --frames")
+        hint = hash_notice(pattern)
+        raise SequenceError(f"no frames of {input_path} found here (looked for files like "
+                            f"{pattern.path(1)}); give --frames"
+                            + (f"; {hint}" if hint else ""))
     return found
 
 

@@ -85,3 +85,21 @@ def test_openjd_run_renders_two_chunks(beachball, tmp_path):
     clfx("-q", "render", beachball, want / "out.#.exr", "--look", "wide-angle",
          "--frames", "1-4")
     assert_same_outputs(out, want)
+
+
+def test_openjd_nuke_style_pattern(tmp_path):
+    """A Nuke user's ``shot.####.exr`` is 16 digits here (oiiotool's #): a farm job of it is
+    said on stderr (the template on stdout stays YAML), and a pattern with no frame on disk
+    says so in the error instead of only asking for --frames."""
+    for f in (1, 2):
+        (tmp_path / f"in.{f:04d}.exr").write_bytes(b"x")
+    result = CliRunner().invoke(cli, ["farm", "openjd", str(tmp_path / "in.#.exr"),
+                                      str(tmp_path / "o.####.exr"), "--frames", "1-2"])
+    assert result.exit_code == 0, result.output
+    assert "o.####.exr: each # is 4 digits" in result.stderr, result.stderr
+    assert yaml.safe_load(result.stdout)["specificationVersion"] == "jobtemplate-2023-09"
+    result = CliRunner().invoke(cli, ["farm", "openjd", str(tmp_path / "in.####.exr"),
+                                      str(tmp_path / "o.#.exr")])
+    assert result.exit_code == 1
+    assert "in.0000000000000001.exr" in result.stderr and "@@@@ or %04d" in result.stderr, \
+        result.stderr

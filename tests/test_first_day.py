@@ -135,6 +135,20 @@ def test_look_show_cinema_hash_is_its_render_stamp():
     assert shown == resolve_quality(look, None)[0].params_hash() == look.params_hash("final")
 
 
+def test_render_frame_stamps_the_hash_of_the_level_it_renders_at(rt):
+    """`render_frame` given a look as written and a level stamps the look at that level
+    (the hash ``look show --quality`` prints), not the look at ``final``."""
+    from clfx.core.frame import Frame
+    from clfx.pipeline.look import render_frame
+    from clfx.pipeline.presets import look_from_dict
+
+    look = look_from_dict({"name": "g", "effects": [{"effect": "vignette"}, {"effect": "grain"}]})
+    px = np.stack(list(rgba().values()), axis=-1)
+    out, _ = render_frame(rt, look, Frame.from_array(px), frame_number=1, quality="draft")
+    assert out.metadata["clfx:paramsHash"] == look.params_hash("draft") != look.params_hash()
+    assert json.loads(out.metadata["clfx:lookJSON"])["effects"][0]["quality"] == "draft"
+
+
 # -- item 3: placing a step in an inherited look ---------------------------------------------
 def look_file(tmp_path, name, text):
     path = tmp_path / f"{name}.yaml"

@@ -128,7 +128,7 @@ def test_gallery_never_writes_through_a_link_nor_replaces_without_overwrite(tmp_
     line = _one_error_line(run(*args, code=1))
     assert "index.json exists" in line and "--overwrite" in line
     assert sorted(p.name for p in out.iterdir()) == ["index.json"]   # nothing rendered
-    run(*args, "--overwrite")
+    run(*args, "-y")                                       # -y is --overwrite, as for demo
     assert outside.read_text() == "keep"                   # the link was replaced, not followed
     assert not (out / "index.json").is_symlink()
     assert json.loads((out / "index.json").read_text())["width"] == 32

@@ -2,7 +2,6 @@
 (infinitely far), said once per sequence; ``--depth-zero`` / ``PassSpec.depth_zero`` override;
 the real Beachball frame (Z = 0 background) through ``dof`` gets a wider, not harder, edge."""
 import warnings
-from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio

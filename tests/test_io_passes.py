@@ -3,7 +3,6 @@
 ``--passes drop``; ``--view``; the input's pixel type and compression unless overridden."""
 import numpy as np
 import OpenImageIO as oiio
-import pytest
 from click.testing import CliRunner
 
 from clfx.cli import cli

@@ -227,3 +227,16 @@ def test_array_api_takes_mask_channels(rt):
     assert any("masked by channel boxB.A (mix)" in n for s in res.report.steps for n in s.notes)
     with pytest.raises(ClipError, match="no file to read it from"):
         clfx.render_array(rgba, look, velocity=vel)
+
+
+def test_a_nuke_style_mask_pattern_is_said(rt, tmp_path, capfd):
+    """A mask sequence's ``m.##.exr`` is 8 digits (each # four, oiiotool's way): said once
+    on stderr, as for the frames' own patterns."""
+    chans, alpha_a, _ = scene()
+    write_exr(tmp_path / "in.0001.exr", chans)
+    write_exr(tmp_path / "m.00000001.exr", {"A": alpha_a})
+    look = look_with("vignette", {"file": str(tmp_path / "m.##.exr")}, {"amount": 0.5})
+    clfx.render_sequence(tmp_path / "in.#.exr", tmp_path / "o.#.exr", look, verbosity=0)
+    assert (tmp_path / "o.0001.exr").is_file()
+    err = capfd.readouterr().err
+    assert err.count("m.##.exr: each # is 4 digits") == 1, err

@@ -103,3 +103,31 @@ def test_raw_usage_errors():
     r = run("render", "a.exr", "b.exr", "--raw-format", "rgbf32le", code=2)
     assert "--raw-format is for raw pipes" in r.stderr
     assert "planes in that order, not R, G, B" in " ".join(run("render", "--help").output.split())
+
+
+def test_raw_in_to_a_nuke_style_pattern_says_its_padding(tmp_path, rt):
+    """Raw frames to ``o.##.exr`` are 8 digits (each # four, oiiotool's way): said once on
+    stderr, as for file inputs (`clfx.io.sequence.hash_notice`)."""
+    data = encode(pixels(seed=6, alpha=False), "gbrpf32le")
+    r = run("-q", "apply", *IDENTITY[:1], "-", tmp_path / "o.##.exr", *IDENTITY[1:], "--raw",
+            f"{W}x{H}", input=data)
+    assert "o.##.exr: each # is 4 digits" in r.stderr, r.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["o.00000001.exr"]
+
+
+def test_raw_in_to_exr_keeps_overscan_when_asked(tmp_path, rt):
+    """``--keep-overscan`` holds for raw frames to EXR files (the light a blur spreads past
+    the frame is kept in the data window), as for file inputs; raw frames on stdout are the
+    frame's size, so there it is said on stderr, not dropped silently."""
+    data = encode(pixels(seed=7, alpha=False), "gbrpf32le")
+    run("apply", "defocus", "-", tmp_path / "o.#.exr", "size=0.2", "--raw", f"{W}x{H}",
+        "--keep-overscan", input=data)
+    inp = oiio.ImageInput.open(str(tmp_path / "o.0001.exr"))
+    spec = inp.spec()
+    inp.close()
+    assert (spec.full_width, spec.full_height) == (W, H)
+    assert spec.width > W and spec.height > H and spec.x < 0 and spec.y < 0
+    r = run("apply", "defocus", "-", "-", "size=0.2", "--raw", f"{W}x{H}", "--keep-overscan",
+            input=data)
+    assert len(r.stdout_bytes) == len(data)
+    assert "--keep-overscan" in r.stderr and "raw frames on stdout" in r.stderr, r.stderr

@@ -48,6 +48,7 @@ _API_NAMES = {
     "--out-colorspace": "out_colorspace", "--working-space": "working_space",
     "--depth": "depth_path", "--velocity": "velocity_path", "--depth-zero": "depth_zero",
     "--passes": "passes_mode", "--quality": "quality", "--frames": "frames", "--view": "view",
+    "--keep-overscan": "keep_overscan=True",
 }
 _SPELLING = ["api"]
 

@@ -25,7 +25,6 @@ them in host memory) with its peak (``device_peak``, restarted by ``reset_peak()
 """
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections import OrderedDict

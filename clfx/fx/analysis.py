@@ -78,8 +78,9 @@ effects' per-unit gains (``1 / E``) would overflow float32; no plate with an ima
 def exposure_reference(p, ctx, effect: str) -> float:
     """The scene-linear value an exposure-relative effect (grain, sensor noise) takes as
     middle grey: its ``middle_grey`` param, or (0, "auto") `meter` on the frame's analysis
-    (the whole frame's, in bands too); at least `EXPOSURE_MIN`.  Metered, a note for ``--explain`` says the value,
-    so a shot whose light changes can pin it (``middle_grey: <that value>``).
+    (the whole frame's, in bands too); at least `EXPOSURE_MIN`.  Metered, a note for
+    ``--explain`` says the value used, so a shot whose light changes can pin it
+    (``middle_grey: <that value>``).
 
     Parameters
     ----------
@@ -93,12 +94,12 @@ def exposure_reference(p, ctx, effect: str) -> float:
     if p.middle_grey > 0.0:
         return max(float(p.middle_grey), EXPOSURE_MIN)
     analysis = ctx.analysis
-    grey = meter(analysis.mean_lum)
+    grey = max(meter(analysis.mean_lum), EXPOSURE_MIN)
     lit = bool(np.any(np.asarray(analysis.mean_lum) > 0.0))
     ctx.notes.append(f"{effect}: middle grey metered at {grey:.4g} "
                      f"({math.log2(grey / MID_GREY):+.1f} stops from 0.18)" if lit else
                      f"{effect}: no light to meter: middle grey {MID_GREY}")
-    return max(grey, EXPOSURE_MIN)
+    return grey
 
 
 @dataclass

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from clfx.core.errors import ClfxError, PresetError
-from clfx.io.presetfiles import (Located, builtin_dir, find_file, search_dirs, suggest,
+from clfx.io.presetfiles import (Located, builtin_dir, find_file, search_dirs,
                                  user_dir, yaml_files)
 
 # -- lens prescriptions (presets/lenses) ------------------------------------------------------

@@ -257,8 +257,8 @@ class Pattern:
 
     @classmethod
     def parse(cls, path) -> "Pattern":
-        """Parse ``"shot.#.exr"``, ``"shot.%04d.exr"``, ``"shot.$F4.exr"``,
-        ``"shot.@.exr"``, ``"shot.#.exr"`` or a plain file path.
+        """Parse ``"shot.#.exr"`` (4 digits), ``"shot.@@@.exr"`` (3), ``"shot.#@.exr"``
+        (5), ``"shot.%04d.exr"``, ``"shot.$F4.exr"`` or a plain file path.
 
         Raises
         ------

@@ -582,7 +582,7 @@ class BatchPlan:
         for frame_in, masks in zip(read.views, read.masks):
             outs.append(render_frame(
                 rt, self.look, frame_in, frame_number=job.frame, quality=self.quality,
-                keep_overscan=self.settings.keep_overscan and not raw and self.raw_out is None,
+                keep_overscan=self.settings.keep_overscan and self.raw_out is None,
                 analysis_summary=self.analysis, stats=stats, masks=masks,
                 release_input=not raw, tile_pixels=self.settings.tile_pixels))
         for (_, r), frame_in in zip(outs, read.views):
@@ -842,7 +842,6 @@ class Batch:
     verbosity: int = 1
     skipped_existing: list[int] = field(default_factory=list, init=False)
     kept_other: list[tuple[int, str | None]] = field(default_factory=list, init=False)
-    _hash: str | None = field(default=None, init=False, repr=False)
     stats: RunStats = field(default_factory=RunStats, init=False)
     look_files: list[str] = field(default_factory=list, init=False)  # files effects read (PathParam)
     mask_files: list[str] = field(default_factory=list, init=False)  # mask sequences' files
@@ -896,7 +895,7 @@ class Batch:
         o = self.options
         check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
         if self.input_path == RAW:
-            given = [f"--{n}" for n in ("depth", "velocity") if getattr(o, f"{n}_path")]
+            given = [option(f"--{n}") for n in ("depth", "velocity") if getattr(o, f"{n}_path")]
             if given:       # raw frames on stdin are RGB only: no pass, no frame name to match
                 raise ClfxError(f"{' and '.join(given)} cannot go with raw frames on stdin ('-': "
                                 f"RGB only); render EXR files with "
@@ -941,6 +940,7 @@ class Batch:
             from clfx.io.raw import check_format
 
             check_format(o.raw_format)
+            self._say_no_overscan()
         else:
             self._check_outputs(jobs)
         self._check_log(jobs)
@@ -956,13 +956,21 @@ class Batch:
 
     def _say_padding(self, *patterns) -> None:
         """One line for each pattern whose ``#`` count differs from Nuke's meaning
-        (`clfx.io.sequence.hash_notice`: ``shot.#.exr`` is 16 digits here)."""
+        (`clfx.io.sequence.hash_notice`: ``shot.####.exr`` is 16 digits here)."""
         from clfx.io.sequence import hash_notice
 
         for pattern in patterns:
             message = hash_notice(pattern)
             if message:
                 self.reporter.assumed(message, f"padding:{pattern.text}")
+
+    def _say_no_overscan(self) -> None:
+        """One line when ``--keep-overscan`` cannot hold: raw frames on stdout are the
+        frame's size (a raw input's, a file's display window)."""
+        if self.options.keep_overscan:
+            self.reporter.assumed(f"{option('--keep-overscan')} ignored: raw frames on stdout "
+                                  f"hold the frame only (light spread past it is cropped)",
+                                  "overscan")
 
     def _raw_out_size(self, first: str, size: tuple[int, int]) -> tuple[int, int]:
         """The size of the raw frames written to stdout: the first input's display window,
@@ -1100,14 +1108,8 @@ class Batch:
             name = header_attribute(job.output, "clfx:look") if stamped else None
         except ClfxError:
             stamped = name = None               # unreadable: its render failed half-way?
-        if stamped != self._stamped_hash():
+        if stamped != self.reporter.params_hash:    # the one this render stamps (`prepare`)
             self.kept_other.append((job.frame, name))
-
-    def _stamped_hash(self) -> str:
-        """The ``clfx:paramsHash`` this render stamps (its look, quality levels resolved)."""
-        if self._hash is None:
-            self._hash = resolve_quality(self.look, self.options.quality)[0].params_hash()
-        return self._hash
 
     def _kept_other_warning(self) -> str | None:
         """One line for the frames kept from another look (`_check_kept`), or None."""
@@ -1236,6 +1238,8 @@ class Batch:
                                  raw_out=raw_size if self.output_path == RAW else None)
         if self.output_path != RAW:
             self._check_raw_outputs()
+        else:
+            self._say_no_overscan()
         self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         self._check_log()
 
@@ -1252,6 +1256,7 @@ class Batch:
         if not pout.is_sequence:
             raise SequenceError(f"output {self.output_path} has no frame token: raw frames on "
                                 f"stdin are a sequence (use e.g. out.#.exr)")
+        self._say_padding(pout)
         _check_output_folder(self.output_path)
         check_output_format(self.output_path, o.out_bit_depth(), o.compression)
         frames = parse_frames(o.frames) if o.frames else None

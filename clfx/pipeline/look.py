@@ -533,7 +533,7 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     tiles = tile_pixels if tile_pixels is not None else limits.tile_pixels()
     report = FrameReport(frame=frame_number, input=frame.source,
                          values=look.values_at(frame_number))
-    stamp = look.stamp(frame_number)
+    stamp = look.at_quality(quality).stamp(frame_number)   # the level rendered (one hash)
     reference_camera = look.camera   # keyframed values at their first keys
     look = look.at(frame_number)
     t_start, c_start = time.perf_counter(), time.process_time()

@@ -209,15 +209,18 @@ def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str, notify=No
     file, a mask file of another size than the frames (display window), a feather wider than
     the frame, or (from the header of the first) a missing channel, layer or name.
     ``source`` is the first input file.  ``notify(message, key)`` hears what will be assumed
-    (a Cryptomatte without manifest).  Returns the files the mask reads (inputs of the
-    render)."""
+    (a Cryptomatte without manifest, a pattern's ``#`` padding).  Returns the files the mask
+    reads (inputs of the render)."""
     from clfx.io import mattes
-    from clfx.io.sequence import Pattern, resolve_inputs
+    from clfx.io.sequence import Pattern, hash_notice, resolve_inputs
 
     files: list[str] = []
     first = source
     if spec.file:
         pat = Pattern.parse(spec.file)
+        padding = hash_notice(pat)       # a Nuke-style m.####.exr: 16 digits here
+        if padding:
+            _say(notify, padding, f"padding:{pat.text}")
         try:
             found = resolve_inputs(pat, list(frame_numbers) if pat.is_sequence else None,
                                    skip_missing=False)

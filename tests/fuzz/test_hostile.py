@@ -270,7 +270,7 @@ def test_skip_existing_says_when_it_keeps_frames_of_another_look(small):
     """Frames 1-2 of 'default' and 3-4 of 'cinema' side by side, both exit 0, no word."""
     for f in range(1, 5):
         os.link(small / "in.exr", small / f"in.{f:04d}.exr")
-    seq = (small / "in.####.exr", small / "o.####.exr")
+    seq = (small / "in.#.exr", small / "o.#.exr")
     r = clfx("-q", "render", *seq, "--look", small / "look.yaml", "--frames", "1-2")
     assert r.returncode == 0, r.stderr
     (small / "other.yaml").write_text("name: other\neffects:\n  - effect: vignette\n"
@@ -296,7 +296,7 @@ def test_passes_with_raw_pipes_are_refused_not_ignored(small, option):
                        input=np.zeros((3, 4, 8), np.float32).tobytes(), capture_output=True,
                        timeout=60, check=False)
     assert r.returncode == 1 and not r.stdout, r.stderr
-    one_line(r.stderr, f"{option} cannot go with raw pipes")
+    one_line(r.stderr, f"{option} cannot go with raw frames on stdin")
 
 
 # -- OpenJD export ------------------------------------------------------------------------------
@@ -304,7 +304,7 @@ def test_passes_with_raw_pipes_are_refused_not_ignored(small, option):
 def shot(small):
     for f in range(1, 4):
         os.link(small / "in.exr", small / f"in.{f:04d}.exr")
-    return small / "in.####.exr", small / "o.####.exr"
+    return small / "in.#.exr", small / "o.#.exr"
 
 
 def test_openjd_keeps_user_text_with_braces_literal(shot, tmp_path):
@@ -403,14 +403,14 @@ def test_extreme_values_leak_no_numpy_warning(tmp_path, effect, value, args):
 def test_a_gap_in_a_sequence_on_disk_is_one_notice(small):
     for f in (1, 2, 4, 5):
         os.link(small / "in.exr", small / f"in.{f:04d}.exr")
-    r = clfx("render", small / "in.####.exr", small / "o.####.exr", "--look", small / "look.yaml")
+    r = clfx("render", small / "in.#.exr", small / "o.#.exr", "--look", small / "look.yaml")
     assert r.returncode == 0, r.stderr
     said = [ln for ln in r.stderr.decode().splitlines() if "gaps" in ln]
     assert len(said) == 1 and "frame(s) 3 missing between 1 and 5; rendering the 4 there" \
         in said[0], r.stderr
     for f in (1, 3, 5):      # evenly stepped: a sequence, not a gap
         os.link(small / "in.exr", small / f"s.{f:04d}.exr")
-    r = clfx("render", small / "s.####.exr", small / "t.####.exr", "--look", small / "look.yaml")
+    r = clfx("render", small / "s.#.exr", small / "t.#.exr", "--look", small / "look.yaml")
     assert r.returncode == 0 and b"gaps" not in r.stderr, r.stderr
 
 
@@ -486,3 +486,36 @@ def test_a_signal_ends_the_process_while_the_main_thread_is_stuck(tmp_path, sig,
     assert proc.returncode == code, err
     assert err.decode().strip() == ("clfx: terminated" if code == 143 else "clfx: interrupted")
     assert not tmp.exists()
+
+
+SLOW_EXIT = """
+import threading, time
+import clfx.cli as cli
+
+class Stuck:                                      # a render that Ctrl-C interrupts...
+    @staticmethod
+    def main(**kw):
+        threading.Thread(target=time.sleep, args=(5,)).start()   # ...while a thread finishes
+        print("ready", flush=True)
+        time.sleep(60)
+
+cli.cli = Stuck
+cli.main(["render"])
+"""
+
+
+def test_an_interrupt_the_main_thread_answers_is_said_once(tmp_path):
+    """'clfx: interrupted' twice: the main thread said it, then the watcher as well while
+    the process waited for a thread to finish."""
+    import signal
+
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_EXIT], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    try:
+        assert proc.stdout.readline() == b"ready\n"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert err.decode() == "clfx: interrupted\n"

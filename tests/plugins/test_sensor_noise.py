@@ -362,7 +362,6 @@ def test_demosaic_correlates_channels_and_neighbours_as_the_linear_model(rt):
 def test_demosaic_keeps_the_mean_and_the_site_colour_follows_the_model(rt):
     out, p = run(rt, flat(128, 128, 0.1), mosaic="bayer", read_noise=3.0, seed=6)
     d = out[..., :3].astype(np.float64) - 0.1
-    g = 1 / electrons_per_unit(p, CAMERA)[1]
     # the demosaic's weights sum to 1 per channel: mean kept within 4 standard errors
     assert np.all(np.abs(d.mean(axis=(0, 1))) <= 4 * math.sqrt(noise_variance(0.1, p, CAMERA))
                   * 2 / 128)
