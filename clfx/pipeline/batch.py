@@ -1130,6 +1130,12 @@ class Batch:
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
                                 f"(add a frame token such as # to the output)")
+        for j in jobs:          # first: an output that names a file the render reads
+            role = self._read_by(j.output)
+            if role is not None:
+                what = "" if role == "input" else f" ({role})"
+                raise ImageIOError(f"output {j.output} is an input of this render{what}; clfx "
+                                   f"never overwrites its inputs")
         check_output_format(outs[0], self.options.out_bit_depth(),
                             self.options.compression)    # not after the first render
         _check_output_folder(outs[0])
@@ -1137,11 +1143,6 @@ class Batch:
             from clfx.io.write import sweep_stale_temps
             sweep_stale_temps(outs)   # temp files of killed runs (their process is gone)
         for j in jobs:
-            role = self._read_by(j.output)
-            if role is not None:
-                what = "" if role == "input" else f" ({role})"
-                raise ImageIOError(f"output {j.output} is an input of this render{what}; clfx "
-                                   f"never overwrites its inputs")
             if os.path.lexists(j.output):   # a dangling symlink counts
                 if self.options.skip_existing:
                     self.skipped_existing.append(j.frame)

@@ -98,10 +98,13 @@ def test_sensor_noise_tiles_with_its_mosaic_and_chroma(rt, mosaic, quality):
 @pytest.mark.parametrize("mosaic", ["bayer", "none"])
 def test_sensor_noise_is_the_same_on_a_crop_at_the_same_place(rt, mosaic):
     """Noise is hashed on frame coordinates: a crop (odd origin) gets the frame's noise at
-    its pixels (with a mosaic, away from the crop's edges the demosaic reads past)."""
+    its pixels (with a mosaic, away from the crop's edges the demosaic reads past).  The
+    middle grey is stated: metered (``auto``, the default) it is the frame's own, and a crop
+    is another frame."""
     name = "sensor_noise"
     plugin = effects.plugin(name)
-    p = effects.params(name, mosaic=mosaic, chroma_noise=1.0, coverage="ignore")
+    p = effects.params(name, mosaic=mosaic, chroma_noise=1.0, coverage="ignore",
+                       middle_grey=0.18)
     src = effects.scene((70, 90))
     window, crop = Rect(-7, -9, 83, 61), Rect(-2, 4, 61, 41)
     full = rt.download(plugin.render(rt, p, effects.context(rt, name, src, window=window)))
