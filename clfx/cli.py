@@ -790,9 +790,11 @@ def _progress(show: bool):
 def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_json):
     """Render the built-in procedural HDR scene through a look: EXRs, PNG previews and a
     contact sheet in OUTDIR.  Needs no input files."""
+    from clfx.api import load_look
     from clfx.demo import run_demo
 
     w, h = _parse_size(size)
+    _cold_steps.append(max(1, len(load_look(look_name).active_steps())))   # the notice's ~N s
     run_demo(_runtime(ctx), outdir, count=count, width=w, height=h, look_name=look_name,
              quality=quality, overwrite=overwrite, explain=explain, as_json=as_json,
              verbosity=ctx.obj.get("verbosity", 1))
