@@ -25,7 +25,9 @@ PLANNED_LOOK = {
     "effects": [
         {"effect": "dof", "params": {"focus_distance": 2.0}},
         {"effect": "breathing"},
-        {"effect": "lens_flare", "params": {"lens": "double-gauss-50mm", "gain": 100.0}},
+        # artistic: this small frame's physical ghosts are all wider than a tenth of its
+        # diagonal, which fade into veiling glare (clfx.fx.flare.VEIL_TO): nothing would draw
+        {"effect": "lens_flare", "params": {"model": "artistic"}},
         {"effect": "glare"},
         {"effect": "vignette", "params": {"amount": 0.3}},
     ]}

@@ -44,7 +44,7 @@ ACTIVE: dict[str, dict] = {
     "lens": {"maker": "Canon", "model": "Canon EF 24-70mm f/2.8L II USM"},
     # physical ghosts of the frame's 5-nit lights are far below visible (1e-5 of the light):
     # a large gain makes them draw, so the physical path is what the suite checks
-    "lens_flare": {"gain": 1e5},
+    "lens_flare": {"gain": 1e5, "light_level": 1e4},   # 2000x for a 5-nit light, as before
     "sensor_noise": {"prnu": 0.01},   # all three noise terms
     "vignette": {"amount": 0.4},
 }
