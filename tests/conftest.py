@@ -54,6 +54,19 @@ def exr_images():
     return EXR_IMAGES
 
 
+@pytest.fixture
+def small(tmp_path):
+    """(tests of the command line) A 24x16 EXR ``in.exr`` and a one-effect look ``look.yaml`` in ``tmp_path``."""
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
+    rgba[..., 3] = 1
+    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
+    (tmp_path / "look.yaml").write_text("name: t\neffects:\n  - effect: vignette\n")
+    return tmp_path
+
+
 def hard_shapes():
     """Image shapes every kernel must survive (hard-cases.md case 12)."""
     return [(1, 1), (1, 7), (7, 1), (2, 2), (3, 5), (17, 31), (64, 48)]

@@ -76,18 +76,6 @@ def test_a_closed_pipe_reader_exits_quietly():
 # --------------------------------------------------------------------------------------------
 # Issue 23, red team: hangs, tracebacks and silent reinterpretation
 
-@pytest.fixture
-def small(tmp_path):
-    """A 24x16 EXR and a one-effect look in ``tmp_path``."""
-    from clfx.core.frame import Frame
-    from clfx.io.write import write_frame
-
-    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
-    rgba[..., 3] = 1
-    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
-    (tmp_path / "look.yaml").write_text("name: t\neffects:\n  - effect: vignette\n")
-    return tmp_path
-
 
 def render_small(small, *args, env=None, **kw):
     """``clfx -q render in.exr o.exr --look look.yaml ARGS`` in ``small`` (a subprocess;

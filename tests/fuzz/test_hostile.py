@@ -29,18 +29,6 @@ def clfx(*args, env=None, cwd=None, timeout=120):
                           env=dict(os.environ, **(env or {})))
 
 
-@pytest.fixture
-def small(tmp_path):
-    """A 24x16 EXR ``in.exr`` and a one-effect look ``look.yaml`` in ``tmp_path``."""
-    from clfx.core.frame import Frame
-    from clfx.io.write import write_frame
-
-    rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)
-    rgba[..., 3] = 1
-    write_frame(Frame.from_array(rgba), tmp_path / "in.exr")
-    (tmp_path / "look.yaml").write_text("name: t\neffects:\n  - effect: vignette\n")
-    return tmp_path
-
 
 # -- environment values ------------------------------------------------------------------------
 @pytest.mark.parametrize("var", ["CLFX_TILE_PIXELS", "CLFX_POOL_MB", "CLFX_MAX_PIXELS",
