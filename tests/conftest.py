@@ -67,6 +67,18 @@ def small(tmp_path):
     return tmp_path
 
 
+def stamped(path, look_json: str):
+    """An EXR whose clfx:lookJSON attribute is ``look_json``."""
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec(8, 4, 4, "float")
+    spec.attribute("clfx:lookJSON", look_json)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec), oiio.geterror()
+    assert out.write_image(np.zeros((4, 8, 4), np.float32))
+    out.close()
+
+
 def hard_shapes():
     """Image shapes every kernel must survive (hard-cases.md case 12)."""
     return [(1, 1), (1, 7), (7, 1), (2, 2), (3, 5), (17, 31), (64, 48)]

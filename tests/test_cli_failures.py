@@ -9,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from clfx.cli import cli
+from tests.conftest import stamped
 
 CLFX = [sys.executable, "-m", "clfx.cli"]
 
@@ -117,18 +118,6 @@ def test_log_on_a_full_disk_is_one_line_and_exit_1(small, rt):
     r = render_small(small, "--log", "/dev/full")
     assert r.returncode == 1, r.stderr
     one_line(r.stderr.decode(), "cannot write --log /dev/full: No space left on device")
-
-
-def stamped(path, look_json: str):
-    """An EXR whose clfx:lookJSON attribute is ``look_json``."""
-    import OpenImageIO as oiio
-
-    spec = oiio.ImageSpec(8, 4, 4, "float")
-    spec.attribute("clfx:lookJSON", look_json)
-    out = oiio.ImageOutput.create(str(path))
-    assert out.open(str(path), spec), oiio.geterror()
-    assert out.write_image(np.zeros((4, 8, 4), np.float32))
-    out.close()
 
 
 @pytest.mark.parametrize("look_json,message", [

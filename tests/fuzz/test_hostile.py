@@ -10,6 +10,8 @@ import threading
 import numpy as np
 import pytest
 
+from tests.conftest import stamped
+
 CLFX = [sys.executable, "-m", "clfx.cli"]
 
 
@@ -233,18 +235,6 @@ def test_integer_keys_far_apart_are_checked_value_by_value():
 
 
 # -- stamps -------------------------------------------------------------------------------------
-def stamped(path, look_json: str):
-    """An EXR whose clfx:lookJSON attribute is ``look_json``."""
-    import OpenImageIO as oiio
-
-    spec = oiio.ImageSpec(8, 4, 4, "float")
-    spec.attribute("clfx:lookJSON", look_json)
-    out = oiio.ImageOutput.create(str(path))
-    assert out.open(str(path), spec), oiio.geterror()
-    assert out.write_image(np.zeros((4, 8, 4), np.float32))
-    out.close()
-
-
 def test_a_stamp_with_a_key_twice_is_refused_as_a_look_file_is(small):
     """Last one won in a stamp; a look file refuses it."""
     stamped(small / "stamp.exr", '{"name": "x", "seed": 1, "seed": 2, "effects": []}')
