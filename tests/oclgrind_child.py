@@ -63,12 +63,12 @@ EXTRA = {
     # "keep_overscan" keeps what the effects grow, "before" (effect, params) runs first.
     # r = 11 px > bleed's fused radius (10): bleed_highlights -> FFT -> bleed_mix; preview's
     # split gathers the 1e4 lights exactly (fftconv_count_bright, _compact_bright, _gather)
-    "bleed": [("preview", (106, 8), {"size": 0.1}, {})],
+    "bleed": [("preview", (106, 24), {"size": 0.1}, {})],
     # trucking/dolly: camera_blur_velocity
     "camera_blur": [("draft", ODD, {"length": 0.05, "truck": [0.01, 0.0], "dolly": 0.01}, {})],
-    # first ring >= 2 x 4 px: the pattern at reduced resolution (corona_down); ACEScg: the
+    # first ring >= 2 x 6 px (draft's ring_px): the pattern at reduced resolution (corona_down); ACEScg: the
     # spectral model carried into Rec.709 and back (image_rgb_matrix)
-    "corona": [("draft", (W, H), {"size": 0.2, "extent": 1.5}, {"working_space": "ACEScg"})],
+    "corona": [("draft", (2 * W, 2 * H), {"size": 0.2, "extent": 1.5}, {"working_space": "ACEScg"})],
     # sigma past the direct passes: the pyramid (blur_gather_h, _v)
     "defocus": [("draft", (W, H), {"size": 0.25}, {})],
     # CoC radius > 16 px: the lattice over the prefiltered colour (dof_prefilter); bleed with
