@@ -19,6 +19,14 @@ import warnings
 from pathlib import Path
 
 
+STANDALONE = {"lens": {"maker": "Canon", "model": "Canon EF 24-70mm f/2.8L II USM"}}
+"""Parameters an effect cannot render without."""
+
+
+STANDALONE = {"lens": {"maker": "Canon", "model": "Canon EF 24-70mm f/2.8L II USM"}}
+"""Parameters an effect cannot render without."""
+
+
 def plates(size):
     import numpy as np
     from clfx.bench.scene import demo_scene, render_sharp
@@ -54,7 +62,8 @@ def main() -> int:
     size = tuple(int(v) for v in args.size.split("x"))
     only = set(filter(None, args.only.split(",")))
     looks = [(n, n) for n in sorted(available_looks())]
-    looks += [(f"fx:{n}", {"effects": [{"effect": n}]}) for n in sorted(discover())]
+    looks += [(f"fx:{n}", {"effects": [{"effect": n, "params": STANDALONE.get(n, {})}]})
+              for n in sorted(discover())]
     for plate, rgba, depth, velocity in plates(size):
         for name, look in looks:
             if only and name.removeprefix("fx:") not in only:
