@@ -61,7 +61,7 @@ Windows: the output covers where the data window's content lands (``region_of_de
 the data window's outline, grown by the filters' reach, mapped forward), within the output
 limit, so a magnified element grows its window instead of being cut at it; a window whose
 content shrinks (barrel, fit) keeps the data window.  The map is built for that window's
-pixels (``clfx.fx.resample.on_canvas``).
+pixels (``clfx.kit.warp.on_canvas``).
 
 ``fit``: ``crop`` (default) scales up just enough that no pixel of the display window reads
 past the plate (``fill`` with the plate's outline, overscan included, and never below 1);
@@ -79,13 +79,13 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, FITS, CanvasRows, FootprintMap, ResampleLevel,
-                              band_window, canvas_context, check_fold, elliptical_map,
-                              fit_scale, fold_radius, footprint_defines, frame_key,
-                              launch_footprint, map_bands, on_plate_canvas, pixel_centres,
-                              plate_frame, rect_boundary, WARP_REACH_TEXELS, warp_frame,
-                              warp_interest, warp_region)
+from clfx.fx.resample import (BORDERS, FITS, FootprintMap, ResampleLevel, band_window, check_fold,
+                              elliptical_map, fit_scale, fold_radius, footprint_defines,
+                              launch_footprint, map_bands, pixel_centres, rect_boundary,
+                              warp_interest)
 from clfx.host import Plugin, register
+from clfx.kit.warp import (CanvasRows, WARP_REACH_TEXELS, canvas_context, frame_key,
+                           on_plate_canvas, plate_frame, warp_frame, warp_region)
 
 NEWTON_STEPS = 8
 RESIDUAL_TOL_PX = 1e-6
@@ -211,7 +211,7 @@ def undistort(xd, yd, k, r_hi: float, fx: float):
 def _geometry(p, camera, display_window, window, pixel_aspect, name, plate=None):
     """Intrinsics, coefficients, fit scale and the radial bracket [0, r_hi] for output
     points inside ``display_window`` and ``window``.  ``plate``: the frame the source's
-    pixels cover (`clfx.fx.resample.warp_frame`; default ``display_window`` and ``window``),
+    pixels cover (`clfx.kit.warp.warp_frame`; default ``display_window`` and ``window``),
     whose imaged outline ``fit=crop`` fills the display window with.  Raises ParamError on
     a fold."""
     fx, fy, cx, cy = intrinsics(p, camera, display_window, pixel_aspect)
