@@ -11,11 +11,17 @@ depend on the plate, ``fit=crop``) does the rest.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import ClassVar
+
+import numpy as np
 
 from clfx.device.runtime import ALIGN_PX
-from clfx.fx.resample import bounding_rect, rect_boundary
+from clfx.fx.resample import (FootprintMap, ResampleLevel, band_window, bounding_rect,
+                              elliptical_map, footprint_defines, launch_footprint, map_bands,
+                              pixel_centres, rect_boundary, warp_interest)
 
 
 def frame_key(p, ctx) -> tuple:
@@ -263,3 +269,227 @@ def canvas_context(plugin, p, ctx, border: str):
     if canvas == ctx.source.window:
         return ctx
     return ctx.with_source(canvas_stand_in(canvas))
+
+
+
+# -- a warp through an analytic map, on the shared footprint kernels ---------------------------
+def widest(points, rect, n: int = 33) -> float:
+    """The largest |J| (2-norm, texels per output pixel) of a map over ``rect``: its outline
+    and an n x n grid (``points(xs, ys, True)`` gives ``(sx, sy, jac)``; compression grows
+    towards a fold or a horizon, so the outline holds the maximum of the maps accepted here;
+    the grid covers the others)."""
+    if rect.empty:
+        return 1.0
+    bx, by = rect_boundary(rect, 256)
+    gx, gy = np.meshgrid(np.linspace(rect.x0, rect.x1, n), np.linspace(rect.y0, rect.y1, n))
+    _, _, jac = points(np.concatenate([bx, gx.ravel()]), np.concatenate([by, gy.ravel()]),
+                       True)
+    norms = np.linalg.norm(np.nan_to_num(jac), ord=2, axis=(-2, -1))
+    return max(float(norms.max(initial=0.0)), 1.0)
+
+
+FOOTPRINT_LEVELS = {
+    "draft": ResampleLevel("footprint quadratic (3x3): 3-point interpolation plus a variance term "
+                           "that follows the map's Jacobian (area-averages where the lens "
+                           "compresses the source), packed map, float32 sums",
+                           filter="quadratic", footprint=True),
+    "preview": ResampleLevel("footprint bicubic (4x4): Keys blended with the cubic B-spline as "
+                             "the map's Jacobian asks, anti-ringing clamp, packed map, float32 "
+                             "sums", filter="bicubic", footprint=True),
+    "final": ResampleLevel("footprint Lanczos-3 (up to 8x8): the mean of two Lanczos-3 samples "
+                           "spread by the map's Jacobian, anti-ringing clamp, packed map "
+                           "(positions to ~1e-7 px), float32 sums",
+                           filter="lanczos3", footprint=True),
+    "reference": ResampleLevel("elliptical footprint: n x n Lanczos-3 samples spread along the "
+                               "Jacobian's principal axes (covariance of the output pixel's "
+                               "preimage), float64 map and sums", fp64=True, filter="lanczos3",
+                               footprint=True),
+}
+"""The quality levels of a `FootprintWarp` (distortion, keystone): the footprint filters of
+kernels/lib/resample.h, the reference's elliptical footprint in float64."""
+
+
+class FootprintWarp:
+    """A warp whose inverse map and its Jacobian are analytic, rendered by the shared
+    footprint kernels (a Plugin mixin: ``class Keystone(FootprintWarp, Plugin)``).
+
+    The effect writes its model and nothing of bands, tiles, canvases or caches:
+
+    - :meth:`warp_geometry`: what the map needs of a frame (intrinsics, coefficients, the
+      ``fit`` scale), from the context's camera, display window, source window and pixel
+      aspect, and ``plate`` (`plate_frame`: the outline ``fit=crop`` fills the display
+      window with); raise `ParamError` for a model the frame cannot take.
+    - :meth:`warp_points`: the source points (frame coordinates, float64, NaN = no source)
+      of output points, with their Jacobians d(source) / d(output) (..., 2, 2) when asked.
+    - :meth:`warp_forward`: where the output shows source points (the map's inverse, for
+      the region of definition; NaN where none).
+    - :meth:`warp_info` (optional): what the map's info holds beside ``no_source``;
+      :meth:`reads_anywhere` (optional): True where the outline of a window comes near a
+      fold or horizon, so the region of definition is the frame.
+
+    The descriptor's ``kernel`` instantiates ``FOOTPRINT_WARP_KERNELS`` and
+    ``EWA_WARP_KERNELS`` (kernels/lib/footprint_warp.h) under its name, its levels are
+    ``clfx.fx.resample.ResampleLevel`` with ``footprint=True`` and its params include
+    ``fit`` (`clfx.fx.resample.FITS`) and ``border`` (`clfx.fx.resample.BORDERS`).
+    Regions, the canvas (`on_plate_canvas`), a tile's rows (`CanvasRows`), maps built in
+    bands (`clfx.fx.resample.map_bands`), their cache keys and the look's ``prepare`` come
+    from here, so a tile's pixels are the whole render's.
+    """
+
+    whole_frame: ClassVar[str | None] = None   # a tile computes its band's rows (`on_canvas`)
+    no_source_note: ClassVar[str] = "beyond the map's reach"
+    """How a render's note names the output pixels without a source."""
+
+    # -- what the effect supplies ------------------------------------------------------------
+    def warp_geometry(self, p, ctx, plate):
+        raise NotImplementedError
+
+    def warp_points(self, g, ox, oy, jacobian: bool):
+        raise NotImplementedError
+
+    def warp_forward(self, g, sx, sy):
+        raise NotImplementedError
+
+    def warp_info(self, g) -> dict:
+        return {}
+
+    def reads_anywhere(self, g, rect) -> bool:
+        return False
+
+    # -- regions ----------------------------------------------------------------------------
+    def geometry(self, p, ctx):
+        """The map's geometry for the step's context (its plate: `plate_frame`)."""
+        return self.warp_geometry(p, ctx, plate_frame(ctx))
+
+    def widest(self, g, rect) -> float:
+        """The map's largest compression over ``rect`` (`widest`)."""
+        return widest(lambda x, y, jac: self.warp_points(g, x, y, jac), rect)
+
+    def region_of_definition(self, p, ctx):
+        # Output pixels read up to ~0.75 |J| + 4 texels from their source points (footprints
+        # widen where the map compresses), so the data window grown by that, mapped forward,
+        # bounds where its content lands.  Kept in ``rt.cache`` with the maps: the Jacobian
+        # survey costs tens of milliseconds of host time, asked several times a frame and
+        # the same for every frame of a shot.
+        def build():
+            g = self.geometry(p, ctx)
+            reach = (math.ceil(0.75 * self.widest(g, ctx.source.window.union(ctx.output_limit)))
+                     + WARP_REACH_TEXELS - 4)
+            if self.reads_anywhere(g, ctx.source.window.grown(reach + 4)):
+                return ctx.source.window.union(warp_frame(ctx))
+            return warp_region(lambda xs, ys: [self.warp_forward(g, xs, ys)], ctx, p.border,
+                               reach=reach)
+
+        return ctx.runtime.cache.get((f"{self.descriptor.name}.rod",) + frame_key(p, ctx)
+                                     + (ctx.output_limit,), build)
+
+    def region_of_interest(self, p, ctx, window):
+        def build():
+            g = self.geometry(p, ctx)
+            return warp_interest(lambda x, y: [self.warp_points(g, x, y, False)], window,
+                                 4 + math.ceil(0.75 * self.widest(g, window)))
+
+        return ctx.runtime.cache.get((f"{self.descriptor.name}.roi",) + frame_key(p, ctx)
+                                     + (window,), build)
+
+    # -- maps -------------------------------------------------------------------------------
+    def host_map(self, rt, p, ctx, plate):
+        """The float64 source points of ``ctx.source``'s pixels (source-window coordinates,
+        NaN = no source), their Jacobians and the map's info, kept in ``rt.cache`` (shared by
+        every level's device map).  ``plate``: the frame the plate covers (`plate_frame` of
+        the step's context: ``ctx`` is the canvas's)."""
+        src = ctx.source
+
+        def build():
+            g = self.warp_geometry(p, ctx, plate)
+            sx, sy, jac = self.warp_points(g, *pixel_centres(src.window), True)
+            info = dict(self.warp_info(g), no_source=int(np.count_nonzero(~np.isfinite(sx))))
+            return sx - src.window.x0, sy - src.window.y0, jac, info
+
+        return rt.cache.get((f"{self.descriptor.name}.host_map",) + frame_key(p, ctx)
+                            + (plate,), build)
+
+    def banded_map(self, rt, p, ctx, filter_name, rows, plate):
+        """A frame larger than one band (`clfx.fx.resample.map_bands`), or a tile's band of
+        rows (``rows``): the footprint map built band by band from the same geometry (no
+        float64 map of the whole frame is kept), or with ``filter_name`` None the reference's
+        elliptical map of ``rows``: ``(map, info)``."""
+        src = ctx.source
+        g = self.warp_geometry(p, ctx, plate)
+        no_source = 0
+
+        def points_of(y0, y1):
+            nonlocal no_source
+            sx, sy, jac = self.warp_points(g, *pixel_centres(band_window(src.window, y0, y1)),
+                                           True)
+            no_source += int(np.count_nonzero(~np.isfinite(sx)))
+            return sx - src.window.x0, sy - src.window.y0, jac
+
+        if filter_name is None:
+            dmap = elliptical_map(rt, *points_of(*rows.span), src.pitch, rows.first)
+        else:
+            dmap = FootprintMap.device(rt, points_of, filter_name, src.width, src.height,
+                                       src.pitch, p.border, rows.span)
+        return dmap, dict(self.warp_info(g), no_source=no_source)
+
+    def device_map(self, rt, p, ctx, filter_name, double, plate, rows=None):
+        """The device map of one level, kept in ``rt.cache``: ``(map, info)``; float levels a
+        `clfx.fx.resample.DeviceFootprintMap` of their footprint filter; ``double``
+        (reference) the float64 elliptical map (`clfx.fx.resample.elliptical_map`).
+        ``rows``: the `CanvasRows` of ``ctx.source``'s window (the canvas) to map (default
+        all: a tile maps its band's); ``plate`` as in `host_map`."""
+        src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
+
+        def build():
+            if rows.tiled or (not double and len(map_bands(src.height, src.pitch)) > 1):
+                return self.banded_map(rt, p, ctx, None if double else filter_name, rows,
+                                       plate)
+            sx, sy, jac, info = self.host_map(rt, p, ctx, plate)
+            if double:
+                return elliptical_map(rt, sx, sy, jac, src.pitch), info
+            return FootprintMap(sx, sy, jac, filter_name, src.width, src.height, src.pitch,
+                                p.border).upload(rt), info
+
+        key = "elliptical" if double else filter_name
+        return rt.cache.get((f"{self.descriptor.name}.map",) + frame_key(p, ctx)
+                            + (plate, key) + rows.key, build)
+
+    def prepare(self, rt, p, ctx):
+        if not self.is_identity(p, ctx):
+            lvl = self.level(ctx)
+            self.device_map(rt, p, canvas_context(self, p, ctx, p.border), lvl.filter,
+                            rt.use_fp64(lvl.fp64), plate_frame(ctx))
+
+    # -- render -----------------------------------------------------------------------------
+    def render(self, rt, p, ctx):
+        return on_plate_canvas(self, rt, p, ctx, p.border)
+
+    def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
+        """The warp over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
+        a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the
+        frame the plate covers (`on_plate_canvas`)."""
+        name, kfile = self.descriptor.name, self.descriptor.kernel
+        src = ctx.source
+        rows = rows or CanvasRows.whole(src.window)
+        canvas = rows.canvas
+        lvl = self.level(ctx)
+        double = rt.use_fp64(lvl.fp64)
+        dmap, info = self.device_map(rt, p, rows.context(ctx), lvl.filter, double, plate, rows)
+        if info["no_source"]:
+            ctx.notes.append(f"{name}: {info['no_source']} px {self.no_source_note} left "
+                             f"transparent")
+        defines = footprint_defines(lvl.filter, p.border, sanitise)
+        dst = src.like()
+        if not double:
+            defines["CLFX_STREAM_STORES"] = int(rt.streams_stores(dst.nbytes))
+        i32 = np.int32
+        tail = (i32(src.pitch), i32(canvas.width), i32(canvas.height), i32(dst.pitch),
+                i32(rows.count), i32(rows.first), i32(rows.shift))
+        if double:
+            knl = rt.kernel(kfile, f"{name}_ewa_f64", fp64=lvl.fp64, **defines)
+            rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, dmap, *tail)
+            return dst
+        launch_footprint(rt, rt.kernel(kfile, f"{name}_footprint", **defines), dmap,
+                         src.pitch // 4, rows.count, (src, dst), tail)
+        return dst
