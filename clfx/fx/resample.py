@@ -1,7 +1,8 @@
 """Host side of clfx's warping effects: inverse maps, fold checks, fit scales, filters.
 
-Shared by ``distortion``, ``chromatic_aberration`` and ``lens`` (device side:
-``kernels/lib/resample.h``).  Everything here runs once per parameter set and frame geometry, in
+Shared by the warps (``distortion``, ``keystone``, ``chromatic_aberration``, ``lens``,
+``breathing``; device side: ``kernels/lib/resample.h``); their canvas and band protocol is
+``clfx.kit.warp``.  Everything here runs once per parameter set and frame geometry, in
 float64 NumPy, and the result (a displacement map or a radial look-up table) is kept in the
 runtime's cache (``rt.cache``) and reused across frames.
 
