@@ -260,6 +260,7 @@ DEMO_VALUES = {
     # its label and caption
     "camera_blur": ["length=0.01", "roll=0.3"],     # short enough for a thumbnail's label
     "distortion": ["k1=-0.08"],
+    "keystone": ["tilt=12"],
 }
 """Demonstration values of effects that change nothing at their defaults: their tiles would
 be the input itself under a caption promising the effect."""
@@ -286,6 +287,8 @@ CAPTIONS = {
              "areas next to them.",
     "grain": "Film grain: fine clumpy texture, most visible in the midtones and flat areas.",
     "halation": "Halation: a thin red-orange glow hugging bright edges and lights.",
+    "keystone": "Keystone (tilt=12; default 0): the camera tilted up, verticals converge "
+                "towards the top, the centre where it was.",
     "lens": "A real lens (Canon 24-70 at 24 mm, lensfun): barrel distortion, colour fringes "
             "and darker corners.",
     "lens_flare": "Lens flare: coloured aperture-shaped ghosts on the line through each "

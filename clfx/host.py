@@ -67,7 +67,7 @@ class StepPlan:
 @dataclass(frozen=True)
 class ExposurePlan(StepPlan):
     """The plan of an effect relative to the plate's exposure (grain, sensor noise): its
-    middle grey, stated or metered on the whole frame (`clfx.fx.analysis.exposure_reference`)
+    middle grey, stated or metered on the whole frame (`clfx.kit.noise.exposure_reference`)
     once per step, so every band of a tiled render uses the frame's."""
 
     middle_grey: float = MID_GREY

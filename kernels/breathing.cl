@@ -12,7 +12,7 @@
  *
  * Rows are the whole render's: output row y of dst is row y + row0 of the whole output,
  * and src holds the whole render's source rows from `shift` on (RS_TILE: a tile of a tiled
- * render, clfx.fx.resample.CanvasRows; both 0 in a whole render), so a band's pixels take
+ * render, clfx.kit.warp.CanvasRows; both 0 in a whole render), so a band's pixels take
  * the whole render's arithmetic.
  */
 #include "lib/resample.h"

@@ -18,7 +18,7 @@
  * rule and checks).  The launched rectangle is [qx0, qx0 + nqx) x [row0, row0 + nrows).
  *
  * Rows are the canvas's (w x h, origin (x0, y0) in the frame): a tile of a tiled render
- * (clfx.fx.resample.CanvasRows) passes buffers holding canvas rows from `shift` on, and
+ * (clfx.kit.warp.CanvasRows) passes buffers holding canvas rows from `shift` on, and
  * RS_TILE addresses them in canvas rows, so its pixels take the whole render's arithmetic.
  */
 #include "lib/resample.h"

@@ -51,6 +51,7 @@ PARAMS = {
     "camera_blur": {"length": 0.05, "roll": 2.0, "zoom": 0.02},
     "defocus": {"size": 0.03},
     "distortion": {"k1": -0.1, "p1": 0.01},
+    "keystone": {"tilt": 10.0, "swing": 5.0},
     "dof": {"coc_source": "max_blur", "max_blur": 0.1, "max_coc": 0.2},
     "lens": {"maker": "Canon", "model": "Canon EF 24-70mm f/2.8L II USM", "fit": "fill"},
     "lens_flare": {"threshold": 5.0, "cull": 0.0, "gain": 100.0},

@@ -1,5 +1,6 @@
 """The architecture is checked, not reviewed: the import contracts in pyproject.toml."""
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -30,9 +31,53 @@ def test_import_contracts_hold():
 
 def test_plugins_are_only_effects():
     """A plugin module defines an effect: no bench fixtures, no host image libraries."""
-    import re
-
     forbidden = re.compile(r"^\s*(def bench_\w+|(from|import) (cv2|scipy|clfx\.bench)\b)", re.M)
     for path in sorted((ROOT / "clfx" / "plugins").glob("*.py")):
         hits = forbidden.findall(path.read_text())
         assert not hits, f"{path.name}: {hits}"
+
+
+CONTEXT_PARAMS = {"ctx", "context", "plugin"}
+CONTEXT_TYPES = re.compile(r"\b(RenderContext|Plugin)\b")
+
+
+def _defined_callables(module):
+    """Every function and method ``module`` defines (not what it imports): top-level
+    functions and the methods, static and class methods and property getters of its
+    classes, nested classes included."""
+    import inspect
+
+    def members(owner, prefix):
+        for name, obj in vars(owner).items():
+            if isinstance(obj, (staticmethod, classmethod)):
+                obj = obj.__func__
+            elif isinstance(obj, property):
+                obj = obj.fget
+            if inspect.isfunction(obj) and obj.__module__ == module.__name__:
+                yield prefix + name, obj
+            elif inspect.isclass(obj) and obj.__module__ == module.__name__:
+                yield from members(obj, f"{prefix}{name}.")
+
+    yield from members(module, "")
+
+
+def test_fx_is_pure_algorithms():
+    """clfx.fx holds algorithms on arrays, maps and the device runtime (``rt``); whatever
+    asks a render context or a plugin (the band/tile protocol, plugin mixins) is the kit's
+    (clfx.kit): no function or method of clfx.fx takes a parameter named ctx, context or
+    plugin, or one annotated RenderContext or Plugin."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    import clfx.fx
+
+    offenders = []
+    for info in pkgutil.walk_packages(clfx.fx.__path__, "clfx.fx."):
+        module = importlib.import_module(info.name)
+        for name, fn in _defined_callables(module):
+            for param in inspect.signature(fn).parameters.values():
+                if param.name in CONTEXT_PARAMS or CONTEXT_TYPES.search(str(param.annotation)):
+                    offenders.append(f"{info.name}.{name}({param.name})")
+    assert not offenders, ("clfx.fx takes a render context or plugin (move it to clfx.kit): "
+                           + ", ".join(offenders))

@@ -79,7 +79,7 @@ VISIBLE = 1.0 / 255.0
 VISIBLE_SHARE = 1e-3
 """...on at least this share of the pixels."""
 
-WARPS = {"distortion", "lens", "chromatic_aberration", "breathing"}
+WARPS = {"distortion", "lens", "chromatic_aberration", "breathing", "keystone"}
 """Effects that move pixels (the halo check leaves them out: it knows the card's edge where
 the plate has it)."""
 LIGHT_EFFECTS = {"glare", "streaks", "lens_flare", "halation", "corona", "soft_focus", "bleed"}

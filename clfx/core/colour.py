@@ -84,6 +84,6 @@ def luminance_defines(m=None) -> dict:
 
 def to_reference(m=None) -> np.ndarray | None:
     """The working space's RGB -> the spectral effects' reference basis, linear Rec.709:
-    ``XYZ_TO_REC709 @ m`` (`clfx.fx.spectral.in_reference_basis`); None for Rec.709 itself
+    ``XYZ_TO_REC709 @ m`` (`clfx.kit.spectral.in_reference_basis`); None for Rec.709 itself
     (nothing to convert)."""
     return None if is_rec709(m) else XYZ_TO_REC709 @ np.asarray(m, np.float64)

@@ -75,33 +75,6 @@ EXPOSURE_MIN = 1e-30
 effects' per-unit gains (``1 / E``) would overflow float32; no plate with an image is near it."""
 
 
-def exposure_reference(p, ctx, effect: str) -> float:
-    """The scene-linear value an exposure-relative effect (grain, sensor noise) takes as
-    middle grey: its ``middle_grey`` param, or (0, "auto") `meter` on the frame's analysis
-    (the whole frame's, in bands too); at least `EXPOSURE_MIN`.  Metered, a note for
-    ``--explain`` says the value used, so a shot whose light changes can pin it
-    (``middle_grey: <that value>``).
-
-    Parameters
-    ----------
-    p : Params
-        Has ``middle_grey``.
-    ctx : RenderContext
-        Its analysis is metered; its ``notes`` get the metered value.
-    effect : str
-        The effect's name, for the note.
-    """
-    if p.middle_grey > 0.0:
-        return max(float(p.middle_grey), EXPOSURE_MIN)
-    analysis = ctx.analysis
-    grey = max(meter(analysis.mean_lum), EXPOSURE_MIN)
-    lit = bool(np.any(np.asarray(analysis.mean_lum) > 0.0))
-    ctx.notes.append(f"{effect}: middle grey metered at {grey:.4g} "
-                     f"({math.log2(grey / MID_GREY):+.1f} stops from 0.18)" if lit else
-                     f"{effect}: no light to meter: middle grey {MID_GREY}")
-    return grey
-
-
 @dataclass
 class LightSource:
     """A bright connected region of tiles, in the frame's full pixel coordinates."""

@@ -51,7 +51,7 @@ output blocks (overlap-save): each block's grid is the block plus the PSF (smoot
 :func:`block_shape` picks the fewest transformed cells under the cap), its input the pixels
 that reach it (:func:`reach`), its result the exact linear convolution there; one grid, plan
 and PSF spectrum serve every block of the call.  The input may be a loader and the output a
-consumer (``emit``), so the glare family (``clfx.fx.scatter.ScatterPlugin.spread_mixed``)
+consumer (``emit``), so the glare family (``clfx.kit.scatter.ScatterPlugin.spread_mixed``)
 computes each block's highlights from the source and mixes each output block into the frame
 at once: beside the step's source and output, only one block's buffers are on the device.
 Every level keeps its semantics in blocks: "direct" blocks give the same bits as one gather,

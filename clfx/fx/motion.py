@@ -294,24 +294,10 @@ def sanitized_copy(rt, src):
     return out
 
 
-def aligned_passes(ctx):
-    """``ctx``'s depth pass and the backward half of its vector pass where they cover the
-    source window, else None (an effect then renders without them)."""
-    src = ctx.source
-    depth = ctx.depth if ctx.depth is not None and ctx.depth.window == src.window else None
-    back = getattr(ctx, "velocity_back", None)
-    return depth, (back if back is not None and back.window == src.window else None)
-
-
 # -- tiled renders -----------------------------------------------------------------------------
 GRID_CHUNK_PIXELS = 1 << 20
 """A tiled render builds the frame's velocity tiles (:func:`tile_grid`) from rows of about
 this many pixels at a time."""
-
-REACH_MARGIN_ROWS = 5
-"""Rows a band's buffers hold beyond the farthest sample (:func:`band_margin`): the clamped
-cubic's taps (2), the sub-pixel closed form's (2 along the path, bilinear), the dilation's
-neighbour (1)."""
 
 
 def path_reach(t0: float, t1: float, curved: bool) -> float:
@@ -329,16 +315,6 @@ def path_reach(t0: float, t1: float, curved: bool) -> float:
     a = np.where(w > MIN_TURN, np.sin(ws * t) / np.sin(ws), t)
     c = np.where(w > MIN_TURN, (np.sin(0.5 * ws * t) / np.sin(0.5 * ws)) ** 2, t * t)
     return float((np.abs(a) + np.abs(c)).max()) * 1.02
-
-
-def band_margin(t0: float, t1: float, radius: float, curved: bool) -> int:
-    """Rows beyond a band that its reconstruction reads (its region of interest): the
-    farthest sample (:func:`path_reach` at the clamped speed ``radius / reach``) and
-    :data:`REACH_MARGIN_ROWS`; 0 when nothing moves."""
-    if _static(t0, t1, radius):
-        return 0
-    return (int(math.ceil(path_reach(t0, t1, curved) * radius / reach_factor(t0, t1)))
-            + REACH_MARGIN_ROWS)
 
 
 @dataclass
@@ -361,7 +337,8 @@ class TileGrid:
     stats: BlurStats
 
 
-def _static(t0, t1, radius) -> bool:
+def is_static(t0, t1, radius) -> bool:
+    """Nothing moves far enough to blur (at most :data:`MIN_BLUR_PX` over the shutter)."""
     reach_t = reach_factor(t0, t1)
     return reach_t <= 0.0 or radius * (t1 - t0) / reach_t < MIN_BLUR_PX
 
@@ -449,7 +426,7 @@ def tile_grid(rt, rows_of, *, width: int, height: int, t0: float, t1: float,
     render has none), and each chunk holds a row more on each side for the dilation, so its
     records are the whole render's.  None when nothing moves (every band is a copy)."""
     radius, k, vmax = _geometry(t0, t1, max_radius_px, peak_speed)
-    if width == 0 or height == 0 or _static(t0, t1, radius):
+    if width == 0 or height == 0 or is_static(t0, t1, radius):
         return None
     defines = _defines(level, has_depth, curved)
     tx, ty, tiles = _grid_buffers(rt, width, height, k, curved)
@@ -513,10 +490,10 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         constant turn rate (:func:`path`); without it, the straight line along ``velocity``.
     grid, row0, band
         A band of a tiled render: the images hold the canvas rows from ``row0`` on (the
-        band's rows ``band = (y0, y1)`` and :func:`band_margin` rows around them, as the whole
-        render fills them), ``grid`` is the frame's (:func:`tile_grid`); the band's rows are
-        the whole render's, the rest of the output is the (sanitised) input.  Default: the
-        images are the whole canvas, and its grid is built from them.
+        band's rows ``band = (y0, y1)`` and `clfx.kit.motion.band_margin` rows around them,
+        as the whole render fills them), ``grid`` is the frame's (:func:`tile_grid`); the
+        band's rows are the whole render's, the rest of the output is the (sanitised) input.
+        Default: the images are the whole canvas, and its grid is built from them.
 
     Returns
     -------
@@ -526,7 +503,7 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     radius, k, vmax = _geometry(t0, t1, max_radius_px, peak_speed)
     col = sanitized_copy(rt, src) if nonfinite else src
     dst = rt.copy(col)
-    if w == 0 or h == 0 or _static(t0, t1, radius):
+    if w == 0 or h == 0 or is_static(t0, t1, radius):
         return dst, BlurStats(0, radius, 0, 0, 0)
     curved = velocity_back is not None
     defines = _defines(level, depth is not None, curved)

@@ -11,8 +11,9 @@ effects (or two streams of one effect) with equal seeds stay uncorrelated.
 Coverage: on a CG element with a tight data window and an empty, alpha-0 background
 (OpenEXR's Beachball) noise over the whole data window draws a visible rectangle around the
 element, and the comp adds it on top of the plate's own noise.  Both effects take
-``coverage`` (:data:`COVERAGE_PARAM`), resolve it per frame with :func:`alpha_is_coverage`
-and weight their deviation by alpha on the device (kernels/lib/coverage.h).
+``coverage`` (:data:`COVERAGE_PARAM`), resolve it per frame with
+`clfx.kit.noise.alpha_is_coverage` and weight their deviation by alpha on the device
+(kernels/lib/coverage.h).
 """
 from __future__ import annotations
 
@@ -48,34 +49,6 @@ COVERAGE_PARAM = ChoiceParam(
          "comped over has its own noise); ignore: noise over every pixel of the data window; "
          "auto: alpha when no pixel with alpha 0 holds light (premultiplied, empty "
          "background), else ignore (a matte in a photograph's alpha).")
-"""The ``coverage`` parameter of every noise effect (resolved by :func:`alpha_is_coverage`;
-applied on the device by ``clfx_cover16`` / ``clfx_cover4`` in kernels/lib/coverage.h)."""
-
-
-def alpha_is_coverage(coverage: str, ctx, effect: str) -> bool:
-    """A noise effect's ``coverage`` resolved for this frame.
-
-    Parameters
-    ----------
-    coverage : {"auto", "alpha", "ignore"}
-        The effect's ``coverage`` param.
-    ctx : RenderContext
-        "auto" reads ``ctx.alpha_is_coverage()`` (no light where alpha <= 0 in the frame's
-        first scene analysis: the look's input where an earlier step read it) and, when that
-        says no, adds a line to ``ctx.notes``.
-    effect : str
-        The effect's name, for that note.
-
-    Returns
-    -------
-    bool
-        True: the deviation is weighted by alpha clamped to [0, 1], ``out = v + alpha
-        (noisy - v)`` (pixels with alpha >= 1 get the full deviation bit for bit).
-    """
-    if coverage != "auto":
-        return coverage == "alpha"
-    if ctx.alpha_is_coverage():
-        return True
-    ctx.notes.append(f"{effect}: light where alpha is 0 (a matte, not coverage): "
-                     "noise over the whole data window")
-    return False
+"""The ``coverage`` parameter of every noise effect (resolved by
+`clfx.kit.noise.alpha_is_coverage`; applied on the device by ``clfx_cover16`` /
+``clfx_cover4`` in kernels/lib/coverage.h)."""

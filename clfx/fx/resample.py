@@ -1,7 +1,8 @@
 """Host side of clfx's warping effects: inverse maps, fold checks, fit scales, filters.
 
-Shared by ``distortion``, ``chromatic_aberration`` and ``lens`` (device side:
-``kernels/lib/resample.h``).  Everything here runs once per parameter set and frame geometry, in
+Shared by the warps (``distortion``, ``keystone``, ``chromatic_aberration``, ``lens``,
+``breathing``; device side: ``kernels/lib/resample.h``); their canvas and band protocol is
+``clfx.kit.warp``.  Everything here runs once per parameter set and frame geometry, in
 float64 NumPy, and the result (a displacement map or a radial look-up table) is kept in the
 runtime's cache (``rt.cache``) and reused across frames.
 
@@ -453,31 +454,6 @@ def launch_packed(rt, fast, fix, dmap: DevicePackedMap, filter_name: str, quads_
         rt.launch(fix, (count,), *head, buf, np.int32(count), *tail)
 
 
-def frame_key(p, ctx) -> tuple:
-    """What a warp's maps depend on besides the effect and level (part of its ``rt.cache``
-    keys): the parameters, the source's window and row pitch, the display window, pixel
-    aspect and camera."""
-    src = ctx.source
-    return (p.hash_hex(), src.window, src.pitch, ctx.display_window, ctx.pixel_aspect,
-            ctx.camera)
-
-
-def needs_sanitising(ctx, effect: str) -> bool:
-    """True if the frame has non-finite pixels (from the shared per-frame analysis).
-
-    Such pixels read as 0 in the resampler; the count goes to ``ctx.notes``.  Without any,
-    the kernels are built without the per-texel test.
-    """
-    try:
-        count = ctx.analysis.nonfinite_count
-        count = count() if callable(count) else int(count)
-    except Exception:      # no analysis available: stay safe
-        return True
-    if count:
-        ctx.notes.append(f"{effect}: {count} non-finite pixel(s) read as 0")
-    return count > 0
-
-
 def check_fold(name: str, coeffs: str, r_fold: float, r_corner: float, unit: str) -> None:
     """ParamError if a radial map folds over before the frame corner."""
     if r_fold <= r_corner:
@@ -730,26 +706,7 @@ def elliptical_map(rt, sx, sy, jac, pitch: int, row0: int = 0):
     return rt.to_device(host)
 
 
-# -- the window a warp renders over -----------------------------------------------------------
-WARP_REACH_TEXELS = 4
-"""How far past a texel a warp's filters read it (Lanczos-3's 3 taps, rounded up): a source
-window grown by this many texels before it is mapped bounds where its pixels can land."""
-
-
-def warp_frame(ctx):
-    """The frame a warp's ``border`` rule applies at: the display window, or the data window
-    where it is larger (overscan).  Inside it, pixels outside the data window are
-    transparent black (an element's bounding box), not an edge to repeat."""
-    return ctx.source.window.union(ctx.display_window)
-
-
-def plate_frame(ctx):
-    """The frame a warp's plate covers (`warp_frame`) as the whole render sees it (a tile's
-    context gives the whole render's): the outline ``fit=crop`` fills the display window
-    with.  Asked of the step's context, never of a canvas's (`on_canvas`)."""
-    return warp_frame(whole_context(ctx))
-
-
+# -- a warp's regions: where an outline's points land -----------------------------------------
 def bounding_rect(xs, ys, margin: int, fallback):
     """The pixels covering the finite points ``(xs, ys)`` (frame coordinates), grown by
     ``margin``; ``fallback`` when none is finite."""
@@ -760,30 +717,6 @@ def bounding_rect(xs, ys, margin: int, fallback):
     rect = type(fallback)
     return rect(math.floor(xs[ok].min()) - margin, math.floor(ys[ok].min()) - margin,
                 math.ceil(xs[ok].max()) + margin, math.ceil(ys[ok].max()) + margin)
-
-
-def warp_region(forward, ctx, border: str, margin: int = 2, reach: int = 0):
-    """Region of definition of a warp whose source points land at ``forward(xs, ys)`` (frame
-    coordinates; a list of ``(xs, ys)``, one per channel that moves differently).
-
-    The data window, grown by the filters' reach (``WARP_REACH_TEXELS``, plus ``reach``
-    texels where footprints widen), has its outline mapped: the maps here are radial and
-    monotonic, so the outline's image bounds the whole window's; the data window itself
-    stays (an image that shrinks keeps its window).  ``margin`` output pixels cover the sampling of the outline and the
-    footprints' sub-samples.  ``border``: with ``edge`` where the data window reaches the
-    frame's edge (``warp_frame``), or ``mirror``, points read past the frame bring its edge
-    in anywhere: the frame is added."""
-    src = ctx.source.window
-    if src.empty:
-        return src
-    xs, ys = rect_boundary(src.grown(WARP_REACH_TEXELS + max(int(reach), 0)), 512)
-    rod = src           # the data window stays (a shrinking image keeps its window)
-    for fx, fy in forward(xs, ys):
-        rod = rod.union(bounding_rect(fx, fy, margin, src))
-    frame = warp_frame(ctx)
-    if border == "mirror" or (border == "edge" and not _inside(src, frame)):
-        rod = rod.union(frame)
-    return rod
 
 
 def warp_interest(inverse, window, reach: int):
@@ -797,186 +730,3 @@ def warp_interest(inverse, window, reach: int):
     for sx, sy in inverse(xs, ys):
         roi = roi.union(bounding_rect(sx, sy, reach, window))
     return roi
-
-
-def _inside(rect, frame) -> bool:
-    """``rect`` lies strictly inside ``frame`` (touches none of its edges)."""
-    return (rect.x0 > frame.x0 and rect.y0 > frame.y0 and rect.x1 < frame.x1
-            and rect.y1 < frame.y1)
-
-
-def warp_canvas(plugin, p, ctx, border: str):
-    """``(canvas, out)``: the window a warp renders over and the one it returns.
-
-    ``out`` is ``plugin.output_window`` (the data window grown to where its content lands,
-    within the output limit).  The canvas is ``out`` with a black border; with ``edge`` or
-    ``mirror`` it also covers the frame (``warp_frame``), so the rule applies at the frame's
-    edge and never at a data window smaller than the frame.  ``edge`` with a data window
-    strictly inside the frame needs only a transparent pixel around it: the frame's edge is
-    transparent there, and so is the canvas's."""
-    out = plugin.output_window(p, ctx)
-    src, frame = ctx.source.window, warp_frame(ctx)
-    if border == "black":
-        return out, out
-    if border == "edge" and _inside(src, frame):
-        return out.union(src.grown(1)), out
-    return out.union(frame), out
-
-
-def warp_source(rt, ctx, canvas, border: str):
-    """The source on ``canvas``: transparent black inside the frame where the data window
-    does not reach; past the frame the edge repeated (``edge``) or black."""
-    src, frame = ctx.source, warp_frame(ctx)
-    if border == "black" or canvas == frame or _inside(src.window, frame):
-        return rt.reframe(src, canvas, "zero")
-    return rt.reframe(rt.reframe(src, frame, "zero"), canvas,
-                      "clamp" if border == "edge" else "zero")
-
-
-def canvas_stand_in(window):
-    """A source with ``window``'s geometry and no pixels (a look's `prepare`), for building
-    the maps of a warp's canvas ahead of the frame."""
-    from types import SimpleNamespace
-
-    from clfx.device.runtime import ALIGN_PX
-
-    return SimpleNamespace(window=window, channels=4, width=window.width,
-                           height=window.height,
-                           pitch=max(ALIGN_PX, -(-window.width // ALIGN_PX) * ALIGN_PX))
-
-
-@dataclass(frozen=True)
-class CanvasRows:
-    """The rows of a warp's canvas one render computes, and how its kernels address them.
-
-    A warp's arithmetic (the maps' source points, the texel indices and fractions, the
-    border rule) is in the coordinates of its ``canvas`` (`warp_canvas`) whatever part of
-    it renders: a tile of a tiled render (`on_canvas`) computes output rows ``first <=
-    y < first + count`` (relative to the canvas's top) from a source buffer holding canvas
-    rows from ``shift`` on, and writes an output of the same rows as its source; kernels
-    address both buffers in canvas rows (``buffer - shift`` rows), so each pixel of the
-    band gets the whole render's bits.  A whole render: every row, ``shift`` 0."""
-
-    canvas: object
-    first: int
-    count: int
-    shift: int = 0
-
-    @classmethod
-    def whole(cls, canvas) -> "CanvasRows":
-        return cls(canvas, 0, canvas.height)
-
-    @property
-    def tiled(self) -> bool:
-        return (self.first, self.count, self.shift) != (0, self.canvas.height, 0)
-
-    @property
-    def key(self) -> tuple:
-        """What a map of these rows adds to its cache key (nothing for a whole render's)."""
-        return (self.first, self.count) if self.tiled else ()
-
-    @property
-    def span(self) -> tuple[int, int]:
-        return self.first, self.first + self.count
-
-    def context(self, ctx):
-        """``ctx`` as the maps see it: over (a stand-in of) the whole canvas."""
-        return ctx if ctx.source.window == self.canvas else ctx.over(
-            source=canvas_stand_in(self.canvas))
-
-
-TILE_MARGIN_ROWS = 8
-"""Rows a tile's source holds beyond its band's region of interest (see `on_canvas`)."""
-
-
-def on_canvas(plugin, rt, p, ctx, border: str, render):
-    """Render a warp over its canvas (`warp_canvas`): ``render(canvas_ctx, sanitise, rows)``
-    sees a context whose source is the frame on the canvas (its maps are built for the
-    canvas's pixels and cached under its window) and the `CanvasRows` to compute; the result
-    is cut to the output window.  ``sanitise``: the frame has non-finite pixels (asked of
-    the frame's own analysis).
-
-    In a tile of a tiled render (``ctx.tiling``) the canvas is the whole render's, the
-    source the canvas rows the band's region of interest covers (with
-    ``TILE_MARGIN_ROWS``), filled as the whole render fills them (`warp_source`), and only
-    the band's rows are computed; the result covers the band."""
-    name = plugin.descriptor.name
-    sanitise = needs_sanitising(ctx, name)
-    if ctx.tiling is not None:
-        return _tile_on_canvas(plugin, rt, p, ctx, border, render, sanitise)
-    canvas, out = warp_canvas(plugin, p, ctx, border)
-    rows = CanvasRows.whole(canvas)
-    if canvas == ctx.source.window:
-        img = render(ctx, sanitise, rows)
-    else:
-        img = render(ctx.with_source(warp_source(rt, ctx, canvas, border)), sanitise, rows)
-    return rt.reframe(img, out, "zero")
-
-
-def on_plate_canvas(plugin, rt, p, ctx, border: str):
-    """`on_canvas` for a warp whose maps depend on the plate it reads (``fit=crop``:
-    distortion, lens): ``plugin.render_canvas(rt, p, canvas_ctx, sanitise, plate, rows)``
-    with ``plate`` the step's `plate_frame` (a canvas's context no longer knows it)."""
-    plate = plate_frame(ctx)
-    return on_canvas(plugin, rt, p, ctx, border, lambda c, sanitise, rows:
-                     plugin.render_canvas(rt, p, c, sanitise, plate, rows))
-
-
-def whole_context(ctx):
-    """``ctx`` as the whole render sees it: in a tile of a tiled render (``ctx.tiling``) over
-    a stand-in of the whole source window (the geometry, maps and canvas of the whole
-    render), else ``ctx`` itself."""
-    return ctx if ctx.tiling is None else ctx.over(
-        source=canvas_stand_in(ctx.tiling.whole), tiling=None)
-
-
-def band_rows(read, roi, band, canvas) -> tuple:
-    """What a tile computing the rows ``band`` of the output ``canvas`` reads and renders.
-
-    Parameters
-    ----------
-    read : Rect
-        The whole render's source window (the frame on the warp's canvas, or what a scale
-        reads).
-    roi : Rect
-        The band's region of interest.
-    band, canvas : Rect
-        The band and the whole render's output canvas.
-
-    Returns
-    -------
-    (Rect, CanvasRows)
-        The rows of ``read`` the tile's source holds (the region of interest and the band,
-        ``TILE_MARGIN_ROWS`` more each side, within ``read``) and the band's `CanvasRows`.
-    """
-    y0 = max(read.y0, min(roi.y0, band.y0) - TILE_MARGIN_ROWS)
-    y1 = min(read.y1, max(roi.y1, band.y1) + TILE_MARGIN_ROWS)
-    return (type(read)(read.x0, y0, read.x1, y1),
-            CanvasRows(canvas, band.y0 - canvas.y0, band.height, y0 - read.y0))
-
-
-def _tile_on_canvas(plugin, rt, p, ctx, border, render, sanitise):
-    """`on_canvas` of a tile (``ctx.tiling``): the band's rows of the whole render."""
-    band = ctx.tiling.band
-    whole = whole_context(ctx)
-    canvas, _ = warp_canvas(plugin, p, whole, border)
-    part, rows = band_rows(canvas, plugin.region_of_interest(p, whole, band), band, canvas)
-    y0, y1 = part.y0, part.y1
-    frame = warp_frame(whole)
-    if border == "edge" and not (canvas == frame or _inside(whole.source.window, frame)):
-        # the rows past the frame repeat its edge rows: bring the ones they repeat
-        top = min(max(y0, frame.y0), frame.y1 - 1)
-        bottom = max(min(y1, frame.y1), top + 1)
-        rows_of = type(canvas)(frame.x0, top, frame.x1, bottom)
-        source = rt.reframe(rt.reframe(ctx.source, rows_of, "zero"), part, "clamp")
-    else:
-        source = rt.reframe(ctx.source, part, "zero")
-    return render(ctx.over(source=source), sanitise, rows)
-
-
-def canvas_context(plugin, p, ctx, border: str):
-    """``ctx`` over a stand-in of the warp's canvas (for `Plugin.prepare`)."""
-    canvas, _ = warp_canvas(plugin, p, ctx, border)
-    if canvas == ctx.source.window:
-        return ctx
-    return ctx.with_source(canvas_stand_in(canvas))

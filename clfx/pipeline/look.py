@@ -31,11 +31,11 @@ from clfx.core.limits import check_pixels
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
 from clfx.core.rect import Rect
 from clfx.fx import mask as mask_fx
-from clfx.fx import resample
 from clfx.device.runtime import release_freed_heap
 from clfx.host import Plugin, RenderContext
 from clfx.io import lenses as lens_io
 from clfx.io.lenses import Lenses
+from clfx.kit.warp import canvas_stand_in
 from clfx.pipeline.animation import Animated
 from clfx.pipeline.masks import FrameMasks, MaskSpec
 from clfx.plugins import get_plugin
@@ -476,7 +476,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
     for what, win in (("display window", display_window), ("data window", data_window)):
         check_pixels(win.width, win.height, f"prepared frame: {what}", FrameTooLarge)
     look = look.at(frame_number)
-    ctx = RenderContext(rt, resample.canvas_stand_in(data_window), display_window=display_window,
+    ctx = RenderContext(rt, canvas_stand_in(data_window), display_window=display_window,
                         pixel_aspect=pixel_aspect, frame=frame_number, seed=look.seed,
                         camera=look.camera, quality=quality or DEFAULT_QUALITY,
                         output_limit=_limit(data_window, display_window, keep_overscan))
@@ -492,7 +492,7 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
                 return
             except Exception:  # noqa: BLE001 - needs pixels after all: the render builds it
                 continue
-            ctx = ctx.over(source=resample.canvas_stand_in(window))
+            ctx = ctx.over(source=canvas_stand_in(window))
 
 
 class FrameTooLarge(ClfxError):

@@ -29,7 +29,7 @@ fused path in ``kernels/bleed.cl``:
      light misplaced, :func:`separable_psf_error`) is 0 / 0.074 at r = 1, 0.025 / 0.24 at
      r = 2, 0.047 / 0.18 at r = 4, 0.059 / 0.14 at r = 7 (rank 2 / rank 1).
 
-Larger PSFs use the glare family's machinery (``clfx.fx.scatter.ScatterPlugin``,
+Larger PSFs use the glare family's machinery (``clfx.kit.scatter.ScatterPlugin``,
 ``clfx.fx.fftconv.spread``).  The quality levels (:data:`LEVELS`) are ``BleedLevel`` data: the
 separable rank of the fused path, and ``clfx.fx.fftconv.LEVELS``' settings for larger PSFs.
 """
@@ -43,8 +43,8 @@ import numpy as np
 from clfx.core.plugin import Descriptor, FloatParam
 from clfx.fx import fftconv
 from clfx.fx import psf as psflib
-from clfx.fx.scatter import ScatterPlugin, knee_param, tint_param
 from clfx.host import Plugin, register
+from clfx.kit.scatter import ScatterPlugin, knee_param, tint_param
 
 MAX_FUSED_RADIUS = 10
 """PSF radii (px) up to this (21 x 21 taps) take the fused direct/separable path."""

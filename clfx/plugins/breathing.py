@@ -52,10 +52,9 @@ import numpy as np
 from clfx.core.camera import image_distance
 from clfx.core.plugin import Descriptor, FloatParam, Vec2Param
 from clfx.core.rect import Rect
-from clfx.fx.resample import (CanvasRows, ResampleLevel, band_rows, elliptical_spread,
-                              footprint_defines, footprint_spread, needs_sanitising,
-                              whole_context)
+from clfx.fx.resample import ResampleLevel, elliptical_spread, footprint_defines, footprint_spread
 from clfx.host import Plugin, StepPlan, register
+from clfx.kit.warp import CanvasRows, band_rows, needs_sanitising, whole_context
 
 MACRO = 2.0
 """Closest focus, in focal lengths: 1:1 macro (the image as large as the object)."""
@@ -227,7 +226,7 @@ class Breathing(Plugin):
     def render(self, rt, p, ctx):
         lvl = self.level(ctx)
         # a tile (ctx.tiling) renders its band's rows of the whole render, from the whole
-        # render's geometry (`clfx.fx.resample.CanvasRows`)
+        # render's geometry (`clfx.kit.warp.CanvasRows`)
         whole = whole_context(ctx)
         m, warnings = self.scale(p, whole)
         out_win = self.output_window(p, whole)

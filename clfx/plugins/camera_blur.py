@@ -53,7 +53,6 @@ from clfx.fx.motion import (
     MAX_RADIUS_PX,
     SHUTTER_OFFSETS,
     FrameGrid,
-    band_margin,
     reach_px,
     reconstruct,
     sanitized_copy,
@@ -61,6 +60,7 @@ from clfx.fx.motion import (
     tile_grid,
 )
 from clfx.host import Plugin, StepPlan, register
+from clfx.kit.motion import band_margin
 
 KERNEL = "camera_blur.cl"
 

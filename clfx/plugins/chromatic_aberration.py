@@ -38,7 +38,7 @@ XYZ color matching functions", JCGT 2013; IEC 61966-2-1 (sRGB/Rec.709 primaries)
 
 Working space: the model is defined in one reference basis, linear Rec.709; pixels of another
 working space are carried into it and back around the render
-(``clfx.fx.spectral.in_reference_basis``), so the fringes are the same light in any space.
+(``clfx.kit.spectral.in_reference_basis``), so the fringes are the same light in any space.
 The functions below take ``rgb_to_xyz`` (None = Rec.709), which the render always leaves at
 Rec.709.  Every step is signed: the bicubic anti-ringing clamp keeps each channel within its
 neighbours' range, negative values (colours outside Rec.709) included.
@@ -53,10 +53,11 @@ import numpy as np
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
 from clfx.fx import spectral
 from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, band_window,
-                              canvas_context, check_fold, fold_radius, frame_key,
-                              CanvasRows, kernel_defines, launch_packed, lut_lookup, on_canvas,
-                              pixel_centres, radial_lut, warp_region)
+                              check_fold, fold_radius, kernel_defines, launch_packed, lut_lookup,
+                              pixel_centres, radial_lut)
 from clfx.host import Plugin, register
+from clfx.kit.spectral import in_reference_basis
+from clfx.kit.warp import CanvasRows, canvas_context, frame_key, on_canvas, warp_region
 
 LAMBDA_MIN, LAMBDA_MAX = 380.0, 720.0
 LAMBDA_B, LAMBDA_R = 450.0, 650.0
@@ -311,9 +312,9 @@ class ChromaticAberration(Plugin):
     def render(self, rt, p, ctx):
         # over the window the data window's content lands in (`on_canvas`); the spectral
         # model is defined in linear Rec.709; other working spaces are carried into it and
-        # back (clfx.fx.spectral.in_reference_basis)
+        # back (clfx.kit.spectral.in_reference_basis)
         return on_canvas(self, rt, p, ctx, p.border, lambda c, sanitise, rows: (
-            spectral.in_reference_basis(
+            in_reference_basis(
                 rt, c, lambda cc: self.render_reference(rt, p, cc, sanitise, rows))))
 
     def render_reference(self, rt, p, ctx, sanitise=True, rows=None):

@@ -14,7 +14,7 @@ through the rainbow, blue inside, red outside.  The RGB PSF is
 with ``w(lambda) = M * cmf(lambda) * d_lambda`` (CIE 1931 colour matching functions,
 ``clfx.fx.spectral``; samples at bin centres from 380 to 780 nm), i.e. an equal-energy spectrum,
 ``M`` the XYZ -> RGB of the reference basis, linear Rec.709 (pixels of another working space
-are carried into it and back, ``clfx.fx.spectral.in_reference_basis``).
+are carried into it and back, ``clfx.kit.spectral.in_reference_basis``).
 Spectral colours are outside the gamut, so each PSF pixel is brought into gamut keeping its
 luminance (``clfx.fx.spectral.to_gamut``); then each channel is normalised to sum 1, so a
 spectrally flat (white) light keeps its colour and energy (white balance) and only the
@@ -48,7 +48,7 @@ with tent weights (each pixel's light keeps its centroid), the PSF is sampled at
 and the glow is upsampled bilinearly (energy per pixel divided by f^2): the pattern is blurred
 by about f pixels, never moved.  The convolution is ``clfx.fx.fftconv.spread`` over the
 bounding box of the tiles with highlights only (scene analysis), so one light costs a small
-FFT; identity and regions are the glare family's (``clfx.fx.scatter.SpreadRegions``).
+FFT; identity and regions are the glare family's (``clfx.kit.scatter.SpreadRegions``).
 """
 from __future__ import annotations
 
@@ -61,9 +61,10 @@ from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import Descriptor, FloatParam, IntParam
 from clfx.fx import fftconv, spectral
 from clfx.fx import psf as psflib
-from clfx.fx.scatter import SpreadRegions
 from clfx.core.rect import Rect
 from clfx.host import Plugin, register
+from clfx.kit.scatter import SpreadRegions
+from clfx.kit.spectral import in_reference_basis
 
 
 @dataclass(frozen=True)
@@ -306,8 +307,8 @@ class Corona(SpreadRegions, Plugin):
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
         # the spectral model is defined in linear Rec.709; other working spaces are carried
-        # into it and back (clfx.fx.spectral.in_reference_basis)
-        return spectral.in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
+        # into it and back (clfx.kit.spectral.in_reference_basis)
+        return in_reference_basis(rt, ctx, lambda c: self.render_reference(rt, p, c))
 
     def render_reference(self, rt, p, ctx):
         """The effect on pixels in the reference basis (linear Rec.709)."""

@@ -61,7 +61,7 @@ Windows: the output covers where the data window's content lands (``region_of_de
 the data window's outline, grown by the filters' reach, mapped forward), within the output
 limit, so a magnified element grows its window instead of being cut at it; a window whose
 content shrinks (barrel, fit) keeps the data window.  The map is built for that window's
-pixels (``clfx.fx.resample.on_canvas``).
+pixels (``clfx.kit.warp.on_canvas``).
 
 ``fit``: ``crop`` (default) scales up just enough that no pixel of the display window reads
 past the plate (``fill`` with the plate's outline, overscan included, and never below 1);
@@ -79,35 +79,13 @@ import math
 import numpy as np
 
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
-from clfx.fx.resample import (BORDERS, FITS, CanvasRows, FootprintMap, ResampleLevel,
-                              band_window, canvas_context, check_fold, elliptical_map,
-                              fit_scale, fold_radius, footprint_defines, frame_key,
-                              launch_footprint, map_bands, on_plate_canvas, pixel_centres,
-                              plate_frame, rect_boundary, WARP_REACH_TEXELS, warp_frame,
-                              warp_interest, warp_region)
+from clfx.fx.resample import (BORDERS, FITS, check_fold, fit_scale, fold_radius,
+                              pixel_centres, rect_boundary)
 from clfx.host import Plugin, register
+from clfx.kit.warp import FOOTPRINT_LEVELS, FootprintWarp
 
 NEWTON_STEPS = 8
 RESIDUAL_TOL_PX = 1e-6
-
-LEVELS = {
-    "draft": ResampleLevel("footprint quadratic (3x3): 3-point interpolation plus a variance term "
-                           "that follows the map's Jacobian (area-averages where the lens "
-                           "compresses the source), packed map, float32 sums",
-                           filter="quadratic", footprint=True),
-    "preview": ResampleLevel("footprint bicubic (4x4): Keys blended with the cubic B-spline as "
-                             "the map's Jacobian asks, anti-ringing clamp, packed map, float32 "
-                             "sums", filter="bicubic", footprint=True),
-    "final": ResampleLevel("footprint Lanczos-3 (up to 8x8): the mean of two Lanczos-3 samples "
-                           "spread by the map's Jacobian, anti-ringing clamp, packed map "
-                           "(positions to ~1e-7 px), float32 sums",
-                           filter="lanczos3", footprint=True),
-    "reference": ResampleLevel("elliptical footprint: n x n Lanczos-3 samples spread along the "
-                               "Jacobian's principal axes (covariance of the output pixel's "
-                               "preimage), float64 map and sums", fp64=True, filter="lanczos3",
-                               footprint=True),
-}
-
 
 def intrinsics(p, camera, display_window, pixel_aspect):
     """(fx, fy, cx, cy) with cx, cy in clfx frame coordinates (pixel centres at +0.5)."""
@@ -211,7 +189,7 @@ def undistort(xd, yd, k, r_hi: float, fx: float):
 def _geometry(p, camera, display_window, window, pixel_aspect, name, plate=None):
     """Intrinsics, coefficients, fit scale and the radial bracket [0, r_hi] for output
     points inside ``display_window`` and ``window``.  ``plate``: the frame the source's
-    pixels cover (`clfx.fx.resample.warp_frame`; default ``display_window`` and ``window``),
+    pixels cover (`clfx.kit.warp.warp_frame`; default ``display_window`` and ``window``),
     whose imaged outline ``fit=crop`` fills the display window with.  Raises ParamError on
     a fold."""
     fx, fy, cx, cy = intrinsics(p, camera, display_window, pixel_aspect)
@@ -277,20 +255,6 @@ def forward_points(g, sx, sy):
     return cx + xd * fx / s_fit, cy + yd * fy / s_fit
 
 
-def _widest(g, rect, n: int = 33) -> float:
-    """The largest |J| (2-norm, texels per output pixel) of the map over ``rect``: its
-    outline and an n x n grid (compression grows with the radius up to a fold, so the
-    outline holds the maximum of the models accepted here; the grid covers the others)."""
-    if rect.empty:
-        return 1.0
-    bx, by = rect_boundary(rect, 256)
-    gx, gy = np.meshgrid(np.linspace(rect.x0, rect.x1, n), np.linspace(rect.y0, rect.y1, n))
-    _, _, jac = _points(g, np.concatenate([bx, gx.ravel()]), np.concatenate([by, gy.ravel()]),
-                        True)
-    norms = np.linalg.norm(np.nan_to_num(jac), ord=2, axis=(-2, -1))
-    return max(float(norms.max(initial=0.0)), 1.0)
-
-
 def build_map(p, camera, display_window, window, pixel_aspect, *, name="distortion",
               jacobian=False, plate=None):
     """Source points (frame coordinates, float64) for the pixel centres of ``window``.
@@ -322,8 +286,8 @@ def _reach(k, r_needed: float) -> float:
 
 
 @register
-class Distortion(Plugin):
-    whole_frame = None   # a tile computes its band's rows of the whole canvas (`on_canvas`)
+class Distortion(FootprintWarp, Plugin):
+    no_source_note = "beyond the lens's reach"
     descriptor = Descriptor(
         name="distortion", label="Lens distortion", group="Lens", kernel="distortion.cl",
         summary="Brown-Conrady barrel/pincushion/tangential distortion with OpenCV's "
@@ -361,7 +325,7 @@ class Distortion(Plugin):
                              "edge); inside the frame, outside the data window is transparent "
                              "black."),
         ),
-        quality=LEVELS,
+        quality=FOOTPRINT_LEVELS,
     )
 
     def is_identity(self, p, ctx):
@@ -369,133 +333,21 @@ class Distortion(Plugin):
             return "amount and all coefficients (k1, k2, k3, p1, p2) are 0"
         return None
 
-    def geometry(self, p, ctx):
+    # -- the model (clfx.kit.warp.FootprintWarp renders it) ----------------------------------
+    def warp_geometry(self, p, ctx, plate):
         return _geometry(p, ctx.camera, ctx.display_window, ctx.source.window,
-                         ctx.pixel_aspect, "distortion", plate_frame(ctx))
+                         ctx.pixel_aspect, "distortion", plate)
 
-    def region_of_definition(self, p, ctx):
-        # Output pixels read up to ~0.75 |J| + 4 texels from their source points (footprints
-        # widen where the lens compresses: |J| = 50 near a strong barrel's fold), so the data
-        # window grown by that, mapped forward, bounds where its content lands.  Kept in
-        # ``rt.cache`` with the maps: the Jacobian survey costs tens of milliseconds of host
-        # time, asked several times a frame and the same for every frame of a shot.
-        def build():
-            g = self.geometry(p, ctx)
-            widest = _widest(g, ctx.source.window.union(ctx.output_limit))
-            reach = math.ceil(0.75 * widest) + WARP_REACH_TEXELS - 4
-            if corner_radius(ctx.source.window.grown(reach + 4), g["fx"], g["fy"], g["cx"],
-                             g["cy"]) >= g["r_fold"]:
-                return ctx.source.window.union(warp_frame(ctx))   # near the fold: anywhere
-            return warp_region(lambda xs, ys: [forward_points(g, xs, ys)], ctx, p.border,
-                               reach=reach)
+    def warp_points(self, g, ox, oy, jacobian):
+        return _points(g, ox, oy, jacobian)
 
-        return ctx.runtime.cache.get(("distortion.rod",) + frame_key(p, ctx)
-                                     + (ctx.output_limit,), build)
+    def warp_forward(self, g, sx, sy):
+        return forward_points(g, sx, sy)
 
-    def region_of_interest(self, p, ctx, window):
-        def build():
-            g = self.geometry(p, ctx)
-            return warp_interest(lambda x, y: [_points(g, x, y, False)], window,
-                                 4 + math.ceil(0.75 * _widest(g, window)))
+    def warp_info(self, g):
+        return dict(fx=g["fx"], fy=g["fy"], cx=g["cx"], cy=g["cy"], k=g["k"],
+                    fit_scale=g["fit_scale"], r_fold=g["r_fold"])
 
-        return ctx.runtime.cache.get(("distortion.roi",) + frame_key(p, ctx) + (window,),
-                                     build)
-
-    def host_map(self, rt, p, ctx, plate):
-        """The float64 source points of ``ctx.source``'s pixels (source-window coordinates,
-        NaN = no source), their Jacobians and the map's info, kept in ``rt.cache`` (shared by
-        every level's device map).  ``plate``: the frame the plate covers (`plate_frame` of
-        the step's context: ``ctx`` is the canvas's)."""
-        src = ctx.source
-
-        def build():
-            sx, sy, info = build_map(p, ctx.camera, ctx.display_window, src.window,
-                                     ctx.pixel_aspect, jacobian=True, plate=plate)
-            return sx - src.window.x0, sy - src.window.y0, info.pop("jacobian"), info
-
-        return rt.cache.get(("distortion.host_map",) + frame_key(p, ctx) + (plate,), build)
-
-    def device_map(self, rt, p, ctx, filter_name, double, plate, rows=None):
-        """The device map of one level, kept in ``rt.cache``: ``(map, info)``; float levels a
-        :class:`clfx.fx.resample.DeviceFootprintMap` of their footprint filter; ``double``
-        (reference) the float64 elliptical map (:func:`clfx.fx.resample.elliptical_map`).
-        ``rows``: the `CanvasRows` of ``ctx.source``'s window (the canvas) to map (default
-        all: a tile maps its band's); ``plate`` as in `host_map`."""
-        src = ctx.source
-        rows = rows or CanvasRows.whole(src.window)
-
-        def build():
-            if rows.tiled or (not double and len(map_bands(src.height, src.pitch)) > 1):
-                return self.banded_map(rt, p, ctx, None if double else filter_name, rows,
-                                       plate)
-            sx, sy, jac, info = self.host_map(rt, p, ctx, plate)
-            if double:
-                return elliptical_map(rt, sx, sy, jac, src.pitch), info
-            return FootprintMap(sx, sy, jac, filter_name, src.width, src.height, src.pitch,
-                                p.border).upload(rt), info
-
-        key = "elliptical" if double else filter_name
-        return rt.cache.get(("distortion.map",) + frame_key(p, ctx) + (plate, key) + rows.key,
-                            build)
-
-    def prepare(self, rt, p, ctx):
-        if not self.is_identity(p, ctx):
-            lvl = self.level(ctx)
-            self.device_map(rt, p, canvas_context(self, p, ctx, p.border), lvl.filter,
-                            rt.use_fp64(lvl.fp64), plate_frame(ctx))
-
-    def banded_map(self, rt, p, ctx, filter_name, rows, plate):
-        """A frame larger than one band (``clfx.fx.resample.map_bands``), or a tile's band
-        of rows (``rows``): the footprint map built band by band from the same geometry (no
-        float64 map of the whole frame is kept), or with ``filter_name`` None the reference's
-        elliptical map of ``rows``: ``(map, info)``."""
-        src = ctx.source
-        g = _geometry(p, ctx.camera, ctx.display_window, src.window, ctx.pixel_aspect,
-                      "distortion", plate)
-        no_source = 0
-
-        def points_of(y0, y1):
-            nonlocal no_source
-            sx, sy, jac = _points(g, *pixel_centres(band_window(src.window, y0, y1)), True)
-            no_source += int(np.count_nonzero(~np.isfinite(sx)))
-            return sx - src.window.x0, sy - src.window.y0, jac
-
-        if filter_name is None:
-            dmap = elliptical_map(rt, *points_of(*rows.span), src.pitch, rows.first)
-        else:
-            dmap = FootprintMap.device(rt, points_of, filter_name, src.width, src.height,
-                                       src.pitch, p.border, rows.span)
-        info = dict(fx=g["fx"], fy=g["fy"], cx=g["cx"], cy=g["cy"], k=g["k"],
-                    fit_scale=g["fit_scale"], no_source=no_source, r_fold=g["r_fold"])
-        return dmap, info
-
-    def render(self, rt, p, ctx):
-        return on_plate_canvas(self, rt, p, ctx, p.border)
-
-    def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
-        """The warp over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
-        a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the
-        frame the plate covers (`on_plate_canvas`)."""
-        src = ctx.source
-        rows = rows or CanvasRows.whole(src.window)
-        canvas = rows.canvas
-        lvl = self.level(ctx)
-        double = rt.use_fp64(lvl.fp64)
-        dmap, info = self.device_map(rt, p, rows.context(ctx), lvl.filter, double, plate, rows)
-        if info["no_source"]:
-            ctx.notes.append(f"distortion: {info['no_source']} px beyond the lens's reach "
-                             f"left transparent")
-        defines = footprint_defines(lvl.filter, p.border, sanitise)
-        dst = src.like()
-        if not double:
-            defines["CLFX_STREAM_STORES"] = int(rt.streams_stores(dst.nbytes))
-        i32 = np.int32
-        tail = (i32(src.pitch), i32(canvas.width), i32(canvas.height), i32(dst.pitch),
-                i32(rows.count), i32(rows.first), i32(rows.shift))
-        if double:
-            knl = rt.kernel("distortion.cl", "distortion_ewa_f64", fp64=lvl.fp64, **defines)
-            rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, dmap, *tail)
-            return dst
-        launch_footprint(rt, rt.kernel("distortion.cl", "distortion_footprint", **defines),
-                         dmap, src.pitch // 4, rows.count, (src, dst), tail)
-        return dst
+    def reads_anywhere(self, g, rect):
+        # near the fold (|J| = 50 near a strong barrel's): points anywhere
+        return corner_radius(rect, g["fx"], g["fy"], g["cx"], g["cy"]) >= g["r_fold"]

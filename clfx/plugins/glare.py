@@ -25,7 +25,7 @@ the analysis tiles with highlights is transformed (``ctx.analysis.tiles_above``)
 without any is an identity ("no pixel above threshold").  Non-finite input pixels are set
 to 0 before the convolution and counted in ``ctx.notes``.
 
-The machinery (shared with bleed and soft focus) is ``clfx.fx.scatter.ScatterPlugin``; the
+The machinery (shared with bleed and soft focus) is ``clfx.kit.scatter.ScatterPlugin``; the
 quality levels are ``clfx.fx.fftconv.LEVELS`` (draft one pyramid level, preview float32 FFT
 with bright pixels gathered exactly, final float64 FFT, reference float64 direct/FFT).
 
@@ -40,8 +40,8 @@ from clfx.core.errors import ParamError
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, PathParam
 from clfx.fx import fftconv
 from clfx.fx import psf as psflib
-from clfx.fx.scatter import ScatterPlugin, knee_param, tint_param
 from clfx.host import Plugin, register
+from clfx.kit.scatter import ScatterPlugin, knee_param, tint_param
 
 
 @register

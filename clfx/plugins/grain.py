@@ -79,7 +79,7 @@ rendered alone, in a batch, cropped or with overscan gives the same noise at the
 pixel, and every frame differs.  Alpha is kept bit for bit; non-finite inputs become 0 first.
 Values are clamped to +-1e30 before the grain and the result to the float range.
 
-Coverage (``coverage``, as ``sensor_noise``'s: `clfx.fx.noise.alpha_is_coverage`).  With
+Coverage (``coverage``, as ``sensor_noise``'s: `clfx.kit.noise.alpha_is_coverage`).  With
 ``"alpha"`` the grain is weighted by the pixel's alpha clamped to [0, 1], ``out = v + alpha
 (grainy - v)``: the empty, alpha-0 background of a CG element with a tight data window
 (OpenEXR's Beachball) stays empty instead of showing a rectangle of grain (the fog's grain
@@ -118,9 +118,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
-from clfx.fx.analysis import MIDDLE_GREY_AUTO, exposure_reference
-from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
+from clfx.fx.analysis import MIDDLE_GREY_AUTO
+from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, effect_seed
 from clfx.host import ExposurePlan, Plugin, register
+from clfx.kit.noise import alpha_is_coverage, exposure_reference
 
 REFERENCE_WIDTH = 2048
 """``amount`` is stated for a pixel of a scan this wide (of the same format); the legacy

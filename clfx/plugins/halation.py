@@ -8,7 +8,7 @@ re-enters the emulsion from behind, where it meets the red-sensitive layer first
 glow hugging bright edges and lights.
 
 *Highlights.*  The light that does this is the soft-knee highlight of the glare family
-(``clfx.fx.scatter``, ``kernels/lib/scatter.h``): ``h = max(rgb, 0) clamp(max(s, L - t) / L,
+(``clfx.kit.scatter``, ``kernels/lib/scatter.h``): ``h = max(rgb, 0) clamp(max(s, L - t) / L,
 0, 1)``, ``s = clamp(L - t + k, 0, 2k)^2 / 4k`` (Rec.709 luminance ``L``, ``threshold`` t,
 ``knee`` k).  Halation is linear in exposure; the threshold keeps it to where it shows.
 
@@ -102,8 +102,8 @@ from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, RGBParam
 from clfx.fx import fftconv
 from clfx.fx import psf as psflib
-from clfx.fx.scatter import ScatterPlugin, knee_param
 from clfx.host import Plugin, register
+from clfx.kit.scatter import ScatterPlugin, knee_param
 
 REFRACTIVE_INDEX = 1.5
 """Refractive index of the film base (cellulose triacetate ~1.48, PET ~1.64): an estimate."""

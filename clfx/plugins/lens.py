@@ -43,13 +43,14 @@ import numpy as np
 from clfx.core.errors import ParamError
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, StringParam
 from clfx.fx import lensdb
-from clfx.fx.resample import (BORDERS, FITS, CanvasRows, DevicePackedMap, PackedMap,
-                              ResampleLevel, band_window, canvas_context, check_fold, fit_scale,
-                              fold_radius, frame_key, kernel_defines, launch_packed, lut_lookup,
-                              map_bands, on_plate_canvas, pixel_centres, plate_frame,
-                              radial_inverse, radial_inverse_fast, radial_lut, rect_boundary,
-                              upload_map, warp_interest, warp_region)
+from clfx.fx.resample import (BORDERS, FITS, DevicePackedMap, PackedMap, ResampleLevel, band_window,
+                              check_fold, fit_scale, fold_radius, kernel_defines, launch_packed,
+                              lut_lookup, map_bands, pixel_centres, radial_inverse,
+                              radial_inverse_fast, radial_lut, rect_boundary, upload_map,
+                              warp_interest)
 from clfx.host import Plugin, register
+from clfx.kit.warp import (CanvasRows, canvas_context, frame_key, on_plate_canvas, plate_frame,
+                           warp_region)
 
 LUT_SIZE = 1024
 
@@ -103,7 +104,7 @@ def simulation_geometry(cal, norm, display_window, window, fit="none", distortio
                         points=None, plate=None):
     """Green source points (frame coordinates) for ``window``'s pixel centres (or for the
     output ``points`` (xs, ys), frame coordinates), and info.  ``plate``: the frame the
-    source's pixels cover (`clfx.fx.resample.plate_frame`; default the display window),
+    source's pixels cover (`clfx.kit.warp.plate_frame`; default the display window),
     whose imaged outline ``fit=crop`` fills the display window with.
 
     lensfun works in pixel-index coordinates of the display window (centres at integers):

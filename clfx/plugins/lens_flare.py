@@ -14,7 +14,7 @@ extent their rms radius.  Each ghost is the aperture polygon (or the round rim o
 limiting it) imaged through its matrix, cut by the clip discs of the other apertures on its
 path, with per-wavelength sizes and positions (``final``: 7 wavelengths, ``clfx.fx.spectral``
 weights per channel in linear Rec.709, the reference basis other working spaces are carried
-into and back, ``clfx.fx.spectral.in_reference_basis``: coloured fringes), a
+into and back, ``clfx.kit.spectral.in_reference_basis``: coloured fringes), a
 Fresnel-diffraction rim and edges blurred by the light's extent and the lens's aberrations,
 and the brightness of its two coated reflections:
 ``F * energy / T_p`` over its area (``clfx.fx.flare``), times ``gain`` (default
@@ -89,6 +89,7 @@ from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Leve
 from clfx.core.rect import Rect
 from clfx.fx import flare, optics, spectral
 from clfx.host import Plugin, StepPlan, register
+from clfx.kit.spectral import in_reference_basis
 
 DEFAULT_GHOSTS = (
     # k (position), size (fraction of diagonal), tint (RGB), softness (edge / radius), rim
@@ -637,7 +638,7 @@ class LensFlare(Plugin):
     # render ---------------------------------------------------------------------------
     def render(self, rt, p, ctx):
         if p.model == "physical":   # spectral: in the reference basis, linear Rec.709
-            return spectral.in_reference_basis(rt, ctx,
+            return in_reference_basis(rt, ctx,
                                                lambda c: self.render_physical(rt, p, c))
         src = ctx.source
         out_win = self.output_window(p, ctx)

@@ -23,7 +23,7 @@ occlusion ordering).
 The effect tiles (`clfx.pipeline.look.render_tiled`): the velocity tiles are the frame's,
 built once in the step's plan (`clfx.fx.motion.tile_grid`), and a band reconstructs its rows
 of the whole render's canvas from the rows its farthest sample reaches (its region of
-interest, `clfx.fx.motion.band_margin`), its positions the whole render's.
+interest, `clfx.kit.motion.band_margin`), its positions the whole render's.
 
 The passes after the blur (`passes_after`).  The blur moves a surface's colour off its
 silhouette (a ball's smear over the empty background around it), while the velocity and depth
@@ -60,8 +60,6 @@ from clfx.fx.motion import (
     MIN_BLUR_PX,
     SHUTTER_OFFSETS,
     FrameGrid,
-    aligned_passes,
-    band_margin,
     reach_px,
     reconstruct,
     sanitized_copy,
@@ -71,6 +69,7 @@ from clfx.fx.motion import (
 import numpy as np
 
 from clfx.host import Plugin, StepPlan, register
+from clfx.kit.motion import aligned_passes, band_margin
 
 
 @dataclass(frozen=True)

@@ -77,11 +77,11 @@ import numpy as np
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Level
 from clfx.core.rect import Rect
-from clfx.fx.motion import (GRID_CHUNK_PIXELS, MAX_RADIUS_PX, FrameGrid, aligned_passes,
-                             path_reach)
+from clfx.fx.motion import GRID_CHUNK_PIXELS, MAX_RADIUS_PX, FrameGrid, path_reach
 from clfx.fx.motion import KERNEL as MOTION_KERNEL
 from clfx.fx.motion import sanitized_copy, tile_size
 from clfx.host import Plugin, StepPlan, register
+from clfx.kit.motion import aligned_passes
 
 DIRECTIONS = ("top-down", "bottom-up", "left-right", "right-left")
 REFERENCES = {"first": 0.0, "centre": 0.5, "last": 1.0}

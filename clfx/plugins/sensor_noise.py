@@ -115,9 +115,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Level, RGBParam
-from clfx.fx.analysis import MID_GREY, MIDDLE_GREY_AUTO, exposure_reference
-from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, alpha_is_coverage, effect_seed
+from clfx.fx.analysis import MID_GREY, MIDDLE_GREY_AUTO
+from clfx.fx.noise import COVERAGE_PARAM, SEED_PARAM, effect_seed
 from clfx.host import ExposurePlan, Plugin, register
+from clfx.kit.noise import alpha_is_coverage, exposure_reference
 
 SENSOR_SALT = 0x73656E73  # "sens"
 PRNU_SALT = 0x70726E75    # "prnu"

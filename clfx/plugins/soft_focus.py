@@ -14,7 +14,7 @@ ends smoothly (``clfx.fx.psf.tail_fade``): no disc edge, no rim.
 ``out = c - amount h + amount tint (PSF * h)``.  Energy is kept; highlights get a halo, mid
 tones a glow, shadows pick up light from nearby brights (the lifted, low-contrast look).
 The default threshold is below 1, so display-referred (8-bit) frames need no expansion.
-Uses the glare family's machinery (``clfx.fx.scatter.ScatterPlugin``, ``kernels/lib/scatter.h``,
+Uses the glare family's machinery (``clfx.kit.scatter.ScatterPlugin``, ``kernels/lib/scatter.h``,
 ``clfx.fx.fftconv``; quality levels ``clfx.fx.fftconv.LEVELS``).
 """
 from __future__ import annotations
@@ -22,8 +22,8 @@ from __future__ import annotations
 from clfx.core.plugin import Descriptor, FloatParam
 from clfx.fx import fftconv
 from clfx.fx import psf as psflib
-from clfx.fx.scatter import ScatterPlugin, knee_param, tint_param
 from clfx.host import Plugin, register
+from clfx.kit.scatter import ScatterPlugin, knee_param, tint_param
 
 
 @register

@@ -1,5 +1,5 @@
 /* coverage.h: alpha as coverage for the noise effects (grain, sensor_noise; the host side is
- * clfx/fx/noise.py, alpha_is_coverage).
+ * clfx/kit/noise.py, alpha_is_coverage).
  *
  * A CG element with an empty, alpha-0 background must not get noise over its whole data
  * window (a rectangle around the element, added on top of the plate's own noise in the

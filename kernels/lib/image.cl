@@ -52,7 +52,7 @@ kernel void image_sanitize(global float *img, const int pitch, const int height,
 
 /* image_rgb_matrix: dst.rgb = M src.rgb, dst.a = src.a for a 4-channel image (M's rows r0,
  * r1, r2 in .xyz): the working space's pixels into the spectral effects' reference basis and
- * back (clfx.fx.spectral.in_reference_basis).  Linear: negative components stay negative.
+ * back (clfx.kit.spectral.in_reference_basis).  Linear: negative components stay negative.
  * One work-item per pixel of the padded rows. */
 kernel void image_rgb_matrix(global const float *src, global float *dst, const int pitch,
                              const int height, const float4 r0, const float4 r1,

@@ -14,7 +14,7 @@
 #define JITTER 1
 #endif
 
-/* A band of a tiled render (the rows `clfx.fx.motion.band_margin` grows it by): the buffer `p` (rows of `pitch` pixels of
+/* A band of a tiled render (the rows `clfx.kit.motion.band_margin` grows it by): the buffer `p` (rows of `pitch` pixels of
  * `ch` floats) holds the canvas rows from `row0` on; from here on it is addressed in canvas
  * rows, as in the whole render (row0 0), so positions take the whole render's coordinates
  * and only the band's offset is in the addressing.  Reads clamp to the rows the buffer holds

@@ -1,6 +1,7 @@
 /* resample.h: filtered reads of an RGBA image at continuous coordinates (clfx/fx/resample.py).
  *
- * Shared by distortion.cl, chromatic_aberration.cl and lens.cl.  Compile-time choices:
+ * Shared by chromatic_aberration.cl, lens.cl, breathing.cl and the footprint warps
+ * (lib/footprint_warp.h: distortion.cl, keystone.cl).  Compile-time choices:
  *   RS_FILTER  0 = bilinear (2x2), 1 = bicubic (Keys, a = -0.5, 4x4), 2 = Lanczos-3 (6x6)
  *   RS_BORDER  0 = black (transparent: texels outside the image are 0),
  *              1 = edge (clamp to the nearest edge texel), 2 = mirror (periodic reflect-101)
@@ -42,7 +43,7 @@
 #define RS_TAPS 6
 #endif
 
-/* A tile of a tiled render (clfx.fx.resample.CanvasRows): `p` holds the canvas rows from
+/* A tile of a tiled render (clfx.kit.warp.CanvasRows): `p` holds the canvas rows from
  * `shift` on (rows of `pitch` RGBA pixels); from here on it is addressed in canvas rows, as
  * in the whole render (whose shift is 0), and only rows the buffer holds are touched. */
 #define RS_TILE(p, pitch, shift) ((p) -= (shift) * (pitch) * 4)

@@ -1,4 +1,4 @@
-/* scatter.h: the light-spreading effects' shared per-pixel maths (clfx/fx/scatter.py).
+/* scatter.h: the light-spreading effects' shared per-pixel maths (clfx/kit/scatter.py).
  *
  * The glare family (glare.cl, bleed.cl, soft_focus.cl) thresholds with a soft knee, spreads
  * the highlights with a PSF (lib/fftconv.cl, or bleed's fused gather) and mixes back:

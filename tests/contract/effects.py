@@ -41,6 +41,7 @@ ACTIVE: dict[str, dict] = {
     "camera_blur": {"length": 0.03, "roll": 2.0, "zoom": 0.02},
     "defocus": {"size": 0.02},
     "distortion": {"amount": 0.15, "p1": 0.01},
+    "keystone": {"tilt": 12.0, "swing": -8.0},
     "lens": {"maker": "Canon", "model": "Canon EF 24-70mm f/2.8L II USM"},
     # physical ghosts of the frame's 5-nit lights are far below visible (1e-5 of the light):
     # a large gain makes them draw, so the physical path is what the suite checks

@@ -232,11 +232,11 @@ def test_finite_input_across_float_range_stays_finite(rt, rng, quality, border):
 
 
 def test_map_is_built_once_and_kept_in_the_runtime_cache(rt, rng, monkeypatch):
-    import clfx.plugins.distortion as module
+    import clfx.kit.warp as kit
 
-    builds = []
-    monkeypatch.setattr(module, "build_map",
-                        lambda *a, **kw: builds.append(a) or build_map(*a, **kw))
+    builds = []      # the pixel centres a map is built for (the host map's, once)
+    centres = kit.pixel_centres
+    monkeypatch.setattr(kit, "pixel_centres", lambda *a, **kw: builds.append(a) or centres(*a, **kw))
     src = rng.uniform(0.0, 1.0, (10, 10, 4)).astype(np.float32)
     p = Distortion.params(k1=0.1 + rng.uniform(0, 1e-6))     # a key no other test used
     a = Distortion().apply(rt, p, src, frame=1)
@@ -250,12 +250,12 @@ def test_regions_are_surveyed_once_a_shot(rt, rng, monkeypatch):
     """The region of definition's Jacobian survey (tens of ms of host time) is asked several
     times a frame (identity, output window, the tiler): it runs once for a shot whose
     geometry does not change, and again when the geometry does."""
-    import clfx.plugins.distortion as module
+    import clfx.kit.warp as kit
     from clfx.host import RenderContext
 
     surveys = []
-    widest = module._widest
-    monkeypatch.setattr(module, "_widest", lambda *a, **kw: surveys.append(a) or widest(*a, **kw))
+    widest = kit.widest
+    monkeypatch.setattr(kit, "widest", lambda *a, **kw: surveys.append(a) or widest(*a, **kw))
     p = Distortion.params(k1=-0.1 - rng.uniform(0, 1e-6))    # a key no other test used
     src = rt.upload(rng.uniform(0.0, 1.0, (12, 16, 4)).astype(np.float32))
     windows = set()

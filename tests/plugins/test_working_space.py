@@ -4,7 +4,7 @@ ACEScg result is converted back to Rec.709, to float32 precision.
 
 Each spectral effect's model is defined once, in linear Rec.709 (the reference basis); in
 another working space the frame is carried into it by ``B = XYZ_TO_REC709 @ ctx.rgb_to_xyz``
-and back by ``B^-1`` (``clfx.fx.spectral.in_reference_basis``).  Every step, the non-linear
+and back by ``B^-1`` (``clfx.kit.spectral.in_reference_basis``).  Every step, the non-linear
 ones included (per-channel anti-ringing clamps, luminance thresholds), then sees the numbers
 it sees for the same light given in Rec.709, negative components (ACEScg colours outside
 Rec.709) included.  What is left is float32 rounding: the test's two conversions and the

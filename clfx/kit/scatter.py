@@ -1,7 +1,7 @@
 """The glare family's shared base: highlights -> PSF spread -> mix (glare, bleed, soft focus),
 and the cheap questions of every effect that spreads its highlights by a PSF (corona).
 
-Effects combine these mixins with ``clfx.host.Plugin`` (this layer sits below the host):
+Effects combine these mixins with ``clfx.host.Plugin``:
 ``class Glare(ScatterPlugin, Plugin)``.  What differs between effects is declared, not
 tested for: the name of the strength parameter (:attr:`SpreadRegions.strength_param`), the
 PSF (:meth:`ScatterPlugin.build_psf`), the display-referred boost (:meth:`ScatterPlugin.boost`).
