@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from clfx.bench import timing
 from clfx.bench.effects import EffectResult, _flag_levels, bench_effect
 from clfx.bench.looks import analysis_frames
 from clfx.bench.metrics import error_metrics
 from clfx.bench.report import losing_levels, markdown, summary_markdown
-from clfx.bench import timing
 from clfx.bench.timing import SHORT_RUNS, timed_pair
 from clfx.cli import cli
 from clfx.core.plugin import QUALITY_LEVELS
