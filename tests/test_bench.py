@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from clfx.bench import timing
 from clfx.bench.effects import EffectResult, _flag_levels, bench_effect
 from clfx.bench.looks import analysis_frames
 from clfx.bench.metrics import error_metrics
@@ -27,7 +28,13 @@ FLOOR = 1e-6
 
 @pytest.fixture(scope="module")
 def effect_results(rt):
-    return {name: bench_effect(rt, name, *SIZE, repeat=1) for name in discover()}
+    """Every effect's bench on the test size, each operation run once to warm up and once
+    timed (no warm-up series, no `SHORT_RUNS`): these tests read errors and rows, never
+    times, and the series were most of this fixture's minute (`timing` has its own tests
+    below)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(timing, "WARMUP_SHORT_S", 0.0)
+        return {name: bench_effect(rt, name, *SIZE, repeat=1) for name in discover()}
 
 
 @pytest.mark.parametrize("name", sorted(discover()))

@@ -275,10 +275,16 @@ def test_tiles_in_focus_are_copied_and_far_tiles_blurred(rt, rng):
     assert not np.allclose(got[:, 140:], src[:, 140:])
 
 
-def test_bench_case_shape():
-    from clfx.bench.cases.dof import CASE
+def test_bench_case_shape(monkeypatch):
+    from clfx.bench.cases import dof as dof_case
 
-    case = CASE.make(64, 36, None)
+    render_case = dof_case.render_case      # the shapes, not the truth: 16 renders, not 2048
+
+    def few(*args, **kw):
+        return render_case(*args, **{**kw, "samples": 16})
+
+    monkeypatch.setattr(dof_case, "render_case", few)
+    case = dof_case.CASE.make(64, 36, None)
     assert case["truth"].shape == case["source"].shape == (36, 64, 4)
     assert case["depth"].shape == (36, 64)
 
