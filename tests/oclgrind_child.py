@@ -225,8 +225,8 @@ def main(argv) -> int:
             if tiles(name):        # and in bands of 8 rows (`clfx.pipeline.look.render_tiled`)
                 runs += [(effect_look(name, masked=False), (W, H), f"{name}@{level} tiled",
                           {"tile_pixels": W * TILE_ROWS})]
-        else:
-            runs = [(name, LOOK_SIZE, f"look {name}@{level}")]
+        else:      # a group of looks in one process: each program is compiled once
+            runs = [(look, LOOK_SIZE, f"look {look}@{level}") for look in name.split(",")]
         for look, size, label, *opts in runs:
             print(json.dumps(render(look, level, size, label, **(opts[0] if opts else {}))),
                   flush=True)
