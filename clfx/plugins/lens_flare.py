@@ -164,8 +164,8 @@ class FlarePlan(StepPlan):
     ghosts: tuple | None = None
 
 
-NO_GHOSTS = (*read_only(np.zeros((0, flare.ENTRY)), np.zeros(0, np.int64), np.zeros(0, np.intp)),
-             ())
+NO_GHOSTS = (*read_only(np.zeros((0, flare.ENTRY)), np.zeros(0, np.int64),
+                        np.zeros(0, np.intp)), ())
 """The physical model's ghosts of a frame without a light (`LensFlare.ghost_plan`'s types):
 a render that is called anyway draws none, without reading the lens or its ghost table."""
 
