@@ -64,6 +64,14 @@ class StepPlan:
     identity: str | None = None
 
 
+def read_only(*arrays):
+    """``arrays`` made read-only (a plan's tables: built once on the whole frame, read by
+    every band); one array or a tuple of them."""
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays if len(arrays) != 1 else arrays[0]
+
+
 @dataclass(frozen=True)
 class ExposurePlan(StepPlan):
     """The plan of an effect relative to the plate's exposure (grain, sensor noise): its
@@ -73,16 +81,31 @@ class ExposurePlan(StepPlan):
     middle_grey: float = MID_GREY
 
 
+def tile_bands(window: Rect, tile_pixels: int | None) -> list[Rect]:
+    """``window`` in full-width bands of at most ``tile_pixels`` pixels (one band, the
+    window, without a tile size or when it fits)."""
+    rows = max(1, tile_pixels // max(window.width, 1)) if tile_pixels else window.height
+    if rows >= window.height:
+        return [window]
+    return [Rect(window.x0, y, window.x1, min(y + rows, window.y1))
+            for y in range(window.y0, window.y1, rows)]
+
+
 @dataclass(frozen=True)
-class Tiling:
-    """Where a tile's context sits in its step (`RenderContext.tile`): ``whole``, the
-    step's source window (the untiled render's), and ``band``, the part of the step's
-    output window this tile renders.  Effects whose arithmetic depends on the window they
-    render over (a warp's coordinates and canvas) compute it from ``whole``, so a band
-    gets the whole render's bits."""
+class Band:
+    """One band of a step's tiled render, the one object a band's render receives (on its
+    context: `RenderContext.tile`): ``band``, the rows of the step's output window it
+    renders; ``roi``, the part of the step's source it reads (its region of interest, cut to
+    the source: the tile context's source window); ``whole``, the step's source window (the
+    untiled render's), from which effects whose arithmetic depends on the window they render
+    over (a warp's coordinates and canvas) compute it, so a band gets the whole render's
+    bits; ``plan``, the step's plan (`Plugin.planned`), built on the whole frame before any
+    band, which the band reads instead of looking it up."""
 
     whole: Rect
     band: Rect
+    roi: Rect
+    plan: StepPlan
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,9 +159,12 @@ class RenderContext:
     notes, warnings : list of str
         This step's notes for the report and lines said on stderr (a clamp, a guess, a
         skipped request); the lists are shared by the contexts derived within one step.
-    tiling : Tiling or None
-        In a tile of a tiled render (`tile`): the step's whole source window and the band of
-        the output this tile renders; None in a whole render.
+    tiling : Band or None
+        In a tile of a tiled render (`tile`): the band (its rows, what it reads, the step's
+        whole source window and plan); None in a whole render.
+    tile_pixels : int or None
+        The band size (pixels) of this step's tiled render (`tile_bands`; None: whole), set
+        before the step plans, so a plan holds what its bands will read (`bands`).
     """
 
     runtime: Any
@@ -165,7 +191,8 @@ class RenderContext:
     """The frame's scene analysis box (shared by the step contexts of one frame)."""
     plans: dict = field(default_factory=dict, repr=False)
     """This step's plans (`Plugin.planned`), shared by the contexts derived within it."""
-    tiling: Tiling | None = None
+    tiling: Band | None = None
+    tile_pixels: int | None = None
 
     def __post_init__(self):
         def put(name, value):
@@ -273,16 +300,22 @@ class RenderContext:
         is this frame's)."""
         return replace(self, quality=quality, notes=[], warnings=[], plans={})
 
-    def tile(self, window: Rect, band: Rect | None = None) -> RenderContext:
+    def bands(self, window: Rect) -> list[Rect]:
+        """The bands of this step's render of ``window`` (its output window):
+        `tile_bands` of its ``tile_pixels`` (``[window]``: a whole render)."""
+        return tile_bands(window, self.tile_pixels)
+
+    def tile(self, window: Rect, band: Rect, plan: StepPlan) -> RenderContext:
         """This step's context over the part ``window`` of its source and passes (a tile of a
         tiled render: `clfx.pipeline.look`): `grown_to` the tile, with the same plans and
         notes, and the whole frame's scene analysis (computed now if not yet), not the
-        tile's; ``tiling`` says the whole source window and the ``band`` of the output the
-        tile renders (default ``window``)."""
+        tile's; ``tiling`` is the :class:`Band`: the ``band`` of the output the tile
+        renders, ``window`` (its region of interest), the step's whole source window and its
+        ``plan`` (the frame's, already built)."""
         frame = _FrameAnalysis(self.analysis, self.alpha_is_coverage())
         whole = self.tiling.whole if self.tiling else self.source.window
         return replace(self.grown_to(window), shared=frame,
-                       tiling=Tiling(whole, band if band is not None else window))
+                       tiling=Band(whole, band, window, plan))
 
     def with_source(self, source) -> RenderContext:
         """This context over another source image (a masked copy of the frame): same notes
@@ -326,9 +359,12 @@ class Plugin:
     def planned(self, p: Params, ctx: RenderContext) -> StepPlan:
         """This step's plan for ``p`` on ``ctx``'s frame: built on first use, then the same
         object for every context derived within the step (`RenderContext.over`, `grown_to`,
-        the tiles of a tiled render); `RenderContext.for_step` and `with_source` start
-        afresh."""
-        key = (type(self), p)
+        the tiles of a tiled render, whose :class:`Band` carries it); `RenderContext.for_step`
+        and `with_source` start afresh.  A plan is made for the step's band size
+        (``ctx.tile_pixels``): what its bands read is in it before any band renders."""
+        if ctx.tiling is not None:     # a band: the frame's plan, built before any band
+            return ctx.tiling.plan
+        key = (type(self), p, ctx.tile_pixels)
         plan = ctx.plans.get(key)
         if plan is None:
             plan = ctx.plans[key] = self.plan(p, ctx)

@@ -73,7 +73,7 @@ def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, mon
     """The lattice level of a gather's largest radius sets the padding, the prefilter
     pyramid's depth and the reach of the regions; the regions and the render each computed
     it (three times a frame); now it is the step plan's, once per window and channel offset
-    (`Dof.gather_radii`).  Counted: every call but the tap tables' and the per-tile levels'."""
+    (`Dof.gather_levels`).  Counted: every call but the tap tables' and the per-tile levels'."""
     import sys
 
     calls = []
@@ -91,7 +91,7 @@ def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, mon
     out, report = render_frame(rt, look, scene(), frame_number=1)
     assert report.steps[0].ran and np.isfinite(out.rgba).all()
     # once over the source window and once over the window dof grows to (as the radii)
-    assert set(calls) == {"gather_radii"} and len(calls) <= 2, calls
+    assert set(calls) == {"gather_levels"} and len(calls) <= 2, calls
 
 
 def test_dof_bands_derive_nothing_frame_wide_again(rt, monkeypatch):

@@ -274,7 +274,7 @@ def path(forward, backward, t):
     return a * 0.5 * (f + b) + c * 0.5 * (f - b)
 
 
-@dataclass
+@dataclass(frozen=True)
 class BlurStats:
     """What one reconstruction did (for notes and benchmarks)."""
 
@@ -317,12 +317,13 @@ def path_reach(t0: float, t1: float, curved: bool) -> float:
     return float((np.abs(a) + np.abs(c)).max()) * 1.02
 
 
-@dataclass
+@dataclass(frozen=True)
 class TileGrid:
     """The frame's velocity tiles (TileMax, NeighborMax on a grid of ``k`` px from the canvas's
     origin) and the host's classification of the moving ones: what every band of a tiled
-    render reads (built once a frame, :func:`tile_grid`), or a whole render builds from its
-    own buffers.  ``nmax_b``: the backward motion of each NeighborMax record's pixel."""
+    render reads (built once a frame in the step's plan, :func:`tile_grid`), or a whole render
+    builds from its own buffers.  ``nmax_b``: the backward motion of each NeighborMax
+    record's pixel.  Immutable: the host arrays are read-only."""
 
     k: int
     tiles_x: int
@@ -335,6 +336,10 @@ class TileGrid:
     jitter: np.ndarray
     length: np.ndarray
     stats: BlurStats
+
+    def __post_init__(self):
+        for a in (self.xs, self.ys, self.n, self.jitter, self.length):
+            a.flags.writeable = False
 
 
 def is_static(t0, t1, radius) -> bool:
@@ -441,19 +446,6 @@ def tile_grid(rt, rows_of, *, width: int, height: int, t0: float, t1: float,
                  k)
         del col, vel, depth, back, aux, auxb
     return _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved)
-
-
-class FrameGrid:
-    """A frame's :class:`TileGrid`, built by ``build()`` when a band first asks (`get`), then
-    the same for every band (a step's plan holds it; a whole render builds its own)."""
-
-    def __init__(self, build):
-        self._build, self._grid, self._built = build, None, False
-
-    def get(self) -> TileGrid | None:
-        if not self._built:
-            self._grid, self._built, self._build = self._build(), True, None
-        return self._grid
 
 
 def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radius_px: float,

@@ -32,7 +32,7 @@ from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
 from clfx.core.rect import Rect
 from clfx.fx import mask as mask_fx
 from clfx.device.runtime import release_freed_heap
-from clfx.host import Plugin, RenderContext
+from clfx.host import Plugin, RenderContext, tile_bands  # noqa: F401 (re-exported)
 from clfx.io import lenses as lens_io
 from clfx.io.lenses import Lenses
 from clfx.kit.warp import canvas_stand_in
@@ -625,6 +625,8 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
     runs from here: planning is part of a step's cost (streaks' plan waits for its seeds)."""
     t0, c0 = time.perf_counter(), time.process_time()
     step_ctx = ctx.for_step(level)
+    if step.plugin.whole_frame is None and tile_pixels:   # its plan holds what bands read
+        step_ctx = step_ctx.over(tile_pixels=tile_pixels)
     missing = step.absent_passes(have)
     reason = f"no {' or '.join(missing)} pass in the input" if missing else None
     if missing:   # the look asked for this step: skipping it is said on stderr, once per batch
@@ -665,27 +667,24 @@ def _run_step(rt, step: Step, ctx: RenderContext, level: str, have: dict[str, bo
                       cpu_ms=(time.process_time() - c0) * 1e3), out, moved
 
 
-def tile_bands(window: Rect, tile_pixels: int | None) -> list[Rect]:
-    """``window`` in full-width bands of at most ``tile_pixels`` pixels (one band, the
-    window, without a tile size or when it fits)."""
-    rows = max(1, tile_pixels // max(window.width, 1)) if tile_pixels else window.height
-    if rows >= window.height:
-        return [window]
-    return [Rect(window.x0, y, window.x1, min(y + rows, window.y1))
-            for y in range(window.y0, window.y1, rows)]
-
-
 def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect,
                  tile_pixels: int | None):
     """``plugin``'s output over ``window`` (its output window): whole, or, for an effect
     that tiles (``whole_frame`` None) and a window of more than ``tile_pixels`` pixels, band
     by band: each band rendered from its region of interest (`Plugin.region_of_interest`:
     the band and the overlap its light comes from, cut to the source) into one output, so the
-    effect's own buffers are band-sized.  The step's plan is the frame's (built before, on
-    the whole frame); the pixels are the whole render's (tests/contract/test_tiles.py)."""
-    bands = [] if plugin.whole_frame else tile_bands(window, tile_pixels)
+    effect's own buffers are band-sized.  The step's plan is the frame's, made for this band
+    size (`RenderContext.tile_pixels`) on the whole frame before any band, and every band
+    receives it in its :class:`~clfx.host.Band`; the pixels are the whole render's
+    (tests/contract/test_tiles.py)."""
+    if plugin.whole_frame:
+        return plugin.render(rt, p, ctx)
+    if ctx.tile_pixels != tile_pixels:
+        ctx = ctx.over(tile_pixels=tile_pixels)
+    bands = ctx.bands(window)
     if len(bands) < 2:
         return plugin.render(rt, p, ctx)
+    plan = plugin.planned(p, ctx)
     rois = [plugin.region_of_interest(p, ctx, band).intersect(ctx.source.window)
             for band in bands]
     if any(roi.empty for roi in rois):   # no light reaches a band: whole
@@ -693,7 +692,7 @@ def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect
     out = rt.image(window, ctx.source.channels)
     name = plugin.descriptor.name
     for band, roi in zip(bands, rois):
-        part = plugin.render(rt, p, ctx.tile(roi, band))
+        part = plugin.render(rt, p, ctx.tile(roi, band, plan))
         if not part.window.contains(band):
             raise RuntimeError(f"effect {name!r}: a tile's output {part.window} does not "
                                f"cover its band {band}")

@@ -40,7 +40,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 
@@ -52,7 +53,7 @@ from clfx.fx.motion import (
     LEVELS,
     MAX_RADIUS_PX,
     SHUTTER_OFFSETS,
-    FrameGrid,
+    TileGrid,
     reach_px,
     reconstruct,
     sanitized_copy,
@@ -132,14 +133,16 @@ GATHER_TAP_ROWS = 2
 class CameraPlan(StepPlan):
     """camera_blur's plan for one step of a frame: the shutter, the motion, the path gather's
     samples (no trucking), how far a band's look-ups reach (x, y; its region of interest)
-    and, with trucking, the frame's velocity tiles for the bands of a tiled render."""
+    and, with trucking when the step renders in bands, the frame's velocity tiles they read
+    (built in the plan from the whole frame; None otherwise).  ``motion``: the read-only
+    mapping of :func:`camera_motion`."""
 
     t0: float = 0.0
     t1: float = 0.0
-    motion: Any = None
+    motion: Mapping | None = None
     samples: int = 0
     reach: tuple = (0, 0)
-    grid: Any = None
+    grid: TileGrid | None = None
 
 
 CAMERA_CUBIC_MAX_PX = CUBIC_MAX_PX
@@ -245,7 +248,7 @@ class CameraBlur(Plugin):
 
     def plan(self, p, ctx) -> CameraPlan:
         t0, t1 = shutter_from(p, ctx.camera)
-        m = camera_motion(p, ctx)
+        m = MappingProxyType(camera_motion(p, ctx))
         level = self.level(ctx)
         src = ctx.source
         if not needs_depth(p):
@@ -270,10 +273,11 @@ class CameraBlur(Plugin):
             vel, back = self._velocities(rt, z, m, window, r0, curved)
             return (sanitized_copy(rt, col) if nonfinite else col), vel, z, back
 
-        grid = FrameGrid(lambda: tile_grid(
-            rt, rows_of, width=window.width, height=window.height, t0=t0, t1=t1,
-            max_radius_px=max_radius, peak_speed=peak, level=CAMERA_LEVELS[ctx.quality],
-            has_depth=True, curved=curved))
+        grid = None
+        if len(ctx.bands(window)) > 1:   # the bands' frame-wide tiles
+            grid = tile_grid(rt, rows_of, width=window.width, height=window.height, t0=t0,
+                             t1=t1, max_radius_px=max_radius, peak_speed=peak,
+                             level=CAMERA_LEVELS[ctx.quality], has_depth=True, curved=curved)
         margin = band_margin(t0, t1, reach_px(peak, t0, t1, max_radius), curved)
         return CameraPlan(t0=t0, t1=t1, motion=m, reach=(margin, margin), grid=grid)
 
@@ -352,7 +356,7 @@ class CameraBlur(Plugin):
             rt, src, vel, depth, t0=t0, t1=t1, max_radius_px=self.max_radius_px(p, ctx),
             peak_speed=self._peak(m, whole, a), level=CAMERA_LEVELS[ctx.quality],
             frame=ctx.frame, nonfinite=nonfinite, velocity_back=back,
-            **(dict(grid=plan.grid.get(), row0=src.window.y0 - whole.y0,
+            **(dict(grid=plan.grid, row0=src.window.y0 - whole.y0,
                     band=(band.y0 - whole.y0, band.y1 - whole.y0)) if tiled else {}))
         ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
                          f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "

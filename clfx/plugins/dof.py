@@ -131,7 +131,7 @@ pair the whole render's rows).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -141,7 +141,7 @@ from clfx.core.errors import ParamError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
 from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE, analyse  # dof's tiles are the shared analysis's
-from clfx.host import Plugin, StepPlan, register
+from clfx.host import Plugin, StepPlan, read_only, register
 
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
 BAND_PIXELS = 1 << 22
@@ -171,17 +171,34 @@ class Lens(NamedTuple):
         return tuple(dict.fromkeys((0.0, *self.ca)))
 
 
+def _over_channels(radii: tuple, with_near: bool = False):
+    """The tile radii of a plan's channels ``((offset, (r_max, r_min, near)), ...)`` taken
+    together: the largest ``r_max`` and ``near``, the smallest ``r_min`` (``r_max`` alone
+    without ``with_near``)."""
+    parts = [r for _, r in radii]
+    if len(parts) == 1:
+        return parts[0] if with_near else parts[0][0]
+    r_max = np.maximum.reduce([r[0] for r in parts])
+    if not with_near:
+        return r_max
+    return (r_max, np.minimum.reduce([r[1] for r in parts]),
+            np.maximum.reduce([r[2] for r in parts]))
+
+
 @dataclass(frozen=True)
 class DofPlan(StepPlan):
-    """dof's plan for one step of a frame: the lens (built once); per analysis window and
-    channel offset the tile radii (`Dof.tile_radii`) and the gather's radii with the lattice
-    level of the largest (`Dof.gather_radii`), computed on first use; and the frame's
-    :class:`DofFrame` (`Dof.frame`), built once on the whole frame."""
+    """dof's plan for one step of a frame, complete before any band renders: the lens; per
+    channel offset, over the frame's analysis window, the tile radii (`Dof.tile_radii`:
+    ``(offset, (r_max, r_min, near))``) and the gather's radii with the lattice level of the
+    largest (`Dof.gather_radii`: ``(offset, (levels, level))``), read-only; how far light
+    spreads (`Dof.spread_px`); and, unless the step is an identity, the frame's
+    :class:`DofFrame` (`Dof.frame`), built on the whole frame."""
 
     lens: Lens | None = None
-    radii: dict = field(default_factory=dict, compare=False, repr=False)
-    gathers: dict = field(default_factory=dict, compare=False, repr=False)
-    frame: dict = field(default_factory=dict, compare=False, repr=False)
+    radii: tuple = ()
+    gathers: tuple = ()
+    spread: tuple = (0, 0)
+    frame: DofFrame | None = None
 
 
 @dataclass(frozen=True)
@@ -227,9 +244,13 @@ class DofFrame:
     tiles_x: int
     tiles_y: int
     log_mean: object
-    gathers: dict
+    gathers: tuple
     notes: tuple
     warning: str | None
+
+    def gather(self, offset: float) -> DofGather:
+        """The :class:`DofGather` of the channel radius ``offset``."""
+        return next(g for g in self.gathers if g.offset == offset)
 
     def rows(self, y0: int, y1: int) -> tuple[int, int]:
         """The rows (frame coordinates, not cut to the window) a band's render reads to give
@@ -239,7 +260,7 @@ class DofFrame:
         half-resolution pixels pair the whole render's rows)."""
         top, bottom = y0 - self.window.y0, y1 - self.window.y0
         lo, hi = top, bottom
-        for g in self.gathers.values():
+        for g in self.gathers:
             lo, hi = min(lo, top - g.reach), max(hi, bottom + g.reach)
             if g.hreach:
                 h0, h1 = self.half_rows(top, bottom)
@@ -482,10 +503,21 @@ class Dof(Plugin):
     # -- the plan --------------------------------------------------------------------------
     def plan(self, p, ctx) -> DofPlan:
         lens = self.make_lens(p, ctx)
-        identity = None
+        tiles = self.depth_tiles(ctx)
+        radii = tuple((off, read_only(*self._tile_radii(lens, tiles, off)))
+                      for off in lens.offsets())
+        lvl = self.level(ctx)
+        gathers = tuple((off, self.gather_levels(r[0], lvl)) for off, r in radii)
+        spread = self._spread(lens, gathers, ctx.pixel_aspect)
+        plan = DofPlan(None, lens, radii, gathers, spread)
         if (lens.k_half == 0.0 and max(map(abs, lens.ca)) < 0.5) or lens.clamp_r < 0.25:
-            identity = "the circle of confusion is 0 (max_blur, max_coc or aperture)"
-        return DofPlan(identity, lens)
+            return replace(plan, identity="the circle of confusion is 0 (max_blur, max_coc or "
+                                          "aperture)")
+        if ctx.depth is not None and float(_over_channels(radii).max()) < 0.5:
+            return replace(plan, identity="circle of confusion below half a pixel everywhere")
+        window = ctx.source.window.union(      # `output_window` (its regions read the plan)
+            ctx.source.window.grown(*spread).intersect(ctx.output_limit))
+        return replace(plan, frame=self._make_frame(ctx.runtime, p, ctx, plan, tiles, window))
 
     # -- geometry --------------------------------------------------------------------------
     def lens(self, p, ctx) -> Lens:
@@ -534,27 +566,16 @@ class Dof(Plugin):
                     np.float32(k * scale / aspect), np.float32(k * (window.y0 - cy) / aspect))
         return tuple(out)
 
-    def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None,
-                   tiles: DepthTiles | None = None):
-        """Per 32 px tile: the largest CoC radius any pixel within reach can have (px); with
-        ``with_near`` also the smallest radius of the tile's own pixels and the largest
-        radius of a pixel in front of the focus plane within reach (0 if none).  ``offset``:
-        one channel's axial-CA radius offset; None: the largest over the channels.
-        ``tiles``: the depth tiles of the window (default: the frame's scene analysis)."""
-        plan = self.planned(p, ctx)
-        tiles = tiles or self.depth_tiles(ctx)
-        if offset is None:
-            out = [self.tile_radii(p, ctx, with_near=with_near, offset=o, tiles=tiles)
-                   for o in plan.lens.offsets()]
-            if with_near:
-                return tuple(np.maximum.reduce(list(t)) if i != 1 else np.minimum.reduce(list(t))
-                             for i, t in enumerate(zip(*out)))
-            return np.maximum.reduce(out)
-        key = (tiles.window, offset)
-        if key not in plan.radii:    # once per window and channel offset in a step
-            plan.radii[key] = self._tile_radii(plan.lens, tiles, offset)
-        r_max, r_min, near = plan.radii[key]
-        return (r_max, r_min, near) if with_near else r_max
+    def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None):
+        """Per 32 px tile of the frame's analysis window: the largest CoC radius any pixel
+        within reach can have (px); with ``with_near`` also the smallest radius of the tile's
+        own pixels and the largest radius of a pixel in front of the focus plane within reach
+        (0 if none).  ``offset``: one channel's axial-CA radius offset; None: the largest over
+        the channels.  The step's plan's."""
+        radii = self.planned(p, ctx).radii
+        if offset is not None:
+            radii = tuple((o, r) for o, r in radii if o == offset)
+        return _over_channels(radii, with_near)
 
     @staticmethod
     def depth_tiles(ctx) -> DepthTiles:
@@ -588,34 +609,37 @@ class Dof(Plugin):
         return r_max, r_min.astype(np.float32), near.astype(np.float32)
 
     def spread_px(self, p, ctx) -> tuple[int, int]:
-        """How far (x, y px) light can land from its pixel: the largest CoC radius of the
+        """How far (x, y px) light can land from its pixel: the step's plan's
+        (:meth:`_spread`)."""
+        return self.planned(p, ctx).spread
+
+    @staticmethod
+    def _spread(lens: Lens, gathers: tuple, aspect: float) -> tuple[int, int]:
+        """:meth:`spread_px` from the ``gathers`` of the plan: the largest CoC radius of the
         frame over the channels (rounded up as the gather's), narrowed by the anamorphic
         squeeze in x and stretched by the pixel aspect in y, plus the coverage ramp's pixel
         (and a sparse lattice's wider ramp and prefilter, :func:`lattice_reach`)."""
-        lens = self.lens(p, ctx)
-        gathers = [self.gather_radii(p, ctx, o) for o in lens.offsets()]
-        r = max(float(levels.max()) if levels.size else 0.0 for levels, _ in gathers)
+        r = max(float(levels.max()) if levels.size else 0.0 for _, (levels, _) in gathers)
         if r == 0.0:
             return 0, 0
-        level = max(lattice for _, lattice in gathers)   # the level of the largest radius
-        rx, ry = lattice_reach(r, level, lens.squeeze, ctx.pixel_aspect)
+        level = max(lattice for _, (_, lattice) in gathers)   # the level of the largest radius
+        rx, ry = lattice_reach(r, level, lens.squeeze, aspect)
         return int(math.ceil(rx)) + 1, int(math.ceil(ry)) + 1
 
-    def gather_radii(self, p, ctx, offset: float = 0.0,
-                     tiles: DepthTiles | None = None) -> tuple[np.ndarray, int]:
-        """Per tile the gather's radius (:func:`quantised_radius` of :meth:`tile_radii` for
-        the channel ``offset``) and the :func:`lattice_level` of the largest, which sets the
-        padding, the prefilter pyramid's depth and the reach: once per window and offset in
-        a step (the plan's), read by the regions (:meth:`spread_px`) and :meth:`frame`."""
-        plan = self.planned(p, ctx)
-        tiles = tiles or self.depth_tiles(ctx)
-        key = (tiles.window, offset)
-        if key not in plan.gathers:
-            levels = quantised_radius(self.tile_radii(p, ctx, offset=offset, tiles=tiles))
-            lvl = self.level(ctx)
-            r_max = float(levels.max()) if levels.size else 0.0
-            plan.gathers[key] = (levels, lattice_level(r_max, lvl.lattice, lvl.dense_radius))
-        return plan.gathers[key]
+    def gather_radii(self, p, ctx, offset: float = 0.0) -> tuple[np.ndarray, int]:
+        """Per tile of the frame's analysis window the gather's radius and the lattice level
+        of the largest, for the channel ``offset``: the step's plan's (:meth:`gather_levels`)."""
+        return dict(self.planned(p, ctx).gathers)[offset]
+
+    @staticmethod
+    def gather_levels(r_max: np.ndarray, lvl: DofLevel) -> tuple[np.ndarray, int]:
+        """Per tile the gather's radius (:func:`quantised_radius` of the tile radii
+        ``r_max``) and the :func:`lattice_level` of the largest, which sets the padding, the
+        prefilter pyramid's depth and the reach: once per window and channel offset in a
+        step (the plan's), read by the regions (:meth:`spread_px`) and :meth:`frame`."""
+        levels = read_only(quantised_radius(r_max))
+        r = float(levels.max()) if levels.size else 0.0
+        return levels, lattice_level(r, lvl.lattice, lvl.dense_radius)
 
     def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0):
         """One concatenated tap table for the radii in ``levels`` and, per entry of
@@ -637,9 +661,9 @@ class Dof(Plugin):
             info[levels == r, :2] = (first_tap, count)
         return np.ascontiguousarray(table), np.ascontiguousarray(info)
 
-    def clamp_warning(self, p, ctx) -> str | None:
-        """The warning when ``max_coc`` cuts a CoC this frame asks for, else None."""
-        lens = self.lens(p, ctx)
+    def clamp_warning(self, p, ctx, lens: Lens) -> str | None:
+        """The warning when ``max_coc`` cuts a CoC this frame asks for through ``lens``, else
+        None."""
         an = ctx.analysis
         if an.min_depth is None or not an.min_depth.size:
             return None
@@ -652,14 +676,6 @@ class Dof(Plugin):
         return (f"a CoC of {asked:.1f} px is asked for and clamped to "
                 f"{2.0 * lens.clamp_r:.1f} px (max_coc = {p.max_coc:g} of the diagonal); "
                 f"raise dof.max_coc to keep the lens")
-
-    def is_identity(self, p, ctx):
-        plan = self.planned(p, ctx)
-        if plan.identity:
-            return plan.identity
-        if ctx.depth is not None and float(self.tile_radii(p, ctx).max()) < 0.5:
-            return "circle of confusion below half a pixel everywhere"
-        return None
 
     def region_of_definition(self, p, ctx):
         return ctx.source.window.grown(*self.spread_px(p, ctx))
@@ -675,29 +691,29 @@ class Dof(Plugin):
 
     # -- the frame -------------------------------------------------------------------------
     def frame(self, p, ctx) -> DofFrame:
-        """The step's :class:`DofFrame`: built once, on the whole frame (a tiled render's
-        regions ask for it before any band renders), then read by every band."""
+        """The step's :class:`DofFrame`: the plan's, built on the whole frame before any
+        band renders (a band's :class:`~clfx.host.Band` carries it); for a step the plan
+        found to be an identity and rendered anyway (whole: a look skips it), made now."""
         plan = self.planned(p, ctx)
-        if "frame" not in plan.frame:
-            if ctx.tiling is not None:
-                raise RuntimeError("dof: a band renders before its frame's plan was made "
-                                   "on the whole frame")
-            plan.frame["frame"] = self._make_frame(ctx.runtime, p, ctx)
-        return plan.frame["frame"]
+        if plan.frame is None and ctx.tiling is None:
+            return self._make_frame(ctx.runtime, p, ctx, plan, self.depth_tiles(ctx),
+                                    self.output_window(p, ctx))
+        return plan.frame
 
-    def _make_frame(self, rt, p, ctx) -> DofFrame:
-        """The :class:`DofFrame` of the whole frame ``ctx`` (its window, tiles, caps, one
-        gather plan per channel offset, the notes and the clamp warning)."""
-        lens = self.lens(p, ctx)
-        warning = self.clamp_warning(p, ctx)
-        window = self.output_window(p, ctx)
+    def _make_frame(self, rt, p, ctx, plan: DofPlan, an: DepthTiles,
+                    window: Rect) -> DofFrame:
+        """The :class:`DofFrame` of the whole frame ``ctx`` rendered over ``window`` (its
+        tiles, caps, one gather plan per channel offset, the notes and the clamp warning),
+        from the ``plan`` so far (the lens, the radii over the analysis window ``an``)."""
+        lens = plan.lens
+        warning = self.clamp_warning(p, ctx, lens)
         notes = []
         if window != ctx.source.window:
             # Light leaves the data window: the render covers the grown window, outside the
             # data window nothing (transparent black) at the edge's depth; its tiles are
             # taken over the grown window.
             notes.append(f"dof: grown to {window}")
-        tiles = self._window_tiles(rt, ctx, window)
+        tiles = an if window == an.window else self._window_tiles(rt, ctx, window)
         ty, tx = max(1, -(-window.height // TILE)), max(1, -(-window.width // TILE))
         log_mean = rt.buffer(tx * ty * 4)
         src, i32 = ctx.source, np.int32
@@ -707,8 +723,8 @@ class Dof(Plugin):
                   i32(src.window.y0 - window.y0), i32(src.width), i32(src.height),
                   i32(window.width), i32(window.height), i32(TILE), i32(tx), i32(ty), log_mean)
         offsets = lens.offsets()
-        gathers = {off: self._plan_gather(rt, p, ctx, lens, tiles, off) for off in offsets}
-        said = [gathers[0.0].note]
+        gathers = tuple(self._plan_gather(rt, p, ctx, plan, tiles, off) for off in offsets)
+        said = [gathers[0].note]
         if len(offsets) > 1:
             said.append(f"axial CA: red {2 * lens.ca[0]:+.2f} px, blue {2 * lens.ca[1]:+.2f} px "
                         f"of CoC, {len(offsets)} gathers")
@@ -748,15 +764,20 @@ class Dof(Plugin):
             stacked = tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
         return DepthTiles(window, *stacked, sum(part[3] for part in parts))
 
-    def _plan_gather(self, rt, p, ctx, lens: Lens, tiles: DepthTiles,
+    def _plan_gather(self, rt, p, ctx, plan: DofPlan, tiles: DepthTiles,
                      offset: float) -> DofGather:
-        """The :class:`DofGather` of the channel radius ``offset`` over ``tiles``' window."""
+        """The :class:`DofGather` of the channel radius ``offset`` over ``tiles``' window
+        (the plan's radii where that is the analysis window's)."""
         lvl = self.level(ctx)
         aspect = ctx.pixel_aspect
+        lens = plan.lens
         blades, first = lens[3:5]
-        radii, r_min, near = self.tile_radii(p, ctx, with_near=True, offset=offset,
-                                             tiles=tiles)
-        levels, full_l = self.gather_radii(p, ctx, offset, tiles=tiles)
+        if tiles.window == self.depth_tiles(ctx).window:
+            radii, r_min, near = dict(plan.radii)[offset]
+            levels, full_l = dict(plan.gathers)[offset]
+        else:
+            radii, r_min, near = self._tile_radii(lens, tiles, offset)
+            levels, full_l = self.gather_levels(radii, lvl)
         # Tiles whose every pixel is far out of focus are gathered at half resolution.
         half = (r_min >= lvl.half_res_radius) & (levels > 0)
         r_max = float(levels.max())
@@ -786,7 +807,7 @@ class Dof(Plugin):
         rows += max((1 << full_l) - 1, 2)
         note = (f"{int((levels == 0).sum())}/{radii.size} tiles in focus (copied), "
                 f"{int(half.sum())} at half resolution")
-        return DofGather(offset, full_l, half, half_l, pad, taps, tile_info, htaps,
+        return DofGather(offset, full_l, read_only(half), half_l, pad, taps, tile_info, htaps,
                          htiles, rows, hrows, note)
 
     def _tile_table(self, rt, levels, sharp, mode, lvl, aspect, blades, first, roundness,
@@ -831,7 +852,7 @@ class Dof(Plugin):
         src = rt.reframe(ctx.source, work, "zero")
         depth = rt.reframe(ctx.depth, work, "clamp")
         lens = self.lens(p, ctx)
-        passes = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gathers[off], src,
+        passes = {off: self._render_pass(rt, p, ctx, lens, frame, frame.gather(off), src,
                                          depth, band)
                   for off in lens.offsets()}
         outs = {off: out for off, (out, _) in passes.items()}
@@ -844,16 +865,17 @@ class Dof(Plugin):
                       r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
                       np.int32(dst.height), local=(16, 4))
         ctx.notes.extend(frame.notes)
-        self._note_mixed(rt, p, ctx, passes[0.0][1])
+        self._note_mixed(rt, ctx, passes[0.0][1])
         return dst
 
-    def _note_mixed(self, rt, p, ctx, count) -> None:
+    @staticmethod
+    def _note_mixed(rt, ctx, count) -> None:
         """The report's line of the mixed edge pixels split (green's gather's device
         ``count`` of its band's rows; the bands of a tiled render add theirs up, the line
-        said once, with the frame's total)."""
-        frame = self.planned(p, ctx).frame
-        total = int(rt.from_device(count, np.int32, 1)[0]) + (frame.get("mixed", 0) if ctx.tiling is not None else 0)
-        frame["mixed"] = total
+        said once, with the frame's total: the step's notes hold the bands' so far)."""
+        total = int(rt.from_device(count, np.int32, 1)[0])
+        if ctx.tiling is not None:
+            total += sum(int(s.split()[1]) for s in ctx.notes if s.endswith(MIXED_NOTE))
         ctx.notes[:] = [s for s in ctx.notes if not s.endswith(MIXED_NOTE)]
         ctx.notes.append(f"dof: {total}{MIXED_NOTE}")
 

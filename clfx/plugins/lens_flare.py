@@ -88,7 +88,7 @@ from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, StringParam
 from clfx.core.rect import Rect
 from clfx.fx import flare, optics, spectral
-from clfx.host import Plugin, StepPlan, register
+from clfx.host import Plugin, StepPlan, read_only, register
 from clfx.kit.spectral import in_reference_basis
 
 DEFAULT_GHOSTS = (
@@ -165,7 +165,8 @@ class FlarePlan(StepPlan):
     ghosts: tuple | None = None
 
 
-NO_GHOSTS = (np.zeros((0, flare.ENTRY)), np.zeros(0, np.int64), np.zeros(0, np.intp), [])
+NO_GHOSTS = (*read_only(np.zeros((0, flare.ENTRY)), np.zeros(0, np.int64),
+                        np.zeros(0, np.intp)), ())
 """The physical model's ghosts of a frame without a light (`LensFlare.ghost_plan`'s types):
 a render that is called anyway draws none, without reading the lens or its ghost table."""
 
@@ -588,7 +589,7 @@ class LensFlare(Plugin):
         entries, levels, rows = flare.plan_entries(
             sub, lights, geometry, flare_channel_weights(wl, ctx.rgb_to_xyz), edge, areas,
             level=level, max_level=lvl.max_level, level_scale=lvl.level_scale)
-        return entries, levels, keep[rows], lights
+        return (*read_only(entries, levels, keep[rows]), tuple(lights))
 
     def render_physical(self, rt, p, ctx):
         entries, levels, _, lights = self.planned(p, ctx).ghosts   # the physical plan's

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam
@@ -59,7 +58,7 @@ from clfx.fx.motion import (
     MAX_RADIUS_PX,
     MIN_BLUR_PX,
     SHUTTER_OFFSETS,
-    FrameGrid,
+    TileGrid,
     reach_px,
     reconstruct,
     sanitized_copy,
@@ -75,16 +74,17 @@ from clfx.kit.motion import aligned_passes, band_margin
 @dataclass(frozen=True)
 class MotionPlan(StepPlan):
     """motion_blur's plan for one step of a frame: the shutter, the canvas the whole render
-    reconstructs over (the output window), the rows a band reads beyond itself, and the
-    frame's velocity tiles for the bands of a tiled render (built when the first asks, from
-    the whole frame's images)."""
+    reconstructs over (the output window), the rows a band reads beyond itself, and, when
+    the step renders in bands, the frame's velocity tiles they read (built in the plan from
+    the whole frame's images; None when nothing moves or the render is whole, which builds
+    its own from its buffers)."""
 
     t0: float = 0.0
     t1: float = 0.0
     max_radius_px: float = 0.0
     canvas: Rect | None = None
     margin: int = 0
-    grid: Any = None
+    grid: TileGrid | None = None
 
 
 def canvas_rows(rt, canvas: Rect, src, vel, depth, back, nonfinite: int):
@@ -166,12 +166,14 @@ class MotionBlur(Plugin):
         a = ctx.analysis
         canvas = self.output_window(p, ctx)
         radius = reach_px(a.peak_speed, t0, t1, max_radius)
-        grid = FrameGrid(lambda: tile_grid(
-            ctx.runtime, canvas_rows(ctx.runtime, canvas, src, vel, depth, back,
-                                     a.nonfinite_count),
-            width=canvas.width, height=canvas.height, t0=t0, t1=t1, max_radius_px=max_radius,
-            peak_speed=a.peak_speed, level=self.level(ctx), has_depth=depth is not None,
-            curved=back is not None))
+        grid = None
+        if len(ctx.bands(canvas)) > 1:   # the bands' frame-wide tiles
+            grid = tile_grid(
+                ctx.runtime, canvas_rows(ctx.runtime, canvas, src, vel, depth, back,
+                                         a.nonfinite_count),
+                width=canvas.width, height=canvas.height, t0=t0, t1=t1,
+                max_radius_px=max_radius, peak_speed=a.peak_speed, level=self.level(ctx),
+                has_depth=depth is not None, curved=back is not None)
         return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=canvas,
                           margin=band_margin(t0, t1, radius, back is not None), grid=grid)
 
@@ -230,7 +232,7 @@ class MotionBlur(Plugin):
             rt, src, vel, depth, t0=plan.t0, t1=plan.t1, max_radius_px=plan.max_radius_px,
             peak_speed=a.peak_speed, level=self.level(ctx), frame=ctx.frame,
             nonfinite=a.nonfinite_count, velocity_back=back,
-            **(dict(grid=plan.grid.get(), row0=window.y0 - canvas.y0,
+            **(dict(grid=plan.grid, row0=window.y0 - canvas.y0,
                     band=(band.y0 - canvas.y0, band.y1 - canvas.y0)) if tiled else {}))
         whole = ctx.tiling.whole if tiled else ctx.source.window
         ctx.notes.append(f"motion_blur: {stats.moving_tiles}/{stats.tiles} tiles of "

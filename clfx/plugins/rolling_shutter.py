@@ -70,14 +70,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Level
 from clfx.core.rect import Rect
-from clfx.fx.motion import GRID_CHUNK_PIXELS, MAX_RADIUS_PX, FrameGrid, path_reach
+from clfx.fx.motion import GRID_CHUNK_PIXELS, MAX_RADIUS_PX, path_reach
 from clfx.fx.motion import KERNEL as MOTION_KERNEL
 from clfx.fx.motion import sanitized_copy, tile_size
 from clfx.host import Plugin, StepPlan, register
@@ -128,13 +127,14 @@ class RowTimes:
 @dataclass(frozen=True)
 class RollingPlan(StepPlan):
     """rolling_shutter's plan for one step of a frame: the row times over the whole source
-    window, the largest shift, the rows a band reads beyond itself and, for the bands of a
-    tiled render, the frame's velocity tiles (built when the first asks)."""
+    window, the largest shift, the rows a band reads beyond itself and, when the step renders
+    in bands, the frame's velocity tiles they read (`RollingShutter._tiles`: tile size, tiles
+    across, the device records; built in the plan from the whole frame, None otherwise)."""
 
     times: RowTimes | None = None
     shift: float = 0.0
     margin: int = 0
-    grid: Any = None
+    grid: tuple | None = None
 
 
 SEARCH_TAP_ROWS = 3
@@ -237,8 +237,10 @@ class RollingShutter(Plugin):
         search = min(math.ceil(2.0 * shift) + 1, self.level(ctx).max_search)
         margin = math.ceil(reach) + search + SEARCH_TAP_ROWS
         rt, window, level = ctx.runtime, src.window, self.level(ctx)
-        grid = FrameGrid(lambda: self._tiles(rt, vel, depth, back is not None, window, vmax,
-                                             shift, level, GRID_CHUNK_PIXELS))
+        grid = None
+        if len(ctx.bands(window)) > 1:   # the bands' frame-wide tiles
+            grid = self._tiles(rt, vel, depth, back is not None, window, vmax, shift, level,
+                               GRID_CHUNK_PIXELS)
         return RollingPlan(times=times, shift=shift, margin=margin, grid=grid)
 
     def _defines(self, lvl, has_depth: bool, curved: bool) -> dict:
@@ -319,7 +321,7 @@ class RollingShutter(Plugin):
             k, ntx, nbr = self._tiles(rt, vel, depth, back is not None, src.window, vmax, shift,
                                       lvl, aux=aux)
         else:
-            k, ntx, nbr = plan.grid.get()
+            k, ntx, nbr = plan.grid
         defines = self._defines(lvl, depth is not None, back is not None)
         row0, b0 = src.window.y0 - whole.y0, band.y0 - whole.y0
         rt.launch(rt.kernel(self.descriptor.kernel, "rolling_shutter_gather", **defines),

@@ -140,13 +140,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 
 from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, RGBParam
 from clfx.core.rect import Rect
-from clfx.host import Plugin, StepPlan, register
+from clfx.host import Plugin, StepPlan, read_only, register
 
 TAPS = 4
 """Taps per pass; pass n steps 4^n pixels, so N passes cover 4^N - 1 pixels."""
@@ -478,7 +480,7 @@ class Ray:
     sy: float
     passes: int
     top: int
-    weights: list
+    weights: tuple
     grid: RayGrid | None = None
 
 
@@ -514,7 +516,8 @@ def streams(width: int, height: int, rings: list[int], chunk: int) -> bool:
 class StreaksFrame:
     """The frame-wide inputs of a streaks step, taken from its whole context when the plan
     is built: the source, the output window, the level, the rays, the per-tile peak map
-    (map, tiles across, tiles down)."""
+    (map, tiles across, tiles down; read-only), the working space's luminance defines
+    (read-only)."""
 
     source: object
     out_win: Rect
@@ -523,8 +526,7 @@ class StreaksFrame:
     peak: tuple
     analysis_tile: int
     radius: int
-    luminance_defines: dict
-    notes: list
+    luminance_defines: Mapping
     nonfinite: int
 
 
@@ -537,16 +539,20 @@ class StreaksPlan(StepPlan):
     total: "StreakSum | None" = None
 
 
-@dataclass
+@dataclass(frozen=True)
 class StreakSum:
     """A frame's streaks over its output window at full resolution (RGBA float32): on the
     device (``device``, interior at ``org``, rows ``pitch`` apart) or on the host (``host``,
-    rows x (width rounded up to 4) x 4)."""
+    rows x (width rounded up to 4) x 4, read-only)."""
 
     device: object = None
     org: int = 0
     pitch: int = 0
     host: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.host is not None:
+            read_only(self.host)
 
 
 @register
@@ -640,15 +646,13 @@ class Streaks(Plugin):
     # cheap questions ------------------------------------------------------------------
     def plan(self, p, ctx) -> StreaksPlan:
         """Whether the step has work and, if so, the frame's streak sum (built on the
-        step's whole context: a tile cannot see the frame its rays cross)."""
-        if ctx.tiling is not None:
-            raise RuntimeError("streaks: the plan is the whole frame's; build it (planned) on "
-                               "the step's context before rendering tiles")
+        step's whole context, before any band: a band cannot see the frame its rays cross;
+        each band composes its rows from the sum its :class:`~clfx.host.Band` carries)."""
         identity = self.identity(p, ctx)
         if identity:
             return StreaksPlan(identity=identity)
         fr = self.frame(p, ctx)
-        return StreaksPlan(frame=fr, total=self.streak_sum(ctx.runtime, p, fr))
+        return StreaksPlan(frame=fr, total=self.streak_sum(ctx.runtime, p, fr, ctx.notes))
 
     def identity(self, p, ctx) -> str | None:
         if p.intensity == 0.0:
@@ -671,7 +675,7 @@ class Streaks(Plugin):
         belongs to, float32 (tiles_y x tiles_x) over the source window."""
         m = ctx.analysis.region_peaks(p.threshold)
         m = np.minimum(np.nan_to_num(m, nan=0.0, posinf=0.0), np.finfo(np.float32).max)
-        return np.ascontiguousarray(m, np.float32).ravel(), m.shape[1], m.shape[0]
+        return read_only(np.ascontiguousarray(m, np.float32).ravel()), m.shape[1], m.shape[0]
 
     def seed_radius(self, ctx) -> int:
         """Half-width (px) of the window a light's peak gathers its streaking light from."""
@@ -690,19 +694,21 @@ class Streaks(Plugin):
             for a in angles:
                 grid = ray_grid(a, lvl.factor, out_win.width, out_win.height)
                 passes, top = pass_plan(float(lengths.max()) / grid.step_px)
+                weights = pass_weights(lengths / grid.step_px, passes, gain, top)
                 rays.append(Ray(grid.sx, grid.sy, passes, top,
-                                pass_weights(lengths / grid.step_px, passes, gain, top), grid))
+                                tuple(read_only(w) for w in weights), grid))
         return StreaksFrame(ctx.source, out_win, lvl, tuple(rays),
                             self.peak_map(p, ctx), ctx.analysis.tile, self.seed_radius(ctx),
-                            dict(ctx.luminance_defines), ctx.notes,
+                            MappingProxyType(dict(ctx.luminance_defines)),
                             ctx.analysis.nonfinite_count)
 
-    def seed_points(self, rt, p, fr: StreaksFrame, peak):
+    def seed_points(self, rt, p, fr: StreaksFrame, peak, notes: list):
         """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
         position (a fixed order whatever the device's): the kernel's float32 rows (peak x, y,
         centroid x, y in source pixels, r, g, b, 0; `grid_points` places them on a working
         grid); and the source-sized uint8 device flags of the pixels they gathered.
-        ``peak``: the per-tile peak map on the device.  One wait for the count and the first
+        ``peak``: the per-tile peak map on the device; ``notes``: the step's, told when
+        lights are left out.  One wait for the count and the first
         ``SEEDS_READ`` points (before the flags grow: a frame without seeds grows none); a
         second read only for a frame with more lights."""
         src = fr.source
@@ -730,14 +736,14 @@ class Streaks(Plugin):
                 rt.launch(dilate, (src.height if sx else src.width,), flags[a], flags[b],
                           i32(src.width), i32(src.height), i32(fr.radius), i32(sx), i32(sy))
         if n > MAX_SEEDS:
-            fr.notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
+            notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
             n = MAX_SEEDS
         rows = first[:n] if n <= SEEDS_READ else \
             rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8)
         return rows[np.lexsort((rows[:, 0], rows[:, 1]))], flags[0]
 
     # render ---------------------------------------------------------------------------
-    def streak_sum(self, rt, p, fr: StreaksFrame) -> StreakSum:
+    def streak_sum(self, rt, p, fr: StreaksFrame, notes: list) -> StreakSum:
         """The frame's full-resolution streaks, computed once per plan: the Kawase passes of
         every ray over the whole frame's light, summed.  Draft and preview: `grid_sum`.
         Final and reference: small frames run each pass over frame-sized buffers (zero
@@ -746,7 +752,7 @@ class Streaks(Plugin):
         its sum waits on the host.  Both compute every pixel with the same float
         operations."""
         if fr.level.factor > 1:
-            return self.grid_sum(rt, p, fr)
+            return self.grid_sum(rt, p, fr, notes)
         src, lvl = fr.source, fr.level
         ox, oy = src.window.offset_in(fr.out_win)
         w, h = fr.out_win.width, fr.out_win.height
@@ -771,7 +777,7 @@ class Streaks(Plugin):
                    **fr.luminance_defines}
 
         peak_buf = rt.to_device(fr.peak[0])
-        rows, gathered = self.seed_points(rt, p, fr, peak_buf)
+        rows, gathered = self.seed_points(rt, p, fr, peak_buf, notes)
         points = grid_points(rows, ox, oy, 1, 1)
         starts, members = bin_points(points, wp, h, BIN)
         points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
@@ -853,7 +859,7 @@ class Streaks(Plugin):
             result = StreakSum(host=host)
         return result
 
-    def grid_sum(self, rt, p, fr: StreaksFrame) -> StreakSum:
+    def grid_sum(self, rt, p, fr: StreaksFrame, notes: list) -> StreakSum:
         """Draft and preview's streak sum: each ray's passes on its ray-aligned working grid
         (`ray_grid`), the rays of one line summed there and upsampled along the line into the
         full-resolution sum, which stays on the device (the grids are not streamed: they are
@@ -881,7 +887,7 @@ class Streaks(Plugin):
 
         peak_buf = rt.to_device(fr.peak[0])
         _, tiles_x, tiles_y = fr.peak
-        rows, gathered = self.seed_points(rt, p, fr, peak_buf)
+        rows, gathered = self.seed_points(rt, p, fr, peak_buf, notes)
         seeds = {}
         for g in {grid.layout: grid for grid, _, _ in plans}.values():
             points = grid_points(rows, ox + g.ex, oy + g.ey, g.fx, g.fy)
@@ -947,7 +953,7 @@ class Streaks(Plugin):
         fr, total = plan.frame, plan.total
         if total is None:   # rendered although the plan found nothing to do
             fr = self.frame(p, ctx)
-            total = self.streak_sum(rt, p, fr)
+            total = self.streak_sum(rt, p, fr, ctx.notes)
         src = ctx.source
         band = ctx.tiling.band if ctx.tiling is not None else fr.out_win
         ox, oy = src.window.offset_in(band)

@@ -45,15 +45,16 @@ def assert_tiles_give_the_whole_render(rt, name, p, quality, src, rows=9, **wher
     rows give its whole render bit for bit."""
     plugin = effects.plugin(name)
 
-    def step():
+    def step(tile_pixels=None):   # the look sets the band size before the step plans
         ctx = effects.context(rt, name, src, quality=quality, **where).for_step(quality)
+        ctx = ctx.over(tile_pixels=tile_pixels)
         assert plugin.is_identity(p, ctx) is None
         return ctx
 
     ctx = step()
     window = plugin.output_window(p, ctx)
     whole = rt.download(plugin.render(rt, p, ctx))
-    ctx = step()
+    ctx = step(window.width * rows)
     renders = []
     plugin.render = lambda *a: renders.append(a[2].tiling) or type(plugin).render(plugin, *a)
     try:
@@ -172,7 +173,7 @@ def test_dof_tiles_with_every_lens_and_window(rt, lens, layout, quality, monkeyp
         ctx = effects.context(rt, "dof", effects.scene((70, 90)), quality=quality,
                               **where).for_step(quality)
         frame = effects.plugin("dof").frame(p, ctx)
-        assert frame.gathers[0.0].full_l >= 1 and frame.gathers[0.0].half.any()
+        assert frame.gather(0.0).full_l >= 1 and frame.gather(0.0).half.any()
 
 
 def layered_aa(shape, ss=4):

@@ -326,12 +326,24 @@ def test_the_rays_share_one_extraction_of_the_bright_pixels(rt, rng, monkeypatch
     assert launched.count("streaks_bright") == 1 and launched.count("streaks_pass") > 4
 
 
-def test_a_tile_cannot_plan_the_frame(rt, rng):
+def test_a_band_composes_from_the_plan_it_carries(rt, rng, monkeypatch):
+    """A band of a tiled render composes its rows from the frame's streak sum that its Band
+    carries (the plan, made on the whole frame before any band): it never plans (a band
+    that came first once raised "the plan is the whole frame's"), and its rows are the
+    whole render's."""
     from clfx.host import RenderContext
     ctx = RenderContext(rt, rt.upload(scene(rng, (20, 30))))
-    tile = ctx.tile(Rect(0, 5, 30, 12))
-    with pytest.raises(RuntimeError, match="whole frame"):
-        Streaks().render(rt, Streaks.params(**PARAMS), tile)
+    fx, p = Streaks(), Streaks.params(**PARAMS)
+    plan = fx.planned(p, ctx)
+    assert plan.identity is None and plan.total is not None
+    whole = fx.render(rt, p, ctx)
+    monkeypatch.setattr(Streaks, "plan", lambda *a: pytest.fail("a band planned"))
+    win = whole.window
+    band = Rect(win.x0, win.y0 + 5, win.x1, win.y0 + 12)
+    part = fx.render(rt, p, ctx.tile(ctx.source.window, band, plan))
+    assert part.window == band
+    rows = rt.download(whole)[5:12]
+    assert np.array_equal(rt.download(part).view(np.uint32), rows.view(np.uint32))
 
 
 # -- what a user sees -------------------------------------------------------------------------
