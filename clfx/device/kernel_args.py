@@ -13,6 +13,9 @@ declares them, ``"<type> <name>, ..."``, where the type is
   ``float4`` ``float8`` ``int4``  the OpenCL vector (pyopencl.cltypes); a launch may pass any
                             sequence of as many numbers
 
+and ``<type> <name> if DEFINE`` is a parameter the source has only under ``#if DEFINE`` (a
+build with that define non-zero).
+
 `Runtime.kernel` applies the entry's dtypes to the kernel it returns and refuses a kernel the
 table does not name; `Runtime.launch` checks a call against it (the count, buffers where
 buffers go, and values that fit) and names the kernel and argument when one does not, so call
@@ -134,7 +137,8 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
     "lib/motion.cl": {
         "motion_prepare": "buf vel, buf depth, buf aux, int pitch, int height, float vmax",
         "motion_dilate": (
-            "buf aux, buf col, buf out, int pitch, int width, int height, float duration"
+            "buf aux, buf col, buf out, int pitch, int width, int height, float duration, "
+            "buf auxb if CURVED, buf outb if CURVED"
         ),
         "motion_sanitize": "buf src, buf dst, int pitch, int height",
         "motion_tilemax": (
@@ -244,7 +248,7 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
             "int tile, int tiles_x, int tiles_y, buf out"
         ),
         "dof_prefilter": (
-            "buf src, int src_off, buf dst, int dst_off, int ppitch, int pheight, int _cl_step, "
+            "buf src, int src_off, buf dst, int dst_off, int ppitch, int pheight, int step, "
             "int vertical"
         ),
         "dof_down2": (
@@ -391,26 +395,39 @@ class KernelArgumentError(TypeError):
 
 @dataclass(frozen=True)
 class KernelArgs:
-    """One entry point's declared parameters: ``names`` and ``types`` (the table's words)."""
+    """One entry point's declared parameters: ``names`` and ``types`` (the table's words), and
+    per parameter the define it exists under (None: always)."""
 
     kernel: str
     file: str
     names: tuple[str, ...]
     types: tuple[str, ...]
+    conditions: tuple[str | None, ...] = ()
 
     @classmethod
     def parse(cls, kernel: str, file: str, spec: str) -> "KernelArgs":
-        names, types = [], []
+        names, types, conditions = [], [], []
         for part in (p.strip() for p in spec.split(",")) if spec.strip() else ():
             words = part.split()
-            if len(words) != 2 or not (words[0] in _SCALARS or words[0] in _VECTORS
-                                       or words[0] in ("buf", "REAL")):
+            if not (len(words) == 2 or len(words) == 4 and words[2] == "if") or not (
+                    words[0] in _SCALARS or words[0] in _VECTORS or words[0] in ("buf", "REAL")):
                 raise KernelArgumentError(f"{file} {kernel}: cannot read the declaration "
-                                          f"{part!r} (want '<type> <name>', types: buf, int, "
-                                          f"uint, float, REAL, float4, float8, int4)")
+                                          f"{part!r} (want '<type> <name>' or '<type> <name> "
+                                          f"if DEFINE', types: buf, int, uint, float, REAL, "
+                                          f"float4, float8, int4)")
             types.append(words[0])
             names.append(words[1])
-        return cls(kernel, file, tuple(names), tuple(types))
+            conditions.append(words[3] if len(words) == 4 else None)
+        return cls(kernel, file, tuple(names), tuple(types), tuple(conditions))
+
+    def built_with(self, defines: dict) -> "KernelArgs":
+        """The parameters a build with ``defines`` has (``if DEFINE`` ones where it is
+        defined non-zero)."""
+        if not any(self.conditions):
+            return self
+        keep = [c is None or str(defines.get(c, 0)) not in ("0", "") for c in self.conditions]
+        pick = lambda xs: tuple(x for x, k in zip(xs, keep) if k)   # noqa: E731
+        return KernelArgs(self.kernel, self.file, pick(self.names), pick(self.types))
 
     def dtypes(self, fp64: bool) -> list:
         """``Kernel.set_scalar_arg_dtypes``'s list: None for a buffer, else the dtype (REAL:
@@ -422,7 +439,9 @@ class KernelArgs:
                 or getattr(cltypes, t) for t in self.types]
 
     def signature(self) -> str:
-        return ", ".join(f"{t} {n}" for t, n in zip(self.types, self.names))
+        return ", ".join(f"{t} {n}" + (f" if {c}" if c else "")
+                         for t, n, c in zip(self.types, self.names,
+                                            self.conditions or (None,) * len(self.names)))
 
 
 def _entry_points() -> dict[str, KernelArgs]:

@@ -606,6 +606,7 @@ class Runtime:
                 else KernelArgs.parse(name, file, arg_types))
         if self.use_fp64(fp64):
             defines["CLFX_FP64"] = 1
+        decl = decl.built_with(defines)
         key = (file, name, tuple(sorted((k, str(v)) for k, v in defines.items())), arg_types)
         with self._lock:
             knl = self._kernels.get(key)
