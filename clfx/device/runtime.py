@@ -675,8 +675,6 @@ class Runtime:
 
     def finish(self) -> None:
         self.queue.finish()
-    def finish(self) -> None:
-        self.queue.finish()
 
     # -- memory ---------------------------------------------------------------------------
     def buffer(self, nbytes: int):
@@ -748,10 +746,8 @@ class Runtime:
         knl = self.kernel("lib/image.cl", "image_reframe", CH=img.channels,
                           BORDER={"zero": 0, "clamp": 1}[border])
         dx, dy = window.x0 - img.window.x0, window.y0 - img.window.y0
-        self.launch(knl, (dst.pitch, window.height), img, np.int32(img.pitch),
-                    np.int32(img.width), np.int32(img.height), dst, np.int32(dst.pitch),
-                    np.int32(window.width), np.int32(window.height), np.int32(dx), np.int32(dy),
-                    local=None)
+        self.launch(knl, (dst.pitch, window.height), img, img.pitch, img.width, img.height, dst,
+                    dst.pitch, window.width, window.height, dx, dy, local=None)
         return dst
 
     def paste(self, src: DeviceImage, dst: DeviceImage, rect: Rect) -> None:
@@ -774,8 +770,7 @@ class Runtime:
             return 0
         counter = self.to_device(np.zeros(1, np.int32))
         self.launch(self.kernel("lib/image.cl", "image_sanitize", CH=4, BORDER=0),
-                    (img.pitch // 4, img.height), img, np.int32(img.pitch),
-                    np.int32(img.height), counter)
+                    (img.pitch // 4, img.height), img, img.pitch, img.height, counter)
         return int(self.from_device(counter, np.int32, 1)[0])
 
     def to_device(self, array: np.ndarray):
