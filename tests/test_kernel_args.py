@@ -65,12 +65,16 @@ def compiled_signatures(rt) -> dict[str, list[tuple[dict, int, list[tuple[str, s
     return out
 
 
+def _unmatched(declared, found) -> list[str]:
+    return ([f"{k}: a kernel without a declaration" for k in sorted(set(found) - set(declared))]
+            + [f"{k}: declared, but no such kernel" for k in sorted(set(declared) - set(found))])
+
+
 def compiled_mismatches(declared: dict[str, KernelArgs], compiled) -> list[str]:
     """Where ``declared`` disagrees with the compiler: kernels without a declaration,
     declarations without a kernel, and per parameter of each build its name, buffer-ness and
     type (REAL: float in a float32 build, double in a float64 one)."""
-    problems = [f"{k}: a kernel without a declaration" for k in sorted(set(compiled) - set(declared))]
-    problems += [f"{k}: declared, but no such kernel" for k in sorted(set(declared) - set(compiled))]
+    problems = _unmatched(declared, compiled)
     for name in sorted(set(compiled) & set(declared)):
         for defines, fp64, args in compiled[name]:
             decl = declared[name].built_with(defines)
@@ -147,8 +151,7 @@ def text_signatures() -> dict[str, tuple[str, list[tuple[str, str]]]]:
 
 
 def text_mismatches(declared: dict[str, KernelArgs], parsed) -> list[str]:
-    problems = [f"{k}: a kernel without a declaration" for k in sorted(set(parsed) - set(declared))]
-    problems += [f"{k}: declared, but no such kernel" for k in sorted(set(declared) - set(parsed))]
+    problems = _unmatched(declared, parsed)
     for name in sorted(set(parsed) & set(declared)):
         file, args = parsed[name]
         decl = declared[name]

@@ -25,9 +25,9 @@ kernels/ has exactly one entry, with its parameters' names and types.
 
 Why one table here and not a declaration beside each caller: the runtime applies it, and the
 device layer imports nothing above it, so declarations in the effect modules would reach it
-only as a side effect of importing them; several modules launch one file's kernels (lib/motion.cl
-from fx/motion.py and plugins/rolling_shutter.py); and a kernel's signature is edited in its
-``.cl`` file, which this table mirrors file by file.
+only as a side effect of importing them; several modules launch one file's kernels
+(lib/motion.cl from fx/motion.py and plugins/rolling_shutter.py); and a kernel's signature is
+edited in its ``.cl`` file, which this table mirrors file by file.
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ import numpy as np
 
 _SCALARS = {"int": np.dtype(np.int32), "uint": np.dtype(np.uint32),
             "float": np.dtype(np.float32)}
-_VECTORS = {"float4": (np.float32, 4), "float8": (np.float32, 8), "int4": (np.int32, 4)}
+_VECTORS = {"float4", "float8", "int4"}
 
 
 def _scatter_family(effect: str) -> dict[str, str]:
@@ -425,9 +425,10 @@ class KernelArgs:
         defined non-zero)."""
         if not any(self.conditions):
             return self
-        keep = [c is None or str(defines.get(c, 0)) not in ("0", "") for c in self.conditions]
-        pick = lambda xs: tuple(x for x, k in zip(xs, keep) if k)   # noqa: E731
-        return KernelArgs(self.kernel, self.file, pick(self.names), pick(self.types))
+        kept = [(n, t) for n, t, c in zip(self.names, self.types, self.conditions)
+                if c is None or str(defines.get(c, 0)) not in ("0", "")]
+        return KernelArgs(self.kernel, self.file, tuple(n for n, _ in kept),
+                          tuple(t for _, t in kept))
 
     def dtypes(self, fp64: bool) -> list:
         """``Kernel.set_scalar_arg_dtypes``'s list: None for a buffer, else the dtype (REAL:

@@ -616,7 +616,8 @@ class Runtime:
                     raise KernelArgumentError(
                         f"kernels/{file} {name} takes {knl.num_args} arguments, its "
                         f"declaration {len(decl.types)} ({decl.signature()})")
-                dtypes = decl.dtypes(str(defines.get("CLFX_FP64", 0)) == "1")
+                dtypes = [None if d is None else np.dtype(d)
+                          for d in decl.dtypes(str(defines.get("CLFX_FP64", 0)) == "1")]
                 knl.set_scalar_arg_dtypes(dtypes)
                 self._signatures[knl.int_ptr] = (decl, tuple(dtypes))
                 self._kernels[key] = knl
@@ -663,7 +664,7 @@ class Runtime:
                 a = a.buffer
             is_buffer = a is None or isinstance(a, self.cl.MemoryObjectHolder)
             if (dt is None) != is_buffer:
-                want = "a buffer" if dt is None else np.dtype(dt).name
+                want = "a buffer" if dt is None else dt.name
                 raise KernelArgumentError(
                     f"kernels/{decl.file} {decl.kernel}: argument {i + 1} "
                     f"({decl.types[i]} {decl.names[i]}) wants {want}, got "
@@ -786,13 +787,14 @@ class Runtime:
         return out
 
 
-def _scalar(value, dtype, decl, index: int):
+def _scalar(value, dtype: np.dtype, decl, index: int):
     """``value`` as argument ``index`` of ``decl``'s kernel, of scalar or vector ``dtype``:
-    an int (or bool) that the integer type holds, a number for a float, a sequence of as many numbers
-    for a vector; else :class:`KernelArgumentError` naming the kernel and argument."""
-    dtype = np.dtype(dtype)
-    what = f"kernels/{decl.file} {decl.kernel}: argument {index + 1} " \
-           f"({decl.types[index]} {decl.names[index]})"
+    an int (or bool) that the integer type holds, a number for a float, a sequence of as many
+    numbers for a vector; else :class:`KernelArgumentError` naming the kernel and argument."""
+    def refuse(wants: str):
+        raise KernelArgumentError(f"kernels/{decl.file} {decl.kernel}: argument {index + 1} "
+                                  f"({decl.types[index]} {decl.names[index]}) wants {wants}")
+
     if dtype.names:                                 # an OpenCL vector (pyopencl.cltypes)
         if getattr(value, "dtype", None) == dtype and np.size(value) == 1:
             return value                            # cltypes.make_float4(...) and the like
@@ -802,18 +804,18 @@ def _scalar(value, dtype, decl, index: int):
         except (TypeError, ValueError):
             arr = None
         if arr is None or arr.size != len(dtype.names):
-            raise KernelArgumentError(f"{what} wants {len(dtype.names)} numbers, got {value!r}")
+            refuse(f"{len(dtype.names)} numbers, got {value!r}")
         return arr.view(dtype)[0]
     if dtype.kind in "iu":
         if not isinstance(value, (int, np.integer, np.bool_)):
-            raise KernelArgumentError(f"{what} wants an integer, got {value!r}")
+            refuse(f"an integer, got {value!r}")
         info, value = np.iinfo(dtype), int(value)
         if not info.min <= value <= info.max:
-            raise KernelArgumentError(f"{what} wants a {dtype.name}, got {value} (out of range)")
+            refuse(f"a {dtype.name}, got {value} (out of range)")
         return value
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
                                                                      np.floating)):
-        raise KernelArgumentError(f"{what} wants a number, got {value!r}")
+        refuse(f"a number, got {value!r}")
     return value
 
 
