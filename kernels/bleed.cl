@@ -40,15 +40,7 @@ inline float4 bleed_source(global const float *src, int spitch, int swidth, int 
                            int sx, int sy)
 {
   if(sx < 0 || sx >= swidth || sy < 0 || sy >= sheight) return (float4)(0.0f);
-  return scatter_sanitise(vload4((size_t)sy * spitch + sx, src));
-}
-
-/* scatter_sanitise of 4 RGBA pixels: a pixel with any non-finite channel becomes 0. */
-inline float16 bleed_sanitise16(float16 c)
-{
-  const int16 bad = (as_int16(c) & 0x7f800000) == 0x7f800000;
-  const int4 p = bad.s048c | bad.s159d | bad.s26ae | bad.s37bf;
-  return select(c, (float16)(0.0f), (int16)(p.xxxx, p.yyyy, p.zzzz, p.wwww));
+  return clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx, src));
 }
 
 /* Source pixels (sx .. sx + 3, sy), sanitised, 0 outside the source: one unaligned float16
@@ -58,7 +50,7 @@ inline float16 bleed_source16(global const float *src, int spitch, int swidth, i
 {
   if(sy < 0 || sy >= sheight || sx + 3 < 0 || sx >= swidth) return (float16)(0.0f);
   if(sx >= 0 && sx + 3 < swidth)
-    return bleed_sanitise16(vload16(0, src + ((size_t)sy * spitch + sx) * 4));
+    return clfx_finite_pixels16_or_zero(vload16(0, src + ((size_t)sy * spitch + sx) * 4));
   return (float16)(bleed_source(src, spitch, swidth, sheight, sx, sy),
                    bleed_source(src, spitch, swidth, sheight, sx + 1, sy),
                    bleed_source(src, spitch, swidth, sheight, sx + 2, sy),

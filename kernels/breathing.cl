@@ -11,9 +11,9 @@
  * Each work-item renders 4 consecutive output pixels (rows are padded to 4).
  *
  * Rows are the whole render's: output row y of dst is row y + row0 of the whole output,
- * and src holds the whole render's source rows from `shift` on (RS_TILE: a tile of a tiled
- * render, clfx.kit.warp.CanvasRows; both 0 in a whole render), so a band's pixels take
- * the whole render's arithmetic.
+ * and src holds the whole render's source rows from `shift` on (CLFX_CANVAS_ROWS: a tile of
+ * a tiled render, clfx.kit.warp.CanvasRows; both 0 in a whole render), so a band's pixels
+ * take the whole render's arithmetic.
  */
 #include "lib/resample.h"
 
@@ -35,7 +35,7 @@ kernel void breathing_footprint(global const float *src, global float *dst,
                                 const float hy, const int n, const int row0, const int shift)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
-  RS_TILE(src, src_pitch, shift);
+  CLFX_CANVAS_ROWS(src, src_pitch, 4, shift);
   const float sy = fma((float)(y + row0), inv_m, ay);
   float fy;
   const int iy = fp_window(sy, hy, &fy);
@@ -76,7 +76,7 @@ kernel void breathing_ewa_f64(global const float *src, global float *dst,
 {
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= dst_h || qx * 4 >= dst_pitch) return;
-  RS_TILE(src, src_pitch, shift);
+  CLFX_CANVAS_ROWS(src, src_pitch, 4, shift);
   const REAL sy = (REAL)(y + row0) * inv_m + ay;
   REAL4 o[4];
   for(int k = 0; k < 4; k++) {

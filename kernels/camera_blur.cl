@@ -43,12 +43,12 @@ inline REAL16 cb_path_sum(global const float *col, const int pitch, const int wi
 }
 
 /* (x0, y0): the window's origin in the frame (the whole render's: positions are the whole
- * render's in every band of a tiled render); `col` holds its rows row0 <= y < row1 (MG_ROWS),
- * `dst` the rows band0 <= y < band1 that this launch computes (from its first row);
- * (cx, cy): the motion's centre in the frame; roll in radians per frame (+ turns +x towards
- * +y); zoom: scale growth per frame.  `col` holds finite colours (the host sanitises NaN/Inf
- * first); a float32 sum of huge ones that overflows is taken again with every sample halved
- * and divided by n first, so the output stays finite. */
+ * render's in every band of a tiled render); `col` holds its rows row0 <= y < row1
+ * (CLFX_CANVAS_ROWS), `dst` the rows band0 <= y < band1 that this launch computes (from its
+ * first row); (cx, cy): the motion's centre in the frame; roll in radians per frame (+ turns
+ * +x towards +y); zoom: scale growth per frame.  `col` holds finite colours (the host
+ * sanitises NaN/Inf first); a float32 sum of huge ones that overflows is taken again with
+ * every sample halved and divided by n first, so the output stays finite. */
 kernel void camera_blur_similarity(global const float *col, global float *dst, const int pitch,
                                    const int width, const int row0, const int row1,
                                    const int band0, const int band1, const int x0,
@@ -59,7 +59,7 @@ kernel void camera_blur_similarity(global const float *col, global float *dst, c
 {
   const int qx = get_global_id(0), y = band0 + get_global_id(1);
   if(y >= band1 || qx * 4 >= pitch) return;
-  MG_ROWS(col, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(col, pitch, 4, row0);
   const float4 lane = (float4)(qx * 4) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
   const float fy = (float)y;
   const float4 qx0 = lane + 0.5f + (float)x0 - cx;         /* relative to the centre */

@@ -19,7 +19,8 @@
  *
  * Rows are the canvas's (w x h, origin (x0, y0) in the frame): a tile of a tiled render
  * (clfx.kit.warp.CanvasRows) passes buffers holding canvas rows from `shift` on, and
- * RS_TILE addresses them in canvas rows, so its pixels take the whole render's arithmetic.
+ * CLFX_CANVAS_ROWS addresses them in canvas rows, so its pixels take the whole render's
+ * arithmetic.
  */
 #include "lib/resample.h"
 
@@ -41,7 +42,8 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
                                        const int qx0, const int row0, const int nqx,
                                        const int nrows, const int shift)
 {
-  RS_TILES(src, pitch, dst, pitch, shift);
+  CLFX_CANVAS_ROWS(src, pitch, 4, shift);
+  CLFX_CANVAS_ROWS(dst, pitch, 4, shift);
   /* the launch covers quads [qx0, qx0 + nqx) x rows [row0, row0 + nrows) */
   if(get_global_id(0) >= nqx || get_global_id(1) >= nrows) return;
   const int qx = get_global_id(0) + qx0, y = get_global_id(1) + row0;

@@ -5,7 +5,7 @@
  *   (the PSF spread runs in lib/fftconv.cl: clfx/fx/fftconv.py)
  *   halation_mix         out = c + strength tint max(g, 0), minus strength tint h with
  *                        CONSERVE (each channel's total kept); alpha c's.
- * Non-finite source pixels count as 0 (scatter_sanitise) and do not spread; sums beyond the
+ * Non-finite source pixels count as 0 (clfx_finite_pixel_or_zero) and do not spread; sums beyond the
  * float range saturate at +-FLT_MAX (finite input, finite output).
  */
 #include "lib/scatter.h"

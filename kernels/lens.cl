@@ -19,9 +19,9 @@
  * coordinates, weights and sums.
  *
  * Each renders the canvas rows row0 .. row0 + rows (the map's rows: all in a whole render)
- * from buffers holding the canvas rows from `shift` on (RS_TILE: a tile of a tiled render,
- * clfx.kit.warp.CanvasRows; 0 in a whole render); records count quads from the canvas's
- * first row.
+ * from buffers holding the canvas rows from `shift` on (CLFX_CANVAS_ROWS: a tile of a tiled
+ * render, clfx.kit.warp.CanvasRows; 0 in a whole render); records count quads from the
+ * canvas's first row.
  */
 #include "lib/resample.h"
 

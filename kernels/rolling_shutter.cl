@@ -28,8 +28,8 @@
  * Positions are REAL (lib/precision.h: double for the reference level); no atomics.
  * Tiles lie on a grid of K x K pixels from the canvas's origin (the whole render's source
  * window) and positions and row times are the whole render's: a band of a tiled render passes
- * buffers holding canvas rows row0 <= y < row1 (MG_ROWS), reads clamp to them (the canvas's
- * edges where the band reaches them), and writes its rows band0 <= y < band1.
+ * buffers holding canvas rows row0 <= y < row1 (CLFX_CANVAS_ROWS), reads clamp to them (the
+ * canvas's edges where the band reaches them), and writes its rows band0 <= y < band1.
  */
 #include "lib/arc.h"
 #include "lib/common.h"
@@ -83,7 +83,7 @@ kernel void rolling_shutter_tiles(global const float *aux, global float *tiles, 
 {
   const int tx = get_global_id(0), ty = ty0 + get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
-  MG_ROWS(aux, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(aux, pitch, 4, row0);
   const int x1 = min(tx * k + k, width), y1 = min(ty * k + k, height);
   float4 fast = RS_NONE, back = RS_NONE, near = RS_NONE;
   for(int y = ty * k; y < y1; y++)
@@ -231,10 +231,10 @@ kernel void rolling_shutter_gather(global const float *col, global const float *
 {
   const int x = get_global_id(0), y = band0 + get_global_id(1);
   if(x >= width || y >= band1) return;
-  MG_ROWS(col, pitch, 4, row0);
-  MG_ROWS(aux, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(col, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(aux, pitch, 4, row0);
 #if CURVED
-  MG_ROWS(auxb, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(auxb, pitch, 4, row0);
 #endif
   const REAL t = (REAL)tx * ((REAL)x - (REAL)xr) + (REAL)ty * ((REAL)y - (REAL)yr);
   const REAL2 p = (REAL2)((REAL)x + (REAL)0.5, (REAL)y + (REAL)0.5);

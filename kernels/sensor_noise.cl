@@ -380,8 +380,8 @@ kernel void sensor_noise_demosaic(global const float *src, global const float *n
     return;
   }
   const float4 raw = vload4(0, src + i);
-  const float4 v = select((float4)0.0f, clamp(raw, -1e38f, 1e38f), isfinite(raw));
-  const float alpha = isfinite(raw.w) ? raw.w : 0.0f;  /* bit for bit where finite */
+  const float4 v = clamp(clfx_finite4_or_zero(raw), -1e38f, 1e38f);
+  const float alpha = clfx_finite_or(raw.w, 0.0f);      /* bit for bit where finite */
   /* linear units per electron, the full well and the model's deviation per channel */
   const float4 g = (float4)(1.0f / kr, 1.0f / kg, 1.0f / kb, 0.0f);
   const float4 vsat = well * g;

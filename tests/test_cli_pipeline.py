@@ -179,11 +179,13 @@ def test_compiler_chatter_stays_off_stderr_unless_verbose(rt, tmp_path, capfd):
     fresh.kernel_dir = tmp_path
     with warnings.catch_warnings():
         _compiler_messages(1)
-        fresh.kernel("w.cl", "k", SALT=np.random.default_rng().integers(1 << 30))
+        fresh.kernel("w.cl", "k", arg_types="buf a",
+                     SALT=np.random.default_rng().integers(1 << 30))
     assert capfd.readouterr().err == ""
     with warnings.catch_warnings(record=True) as caught:
         _compiler_messages(2)
-        fresh.kernel("w.cl", "k", SALT=np.random.default_rng().integers(1 << 30))
+        fresh.kernel("w.cl", "k", arg_types="buf a",
+                     SALT=np.random.default_rng().integers(1 << 30))
     said = [w for w in caught if issubclass(w.category, KernelBuildWarning)]
     assert said and "implicit conversion from 'float' to 'int'" in str(said[0].message)
     assert "warnings generated" not in capfd.readouterr().err

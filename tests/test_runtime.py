@@ -105,7 +105,7 @@ def test_cpu_device_builds_get_software_prefetch(rt, tmp_path, monkeypatch):
     monkeypatch.setattr(rt, "kernel_dir", tmp_path)
     out, src = np.full(1, -1, np.int32), np.zeros(64, np.float32)
     o, s = rt.to_device(out), rt.to_device(src)
-    rt.launch(rt.kernel("probe.cl", "probe"), (1,), o, s)
+    rt.launch(rt.kernel("probe.cl", "probe", arg_types="buf o, buf s"), (1,), o, s)
     rt.cl.enqueue_copy(rt.queue, out, o.buffer)
     rt.finish()
     assert out[0] == int(rt.host_cpu_kernels)
@@ -154,7 +154,8 @@ def test_streaming_stores_write_every_value_and_are_live_only_where_asked(rt, tm
         " 10, 11, 12, 13, 14, 15) * 0.0625f, o + 16 * i);\n"
         "  if(i == 0) can[0] = CLFX_CAN_STREAM_STORE;\n  clfx_streaming_fence(); }\n")
     monkeypatch.setattr(rt, "kernel_dir", tmp_path)
-    knl = rt.kernel("probe.cl", "probe", CLFX_STREAM_STORES=stream)
+    knl = rt.kernel("probe.cl", "probe", arg_types="buf o, buf can",
+                   CLFX_STREAM_STORES=stream)
     for size, local in (((64, 9), None), ((16, 4), (8, 2)), ((1, 1), None)):
         n = size[0] * size[1]
         out = rt.to_device(np.full(16 * n, -1.0, np.float32))

@@ -46,6 +46,7 @@ import numpy as np
 from clfx.core.errors import DeviceError, KernelBuildError
 from clfx.core.rect import Rect
 from clfx.device.cache import DeviceCache
+from clfx.device.kernel_args import KernelArgs, KernelArgumentError, declaration
 
 BUILD_OPTIONS = ("-cl-std=CL1.2", "-cl-mad-enable")
 """Pinned for every program.  ``-cl-mad-enable`` only allows fused multiply-add (more
@@ -445,6 +446,8 @@ class Runtime:
         self.cache = DeviceCache(self.ctx)
         self._programs: dict = {}
         self._kernels: dict = {}
+        self._signatures: dict = {}
+        """Each kernel's declaration and dtypes, by its handle (``Kernel.int_ptr``)."""
         self._lock = threading.RLock()
         self.kernel_dir = kernel_dir()
         self.builds: list[BuildRecord] = []
@@ -591,30 +594,49 @@ class Runtime:
                           f"{log or chr(10).join(caught)}", KernelBuildWarning, stacklevel=2)
         return prg
 
-    def kernel(self, file: str, name: str, fp64: bool = False, **defines):
+    def kernel(self, file: str, name: str, fp64: bool = False, arg_types: str | None = None,
+               **defines):
         """A reusable ``cl.Kernel`` named ``name`` from ``kernels/<file>`` (``fp64``: see
-        :meth:`program`)."""
+        :meth:`program`), typed by its declaration in ``clfx.device.kernel_args`` (its
+        scalar argument dtypes; REAL is float64 in a ``CLFX_FP64`` build).  A kernel the table
+        does not name is refused (:class:`~clfx.device.kernel_args.KernelArgumentError`)
+        unless ``arg_types`` declares it here, in the table's words (a kernel from outside
+        kernels/, as tests build)."""
+        decl = (declaration(file, name) if arg_types is None
+                else KernelArgs.parse(name, file, arg_types))
         if self.use_fp64(fp64):
             defines["CLFX_FP64"] = 1
-        key = (file, name, tuple(sorted((k, str(v)) for k, v in defines.items())))
+        decl = decl.built_with(defines)
+        key = (file, name, tuple(sorted((k, str(v)) for k, v in defines.items())), arg_types)
         with self._lock:
             knl = self._kernels.get(key)
             if knl is None:
                 knl = self.cl.Kernel(self.program(file, **defines), name)
+                if knl.num_args != len(decl.types):
+                    raise KernelArgumentError(
+                        f"kernels/{file} {name} takes {knl.num_args} arguments, its "
+                        f"declaration {len(decl.types)} ({decl.signature()})")
+                dtypes = [None if d is None else np.dtype(d)
+                          for d in decl.dtypes(str(defines.get("CLFX_FP64", 0)) == "1")]
+                knl.set_scalar_arg_dtypes(dtypes)
+                self._signatures[knl.int_ptr] = (decl, tuple(dtypes))
                 self._kernels[key] = knl
             return knl
 
     def launch(self, knl, global_size, *args, local=None, wait: bool = False):
-        """Enqueue ``knl`` over ``global_size`` (x first), rounded up to ``local`` if given.
+        """Enqueue ``knl`` (from :meth:`kernel`) over ``global_size`` (x first), rounded up to
+        ``local`` if given.
 
-        Python ints and floats must already be wrapped as ``np.int32`` / ``np.float32``;
-        DeviceImages may be passed directly (their buffer is used).
+        Arguments as the kernel's declaration types them (``clfx.device.kernel_args``):
+        DeviceImages, pooled buffers or None where it takes a buffer, plain Python (or NumPy)
+        ints and floats where it takes a scalar, a sequence of numbers for a vector; a call
+        that does not match raises :class:`~clfx.device.kernel_args.KernelArgumentError`
+        naming the kernel and the argument.
         """
         gsize = tuple(max(1, int(n)) for n in global_size)
         if local is not None:
             gsize = tuple(-(-g // l) * l for g, l in zip(gsize, local))
-        cargs = [a.buffer if isinstance(a, (DeviceImage, _PooledBuffer)) else a for a in args]
-        ev = knl(self.queue, gsize, local, *cargs)
+        ev = knl(self.queue, gsize, local, *self._checked_args(knl, args))
         # Submit now: PoCL 3.1 (pthread) left a kernel queued behind a running one for up
         # to ~4 ms more at random (distortion draft at 1080p, two kernels: 5.0 or 9.3 ms;
         # with a flush after each launch 5.1-6.0 ms)
@@ -622,6 +644,35 @@ class Runtime:
         if wait:
             ev.wait()
         return ev
+
+    def _checked_args(self, knl, args) -> list:
+        """``args`` for ``knl``'s enqueue, checked against its declaration: buffers (a
+        DeviceImage's, a pooled one's) where it takes buffers, scalars that its dtypes hold,
+        vectors as its OpenCL vector type."""
+        try:
+            decl, dtypes = self._signatures[knl.int_ptr]
+        except KeyError:
+            raise KernelArgumentError(f"launch: kernel {knl.function_name} was not made by "
+                                      f"Runtime.kernel (it types its arguments)") from None
+        if len(args) != len(dtypes):
+            raise KernelArgumentError(
+                f"kernels/{decl.file} {decl.kernel} takes {len(dtypes)} arguments, got "
+                f"{len(args)} ({decl.signature()})")
+        out = []
+        for i, (a, dt) in enumerate(zip(args, dtypes)):
+            if isinstance(a, (DeviceImage, _PooledBuffer)):
+                a = a.buffer
+            is_buffer = a is None or isinstance(a, self.cl.MemoryObjectHolder)
+            if (dt is None) != is_buffer:
+                want = "a buffer" if dt is None else dt.name
+                raise KernelArgumentError(
+                    f"kernels/{decl.file} {decl.kernel}: argument {i + 1} "
+                    f"({decl.types[i]} {decl.names[i]}) wants {want}, got "
+                    f"{type(args[i]).__name__}")
+            if dt is not None:
+                a = _scalar(a, dt, decl, i)
+            out.append(a)
+        return out
 
     def finish(self) -> None:
         self.queue.finish()
@@ -696,10 +747,8 @@ class Runtime:
         knl = self.kernel("lib/image.cl", "image_reframe", CH=img.channels,
                           BORDER={"zero": 0, "clamp": 1}[border])
         dx, dy = window.x0 - img.window.x0, window.y0 - img.window.y0
-        self.launch(knl, (dst.pitch, window.height), img, np.int32(img.pitch),
-                    np.int32(img.width), np.int32(img.height), dst, np.int32(dst.pitch),
-                    np.int32(window.width), np.int32(window.height), np.int32(dx), np.int32(dy),
-                    local=None)
+        self.launch(knl, (dst.pitch, window.height), img, img.pitch, img.width, img.height, dst,
+                    dst.pitch, window.width, window.height, dx, dy, local=None)
         return dst
 
     def paste(self, src: DeviceImage, dst: DeviceImage, rect: Rect) -> None:
@@ -722,8 +771,7 @@ class Runtime:
             return 0
         counter = self.to_device(np.zeros(1, np.int32))
         self.launch(self.kernel("lib/image.cl", "image_sanitize", CH=4, BORDER=0),
-                    (img.pitch // 4, img.height), img, np.int32(img.pitch),
-                    np.int32(img.height), counter)
+                    (img.pitch // 4, img.height), img, img.pitch, img.height, counter)
         return int(self.from_device(counter, np.int32, 1)[0])
 
     def to_device(self, array: np.ndarray):
@@ -737,6 +785,38 @@ class Runtime:
         out = np.empty(count, dtype)
         self.cl.enqueue_copy(self.queue, out, holder.buffer)
         return out
+
+
+def _scalar(value, dtype: np.dtype, decl, index: int):
+    """``value`` as argument ``index`` of ``decl``'s kernel, of scalar or vector ``dtype``:
+    an int (or bool) that the integer type holds, a number for a float, a sequence of as many
+    numbers for a vector; else :class:`KernelArgumentError` naming the kernel and argument."""
+    def refuse(wants: str):
+        raise KernelArgumentError(f"kernels/{decl.file} {decl.kernel}: argument {index + 1} "
+                                  f"({decl.types[index]} {decl.names[index]}) wants {wants}")
+
+    if dtype.names:                                 # an OpenCL vector (pyopencl.cltypes)
+        if getattr(value, "dtype", None) == dtype and np.size(value) == 1:
+            return value                            # cltypes.make_float4(...) and the like
+        base = dtype.fields[dtype.names[0]][0]
+        try:
+            arr = np.ascontiguousarray(value, dtype=base).reshape(-1)
+        except (TypeError, ValueError):
+            arr = None
+        if arr is None or arr.size != len(dtype.names):
+            refuse(f"{len(dtype.names)} numbers, got {value!r}")
+        return arr.view(dtype)[0]
+    if dtype.kind in "iu":
+        if not isinstance(value, (int, np.integer, np.bool_)):
+            refuse(f"an integer, got {value!r}")
+        info, value = np.iinfo(dtype), int(value)
+        if not info.min <= value <= info.max:
+            refuse(f"a {dtype.name}, got {value} (out of range)")
+        return value
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
+                                                                     np.floating)):
+        refuse(f"a number, got {value!r}")
+    return value
 
 
 class _PooledBuffer:

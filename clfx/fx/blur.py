@@ -367,13 +367,11 @@ def _direct(rt, axis, plan, ch, double, border, n_in, offset, rows, cols):
     taps = 2 * plan.radius + 1
     wbuf = _direct_weights(rt, plan, double)
     knl = _kernel(rt, f"blur_direct_{axis}", ch, taps, double)
-    i32 = np.int32
 
     def run(src, dst):
-        head = ((src, i32(src.pitch), i32(n_in), dst, i32(dst.pitch), i32(rows)) if axis == "h"
-                else (src, i32(n_in), dst, i32(rows), i32(dst.pitch)))
-        rt.launch(knl, (dst.pitch // 4, rows), *head, i32(offset), wbuf, i32(taps),
-                  i32(BORDERS[border]))
+        head = ((src, src.pitch, n_in, dst, dst.pitch, rows) if axis == "h"
+                else (src, n_in, dst, rows, dst.pitch))
+        rt.launch(knl, (dst.pitch // 4, rows), *head, offset, wbuf, taps, BORDERS[border])
     return _Pass(rows, cols, run)
 
 
@@ -396,8 +394,8 @@ def _gather_h(rt, key, make_table, ch, double, rows):
     knl = _kernel(rt, "blur_gather_h", ch, taps, dbl)
 
     def run(src, dst):
-        rt.launch(knl, (dst.pitch // 4, rows), src, np.int32(src.pitch), dst,
-                  np.int32(dst.pitch), np.int32(rows), ibuf, wbuf, np.int32(taps))
+        rt.launch(knl, (dst.pitch // 4, rows), src, src.pitch, dst, dst.pitch, rows, ibuf, wbuf,
+                  taps)
     return _Pass(rows, cols, run)
 
 
@@ -409,8 +407,7 @@ def _gather_v(rt, key, make_table, ch, double, cols):
     knl = _kernel(rt, "blur_gather_v", ch, taps, dbl)
 
     def run(src, dst):
-        rt.launch(knl, (dst.pitch // 4, rows), src, dst, np.int32(dst.pitch), np.int32(rows),
-                  ibuf, wbuf, np.int32(taps))
+        rt.launch(knl, (dst.pitch // 4, rows), src, dst, dst.pitch, rows, ibuf, wbuf, taps)
     return _Pass(rows, cols, run)
 
 
@@ -547,8 +544,7 @@ def sanitize_nonfinite(rt, img):
     dst = img.like()
     counts = rt.buffer(max(img.height, 1) * 4)
     knl = rt.kernel(KERNEL_FILE, "blur_sanitize", CH=img.channels)
-    rt.launch(knl, (max(img.height, 1),), img, dst, np.int32(img.pitch), np.int32(img.width),
-              np.int32(img.height), counts)
+    rt.launch(knl, (max(img.height, 1),), img, dst, img.pitch, img.width, img.height, counts)
     n = int(rt.from_device(counts, np.int32, max(img.height, 1))[:img.height].sum())
     return dst, n
 

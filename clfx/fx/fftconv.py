@@ -442,24 +442,21 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
     pack = _kernel(rt, "fftconv_pack", precision)
     mul = _kernel(rt, "fftconv_multiply", precision)
     unpack = _kernel(rt, "fftconv_unpack", precision)
-    i32 = np.int32
     sx, sy = support.offset_in(img.window)
     dx, dy = dst.window.x0 - support.x0, dst.window.y0 - support.y0
     ex0, ey0 = effective.offset_in(dst.window)
     count = n1 * (n2 // 2 + 1)
     for c0 in range(0, nch, batch):
-        rt.launch(pack, (n2 + 2, n1), img, i32(img.pitch), i32(img.channels), i32(sx),
-                  i32(sy), i32(support.width), i32(support.height), work, i32(n1),
-                  i32(n2 + 2), i32(c0), i32(batch),
-                  np.float32(np.inf if split is None else split), local=None)
+        rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
+                  support.height, work, n1, n2 + 2, c0, batch, np.inf if split is None else split,
+                  local=None)
         app.fft(arr)
-        rt.launch(mul, (count,), work, spec, i32(count), i32(batch), i32(spec_planes),
-                  i32(c0 if spec_planes > 1 else 0))
+        rt.launch(mul, (count,), work, spec, count, batch, spec_planes,
+                  c0 if spec_planes > 1 else 0)
         app.ifft(arr)
-        rt.launch(unpack, (dst.pitch, dst.height), work, i32(n1), i32(n2 + 2), i32(n2), dst,
-                  i32(dst.pitch), i32(dst.channels), i32(dst.width), i32(dst.height),
-                  i32(dx), i32(dy), i32(ex0), i32(ey0), i32(ex0 + effective.width),
-                  i32(ey0 + effective.height), i32(c0), i32(batch))
+        rt.launch(unpack, (dst.pitch, dst.height), work, n1, n2 + 2, n2, dst, dst.pitch,
+                  dst.channels, dst.width, dst.height, dx, dy, ex0, ey0, ex0 + effective.width,
+                  ey0 + effective.height, c0, batch)
     if bright is not None and bright[2]:
         _gather(rt, dst, support, k, bright, precision="float32")
 
@@ -484,11 +481,9 @@ def _bright_pixels(rt, img, support, split, max_points):
 def _bright_rows(rt, img, support, split):
     """Per support row, how many pixels have a largest channel above ``split`` (and the
     kernel arguments that found them)."""
-    i32 = np.int32
     sx, sy = support.offset_in(img.window)
     counts = rt.buffer(4 * support.height)
-    args = (img, i32(img.pitch), i32(img.channels), i32(sx), i32(sy), i32(support.width),
-            i32(support.height), np.float32(split))
+    args = (img, img.pitch, img.channels, sx, sy, support.width, support.height, split)
     rt.launch(_kernel(rt, "fftconv_count_bright"), (support.height,), *args, counts)
     return rt.from_device(counts, np.int32, support.height), args
 
@@ -505,17 +500,14 @@ def _gather(rt, dst, support, k, bright, precision):
     pos, val, total = bright
     kh, kw, planes = k.shape
     table = rt.to_device(_psf_planes_padded(k, 4))
-    i32 = np.int32
     knl = _kernel(rt, "fftconv_gather", precision)
-    rt.launch(knl, (dst.pitch // 4, dst.height), dst, i32(dst.pitch), i32(dst.channels),
-              i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
-              pos, val, i32(total), table, i32(kw), i32(kh), i32(kw // 2), i32(kh // 2),
-              i32(planes))
+    rt.launch(knl, (dst.pitch // 4, dst.height), dst, dst.pitch, dst.channels, dst.height,
+              dst.window.x0 - support.x0, dst.window.y0 - support.y0, pos, val, total, table, kw,
+              kh, kw // 2, kh // 2, planes)
 
 
 def _direct(rt, img, k, support, effective, dst, precision):
     kh, kw, planes = k.shape
-    i32 = np.int32
     ppitch = dst.pitch + kw - 1 + 4
     pheight = dst.height + kh - 1
     pad = rt.buffer(ppitch * pheight * 16)
@@ -523,17 +515,16 @@ def _direct(rt, img, k, support, effective, dst, precision):
     ox = dst.window.x0 - (kw - 1 - kw // 2)
     oy = dst.window.y0 - (kh - 1 - kh // 2)
     sx, sy = support.offset_in(img.window)
-    rt.launch(_kernel(rt, "fftconv_pad"), (ppitch, pheight), img, i32(img.pitch),
-              i32(img.channels), i32(sx), i32(sy), i32(support.width), i32(support.height),
-              pad, i32(ppitch), i32(pheight), i32(support.x0 - ox), i32(support.y0 - oy))
+    rt.launch(_kernel(rt, "fftconv_pad"), (ppitch, pheight), img, img.pitch, img.channels, sx, sy,
+              support.width, support.height, pad, ppitch, pheight, support.x0 - ox,
+              support.y0 - oy)
     wtype = np.float64 if precision == "float64" else np.float32
     weights = rt.to_device(np.ascontiguousarray(np.moveaxis(k, 2, 0), wtype))
     ex0, ey0 = effective.offset_in(dst.window)
     knl = _kernel(rt, "fftconv_direct", precision)
-    rt.launch(knl, (dst.pitch // 4, dst.height), pad, i32(ppitch), dst, i32(dst.pitch),
-              i32(dst.channels), i32(dst.width), i32(dst.height), i32(ex0), i32(ey0),
-              i32(ex0 + effective.width), i32(ey0 + effective.height), weights, i32(kw),
-              i32(kh), i32(planes))
+    rt.launch(knl, (dst.pitch // 4, dst.height), pad, ppitch, dst, dst.pitch, dst.channels,
+              dst.width, dst.height, ex0, ey0, ex0 + effective.width, ey0 + effective.height,
+              weights, kw, kh, planes)
 
 
 def tent_downsample(k: np.ndarray) -> np.ndarray:
@@ -576,17 +567,15 @@ def half_psf(rt, k: np.ndarray) -> np.ndarray:
 def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, hi=None):
     """One pyramid level; ``hi``: the half-resolution pixels to build (a block's; default
     all of the support's), from the full-resolution pixels of ``img`` they sum."""
-    i32 = np.int32
     hw, hh = -(-support.width // 2), -(-support.height // 2)
     hi = hi or Rect(0, 0, hw, hh)
     half_in = rt.image(hi, 4)
     sx, sy = support.offset_in(img.window)
     sx, sy = sx + 2 * hi.x0, sy + 2 * hi.y0
-    rt.launch(_kernel(rt, "fftconv_down2"), (half_in.pitch, hi.height), img,
-              i32(img.pitch), i32(img.channels), i32(sx), i32(sy),
-              i32(min(support.width - 2 * hi.x0, 2 * hi.width)),
-              i32(min(support.height - 2 * hi.y0, 2 * hi.height)), half_in,
-              i32(half_in.pitch), i32(hi.width), i32(hi.height))
+    rt.launch(_kernel(rt, "fftconv_down2"), (half_in.pitch, hi.height), img, img.pitch,
+              img.channels, sx, sy, min(support.width - 2 * hi.x0, 2 * hi.width),
+              min(support.height - 2 * hi.y0, 2 * hi.height), half_in, half_in.pitch, hi.width,
+              hi.height)
     hout = half_window(support, effective)
     kh2 = half_psf(rt, k)
     sub = ConvolveInfo()
@@ -594,11 +583,10 @@ def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, h
                          grid, spectrum)
     info.grid = sub.grid
     ex0, ey0 = effective.offset_in(dst.window)
-    rt.launch(_kernel(rt, "fftconv_up2"), (dst.pitch, dst.height), half_out,
-              i32(half_out.pitch), i32(half_out.width), i32(half_out.height), i32(hout.x0),
-              i32(hout.y0), dst, i32(dst.pitch), i32(dst.channels), i32(dst.width),
-              i32(dst.height), i32(dst.window.x0 - support.x0), i32(dst.window.y0 - support.y0),
-              i32(ex0), i32(ey0), i32(ex0 + effective.width), i32(ey0 + effective.height))
+    rt.launch(_kernel(rt, "fftconv_up2"), (dst.pitch, dst.height), half_out, half_out.pitch,
+              half_out.width, half_out.height, hout.x0, hout.y0, dst, dst.pitch, dst.channels,
+              dst.width, dst.height, dst.window.x0 - support.x0, dst.window.y0 - support.y0, ex0,
+              ey0, ex0 + effective.width, ey0 + effective.height)
 
 
 # -- blocks: overlap-save over output blocks --------------------------------------------------

@@ -18,8 +18,6 @@ effect that grew the frame keeps its light where the mask allows it.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from clfx.fx.blur import gaussian_blur
 
 KERNEL = "lib/mask.cl"
@@ -38,8 +36,8 @@ def _run(rt, name: str, window, *images):
     own windows); returns the new RGBA image it wrote."""
     placed = [rt.reframe(img, window, "zero") for img in images]
     dst = rt.image(window, 4)
-    rt.launch(rt.kernel(KERNEL, f"mask_{name}"), (dst.pitch, dst.height), *placed, dst,
-              np.int32(dst.pitch), np.int32(dst.height))
+    rt.launch(rt.kernel(KERNEL, f"mask_{name}"), (dst.pitch, dst.height), *placed, dst, dst.pitch,
+              dst.height)
     return dst
 
 

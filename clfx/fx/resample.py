@@ -451,7 +451,7 @@ def launch_packed(rt, fast, fix, dmap: DevicePackedMap, filter_name: str, quads_
         rt.launch(fast, (quads_x, max(rows, 1)), *head, dmap.entries, *tail)
     buf, count = dmap.fixups[code]
     if count:
-        rt.launch(fix, (count,), *head, buf, np.int32(count), *tail)
+        rt.launch(fix, (count,), *head, buf, count, *tail)
 
 
 def check_fold(name: str, coeffs: str, r_fold: float, r_corner: float, unit: str) -> None:

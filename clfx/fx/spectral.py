@@ -129,6 +129,5 @@ def rgb_matrix(rt, img, m):
     out = img.like()
     f4 = [cltypes.make_float4(*(float(v) for v in r), 0.0) for r in np.asarray(m)]
     rt.launch(rt.kernel("lib/image.cl", "image_rgb_matrix", CH=4, BORDER=0),
-              (img.pitch, max(img.height, 1)), img, out, np.int32(img.pitch),
-              np.int32(img.height), *f4)
+              (img.pitch, max(img.height, 1)), img, out, img.pitch, img.height, *f4)
     return out

@@ -197,7 +197,6 @@ class ScatterPlugin(SpreadRegions):
         k = self.psf(p, ctx)
         boost = self.boost(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
-        f32, i32 = np.float32, np.int32
         from pyopencl import cltypes
 
         tint = cltypes.make_float4(*p.tint, 0.0)
@@ -205,15 +204,14 @@ class ScatterPlugin(SpreadRegions):
         mx = rt.kernel(kfile, f"{name}_mix", **ctx.luminance_defines)
 
         def highlights(img, h):
-            rt.launch(hl, (img.pitch // 4, max(img.height, 1)), img, h, i32(img.pitch),
-                      i32(img.height), f32(p.threshold), f32(p.knee), f32(boost))
+            rt.launch(hl, (img.pitch // 4, max(img.height, 1)), img, h, img.pitch, img.height,
+                      p.threshold, p.knee, boost)
 
         def mix(g, dst, rect):
             dx, dy = rect.offset_in(src.window)
-            rt.launch(mx, (dst.pitch // 4, max(dst.height, 1)),
-                      src, i32(src.pitch), i32(src.width), i32(src.height), g, dst,
-                      i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(self.strength(p)),
-                      tint, f32(p.threshold), f32(p.knee), f32(boost), i32(boost > 0.0))
+            rt.launch(mx, (dst.pitch // 4, max(dst.height, 1)), src, src.pitch, src.width,
+                      src.height, g, dst, dst.pitch, dst.height, dx, dy, self.strength(p), tint,
+                      p.threshold, p.knee, boost, boost > 0.0)
 
         split = max(4.0 * p.threshold, SPLIT_RATIO * ctx.analysis.peak_luminance)
         return self.spread_mixed(rt, p, ctx, k, highlights, mix, split)

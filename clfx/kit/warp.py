@@ -483,9 +483,8 @@ class FootprintWarp:
         dst = src.like()
         if not double:
             defines["CLFX_STREAM_STORES"] = int(rt.streams_stores(dst.nbytes))
-        i32 = np.int32
-        tail = (i32(src.pitch), i32(canvas.width), i32(canvas.height), i32(dst.pitch),
-                i32(rows.count), i32(rows.first), i32(rows.shift))
+        tail = (src.pitch, canvas.width, canvas.height, dst.pitch, rows.count, rows.first,
+                rows.shift)
         if double:
             knl = rt.kernel(kfile, f"{name}_ewa_f64", fp64=lvl.fp64, **defines)
             rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, dmap, *tail)

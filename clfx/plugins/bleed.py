@@ -163,21 +163,18 @@ class Bleed(ScatterPlugin, Plugin):
         flags = rt.buffer((hpitch // 4) * fblocks_y)
         active = rt.buffer(blocks_x * blocks_y)
         dx, dy = out_window.offset_in(src.window)
-        f32, i32 = np.float32, np.int32
         kfile = self.descriptor.kernel
         rt.launch(rt.kernel(kfile, "bleed_pad_highlights", **defines), (hpitch // 4, fblocks_y),
-                  src, i32(src.pitch), i32(src.width), i32(src.height), i32(padx - dx),
-                  i32(r - dy), hp, i32(hpitch), i32(hheight), flags, f32(p.threshold),
-                  f32(p.knee))
+                  src, src.pitch, src.width, src.height, padx - dx, r - dy, hp, hpitch, hheight,
+                  flags, p.threshold, p.knee)
         rt.launch(rt.kernel(kfile, "bleed_active", **defines), (blocks_x, blocks_y), flags,
-                  i32(hpitch // 4), i32(fblocks_y), active, i32(dst.pitch), i32(blocks_y))
+                  hpitch // 4, fblocks_y, active, dst.pitch, blocks_y)
         from pyopencl import cltypes
 
         tint = cltypes.make_float4(*p.tint, 0.0)
         name = "bleed_separable_mix" if lvl.rank else "bleed_direct_mix"
         rows = blocks_y if lvl.rank else dst.height   # direct: one row per work-item
-        rt.launch(rt.kernel(kfile, name, **defines), (blocks_x, rows), hp, i32(hpitch),
-                  active, src, i32(src.pitch), i32(src.width), i32(src.height), dst,
-                  i32(dst.pitch), i32(dst.height), i32(dx), i32(dy), f32(p.strength), tint,
-                  *weights)
+        rt.launch(rt.kernel(kfile, name, **defines), (blocks_x, rows), hp, hpitch, active, src,
+                  src.pitch, src.width, src.height, dst, dst.pitch, dst.height, dx, dy, p.strength,
+                  tint, *weights)
         return dst

@@ -254,21 +254,16 @@ class Breathing(Plugin):
         jac = np.array([[[inv, 0.0], [0.0, inv]]])
         defines = footprint_defines(lvl.filter, "edge", needs_sanitising(ctx, "breathing"))
         dst = rt.image(out_win, 4)
-        i32 = np.int32
-        head = (src, dst, i32(src.pitch), i32(read.width), i32(read.height), i32(dst.pitch),
-                i32(dst.height))
-        at = (i32(rows.first), i32(rows.shift))
+        head = (src, dst, src.pitch, read.width, read.height, dst.pitch, dst.height)
+        at = (rows.first, rows.shift)
         size = (dst.pitch // 4, max(dst.height, 1))
         if double:
             jc, n = elliptical_spread(jac)
             knl = rt.kernel("breathing.cl", "breathing_ewa_f64", fp64=lvl.fp64, **defines)
-            rt.launch(knl, size, *head, np.float64(ax), np.float64(ay), np.float64(inv),
-                      np.float64(jc[0, 0, 0]), i32(n[0]), *at)
+            rt.launch(knl, size, *head, ax, ay, inv, jc[0, 0, 0], int(n[0]), *at)
             return dst
         hx, hy, n = footprint_spread(jac, lvl.filter)
         knl = rt.kernel("breathing.cl", "breathing_footprint",
                         CLFX_STREAM_STORES=int(rt.streams_stores(dst.nbytes)), **defines)
-        f32 = np.float32
-        rt.launch(knl, size, *head, f32(ax), f32(ay), f32(inv), f32(hx[0]), f32(hy[0]), i32(n[0]),
-                  *at)
+        rt.launch(knl, size, *head, ax, ay, inv, hx[0], hy[0], n[0], *at)
         return dst

@@ -331,9 +331,7 @@ class ChromaticAberration(Plugin):
         defines = kernel_defines(lvl.filter, p.border, sanitise)
         defines.update(NWAVE=n, NWP=padded_count(n), LUTN=LUT_SIZE, GREEN_IN_PLACE=int(n == 3))
         dst = src.like()
-        i32 = np.int32
-        at = (i32(canvas.width), i32(canvas.height), i32(rows.first), i32(rows.count),
-              i32(rows.shift))
+        at = (canvas.width, canvas.height, rows.first, rows.count, rows.shift)
         if n == 3 and not double:
             dmap, wbuf = self.packed_maps(rt, p, geo, rows)
             name = "chromatic_aberration_packed"
@@ -342,12 +340,11 @@ class ChromaticAberration(Plugin):
                           rt.kernel("chromatic_aberration.cl", name + "_fix", fp64=lvl.fp64,
                                     CA_FAST=1, **defines),
                           dmap, lvl.filter, src.pitch // 4, rows.count, (src, dst),
-                          (wbuf, i32(src.pitch)) + at)
+                          (wbuf, src.pitch) + at)
             return dst
         luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, geo, n, double)
-        real = np.float64 if double else np.float32
-        args = (src, dst, luts, weights, i32(src.pitch), i32(canvas.width), i32(canvas.height),
-                i32(canvas.x0), i32(canvas.y0), real(cx), real(cy), real(ax), real(ay))
+        args = (src, dst, luts, weights, src.pitch, canvas.width, canvas.height, canvas.x0,
+                canvas.y0, cx, cy, ax, ay)
         quads = src.pitch // 4
         inner = None if double else interior_quads(shift, FILTER_TAPS[lvl.filter],
                                                    canvas.width, canvas.height)
@@ -361,8 +358,7 @@ class ChromaticAberration(Plugin):
                 continue
             knl = rt.kernel("chromatic_aberration.cl", "chromatic_aberration_apply",
                             fp64=lvl.fp64, CA_FAST=fast, **defines)
-            rt.launch(knl, (nq, max(y1 - y0, 1)), *args, i32(qx0), i32(y0), i32(nq),
-                      i32(y1 - y0), i32(rows.shift))
+            rt.launch(knl, (nq, max(y1 - y0, 1)), *args, qx0, y0, nq, y1 - y0, rows.shift)
         return dst
 
 

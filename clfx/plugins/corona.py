@@ -313,7 +313,6 @@ class Corona(SpreadRegions, Plugin):
     def render_reference(self, rt, p, ctx):
         """The effect on pixels in the reference basis (linear Rec.709)."""
         src = ctx.source
-        i32, f32 = np.int32, np.float32
         out_win = self.output_window(p, ctx)
         ox, oy = src.window.offset_in(out_win)
         f = self.factor(p, ctx)
@@ -322,8 +321,8 @@ class Corona(SpreadRegions, Plugin):
         if f == 1:
             bright = src.like()
             rt.launch(rt.kernel("corona.cl", "corona_bright", **luma),
-                      (src.pitch // 4, src.height), src, bright, i32(src.pitch), i32(src.height),
-                      f32(p.threshold))
+                      (src.pitch // 4, src.height), src, bright, src.pitch, src.height,
+                      p.threshold)
             glow_win = out_win
         else:
             # the pattern at 1 / f resolution: reduced pixel (i, j) is centred on output pixel
@@ -332,10 +331,8 @@ class Corona(SpreadRegions, Plugin):
             glow_win = Rect(0, 0, -(-out_win.width // f) + 2, -(-out_win.height // f) + 2)
             bright = rt.image(glow_win)
             rt.launch(rt.kernel("corona.cl", "corona_down", FACTOR=f, **luma),
-                      (bright.pitch, bright.height), src, i32(src.pitch), i32(src.width),
-                      i32(src.height), i32(ox), i32(oy),
-                      bright, i32(bright.pitch), i32(bright.width), i32(bright.height),
-                      f32(p.threshold))
+                      (bright.pitch, bright.height), src, src.pitch, src.width, src.height, ox, oy,
+                      bright, bright.pitch, bright.width, bright.height, p.threshold)
             if not support.empty:
                 sx, sy = support.x0 - out_win.x0, support.y0 - out_win.y0
                 support = Rect(sx // f, sy // f, -(-(sx + support.width) // f) + 2,
@@ -346,10 +343,9 @@ class Corona(SpreadRegions, Plugin):
                               split_level=max(p.threshold, 1.0) * 64.0 * f * f, info=info)
         out = rt.image(out_win)
         rt.launch(rt.kernel("corona.cl", "corona_compose", FACTOR=f, **luma),
-                  (out.pitch, out.height), src, i32(src.pitch), i32(src.width), i32(src.height),
-                  i32(ox), i32(oy), glow,
-                  i32(glow.pitch), i32(glow.width), i32(glow.height), out, i32(out.pitch),
-                  i32(out.width), i32(out.height), f32(p.intensity), f32(p.threshold))
+                  (out.pitch, out.height), src, src.pitch, src.width, src.height, ox, oy, glow,
+                  glow.pitch, glow.width, glow.height, out, out.pitch, out.width, out.height,
+                  p.intensity, p.threshold)
         if f > 1:
             ctx.notes.append(f"corona: pattern at 1/{f} resolution")
         bad = ctx.analysis.nonfinite_count

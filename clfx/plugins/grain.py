@@ -370,13 +370,12 @@ class Grain(Plugin):
                    "GRAIN_TOE": repr(TOE), "GRAIN_D_GREY": repr(D_GREY),
                    "COVERAGE": int(alpha_is_coverage(p.coverage, ctx, "grain")),
                    **ctx.luminance_defines}
-        seed = np.uint32(effect_seed(p.seed, ctx.seed, GRAIN_SALT))
-        frame = np.int32(ctx.frame)
+        seed = effect_seed(p.seed, ctx.seed, GRAIN_SALT)
+        frame = ctx.frame
         fmt = ctx.camera.sensor_width
-        ar, ag, ab = (np.float32(a) for a in grain_amounts(p, ctx.width_px, fmt))
+        ar, ag, ab = grain_amounts(p, ctx.width_px, fmt)
         grey = self.planned(p, ctx).middle_grey
-        tone = (np.float32(p.response), np.float32(grey), np.float32(1.0 / grey))
-        i32 = np.int32
+        tone = (p.response, grey, 1.0 / grey)
         dst = src.like()
         pitch, height = src.pitch, src.height
         x0, y0 = src.window.x0, src.window.y0
@@ -385,8 +384,8 @@ class Grain(Plugin):
         if truncation is None or max(sigmas) < 1e-6:
             # draft, or size 0: the filter is the single tap 1, so skip the two passes
             knl = rt.kernel("grain.cl", "grain_apply_white", fp64=lvl.fp64, **defines)
-            rt.launch(knl, (pitch // 4, height), src, dst, i32(pitch), i32(height), i32(x0),
-                      i32(y0), seed, frame, ar, ag, ab, *tone)
+            rt.launch(knl, (pitch // 4, height), src, dst, pitch, height, x0, y0, seed, frame, ar,
+                      ag, ab, *tone)
             return dst
 
         radius, weights = self._device_weights(rt, sigmas, truncation, use64)
@@ -399,10 +398,10 @@ class Grain(Plugin):
         def knl(name):
             return rt.kernel("grain.cl", name, fp64=lvl.fp64, **defines)
 
-        rt.launch(knl("grain_noise"), (npitch // 4, rows), noise, i32(npitch), i32(rows),
-                  i32(x0 - radius), i32(y0 - radius), seed, frame)
-        rt.launch(knl("grain_blur_h"), (pitch // 4, rows), noise, tmp, weights, i32(npitch),
-                  i32(pitch), i32(rows))
-        rt.launch(knl("grain_apply"), (pitch // 4, height), src, dst, tmp, weights, i32(pitch),
-                  i32(height), ar, ag, ab, *tone)
+        rt.launch(knl("grain_noise"), (npitch // 4, rows), noise, npitch, rows, x0 - radius,
+                  y0 - radius, seed, frame)
+        rt.launch(knl("grain_blur_h"), (pitch // 4, rows), noise, tmp, weights, npitch, pitch,
+                  rows)
+        rt.launch(knl("grain_apply"), (pitch // 4, height), src, dst, tmp, weights, pitch, height,
+                  ar, ag, ab, *tone)
         return dst

@@ -291,7 +291,6 @@ class Halation(ScatterPlugin, Plugin):
         src, kfile = ctx.source, self.descriptor.kernel
         k = self.psf(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
-        f32, i32 = np.float32, np.int32
         from pyopencl import cltypes
 
         tint = cltypes.make_float4(*s.tint, 0.0)
@@ -299,14 +298,14 @@ class Halation(ScatterPlugin, Plugin):
         mx = rt.kernel(kfile, "halation_mix", CONSERVE=int(p.conserve), **ctx.luminance_defines)
 
         def highlights(img, h):
-            rt.launch(hl, (img.pitch // 4, max(img.height, 1)), img, h, i32(img.pitch),
-                      i32(img.height), f32(p.threshold), f32(p.knee))
+            rt.launch(hl, (img.pitch // 4, max(img.height, 1)), img, h, img.pitch, img.height,
+                      p.threshold, p.knee)
 
         def mix(g, dst, rect):
             dx, dy = rect.offset_in(src.window)
-            rt.launch(mx, (dst.pitch // 4, max(dst.height, 1)), src, i32(src.pitch),
-                      i32(src.width), i32(src.height), g, dst, i32(dst.pitch), i32(dst.height),
-                      i32(dx), i32(dy), f32(s.strength), tint, f32(p.threshold), f32(p.knee))
+            rt.launch(mx, (dst.pitch // 4, max(dst.height, 1)), src, src.pitch, src.width,
+                      src.height, g, dst, dst.pitch, dst.height, dx, dy, s.strength, tint,
+                      p.threshold, p.knee)
 
         split = max(4.0 * p.threshold, 1e-3 * ctx.analysis.peak_luminance)
         dst = self.spread_mixed(rt, p, ctx, k, highlights, mix, split)

@@ -416,18 +416,16 @@ class Lens(Plugin):
         defines.update(HAS_MAP=int(use_map), HAS_TCA=int(use_tca), HAS_VIG=int(use_vig),
                        LUTN=LUT_SIZE)
         dst = src.like()
-        i32 = np.int32
-        at = (i32(src.pitch), i32(canvas.width), i32(canvas.height), i32(rows.first),
-              i32(rows.count), i32(rows.shift))
+        at = (src.pitch, canvas.width, canvas.height, rows.first, rows.count, rows.shift)
         if double:
             map_buf, lut_buf = bufs
             knl = rt.kernel("lens.cl", "lens_apply", fp64=lvl.fp64, **defines)
-            rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, map_buf, lut_buf,
-                      *at, *[np.float64(c) for c in geo["consts"]])
+            rt.launch(knl, (src.pitch // 4, max(rows.count, 1)), src, dst, map_buf, lut_buf, *at,
+                      *geo["consts"])
             return dst
         defines.update(LENS_MAPS=bufs.maps)
         ccx, ccy, _, vig_scale, vk1, vk2, vk3 = geo["consts"]
-        tail = at + tuple(np.float32(c) for c in (ccx, ccy, vig_scale, vk1, vk2, vk3))
+        tail = at + (ccx, ccy, vig_scale, vk1, vk2, vk3)
         fast = rt.kernel("lens.cl", "lens_packed", fp64=lvl.fp64, **defines)
         if bufs.maps == 0:
             rt.launch(fast, (src.pitch // 4, max(rows.count, 1)), src, dst, bufs.entries, *tail)

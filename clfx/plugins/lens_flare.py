@@ -481,9 +481,8 @@ class LensFlare(Plugin):
             return []
         knl = rt.kernel("lens_flare.cl", "lens_flare_measure", fp64=self.level(ctx).fp64,
                         FULL=int(full), **ctx.luminance_defines)
-        rt.launch(knl, (n,), src, np.int32(src.pitch),
-                  rt.to_device(np.asarray(boxes, np.int32).ravel()), np.int32(n),
-                  np.float32(p.threshold), out)
+        rt.launch(knl, (n,), src, src.pitch, rt.to_device(np.asarray(boxes, np.int32).ravel()), n,
+                  p.threshold, out)
         m = rt.from_device(out, np.float32, 8 * n).reshape(n, 8).astype(np.float64)
         if full:
             return [flare.Light(src.window.x0 + r[4], src.window.y0 + r[5], tuple(r[:3]), r[7],
@@ -617,7 +616,6 @@ class LensFlare(Plugin):
         norm = rt.to_device(normals.astype(np.float32).ravel())
         edge = rt.to_device(self.edge_tables(ctx)[2])
         ox, oy = src.window.offset_in(out_win)
-        i32, f32 = np.int32, np.float32
         coarse = None
         for t in reversed(tiles):
             final = t.factor == 1
@@ -626,13 +624,11 @@ class LensFlare(Plugin):
                             BLADES=blades if blades >= 3 else 0, COMPOSE=int(final),
                             EDGE_SAMPLES=flare.EDGE_SAMPLES, EDGE_REACH=f"{flare.EDGE_REACH}f")
             c = coarse if coarse is not None else out
-            rt.launch(knl, (out.pitch // 4, t.height), out, i32(out.pitch), i32(t.width),
-                      i32(t.height), f32(out_win.x0 + 0.5 * t.factor),
-                      f32(out_win.y0 + 0.5 * t.factor), f32(t.factor), i32(t.tiles_x),
-                      rt.to_device(t.start), rt.to_device(t.items), ent,
-                      rt.to_device(t.constant.ravel()), norm, edge, c, i32(c.pitch),
-                      i32(c.width), i32(c.height), i32(coarse is not None), src,
-                      i32(src.pitch), i32(src.width), i32(src.height), i32(ox), i32(oy))
+            rt.launch(knl, (out.pitch // 4, t.height), out, out.pitch, t.width, t.height,
+                      out_win.x0 + 0.5 * t.factor, out_win.y0 + 0.5 * t.factor, t.factor,
+                      t.tiles_x, rt.to_device(t.start), rt.to_device(t.items), ent,
+                      rt.to_device(t.constant.ravel()), norm, edge, c, c.pitch, c.width, c.height,
+                      coarse is not None, src, src.pitch, src.width, src.height, ox, oy)
             coarse = out
         return coarse
 
@@ -653,14 +649,12 @@ class LensFlare(Plugin):
         ent = entries.astype(np.float32).ravel() if entries.size else np.zeros(ENTRY, np.float32)
         out = rt.image(out_win)
         ox, oy = src.window.offset_in(out_win)
-        i32 = np.int32
         knl = rt.kernel("lens_flare.cl", "lens_flare_render", TILE=TILE,
                         BLADES=blades if blades >= 3 else 0, **ctx.luminance_defines)
-        rt.launch(knl, (out.pitch // 4, out.height), src, i32(src.pitch), i32(src.width),
-                  i32(src.height), i32(ox), i32(oy), out, i32(out.pitch), i32(out.width),
-                  i32(out.height), i32(out_win.x0), i32(out_win.y0), i32(tiles_x),
+        rt.launch(knl, (out.pitch // 4, out.height), src, src.pitch, src.width, src.height, ox, oy,
+                  out, out.pitch, out.width, out.height, out_win.x0, out_win.y0, tiles_x,
                   rt.to_device(start), rt.to_device(flat), rt.to_device(ent),
-                  rt.to_device(normals.ravel()), np.float32(p.roundness), np.float32(p.rim))
+                  rt.to_device(normals.ravel()), p.roundness, p.rim)
         ctx.notes.append(f"lens_flare: {len(sources)} light source(s)")
         bad = ctx.analysis.nonfinite_count
         if bad:

@@ -275,9 +275,8 @@ class SensorNoise(Plugin):
         def build():
             pattern = src.like()
             knl = rt.kernel("sensor_noise.cl", "sensor_noise_prnu", fp64=fp64)
-            rt.launch(knl, (src.pitch // 4, src.height), pattern, np.int32(src.pitch),
-                      np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
-                      np.uint32(seed), np.float32(p.prnu))
+            rt.launch(knl, (src.pitch // 4, src.height), pattern, src.pitch, src.height,
+                      src.window.x0, src.window.y0, seed, p.prnu)
             return pattern
 
         key = ("sensor_noise.prnu", seed, float(p.prnu), src.window, src.pitch,
@@ -292,11 +291,10 @@ class SensorNoise(Plugin):
                    "PRNU": int(p.prnu > 0), "INVERT": int(switch is not None),
                    "SWITCH": repr(float(switch or 0.0)), "MAX_COUNT": MAX_COUNT}
         pattern = self.prnu_pattern(rt, p, ctx, lvl.fp64) if p.prnu > 0 else src  # src: unread
-        kr, kg, kb = (np.float32(k) for k in
-                      electrons_per_unit(p, ctx.camera, self.planned(p, ctx).middle_grey))
-        well, prnu, read = np.float32(p.full_well), np.float32(p.prnu), np.float32(p.read_noise)
-        seed = np.uint32(effect_seed(p.seed, ctx.seed, SENSOR_SALT))
-        x0, y0 = np.int32(src.window.x0), np.int32(src.window.y0)
+        kr, kg, kb = electrons_per_unit(p, ctx.camera, self.planned(p, ctx).middle_grey)
+        well, prnu, read = p.full_well, p.prnu, p.read_noise
+        seed = effect_seed(p.seed, ctx.seed, SENSOR_SALT)
+        x0, y0 = src.window.x0, src.window.y0
         demosaic, chroma = p.mosaic == "bayer", p.chroma_noise > 0
         # bayer: the first pass writes each photosite's deviation (one float per pixel)
         dst = rt.buffer(src.pitch * src.height * 4) if demosaic else src.like()
@@ -304,9 +302,8 @@ class SensorNoise(Plugin):
         last = not (demosaic or chroma)          # the apply pass writes the output itself
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_apply", fp64=lvl.fp64,
                         MOSAIC=int(demosaic), COVERAGE=coverage * int(last), **defines)
-        rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, np.int32(src.pitch),
-                  np.int32(src.height), x0, y0, seed, np.int32(ctx.frame),
-                  kr, kg, kb, read, well, prnu)
+        rt.launch(knl, (src.pitch // 4, src.height), src, dst, pattern, src.pitch, src.height, x0,
+                  y0, seed, ctx.frame, kr, kg, kb, read, well, prnu)
         if last:
             return dst
         out = src.like()
@@ -314,8 +311,7 @@ class SensorNoise(Plugin):
         knl = rt.kernel("sensor_noise.cl", "sensor_noise_demosaic", DEMOSAIC=int(demosaic),
                         CHROMA=int(chroma), COVERAGE=coverage, SHOT=defines["SHOT"],
                         **ctx.luminance_defines)
-        rt.launch(knl, (src.pitch, src.height), src, dst, out, np.int32(src.pitch),
-                  np.int32(src.window.width), np.int32(src.height), x0, y0, seed,
-                  np.int32(ctx.frame), kr, kg, kb, read, prnu, well,
-                  np.float32(p.chroma_noise), np.float32(1.0 / cell))
+        rt.launch(knl, (src.pitch, src.height), src, dst, out, src.pitch, src.window.width,
+                  src.height, x0, y0, seed, ctx.frame, kr, kg, kb, read, prnu, well,
+                  p.chroma_noise, 1.0 / cell)
         return out

@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from clfx.core.plugin import Descriptor, FloatParam, Level, Vec2Param
 from clfx.host import Plugin, register
 
@@ -89,10 +87,7 @@ class Vignette(Plugin):
             ctx.notes.append(f"vignette: {nonfinite} non-finite pixel(s) set to 0")
         knl = rt.kernel("vignette.cl", "vignette_apply", fp64=self.level(ctx).fp64)
         dst = src.like()
-        f32 = np.float32
-        rt.launch(knl, (src.pitch // 4, src.height), src, dst, np.int32(src.pitch),
-                  np.int32(src.height), np.int32(src.window.x0), np.int32(src.window.y0),
-                  f32(cx), f32(cy), f32(sx), f32(sy), f32(1.0 / ctx.camera.focal_length),
-                  f32(p.natural), f32(ax), f32(ay), f32(p.amount), f32(p.radius),
-                  f32(1.0 / p.softness))
+        rt.launch(knl, (src.pitch // 4, src.height), src, dst, src.pitch, src.height,
+                  src.window.x0, src.window.y0, cx, cy, sx, sy, 1.0 / ctx.camera.focal_length,
+                  p.natural, ax, ay, p.amount, p.radius, 1.0 / p.softness)
         return dst

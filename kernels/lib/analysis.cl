@@ -43,8 +43,7 @@ kernel void analysis_rows(global const float *src, const int pitch, const int wi
     const int4 ok = analysis_finite4(c) & inside;
     const float4 l = (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
     max_lum = select(max_lum, fmax(max_lum, l), ok);
-    const float16 cz = select((float16)0.0f, c,
-                              (as_int16(c) & 0x7f800000) != 0x7f800000);   /* NaN, Inf -> 0 */
+    const float16 cz = clfx_finite16_or_zero(c);                            /* NaN, Inf -> 0 */
     const float4 lz = (CLFX_LUMA_R) * cz.s048c + (CLFX_LUMA_G) * cz.s159d
                       + (CLFX_LUMA_B) * cz.s26ae;
     sum_lum += select((float4)0.0f, lz, inside);

@@ -82,17 +82,43 @@ inline float clfx_finite_or(float v, float fallback)
   return clfx_is_finite(v) ? v : fallback;
 }
 
+/* Sanitising, one helper per width: non-finite lanes (NaN, +-Inf) become 0, finite ones stay
+ * bit for bit; a vector select, no branches.  The _pixel forms zero a whole RGBA pixel that has
+ * any non-finite channel (the glare family's rule: such a pixel neither lights nor spreads). */
 inline float4 clfx_finite4_or_zero(float4 v)
 {
-  return (float4)(clfx_finite_or(v.x, 0.0f), clfx_finite_or(v.y, 0.0f),
-                  clfx_finite_or(v.z, 0.0f), clfx_finite_or(v.w, 0.0f));
+  return select((float4)0.0f, v, (as_uint4(v) & 0x7f800000u) != (uint4)0x7f800000u);
 }
 
-/* 4 RGBA pixels at once (one vector select): non-finite lanes become 0. */
+inline float8 clfx_finite8_or_zero(float8 v)
+{
+  return select((float8)0.0f, v, (as_uint8(v) & 0x7f800000u) != (uint8)0x7f800000u);
+}
+
 inline float16 clfx_finite16_or_zero(float16 v)
 {
   return select((float16)0.0f, v, (as_uint16(v) & 0x7f800000u) != (uint16)0x7f800000u);
 }
+
+inline float4 clfx_finite_pixel_or_zero(float4 c)
+{
+  return (clfx_is_finite(c.x) & clfx_is_finite(c.y) & clfx_is_finite(c.z) & clfx_is_finite(c.w))
+         ? c : (float4)(0.0f);
+}
+
+/* 4 RGBA pixels (lanes s0123 the first pixel's, ...). */
+inline float16 clfx_finite_pixels16_or_zero(float16 c)
+{
+  const int16 bad = (as_int16(c) & 0x7f800000) == 0x7f800000;
+  const int4 p = bad.s048c | bad.s159d | bad.s26ae | bad.s37bf;
+  return select(c, (float16)(0.0f), (int16)(p.xxxx, p.yyyy, p.zzzz, p.wwww));
+}
+
+/* The rows of a band of a tiled render: the buffer `p` (rows of `pitch` pixels of `ch` floats)
+ * holds the canvas rows from `row0` on; from here on it is addressed in canvas rows, as in the
+ * whole render (whose row0 is 0), so positions take the whole render's coordinates and only
+ * the band's offset is in the addressing; only rows the buffer holds may be touched. */
+#define CLFX_CANVAS_ROWS(p, pitch, ch, row0) ((p) -= (long)(row0) * (long)(pitch) * (ch))
 
 /* Luminance of scene-linear RGB: the working space's Y row of RGB -> XYZ, given as build
  * defines (clfx.core.colour.luminance_defines); BT.709's weights by default. */

@@ -35,8 +35,8 @@
  * samples' nearest 2x2 texels together (one sample: today's 2x2 clamp).
  *
  * Both render the canvas rows row0 .. row0 + dst_h (the map's rows: all of them in a whole
- * render) from buffers holding the canvas rows from `shift` on (RS_TILE: a tile of a tiled
- * render, clfx.kit.warp.CanvasRows; 0 in a whole render); records count quads from the
+ * render) from buffers holding the canvas rows from `shift` on (CLFX_CANVAS_ROWS: a tile of a
+ * tiled render, clfx.kit.warp.CanvasRows; 0 in a whole render); records count quads from the
  * canvas's first row.
  */
 #ifndef CLFX_FOOTPRINT_WARP_H
@@ -77,7 +77,8 @@ kernel void effect##_footprint(global const float *src, global float *dst,      
                                const int dst_pitch, const int dst_h, const int row0,          \
                                const int shift)                                               \
 {                                                                                             \
-  RS_TILES(src, src_pitch, dst, dst_pitch, shift);                                            \
+  CLFX_CANVAS_ROWS(src, src_pitch, 4, shift);                                                 \
+  CLFX_CANVAS_ROWS(dst, dst_pitch, 4, shift);                                                 \
   const int quads = dst_pitch / 4, entry = get_global_id(1) * quads + get_global_id(0);      \
   const int quad = entry + row0 * quads;                                                      \
   fp_prefetch_quad(src, src_pitch, map + FP_Q_INTS * min(entry + FP_PREFETCH_AHEAD,           \

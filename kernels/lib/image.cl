@@ -44,7 +44,7 @@ kernel void image_sanitize(global float *img, const int pitch, const int height,
   const float16 v = vload16(0, p);
   const int16 bad = (as_int16(v) & 0x7f800000) == 0x7f800000;
   if(!any(bad)) return;
-  vstore16(select(v, (float16)(0.0f), bad), 0, p);
+  vstore16(clfx_finite16_or_zero(v), 0, p);
   const int n = (any(bad.s0123) ? 1 : 0) + (any(bad.s4567) ? 1 : 0) +
                 (any(bad.s89ab) ? 1 : 0) + (any(bad.scdef) ? 1 : 0);
   atomic_add(count, n);

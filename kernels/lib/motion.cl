@@ -190,16 +190,14 @@ kernel void motion_sanitize(global const float *src, global float *dst, const in
   const int qx = get_global_id(0), y = get_global_id(1);
   if(y >= height || qx * 4 >= pitch) return;
   const int i = (y * pitch + qx * 4) * 4;
-  float16 c = vload16(0, src + i);
-  const int16 bad = (as_int16(c) & 0x7f800000) == 0x7f800000;
-  vstore16(select(c, (float16)(0.0f), bad), 0, dst + i);
+  vstore16(clfx_finite16_or_zero(vload16(0, src + i)), 0, dst + i);
 }
 
 /* --- tile classification ---------------------------------------------------------------- */
 /* Tiles lie on a grid of K x K pixels from the canvas's origin (the whole render's window,
- * whatever part of it `aux` holds: canvas rows from row0 on, MG_ROWS); this launch computes
- * the tile rows from ty0 on, whose pixel rows the buffer holds.  A record: (vx, vy, |v|, 0)
- * of the tile's fastest pixel (the first in scan order among equals), and in `tiles_b` its
+ * whatever part of it `aux` holds: canvas rows from row0 on, CLFX_CANVAS_ROWS); this launch
+ * computes the tile rows from ty0 on, whose pixel rows the buffer holds.  A record: (vx, vy,
+ * |v|, 0) of the tile's fastest pixel (the first in scan order among equals), and in `tiles_b` its
  * backward motion (bx, by) from `auxb` (CURVED; else unused). */
 kernel void motion_tilemax(global const float *aux, global const float *auxb,
                            global float *tiles, global float *tiles_b, const int pitch,
@@ -208,7 +206,7 @@ kernel void motion_tilemax(global const float *aux, global const float *auxb,
 {
   const int tx = get_global_id(0), ty = ty0 + get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
-  MG_ROWS(aux, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(aux, pitch, 4, row0);
   const int x0 = tx * k, y0 = ty * k;
   const int x1 = min(x0 + k, width), y1 = min(y0 + k, height);
   float4 best = (float4)(0.0f);
@@ -221,7 +219,7 @@ kernel void motion_tilemax(global const float *aux, global const float *auxb,
     }
   vstore4(best, ty * tiles_x + tx, tiles);
 #if CURVED
-  MG_ROWS(auxb, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(auxb, pitch, 4, row0);
   vstore2(at >= 0 ? vload2(0, auxb + 4 * (size_t)at) : (float2)(0.0f), ty * tiles_x + tx,
           tiles_b);
 #endif
@@ -794,8 +792,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 /* tiles: (tx, ty, samples, jitter) per moving tile (jitter 0: the midpoint rule, exact for the
  * few, dense samples of a short blur; 1: per-pixel jitter where samples are sparse);
  * k: tile size (multiple of 4); qpt = k * k / 4.  The buffers hold the canvas rows
- * row0 <= y < row1 (MG_ROWS: a band of a tiled render and its margin; 0 and the canvas's
- * height in a whole render); the rows band0 <= y < band1 are written.  nmax_b: the
+ * row0 <= y < row1 (CLFX_CANVAS_ROWS: a band of a tiled render and its margin; 0 and the
+ * canvas's height in a whole render); the rows band0 <= y < band1 are written.  nmax_b: the
  * backward motion of each NeighborMax record's pixel (CURVED).
  * `col` holds finite colours (the host sanitises NaN/Inf first); a float32 sum of huge ones
  * that overflows is taken again with every colour halved and divided by n first, so finite
@@ -817,11 +815,11 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const int jittered = tiles[4 * tile + 3];
   const int x = tx * k + (r % qrow) * 4, y = ty * k + r / qrow;
   if(y < band0 || y >= band1 || x >= pitch) return;
-  MG_ROWS(col, pitch, 4, row0);
-  MG_ROWS(aux, pitch, 4, row0);
-  MG_ROWS(dst, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(col, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(aux, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(dst, pitch, 4, row0);
 #if CURVED
-  MG_ROWS(auxb, pitch, 4, row0);
+  CLFX_CANVAS_ROWS(auxb, pitch, 4, row0);
 #endif
 
   const float4 vn = vload4(ty * tiles_x + tx, nmax);   /* dominant velocity, |v| in .z */

@@ -14,13 +14,11 @@
 #define JITTER 1
 #endif
 
-/* A band of a tiled render (the rows `clfx.kit.motion.band_margin` grows it by): the buffer `p` (rows of `pitch` pixels of
- * `ch` floats) holds the canvas rows from `row0` on; from here on it is addressed in canvas
- * rows, as in the whole render (row0 0), so positions take the whole render's coordinates
- * and only the band's offset is in the addressing.  Reads clamp to the rows the buffer holds
- * (row0 <= y < row1): the canvas's edges where the buffer reaches them, elsewhere never hit
- * (the band's margin covers every read). */
-#define MG_ROWS(p, pitch, ch, row0) ((p) -= (size_t)(row0) * (size_t)(pitch) * (ch))
+/* A band of a tiled render (the rows `clfx.kit.motion.band_margin` grows it by): its buffers
+ * hold the canvas rows from `row0` on, addressed in canvas rows (CLFX_CANVAS_ROWS,
+ * kernels/lib/common.h).  Reads clamp to the rows the buffer holds (row0 <= y < row1): the
+ * canvas's edges where the buffer reaches them, elsewhere never hit (the band's margin covers
+ * every read). */
 
 /* Colour at continuous position (px, py) (pixel centres at +0.5), clamp-to-edge (rows
  * row0 <= y < row1), times `scale`.  The float index is clamped before the int conversion

@@ -43,40 +43,39 @@
 #define RS_TAPS 6
 #endif
 
-/* A tile of a tiled render (clfx.kit.warp.CanvasRows): `p` holds the canvas rows from
- * `shift` on (rows of `pitch` RGBA pixels); from here on it is addressed in canvas rows, as
- * in the whole render (whose shift is 0), and only rows the buffer holds are touched. */
-#define RS_TILE(p, pitch, shift) ((p) -= (shift) * (pitch) * 4)
-/* Both buffers of a band kernel to canvas rows. */
-#define RS_TILES(src, src_pitch, dst, dst_pitch, shift)                                     \
-  RS_TILE(src, src_pitch, shift);                                                           \
-  RS_TILE(dst, dst_pitch, shift)
-
-/* The prologue of a kernel that renders canvas rows row0 .. row0 + rows, 4 output pixels (a
+/* A tile of a tiled render (clfx.kit.warp.CanvasRows): its buffers hold the canvas rows
+ * from `shift` on (rows of `pitch` RGBA pixels), addressed in canvas rows from the prologue on
+ * (CLFX_CANVAS_ROWS, kernels/lib/common.h), so its pixels take the whole render's arithmetic.
+ *
+ * The prologue of a kernel that renders canvas rows row0 .. row0 + rows, 4 output pixels (a
  * quad) per work-item: declares qx (the quad), my (the row within the band) and y (its
- * canvas row), returns past the band or the pitch (the global size is rounded up), then
- * RS_TILES. */
+ * canvas row), returns past the band or the pitch (the global size is rounded up), then puts
+ * both buffers in canvas rows. */
 #define RS_BAND_PROLOGUE(src, src_pitch, dst, dst_pitch, rows, row0, shift)                 \
   const int qx = get_global_id(0), my = get_global_id(1), y = my + (row0);                  \
   if(my >= (rows) || qx * 4 >= (dst_pitch)) return;                                         \
-  RS_TILES(src, src_pitch, dst, dst_pitch, shift)
+  CLFX_CANVAS_ROWS(src, src_pitch, 4, shift);                                               \
+  CLFX_CANVAS_ROWS(dst, dst_pitch, 4, shift)
 
 /* The prologue of a kernel over `count` records (the checked quads of a band): declares n,
- * the record, returns past count, then RS_TILES. */
+ * the record, returns past count, then puts both buffers in canvas rows. */
 #define RS_RECORD_PROLOGUE(src, dst, pitch, count, shift)                                   \
   const int n = get_global_id(0);                                                           \
   if(n >= (count)) return;                                                                  \
-  RS_TILES(src, pitch, dst, pitch, shift)
+  CLFX_CANVAS_ROWS(src, pitch, 4, shift);                                                   \
+  CLFX_CANVAS_ROWS(dst, pitch, 4, shift)
 
-/* Non-finite lanes (exponent bits all ones) become 0; a vector select, no branches. */
-inline float4 rs_sanitise(float4 v)
-{
-#if !RS_SANITISE
-  return v;
+/* Sanitised texels: kernels/lib/common.h's helpers, or the value itself where the frame's
+ * analysis counted no non-finite pixel (RS_SANITISE 0). */
+#if RS_SANITISE
+#define rs_sanitise(v) clfx_finite4_or_zero(v)
+#define rs_sanitise8(v) clfx_finite8_or_zero(v)
+#define rs_sanitise16(v) clfx_finite16_or_zero(v)
+#else
+#define rs_sanitise(v) (v)
+#define rs_sanitise8(v) (v)
+#define rs_sanitise16(v) (v)
 #endif
-  const int4 bad = (as_int4(v) & (int4)0x7f800000) == (int4)0x7f800000;
-  return select(v, (float4)0.0f, bad);
-}
 
 /* One texel with the border rule; (x, y) may lie anywhere. */
 inline float4 rs_texel(global const float *src, int pitch, int w, int h, int x, int y)
@@ -157,23 +156,6 @@ inline void rs_weights(REAL t, REAL *wt)
 #else
   rs_lanczos3_weights(t, wt);
 #endif
-}
-
-/* Sanitised vector loads: non-finite lanes read as 0. */
-inline float8 rs_sanitise8(float8 v)
-{
-#if !RS_SANITISE
-  return v;
-#endif
-  return select(v, (float8)0.0f, (as_int8(v) & (int8)0x7f800000) == (int8)0x7f800000);
-}
-
-inline float16 rs_sanitise16(float16 v)
-{
-#if !RS_SANITISE
-  return v;
-#endif
-  return clfx_finite16_or_zero(v);
 }
 
 #define RS_MINMAX(t) do { lo = fmin(lo, (t)); hi = fmax(hi, (t)); } while(0)

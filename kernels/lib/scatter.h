@@ -27,11 +27,6 @@ inline int scatter_pixel_finite(float4 c)
   return clfx_is_finite(c.x) & clfx_is_finite(c.y) & clfx_is_finite(c.z) & clfx_is_finite(c.w);
 }
 
-/* A pixel with any non-finite channel becomes 0 (the glare family's sanitising). */
-inline float4 scatter_sanitise(float4 c)
-{
-  return scatter_pixel_finite(c) ? c : (float4)(0.0f);
-}
 
 inline float scatter_knee_weight(float lum, float threshold, float knee)
 {
@@ -68,10 +63,10 @@ inline void scatter_highlights_body(global const float *src, global float *dst, 
   if(qx * 4 >= pitch || y >= height) return;
   const size_t i = ((size_t)y * pitch + qx * 4) * 4;
   const float16 c = vload16(0, src + i);
-  const float4 h0 = scatter_highlight(scatter_sanitise(c.s0123), threshold, knee, boost);
-  const float4 h1 = scatter_highlight(scatter_sanitise(c.s4567), threshold, knee, boost);
-  const float4 h2 = scatter_highlight(scatter_sanitise(c.s89ab), threshold, knee, boost);
-  const float4 h3 = scatter_highlight(scatter_sanitise(c.scdef), threshold, knee, boost);
+  const float4 h0 = scatter_highlight(clfx_finite_pixel_or_zero(c.s0123), threshold, knee, boost);
+  const float4 h1 = scatter_highlight(clfx_finite_pixel_or_zero(c.s4567), threshold, knee, boost);
+  const float4 h2 = scatter_highlight(clfx_finite_pixel_or_zero(c.s89ab), threshold, knee, boost);
+  const float4 h3 = scatter_highlight(clfx_finite_pixel_or_zero(c.scdef), threshold, knee, boost);
   vstore16((float16)(h0, h1, h2, h3), 0, dst + i);
 }
 
@@ -97,7 +92,7 @@ inline void scatter_mix_body(global const float *src, const int spitch, const in
     const int sx = qx * 4 + l + dx;
     float4 c = (float4)(0.0f);
     if(sx >= 0 && sx < swidth && sy >= 0 && sy < sheight)
-      c = scatter_sanitise(vload4((size_t)sy * spitch + sx, src));
+      c = clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx, src));
     /* PSF >= 0 and h >= 0: clamp the FFT's round-off (~1e-16 x energy) at 0 */
     float4 r = c + strength * tint * (float4)(fmax(gg[l].xyz, 0.0f), 0.0f);
     if(additive == 0) r -= strength * scatter_highlight(c, threshold, knee, boost);
