@@ -17,7 +17,6 @@ import numpy as np
 from clfx.core import colour
 from clfx.core.camera import Camera
 from clfx.core.errors import ClipError, ParamError
-from clfx.core.frame import crop_to
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Descriptor, Level, Params
 from clfx.core.rect import Rect
 from clfx.fx.analysis import MID_GREY, analyse
@@ -424,46 +423,6 @@ class Plugin:
             if clip.name != "source" and not clip.optional and getattr(ctx, clip.name) is None:
                 raise ClipError(f"effect {self.descriptor.name!r} needs a {clip.name} pass "
                                 f"and the frame has none (see `clfx probe`, --depth/--velocity)")
-
-    def apply(self, rt, p: Params, source: np.ndarray, *, depth=None, velocity=None,
-              velocity_back=None, quality: str = DEFAULT_QUALITY, frame: int = 0, seed: int = 0, camera=None,
-              data_window: Rect | None = None, display_window: Rect | None = None,
-              pixel_aspect: float = 1.0, display_referred: bool = False,
-              keep_rod: bool = False, read_image=None, read_lens=None, reference_camera=None,
-              rgb_to_xyz=None):
-        """Run the effect on host arrays: upload, identity check, render, download.
-
-        ``source`` is in the working space whose RGB -> XYZ matrix is ``rgb_to_xyz`` (default
-        linear Rec.709).
-
-        Returns the output cropped to the source window, or ``(array, window)`` with
-        ``keep_rod=True``.  ``reference_camera`` is the camera at the shot's first keys
-        (default ``camera``: nothing animated).  An identity returns a copy of ``source`` with NaN and infinities set to 0 (as a look does on
-        upload).
-        """
-        src = np.asarray(source, np.float32)
-        if src.ndim == 2:
-            src = np.stack([src, src, src, np.ones_like(src)], axis=2)
-        window = data_window or Rect.from_size(src.shape[1], src.shape[0])
-        ctx = RenderContext(
-            rt, rt.upload(src, window),
-            depth=None if depth is None else rt.upload(np.asarray(depth, np.float32), window),
-            velocity=None if velocity is None else rt.upload(np.asarray(velocity, np.float32), window),
-            velocity_back=(None if velocity_back is None
-                           else rt.upload(np.asarray(velocity_back, np.float32), window)),
-            display_window=display_window or window, pixel_aspect=pixel_aspect, frame=frame,
-            seed=seed, camera=camera, quality=quality, display_referred=display_referred,
-            read_image=read_image, read_lens=read_lens, reference_camera=reference_camera,
-            rgb_to_xyz=rgb_to_xyz)
-        self.check_clips(ctx)
-        if self.is_identity(p, ctx):  # as in a look, whose upload sanitises: NaN/Inf -> 0
-            out, out_window = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0), window
-        else:
-            img = self.render(rt, p, ctx)
-            out, out_window = rt.download(img), img.window
-        if keep_rod:
-            return out, out_window
-        return crop_to(out, out_window, window)
 
 
 _REGISTRY: dict[str, type[Plugin]] = {}

@@ -10,6 +10,7 @@ from clfx.core.plugin import (QUALITY_LEVELS, BoolParam, Level, ChoiceParam, Flo
                          Vec2Param)
 from clfx.plugins import discover, get_plugin
 from clfx.core.rect import Rect
+from tests.effects import render_effect
 
 
 def test_every_plugin_descriptor_is_complete():
@@ -74,8 +75,8 @@ def test_look_renders_with_one_upload_and_one_download(rt, rng, monkeypatch):
     assert calls == {"upload": 1, "download": 1}
     assert [s.ran for s in report.steps] == [True, False, True]
     assert report.steps[1].reason == "natural and amount are 0"
-    one = cls().apply(rt, cls.params(amount=0.3), src)
-    two = cls().apply(rt, cls.params(amount=0.2, natural=0.5), one)
+    one = render_effect(rt, cls(), cls.params(amount=0.3), src)
+    two = render_effect(rt, cls(), cls.params(amount=0.2, natural=0.5), one)
     np.testing.assert_allclose(out.rgba, two, rtol=1e-6)
     assert out.metadata["clfx:look"] == "two" and len(out.metadata["clfx:paramsHash"]) == 16
 

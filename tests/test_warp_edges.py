@@ -11,6 +11,7 @@ import clfx
 from clfx.core.rect import Rect
 from clfx.plugins import discover
 from tests.contract.effects import CAMERA
+from tests.effects import render_effect
 
 GREY = 0.5
 SHAPE = (36, 64)
@@ -47,7 +48,7 @@ def test_warp_of_a_flat_plate_keeps_its_border(rt, case):
     name, settings = WARPS[case]
     cls = discover()[name]
     # the camera's focus at 2 m: breathing from a reference of 0.5 m widens the frame 5.6 %
-    got = cls().apply(rt, cls.params(**settings), flat(), camera=CAMERA)
+    got = render_effect(rt, cls(), cls.params(**settings), flat(), camera=CAMERA)
     assert got.shape == SHAPE + (4,)
     # interpolating filters on a constant plate: the constant wherever the plate is read
     np.testing.assert_allclose(borders(got), GREY, rtol=2e-3)
@@ -57,8 +58,8 @@ def test_warp_of_a_flat_plate_keeps_its_border(rt, case):
 def test_explicit_black_border_still_darkens(rt):
     # the old behaviour stays available when asked for (outside the frame is transparent)
     cls = discover()["distortion"]
-    got = cls().apply(rt, cls.params(k1=-2.0, fit="none", border="black"), flat(),
-                      camera=CAMERA)
+    got = render_effect(rt, cls(), cls.params(k1=-2.0, fit="none", border="black"), flat(),
+                        camera=CAMERA)
     assert borders(got).min() < 0.9 * GREY
 
 

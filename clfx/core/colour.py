@@ -2,8 +2,8 @@
 luminance weights (the matrix's Y row) that effects build spectral tables and thresholds with.
 
 The pipeline takes the matrix from OCIO (`clfx.io.colour.working_rgb_to_xyz`) and hands it
-to effects on the render context (``ctx.rgb_to_xyz``); where none is known (NumPy arrays
-through ``Plugin.apply``, tests) effects work in linear Rec.709, `REC709_TO_XYZ`.  Nothing
+to effects on the render context (``ctx.rgb_to_xyz``); where none is known (a context
+built without one, tests) effects work in linear Rec.709, `REC709_TO_XYZ`.  Nothing
 here reads a colour configuration: host, fx and plugins never import OpenImageIO.
 
 For Rec.709 the classic constants stand: the IEC 61966-2-1 XYZ -> RGB matrix (OCIO's built-in

@@ -52,6 +52,7 @@ from clfx.fx.motion import (
     CUBIC_MAX_PX,
     LEVELS,
     MAX_RADIUS_PX,
+    MotionLevel,
     SHUTTER_OFFSETS,
     TileGrid,
     reach_px,
@@ -67,8 +68,9 @@ KERNEL = "camera_blur.cl"
 
 FAST_LEVELS = ("draft", "preview")
 """Levels whose path gather reads the nearest pixel rather than bilinearly (its long, smooth
-paths hide it; the speed is what these levels are for).  Trucking renders through
-the motion gather's levels (:data:`CAMERA_LEVELS`: bilinear, the clamped cubic under 2 px)."""
+paths hide it; the speed is what these levels are for).  Trucking's motion gather keeps
+its fetches at every level (:data:`QUALITY`: bilinear, the clamped cubic under
+:data:`CAMERA_CUBIC_MAX_PX`)."""
 
 
 def camera_motion(p, ctx):
@@ -154,7 +156,17 @@ sampled as a renderer samples (jittered points and instants, issue 24) the cubic
 wins on the bench case (final 39.37 vs 38.88 dB at 480x270, 37.69 vs 36.67 at 320x180) and
 on Cycles' truck (48.6 vs 48.5; pan level)."""
 
-_BASE_LEVELS = dict(LEVELS, draft=replace(LEVELS["draft"], max_samples=10))
+
+@dataclass(frozen=True)
+class CameraLevel(MotionLevel):
+    """One level of camera_blur: its two renders in one place.  Trucking's motion gather
+    (`clfx.fx.motion.reconstruct`) reads the :class:`~clfx.fx.motion.MotionLevel` fields;
+    the pan/roll/zoom path gather reads ``max_samples``, ``jitter`` and ``fp64`` with its
+    own sample spacing and fetch (``path_spacing``, ``path_bilinear``)."""
+
+    path_spacing: float = 0.5    # path gather: target distance between samples, px
+    path_bilinear: bool = True   # path gather: bilinear fetches (else nearest)
+
 
 CAMERA_SPACING = {"draft": 0.5, "preview": 0.5, "final": 0.25, "reference": 0.25}
 """Trucking's sample spacing (px of blur) per level, short blurs included.  ``final`` used
@@ -163,10 +175,34 @@ half a pixel like the faster levels and ended the worst level on Cycles' pan (re
 apart along the pan's 10 px blur read the texture at two sub-pixel offsets, both blurred by
 the bilinear read; a quarter pixel scores 0.0437 (truck 0.0416 -> 0.0414, issue 35)."""
 
-CAMERA_LEVELS = {name: replace(lvl, cubic_max_px=CAMERA_CUBIC_MAX_PX,
-                               spacing=CAMERA_SPACING[name], short_spacing=0.0)
-                 for name, lvl in _BASE_LEVELS.items()}
-"""The motion gather's levels (:data:`clfx.fx.motion.LEVELS`) for trucking, with the cubic
+
+def _summary(lvl: CameraLevel) -> str:
+    return (f"pan/roll/zoom: exact path gather, up to {lvl.max_samples} samples (one per "
+            f"{lvl.path_spacing:g} px of the longest path), "
+            f"{'bilinear' if lvl.path_bilinear else 'nearest'}, "
+            f"{'float64' if lvl.fp64 else 'float32'} accumulation"
+            f"{'' if lvl.jitter else ', midpoint rule'}; trucking: the motion gather "
+            f"(motion_blur's), up to {lvl.max_samples} samples (one per {lvl.spacing:g} px), "
+            f"clamped cubic under {lvl.cubic_max_px:g} px, "
+            f"{'bilinear' if lvl.bilinear else 'nearest'} above")
+
+
+def _level(name: str, lvl: MotionLevel) -> CameraLevel:
+    """camera_blur's ``name`` level from the motion gather's: trucking with the cubic only
+    under :data:`CAMERA_CUBIC_MAX_PX` and a sample per :data:`CAMERA_SPACING` px (short
+    blurs too); the path gather with the motion level's spacing, nearest at
+    :data:`FAST_LEVELS`; 10 samples at most for draft instead of 8 (both renders)."""
+    out = CameraLevel("", fp64=lvl.fp64, jitter=lvl.jitter, bilinear=lvl.bilinear,
+                      max_samples=10 if name == "draft" else lvl.max_samples,
+                      spacing=CAMERA_SPACING[name], cubic_max_px=CAMERA_CUBIC_MAX_PX,
+                      short_spacing=0.0, path_spacing=lvl.spacing,
+                      path_bilinear=lvl.bilinear and name not in FAST_LEVELS)
+    return replace(out, summary=_summary(out))
+
+
+QUALITY = {name: _level(name, lvl) for name, lvl in LEVELS.items()}
+"""camera_blur's levels, one table for both renders (what ``clfx describe`` shows is what
+runs).  Trucking: the motion gather's levels (:data:`clfx.fx.motion.LEVELS`) with the cubic
 only under :data:`CAMERA_CUBIC_MAX_PX`, a sample per half pixel of blur or less at every level
 (:data:`CAMERA_SPACING`; short blurs too: motion_blur's ``short_spacing`` is not used; the
 background's blurs of a few pixels took 3 samples at draft and preview, which ended below the
@@ -176,22 +212,6 @@ at 1920x1080 (blurs up to 32 px) 8 samples lie 4 px apart, and the ghost copies 
 texture left draft 0.08 dB below the naive per-pixel line blur (39.07 vs 39.14 dB log-PSNR);
 10 samples score 39.48 dB, level with preview's 16 (39.49), for 81% of preview's CPU time
 (9 samples: 39.08)."""
-
-
-def _quality(name, lvl):
-    bilinear = lvl.bilinear and name not in FAST_LEVELS
-    return replace(lvl, bilinear=bilinear, short_spacing=0.0, summary=(
-        f"pan/roll/zoom: exact path gather, up to {lvl.max_samples} samples (one per "
-        f"{lvl.spacing:g} px of the longest path), {'bilinear' if bilinear else 'nearest'}, "
-        f"{'float64' if lvl.fp64 else 'float32'} accumulation"
-        f"{'' if lvl.jitter else ', midpoint rule'}; trucking: the motion gather "
-        f"(motion_blur's), up to {lvl.max_samples} samples (one per "
-        f"{CAMERA_SPACING[name]:g} px), clamped cubic under {CAMERA_CUBIC_MAX_PX:g} px, "
-        f"bilinear above"))
-
-
-QUALITY = {name: _quality(name, lvl) for name, lvl in _BASE_LEVELS.items()}
-""":data:`CAMERA_LEVELS`, described for the path gather."""
 
 
 @register
@@ -253,7 +273,7 @@ class CameraBlur(Plugin):
         src = ctx.source
         if not needs_depth(p):
             length = peak_speed_bound(m, src.window, None) * (t1 - t0)
-            n = int(np.clip(math.ceil(length / level.spacing), 2, level.max_samples))
+            n = int(np.clip(math.ceil(length / level.path_spacing), 2, level.max_samples))
             rx, ry = path_reach_px(m, src.window, t0, t1)
             return CameraPlan(t0=t0, t1=t1, motion=m, samples=n,
                               reach=(math.ceil(rx) + GATHER_TAP_ROWS,
@@ -277,7 +297,7 @@ class CameraBlur(Plugin):
         if len(ctx.bands(window)) > 1:   # the bands' frame-wide tiles
             grid = tile_grid(rt, rows_of, width=window.width, height=window.height, t0=t0,
                              t1=t1, max_radius_px=max_radius, peak_speed=peak,
-                             level=CAMERA_LEVELS[ctx.quality], has_depth=True, curved=curved)
+                             level=self.level(ctx), has_depth=True, curved=curved)
         margin = band_margin(t0, t1, reach_px(peak, t0, t1, max_radius), curved)
         return CameraPlan(t0=t0, t1=t1, motion=m, reach=(margin, margin), grid=grid)
 
@@ -331,8 +351,9 @@ class CameraBlur(Plugin):
             col = sanitized_copy(rt, src) if nonfinite else src
             dst = rt.image(band, 4)
             r0 = src.window.y0 - whole.y0
-            rt.launch(rt.kernel(KERNEL, "camera_blur_similarity", BILINEAR=int(level.bilinear),
-                                JITTER=int(level.jitter), fp64=level.fp64),
+            rt.launch(rt.kernel(KERNEL, "camera_blur_similarity",
+                                BILINEAR=int(level.path_bilinear), JITTER=int(level.jitter),
+                                fp64=level.fp64),
                       (src.pitch // 4, band.height), col, dst, i32(src.pitch), i32(src.width),
                       i32(r0), i32(r0 + src.height), i32(band.y0 - whole.y0),
                       i32(band.y1 - whole.y0), i32(whole.x0), i32(whole.y0), f32(m["cx"]),
@@ -354,7 +375,7 @@ class CameraBlur(Plugin):
         a = ctx.analysis
         out, stats = reconstruct(
             rt, src, vel, depth, t0=t0, t1=t1, max_radius_px=self.max_radius_px(p, ctx),
-            peak_speed=self._peak(m, whole, a), level=CAMERA_LEVELS[ctx.quality],
+            peak_speed=self._peak(m, whole, a), level=self.level(ctx),
             frame=ctx.frame, nonfinite=nonfinite, velocity_back=back,
             **(dict(grid=plan.grid, row0=src.window.y0 - whole.y0,
                     band=(band.y0 - whole.y0, band.y1 - whole.y0)) if tiled else {}))

@@ -19,6 +19,7 @@ from clfx.core.plugin import QUALITY_LEVELS, BoolParam, FloatParam, IntParam
 from clfx.core.rect import Rect
 from clfx.host import RenderContext
 from clfx.plugins import discover
+from tests.effects import render_effect
 
 EFFECTS = sorted(discover())
 QUALITIES = QUALITY_LEVELS
@@ -118,15 +119,16 @@ def plugin(name: str):
 
 def apply(rt, name: str, src: np.ndarray, p=None, *, quality: str = "final", frame: int = 7,
           seed: int = 11, **kw):
-    """Render ``src`` through ``name`` with synthetic passes and the contract camera."""
-    kw = {**passes(name, src.shape[:2]), "camera": CAMERA, **READERS, **kw}
-    return plugin(name).apply(rt, p if p is not None else params(name), src, quality=quality,
-                              frame=frame, seed=seed, **kw)
+    """Render ``src`` through ``name`` with synthetic passes and the contract camera, on the
+    production path (`tests.effects.render_effect`: the pipeline's readers)."""
+    kw = {**passes(name, src.shape[:2]), "camera": CAMERA, **kw}
+    return render_effect(rt, plugin(name), p if p is not None else params(name), src,
+                         quality=quality, frame=frame, seed=seed, **kw)
 
 
 def context(rt, name: str, src: np.ndarray, *, quality: str = "final", window: Rect = None,
             display_window: Rect = None, **kw) -> RenderContext:
-    """A render context like ``Plugin.apply`` builds (passes uploaded, contract camera)."""
+    """A render context like the pipeline builds (passes uploaded, contract camera)."""
     window = window or Rect.from_size(src.shape[1], src.shape[0])
     up = {k: rt.upload(v, window) for k, v in passes(name, src.shape[:2]).items()}
     return RenderContext(rt, rt.upload(src, window), display_window=display_window or window,

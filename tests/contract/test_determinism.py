@@ -18,6 +18,7 @@ import pytest
 
 from tests.contract import effects as E
 from tests.contract.known import param
+from tests.effects import render_effect
 
 ROOT = Path(__file__).resolve().parents[2]
 ONE_THREAD = {"POCL_MAX_PTHREAD_COUNT": "1", "POCL_CPU_MAX_CU_COUNT": "1"}
@@ -29,10 +30,10 @@ def render_all(rt, fresh: bool = False) -> dict[str, np.ndarray]:
     out = {}
     for name in E.EFFECTS:
         plugin = E.discover()[name]() if fresh else E.plugin(name)
-        kw = {**E.passes(name, src.shape[:2]), "camera": E.CAMERA, **E.READERS}
+        kw = {**E.passes(name, src.shape[:2]), "camera": E.CAMERA}
         for q in E.QUALITIES:
-            out[f"{name}-{q}"] = plugin.apply(rt, E.params(name), src, quality=q, frame=7,
-                                              seed=11, **kw)
+            out[f"{name}-{q}"] = render_effect(rt, plugin, E.params(name), src, quality=q, frame=7,
+                                               seed=11, **kw)
     return out
 
 

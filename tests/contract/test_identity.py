@@ -4,8 +4,8 @@ The neutral settings are found from each descriptor (``effects.neutral_candidate
 numeric parameter set to 0 where its range allows, each switch turned off, then all of them
 at once).  For every candidate, ``is_identity`` gives a non-empty reason exactly when
 rendering anyway leaves the frame unchanged; at least one candidate is an identity, and then
-``apply`` returns the input bit for bit.  The active parameters of the other contract tests
-are no identity (so those tests render).
+its render (`tests.effects.render_effect`) returns the input bit for bit.  The active
+parameters of the other contract tests are no identity (so those tests render).
 """
 import numpy as np
 import pytest

@@ -1,6 +1,7 @@
 """Force `clfx.fx.fftconv.convolve_blocks` into many small blocks (the 8K path on a test
 frame) and record that it took them."""
 from clfx.fx import fftconv
+from tests.effects import render_effect
 
 
 def force_blocks(monkeypatch, cells: int = 4096, min_block: int = 8) -> list:
@@ -26,9 +27,9 @@ def assert_blocks_match(rt, monkeypatch, plugin, p, src, quality, *, cells=6000,
     returns the blocked render."""
     import numpy as np
 
-    one = plugin.apply(rt, p, src, quality=quality, **kw)
+    one = render_effect(rt, plugin, p, src, quality=quality, **kw)
     calls = force_blocks(monkeypatch, cells, 16)
-    got = plugin.apply(rt, p, src, quality=quality, **kw)
+    got = render_effect(rt, plugin, p, src, quality=quality, **kw)
     assert calls and all(c.blocks > 1 for c in calls)
     np.testing.assert_allclose(got, one, rtol=0, atol=tol * np.abs(one).max())
     return got

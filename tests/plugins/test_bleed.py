@@ -6,6 +6,7 @@ from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.fx.blocks import assert_blocks_match
 from tests.reference.bleed import bleed as reference
+from tests.effects import render_effect
 
 LEVELS = ("draft", "preview", "final", "reference")
 
@@ -24,7 +25,7 @@ def radius(p, shape, display=None):
 def test_bleed_matches_reference(rt, rng, shape):
     src = rng.uniform(0.0, 3.0, shape + (4,)).astype(np.float32)
     p = Bleed.params(strength=0.4, size=0.08)
-    got = Bleed().apply(rt, p, src)
+    got = render_effect(rt, Bleed(), p, src)
     want = oracle(src, p, radius(p, shape))
     # direct float32 gather of <= 441 taps: ~1e-6 relative
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * max(want.max(), 1))
@@ -35,9 +36,9 @@ def test_bleed_levels_monotonic_and_hdr(rt, rng):
     src[20, 25, :3] = 1e5
     p = Bleed.params(strength=0.3, size=0.1)   # radius 6 px: direct at every level
     want = oracle(src, p, radius(p, (40, 50)))
-    errs = [np.abs(Bleed().apply(rt, p, src, quality=q) - want).max() for q in LEVELS]
+    errs = [np.abs(render_effect(rt, Bleed(), p, src, quality=q) - want).max() for q in LEVELS]
     assert all(a >= b for a, b in zip(errs, errs[1:])), errs
-    got = Bleed().apply(rt, p, src, quality="final").astype(np.float64)
+    got = render_effect(rt, Bleed(), p, src, quality="final").astype(np.float64)
     m = want >= 1e-3
     assert (np.abs(got - want)[m] / want[m]).max() <= 1e-4
     assert got.min() >= -1e-6 * want.max()
@@ -62,7 +63,8 @@ def test_bleed_rod_grows_into_display(rt):
     src = np.zeros((10, 10, 4), np.float32)
     src[0, 0, :3] = 50.0
     p = Bleed.params(size=0.05)
-    out, win = Bleed().apply(rt, p, src, data_window=data, display_window=display, keep_rod=True)
+    out, win = render_effect(rt, Bleed(), p, src, data_window=data, display_window=display,
+                             keep_rod=True)
     r = radius(p, None, display)
     assert win == data.grown(r)
     want = oracle(src, p, r, data_window=(10, 10, 20, 20),
@@ -95,7 +97,7 @@ def test_bleed_separable_levels_within_psf_error(rt, rng, quality):
     p = Bleed.params(strength=0.4, size=0.08)          # radius 5 px: the fused path
     r = radius(p, src.shape[:2])
     want = oracle(src, p, r)
-    got = Bleed().apply(rt, p, src, quality=quality)
+    got = render_effect(rt, Bleed(), p, src, quality=quality)
     # |PSF_m * h - PSF * h| <= L1(PSF_m - PSF) max(h) (h <= max rgb), times strength; plus
     # float32 round-off of a <= 441-tap sum
     l1 = separable_psf_error(psflib.exponential(r, r / 3.0), LEVELS[quality].rank)
@@ -111,7 +113,7 @@ def test_bleed_block_skipping_sparse_specks(rt, rng):
     for y, x in ((0, 0), (7, 3), (8, 4), (149, 202), (75, 100), (40, 199), (100, 1)):
         src[y, x, :3] = (5.0, 1e3, 2.0)
     p = Bleed.params(strength=0.3, size=0.02)          # radius 5 px
-    out, win = Bleed().apply(rt, p, src, keep_rod=True)
+    out, win = render_effect(rt, Bleed(), p, src, keep_rod=True)
     r = radius(p, src.shape[:2])
     want = oracle(src, p, r, out_window=(win.x0, win.y0, win.x1, win.y1))
     # float32 gather of <= 441 taps: ~1e-6 relative
@@ -128,7 +130,7 @@ def test_bleed_large_radius_uses_glare_path(rt, rng):
     src = rng.uniform(0.0, 0.2, (90, 120, 4)).astype(np.float32)
     src[30, 40, :3] = 50.0
     p = Bleed.params(strength=0.3, size=0.1)           # radius 15 px > 10: FFT path
-    got = Bleed().apply(rt, p, src, quality="final")
+    got = render_effect(rt, Bleed(), p, src, quality="final")
     want = oracle(src, p, radius(p, src.shape[:2]))
     # float64 FFT: ~1e-7 relative of the peak
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
@@ -139,8 +141,8 @@ def test_bleed_reference_float64_and_final_agree_tightly(rt, rng):
     src[27, 35, :3] = 1e5
     p = Bleed.params(strength=0.3, size=0.09)          # radius 8 px
     want = oracle(src, p, radius(p, src.shape[:2]))
-    ref = Bleed().apply(rt, p, src, quality="reference").astype(np.float64)
-    fin = Bleed().apply(rt, p, src, quality="final").astype(np.float64)
+    ref = render_effect(rt, Bleed(), p, src, quality="reference").astype(np.float64)
+    fin = render_effect(rt, Bleed(), p, src, quality="final").astype(np.float64)
     m = want >= 1e-3
     # float64 sums: only float32 output rounding and the float32 mix remain (~1e-7 relative)
     assert (np.abs(ref - want)[m] / want[m]).max() <= 2e-6

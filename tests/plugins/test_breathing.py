@@ -14,6 +14,7 @@ from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import (built_with_streaming, nonfinite_image,
                                            plain_and_streamed, render_with_notes, smooth_image)
 from tests.reference import breathing as ref
+from tests.effects import render_effect
 
 LENS = Camera(focal_length=50.0, focus_distance=0.6, breathing=1.0)
 SETUP = Camera(focal_length=50.0, focus_distance=5.0)
@@ -33,7 +34,8 @@ def m_of(camera=LENS, setup=SETUP, amount=None):
 
 def run(rt, src, quality="final", camera=LENS, setup=SETUP, **kw):
     p = Breathing.params(**kw)
-    return Breathing().apply(rt, p, src, quality=quality, camera=camera, reference_camera=setup)
+    return render_effect(rt, Breathing(), p, src, quality=quality, camera=camera,
+                         reference_camera=setup)
 
 
 def test_scale_is_the_thin_lens_image_distance_ratio():
@@ -173,8 +175,8 @@ def test_widening_reads_the_overscan_and_does_not_warn(rt, rng):
     camera, setup = SETUP.updated(breathing=1.0), LENS
     m = m_of(camera, setup)
     p = Breathing.params()
-    out = Breathing().apply(rt, p, src, camera=camera, reference_camera=setup, data_window=data,
-                            display_window=display)
+    out = render_effect(rt, Breathing(), p, src, camera=camera, reference_camera=setup,
+                        data_window=data, display_window=display)
     want = ref.breathing(src, m=m, data_window=(-6, -6, 54, 38), display_window=(0, 0, 48, 32))
     np.testing.assert_allclose(out, want, rtol=0, atol=2e-5)
     from clfx.host import RenderContext

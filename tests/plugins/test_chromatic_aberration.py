@@ -9,13 +9,14 @@ from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import (nonfinite_image, render_with_notes, smooth_image,
                                            wide_range_image)
 from tests.reference.chromatic_aberration import chromatic_aberration as reference
+from tests.effects import render_effect
 
 PARAMS = dict(amount=0.01, cubic=0.4, center=(0.1, -0.2))
 
 
 def run(rt, src, quality="final", **kw):
     p = CA.params(**{**PARAMS, **kw})
-    return CA().apply(rt, p, src, quality=quality), p
+    return render_effect(rt, CA(), p, src, quality=quality), p
 
 
 def want(src, p, quality, **kw):
@@ -45,7 +46,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
     src = smooth_image(rng, 36, 60)
     p = CA.params(**PARAMS)
     ref = want(src, p, "reference")
-    errs = [np.abs(CA().apply(rt, p, src, quality=q) - ref).max()
+    errs = [np.abs(render_effect(rt, CA(), p, src, quality=q) - ref).max()
             for q in ("draft", "preview", "final", "reference")]
     assert all(a >= b for a, b in zip(errs, errs[1:])), errs
     assert errs[-1] < 2e-7
@@ -93,7 +94,7 @@ def test_lut_matches_direct_inversion():
 def test_identity_and_hard_values(rt, rng):
     src = rng.uniform(0.0, 1.0, (8, 8, 4)).astype(np.float32)
     assert CA().is_identity(CA.params(amount=0.0), None) == "amount is 0"
-    assert np.array_equal(CA().apply(rt, CA.params(amount=0.0), src), src)
+    assert np.array_equal(render_effect(rt, CA(), CA.params(amount=0.0), src), src)
     src[4, 4] = np.nan
     src[1, 1] = np.inf
     src[6, 2, :3] = 1e5
@@ -105,7 +106,7 @@ def test_identity_and_hard_values(rt, rng):
 def test_three_channel_switch_and_pixel_aspect(rt, rng):
     src = rng.uniform(0.0, 1.0, (20, 28, 4)).astype(np.float32)
     p = CA.params(**PARAMS, spectral=False)
-    got = CA().apply(rt, p, src, quality="preview", pixel_aspect=2.0)
+    got = render_effect(rt, CA(), p, src, quality="preview", pixel_aspect=2.0)
     np.testing.assert_allclose(got, want(src, p, "preview", pixel_aspect=2.0), atol=1e-5)
 
 
@@ -118,8 +119,8 @@ def test_nan_and_inf_become_zero_and_finite_input_stays_finite(rt, rng, quality,
     assert np.isfinite(got).all()
     assert "chromatic_aberration: 4 non-finite pixel(s) read as 0" in notes
     clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
-    np.testing.assert_array_equal(got, CA().apply(rt, p, clean, quality=quality))
-    assert np.isfinite(CA().apply(rt, p, wide_range_image(rng), quality=quality)).all()
+    np.testing.assert_array_equal(got, render_effect(rt, CA(), p, clean, quality=quality))
+    assert np.isfinite(render_effect(rt, CA(), p, wide_range_image(rng), quality=quality)).all()
 
 
 def test_packed_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch):
@@ -129,10 +130,10 @@ def test_packed_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch):
 
     src = rng.uniform(0.0, 2.0, (181, 323, 4)).astype(np.float32)
     p = CA.params(amount=0.01 + rng.uniform(0, 1e-6), spectral=False, border="black")
-    whole = CA().apply(rt, p, src, quality="final")
+    whole = render_effect(rt, CA(), p, src, quality="final")
     rt.cache.clear("chromatic_aberration.packed")
     monkeypatch.setattr(resample, "BAND_PIXELS", 3000)
-    banded = CA().apply(rt, p, src, quality="final")
+    banded = render_effect(rt, CA(), p, src, quality="final")
     assert np.array_equal(banded, whole)
 
 
@@ -145,13 +146,13 @@ def test_matches_reference_in_acescg(rt, rng):
     src = smooth_image(rng, 24, 36)
     for spectral in (True, False):
         p = CA.params(**PARAMS, spectral=spectral)
-        got = CA().apply(rt, p, src, quality="final", rgb_to_xyz=aces)
+        got = render_effect(rt, CA(), p, src, quality="final", working_space="ACEScg")
         # as test_matches_reference_hard_shapes: float32 LUT and 16 bicubic reads, values <= 2
         # (values <= 3.4 in Rec.709)
         np.testing.assert_allclose(
             got, in_reference_basis(lambda s: want(s, p, "final"), src, aces), atol=4e-5)
         # the ACEScg pixels taken as Rec.709 ones (no conversion) give other fringes
-        assert np.abs(got - CA().apply(rt, p, src, quality="final")).max() > 1e-4
+        assert np.abs(got - render_effect(rt, CA(), p, src, quality="final")).max() > 1e-4
 
 
 @pytest.mark.parametrize("quality", ["draft", "preview", "reference"])

@@ -11,6 +11,7 @@ from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.fx.blocks import assert_blocks_match
 from tests.reference.corona import corona as reference
+from tests.effects import render_effect
 
 PARAMS = dict(threshold=2.0, intensity=0.5, size=0.05, extent=4.0)
 
@@ -34,7 +35,7 @@ def test_corona_matches_reference(rt, rng, shape):
     p = Corona.params(**PARAMS)
     plugin = Corona()
     for quality in ("final", "reference"):
-        got = plugin.apply(rt, p, src, quality=quality)
+        got = render_effect(rt, plugin, p, src, quality=quality)
         want = reference(src, psf_for(plugin, rt, p, src, quality), **p.as_dict())
         # float32 image and PSF storage (FFT in float64): ~1e-7 of the largest value
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
@@ -45,7 +46,7 @@ def test_error_falls_with_quality(rt, rng):
     p = Corona.params(**PARAMS)
     plugin = Corona()
     want = reference(src, psf_for(plugin, rt, p, src, "reference"), **p.as_dict())
-    errs = [np.abs(plugin.apply(rt, p, src, quality=q) - want).max()
+    errs = [np.abs(render_effect(rt, plugin, p, src, quality=q) - want).max()
             for q in ("draft", "preview", "final", "reference")]
     assert errs[0] >= errs[1] >= errs[2] >= errs[3], errs
 
@@ -120,7 +121,7 @@ def test_cie_fit_peaks():
 def test_identities(rt, rng):
     src = rng.uniform(0.0, 1.5, (9, 13, 4)).astype(np.float32)
     for kw in ({"intensity": 0.0}, {}):
-        got = Corona().apply(rt, Corona.params(**{**PARAMS, **kw}), src)
+        got = render_effect(rt, Corona(), Corona.params(**{**PARAMS, **kw}), src)
         assert np.array_equal(got, src)
 
 
@@ -129,7 +130,7 @@ def test_hdr_energy_no_negatives_and_shadows(rt):
     src[48, 48, :3] = 1e5
     p = Corona.params(**{**PARAMS, "size": 0.03, "extent": 5.0})
     for quality in ("preview", "final"):
-        got = Corona().apply(rt, p, src, quality=quality)
+        got = render_effect(rt, Corona(), p, src, quality=quality)
         assert got.min() >= 0.0
         diff = (got.astype(np.float64) - src)[..., :3]
         # the PSF (radius 29 px) stays inside: the corona moves light, it adds none (float32
@@ -146,8 +147,8 @@ def test_deterministic_and_alpha(rt, rng):
     src = scene(rng, (50, 70))
     src[..., 3] = rng.uniform(0, 1, (50, 70))
     p = Corona.params(**PARAMS)
-    a = Corona().apply(rt, p, src)
-    b = Corona().apply(rt, p, src)
+    a = render_effect(rt, Corona(), p, src)
+    b = render_effect(rt, Corona(), p, src)
     assert a.tobytes() == b.tobytes()
     np.testing.assert_array_equal(a[..., 3], src[..., 3])
 
@@ -158,8 +159,8 @@ def test_rod_grows(rt):
     data, display = Rect(20, 20, 36, 36), Rect(0, 0, 60, 60)
     p = Corona.params(**PARAMS)
     plugin = Corona()
-    out, win = plugin.apply(rt, p, src, data_window=data, display_window=display,
-                            keep_rod=True)
+    out, win = render_effect(rt, plugin, p, src, data_window=data, display_window=display,
+                             keep_rod=True)
     assert win.x0 < data.x0 and win.contains(data)
     assert out[8 + data.y0 - win.y0, :data.x0 - win.x0, 1].max() > 0.0
     k = psf_for(plugin, rt, p, src, "final", display_window=display)
@@ -185,7 +186,7 @@ def test_huge_size_is_capped_and_finite(rt, rng):
     src = scene(rng, (17, 31))
     p = Corona.params(**{**PARAMS, "size": 0.2, "extent": 40.0})
     plugin = Corona()
-    got = plugin.apply(rt, p, src, quality="draft")
+    got = render_effect(rt, plugin, p, src, quality="draft")
     assert np.isfinite(got).all() and got.min() >= 0.0
     k = psf_for(plugin, rt, p, src, "draft")
     assert k.shape[0] <= 2 * (1.5 * math.hypot(17, 31) + 2) + 1      # radius capped
@@ -210,9 +211,9 @@ def test_reduced_resolution_is_close_to_the_full_pattern(rt):
     plugin = Corona()
     ctx = RenderContext(rt, rt.upload(src), quality="final")
     assert plugin.factor(p, ctx) == 8
-    full = plugin.apply(rt, p, src, quality="reference").astype(np.float64)
+    full = render_effect(rt, plugin, p, src, quality="reference").astype(np.float64)
     for quality, tol in (("final", 0.09), ("preview", 0.15)):
-        got = plugin.apply(rt, p, src, quality=quality).astype(np.float64)
+        got = render_effect(rt, plugin, p, src, quality=quality).astype(np.float64)
         glow = full[..., :3] - src[..., :3]
         err = np.abs(got[..., :3] - full[..., :3])
         far = np.hypot(*np.mgrid[-90:90, -160:160]) > 10       # beyond the light's own block
@@ -334,7 +335,7 @@ def test_matches_reference_in_acescg(rt, rng):
     src[5, 5, :3] = (0.0, 0.0, 30.0)    # Y 2.2 in Rec.709 (above threshold), 1.7 in ACEScg
     p = Corona.params(**PARAMS)
     plugin = Corona()
-    got = plugin.apply(rt, p, src, quality="reference", rgb_to_xyz=aces)
+    got = render_effect(rt, plugin, p, src, quality="reference", working_space="ACEScg")
     psf = psf_for(plugin, rt, p, src, "reference")      # the reference basis's PSF
     want = in_reference_basis(lambda s: reference(s, psf, **p.as_dict()), src, aces)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
@@ -343,7 +344,7 @@ def test_matches_reference_in_acescg(rt, rng):
     assert highlights(src, p.threshold, aces)[0][5, 5].max() == 0.0      # not a highlight
     assert highlights(src, p.threshold)[0][5, 5].max() > 0.0             # in Rec.709 it is
     # the ACEScg pixels taken as Rec.709 ones (no conversion) give another corona
-    assert np.abs(got - plugin.apply(rt, p, src, quality="reference")).max() > 1e-3
+    assert np.abs(got - render_effect(rt, plugin, p, src, quality="reference")).max() > 1e-3
 
 
 def test_default_corona_around_a_candle_is_not_a_flat_white_disc(rt):
@@ -363,7 +364,7 @@ def test_default_corona_around_a_candle_is_not_a_flat_white_disc(rt):
     def white_run(img):
         return int((tonemap_preview(img, e)[h // 2, :, 1] >= 0.95).sum())
 
-    out = Corona().apply(rt, Corona.params(), src).astype(np.float64)
+    out = render_effect(rt, Corona(), Corona.params(), src).astype(np.float64)
     assert white_run(out) <= white_run(src) + 4, (white_run(out), white_run(src))
     # and the corona shows: the glow at 3 first-ring radii lifts the room visibly
     r0 = Corona.params().size * math.hypot(w, h)
@@ -392,9 +393,9 @@ def test_draft_keeps_the_rings(rt, size, quality="draft"):
     src[h // 2, w // 2, :3] = 2000.0
     p = Corona.params(size=size)
     r0 = size * math.hypot(w, h)
-    want = radial_profiles(Corona().apply(rt, p, src, quality="final")[..., :3] - 0.01,
+    want = radial_profiles(render_effect(rt, Corona(), p, src, quality="final")[..., :3] - 0.01,
                            w / 2 + 0.5, h / 2 + 0.5)
-    got = radial_profiles(Corona().apply(rt, p, src, quality=quality)[..., :3] - 0.01,
+    got = radial_profiles(render_effect(rt, Corona(), p, src, quality=quality)[..., :3] - 0.01,
                           w / 2 + 0.5, h / 2 + 0.5)
     f = Corona().factor(p, RenderContext(rt, rt.upload(src), quality=quality))
     for c in range(3):

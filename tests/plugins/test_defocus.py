@@ -10,6 +10,7 @@ from clfx.host import RenderContext
 from clfx.plugins.defocus import Defocus, defocus_sigmas
 from tests.conftest import hard_shapes
 from tests.reference.defocus import defocus as reference
+from tests.effects import render_effect
 
 LEVELS = ("draft", "preview", "final", "reference")
 # Max |error| for inputs in [0, 1] (see tests/test_blur.py: measured errors x 2-3, two axes)
@@ -19,7 +20,7 @@ TOL = {"draft": 6e-3, "preview": 1e-3, "final": 2e-4, "reference": 3e-7}
 def run(rt, src, quality="final", **kw):
     params = {k: kw.pop(k) for k in ("size", "aspect", "edges") if k in kw}
     p = Defocus.params(**params)
-    return Defocus().apply(rt, p, src, quality=quality, **kw), p
+    return render_effect(rt, Defocus(), p, src, quality=quality, **kw), p
 
 
 @pytest.mark.parametrize("shape", hard_shapes())
@@ -86,8 +87,8 @@ def test_light_spreads_past_the_data_window(rt, rng, edges):
     src = rng.uniform(0.0, 1.0, (12, 16, 4)).astype(np.float32)
     data, display = Rect(40, 30, 56, 42), Rect(0, 0, 96, 72)
     p = Defocus.params(size=0.02, edges=edges)  # sigma 2.4 px of the 120 px diagonal
-    got, window = Defocus().apply(rt, p, src, data_window=data, display_window=display,
-                                  keep_rod=True)
+    got, window = render_effect(rt, Defocus(), p, src, data_window=data, display_window=display,
+                                keep_rod=True)
     sigma = 0.02 * display.diagonal
     g = math.ceil(3 * sigma)
     assert window == data.grown(g)
@@ -101,7 +102,7 @@ def test_light_spreads_past_the_data_window(rt, rng, edges):
 
 def test_rod_is_clipped_to_the_frame_when_data_equals_display(rt, rng):
     src = rng.uniform(0.0, 1.0, (20, 30, 4)).astype(np.float32)
-    got, window = Defocus().apply(rt, Defocus.params(size=0.1), src, keep_rod=True)
+    got, window = render_effect(rt, Defocus(), Defocus.params(size=0.1), src, keep_rod=True)
     assert window == Rect(0, 0, 30, 20) and got.shape == src.shape
 
 
@@ -152,7 +153,7 @@ def test_bench_case_is_renderable(rt, rng):
     case = CASE.make(64, 36, rng)
     assert case["source"].shape == (36, 64, 4) and case["depth"] is None
     p = Defocus.params(**case["params"])
-    got = Defocus().apply(rt, p, case["source"], camera=case["camera"])
+    got = render_effect(rt, Defocus(), p, case["source"], camera=case["camera"])
     assert np.isfinite(got).all() and got.min() >= 0
 
 

@@ -12,6 +12,7 @@ from clfx.core.rect import Rect
 from clfx.fx.resample import FootprintMap
 from tests.conftest import hard_shapes
 from tests.reference import distortion as ref
+from tests.effects import render_effect
 
 CAM = Camera(focal_length=24.0, sensor_width=36.0)
 QUALITY_FOOTPRINT = {"draft": "quadratic", "preview": "bicubic", "final": "lanczos3",
@@ -119,12 +120,12 @@ def test_fold_over_is_refused_with_a_clear_message(rt):
     # 16:9 with fx = half the width: corner at r = 1.147, k1 = -0.3 folds at r = 1.054
     p = Distortion.params(k1=-0.3, fx=96.0, fy=96.0)
     with pytest.raises(ParamError, match=r"k1=-0\.3.*r=1\.054.*r=1\.147"):
-        Distortion().apply(rt, p, np.zeros((108, 192, 4), np.float32))
+        render_effect(rt, Distortion(), p, np.zeros((108, 192, 4), np.float32))
 
 
 def test_fold_outside_frame_is_accepted(rt):
     p = Distortion.params(amount=-0.3)            # corner moves 30% inwards: fold beyond it
-    out = Distortion().apply(rt, p, np.ones((18, 32, 4), np.float32), quality="draft")
+    out = render_effect(rt, Distortion(), p, np.ones((18, 32, 4), np.float32), quality="draft")
     assert np.isfinite(out).all()
 
 
@@ -135,7 +136,7 @@ def test_matches_reference_hard_shapes(rt, rng, shape, border):
     h, w = shape
     src = rng.uniform(0.0, 2.0, shape + (4,)).astype(np.float32)
     p = Distortion.params(k1=-0.2, k2=0.05, p1=0.002, border=border, fx=max(w, h) * 0.8)
-    got = Distortion().apply(rt, p, src, quality="final", camera=CAM)
+    got = render_effect(rt, Distortion(), p, src, quality="final", camera=CAM)
     want = ref.distortion(src, footprint="lanczos3", border=border, **oracle_args(p, w, h))
     # float32 weights/sums over up to 64 taps of values <= 2: a few 1e-6
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-5)
@@ -145,7 +146,7 @@ def test_matches_reference_hard_shapes(rt, rng, shape, border):
 def test_each_quality_matches_its_own_filter(rt, rng, quality):
     src = rng.uniform(0.0, 1.0, (23, 41, 4)).astype(np.float32)
     p = Distortion.params(amount=0.15, fit="fit-all", border="edge")
-    got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    got = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM)
     half = half_fractions(p, 41, 23, "edge") if quality == "draft" else None
     want = ref.distortion(src, footprint=QUALITY_FOOTPRINT[quality], border="edge", half=half,
                           **oracle_args(p, 41, 23))
@@ -157,7 +158,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
     src = smooth_image(rng, 40, 64)
     p = Distortion.params(k1=-0.15, k2=0.02, fit="fill", border="edge")
     want = ref.distortion(src, footprint="elliptical", border="edge", **oracle_args(p, 64, 40))
-    errs = [np.abs(Distortion().apply(rt, p, src, quality=q, camera=CAM) - want).max()
+    errs = [np.abs(render_effect(rt, Distortion(), p, src, quality=q, camera=CAM) - want).max()
             for q in ("draft", "preview", "final", "reference")]
     assert all(a >= b for a, b in zip(errs, errs[1:])), errs
     assert errs[-1] < 1e-7   # float32 storage of a float64 result
@@ -166,7 +167,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
 def test_pixel_aspect_and_principal_point(rt, rng):
     src = rng.uniform(0.0, 1.0, (30, 40, 4)).astype(np.float32)
     p = Distortion.params(k1=0.1, p2=0.003, cx=17.0, cy=12.5, border="mirror")
-    got = Distortion().apply(rt, p, src, quality="preview", camera=CAM, pixel_aspect=1.5)
+    got = render_effect(rt, Distortion(), p, src, quality="preview", camera=CAM, pixel_aspect=1.5)
     want = ref.distortion(src, footprint="bicubic", border="mirror",
                           **oracle_args(p, 40, 30, pixel_aspect=1.5))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
@@ -177,23 +178,25 @@ def test_tiny_coefficient_renders_as_near_identity(rt, rng):
     src = rng.uniform(0.0, 1.0, (16, 24, 4)).astype(np.float32)
     p = Distortion.params(k1=1e-12)
     for q in ("draft", "preview", "final", "reference"):
-        got = Distortion().apply(rt, p, src, quality=q)
+        got = render_effect(rt, Distortion(), p, src, quality=q)
         np.testing.assert_allclose(got, src, atol=1e-5)   # interpolating filters at integer shift
 
 
 def test_fill_leaves_no_undefined_border_and_fit_all_keeps_everything(rt):
     w, h = 96, 54
     src = np.ones((h, w, 4), np.float32)
-    fill = Distortion().apply(rt, Distortion.params(amount=-0.2, fit="fill"), src, quality="draft")
+    fill = render_effect(rt, Distortion(), Distortion.params(amount=-0.2, fit="fill"), src,
+                         quality="draft")
     assert fill.min() > 0.999                        # every pixel reads inside the source
     win = Rect(0, 0, w, h)
     sx, sy, _ = build_map(Distortion.params(amount=0.2, fit="fit-all"), Camera(), win, win, 1.0)
     # the whole source is visible: the sampled area reaches every source edge
     assert sx.min() <= 0.5 + 1e-6 or sx.max() >= w - 0.5 - 1e-6
-    none = Distortion().apply(rt, Distortion.params(amount=-0.2, fit="none", border="black"),
-                              src, quality="draft")
+    none = render_effect(rt, Distortion(),
+                         Distortion.params(amount=-0.2, fit="none", border="black"), src,
+                         quality="draft")
     assert none[0, 0, 0] < 0.5                       # barrel without fit, black border: black
-    crop = Distortion().apply(rt, Distortion.params(amount=-0.2), src, quality="draft")
+    crop = render_effect(rt, Distortion(), Distortion.params(amount=-0.2), src, quality="draft")
     assert crop.min() > 0.999                        # the default (crop, edge): none
 
 
@@ -202,8 +205,8 @@ def test_hdr_edge_does_not_ring(rt):
     src[:, 24:] = 1e5
     src[..., 3] = 1.0
     for q in ("draft", "preview", "final", "reference"):
-        got = Distortion().apply(rt, Distortion.params(k1=-0.1, p1=0.003, border="edge"), src,
-                                 quality=q)
+        got = render_effect(rt, Distortion(), Distortion.params(k1=-0.1, p1=0.003, border="edge"),
+                            src, quality=q)
         assert got.min() >= 0.0 and got.max() <= 1e5 * (1 + 1e-6)
         # each output within the min/max of its footprint: far from the edge nothing moves
         np.testing.assert_allclose(got[:, :8, :3], 0.01, rtol=1e-4)
@@ -216,8 +219,8 @@ def test_nan_and_inf_become_zero_and_are_noted(rt, rng, quality):
     got, notes = render_with_notes(rt, Distortion(), p, src, quality=quality, camera=CAM)
     assert np.isfinite(got).all()
     assert "distortion: 4 non-finite pixel(s) read as 0" in notes
-    want = Distortion().apply(rt, p, np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0),
-                              quality=quality, camera=CAM)
+    want = render_effect(rt, Distortion(), p, np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0),
+                         quality=quality, camera=CAM)
     np.testing.assert_array_equal(got, want)
 
 
@@ -227,7 +230,7 @@ def test_finite_input_across_float_range_stays_finite(rt, rng, quality, border):
     src = wide_range_image(rng)
     for p in (Distortion.params(k1=-0.2, p1=0.002, border=border),
               Distortion.params(amount=0.3, fit="fit-all", border=border)):
-        got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+        got = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM)
         assert np.isfinite(got).all(), p
 
 
@@ -239,9 +242,9 @@ def test_map_is_built_once_and_kept_in_the_runtime_cache(rt, rng, monkeypatch):
     monkeypatch.setattr(kit, "pixel_centres", lambda *a, **kw: builds.append(a) or centres(*a, **kw))
     src = rng.uniform(0.0, 1.0, (10, 10, 4)).astype(np.float32)
     p = Distortion.params(k1=0.1 + rng.uniform(0, 1e-6))     # a key no other test used
-    a = Distortion().apply(rt, p, src, frame=1)
-    b = Distortion().apply(rt, p, src, frame=2, quality="draft")   # another level, same map
-    c = Distortion().apply(rt, p, src, frame=3)
+    a = render_effect(rt, Distortion(), p, src, frame=1)
+    b = render_effect(rt, Distortion(), p, src, frame=2, quality="draft")   # another level, same map
+    c = render_effect(rt, Distortion(), p, src, frame=3)
     assert len(builds) == 1 and np.array_equal(a, c) and not np.array_equal(a, b)
     assert rt.cache.stats()["owners"]["distortion.map"] > 0
 
@@ -300,8 +303,8 @@ def test_data_window_render_matches_oracle_in_frame_coordinates(rt, rng):
     display, data = Rect(0, 0, 48, 32), Rect(6, 4, 38, 26)
     src = rng.uniform(0.0, 1.0, (data.height, data.width, 4)).astype(np.float32)
     p = Distortion.params(k1=0.12, border="edge")
-    got, window = Distortion().apply(rt, p, src, quality="final", camera=CAM, data_window=data,
-                                     display_window=display, keep_rod=True)
+    got, window = render_effect(rt, Distortion(), p, src, quality="final", camera=CAM,
+                                data_window=data, display_window=display, keep_rod=True)
     assert window.contains(data) and window != data
     sx, sy, info = build_map(p, CAM, display, display, 1.0, jacobian=True)
     want = ref.sample_footprint(placed(src, data, display), sx, sy, info["jacobian"],
@@ -318,7 +321,7 @@ def test_strong_minification_matches_the_footprint_oracle(rt, rng, coeffs, quali
     sub-footprints (the checked kernel); every level against its float64 oracle."""
     src = rng.uniform(0.0, 2.0, (40, 64, 4)).astype(np.float32)
     p = Distortion.params(border="edge", fx=30.0, **coeffs)
-    got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    got = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM)
     half = half_fractions(p, 64, 40, "edge") if quality == "draft" else None
     want = ref.distortion(src, footprint=QUALITY_FOOTPRINT[quality], border="edge", half=half,
                           **oracle_args(p, 64, 40))
@@ -338,7 +341,7 @@ def test_magnified_pixels_keep_the_point_filters(rt, rng):
     assert np.linalg.svd(info["jacobian"], compute_uv=False).max() <= 1.0
     for quality, filter_name in (("preview", "bicubic"), ("final", "lanczos3"),
                                  ("reference", "lanczos3")):
-        got = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+        got = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM)
         want = ref.sample(src, sx, sy, filter_name, "mirror")
         np.testing.assert_allclose(got, want, rtol=0, atol=2e-5)
 
@@ -373,7 +376,8 @@ def test_every_level_beats_bilinear_remap_and_the_input_on_ground_truth(rt, vari
     sx, sy, _ = build_map(p, c["camera"], win, win, 1.0)
     bilinear = psnr_log(ref.sample(c["source"], sx, sy, "bilinear", p.border), c["truth"])
     unchanged = psnr_log(c["source"], c["truth"])
-    scores = {q: psnr_log(Distortion().apply(rt, p, c["source"], quality=q, camera=c["camera"]),
+    scores = {q: psnr_log(render_effect(rt, Distortion(), p, c["source"], quality=q,
+                                        camera=c["camera"]),
                           c["truth"]) for q in ("draft", "preview", "final", "reference")}
     for q, score in scores.items():
         assert score > bilinear + 0.5, (q, score, bilinear)
@@ -389,11 +393,11 @@ def test_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch, quality
 
     src = rng.uniform(0.0, 2.0, (181, 323, 4)).astype(np.float32)
     p = Distortion.params(k1=-0.3 + rng.uniform(0, 1e-6), p1=0.01, border="mirror")
-    whole = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    whole = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM)
     rt.cache.clear("distortion.map")
     monkeypatch.setattr(resample, "BAND_PIXELS", 3000)          # 9-row bands
     assert len(resample.map_bands(181, 324)) == 21
-    banded = Distortion().apply(rt, p, src, quality=quality, camera=CAM)
+    banded = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM)
     assert np.array_equal(banded, whole)
 
 
@@ -419,7 +423,8 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
     src = smooth_image(rng, 61, 90)
     p = Distortion.params(k1=-0.45 + rng.uniform(0, 1e-6), k2=0.1, fit="none", border="black")
     plain, streamed, asked = plain_and_streamed(
-        rt, monkeypatch, lambda: Distortion().apply(rt, p, src, quality=quality, camera=CAM))
+        rt, monkeypatch, lambda: render_effect(rt, Distortion(), p, src, quality=quality,
+                                               camera=CAM))
     assert asked and asked[-1] >= src.nbytes          # asked with the output's size
     assert np.array_equal(streamed, plain)
     assert built_with_streaming(rt, "distortion.cl")
@@ -470,8 +475,9 @@ def test_edge_border_on_a_tight_window_repeats_the_frame_not_the_box(rt, rng):
     src = np.ones((TIGHT_DATA.height, TIGHT_DATA.width, 4), np.float32)   # opaque box
     kw = dict(quality="final", camera=CAM, data_window=TIGHT_DATA, display_window=TIGHT_DISPLAY,
               keep_rod=True)
-    edge, ew = Distortion().apply(rt, Distortion.params(k1=-0.2, border="edge"), src, **kw)
-    black, bw = Distortion().apply(rt, Distortion.params(k1=-0.2, border="black"), src, **kw)
+    edge, ew = render_effect(rt, Distortion(), Distortion.params(k1=-0.2, border="edge"), src, **kw)
+    black, bw = render_effect(rt, Distortion(), Distortion.params(k1=-0.2, border="black"), src,
+                              **kw)
     assert ew == bw
     np.testing.assert_array_equal(edge, black)
     # inside the display window, beyond the box's image: transparent
@@ -486,9 +492,8 @@ def test_tight_window_matches_the_oracle_on_the_grown_window(rt, rng, quality):
 
     src = element(rng, TIGHT_DATA)
     p = Distortion.params(amount=-0.12, fit="fill", border="edge")
-    got, window = Distortion().apply(rt, p, src, quality=quality, camera=CAM,
-                                     data_window=TIGHT_DATA, display_window=TIGHT_DISPLAY,
-                                     keep_rod=True)
+    got, window = render_effect(rt, Distortion(), p, src, quality=quality, camera=CAM,
+                                data_window=TIGHT_DATA, display_window=TIGHT_DISPLAY, keep_rod=True)
     full = placed(src, TIGHT_DATA, TIGHT_DISPLAY)
     w, h = TIGHT_DISPLAY.width, TIGHT_DISPLAY.height
     half = half_fractions(p, w, h, "edge") if quality == "draft" else None
@@ -515,10 +520,10 @@ def test_tight_window_map_built_in_bands(rt, rng, monkeypatch, quality):
     p = Distortion.params(amount=0.25 + rng.uniform(0, 1e-6), border="black")
     kw = dict(quality=quality, camera=CAM, data_window=TIGHT_DATA,
               display_window=TIGHT_DISPLAY, keep_rod=True)
-    whole, ww = Distortion().apply(rt, p, src, **kw)
+    whole, ww = render_effect(rt, Distortion(), p, src, **kw)
     rt.cache.clear("distortion.map")
     monkeypatch.setattr(resample, "BAND_PIXELS", 600)
-    banded, bw = Distortion().apply(rt, p, src, **kw)
+    banded, bw = render_effect(rt, Distortion(), p, src, **kw)
     assert bw == ww and len(resample.map_bands(ww.height, -(-ww.width // 4) * 4)) > 3
     assert np.array_equal(banded, whole)
 
@@ -533,8 +538,8 @@ def test_regions_bound_what_the_render_reads_and_writes(rt, rng):
     p = Distortion.params(amount=0.25, border="black")
     ctx = RenderContext(rt, rt.upload(src, TIGHT_DATA), display_window=TIGHT_DISPLAY, camera=CAM)
     rod = Distortion().region_of_definition(p, ctx)
-    full = Distortion().apply(rt, p, placed(src, TIGHT_DATA, TIGHT_DISPLAY), camera=CAM,
-                              quality="final")
+    full = render_effect(rt, Distortion(), p, placed(src, TIGHT_DATA, TIGHT_DISPLAY), camera=CAM,
+                         quality="final")
     ys, xs = np.nonzero(np.abs(full).sum(axis=2) > 0)
     assert rod.contains(Rect(xs.min(), ys.min(), xs.max() + 1, ys.max() + 1))
     out = Rect(20, 10, 60, 40)
@@ -547,5 +552,5 @@ def test_regions_bound_what_the_render_reads_and_writes(rt, rng):
         if 0 <= x < 128 and 0 <= y < 96:
             frame[y, x] = 1e4
     assert frame.any()
-    got = Distortion().apply(rt, p, frame, camera=CAM, quality="final")
+    got = render_effect(rt, Distortion(), p, frame, camera=CAM, quality="final")
     assert np.all(got[out.y0:out.y1, out.x0:out.x1] == 0.0)

@@ -11,6 +11,7 @@ from clfx.core.plugin import QUALITY_LEVELS
 from clfx.plugins.dof import LEVELS, Dof, quantised_radius, tap_table
 from tests.conftest import hard_shapes
 from tests.reference import dof as reference
+from tests.effects import render_effect
 
 # 50 mm f/2 on a 36 mm sensor focused at 3 m: K (CoC at infinity) = 0.424 mm.
 CAM = Camera(focal_length=50.0, f_number=2.0, sensor_width=36.0, focus_distance=3.0)
@@ -62,7 +63,8 @@ def oracle(src, depth, quality, cam=CAM, **params):
 
 
 def run(rt, src, depth, quality="final", cam=CAM, **params):
-    return Dof().apply(rt, Dof.params(**params), src, depth=depth, camera=cam, quality=quality)
+    return render_effect(rt, Dof(), Dof.params(**params), src, depth=depth, camera=cam,
+                         quality=quality)
 
 
 def random_case(rng, shape, zmin=0.8, zmax=40.0):
@@ -229,8 +231,8 @@ def test_huge_coc_and_pixel_aspect(rt, rng):
     pt = np.zeros((40, 40, 4), np.float32)
     pt[20, 20] = 1e3
     d = np.full((40, 40), 1e3, np.float32)
-    out = Dof().apply(rt, Dof.params(), pt, depth=d, camera=CAM.updated(sensor_width=6.0),
-                      pixel_aspect=2.0, quality="reference")
+    out = render_effect(rt, Dof(), Dof.params(), pt, depth=d, camera=CAM.updated(sensor_width=6.0),
+                        pixel_aspect=2.0, quality="reference")
     ys, xs = np.nonzero(out[..., 0] > 1e-3)
     assert np.ptp(ys) > 1.5 * np.ptp(xs)      # wide pixels: the bokeh spans twice the rows
 
@@ -242,10 +244,10 @@ def test_identity_cases(rt, rng):
     p = Dof.params(coc_source="max_blur", max_blur=0.0)
     ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(depth), camera=CAM)
     assert "is 0" in Dof().is_identity(p, ctx)
-    got = Dof().apply(rt, p, src, depth=depth, camera=CAM)
+    got = render_effect(rt, Dof(), p, src, depth=depth, camera=CAM)
     assert np.array_equal(got, src)
     focus = np.full((16, 16), 3.0, np.float32)
-    got = Dof().apply(rt, Dof.params(), src, depth=focus, camera=CAM)
+    got = render_effect(rt, Dof(), Dof.params(), src, depth=focus, camera=CAM)
     assert np.array_equal(got, src)
     # small CoC everywhere: the reason names it
     ctx = RenderContext(rt, rt.upload(src), depth=rt.upload(focus), camera=CAM)
@@ -398,22 +400,22 @@ def test_bokeh_leaves_a_tight_data_window(rt):
     k_half, focus, clamp_r = lens(display.width, display.height, p, cam)
     r = abs(reference.coc_radius(100.0, k_half=k_half, focus=focus, clamp_r=clamp_r))
     for q in ("draft", "reference"):
-        out, window = Dof().apply(rt, p, src, depth=depth, camera=cam, quality=q,
-                                  data_window=data, display_window=display, keep_rod=True)
+        out, window = render_effect(rt, Dof(), p, src, depth=depth, camera=cam, quality=q,
+                                    data_window=data, display_window=display, keep_rod=True)
         assert window == data.grown(math.ceil(r) + 1), (window, r)
         right = out[:, data.x1 - window.x0:, 0]
         assert right.sum() > 0.15 * 1e3, q         # a good part of the disk is outside
         np.testing.assert_allclose(out[..., 0].sum(), 1e3, rtol=0.05)   # energy kept
         assert np.isfinite(out).all()
     # data window = display window: nothing to grow into
-    out, window = Dof().apply(rt, p, src, depth=depth, camera=cam, keep_rod=True)
+    out, window = render_effect(rt, Dof(), p, src, depth=depth, camera=cam, keep_rod=True)
     assert window == Rect(0, 0, 32, 32)
 
 
 def test_tap_tables_live_in_the_runtime_cache(rt, rng):
     src, depth = random_case(rng, (24, 24))
     plugin, cam = Dof(), CAM.updated(sensor_width=4.0)
-    got = plugin.apply(rt, Dof.params(), src, depth=depth, camera=cam, quality="preview")
+    got = render_effect(rt, plugin, Dof.params(), src, depth=depth, camera=cam, quality="preview")
     assert not np.array_equal(got, src)
     assert not vars(plugin)                          # no state on the instance
     assert rt.cache.stats()["owners"].get("dof.taps", 0) > 0
@@ -586,8 +588,8 @@ def test_beachball_edge_widens_without_a_dark_outline(rt, exr_images):
         src[..., :3] += (1 - src[..., 3:4]) * grey
         if grey:
             src[..., 3] = 1.0
-        out = Dof().apply(rt, Dof.params(roundness=0.6), src, depth=depth, camera=cam,
-                          data_window=fr.data_window, display_window=fr.display_window)
+        out = render_effect(rt, Dof(), Dof.params(roundness=0.6), src, depth=depth, camera=cam,
+                            data_window=fr.data_window, display_window=fr.display_window)
         for ang in angles:
             px = np.round(cx + t * math.cos(ang)).astype(int)
             py = np.round(cy + t * math.sin(ang)).astype(int)
@@ -945,8 +947,8 @@ def test_cateye_and_squeeze_with_pixel_aspect_match_reference(rt, rng):
     src, depth = random_case(rng, (36, 30))
     cam = CAM.updated(sensor_width=8.0)
     p = Dof.params(optical_vignetting=1.5, anamorphic_squeeze=1.33)
-    got = Dof().apply(rt, p, src, depth=depth, camera=cam, pixel_aspect=1.5,
-                      quality="reference")
+    got = render_effect(rt, Dof(), p, src, depth=depth, camera=cam, pixel_aspect=1.5,
+                        quality="reference")
     k_half, focus, clamp_r = lens(30, 36, p, cam)
     r = reference.coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
     lvl = LEVELS["reference"]

@@ -9,6 +9,7 @@ from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.fx.blocks import assert_blocks_match
 from tests.reference.glare import glare as reference
+from tests.effects import render_effect
 
 LEVELS = ("draft", "preview", "final", "reference")
 
@@ -50,7 +51,7 @@ def scene(rng, h=48, w=64, sun=1e5):
 def test_glare_matches_reference_on_hard_shapes(rt, rng, shape):
     src = rng.uniform(0.0, 4.0, shape + (4,)).astype(np.float32)
     p = Glare.params(strength=0.3, size=0.5, threshold=1.0, tint=(1.0, 0.9, 0.8))
-    got = Glare().apply(rt, p, src, quality="final")
+    got = render_effect(rt, Glare(), p, src, quality="final")
     want = oracle(src, p)
     # float32 image values ~4, float64 FFT: error is float32 rounding of the sums
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * max(want.max(), 1))
@@ -61,7 +62,7 @@ def test_glare_levels_error_falls_monotonically(rt, rng, psf):
     src = scene(rng)
     p = Glare.params(strength=0.1, size=0.4, psf=psf)
     want = oracle(src, p)
-    errs = [np.abs(Glare().apply(rt, p, src, quality=q) - want).max() for q in LEVELS]
+    errs = [np.abs(render_effect(rt, Glare(), p, src, quality=q) - want).max() for q in LEVELS]
     assert all(a >= b for a, b in zip(errs, errs[1:])), errs
     assert errs[-1] <= 1e-6 * want.max()
 
@@ -70,7 +71,7 @@ def test_glare_levels_error_falls_monotonically(rt, rng, psf):
 def test_glare_hdr_shadows(rt, rng, quality):
     src = scene(rng, 64, 96)
     p = Glare.params(strength=0.1, size=0.5)
-    got = Glare().apply(rt, p, src, quality=quality).astype(np.float64)[..., :3]
+    got = render_effect(rt, Glare(), p, src, quality=quality).astype(np.float64)[..., :3]
     want = oracle(src, p)[..., :3]
     m = want >= 1e-3
     assert (np.abs(got - want)[m] / want[m]).max() <= 1e-4   # hard-cases.md case 1
@@ -87,7 +88,7 @@ def test_glare_nonfinite_sanitised_and_counted(rt, rng):
     out = Glare().render(rt, p, ctx).download()
     assert np.isfinite(out).all()
     assert any("2 non-finite" in n for n in ctx.notes), ctx.notes
-    np.testing.assert_array_equal(out, Glare().apply(rt, p, clean))
+    np.testing.assert_array_equal(out, render_effect(rt, Glare(), p, clean))
 
 
 def test_glare_conserves_energy_away_from_borders(rt):
@@ -95,7 +96,7 @@ def test_glare_conserves_energy_away_from_borders(rt):
     src[30:34, 30:34, :3] = 1e4
     p = Glare.params(strength=0.5, size=0.3)     # radius 27 px: stays inside
     for q in LEVELS:
-        out = Glare().apply(rt, p, src, quality=q)
+        out = render_effect(rt, Glare(), p, src, quality=q)
         assert abs(out[..., :3].sum() / src[..., :3].sum() - 1) <= 1e-5, q  # case 15
 
 
@@ -105,7 +106,7 @@ def test_glare_identity_without_highlights(rt, rng):
     ctx = RenderContext(rt, rt.upload(src))
     assert Glare().is_identity(p, ctx) == "no pixel above threshold"
     assert Glare().is_identity(Glare.params(strength=0.0), ctx) == "strength is 0"
-    assert np.array_equal(Glare().apply(rt, p, src), src)
+    assert np.array_equal(render_effect(rt, Glare(), p, src), src)
 
 
 def test_glare_overscan_contributes(rt, rng):
@@ -114,7 +115,7 @@ def test_glare_overscan_contributes(rt, rng):
     src = np.full((data.height, data.width, 4), 0.01, np.float32)
     src[4:6, 4:6, :3] = 1e4            # frame (-12, -12): outside the display window
     p = Glare.params(strength=0.2, size=0.4)
-    got = Glare().apply(rt, p, src, data_window=data, display_window=display)
+    got = render_effect(rt, Glare(), p, src, data_window=data, display_window=display)
     want = oracle(src, p, data, data, display)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
     inside = got[16:, 16:, 0]
@@ -129,7 +130,8 @@ def test_glare_rod_grows(rt):
     ctx = RenderContext(rt, rt.upload(src, data), display_window=display)
     r = math.floor(0.2 * display.diagonal + 0.5)
     assert Glare().region_of_definition(p, ctx) == data.grown(r)
-    out, win = Glare().apply(rt, p, src, data_window=data, display_window=display, keep_rod=True)
+    out, win = render_effect(rt, Glare(), p, src, data_window=data, display_window=display,
+                             keep_rod=True)
     assert win.contains(data) and win != data
     want = oracle(src, p, data, win, display)
     np.testing.assert_allclose(out, want, rtol=1e-5, atol=1e-6 * want.max())
@@ -143,11 +145,11 @@ def test_glare_display_referred_isolates_and_boosts(rt, rng):
     p = Glare.params(strength=0.1, size=0.3)
     ctx = RenderContext(rt, rt.upload(src), display_referred=True)
     assert Glare().is_identity(p, ctx) is None
-    got = Glare().apply(rt, p, src, display_referred=True)
+    got = render_effect(rt, Glare(), p, src, display_referred=True)
     want = oracle(src, p, boost=p.display_boost)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
     assert got[16, 24, 0] > src[16, 24, 0]          # glare reads as glare
-    linear = Glare().apply(rt, p, src)
+    linear = render_effect(rt, Glare(), p, src)
     assert got[16, 24, 0] - src[16, 24, 0] > 2 * (linear[16, 24, 0] - src[16, 24, 0])
 
 
@@ -155,7 +157,7 @@ def test_glare_huge_size_and_extreme_params(rt, rng):
     src = rng.uniform(0.0, 3.0, (12, 9, 4)).astype(np.float32)
     src[5, 4, :3] = 1e5
     p = Glare.params(strength=1.0, size=2.0, threshold=0.0, knee=0.0, psf="gaussians")
-    got = Glare().apply(rt, p, src)
+    got = render_effect(rt, Glare(), p, src)
     want = oracle(src, p)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
     np.testing.assert_array_equal(got[..., 3], src[..., 3])   # alpha preserved
@@ -181,9 +183,10 @@ def test_psf_kernel_image_resample():
     assert k[15, 15, 2] > k[15, 15, 0] * 0.5    # centre of the image lands on the centre tap
 
 
-def test_glare_kernel_image_comes_from_the_context_reader(rt, rng):
+def test_glare_kernel_image_comes_from_the_context_reader(rt, rng, monkeypatch):
     from clfx.core.errors import ParamError
     from clfx.fx import psf
+    from clfx.pipeline import look
 
     assert Glare.descriptor.param("kernel_path").kind == "path"   # an input of the render
     src = scene(rng)
@@ -195,9 +198,10 @@ def test_glare_kernel_image_comes_from_the_context_reader(rt, rng):
         reads.append(path)
         return kimg
 
+    monkeypatch.setattr(look, "read_image_rgba", read_image)   # the pipeline's reader
     p = Glare.params(strength=0.2, size=0.3, psf="image",
                      kernel_path="test_glare_kernel_image.exr")
-    got = Glare().apply(rt, p, src, read_image=read_image)
+    got = render_effect(rt, Glare(), p, src)
     assert reads == ["test_glare_kernel_image.exr"]     # effects never open files
     window = Rect.from_size(src.shape[1], src.shape[0])
     k = psf.from_image(kimg, int(round(0.3 * window.diagonal)))
@@ -206,7 +210,7 @@ def test_glare_kernel_image_comes_from_the_context_reader(rt, rng):
                      out_window=(0, 0, window.x1, window.y1))
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
     with pytest.raises(ParamError, match="glare.kernel_path: psf 'image' needs a kernel image"):
-        Glare().apply(rt, Glare.params(psf="image", size=0.3), src, read_image=read_image)
+        render_effect(rt, Glare(), Glare.params(psf="image", size=0.3), src)
 
 
 @pytest.mark.parametrize("psf", ["spencer", "gaussians"])
@@ -219,7 +223,7 @@ def test_point_light_glare_fades_smoothly_before_its_support_ends(rt, psf, size)
 
     src = point_light()
     h, w = src.shape[:2]
-    out = Glare().apply(rt, Glare.params(psf=psf, size=size), src)
+    out = render_effect(rt, Glare(), Glare.params(psf=psf, size=size), src)
     support = round(size * math.hypot(w, h))
     assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support,
                        what=f"glare {psf} size {size}")
@@ -239,7 +243,7 @@ def test_glare_of_a_flame_in_a_dark_room_fades_without_a_rim(rt):
     h, w = 260, 480
     src = flame_in_a_dark_room(h, w, 4e-4, 8.0, 32.0)
     p = Glare.params(strength=0.04, threshold=2.0, knee=1.0, size=0.2, psf="spencer")
-    out = Glare().apply(rt, p, src).astype(np.float64)
+    out = render_effect(rt, Glare(), p, src).astype(np.float64)
     radius = p.size * math.hypot(w, h)
     row = tonemap_preview(out, exposure_for(src))[h // 2, w // 2:, 1].astype(np.float64)
     drop = np.convolve(-np.diff(row), np.ones(5) / 5, mode="valid")

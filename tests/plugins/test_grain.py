@@ -20,6 +20,7 @@ from tests.conftest import ROOT, hard_shapes
 from tests.plugins.test_distortion import wide_range_image
 from tests.reference.grain import grain as reference
 from tests.reference.grain import uniform as reference_uniform
+from tests.effects import render_effect
 
 # A 2048-wide display window: amounts are stated for this width (Selwyn factor 1).
 DISPLAY_2K = Rect(0, 0, 2048, 1080)
@@ -31,14 +32,14 @@ TRUNCATION = {"draft": None, "preview": 2.0, "final": 4.0, "reference": 6.0}
 def run(rt, src, quality="final", frame=0, look_seed=0, data_window=None, display=DISPLAY_2K,
         camera=S35, **kw):
     p = Grain.params(**kw)
-    out = Grain().apply(rt, p, src, quality=quality, frame=frame, seed=look_seed,
+    out = render_effect(rt, Grain(), p, src, quality=quality, frame=frame, seed=look_seed,
                         data_window=data_window, display_window=display, camera=camera)
     return out, p
 
 
 def want(src, p, display=DISPLAY_2K, camera=S35, **kw):
-    return reference(src, **p.as_dict(), display_width=display.width,
-                     sensor_width=camera.sensor_width, **kw)
+    return reference(src, **p.as_dict() | {"stock": STOCKS[p.stock]},
+                     display_width=display.width, sensor_width=camera.sensor_width, **kw)
 
 
 def flat(h, w, value=0.18):
@@ -487,7 +488,7 @@ def test_zero_amount_is_identity_with_reason(rt, rng):
     assert Grain().is_identity(p, None) == "amount is 0"
     assert Grain().is_identity(Grain.params(channel_amount=(0, 0, 0)), None)
     assert Grain().is_identity(Grain.params(), None) is None
-    assert np.array_equal(Grain().apply(rt, p, src), src)
+    assert np.array_equal(render_effect(rt, Grain(), p, src), src)
 
 
 def test_descriptor_and_params():
@@ -509,7 +510,7 @@ def test_descriptor_and_params():
 def test_bench_case_renders(rt, rng):
     case = CASE.make(64, 36, rng)
     p = Grain.params(**case["params"])
-    out = Grain().apply(rt, p, case["source"], camera=case["camera"])
+    out = render_effect(rt, Grain(), p, case["source"], camera=case["camera"])
     assert out.shape == (36, 64, 4) and np.isfinite(out).all()
 
 

@@ -11,6 +11,7 @@ from tests.conftest import hard_shapes
 from tests.fx.blocks import assert_blocks_match
 from tests.reference.halation import halation as reference
 from tests.reference.halation import psf as reference_psf
+from tests.effects import render_effect
 
 LEVELS = ("draft", "preview", "final", "reference")
 
@@ -57,7 +58,7 @@ def test_psf_shape_glow_not_ring():
 def test_halation_matches_reference(rt, rng, shape, stock):
     src = rng.uniform(0.0, 3.0, shape + (4,)).astype(np.float32)
     p = Halation.params(stock=stock, radius=0.08)
-    got = Halation().apply(rt, p, src)
+    got = render_effect(rt, Halation(), p, src)
     want = oracle(src, p, radius(p, shape))
     # direct float32 gather of <= 441 taps (or the float64 FFT): ~1e-6 relative
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * max(want.max(), 1))
@@ -72,7 +73,7 @@ def test_halation_fft_path_and_levels(rt, rng, conserve):
     want = oracle(src, p, radius(p, src.shape[:2]))
     errs = {}
     for q in LEVELS:
-        got = Halation().apply(rt, p, src, quality=q).astype(np.float64)
+        got = render_effect(rt, Halation(), p, src, quality=q).astype(np.float64)
         errs[q] = np.abs(got - want).max()
     scale = 0.3 * 1e4
     # float64 FFT / direct: float32 output rounding only (the 1e4 pixel: ~1e-3 absolute)
@@ -93,7 +94,7 @@ def test_energy_added_or_conserved(rt):
     src[40, 40, :3] = (1e4, 2e3, 5e2)
     for conserve in (False, True):
         p = Halation.params(radius=0.12, conserve=conserve)       # 14 px
-        out = Halation().apply(rt, p, src).astype(np.float64)
+        out = render_effect(rt, Halation(), p, src).astype(np.float64)
         st = STOCKS[p.stock]
         c = src[40, 40, :3].astype(np.float64)
         lum = c @ [0.2126, 0.7152, 0.0722]
@@ -103,7 +104,7 @@ def test_energy_added_or_conserved(rt):
         # float32 gather of <= 841 taps: ~1e-6 of the pixel's light per channel
         np.testing.assert_allclose(added, want, atol=2e-6 * h.max())
         np.testing.assert_array_equal(out[..., 3], 1.0)            # alpha kept
-    out = Halation().apply(rt, Halation.params(radius=0.12), src)
+    out = render_effect(rt, Halation(), Halation.params(radius=0.12), src)
     glow = out[40, 40:, 0]
     assert np.argmax(glow[1:]) == 0                     # the halo hugs the light: no ring
     assert out[40, 44, 0] > 10 * out[40, 44, 2]                   # and it is red
@@ -121,7 +122,7 @@ def test_identity_reasons(rt):
     assert h.is_identity(Halation.params(tint=(0, 0, 0)), ctx) == "tint is black"
     assert h.is_identity(Halation.params(radius=0.0), ctx) is None   # added where it left
     assert "conserved" in h.is_identity(Halation.params(radius=0.0, conserve=True), ctx)
-    out = h.apply(rt, Halation.params(radius=0.0), hot)
+    out = render_effect(rt, h, Halation.params(radius=0.0), hot)
     # h = c (L - t) / L, times the default stock's strength (vision3-500t's 0.02 since
     # issue 32; CineStill 800T's 0.25 before) and its red tint 1
     st = STOCKS[Halation.params().stock]
@@ -133,8 +134,8 @@ def test_rod_grows_by_the_psf_radius(rt):
     src = np.zeros((20, 20, 4), np.float32)
     src[0, 0, :3] = 50.0
     p = Halation.params(radius=0.1)
-    out, win = Halation().apply(rt, p, src, data_window=data, display_window=display,
-                                keep_rod=True)
+    out, win = render_effect(rt, Halation(), p, src, data_window=data, display_window=display,
+                             keep_rod=True)
     r = radius(p, None, display)
     assert win == data.grown(r)
     want = oracle(src, p, r, data_window=(10, 10, 30, 30),
@@ -173,7 +174,7 @@ def test_nonfinite_pixels_do_not_spread(rt):
     out = Halation().render(rt, p, ctx).download()
     assert np.isfinite(out).all() and any("2 non-finite" in n for n in ctx.notes)
     zeroed = np.where(np.isfinite(bad).all(axis=2, keepdims=True), bad, 0.0)
-    np.testing.assert_allclose(out, Halation().apply(rt, p, zeroed), rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(out, render_effect(rt, Halation(), p, zeroed), rtol=1e-6, atol=1e-7)
 
 
 @pytest.mark.parametrize("stock,size", [("cinestill-800t", -1.0), ("vision3-500t", -1.0),
@@ -186,7 +187,7 @@ def test_point_light_halation_fades_smoothly_before_its_support_ends(rt, stock, 
     src = point_light()
     h, w = src.shape[:2]
     p = Halation.params(stock=stock, radius=size)
-    out = Halation().apply(rt, p, src)
+    out = render_effect(rt, Halation(), p, src)
     ctx = RenderContext(rt, rt.upload(src))
     support = Halation().settings(p, ctx).radius_px
     assert support >= 8

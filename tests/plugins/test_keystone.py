@@ -8,6 +8,7 @@ from clfx.core.rect import Rect
 from clfx.fx.resample import FootprintMap
 from clfx.plugins.keystone import Keystone, geometry, source_points
 from tests.conftest import hard_shapes
+from tests.effects import render_effect
 from tests.reference import keystone as ref
 
 CAM = Camera(focal_length=35.0, sensor_width=36.0)
@@ -40,7 +41,7 @@ def half_fractions(p, w, h, border):
 def test_each_quality_matches_its_oracle(rt, rng, quality, border):
     src = rng.uniform(0.0, 1.0, (23, 41, 4)).astype(np.float32)
     p = Keystone.params(tilt=14.0, swing=-9.0, fit="none", border=border)
-    got = Keystone().apply(rt, p, src, quality=quality, camera=CAM)
+    got = render_effect(rt, Keystone(), p, src, quality=quality, camera=CAM)
     half = half_fractions(p, 41, 23, border) if quality == "draft" else None
     want = ref.keystone(src, footprint=QUALITY_FOOTPRINT[quality], border=border, half=half,
                         **oracle_args(p, 41, 23))
@@ -53,7 +54,7 @@ def test_hard_shapes_match_the_oracle(rt, rng, shape):
     h, w = shape
     src = rng.uniform(0.0, 2.0, shape + (4,)).astype(np.float32)
     p = Keystone.params(tilt=-20.0, swing=11.0, fit="crop", border="mirror")
-    got = Keystone().apply(rt, p, src, quality="final", camera=CAM)
+    got = render_effect(rt, Keystone(), p, src, quality="final", camera=CAM)
     want = ref.keystone(src, footprint="lanczos3", border="mirror", **oracle_args(p, w, h))
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-5)
 
@@ -93,9 +94,9 @@ def test_crop_leaves_no_border(rt, rng):
     src[..., 3] = 1.0
     for tilt, swing in ((20.0, 0.0), (-12.0, 17.0)):
         p = Keystone.params(tilt=tilt, swing=swing, border="black")
-        got = Keystone().apply(rt, p, src, quality="preview", camera=CAM)
+        got = render_effect(rt, Keystone(), p, src, quality="preview", camera=CAM)
         assert got[..., 3].min() > 0.999, (tilt, swing, got[..., 3].min())
-        none = Keystone().apply(rt, Keystone.params(**{**p.as_dict(), "fit": "none"}), src,
+        none = render_effect(rt, Keystone(), Keystone.params(**{**p.as_dict(), "fit": "none"}), src,
                                 quality="preview", camera=CAM)
         assert none[..., 3].min() < 0.5        # unscaled, the receding side reads past it
 

@@ -10,6 +10,7 @@ from clfx.core.rect import Rect
 from tests.reference import lens as ref
 from tests.plugins.test_distortion import (nonfinite_image, render_with_notes, smooth_image,
                                            wide_range_image)
+from tests.effects import render_effect
 
 CANON = ("Canon", "Canon EF 24-70mm f/2.8L II USM")       # ptlens + poly3 TCA + pa vignetting
 LENSES = [  # (maker, model, focal mm, camera crop): one per model family
@@ -66,7 +67,7 @@ def test_vignetting_agrees_with_lensfun(rt):
     m.apply_color_modification(ones)
     p = Lens.params(maker=CANON[0], model=CANON[1], distortion=False, tca=False)
     src = np.ones((h, w, 4), np.float32)
-    got = Lens().apply(rt, p, src, camera=cam, quality="draft")
+    got = render_effect(rt, Lens(), p, src, camera=cam, quality="draft")
     # float32 polynomial on both sides
     np.testing.assert_allclose(got[..., :3], ones, rtol=2e-6, atol=1e-6)
     np.testing.assert_array_equal(got[..., 3], 1.0)
@@ -92,7 +93,7 @@ def test_matches_reference(rt, rng, quality, filt):
     src = rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32)
     cam = camera_for_crop(1.0, w, h, focal_length=24.0, f_number=2.8, focus_distance=2.0)
     p = Lens.params(maker=CANON[0], model=CANON[1], border="mirror", fit="none")
-    got = Lens().apply(rt, p, src, camera=cam, quality=quality)
+    got = render_effect(rt, Lens(), p, src, camera=cam, quality=quality)
     want = oracle(src, p, cam, filt, 1.0)
     # float32 map/LUT (~1e-6 px) and sums; reference float64 with float32 output
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-7 if quality == "reference" else 1e-5)
@@ -104,7 +105,7 @@ def test_error_falls_monotonically_with_quality(rt, rng):
     cam = camera_for_crop(1.0, w, h, focal_length=24.0, f_number=2.8, focus_distance=2.0)
     p = Lens.params(maker=CANON[0], model=CANON[1], fit="none")
     want = oracle(src, p, cam, "lanczos3", 1.0)
-    errs = [np.abs(Lens().apply(rt, p, src, camera=cam, quality=q) - want).max()
+    errs = [np.abs(render_effect(rt, Lens(), p, src, camera=cam, quality=q) - want).max()
             for q in ("draft", "preview", "final", "reference")]
     assert all(a >= b for a, b in zip(errs, errs[1:])), errs
 
@@ -113,7 +114,7 @@ def test_hdr_edge_does_not_ring(rt):
     src = np.full((30, 45, 4), 0.01, np.float32)
     src[:, 22:] = 1e5
     p = Lens.params(maker=CANON[0], model=CANON[1], vignetting=False)
-    got = Lens().apply(rt, p, src, camera=Camera(focal_length=24.0), quality="final")
+    got = render_effect(rt, Lens(), p, src, camera=Camera(focal_length=24.0), quality="final")
     assert got.min() >= 0.0 and got.max() <= 1e5 * (1 + 1e-6)
 
 
@@ -123,11 +124,12 @@ def test_identity_and_errors(rt):
     with pytest.raises(ParamError, match="no lens chosen"):
         Lens().is_identity(Lens.params(), None)
     with pytest.raises(ParamError, match="no lens 'Canon EF 24-70mm f/2.9'"):
-        Lens().apply(rt, Lens.params(model="Canon EF 24-70mm f/2.9"), np.ones((4, 4, 4), np.float32))
+        render_effect(rt, Lens(), Lens.params(model="Canon EF 24-70mm f/2.9"),
+                      np.ones((4, 4, 4), np.float32))
     # a compact camera's lens on a full-frame sensor folds over before the corner
     with pytest.raises(ParamError, match="poly5 distortion.*fold over"):
-        Lens().apply(rt, Lens.params(model=LENSES[3][1], focal_length=10.0),
-                     np.ones((20, 30, 4), np.float32), camera=Camera(sensor_width=36.0))
+        render_effect(rt, Lens(), Lens.params(model=LENSES[3][1], focal_length=10.0),
+                      np.ones((20, 30, 4), np.float32), camera=Camera(sensor_width=36.0))
 
 
 def test_find_lenses():
@@ -165,7 +167,7 @@ def test_packed_channels_match_reference(rt, rng, quality, filt, distortion, tca
     cam = camera_for_crop(1.0, w, h, focal_length=24.0, f_number=2.8, focus_distance=2.0)
     p = Lens.params(maker=CANON[0], model=CANON[1], distortion=distortion, tca=tca,
                     vignetting=vignetting, border=border, fit="none")
-    got = Lens().apply(rt, p, src, camera=cam, quality=quality)
+    got = render_effect(rt, Lens(), p, src, camera=cam, quality=quality)
     want = oracle(src, p, cam, filt, 1.0)
     # float32 fractions (~6e-8 px) and float32 sums of values <= 1
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
@@ -182,8 +184,9 @@ def test_nan_and_inf_become_zero_and_finite_input_stays_finite(rt, rng, quality,
     assert np.isfinite(got).all()
     assert "lens: 4 non-finite pixel(s) read as 0" in notes
     clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
-    np.testing.assert_array_equal(got, Lens().apply(rt, p, clean, quality=quality, camera=cam))
-    got = Lens().apply(rt, p, wide_range_image(rng), quality=quality, camera=cam)
+    np.testing.assert_array_equal(got, render_effect(rt, Lens(), p, clean, quality=quality,
+                                                     camera=cam))
+    got = render_effect(rt, Lens(), p, wide_range_image(rng), quality=quality, camera=cam)
     assert np.isfinite(got).all()
 
 
@@ -200,12 +203,12 @@ def test_maps_built_in_bands_are_the_whole_frame_maps(rt, rng, monkeypatch, qual
     src = rng.uniform(0.0, 2.0, (h, w, 4)).astype(np.float32)
     p = Lens.params(maker=CANON[0], model=CANON[1], fit=fit, border="mirror",
                     aperture=2.8 + rng.uniform(0, 1e-6))
-    whole = Lens().apply(rt, p, src, quality=quality, camera=cam)
+    whole = render_effect(rt, Lens(), p, src, quality=quality, camera=cam)
     rt.cache.clear("lens.geometry")
     rt.cache.clear("lens.device")
     monkeypatch.setattr(resample, "BAND_PIXELS", 2048)          # 10-row bands
     assert len(resample.map_bands(h, 204)) == 10
-    banded = Lens().apply(rt, p, src, quality=quality, camera=cam)
+    banded = render_effect(rt, Lens(), p, src, quality=quality, camera=cam)
     assert np.array_equal(banded, whole)
 
 

@@ -10,6 +10,7 @@ from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from clfx.pipeline.presets import read_lens
 from tests.reference.lens_flare import lens_flare as reference, sources
+from tests.effects import render_effect
 
 PARAMS = dict(model="artistic", threshold=5.0, ghost_count=8, softness=0.2, roundness=0.3, halo_intensity=0.05)
 CAM = Camera(blades=6, blade_rotation=10.0)
@@ -36,7 +37,7 @@ def expected(src, p, camera=CAM, origin=(0, 0), display=None, margin_px=0):
 def test_lens_flare_matches_reference(rt, rng, shape):
     src = scene(rng, shape)
     p = LensFlare.params(**PARAMS)
-    got = LensFlare().apply(rt, p, src, camera=CAM)
+    got = render_effect(rt, LensFlare(), p, src, camera=CAM)
     want = expected(src, p)
     # float32 entries and shape evaluation: ~1e-6 of the brightest ghost, plus the source
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
@@ -46,7 +47,7 @@ def test_round_ghosts_and_custom_table(rt, rng):
     src = scene(rng, (70, 100))
     p = LensFlare.params(**{**PARAMS, "ghosts": "-0.5:0.05:0.2,0.4,0.1; 0.4:0.02:1,1,1"})
     cam = Camera(blades=0)
-    got = LensFlare().apply(rt, p, src, camera=cam)
+    got = render_effect(rt, LensFlare(), p, src, camera=cam)
     np.testing.assert_allclose(got, expected(src, p, cam), rtol=1e-5,
                                atol=1e-5 * np.abs(got).max())
 
@@ -69,7 +70,7 @@ def test_ghost_position_and_brightness_follow_the_light(rt):
     for v in (101.0, 201.0):
         src = np.zeros((h, w, 4), np.float32)
         src[ly, lx, :3] = v
-        out = LensFlare().apply(rt, p, src, camera=Camera(blades=0)) - src
+        out = render_effect(rt, LensFlare(), p, src, camera=Camera(blades=0)) - src
         ys, xs = np.mgrid[0:h, 0:w] + 0.5
         g = out[..., 1]
         # ghost centre = c + k (L - c) with k = -1: mirrored through the centre
@@ -90,7 +91,7 @@ def test_hexagonal_ghost_shape(rt):
     p = LensFlare.params(model="artistic", threshold=1.0, ghosts="1:0.2:1,1,1",
                          halo_intensity=0.0,
                          softness=0.02, roundness=0.0)
-    out = LensFlare().apply(rt, p, src, camera=Camera(blades=6, blade_rotation=0.0)) - src
+    out = render_effect(rt, LensFlare(), p, src, camera=Camera(blades=6, blade_rotation=0.0)) - src
     r = 0.2 * math.hypot(w, h)                            # circumradius 56.6 px
     c = 100.5
     # vertex 0 at 0 deg (+x): inside at 0.95 r; along an edge normal (30 deg) the apothem is
@@ -107,7 +108,8 @@ def test_light_just_outside_the_frame_flares(rt, rng):
     src = rng.uniform(0.0, 0.2, (100, 200, 4)).astype(np.float32)
     src[4:7, 170:173, :3] = 500.0                         # 30 px right of the display window
     p = LensFlare.params(**{**PARAMS, "margin": 0.2})
-    got = LensFlare().apply(rt, p, src, camera=CAM, data_window=data, display_window=display)
+    got = render_effect(rt, LensFlare(), p, src, camera=CAM, data_window=data,
+                        display_window=display)
     want = expected(src, p, display=(20, 10, 140, 90), margin_px=math.ceil(0.2 * display.diagonal))
     assert np.abs(got - src).max() > 1e-3
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
@@ -121,7 +123,7 @@ def test_light_just_outside_the_frame_flares(rt, rng):
 def test_identities(rt, rng):
     src = rng.uniform(0.0, 0.9, (9, 13, 4)).astype(np.float32)
     for kw in ({"intensity": 0.0, "halo_intensity": 0.0}, {}):
-        got = LensFlare().apply(rt, LensFlare.params(**{**PARAMS, **kw}), src)
+        got = render_effect(rt, LensFlare(), LensFlare.params(**{**PARAMS, **kw}), src)
         assert np.array_equal(got, src)
 
 
@@ -130,8 +132,8 @@ def test_nan_inf_determinism_alpha_no_negatives(rt, rng):
     src[..., 3] = rng.uniform(0, 1, (60, 80))
     src[3, 3, 0], src[20, 40, 2], src[5, 30, :] = np.nan, np.inf, -np.inf
     p = LensFlare.params(**PARAMS)
-    a = LensFlare().apply(rt, p, src, camera=CAM)
-    b = LensFlare().apply(rt, p, src, camera=CAM)
+    a = render_effect(rt, LensFlare(), p, src, camera=CAM)
+    b = render_effect(rt, LensFlare(), p, src, camera=CAM)
     assert a.tobytes() == b.tobytes()
     assert np.isfinite(a).all() and a.min() >= 0.0
     ok = np.isfinite(src[..., 3])
@@ -144,9 +146,8 @@ def test_rod_covers_display(rt):
     src = np.zeros((20, 20, 4), np.float32)
     src[10, 10, :3] = 1e3
     p = LensFlare.params(**PARAMS)
-    out, win = LensFlare().apply(rt, p, src, data_window=Rect(40, 30, 60, 50),
-                                 display_window=Rect(0, 0, 100, 80), keep_rod=True,
-                                 camera=CAM)
+    out, win = render_effect(rt, LensFlare(), p, src, data_window=Rect(40, 30, 60, 50),
+                             display_window=Rect(0, 0, 100, 80), keep_rod=True, camera=CAM)
     assert win == Rect(0, 0, 100, 80)
     assert out[:30].max() > 0.0                           # ghosts land outside the data window
 
@@ -186,8 +187,8 @@ def test_finite_input_gives_finite_output(rt, effect, params, quality):
 
     cls = get_plugin(effect)
     src = wide_range_frame()
-    got = cls().apply(rt, cls.params(**params), src, quality=quality, camera=CAM,
-                      read_lens=read_lens)
+    got = render_effect(rt, cls(), cls.params(**params), src, quality=quality, camera=CAM,
+                        read_lens=read_lens)
     finite = np.isfinite(src)
     assert np.isfinite(got[finite]).all(), np.argwhere(~np.isfinite(got) & finite)[:5]
 
@@ -198,9 +199,9 @@ def test_wide_float_range_exr_flares_finite(rt, exr_images):
     f = read_frame(exr_images / "TestImages" / "WideFloatRange.exr")
     assert np.isfinite(f.rgba).all()
     for quality in ("draft", "reference"):
-        got = LensFlare().apply(rt, LensFlare.params(), f.rgba, quality=quality,
-                                data_window=f.data_window, display_window=f.display_window,
-                                read_lens=read_lens)
+        got = render_effect(rt, LensFlare(), LensFlare.params(), f.rgba, quality=quality,
+                            data_window=f.data_window, display_window=f.display_window,
+                            read_lens=read_lens)
         assert np.isfinite(got).all()
 
 
@@ -230,14 +231,16 @@ def planned(rt, p, src, camera=CAM_P, quality="reference"):
 def test_physical_ghosts_match_reference(rt, lens):
     src = physical_scene()
     p = LensFlare.params(light_level=0.0, lens=lens, gain=100.0, cull=0.0)
-    got = LensFlare().apply(rt, p, src, camera=CAM_P, quality="reference", read_lens=read_lens)
+    got = render_effect(rt, LensFlare(), p, src, camera=CAM_P, quality="reference",
+                        read_lens=read_lens)
     _, (entries, levels, _, _) = planned(rt, p, src)
     # >= 10 drawn (the double Gauss's ten: ghosts wider than VEIL_FROM = 5 % of the diagonal
     # fade out since issue 32); reference: all at full resolution
     assert len(entries) >= 10 and (levels == 0).all()
     table = flare.edge_table()
     want = src[..., :3] + oracle.physical_ghosts(src.shape[:2], entries,
-                                                 flare.aperture_normals(6, 10.0), table)
+                                                 flare.aperture_normals(6, 10.0), table,
+                                                 reach=flare.EDGE_REACH)
     ghosts = want - src[..., :3]
     # float32 distances, table lookups and sums of ~100 entries: ~1e-5 of the brightest ghost
     np.testing.assert_allclose(got[..., :3], want, rtol=1e-4, atol=2e-5 * ghosts.max())
@@ -268,7 +271,8 @@ def test_final_levels_close_to_full_resolution(rt):
     assert levels.max() >= 1
     got = rt.download(LensFlare().draw(rt, ctx, entries, levels, ctx.source.window, 6, 0.0))
     want = src[..., :3] + oracle.physical_ghosts(src.shape[:2], entries,
-                                                 flare.aperture_normals(6, 0.0), flare.edge_table())
+                                                 flare.aperture_normals(6, 0.0), flare.edge_table(),
+                                                 reach=flare.EDGE_REACH)
     err = np.abs(got[..., :3] - want)
     peak = (want - src[..., :3]).max()
     assert err.max() < 0.03 * peak and err.mean() < 0.003 * peak
@@ -343,7 +347,8 @@ def test_ghosts_are_dim_by_the_physics_and_gain_multiplies(rt):
     added = []
     for gain in (1.0, 10.0):
         p = LensFlare.params(light_level=0.0, lens="zoom-80-200mm", gain=gain, cull=0.0)
-        out = LensFlare().apply(rt, p, src, camera=CAM_P, read_lens=read_lens, quality="reference")
+        out = render_effect(rt, LensFlare(), p, src, camera=CAM_P, read_lens=read_lens,
+                            quality="reference")
         added.append((out[..., :3] - src[..., :3]).sum())
     flux = oracle.lights(src, 5.0)[0][2].sum()
     # two coated reflections per ghost, 210 ghosts (most leave this small frame): 1e-5..1e-2
@@ -382,16 +387,20 @@ def test_unknown_lens_and_lens_files(rt, tmp_path):
 
     src = physical_scene()
     with pytest.raises(ClfxError, match="did you mean 'zoom-80-200mm'"):
-        LensFlare().apply(rt, LensFlare.params(lens="zoom-80-200"), src, read_lens=read_lens)
+        render_effect(rt, LensFlare(), LensFlare.params(lens="zoom-80-200"), src,
+                      read_lens=read_lens)
     from clfx.pipeline.presets import find_lens
 
     path = tmp_path / "mine.yaml"
     path.write_text(find_lens("double-gauss-50mm").read_text())
-    with pytest.raises(ClfxError, match="no lens reader"):
-        LensFlare().apply(rt, LensFlare.params(lens=str(path)), src)
-    a = LensFlare().apply(rt, LensFlare.params(light_level=0.0, lens=str(path), gain=100.0), src,
-                          read_lens=read_lens)
-    b = LensFlare().apply(rt, LensFlare.params(light_level=0.0, gain=100.0), src, read_lens=read_lens)
+    bare = RenderContext(rt, rt.upload(src), camera=CAM_P)   # made without a lens reader
+    with pytest.raises(ClfxError, match="no lens reader"):   # (a render always has one)
+        LensFlare().render(rt, LensFlare.params(lens=str(path)), bare)
+    a = render_effect(rt, LensFlare(),
+                      LensFlare.params(light_level=0.0, lens=str(path), gain=100.0), src,
+                      read_lens=read_lens)
+    b = render_effect(rt, LensFlare(), LensFlare.params(light_level=0.0, gain=100.0), src,
+                      read_lens=read_lens)
     assert np.array_equal(a, b) and not np.array_equal(a, src)
 
 
@@ -399,8 +408,8 @@ def test_physical_is_deterministic_and_keeps_alpha(rt, rng):
     src = physical_scene()
     src[..., 3] = rng.uniform(0, 1, src.shape[:2])
     p = LensFlare.params(light_level=0.0, lens="zoom-80-200mm", gain=10.0)
-    a = LensFlare().apply(rt, p, src, camera=CAM_P, read_lens=read_lens)
-    b = LensFlare().apply(rt, p, src, camera=CAM_P, read_lens=read_lens)
+    a = render_effect(rt, LensFlare(), p, src, camera=CAM_P, read_lens=read_lens)
+    b = render_effect(rt, LensFlare(), p, src, camera=CAM_P, read_lens=read_lens)
     assert np.array_equal(a, b)
     assert np.array_equal(a[..., 3], src[..., 3])
     assert (a[..., :3] >= src[..., :3]).all()
@@ -411,8 +420,9 @@ def test_physical_hard_shapes(rt, rng, shape):
     src = rng.uniform(0.0, 0.5, shape + (4,)).astype(np.float32)
     src[0, -1, :3] = 1e6                                     # a light in the corner
     for quality in ("draft", "reference"):
-        got = LensFlare().apply(rt, LensFlare.params(light_level=0.0, lens="zoom-80-200mm", gain=1e3), src,
-                                camera=CAM_P, quality=quality, read_lens=read_lens)
+        got = render_effect(rt, LensFlare(),
+                            LensFlare.params(light_level=0.0, lens="zoom-80-200mm", gain=1e3), src,
+                            camera=CAM_P, quality=quality, read_lens=read_lens)
         assert np.isfinite(got).all() and (got[..., :3] >= src[..., :3]).all()
         assert np.array_equal(got[..., 3], src[..., 3])
 
@@ -429,7 +439,7 @@ def test_working_space_luminance_and_channel_weights(rt, rng):
     table = parse_ghosts(p.ghosts, p.ghost_count)
     kw = p.as_dict() | {"blades": CAM.blades, "rotation": CAM.blade_rotation + p.rotation}
     want = reference(src, lights, table, **kw)
-    got = LensFlare().apply(rt, p, src, camera=CAM, rgb_to_xyz=aces)
+    got = render_effect(rt, LensFlare(), p, src, camera=CAM, working_space="ACEScg")
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * want.max())
     # the physical model: the light's centroid is ACEScg-luminance weighted, and channels
     # spread over the wavelengths by ACEScg's primaries (3 samples: one per channel anyway)
@@ -504,7 +514,7 @@ def test_physical_flare_is_visible_varied_and_veil_free_at_defaults(rt, lens):
     src = point_light_frame(h, w, bg)
     cam = Camera()                                           # defaults: f/2.8, round
     p = LensFlare.params(lens=lens)
-    out = LensFlare().apply(rt, p, src, camera=cam, read_lens=read_lens, quality="final")
+    out = render_effect(rt, LensFlare(), p, src, camera=cam, read_lens=read_lens, quality="final")
     added = out[..., :3] - src[..., :3]
     ys, xs = np.mgrid[0:h, 0:w] + 0.5
     away = np.hypot(xs - lx - 0.5, ys - ly - 0.5) > 12      # not the light itself
@@ -573,7 +583,7 @@ def test_artistic_ghosts_differ_in_size_sharpness_rim_and_tint(rt):
     src[30, 130, :3] = 1e4
     p = LensFlare.params(model="artistic", threshold=5.0, halo_intensity=0.0,
                          ghosts="-1:0.12:1,1,1:0.05:0.95; 0.5:0.06:1,1,1:0.9:0.0")
-    out = LensFlare().apply(rt, p, src, camera=Camera(blades=0))[..., 1]
+    out = render_effect(rt, LensFlare(), p, src, camera=Camera(blades=0))[..., 1]
     cx, cy = 80.0, 60.0
     gx, gy = cx - (130.5 - cx), cy - (30.5 - cy)             # the ring, k = -1
     r = 0.12 * math.hypot(160, 120)

@@ -14,6 +14,7 @@ from clfx.host import RenderContext
 from clfx.plugins.motion_blur import MotionBlur
 from tests.conftest import hard_shapes
 from tests.reference.motion_blur import line_blur, naive_blur, short_blur
+from tests.effects import render_effect
 
 QUALITIES = ("draft", "preview", "final", "reference")
 CENTRED = Camera(shutter_angle=180.0, shutter_offset="centered")
@@ -32,8 +33,8 @@ def smooth_texture(rng, h, w):
 
 
 def run(rt, src, vel, depth=None, quality="final", camera=CENTRED, **kw):
-    return MotionBlur().apply(rt, MotionBlur.params(**kw), src, velocity=vel, depth=depth,
-                              quality=quality, camera=camera)
+    return render_effect(rt, MotionBlur(), MotionBlur.params(**kw), src, velocity=vel, depth=depth,
+                         quality=quality, camera=camera)
 
 
 def uniform(shape, v):
@@ -362,10 +363,10 @@ def test_object_crossing_a_tight_data_window_is_not_cut(rt, with_depth):
     vel[6:18, 20:] = (16.0, 0.0)                  # 16 px/frame, 180 deg centred: +-4 px
     depth = np.full((h, w), 10.0, np.float32)
     depth[6:18, 20:] = 2.0
-    out, window = MotionBlur().apply(rt, MotionBlur.params(), src, velocity=vel,
-                                     depth=depth if with_depth else None, data_window=data,
-                                     display_window=display, camera=CENTRED, quality="reference",
-                                     keep_rod=True)
+    out, window = render_effect(rt, MotionBlur(), MotionBlur.params(), src, velocity=vel,
+                                depth=depth if with_depth else None, data_window=data,
+                                display_window=display, camera=CENTRED, quality="reference",
+                                keep_rod=True)
     assert window.contains(data) and window != data and display.contains(window)
     assert window.x1 >= data.x1 + 4                # the whole smear fits
     row = out[12 + data.y0 - window.y0, :, 0]      # a row through the bar
@@ -380,9 +381,9 @@ def test_object_crossing_a_tight_data_window_is_not_cut(rt, with_depth):
 
 def test_rod_is_the_source_window_when_data_equals_display(rt, rng):
     src = smooth_texture(rng, 24, 40)
-    out, window = MotionBlur().apply(rt, MotionBlur.params(), src,
-                                     velocity=uniform((24, 40), (9.0, 0.0)), camera=CENTRED,
-                                     keep_rod=True)
+    out, window = render_effect(rt, MotionBlur(), MotionBlur.params(), src,
+                                velocity=uniform((24, 40), (9.0, 0.0)), camera=CENTRED,
+                                keep_rod=True)
     assert window == Rect(0, 0, 40, 24) and out.shape == src.shape
 
 
@@ -440,17 +441,16 @@ def test_spinning_light_streak_follows_its_arc_with_both_halves(rt):
     t0, t1 = CENTRED.shutter_interval()
     angles = th0 + w * np.linspace(t0, t1, 21)[3:-3]
     for q in QUALITIES:
-        curved = MotionBlur().apply(rt, MotionBlur.params(), src, velocity=fwd,
-                                    velocity_back=back, depth=depth, quality=q,
-                                    camera=CENTRED)
+        curved = render_effect(rt, MotionBlur(), MotionBlur.params(), src, velocity=fwd,
+                               velocity_back=back, depth=depth, quality=q, camera=CENTRED)
         err = np.abs(_streak_radius(curved, c, angles, r) - r)
         assert err.max() <= 1.0, (q, err.round(2))
-    straight = MotionBlur().apply(rt, MotionBlur.params(), src, velocity=fwd, depth=depth,
-                                  camera=CENTRED)
+    straight = render_effect(rt, MotionBlur(), MotionBlur.params(), src, velocity=fwd, depth=depth,
+                             camera=CENTRED)
     assert np.abs(_streak_radius(straight, c, angles, r) - r).max() > 3.0
     # one half: today's behaviour, bit for bit
-    same = MotionBlur().apply(rt, MotionBlur.params(), src, velocity=fwd, depth=depth,
-                              velocity_back=fwd, camera=CENTRED)
+    same = render_effect(rt, MotionBlur(), MotionBlur.params(), src, velocity=fwd, depth=depth,
+                         velocity_back=fwd, camera=CENTRED)
     np.testing.assert_allclose(same, straight, rtol=1e-5, atol=1e-3)
 
 

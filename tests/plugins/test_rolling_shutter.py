@@ -8,6 +8,7 @@ from clfx.host import RenderContext
 from clfx.plugins.rolling_shutter import LEVELS, RollingShutter
 from tests.conftest import hard_shapes
 from tests.reference.rolling_shutter import rolling_shutter as reference
+from tests.effects import render_effect
 
 DIRECTIONS = ("top-down", "bottom-up", "left-right", "right-left")
 
@@ -44,7 +45,7 @@ def test_matches_reference_every_level(rt, rng, direction, with_depth):
         p = RollingShutter.params(readout_fraction=0.8, direction=direction, reference=ref,
                                   max_shift=0.3)
         for q in LEVELS:
-            got = RollingShutter().apply(rt, p, src, velocity=vel, depth=d, quality=q)
+            got = render_effect(rt, RollingShutter(), p, src, velocity=vel, depth=d, quality=q)
             want = oracle(src, vel, d, p, q)
             # the same pixels chosen; float32 bilinear weights (float64 at reference) and
             # float32 output rounding on colours in [0, 1]
@@ -56,7 +57,7 @@ def test_matches_reference_every_level(rt, rng, direction, with_depth):
 def test_hard_shapes_match_reference(rt, rng, shape):
     src, vel, depth = layered(shape, rng)
     p = RollingShutter.params(readout_ms=30.0, fps=30.0, reference="centre", max_shift=0.5)
-    got = RollingShutter().apply(rt, p, src, velocity=vel, depth=depth)
+    got = render_effect(rt, RollingShutter(), p, src, velocity=vel, depth=depth)
     np.testing.assert_allclose(got, oracle(src, vel, depth, p, "final"), rtol=0, atol=1e-5)
 
 
@@ -73,7 +74,7 @@ def test_uniform_pan_shears_rows_exactly(rt):
         p = RollingShutter.params(readout_ms=25.0, fps=40.0, reference=ref, max_shift=0.5)
         t = 1.0 * (y / h - r0 * (h - 1) / h)          # 25 ms at 40 fps: one frame
         for q in LEVELS:
-            out = RollingShutter().apply(rt, p, src, velocity=vel, quality=q)
+            out = render_effect(rt, RollingShutter(), p, src, velocity=vel, quality=q)
             want = np.clip(np.arange(w)[None, :] - 8.0 * t, 0, w - 1)
             err = np.abs(out[..., 0] - want)[:, 9:-9]      # away from the clamped edges
             # bilinear: exact up to float32
@@ -89,14 +90,14 @@ def test_bottom_up_and_sideways_readouts(rt):
     vel = np.zeros((h, w, 2), np.float32)
     vel[..., 0] = 6.0
     p = RollingShutter.params(readout_fraction=1.0, direction="bottom-up", max_shift=0.5)
-    out = RollingShutter().apply(rt, p, src, velocity=vel)
+    out = render_effect(rt, RollingShutter(), p, src, velocity=vel)
     np.testing.assert_allclose(out[-1, :, 0], src[-1, :, 0])                 # read first
     np.testing.assert_allclose(out[0, 12:, 0], src[0, 12:, 0] - 6.0 * (h - 1) / h, atol=1e-4)
     # reading columns left to right under a vertical pan: columns slide up and down
     vel = np.zeros((h, w, 2), np.float32)
     vel[..., 1] = 5.0
     p = RollingShutter.params(readout_fraction=1.0, direction="left-right", max_shift=0.5)
-    out = RollingShutter().apply(rt, p, src, velocity=vel)
+    out = render_effect(rt, RollingShutter(), p, src, velocity=vel)
     np.testing.assert_allclose(out[:, 0, 1], src[:, 0, 1])
     np.testing.assert_allclose(out[8:, -1, 1], src[8:, -1, 1] - 5.0 * (w - 1) / w, atol=1e-4)
 
@@ -120,11 +121,12 @@ def test_regions_and_data_window_rows_count_in_the_display(rt, rng):
     # as the full frame (where the shifted reads stay inside the data window)
     src, vel, depth = layered((60, 80), rng)
     p = RollingShutter.params(readout_fraction=0.5, max_shift=0.1)
-    full = RollingShutter().apply(rt, p, src, velocity=vel, depth=depth)
+    full = render_effect(rt, RollingShutter(), p, src, velocity=vel, depth=depth)
     data, display = Rect(20, 10, 70, 50), Rect(0, 0, 80, 60)
     crop = np.s_[10:50, 20:70]
-    out, win = RollingShutter().apply(rt, p, src[crop], velocity=vel[crop], depth=depth[crop],
-                                      data_window=data, display_window=display, keep_rod=True)
+    out, win = render_effect(rt, RollingShutter(), p, src[crop], velocity=vel[crop],
+                             depth=depth[crop], data_window=data, display_window=display,
+                             keep_rod=True)
     assert win == data                                              # nothing spreads
     ctx = RenderContext(rt, rt.upload(src[crop], data), velocity=rt.upload(vel[crop], data),
                         display_window=display)
@@ -152,8 +154,8 @@ def test_beats_input_and_naive_splat_on_ground_truth(rt, pan_case):
     truth = case["truth"]
     scores = {}
     for q in LEVELS:
-        out = RollingShutter().apply(rt, p, case["source"], velocity=case["velocity"],
-                                     depth=case["depth"], quality=q)
+        out = render_effect(rt, RollingShutter(), p, case["source"], velocity=case["velocity"],
+                            depth=case["depth"], quality=q)
         scores[q] = error_metrics(out, truth)["psnr_log"]
     for label, fn in case_module.peers(case, p, None).items():
         scores[label] = error_metrics(fn(), truth)["psnr_log"]
@@ -218,8 +220,8 @@ def test_trailing_edge_has_no_row_comb_or_left_behind_rim(rt):
     want = comb(truth)
     p = RollingShutter.params(**params)
     for q in LEVELS:
-        out = RollingShutter().apply(rt, p, sharp.rgba, velocity=sharp.velocity,
-                                     depth=sharp.depth, quality=q)
+        out = render_effect(rt, RollingShutter(), p, sharp.rgba, velocity=sharp.velocity,
+                            depth=sharp.depth, quality=q)
         got = comb(out)
         psnr = error_metrics(out, truth)["psnr_log"]
         # measured: truth 0.146; before the fill (the nearest background pixel repeated
@@ -234,13 +236,13 @@ def test_both_halves_match_reference_and_one_half_is_today(rt, rng):
     back = vel + rng.normal(0.0, 1.5, vel.shape).astype(np.float32)
     p = RollingShutter.params(readout_fraction=0.8, reference="centre", max_shift=0.3)
     for q in LEVELS:
-        got = RollingShutter().apply(rt, p, src, velocity=vel, velocity_back=back, depth=depth,
-                                     quality=q)
+        got = render_effect(rt, RollingShutter(), p, src, velocity=vel, velocity_back=back,
+                            depth=depth, quality=q)
         want = oracle(src, vel, depth, p, q, velocity_back=back)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 if q == "reference" else 1e-5,
                                    err_msg=q)
-    one = RollingShutter().apply(rt, p, src, velocity=vel, depth=depth)
-    same = RollingShutter().apply(rt, p, src, velocity=vel, velocity_back=vel, depth=depth)
+    one = render_effect(rt, RollingShutter(), p, src, velocity=vel, depth=depth)
+    same = render_effect(rt, RollingShutter(), p, src, velocity=vel, velocity_back=vel, depth=depth)
     np.testing.assert_allclose(same, one, rtol=0, atol=1e-5)
 
 
@@ -278,7 +280,7 @@ def test_spinning_wheel_shears_along_its_arcs_with_both_halves(rt):
     for label, kw in (("both", dict(velocity=fwd, velocity_back=back)),
                       ("forward", dict(velocity=fwd)),
                       ("tangent", dict(velocity=sharp.velocity))):
-        out = RollingShutter().apply(rt, p, sharp.rgba, depth=sharp.depth, **kw)
+        out = render_effect(rt, RollingShutter(), p, sharp.rgba, depth=sharp.depth, **kw)
         score[label] = error_metrics(out, truth)["psnr_log"]
     assert score["both"] >= score["forward"] + 3.0, score
     assert score["both"] >= score["tangent"], score

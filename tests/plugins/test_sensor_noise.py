@@ -17,6 +17,7 @@ from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import wide_range_image
 from tests.reference.sensor_noise import demosaic_unit
 from tests.reference.sensor_noise import sensor_noise as reference
+from tests.effects import render_effect
 
 LEVELS = ("draft", "preview", "final", "reference")
 SWITCH = {"draft": None, "preview": 10.0, "final": 30.0, "reference": 30.0}
@@ -28,8 +29,8 @@ def run(rt, src, quality="final", frame=0, look_seed=0, data_window=None, camera
     kw.setdefault("mosaic", "none")   # the photon-transfer model per site; demosaic below
     kw.setdefault("middle_grey", 0.18)  # the model's own scale (auto meters: tests below)
     p = SensorNoise.params(**kw)
-    out = SensorNoise().apply(rt, p, src, quality=quality, frame=frame, seed=look_seed,
-                              data_window=data_window, camera=camera, display_window=display)
+    out = render_effect(rt, SensorNoise(), p, src, quality=quality, frame=frame, seed=look_seed,
+                        data_window=data_window, camera=camera, display_window=display)
     return out, p
 
 
@@ -236,10 +237,10 @@ def test_cached_prnu_pattern_follows_params_and_window(rt, rng):
              (dict(prnu=0.0, seed=2), None, "final")]
     for i, (kw, window, quality) in enumerate(cases):
         p = SensorNoise.params(**kw)
-        got = plugin.apply(rt, p, src, quality=quality, frame=i, data_window=window,
-                           camera=CAMERA)
-        want = SensorNoise().apply(rt, p, src, quality=quality, frame=i, data_window=window,
-                                   camera=CAMERA)
+        got = render_effect(rt, plugin, p, src, quality=quality, frame=i, data_window=window,
+                            camera=CAMERA)
+        want = render_effect(rt, SensorNoise(), p, src, quality=quality, frame=i,
+                             data_window=window, camera=CAMERA)
         assert got.tobytes() == want.tobytes(), (i, kw, window, quality)
     # unchanged params and window: the pattern is reused, not rebuilt
     p = SensorNoise.params(prnu=0.02)
@@ -279,8 +280,8 @@ def test_descriptor_and_bench_case(rt, rng):
     d = SensorNoise.descriptor
     assert d.frame_varying and set(d.quality) == set(LEVELS)
     case = CASE.make(64, 36, rng)
-    out = SensorNoise().apply(rt, SensorNoise.params(**case["params"]), case["source"],
-                              camera=case["camera"])
+    out = render_effect(rt, SensorNoise(), SensorNoise.params(**case["params"]), case["source"],
+                        camera=case["camera"])
     assert out.shape == (36, 64, 4) and np.isfinite(out).all()
 
 
@@ -471,7 +472,7 @@ def test_default_meters_a_dark_plate(rt, exr_images):
     assert 1e-4 < grey < 2e-3
     p = SensorNoise.params()
     assert p.middle_grey == 0.0    # auto
-    out = SensorNoise().apply(rt, p, src, camera=Camera(), seed=3)
+    out = render_effect(rt, SensorNoise(), p, src, camera=Camera(), seed=3)
     lum = src[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
     near = np.abs(np.log2(np.maximum(lum, 1e-12) / grey)) < 0.25       # within 1/4 stop
     assert near.sum() > 1000
@@ -527,7 +528,7 @@ def test_lights_above_the_full_well_leave_no_demosaic_ring(rt, look):
     src[r < 6.0, :3] = 1e3
     src[100:, 80:, :3] = 0.0                      # black, with a light on it
     src[120:130, 100:112, :3] = 1e3
-    out = SensorNoise().apply(rt, p, src, camera=cam, seed=5, frame=1)
+    out = render_effect(rt, SensorNoise(), p, src, camera=cam, seed=5, frame=1)
     g = 1 / np.array(electrons_per_unit(p, cam, meter(src.astype(np.float64))))
     read_sd = p.read_noise * g                    # per channel
     dev = out[..., :3] - src[..., :3]
@@ -550,7 +551,7 @@ def test_no_bayer_lattice_in_the_noise(rt, look, colour):
     p, cam = preset_params(look)
     src = flat(96, 96, 0.0)
     src[..., :3] = colour
-    out = SensorNoise().apply(rt, p, src, camera=cam, seed=2, frame=1)
+    out = render_effect(rt, SensorNoise(), p, src, camera=cam, seed=2, frame=1)
     d = (out - src)[4:-4, 4:-4, :3]
     for c in range(3):
         phases = np.array([d[i::2, j::2, c].std() for i in (0, 1) for j in (0, 1)])

@@ -5,6 +5,7 @@ from clfx.plugins.soft_focus import SoftFocus
 from tests.conftest import hard_shapes
 from tests.fx.blocks import assert_blocks_match
 from tests.reference.soft_focus import soft_focus as reference
+from tests.effects import render_effect
 
 LEVELS = ("draft", "preview", "final", "reference")
 
@@ -19,7 +20,7 @@ def oracle(src, p, **kw):
 def test_soft_focus_matches_reference(rt, rng, shape):
     src = rng.uniform(0.0, 2.0, shape + (4,)).astype(np.float32)
     p = SoftFocus.params(amount=0.5, size=0.3)
-    got = SoftFocus().apply(rt, p, src)
+    got = render_effect(rt, SoftFocus(), p, src)
     want = oracle(src, p)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * max(want.max(), 1))
 
@@ -32,11 +33,11 @@ def test_soft_focus_levels_monotonic_energy_and_8bit(rt, rng):
     ctx = RenderContext(rt, rt.upload(src), display_referred=True)
     assert SoftFocus().is_identity(p, ctx) is None
     want = oracle(src, p)
-    outs = [SoftFocus().apply(rt, p, src, quality=q, display_referred=True) for q in LEVELS]
+    outs = [render_effect(rt, SoftFocus(), p, src, quality=q, display_referred=True) for q in LEVELS]
     errs = [np.abs(o - want).max() for o in outs]
     assert all(a >= b for a, b in zip(errs, errs[1:])), errs
     assert errs[-1] <= 1e-6 * want.max()
-    assert outs[2].tobytes() == SoftFocus().apply(rt, p, src, display_referred=True).tobytes()
+    assert outs[2].tobytes() == render_effect(rt, SoftFocus(), p, src, display_referred=True).tobytes()
 
 
 def test_soft_focus_hdr_nonfinite_identity(rt, rng):
@@ -67,7 +68,7 @@ def test_point_light_diffusion_fades_smoothly_before_its_support_ends(rt, size):
 
     src = point_light()
     h, w = src.shape[:2]
-    out = SoftFocus().apply(rt, SoftFocus.params(size=size), src)
+    out = render_effect(rt, SoftFocus(), SoftFocus.params(size=size), src)
     support = round(3.0 * size * np.hypot(w, h))
     assert_smooth_tail(ray(out, h // 2, w // 2, 1, 0, w // 2), support,
                        what=f"soft_focus size {size}")

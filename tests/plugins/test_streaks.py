@@ -7,7 +7,8 @@ from clfx.core.camera import Camera
 from clfx.plugins.streaks import Streaks, streak_angles
 from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
-from tests.reference.streaks import line_kernel_streaks, streaks as reference
+from tests.reference.streaks import angles_of, line_kernel_streaks, streaks as reference
+from tests.effects import render_effect
 
 PARAMS = dict(threshold=1.0, intensity=0.5, length=0.6, angle=30.0, color_shift=0.4,
               tint=(1.0, 0.9, 0.8))
@@ -23,7 +24,7 @@ def scene(rng, shape, hot=1e4):
 
 def run(rt, src, quality="final", **kw):
     p = Streaks.params(**{**PARAMS, **kw})
-    return Streaks().apply(rt, p, src, quality=quality), p
+    return render_effect(rt, Streaks(), p, src, quality=quality), p
 
 
 @pytest.mark.parametrize("shape", hard_shapes())
@@ -59,7 +60,7 @@ def test_error_falls_with_quality(rt, rng):
     src = scene(rng, (40, 56))
     p = Streaks.params(**PARAMS)
     want = reference(src, **p.as_dict())
-    errs = [np.abs(Streaks().apply(rt, p, src, quality=q) - want).max()
+    errs = [np.abs(render_effect(rt, Streaks(), p, src, quality=q) - want).max()
             for q in ("draft", "preview", "final", "reference")]
     assert errs[0] >= errs[1] >= errs[2] >= errs[3] - 1e-9 * want.max(), errs
 
@@ -92,10 +93,10 @@ def test_draft_and_preview_beat_the_input_on_thin_rays(rt):
     case = make(480, 270, np.random.default_rng(0))
     p = Streaks.params(**case["params"])
     src, camera = case["source"], case["camera"]
-    want = Streaks().apply(rt, p, src, quality="reference", camera=camera)
+    want = render_effect(rt, Streaks(), p, src, quality="reference", camera=camera)
     floor = psnr_log(src, want)
     for quality in ("draft", "preview"):
-        got = psnr_log(Streaks().apply(rt, p, src, quality=quality, camera=camera), want)
+        got = psnr_log(render_effect(rt, Streaks(), p, src, quality=quality, camera=camera), want)
         assert got > floor + 20.0, (quality, got, floor)
 
 
@@ -125,14 +126,29 @@ def test_aperture_spike_counts():
     assert streak_angles("aperture", 0, 0.0, 0, 0.0) == []          # round: none
 
 
+@pytest.mark.parametrize("mode", ["star", "anamorphic", "aperture"])
+def test_ray_directions_follow_the_optics(mode):
+    """Every mode's rays point where the descriptor's optics put them (the oracle derives
+    them on its own: an aperture's spikes perpendicular to its polygon's edges, a star's
+    evenly around, an anamorphic line through ``angle``), as sets of directions mod 360."""
+    def directions(angles):
+        return sorted(round(a % 360.0, 6) % 360.0 for a in angles)
+
+    for blades, rotation, angle, streaks in [(3, 0.0, 0.0, 4), (5, 10.0, 0.0, 6),
+                                             (6, 0.0, 15.0, 5), (7, -33.0, 40.0, 8),
+                                             (8, 22.5, 0.0, 3), (9, 90.0, 200.0, 1)]:
+        want = directions(angles_of(mode, streaks, angle, blades, rotation))
+        assert directions(streak_angles(mode, streaks, angle, blades, rotation)) == want
+
+
 def test_aperture_mode_uses_camera_blades(rt, rng):
     src = scene(rng, (33, 41))
     p = Streaks.params(**{**PARAMS, "mode": "aperture", "blades": 0})
-    got = Streaks().apply(rt, p, src, quality="reference", camera=Camera(blades=5,
-                                                                         blade_rotation=10.0))
+    got = render_effect(rt, Streaks(), p, src, quality="reference",
+                        camera=Camera(blades=5, blade_rotation=10.0))
     want = reference(src, **p.as_dict() | {"blades": 5}, blade_rotation=10.0)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * want.max())
-    same = Streaks().apply(rt, p, src, camera=Camera(blades=0))       # round: identity
+    same = render_effect(rt, Streaks(), p, src, camera=Camera(blades=0))       # round: identity
     assert np.array_equal(same, src)
 
 
@@ -148,7 +164,7 @@ def test_nan_inf_do_not_spread_and_are_counted(rt, rng):
     bad = clean.copy()
     bad[3, 3, 0], bad[20, 40, 2], bad[5, 30, :] = np.nan, np.inf, -np.inf
     p = Streaks.params(**PARAMS)
-    got = Streaks().apply(rt, p, bad)
+    got = render_effect(rt, Streaks(), p, bad)
     assert np.isfinite(got).all()
     ref = reference(bad, **p.as_dict())
     np.testing.assert_allclose(got, ref, rtol=1e-5, atol=2e-6 * ref.max())
@@ -162,7 +178,7 @@ def test_hdr_point_energy_and_no_negatives(rt):
     src = np.zeros((64, 64, 4), np.float32)
     src[32, 32, :3] = 1e5
     p = Streaks.params(**{**PARAMS, "length": 0.1, "color_shift": 0.0, "tint": (1, 1, 1)})
-    got = Streaks().apply(rt, p, src)
+    got = render_effect(rt, Streaks(), p, src)
     assert got.min() >= 0.0
     bright = 1e5 * (1 - 0.5)                 # lum - core x peak: the pixel is its own peak
     added = (got.astype(np.float64) - src)[..., :3].sum(axis=(0, 1))
@@ -182,8 +198,8 @@ def test_rod_grows_and_light_reaches_overscan(rt):
     src[8, 1, :3] = 1e3                          # near the left edge of the data window
     data, display = Rect(20, 20, 36, 36), Rect(0, 0, 60, 60)
     p = Streaks.params(**{**PARAMS, "angle": 0.0, "streaks": 2, "length": 0.2})
-    out, win = Streaks().apply(rt, p, src, data_window=data, display_window=display,
-                               keep_rod=True)
+    out, win = render_effect(rt, Streaks(), p, src, data_window=data, display_window=display,
+                             keep_rod=True)
     assert win == display                        # grown by the spread, clipped to the limit
     row = out[8 + data.y0, :data.x0, 1]
     assert row.max() > 0.0                       # the left-going ray continues outside
@@ -231,11 +247,11 @@ def test_streamed_passes_give_the_whole_passes_bits(rt, rng, monkeypatch, qualit
     src = lights(rng, (61, 133))
     p = Streaks.params(**{**PARAMS, **kw})
     cam = Camera(blades=5)
-    whole = Streaks().apply(rt, p, src, quality=quality, camera=cam)
+    whole = render_effect(rt, Streaks(), p, src, quality=quality, camera=cam)
     monkeypatch.setattr(mod, "streams", lambda *a: True)
     for chunk_rows in (1, 5):
         monkeypatch.setattr(mod, "CHUNK_PIXELS", chunk_rows * 136)
-        got = Streaks().apply(rt, p, src, quality=quality, camera=cam)
+        got = render_effect(rt, Streaks(), p, src, quality=quality, camera=cam)
         assert np.array_equal(got.view(np.uint32), whole.view(np.uint32)), chunk_rows
 
 
@@ -262,9 +278,9 @@ def test_many_lights_read_after_the_first_wait(rt, rng, monkeypatch):
     src = lights(rng, (48, 64))
     src[5:45:8, 4:60:9, :3] = 500.0
     p = Streaks.params(**PARAMS)
-    want = Streaks().apply(rt, p, src)
+    want = render_effect(rt, Streaks(), p, src)
     monkeypatch.setattr(mod, "SEEDS_READ", 2)
-    got = Streaks().apply(rt, p, src)
+    got = render_effect(rt, Streaks(), p, src)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 
@@ -310,7 +326,7 @@ def test_a_frame_without_seeds_grows_no_flags(rt, rng, monkeypatch):
     src = rng.uniform(0.0, 0.5, (32, 48, 4)).astype(np.float32)
     src[4:28, 4:44, :3] = 50.0           # one extended light: no compact light to seed
     p = Streaks.params(**PARAMS)
-    Streaks().apply(rt, p, src)
+    render_effect(rt, Streaks(), p, src)
     assert "streaks_seeds" in launched and "streaks_dilate" not in launched
 
 
@@ -322,7 +338,7 @@ def test_the_rays_share_one_extraction_of_the_bright_pixels(rt, rng, monkeypatch
                         or real(knl, *a, **kw))
     src = lights(rng, (48, 64))
     p = Streaks.params(**{**PARAMS, "streaks": 4})
-    Streaks().apply(rt, p, src)     # its pixels: test_streaks_match_reference and the rest
+    render_effect(rt, Streaks(), p, src)     # its pixels: test_streaks_match_reference and the rest
     assert launched.count("streaks_bright") == 1 and launched.count("streaks_pass") > 4
 
 
@@ -458,7 +474,7 @@ def test_point_light_streak_fades_smoothly_before_its_support_ends(rt, mode, kw)
     src = point_light(320, 480)
     h, w = src.shape[:2]
     p = Streaks.params(mode=mode, **kw)
-    out = Streaks().apply(rt, p, src)
+    out = render_effect(rt, Streaks(), p, src)
     step = grid_step(p.angle)[2]
     support = support_steps(p.length * math.hypot(w, h) / step)     # in samples of the ray
     dx, dy = (1, -1) if p.angle == 45.0 else (1, 0)
@@ -488,7 +504,7 @@ def test_anamorphic_streak_thin_core_falls_off_and_is_blue_cyan(rt):
     src = spot()
     h, w = src.shape[:2]
     ana = Streaks.params(mode="anamorphic", angle=0.0, length=0.35, core=0.3, source_color=0.0)
-    out = Streaks().apply(rt, ana, src).astype(np.float64)
+    out = render_effect(rt, Streaks(), ana, src).astype(np.float64)
     added = out[..., :3] - src[..., :3]
     lum = added @ [0.2126, 0.7152, 0.0722]
     # thin: the streak is a line (1 px at half maximum on a horizontal ray), not as wide as
@@ -505,7 +521,8 @@ def test_anamorphic_streak_thin_core_falls_off_and_is_blue_cyan(rt):
         r, g, b = added[h // 2, w // 2 + dx]
         assert b > 2.0 * r and g > 1.2 * r, (dx, r, g, b)
     # the coating's design sets the colour: one designed in the blue gives a warmer streak
-    warm = Streaks().apply(rt, Streaks.params(**{**ana.as_dict(), "coating_nm": 450.0}), src)
+    warm = render_effect(rt, Streaks(), Streaks.params(**{**ana.as_dict(), "coating_nm": 450.0}),
+                         src)
     r, g, b = warm[h // 2, w // 2 + 60, :3] - src[h // 2, w // 2 + 60, :3]
     assert r > b
 
@@ -535,7 +552,7 @@ def test_aperture_spike_tapers_as_diffraction_and_reddens(rt):
     diag = math.hypot(2 * w, h)
     p = Streaks.params(mode="aperture", blades=4, angle=45.0, length=L / diag,
                        threshold=1.0, intensity=1.0, core=0.0)
-    got = Streaks().apply(rt, p, src, quality="reference", camera=Camera(blades=4))
+    got = render_effect(rt, Streaks(), p, src, quality="reference", camera=Camera(blades=4))
     prof = (got[h // 2, w:, :3] - src[h // 2, w:, :3]).astype(np.float64)
     # the kernel in closed form: each part's exponential, normalised over its support
     k = np.arange(w)
@@ -584,7 +601,7 @@ def test_streak_width_does_not_follow_the_light_size(rt, mode, angle, quality):
     for sigma in (1.0, 3.0, 6.0):
         src = spot(h=360, w=640, sigma=sigma)
         h, w = src.shape[:2]
-        out = Streaks().apply(rt, p, src, quality=quality).astype(np.float64)
+        out = render_effect(rt, Streaks(), p, src, quality=quality).astype(np.float64)
         lum = (out[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
         widths.append([streak_fwhm(lum, w // 2, h // 2, angle, r) for r in (40, 80)])
     widths = np.array(widths)
@@ -605,7 +622,7 @@ def test_thin_ray_has_no_staircase(rt):
     angle = 15.0
     for quality in ("draft", "preview", "final"):
         p = Streaks.params(mode="star", streaks=1, angle=angle, length=0.6, threshold=1.0)
-        out = Streaks().apply(rt, p, src, quality=quality).astype(np.float64)
+        out = render_effect(rt, Streaks(), p, src, quality=quality).astype(np.float64)
         lum = (out[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
         t = math.radians(angle)
         ux, uy = math.cos(t), -math.sin(t)
@@ -643,7 +660,7 @@ def test_extended_light_streaks_as_a_band_not_a_hatch(rt, rng):
     # it is, smooth across (Desk.exr's window through the star filter)
     src = bright_pane(rng)
     p = Streaks.params(mode="star", streaks=2, angle=0.0, length=0.5, threshold=1.0, core=0.5)
-    out = Streaks().apply(rt, p, src).astype(np.float64)
+    out = render_effect(rt, Streaks(), p, src).astype(np.float64)
     lum = (out[..., :3] - src[..., :3]) @ [0.2126, 0.7152, 0.0722]
     col = lum[15:55, 100]                    # 30 px right of the pane, away from the light
     band = col[7:33]                         # the rows the pane covers (22..47)

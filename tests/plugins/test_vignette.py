@@ -7,13 +7,14 @@ from clfx.core.rect import Rect
 from tests.conftest import hard_shapes
 from tests.plugins.test_distortion import nonfinite_image, render_with_notes, wide_range_image
 from tests.reference.vignette import vignette as reference
+from tests.effects import render_effect
 
 PARAMS = dict(natural=1.0, amount=0.4, radius=0.3, softness=0.5, roundness=0.5, center=(0.1, -0.2))
 
 
 def run(rt, src, quality="final", camera=None, **kw):
     p = Vignette.params(**{**PARAMS, **kw})
-    return Vignette().apply(rt, p, src, quality=quality, camera=camera), p
+    return render_effect(rt, Vignette(), p, src, quality=quality, camera=camera), p
 
 
 @pytest.mark.parametrize("shape", hard_shapes())
@@ -38,7 +39,7 @@ def test_vignette_pixel_aspect_and_camera(rt, rng):
     src = rng.uniform(0.0, 1.0, (20, 30, 4)).astype(np.float32)
     cam = Camera(focal_length=12.0, sensor_width=24.0)
     p = Vignette.params(**PARAMS)
-    got = Vignette().apply(rt, p, src, camera=cam, pixel_aspect=2.0)
+    got = render_effect(rt, Vignette(), p, src, camera=cam, pixel_aspect=2.0)
     want = reference(src, **p.as_dict(), focal_length=12.0, sensor_width=24.0, pixel_aspect=2.0)
     np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-6)
 
@@ -47,7 +48,7 @@ def test_vignette_data_window_inside_display_window(rt, rng):
     src = rng.uniform(0.0, 1.0, (10, 12, 4)).astype(np.float32)
     data, display = Rect(30, 20, 42, 30), Rect(0, 0, 100, 50)
     p = Vignette.params(**PARAMS)
-    got = Vignette().apply(rt, p, src, data_window=data, display_window=display)
+    got = render_effect(rt, Vignette(), p, src, data_window=data, display_window=display)
     want = reference(src, **p.as_dict(), data_origin=(30, 20), display_size=(100, 50))
     np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-6)
 
@@ -70,7 +71,7 @@ def test_nan_and_inf_become_zero_and_are_noted(rt, rng, quality):
     assert np.isfinite(got).all()
     assert "vignette: 4 non-finite pixel(s) set to 0" in notes
     clean = np.nan_to_num(src, nan=0.0, posinf=0.0, neginf=0.0)
-    np.testing.assert_array_equal(got, Vignette().apply(rt, p, clean, quality=quality))
+    np.testing.assert_array_equal(got, render_effect(rt, Vignette(), p, clean, quality=quality))
     _, clean_notes = render_with_notes(rt, Vignette(), p, clean, quality=quality)
     assert clean_notes == []
 
@@ -83,7 +84,7 @@ def test_finite_input_across_float_range_stays_finite(rt, rng, quality):
 
 def test_vignette_factor_far_outside_frame_is_in_unit_range(rt):
     src = np.ones((4, 4, 4), np.float32)
-    got = Vignette().apply(rt, Vignette.params(amount=-1.0), src,
-                           data_window=Rect(100000, 100000, 100004, 100004),
-                           display_window=Rect(0, 0, 16, 9))
+    got = render_effect(rt, Vignette(), Vignette.params(amount=-1.0), src,
+                        data_window=Rect(100000, 100000, 100004, 100004),
+                        display_window=Rect(0, 0, 16, 9))
     assert np.isfinite(got).all() and (got >= 0).all() and (got <= 1).all()

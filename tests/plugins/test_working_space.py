@@ -25,6 +25,7 @@ import pytest
 
 import clfx
 from clfx.io import colour
+from tests.effects import render_effect
 
 H, W = 96, 128
 
@@ -131,7 +132,7 @@ def test_thresholds_weigh_the_working_space_luminance(rt, effect):
     knee = {"knee": 0.0} if any(q.name == "knee" for q in plugin.descriptor.params) else {}
     p = plugin.params(threshold=2.0, **knee)
     aces = colour.rgb_to_xyz("ACEScg")
-    rec709 = plugin.apply(rt, p, src)
-    acescg = plugin.apply(rt, p, src, rgb_to_xyz=aces)
+    rec709 = render_effect(rt, plugin, p, src)
+    acescg = render_effect(rt, plugin, p, src, working_space="ACEScg")
     assert np.abs(rec709 - src).max() > 1e-4
     np.testing.assert_array_equal(acescg, src)

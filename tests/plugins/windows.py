@@ -3,6 +3,7 @@ bounding box must give the pixels it gives placed in a full-frame data window.""
 import numpy as np
 
 from clfx.core.rect import Rect
+from tests.effects import render_effect
 
 
 def placed(src, data: Rect, display: Rect):
@@ -25,10 +26,10 @@ def tight_and_full(rt, plugin, p, src, data: Rect, display: Rect, **kw):
     """``(tight, full, tight_window)``: the effect on the element in its own data window and
     on the element placed in a full-frame data window, both on the union of their windows
     (the tight render transparent outside its window)."""
-    t, tw = plugin.apply(rt, p, src, data_window=data, display_window=display, keep_rod=True,
-                         **kw)
-    f, fw = plugin.apply(rt, p, placed(src, data, display), display_window=display,
-                         keep_rod=True, **kw)
+    t, tw = render_effect(rt, plugin, p, src, data_window=data, display_window=display,
+                          keep_rod=True, **kw)
+    f, fw = render_effect(rt, plugin, p, placed(src, data, display), display_window=display,
+                          keep_rod=True, **kw)
     both = tw.union(fw)
     return on(t, tw, both), on(f, fw, both), tw
 

@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 
-from clfx.plugins.grain import STOCKS  # data only: the stocks' per-channel ratios
 from tests.reference.noise import cover
 
 M32 = 0xFFFFFFFF
@@ -135,11 +134,13 @@ def meter(src, tile=32):
 def grain(src, *, stock, amount, diameter, middle_grey, response, channel_amount,
           channel_size, monochrome, size, seed, coverage="auto", frame=0, look_seed=0,
           data_origin=(0, 0), display_width=None, sensor_width=36.0, truncation=6.0):
-    """Film grain on ``src`` (h, w, 4) float64; same parameters as the plugin."""
+    """Film grain on ``src`` (h, w, 4) float64; same parameters as the plugin, but ``stock``
+    is the stock's data (the descriptor's table of by-eye ratios, given by the test): per
+    channel ``size`` and ``amount`` ratios, ``monochrome``, ``diameter`` (um)."""
     src = np.asarray(src, np.float64)
     h, w = src.shape[:2]
     display_width = display_width or w
-    st = STOCKS[stock]
+    st = stock
     sizes = [a * b for a, b in zip(st.size, channel_size)]
     amounts = [a * b for a, b in zip(st.amount, channel_amount)]
     mono = monochrome or st.monochrome

@@ -159,18 +159,17 @@ def lights(src, threshold, *, origin=(0, 0), tile=32, rgb_to_xyz=None):
     return [(x, y, f, r) for _, x, y, f, r in out]
 
 
-def edge(table, row, t):
-    """The edge profile of clfx.fx.flare (its float64 table), linear in t, 1 / 0 beyond."""
-    from clfx.fx.flare import EDGE_REACH
-
+def edge(table, row, t, reach):
+    """The edge profile of clfx.fx.flare (its float64 table, sampled over t in [-reach,
+    reach], both given by the test), linear in t, 1 / 0 beyond."""
     n = table.shape[1]
-    x = np.clip((np.asarray(t) + EDGE_REACH) * (n - 1) / (2 * EDGE_REACH), 0, n - 1)
+    x = np.clip((np.asarray(t) + reach) * (n - 1) / (2 * reach), 0, n - 1)
     i = np.minimum(np.floor(x).astype(int), n - 2)
     f = x - i
     return table[int(row), i] * (1 - f) + table[int(row), i + 1] * f
 
 
-def physical_ghosts(shape, entries, normals, table, *, origin=(0, 0)):
+def physical_ghosts(shape, entries, normals, table, *, reach, origin=(0, 0)):
     """The ghost layer (h, w, 3) of ``entries`` (clfx.fx.flare.plan_entries) evaluated at
     every pixel centre in float64: per channel the signed distance to the channel's edge
     (a disc, or the polygon's largest normal projection shifted along the axis by its
@@ -195,7 +194,7 @@ def physical_ghosts(shape, entries, normals, table, *, origin=(0, 0)):
         for col in (18, 20):
             if e[col + 1] > 0:
                 d = np.hypot(dx - e[col] * ux, dy - e[col] * uy) - e[col + 1]
-                clip = clip * edge(table, row, d * e[11])
+                clip = clip * edge(table, row, d * e[11], reach)
         for c in range(3):
-            out[..., c] += e[13 + c] * clip * edge(table, row, dist[c] * e[10 + c])
+            out[..., c] += e[13 + c] * clip * edge(table, row, dist[c] * e[10 + c], reach)
     return out

@@ -1,4 +1,5 @@
-"""float64 NumPy oracles of clfx/plugins/motion_blur.py and clfx/plugins/camera_blur.py.
+"""float64 NumPy oracles of clfx/plugins/motion_blur.py (camera_blur has its own:
+tests/reference/camera_blur.py).
 
 Every function averages the source, read bilinearly with clamp-to-edge at continuous
 positions (pixel centres at +0.5), over ``n`` instants of the open shutter ``[t0, t1]``
@@ -14,8 +15,6 @@ positions (pixel centres at +0.5), over ``n`` instants of the open shutter ``[t0
   by the smear's length, the step model over both by its weight.
 - ``naive_blur``: the naive baseline — each pixel blurred along its *own* velocity (no
   tiles, no depth, no scatter): what a per-pixel directional blur does.
-- ``similarity_blur``: the camera's image-plane motion ``p(t) = c + (1 + zoom t) R(roll t)
-  (p0 - c) + shift t`` inverted per instant (exact spin, zoom and pan gathers).
 """
 import math
 
@@ -216,26 +215,4 @@ def naive_blur(src, velocity, *, t0, t1, n=256):
     acc = np.zeros(src.shape)
     for t in _times(t0, t1, n):
         acc += bilinear(src, xs - v[..., 0] * t, ys - v[..., 1] * t)
-    return acc / n
-
-
-def similarity_blur(src, *, t0, t1, center, shift=(0.0, 0.0), roll_deg=0.0, zoom=0.0,
-                    n=1024):
-    """Camera blur of a pan (``shift`` px/frame), roll (deg/frame about ``center``) and zoom
-    (image scale grows by ``zoom`` per frame): at time t the frame shows the sharp image
-    mapped by ``p -> c + (1 + zoom t) R(roll t) (p - c) + shift t``; average the inverse
-    look-ups over the shutter."""
-    src = _sanitise(src)
-    h, w = src.shape[:2]
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
-    cx, cy = center
-    acc = np.zeros(src.shape)
-    for t in _times(t0, t1, n):
-        a = math.radians(roll_deg) * t
-        k = 1.0 + zoom * t
-        qx, qy = xs - cx - shift[0] * t, ys - cy - shift[1] * t
-        # inverse rotation by a (y down: a positive angle turns +x towards +y), then scale
-        rx = (math.cos(a) * qx + math.sin(a) * qy) / k
-        ry = (-math.sin(a) * qx + math.cos(a) * qy) / k
-        acc += bilinear(src, rx + cx, ry + cy)
     return acc / n

@@ -114,17 +114,35 @@ def shifted(img, dx, dy):
     return out
 
 
+def aperture_spikes(blades, rotation):
+    """Directions (degrees, counter-clockwise from +x, screen up) of the diffraction spikes
+    of a regular aperture, from its geometry: the far field of a straight edge is a line
+    through the light perpendicular to the edge, on both sides.  The polygon's vertices lie
+    at ``rotation + 360 i / blades`` on the unit circle; each edge's direction is the
+    difference of its two vertices, its spike the perpendicular of that; parallel edges
+    (opposite sides of an even polygon) give the same spike.  None for a round aperture."""
+    if blades < 3:
+        return []
+    vx = [math.cos(math.radians(rotation + 360.0 * i / blades)) for i in range(blades + 1)]
+    vy = [math.sin(math.radians(rotation + 360.0 * i / blades)) for i in range(blades + 1)]
+    found = set()
+    for i in range(blades):
+        ex, ey = vx[i + 1] - vx[i], vy[i + 1] - vy[i]
+        for nx, ny in ((ey, -ex), (-ey, ex)):           # both perpendiculars
+            found.add(round(math.degrees(math.atan2(ny, nx)) % 360.0, 9) % 360.0)
+    return sorted(found)
+
+
 def angles_of(mode, streaks, angle, blades, blade_rotation):
+    """The rays' directions as the descriptor states them: a star filter's ``streaks`` rays
+    evenly around from ``angle``; an anamorphic lens's one horizontal line turned by
+    ``angle`` (its two halves); an aperture's spikes (:func:`aperture_spikes`), the polygon
+    turned by the camera's blade rotation and ``angle``."""
     if mode == "star":
         return [angle + 360.0 * i / streaks for i in range(streaks)]
     if mode == "anamorphic":
         return [angle, angle + 180.0]
-    if blades < 3:
-        return []
-    n = blades if blades % 2 == 0 else 2 * blades
-    # even N: opposite edge normals coincide -> N rays; odd: normals and opposites -> 2N
-    step = 360.0 / n
-    return [blade_rotation + angle + 180.0 / blades + step * i for i in range(n)]
+    return aperture_spikes(blades, blade_rotation + angle)
 
 
 def _setup(lengths_frac, diagonal, color_shift, step_len, scale=(1.0, 1.0, 1.0)):
