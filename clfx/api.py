@@ -31,7 +31,8 @@ import numpy as np
 from clfx.core.errors import ParamError, SequenceError
 from clfx.core.frame import Frame
 from clfx.core.rect import Rect
-from clfx.pipeline.batch import Batch, ClusterOptions, PassOptions, RenderOptions, resolve_quality
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.options import ClusterOptions, PassOptions, RenderOptions, resolve_quality
 from clfx.pipeline.look import FrameReport, Look, RunStats, render_frame
 
 

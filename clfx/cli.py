@@ -221,8 +221,8 @@ def _runtime(ctx: click.Context):
 
 def _check_first_frame(input_path: str, options) -> None:
     """Refuse a first frame whose windows exceed the pixel limits from its header, before
-    the device is set up on a thread (`clfx.pipeline.batch.check_first_frame`)."""
-    from clfx.pipeline.batch import check_first_frame
+    the device is set up on a thread (`clfx.pipeline.preflight.check_first_frame`)."""
+    from clfx.pipeline.preflight import check_first_frame
 
     check_first_frame(input_path, options)
 
@@ -533,7 +533,7 @@ def lens_table(rows: list[dict]) -> str:
 # -- render / apply ------------------------------------------------------------------------
 def _pass_options(kw: dict):
     """The pass options of a command's keyword arguments (see ``cli_options.pass_options``)."""
-    from clfx.pipeline.batch import PassOptions
+    from clfx.pipeline.options import PassOptions
 
     return PassOptions(**{name: kw[name] for name in PassOptions.names()})
 
@@ -541,7 +541,7 @@ def _pass_options(kw: dict):
 def _render_options(kw: dict):
     """The typed options of ``render`` / ``apply`` from their keyword arguments, with the
     command line (stamped into outputs)."""
-    from clfx.pipeline.batch import PassOptions, RenderOptions
+    from clfx.pipeline.options import PassOptions, RenderOptions
 
     passes = set(PassOptions.names())
     rest = {k: v for k, v in kw.items() if k not in passes}
@@ -608,7 +608,7 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     if workers and scheduler:
         raise click.UsageError("give --workers N (a local cluster) or --scheduler ADDRESS "
                                "(an existing one), not both")
-    from clfx.pipeline.batch import ClusterOptions
+    from clfx.pipeline.options import ClusterOptions
 
     scale = ClusterOptions(workers=workers, scheduler=scheduler, chunk=chunk, fail_fast=fail_fast)
     options = _render_options(kw)

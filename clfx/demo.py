@@ -81,13 +81,15 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     demo there are an error before anything is rendered (like ``clfx render``).
 
     The scene's frames are written first (``scene.#.exr``, float); the look then runs over
-    them through `clfx render`'s own pipeline (`clfx.pipeline.batch.render_stream`: read,
+    them through `clfx render`'s own pipeline (`clfx.pipeline.stream.render_stream`: read,
     render, write; half-float output stamped like a render's), so ``clfx render`` of the
     scene files with the same look renders the same frames (written as float there, the
     input's type).  Each preview is the output as written."""
     from clfx.core.errors import ImageIOError, option
     from clfx.io.write import output_folder, write_frame
-    from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
+    from clfx.pipeline.batch import Batch
+    from clfx.pipeline.options import RenderOptions
+    from clfx.pipeline.stream import codec_threads_for, io_threads, render_stream
     from clfx.pipeline.presets import load_look
 
     look = load_look(look_name)

@@ -397,7 +397,7 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
                 verbosity: int = 1) -> dict:
     """Render the gallery into ``outdir``; returns the index written to ``index.json``.
 
-    Not a read/render/write loop (`clfx.pipeline.batch.render_stream` is the one): each
+    Not a read/render/write loop (`clfx.pipeline.stream.render_stream` is the one): each
     input is read once and resized in memory, every look renders that frame in memory, and
     what is written is a labelled, tone-mapped sRGB tile about the render, never a rendered
     frame.  Every file goes through clfx's atomic writers (`clfx.io.write`: a temp file,

@@ -97,13 +97,13 @@ def _no_set_up(monkeypatch):
     """Record any set-up (the device, the first read, the look's maps) instead of doing it."""
     import clfx.api
     from clfx.device.runtime import Runtime
-    from clfx.pipeline import batch as batch_mod, look as look_mod
+    from clfx.pipeline import look as look_mod, plan as plan_mod
 
     started = []
     monkeypatch.setattr(clfx.api, "runtime_soon", lambda *a, **k: started.append("device"))
     monkeypatch.setattr(Runtime, "get", classmethod(lambda cls, *a: started.append("device")))
     monkeypatch.setattr(look_mod, "prepare", lambda *a, **k: started.append("maps"))
-    monkeypatch.setattr(batch_mod.BatchPlan, "read", lambda *a: started.append("read"))
+    monkeypatch.setattr(plan_mod.BatchPlan, "read", lambda *a: started.append("read"))
     return started
 
 
@@ -156,7 +156,9 @@ def test_maps_are_prepared_only_for_frames_that_will_render_and_fit(rt, tmp_path
     above `PREPARE_MAX_PIXELS` (at 8K the maps sat beside the first steps: 3794 MiB, budget
     3390); for a small frame it starts, and closing it with ``cancel`` stops it."""
     from clfx.pipeline import look as look_mod
-    from clfx.pipeline.batch import Job, prepare_maps, resolve_quality
+    from clfx.pipeline.options import resolve_quality
+    from clfx.pipeline.plan import Job
+    from clfx.pipeline.stream import prepare_maps
     from clfx.pipeline.presets import load_look
 
     prepared = []

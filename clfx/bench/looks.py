@@ -69,7 +69,7 @@ def bench_io(frame: Frame, repeat: int) -> dict:
 def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
                    repeat: int = 3) -> dict:
     """A stream as fast as its parts?  The look over ``frames`` EXR frames through `clfx
-    render`'s batch pipeline (phased or overlapped, `clfx.pipeline.batch.stream_mode`), beside the same
+    render`'s batch pipeline (phased or overlapped, `clfx.pipeline.stream.stream_mode`), beside the same
     parts measured alone in the same run: the look on the first frame (per effect), reading
     a frame and writing its output (median of ``repeat`` warm runs each, half of them before
     the stream and half after).
@@ -83,8 +83,9 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     parts slow each other down."""
     from clfx.bench.scene import demo_scene, render_sharp
     from clfx.io.write import write_frame
-    from clfx.pipeline.batch import (Batch, RenderOptions, available_cores, codec_threads_for,
-                                     io_threads, stream_mode)
+    from clfx.pipeline.batch import Batch
+    from clfx.pipeline.options import RenderOptions
+    from clfx.pipeline.stream import available_cores, codec_threads_for, io_threads, stream_mode
     from clfx.pipeline.look import render_frame
     from clfx.pipeline.presets import load_look
 

@@ -13,7 +13,7 @@ worker joins (a process-wide `Runtime`), and the plans it has unpacked, by key, 
 pays neither device set-up nor look loading; effects keep their one-off set-up in the
 runtime's cache as in one process.  Inside a task the next frame is read and the previous one
 written on I/O threads while the device renders (at nice 10/5 on a CPU device: the overlapped
-stream of `clfx.pipeline.batch`; workers keep it, measured faster for them than the single
+stream of `clfx.pipeline.stream`; workers keep it, measured faster for them than the single
 process's phases, docs/scaling.md); across tasks, a worker runs `TASK_THREADS` of them
 at once and a per-process device lock lets one render while the others read or write, so
 single-frame tasks overlap their I/O too.
@@ -46,8 +46,10 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError, option
 from clfx.device.runtime import KernelBuildWarning, user_set_pocl_affinity
-from clfx.pipeline.batch import (RAW, Batch, BatchPlan, ClusterOptions, Job, available_cores,
-                                 render_stream)
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.options import RAW, ClusterOptions
+from clfx.pipeline.plan import BatchPlan, Job
+from clfx.pipeline.stream import available_cores, render_stream
 from clfx.pipeline.look import RunStats
 from clfx.pipeline.report import ClusterInfo, FrameResult, Reporter
 
