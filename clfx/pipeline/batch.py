@@ -11,17 +11,17 @@ import itertools
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from clfx.core.errors import SequenceError, option
+from clfx.io.raw import frame_bytes
+from clfx.io.read import PassSpec
+from clfx.io.sequence import Pattern, output_path, parse_frames
 from clfx.pipeline.look import Look, RunStats
 from clfx.pipeline.options import RAW, RenderOptions
 from clfx.pipeline.plan import BatchPlan, Job
 from clfx.pipeline.preflight import Preflight
+from clfx.pipeline.report import Reporter
 from clfx.pipeline.stream import codec_threads_for, io_pool, io_threads, render_stream
-
-if TYPE_CHECKING:
-    from clfx.io.read import PassSpec
 
 
 @dataclass
@@ -76,8 +76,6 @@ class Batch(Preflight):
         """The `clfx.pipeline.report.Reporter` of this batch (warnings said while checking
         count for the render: each once)."""
         if self._reporter is None:
-            from clfx.pipeline.report import Reporter
-
             self._reporter = Reporter(self.look, self.options.report_options(self.verbosity),
                                       on_frame=self.on_frame,
                                       data_on_stdout=self.output_path == RAW)
@@ -117,7 +115,6 @@ class Batch(Preflight):
             first, self._first_read = self._first_read, None
             render_stream(rt, self.plan, jobs, reporter.frame, stats=self.stats, first=first)
             if raw and not reporter.reports and not reporter.failed:   # an empty stream is an
-                from clfx.io.raw import frame_bytes                     # error, not 0 frames
 
                 w, h = self.raw_size
                 fmt = self.options.raw_format
@@ -135,7 +132,6 @@ class Batch(Preflight):
         each with its output."""
         if self.output_path == RAW:
             return (Job(i, RAW, RAW) for i in itertools.count())
-        from clfx.io.sequence import Pattern, output_path, parse_frames
 
         pout = Pattern.parse(self.output_path)
         numbers = parse_frames(self.options.frames) if self.options.frames else itertools.count(1)

@@ -5,12 +5,11 @@ batch (`clfx.pipeline.batch`) checks them before any frame is read."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
-from typing import TYPE_CHECKING
 
 from clfx.core import limits
-
-if TYPE_CHECKING:
-    from clfx.pipeline.look import Look
+from clfx.io.read import PassSpec
+from clfx.pipeline.look import DEFAULT_QUALITY, Look
+from clfx.pipeline.report import ReportOptions
 
 RAW = "-"
 """INPUT or OUTPUT ``-``: raw frames on stdin or stdout (`clfx.io.raw`)."""
@@ -63,8 +62,6 @@ class PassOptions:
 
     def spec(self, focal_length_px: float | None = None):
         """The :class:`~clfx.io.read.PassSpec` (``focal_length_px`` fills in a missing one)."""
-        from clfx.io.read import PassSpec
-
         return PassSpec(depth_channel=self.depth_channel, depth_mode=self.depth_mode,
                         depth_scale=self.depth_scale, velocity_channels=self.velocity_channels,
                         velocity_y_up=self.velocity_y_up, velocity_scale=self.velocity_scale,
@@ -191,8 +188,6 @@ class RenderOptions(IOOptions):
 
     def report_options(self, verbosity: int = 1):
         """What the render says (`clfx.pipeline.report.ReportOptions`)."""
-        from clfx.pipeline.report import ReportOptions
-
         return ReportOptions(explain=self.explain, as_json=self.as_json,
                              log_path=self.log_path, verbosity=verbosity)
 
@@ -234,7 +229,5 @@ def resolve_quality(look: Look, quality: str | None) -> tuple[Look, str]:
     """The render's quality level (``quality``, else ``final``) and ``look`` with every
     step's level resolved (its own override, else the render's): the one place a batch
     resolves it, so the stamped look (``clfx:lookJSON``) renders the same pixels again."""
-    from clfx.pipeline.look import DEFAULT_QUALITY
-
     level = quality or DEFAULT_QUALITY
     return look.at_quality(level), level

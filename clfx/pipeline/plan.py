@@ -11,15 +11,15 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
 
 from clfx.core.errors import ImageIOError
 from clfx.core.frame import Frame
+from clfx.io.raw import read_raw, write_raw
+from clfx.io.read import PassSpec, read_views
+from clfx.io.write import OutputExistsError, write_frame
 from clfx.pipeline.look import Look, RunStats, render_frame
+from clfx.pipeline.masks import read_masks
 from clfx.pipeline.options import RAW, IOOptions, RenderOptions, RenderSettings, resolve_quality
-
-if TYPE_CHECKING:
-    from clfx.io.read import PassSpec
 
 
 @dataclass
@@ -132,13 +132,9 @@ class BatchPlan:
     def read(self, job: Job) -> FrameRead | None:
         """The job's frame (every view of a multi-view file when the output can hold them,
         hero first) with each view's masks; None at the end of a raw stream."""
-        from clfx.pipeline.masks import read_masks
-
         t0, c0 = time.perf_counter(), time.process_time()
         io, notes = self.io, []
         if self.raw_size is not None:
-            from clfx.io.raw import read_raw
-
             frame = read_raw(sys.stdin.buffer, self.raw_size, job.frame,
                              colorspace=io.colorspace, working_space=io.working_space,
                              pix_fmt=io.raw_format)
@@ -146,8 +142,6 @@ class BatchPlan:
                 return None
             frames = [frame]
         else:
-            from clfx.io.read import read_views
-
             frames = read_views(job.input, view=io.view, passes=self.passes,
                                 all_views=job.output.lower().endswith(".exr")
                                 and io.passes_mode != "drop",
@@ -192,8 +186,6 @@ class BatchPlan:
         t0, c0 = time.perf_counter(), time.process_time()
         io, skipped = self.io, False
         if self.raw_out is not None:
-            from clfx.io.raw import write_raw
-
             if (rest.width, rest.height) != self.raw_out:
                 w, h = self.raw_out
                 raise ImageIOError(f"{job.input}: display window {rest.width}x{rest.height}, "
@@ -202,8 +194,6 @@ class BatchPlan:
             write_raw(sys.stdout.buffer, frame, rest, colorspace=io.out_colorspace,
                       pix_fmt=io.raw_format)
         else:
-            from clfx.io.write import OutputExistsError, write_frame
-
             try:   # not overwrite: an output published meanwhile is never replaced
                 write_frame(frame, job.output, bit_depth=io.out_bit_depth(),
                             compression=io.compression, colorspace=io.out_colorspace,

@@ -7,13 +7,23 @@ refuses an oversized first frame from its header before ``clfx render`` sets up 
 from __future__ import annotations
 
 import os
+import stat
 import sys
 from dataclasses import replace
 
 from clfx.core.errors import ClfxError, ImageIOError, SequenceError, option
+from clfx.io.colour import check_config, config_file
+from clfx.io.probe import header_attribute, probe as probe_file
+from clfx.io.raw import check_format, check_stream_size, parse_size
+from clfx.io.read import beauty_geometry
+from clfx.io.sequence import (Pattern, check_input_file, compact, hash_notice, output_path,
+                              parse_frames, resolve_inputs)
+from clfx.io.write import OutputExistsError, check_output_format, sweep_stale_temps
 from clfx.pipeline.look import Look
+from clfx.pipeline.masks import check_mask
 from clfx.pipeline.options import RAW, RenderOptions
 from clfx.pipeline.plan import BatchPlan, Job
+from clfx.pipeline.presets import find_lens
 
 
 def look_files(look: Look) -> list[tuple[str, str]]:
@@ -25,8 +35,6 @@ def look_files(look: Look) -> list[tuple[str, str]]:
 def lens_files(look: Look) -> list[tuple[str, str]]:
     """(``effect.param``, file) of every lens prescription an enabled step reads (its
     plugin's `clfx.host.Plugin.lens_refs`, the lenses `clfx.io.lenses.resolve` reads)."""
-    from clfx.pipeline.presets import find_lens
-
     return [(f"{s.id}.{param}", str(find_lens(value))) for s in look.steps if s.enabled
             for param, kind, value in s.plugin.lens_refs(s.params) if kind == "prescription"]
 
@@ -45,8 +53,6 @@ def first_frame_geometry(path: str):
     from ``path``, from its headers; refused (`ImageIOError`, the reader's message) when a
     window exceeds the limits of `clfx.core.limits`.  A render checks its first frame so
     before anything is set up for it (the device, the first read, the maps)."""
-    from clfx.io.read import beauty_geometry
-
     return beauty_geometry(path, check=True)
 
 
@@ -57,7 +63,6 @@ def check_first_frame(input_path: str, options: RenderOptions) -> None:
     `Batch.prepare`, which checks the first frame it will render again."""
     if input_path == RAW:
         return
-    from clfx.io.sequence import Pattern, parse_frames, resolve_inputs
 
     try:
         frames = parse_frames(options.frames) if options.frames else None
@@ -91,10 +96,6 @@ class Preflight:
     def prepare(self) -> None:
         """Resolve frames and outputs; raise before any pixel is read if anything is wrong;
         make the `plan`."""
-        from clfx.io.sequence import Pattern, output_path, parse_frames, resolve_inputs
-
-        from clfx.io.colour import check_config
-
         o = self.options
         check_config()      # a FIFO or broken $OCIO: refused before anything reads a frame
         if self.input_path == RAW:
@@ -134,14 +135,11 @@ class Preflight:
             passes = {name: found[frame] if pat.is_sequence else next(iter(found.values()))
                       for name, (pat, found) in aux.items()}
             jobs.append(Job(frame, path, out, **passes))
-        from clfx.io.sequence import check_input_file
         self.look_files = [check_input_file(p, what) for what, p in look_files(self.look)]
         self._check_masks(jobs)
         self.plan = BatchPlan.of(self.look, o, reads=self._reads(jobs))   # what is read: checked
         self.reporter.stamped(self.plan.look.params_hash(), self.plan.quality)
         if raw_out:
-            from clfx.io.raw import check_format
-
             check_format(o.raw_format)
             self._say_no_overscan()
         else:
@@ -160,8 +158,6 @@ class Preflight:
     def _say_padding(self, *patterns) -> None:
         """One line for each pattern whose ``#`` count differs from Nuke's meaning
         (`clfx.io.sequence.hash_notice`: ``shot.####.exr`` is 16 digits here)."""
-        from clfx.io.sequence import hash_notice
-
         for pattern in patterns:
             message = hash_notice(pattern)
             if message:
@@ -178,8 +174,6 @@ class Preflight:
     def _raw_out_size(self, first: str, size: tuple[int, int]) -> tuple[int, int]:
         """The size of the raw frames written to stdout: the first input's display window,
         which ``--raw WxH``, when given, must match; said once on stderr (ffmpeg's ``-s``)."""
-        from clfx.io.raw import parse_size
-
         if self.options.raw_size:
             want = parse_size(self.options.raw_size)
             if want != size:
@@ -197,7 +191,6 @@ class Preflight:
         p = self.options.passes
         if p.depth_mode != "distance" or p.focal_length_px or not jobs:
             return None
-        from clfx.io.probe import probe as probe_file
 
         info = probe_file(jobs[0].input)
         part = info["beauty"]["part"] if info["beauty"] else 0   # pass-only: read refuses it
@@ -223,8 +216,6 @@ class Preflight:
     def _check_masks(self, jobs: list[Job]) -> None:
         """Every masked step's mask can be made: its files exist, its channel, layer and
         names are in the first frame's header (`clfx.pipeline.masks.check_mask`)."""
-        from clfx.pipeline.masks import check_mask
-
         files: set[str] = set()
         for step, mask in self.look.masks():
             files.update(check_mask(mask, jobs[0].input, [j.frame for j in jobs],
@@ -237,8 +228,6 @@ class Preflight:
         the output of ``--look-from``), mask files, files effects read (kernel images, lens
         prescriptions) and the OCIO config.  The one list every output and ``--log`` is
         checked against (`_check_outputs`, `_check_log`, the writer's ``protect``)."""
-        from clfx.io.colour import config_file
-
         reads = [(role, p) for j in jobs for role, p in
                  (("input", j.input), ("--depth", j.depth), ("--velocity", j.velocity)) if p]
         reads += [("look", p) for p in self.look.files]
@@ -273,8 +262,6 @@ class Preflight:
         """The --log file is none of the render's inputs or outputs, is a regular file (or a
         device such as /dev/null; a FIFO would block), and can be written (created now,
         empty)."""
-        import stat
-
         path = self.options.log_path
         if not path:
             return
@@ -304,8 +291,6 @@ class Preflight:
     def _check_kept(self, job: Job) -> None:
         """Note a frame --skip-existing keeps that another look or other parameters rendered
         (its stamped ``clfx:paramsHash`` differs from this look's, or it has none)."""
-        from clfx.io.probe import header_attribute
-
         try:
             stamped = header_attribute(job.output, "clfx:paramsHash")
             name = header_attribute(job.output, "clfx:look") if stamped else None
@@ -318,7 +303,6 @@ class Preflight:
         """One line for the frames kept from another look (`_check_kept`), or None."""
         if not self.kept_other:
             return None
-        from clfx.io.sequence import compact
 
         names = sorted({n or "no clfx stamp" for _, n in self.kept_other})
         return (f"clfx: warning: --skip-existing keeps frame(s) "
@@ -327,8 +311,6 @@ class Preflight:
                 f"use --overwrite to render them again")
 
     def _check_outputs(self, jobs: list[Job]) -> None:
-        from clfx.io.write import check_output_format
-
         outs = [j.output for j in jobs]
         if len(set(outs)) != len(outs):
             raise SequenceError(f"several frames would write the same output {outs[0]} "
@@ -343,7 +325,6 @@ class Preflight:
                             self.options.compression)    # not after the first render
         check_output_folder(outs[0])
         if self.options.skip_existing:
-            from clfx.io.write import sweep_stale_temps
             sweep_stale_temps(outs)   # temp files of killed runs (their process is gone)
         for j in jobs:
             if os.path.lexists(j.output):   # a dangling symlink counts
@@ -351,8 +332,6 @@ class Preflight:
                     self.skipped_existing.append(j.frame)
                     self._check_kept(j)
                 elif not self.options.overwrite:
-                    from clfx.io.write import OutputExistsError
-
                     raise OutputExistsError(f"output {j.output} exists (use {option('--overwrite')} "
                                             f"to replace it, or {option('--skip-existing')} to "
                                             f"resume)")
@@ -362,7 +341,6 @@ class Preflight:
         """Raw frames on stdin, to stdout or to a file sequence: checked as far as a stream
         of unknown length can be before it is read."""
         o = self.options
-        from clfx.io.raw import check_format, check_stream_size, parse_size
 
         check_format(o.raw_format)
         if not o.raw_size:
@@ -395,9 +373,6 @@ class Preflight:
         frames) in a writable folder and format; outputs already on disk (of ``--frames``,
         else any frame of the pattern) are refused unless overwritten or skipped, and none
         is a file the render reads."""
-        from clfx.io.sequence import Pattern, parse_frames, resolve_inputs
-        from clfx.io.write import OutputExistsError, check_output_format
-
         o = self.options
         pout = Pattern.parse(self.output_path)
         if not pout.is_sequence:

@@ -30,10 +30,12 @@ from dataclasses import dataclass
 from clfx.core.errors import ClfxError
 from clfx.core import limits
 from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
-from clfx.pipeline.look import Look, RunStats
+from clfx.io.read import codec_threads
+from clfx.pipeline.look import Look, RunStats, prepare
 from clfx.pipeline.options import RAW
 from clfx.pipeline.plan import BatchPlan, Job
 from clfx.pipeline.preflight import first_frame_geometry
+from clfx.pipeline.report import FrameResult
 
 STREAM = os.environ.get("CLFX_STREAM", "auto")
 """How a sequence's I/O and rendering share the machine (``CLFX_STREAM``): "phased" (render,
@@ -99,8 +101,6 @@ _STREAM_SAID = False
 
 def _background(nice: int) -> None:
     """Initialiser of an I/O thread: lower its priority by ``nice`` (where the OS can)."""
-    import threading
-
     if nice and hasattr(os, "setpriority"):
         try:
             tid = threading.get_native_id()
@@ -123,8 +123,6 @@ def io_pool(kind: str = "read", lowered: bool = False) -> ThreadPoolExecutor:
 def io_threads(n: int | None = None):
     """The codecs' threads while a batch runs: ``n``, default every core (the first read,
     while the device is set up: `Batch.reading`)."""
-    from clfx.io.read import codec_threads
-
     with codec_threads(n or available_cores()):
         yield
 
@@ -154,8 +152,6 @@ def prepare_maps(rt, look: Look, jobs, quality: str | None,
     caller closes what it returns, cancelling it when the frame is refused."""
     if not jobs or jobs[0].input == RAW:
         return None
-    from clfx.core.errors import ClfxError
-    from clfx.pipeline.look import prepare
 
     job = jobs[0]
     try:
@@ -244,8 +240,6 @@ class _Pending:
 
     def result(self, keep_going: bool, worker: str | None):
         """The frame's `clfx.pipeline.report.FrameResult` (waiting for its write)."""
-        from clfx.pipeline.report import FrameResult
-
         error, skipped = self.error, False
         if error is None:
             try:
