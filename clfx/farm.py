@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 
+from openjd.model import DecodeValidationError, create_job, decode_job_template
 import yaml
 
 from clfx.core.errors import ClfxError, SequenceError
@@ -209,8 +210,6 @@ def _literal_args(args: list[str]) -> tuple[list[dict], list[str]]:
 def check_template(template: dict, *, path_params: bool = False) -> None:
     """Refuse a template OpenJD would refuse (`openjd check`, and a job made from its
     defaults), in one line naming what OpenJD says."""
-    from openjd.model import DecodeValidationError, create_job, decode_job_template
-
     try:
         decoded = decode_job_template(template=template,
                                       supported_extensions=template.get("extensions", []))

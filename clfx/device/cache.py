@@ -31,6 +31,7 @@ from collections import OrderedDict
 from typing import Callable, Hashable, TypeVar
 
 import numpy as np
+import pyopencl as cl
 
 from clfx.core.errors import DeviceError
 from clfx.core.limits import env_int
@@ -166,8 +167,6 @@ class DeviceCache:
     # -- idle buffers ---------------------------------------------------------------------
     def take(self, nbytes: int):
         """A buffer of ``nbytes``: the most recently freed idle one of that size, or new."""
-        import pyopencl as cl
-
         nbytes = max(int(nbytes), 16)
         with self._lock:
             for key in reversed(self._lru):
