@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 
-from openjd.model import DecodeValidationError, create_job, decode_job_template
 import yaml
 
 from clfx.core.errors import ClfxError, SequenceError
@@ -210,6 +209,9 @@ def _literal_args(args: list[str]) -> tuple[list[dict], list[str]]:
 def check_template(template: dict, *, path_params: bool = False) -> None:
     """Refuse a template OpenJD would refuse (`openjd check`, and a job made from its
     defaults), in one line naming what OpenJD says."""
+    # lazy: openjd is optional (the test extra): only checking a template needs it
+    from openjd.model import DecodeValidationError, create_job, decode_job_template
+
     try:
         decoded = decode_job_template(template=template,
                                       supported_extensions=template.get("extensions", []))
