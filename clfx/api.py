@@ -34,11 +34,7 @@ from clfx.core.limits import load_json
 from clfx.core.plugin import QUALITY_LEVELS
 from clfx.core.rect import Rect
 from clfx.device.runtime import Runtime
-from clfx.io import colour
 from clfx.io.channels import beauty_out
-from clfx.io.probe import header_attribute
-from clfx.io.sequence import Pattern
-from clfx.pipeline.batch import Batch
 from clfx.pipeline.masks import read_masks
 from clfx.pipeline.options import ClusterOptions, PassOptions, RenderOptions, resolve_quality
 from clfx.pipeline.look import FrameReport, Look, RunStats, render_frame
@@ -162,6 +158,8 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
     PresetError
         The file carries no clfx look (not rendered by clfx, or by a clfx before 0.1.0).
     """
+    from clfx.io.probe import header_attribute   # lazy: files cost `import clfx.api` ~0.5 s
+
     text = header_attribute(path, "clfx:lookJSON")
     if not text:
         raise PresetError(f"{os.fspath(path)}: no clfx:lookJSON attribute (not rendered by clfx "
@@ -180,6 +178,8 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
 def stamped_quality(path: str | os.PathLike) -> str | None:
     """The quality level an output of clfx was rendered at (its ``clfx:quality``), None
     when it has none (rendered by a clfx before it was stamped) or not a level."""
+    from clfx.io.probe import header_attribute   # lazy: as look_from_stamp
+
     level = header_attribute(path, "clfx:quality")
     return level if level in QUALITY_LEVELS else None
 
@@ -276,6 +276,8 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     lk, level = resolve_quality(look if isinstance(look, Look) else load_look(look), quality)
     frm = Frame.from_array(arr, depth=depth, velocity=velocity)
     if working_space is not None:
+        from clfx.io import colour   # lazy: OpenImageIO, as look_from_stamp
+
         frm.colorspace = colour.resolve(working_space, "working space")
         if frm.colorspace == colour.RAW or not colour.is_linear(frm.colorspace):
             raise ParamError(f"working_space {working_space!r} must be a linear colour space "
@@ -364,6 +366,9 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     _check_look(look)
     _check_quality(options.quality)
     lk = look if isinstance(look, Look) and not set else load_look(look, set=set)
+    # lazy: files (OpenImageIO, fileseq) cost `import clfx.api` ~0.5 s
+    from clfx.pipeline.batch import Batch
+
     batch = Batch(look=lk, input_path=os.fspath(input), output_path=os.fspath(output),
                   options=options, verbosity=verbosity, on_frame=on_frame)
     batch.prepare()
@@ -385,6 +390,8 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
 def render_file(input, output, look: str | dict | Look = "default", **kw) -> RenderResult:
     """Render one image file to another (any format OpenImageIO reads; the output's
     extension picks its format).  Keywords: see :func:`render`."""
+    from clfx.io.sequence import Pattern   # lazy: fileseq, as render
+
     if Pattern.parse(os.fspath(input)).is_sequence:
         raise SequenceError(f"{os.fspath(input)} is a sequence pattern; use render_sequence")
     return render(input, output, look, **kw)

@@ -31,7 +31,6 @@ from collections import OrderedDict
 from typing import Callable, Hashable, TypeVar
 
 import numpy as np
-import pyopencl as cl
 
 from clfx.core.errors import DeviceError
 from clfx.core.limits import env_int
@@ -167,6 +166,8 @@ class DeviceCache:
     # -- idle buffers ---------------------------------------------------------------------
     def take(self, nbytes: int):
         """A buffer of ``nbytes``: the most recently freed idle one of that size, or new."""
+        import pyopencl as cl   # lazy: ~0.4 s; the CLI loads the runtime without it
+
         nbytes = max(int(nbytes), 16)
         with self._lock:
             for key in reversed(self._lru):

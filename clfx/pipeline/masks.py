@@ -59,8 +59,6 @@ from clfx.core.errors import ClipError
 from clfx.core.frame import Frame, crop_to
 from clfx.core.rect import Rect
 from clfx.fx import mask as mask_fx
-from clfx.io import mattes
-from clfx.io.sequence import Pattern, hash_notice, resolve_inputs
 
 MODES = ("auto", "mix", "sources")
 MASK_KEYS = ("channel", "file", "cryptomatte", "names", "invert", "feather", "mode")
@@ -180,6 +178,7 @@ def mask_file(spec: MaskSpec, frame_number: int) -> str | None:
     """The mask file of ``frame_number`` (``spec.file`` with its frame token filled in)."""
     if not spec.file:
         return None
+    from clfx.io.sequence import Pattern   # lazy: fileseq, as check_mask
 
     return Pattern.parse(spec.file).path(frame_number)
 
@@ -211,6 +210,10 @@ def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str, notify=No
     ``source`` is the first input file.  ``notify(message, key)`` hears what will be assumed
     (a Cryptomatte without manifest, a pattern's ``#`` padding).  Returns the files the mask
     reads (inputs of the render)."""
+    # lazy: OpenImageIO and fileseq (~0.3 s): listing looks loads this module
+    from clfx.io import mattes
+    from clfx.io.sequence import Pattern, hash_notice, resolve_inputs
+
     files: list[str] = []
     first = source
     if spec.file:
@@ -259,6 +262,8 @@ def read_mask(spec: MaskSpec, frame: Frame, frame_number: int, *,
     data window; otherwise the channel is read from the frame's file (``frame.source``) or
     the mask file.
     """
+    from clfx.io import mattes   # lazy: OpenImageIO, as check_mask
+
     if channels and spec.channel and not spec.file and spec.channel in channels:
         arr = np.asarray(channels[spec.channel], np.float32)
         if arr.shape != frame.data_window.shape:

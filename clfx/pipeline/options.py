@@ -7,7 +7,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 
 from clfx.core import limits
-from clfx.io.read import PassSpec
 from clfx.pipeline.look import DEFAULT_QUALITY, Look
 from clfx.pipeline.report import ReportOptions
 
@@ -62,6 +61,8 @@ class PassOptions:
 
     def spec(self, focal_length_px: float | None = None):
         """The :class:`~clfx.io.read.PassSpec` (``focal_length_px`` fills in a missing one)."""
+        from clfx.io.read import PassSpec   # lazy: OpenImageIO; `import clfx.api` skips it
+
         return PassSpec(depth_channel=self.depth_channel, depth_mode=self.depth_mode,
                         depth_scale=self.depth_scale, velocity_channels=self.velocity_channels,
                         velocity_y_up=self.velocity_y_up, velocity_scale=self.velocity_scale,
@@ -221,7 +222,7 @@ class ClusterOptions:
         try:
             return cls(**dict(value))
         except TypeError as exc:
-            raise TypeError(f"distributed: {exc} (see clfx.pipeline.options.ClusterOptions)") from None
+            raise TypeError(f"distributed: {exc} (see clfx.ClusterOptions)") from None
 
 
 
