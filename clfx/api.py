@@ -22,17 +22,24 @@ Examples
 from __future__ import annotations
 
 import os
-from concurrent.futures import Future
-from dataclasses import dataclass, field
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
 from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from clfx.core.errors import ParamError, SequenceError
+from clfx.core.errors import ParamError, PresetError, SequenceError
 from clfx.core.frame import Frame
+from clfx.core.limits import load_json
+from clfx.core.plugin import QUALITY_LEVELS
 from clfx.core.rect import Rect
-from clfx.pipeline.batch import Batch, ClusterOptions, PassOptions, RenderOptions, resolve_quality
+from clfx.device.runtime import Runtime
+from clfx.io.channels import beauty_out
+from clfx.pipeline.masks import read_masks
+from clfx.pipeline.options import ClusterOptions, PassOptions, RenderOptions, resolve_quality
 from clfx.pipeline.look import FrameReport, Look, RunStats, render_frame
+from clfx.pipeline.presets import (MAX_LOOK_BYTES, apply_overrides, load_look as _load,
+                                   look_from_dict)
 
 
 __all__ = ["Look", "FrameReport", "RenderOptions", "PassOptions", "ClusterOptions", "ArrayResult", "RenderResult",
@@ -53,8 +60,6 @@ def runtime(device: str | None = None):
     DeviceError
         No usable OpenCL device (the message says what to install).
     """
-    from clfx.device.runtime import Runtime
-
     return Runtime.get(device)
 
 
@@ -84,10 +89,6 @@ def load_look(look: str | os.PathLike | dict | Look = "default", *,
     PresetError, ParamError
         Unknown look, effect or parameter (with the closest name), a value out of range.
     """
-    from dataclasses import replace
-
-    from clfx.pipeline.presets import apply_overrides, load_look as _load, look_from_dict
-
     _check_look(look)
     if isinstance(set, (str, bytes)) or not isinstance(set, Iterable):
         raise TypeError(f"set: {set!r} is not a list of 'key=value' strings")
@@ -110,8 +111,6 @@ def _check_look(look) -> None:
 
 def _check_quality(quality) -> None:
     """ValueError unless ``quality`` is None or a quality level."""
-    from clfx.core.plugin import QUALITY_LEVELS
-
     if quality is not None and (not isinstance(quality, str) or quality not in QUALITY_LEVELS):
         raise ValueError(f"quality: {quality!r} is not one of {', '.join(QUALITY_LEVELS)} "
                          f"(or None: final)")
@@ -159,10 +158,7 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
     PresetError
         The file carries no clfx look (not rendered by clfx, or by a clfx before 0.1.0).
     """
-    from clfx.core.errors import PresetError
-    from clfx.core.limits import load_json
-    from clfx.io.probe import header_attribute
-    from clfx.pipeline.presets import MAX_LOOK_BYTES, look_from_dict
+    from clfx.io.probe import header_attribute   # lazy: files cost `import clfx.api` ~0.5 s
 
     text = header_attribute(path, "clfx:lookJSON")
     if not text:
@@ -170,7 +166,6 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
                           "with a stamped look)")
     data = load_json(text, f"{os.fspath(path)}: clfx:lookJSON", PresetError,
                      max_bytes=MAX_LOOK_BYTES, unique_keys=True)   # as a look file
-    from dataclasses import replace
 
     look = look_from_dict(data, where=f"{os.fspath(path)} (clfx:lookJSON)")
     if relevel:
@@ -183,8 +178,7 @@ def look_from_stamp(path: str | os.PathLike, *, relevel: bool = False,
 def stamped_quality(path: str | os.PathLike) -> str | None:
     """The quality level an output of clfx was rendered at (its ``clfx:quality``), None
     when it has none (rendered by a clfx before it was stamped) or not a level."""
-    from clfx.core.plugin import QUALITY_LEVELS
-    from clfx.io.probe import header_attribute
+    from clfx.io.probe import header_attribute   # lazy: as look_from_stamp
 
     level = header_attribute(path, "clfx:quality")
     return level if level in QUALITY_LEVELS else None
@@ -265,8 +259,6 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
         An argument of the wrong type (``look=5``, ``frame="x"``, a uint8 array) or value
         (``quality="ultra"``), naming the argument.
     """
-    from clfx.pipeline.masks import read_masks
-
     _check_look(look)
     _check_quality(quality)
     frame = _check_frame(frame)
@@ -284,7 +276,7 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     lk, level = resolve_quality(look if isinstance(look, Look) else load_look(look), quality)
     frm = Frame.from_array(arr, depth=depth, velocity=velocity)
     if working_space is not None:
-        from clfx.io import colour
+        from clfx.io import colour   # lazy: OpenImageIO, as look_from_stamp
 
         frm.colorspace = colour.resolve(working_space, "working space")
         if frm.colorspace == colour.RAW or not colour.is_linear(frm.colorspace):
@@ -293,7 +285,6 @@ def render_array(rgba, look: str | dict | Look = "default", *, depth=None, veloc
     masks = read_masks(lk.at(frame), frm, frame, channels=channels) if lk.masks() else None
     out, report = render_frame(runtime(device), lk, frm, frame_number=frame, quality=level,
                                keep_overscan=keep_overscan, stats=stats, masks=masks)
-    from clfx.io.channels import beauty_out
 
     pixels = beauty_out(out.rgba, arr.shape[2] if arr.ndim == 3 else 1)   # channels in = out
     return ArrayResult(pixels[..., 0] if arr.ndim == 2 else pixels, out.data_window, report)
@@ -375,10 +366,14 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
     _check_look(look)
     _check_quality(options.quality)
     lk = look if isinstance(look, Look) and not set else load_look(look, set=set)
+    # lazy: files (OpenImageIO, fileseq) cost `import clfx.api` ~0.5 s
+    from clfx.pipeline.batch import Batch
+
     batch = Batch(look=lk, input_path=os.fspath(input), output_path=os.fspath(output),
                   options=options, verbosity=verbosity, on_frame=on_frame)
     batch.prepare()
     if distributed:
+        # lazy: Dask costs ~0.6 s to import (measured); only a render on a cluster needs it
         from clfx.pipeline.distributed import render_distributed
 
         summary = render_distributed(batch, ClusterOptions.of(distributed), device=device)
@@ -395,7 +390,7 @@ def render(input: str | os.PathLike, output: str | os.PathLike,
 def render_file(input, output, look: str | dict | Look = "default", **kw) -> RenderResult:
     """Render one image file to another (any format OpenImageIO reads; the output's
     extension picks its format).  Keywords: see :func:`render`."""
-    from clfx.io.sequence import Pattern
+    from clfx.io.sequence import Pattern   # lazy: fileseq, as render
 
     if Pattern.parse(os.fspath(input)).is_sequence:
         raise SequenceError(f"{os.fspath(input)} is a sequence pattern; use render_sequence")
@@ -423,8 +418,6 @@ def _options(values: dict) -> RenderOptions:
 def runtime_soon(device: str | None = None) -> Future:
     """Start creating the runtime on a thread (OpenCL releases the GIL) so device set-up
     overlaps reading the first frame."""
-    from concurrent.futures import ThreadPoolExecutor
-
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="clfx-device")
     future = pool.submit(runtime, device)
     pool.shutdown(wait=False)

@@ -15,18 +15,26 @@ about what clfx assumed (a depth pass's "no hit" convention, ``####`` as 16 digi
 from __future__ import annotations
 
 import contextlib
+import difflib
 import json
 import math
 import os
+import shlex
 import signal
+import stat
 import sys
+import threading
+import time
+import warnings
+from dataclasses import replace
 
 import click
 
 from clfx._version import __version__
 from clfx.cli_options import (check_frames, colour_options, pass_options, quality_option,
                                render_options)
-from clfx.core.errors import ClfxError, speak
+from clfx.core.errors import ClfxError, PresetError, speak
+from clfx.core.limits import check_pixels
 
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
@@ -214,6 +222,7 @@ class ClfxGroup(click.Group):
 
 
 def _runtime(ctx: click.Context):
+    # lazy: the device (pyopencl) is ~0.3 s at start-up; only device commands need it
     from clfx.device.runtime import Runtime
 
     return Runtime.get(ctx.obj.get("device") if ctx.obj else None)
@@ -221,8 +230,9 @@ def _runtime(ctx: click.Context):
 
 def _check_first_frame(input_path: str, options) -> None:
     """Refuse a first frame whose windows exceed the pixel limits from its header, before
-    the device is set up on a thread (`clfx.pipeline.batch.check_first_frame`)."""
-    from clfx.pipeline.batch import check_first_frame
+    the device is set up on a thread (`clfx.pipeline.preflight.check_first_frame`)."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
+    from clfx.pipeline.preflight import check_first_frame
 
     check_first_frame(input_path, options)
 
@@ -230,6 +240,7 @@ def _check_first_frame(input_path: str, options) -> None:
 def _runtime_soon(ctx: click.Context):
     """Start creating the runtime on a thread (`clfx.api.runtime_soon`), so device set-up
     overlaps loading the look and reading the first frame; call ``.result()`` for it."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.api import runtime_soon
 
     return runtime_soon(ctx.obj.get("device") if ctx.obj else None)
@@ -258,8 +269,7 @@ def _compiler_messages(verbosity: int) -> None:
     """OpenCL compiler output (pyopencl's CompilerWarning, PoCL's "N warnings generated.",
     caught by the runtime as a KernelBuildWarning) is shown only with -v: then with the
     whole build log."""
-    import warnings
-
+    # lazy: the device (pyopencl) is ~0.3 s at start-up; only device commands need it
     from clfx.device import runtime
     from clfx.device.runtime import KernelBuildWarning
 
@@ -299,6 +309,7 @@ def _cold_build_notice(rt) -> None:
 @click.pass_context
 def devices(ctx, as_json):
     """List every OpenCL platform and device, mark the one in use, say why others are not."""
+    # lazy: the device (pyopencl) is ~0.3 s at start-up; only device commands need it
     from clfx.device.runtime import INSTALL_HINT, survey_devices
 
     reports, chosen = survey_devices(ctx.obj.get("device"))
@@ -317,6 +328,7 @@ def devices(ctx, as_json):
 @click.option("--json", "as_json", is_flag=True)
 def plugins(as_json):
     """List the effects."""
+    # lazy: the effect registry is ~90 ms at start-up
     from clfx.plugins import discover
 
     reg = discover()
@@ -345,6 +357,7 @@ def _check_render_args(args) -> None:
 @click.option("--json", "as_json", is_flag=True)
 def describe(effect, as_json):
     """Print an effect's full descriptor: parameters, clips, quality levels."""
+    # lazy: the effect registry is ~90 ms at start-up
     from clfx.plugins import get_plugin
 
     d = get_plugin(effect).descriptor.describe()
@@ -382,6 +395,7 @@ def describe(effect, as_json):
 @click.option("--json", "as_json", is_flag=True)
 def looks(as_json):
     """List the looks (built-in, user and CLFX_PRESET_PATH)."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.pipeline.presets import available_looks, load_look
 
     rows = []
@@ -420,6 +434,7 @@ def look_show(name, assignments, frame, quality, as_json):
     """Print the resolved look (inheritance applied, defaults filled in); NAME is a look, a
     YAML file or an output clfx rendered (its stamped look).  Its params hash is the
     ``clfx:paramsHash`` a render at ``--quality`` (default final) stamps."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.api import load_look
 
     full = load_look(name, set=assignments)
@@ -477,6 +492,7 @@ def _step_origin(shown: dict, name: str) -> str:
 @colour_options
 def probe(file, as_json, colorspace, working_space, view, **kw):
     """Print the channels, windows and passes found in FILE and how they will be read."""
+    # lazy: OpenImageIO and the reader are ~0.5 s at start-up
     from clfx.io.probe import format_probe, probe as probe_file
 
     info = probe_file(file, passes=_pass_options(kw).spec(), colorspace=colorspace,
@@ -490,6 +506,7 @@ def probe(file, as_json, colorspace, working_space, view, **kw):
 @click.option("--json", "as_json", is_flag=True)
 def lenses(query, limit, as_json):
     """Find real lenses in the lensfun database (for the `lens` effect)."""
+    # lazy: the lens database reader is ~40 ms at start-up
     from clfx.fx.lensdb import find_lenses
 
     rows = find_lenses(query, limit=limit)
@@ -533,7 +550,8 @@ def lens_table(rows: list[dict]) -> str:
 # -- render / apply ------------------------------------------------------------------------
 def _pass_options(kw: dict):
     """The pass options of a command's keyword arguments (see ``cli_options.pass_options``)."""
-    from clfx.pipeline.batch import PassOptions
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
+    from clfx.pipeline.options import PassOptions
 
     return PassOptions(**{name: kw[name] for name in PassOptions.names()})
 
@@ -541,7 +559,8 @@ def _pass_options(kw: dict):
 def _render_options(kw: dict):
     """The typed options of ``render`` / ``apply`` from their keyword arguments, with the
     command line (stamped into outputs)."""
-    from clfx.pipeline.batch import PassOptions, RenderOptions
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
+    from clfx.pipeline.options import PassOptions, RenderOptions
 
     passes = set(PassOptions.names())
     rest = {k: v for k, v in kw.items() if k not in passes}
@@ -551,8 +570,6 @@ def _render_options(kw: dict):
 
 def _command_line() -> str:
     """The command line as a shell would take it (stamped as clfx:commandLine)."""
-    import shlex
-
     ctx = click.get_current_context(silent=True)
     args = ctx.meta.get("clfx.argv", []) if ctx is not None else []
     return shlex.join(["clfx", *map(str, args)])
@@ -608,14 +625,15 @@ def render(ctx, input_path, output_path, look_name, look_from, assignments, work
     if workers and scheduler:
         raise click.UsageError("give --workers N (a local cluster) or --scheduler ADDRESS "
                                "(an existing one), not both")
-    from clfx.pipeline.batch import ClusterOptions
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
+    from clfx.pipeline.options import ClusterOptions
 
     scale = ClusterOptions(workers=workers, scheduler=scheduler, chunk=chunk, fail_fast=fail_fast)
     options = _render_options(kw)
     _check_first_frame(input_path, options)
     runtime = None if workers or scheduler else _runtime_soon(ctx)
-    from dataclasses import replace
 
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.api import load_look, look_from_stamp, stamped_quality
 
     lk = look_name or "default"
@@ -657,6 +675,7 @@ def farm():
 def farm_openjd(input_path, output_path, render_args, look_name, assignments, frames, chunk,
                 quality, name, clfx_command, task_chunking, path_params):
     """Print an Open Job Description template whose tasks run `clfx render` on chunks."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.farm import openjd_template, openjd_yaml
     from clfx.io.sequence import Pattern, hash_notice
 
@@ -684,6 +703,7 @@ def apply(ctx, effect, input_path, output_path, assignments, **kw):
     options = _render_options(kw)
     _check_first_frame(input_path, options)
     runtime = _runtime_soon(ctx)
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.pipeline.presets import single_effect_look
 
     lk = single_effect_look(effect, list(assignments))
@@ -692,6 +712,7 @@ def apply(ctx, effect, input_path, output_path, assignments, **kw):
 
 def _run_batch(ctx, lk, input_path, output_path, options, runtime, scale=None):
     """``clfx render`` / ``apply``: `clfx.api.render`, with progress on a terminal."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.api import render as render_api
 
     verbosity = ctx.obj.get("verbosity", 1)
@@ -713,8 +734,7 @@ class _Progress:
     meanwhile are not wrapped; `close` (before the summary) takes the bar away."""
 
     def __init__(self, clock=None, console=None):
-        import time
-
+        # lazy: rich is ~0.1 s at start-up; only the progress bar needs it
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                    TimeRemainingColumn)
@@ -790,6 +810,7 @@ def _progress(show: bool):
 def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_json):
     """Render the built-in procedural HDR scene through a look: EXRs, PNG previews and a
     contact sheet in OUTDIR.  Needs no input files."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.api import load_look
     from clfx.demo import run_demo
 
@@ -813,6 +834,7 @@ def demo(ctx, outdir, count, size, look_name, quality, overwrite, explain, as_js
 def gallery(ctx, outdir, width, only, quality, overwrite):
     """Every effect and built-in look on the demo scene, CandleGlass.exr and Desk.exr: a
     labelled before/after contact sheet per image in OUTDIR."""
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.gallery import run_gallery
 
     run_gallery(_runtime(ctx), outdir, width=width, quality=quality, only=only,
@@ -824,6 +846,7 @@ def _gallery_names(value: str | None) -> set[str] | None:
     unknown one is a usage error naming the closest, before anything renders."""
     if value is None:
         return None
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.gallery import VARIANTS
     from clfx.pipeline.presets import available_looks
     from clfx.plugins import discover
@@ -837,8 +860,6 @@ def _gallery_names(value: str | None) -> set[str] | None:
 
 def _check_names(names, known, what: str) -> None:
     """A usage error for the first of ``names`` not in ``known``, naming the closest."""
-    import difflib
-
     for name in sorted(names):
         if name not in known:
             close = difflib.get_close_matches(name, sorted(known), n=1)
@@ -852,7 +873,7 @@ def _bench_looks(ctx, param, value):
     one is a usage error before anything is measured."""
     if value is None or value == "none":
         return value
-    from clfx.core.errors import PresetError
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.pipeline.presets import find_look
 
     for name in value.split(","):
@@ -879,10 +900,10 @@ def _bench_looks(ctx, param, value):
 def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path, md_path):
     """What accuracy costs in time: every effect at every quality level against its reference
     (with OpenCV/SciPy peers), whole looks, sequence throughput, and scene-analysis skipping."""
+    # lazy: the bench (scenes, cases, plots) is ~1 s at start-up
     from clfx.bench.plots import check_plot_path, pareto_plot
     from clfx.bench.report import markdown
     from clfx.bench.runner import run_bench
-    from clfx.core.limits import check_pixels
 
     w, h = _parse_size(size)
     check_pixels(w, h, "--size")
@@ -926,8 +947,7 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
 def prebuild(ctx, looks, levels, size):
     """Compile the kernels of looks at quality levels into the kernel cache, ahead of renders
     (e.g. when a farm node's image is built): renders one demo frame through each."""
-    import time
-
+    # lazy: the render stack (device, OpenImageIO, looks) is ~1 s; --help must not wait
     from clfx.device import runtime
     from clfx.pipeline.presets import available_looks
     from clfx.prebuild import levels_of, prebuild as run_prebuild
@@ -956,8 +976,6 @@ def _check_writable(path: str, option: str) -> None:
     """Refuse, before a long run, an output file that cannot take what it will be given: a
     folder, a FIFO (it would block), a missing or read-only folder, a device that refuses a
     byte (/dev/full) or a file system without a free block."""
-    import stat
-
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
@@ -1003,9 +1021,6 @@ inside one long call: an FFT plan, a device wait, numpy on a large array)."""
 def _watch_signals() -> None:
     """Hear SIGTERM / SIGINT on a thread (Python's wakeup descriptor) whatever the main
     thread is doing, and end the process `SIGNAL_GRACE_S` later if it is still running."""
-    import threading
-    import time
-
     try:
         r, w = os.pipe()
         os.set_blocking(w, False)

@@ -22,7 +22,15 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from clfx.core.frame import Frame
+from clfx.bench.scene import demo_scene, render_sharp
+from clfx.core.errors import ImageIOError, option
+from clfx.core.frame import Frame, crop_to
+from clfx.io.read import read_frame
+from clfx.io.write import output_folder, write_frame
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.options import RenderOptions
+from clfx.pipeline.presets import load_look
+from clfx.pipeline.stream import codec_threads_for, io_threads, render_stream
 
 PREVIEW_EXPOSURE = 1.0
 
@@ -42,7 +50,7 @@ def contact_sheet(pairs: list[tuple[int, np.ndarray, np.ndarray]], look_name: st
     """Each frame's ``(number, before, after)`` previews (display-linear RGB) side by side,
     box-downscaled and labelled ``frame N`` / ``before`` or ``after: LOOK`` (the gallery's
     labels), pairs kept on one row."""
-    from clfx.gallery import label, thumbnail     # the gallery's sheet code (same layer)
+    from clfx.gallery import label, thumbnail     # lazy: clfx.gallery imports this module (a cycle)
 
     tiles = []
     for number, before, after in pairs:
@@ -81,15 +89,10 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
     demo there are an error before anything is rendered (like ``clfx render``).
 
     The scene's frames are written first (``scene.#.exr``, float); the look then runs over
-    them through `clfx render`'s own pipeline (`clfx.pipeline.batch.render_stream`: read,
+    them through `clfx render`'s own pipeline (`clfx.pipeline.stream.render_stream`: read,
     render, write; half-float output stamped like a render's), so ``clfx render`` of the
     scene files with the same look renders the same frames (written as float there, the
     input's type).  Each preview is the output as written."""
-    from clfx.core.errors import ImageIOError, option
-    from clfx.io.write import output_folder, write_frame
-    from clfx.pipeline.batch import Batch, RenderOptions, codec_threads_for, io_threads, render_stream
-    from clfx.pipeline.presets import load_look
-
     look = load_look(look_name)
     if not overwrite:
         there = [p for p in demo_files(outdir, count) if os.path.lexists(p)]
@@ -146,9 +149,6 @@ def run_demo(rt, outdir: str, *, count: int = 24, width: int = 640, height: int 
 def write_scene(outdir: str, frame_no: int, width: int, height: int, overwrite: bool) -> str:
     """Frame ``frame_no`` of the demo scene, sharp with its depth and velocity passes, as
     ``scene.#.exr`` (float) in ``outdir``; its path."""
-    from clfx.bench.scene import demo_scene, render_sharp
-    from clfx.io.write import write_frame
-
     path = os.path.join(outdir, f"scene.{frame_no:04d}.exr")
     write_frame(render_sharp(demo_scene(frame_no, width, height)), path, overwrite=overwrite,
                 bit_depth="float")
@@ -157,8 +157,5 @@ def write_scene(outdir: str, frame_no: int, width: int, height: int, overwrite: 
 
 def preview_of(path: str) -> np.ndarray:
     """The tone-mapped preview (`tonemap_preview`) of an output file's display window."""
-    from clfx.core.frame import crop_to
-    from clfx.io.read import read_frame
-
     out = read_frame(path)
     return tonemap_preview(crop_to(out.rgba, out.data_window, out.display_window))

@@ -26,7 +26,7 @@ from pathlib import Path
 import yaml
 
 from clfx.core.plugin import QUALITY_LEVELS
-from clfx.io.presetfiles import builtin_dir
+from clfx.io.presetfiles import builtin_dir, read_text
 from clfx.pipeline.masks import MaskSpec
 from clfx.plugins import discover
 
@@ -97,8 +97,6 @@ def looks_using() -> dict[str, list[str]]:
 
 
 def _builtin_looks() -> list[tuple[str, dict]]:
-    from clfx.io.presetfiles import read_text
-
     return [(p.stem, yaml.safe_load(read_text(p)) or {})
             for p in sorted(builtin_dir().glob("*.yaml"))]
 

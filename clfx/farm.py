@@ -209,6 +209,7 @@ def _literal_args(args: list[str]) -> tuple[list[dict], list[str]]:
 def check_template(template: dict, *, path_params: bool = False) -> None:
     """Refuse a template OpenJD would refuse (`openjd check`, and a job made from its
     defaults), in one line naming what OpenJD says."""
+    # lazy: openjd is optional (the test extra): only checking a template needs it
     from openjd.model import DecodeValidationError, create_job, decode_job_template
 
     try:

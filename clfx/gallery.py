@@ -51,10 +51,15 @@ from pathlib import Path
 
 import numpy as np
 
-from clfx.core.errors import ClfxError
-from clfx.core.frame import Frame
+from clfx.bench.scene import demo_scene, render_sharp
+from clfx.core.errors import ClfxError, ParamError
+from clfx.core.frame import Frame, crop_to
 from clfx.demo import tile_sheet, tonemap_preview as tonemap
+from clfx.io.read import read_frame
+from clfx.io.write import OutputExistsError, output_folder, write_frame, write_text
 from clfx.pipeline.look import render_frame
+from clfx.pipeline.presets import available_looks, load_look, single_effect_look
+from clfx.plugins import discover
 
 GALLERY_WIDTH = 640
 SCANLINES = ("CandleGlass", "Desk")
@@ -210,8 +215,6 @@ def gallery_image_names() -> list[str]:
 
 def gallery_inputs(width: int, log=print) -> list[tuple[str, Frame]]:
     """(name, frame) of every gallery image found, downscaled to ``width`` pixels."""
-    from clfx.bench.scene import demo_scene, render_sharp
-
     height = int(round(width * 9 / 16))
     demo = render_sharp(demo_scene(1, width, height))
     demo.source = "demo scene frame 1"
@@ -225,8 +228,6 @@ def gallery_inputs(width: int, log=print) -> list[tuple[str, Frame]]:
                 f"{', '.join(str(d / 'openexr-images/ScanLines') for d in shared_data_dirs())}); "
                 f"skipped")
             continue
-        from clfx.core.frame import crop_to
-        from clfx.io.read import read_frame
 
         frame = read_frame(path)
         rgba = crop_to(frame.rgba, frame.data_window, frame.display_window)
@@ -359,9 +360,6 @@ VARIANTS = {
 def gallery_looks(only=None):
     """(kind, name, look) of every effect alone, every option variant (`VARIANTS`) and every
     built-in look."""
-    from clfx.pipeline.presets import available_looks, load_look, single_effect_look
-    from clfx.plugins import discover
-
     items = [("effect", e, single_effect_look(e, EFFECT_SETTINGS.get(e, [])
                                               + DEMO_VALUES.get(e, [])))
              for e in discover()]
@@ -400,7 +398,7 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
                 verbosity: int = 1) -> dict:
     """Render the gallery into ``outdir``; returns the index written to ``index.json``.
 
-    Not a read/render/write loop (`clfx.pipeline.batch.render_stream` is the one): each
+    Not a read/render/write loop (`clfx.pipeline.stream.render_stream` is the one): each
     input is read once and resized in memory, every look renders that frame in memory, and
     what is written is a labelled, tone-mapped sRGB tile about the render, never a rendered
     frame.  Every file goes through clfx's atomic writers (`clfx.io.write`: a temp file,
@@ -415,10 +413,6 @@ def run_gallery(rt, outdir: str, *, width: int = GALLERY_WIDTH, quality: str | N
         ``outdir`` (or an image's folder in it) is a file or a symbolic link; a file the
         gallery writes exists and ``overwrite`` is off.
     """
-    from clfx.core.errors import ParamError
-    from clfx.core.frame import crop_to
-    from clfx.io.write import OutputExistsError, output_folder, write_frame, write_text
-
     for what, value in (("width", width), ("thumb_width", thumb_width), ("columns", columns)):
         if int(value) < 1:
             raise ParamError(f"gallery: {what} must be at least 1, got {value}")

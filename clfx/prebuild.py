@@ -14,7 +14,10 @@ from __future__ import annotations
 import time
 from typing import Callable
 
+from clfx.bench.looks import demo_frame
 from clfx.core.plugin import QUALITY_LEVELS
+from clfx.pipeline.look import render_frame
+from clfx.pipeline.presets import load_look
 
 
 def prebuild(rt, looks: list[str], levels: list[str], width: int, height: int, *,
@@ -28,10 +31,6 @@ def prebuild(rt, looks: list[str], levels: list[str], width: int, height: int, *
         this process had not built yet), ``compiled`` (of those, the ones the kernel cache
         did not hold: compiled now) and ``s`` (seconds, the render included).
     """
-    from clfx.bench.looks import demo_frame
-    from clfx.pipeline.look import render_frame
-    from clfx.pipeline.presets import load_look
-
     frame = demo_frame(width, height)
     rows = []
     for name in looks:

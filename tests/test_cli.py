@@ -332,7 +332,7 @@ def test_raw_pipe_needs_a_size():
 def test_pass_options_are_declared_once_for_every_command():
     """render, apply and probe take the same pass options, with the same help (issue 9)."""
     from clfx.cli import apply, probe, render
-    from clfx.pipeline.batch import PassOptions
+    from clfx.pipeline.options import PassOptions
 
     def options(cmd):
         return {p.name: (p.opts, p.help, p.default) for p in cmd.params if p.name in PassOptions.names()}
@@ -348,7 +348,8 @@ def test_batch_options_are_typed_and_its_state_declared(tmp_path):
     dataclass does not declare, before or after prepare (issue 9)."""
     import dataclasses
 
-    from clfx.pipeline.batch import Batch, RenderOptions
+    from clfx.pipeline.batch import Batch
+    from clfx.pipeline.options import RenderOptions
     from clfx.pipeline.presets import load_look
 
     opts = RenderOptions(raw_size="8x4", quality="draft")
@@ -371,7 +372,7 @@ def test_cluster_progress_counts_frames_as_they_finish_and_agrees_with_the_summa
 
     import clfx.pipeline.distributed as dist
     from clfx.cli import _Progress
-    from clfx.pipeline.batch import Job
+    from clfx.pipeline.plan import Job
     from clfx.pipeline.look import FrameReport
     from clfx.pipeline.report import FrameResult, Reporter, ReportOptions
 

@@ -263,7 +263,7 @@ def test_bad_output_options_are_found_before_rendering(small, monkeypatch, out, 
         raise AssertionError("rendered before the output options were checked")
 
     monkeypatch.setattr(look_module, "render_frame", no_render)
-    monkeypatch.setattr("clfx.pipeline.batch.render_frame", no_render)
+    monkeypatch.setattr("clfx.pipeline.plan.render_frame", no_render)
     r = CliRunner().invoke(cli, ["render", str(small / "in.exr"), str(small / out),
                                  "--look", str(small / "look.yaml"), *args])
     assert r.exit_code == 1, r.output

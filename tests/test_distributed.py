@@ -155,8 +155,9 @@ def test_task_threads_take_turns_on_the_device(monkeypatch):
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from clfx.pipeline import batch as batch_mod
-    from clfx.pipeline.batch import BatchPlan, Job, render_stream
+    from clfx.pipeline import stream as stream_mod
+    from clfx.pipeline.plan import BatchPlan, Job
+    from clfx.pipeline.stream import render_stream
     from clfx.pipeline.presets import load_look
 
     lock = threading.Lock()
@@ -185,7 +186,7 @@ def test_task_threads_take_turns_on_the_device(monkeypatch):
             time.sleep(0.02)
             return False
 
-    monkeypatch.setattr(batch_mod, "prepare_maps", lambda *a, **k: None)
+    monkeypatch.setattr(stream_mod, "prepare_maps", lambda *a, **k: None)
     plan = StubPlan(look=load_look("default"), quality="final")
     jobs = [[Job(frame=f, input=f"in.{f}", output=f"out.{f}")] for f in range(1, 7)]
 
@@ -246,7 +247,8 @@ def masked_batch(folder, mask_file: str, monkeypatch):
 
     from clfx.core.frame import Frame
     from clfx.io.write import write_frame
-    from clfx.pipeline.batch import Batch, RenderOptions
+    from clfx.pipeline.batch import Batch
+    from clfx.pipeline.options import RenderOptions
     from clfx.pipeline.presets import load_look
 
     rgba = np.random.default_rng(1).uniform(0, 2, (16, 24, 4)).astype(np.float32)

@@ -127,7 +127,7 @@ def test_look_show_prints_the_hash_renders_are_stamped_with(rt, tmp_path):
 def test_look_show_cinema_hash_is_its_render_stamp():
     """cinema's shown hash was 6ffbc746... and its renders' d836a463... (issue 33 item 8):
     the look as shown and as a render resolves it hash the same."""
-    from clfx.pipeline.batch import resolve_quality
+    from clfx.pipeline.options import resolve_quality
     from clfx.pipeline.presets import load_look
 
     look = load_look("cinema")

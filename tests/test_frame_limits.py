@@ -97,13 +97,13 @@ def _no_set_up(monkeypatch):
     """Record any set-up (the device, the first read, the look's maps) instead of doing it."""
     import clfx.api
     from clfx.device.runtime import Runtime
-    from clfx.pipeline import batch as batch_mod, look as look_mod
+    from clfx.pipeline import plan as plan_mod, stream as stream_mod
 
     started = []
     monkeypatch.setattr(clfx.api, "runtime_soon", lambda *a, **k: started.append("device"))
     monkeypatch.setattr(Runtime, "get", classmethod(lambda cls, *a: started.append("device")))
-    monkeypatch.setattr(look_mod, "prepare", lambda *a, **k: started.append("maps"))
-    monkeypatch.setattr(batch_mod.BatchPlan, "read", lambda *a: started.append("read"))
+    monkeypatch.setattr(stream_mod, "prepare", lambda *a, **k: started.append("maps"))
+    monkeypatch.setattr(plan_mod.BatchPlan, "read", lambda *a: started.append("read"))
     return started
 
 
@@ -155,12 +155,14 @@ def test_maps_are_prepared_only_for_frames_that_will_render_and_fit(rt, tmp_path
     """`prepare_maps` (what `render_stream` starts for its first job) starts nothing for a frame the reader will refuse nor for one
     above `PREPARE_MAX_PIXELS` (at 8K the maps sat beside the first steps: 3794 MiB, budget
     3390); for a small frame it starts, and closing it with ``cancel`` stops it."""
-    from clfx.pipeline import look as look_mod
-    from clfx.pipeline.batch import Job, prepare_maps, resolve_quality
+    from clfx.pipeline import stream as stream_mod
+    from clfx.pipeline.options import resolve_quality
+    from clfx.pipeline.plan import Job
+    from clfx.pipeline.stream import prepare_maps
     from clfx.pipeline.presets import load_look
 
     prepared = []
-    monkeypatch.setattr(look_mod, "prepare", lambda *a, **k: prepared.append(k["cancel"]))
+    monkeypatch.setattr(stream_mod, "prepare", lambda *a, **k: prepared.append(k["cancel"]))
     look, level = resolve_quality(load_look("cinema"), None)
     side = int((limits.PREPARE_MAX_PIXELS) ** 0.5) + 1
     for name, w in (("refused", 60000), ("large", side)):

@@ -17,7 +17,8 @@ from clfx.core.plugin import Descriptor, PathParam
 from clfx.host import Plugin
 from clfx.io.read import read_frame
 from clfx.io.write import write_frame
-from clfx.pipeline.batch import Batch, look_files
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.preflight import look_files
 from clfx.pipeline.look import Look, Step
 from clfx.pipeline.presets import single_effect_look
 from tests.test_damaged import run_with_timeout
@@ -47,7 +48,7 @@ def frames(folder: Path, count=4, w=48, h=32, name="in.{:04d}.exr"):
 
 
 def batch(look, inp, out, **options) -> Batch:
-    from clfx.pipeline.batch import RenderOptions
+    from clfx.pipeline.options import RenderOptions
 
     return Batch(look=look, input_path=str(inp), output_path=str(out),
                  options=RenderOptions(**options), verbosity=0)

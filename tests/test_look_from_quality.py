@@ -1,5 +1,5 @@
 """``--look-from`` renders the same pixels as the render it reads, at any ``--quality``: the
-batch resolves the level once (`clfx.pipeline.batch.resolve_quality`) and stamps the look with
+batch resolves the level once (`clfx.pipeline.options.resolve_quality`) and stamps the look with
 every step's level, and ``clfx:quality``."""
 import json
 

@@ -197,7 +197,7 @@ def test_the_files_a_batch_protects_are_the_lenses_its_steps_read():
     """`lens_files` lists what `Plugin.lens_refs` names (the lenses the render reads): a
     physical flare's prescription; not an artistic flare's unused ``lens``, nor a disabled
     step's, nor the ``lens`` effect's lensfun name (no file)."""
-    from clfx.pipeline.batch import lens_files
+    from clfx.pipeline.preflight import lens_files
     from clfx.pipeline.presets import find_lens, look_from_dict
 
     look = look_from_dict({"name": "x", "effects": [

@@ -121,7 +121,8 @@ def test_a_hard_link_to_an_input_is_the_input(shot):
 
 def test_reads_is_one_list_the_writer_protects_too(shot):
     from clfx.api import load_look
-    from clfx.pipeline.batch import Batch, RenderOptions
+    from clfx.pipeline.batch import Batch
+    from clfx.pipeline.options import RenderOptions
 
     b = Batch(look=load_look("masked.yaml"), input_path="in.exr", output_path="o.exr",
               options=RenderOptions(depth_path="depth.exr"), verbosity=0)

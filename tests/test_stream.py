@@ -17,8 +17,10 @@ from clfx.device.cache import DeviceCache
 from clfx.io import read as io_read
 from clfx.io.read import read_frame
 from clfx.io.write import write_frame
-from clfx.pipeline import batch as batch_mod
-from clfx.pipeline.batch import Batch, RenderOptions
+from clfx.pipeline import stream as stream_mod
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.options import RenderOptions
+from clfx.pipeline.plan import BatchPlan
 from clfx.pipeline.look import prepare, render_frame
 from clfx.pipeline.presets import load_look
 
@@ -83,17 +85,17 @@ def test_codec_threads_set_and_restored():
 
 @pytest.mark.skipif(not hasattr(os, "setpriority"), reason="per-thread nice is Linux's")
 def test_overlapping_io_threads_run_below_a_cpu_device(monkeypatch):
-    monkeypatch.setattr(batch_mod, "IO_NICE", 10)
+    monkeypatch.setattr(stream_mod, "IO_NICE", 10)
     base = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
     def nice():
         return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
-    with batch_mod.io_pool("read", lowered=True) as r, batch_mod.io_pool("write", lowered=True) as w:
+    with stream_mod.io_pool("read", lowered=True) as r, stream_mod.io_pool("write", lowered=True) as w:
         got_r, got_w = r.submit(nice).result(), w.submit(nice).result()
     assert got_w == min(19, base + 10) and got_r == min(19, base + 5)
     assert nice() == base                       # the caller keeps its priority
-    with batch_mod.io_pool("read") as r, batch_mod.io_pool("write") as w:
+    with stream_mod.io_pool("read") as r, stream_mod.io_pool("write") as w:
         assert r.submit(nice).result() == w.submit(nice).result() == base   # phased
 
 
@@ -103,31 +105,31 @@ class _Device:
 
 
 def test_stream_mode_follows_the_device(monkeypatch):
-    monkeypatch.setattr(batch_mod, "STREAM", "auto")
-    small, big = 1920 * 1080, batch_mod.OVERLAP_MAX_PIXELS + 1
-    assert batch_mod.stream_mode(_Device(True), small) == "phased"
-    assert batch_mod.stream_mode(_Device(False), small) == "overlap"
-    assert batch_mod.stream_mode(_Device(False), big) == "serial"
-    monkeypatch.setattr(batch_mod, "STREAM", "overlap")
-    assert batch_mod.stream_mode(_Device(True), small) == "overlap"
+    monkeypatch.setattr(stream_mod, "STREAM", "auto")
+    small, big = 1920 * 1080, stream_mod.OVERLAP_MAX_PIXELS + 1
+    assert stream_mod.stream_mode(_Device(True), small) == "phased"
+    assert stream_mod.stream_mode(_Device(False), small) == "overlap"
+    assert stream_mod.stream_mode(_Device(False), big) == "serial"
+    monkeypatch.setattr(stream_mod, "STREAM", "overlap")
+    assert stream_mod.stream_mode(_Device(True), small) == "overlap"
 
 
 def test_unknown_stream_value_is_said_once_and_taken_as_auto(monkeypatch, capsys):
-    monkeypatch.setattr(batch_mod, "STREAM", "fast")
-    monkeypatch.setattr(batch_mod, "_STREAM_SAID", False)
-    assert batch_mod.stream_mode(_Device(True), 1920 * 1080) == "phased"
-    assert batch_mod.stream_mode(_Device(False), 1920 * 1080) == "overlap"
+    monkeypatch.setattr(stream_mod, "STREAM", "fast")
+    monkeypatch.setattr(stream_mod, "_STREAM_SAID", False)
+    assert stream_mod.stream_mode(_Device(True), 1920 * 1080) == "phased"
+    assert stream_mod.stream_mode(_Device(False), 1920 * 1080) == "overlap"
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "CLFX_STREAM='fast'" in err[0] and "using auto" in err[0]
 
 
 def test_codecs_take_every_core_unless_io_overlaps_a_cpu_device(monkeypatch):
-    monkeypatch.setattr(batch_mod, "available_cores", lambda: 8)
-    monkeypatch.setattr(batch_mod, "STREAM", "auto")
-    assert batch_mod.codec_threads_for(_Device(True)) == 8       # phased: I/O has the cores
-    assert batch_mod.codec_threads_for(_Device(False)) == 8      # beside a GPU
-    monkeypatch.setattr(batch_mod, "STREAM", "overlap")
-    assert batch_mod.codec_threads_for(_Device(True)) == batch_mod.IO_CODEC_THREADS == 1
+    monkeypatch.setattr(stream_mod, "available_cores", lambda: 8)
+    monkeypatch.setattr(stream_mod, "STREAM", "auto")
+    assert stream_mod.codec_threads_for(_Device(True)) == 8       # phased: I/O has the cores
+    assert stream_mod.codec_threads_for(_Device(False)) == 8      # beside a GPU
+    monkeypatch.setattr(stream_mod, "STREAM", "overlap")
+    assert stream_mod.codec_threads_for(_Device(True)) == stream_mod.IO_CODEC_THREADS == 1
 
 
 def _timeline(tmp_path, rt, monkeypatch, stream):
@@ -135,7 +137,7 @@ def _timeline(tmp_path, rt, monkeypatch, stream):
     (kind, frame, start, end) intervals."""
     for i in range(1, 5):
         write_frame(_frame(np.random.default_rng(i)), tmp_path / f"in.{i:04d}.exr")
-    monkeypatch.setattr(batch_mod, "STREAM", stream)
+    monkeypatch.setattr(stream_mod, "STREAM", stream)
     b = Batch(look=load_look("cinema"), input_path=str(tmp_path / "in.#.exr"),
               output_path=str(tmp_path / stream / "o.#.exr"),
               options=RenderOptions(), verbosity=0)
@@ -152,7 +154,7 @@ def _timeline(tmp_path, rt, monkeypatch, stream):
             return out
         return run
 
-    plan = batch_mod.BatchPlan
+    plan = BatchPlan
     monkeypatch.setattr(plan, "read", timed("read", plan.read, lambda a: a[1].frame))
     monkeypatch.setattr(plan, "render", timed("render", plan.render, lambda a: a[2].frame))
     monkeypatch.setattr(plan, "write", timed("write", plan.write, lambda a: a[2].frame))
@@ -245,12 +247,12 @@ def test_only_io_overlapping_a_cpu_device_runs_lowered(monkeypatch):
     """The default phased stream's read and write threads keep their priority (a lowered
     thread would give way to other processes on a loaded machine); overlapping a CPU device's
     renders, they are lowered; beside a GPU they are not."""
-    monkeypatch.setattr(batch_mod, "STREAM", "auto")
-    assert not batch_mod.io_overlaps_cpu_device(_Device(True))
-    assert not batch_mod.io_overlaps_cpu_device(_Device(False))
-    monkeypatch.setattr(batch_mod, "STREAM", "overlap")
-    assert batch_mod.io_overlaps_cpu_device(_Device(True))
-    assert not batch_mod.io_overlaps_cpu_device(_Device(False))
+    monkeypatch.setattr(stream_mod, "STREAM", "auto")
+    assert not stream_mod.io_overlaps_cpu_device(_Device(True))
+    assert not stream_mod.io_overlaps_cpu_device(_Device(False))
+    monkeypatch.setattr(stream_mod, "STREAM", "overlap")
+    assert stream_mod.io_overlaps_cpu_device(_Device(True))
+    assert not stream_mod.io_overlaps_cpu_device(_Device(False))
 
 
 def test_a_frame_over_4k_keeps_no_channels_for_the_writer(tmp_path, rng, monkeypatch):
@@ -317,7 +319,7 @@ def render_write_functions(root) -> dict[str, set]:
 
 
 def test_no_module_outside_the_pipeline_runs_a_read_render_write_loop():
-    """`clfx.pipeline.batch.render_stream` is the one loop that reads (or is handed), renders
+    """`clfx.pipeline.stream.render_stream` is the one loop that reads (or is handed), renders
     and writes frames: a local render, a Dask worker, a raw pipe and `clfx demo` all run it.
     A function elsewhere that calls a renderer and a frame writer is one loop too many,
     unless it is one of the listed exceptions (each says why it is not such a loop)."""

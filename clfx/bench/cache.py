@@ -16,16 +16,14 @@ import pickle
 
 import numpy as np
 
-from clfx.bench.cases import Case
+from clfx.bench import groundtruth, scene
+from clfx.bench.cases import Case, shared
 
 CACHE_VERSION = 1
 
 
 def case_cache_path(module, name: str, width: int, height: int, seed: int):
     """A cache file for a case with a costly ground truth, keyed by the sources that make it."""
-    from clfx.bench import groundtruth, scene
-    from clfx.bench.cases import shared
-
     h = hashlib.sha1(f"{CACHE_VERSION}:{name}:{width}x{height}:{seed}".encode())
     depends = [importlib.import_module(m) for m in getattr(module, "TRUTH_DEPENDS", ())]
     for mod in (module, scene, groundtruth, shared, *depends):

@@ -3,7 +3,7 @@ reference, beside the naive method, the unchanged input and the peers (`bench_ef
 
 These renders are in memory (a case's arrays uploaded, the plugin's ``render`` called,
 the output downloaded), timed run by run: no file is read or written, so they are not a
-read/render/write loop (that is `clfx.pipeline.batch.render_stream`'s alone).
+read/render/write loop (that is `clfx.pipeline.stream.render_stream`'s alone).
 """
 from __future__ import annotations
 

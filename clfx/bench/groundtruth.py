@@ -85,6 +85,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clfx.bench.metrics import error_metrics
 from clfx.bench.scene import (
     Scene,
     background_rgba,
@@ -101,6 +102,8 @@ from clfx.core.camera import (
     first_blade_angle,
     optical_vignetting_centre,
 )
+from clfx.core.frame import Frame
+from clfx.io.write import write_frame
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 PLASTIC_INV = 0.7548776662466927  # 1 / plastic number: a second, independent Weyl sequence
@@ -558,8 +561,6 @@ def make_case(scene: Scene, camera: Camera, *, t: float = 0.0, samples: int = 25
         ``sharp`` (a Frame with rgba, depth, velocity) is the effects' input, ``truth``
         the (h, w, 4) float32 multisample render to compare with.
     """
-    from clfx.bench.metrics import error_metrics
-
     sharp = render_sharp(scene, t, ss=ss, pixel_filter=pixel_filter, filter_width=filter_width,
                          passes=passes, jitter_seed=jitter_seed,
                          samples=None if jitter_seed is None else samples)
@@ -594,9 +595,6 @@ def write_case(case: GroundTruthCase, directory, *, name: str = "case",
 
     Returns the paths written.  Uses :func:`clfx.io.write.write_frame` (imported lazily).
     """
-    from clfx.core.frame import Frame
-    from clfx.io.write import write_frame
-
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     attrs = {"clfx:camera": str(case.camera.as_dict()), "clfx:samples": int(case.samples)}

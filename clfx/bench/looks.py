@@ -15,23 +15,26 @@ import time
 
 import numpy as np
 
+from clfx.bench.scene import demo_scene, render_sharp
 from clfx.bench.timing import stats
 from clfx.core.camera import Camera
 from clfx.core.frame import Frame
+from clfx.io.read import read_frame
+from clfx.io.write import write_frame
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.look import render_frame
+from clfx.pipeline.options import RenderOptions
+from clfx.pipeline.presets import load_look
+from clfx.pipeline.stream import available_cores, codec_threads_for, io_threads, stream_mode
 
 
 def demo_frame(width: int, height: int, frame: int = 12) -> Frame:
     """Frame ``frame`` of the demo scene, sharp with its passes: the looks' bench input."""
-    from clfx.bench.scene import demo_scene, render_sharp
-
     return render_sharp(demo_scene(frame, width, height))
 
 
 def bench_look(rt, look_name: str, frame: Frame, repeat: int, quality: str | None = None) -> dict:
     """Milliseconds per frame of a look with a per-effect breakdown (median of runs)."""
-    from clfx.pipeline.look import render_frame
-    from clfx.pipeline.presets import load_look
-
     look = load_look(look_name)
     render_frame(rt, look, frame, frame_number=1, quality=quality)  # warm-up
     totals, per_effect = [], {}
@@ -48,9 +51,6 @@ def bench_look(rt, look_name: str, frame: Frame, repeat: int, quality: str | Non
 
 def bench_io(frame: Frame, repeat: int) -> dict:
     """Reading and writing one frame as half-float EXR (zip), the floor of a frame's cost."""
-    from clfx.io.read import read_frame
-    from clfx.io.write import write_frame
-
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "io.exr")
         write_frame(frame, path, overwrite=True)
@@ -69,7 +69,7 @@ def bench_io(frame: Frame, repeat: int) -> dict:
 def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
                    repeat: int = 3) -> dict:
     """A stream as fast as its parts?  The look over ``frames`` EXR frames through `clfx
-    render`'s batch pipeline (phased or overlapped, `clfx.pipeline.batch.stream_mode`), beside the same
+    render`'s batch pipeline (phased or overlapped, `clfx.pipeline.stream.stream_mode`), beside the same
     parts measured alone in the same run: the look on the first frame (per effect), reading
     a frame and writing its output (median of ``repeat`` warm runs each, half of them before
     the stream and half after).
@@ -81,13 +81,6 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     look + read + write alone) and the CPU seconds per frame do not depend on how loaded the
     machine is as much as milliseconds do: below 1 the overlap wins time, above 1 the
     parts slow each other down."""
-    from clfx.bench.scene import demo_scene, render_sharp
-    from clfx.io.write import write_frame
-    from clfx.pipeline.batch import (Batch, RenderOptions, available_cores, codec_threads_for,
-                                     io_threads, stream_mode)
-    from clfx.pipeline.look import render_frame
-    from clfx.pipeline.presets import load_look
-
     def timed(fn):
         c0, t0 = time.process_time(), time.perf_counter()
         out = fn()
@@ -201,8 +194,6 @@ def analysis_frames(width: int, height: int, camera: Camera) -> dict[str, Frame]
 
 
 def bench_analysis(rt, look_name: str, width: int, height: int, repeat: int) -> dict:
-    from clfx.pipeline.presets import load_look
-
     look = load_look(look_name)
     frames = analysis_frames(width, height, look.camera)
     io = bench_io(frames["a_needs_everything"], repeat)

@@ -2,7 +2,11 @@
 from __future__ import annotations
 
 import math
+import os
 import textwrap
+
+from clfx.core.errors import ClfxError
+from clfx.plugins import get_plugin
 
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
@@ -11,8 +15,6 @@ def family(effect: str) -> str:
     """The effect family a bench row belongs to: its plugin's descriptor group ("Lens",
     "Glare", ...; a case variant "distortion:moustache" is its effect's), "Other" for a
     name no plugin has."""
-    from clfx.plugins import get_plugin
-
     try:
         return get_plugin(effect.split(":", 1)[0]).descriptor.group or "Other"
     except Exception:  # noqa: BLE001 - an unknown name still gets a panel
@@ -39,12 +41,8 @@ def pareto_points(effect: dict) -> dict:
 def check_plot_path(path: str) -> None:
     """Refuse, before a bench runs, a --plot file matplotlib cannot write (its extension names
     no format it has, or matplotlib is missing)."""
-    import os
-
-    from clfx.core.errors import ClfxError
-
     try:
-        from matplotlib.backend_bases import FigureCanvasBase
+        from matplotlib.backend_bases import FigureCanvasBase  # lazy: optional, ~1.9 s
     except ImportError as exc:
         raise ClfxError("--plot needs matplotlib: pip install 'clfx[plot]'") from exc
     ext = os.path.splitext(path)[1].lower().lstrip(".")
@@ -57,7 +55,7 @@ def check_plot_path(path: str) -> None:
 
 def pareto_plot(results: dict, path: str) -> None:
     """`pareto_figure` of ``results`` as a PNG at ``path``."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: optional ([plot] extra); ~1.9 s to import
 
     fig = pareto_figure(results)
     fig.savefig(path, dpi=120)
@@ -70,13 +68,11 @@ def pareto_figure(results: dict):
     the same colour and the unchanged input's error as a dotted line (the error to beat at
     no cost).  Needs matplotlib: the [plot] extra."""
     try:
-        import matplotlib
+        import matplotlib  # lazy: optional ([plot] extra); ~1.9 s to import
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # lazy: after choosing the Agg backend
     except ImportError as exc:
-        from clfx.core.errors import ClfxError
-
         raise ClfxError("--plot needs matplotlib: pip install 'clfx[plot]'") from exc
     groups: dict[str, list[dict]] = {}
     for e in results["effects"]:

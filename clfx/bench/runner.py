@@ -38,7 +38,8 @@ from clfx.bench.cache import case_label
 from clfx.bench.effects import bench_effect
 from clfx.bench.looks import bench_analysis, bench_look, bench_sequence, demo_frame
 from clfx.bench.report import losing_levels
-from clfx.plugins import discover
+from clfx.pipeline.presets import available_looks
+from clfx.plugins import discover, get_plugin
 
 __all__ = ["run_bench"]
 
@@ -55,8 +56,6 @@ def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5
                "effects": [], "looks": []}
     for name in effect_names:
         if name not in reg:
-            from clfx.plugins import get_plugin
-
             get_plugin(name)  # raises with a suggestion
         spec = cases.for_effect(name)
         for variant in [None, *(spec.variants if spec is not None else ())]:
@@ -76,8 +75,6 @@ def run_bench(rt, *, effects=None, looks=None, width=1920, height=1080, repeat=5
             for lost in losing_levels(res.as_dict()):
                 log(f"clfx bench: {label}: {lost} in log-PSNR")
     if looks is None or looks:
-        from clfx.pipeline.presets import available_looks
-
         names = list(looks) if looks else [n for n, (o, _) in available_looks().items() if o == "built-in"]
         frame = demo_frame(width, height)
         for n in names:

@@ -38,6 +38,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from clfx.core.frame import Frame
+
 SHAPES = ("full", "rect", "disk", "rounded", "none")
 PATTERNS = ("flat", "checker", "stripes", "noise", "blocks")
 
@@ -571,8 +573,6 @@ def render_sharp(scene: Scene, t: float = 0.0, *, ss: int = 2, pixel_filter: str
         the pixel centre in px/frame (0 for the background), in clfx's conventions
         (:mod:`clfx.core.frame`).
     """
-    from clfx.core.frame import Frame
-
     if passes not in PASS_MODES:
         raise ValueError(f"passes {passes!r} is not one of {PASS_MODES}")
     w, h = scene.width, scene.height
@@ -792,8 +792,6 @@ def synthetic_plate(w: int, h: int):
     """A synthetic plate with depth, velocity and a few hot lights (no scene rasteriser:
     cheap at 8K): what the tiled renders of the cinema look are checked and measured on
     (tests/test_plan.py, scripts/tile_8k.py)."""
-    from clfx.core.frame import Frame
-
     y, x = np.mgrid[0:h, 0:w].astype(np.float32)
     rgba = np.empty((h, w, 4), np.float32)
     rgba[..., 0] = 0.3 + 0.2 * np.sin(x * 0.013) * np.cos(y * 0.011)

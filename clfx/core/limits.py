@@ -5,8 +5,10 @@ light-spreading effect's grown window, an FFT grid); ``CLFX_MAX_PIXELS`` overrid
 """
 from __future__ import annotations
 
+import json
 import math
 import os
+import re
 
 from clfx.core.errors import ClfxError
 
@@ -120,8 +122,6 @@ manifest 1); deeper text is refused before parsing (Python's parser recurses per
 def json_nesting(text: str) -> int:
     """The deepest nesting of ``[`` and ``{`` in JSON ``text`` (brackets inside strings not
     counted), in one pass without parsing."""
-    import re
-
     depth = deepest = 0
     for ch in re.sub(r'"(?:[^"\\]|\\.)*"', '""', text):
         if ch in "[{":
@@ -142,8 +142,6 @@ def load_json(text: str, what: str, exc: type[ClfxError] = ClfxError, *,
     ``max_bytes`` (UTF-8), nested deeper than ``max_depth``, with a key twice in one object
     (``unique_keys``: as look files refuse), or not JSON (an integer of more than Python's 4300 digits
     included)."""
-    import json
-
     if max_bytes is not None and len(text) > max_bytes // 4 and len(text.encode()) > max_bytes:
         raise exc(f"{what} is {len(text.encode())} bytes; the limit is {max_bytes}")
     depth = json_nesting(text)

@@ -166,7 +166,7 @@ class DeviceCache:
     # -- idle buffers ---------------------------------------------------------------------
     def take(self, nbytes: int):
         """A buffer of ``nbytes``: the most recently freed idle one of that size, or new."""
-        import pyopencl as cl
+        import pyopencl as cl   # lazy: ~0.4 s; the CLI loads the runtime without it
 
         nbytes = max(int(nbytes), 16)
         with self._lock:

@@ -109,6 +109,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clfx.core.colour import REC709_LUMINANCE
+
 #: Converted depths at or above this are background (Blender writes 1e10).
 DEPTH_FAR_AS_INF = 1e9
 #: ``zero="auto"``: zeros on at least this share of a depth pass's pixels are no hit.
@@ -714,7 +716,6 @@ def beauty_out(rgba: np.ndarray, count: int) -> np.ndarray:
         return rgba
     if count == 3:
         return rgba[..., :3]
-    from clfx.core.colour import REC709_LUMINANCE
 
     r, g, b = rgba[..., 0], rgba[..., 1], rgba[..., 2]
     lum = (r * np.float32(REC709_LUMINANCE[0]) + g * np.float32(REC709_LUMINANCE[1])

@@ -27,6 +27,7 @@ import difflib
 import functools
 import math
 import os
+import stat
 
 import numpy as np
 import OpenImageIO as oiio
@@ -64,7 +65,6 @@ def check_config() -> None:
     path = config_file()
     if path is None or path in _CHECKED:
         return
-    import stat
 
     try:
         mode = os.stat(path).st_mode

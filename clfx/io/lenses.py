@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from clfx.core.errors import ClfxError, PresetError
+from clfx.fx import optics
 from clfx.io.presetfiles import (Located, builtin_dir, find_file, search_dirs,
                                  user_dir, yaml_files)
 
@@ -78,8 +79,6 @@ def resolve(steps, read=None, known: Lenses | None = None) -> Lenses:
     lensfun names looked up.  Prescriptions in ``known`` (what the look resolved when it was
     loaded, before ``--set``) are taken from it, not read and checked again.  Raises a
     ClfxError of one line naming ``STEP.PARAM``."""
-    from clfx.fx import optics   # the prescription's own validation
-
     read = read or read_lens
     done = known.prescriptions if known is not None else {}
     found: dict[str, dict] = {}

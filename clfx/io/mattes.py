@@ -21,10 +21,11 @@ import struct
 
 import numpy as np
 
-from clfx.core.errors import ClipError
+from clfx.core.errors import ClipError, ImageIOError
 from clfx.core.limits import load_json
 from clfx.core.rect import Rect
 from clfx.io.read import _Part, _read_channels, _scan
+from clfx.io.sequence import check_input_file
 
 MASK_CHANNELS = ("A", "alpha", "mask", "R", "Y")
 """The channel a mask file is read from when none is named: the first present (or its only
@@ -163,9 +164,6 @@ def _manifest(f, layer: str, attrs: dict) -> dict[str, int]:
     text = attrs.get("manifest")
     side = _sidecar(f, attrs)
     if text is None and side:
-        from clfx.core.errors import ImageIOError
-        from clfx.io.sequence import check_input_file
-
         try:
             check_input_file(side, f"Cryptomatte {layer!r} manifest")   # a FIFO would block
             with open(side, encoding="utf-8") as fh:

@@ -35,7 +35,7 @@ def builtin_dir() -> Path:
 
 
 def user_dir() -> Path:
-    import click
+    import click   # lazy: 25 ms, for its app-dir rule only: API users do not load click
 
     return Path(click.get_app_dir("clfx")) / "looks"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from clfx.io import channels as ch
 from clfx.io._oiio import win_json
-from clfx.io.read import PassSpec, depth_no_hit, plan_read
+from clfx.io.read import PassSpec, _scan, depth_no_hit, plan_read
 
 _CONVENTION = {True: "y-up", False: "y-down"}
 
@@ -124,8 +124,6 @@ def format_probe(info: dict) -> str:
 def header_attribute(path, name: str):
     """The value of header attribute ``name`` in the first part of ``path`` that has it
     (whatever its length: `Frame.metadata` skips long strings), or None."""
-    from clfx.io.read import _scan
-
     for part in _scan(path).parts:
         value = part.spec.getattribute(name)
         if value is not None:

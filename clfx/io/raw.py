@@ -39,6 +39,8 @@ from clfx.core.frame import Frame, crop_to
 from clfx.core.limits import check_pixels
 from clfx.core.rect import Rect
 from clfx.io import colour
+import os
+import stat
 
 PIX_FMT = "gbrpf32le"
 """The default format (ffmpeg's planar float RGB)."""
@@ -149,9 +151,6 @@ def check_stream_size(stream, size: tuple[int, int], pix_fmt: str = PIX_FMT) -> 
         The file's length is not a multiple of the frame size (the error says how many
         frames of that size it would hold).
     """
-    import os
-    import stat
-
     try:
         st = os.fstat(stream.fileno())
     except (AttributeError, OSError, ValueError):

@@ -167,7 +167,7 @@ def codec_threads(n: int):
     write (``threads``, ``exr_threads``; 1: everything on the calling thread).  A batch sets
     1 and runs its reads and writes on low-priority threads of its own, so decoding and
     encoding fill the cores the device leaves idle instead of taking them from it
-    (`clfx.pipeline.batch`).  Process-wide: restored on exit."""
+    (`clfx.pipeline.stream`).  Process-wide: restored on exit."""
     saved = {k: oiio.get_int_attribute(k, 0) for k in ("threads", "exr_threads")}
     set_codec_threads(n)
     try:

@@ -13,7 +13,7 @@ worker joins (a process-wide `Runtime`), and the plans it has unpacked, by key, 
 pays neither device set-up nor look loading; effects keep their one-off set-up in the
 runtime's cache as in one process.  Inside a task the next frame is read and the previous one
 written on I/O threads while the device renders (at nice 10/5 on a CPU device: the overlapped
-stream of `clfx.pipeline.batch`; workers keep it, measured faster for them than the single
+stream of `clfx.pipeline.stream`; workers keep it, measured faster for them than the single
 process's phases, docs/scaling.md); across tasks, a worker runs `TASK_THREADS` of them
 at once and a per-process device lock lets one render while the others read or write, so
 single-frame tasks overlap their I/O too.
@@ -29,25 +29,37 @@ same as in one process (the look's seed and the frame number decide the noise).
 """
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import glob
 import logging
 import os
 import pickle
+import platform
 import socket
+import struct
 import threading
 import time
 import uuid
+import warnings
 from collections import OrderedDict
 from contextlib import ExitStack, contextmanager, suppress
 from dataclasses import dataclass
 
+import OpenImageIO as oiio
 from distributed import Client, LocalCluster, as_completed, get_worker
+from distributed.comm import registry
+from distributed.comm.addressing import parse_address, parse_host_port
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from clfx.core.errors import ClfxError, ClusterError, SequenceError, option
-from clfx.device.runtime import KernelBuildWarning, user_set_pocl_affinity
-from clfx.pipeline.batch import (RAW, Batch, BatchPlan, ClusterOptions, Job, available_cores,
-                                 render_stream)
+from clfx.device.runtime import KernelBuildWarning, Runtime, user_set_pocl_affinity
+from clfx.io.read import set_codec_threads
+from clfx.io.sequence import compact
+from clfx.pipeline.batch import Batch
+from clfx.pipeline.options import RAW, ClusterOptions
+from clfx.pipeline.plan import BatchPlan, Job
+from clfx.pipeline.stream import available_cores, render_stream
 from clfx.pipeline.look import RunStats
 from clfx.pipeline.report import ClusterInfo, FrameResult, Reporter
 
@@ -99,8 +111,6 @@ class ClfxWorker(WorkerPlugin):
         self.codec_threads = codec_threads
 
     def setup(self, worker=None):
-        import warnings
-
         warnings.filterwarnings("ignore", category=KernelBuildWarning)   # -v shows them
         malloc_like_one_process()
         codec_threads_for_batches(self.codec_threads)
@@ -112,8 +122,6 @@ class ClfxWorker(WorkerPlugin):
         self.runtime_s = 0.0
         t0 = time.perf_counter()
         try:
-            from clfx.device.runtime import Runtime
-
             self._rt = Runtime.get(self.device)
         except ClfxError as exc:   # reported by every task of this worker, not at join time
             self._rt_error = exc
@@ -156,9 +164,6 @@ def malloc_like_one_process() -> bool:
     """
     if not any(k in os.environ for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")):
         return False
-    import ctypes
-    import ctypes.util
-    import platform
 
     if platform.libc_ver()[0] != "glibc":
         return False
@@ -178,10 +183,7 @@ def codec_threads_for_batches(n: int | None = None) -> int:
     threads, 1.075 and 1.034 with 1 (the I/O runs on its own thread at nice 10/5 beside the
     renders).  Once for the process, since its task threads would undo each other's
     `clfx.io.read.codec_threads`."""
-    from clfx.io.read import set_codec_threads
-
     if not n and os.environ.get("OPENIMAGEIO_OPTIONS"):   # a farm worker's own setting
-        import OpenImageIO as oiio
 
         oiio.attribute("options", os.environ["OPENIMAGEIO_OPTIONS"])
         n = oiio.get_int_attribute("exr_threads", 0)
@@ -264,8 +266,6 @@ announce more is something else (an SSH or SMTP banner read as a length is exaby
 
 def _check_handshake(sock: socket.socket, address: str) -> None:
     """Read the first 8 bytes a scheduler sends and refuse what cannot be Dask's handshake."""
-    import struct
-
     head = b""
     while len(head) < 8:
         got = sock.recv(8 - len(head))
@@ -290,9 +290,6 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     """Raise `ClusterError` in one line unless a Dask scheduler answers at ``address``
     within ``timeout`` seconds: an unknown protocol, a bad port or host, nothing listening,
     or (``tcp://``) a listener that never sends Dask's handshake."""
-    from distributed.comm import registry
-    from distributed.comm.addressing import parse_address, parse_host_port
-
     what = option("--scheduler", address)
     try:
         scheme, loc = parse_address(address.strip(), strict=False)
@@ -448,8 +445,6 @@ def _collect(reporter: Reporter, client, shipped: ShippedPlan, jobs: list[Job],
 
 
 def _frames_text(results: list[FrameResult]) -> str:
-    from clfx.io.sequence import compact
-
     return compact(r.frame for r in results)
 
 

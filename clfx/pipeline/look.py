@@ -24,9 +24,9 @@ import numpy as np
 
 from clfx._version import __version__
 from clfx.core.camera import Camera
-from clfx.core.errors import ClfxError, ClipError
+from clfx.core.errors import ClfxError, ClipError, ParamError
 from clfx.core.frame import Frame
-from clfx.core import limits
+from clfx.core import cancel as cancelling, limits
 from clfx.core.limits import check_pixels
 from clfx.core.plugin import DEFAULT_QUALITY, QUALITY_LEVELS, Params
 from clfx.core.rect import Rect
@@ -37,7 +37,7 @@ from clfx.io import lenses as lens_io
 from clfx.io.lenses import Lenses
 from clfx.kit.warp import canvas_stand_in
 from clfx.pipeline.animation import Animated
-from clfx.pipeline.masks import FrameMasks, MaskSpec
+from clfx.pipeline.masks import FrameMasks, MaskSpec, read_masks
 from clfx.plugins import get_plugin
 
 OVERSCAN_KEEP_FRACTION = 0.25
@@ -471,8 +471,6 @@ def prepare(rt, look: Look, data_window: Rect, display_window: Rect, pixel_aspec
     ``cancel`` (a `threading.Event`): once set, the work stops before the next step or the
     next band of a map (`clfx.core.cancel`), e.g. when the first frame is refused.  The
     windows must be within the pixel limit (the caller checks them, as the reader does)."""
-    from clfx.core import cancel as cancelling
-
     for what, win in (("display window", display_window), ("data window", data_window)):
         check_pixels(win.width, win.height, f"prepared frame: {what}", FrameTooLarge)
     look = look.at(frame_number)
@@ -539,8 +537,6 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
     t_start, c_start = time.perf_counter(), time.process_time()
     look.check_clips(frame)
     if masks is None and look.masks():
-        from clfx.pipeline.masks import read_masks
-
         masks = read_masks(look, frame, frame_number)
     for what, win in (("display window", frame.display_window), ("data window", frame.data_window)):
         check_pixels(win.width, win.height, f"{frame.source or 'frame'}: {what}", FrameTooLarge)
@@ -740,8 +736,6 @@ def _download(rt, ctx: RenderContext):
 
 
 def validate_quality(level: str | None, where: str = "--quality") -> str | None:
-    from clfx.core.errors import ParamError
-
     if level is not None and level not in QUALITY_LEVELS:
         raise ParamError(f"{where}: {level!r} is not one of {', '.join(QUALITY_LEVELS)}")
     return level

@@ -47,7 +47,9 @@ blended on the device (`clfx.fx.mask`).
 """
 from __future__ import annotations
 
+import difflib
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -56,6 +58,7 @@ import numpy as np
 from clfx.core.errors import ClipError
 from clfx.core.frame import Frame, crop_to
 from clfx.core.rect import Rect
+from clfx.fx import mask as mask_fx
 
 MODES = ("auto", "mix", "sources")
 MASK_KEYS = ("channel", "file", "cryptomatte", "names", "invert", "feather", "mode")
@@ -117,8 +120,6 @@ def parse_mask(data, where: str) -> MaskSpec:
                          "{cryptomatte: CryptoObject, names: [ball]}")
     for k in data:
         if k not in MASK_KEYS:
-            import difflib
-
             close = difflib.get_close_matches(str(k), MASK_KEYS, n=1)
             hint = f"; did you mean {close[0]!r}?" if close else \
                 f" (expected one of: {', '.join(MASK_KEYS)})"
@@ -177,7 +178,7 @@ def mask_file(spec: MaskSpec, frame_number: int) -> str | None:
     """The mask file of ``frame_number`` (``spec.file`` with its frame token filled in)."""
     if not spec.file:
         return None
-    from clfx.io.sequence import Pattern
+    from clfx.io.sequence import Pattern   # lazy: fileseq, as check_mask
 
     return Pattern.parse(spec.file).path(frame_number)
 
@@ -188,8 +189,6 @@ class MaskWarning(UserWarning):
 
 def _say(notify, message: str, key: str) -> None:
     if notify is None:
-        import warnings
-
         warnings.warn(message, MaskWarning, stacklevel=3)
     else:
         notify(message, key)
@@ -211,6 +210,7 @@ def check_mask(spec: MaskSpec, source: str, frame_numbers, where: str, notify=No
     ``source`` is the first input file.  ``notify(message, key)`` hears what will be assumed
     (a Cryptomatte without manifest, a pattern's ``#`` padding).  Returns the files the mask
     reads (inputs of the render)."""
+    # lazy: OpenImageIO and fileseq (~0.3 s): listing looks loads this module
     from clfx.io import mattes
     from clfx.io.sequence import Pattern, hash_notice, resolve_inputs
 
@@ -262,7 +262,7 @@ def read_mask(spec: MaskSpec, frame: Frame, frame_number: int, *,
     data window; otherwise the channel is read from the frame's file (``frame.source``) or
     the mask file.
     """
-    from clfx.io import mattes
+    from clfx.io import mattes   # lazy: OpenImageIO, as check_mask
 
     if channels and spec.channel and not spec.file and spec.channel in channels:
         arr = np.asarray(channels[spec.channel], np.float32)
@@ -328,11 +328,9 @@ class FrameMasks:
 
     def get(self, spec: MaskSpec, window: Rect):
         """The mask over ``window`` (zero outside the frame's data window)."""
-        from clfx.fx.mask import feather
-
         img = self._device.get(spec)
         if img is None:
-            img = feather(self.rt, self.rt.upload(self._host(spec), self.window),
-                          spec.sigma_px(self.display))
+            img = mask_fx.feather(self.rt, self.rt.upload(self._host(spec), self.window),
+                                  spec.sigma_px(self.display))
             self._device[spec] = img
         return self.rt.reframe(img, window, "zero")

@@ -1,6 +1,6 @@
 """What a render says: each frame's report, warnings, notices, failures and the summary.
 
-`clfx.pipeline.batch.render_stream` hands every frame to a sink as a typed `FrameResult`
+`clfx.pipeline.stream.render_stream` hands every frame to a sink as a typed `FrameResult`
 (in this process, or returned by a Dask task); one `Reporter` turns them into the lines a
 user sees, wherever the frame was rendered: warnings on stderr (each text once per batch),
 ``--json`` lines on stdout, ``--explain`` texts, the ``--log`` file, progress, and the
@@ -78,7 +78,7 @@ class FrameResult:
     @classmethod
     def failure(cls, job, exc: BaseException, worker: str | None = None,
                 notices=()) -> FrameResult:
-        """The result of ``job`` (a `clfx.pipeline.batch.Job`) that ``exc`` failed."""
+        """The result of ``job`` (a `clfx.pipeline.plan.Job`) that ``exc`` failed."""
         return cls(job.frame, job.input, job.output, error=one_line(exc), worker=worker,
                    notices=list(notices))
 

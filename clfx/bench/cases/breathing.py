@@ -97,7 +97,7 @@ def _warp_matrix(case):
 
 
 def _warp(case, flag):
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     src = np.ascontiguousarray(case["source"], np.float32)
     mat = _warp_matrix(case)
@@ -110,7 +110,7 @@ def _warp(case, flag):
 def peers(case, params, ctx):
     """cv2.warpAffine about the centre: bilinear, bicubic and Lanczos-4 (edge border)."""
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
     except ImportError:
         return {}
     return {f"cv2.warpAffine {name}": (_warp(case, flag), level)
@@ -121,7 +121,7 @@ def peers(case, params, ctx):
 
 def naive(case, params, ctx):
     """Bilinear ``cv2.warpAffine``, scaled about the centre: one point per pixel."""
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     return _warp(case, cv2.INTER_LINEAR)
 

@@ -47,6 +47,7 @@ from clfx.bench.groundtruth import JITTER_SEED, RENDER_SS, case_dict, make_case
 from clfx.bench.metrics import edge_band
 from clfx.bench.scene import Scene, moving_scene, render_sharp
 from clfx.core.camera import Camera
+from clfx.fx.motion import shutter_from
 
 __all__ = ["CASE", "PARAMS", "camera_scene", "make", "naive"]
 
@@ -113,8 +114,6 @@ def image_velocity(depth: np.ndarray, params, camera: Camera) -> np.ndarray:
 def naive(case: dict, params, ctx) -> np.ndarray:
     """The naive baseline (:data:`LINE_BLUR_LABEL`): the per-pixel line blur along the image
     velocity of the camera motion."""
-    from clfx.fx.motion import shutter_from
-
     t0, t1 = shutter_from(params, ctx.camera)
     vel = image_velocity(np.asarray(case["depth"], np.float64), params, ctx.camera)
     return line_blur_per_pixel(np.asarray(case["source"], np.float32), vel, t0, t1)

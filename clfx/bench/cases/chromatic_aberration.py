@@ -25,7 +25,7 @@ def peers(case, params, ctx):
     """cv2.remap of red and blue with the float64 source points of the three-channel mode
     (the ``draft`` level's operation: green and alpha stay in place), bilinear."""
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
     except ImportError:
         return {}
     src = np.ascontiguousarray(case["source"], np.float32)

@@ -84,7 +84,7 @@ def _exact_cv2_maps(params, ctx):
 def peers(case, params, ctx):
     """cv2.remap with the same (float64-inverted) map: bilinear, bicubic and Lanczos-4."""
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
     except ImportError:
         return {}
     src = np.ascontiguousarray(case["source"], np.float32)
@@ -100,7 +100,7 @@ def peers(case, params, ctx):
 
 def naive(case, params, ctx):
     """Bilinear ``cv2.remap`` on the exact (float64-inverted) map: one point per pixel."""
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     src = np.ascontiguousarray(case["source"], np.float32)
     map_x, map_y = _exact_cv2_maps(params, ctx)

@@ -34,13 +34,20 @@ bench table.
 from __future__ import annotations
 
 import math
+import sys
+import time
 
 import numpy as np
 
+from clfx.bench.cache import load_case
 from clfx.bench.cases import Case, Naive
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
+from clfx.bench.metrics import EDGE_BAND_PX, edge_band, error_metrics
 from clfx.bench.scene import Layer, Light, Scene, Texture, demo_scene
-from clfx.core.camera import Camera, coc_signed
+from clfx.core.camera import Camera, coc_signed, optical_vignetting_centre
+from clfx.core.frame import crop_to
+from clfx.host import RenderContext
+from clfx.plugins.dof import Dof
 
 SS = RENDER_SS
 """Beauty and truth sub-samples per pixel and axis (a renderer's antialiasing: 4 x 4)."""
@@ -316,7 +323,7 @@ def naive_dof(src: np.ndarray, depth: np.ndarray, *, k_half: float, focus: float
     :func:`_naive_shaped`), ``cateye_front``: the front rim's centres likewise, ``ca``: red
     and blue radius offsets (px), one gather per channel.
     """
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     src = np.asarray(src, np.float32)
     src = np.where(np.isfinite(src), src, 0.0).astype(np.float32)
@@ -362,7 +369,7 @@ def _naive_shaped(src: np.ndarray, r: np.ndarray, squeeze: float, cateye,
     (the bokeh of a point with p's radius, seen from p).  Pixels are grouped by radius
     (rounded to 1/4 px) and circle centres (rounded to :data:`CATEYE_STEP`), one
     normalised filter each over the pixels' bounding box."""
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     h, w = r.shape
     rq = np.round(r * 4.0) / 4.0
@@ -401,9 +408,6 @@ def _naive_shaped(src: np.ndarray, r: np.ndarray, squeeze: float, cateye,
 def naive(case: dict, params, ctx) -> np.ndarray:
     """The naive baseline on a bench case with the effect's lens (``params``, ``ctx``):
     the same aperture (squeeze, cat-eye barrel, per-channel CA radii) as the effect."""
-    from clfx.core.camera import optical_vignetting_centre
-    from clfx.plugins.dof import Dof
-
     lens = Dof().lens(params, ctx)
     d = ctx.display_window
     h, w = np.asarray(case["depth"]).shape
@@ -450,15 +454,6 @@ def scene_table(rt, width: int = 320, height: int = 180, *, names=None, repeat: 
     """Every level of dof, the naive gather and the unchanged input on each of ``SCENES``:
     log-PSNR (dB) and edge-band RMSE against the truth, median ms of ``repeat`` warm runs.
     Cases are cached on disk like the runner's (rendering one takes tens of seconds)."""
-    import sys
-    import time
-
-    from clfx.bench.cache import load_case
-    from clfx.bench.metrics import EDGE_BAND_PX, edge_band, error_metrics
-    from clfx.core.frame import crop_to
-    from clfx.host import RenderContext
-    from clfx.plugins.dof import Dof
-
     plugin, out = Dof(), {}
     for name in names or SCENES:
         spec = Case(make=lambda w, h, rng=None, name=name: make_scene(name, w, h))

@@ -45,14 +45,14 @@ def peers(case, params, ctx):
 
     found = {}
     try:
-        from scipy.signal import fftconvolve
+        from scipy.signal import fftconvolve  # lazy: optional (test extra)
 
         found["scipy.signal.fftconvolve float32"] = lambda: mix(np.stack(
             [fftconvolve(hl[..., c], kernel, mode="same") for c in range(3)], axis=-1))
     except ImportError:
         pass
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
         cv2.setNumThreads(2)
         found["cv2.filter2D"] = lambda: mix(cv2.filter2D(

@@ -44,7 +44,7 @@ def make(width, height, rng):
 def peers(case, params, ctx=None):
     """OpenCV doing the same operation (its own random samples: scored by statistics)."""
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
     except ImportError:
         return {}
     src = np.asarray(case["source"], np.float32)

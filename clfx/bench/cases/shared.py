@@ -117,7 +117,7 @@ def edge_mask(truth: np.ndarray) -> np.ndarray:
 # -- OpenCV remap (the warps' peers) -------------------------------------------------------
 def cv2_border(border: str):
     """OpenCV's border mode for a warp's ``border`` parameter."""
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     return {"edge": cv2.BORDER_REPLICATE, "mirror": cv2.BORDER_REFLECT_101}.get(
         border, cv2.BORDER_CONSTANT)

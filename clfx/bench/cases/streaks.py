@@ -30,7 +30,7 @@ def peers(case, params, ctx):
     step), the operation the Kawase passes approximate: its error against clfx's reference
     includes that kernel difference."""
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
     except ImportError:
         return {}
     plugin = Streaks()

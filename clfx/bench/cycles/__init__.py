@@ -26,6 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from clfx.core.camera import Camera
+from clfx.io.probe import header_attribute
+from clfx.io.read import read_channels, read_frame
+
 DATA = Path(__file__).resolve().parent / "data"
 
 WIDTH, HEIGHT = 320, 180
@@ -73,8 +77,6 @@ def available(name: str) -> bool:
 def read_layers(path: Path) -> dict[str, np.ndarray]:
     """The layers of a data file (``truth.R/G/B`` -> ``truth``), (h, w, n) float32, their
     channels in the file's order (`clfx.io.read.read_channels`)."""
-    from clfx.io.read import read_channels
-
     out: dict[str, list] = {}
     for name, plane in read_channels(path).items():
         out.setdefault(name.rpartition(".")[0], []).append(plane)
@@ -85,9 +87,6 @@ def read_layers(path: Path) -> dict[str, np.ndarray]:
 def load(name: str) -> dict:
     """The scene's sharp frame (through clfx's reader), truth, its noise floor and
     Blender's Vector Blur (where rendered)."""
-    from clfx.io.probe import header_attribute
-    from clfx.io.read import read_frame
-
     sharp, ref = files(name)
     frame = read_frame(str(sharp))
     layers = read_layers(ref)
@@ -106,8 +105,6 @@ def noise_floor(name: str) -> float | None:
 
 
 def camera():
-    from clfx.core.camera import Camera
-
     return Camera(focal_length=FOCAL_MM, sensor_width=SENSOR_MM, shutter_angle=180.0,
                   shutter_offset="centered")
 

@@ -17,13 +17,17 @@ import os
 import sys
 from pathlib import Path
 
+import OpenImageIO as oiio
 import numpy as np
+
+from clfx.bench import cycles
+from clfx.bench.cycles import FLOOR_ATTRIBUTE, base_scene
+from clfx.bench.metrics import psnr_log
+from clfx.io.read import read_channels
 
 
 def _write(path: str, channels: dict[str, np.ndarray], formats: dict[str, str],
            attributes: dict | None = None) -> None:
-    import OpenImageIO as oiio
-
     names = list(channels)
     h, w = channels[names[0]].shape
     spec = oiio.ImageSpec(w, h, len(names), "half")
@@ -43,10 +47,6 @@ def _write(path: str, channels: dict[str, np.ndarray], formats: dict[str, str],
 
 
 def pack(src: str, name: str, out_dir: str, keep_second: bool = False) -> None:
-    from clfx.bench.cycles import FLOOR_ATTRIBUTE, base_scene
-    from clfx.bench.metrics import psnr_log
-    from clfx.io.read import read_channels
-
     if base_scene(name) == name:
         sharp = read_channels(os.path.join(src, f"{name}.sharp.exr"))
         keep = [f"ViewLayer.Combined.{c}" for c in "RGBA"] + ["ViewLayer.Depth.Z"]
@@ -74,8 +74,6 @@ def pack(src: str, name: str, out_dir: str, keep_second: bool = False) -> None:
 
 
 def main(argv=None) -> int:
-    from clfx.bench import cycles
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("src")
     ap.add_argument("--out", default=str(cycles.DATA))
