@@ -470,7 +470,7 @@ class Runtime:
     @property
     def shares_host_cores(self) -> bool:
         """Whether the device is the host's CPU (PoCL): its kernels and the host's threads
-        (EXR codecs) take turns on the same cores (`clfx.pipeline.batch.stream_mode`)."""
+        (EXR codecs) take turns on the same cores (`clfx.pipeline.stream.stream_mode`)."""
         return bool(self.device.type & self.cl.device_type.CPU)
 
     @property
