@@ -18,11 +18,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 MARK = "# lazy:"
 
-NOT_YET = ("clfx/plugins/", "clfx/fx/", "clfx/host.py", "clfx/device/runtime.py")
-"""Restructured by other steps of the same issue at the time of writing (see issue 36:
-kit/plan/typed helpers); their function-level imports are left to those steps."""
-
-
 def _comments(source: str) -> dict[int, str]:
     """Line -> the comment on it."""
     return {tok.start[0]: tok.string for tok in
@@ -33,8 +28,6 @@ def function_level_imports():
     """(path, line, modules, reason or None) of every import inside a function in clfx."""
     for path in sorted((ROOT / "clfx").rglob("*.py")):
         rel = path.relative_to(ROOT).as_posix()
-        if rel.startswith(NOT_YET):
-            continue
         source = path.read_text()
         lines = source.splitlines()
         comments = _comments(source)

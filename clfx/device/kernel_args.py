@@ -440,7 +440,7 @@ class KernelArgs:
     def dtypes(self, fp64: bool) -> list:
         """``Kernel.set_scalar_arg_dtypes``'s list: None for a buffer, else the dtype (REAL:
         float64 in a ``CLFX_FP64`` build)."""
-        from pyopencl import cltypes
+        from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; `clfx looks` loads this module
 
         real = np.dtype(np.float64 if fp64 else np.float32)
         return [None if t == "buf" else real if t == "REAL" else _SCALARS.get(t)

@@ -30,6 +30,9 @@ builds (`Runtime.builds`) and, once per process before the first compile, calls
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import hashlib
+import json
 import os
 import re
 import sys
@@ -81,6 +84,7 @@ def _compiler_quiet(caught: list):
     (``CompilerWarning``).  Both land in ``caught``; anything else written to stderr
     meanwhile (another thread's messages) is passed on afterwards, and other warnings are
     re-issued."""
+    # lazy: pyopencl is ~0.2 s; `clfx render --help` and `import clfx.api` load this module
     import pyopencl as cl
 
     with contextlib.suppress(Exception):
@@ -154,8 +158,6 @@ def _malloc_trim():
     if not sys.platform.startswith("linux"):
         return None
     try:
-        import ctypes
-
         trim = ctypes.CDLL(None).malloc_trim
     except (OSError, AttributeError):
         return None
@@ -208,6 +210,7 @@ class DeviceReport:
 
 
 def _device_kind(dev) -> str:
+    # lazy: pyopencl is ~0.2 s; `clfx render --help` and `import clfx.api` load this module
     import pyopencl as cl
 
     t = dev.type
@@ -222,6 +225,7 @@ def _device_kind(dev) -> str:
 
 def _test_device(dev) -> str | None:
     """None if a tiny kernel builds and computes correctly on ``dev``, else the reason."""
+    # lazy: pyopencl is ~0.2 s; `clfx render --help` and `import clfx.api` load this module
     import pyopencl as cl
 
     try:
@@ -250,8 +254,6 @@ sums them per test module."""
 
 
 def _log_build(file: str, defines, seconds: float) -> None:
-    import json
-
     test = os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" (", 1)[0]
     with contextlib.suppress(OSError), open(BUILD_LOG, "a") as log:
         log.write(json.dumps({"file": file, "defines": [list(d) for d in defines],
@@ -278,8 +280,6 @@ class BuildRecord:
 
 def _headers_digest(folder: Path) -> str:
     """A digest of the shared kernel sources (``kernels/lib``): a program includes them."""
-    import hashlib
-
     h = hashlib.sha1()
     for path in sorted(folder.rglob("*")):
         if path.is_file() and path.suffix in (".h", ".cl"):
@@ -332,6 +332,7 @@ def survey_devices(selector: str | None = None) -> tuple[list[DeviceReport], obj
     _ensure_pocl_affinity()
     _ensure_generic_work_groups()
     try:
+        # lazy: pyopencl is ~0.2 s; `clfx render --help` and `import clfx.api` load this module
         import pyopencl as cl
     except ImportError as exc:  # pragma: no cover - dependency missing
         raise DeviceError(f"pyopencl is not installed ({exc}); run `make setup`") from exc
@@ -431,6 +432,7 @@ class Runtime:
     _instance_lock = threading.Lock()
 
     def __init__(self, device=None, selector: str | None = None):
+        # lazy: pyopencl is ~0.2 s; `clfx render --help` and `import clfx.api` load this module
         import pyopencl as cl
 
         if device is None:
@@ -514,8 +516,6 @@ class Runtime:
         keys its cache on the source and options, so clfx keeps a marker per (device,
         driver, options, source, shared headers) beside it (deleting the cache deletes
         them); another driver's markers live in clfx's own cache folder."""
-        import hashlib
-
         if self._headers is None:
             self._headers = _headers_digest(self.kernel_dir / "lib")
         dev = self.device

@@ -10,6 +10,7 @@ source in view.  The per-tile arrays are small (a 1080p frame has 60 x 34 tiles)
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -254,8 +255,6 @@ def analyse(rt, source, *, depth=None, velocity=None, camera: Camera | None = No
     """Run the tile-statistics kernel over ``source`` (and passes sharing its window);
     luminance weighs RGB as ``luminance_defines`` say (``ctx.luminance_defines``: the working
     space's Y row; default Rec.709)."""
-    import time
-
     t0 = time.perf_counter()
     w, h = source.width, source.height
     tx, ty = max(1, math.ceil(w / TILE)), max(1, math.ceil(h / TILE))

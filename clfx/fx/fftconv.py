@@ -236,7 +236,7 @@ class _Plan:
 def _plan(rt, shape: tuple[int, int, int], precision: str):
     """The cached in-place r2c plan for ``shape`` = (batch, N1, N2 + 2)."""
     def build():
-        from pyvkfft.opencl import VkFFTApp
+        from pyvkfft.opencl import VkFFTApp  # lazy: pyvkfft is ~0.3 s; `clfx looks` loads this module
 
         app = VkFFTApp(shape, _real(precision), rt.queue, ndim=2, inplace=True, r2c=True)
         return _Plan(app, int(getattr(app, "tmp_buffer_nbytes", 0)) + PLAN_NOMINAL_BYTES)
@@ -245,7 +245,7 @@ def _plan(rt, shape: tuple[int, int, int], precision: str):
 
 
 def _array(rt, holder, shape, dtype):
-    import pyopencl.array as cla
+    import pyopencl.array as cla  # lazy: pyopencl is ~0.2 s; `clfx looks` loads this module
 
     return cla.Array(rt.queue, shape, dtype, data=holder.buffer)
 

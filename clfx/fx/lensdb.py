@@ -44,6 +44,7 @@ DEFAULT_ASPECT = 1.5
 def database():
     """The lensfun database bundled with lensfunpy (loaded once per process)."""
     try:
+        # lazy: lensfunpy is ~0.1 s; listing the effects (discover) loads this module, not it
         import lensfunpy
     except ImportError as exc:  # pragma: no cover - dependency missing
         raise ParamError(f"lens profiles need the lensfunpy package ({exc})") from exc
@@ -56,7 +57,7 @@ def _aspect_ratios() -> dict:
 
     lensfunpy does not expose ``lfLens::AspectRatio``; lensfun's default is 3:2.
     """
-    import lensfunpy
+    import lensfunpy  # lazy: as database()
 
     out = {}
     folder = Path(lensfunpy.__file__).parent / "db_files"

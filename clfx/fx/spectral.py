@@ -124,7 +124,7 @@ def channel_weights(wavelength_nm, rgb_to_xyz=None) -> np.ndarray:
 def rgb_matrix(rt, img, m):
     """A new RGBA device image: ``m @ rgb`` of ``img``'s pixels, alpha copied
     (kernels/lib/image.cl ``image_rgb_matrix``, float32)."""
-    from pyopencl import cltypes
+    from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; `clfx looks` loads this module
 
     out = img.like()
     f4 = [cltypes.make_float4(*(float(v) for v in r), 0.0) for r in np.asarray(m)]

@@ -22,6 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from clfx.core.limits import check_derived
 from clfx.core.plugin import FloatParam, RGBParam
 from clfx.core.rect import Rect
 from clfx.fx import fftconv
@@ -98,8 +99,6 @@ def check_psf(name: str, radius: int, ctx) -> None:
     """Refuse a PSF of ``radius`` px beyond the frame's memory budget, before building it
     (`clfx.core.limits.check_derived`): a PSF is sized from the frame's diagonal, so a thin
     frame (65535x1) asked for 19661^2 cells, 8 GB and more."""
-    from clfx.core.limits import check_derived
-
     side = 2 * int(radius) + 1
     win = ctx.source.window
     check_derived(side * side, PSF_BYTES_PER_CELL, win.width, win.height,
@@ -197,7 +196,7 @@ class ScatterPlugin(SpreadRegions):
         k = self.psf(p, ctx)
         boost = self.boost(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
-        from pyopencl import cltypes
+        from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; `clfx looks` loads this module
 
         tint = cltypes.make_float4(*p.tint, 0.0)
         hl = rt.kernel(kfile, f"{name}_highlights", **ctx.luminance_defines)

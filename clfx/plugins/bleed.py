@@ -169,7 +169,7 @@ class Bleed(ScatterPlugin, Plugin):
                   flags, p.threshold, p.knee)
         rt.launch(rt.kernel(kfile, "bleed_active", **defines), (blocks_x, blocks_y), flags,
                   hpitch // 4, fblocks_y, active, dst.pitch, blocks_y)
-        from pyopencl import cltypes
+        from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; listing the effects loads this module
 
         tint = cltypes.make_float4(*p.tint, 0.0)
         name = "bleed_separable_mix" if lvl.rank else "bleed_direct_mix"

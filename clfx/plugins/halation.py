@@ -291,7 +291,7 @@ class Halation(ScatterPlugin, Plugin):
         src, kfile = ctx.source, self.descriptor.kernel
         k = self.psf(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
-        from pyopencl import cltypes
+        from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; listing the effects loads this module
 
         tint = cltypes.make_float4(*s.tint, 0.0)
         hl = rt.kernel(kfile, "halation_highlights", **ctx.luminance_defines)

@@ -148,6 +148,7 @@ import numpy as np
 from clfx.core.camera import BLADES_WHY, NO_POLYGON
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam, IntParam, Level, RGBParam
 from clfx.core.rect import Rect
+from clfx.fx import optics, spectral
 from clfx.host import Plugin, StepPlan, read_only, register
 
 TAPS = 4
@@ -443,8 +444,6 @@ def coating_tint(design_nm: float, design: str = "v-coat") -> np.ndarray:
     (:data:`clfx.fx.optics.MULTILAYER_DESIGNS`) designed at ``design_nm`` on crown glass: the
     stack's residual reflectance squared, integrated with the CIE 1931 observer into linear
     Rec.709 (into gamut)."""
-    from clfx.fx import optics, spectral
-
     lam = spectral.wavelengths(80)
     weights = spectral.spectral_rgb_weights(lam)
     refl = optics.thin_film_reflectance(1.0, GLASS_INDEX, optics.MULTILAYER_DESIGNS[design],

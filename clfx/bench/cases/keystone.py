@@ -94,7 +94,7 @@ def homography(params, ctx) -> np.ndarray:
 
 
 def _warp(case, params, ctx, flag):
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     src = np.ascontiguousarray(case["source"], np.float32)
     h = homography(params, ctx)
@@ -108,7 +108,7 @@ def _warp(case, params, ctx, flag):
 def peers(case, params, ctx):
     """cv2.warpPerspective with the same homography: bilinear, bicubic and Lanczos-4."""
     try:
-        import cv2
+        import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
     except ImportError:
         return {}
     return {f"cv2.warpPerspective {name}": (_warp(case, params, ctx, flag), level)
@@ -119,7 +119,7 @@ def peers(case, params, ctx):
 
 def naive(case, params, ctx):
     """Bilinear ``cv2.warpPerspective``: one point per pixel."""
-    import cv2
+    import cv2  # lazy: OpenCV is optional (test extra); the bench's peers go without it
 
     return _warp(case, params, ctx, cv2.INTER_LINEAR)
 
