@@ -289,8 +289,8 @@ def sanitized_copy(rt, src):
     """A copy of ``src`` with non-finite components set to 0 (so they cannot spread)."""
     out = src.like()
     knl = rt.kernel(KERNEL, "motion_sanitize")
-    rt.launch(knl, (src.pitch // 4, src.height), src, out, np.int32(src.pitch),
-              np.int32(src.height))
+    rt.launch(knl, (src.pitch // 4, src.height), src, out, src.pitch,
+              src.height)
     return out
 
 
@@ -357,17 +357,16 @@ def _defines(level, has_depth: bool, curved: bool) -> dict:
 def _prepared(rt, col, velocity, depth, back, defines, vmax, duration):
     """The aux records (vx, vy, z, |v|) of ``velocity`` (and ``back``'s: dummy without it),
     clamped to ``vmax``, dilated with a depth pass; over the rows the images hold."""
-    i32, f32 = np.int32, np.float32
     pitch, w, h = col.pitch, col.width, col.height
     dummy = rt.buffer(16)
     aux = rt.image(col.window, 4)
     rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), velocity,
-              depth if depth is not None else dummy, aux, i32(pitch), i32(h), f32(vmax))
+              depth if depth is not None else dummy, aux, pitch, h, vmax)
     auxb = dummy
     if back is not None:    # (bx, by, z, |b|), clamped like the forward motion
         auxb = rt.image(col.window, 4)
         rt.launch(rt.kernel(KERNEL, "motion_prepare", **defines), (pitch // 4, h), back,
-                  depth if depth is not None else dummy, auxb, i32(pitch), i32(h), f32(vmax))
+                  depth if depth is not None else dummy, auxb, pitch, h, vmax)
     if depth is not None:   # rims of small bright moving surfaces move with them
         dilated = rt.image(col.window, 4)
         extra = ()
@@ -375,7 +374,7 @@ def _prepared(rt, col, velocity, depth, back, defines, vmax, duration):
             dilated_b = rt.image(col.window, 4)
             extra = (auxb, dilated_b)
         rt.launch(rt.kernel(KERNEL, "motion_dilate", **defines), (pitch // 4, h), aux, col,
-                  dilated, i32(pitch), i32(w), i32(h), f32(duration), *extra)
+                  dilated, pitch, w, h, duration, *extra)
         aux = dilated
         if back is not None:
             auxb = dilated_b
@@ -395,19 +394,17 @@ def _grid_buffers(rt, w, h, k, curved):
 
 
 def _tilemax(rt, defines, aux, auxb, tiles, pitch, w, h, row0, tx, ty, ty0, ty1, k):
-    i32 = np.int32
     rt.launch(rt.kernel(KERNEL, "motion_tilemax", **defines), (tx, ty1 - ty0), aux, auxb,
-              tiles[0], tiles[1], i32(pitch), i32(w), i32(h), i32(row0), i32(tx), i32(ty),
-              i32(ty0), i32(k))
+              tiles[0], tiles[1], pitch, w, h, row0, tx, ty,
+              ty0, k)
 
 
 def _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved) -> TileGrid:
     """NeighborMax of the TileMax grid ``tiles`` and the moving tiles' sample counts."""
-    i32 = np.int32
     nmax = rt.buffer(tx * ty * 16)
     nmax_b = rt.buffer(tx * ty * 8) if curved else rt.buffer(16)
     rt.launch(rt.kernel(KERNEL, "motion_neighbormax", **defines), (tx, ty), tiles[0],
-              tiles[1], nmax, nmax_b, i32(tx), i32(ty))
+              tiles[1], nmax, nmax_b, tx, ty)
     # Classification on the host: a few thousand floats, the only read-back.
     nm = rt.from_device(nmax, np.float32, tx * ty * 4).reshape(ty, tx, 4)
     length = nm[..., 2].astype(np.float64) * (t1 - t0)     # blur length of the tile's v_n
@@ -507,7 +504,6 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
         del tiles
     k = grid.k
     y0, y1 = band if band is not None else (row0, row0 + h)
-    i32, f32 = np.int32, np.float32
     sel = (grid.ys * k < y1) & ((grid.ys + 1) * k > y0)     # the moving tiles of the band
     if not sel.any():
         return dst, grid.stats
@@ -520,7 +516,7 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
                                        grid.jitter[part]], axis=1).astype(np.int32).ravel())
         count = int(part.sum())
         rt.launch(rt.kernel(KERNEL, "motion_gather", CUBIC=cubic, **defines),
-                  (count * qpt,), col, aux, auxb, grid.nmax, grid.nmax_b, table, i32(count),
-                  dst, i32(pitch), i32(w), i32(row0), i32(row0 + h), i32(y0), i32(y1),
-                  i32(grid.tiles_x), i32(k), f32(t0), f32(t1), i32(frame), local=(LOCAL,))
+                  (count * qpt,), col, aux, auxb, grid.nmax, grid.nmax_b, table, count,
+                  dst, pitch, w, row0, row0 + h, y0, y1,
+                  grid.tiles_x, k, t0, t1, frame, local=(LOCAL,))
     return dst, grid.stats

@@ -318,16 +318,15 @@ class CameraBlur(Plugin):
         rows, the rows ``row0`` on of the whole render's ``whole`` window (its coordinates):
         with a roll the chords to the positions a frame after and before (the gather's paths
         follow the arcs), else the tangent."""
-        i32, f32 = np.int32, np.float32
         fields = []
         for chord in ((1.0, -1.0) if curved else (0.0,)):
             vel = rt.image(depth.window, 2)
             rt.launch(rt.kernel(KERNEL, "camera_blur_velocity", HAS_DEPTH=1),
-                      (depth.pitch // 4, depth.height), depth, vel, i32(depth.pitch),
-                      i32(depth.width), i32(depth.height), i32(row0), i32(whole.x0),
-                      i32(whole.y0), f32(m["cx"]), f32(m["cy"]), f32(m["sx"]), f32(m["sy"]),
-                      f32(m["roll"]), f32(m["zoom"]), f32(m["truck_x"]), f32(m["truck_y"]),
-                      f32(m["dolly"]), f32(chord))
+                      (depth.pitch // 4, depth.height), depth, vel, depth.pitch,
+                      depth.width, depth.height, row0, whole.x0,
+                      whole.y0, m["cx"], m["cy"], m["sx"], m["sy"],
+                      m["roll"], m["zoom"], m["truck_x"], m["truck_y"],
+                      m["dolly"], chord)
             fields.append(vel)
         return fields[0], (fields[1] if curved else None)
 
@@ -340,7 +339,6 @@ class CameraBlur(Plugin):
         src = ctx.source
         plan = self.planned(p, ctx)
         t0, t1, m = plan.t0, plan.t1, plan.motion
-        i32, f32 = np.int32, np.float32
         nonfinite = ctx.analysis.nonfinite_count
         if nonfinite:
             ctx.notes.append(f"camera_blur: {nonfinite} non-finite pixels set to 0")
@@ -354,11 +352,11 @@ class CameraBlur(Plugin):
             rt.launch(rt.kernel(KERNEL, "camera_blur_similarity",
                                 BILINEAR=int(level.path_bilinear), JITTER=int(level.jitter),
                                 fp64=level.fp64),
-                      (src.pitch // 4, band.height), col, dst, i32(src.pitch), i32(src.width),
-                      i32(r0), i32(r0 + src.height), i32(band.y0 - whole.y0),
-                      i32(band.y1 - whole.y0), i32(whole.x0), i32(whole.y0), f32(m["cx"]),
-                      f32(m["cy"]), f32(m["sx"]), f32(m["sy"]), f32(m["roll"]), f32(m["zoom"]),
-                      f32(t0), f32(t1), i32(plan.samples), i32(ctx.frame))
+                      (src.pitch // 4, band.height), col, dst, src.pitch, src.width,
+                      r0, r0 + src.height, band.y0 - whole.y0,
+                      band.y1 - whole.y0, whole.x0, whole.y0, m["cx"],
+                      m["cy"], m["sx"], m["sy"], m["roll"], m["zoom"],
+                      t0, t1, plan.samples, ctx.frame)
             ctx.notes.append(f"camera_blur: direct path gather, {plan.samples} samples")
             return dst
         depth = ctx.depth

@@ -431,13 +431,12 @@ def prefilter(rt, col, pheight: int, levels: int) -> None:
     knl = rt.kernel("dof.cl", "dof_prefilter")
     plane = col.pitch * pheight
     tmp = rt.image(Rect.from_size(col.pitch, pheight), 4)
-    i32 = np.int32
     for lv in range(1, levels + 1):
-        step = i32(1 << (lv - 1))
-        rt.launch(knl, (col.pitch, pheight), col, i32((lv - 1) * plane), tmp, i32(0),
-                  i32(col.pitch), i32(pheight), step, i32(0), local=(16, 4))
-        rt.launch(knl, (col.pitch, pheight), tmp, i32(0), col, i32(lv * plane),
-                  i32(col.pitch), i32(pheight), step, i32(1), local=(16, 4))
+        step = 1 << (lv - 1)
+        rt.launch(knl, (col.pitch, pheight), col, (lv - 1) * plane, tmp, 0,
+                  col.pitch, pheight, step, 0, local=(16, 4))
+        rt.launch(knl, (col.pitch, pheight), tmp, 0, col, lv * plane,
+                  col.pitch, pheight, step, 1, local=(16, 4))
 
 
 @register
@@ -562,8 +561,8 @@ class Dof(Plugin):
         out = []
         for strength in (lens.cateye_strengths() + (0.0, 0.0))[:2]:
             k = strength / half_diag
-            out += (np.float32(k * scale), np.float32(k * (window.x0 - cx)),
-                    np.float32(k * scale / aspect), np.float32(k * (window.y0 - cy) / aspect))
+            out += (k * scale, k * (window.x0 - cx),
+                    k * scale / aspect, k * (window.y0 - cy) / aspect)
         return tuple(out)
 
     def tile_radii(self, p, ctx, *, with_near: bool = False, offset: float | None = None):
@@ -716,12 +715,12 @@ class Dof(Plugin):
         tiles = an if window == an.window else self._window_tiles(rt, ctx, window)
         ty, tx = max(1, -(-window.height // TILE)), max(1, -(-window.width // TILE))
         log_mean = rt.buffer(tx * ty * 4)
-        src, i32 = ctx.source, np.int32
+        src = ctx.source
         rt.launch(rt.kernel("dof.cl", "dof_tile_cap", fp64=self.level(ctx).fp64,
                             **ctx.luminance_defines), (tx, ty),
-                  src, i32(src.pitch), i32(src.window.x0 - window.x0),
-                  i32(src.window.y0 - window.y0), i32(src.width), i32(src.height),
-                  i32(window.width), i32(window.height), i32(TILE), i32(tx), i32(ty), log_mean)
+                  src, src.pitch, src.window.x0 - window.x0,
+                  src.window.y0 - window.y0, src.width, src.height,
+                  window.width, window.height, TILE, tx, ty, log_mean)
         offsets = lens.offsets()
         gathers = tuple(self._plan_gather(rt, p, ctx, plan, tiles, off) for off in offsets)
         said = [gathers[0].note]
@@ -862,8 +861,8 @@ class Dof(Plugin):
             dst = outs[0.0].like()
             r, b = (outs[o] for o in lens.ca)
             rt.launch(rt.kernel("dof.cl", "dof_merge_channels"), (dst.width, dst.height),
-                      r, outs[0.0], b, dst, np.int32(dst.pitch), np.int32(dst.width),
-                      np.int32(dst.height), local=(16, 4))
+                      r, outs[0.0], b, dst, dst.pitch, dst.width,
+                      dst.height, local=(16, 4))
         ctx.notes.extend(frame.notes)
         self._note_mixed(rt, ctx, passes[0.0][1])
         return dst
@@ -894,15 +893,14 @@ class Dof(Plugin):
         # the colour, then its prefiltered copies for the sparse taps (planes 1..L)
         col = rt.image(Rect.from_size(padded.width, padded.height * (1 + full_l)), 4)
         coc0, coc = rt.image(padded, 1), rt.image(padded, 1)
-        f32, i32 = np.float32, np.int32
         luma = ctx.luminance_defines     # log luminance of the working space
         prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64, **luma)
-        rt.launch(prep, (col.pitch // 4, padded.height), src, depth, i32(src.pitch), i32(w),
-                  i32(h), col, coc0, i32(col.pitch), i32(padded.height), i32(pad), f32(k_half),
-                  f32(focus), f32(clamp_r), f32(g.offset))
+        rt.launch(prep, (col.pitch // 4, padded.height), src, depth, src.pitch, w,
+                  h, col, coc0, col.pitch, padded.height, pad, k_half,
+                  focus, clamp_r, g.offset)
         prefilter(rt, col, padded.height, full_l)
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
-                  col, coc0, coc, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h),
+                  col, coc0, coc, col.pitch, padded.height, pad, w, h,
                   local=(8, 4))
         del coc0
         mix, count = self._mixed(rt, col, coc, padded, pad, w, h, band.y0 - src.window.y0,
@@ -920,8 +918,8 @@ class Dof(Plugin):
             colh = rt.image(Rect.from_size(hpadded.width, hpadded.height * (1 + g.half_l)), 4)
             coch = rt.image(hpadded, 1)
             rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
-                      (colh.pitch, hpadded.height), col, coc, i32(col.pitch), i32(padded.height),
-                      colh, coch, i32(colh.pitch), i32(hpadded.height))
+                      (colh.pitch, hpadded.height), col, coc, col.pitch, padded.height,
+                      colh, coch, colh.pitch, hpadded.height)
             prefilter(rt, colh, hpadded.height, g.half_l)
             # the half-resolution rows this band's upsampling reads (row0 is even:
             # `DofFrame.rows`)
@@ -950,11 +948,10 @@ class Dof(Plugin):
         count = rt.to_device(np.zeros(1, np.int32))
         tx, ty = -(-w // TILE), -(-h // TILE)
         flags = rt.to_device(np.zeros(tx * ty, np.int32))
-        i32 = np.int32
         rt.launch(rt.kernel("dof.cl", "dof_mixed"), (-(-w // 4), h), col, coc, mixa, mixr,
-                  mixd, i32(col.pitch), i32(padded.height), i32(pad), i32(w), i32(h), i32(y0),
-                  i32(y0 + rows), count, flags, i32(tx), local=(8, 4))
-        return (mixa, mixr, mixd, flags, i32(tx), i32(ty)), count
+                  mixd, col.pitch, padded.height, pad, w, h, y0,
+                  y0 + rows, count, flags, tx, local=(8, 4))
+        return (mixa, mixr, mixd, flags, tx, ty), count
 
     def _gather(self, rt, knl, col, coc, pad, dst, taps, tiles, frame: DofFrame, lvl, cateye,
                 place, *, tile=TILE, hres=None, hplace=(0, 0), half_size=(1, 1), plane=0,
@@ -965,13 +962,11 @@ class Dof(Plugin):
         ``hplace``, ``half_size`` its whole size); ``plane``: pixels between the planes of
         ``col``'s prefilter pyramid (:func:`prefilter`); ``mix``: the mixed edge pixels
         (:meth:`_mixed`) the gather splits, None: none (the half-resolution gather)."""
-        i32, f32 = np.int32, np.float32
-        hres_args = ((hres, i32(hres.pitch), i32(half_size[0]), i32(half_size[1]))
-                     if hres is not None else (dst, i32(dst.pitch), i32(1), i32(1)))
-        rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, i32(col.pitch), i32(pad),
-                  dst, i32(dst.pitch), i32(dst.width), i32(dst.height), taps, tiles,
-                  frame.log_mean, i32(frame.tiles_x), i32(frame.tiles_y), i32(tile),
-                  f32(CAP_FACTOR), *hres_args, f32(lvl.refine), f32(lvl.half_res_radius),
-                  np.array(cateye, np.float32), i32(plane), np.array(place, np.int32),
-                  np.array((*hplace, 0, 0), np.int32),
-                  *(mix or (coc, coc, coc, coc, i32(0), i32(0))), local=LOCAL)
+        hres_args = ((hres, hres.pitch, half_size[0], half_size[1])
+                     if hres is not None else (dst, dst.pitch, 1, 1))
+        rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, col.pitch, pad,
+                  dst, dst.pitch, dst.width, dst.height, taps, tiles,
+                  frame.log_mean, frame.tiles_x, frame.tiles_y, tile,
+                  CAP_FACTOR, *hres_args, lvl.refine, lvl.half_res_radius,
+                  cateye, plane, place, (*hplace, 0, 0),
+                  *(mix or (coc, coc, coc, coc, 0, 0)), local=LOCAL)

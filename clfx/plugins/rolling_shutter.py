@@ -71,8 +71,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from clfx.core.errors import ClipError
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Level
 from clfx.core.rect import Rect
@@ -249,11 +247,10 @@ class RollingShutter(Plugin):
 
     def _aux(self, rt, vel, depth, vmax):
         """motion_prepare's records (vx, vy, z, |v|) of ``vel`` over its window."""
-        i32, f32 = np.int32, np.float32
         aux = rt.image(vel.window, 4)
         rt.launch(rt.kernel(MOTION_KERNEL, "motion_prepare", HAS_DEPTH=int(depth is not None)),
                   (vel.pitch // 4, vel.height), vel, depth if depth is not None else
-                  rt.buffer(16), aux, i32(vel.pitch), i32(vel.height), f32(vmax))
+                  rt.buffer(16), aux, vel.pitch, vel.height, vmax)
         return aux
 
     def _tiles(self, rt, vel, depth, curved: bool, window: Rect, vmax, shift, lvl,
@@ -261,7 +258,6 @@ class RollingShutter(Plugin):
         """(tile size, tiles across, the 3 x 3 neighbourhoods' records) of the frame's tile
         grid over ``window``: from ``aux`` (the whole window's records), or built from rows of
         about ``chunk_pixels`` of the passes at a time."""
-        i32 = np.int32
         w, h = window.width, window.height
         k = tile_size(shift)
         ntx, nty = -(-w // k), -(-h // k)
@@ -278,10 +274,10 @@ class RollingShutter(Plugin):
                 part = self._aux(rt, rt.reframe(vel, rows),
                                  None if depth is None else rt.reframe(depth, rows), vmax)
             rt.launch(rt.kernel(kfile, "rolling_shutter_tiles", **defines), (ntx, ty1 - ty0),
-                      part, tiles, i32(part.pitch), i32(w), i32(h), i32(r0),
-                      i32(ntx), i32(nty), i32(ty0), i32(k))
+                      part, tiles, part.pitch, w, h, r0,
+                      ntx, nty, ty0, k)
         rt.launch(rt.kernel(kfile, "rolling_shutter_neighbors", **defines), (ntx, nty), tiles,
-                  nbr, i32(ntx), i32(nty))
+                  nbr, ntx, nty)
         return k, ntx, nbr
 
     def region_of_interest(self, p, ctx, window):
@@ -311,7 +307,6 @@ class RollingShutter(Plugin):
         w, h, pitch = src.width, src.height, src.pitch
         if w == 0 or h == 0:
             return dst
-        i32, f32 = np.int32, np.float32
         vmax = shift / times.t_max if times.t_max > 0 else 0.0
         aux = self._aux(rt, vel, depth, vmax)
         auxb = rt.buffer(16)
@@ -325,9 +320,9 @@ class RollingShutter(Plugin):
         defines = self._defines(lvl, depth is not None, back is not None)
         row0, b0 = src.window.y0 - whole.y0, band.y0 - whole.y0
         rt.launch(rt.kernel(self.descriptor.kernel, "rolling_shutter_gather", **defines),
-                  (w, band.height), col, aux, auxb, nbr, dst, i32(pitch), i32(w), i32(row0),
-                  i32(row0 + h), i32(b0), i32(b0 + band.height), i32(ntx), i32(k),
-                  f32(times.tx), f32(times.ty), f32(times.xr), f32(times.yr))
+                  (w, band.height), col, aux, auxb, nbr, dst, pitch, w, row0,
+                  row0 + h, b0, b0 + band.height, ntx, k,
+                  times.tx, times.ty, times.xr, times.yr)
         ctx.notes.append(f"rolling_shutter: readout {self.readout(p):.3g} frame "
                          f"({p.direction}, t = 0 at the {p.reference} row), largest shift "
                          f"{shift:.1f} px, {k} px tiles, "

@@ -720,11 +720,10 @@ class Streaks(Plugin):
         seeds = rt.buffer(MAX_SEEDS * 32)
         knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=fr.analysis_tile,
                         **fr.luminance_defines)
-        i32, f32 = np.int32, np.float32
-        rt.launch(knl, (src.width, src.height), src, i32(src.pitch), i32(src.width),
-                  i32(src.height), f32(p.threshold), peak, i32(tiles_x),
-                  i32(tiles_y), f32(p.core), f32(p.source_color), f32(self.core_power(p)),
-                  i32(fr.radius), f32(RING_SHARE), seeds, count, i32(MAX_SEEDS), flags[0])
+        rt.launch(knl, (src.width, src.height), src, src.pitch, src.width,
+                  src.height, p.threshold, peak, tiles_x,
+                  tiles_y, p.core, p.source_color, self.core_power(p),
+                  fr.radius, RING_SHARE, seeds, count, MAX_SEEDS, flags[0])
         n_host, first = np.zeros(1, np.int32), np.empty((SEEDS_READ, 8), np.float32)
         rt.cl.enqueue_copy(rt.queue, n_host, count.buffer, is_blocking=False)
         rt.cl.enqueue_copy(rt.queue, first, seeds.buffer, is_blocking=True)
@@ -733,7 +732,7 @@ class Streaks(Plugin):
             dilate = rt.kernel("streaks.cl", "streaks_dilate")
             for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
                 rt.launch(dilate, (src.height if sx else src.width,), flags[a], flags[b],
-                          i32(src.width), i32(src.height), i32(fr.radius), i32(sx), i32(sy))
+                          src.width, src.height, fr.radius, sx, sy)
         if n > MAX_SEEDS:
             notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
             n = MAX_SEEDS
@@ -756,7 +755,6 @@ class Streaks(Plugin):
         ox, oy = src.window.offset_in(fr.out_win)
         w, h = fr.out_win.width, fr.out_win.height
         wp = -(-w // 4) * 4
-        i32, f32 = np.int32, np.float32
         chunk = max(1, CHUNK_PIXELS // wp)
         rings = ring_rows(fr.rays, chunk, h)
         stream = streams(wp, h, rings, chunk)
@@ -785,25 +783,25 @@ class Streaks(Plugin):
         bright_knl = rt.kernel("streaks.cl", "streaks_bright", PEAK_TILE=fr.analysis_tile,
                                **defines)
         _, tiles_x, tiles_y = fr.peak
-        bright_args = (src, i32(src.pitch), i32(src.width), i32(src.height))
-        bright_tail = (i32(1), i32(1), f32(0.0), i32(0), i32(ox), i32(oy), f32(p.threshold),
-                       peak_buf, i32(tiles_x), i32(tiles_y), f32(p.core), f32(p.source_color),
-                       f32(self.core_power(p)), gathered, points_buf, starts_buf, members_buf,
-                       i32(-(-wp // BIN)), i32(BIN))
+        bright_args = (src, src.pitch, src.width, src.height)
+        bright_tail = (1, 1, 0.0, 0, ox, oy, p.threshold,
+                       peak_buf, tiles_x, tiles_y, p.core, p.source_color,
+                       self.core_power(p), gathered, points_buf, starts_buf, members_buf,
+                       -(-wp // BIN), BIN)
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
 
         def bright(dst, y0, rows, ring):   # the bright pixels and points of rows y0..
-            rt.launch(bright_knl, (wp, rows), *bright_args, dst, i32(org), i32(pitch), i32(wp),
-                      i32(h), *bright_tail, i32(y0), i32(ring))
+            rt.launch(bright_knl, (wp, rows), *bright_args, dst, org, pitch, wp,
+                      h, *bright_tail, y0, ring)
 
         def run_pass(ray, n, src_buf, dst_buf, y0, rows, in_rows, out_rows):
             b = TAPS ** n
             rt.launch(accum_knl if n == ray.passes - 1 else step_knl, (wp // 4, rows), src_buf,
-                      dst_buf, i32(org), i32(pitch), i32(wp), i32(w), i32(h),
-                      f32(ray.sx * b), f32(ray.sy * b),
-                      *[w4.astype(np.float32) for w4 in ray.weights[n]],
-                      i32(y0), i32(in_rows), i32(out_rows), local=LOCAL)
+                      dst_buf, org, pitch, wp, w, h,
+                      ray.sx * b, ray.sy * b,
+                      *ray.weights[n],
+                      y0, in_rows, out_rows, local=LOCAL)
 
         if not stream:
             nbytes = pitch * (h + 2 * margin) * 16
@@ -866,7 +864,6 @@ class Streaks(Plugin):
         src, lvl, out_win = fr.source, fr.level, fr.out_win
         factor = lvl.factor
         ox, oy = src.window.offset_in(out_win)
-        i32, f32 = np.int32, np.float32
         defines = {"fp64": lvl.fp64, **fr.luminance_defines}
         # the rays of one line share a working sum, upsampled along them once
         plans = sorted(((r.grid, r.passes, r.weights) for r in fr.rays),
@@ -900,10 +897,10 @@ class Streaks(Plugin):
         # the streaking light of the pixels no seed gathered, once a frame
         ext = rt.buffer(max(src.width * src.height, 1) * 16)
         rt.launch(rt.kernel("streaks.cl", "streaks_extended", PEAK_TILE=fr.analysis_tile,
-                            **defines), (src.width, src.height), src, i32(src.pitch),
-                  i32(src.width), i32(src.height), f32(p.threshold), peak_buf,
-                  i32(tiles_x), i32(tiles_y), f32(p.core), f32(p.source_color),
-                  f32(self.core_power(p)), gathered, ext)
+                            **defines), (src.width, src.height), src, src.pitch,
+                  src.width, src.height, p.threshold, peak_buf,
+                  tiles_x, tiles_y, p.core, p.source_color,
+                  self.core_power(p), gathered, ext)
         last_layout = None
         for k, (grid, passes, weights) in enumerate(plans):
             lay = layouts[grid.layout]
@@ -918,30 +915,29 @@ class Streaks(Plugin):
             accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **kdefs)
             # each ray starts from the bright pixels, extracted again into pong (cheaper than
             # a fourth working buffer; passes write inside the zero margins only)
-            rt.launch(bright_knl, (lay.wp, lay.h), ext, i32(src.width), i32(src.width),
-                      i32(src.height), pong, i32(lay.org), i32(lay.pitch), i32(lay.wp),
-                      i32(lay.h), i32(grid.fx), i32(grid.fy), f32(grid.shear),
-                      i32(grid.lead), i32(ox + grid.ex), i32(oy + grid.ey), f32(p.threshold),
-                      peak_buf, i32(tiles_x), i32(tiles_y),
-                      f32(p.core), f32(p.source_color), f32(self.core_power(p)), gathered,
-                      *seeds[grid.layout], i32(-(-lay.wp // BIN)), i32(BIN), i32(0), i32(0))
+            rt.launch(bright_knl, (lay.wp, lay.h), ext, src.width, src.width,
+                      src.height, pong, lay.org, lay.pitch, lay.wp,
+                      lay.h, grid.fx, grid.fy, grid.shear,
+                      grid.lead, ox + grid.ex, oy + grid.ey, p.threshold,
+                      peak_buf, tiles_x, tiles_y,
+                      p.core, p.source_color, self.core_power(p), gathered,
+                      *seeds[grid.layout], -(-lay.wp // BIN), BIN, 0, 0)
             cur = pong
             for n in range(passes):
                 last = n == passes - 1
                 dst = total if last else (ping if cur is not ping else pong)
                 b = TAPS ** n
-                w = [w4.astype(np.float32) for w4 in weights[n]]
                 rt.launch(accum_knl if last else step_knl, (lay.wp // 4, lay.h), cur, dst,
-                          i32(lay.org), i32(lay.pitch), i32(lay.wp), i32(grid.w), i32(lay.h),
-                          f32(grid.sx * b), f32(grid.sy * b), *w, i32(0), i32(0), i32(0),
+                          lay.org, lay.pitch, lay.wp, grid.w, lay.h,
+                          grid.sx * b, grid.sy * b, *weights[n], 0, 0, 0,
                           local=LOCAL)
                 cur = dst
             if k + 1 == len(plans) or plans[k + 1][0].line != grid.line:
                 rt.launch(rt.kernel("streaks.cl", "streaks_expand", ALONG_X=int(grid.fx > 1)),
-                          (out_win.width, out_win.height), total, i32(lay.org),
-                          i32(lay.pitch), i32(grid.w), i32(grid.h), i32(factor),
-                          i32(grid.ex + grid.ey), f32(grid.shear), full, i32(full_pitch),
-                          i32(out_win.width), i32(out_win.height), local=LOCAL)
+                          (out_win.width, out_win.height), total, lay.org,
+                          lay.pitch, grid.w, grid.h, factor,
+                          grid.ex + grid.ey, grid.shear, full, full_pitch,
+                          out_win.width, out_win.height, local=LOCAL)
                 if k + 1 < len(plans):
                     rt.cl.enqueue_fill_buffer(rt.queue, total.buffer, np.float32(0.0), 0,
                                               nbytes)
@@ -959,13 +955,12 @@ class Streaks(Plugin):
         dx0, dy0 = band.offset_in(fr.out_win)
         out = rt.image(band)
         knl = rt.kernel("streaks.cl", "streaks_compose", **fr.luminance_defines)
-        i32 = np.int32
 
         def compose(buf, org, pitch, r0, row0, rows):
-            rt.launch(knl, (out.pitch, rows), src, i32(src.pitch), i32(src.width),
-                      i32(src.height), i32(ox), i32(oy), buf, i32(org), i32(pitch),
-                      i32(r0), out, i32(out.pitch),
-                      i32(band.width), i32(row0 + rows), i32(dx0), i32(dy0), i32(row0))
+            rt.launch(knl, (out.pitch, rows), src, src.pitch, src.width,
+                      src.height, ox, oy, buf, org, pitch,
+                      r0, out, out.pitch,
+                      band.width, row0 + rows, dx0, dy0, row0)
 
         if total.host is None:
             compose(total.device, total.org, total.pitch, 0, 0, band.height)
