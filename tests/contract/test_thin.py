@@ -95,6 +95,17 @@ def test_a_65535x1_psf_is_built_over_its_reach_within_the_budget(rt, name):
     assert 0.0 < float(k.sum()) < 1.0
 
 
+def test_a_glare_size_the_docs_allow_is_built_over_the_frame_it_reaches(rt):
+    """glare size 2.0 (its documented maximum) on a 960x540 frame: a 4407^2 PSF, refused by
+    the frame's budget (as 1080p was past size 0.84); the rows and columns that reach the
+    frame are built."""
+    ctx = E.context(rt, "glare", np.zeros((540, 960, 4), np.float32))
+    p = E.params("glare", size=2.0)
+    k = E.plugin("glare").psf(p, ctx)
+    reach = 2 * (fftconv.REACH_MARGIN + np.array([539, 959])) + 1
+    assert k.shape == tuple(reach)
+
+
 @pytest.mark.parametrize("name", ["glare", "soft_focus"])
 def test_a_psf_beyond_the_frames_budget_is_refused_before_it_is_built(rt, name, monkeypatch):
     """What even the PSF's window would take beyond the frame's budget (mocked to 72 bytes a
