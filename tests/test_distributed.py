@@ -2,6 +2,7 @@
 same pixels as one process, survive a worker killed mid-frame, and report bad frames."""
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -10,6 +11,7 @@ import signal
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.cluster import assert_same_outputs, clfx, clfx_popen, dask_cluster
@@ -331,3 +333,80 @@ def test_quiet_workers_say_nothing_on_a_cold_compiler_cache(tmp_path):
                 POCL_CACHE_DIR=str(tmp_path / "cold-cache"))
     assert proc.stderr == "" and proc.stdout == ""
     assert sorted(os.listdir(tmp_path / "out")) == ["o.0001.exr", "o.0002.exr"]
+
+
+def test_sigterm_leaves_no_local_worker_behind(tmp_path):
+    """A render on a local cluster (127.0.0.1) ended by SIGTERM: clfx exits 143 within a
+    few seconds and no worker process it started outlives it (the signal watcher's forced
+    exit skips the cluster's close)."""
+    import psutil
+    from clfx.core.frame import Frame
+    from clfx.io.write import write_frame
+
+    rgba = np.random.default_rng(3).uniform(0, 2, (48, 64, 4)).astype(np.float32)
+    for f in range(1, 41):
+        write_frame(Frame.from_array(rgba), tmp_path / f"in.{f:04d}.exr")
+    proc = clfx_popen("render", tmp_path / "in.#.exr", tmp_path / "out" / "o.#.exr",
+                      "--look", "cinema", "--workers", "2")
+    me, every = psutil.Process(proc.pid), []
+    try:
+        workers, deadline = [], time.monotonic() + 90
+        while len(workers) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            workers = [c for c in me.children(recursive=True)
+                       if "multiprocessing" in " ".join(c.cmdline())]
+            time.sleep(0.2)
+        assert len(workers) >= 2, "no local workers started"
+        every = me.children(recursive=True)
+        time.sleep(2)                                   # the workers take their frames
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+        assert proc.returncode == 143
+        gone, alive = psutil.wait_procs(every, timeout=10)
+        assert not alive, [(p.pid, p.cmdline()) for p in alive]
+    finally:
+        proc.kill()
+        for p in every:                                 # none, unless the test failed
+            with contextlib.suppress(psutil.Error):
+                p.kill()
+
+
+STUCK_ON_A_CLUSTER = """
+import signal, sys, time
+import clfx.cli as cli
+from clfx.pipeline.distributed import connect
+for s in (signal.SIGTERM, signal.SIGINT):         # a main thread that never gets to react
+    signal.signal(s, lambda *a: None)
+cli._watch_signals()
+with connect(workers=2):
+    print("ready", flush=True)
+    time.sleep(120)
+"""
+
+
+def test_a_forced_exit_leaves_no_local_worker_behind():
+    """The signal watcher ends a process whose main thread does not answer with os._exit
+    (no cluster close runs): the local workers end with it."""
+    import subprocess
+    import sys
+
+    import psutil
+
+    from tests.cluster import env
+
+    proc = subprocess.Popen([sys.executable, "-c", STUCK_ON_A_CLUSTER], env=env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    every = []
+    try:
+        assert proc.stdout.readline() == b"ready\n"
+        every = psutil.Process(proc.pid).children(recursive=True)
+        assert len([c for c in every if "multiprocessing" in " ".join(c.cmdline())]) >= 2
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 143, err
+        _, alive = psutil.wait_procs(every, timeout=10)
+        assert not alive, [(p.pid, p.cmdline()) for p in alive]
+    finally:
+        proc.kill()
+        for p in every:
+            with contextlib.suppress(psutil.Error):
+                p.kill()

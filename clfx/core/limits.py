@@ -99,19 +99,28 @@ def memory_budget_mib(pixels: int, pool_mib: float, sequence: bool = False) -> f
 DERIVED_MIN_BYTES = 256 * 2 ** 20
 """The least a derived buffer may take whatever the frame (a PSF for a small frame)."""
 
+DEVICE_BYTES_PER_PIXEL = 1024
+"""Bytes per frame pixel the device buffers of one effect may take beyond ``CLFX_POOL_MB``
+(:func:`check_derived`'s ``per_pixel`` for them): dof's padded planes at ``max_coc`` 1 on a
+16:9 frame (the frame grown by a CoC radius of half its diagonal on every side, five
+RGBA float planes and two CoC planes) take ~570; a 65535x1 frame's at the default 0.25
+(the frame grown by 8192 rows above and below) took 28 GiB, 460000 a pixel."""
+
 
 def check_derived(cells: int, bytes_per_cell: int, frame_w: int, frame_h: int,
-                  pool_bytes: int, what: str, exc: type[ClfxError] = ClfxError) -> None:
+                  pool_bytes: int, what: str, exc: type[ClfxError] = ClfxError, *,
+                  per_pixel: int = MEMORY_BYTES_PER_PIXEL, hint: str = "lower its size") -> None:
     """Refuse, before allocating, a buffer derived from a ``frame_w`` x ``frame_h`` frame
     (a PSF sized from its diagonal: a thin 65535x1 frame's is 19661^2) whose ``cells`` x
     ``bytes_per_cell`` exceed the frame's share of the memory budget: ``CLFX_POOL_MB`` (at
-    least 256 MiB) + `MEMORY_BYTES_PER_PIXEL` x its pixels."""
+    least 256 MiB) + ``per_pixel`` (`MEMORY_BYTES_PER_PIXEL`; `DEVICE_BYTES_PER_PIXEL` for
+    an effect's device buffers) x its pixels; the line ends with ``hint``."""
     need = cells * bytes_per_cell
-    budget = max(pool_bytes, DERIVED_MIN_BYTES) + MEMORY_BYTES_PER_PIXEL * frame_w * frame_h
+    budget = max(pool_bytes, DERIVED_MIN_BYTES) + per_pixel * frame_w * frame_h
     if need > budget:
         raise exc(f"{what} would take {need / 2 ** 30:.1f} GiB; the memory budget of a "
                   f"{frame_w}x{frame_h} frame allows {budget / 2 ** 30:.2f} GiB (CLFX_POOL_MB "
-                  f"+ {MEMORY_BYTES_PER_PIXEL} bytes a pixel): lower its size")
+                  f"+ {per_pixel} bytes a pixel): {hint}")
 
 
 MAX_JSON_NESTING = 32

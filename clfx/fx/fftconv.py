@@ -170,6 +170,15 @@ REACH_MARGIN = 2
 (:func:`reachable`): the half-resolution method's tent filters reach one tap further."""
 
 
+def psf_reach(support: Rect, out_window: Rect) -> tuple[int, int]:
+    """(dy, dx): the farthest PSF offsets, rows and columns, that carry light from
+    ``support`` to ``out_window`` (:data:`REACH_MARGIN` included): the part of a PSF worth
+    building (``clfx.fx.psf.window``) and convolving (:func:`reachable`)."""
+    dy = max(out_window.y1 - 1 - support.y0, support.y1 - 1 - out_window.y0, 0) + REACH_MARGIN
+    dx = max(out_window.x1 - 1 - support.x0, support.x1 - 1 - out_window.x0, 0) + REACH_MARGIN
+    return dy, dx
+
+
 def reachable(k: np.ndarray, support: Rect, out_window: Rect) -> np.ndarray:
     """``k`` (centred, (kh, kw[, planes])) without the rows and columns that carry no light
     from ``support`` to ``out_window``: a PSF sized from a thin frame's diagonal (65535x1:
@@ -178,8 +187,7 @@ def reachable(k: np.ndarray, support: Rect, out_window: Rect) -> np.ndarray:
     ``k`` (no copy, the same bits) when everything can reach."""
     kh, kw = k.shape[:2]
     cy, cx = kh // 2, kw // 2
-    dy = max(out_window.y1 - 1 - support.y0, support.y1 - 1 - out_window.y0, 0) + REACH_MARGIN
-    dx = max(out_window.x1 - 1 - support.x0, support.x1 - 1 - out_window.x0, 0) + REACH_MARGIN
+    dy, dx = psf_reach(support, out_window)
     if dy >= kh - 1 - cy and dx >= kw - 1 - cx:
         return k
     if dy < kh - 1 - cy:
@@ -598,6 +606,10 @@ px: 4000 x 6720 cells); a larger one is cut into output blocks (:func:`convolve_
 The cap trades memory for transform work: measured with the cap at 2^24 instead, blocks of
 a 2645 px PSF were 11 % output, so the 8K plate's glare took 15 blocks, 8.9x the one grid's
 cells, for 1366 MiB of device peak; at this cap it is one grid, about 1520 MiB."""
+MAX_FFT_AXIS = 2 ** 16
+"""Longest FFT axis: VkFFT's float64 r2c plan of a 3 x 71442 grid (soft_focus on a 65535x1
+frame) ended the process (SIGSEGV) on PoCL, float32 past 2^17; a longer axis is cut into
+blocks (:func:`block_shape`)."""
 MIN_BLOCK = 256
 """Smallest block side kept by a PSF so large that :data:`MAX_BLOCK_CELLS` leaves less (the
 grid then grows past the cap rather than spending the transform on overlap)."""
@@ -622,11 +634,13 @@ def block_shape(height: int, width: int, kh: int, kw: int,
                 cells: int | None = None) -> tuple[int, int]:
     """(rows, columns) of the output blocks covering ``height`` x ``width`` with a (kh, kw)
     PSF: the FFT grid (block + PSF - 1, smooth sizes) of at most ``cells`` (default
-    :data:`MAX_BLOCK_CELLS`) that transforms the fewest cells in all (grid cells x log x
-    blocks); each block side at least :data:`MIN_BLOCK` (or the whole side)."""
+    :data:`MAX_BLOCK_CELLS`, each axis at most :data:`MAX_FFT_AXIS`) that transforms the
+    fewest cells in all (grid cells x log x blocks); each block side at least
+    :data:`MIN_BLOCK` (or the whole side)."""
     cells = cells or MAX_BLOCK_CELLS
     lo1, lo2 = kh - 1 + min(MIN_BLOCK, height), kw - 1 + min(MIN_BLOCK, width)
-    hi1, hi2 = fft_size(height + kh - 1), fft_size(width + kw - 1, even=True)
+    hi1 = min(fft_size(height + kh - 1), max(MAX_FFT_AXIS, fft_size(lo1)))
+    hi2 = min(fft_size(width + kw - 1, even=True), max(MAX_FFT_AXIS, fft_size(lo2, even=True)))
     best = None
     for n1 in _smooth_sizes(lo1, hi1):
         for n2 in _smooth_sizes(lo2, hi2, even=True):
@@ -640,19 +654,20 @@ def block_shape(height: int, width: int, kh: int, kw: int,
     return best[1]
 
 
-def _one_grid_cells(rt, method, k, support, effective, out_window) -> int:
-    """Cells of the one work grid a single-block convolution would use."""
+def _one_grid_fits(rt, method, k, support, effective, out_window) -> bool:
+    """Whether a single-block convolution's one work grid fits :data:`MAX_BLOCK_CELLS` (and
+    its FFT axes :data:`MAX_FFT_AXIS`)."""
     kh, kw = k.shape[:2]
     if method == "direct":
-        return (out_window.width + kw + 3) * (out_window.height + kh - 1)
+        return (out_window.width + kw + 3) * (out_window.height + kh - 1) <= MAX_BLOCK_CELLS
     if method == "half":
         hs = Rect(0, 0, -(-support.width // 2), -(-support.height // 2))
         k2 = _as_psf(half_psf(rt, k)).shape[:2]
         hout = half_window(support, effective)
         n1, n2 = fft_grid(hs, hout.intersect(full_region(hs, *k2)), *k2)
-        return n1 * n2
-    n1, n2 = fft_grid(support, effective, kh, kw)
-    return n1 * n2
+    else:
+        n1, n2 = fft_grid(support, effective, kh, kw)
+    return n1 * n2 <= MAX_BLOCK_CELLS and max(n1, n2) <= MAX_FFT_AXIS
 
 
 def _block_rects(out_window: Rect, anchor: tuple[int, int], b1: int, b2: int) -> list[Rect]:
@@ -712,7 +727,7 @@ def convolve_blocks(rt, img, psf, *, out_window: Rect, support: Rect | None = No
     if support.empty or effective.empty:
         emit(out_window, rt.fill(rt.image(out_window, channels), 0.0))
         return kept and kept.image
-    if _one_grid_cells(rt, method, k, support, effective, out_window) <= MAX_BLOCK_CELLS:
+    if _one_grid_fits(rt, method, k, support, effective, out_window):
         info.blocks = 1
         emit(out_window, _convolve(rt, load(support), k, support, out_window, method,
                                    precision, threshold_split, split_max_points, info))

@@ -95,15 +95,16 @@ PSF_BYTES_PER_CELL = 48
 values and the taper's terms (six arrays at the peak)."""
 
 
-def check_psf(name: str, radius: int, ctx) -> None:
-    """Refuse a PSF of ``radius`` px beyond the frame's memory budget, before building it
-    (`clfx.core.limits.check_derived`): a PSF is sized from the frame's diagonal, so a thin
-    frame (65535x1) asked for 19661^2 cells, 8 GB and more."""
-    side = 2 * int(radius) + 1
-    win = ctx.source.window
-    check_derived(side * side, PSF_BYTES_PER_CELL, win.width, win.height,
+def check_psf(name: str, radius: int, ctx, out_window: Rect) -> tuple[int, int]:
+    """The reach of a PSF of ``radius`` px into ``out_window`` (`clfx.fx.fftconv.psf_reach`:
+    of a thin 65535x1 frame's 16385^2 cells, 5 rows), refused beyond the frame's memory
+    budget before it is built (`clfx.core.limits.check_derived`)."""
+    side, win = 2 * int(radius) + 1, ctx.source.window
+    reach = fftconv.psf_reach(win, out_window)
+    check_derived(psflib.cells_built(radius, reach), PSF_BYTES_PER_CELL, win.width, win.height,
                   ctx.runtime.cache.max_bytes,
                   f"{name}: its {side}x{side} PSF ({radius} px, from the frame's diagonal)")
+    return reach
 
 
 # -- the glare family ------------------------------------------------------------------
@@ -124,15 +125,17 @@ class ScatterPlugin(SpreadRegions):
     def radius_px(self, p, ctx) -> int:
         return psflib.psf_radius_px(p.size, ctx.diagonal_px)
 
-    def build_psf(self, p, ctx, radius: int) -> np.ndarray:
+    def build_psf(self, p, ctx, radius: int, reach=None) -> np.ndarray:
+        """The PSF of ``radius`` px: the whole (2r + 1)^2, or only its rows and columns within
+        ``reach`` = (dy, dx) when ``clfx.fx.psf.windowed`` (normalised as the whole)."""
         raise NotImplementedError
 
     def psf(self, p, ctx) -> np.ndarray:
         """The PSF for this parameter set and frame size (kept in the runtime's cache)."""
         r = self.radius_px(p, ctx)
-        check_psf(self.descriptor.name, r, ctx)
-        key = (f"{self.descriptor.name}.psf", p.hash_hex(), r, ctx.width_px, ctx.camera)
-        return ctx.runtime.cache.get(key, lambda: self.build_psf(p, ctx, r))
+        reach = check_psf(self.descriptor.name, r, ctx, self.output_window(p, ctx))
+        key = (f"{self.descriptor.name}.psf", p.hash_hex(), r, reach, ctx.width_px, ctx.camera)
+        return ctx.runtime.cache.get(key, lambda: self.build_psf(p, ctx, r, reach))
 
     def raw_level(self, p, ctx) -> float:
         """Source luminance above which a pixel contributes (threshold - knee, in input units)."""

@@ -121,8 +121,8 @@ class Bleed(ScatterPlugin, Plugin):
         quality=LEVELS,
     )
 
-    def build_psf(self, p, ctx, radius):
-        return psflib.exponential(radius, radius / 3.0)
+    def build_psf(self, p, ctx, radius, reach=None):
+        return psflib.exponential(radius, radius / 3.0, reach)
 
     # -- fused small-PSF path ---------------------------------------------------------------
     def _weights(self, rt, p, ctx, lvl: BleedLevel):

@@ -138,6 +138,7 @@ import numpy as np
 
 from clfx.core.camera import BLADES_WHY, NO_POLYGON, aperture_radius, coc_signed, first_blade_angle
 from clfx.core.errors import ParamError
+from clfx.core.limits import DEVICE_BYTES_PER_PIXEL, check_derived
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, IntParam, Level
 from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE, analyse  # dof's tiles are the shared analysis's
@@ -890,6 +891,7 @@ class Dof(Plugin):
         pad, full_l = g.pad, g.full_l
         w, h = src.width, src.height
         padded = Rect.from_size(-(-(w + 2 * pad + 4) // 4) * 4, h + 2 * pad)
+        check_derived(padded.width * padded.height, 16 * (1 + full_l) + 8, whole.width, whole.height, rt.cache.max_bytes, f"dof: its {padded.width}x{padded.height} padded planes (the frame and {pad} px of CoC reach on every side)", per_pixel=DEVICE_BYTES_PER_PIXEL, hint="lower dof.max_coc or the lens's blur")
         # the colour, then its prefiltered copies for the sparse taps (planes 1..L)
         col = rt.image(Rect.from_size(padded.width, padded.height * (1 + full_l)), 4)
         coc0, coc = rt.image(padded, 1), rt.image(padded, 1)

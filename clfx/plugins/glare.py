@@ -83,14 +83,14 @@ class Glare(ScatterPlugin, Plugin):
     def boost(self, p, ctx):
         return p.display_boost if ctx.display_referred else 0.0
 
-    def build_psf(self, p, ctx, radius):
-        """The PSF ``p.psf`` at ``radius`` pixels."""
+    def build_psf(self, p, ctx, radius, reach=None):
+        """The PSF ``p.psf`` at ``radius`` pixels (its rows and columns within ``reach``)."""
         if p.psf == "spencer":
             dpp = psflib.degrees_per_pixel(ctx.camera, ctx.width_px, p.fov)
-            return psflib.spencer(radius, dpp)
+            return psflib.spencer(radius, dpp, reach=reach)
         if p.psf == "gaussians":
             sig, w = psflib.bloom_sigmas(radius)
-            return psflib.gaussians(radius, sig, w)
+            return psflib.gaussians(radius, sig, w, reach)
         if not p.kernel_path:
             raise ParamError("glare.kernel_path: psf 'image' needs a kernel image path")
-        return psflib.from_image(ctx.read_image(p.kernel_path), radius)
+        return psflib.from_image(ctx.read_image(p.kernel_path), radius, reach)

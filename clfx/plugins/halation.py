@@ -169,8 +169,10 @@ def supersample(radius_px: int) -> int:
     return 8 if radius_px <= 16 else 4 if radius_px <= 64 else 2 if radius_px <= 256 else 1
 
 
-def halation_psf(radius_px: int, bare_back: bool) -> np.ndarray:
-    """The normalised halation PSF on a (2r + 1)^2 grid (see the module notes).
+def halation_psf(radius_px: int, bare_back: bool,
+                 reach: tuple[int, int] | None = None) -> np.ndarray:
+    """The normalised halation PSF on a (2r + 1)^2 grid (see the module notes); with
+    ``reach`` = (dy, dx) only its rows -dy..dy and columns -dx..dx (``psflib.window``).
 
     Each pixel is the mean of ``supersample(r)^2`` samples of :func:`halation_profile` at
     ``d / H``, ``H = r / SUPPORT``; then ended by ``psflib.tail_fade``.  ``r`` = 0 is the
@@ -180,13 +182,18 @@ def halation_psf(radius_px: int, bare_back: bool) -> np.ndarray:
     if r == 0:
         return np.ones((1, 1))
     h, ss = r / SUPPORT[bool(bare_back)], supersample(r)
+
+    def cells(x, y):
+        k = np.zeros(np.broadcast_shapes(x.shape, y.shape))
+        for oy in (np.arange(ss) + 0.5) / ss - 0.5:
+            for ox in (np.arange(ss) + 0.5) / ss - 0.5:
+                k += halation_profile(np.hypot(x + ox, y + oy) / h, bare_back)
+        return k
+
+    if psflib.windowed(r, reach):
+        return psflib.window(cells, r, reach)
     c = np.arange(-r, r + 1, dtype=np.float64)
-    k = np.zeros((2 * r + 1, 2 * r + 1))
-    for oy in (np.arange(ss) + 0.5) / ss - 0.5:
-        for ox in (np.arange(ss) + 0.5) / ss - 0.5:
-            d = np.hypot(c[None, :] + ox, c[:, None] + oy)
-            k += halation_profile(d / h, bare_back)
-    k = psflib.tail_fade(k, r)
+    k = psflib.tail_fade(cells(c[None, :], c[:, None]), r)
     return k / k.sum()
 
 
@@ -271,8 +278,8 @@ class Halation(ScatterPlugin, Plugin):
     def radius_px(self, p, ctx) -> int:
         return self.settings(p, ctx).radius_px
 
-    def build_psf(self, p, ctx, radius):
-        return halation_psf(radius, STOCKS[p.stock].bare_back)
+    def build_psf(self, p, ctx, radius, reach=None):
+        return halation_psf(radius, STOCKS[p.stock].bare_back, reach)
 
     def is_identity(self, p, ctx):
         s = self.settings(p, ctx)

@@ -52,9 +52,9 @@ class SoftFocus(ScatterPlugin, Plugin):
     def radius_px(self, p, ctx) -> int:
         return psflib.psf_radius_px(SUPPORT * p.size, ctx.diagonal_px)
 
-    def build_psf(self, p, ctx, radius):
+    def build_psf(self, p, ctx, radius, reach=None):
         scales, weights = diffusion_scales(radius)
-        return psflib.exponentials(radius, scales, weights)
+        return psflib.exponentials(radius, scales, weights, reach)
 
 
 SUPPORT = 3.0
