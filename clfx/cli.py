@@ -34,7 +34,6 @@ from clfx._version import __version__
 from clfx.cli_options import (check_frames, colour_options, pass_options, quality_option,
                                render_options)
 from clfx.core.errors import ClfxError, PresetError, speak
-from clfx.core.limits import check_pixels
 
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
@@ -904,6 +903,9 @@ def bench(ctx, effects, looks, size, repeat, sequence_frames, as_json, plot_path
     from clfx.bench.plots import check_plot_path, pareto_plot
     from clfx.bench.report import markdown
     from clfx.bench.runner import run_bench
+
+    # lazy: limits reads CLFX_MAX_PIXELS at import: a bad value is main's one error line
+    from clfx.core.limits import check_pixels
 
     w, h = _parse_size(size)
     check_pixels(w, h, "--size")

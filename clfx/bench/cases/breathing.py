@@ -74,6 +74,8 @@ class _Ctx:
         self.camera = camera
         self.reference_camera = camera
         self.plans = {}          # Plugin.planned keeps the step's plan here
+        self.tiling = None       # a whole frame, not a band of one
+        self.tile_pixels = None
 
 
 def make(width, height, rng):
