@@ -309,7 +309,25 @@ FOOTPRINT_LEVELS = {
 kernels/lib/resample.h, the reference's elliptical footprint in float64."""
 
 
-class FootprintWarp:
+class PlateCanvasWarp:
+    """A warp rendered on the plate's canvas (`on_plate_canvas`), whose maps a look's
+    ``prepare`` builds ahead on the canvas's stand-in (a Plugin mixin): the effect writes
+    :meth:`prepare_maps` (build, through ``rt.cache``, what ``render_canvas`` will ask for,
+    on ``cctx``, the canvas's context, at level ``lvl`` for ``plate``) and ``render_canvas``."""
+
+    def prepare_maps(self, rt, p, cctx, lvl, plate) -> None:
+        raise NotImplementedError
+
+    def prepare(self, rt, p, ctx):
+        if not self.is_identity(p, ctx):
+            self.prepare_maps(rt, p, canvas_context(self, p, ctx, p.border), self.level(ctx),
+                              plate_frame(ctx))
+
+    def render(self, rt, p, ctx):
+        return on_plate_canvas(self, rt, p, ctx, p.border)
+
+
+class FootprintWarp(PlateCanvasWarp):
     """A warp whose inverse map and its Jacobian are analytic, rendered by the shared
     footprint kernels (a Plugin mixin: ``class Keystone(FootprintWarp, Plugin)``).
 
@@ -455,16 +473,10 @@ class FootprintWarp:
         return rt.cache.get((f"{self.descriptor.name}.map",) + frame_key(p, ctx)
                             + (plate, key) + rows.key, build)
 
-    def prepare(self, rt, p, ctx):
-        if not self.is_identity(p, ctx):
-            lvl = self.level(ctx)
-            self.device_map(rt, p, canvas_context(self, p, ctx, p.border), lvl.filter,
-                            rt.use_fp64(lvl.fp64), plate_frame(ctx))
+    def prepare_maps(self, rt, p, cctx, lvl, plate):
+        self.device_map(rt, p, cctx, lvl.filter, rt.use_fp64(lvl.fp64), plate)
 
     # -- render -----------------------------------------------------------------------------
-    def render(self, rt, p, ctx):
-        return on_plate_canvas(self, rt, p, ctx, p.border)
-
     def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
         """The warp over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
         a tile holds: ``rows``, the `CanvasRows` to compute, default all); ``plate``: the

@@ -49,7 +49,7 @@ from clfx.fx.resample import (BORDERS, FITS, DevicePackedMap, PackedMap, Resampl
                               radial_inverse_fast, radial_lut, rect_boundary, upload_map,
                               warp_interest)
 from clfx.host import Plugin, register
-from clfx.kit.warp import (CanvasRows, canvas_context, frame_key, on_plate_canvas, plate_frame,
+from clfx.kit.warp import (CanvasRows, PlateCanvasWarp, frame_key, plate_frame,
                            warp_region)
 
 LUT_SIZE = 1024
@@ -205,7 +205,7 @@ def channel_points(cal, norm, display_window, window, fit="none", distortion=Tru
 
 
 @register
-class Lens(Plugin):
+class Lens(PlateCanvasWarp, Plugin):
     whole_frame = None   # a tile computes its band's rows of the whole canvas (`on_canvas`)
     descriptor = Descriptor(
         name="lens", label="Real lens (lensfun)", group="Lens", kernel="lens.cl",
@@ -389,14 +389,8 @@ class Lens(Plugin):
         return rt.cache.get(("lens.device",) + frame_key(p, ctx) + (plate, double) + rows.key,
                             build)
 
-    def prepare(self, rt, p, ctx):
-        if not self.is_identity(p, ctx):
-            lvl = self.level(ctx)
-            self.device_buffers(rt, p, canvas_context(self, p, ctx, p.border),
-                                rt.use_fp64(lvl.fp64), plate_frame(ctx))
-
-    def render(self, rt, p, ctx):
-        return on_plate_canvas(self, rt, p, ctx, p.border)
+    def prepare_maps(self, rt, p, cctx, lvl, plate):
+        self.device_buffers(rt, p, cctx, rt.use_fp64(lvl.fp64), plate)
 
     def render_canvas(self, rt, p, ctx, sanitise, plate, rows=None):
         """The lens over ``ctx.source``'s window (the canvas: `on_canvas`, or the part of it
