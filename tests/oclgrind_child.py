@@ -151,7 +151,31 @@ def render(look, level: str, size, label: str, tile_pixels: int = 0,
     return {"render": label, "level": level, "size": list(size), "device": rt.description,
             "ran": rep.get("ran"), "skipped": rep.get("skipped"),
             "finite": bool(np.isfinite(res.rgba).all()),
+            "entry_points": sorted(LAUNCHED.pop(label, ())),
             "seconds": round(time.perf_counter() - t0, 2)}
+
+
+LAUNCHED: dict[str, set] = {}
+"""Per render label: the entry points it launched, as "file:kernel" with ":f64" for a
+``CLFX_FP64`` build (its buffers hold doubles: other offsets, other bounds)."""
+
+
+def record_launches(label_of) -> None:
+    """Wrap ``Runtime.launch`` so that every launch adds its entry point to ``LAUNCHED`` under
+    the label ``label_of()`` returns."""
+    from clfx.device.runtime import Runtime
+
+    launch = Runtime.launch
+
+    def recorded(rt, knl, *args, **kw):
+        for (file, name, defines, _), k in rt._kernels.items():
+            if k is knl:
+                f64 = ":f64" if ("CLFX_FP64", "1") in defines else ""
+                LAUNCHED.setdefault(label_of(), set()).add(f"{file}:{name}{f64}")
+                break
+        return launch(rt, knl, *args, **kw)
+
+    Runtime.launch = recorded
 
 
 def sanitizers(level: str) -> dict:
@@ -211,6 +235,9 @@ def main(argv) -> int:
         for level in levels:
             print(json.dumps(FX[name](level)), flush=True)
         return 0
+    current = [""]
+    record_launches(lambda: current[0])
+    banded: set = set()     # entry points already run in bands
     for level in levels:
         if kind == "effect":
             runs = [(effect_look(name, masked=False), (W, H), f"{name}@{level}")]
@@ -222,14 +249,21 @@ def main(argv) -> int:
                     look = effect_look(name, False, params, opts.get("before"))
                     runs.append((look, size, f"{name}@{level} {size} {params} {opts}",
                                  {k: v for k, v in opts.items() if k != "before"}))
-            if tiles(name):        # and in bands of 8 rows (`clfx.pipeline.look.render_tiled`)
-                runs += [(effect_look(name, masked=False), (W, H), f"{name}@{level} tiled",
-                          {"tile_pixels": W * TILE_ROWS})]
         else:      # a group of looks in one process: each program is compiled once
             runs = [(look, LOOK_SIZE, f"look {look}@{level}") for look in name.split(",")]
         for look, size, label, *opts in runs:
-            print(json.dumps(render(look, level, size, label, **(opts[0] if opts else {}))),
-                  flush=True)
+            current[0] = label
+            rec = render(look, level, size, label, **(opts[0] if opts else {}))
+            print(json.dumps(rec), flush=True)
+            if kind == "effect" and tiles(name) and size == (W, H) and label == runs[0][2]:
+                # and in bands of 8 rows (`clfx.pipeline.look.render_tiled`), where this
+                # level's main frame launched an entry point no banded render has run
+                if not set(rec["entry_points"]) <= banded:
+                    current[0] = label = f"{name}@{level} tiled"
+                    tiled = render(effect_look(name, masked=False), level, (W, H), label,
+                                   tile_pixels=W * TILE_ROWS)
+                    banded.update(tiled["entry_points"])
+                    print(json.dumps(tiled), flush=True)
     return 0
 
 
