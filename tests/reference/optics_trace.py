@@ -99,77 +99,101 @@ def primary_path(lens):
 
 def _trace(lens, path, p0, direction, wavelength_nm, fresnel):
     """Trace rays starting at entrance-plane points ``p0`` (M, 2); return landed (x, y) and
-    weights, and the mask of surviving rays."""
-    with np.errstate(all="ignore"):   # lost rays run to inf/nan; ``alive`` drops them
+    weights (NaN and 0 for lost rays), and the mask of surviving rays."""
+    with np.errstate(all="ignore"):   # a ray lost this crossing may run to inf/nan
         return _trace_rays(lens, path, p0, direction, wavelength_nm, fresnel)
 
 
 def _trace_rays(lens, path, p0, direction, wavelength_nm, fresnel):
+    """The rays as separate x, y, z arrays; a ray lost at a crossing (outside a clear
+    aperture, missing a sphere, reflected totally) is dropped from them there, so each
+    crossing computes only the rays still alive (``idx`` says which they are).  Dot products
+    add x, z, then y: the order NumPy's ``einsum("ij,ij->i")`` over (M, 3) arrays takes, so
+    every ray lands bit for bit where the former (M, 3) version of this tracer put it."""
     s = lens.surfaces
     n = lens.media(wavelength_nm)[:, 0]
     z_vertex = np.concatenate([[0.0], np.cumsum([x.thickness for x in s])])
     m = len(p0)
-    d = np.broadcast_to(direction, (m, 3)).copy()
-    o = np.column_stack([p0, np.zeros(m)]) - START_BACK_MM * d
-    alive = np.ones(m, bool)
-    weight = np.ones(m)
+    idx = np.arange(m)
+    dx = np.full(m, float(direction[0]))
+    dy = np.full(m, float(direction[1]))
+    dz = np.full(m, float(direction[2]))
+    ox = p0[:, 0] - START_BACK_MM * dx
+    oy = p0[:, 1] - START_BACK_MM * dy
+    oz = 0.0 - START_BACK_MM * dz
+    # with Fresnel at normal incidence every ray carries the same factors: one number
+    weight = np.ones(m) if fresnel == "exact" else np.float64(1.0)
     going_forward = True
     for k, action in path:
         surf = s[k]
         zk = z_vertex[k]
         if np.isinf(surf.radius):
-            t = (zk - o[:, 2]) / d[:, 2]
-            hit = o + t[:, None] * d
-            normal = np.broadcast_to([0.0, 0.0, -1.0], (m, 3))
+            t = (zk - oz) / dz
+            nx = ny = 0.0
+            nz = -1.0
             ok = np.isfinite(t) & (t > 1e-9)
+            hx, hy, hz = ox + t * dx, oy + t * dy, oz + t * dz
         else:
             r = surf.radius
-            centre = np.array([0.0, 0.0, zk + r])
-            oc = o - centre
-            b = np.einsum("ij,ij->i", d, oc)
-            c = np.einsum("ij,ij->i", oc, oc) - r * r
+            cz = zk + r
+            ocz = oz - cz
+            b = (dx * ox + dz * ocz) + dy * oy
+            c = ((ox * ox + ocz * ocz) + oy * oy) - r * r
             disc = b * b - c
             root = np.sqrt(np.maximum(disc, 0.0))
-            best = np.full(m, np.inf)
+            hits = disc >= 0.0
+            t = np.inf                   # the nearer root ahead on the vertex's hemisphere
             for t_try in (-b - root, -b + root):
-                z_hit = o[:, 2] + t_try * d[:, 2]
-                good = (disc >= 0.0) & (t_try > 1e-9) & ((z_hit - centre[2]) * r < 0.0)
-                best = np.where(good & (t_try < best), t_try, best)
-            ok = np.isfinite(best)
-            t = np.where(ok, best, 0.0)
-            hit = o + t[:, None] * d
-            normal = (hit - centre) / r          # unit; -z at the vertex
-        ok &= hit[:, 0] ** 2 + hit[:, 1] ** 2 <= surf.semi_aperture ** 2
-        alive &= ok
-        cos_i = np.abs(np.einsum("ij,ij->i", d, normal))
+                good = hits & (t_try > 1e-9) & (((oz + t_try * dz) - cz) * r < 0.0)
+                t = np.where(good & (t_try < t), t_try, t)
+            ok = np.isfinite(t)
+            t[~ok] = 0.0
+            hx, hy, hz = ox + t * dx, oy + t * dy, oz + t * dz
+            nx, ny, nz = hx / r, hy / r, (hz - cz) / r      # unit; -z at the vertex
+        ok &= hx * hx + hy * hy <= surf.semi_aperture ** 2
+        dn = (dx * nx + dz * nz) + dy * ny
         if action == "reflect":
             n1, n2 = (n[k], n[k + 1]) if going_forward else (n[k + 1], n[k])
             if fresnel == "exact":
-                weight = weight * reflectance(n1, n2, cos_i, surf.coating, wavelength_nm)
+                weight = weight * reflectance(n1, n2, np.abs(dn), surf.coating, wavelength_nm)
             else:
                 weight = weight * reflectance(n1, n2, 1.0, surf.coating, wavelength_nm)
-            dn = np.einsum("ij,ij->i", d, normal)
-            d = d - 2.0 * dn[:, None] * normal
+            two = 2.0 * dn
+            dx, dy, dz = dx - two * nx, dy - two * ny, dz - two * nz
             going_forward = not going_forward
         else:
             n1, n2 = (n[k], n[k + 1]) if action == "fwd" else (n[k + 1], n[k])
             if n1 != n2:
-                cos_w = cos_i if fresnel == "exact" else 1.0
+                cos_w = np.abs(dn) if fresnel == "exact" else 1.0
                 weight = weight * (1.0 - reflectance(n1, n2, cos_w, surf.coating,
                                                      wavelength_nm))
-                # vector Snell's law with the normal facing the incoming ray
-                nn = np.where((np.einsum("ij,ij->i", d, normal) > 0.0)[:, None], -normal, normal)
+                # vector Snell's law with the normal facing the incoming ray (-n where
+                # d.n > 0): the sign flips are exact, so ci = -d.nn is |d.n| as computed
                 eta = n1 / n2
-                ci = -np.einsum("ij,ij->i", d, nn)
+                flip = dn > 0.0
+                ci = np.where(flip, dn, -dn)
                 k2 = 1.0 - eta * eta * (1.0 - ci * ci)
-                alive &= k2 >= 0.0                    # total internal reflection: lost
-                d = eta * d + (eta * ci - np.sqrt(np.maximum(k2, 0.0)))[:, None] * nn
-        o = np.where(alive[:, None], hit, o)
+                ok &= k2 >= 0.0                       # total internal reflection: lost
+                g = eta * ci - np.sqrt(np.maximum(k2, 0.0))
+                g = np.where(flip, -g, g)             # g * nn = (-g) * n where flipped
+                dx, dy, dz = eta * dx + g * nx, eta * dy + g * ny, eta * dz + g * nz
+        ox, oy, oz = hx, hy, hz
+        if not ok.all():
+            keep = np.flatnonzero(ok)
+            idx, ox, oy, oz, dx, dy, dz = (a.take(keep) for a in (idx, ox, oy, oz, dx, dy, dz))
+            if fresnel == "exact":
+                weight = weight.take(keep)
     # the image plane
-    t = (z_vertex[-1] - o[:, 2]) / d[:, 2]
-    alive &= np.isfinite(t) & (t > 0.0)
-    land = o + np.where(alive, t, 0.0)[:, None] * d
-    return land[:, :2], weight, alive
+    t = (z_vertex[-1] - oz) / dz
+    ok = np.isfinite(t) & (t > 0.0)
+    alive = np.zeros(m, bool)
+    alive[idx[ok]] = True
+    land = np.full((m, 2), np.nan)
+    land[idx[ok], 0] = (ox + t * dx)[ok]
+    land[idx[ok], 1] = (oy + t * dy)[ok]
+    weights = np.zeros(m)
+    weights[idx[ok]] = (weight[ok] if fresnel == "exact" else weight)
+    return land, weights, alive
 
 
 def trace(lens, path, field_deg, wavelength_nm, *, fresnel="normal", n_coarse=96,
