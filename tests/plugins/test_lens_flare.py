@@ -404,6 +404,25 @@ def test_unknown_lens_and_lens_files(rt, tmp_path):
     assert np.array_equal(a, b) and not np.array_equal(a, src)
 
 
+def test_the_ghost_table_is_built_once_per_lens_and_stop(rt, monkeypatch):
+    """The physical model's ghost table (clfx.fx.optics.ghosts: 210 ghosts of the zoom, its
+    time is the bench's) is built once per lens, f-number and wavelengths, not per frame."""
+    from clfx.plugins import lens_flare as module
+
+    calls = []
+    ghosts = module.optics.ghosts
+    monkeypatch.setattr(module.optics, "ghosts", lambda *a, **k: calls.append(a) or ghosts(*a, **k))
+    rt.cache.clear()
+    src = physical_scene()
+    p = LensFlare.params(light_level=0.0, lens="zoom-80-200mm", gain=10.0)
+    first = render_effect(rt, LensFlare(), p, src, camera=CAM_P, read_lens=read_lens)
+    again = render_effect(rt, LensFlare(), p, src, camera=CAM_P, read_lens=read_lens)
+    assert len(calls) == 1 and np.array_equal(first, again)
+    render_effect(rt, LensFlare(), p, src, camera=Camera(blades=6, blade_rotation=10.0, f_number=4.0),
+                  read_lens=read_lens)
+    assert len(calls) == 2                                # another stop: another table
+
+
 def test_physical_is_deterministic_and_keeps_alpha(rt, rng):
     src = physical_scene()
     src[..., 3] = rng.uniform(0, 1, src.shape[:2])
