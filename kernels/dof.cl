@@ -559,7 +559,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
     const int lv = (int)tp.s7;
-    const float inv_s = 1.0f / (float)(1 << lv);
+    const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
     const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     const float4 rq = vload4(0, coc + at);
     const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
@@ -643,12 +643,12 @@ inline float4 dof_upsample(global const float *hres, const int hpitch, const int
   return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
 }
 
-
 /* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
- * the lattice levels of the two tables (tap_table's column 7, one per table), the farthest
- * x or y offset of a tap of the first (px); count 0 copies the
- * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
- * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
+ * the largest lattice levels of the two tables' taps (tap_table's column 7; 0: every tap
+ * reads the image itself), the farthest x or y offset of a tap of the first (px); count 0
+ * copies the sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
+ * pixel) gather with the sharp table (every pixel within sharp_r a far-field tap, the near
+ * field around: tap_table's core); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
  * unless (mode bit 1: a dense table, a full-resolution gather there is worth it) its
  * half-res pixels span more than `refine` in log luminance (a bokeh rim); every other

@@ -52,7 +52,12 @@ ground-truth renderer models the same optics):
 
 Algorithm (after Jimenez 2014, "Next generation post processing in Call of Duty: Advanced
 Warfare", simplified for offline use)
-1. ``dof_prepare``: sanitised colour and signed CoC radius into a padded buffer.
+1. ``dof_prepare``: sanitised colour and signed CoC radius into a padded buffer (the edge
+   pixels repeated past the frame).  What lies past the frame edge is unknown: the padding's
+   colours are capped in luminance like the hidden background's (``CAP_FACTOR`` times the
+   geometric mean of the tiles around the edge pixel, below), so a light on the edge row
+   gives the half of its bokeh that falls inside the frame instead of a streak of copies a
+   CoC radius tall (at 45 px of CoC, the issue 35 case's largest error).
 2. ``dof_edges``: edge-aware radii.  Renderers write an antialiased beauty but a depth taken
    at the pixel centre, so a light beside a blurred foreground bar has pixels that mix the
    light with the bar and carry the bar's depth; spread with the bar's CoC they make a
@@ -80,8 +85,12 @@ Warfare", simplified for offline use)
    produce, dilated on the host over as many tiles as the largest radius reaches (3 x 3 for
    radii up to a tile); tiles whose neighbourhood maximum is below half a pixel are copied
    (and the whole frame is an identity when every tile is).  Per tile also the largest
-   radius of a pixel in front of the focus plane within reach: pixels in focus (or nearly)
-   gather over only that and their own radius.
+   radius of a pixel in front of the focus plane within reach: 4 pixels in focus (or
+   nearly: every CoC radius below the level's ``sharp_radius``) gather over only that and
+   their own radius, with a table whose far field is every pixel within ``sharp_radius``
+   (their own blur is no wider) and whose near field is the lattice below when the near
+   blur is large (:func:`tap_table`'s ``core``): an in-focus subject beside a 40 px
+   foreground post stays sharp instead of taking the lattice's prefilter tent.
 5. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
    the level's ``dense_radius`` (a single bright pixel spreads into an evenly lit disk with
    an antialiased rim), beyond that a lattice of every 2nd, 4th, ... pixel (at most the
@@ -285,42 +294,47 @@ class DofLevel(Level):
     dense_radius: float = 16.0        # radii up to this: every pixel of the disk is a tap
     half_res_radius: float = 6.0      # tiles whose every CoC radius is >= this: half resolution
     refine: float = math.inf          # log-luminance span that a half-res pixel gathers again
-    sharp_radius: float = 6.0         # pixels below this CoC radius (and no near pixel among
-    #                                   the 4) gather with the tile's sharp table, their own
-    #                                   radius's every pixel a tap (tap_table's core)
+    sharp_radius: float = 6.0         # 4 pixels all below this CoC radius (none in front of
+    #                                   the focus plane) gather with the tile's sharp table:
+    #                                   every pixel within it a far-field tap (tap_table's core)
 
 
 LEVELS = {
     "draft": DofLevel("every pixel of the disk a tap up to 16 px radius, then a lattice of at "
-                      "most 10 taps per radius over a prefiltered copy; half resolution where "
+                      "most 10 taps per radius over a prefiltered copy (pixels under 3 px of "
+                      "CoC: every pixel of their own blur); half resolution where "
                       "every CoC radius >= 3 px, only strong bokeh rims gathered again at full "
                       "resolution; float32 sums",
                       lattice=10, dense_radius=16.0, half_res_radius=3.0, refine=1.0,
                       sharp_radius=3.0),
     "preview": DofLevel("every pixel of the disk a tap up to 16 px radius, then a lattice of at "
-                        "most 16 taps per radius over a prefiltered copy; half resolution where "
+                        "most 16 taps per radius over a prefiltered copy (pixels under 3 px of "
+                        "CoC: every pixel of their own blur); half resolution where "
                         "every CoC radius >= 3 px, bokeh rims gathered again at full "
                         "resolution; float32 sums",
                         lattice=16, dense_radius=16.0, half_res_radius=3.0, refine=0.5,
                         sharp_radius=3.0),
     "final": DofLevel("every pixel of the disk a tap up to 32 px radius, then a lattice of at "
-                      "most 32 taps per radius over a prefiltered copy; half resolution where "
+                      "most 32 taps per radius over a prefiltered copy (pixels under 6 px of "
+                      "CoC: every pixel of their own blur); half resolution where "
                       "every CoC radius >= 6 px, bokeh rims and other contrasts over 0.15 in "
                       "log luminance gathered again at full resolution; float32 sums",
                       lattice=32, dense_radius=32.0, half_res_radius=6.0, refine=0.15),
     "reference": DofLevel("every pixel of the disk a tap up to 32 px radius, then a lattice of "
-                          "at most 32 taps per radius over a prefiltered copy, all at full "
+                          "at most 32 taps per radius over a prefiltered copy (pixels under "
+                          "6 px of CoC: every pixel of their own blur), all at full "
                           "resolution, float64 sums",
                           fp64=True, lattice=32, dense_radius=32.0, half_res_radius=math.inf,
                           sharp_radius=6.0),
 }
 
 CAP_FACTOR = 4.0
-MIXED_NOTE = " mixed edge pixels split"
-"""The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 """Background hidden behind a blurred foreground pixel is filled in from the visible
 background around, its colours capped at this many times the geometric mean luminance of
-the tiles around (so a light beside a blurred bar does not shine through it)."""
+the tiles around (so a light beside a blurred bar does not shine through it); the edge
+pixels repeated past the frame edge are capped the same way."""
+MIXED_NOTE = " mixed edge pixels split"
+"""The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 
 
 def lens_scale_px(p, camera, ctx_diag: float, width_px: float) -> float:
