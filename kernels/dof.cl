@@ -2,7 +2,10 @@
  *
  * dof_prepare: per padded pixel, the sanitised premultiplied colour and the signed CoC
  *   radius in x pixels (< 0 in front of the focus plane), clamped to clamp_r.  The padded
- *   image (`pad` pixels each side, clamp-to-edge) lets the gather read without bounds tests.
+ *   image (`pad` pixels each side, clamp-to-edge) lets the gather read without bounds tests;
+ *   beyond the image its colours' luminance is capped as the hidden background's (dof_cap):
+ *   what lies past the frame edge is a guess, and a light on the edge row must not become a
+ *   streak of lights reaching a CoC radius past it (issue 35).
  * dof_edges: the radii made edge-aware (see there).
  * dof_mixed: mixed edge pixels (a filtered beauty over a point-sampled depth), their
  *   coverage of the near layer and the two layers' radii and colours (see there); the
@@ -66,20 +69,47 @@ inline float dof_log_lum(float4 c)
   return log1p(fmax(clfx_luminance(clfx_finite4_or_zero(c)), 0.0f));
 }
 
+/* The cap of hidden-background colours for tile (tx, ty): CAP_FACTOR times the geometric
+ * mean luminance (minus 1) of the brightest 3 x 3 tiles around (dof_tile_cap's means). */
+inline float dof_cap(global const float *log_mean, const int tx, const int ty,
+                     const int tiles_x, const int tiles_y, const float cap_factor)
+{
+  float g = 0.0f;
+  for(int dy = -1; dy <= 1; dy++)
+    for(int dx = -1; dx <= 1; dx++)
+      g = fmax(g, log_mean[clfx_clampi(ty + dy, 0, tiles_y - 1) * tiles_x
+                           + clfx_clampi(tx + dx, 0, tiles_x - 1)]);
+  return cap_factor * (exp(g) - 1.0f);
+}
+
+/* `log_mean` (dof_tile_cap's, `tiles_x` x `tiles_y` tiles of `tile` px on the whole render's
+ * grid, image pixel (0, 0) at grid pixel (gx0, gy0)): the padding's colours are capped at
+ * dof_cap of the tile of the edge pixel they repeat. */
 kernel void dof_prepare(global const float *src, global const float *depth, const int pitch,
                         const int width, const int height, global float *col,
                         global float *coc, const int ppitch, const int pheight,
                         const int pad, const float k_half, const float focus,
-                        const float clamp_r, const float offset)
+                        const float clamp_r, const float offset,
+                        global const float *log_mean, const int tiles_x, const int tiles_y,
+                        const int tile, const float cap_factor, const int gx0, const int gy0)
 {
   const int qx = get_global_id(0), py = get_global_id(1);
   if(py >= pheight || qx * 4 >= ppitch) return;
   const int sy = clfx_clampi(py - pad, 0, height - 1);
+  const int ty = clfx_clampi((sy + gy0) / tile, 0, tiles_y - 1);
   for(int l = 0; l < 4; l++)
   {
     const int px = qx * 4 + l;
     const int sx = clfx_clampi(px - pad, 0, width - 1);
-    vstore4(clfx_finite4_or_zero(vload4(sy * pitch + sx, src)), py * ppitch + px, col);
+    float4 c = clfx_finite4_or_zero(vload4(sy * pitch + sx, src));
+    if(sx != px - pad || sy != py - pad)
+    {  /* past the frame edge: the edge pixel repeated, its highlights capped */
+      const float cap = dof_cap(log_mean, clfx_clampi((sx + gx0) / tile, 0, tiles_x - 1), ty,
+                                tiles_x, tiles_y, cap_factor);
+      const float lum = clfx_luminance(c);
+      if(lum > cap) c *= cap / lum;
+    }
+    vstore4(c, py * ppitch + px, col);
     coc[py * ppitch + px] = dof_coc_radius(depth[sy * pitch + sx], k_half, focus, clamp_r, offset);
   }
 }
@@ -405,10 +435,13 @@ typedef struct
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
  * aperture area the tap stands for (px^2); the offset in aperture space (x times the
- * anamorphic squeeze, y over the pixel aspect: px of the CoC radius); the lattice level L
- * (the same for a whole table: the caller passes it): the taps' colours are read from
- * `tcol`, plane L of the prefilter pyramid, and every coverage ramp is 2^L px wide
- * (`inv_s` = 2^-L; a lattice of spacing 2^L: the tents interpolate the ramp).
+ * anamorphic squeeze, y over the pixel aspect: px of the CoC radius); the tap's lattice
+ * level L: its colour is read from plane L of the prefilter pyramid (`plane` pixels after
+ * plane 0, `col`), and its coverage ramps are 2^L px wide (`inv_s` = 2^-L; a lattice of
+ * spacing 2^L: the tents interpolate the ramp).  A table mixes levels where the pixels in
+ * focus or nearly of a tile within reach of a large near-field blur gather (tap_table's
+ * `core`): a lattice serving the near field only (far distance "never") and the every-pixel
+ * taps of the pixel's own small radius serving the far field only (near distance "never").
  * With DOF_CATEYE, `ce_x`, `ce_y` are the 4 pixels' barrel centres (aperture radii) and
  * `ce_frac` the open fraction of their apertures: a point at lens position l (aperture
  * radii) is seen only if |l - c| <= 1; a tap q whose light lands at p = q - o comes through
@@ -502,13 +535,13 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
 }
 /* The gather of 4 pixels at `base` (padded index) whose radii are `r0`, colours times
  * `scale`; `c0`: their colours, the result where every tap is rejected.  With `mix` (a
- * dense table over the full-resolution image), mixed edge pixels among the taps are split
+ * table over the full-resolution image), mixed edge pixels among its level-0 taps are split
  * into their near and far parts (dof_mixed: near coverage `mixa`, near and far radii
  * `mixr`, near minus far colour `mixd`), each part a tap of its own radius standing for its
  * coverage; `layer` 1 (2): at the centre tap a mixed pixel stands for its far (near) part
  * only (the two gathers of a mixed pixel, dof_gather). */
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
-                          global const float *tcol, const float inv_s, const int base,
+                          const int plane, const int base,
                           const float16 c0_in, const float4 r0, global const float *taps,
                           const int first, const int count, const float cap,
                           const float scale, global const float *mixa,
@@ -525,9 +558,11 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   {
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
-    const float16 c = vload16(0, tcol + at * 4) * scale;
+    const int lv = (int)tp.s7;
+    const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
+    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     const float4 rq = vload4(0, coc + at);
-    const float4 aq = mix ? vload4(0, mixa + at) : (float4)(0.0f);
+    const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
     if(!any(aq > 0.0f))
     {
       dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
@@ -567,18 +602,18 @@ inline int dof_all_finite16(float16 v)
 /* The gather of 4 pixels, taken again with scaled colours if float sums overflowed. */
 
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
-                               const int ppitch, global const float *tcol,
-                               const float inv_s, const int base, const float16 c0,
+                               const int ppitch, const int plane, const int base,
+                               const float16 c0,
                                const float4 r0, global const float *taps, const int first,
                                const int count, const float cap, global const float *mixa,
                                global const float *mixr, global const float *mixd,
                                const int mix, const int layer CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, ppitch, tcol, inv_s, base, c0, r0, taps, first,
+  const REAL16 out = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, first,
                                  count, cap, 1.0f, mixa, mixr, mixd, mix, layer CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, ppitch, tcol, inv_s, base, c0, r0, taps, first,
+  const REAL16 s = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, first,
                                count, cap, OVERFLOW_SCALE, mixa, mixr, mixd, mix, layer
                                CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
@@ -608,24 +643,12 @@ inline float4 dof_upsample(global const float *hres, const int hpitch, const int
   return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
 }
 
-/* The cap of hidden-background colours for tile (tx, ty): CAP_FACTOR times the geometric
- * mean luminance (minus 1) of the brightest 3 x 3 tiles around (dof_tile_cap's means). */
-inline float dof_cap(global const float *log_mean, const int tx, const int ty,
-                     const int tiles_x, const int tiles_y, const float cap_factor)
-{
-  float g = 0.0f;
-  for(int dy = -1; dy <= 1; dy++)
-    for(int dx = -1; dx <= 1; dx++)
-      g = fmax(g, log_mean[clfx_clampi(ty + dy, 0, tiles_y - 1) * tiles_x
-                           + clfx_clampi(tx + dx, 0, tiles_x - 1)]);
-  return cap_factor * (exp(g) - 1.0f);
-}
-
 /* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
- * the lattice levels of the two tables (tap_table's column 7, one per table), the farthest
- * x or y offset of a tap of the first (px); count 0 copies the
- * sanitised source.  4 pixels in focus or nearly (0 <= radius < low_r, no near pixel)
- * gather with the sharp table (reach: low_r and the near field around); with mode bit 0,
+ * the largest lattice levels of the two tables' taps (tap_table's column 7; 0: every tap
+ * reads the image itself), the farthest x or y offset of a tap of the first (px); count 0
+ * copies the sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
+ * pixel) gather with the sharp table (every pixel within sharp_r a far-field tap, the near
+ * field around: tap_table's core); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
  * unless (mode bit 1: a dense table, a full-resolution gather there is worth it) its
  * half-res pixels span more than `refine` in log luminance (a bokeh rim); every other
@@ -647,7 +670,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
                        const int hwidth, const int hheight, const float refine,
-                       const float low_r, const float8 cateye, const int plane,
+                       const float low_r, const float sharp_r, const float8 cateye,
+                       const int plane,
                        const int4 place, const int4 hplace, global const float *mixa,
                        global const float *mixr, global const float *mixd,
                        global const int *mflags, const int mtiles_x, const int mtiles_y)
@@ -692,25 +716,23 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     rn = select(r, rr.s0246, sm);
     rf = select(r, rr.s1357, sm);
   }
-  int first = info.s0, count = info.s1, level = info.s5;
+  int first = info.s0, count = info.s1;
   /* a mixed pixel among the 4 is gathered twice with a dense table serving both its radii:
      the sharp one if both are in focus or nearly, else the full one; otherwise (a sparse
      table) as any pixel, at its own radius */
   int twice = 0;
-  if(split && all(fmin(rn, rf) >= -NEAR_EPS && fmax(rn, rf) < low_r) && info.s6 == 0)
+  if(split && all(fmin(rn, rf) >= -NEAR_EPS && fmax(rn, rf) < sharp_r) && info.s6 == 0)
   {
     first = info.s2;
     count = info.s3;
-    level = info.s6;
     twice = 1;
   }
   else if(split && info.s5 == 0)
     twice = 1;
-  else if(all(r >= -NEAR_EPS && r < low_r))
+  else if(all(r >= -NEAR_EPS && r < sharp_r))
   {
     first = info.s2;
     count = info.s3;
-    level = info.s6;
   }
   else if((info.s4 & 1) && all(fabs(r) >= low_r))
   {
@@ -748,26 +770,23 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                               * (1.0f / CLFX_PI), CATEYE_MIN_FRAC);
 #endif
   /* rows are padded to 4 pixels: the lanes past the width land in the padding */
-  /* the table's lattice level: its plane of the prefilter pyramid, its ramps' width */
-  global const float *tcol = col + (size_t)level * (size_t)plane * 4;
-  const float inv_s = 1.0f / (float)(1 << level);
-  /* mixed pixels are split over the image's own pixels: dense tables only */
-  const int dense = mix && level == 0;
+  /* each tap reads the plane of its lattice level; mixed pixels are split over the image's
+     own pixels: level-0 taps only */
   const float16 c0 = vload16(0, col + base * 4);
   if(!twice)
   {
-    vstore16(dof_gather_safe(col, coc, ppitch, tcol, inv_s, base, c0, r, taps, first, count,
-                             cap, mixa, mixr, mixd, dense, 0 CATEYE_PASS), 0, out);
+    vstore16(dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first, count,
+                             cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS), 0, out);
     return;
   }
   /* a mixed pixel: its far part's gather (at the far layer's radius) and its near part's,
      blended by its coverage */
   const float16 dm = vload16(0, mixd + base * 4);
   const int16 sm16 = LANES(sm);
-  const float16 o_far = dof_gather_safe(col, coc, ppitch, tcol, inv_s, base,
+  const float16 o_far = dof_gather_safe(col, coc, ppitch, plane, base,
                                         select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
                                         count, cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
-  const float16 o_near = dof_gather_safe(col, coc, ppitch, tcol, inv_s, base,
+  const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
                                          taps, first, count, cap, mixa, mixr, mixd, 1, 2
                                          CATEYE_PASS);

@@ -240,7 +240,8 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
     "dof.cl": {
         "dof_prepare": (
             "buf src, buf depth, int pitch, int width, int height, buf col, buf coc, int ppitch, "
-            "int pheight, int pad, float k_half, float focus, float clamp_r, float offset"
+            "int pheight, int pad, float k_half, float focus, float clamp_r, float offset, "
+            "buf log_mean, int tiles_x, int tiles_y, int tile, float cap_factor, int gx0, int gy0"
         ),
         "dof_edges": (
             "buf col, buf coc, buf out, int ppitch, int pheight, int pad, int width, int height"
@@ -265,7 +266,8 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
             "buf col, buf coc, int ppitch, int pad, buf dst, int pitch, int width, int height, "
             "buf taps, buf tile_info, buf log_mean, int tiles_x, int tiles_y, int tile, "
             "float cap_factor, buf hres, int hpitch, int hwidth, int hheight, float refine, "
-            "float low_r, float8 cateye, int plane, int4 place, int4 hplace, buf mixa, buf mixr, "
+            "float low_r, float sharp_r, float8 cateye, int plane, int4 place, int4 hplace, "
+            "buf mixa, buf mixr, "
             "buf mixd, buf mflags, int mtiles_x, int mtiles_y"
         ),
         "dof_merge_channels": "buf r, buf g, buf b, buf dst, int pitch, int width, int height",

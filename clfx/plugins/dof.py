@@ -52,7 +52,12 @@ ground-truth renderer models the same optics):
 
 Algorithm (after Jimenez 2014, "Next generation post processing in Call of Duty: Advanced
 Warfare", simplified for offline use)
-1. ``dof_prepare``: sanitised colour and signed CoC radius into a padded buffer.
+1. ``dof_prepare``: sanitised colour and signed CoC radius into a padded buffer (the edge
+   pixels repeated past the frame).  What lies past the frame edge is unknown: the padding's
+   colours are capped in luminance like the hidden background's (``CAP_FACTOR`` times the
+   geometric mean of the tiles around the edge pixel, below), so a light on the edge row
+   gives the half of its bokeh that falls inside the frame instead of a streak of copies a
+   CoC radius tall (at 45 px of CoC, the issue 35 case's largest error).
 2. ``dof_edges``: edge-aware radii.  Renderers write an antialiased beauty but a depth taken
    at the pixel centre, so a light beside a blurred foreground bar has pixels that mix the
    light with the bar and carry the bar's depth; spread with the bar's CoC they make a
@@ -80,8 +85,12 @@ Warfare", simplified for offline use)
    produce, dilated on the host over as many tiles as the largest radius reaches (3 x 3 for
    radii up to a tile); tiles whose neighbourhood maximum is below half a pixel are copied
    (and the whole frame is an identity when every tile is).  Per tile also the largest
-   radius of a pixel in front of the focus plane within reach: pixels in focus (or nearly)
-   gather over only that and their own radius.
+   radius of a pixel in front of the focus plane within reach: 4 pixels in focus (or
+   nearly: every CoC radius below the level's ``sharp_radius``) gather over only that and
+   their own radius, with a table whose far field is every pixel within ``sharp_radius``
+   (their own blur is no wider) and whose near field is the lattice below when the near
+   blur is large (:func:`tap_table`'s ``core``): an in-focus subject beside a 40 px
+   foreground post stays sharp instead of taking the lattice's prefilter tent.
 5. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
    the level's ``dense_radius`` (a single bright pixel spreads into an evenly lit disk with
    an antialiased rim), beyond that a lattice of every 2nd, 4th, ... pixel (at most the
@@ -285,36 +294,47 @@ class DofLevel(Level):
     dense_radius: float = 16.0        # radii up to this: every pixel of the disk is a tap
     half_res_radius: float = 6.0      # tiles whose every CoC radius is >= this: half resolution
     refine: float = math.inf          # log-luminance span that a half-res pixel gathers again
+    sharp_radius: float = 6.0         # 4 pixels all below this CoC radius (none in front of
+    #                                   the focus plane) gather with the tile's sharp table:
+    #                                   every pixel within it a far-field tap (tap_table's core)
 
 
 LEVELS = {
     "draft": DofLevel("every pixel of the disk a tap up to 16 px radius, then a lattice of at "
-                      "most 10 taps per radius over a prefiltered copy; half resolution where "
+                      "most 10 taps per radius over a prefiltered copy (pixels under 3 px of "
+                      "CoC: every pixel of their own blur); half resolution where "
                       "every CoC radius >= 3 px, only strong bokeh rims gathered again at full "
                       "resolution; float32 sums",
-                      lattice=10, dense_radius=16.0, half_res_radius=3.0, refine=1.0),
+                      lattice=10, dense_radius=16.0, half_res_radius=3.0, refine=1.0,
+                      sharp_radius=3.0),
     "preview": DofLevel("every pixel of the disk a tap up to 16 px radius, then a lattice of at "
-                        "most 16 taps per radius over a prefiltered copy; half resolution where "
+                        "most 16 taps per radius over a prefiltered copy (pixels under 3 px of "
+                        "CoC: every pixel of their own blur); half resolution where "
                         "every CoC radius >= 3 px, bokeh rims gathered again at full "
                         "resolution; float32 sums",
-                        lattice=16, dense_radius=16.0, half_res_radius=3.0, refine=0.5),
+                        lattice=16, dense_radius=16.0, half_res_radius=3.0, refine=0.5,
+                        sharp_radius=3.0),
     "final": DofLevel("every pixel of the disk a tap up to 32 px radius, then a lattice of at "
-                      "most 32 taps per radius over a prefiltered copy; half resolution where "
+                      "most 32 taps per radius over a prefiltered copy (pixels under 6 px of "
+                      "CoC: every pixel of their own blur); half resolution where "
                       "every CoC radius >= 6 px, bokeh rims and other contrasts over 0.15 in "
                       "log luminance gathered again at full resolution; float32 sums",
                       lattice=32, dense_radius=32.0, half_res_radius=6.0, refine=0.15),
     "reference": DofLevel("every pixel of the disk a tap up to 32 px radius, then a lattice of "
-                          "at most 32 taps per radius over a prefiltered copy, all at full "
+                          "at most 32 taps per radius over a prefiltered copy (pixels under "
+                          "6 px of CoC: every pixel of their own blur), all at full "
                           "resolution, float64 sums",
-                          fp64=True, lattice=32, dense_radius=32.0, half_res_radius=math.inf),
+                          fp64=True, lattice=32, dense_radius=32.0, half_res_radius=math.inf,
+                          sharp_radius=6.0),
 }
 
 CAP_FACTOR = 4.0
-MIXED_NOTE = " mixed edge pixels split"
-"""The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 """Background hidden behind a blurred foreground pixel is filled in from the visible
 background around, its colours capped at this many times the geometric mean luminance of
-the tiles around (so a light beside a blurred bar does not shine through it)."""
+the tiles around (so a light beside a blurred bar does not shine through it); the edge
+pixels repeated past the frame edge are capped the same way."""
+MIXED_NOTE = " mixed edge pixels split"
+"""The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 
 
 def lens_scale_px(p, camera, ctx_diag: float, width_px: float) -> float:
@@ -345,9 +365,13 @@ def lattice_level(radius: float, lattice: int, dense: float) -> int:
     return max(1, int(math.ceil(math.log2(radius / max(lattice, 1)) - 1e-9)))
 
 
+NEVER = 1e30
+"""A tap's near or far distance that no coverage reaches: the tap serves the other field only."""
+
+
 def tap_table(radius: float, lattice: int, aspect: float = 1.0, blades: int = 0,
               first: float = -0.5 * math.pi, roundness: float = 0.0,
-              dense: float = 0.0, squeeze: float = 1.0) -> np.ndarray:
+              dense: float = 0.0, squeeze: float = 1.0, core: float = 0.0) -> np.ndarray:
     """The gather's taps for a neighbourhood radius ``radius`` (px): (n, 8) float32 rows of
     (offset x, offset y, near distance, far distance, area, aperture x, aperture y, level).
 
@@ -365,6 +389,14 @@ def tap_table(radius: float, lattice: int, aspect: float = 1.0, blades: int = 0,
     coverage ramp is ``s`` px wide for these taps, is a smooth ramp instead of a staircase.
     Distances are divided by the aperture's boundary radius in the direction of ``o`` (near
     taps: bokeh turned 180 degrees) or ``-o`` (far taps).
+
+    ``core`` (px, > 0): the table of pixels in focus or nearly (CoC radius below ``core``)
+    in a tile within reach of a larger near-field blur.  Their far field reaches no farther
+    than their own radius, which a sparse lattice would blur by its tent (an in-focus
+    subject beside a 40 px foreground post went soft, issue 35): with a lattice (``L > 0``)
+    its taps serve the near field only (far distance :data:`NEVER`), and every pixel within
+    ``core + 1/2`` (aperture space, ``L = 0``) serves the far field only (near distance
+    :data:`NEVER`), listed first (the centre first).
     """
     level = lattice_level(radius, lattice, dense)
     s = 1 << level
@@ -386,7 +418,13 @@ def tap_table(radius: float, lattice: int, aspect: float = 1.0, blades: int = 0,
     table[:, 4] = area
     table[:, 5], table[:, 6] = dx, dy
     table[:, 7] = level
-    return table
+    if level == 0 or not 0.0 < core < math.inf:
+        return table
+    table[:, 3] = NEVER
+    inner = tap_table(core, lattice, aspect, blades, first, roundness, dense=core,
+                      squeeze=squeeze)
+    inner[:, 2] = NEVER
+    return np.concatenate([inner, table])
 
 
 def lattice_reach(radius: float, level: int, squeeze: float = 1.0,
@@ -641,24 +679,30 @@ class Dof(Plugin):
         r = float(levels.max()) if levels.size else 0.0
         return levels, lattice_level(r, lvl.lattice, lvl.dense_radius)
 
-    def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0):
+    def tap_tables(self, rt, levels, lvl, aspect, blades, first, roundness, squeeze=1.0,
+                   cores=None):
         """One concatenated tap table for the radii in ``levels`` and, per entry of
-        ``levels``, (first, count, 0, 0); each radius's table is kept in the runtime's
-        cache."""
+        ``levels``, (first, count, 0, 0); ``cores``: per entry of ``levels``' first axis the
+        :func:`tap_table` core (None: none).  Each table is kept in the runtime's cache."""
+        cores = tuple(cores) if cores is not None else (0.0,) * len(levels)
         parts, offsets, n = [], {}, 0
-        for r in sorted(set(levels.ravel().tolist()) - {0.0}):
+        for key_r in sorted({(r, c) for lv, c in zip(levels, cores)
+                             for r in set(np.asarray(lv).ravel().tolist()) - {0.0}}):
+            r, core = key_r
             key = ("dof.taps", r, lvl.lattice, lvl.dense_radius, aspect, blades, first,
-                   roundness, squeeze)
-            taps = rt.cache.get(key, lambda r=r: tap_table(
+                   roundness, squeeze, core)
+            taps = rt.cache.get(key, lambda r=r, core=core: tap_table(
                 r, lvl.lattice, aspect, blades, first, roundness,
-                dense=lvl.dense_radius, squeeze=squeeze))
-            offsets[r] = (n, len(taps))
+                dense=lvl.dense_radius, squeeze=squeeze, core=core))
+            offsets[key_r] = (n, len(taps))
             parts.append(taps)
             n += len(taps)
         table = np.concatenate(parts) if parts else np.zeros((1, 8), np.float32)
-        info = np.zeros(levels.shape + (4,), np.int32)
-        for r, (first_tap, count) in offsets.items():
-            info[levels == r, :2] = (first_tap, count)
+        info = np.zeros(np.shape(levels) + (4,), np.int32)
+        for (r, core), (first_tap, count) in offsets.items():
+            for i, c in enumerate(cores):
+                if c == core:
+                    info[i][levels[i] == r, :2] = (first_tap, count)
         return np.ascontiguousarray(table), np.ascontiguousarray(info)
 
     def clamp_warning(self, p, ctx, lens: Lens) -> str | None:
@@ -795,12 +839,13 @@ class Dof(Plugin):
             hrows += (1 << half_l) - 1     # the half-resolution prefilter's tent
         # full resolution: sharp pixels gather over their own reach and the near field's,
         # out-of-focus ones take the half-resolution result where it is smooth
-        sharp = np.where(levels > 0, quantised_radius(np.maximum(near, lvl.half_res_radius)
-                                                      if math.isfinite(lvl.half_res_radius)
+        sharp = np.where(levels > 0, quantised_radius(np.maximum(near, lvl.sharp_radius)
+                                                      if math.isfinite(lvl.sharp_radius)
                                                       else radii), 0.0)
         sharp = np.minimum(sharp, levels)
         mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
-        taps, tile_info, rows = self._tile_table(rt, levels, sharp, mode, *common)
+        taps, tile_info, rows = self._tile_table(rt, levels, sharp, mode, *common,
+                                                 core=lvl.sharp_radius)
         # rows a pixel reads: its farthest tap's, the prefilter's tent around it, or the
         # rows beyond it that a tap's mixed-pixel split reads (its 3 x 3 neighbours' edge-aware
         # radii, each from its own 3 x 3 neighbours)
@@ -811,14 +856,15 @@ class Dof(Plugin):
                          htiles, rows, hrows, note)
 
     def _tile_table(self, rt, levels, sharp, mode, lvl, aspect, blades, first, roundness,
-                    squeeze):
+                    squeeze, core=0.0):
         """``dof_gather``'s tap table and per-tile table (on the device): per tile the table
-        of radius ``levels``, that of radius ``sharp`` for pixels in focus, ``mode`` (bit 0:
+        of radius ``levels``, that of radius ``sharp`` for pixels in focus (with the
+        :func:`tap_table` ``core``: their own radius's, below it), ``mode`` (bit 0:
         take the half-resolution result where it is smooth, bit 1: gather again where it is
         not), the two tables' lattice levels and the farthest offset (x or y, px) of a tap of
         the first (sharp <= levels); and the farthest row offset of a tap."""
         table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
-                                      roundness, squeeze)
+                                      roundness, squeeze, cores=(0.0, core))
         tiles = np.zeros(levels.shape + (8,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
@@ -899,7 +945,8 @@ class Dof(Plugin):
         prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64, **luma)
         rt.launch(prep, (col.pitch // 4, padded.height), src, depth, src.pitch, w,
                   h, col, coc0, col.pitch, padded.height, pad, k_half,
-                  focus, clamp_r, g.offset)
+                  focus, clamp_r, g.offset, frame.log_mean, frame.tiles_x, frame.tiles_y,
+                  TILE, CAP_FACTOR, src.window.x0 - whole.x0, src.window.y0 - whole.y0)
         prefilter(rt, col, padded.height, full_l)
         rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
                   col, coc0, coc, col.pitch, padded.height, pad, w, h,
@@ -969,6 +1016,6 @@ class Dof(Plugin):
         rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, col.pitch, pad,
                   dst, dst.pitch, dst.width, dst.height, taps, tiles,
                   frame.log_mean, frame.tiles_x, frame.tiles_y, tile,
-                  CAP_FACTOR, *hres_args, lvl.refine, lvl.half_res_radius,
+                  CAP_FACTOR, *hres_args, lvl.refine, lvl.half_res_radius, lvl.sharp_radius,
                   cateye, plane, place, (*hplace, 0, 0),
                   *(mix or (coc, coc, coc, coc, 0, 0)), local=LOCAL)

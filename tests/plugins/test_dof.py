@@ -35,6 +35,21 @@ def ca_offsets(width, cam, p):
                               (cam.axial_ca_blue, p.axial_ca_blue)))
 
 
+def tables(radius, near, lvl, aspect=1.0, blades=0, first=-0.5 * math.pi, roundness=0.0,
+           squeeze=1.0):
+    """The oracle's ``taps`` and sharp table (``sharp_taps``, ``sharp_radius``) of a frame
+    whose tiles all gather over ``radius`` with the largest near-field radius ``near``, as
+    the plugin builds them (its sharp table: the radius ``max(near, sharp_radius)``, with
+    every pixel of the sharp radius a far-field tap)."""
+    taps = tap_table(radius, lvl.lattice, aspect, blades, first, roundness,
+                     dense=lvl.dense_radius, squeeze=squeeze)
+    sharp = min(float(quantised_radius(max(near, lvl.sharp_radius))), radius)
+    return dict(taps=taps, sharp_radius=lvl.sharp_radius,
+                sharp_taps=tap_table(sharp, lvl.lattice, aspect, blades, first, roundness,
+                                     dense=lvl.dense_radius, squeeze=squeeze,
+                                     core=lvl.sharp_radius))
+
+
 def oracle(src, depth, quality, cam=CAM, **params):
     """The float64 oracle with the plugin's taps for one neighbourhood radius (images of up to
     3 x 3 tiles, where the tile dilation makes the radius uniform)."""
@@ -45,16 +60,19 @@ def oracle(src, depth, quality, cam=CAM, **params):
     radius = max(float(quantised_radius(np.abs(reference.coc_radius(
         depth, k_half=k_half, focus=focus, clamp_r=clamp_r, offset=o)).max()))
         for o in (0.0, *offsets))
+    near = max(float(np.maximum(-reference.coc_radius(
+        depth, k_half=k_half, focus=focus, clamp_r=clamp_r, offset=o), 0.0).max())
+        for o in (0.0, *offsets))
     lvl = LEVELS[quality]
     blades = cam.blades if p.blades < 0 else p.blades
     squeeze = p.anamorphic_squeeze or cam.anamorphic_squeeze
-    taps = tap_table(radius, lvl.lattice, 1.0, blades,
-                     -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
-                     p.roundness, dense=lvl.dense_radius, squeeze=squeeze)
     ov = cam.optical_vignetting if p.optical_vignetting < 0 else p.optical_vignetting
     fr = (cam.optical_vignetting_front if p.optical_vignetting_front < 0
           else p.optical_vignetting_front)
-    kw = dict(k_half=k_half, focus=focus, clamp_r=clamp_r, taps=taps,
+    kw = dict(k_half=k_half, focus=focus, clamp_r=clamp_r,
+              **tables(radius, near, lvl, 1.0, blades,
+                       -0.5 * math.pi + math.radians(cam.blade_rotation + p.blade_rotation),
+                       p.roundness, squeeze),
               cateye=reference.cateye_centres((h, w), ov) if ov > 0 else None,
               cateye_front=reference.cateye_centres((h, w), -fr) if fr > 0 else None)
     if any(offsets):
@@ -188,6 +206,74 @@ def test_error_falls_with_quality(rt, gt_case):
                            metrics.log_tonemap(truth)) for q in QUALITY_LEVELS}
     assert err["draft"] >= err["final"] and err["preview"] >= err["final"], err
     assert err["reference"] <= err["final"] * 1.05, err      # ground truth noise ~ a few %
+
+
+@pytest.fixture(scope="module")
+def large_case():
+    """Large circles of confusion over each other (the bench's dof:large at 192 x 108, the
+    same CoC in pixels): a lit wall blurred 45 px, a sign 30 px, an in-focus subject,
+    foreground posts -40 and -22 px, lights on the frame's top edge; its thin-lens truth
+    (2048 renders)."""
+    from clfx.bench.cases.dof import large_scene, render_case
+    scene, cam = large_scene(192, 108)
+    cam = cam.updated(sensor_width=cam.sensor_width * 192 / 320)
+    return render_case(scene, cam, ss=2, samples=2048)
+
+
+def test_large_circles_of_confusion_beat_naive_at_every_level(rt, large_case):
+    """Issue 35: at 20-45 px of CoC every level beats the naive gather by 1 dB overall and
+    in the edge band.  Before: an in-focus subject beside a 40 px foreground blur took its
+    own far field from the sparse lattice (blurred by its tent), and a light on the frame's
+    edge row was repeated into a streak past the edge (clamp-to-edge): every level lost to
+    the naive gather (draft -0.65 dB overall, -0.66 dB in the edge band; now +1.5, +1.6)."""
+    case = large_case
+    src, depth, truth, cam = case["source"], case["depth"], case["truth"], case["camera"]
+    h, w = depth.shape
+    k_half, focus, clamp_r = lens(w, h, cam=cam)
+    assert 40 < k_half * (1 - focus / 12.0) < 50          # the wall's CoC radius
+    naive = reference.naive_dof(src, depth, k_half=k_half, focus=focus, clamp_r=clamp_r)
+    band = metrics.edge_band(depth, None, 4)
+    base = metrics.psnr_log(naive, truth), metrics.psnr_log(naive, truth, band)
+    for q in QUALITY_LEVELS:
+        got = run(rt, src, depth, q, cam)
+        score = metrics.psnr_log(got, truth), metrics.psnr_log(got, truth, band)
+        assert score[0] > base[0] + 1.0 and score[1] > base[1] + 1.0, (q, score, base)
+
+
+def test_in_focus_pixels_beside_a_large_near_blur_stay_sharp(rt):
+    """An in-focus 1-px checker in a tile within reach of a 30 px foreground blur, beyond
+    that blur's own reach: unchanged at every level (their far field is their own radius's
+    every pixel, not the sparse lattice that the near field needs; before, draft and preview
+    read them through the lattice's prefilter tent: a soft copy of the checker)."""
+    ys, xs = np.mgrid[0:64, 0:128]
+    src = np.zeros((64, 128, 4), np.float32)
+    src[..., :3] = (((xs + ys) % 2) * 0.8 + 0.1)[..., None]
+    src[..., 3] = 1.0
+    depth = np.full((64, 128), 3.0, np.float32)          # in focus
+    depth[:, :8] = 1.5                                   # a foreground post
+    cam = CAM.updated(sensor_width=0.9)
+    r = reference.coc_radius(1.5, k_half=lens(128, 64, cam=cam)[0], focus=3.0, clamp_r=1e9)
+    assert -34 < r < -26
+    for q in QUALITY_LEVELS:
+        got = run(rt, src, depth, q, cam)
+        np.testing.assert_allclose(got[:, 44:64], src[:, 44:64], rtol=1e-5, err_msg=q)
+
+
+def test_a_light_on_the_frame_edge_is_not_repeated_past_it(rt):
+    """A light on the top row of a far wall: past the frame edge the clamp-to-edge copies
+    of it are capped like hidden background, so the frame receives about the half of its
+    bokeh that falls inside (not a streak of lights a CoC radius tall)."""
+    src = np.full((64, 64, 4), 0.01, np.float32)
+    src[..., 3] = 1.0
+    src[0, 32, :3] = 1000.0
+    depth = np.full((64, 64), 1e4, np.float32)
+    cam = CAM.updated(sensor_width=0.7)                  # CoC radius ~ 20 px
+    r = lens(64, 64, cam=cam)[0]
+    assert 15 < r < 25
+    for q in QUALITY_LEVELS:
+        got = run(rt, src, depth, q, cam)
+        excess = float((got[..., 1] - 0.01).sum())
+        assert 0.3 * 1000 < excess < 0.7 * 1000, (q, excess)
 
 
 # -- hard cases ------------------------------------------------------------------------------

@@ -165,12 +165,32 @@ def mixed_pixels(src, r):
     return a, rn, rf, d
 
 
+def padded_source(src, pad):
+    """The image extended by ``pad`` px each side: the edge pixel repeated (clamp-to-edge),
+    its colour scaled down to the luminance :func:`hidden_caps` of the edge pixel it
+    repeats where brighter (what lies past the frame is a guess: a light on the edge row is
+    not repeated into a streak)."""
+    src = np.asarray(src, np.float64)
+    h, w = src.shape[:2]
+    out = np.pad(src, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
+    cap = np.pad(hidden_caps(src), pad, mode="edge")
+    lum = 0.2126 * out[..., 0] + 0.7152 * out[..., 1] + 0.0722 * out[..., 2]
+    k = np.where(lum > cap, cap / np.where(lum > cap, lum, 1.0), 1.0)
+    outside = np.ones(out.shape[:2], bool)
+    outside[pad:pad + h, pad:pad + w] = False
+    return np.where(outside[..., None], out * k[..., None], out)
+
+
 def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
-        cateye_front=None):
+        cateye_front=None, sharp_taps=None, sharp_radius=0.0):
     """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area,
     aperture-space ox, oy, level L).  A tap of level L reads plane L of
-    :func:`prefilter_pyramid` (colour and luminance) and every coverage ramp below is
-    ``s = 2^L`` px wide: ``clamp((a - b) / s + 0.5, 0, 1)`` for ``clamp(a - b + 0.5, 0, 1)``.  ``offset``: added to every signed radius (axial CA).
+    :func:`prefilter_pyramid` of :func:`padded_source` (colour and luminance) and every
+    coverage ramp below is ``s = 2^L`` px wide: ``clamp((a - b) / s + 0.5, 0, 1)`` for
+    ``clamp(a - b + 0.5, 0, 1)``.  ``offset``: added to every signed radius (axial CA).
+    ``sharp_taps``: the table of pixels in focus or nearly (the plugin's per-tile sharp
+    table; a far distance or a near distance of 1e30 never covers), used by the pixels of a
+    group of 4 (x // 4 of a row) whose every radius lies in [-0.25, ``sharp_radius``).
     ``cateye``: (cx, cy) per pixel (:func:`cateye_centres`): every coverage below is also
     clipped by the barrel, near taps by clamp(|r_q| - |a - c |r_q|| + 0.5, 0, 1), far ones by
     clamp(rf - |a + c rf| + 0.5, 0, 1) (a: the tap's aperture-space offset), and the near
@@ -188,39 +208,41 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
     out = far (1 - a) + near a, a = clamp(alpha, 0, 1), each field normalised; empty fields
     fall back to the other field, then to the centre pixel.
 
-    Mixed edge pixels (:func:`mixed_pixels` of the depth's radii; dense taps, L = 0, only):
-    a mixed tap q (coverage a_q, radii rn_q, rf_q, d_q) is two taps, its far part
+    Mixed edge pixels (:func:`mixed_pixels` of the depth's radii; level-0 taps only): a
+    mixed tap q (coverage a_q, radii rn_q, rf_q, d_q) is two taps, its far part
     C_q - a_q d_q of radius rf_q weighing 1 - a_q and its near part C_q + (1 - a_q) d_q of
-    radius rn_q weighing a_q (every weight above times its part's weight).  A mixed pixel p
-    is gathered twice, as its far part (r_p = rf_p, centre C_p - a_p d_p, its own centre tap
-    only its far part with weight 1) and as its near part (likewise): (1 - a_p) far + a_p
-    near.
+    radius rn_q weighing a_q (every weight above times its part's weight).  With a dense
+    table (every tap L = 0) a group of 4 holding a mixed pixel is gathered twice, as its far
+    part (r_p = rf_p, centre C_p - a_p d_p, its own centre tap only its far part with weight
+    1) and as its near part (likewise): (1 - a_p) far + a_p near; with the sharp table when
+    it is dense and both radii of every mixed pixel of the group lie in the sharp range.
     """
     src = np.asarray(src, np.float64)
     src = np.where(np.isfinite(src), src, 0.0)
     r = edge_radius(src, coc_radius(depth, k_half=k_half, focus=focus, clamp_r=clamp_r,
                                     offset=offset))
     taps = np.asarray(taps, np.float64)
+    tables = [taps] + ([np.asarray(sharp_taps, np.float64)] if sharp_taps is not None else [])
+    every = np.concatenate(tables)
     # the pyramid of the image extended past every tap (the kernel's padded buffer): a tap
     # outside reads the prefiltered extension, not the prefiltered image's edge
-    pad = int(np.abs(taps[:, :2]).max()) + 1 if len(taps) else 0
-    level = int(taps[:, 7].max()) if len(taps) else 0
-    planes = prefilter_pyramid(src, level, pad)
+    pad = int(np.abs(every[:, :2]).max()) + 1 if len(every) else 0
+    level = int(every[:, 7].max()) if len(every) else 0
+    planes = prefilter_pyramid(padded_source(src, pad), level, 0)
     cap = hidden_caps(src)
     h, w = r.shape
     ys, xs = np.mgrid[0:h, 0:w]
     mix_a, mix_rn, mix_rf, mix_d = mixed_pixels(src, r)
-    if level > 0:
-        mix_a = np.zeros_like(mix_a)
     circles = [tuple(np.asarray(v, np.float64) for v in c)
                for c in (cateye, cateye_front) if c is not None]
     if circles:
         (cx, cy), (fx, fy) = circles[0], circles[-1] if len(circles) > 1 else (0.0, 0.0)
         frac = open_fraction(np.hypot(cx - fx, cy - fy))
 
-    def gather(r0, c0, layer):
-        """Both fields of every pixel with radii ``r0`` (centre colours ``c0``); ``layer`` 1
-        (2): a mixed pixel's own centre tap is only its far (near) part."""
+    def gather(r0, c0, layer, taps):
+        """Both fields of every pixel with radii ``r0`` (centre colours ``c0``) over
+        ``taps``; ``layer`` 1 (2): a mixed pixel's own centre tap is only its far (near)
+        part."""
         p_near = r0 < -NEAR_EPS
         fn = np.zeros(src.shape)
         ff = np.zeros(src.shape)
@@ -240,7 +262,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
 
             c = _clamped(planes[int(lv)], ys + int(oy) + pad, xs + int(ox) + pad)
             rq = _clamped(r, ys + int(oy), xs + int(ox))
-            aq = _clamped(mix_a, ys + int(oy), xs + int(ox))
+            aq = _clamped(mix_a, ys + int(oy), xs + int(ox)) * (lv == 0)
             dq = _clamped(mix_d, ys + int(oy), xs + int(ox))
             sq = aq > 0
             an = aq
@@ -284,12 +306,44 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
         return far * (1 - a) + near * a
 
     split = mix_a > 0
-    if not split.any():
-        return gather(r, src, 0)
     am = mix_a[..., None]
-    out_f = gather(np.where(split, mix_rf, r), src - mix_d * am, 1)
-    out_n = gather(np.where(split, mix_rn, r), src + mix_d * (1 - am), 2)
-    return np.where(split[..., None], out_f * (1 - am) + out_n * am, out_f)
+
+    def once(taps):
+        return gather(r, src, 0, taps)
+
+    def twice(taps):
+        out_f = gather(np.where(split, mix_rf, r), src - mix_d * am, 1, taps)
+        out_n = gather(np.where(split, mix_rn, r), src + mix_d * (1 - am), 2, taps)
+        return np.where(split[..., None], out_f * (1 - am) + out_n * am, out_f)
+
+    def groups(mask, how):   # per pixel, ``how`` (np.any / np.all) over its group of 4
+        g = np.pad(mask, ((0, 0), (0, -w % 4)), mode="edge").reshape(h, -1, 4)
+        return np.repeat(how(g, axis=2), 4, axis=1)[:, :w]
+
+    def dense(t):
+        return not len(t) or t[:, 7].max() == 0
+
+    g_split = groups(split, np.any)
+    if sharp_taps is None:
+        return twice(taps) if g_split.any() and dense(taps) else once(taps)
+    near_eps = NEAR_EPS
+    rn_, rf_ = np.where(split, mix_rn, r), np.where(split, mix_rf, r)
+    both = groups((np.minimum(rn_, rf_) >= -near_eps) & (np.maximum(rn_, rf_) < sharp_radius),
+                  np.all)
+    own = groups((r >= -near_eps) & (r < sharp_radius), np.all)
+    sharp = tables[1]
+    cases = [(g_split & both & dense(sharp), lambda: twice(sharp)),
+             (g_split & dense(taps), lambda: twice(taps)),
+             (own, lambda: once(sharp)),
+             (np.ones((h, w), bool), lambda: once(taps))]
+    out = np.zeros(src.shape)
+    left = np.ones((h, w), bool)
+    for sel, make in cases:
+        sel = sel & left
+        if sel.any():
+            out = np.where(sel[..., None], make(), out)
+        left &= ~sel
+    return out
 
 
 def dof_chromatic(src, depth, *, offsets, **kw):
