@@ -224,10 +224,26 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
  * wins.  Written: `mixa` the near layer's coverage a (0: not mixed), `mixr` (r_n, r_f) the
  * two neighbours' radii, `mixd` n - f: the near part's colour is C + (1 - a)(n - f), the
  * far part's C - a (n - f) (they mix back to C; the residual stays in both).  RGBA
- * (premultiplied: the beauty mixes linearly in every channel).  Border pixels also fill
+ * (premultiplied: the beauty mixes linearly in every channel).  Each part estimates a
+ * layer's colour, which lies in the range of the colours it is estimated from: a part
+ * below min(0, C, n, f) in a channel (the residual extrapolated past 0: a pixel of the
+ * beach ball's rim over transparent black split into a far part of negative blue, spread
+ * into the blurred background, QC) is set to that bound and the other part takes up the
+ * difference, so they still mix back to C (dof_mix_bound).  Border pixels also fill
  * their part of the padding (clamp-to-edge, as dof_edges); `count` counts the mixed pixels
  * of rows y0..y1; `flags` (zeroed, `ftiles_x` per row) flags the MIX_TILE px tiles of the
  * image holding one (the gather reads the split data only within reach of a flagged tile). */
+/* The colour difference `d` of a split of colour `c` at near coverage `a`, its far part
+ * c - a d and near part c + (1 - a) d kept at or above `lo` (per channel; c >= lo): a part
+ * below it is set to it, the other takes up the difference (they mix back to c).  Neither
+ * below: `d` itself. */
+inline float4 dof_mix_bound(const float4 c, const float a, const float4 d, const float4 lo)
+{
+  const float4 span = c - lo;   /* >= 0 */
+  float4 out = select(d, span / a, c - a * d < lo);                 /* far part at lo */
+  return select(out, -span / (1.0f - a), c + (1.0f - a) * d < lo);  /* near part at lo */
+}
+
 /* The split of image pixel (x, y) on a depth edge (see dof_mixed): its near coverage (0: not
  * mixed), with `rn`, `rf`, `d` set when mixed. */
 inline float dof_mix_split(global const float *col, global const float *coc, const int ppitch,
@@ -260,6 +276,7 @@ inline float dof_mix_split(global const float *col, global const float *coc, con
   const float mid = 0.5f * (rmin + rmax);
   const float4 c4 = vload4(at[4], col);
   float best = 0.0f, a = 0.0f;
+  float4 lo = (float4)(0.0f);   /* the winning pair's lower bound of the layers' colours */
   for(int jn = 0; jn < 9; jn++)
   {
     if(jn == 4 || !(r[jn] < mid)) continue;
@@ -278,10 +295,12 @@ inline float dof_mix_split(global const float *col, global const float *coc, con
       best = l2;
       a = t;
       *d = dd;
+      lo = fmin(fmin(cn, cf), fmin(c4, (float4)(0.0f)));
       *rn = r[jn];
       *rf = r[jf];
     }
   }
+  if(a > 0.0f) *d = dof_mix_bound(c4, a, *d, lo);
   return a;
 }
 
