@@ -1191,3 +1191,91 @@ def test_explain_and_json_say_how_many_mixed_edge_pixels_were_split(rt, tmp_path
     lines = [json.loads(ln) for ln in cli(*args, "--json").output.splitlines() if ln.strip()]
     notes = [n for ln in lines for s in ln.get("steps", []) for n in s.get("notes", [])]
     assert "dof: 64 mixed edge pixels split" in notes, lines
+
+
+# -- no negative light from the split of mixed edge pixels (QC) ------------------------------
+def shaded_ball_over_nothing(h=48, w=48, radius=14.3, ss=4, bg_depth=np.inf):
+    """A ball (3 m, in focus through ``CAM``) over transparent black at ``bg_depth``, as a
+    renderer writes it: premultiplied RGBA, the ``ss x ss`` box mean of sub-samples, the
+    depth at each pixel centre.  Its colour is yellow with the blue fading out over its last
+    4 px (the Beachball's rim: R = G, B much lower at the edge than one pixel in), so an
+    edge pixel is off the segment between its neighbours and its residual is negative in
+    blue."""
+    ys, xs = np.mgrid[0:h * ss, 0:w * ss]
+    rho = np.hypot((xs + 0.5) / ss - w / 2, (ys + 0.5) / ss - h / 2)
+    inside = rho <= radius
+    blue = np.clip((radius - rho) / 4.0, 0.0, 1.0)
+    sub = np.stack([0.5 * inside, 0.5 * inside, 0.3 * blue * inside, 1.0 * inside], -1)
+    src = sub.reshape(h, ss, w, ss, 4).mean(axis=(1, 3)).astype(np.float32)
+    yc, xc = np.mgrid[0:h, 0:w] + 0.5
+    depth = np.where(np.hypot(xc - w / 2, yc - h / 2) <= radius, 3.0, bg_depth)
+    return src, depth.astype(np.float32)
+
+
+def lowest_allowed(src):
+    """The least value a gather of ``src`` may give: min(0, the input's least) less float32
+    round-off of sums of the input's scale (a few ulps of its largest magnitude)."""
+    return min(0.0, float(src.min())) - 1e-6 * float(np.abs(src).max())
+
+
+@pytest.mark.parametrize("quality", QUALITY_LEVELS)
+def test_an_antialiased_edge_over_transparent_black_makes_no_negative_light(rt, quality):
+    """The ball's rim pixels mix it with transparent black at infinity: split into a near and
+    a far part, the far part (C - a (n - f), f = 0) was the projection residual, negative in
+    blue (-0.004), spread into the blurred background at the sky's CoC: output below 0 where
+    the input has nothing below 0 (the Beachball at defaults: 247 pixels, QC).  Each part
+    now stays at or above min(0, the colours it is estimated from) and they still mix back
+    to the pixel: no value below 0, the in-focus ball untouched."""
+    src, depth = shaded_ball_over_nothing()
+    assert src.min() == 0.0
+    got = run(rt, src, depth, quality, coc_source="max_blur", max_blur=0.12)   # 8 px at inf
+    assert got.min() >= lowest_allowed(src), (quality, got.min())
+    inner = np.hypot(*(np.mgrid[0:48, 0:48] + 0.5 - 24.0)) < 14.3 - 1.5
+    np.testing.assert_array_equal(got[inner], src[inner])
+
+
+def test_a_negative_input_keeps_its_negative_values_through_the_split(rt):
+    """Negative input (a grade's negative blue in the background) is the user's: the split's
+    bound is min(0, the colours a part is estimated from), so the background's negative
+    blue passes as before, and nothing goes below the input's least value."""
+    src, depth = shaded_ball_over_nothing()
+    src[..., 2] -= 0.05 * (1.0 - src[..., 3])       # the background's blue at -0.05
+    assert src.min() == pytest.approx(-0.05)
+    got = run(rt, src, depth, "final", coc_source="max_blur", max_blur=0.12)
+    assert got.min() >= lowest_allowed(src), got.min()
+    np.testing.assert_allclose(got[:4, :4], src[:4, :4], atol=1e-6)   # far corner: as it was
+
+
+def test_the_mixed_split_bound_matches_the_reference(rt):
+    """The oracle's split carries the same bound (float64): the ball over transparent black
+    at the reference level."""
+    src, depth = shaded_ball_over_nothing(40, 40, radius=11.3)
+    cam = CAM.updated(sensor_width=3.0)                    # 2.8 px of CoC radius at inf
+    got = run(rt, src, depth, "reference", cam)
+    want = oracle(src, depth, "reference", cam)
+    assert want.min() >= lowest_allowed(src)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+def test_beachball_rim_at_defaults_makes_no_negative_light(rt, exr_images):
+    """``clfx apply dof`` at defaults on Beachball 0001 wrote 247 pixels below -1e-5 (min
+    -0.00105, R = G > 0, B < 0) just outside the ball's silhouette, over a background of
+    RGBA 0 and Z = 0 (read as no hit: +inf); the input's least value is 0.  A 96 x 96 crop
+    around the worst of them, placed in the frame's display window, at draft and final."""
+    from clfx.core.rect import Rect
+    from clfx.io.read import read_frame
+
+    with pytest.warns(UserWarning, match="read as no hit"):
+        fr = read_frame(exr_images / "Beachball" / "singlepart.0001.exr")
+    assert np.isinf(fr.depth).any() and not (fr.depth == 0).any()
+    y0, x0 = 175 - 48, 770 - 48                    # (770, 175) of the data window
+    crop = (slice(y0, y0 + 96), slice(x0, x0 + 96))
+    src = np.ascontiguousarray(fr.rgba[crop])
+    assert src.min() >= 0.0
+    dw = fr.data_window
+    window = Rect(dw.x0 + x0, dw.y0 + y0, dw.x0 + x0 + 96, dw.y0 + y0 + 96)
+    for quality in ("draft", "final"):
+        got = render_effect(rt, Dof(), Dof.params(), src, depth=np.ascontiguousarray(
+            fr.depth[crop]), camera=Camera(), quality=quality, data_window=window,
+            display_window=fr.display_window)
+        assert got.min() >= lowest_allowed(src), (quality, got.min(), (got < -1e-5).sum())

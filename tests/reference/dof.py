@@ -128,8 +128,11 @@ def mixed_pixels(src, r):
     (radius below the mid-range) and a far one: over every pair (near n, far f), in row
     order of n then f, C = f + a (n - f) + e (RGBA); a pair explains C when
     MIX_MIN < a < 1 - MIX_MIN and |e| <= MIX_TOL min(|C - f|, |C - n|); the explaining pair
-    with the largest |n - f| (strictly) wins.  Returns (a, rn, rf, d = n - f); a = 0: not
-    mixed."""
+    with the largest |n - f| (strictly) wins.  Its parts, far C - a d and near
+    C + (1 - a) d with d = n - f, estimate the layers' colours: a part below
+    lo = min(0, C, n, f) in a channel is set to lo and the other takes up the difference
+    (they mix back to C), i.e. d there is (C - lo) / a (far part at lo) or
+    -(C - lo) / (1 - a) (near part at lo).  Returns (a, rn, rf, d); a = 0: not mixed."""
     h, w = r.shape
     a = np.zeros((h, w))
     rn = np.zeros((h, w))
@@ -162,6 +165,11 @@ def mixed_pixels(src, r):
                 if e @ e > MIX_TOL ** 2 * min(ef @ ef, en @ en):
                     continue
                 best, a[y, x], d[y, x], rn[y, x], rf[y, x] = l2, t, dd, rr[jn], rr[jf]
+                lo = np.minimum(np.minimum(cc[jn], cc[jf]), np.minimum(cc[4], 0.0))
+        if a[y, x] > 0:
+            t, span = a[y, x], cc[4] - lo
+            dd = np.where(cc[4] - t * d[y, x] < lo, span / t, d[y, x])
+            d[y, x] = np.where(cc[4] + (1 - t) * d[y, x] < lo, -span / (1 - t), dd)
     return a, rn, rf, d
 
 
