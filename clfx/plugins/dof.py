@@ -75,12 +75,16 @@ Warfare", simplified for offline use)
    distance to either end; of such pairs the one farthest apart in colour) is split: its
    near part ``C + (1 - a)(n - f)`` with the near neighbour's radius standing for ``a`` of
    the pixel, its far part ``C - a (n - f)`` with the far one's for ``1 - a`` (they mix back
-   to ``C``).  In the dense gathers each part is a tap of its own radius weighted by its
-   coverage, and a mixed pixel is gathered twice, as its far part and as its near part (at
-   its own centre only that part), blended by ``a``: an in-focus edge stays sharp, the sky
-   behind it stays clean.  The gather reads the split data only within reach of a 32 px
-   tile holding a mixed pixel; the report says how many were split.  (The sparse lattice and
-   the half-resolution gather read prefiltered colours and do not split.)
+   to ``C``); each part estimates a layer's colour, so a part below ``min(0, C, n, f)``
+   in a channel is set to that bound and the other takes up the difference (still ``C``
+   mixed: a rim over transparent black gave a far part of negative blue, spread into the
+   blurred background).  In the dense gathers each part is a tap of its own radius
+   weighted by its coverage, and a mixed pixel is gathered twice, as its far part and as
+   its near part (at its own centre only that part), blended by ``a``: an in-focus edge
+   stays sharp, the sky behind it stays clean.  The gather reads the split data only
+   within reach of a 32 px tile holding a mixed pixel; the report says how many were
+   split.  (The sparse lattice and the half-resolution gather read prefiltered colours and
+   do not split.)
 4. Tiles (32 px, the shared scene analysis): the largest CoC radius a tile's depth range can
    produce, dilated on the host over as many tiles as the largest radius reaches (3 x 3 for
    radii up to a tile); tiles whose neighbourhood maximum is below half a pixel are copied
