@@ -1257,17 +1257,20 @@ def test_the_mixed_split_bound_matches_the_reference(rt):
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
 
 
-def test_beachball_rim_at_defaults_makes_no_negative_light(rt, exr_images):
+@pytest.mark.parametrize("zero", ["far", "invalid"])
+def test_beachball_rim_at_defaults_makes_no_negative_light(rt, exr_images, zero):
     """``clfx apply dof`` at defaults on Beachball 0001 wrote 247 pixels below -1e-5 (min
     -0.00105, R = G > 0, B < 0) just outside the ball's silhouette, over a background of
-    RGBA 0 and Z = 0 (read as no hit: +inf); the input's least value is 0.  A 96 x 96 crop
-    around the worst of them, placed in the frame's display window, at draft and final."""
+    RGBA 0 and Z = 0 (read as no hit: +inf; 32 pixels with ``--depth-zero invalid``, Z = 0
+    in focus); the input's least value is 0.  A 96 x 96 crop around the worst of them,
+    placed in the frame's display window, at draft and final."""
     from clfx.core.rect import Rect
     from clfx.io.read import read_frame
 
     with pytest.warns(UserWarning, match="read as no hit"):
         fr = read_frame(exr_images / "Beachball" / "singlepart.0001.exr")
     assert np.isinf(fr.depth).any() and not (fr.depth == 0).any()
+    depth = fr.depth if zero == "far" else np.where(np.isinf(fr.depth), 0.0, fr.depth)
     y0, x0 = 175 - 48, 770 - 48                    # (770, 175) of the data window
     crop = (slice(y0, y0 + 96), slice(x0, x0 + 96))
     src = np.ascontiguousarray(fr.rgba[crop])
@@ -1276,6 +1279,6 @@ def test_beachball_rim_at_defaults_makes_no_negative_light(rt, exr_images):
     window = Rect(dw.x0 + x0, dw.y0 + y0, dw.x0 + x0 + 96, dw.y0 + y0 + 96)
     for quality in ("draft", "final"):
         got = render_effect(rt, Dof(), Dof.params(), src, depth=np.ascontiguousarray(
-            fr.depth[crop]), camera=Camera(), quality=quality, data_window=window,
+            depth[crop], np.float32), camera=Camera(), quality=quality, data_window=window,
             display_window=fr.display_window)
         assert got.min() >= lowest_allowed(src), (quality, got.min(), (got < -1e-5).sum())
