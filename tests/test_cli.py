@@ -98,10 +98,11 @@ def test_frame_alone_equals_frame_in_batch(rt, small_beachball, tmp_path):
     assert np.array_equal(a, b)
 
 
-def test_apply_one_effect_on_exr_and_png(rt, exr_images, tmp_path):
+def test_apply_one_effect_on_exr_and_png(rt, small_beachball, tmp_path):
     from clfx.io.read import read_frame
 
-    run("apply", "vignette", exr_images / BEACH.format(1), tmp_path / "v.exr", "amount=0.5")
+    run("apply", "vignette", small_beachball.path("singlepart", 1), tmp_path / "v.exr",
+        "amount=0.5")
     run("apply", "vignette", tmp_path / "v.exr", tmp_path / "v.png", "amount=0.2", "roundness=0")
     png = read_frame(tmp_path / "v.png")
     assert png.display_referred and png.rgba.shape[2] == 4
