@@ -231,15 +231,18 @@ def test_progress_counts_elapsed_time_from_the_start_of_the_render():
 # -- interrupts ------------------------------------------------------------------------------
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_a_signal_leaves_no_partial_file(rt, exr_images, tmp_path, sig, code):
-    """SIGTERM exits 143 and SIGINT (Ctrl-C) 130, with every file present complete."""
+    """SIGTERM exits 143 and SIGINT (Ctrl-C) 130, with every file present complete and no
+    temp file left: the signal comes while the first 2K frame is being written (its temp
+    file is there; waiting for the first output, it came between writes)."""
     pattern = str(exr_images / "Beachball" / "singlepart.#.exr")
     env = dict(os.environ)
     proc = subprocess.Popen([sys.executable, "-m", "clfx.cli", "render", pattern,
                              str(tmp_path / "o.#.exr"), "--float", "--compression", "zip"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.time() + 60
-    while time.time() < deadline and not list(tmp_path.glob("o.*.exr")):
-        time.sleep(0.05)
+    while time.time() < deadline and proc.poll() is None and not no_temp_files(tmp_path):
+        time.sleep(0.002)
+    assert no_temp_files(tmp_path), "no frame was caught being written"
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode in (code, 0), err  # 0 only if it finished before the signal
