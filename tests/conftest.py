@@ -174,3 +174,13 @@ def _kernel_cache_entries() -> list[int] | None:
                 programs += 1
                 kernels += sum(1 for k in os.scandir(prog.path) if k.is_dir())
     return [programs, kernels]
+
+
+@pytest.fixture(scope="session")
+def small_beachball(exr_images, tmp_path_factory):
+    """Beachball's frames decimated by 4, made on first use (`tests.plates.SmallBeachball`)."""
+    from tests.plates import SmallBeachball
+
+    if not (exr_images / "Beachball" / "multipart.0008.exr").is_file():
+        pytest.skip(f"Beachball sequence not found in {exr_images / 'Beachball'}")
+    return SmallBeachball(exr_images / "Beachball", tmp_path_factory.mktemp("small-beachball"))

@@ -20,23 +20,30 @@ pytest.importorskip("distributed")
 
 
 @pytest.fixture(scope="module")
-def beachball(exr_images):
-    pattern = exr_images / "Beachball" / "multipart.#.exr"
-    if not (exr_images / "Beachball" / "multipart.0008.exr").is_file():
-        pytest.skip(f"Beachball sequence not found in {exr_images / 'Beachball'}")
-    return str(pattern)
+def beachball(small_beachball):
+    """Beachball's multipart sequence decimated by 4 (`tests.plates`): every part, view and
+    window of the real files, 1/16 of the pixels.  A cluster's frames equal one process's
+    at any size; the full-size frames are the killed worker's (`full_beachball`)."""
+    return small_beachball.pattern("multipart", range(1, 5))
 
 
 @pytest.fixture(scope="module")
-def reference(beachball, tmp_path_factory):
-    """Single-process renders (no flag), made once per (look, frames, options)."""
+def full_beachball(exr_images):
+    if not (exr_images / "Beachball" / "multipart.0008.exr").is_file():
+        pytest.skip(f"Beachball sequence not found in {exr_images / 'Beachball'}")
+    return str(exr_images / "Beachball" / "multipart.#.exr")
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """Single-process renders (no flag), made once per (source, look, frames, options)."""
     made = {}
 
-    def render(look, frames, *options):
-        key = (look, frames, options)
+    def render(source, look, frames, *options):
+        key = (source, look, frames, options)
         if key not in made:
             out = tmp_path_factory.mktemp("reference")
-            clfx("-q", "render", beachball, out / "out.#.exr", "--look", look,
+            clfx("-q", "render", source, out / "out.#.exr", "--look", look,
                  "--frames", frames, *options)
             made[key] = out
         return made[key]
@@ -48,7 +55,7 @@ def json_lines(stdout: str) -> list[dict]:
 
 
 def test_scheduler_cinema_matches_single_process(beachball, reference, tmp_path):
-    want = reference("cinema", "1-3", "--quality", "draft")
+    want = reference(beachball, "cinema", "1-3", "--quality", "draft")
     out = tmp_path / "out"
     with dask_cluster(tmp_path / "logs") as (address, _):
         proc = clfx("render", beachball, out / "out.#.exr", "--look", "cinema",
@@ -60,13 +67,16 @@ def test_scheduler_cinema_matches_single_process(beachball, reference, tmp_path)
     assert_same_outputs(out, want)
 
 
-def test_worker_killed_mid_frame_batch_completes(beachball, reference, tmp_path):
-    want = reference("wide-angle", "1-8")
+def test_worker_killed_mid_frame_batch_completes(full_beachball, reference, tmp_path):
+    """Full-size frames: a worker is caught while it writes one (a 2K stereo frame takes
+    long enough to write), its chunk goes to the other worker.  Four frames in two chunks:
+    each worker starts one, the survivor renders both."""
+    want = reference(full_beachball, "wide-angle", "1-4")
     out = tmp_path / "out"
     with dask_cluster(tmp_path / "logs") as (address, workers):
         by_pid = {w.pid: w for w in workers}
-        proc = clfx_popen("render", beachball, out / "out.#.exr", "--look", "wide-angle",
-                          "--frames", "1-8", "--chunk", "2", "--scheduler", address, "--json")
+        proc = clfx_popen("render", full_beachball, out / "out.#.exr", "--look", "wide-angle",
+                          "--frames", "1-4", "--chunk", "2", "--scheduler", address, "--json")
         victim, deadline = None, time.monotonic() + 40
         while victim is None and proc.poll() is None and time.monotonic() < deadline:
             # a worker writing a frame: its temp file .<name>.tmp-<pid>-... is in the folder
@@ -82,13 +92,13 @@ def test_worker_killed_mid_frame_batch_completes(beachball, reference, tmp_path)
         assert victim.wait(timeout=5) == -signal.SIGKILL
     assert proc.returncode == 0, stderr[-3000:]
     lines = json_lines(stdout)
-    assert [d["frame"] for d in lines[:-1]] == list(range(1, 9))
-    assert lines[-1]["frames"] == 8 and lines[-1]["failed"] == []
+    assert [d["frame"] for d in lines[:-1]] == list(range(1, 5))
+    assert lines[-1]["frames"] == 4 and lines[-1]["failed"] == []
     assert_same_outputs(out, want)   # no partial or temp file either
 
 
 def test_local_workers_match_no_flag(beachball, reference, tmp_path):
-    want = reference("film-35mm", "1-4")
+    want = reference(beachball, "film-35mm", "1-4")
     out = tmp_path / "out"
     proc = clfx("render", beachball, out / "out.#.exr", "--look", "film-35mm",
                 "--frames", "1-4", "--workers", "2", "--json")
@@ -96,7 +106,7 @@ def test_local_workers_match_no_flag(beachball, reference, tmp_path):
     assert_same_outputs(out, want)
 
 
-def test_bad_frame_fails_once_and_others_render(exr_images, beachball, tmp_path):
+def test_bad_frame_fails_once_and_others_render(beachball, tmp_path):
     src = tmp_path / "in"
     src.mkdir()
     for f in (1, 3):

@@ -106,9 +106,11 @@ def stereo_multipart(path, rng, w=24, h=16):
 # --------------------------------------------------------------------------------------------
 # The real Beachball files
 
-@needs_data
-def test_beachball_multipart_through_cinema_keeps_every_part_and_channel(tmp_path, rt):
-    src = BEACHBALL / "multipart.0001.exr"
+def test_beachball_multipart_through_cinema_keeps_every_part_and_channel(tmp_path, rt,
+                                                                       small_beachball):
+    """The multipart file decimated by 4 (tests/plates.py: its 10 parts, views, windows,
+    types and compression as stored); the 2K singlepart file is the next test's."""
+    src = small_beachball.path("multipart", 1)
     run("render", src, tmp_path / "c.exr", "--look", "cinema")
     a, b = parts(src), parts(tmp_path / "c.exr")
     assert [(p["name"], p["view"], p["channels"]) for p in a] == \

@@ -20,10 +20,13 @@ def run(*args):
 
 
 @pytest.mark.parametrize("look", BUILTIN)
-def test_builtin_look_renders_beachball(rt, exr_images, tmp_path, look):
+def test_builtin_look_renders_beachball(rt, small_beachball, tmp_path, look):
+    """Every look on a real stereo frame with depth and motion (Beachball decimated by 4,
+    tests/plates.py: its views, passes and windows; sizes are fractions of the frame, so a
+    look does at 512x389 what it does at 2K; the pass effects below run on a 2K frame)."""
     from clfx.io.read import read_frame
 
-    src = exr_images / "Beachball" / "singlepart.0004.exr"
+    src = small_beachball.path("singlepart", 4)
     r = run("render", src, tmp_path / "o.exr", "--look", look, "--quality", "preview", "--json")
     record = json.loads(r.stdout.splitlines()[0])
     assert record["ran"] or record["skipped"]

@@ -233,26 +233,41 @@ def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
 
 @pytest.mark.slow
 def test_4k_renders_tiled_in_32_bands_bit_identical(rt, monkeypatch):
-    """At 4K UHD (as at 8K, where this test ran until CI time asked for a quarter of the
-    pixels: the same 32 bands, 2^18 pixels each instead of 2^20) every step of cinema but glare (which convolves in capped blocks instead:
-    `clfx.fx.fftconv.convolve_blocks`) tiles.  Here its resampling and grain steps (chromatic
-    aberration, distortion, vignette, grain) render in bands of 2^20 pixels: the same bits as
-    whole frames.  dof, motion blur and streaks at 8K, whole against tiled, took ~250 s of
-    this 2-core machine's time a run, so CI checks them in 7-row bands at every level and
-    frame layout (tests/contract/test_tiles.py) and streaks' row rings forced on small frames,
-    with their 8K memory plan (tests/plugins/test_streaks.py); the whole look at 8K, its bits and its peaks, is
-    scripts/tile_8k.py's.  With CLFX_POOL_MB=64 vignette + grain's device peak fell from
-    2065 to 1118 MiB."""
+    """A 4K UHD render in 32 bands, at a quarter of its pixels: every step of cinema but glare
+    (which convolves in capped blocks instead: `clfx.fx.fftconv.convolve_blocks`) tiles;
+    its resampling and grain steps (chromatic aberration, distortion, vignette, grain)
+    rendered in 32 bands give the same bits as whole frames.
+
+    The frame is 1920x1080 with everything that scales with the frame scaled with it, so the
+    render is 4K's (3840x2160, bands of 2^18 pixels) in every count: 32 bands of 2^16 pixels
+    (34 rows, the last 26; 4K: 68, the last 52), the whole render's maps built in 32 bands
+    (`clfx.fx.resample.BAND_PIXELS` 2^16 here, 2^18 there) and each band's map in one, the
+    pool's byte cap a quarter of the runtime's, as the frame's bytes are.  Sizes and
+    displacements are fractions of the frame; the rows a band reads past its band do not
+    grow with it (with its region of interest ignored, 2 rows fail and 4 pass at 480x270
+    and 1920x1080; 2 fail at 3840x2160).  This ran at 8K, then 4K (45 s); 1080p: ~9 s.
+    dof, motion blur and streaks at 8K, whole against tiled, took ~250 s of this 2-core
+    machine's time a run, so CI checks them in 7-row bands at every level and frame layout
+    (tests/contract/test_tiles.py) and streaks' row rings forced on small frames, with their
+    8K memory plan (tests/plugins/test_streaks.py); the whole look at 4K and 8K, its bits and
+    its peaks, is scripts/tile_8k.py's.  With CLFX_POOL_MB=64 vignette + grain's device peak
+    at 8K fell from 2065 to 1118 MiB."""
+    from clfx.fx import resample
+
     look = clfx.load_look("cinema")
     tiling = [s.effect for s in look.steps if s.plugin.whole_frame is None]
     assert tiling == ["dof", "motion_blur", "streaks", "chromatic_aberration", "distortion",
                       "vignette", "grain"]
     look = dataclasses.replace(look, steps=[s for s in look.steps if s.effect in tiling[3:]])
-    w, h = 3840, 2160
+    scale = 2                                     # of each side: 3840x2160 / 2
+    w, h, band = 3840 // scale, 2160 // scale, (1 << 18) // scale ** 2
+    monkeypatch.setattr(resample, "BAND_PIXELS", resample.BAND_PIXELS // scale ** 2)
+    monkeypatch.setattr(rt.cache, "max_bytes", rt.cache.max_bytes // scale ** 2)
+    assert len(tile_bands(Rect.from_size(w, h), band)) == 32
+    assert len(resample.map_bands(h, w)) == 32
     whole, _ = render_frame(rt, look, cinema_frame(w, h), frame_number=5)
     tiled, report = render_frame(rt, look, cinema_frame(w, h), frame_number=5,
-                                 tile_pixels=1 << 18)
-    assert len(tile_bands(Rect.from_size(w, h), 1 << 18)) == 32
+                                 tile_pixels=band)
     assert all(s.ran for s in report.steps)
     assert np.array_equal(whole.rgba.view(np.uint32), tiled.rgba.view(np.uint32))
 
