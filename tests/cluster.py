@@ -95,12 +95,27 @@ def pixels(path: Path):
         buf.get_pixels(oiio.FLOAT)
 
 
+def stamps(path: Path) -> dict:
+    """The ``clfx:*`` header attributes a render stamps (look, its JSON, quality, values,
+    hash, version, ...), but the command line, which names how the render was run."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    spec = inp.spec()
+    inp.close()
+    return {a.name: spec.getattribute(a.name) for a in spec.extra_attribs
+            if a.name.startswith("clfx:") and a.name != "clfx:commandLine"}
+
+
 def assert_same_outputs(got: Path, want: Path) -> None:
-    """Same file names (no temp files) and bit-identical pixels, windows and channels."""
+    """Same file names (no temp files), bit-identical pixels, windows and channels, and the
+    same stamps (a worker that rendered at another quality or with other values says so)."""
     names = sorted(os.listdir(want))
     assert sorted(os.listdir(got)) == names, f"{got}: {sorted(os.listdir(got))} != {names}"
     for name in names:
         (w_layout, w_px), (g_layout, g_px) = pixels(want / name), pixels(got / name)
         assert g_layout == w_layout, name
         np.testing.assert_array_equal(g_px, w_px, err_msg=name)
+        w_stamps = stamps(want / name)
+        assert "clfx:quality" in w_stamps and stamps(got / name) == w_stamps, name
 
