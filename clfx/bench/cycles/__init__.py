@@ -4,7 +4,7 @@ field as the truth.
 The scenes are made by :mod:`clfx.bench.cycles.render_scenes` (run with ``bpy``, Python
 3.13; the ``cycles`` bench extra, not needed by the tests) and packed by
 ``python -m clfx.bench.cycles.pack RENDER_DIR`` into ``data/`` here, two files per scene
-(320x180, half float, ZIP; 2.78 MB in all: textured frames do not compress far losslessly):
+(320x180, half float, ZIP; 3.3 MB in all: textured frames do not compress far losslessly):
 
 - ``<name>.exr``: the sharp frame as Blender writes it, one part with Blender's multilayer
   names: ``ViewLayer.Combined.RGBA``, ``ViewLayer.Depth.Z`` (float), ``ViewLayer.Vector.XYZW``

@@ -21,6 +21,13 @@ at frames 0, 1, 2 are keyed, so Blender's vector pass has both halves).  For eac
 The rolling-shutter scene (``truck_rolling``) is ``truck`` (whose sharp frame it shares) and
 its truth is Cycles' rolling shutter (top row first, 0.75 of a frame from the frame time,
 each row an instant: one render, ``truck_rolling.truth1.exr``).
+
+The depth-of-field scenes (``dof_large``, :data:`DOF_SCENES`) are still frames through a
+200 mm f/2 focused at 2 m: ``<name>.sharp.exr`` is the pinhole frame (depth of field off)
+with ``ViewLayer.Depth.Z`` and Blender's compositor Defocus node of it (the same f-number and
+focus, round bokeh) as ``Composite.Combined.RGBA``; the truths are Cycles' thin lens with the
+aperture that gives clfx's circle of confusion (:func:`cycles_fstop`), seeds 1 and 2
+(:data:`DOF_SAMPLES`: the lamps' bokeh is the noisiest part, 37.5 dB at 8192).
 """
 from __future__ import annotations
 
@@ -364,6 +371,9 @@ DOF_SCENES = {"dof_large": scene_dof_large}
 """Depth-of-field scenes: a pinhole frame (dof off) with its Depth pass and Blender's
 Defocus node, and Cycles' thin lens as the truth."""
 
+DOF_SAMPLES = 8192
+"""Samples per pixel of a depth-of-field truth (6 minutes a seed on 2 shared cores)."""
+
 SCENES = {"spin": scene_spin, "truck": scene_truck, "pan": scene_pan,
           "crossing": scene_crossing, "slow": scene_slow, "truck_rolling": scene_truck,
           **DOF_SCENES}
@@ -488,14 +498,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(here, "data"))
     ap.add_argument("--scenes", default=",".join(SCENES))
-    ap.add_argument("--samples", type=int, default=512, help="samples per pixel of a truth")
+    ap.add_argument("--samples", type=int, default=None,
+                    help="samples per pixel of a truth (default: 512, 8192 for depth of field)")
     ap.add_argument("--sharp-samples", type=int, default=128)
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     print(f"Blender {bpy.app.version_string}", flush=True)
     for name in args.scenes.split(","):
         print(name, flush=True)
-        make(name, args.out, args.samples, args.sharp_samples)
+        samples = args.samples or (DOF_SAMPLES if name in DOF_SCENES else 512)
+        make(name, args.out, samples, args.sharp_samples)
     return 0
 
 
