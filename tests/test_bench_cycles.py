@@ -1,4 +1,5 @@
-"""The motion effects against Blender Cycles' own renders (clfx.bench.cycles, issue 24).
+"""The motion effects (issue 24) and depth of field (issue 35) against Blender Cycles' own
+renders (clfx.bench.cycles).
 
 The renders are checked in (clfx/bench/cycles/data, made by render_scenes.py with bpy and
 packed by pack.py): these tests need neither Blender nor a render, only the files.
@@ -17,8 +18,10 @@ from clfx.plugins import get_plugin
 MOTION = [(e, v) for e in ("motion_blur", "camera_blur", "rolling_shutter")
           for v in cases.for_effect(e).variants if v.startswith("cycles_")]
 
-DATA_BUDGET = 3_000_000
-"""Bytes of every checked-in render together (2.78 MB: 320x180 lossless half float of
+DOF = [v for v in cases.for_effect("dof").variants if v.startswith("cycles_")]
+
+DATA_BUDGET = 3_500_000
+"""Bytes of every checked-in render together (3.3 MB: 320x180 lossless half float of
 textured scenes; see clfx/bench/cycles/__init__.py)."""
 
 
@@ -83,7 +86,7 @@ def _score(rt, effect, variant, quality="final"):
         naive = np.asarray(spec.naive.make(case, params, case_context(rt, case, "final"))())
         scores["naive"] = error_metrics(naive, truth)["psnr_log"]
     for label, peer in (case.get("peer_images") or {}).items():
-        scores["Blender Vector Blur"] = error_metrics(peer, truth)["psnr_log"]
+        scores[label] = error_metrics(peer, truth)["psnr_log"]
     return scores, case.get("truth_floor")
 
 
@@ -138,3 +141,49 @@ def test_rotating_light_streak_follows_its_arc_on_a_cycles_render(rt):
     out = crop_to(rt.download(img), img.window, ctx.source.window)
     assert np.abs(_streak_offsets(out)).max() < 1.0
     assert np.nanmax(np.abs(_streak_offsets(d["vector_blur"]))) > 3.0   # (nan: no light)
+
+
+def test_cycles_dof_scene_is_read_as_blender_writes_it():
+    """The dof scene's input is the pinhole frame with Blender's Depth pass read as planar z
+    (the wall facing the camera reads 12 m in the corners too, where the distance along the
+    ray is 6 cm longer), no Vector pass, and clfx's CoC of those depths has the scene's
+    radii and signs: the wall +41 px behind the focus plane, the near post -40 px in front."""
+    _have("dof_large")
+    d = cycles.load("dof_large")
+    assert d["velocity"] is None and d["velocity_back"] is None
+    z = np.asarray(d["depth"], np.float64)
+    wall = np.abs(z - 12.0) < 0.2
+    for y, x in ((0, 0), (0, -1), (-1, 0), (-1, -1), (2, 200)):
+        assert wall[y, x], (y, x, z[y, x])
+        assert abs(z[y, x] - 12.0) < 1e-3, (y, x, z[y, x])
+    cam = cycles.dof_camera()
+    r = 0.5 * cam.coc_signed_px(z, cycles.WIDTH)
+    assert abs(float(np.median(r[wall])) - 41.15) < 0.05
+    post = np.abs(z - 1.1) < 0.01       # the near post, 64 px left of the centre
+    assert post[:, 96].all() and abs(float(r[post].mean()) + 40.40) < 0.05
+    assert float(r[np.abs(z - 2.0) < 0.01].std()) < 0.5      # the subject: in focus
+    assert "Blender Defocus" in " ".join(d["peers"])
+
+
+@pytest.mark.parametrize("variant", DOF, ids=[f"dof:{v}" for v in DOF])
+def test_every_dof_level_beats_naive_and_input_on_cycles_thin_lens(rt, variant):
+    """Issue 35: circles of confusion of 27-41 px over each other, Cycles' thin lens as the
+    truth: every level scores above the naive per-pixel-CoC gather and the unchanged input
+    (log-PSNR), and the truth's noise floor lies above every level."""
+    spec = cases.for_effect("dof")
+    case = spec.maker(variant)(cycles.WIDTH, cycles.HEIGHT, None)
+    cls = get_plugin("dof")
+    params = cls.params(**case.get("params", {}))
+    truth = np.asarray(case["truth"], np.float64)
+    naive = np.asarray(spec.naive.make(case, params, case_context(rt, case, "final"))())
+    theirs = {"naive": error_metrics(naive, truth)["psnr_log"],
+              "input": error_metrics(case["source"], truth)["psnr_log"]}
+    floor = case["truth_floor"]
+    for q in ("draft", "preview", "final", "reference"):
+        ctx = case_context(rt, case, q)
+        img = cls().render(rt, params, ctx)
+        mine = error_metrics(crop_to(rt.download(img), img.window, ctx.source.window),
+                             truth)["psnr_log"]
+        for what, score in theirs.items():
+            assert mine > score, f"dof:{variant} {q}: {mine:.2f} dB <= {what} {score:.2f} dB"
+        assert floor > mine, f"dof:{variant}: noise floor {floor:.1f} dB <= {q} {mine:.1f} dB"

@@ -26,6 +26,11 @@ wide); ``SCENES`` are the classes of the depth-of-field table of issue 11, each 
 - ``cateye_front``, ``cateye_both``: the same lights clipped by the front rim (1.0, the
   clip shifted towards the centre) and by both rims (rear 0.7, front 0.7: pointed lemons).
 
+``cycles_large`` is ``large``'s set-up rendered by Blender Cycles (:mod:`clfx.bench.cycles`,
+scene ``dof_large``: a 200 mm f/2 at 2 m, CoC radii 27-41 px over each other): the pinhole
+frame with Blender's Depth pass as the input, Cycles' thin lens as the truth (its noise floor
+beside), Blender's compositor Defocus node as the peer row.
+
 ``naive(case, params, ctx)`` is the classic baseline (each pixel averages the source over the
 disk of its own CoC, no layering), with the same aperture model as the effect (squeeze,
 barrel clipping, per-channel radii) when the lens has them; ``NAIVE_LABEL`` names it in the
@@ -39,6 +44,7 @@ import time
 
 import numpy as np
 
+from clfx.bench import cycles
 from clfx.bench.cache import load_case
 from clfx.bench.cases import Case, Naive
 from clfx.bench.groundtruth import RENDER_SS, case_dict, make_case
@@ -442,7 +448,9 @@ def _scene_maker(name: str):
 
 CASE = Case(make=make,
             naive=Naive(NAIVE_LABEL, lambda case, params, ctx: (lambda: naive(case, params, ctx))),
-            variants={name: _scene_maker(name) for name in SCENES})
+            variants={**{name: _scene_maker(name) for name in SCENES},
+                      **({"cycles_large": cycles.maker("dof_large")}
+                         if cycles.available("dof_large") else {})})
 
 
 # -- the ground-truth table --------------------------------------------------------------------

@@ -4,9 +4,10 @@
 
 ``<name>.sharp.exr`` (Blender's multi-part multilayer file) becomes ``<name>.exr``: one part
 with the same channel names (``ViewLayer.Combined.RGBA`` half, ``ViewLayer.Depth.Z`` float,
-``ViewLayer.Vector.XYZW`` half), ZIP; the truths and the compositor's Vector Blur
-(``Composite.Combined``) go into ``<name>.ref.exr`` as ``truth.RGB`` (the seed-1 render) and
-``vectorblur.RGB`` (half, ZIP), with the log-PSNR of the seed-2 render against it in the
+``ViewLayer.Vector.XYZW`` half; the depth-of-field scenes have no Vector pass), ZIP; the
+truths and the compositor's Vector Blur or Defocus (``Composite.Combined``) go into
+``<name>.ref.exr`` as ``truth.RGB`` (the seed-1 render) and ``vectorblur.RGB`` or
+``defocus.RGB`` (half, ZIP), with the log-PSNR of the seed-2 render against it in the
 header (``clfx:noise_floor_log_psnr``; ``--keep-second`` stores that render too, as
 ``truth2.RGB``).  Prints each scene's noise floor and file sizes.
 """
@@ -21,7 +22,7 @@ import OpenImageIO as oiio
 import numpy as np
 
 from clfx.bench import cycles
-from clfx.bench.cycles import FLOOR_ATTRIBUTE, base_scene
+from clfx.bench.cycles import DOF_SCENES, FLOOR_ATTRIBUTE, base_scene
 from clfx.bench.metrics import psnr_log
 from clfx.io.read import read_channels
 
@@ -65,8 +66,9 @@ def pack(src: str, name: str, out_dir: str, keep_second: bool = False) -> None:
     if keep_second and len(truths) > 1:
         ref.update({f"truth2.{c}": truths[1][..., i] for i, c in enumerate("RGB")})
     if "Composite.Combined.R" in sharp:
+        peer = "defocus" if name in DOF_SCENES else "vectorblur"
         for c in "RGB":
-            ref[f"vectorblur.{c}"] = sharp[f"Composite.Combined.{c}"]
+            ref[f"{peer}.{c}"] = sharp[f"Composite.Combined.{c}"]
     # The floor of the stored (half-float) truth: both renders rounded as stored.
     half = [t.astype(np.float16).astype(np.float32) for t in truths]
     attrs = {FLOOR_ATTRIBUTE: float(psnr_log(half[1], half[0]))} if len(half) > 1 else {}

@@ -21,12 +21,20 @@ at frames 0, 1, 2 are keyed, so Blender's vector pass has both halves).  For eac
 The rolling-shutter scene (``truck_rolling``) is ``truck`` (whose sharp frame it shares) and
 its truth is Cycles' rolling shutter (top row first, 0.75 of a frame from the frame time,
 each row an instant: one render, ``truck_rolling.truth1.exr``).
+
+The depth-of-field scenes (``dof_large``, :data:`DOF_SCENES`) are still frames through a
+200 mm f/2 focused at 2 m: ``<name>.sharp.exr`` is the pinhole frame (depth of field off)
+with ``ViewLayer.Depth.Z`` and Blender's compositor Defocus node of it (the same f-number and
+focus, round bokeh) as ``Composite.Combined.RGBA``; the truths are Cycles' thin lens with the
+aperture that gives clfx's circle of confusion (:func:`cycles_fstop`), seeds 1 and 2
+(:data:`DOF_SAMPLES`: the lamps' bokeh is the noisiest part, 37.5 dB at 8192).
 """
 from __future__ import annotations
 
 import argparse
 import math
 import os
+import random
 import sys
 import time
 
@@ -38,9 +46,30 @@ FOCAL_MM, SENSOR_MM = 50.0, 36.0
 F_PX = FOCAL_MM / SENSOR_MM * W          # 444.4 px
 
 
-def px_m(depth: float, px: float) -> float:
-    """Metres spanned by ``px`` pixels at ``depth`` metres (at the frame centre)."""
-    return px * depth / F_PX
+def px_m(depth: float, px: float, f_px: float = F_PX) -> float:
+    """Metres spanned by ``px`` pixels at ``depth`` metres (at the frame centre) through a
+    lens of focal length ``f_px`` pixels (default: the 50 mm)."""
+    return px * depth / f_px
+
+
+# The depth-of-field lens (clfx.bench.cycles.DOF_*): a 200 mm f/2 focused at 2 m (its
+# close focus) on the 36 mm sensor: CoC diameter at infinity K = f^2 / (N (S - f)) = 11.1 mm,
+# 98.8 px at 320 wide (radius 49.4 px).
+DOF_FOCAL_MM, DOF_F_NUMBER, DOF_FOCUS_M = 200.0, 2.0, 2.0
+DOF_F_PX = DOF_FOCAL_MM / SENSOR_MM * W  # 1777.8 px
+
+
+def cycles_fstop(f_number: float, focal_mm: float, focus_m: float) -> float:
+    """The ``aperture_fstop`` that gives Cycles' camera clfx's CoC for ``f_number``.
+
+    Cycles' thin lens keeps the pinhole's framing and jitters the ray origin over an aperture
+    of radius ``f / (2 N)`` aimed at the focus plane, so its CoC diameter at infinity is
+    ``f^2 / (N S)`` on the sensor; clfx's (and Blender's Defocus node's) real thin lens has
+    the image distance in it: ``f^2 / (N (S - f))``.  ``N (S - f) / S`` makes them equal
+    (f/1.8 for f/2 at 200 mm and 2 m: the same f-number would give a CoC 10 % smaller).
+    """
+    s_mm = focus_m * 1000.0
+    return f_number * (s_mm - focal_mm) / s_mm
 
 
 # -- scene building ----------------------------------------------------------------------
@@ -279,8 +308,75 @@ def scene_slow(scene, cam):
     linear(c, velocity=(0.0, 0.0, px_m(d, -3.0)))
 
 
+DOF_LARGE = {   # name: depth m, centre x, y (px from the frame centre, y down), w, h px, turn deg
+    "sign": (5.0, 90.0, -40.0, 96.0, 54.0, 30.0),
+    "subject": (DOF_FOCUS_M, -16.0, 9.0, 96.0, 108.0, 6.0),
+    "near post": (1.1, -64.0, 0.0, 22.0, 216.0, 0.0),
+    "rail": (1.3, 32.0, 63.0, 288.0, 11.0, 0.0),
+}
+"""What stands in front of ``dof_large``'s wall, in the pinhole frame."""
+
+
+def _covered(x: float, y: float, margin: float) -> bool:
+    """Whether the point (px from the frame centre, y down) lies within ``margin`` px of
+    anything in front of ``dof_large``'s wall (a turn is clockwise on screen)."""
+    for _, cx, cy, w, h, turn in DOF_LARGE.values():
+        c, s = math.cos(math.radians(turn)), math.sin(math.radians(turn))
+        u, v = (x - cx) * c + (y - cy) * s, -(x - cx) * s + (y - cy) * c
+        if abs(u) <= 0.5 * w + margin and abs(v) <= 0.5 * h + margin:
+            return True
+    return False
+
+
+def scene_dof_large(scene, cam):
+    """Large circles of confusion over each other (the layered ``dof:large``'s set-up)
+    through the 200 mm f/2 at 2 m: a brick wall at 12 m (CoC radius 41 px) with 16 small
+    bright lamps on it (5-7 px wide: smaller ones need far more samples for the same noise
+    floor; none hidden in the pinhole frame, which no input would show), a striped sign at
+    5 m (30 px), an in-focus checkered subject at 2 m, a near post at 1.1 m (-40 px)
+    crossing the subject and a rail at 1.3 m (-27 px) crossing all (:data:`DOF_LARGE`)."""
+    f = DOF_F_PX
+    cam.data.lens = DOF_FOCAL_MM
+    dw = 12.0
+    wide = dw * SENSOR_MM / DOF_FOCAL_MM * 1.6
+    add(scene, "plane", "wall", emission("wall", "brick", (0.55, 0.42, 0.3), (0.12, 0.14, 0.18),
+                                          scale=24.0, strength=0.3),
+        (0.0, dw, 0.0), (wide, 1.0, wide * 0.6))
+    rng = random.Random(17)
+    lamps = 0
+    while lamps < 16:
+        x, y = rng.uniform(-150.0, 150.0), rng.uniform(-80.0, 80.0)
+        if _covered(x, y, 6.0):
+            continue
+        v = math.exp(rng.uniform(math.log(6.0), math.log(80.0)))
+        tint = [rng.uniform(0.4, 1.0) for _ in range(3)]
+        tint = tuple(t / max(tint) for t in tint)
+        d = dw - 0.05
+        add(scene, "sphere", f"lamp {lamps}", emission(f"lamp{lamps}", "flat", tint, None,
+                                                        strength=v),
+            (px_m(d, x, f), d, px_m(d, -y, f)), px_m(d, rng.uniform(5.0, 7.0), f))
+        lamps += 1
+    looks = {"sign": ("stripes", (0.8, 0.7, 0.3), (0.1, 0.15, 0.3), 3.0),
+             "subject": ("checker", (0.75, 0.7, 0.6), (0.08, 0.07, 0.06), 8.0),
+             "near post": ("noise", (0.35, 0.1, 0.06), (0.1, 0.05, 0.03), 6.0),
+             "rail": ("noise", (0.1, 0.3, 0.35), (0.05, 0.1, 0.1), 6.0)}
+    for name, (d, x, y, w, h, turn) in DOF_LARGE.items():
+        tex, a, b, scale = looks[name]
+        add(scene, "plane", name, emission(name, tex, a, b, scale=scale),
+            (px_m(d, x, f), d, px_m(d, -y, f)), (px_m(d, w, f), 1.0, px_m(d, h, f)),
+            rotation=(0.0, math.radians(turn), 0.0))
+
+
+DOF_SCENES = {"dof_large": scene_dof_large}
+"""Depth-of-field scenes: a pinhole frame (dof off) with its Depth pass and Blender's
+Defocus node, and Cycles' thin lens as the truth."""
+
+DOF_SAMPLES = 8192
+"""Samples per pixel of a depth-of-field truth (6 minutes a seed on 2 shared cores)."""
+
 SCENES = {"spin": scene_spin, "truck": scene_truck, "pan": scene_pan,
-          "crossing": scene_crossing, "slow": scene_slow, "truck_rolling": scene_truck}
+          "crossing": scene_crossing, "slow": scene_slow, "truck_rolling": scene_truck,
+          **DOF_SCENES}
 
 
 # -- rendering ---------------------------------------------------------------------------
@@ -310,6 +406,51 @@ def vector_blur_compositor(scene):
     scene.render.use_compositing = True
 
 
+def defocus_compositor(scene):
+    """Render Layers -> Defocus (the scene camera's focus, clfx's f-number, round bokeh,
+    Z buffer from the Depth pass, no blur cap under the frame's largest CoC) -> the
+    composite: Blender's own post-process depth of field, the peer row."""
+    tree = bpy.data.node_groups.new("defocus", "CompositorNodeTree")
+    tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+    rl = tree.nodes.new("CompositorNodeRLayers")
+    df = tree.nodes.new("CompositorNodeDefocus")
+    df.bokeh = "CIRCLE"
+    df.f_stop = DOF_F_NUMBER
+    df.blur_max = 128.0
+    df.use_zbuffer = True
+    out = tree.nodes.new("NodeGroupOutput")
+    tree.links.new(rl.outputs["Image"], df.inputs["Image"])
+    tree.links.new(rl.outputs["Depth"], df.inputs["Z"])
+    tree.links.new(df.outputs["Image"], out.inputs["Image"])
+    scene.compositing_node_group = tree
+    scene.render.use_compositing = True
+
+
+def make_dof(name: str, out: str, samples: int, sharp_samples: int) -> None:
+    """A depth-of-field scene: the pinhole frame with its Depth pass and the Defocus node,
+    then Cycles' thin lens (seeds 1 and 2)."""
+    scene, cam = reset()
+    DOF_SCENES[name](scene, cam)
+    vl = scene.view_layers[0]
+    vl.use_pass_z = True
+    scene.render.use_motion_blur = False
+    dof = cam.data.dof
+    dof.use_dof = False
+    dof.focus_distance = DOF_FOCUS_M     # the Defocus node's focus (it reads the camera's)
+    defocus_compositor(scene)
+    exr(scene, multilayer=True)
+    render(scene, os.path.join(out, f"{name}.sharp.exr"), samples=sharp_samples)
+    scene.render.use_compositing = False
+    vl.use_pass_z = False
+    dof.use_dof = True
+    dof.aperture_fstop = cycles_fstop(DOF_F_NUMBER, DOF_FOCAL_MM, DOF_FOCUS_M)
+    dof.aperture_blades = 0          # round, as clfx's camera (blades 0)
+    dof.aperture_ratio = 1.0
+    exr(scene, multilayer=False)
+    for seed in (1, 2):
+        render(scene, os.path.join(out, f"{name}.truth{seed}.exr"), samples=samples, seed=seed)
+
+
 def render(scene, path, *, samples, seed=1):
     scene.cycles.samples = samples
     scene.cycles.seed = seed
@@ -320,6 +461,8 @@ def render(scene, path, *, samples, seed=1):
 
 
 def make(name: str, out: str, samples: int, sharp_samples: int) -> None:
+    if name in DOF_SCENES:
+        return make_dof(name, out, samples, sharp_samples)
     scene, cam = reset()
     SCENES[name](scene, cam)
     scene.frame_set(1)
@@ -355,14 +498,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(here, "data"))
     ap.add_argument("--scenes", default=",".join(SCENES))
-    ap.add_argument("--samples", type=int, default=512, help="samples per pixel of a truth")
+    ap.add_argument("--samples", type=int, default=None,
+                    help="samples per pixel of a truth (default: 512, 8192 for depth of field)")
     ap.add_argument("--sharp-samples", type=int, default=128)
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     print(f"Blender {bpy.app.version_string}", flush=True)
     for name in args.scenes.split(","):
         print(name, flush=True)
-        make(name, args.out, args.samples, args.sharp_samples)
+        samples = args.samples or (DOF_SAMPLES if name in DOF_SCENES else 512)
+        make(name, args.out, samples, args.sharp_samples)
     return 0
 
 
