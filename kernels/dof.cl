@@ -794,8 +794,18 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float16 c0 = vload16(0, col + base * 4);
   if(!twice)
   {
-    vstore16(dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first, count,
-                             cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS), 0, out);
+    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first, count,
+                                cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS);
+    /* pixels in focus or nearly beside out-of-focus ones in a sparse table's group: a
+       lattice's far field would give them their own pixel through its prefilter tent (an
+       in-focus edge against a 41 px background went soft 2^L px deep); they take the sharp
+       table's gather (every pixel within sharp_r), as a group of 4 such pixels does */
+    const int4 sharp4 = r >= -NEAR_EPS && r < sharp_r;
+    if(info.s5 > 0 && first == info.s0 && any(sharp4))
+      o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, info.s2,
+                                    info.s3, cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
+                 LANES(sharp4));
+    vstore16(o, 0, out);
     return;
   }
   /* a mixed pixel: its far part's gather (at the far layer's radius) and its near part's,

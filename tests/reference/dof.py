@@ -198,7 +198,8 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
     ``clamp(a - b + 0.5, 0, 1)``.  ``offset``: added to every signed radius (axial CA).
     ``sharp_taps``: the table of pixels in focus or nearly (the plugin's per-tile sharp
     table; a far distance or a near distance of 1e30 never covers), used by the pixels of a
-    group of 4 (x // 4 of a row) whose every radius lies in [-0.25, ``sharp_radius``).
+    group of 4 (x // 4 of a row) whose every radius lies in [-0.25, ``sharp_radius``), and
+    with a sparse ``taps`` (any L > 0) by every such pixel of a group whose others are not.
     ``cateye``: (cx, cy) per pixel (:func:`cateye_centres`): every coverage below is also
     clipped by the barrel, near taps by clamp(|r_q| - |a - c |r_q|| + 0.5, 0, 1), far ones by
     clamp(rf - |a + c rf| + 0.5, 0, 1) (a: the tap's aperture-space offset), and the near
@@ -338,11 +339,13 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
     rn_, rf_ = np.where(split, mix_rn, r), np.where(split, mix_rf, r)
     both = groups((np.minimum(rn_, rf_) >= -near_eps) & (np.maximum(rn_, rf_) < sharp_radius),
                   np.all)
-    own = groups((r >= -near_eps) & (r < sharp_radius), np.all)
+    own_px = (r >= -near_eps) & (r < sharp_radius)
+    own = groups(own_px, np.all)
     sharp = tables[1]
     cases = [(g_split & both & dense(sharp), lambda: twice(sharp)),
              (g_split & dense(taps), lambda: twice(taps)),
              (own, lambda: once(sharp)),
+             (own_px & (not dense(taps)), lambda: once(sharp)),
              (np.ones((h, w), bool), lambda: once(taps))]
     out = np.zeros(src.shape)
     left = np.ones((h, w), bool)
