@@ -667,7 +667,8 @@ inline float4 dof_upsample(global const float *hres, const int hpitch, const int
  * reads the image itself), the farthest x or y offset of a tap of the first (px); count 0
  * copies the sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
  * pixel) gather with the sharp table (every pixel within sharp_r a far-field tap, the near
- * field around: tap_table's core); with mode bit 0,
+ * field around: tap_table's core), as do such pixels of a group gathered with a sparse
+ * first table (level > 0); with mode bit 0,
  * 4 pixels all out of focus (|radius| >= low_r) take the half-resolution result `hres`
  * unless (mode bit 1: a dense table, a full-resolution gather there is worth it) its
  * half-res pixels span more than `refine` in log luminance (a bokeh rim); every other

@@ -94,7 +94,10 @@ Warfare", simplified for offline use)
    their own radius, with a table whose far field is every pixel within ``sharp_radius``
    (their own blur is no wider) and whose near field is the lattice below when the near
    blur is large (:func:`tap_table`'s ``core``): an in-focus subject beside a 40 px
-   foreground post stays sharp instead of taking the lattice's prefilter tent.
+   foreground post stays sharp instead of taking the lattice's prefilter tent.  In a group
+   of 4 that also holds out-of-focus pixels under a sparse lattice, the pixels in focus or
+   nearly take that table's gather too (the group is gathered twice): the lattice's centre
+   tap gave an in-focus edge against a 41 px background its own pixels through the tent.
 5. ``dof_gather``: taps over the neighbourhood radius ``R``: every pixel of the disk up to
    the level's ``dense_radius`` (a single bright pixel spreads into an evenly lit disk with
    an antialiased rim), beyond that a lattice of every 2nd, 4th, ... pixel (at most the
