@@ -250,10 +250,11 @@ BUILD_LOG = os.environ.get("CLFX_BUILD_LOG")
 """Opt-in: a file to which every program build appends one JSON line (kernel file, defines,
 seconds, and the test running it, from ``PYTEST_CURRENT_TEST``).  The distinct (file, defines)
 pairs are the programs a cold kernel cache compiles; ``scripts/test_cpu_table.py --builds``
-sums them per test module."""
+sums them per test module.  VkFFT's plans (``clfx.fx.fftconv``) are logged as file ``vkfft``:
+each builds a program of its own, a compile on a cold kernel cache."""
 
 
-def _log_build(file: str, defines, seconds: float) -> None:
+def log_build(file: str, defines, seconds: float) -> None:
     test = os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" (", 1)[0]
     with contextlib.suppress(OSError), open(BUILD_LOG, "a") as log:
         log.write(json.dumps({"file": file, "defines": [list(d) for d in defines],
@@ -584,7 +585,7 @@ class Runtime:
                 marker.parent.mkdir(parents=True, exist_ok=True)
                 marker.write_text(f"{file} {' '.join(opts)} {seconds:.3f}\n")
         if BUILD_LOG:
-            _log_build(file, defines, seconds)
+            log_build(file, defines, seconds)
         if caught:
             try:
                 log = prg.get_build_info(self.device, cl.program_build_info.LOG).strip()
