@@ -288,13 +288,12 @@ def _spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
     # kernel cache compiles each, ~1 s on PoCL); its plane is the same either way.
     batch = 3 if planes == 1 and 3 * plane_bytes <= MAX_BATCH_BYTES else planes
     holder = rt.buffer(batch * plane_bytes)
-    if batch > planes:
+    quadrants = kh <= n1 and kw <= n2
+    if quadrants or batch > planes:   # the planes the copies below leave zero
         rt.cl.enqueue_fill_buffer(rt.queue, holder.buffer, real(0), 0, batch * plane_bytes)
-    if kh <= n1 and kw <= n2:
+    if quadrants:
         # no two taps coincide modulo the grid: the taps' four wrapped quadrants are copied
         # into the zeroed buffer (the host holds the PSF, never a grid-sized plane)
-        if batch == planes:
-            rt.cl.enqueue_fill_buffer(rt.queue, holder.buffer, real(0), 0, planes * plane_bytes)
         taps = np.ascontiguousarray(np.moveaxis(k, 2, 0), real)     # (planes, kh, kw)
         item, row = np.dtype(real).itemsize, (n2 + 2) * np.dtype(real).itemsize
         for p in range(planes):
