@@ -136,25 +136,21 @@ def test_cli_is_a_thin_layer_over_the_api():
 def test_the_api_keeps_compiler_warnings_quiet_on_a_cold_cache(tmp_path):
     """A cold PoCL cache makes the compiler warn (hundreds of lines for a look on some
     machines, none on others); the API says nothing, as the command line without -v, unless the
-    caller's own filter asks.  The child builds one program that always warns (``#warning``)
-    through the runtime, so the test does not depend on whether this machine's compiler has
-    anything to say about clfx's own kernels, then renders through the API on a cold cache."""
+    caller's own filter asks.  The child builds one program that always warns
+    (`tests.compiler_warns`) through the runtime, so the test does not depend on whether this
+    machine's compiler has anything to say about clfx's own kernels, then renders through
+    the API on a cold cache."""
     import subprocess
     import sys
     from pathlib import Path
 
+    from tests import compiler_warns
+
     root = Path(__file__).resolve().parents[1]
-    code = ("import sys, numpy as np, clfx, pathlib\n"
+    code = ("import sys, numpy as np, clfx\n"
             "from clfx.device.runtime import Runtime\n"
-            "rt = Runtime.get()\n"
-            "d = pathlib.Path(sys.argv[1]); d.mkdir()\n"
-            "(d / 'warns.cl').write_text('#warning \"clfx test: the compiler warns\"\\n'\n"
-            "    'kernel void k(global float *x) { x[0] = 1.0f; }\\n')\n"
-            "kernels, rt.kernel_dir = rt.kernel_dir, d\n"
-            "try:\n"
-            "    rt.program('warns.cl')\n"
-            "finally:\n"
-            "    rt.kernel_dir = kernels\n"
+            "from tests import compiler_warns\n"
+            "compiler_warns.build(Runtime.get(), sys.argv[1])\n"
             "clfx.render_array(np.ones((8, 8, 4), np.float32), {'effects': [{'effect': 'vignette'}]})\n")
 
     def run(*flags, cache):
@@ -167,7 +163,7 @@ def test_the_api_keeps_compiler_warnings_quiet_on_a_cold_cache(tmp_path):
     assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
     shown = run("-W", "always::UserWarning", cache="b")     # the warnings are there to hide
     assert shown.returncode == 0, shown.stderr
-    if "clfx test: the compiler warns" in shown.stderr or "KernelBuildWarning" in shown.stderr:
+    if compiler_warns.spoke(shown.stderr):
         assert "KernelBuildWarning" in shown.stderr
     else:        # a compiler that ignores #warning (none seen yet): nothing leaked either way
         assert shown.stderr == "", shown.stderr

@@ -2,25 +2,17 @@
 code: they import only the standard library, NumPy, SciPy and each other (a constant or a
 function taken from clfx would make the test agree with the implementation by
 construction), and no oracle function is a copy of a function in clfx (the same body,
-statement for statement)."""
+statement for statement).  Published data an oracle needs (CIE tables, coating designs, a
+filter's constants) it states itself; a test here checks that clfx uses the same numbers."""
 import ast
 import sys
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parent.parent
 ORACLES = sorted((ROOT / "tests" / "reference").glob("*.py"))
 ALLOWED = {"numpy", "scipy"} | set(sys.stdlib_module_names)
-
-KNOWN: dict[tuple[str, str], str] = {
-    ("distortion.py", "clfx.fx.resample"):
-        "footprint_spread: the host's rule for a footprint's spread (kappa, cap, float16)",
-    ("rolling_shutter.py", "clfx.fx.motion"):
-        "path: the arc through a point's positions at -1, 0 and +1 frame",
-    ("streaks.py", "clfx.fx"):
-        "coating_tint: optics.MULTILAYER_DESIGNS and spectral's CIE tables",
-}
-"""(oracle file, imported module) still to be written out of the oracle, with what it takes:
-none may be added (issue 36), each goes when its oracle derives it."""
 
 
 def imports(tree) -> list[str]:
@@ -40,10 +32,8 @@ def test_oracles_import_only_numpy_scipy_and_the_standard_library():
     for path in ORACLES:
         for module in imports(ast.parse(path.read_text())):
             root = module.split(".")[0]
-            if root in ALLOWED or module == "tests.reference" or \
-                    module.startswith("tests.reference."):
-                continue
-            if (path.name, module) not in KNOWN:
+            if not (root in ALLOWED or module == "tests.reference"
+                    or module.startswith("tests.reference.")):
                 wrong.append(f"{path.name}: {module}")
     assert not wrong, wrong
 
@@ -83,3 +73,27 @@ def test_the_checks_catch_an_import_and_a_copy(tmp_path):
     mine = _bodies(fake)
     theirs = set(_bodies(ROOT / "clfx" / "core" / "camera.py").values())
     assert any(dump in theirs for dump in mine.values())
+
+
+def test_the_oracles_published_numbers_are_the_ones_clfx_uses():
+    """What an oracle states of published data or of a design's constants, clfx's tables say
+    too: the footprint filters' (kappa, cap), the arc's turn limits (kernels/lib/arc.h), the
+    coating stacks and their glass, the CIE 1931 fit, the Rec.709 matrix and luminance."""
+    from clfx.core import colour
+    from clfx.fx import motion, optics, resample, spectral
+    from clfx.plugins import streaks
+    from tests import reference
+    from tests.reference import distortion, rolling_shutter
+    from tests.reference import streaks as streaks_oracle
+
+    assert distortion.FOOTPRINT_CONSTANTS == {name: (fp.kappa, fp.cap)
+                                              for name, fp in resample.FOOTPRINTS.items()}
+    assert (rolling_shutter.MIN_TURN, rolling_shutter.MAX_TURN) == (motion.MIN_TURN,
+                                                                    motion.MAX_TURN)
+    assert streaks_oracle.COATING_DESIGNS == optics.MULTILAYER_DESIGNS
+    assert streaks_oracle.CROWN_GLASS_INDEX == streaks.GLASS_INDEX
+    lam = np.linspace(360.0, 830.0, 941)
+    np.testing.assert_allclose(reference.cie1931(lam), spectral.cie1931_cmf(lam), rtol=0,
+                               atol=1e-15)
+    np.testing.assert_array_equal(reference.XYZ_TO_REC709, colour.XYZ_TO_REC709)
+    np.testing.assert_array_equal(reference.REC709_Y, colour.REC709_LUMINANCE)

@@ -220,11 +220,20 @@ def test_a_loaded_look_renders_from_the_lenses_it_resolved(rt, monkeypatch):
     assert report.steps[0].ran
 
 
-def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt):
+@pytest.mark.parametrize("overscan", [0, 12])
+def test_cinema_renders_tiled_with_the_pixels_of_a_whole_render(rt, overscan):
     """The cinema look with its tiling steps in bands of 64 rows: bit-identical to the
-    whole frame (the steps that cannot tile run whole: `Plugin.whole_frame`)."""
+    whole frame (the steps that cannot tile run whole: `Plugin.whole_frame`).  With
+    ``overscan`` pixels of data window past the display window on every side, a warp's
+    canvas and region of definition in a band are the whole render's
+    (`clfx.kit.warp.whole_context`: with the band's own instead, the overscan frame's pixels
+    differ; the frame without overscan, and the 32-band test's, keep them).  Every warp at
+    every border and window: tests/contract/test_tiles.py."""
     look = clfx.load_look("cinema")
-    frame = cinema_frame(480, 270)
+    frame = cinema_frame(480 + 2 * overscan, 270 + 2 * overscan)
+    frame = dataclasses.replace(frame, data_window=Rect(-overscan, -overscan, 480 + overscan,
+                                                        270 + overscan),
+                                display_window=Rect.from_size(480, 270))
     whole, _ = render_frame(rt, look, frame, frame_number=5, tile_pixels=None)
     tiled, _ = render_frame(rt, look, frame, frame_number=5, tile_pixels=480 * 64)
     assert whole.data_window == tiled.data_window

@@ -224,7 +224,9 @@ def test_case_edge_band_beats_naive_by_a_margin(rt, gt_case):
     than the per-pixel line blur: measured 18% at 320x180, 128 rays (0.0145 final, 0.0146
     draft vs 0.0177), 16% at 240x135 (0.0188 vs 0.0225), 22% at 480x270, 256 rays (0.0137
     vs 0.0176).  Elsewhere the line blur along each pixel's exact camera velocity is what
-    the gather does too (see clfx.bench.cases.camera_blur: what limits the score)."""
+    the gather does too (see clfx.bench.cases.camera_blur: what limits the score).  A
+    gather that ignores depth order still passes here (0.87): its near things are its fast
+    ones; test_follow_shot_keeps_the_background_behind_the_card catches it."""
     from clfx.bench.cases import camera_blur as cb
     from clfx.bench.metrics import error_metrics
 
@@ -240,6 +242,34 @@ def test_case_edge_band_beats_naive_by_a_margin(rt, gt_case):
         got = edge_rmse(run(rt, c["source"], q, depth=c["depth"], camera=c["camera"],
                             **c["params"]))
         assert got < 0.90 * naive, (q, got, naive)
+
+
+def test_follow_shot_keeps_the_background_behind_the_card(rt, rng):
+    """Where depth order decides the edge: the camera trucks right while panning so that a
+    near card (1 m) holds still and the far wall (40 m) streaks 12 px/frame behind it (a
+    follow shot).  The truth needs no render: the card never moves, so its pixels stay the
+    source's and none of its light (its red; the wall has none) reaches a pixel outside it,
+    however the wall streaks past.  A gather that ignores depth order (the effect's kernels
+    built without HAS_DEPTH) averages the card into the wall's streaks beside it (red up to
+    0.33 there, measured at every level); in front of the wall the card rejects those
+    samples (measured: up to 0.050 draft, 0.025 the others, the colour fetch's filter at
+    the card's rim).  The bench case's edge band does not tell the two apart: its parallax
+    makes the near things the fast ones."""
+    import math
+
+    h, w = 48, 80
+    src = smooth_texture(rng, h, w)
+    card = np.zeros((h, w), bool)
+    card[12:36, 28:52] = True
+    src[..., 0] = 0.0
+    src[card, 0] = 0.8
+    depth = np.where(card, 1.0, 40.0).astype(np.float32)
+    truck = 12.0 / CAM.focal_length_px(w) / (1.0 / 1.0 - 1.0 / 40.0)   # m/frame
+    pan = CAM.focal_length_px(w) * truck / 1.0 / math.hypot(w, h)       # the card's speed
+    for q in ("draft", "final"):
+        out = run(rt, src, q, depth=depth, length=pan, direction=0.0, truck=(truck, 0.0))
+        np.testing.assert_allclose(out[card], src[card], rtol=0, atol=1e-6, err_msg=q)
+        assert out[~card, 0].max() < 0.1, (q, out[~card, 0].max())
 
 
 def test_roll_while_trucking_follows_the_arcs(rt, rng):

@@ -6,24 +6,15 @@ import math
 
 import numpy as np
 
+from tests.reference import XYZ_TO_REC709 as M, cie1931
 from tests.reference.distortion import bisect, sample
-
-M = np.array([[3.2404542, -1.5371385, -0.4985314],
-              [-0.9692660, 1.8760108, 0.0415560],
-              [0.0556434, -0.2040259, 1.0572252]])
-
-
-def g(lam, mu, s1, s2):
-    return np.exp(-0.5 * ((lam - mu) / np.where(lam < mu, s1, s2)) ** 2)
 
 
 def response(lam, rgb_to_xyz=None):
-    x = 1.056 * g(lam, 599.8, 37.9, 31.0) + 0.362 * g(lam, 442.0, 16.0, 26.7) - 0.065 * g(lam, 501.1, 20.4, 26.2)
-    y = 0.821 * g(lam, 568.8, 46.9, 40.5) + 0.286 * g(lam, 530.9, 16.3, 31.1)
-    z = 1.217 * g(lam, 437.0, 11.8, 36.0) + 0.681 * g(lam, 459.0, 26.0, 13.8)
+    xyz = cie1931(lam)
     to_rgb = M if rgb_to_xyz is None else np.linalg.inv(rgb_to_xyz)
-    rgb = np.clip(np.stack([x, y, z], -1) @ to_rgb.T, 0, None)
-    return np.concatenate([rgb, y[:, None]], -1)
+    rgb = np.clip(xyz @ to_rgb.T, 0, None)
+    return np.concatenate([rgb, xyz[:, 1:2]], -1)
 
 
 def delta(lam, amount, rgb_to_xyz=None):

@@ -6,18 +6,29 @@ chromatic_aberration and lens): the plainest forms, no shortcuts.
 - Resampling: direct separable sums of the same filters (bilinear, Keys a=-0.5 bicubic,
   normalised Lanczos-3 with exact sines), texels read through the border rule, non-finite
   texels read as 0, outputs clamped to the min/max of their nearest 2x2 texels.
-- Footprints (distortion's levels, clfx.fx.resample.FOOTPRINTS): the map's Jacobian by
-  central differences of the forward model, the per-axis spread h and the sub-footprint count
-  n from the host's rule (``footprint_spread``: h rounded to float16, as the kernels store
-  it), then each tap's weight by its definition (no vector tricks) and the clamp to the
-  texels within 1 + h of the point (the quadratic: its 3x3 window); the reference's
-  elliptical footprint through an SVD of the Jacobian and n x n Lanczos-3 samples.
+- Footprints (distortion's levels): the map's Jacobian by central differences of the forward
+  model, the per-axis spread h and the sub-footprint count n derived from the box the output
+  pixel's preimage covers (:func:`spread`, with each filter's constants stated in
+  ``FOOTPRINT_CONSTANTS``), then each tap's weight by its definition (no vector tricks) and
+  the clamp to the texels within 1 + h of the point (the quadratic: its 3x3 window); the
+  reference's elliptical footprint through an SVD of the Jacobian and n x n Lanczos-3
+  samples.
 """
 import math
 
 import numpy as np
 
-from clfx.fx.resample import footprint_spread
+FOOTPRINT_CONSTANTS = {
+    "quadratic": (1.3, 0.75),
+    "bicubic": (1.0, 1.0 / 3.0),
+    "lanczos3": (1.0, 0.98),
+}
+"""Each footprint filter's (kappa, cap), the design's per-filter constants: kappa scales the
+variance the footprint adds (the draft's 3-tap quadratic attenuates high frequencies less
+than the box it stands for, so it takes 1.3 times the box's), cap is the most added
+variance (texels^2) one window of the filter holds (3 taps: 0.75, Keys' 4: 1/3, the 8-tap
+Lanczos pair: 0.98).  The oracle states them; tests/test_oracles.py checks that the host's
+table (clfx.fx.resample.FOOTPRINTS) says the same."""
 
 
 def mirror_index(i, n):
@@ -192,9 +203,27 @@ def lanczos3(x):
 
 def spread(jac, name):
     """(hx, hy, n): the per-axis spread of footprint filter ``name`` and the sub-footprint
-    count.  The rule itself (marginal widths, kappa, the cap, float16 storage) is the host's
-    definition, checked by hand-computed values in the tests; the oracle filters with it."""
-    return footprint_spread(jac, name)
+    count, from the box an output pixel's preimage covers.
+
+    The output pixel (a unit square) maps to the parallelogram of sides J e_x and J e_y;
+    along the source's x axis it spans the box width W_x with W_x^2 = J11^2 + J12^2 (y:
+    J21, J22).  A box of width W has variance W^2 / 12, a texel's own 1 / 12, so reading
+    through the footprint adds kappa (W^2 - 1) / 12 where W > 1 (nothing where the map
+    magnifies).  One window holds at most ``cap`` of it: a wider pixel is cut into n x n
+    equal parts (each J / n, width W / n), n the least whole number with
+    kappa ((W / n)^2 - 1) / 12 <= cap on both axes, i.e. n >= W / sqrt(1 + 12 cap / kappa).
+    The spread of each part, h = sqrt(kappa max((W / n)^2 - 1, 0) / 12), is stored by the
+    kernels' maps as float16 (the nearest half-precision value).  A Jacobian entry that is
+    not finite widens nothing (read as 0)."""
+    kappa, cap = FOOTPRINT_CONSTANTS[name]
+    j = np.where(np.isfinite(jac), jac, 0.0)
+    widths = np.sqrt(np.stack([j[..., 0, 0] ** 2 + j[..., 0, 1] ** 2,
+                               j[..., 1, 0] ** 2 + j[..., 1, 1] ** 2]))   # W_x, W_y
+    widest_part = math.sqrt(1.0 + 12.0 * cap / kappa)       # the widest W / n one window takes
+    n = np.maximum(np.ceil(widths.max(axis=0) / widest_part), 1.0)
+    added = kappa * np.maximum((widths / n) ** 2 - 1.0, 0.0) / 12.0
+    h = np.sqrt(added).astype(np.float16).astype(np.float64)
+    return h[0], h[1], n.astype(np.int64)
 
 
 def footprint_taps(p, h, name, half=None):

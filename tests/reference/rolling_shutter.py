@@ -1,17 +1,59 @@
 """float64 NumPy oracle of clfx/plugins/rolling_shutter.py: the same model written plainly
 (row times per row, velocities sanitised and clamped, tile candidates, fixed-point iteration,
-nearest-in-front selection, background search), vectorised over pixels."""
+nearest-in-front selection, background search), vectorised over pixels; with both halves of
+a vector pass, a point's path is the arc through its three positions (:func:`arc`)."""
 import math
 
 import numpy as np
-
-from clfx.fx.motion import path as arc
 
 
 BIG_DEPTH = 1e30
 TOL = 0.5
 SOFT_Z = 0.02
 MAX_RADIUS_PX = 512
+MIN_TURN = 1e-3
+"""rad/frame: a path turning slower is taken as straight (the arc's limit, :func:`arc`)."""
+MAX_TURN = 2.6
+"""rad/frame (149 deg): the fastest turn a path is taken to make (tests/test_oracles.py
+checks both against the kernels' statement, kernels/lib/arc.h)."""
+
+
+def _circle(w, t):
+    """Position at time ``t`` (frames) of a point turning at ``w`` rad/frame on the unit
+    circle about (0, 1), through the origin at t = 0 heading along +x: (sin wt, 1 - cos wt)."""
+    return np.stack([np.sin(w * t), 1.0 - np.cos(w * t)], -1)
+
+
+def arc(forward, backward, t):
+    """Displacement (px) at time ``t`` (frames) of a point that moves by ``forward`` over the
+    next frame and came by ``backward`` over the last one, on the arc through its positions
+    at -1, 0 and +1 frame.
+
+    A point turning at a constant rate w about a centre is at p(t) = (I - R(w t)) c (R a
+    rotation, the point at the origin at t = 0).  Its chords to the next and from the
+    previous position give s = f + b = p(1) - p(-1), along its heading, and e = f - b =
+    p(1) + p(-1), across it, with |e| / |s| = tan(w / 2).  On every such circle p(t) is the
+    same combination alpha(t) s + beta(t) e: this takes alpha, beta from one circle turning
+    at w (:func:`_circle`: s and e from its positions at +-1, solved for its position at
+    t), and w from the part of e across s (a path that speeds up or slows down along a
+    straight line has e along s: w = 0), at most ``MAX_TURN``.  Below ``MIN_TURN`` the arc is
+    its limit, the parabola alpha = t / 2, beta = t^2 / 2 (so f = b gives the line f t)."""
+    f, b = np.asarray(forward, np.float64), np.asarray(backward, np.float64)
+    s, e = f + b, f - b
+    along = np.sqrt((s * s).sum(-1))
+    heading = s / np.where(along > 0, along, 1.0)[..., None]
+    across = e - (e * heading).sum(-1)[..., None] * heading
+    w = np.minimum(2.0 * np.arctan2(np.sqrt((across * across).sum(-1)), along), MAX_TURN)
+    t = np.broadcast_to(np.asarray(t, np.float64)[..., 0] if np.ndim(t) == f.ndim
+                        else np.asarray(t, np.float64), w.shape)
+    turning = w > MIN_TURN
+    wc = np.where(turning, w, 1.0)
+    basis = np.stack([_circle(wc, 1.0) - _circle(wc, -1.0),      # s, e of the unit circle
+                      _circle(wc, 1.0) + _circle(wc, -1.0)], -1)
+    alpha, beta = np.moveaxis(np.linalg.solve(basis, _circle(wc, t)[..., None])[..., 0], -1, 0)
+    alpha = np.where(turning, alpha, t / 2.0)
+    beta = np.where(turning, beta, t * t / 2.0)
+    return alpha[..., None] * s + beta[..., None] * e
 
 
 def row_times(shape, *, readout, direction="top-down", reference="first", data_window=None,

@@ -7,8 +7,12 @@ exact exponential line kernel (one interpolated tap per step k) that the passes 
 the tests state the difference between the two.
 """
 import math
+from types import SimpleNamespace
 
 import numpy as np
+
+from tests.reference import REC709_Y, XYZ_TO_REC709, cie1931
+from tests.reference.optics_trace import reflectance
 
 
 def peak_level(lum, threshold, tile=32):
@@ -163,21 +167,45 @@ def _setup(lengths_frac, diagonal, color_shift, step_len, scale=(1.0, 1.0, 1.0))
     return a, n, top
 
 
-def coating_tint(design_nm, design="v-coat"):
-    """RGB (luminance 1) of two reflections off the stack ``design`` (films from the air side,
-    as clfx.fx.optics.MULTILAYER_DESIGNS) designed at design_nm on glass 1.52: the film-by-film
-    Airy recursion of tests/reference/optics_trace.py, CIE 1931 -> Rec.709, into gamut."""
-    from types import SimpleNamespace
+COATING_DESIGNS = {
+    "mgf2": ((1.38, 1.0),),
+    "v-coat": ((1.38, 1.0), (1.63, 1.0)),
+    "broadband": ((1.38, 1.0), (2.05, 2.0), (1.63, 1.0)),
+    "broadband-hi": ((1.38, 1.0), (2.10, 2.0), (1.70, 1.0)),
+}
+"""Anti-reflection stacks, films from the air side as (index, quarter waves at the design
+wavelength): one quarter wave of MgF2 (1.38); the V-coat MgF2 / Al2O3 (1.63); the
+quarter-half-quarter broadband MgF2 / ZrO2 (2.05) / Al2O3, and with ZrO2 2.10 / a 1.70 film
+(H. A. Macleod, *Thin-Film Optical Filters*, 4th ed., ch. 4).  tests/test_oracles.py checks
+the effect's table (clfx.fx.optics.MULTILAYER_DESIGNS) against these."""
 
-    from clfx.fx import optics, spectral
-    from tests.reference.optics_trace import reflectance
+CROWN_GLASS_INDEX = 1.52
+"""The substrate the streaks' coating is on (crown glass, n_d ~ 1.52)."""
 
-    lam = spectral.wavelengths(80)
-    wts = spectral.spectral_rgb_weights(lam)
-    coating = SimpleNamespace(layers=optics.MULTILAYER_DESIGNS[design], wavelength_nm=design_nm)
-    refl = reflectance(1.0, 1.52, 1.0, coating, lam)
-    rgb = spectral.to_gamut((refl ** 2) @ wts / wts.sum(axis=0))
-    return rgb / (rgb @ np.array([0.2126, 0.7152, 0.0722]))
+
+def coating_tint(design_nm, design="v-coat", bins=80):
+    """RGB (linear Rec.709, luminance 1) of white light reflected twice off the coating stack
+    ``design`` designed at ``design_nm`` on crown glass at normal incidence.
+
+    The stack's reflectance R(lambda) by the film-by-film Airy recursion of
+    tests/reference/optics_trace.py; twice reflected: R^2.  Its colour: the CIE 1931 observer
+    (tests.reference.cie1931) integrated over 380-780 nm by the midpoint rule on ``bins``
+    equal bins (the effect's 80), into Rec.709 (XYZ_TO_REC709), each channel relative to an
+    equal-energy white's (a grey reflector stays grey); then desaturated towards its own
+    luminance just enough that no channel is negative, and scaled to luminance 1."""
+    edges = np.linspace(380.0, 780.0, bins + 1)
+    lam = 0.5 * (edges[:-1] + edges[1:])
+    films = SimpleNamespace(layers=COATING_DESIGNS[design], wavelength_nm=design_nm)
+    twice = reflectance(1.0, CROWN_GLASS_INDEX, 1.0, films, lam) ** 2
+    xyz = cie1931(lam)
+    rgb = XYZ_TO_REC709 @ (twice @ xyz) / (XYZ_TO_REC709 @ xyz.sum(axis=0))
+    y = float(rgb @ REC709_Y)
+    negative = rgb < 0
+    if negative.any():      # mix(rgb, y, k) >= 0 in every channel: the least such k
+        k = max(c / (c - y) for c in rgb[negative])
+        rgb = (1.0 - k) * rgb + k * y
+    rgb = np.maximum(rgb, 0.0)
+    return rgb / float(rgb @ REC709_Y)
 
 
 def _unit(angle):
