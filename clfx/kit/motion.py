@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from clfx.core.errors import ClipError
+from clfx.core.plugin import ChoiceParam, FloatParam
 from clfx.core.rect import Rect
 from clfx.fx.motion import (
     MAX_RADIUS_PX,
+    SHUTTER_OFFSETS,
     BlurStats,
     TileGrid,
     is_static,
@@ -39,6 +41,16 @@ from clfx.fx.motion import (
     tile_grid,
 )
 from clfx.host import StepPlan
+
+SHUTTER_PARAMS = (
+    FloatParam("shutter_angle", -1.0, min=-1.0, max=720.0, units="deg",
+               hint="Shutter angle in degrees; -1 = the camera block's."),
+    ChoiceParam("shutter_offset", "camera", choices=SHUTTER_OFFSETS,
+                hint="Shutter centred on, opening at or closing at the frame time; "
+                     "'camera' = the camera block's."),
+)
+"""The shutter overrides of a blur of the camera's own motion (camera_blur, shake), read by
+`clfx.fx.motion.shutter_from`."""
 
 
 def aligned_passes(ctx):
@@ -152,6 +164,11 @@ class VelocityGather:
     # -- defaults an effect may override ----------------------------------------------------
     def shutter(self, p, ctx) -> tuple[float, float]:
         return shutter_from(p, ctx.camera)
+
+    def shutter_closed(self, p, ctx) -> str | None:
+        """The identity reason of a shutter open for no time, else None."""
+        t0, t1 = self.shutter(p, ctx)
+        return "shutter angle is 0" if t1 - t0 <= 0.0 else None
 
     def max_radius_px(self, p, ctx) -> float:
         return min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX)

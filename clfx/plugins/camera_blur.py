@@ -46,18 +46,23 @@ from typing import Mapping
 
 import numpy as np
 
-from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Vec2Param
+from clfx.core.plugin import Clip, Descriptor, FloatParam, Vec2Param
 from clfx.fx.motion import (
     CUBIC_MAX_PX,
     LEVELS,
     MAX_RADIUS_PX,
     MotionLevel,
-    SHUTTER_OFFSETS,
     sanitized_copy,
     shutter_from,
 )
 from clfx.host import Plugin, register
-from clfx.kit.motion import GatherMotion, GatherPlan, VelocityGather, on_rows
+from clfx.kit.motion import (
+    SHUTTER_PARAMS,
+    GatherMotion,
+    GatherPlan,
+    VelocityGather,
+    on_rows,
+)
 
 KERNEL = "camera_blur.cl"
 
@@ -240,11 +245,7 @@ class CameraBlur(VelocityGather, Plugin):
                             "scene units; needs depth."),
             Vec2Param("center", (0.0, 0.0), min=-2.0, max=2.0,
                       hint="Centre of roll, zoom and dolly as a fraction of half the frame (x right, y down)."),
-            FloatParam("shutter_angle", -1.0, min=-1.0, max=720.0, units="deg",
-                       hint="Shutter angle in degrees; -1 = the camera block's."),
-            ChoiceParam("shutter_offset", "camera", choices=SHUTTER_OFFSETS,
-                        hint="Shutter centred on, opening at or closing at the frame time; "
-                             "'camera' = the camera block's."),
+            *SHUTTER_PARAMS,
             FloatParam("max_blur", 0.05, min=0.001, max=0.25,
                        hint="Largest blur radius with trucking, as a fraction of the frame "
                             f"diagonal (at most {MAX_RADIUS_PX} px)."),
