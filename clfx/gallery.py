@@ -298,6 +298,8 @@ CAPTIONS = {
                    "paths, the background sharp.",
     "rolling_shutter": "Rolling shutter: moving objects and verticals lean, rows read one "
                        "after another.",
+    "shake": "Handheld shake: every edge smeared a few pixels the same wandering way, a "
+             "little more in the corners that the roll turns.",
     "sensor_noise": "Sensor noise: colour speckle and blotches in the shadows, little in the "
                     "highlights.",
     "soft_focus": "Diffusion filter: bright areas glow softly into their surroundings.",

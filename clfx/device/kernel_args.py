@@ -352,6 +352,12 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
             "float well, float chroma, float inv_cell"
         ),
     },
+    "shake.cl": {
+        "shake_velocity": (
+            "buf vel, buf m, int pitch, int width, int height, int x0, int y0, float cx, "
+            "float cy, float fx, float fy, float inv_dt"
+        ),
+    },
     "soft_focus.cl": _scatter_family("soft_focus"),
     "streaks.cl": {
         "streaks_seeds": (

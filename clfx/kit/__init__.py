@@ -12,8 +12,9 @@ its maps and kernels and no band code of its own.
   keys, the stand-in source a look's ``prepare`` builds maps on.
 - `clfx.kit.scatter`: the glare family's plugin mixins (glare, bleed, soft_focus,
   halation; corona's identity and regions): threshold -> PSF spread -> mix.
-- `clfx.kit.motion`: the motion family's passes and band margins (motion_blur,
-  camera_blur, rolling_shutter).
+- `clfx.kit.motion`: the motion family's base, `VelocityGather` (motion_blur,
+  camera_blur's trucking, shake: an effect writes its velocity fields over a band's rows;
+  the base plans, tiles and reconstructs them), its passes and band rows (rolling_shutter).
 - `clfx.kit.noise`: the noise effects' per-frame exposure and coverage (grain,
   sensor_noise).
 - `clfx.kit.spectral`: a spectral effect rendered in the reference basis whatever the

@@ -30,8 +30,9 @@ arcs to second order (the tangent alone was a straight line).
 
 Reads outside the source window clamp to its edge (the blur does not grow the frame).  The
 effect tiles: a band samples its paths at the whole render's coordinates, from the rows its
-look-ups reach (its region of interest); trucking reads the frame's velocity tiles (the
-step's plan) as motion_blur does.
+look-ups reach (its region of interest); trucking is the motion family's gather
+(`clfx.kit.motion.VelocityGather`: the frame's velocity tiles, a band's rows, the
+reconstruction), this module supplying the camera's velocity fields over a band's rows.
 Non-finite input pixels are set to 0 before they are spread (counted in ``ctx.notes``); finite
 input stays finite, however large (a sum that overflows float32 is taken again with each
 sample scaled first).
@@ -45,24 +46,23 @@ from typing import Mapping
 
 import numpy as np
 
-from clfx.core.errors import ClipError
-from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam, Vec2Param
-from clfx.core.rect import Rect
+from clfx.core.plugin import Clip, Descriptor, FloatParam, Vec2Param
 from clfx.fx.motion import (
     CUBIC_MAX_PX,
     LEVELS,
     MAX_RADIUS_PX,
     MotionLevel,
-    SHUTTER_OFFSETS,
-    TileGrid,
-    reach_px,
-    reconstruct,
     sanitized_copy,
     shutter_from,
-    tile_grid,
 )
-from clfx.host import Plugin, StepPlan, register
-from clfx.kit.motion import band_margin
+from clfx.host import Plugin, register
+from clfx.kit.motion import (
+    SHUTTER_PARAMS,
+    GatherMotion,
+    GatherPlan,
+    VelocityGather,
+    on_rows,
+)
 
 KERNEL = "camera_blur.cl"
 
@@ -132,19 +132,21 @@ GATHER_TAP_ROWS = 2
 
 
 @dataclass(frozen=True)
-class CameraPlan(StepPlan):
-    """camera_blur's plan for one step of a frame: the shutter, the motion, the path gather's
-    samples (no trucking), how far a band's look-ups reach (x, y; its region of interest)
-    and, with trucking when the step renders in bands, the frame's velocity tiles they read
-    (built in the plan from the whole frame; None otherwise).  ``motion``: the read-only
-    mapping of :func:`camera_motion`."""
+class CameraPlan(GatherPlan):
+    """camera_blur's plan for one step of a frame: the motion gather's with trucking
+    (`clfx.kit.motion.GatherPlan`), and the camera's own: ``motion``, the read-only mapping
+    of :func:`camera_motion`; without trucking, the path gather's samples and how far a
+    band's look-ups reach (``path_reach``, x and y px: its region of interest)."""
 
-    t0: float = 0.0
-    t1: float = 0.0
     motion: Mapping | None = None
     samples: int = 0
-    reach: tuple = (0, 0)
-    grid: TileGrid | None = None
+    path_reach: tuple | None = None
+
+    @property
+    def reach(self) -> tuple:
+        """How far a band's look-ups reach (x, y px): the path gather's, or the motion
+        gather's margin."""
+        return self.path_reach if self.path_reach is not None else (self.margin, self.margin)
 
 
 CAMERA_CUBIC_MAX_PX = CUBIC_MAX_PX
@@ -215,8 +217,10 @@ texture left draft 0.08 dB below the naive per-pixel line blur (39.07 vs 39.14 d
 
 
 @register
-class CameraBlur(Plugin):
-    whole_frame = None   # a band samples its paths at the whole render's coordinates
+class CameraBlur(VelocityGather, Plugin):
+    # pan/roll/zoom: a band samples its paths at the whole render's coordinates; trucking:
+    # the motion family's gather (clfx.kit.motion.VelocityGather) of the camera's velocities
+    plan_type = CameraPlan
     descriptor = Descriptor(
         name="camera_blur", label="Camera blur", group="Camera", kernel=KERNEL,
         summary="Blur of the camera's pan, tilt, roll, zoom and trucking during the shutter "
@@ -241,11 +245,7 @@ class CameraBlur(Plugin):
                             "scene units; needs depth."),
             Vec2Param("center", (0.0, 0.0), min=-2.0, max=2.0,
                       hint="Centre of roll, zoom and dolly as a fraction of half the frame (x right, y down)."),
-            FloatParam("shutter_angle", -1.0, min=-1.0, max=720.0, units="deg",
-                       hint="Shutter angle in degrees; -1 = the camera block's."),
-            ChoiceParam("shutter_offset", "camera", choices=SHUTTER_OFFSETS,
-                        hint="Shutter centred on, opening at or closing at the frame time; "
-                             "'camera' = the camera block's."),
+            *SHUTTER_PARAMS,
             FloatParam("max_blur", 0.05, min=0.001, max=0.25,
                        hint="Largest blur radius with trucking, as a fraction of the frame "
                             f"diagonal (at most {MAX_RADIUS_PX} px)."),
@@ -269,40 +269,16 @@ class CameraBlur(Plugin):
     def plan(self, p, ctx) -> CameraPlan:
         t0, t1 = shutter_from(p, ctx.camera)
         m = MappingProxyType(camera_motion(p, ctx))
+        if needs_depth(p):   # trucking: the motion family's gather
+            return self.gather_plan(p, ctx, motion=m)
         level = self.level(ctx)
-        src = ctx.source
-        if not needs_depth(p):
-            length = peak_speed_bound(m, src.window, None) * (t1 - t0)
-            n = int(np.clip(math.ceil(length / level.path_spacing), 2, level.max_samples))
-            rx, ry = path_reach_px(m, src.window, t0, t1)
-            return CameraPlan(t0=t0, t1=t1, motion=m, samples=n,
-                              reach=(math.ceil(rx) + GATHER_TAP_ROWS,
-                                     math.ceil(ry) + GATHER_TAP_ROWS))
-        depth = ctx.depth
-        if depth is None or depth.window != src.window:
-            return CameraPlan(t0=t0, t1=t1, motion=m)
-        a = ctx.analysis
-        peak = self._peak(m, src.window, a)
-        max_radius = self.max_radius_px(p, ctx)
-        curved = m["roll"] != 0.0
-        rt, window, nonfinite = ctx.runtime, src.window, a.nonfinite_count
-
-        def rows_of(r0, r1):
-            rows = Rect(window.x0, window.y0 + r0, window.x1, window.y0 + r1)
-            col, z = rt.reframe(src, rows), rt.reframe(depth, rows)
-            vel, back = self._velocities(rt, z, m, window, r0, curved)
-            return (sanitized_copy(rt, col) if nonfinite else col), vel, z, back
-
-        grid = None
-        if len(ctx.bands(window)) > 1:   # the bands' frame-wide tiles
-            grid = tile_grid(rt, rows_of, width=window.width, height=window.height, t0=t0,
-                             t1=t1, max_radius_px=max_radius, peak_speed=peak,
-                             level=self.level(ctx), has_depth=True, curved=curved)
-        margin = band_margin(t0, t1, reach_px(peak, t0, t1, max_radius), curved)
-        return CameraPlan(t0=t0, t1=t1, motion=m, reach=(margin, margin), grid=grid)
-
-    def max_radius_px(self, p, ctx) -> float:
-        return min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX)
+        window = ctx.source.window
+        length = peak_speed_bound(m, window, None) * (t1 - t0)
+        n = int(np.clip(math.ceil(length / level.path_spacing), 2, level.max_samples))
+        rx, ry = path_reach_px(m, window, t0, t1)
+        return CameraPlan(t0=t0, t1=t1, motion=m, samples=n,
+                          path_reach=(math.ceil(rx) + GATHER_TAP_ROWS,
+                                      math.ceil(ry) + GATHER_TAP_ROWS))
 
     @staticmethod
     def _peak(m, window, analysis) -> float:
@@ -311,6 +287,27 @@ class CameraBlur(Plugin):
         finite = a.min_depth[np.isfinite(a.min_depth)] if a.min_depth is not None else None
         zmin = float(finite.min()) if finite is not None and finite.size else math.inf
         return peak_speed_bound(m, window, zmin)
+
+    # -- trucking's velocity fields (clfx.kit.motion.VelocityGather renders them) ----------
+    def gather_motion(self, p, ctx):
+        src, depth = ctx.source, ctx.depth
+        if depth is None or depth.window != src.window:
+            return ("camera_blur: truck/dolly need a depth pass covering the source "
+                    f"window {src.window}")
+        return GatherMotion(self._peak(camera_motion(p, ctx), src.window, ctx.analysis),
+                            has_depth=True, curved=p.roll != 0.0)
+
+    def velocity_rows(self, rt, p, ctx, plan, rows):
+        depth = on_rows(rt, ctx.depth, rows)
+        vel, back = self._velocities(rt, depth, plan.motion, plan.canvas,
+                                     rows.y0 - plan.canvas.y0, plan.curved)
+        return vel, depth, back
+
+    def gather_note(self, p, ctx, plan, stats):
+        return (f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
+                f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
+                + ("the roll along its arcs (circular paths through the previous, "
+                   "current and next positions)" if plan.curved else "straight paths"))
 
     @staticmethod
     def _velocities(rt, depth, m, whole, row0: int, curved: bool):
@@ -359,26 +356,4 @@ class CameraBlur(Plugin):
                       t0, t1, plan.samples, ctx.frame)
             ctx.notes.append(f"camera_blur: direct path gather, {plan.samples} samples")
             return dst
-        depth = ctx.depth
-        if depth is None or depth.window != src.window:
-            raise ClipError("camera_blur: truck/dolly need a depth pass covering the source "
-                            f"window {src.window}")
-        curved = m["roll"] != 0.0
-        tiled = ctx.tiling is not None
-        if tiled:   # the band's rows and the margin its samples read
-            rows = Rect(whole.x0, max(band.y0 - plan.reach[1], whole.y0), whole.x1,
-                        min(band.y1 + plan.reach[1], whole.y1))
-            src, depth = rt.reframe(src, rows), rt.reframe(depth, rows)
-        vel, back = self._velocities(rt, depth, m, whole, src.window.y0 - whole.y0, curved)
-        a = ctx.analysis
-        out, stats = reconstruct(
-            rt, src, vel, depth, t0=t0, t1=t1, max_radius_px=self.max_radius_px(p, ctx),
-            peak_speed=self._peak(m, whole, a), level=self.level(ctx),
-            frame=ctx.frame, nonfinite=nonfinite, velocity_back=back,
-            **(dict(grid=plan.grid, row0=src.window.y0 - whole.y0,
-                    band=(band.y0 - whole.y0, band.y1 - whole.y0)) if tiled else {}))
-        ctx.notes.append(f"camera_blur: velocity reconstruction, {stats.moving_tiles}/"
-                         f"{stats.tiles} tiles moving, radius {stats.radius_px:.1f} px, "
-                         + ("the roll along its arcs (circular paths through the previous, "
-                            "current and next positions)" if curved else "straight paths"))
-        return out
+        return self.gather_render(rt, p, ctx)

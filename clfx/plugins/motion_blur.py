@@ -20,10 +20,9 @@ the passes by their edge values, so a moving object's smear continues past the d
 instead of stopping at a hard edge.  Without a depth pass all pixels count as one depth (no
 occlusion ordering).
 
-The effect tiles (`clfx.pipeline.look.render_tiled`): the velocity tiles are the frame's,
-built once in the step's plan (`clfx.fx.motion.tile_grid`), and a band reconstructs its rows
-of the whole render's canvas from the rows its farthest sample reaches (its region of
-interest, `clfx.kit.motion.band_margin`), its positions the whole render's.
+Rendering is the motion family's (`clfx.kit.motion.VelocityGather`: the plan, the frame's
+velocity tiles, a band's rows of the canvas, the reconstruction); this module supplies the
+velocity pass over a band's rows and its notes.
 
 The passes after the blur (`passes_after`).  The blur moves a surface's colour off its
 silhouette (a ball's smear over the empty background around it), while the velocity and depth
@@ -48,62 +47,24 @@ Warfare", SIGGRAPH 2014 course.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
-from clfx.core.errors import ClipError
+import numpy as np
+
 from clfx.core.plugin import ChoiceParam, Clip, Descriptor, FloatParam
-from clfx.core.rect import Rect
 from clfx.fx.motion import (
     LEVELS,
     MAX_RADIUS_PX,
     MIN_BLUR_PX,
     SHUTTER_OFFSETS,
-    TileGrid,
     reach_px,
-    reconstruct,
-    sanitized_copy,
     shutter_from,
-    tile_grid,
 )
-import numpy as np
-
-from clfx.host import Plugin, StepPlan, register
-from clfx.kit.motion import aligned_passes, band_margin
-
-
-@dataclass(frozen=True)
-class MotionPlan(StepPlan):
-    """motion_blur's plan for one step of a frame: the shutter, the canvas the whole render
-    reconstructs over (the output window), the rows a band reads beyond itself, and, when
-    the step renders in bands, the frame's velocity tiles they read (built in the plan from
-    the whole frame's images; None when nothing moves or the render is whole, which builds
-    its own from its buffers)."""
-
-    t0: float = 0.0
-    t1: float = 0.0
-    max_radius_px: float = 0.0
-    canvas: Rect | None = None
-    margin: int = 0
-    grid: TileGrid | None = None
-
-
-def canvas_rows(rt, canvas: Rect, src, vel, depth, back, nonfinite: int):
-    """``rows_of(r0, r1)`` of :func:`clfx.fx.motion.tile_grid`: the canvas rows ``r0 <= y <
-    r1`` (from the canvas's top) of the images as the whole render fills the canvas (colour
-    with transparent black past the data window, sanitised; passes by their edges)."""
-    def rows_of(r0, r1):
-        rows = Rect(canvas.x0, canvas.y0 + r0, canvas.x1, canvas.y0 + r1)
-        col = rt.reframe(src, rows, "zero")
-        return ((sanitized_copy(rt, col) if nonfinite else col),
-                rt.reframe(vel, rows, "clamp"),
-                None if depth is None else rt.reframe(depth, rows, "clamp"),
-                None if back is None else rt.reframe(back, rows, "clamp"))
-    return rows_of
+from clfx.host import Plugin, register
+from clfx.kit.motion import GatherMotion, VelocityGather, aligned_passes, on_rows
 
 
 @register
-class MotionBlur(Plugin):
-    whole_frame = None   # a band reads the frame's velocity tiles (the plan's) and its rows
+class MotionBlur(VelocityGather, Plugin):
     descriptor = Descriptor(
         name="motion_blur", label="Motion blur", group="Camera", kernel="motion_blur.cl",
         summary="Object motion blur reconstructed from the velocity pass (McGuire 2012 "
@@ -129,9 +90,6 @@ class MotionBlur(Plugin):
         spreads_light=True,
     )
 
-    def max_radius_px(self, p, ctx) -> float:
-        return min(p.max_blur * ctx.diagonal_px, MAX_RADIUS_PX)
-
     def reach(self, p, ctx) -> int:
         """How far (px) light moves from where it is at the frame time: the frame's peak speed
         over the shutter (clamped like the velocities), plus a pixel for bilinear fetches."""
@@ -156,26 +114,36 @@ class MotionBlur(Plugin):
     def region_of_definition(self, p, ctx):
         return ctx.source.window.grown(self.reach(p, ctx))
 
-    def plan(self, p, ctx) -> MotionPlan:
-        t0, t1 = shutter_from(p, ctx.camera)
-        max_radius = self.max_radius_px(p, ctx)
+    # -- the velocity fields (clfx.kit.motion.VelocityGather renders them) ---------------
+    def gather_canvas(self, p, ctx):
+        return self.output_window(p, ctx)   # the smear continues past the data window
+
+    def gather_motion(self, p, ctx):
         src, vel = ctx.source, ctx.velocity
         if vel is None or vel.window != src.window:
-            return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=src.window)
+            return ("motion_blur: the velocity pass must cover the source window "
+                    f"{src.window} (it covers {None if vel is None else vel.window})")
         depth, back = aligned_passes(ctx)
-        a = ctx.analysis
-        canvas = self.output_window(p, ctx)
-        radius = reach_px(a.peak_speed, t0, t1, max_radius)
-        grid = None
-        if len(ctx.bands(canvas)) > 1:   # the bands' frame-wide tiles
-            grid = tile_grid(
-                ctx.runtime, canvas_rows(ctx.runtime, canvas, src, vel, depth, back,
-                                         a.nonfinite_count),
-                width=canvas.width, height=canvas.height, t0=t0, t1=t1,
-                max_radius_px=max_radius, peak_speed=a.peak_speed, level=self.level(ctx),
-                has_depth=depth is not None, curved=back is not None)
-        return MotionPlan(t0=t0, t1=t1, max_radius_px=max_radius, canvas=canvas,
-                          margin=band_margin(t0, t1, radius, back is not None), grid=grid)
+        return GatherMotion(ctx.analysis.peak_speed, has_depth=depth is not None,
+                            curved=back is not None)
+
+    def velocity_rows(self, rt, p, ctx, plan, rows):
+        # the pass over the rows, past the data window moving like its edge
+        depth, back = aligned_passes(ctx)
+        return on_rows(rt, ctx.velocity, rows), on_rows(rt, depth, rows), on_rows(rt, back, rows)
+
+    def gather_note(self, p, ctx, plan, stats):
+        nonfinite = ctx.analysis.nonfinite_count
+        whole = ctx.tiling.whole if ctx.tiling is not None else ctx.source.window
+        return (f"motion_blur: {stats.moving_tiles}/{stats.tiles} tiles of "
+                f"{stats.tile} px moving, radius {stats.radius_px:.1f} px, "
+                f"<= {stats.max_samples} samples, "
+                + ("curved paths through the previous, current and next positions "
+                   "(both halves of the vector pass)" if plan.curved else
+                   "straight paths along the forward motion (one half of the vector "
+                   "pass)")
+                + (f", {nonfinite} non-finite pixels zeroed" if nonfinite else "")
+                + (f", grown to {plan.canvas}" if plan.canvas != whole else ""))
 
     def passes_after(self, rt, p, ctx, out, later):
         """The velocity (and depth) the blurred frame shows, for a later step that reads them
@@ -203,46 +171,3 @@ class MotionBlur(Plugin):
             moved["depth"] = rt.upload(np.where(took[..., 0], spread[..., 2] / np.where(
                 took[..., 0], weight[..., 0], 1.0), own_z), out.window)
         return moved
-
-    def region_of_interest(self, p, ctx, window):
-        # the farthest sample of the gather and the taps around it (the frame's reach)
-        return window.grown(self.planned(p, ctx).margin)
-
-    def render(self, rt, p, ctx):
-        src, vel = ctx.source, ctx.velocity
-        if vel is None or vel.window != src.window:
-            raise ClipError("motion_blur: the velocity pass must cover the source window "
-                            f"{src.window} (it covers {None if vel is None else vel.window})")
-        plan = self.planned(p, ctx)
-        depth, back = aligned_passes(ctx)
-        a = ctx.analysis
-        canvas, tiled = plan.canvas, ctx.tiling is not None
-        window = canvas
-        if tiled:   # the band's rows of the canvas and the margin its samples read
-            band = ctx.tiling.band
-            window = Rect(canvas.x0, max(band.y0 - plan.margin, canvas.y0), canvas.x1,
-                          min(band.y1 + plan.margin, canvas.y1))
-        if window != src.window:
-            # past the data window: nothing (transparent black), moving like the edge
-            src = rt.reframe(src, window, "zero")
-            vel = rt.reframe(vel, window, "clamp")
-            depth = None if depth is None else rt.reframe(depth, window, "clamp")
-            back = None if back is None else rt.reframe(back, window, "clamp")
-        out, stats = reconstruct(
-            rt, src, vel, depth, t0=plan.t0, t1=plan.t1, max_radius_px=plan.max_radius_px,
-            peak_speed=a.peak_speed, level=self.level(ctx), frame=ctx.frame,
-            nonfinite=a.nonfinite_count, velocity_back=back,
-            **(dict(grid=plan.grid, row0=window.y0 - canvas.y0,
-                    band=(band.y0 - canvas.y0, band.y1 - canvas.y0)) if tiled else {}))
-        whole = ctx.tiling.whole if tiled else ctx.source.window
-        ctx.notes.append(f"motion_blur: {stats.moving_tiles}/{stats.tiles} tiles of "
-                         f"{stats.tile} px moving, radius {stats.radius_px:.1f} px, "
-                         f"<= {stats.max_samples} samples, "
-                         + ("curved paths through the previous, current and next positions "
-                            "(both halves of the vector pass)" if back is not None else
-                            "straight paths along the forward motion (one half of the vector "
-                            "pass)")
-                         + (f", {a.nonfinite_count} non-finite pixels zeroed"
-                            if a.nonfinite_count else "")
-                         + (f", grown to {canvas}" if canvas != whole else ""))
-        return out

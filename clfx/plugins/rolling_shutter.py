@@ -78,7 +78,7 @@ from clfx.fx.motion import GRID_CHUNK_PIXELS, MAX_RADIUS_PX, path_reach
 from clfx.fx.motion import KERNEL as MOTION_KERNEL
 from clfx.fx.motion import sanitized_copy, tile_size
 from clfx.host import Plugin, StepPlan, register
-from clfx.kit.motion import aligned_passes
+from clfx.kit.motion import aligned_passes, band_rows, on_rows
 
 DIRECTIONS = ("top-down", "bottom-up", "left-right", "right-left")
 REFERENCES = {"first": 0.0, "centre": 0.5, "last": 1.0}
@@ -296,12 +296,9 @@ class RollingShutter(Plugin):
         a = ctx.analysis
         whole = ctx.tiling.whole if ctx.tiling is not None else src.window
         band = ctx.tiling.band if ctx.tiling is not None else src.window
-        if ctx.tiling is not None:   # the band's rows and the margin its look-ups read
-            rows = Rect(whole.x0, max(band.y0 - plan.margin, whole.y0), whole.x1,
-                        min(band.y1 + plan.margin, whole.y1))
-            src, vel = rt.reframe(src, rows), rt.reframe(vel, rows)
-            depth = None if depth is None else rt.reframe(depth, rows)
-            back = None if back is None else rt.reframe(back, rows)
+        rows = band_rows(ctx, whole, plan.margin)   # a band's rows and the margin its look-ups read
+        src, vel = rt.reframe(src, rows), on_rows(rt, vel, rows)
+        depth, back = on_rows(rt, depth, rows), on_rows(rt, back, rows)
         col = sanitized_copy(rt, src) if a.nonfinite_count else src
         dst = rt.image(band, 4)
         w, h, pitch = src.width, src.height, src.pitch
