@@ -71,8 +71,10 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     """A stream as fast as its parts?  The look over ``frames`` EXR frames through `clfx
     render`'s batch pipeline (phased or overlapped, `clfx.pipeline.stream.stream_mode`), beside the same
     parts measured alone in the same run: the look on the first frame (per effect), reading
-    a frame and writing its output (median of ``repeat`` warm runs each, half of them before
-    the stream and half after).
+    the stream's frames in turn and writing the look's output (median of ``repeat`` warm
+    runs each, half of them before the stream and half after).  In the stream a write and
+    the next read share the codec threads, so their CPU is one figure, ``read + write``
+    (``io_cpu_in_stream_ms``): the stream's CPU less its renders'.
 
     The inputs are the demo scene as a renderer writes it: float RGBA, depth and velocity, in
     the default EXR compression (`clfx.io.write`); outputs keep the input's type and
