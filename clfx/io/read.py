@@ -15,7 +15,9 @@ Reading
   JSON-able values; binary blobs, ICC profiles and values over 64 elements / 4096 characters
   are skipped).
 - Channels are always looked up by name (``spec.channelindex``); a missing channel is an
-  error, never zeros.
+  error, never zeros.  ``needs`` limits the passes read to those the caller uses, ``keep``
+  says whether the beauty part's other channels are kept for the writer (a batch:
+  `clfx.pipeline.plan.BatchPlan.read`); what is not needed is not decoded.
 - The beauty, depth and velocity search orders and the renderers' conventions are in
   `clfx.io.channels` (``probe`` prints them).  A depth pass's "no hit" sentinels (0, huge
   values) are read as +inf per `clfx.io.channels.no_hit`; what was assumed is passed to
