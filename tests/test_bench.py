@@ -3,6 +3,7 @@
 No wall-time assertions: timings are reported, never asserted.
 """
 import json
+import os
 
 import numpy as np
 import pytest
@@ -291,16 +292,43 @@ def test_bench_sequence_says_where_each_frames_time_and_cpu_went(rt, tmp_path):
     seq = json.loads(r.stdout)["sequence"]
     parts = [row["part"] for row in seq["rows"]]
     steps = [s.id for s in load_look("default").steps]
-    assert parts == ["read", "upload", *steps, "download", "write", "look (device)"]
+    assert parts == ["read", "upload", *steps, "download", "write", "read + write",
+                     "look (device)"]
     for row in seq["rows"]:
         assert row["alone_cpu_ms"] is not None and row["alone_cpu_ms"] >= 0, row
-    for row in seq["rows"][2:-3]:
+    for row in seq["rows"][2:-4]:
         assert row["host_ms"] is not None and row["host_ms"] <= row["stream_ms"] + 1e-6, row
     assert seq["io_ms"] > 0 and seq["stream_vs_io"] == pytest.approx(seq["ms_per_frame"] / seq["io_ms"])
     assert seq["stream_cpu_vs_io"] == pytest.approx(seq["cpu_ms_per_frame"] / seq["io_cpu_ms"])
+    rows = {row["part"]: row for row in seq["rows"]}
+    # a read and the write beside it share the codec threads: their CPU in the stream is
+    # one figure (each used to hold the other's), the stream's less its renders'
+    assert rows["read"]["stream_cpu_ms"] is None and rows["write"]["stream_cpu_ms"] is None
+    both = rows["read + write"]
+    assert both["alone_cpu_ms"] == pytest.approx(rows["read"]["alone_cpu_ms"]
+                                                 + rows["write"]["alone_cpu_ms"])
+    assert both["stream_cpu_ms"] == pytest.approx(seq["io_cpu_in_stream_ms"])
+    assert both["stream_cpu_ms"] < seq["cpu_ms_per_frame"]
     md = (tmp_path / "b.md").read_text()
     assert "| part | alone ms | in stream ms | in stream / alone | host ms |" in md
     assert "| upload |" in md and "| download |" in md
+
+
+def test_bench_sequence_reads_alone_the_frames_it_streams(rt, monkeypatch):
+    """Issue 37: "alone" and "stream" read the same files (it read the first frame only,
+    which its page cache and one picture's compressibility favour)."""
+    from clfx.bench.looks import bench_sequence
+    from clfx.pipeline.plan import BatchPlan
+
+    seen = []
+    real = BatchPlan.read
+    monkeypatch.setattr(BatchPlan, "read", lambda self, job: seen.append(
+        os.path.basename(job.input)) or real(self, job))
+    seq = bench_sequence(rt, "default", 32, 24, frames=3, repeat=4)
+    assert seq["frames"] == 3
+    streamed = {f"in.{i:04d}.exr" for i in (1, 2, 3)}
+    alone = seen[1:3] + seen[6:]     # after the warm-up: two before the stream, two after
+    assert len(seen) == 8 and set(alone) == streamed, seen
 
 
 def test_pareto_plot_is_one_panel_per_family_with_naive_and_input_marked(tmp_path):

@@ -69,6 +69,27 @@ def test_one_plan_and_one_lens_per_step_per_frame(rt, monkeypatch):
     assert all(v == len(frames) for v in radii.values()) and len(radii) <= 2
 
 
+def test_a_batch_plans_each_step_once_as_a_lone_render_does(rt, monkeypatch):
+    """A batch renders with ``tile_pixels=0`` (`RenderSettings`: whole frames), a lone
+    `render_frame` with None.  The step's plan was keyed on None and its render on 0, so
+    every step of every batch frame planned twice: streaks built their whole streak sum
+    again (issue 37: the 1080p cinema stream's streaks took 821 ms of CPU against 473
+    alone).  Both now mean one whole-frame plan."""
+    look = clfx.load_look(PLANNED_LOOK)
+    plans = Counter()
+    for name in ("dof", "breathing", "lens_flare", "glare", "vignette"):
+        cls = get_plugin(name)
+
+        def counted(self, p, ctx, real=cls.plan, name=name):
+            plans[name] += 1
+            return real(self, p, ctx)
+        monkeypatch.setattr(cls, "plan", counted)
+    whole, _ = render_frame(rt, look, scene(), frame_number=2)
+    batch, _ = render_frame(rt, look, scene(), frame_number=2, tile_pixels=0)
+    assert plans == {name: 2 for name in plans} and len(plans) == 5
+    assert np.array_equal(whole.rgba, batch.rgba)
+
+
 def test_dof_finds_the_lattice_level_of_its_largest_radius_once_per_step(rt, monkeypatch):
     """The lattice level of a gather's largest radius sets the padding, the prefilter
     pyramid's depth and the reach of the regions; the regions and the render each computed

@@ -63,6 +63,39 @@ def test_a_part_is_decoded_once_and_its_passes_copied_from_memory(tmp_path, rng,
     assert (tmp_path / "kept.exr").read_bytes() == (tmp_path / "file.exr").read_bytes()
 
 
+@pytest.mark.parametrize("look, output, passes_mode, decoded, depth, velocity, stored", [
+    ("cinema", "out.exr", "keep", 7, True, True, {"Z", "forward.u", "forward.v"}),
+    ("macro", "out.exr", "keep", 7, True, False, {"Z", "forward.u", "forward.v"}),
+    ("dreamy", "out.exr", "keep", 7, False, False, {"Z", "forward.u", "forward.v"}),
+    ("dreamy", "out.png", "keep", 4, False, False, set()),
+    ("dreamy", "out.exr", "drop", 4, False, False, set()),
+    ("macro", "out.jpg", "keep", 5, True, False, set()),
+])
+def test_a_batch_reads_the_passes_its_steps_use_and_the_channels_its_output_copies(
+        tmp_path, rng, monkeypatch, look, output, passes_mode, decoded, depth, velocity, stored):
+    """Issue 37: a look that reads no velocity (macro) or no pass (dreamy) had every pass
+    decoded and converted; an output that copies no channel (PNG, JPEG, --passes drop) had
+    the beauty part's every channel decoded and kept through the render for nothing."""
+    from clfx.pipeline.plan import Job
+
+    src = tmp_path / "in.exr"
+    write_frame(_frame(rng), src, bit_depth="float")
+    names = []
+    real = io_read._read_channels
+    monkeypatch.setattr(io_read, "_read_channels",
+                        lambda path, part, wanted: names.extend(wanted) or real(path, part, wanted))
+    plan = BatchPlan.of(load_look(look), RenderOptions(passes_mode=passes_mode),
+                        passes=io_read.PassSpec())
+    fr = plan.read(Job(1, str(src), str(tmp_path / output))).views[0]
+    assert len(names) == decoded, names
+    assert (fr.depth is not None, fr.velocity is not None) == (depth, velocity)
+    assert set(fr.layout.stored.get(0, {})) == stored
+    whole = read_frame(src)        # what is read is read as before
+    assert np.array_equal(fr.rgba, whole.rgba)
+    if depth:
+        assert np.array_equal(fr.depth, whole.depth)
+
+
 def test_compression_kept_from_an_exr_only(tmp_path, rng):
     fr = _frame(rng)
     write_frame(fr, tmp_path / "a.exr", compression="piz")

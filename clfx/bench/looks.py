@@ -71,8 +71,10 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
     """A stream as fast as its parts?  The look over ``frames`` EXR frames through `clfx
     render`'s batch pipeline (phased or overlapped, `clfx.pipeline.stream.stream_mode`), beside the same
     parts measured alone in the same run: the look on the first frame (per effect), reading
-    a frame and writing its output (median of ``repeat`` warm runs each, half of them before
-    the stream and half after).
+    the stream's frames in turn and writing the look's output (median of ``repeat`` warm
+    runs each, half of them before the stream and half after).  In the stream a write and
+    the next read share the codec threads, so their CPU is one figure, ``read + write``
+    (``io_cpu_in_stream_ms``): the stream's CPU less its renders'.
 
     The inputs are the demo scene as a renderer writes it: float RGBA, depth and velocity, in
     the default EXR compression (`clfx.io.write`); outputs keep the input's type and
@@ -102,9 +104,11 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
         alone.prepare()
         reads, renders, writes = [], [], []
 
-        def parts(n):   # each part alone, with the codecs as the stream runs them
-            with io_threads(codec_threads_for(rt)):
-                reads.extend(timed(lambda: alone.plan.read(alone.jobs[0])) for _ in range(n))
+        def parts(n):   # each part alone, with the codecs as the stream runs them; the reads
+            with io_threads(codec_threads_for(rt)):     # of the stream's own frames in turn
+                start = len(reads)
+                reads.extend([timed(lambda k=start + i: batch.plan.read(
+                    batch.jobs[k % len(batch.jobs)])) for i in range(n)])
                 renders.extend(timed(lambda: render_frame(rt, look, read.views[0],
                                                           frame_number=job.frame))
                                for _ in range(n))
@@ -156,11 +160,22 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
              {"part": "look (device)", "alone_ms": med([r[1] for r in renders]),
               "stream_ms": med([r.total_ms for r in reports]),
               "alone_cpu_ms": med([r[2] for r in renders])}]
+    # the stream's read and write run side by side on shared codec threads: the process CPU
+    # each saw holds the other's, so neither is theirs alone.  Theirs together (and the
+    # loop's) is the stream's CPU less its renders' (upload, steps, download).
+    look_cpu = [r.upload_cpu_ms + r.download_cpu_ms + sum(s.cpu_ms for s in r.steps if s.ran)
+                for r in reports]
+    rows[-1]["stream_cpu_ms"] = med(look_cpu)
+    io_cpu = rows[0]["alone_cpu_ms"] + rows[-2]["alone_cpu_ms"]   # the ratio a load moves less
+    io_cpu_stream = (1e3 * cpu - sum(look_cpu)) / max(len(reports), 1)
+    rows.insert(-1, {"part": "read + write", "alone_ms": None, "stream_ms": None,
+                     "alone_cpu_ms": io_cpu, "stream_cpu_ms": io_cpu_stream})
     for r in rows:
+        if r["part"] in ("read", "write"):
+            r["stream_cpu_ms"] = None        # in "read + write"
         a, b = r["alone_ms"], r["stream_ms"]
         r["ratio"] = b / a if a and b is not None and a > 0.5 else None
-    io_ms = rows[0]["alone_ms"] + rows[-2]["alone_ms"]
-    io_cpu = rows[0]["alone_cpu_ms"] + rows[-2]["alone_cpu_ms"]   # the ratio a load moves less
+    io_ms = rows[0]["alone_ms"] + rows[-3]["alone_ms"]
     parts_ms = io_ms + rows[-1]["alone_ms"]
     parts_cpu = sum(med([x[2] for x in xs]) for xs in (renders, reads, writes))
     ms_per_frame = 1e3 * wall / max(len(reports), 1)
@@ -170,7 +185,7 @@ def bench_sequence(rt, look_name: str, width: int, height: int, frames: int,
             "parts_ms": parts_ms, "stream_vs_parts": ms_per_frame / parts_ms if parts_ms else None,
             "io_ms": io_ms, "stream_vs_io": ms_per_frame / io_ms if io_ms else None,
             "io_cpu_ms": io_cpu, "stream_cpu_vs_io": 1e3 * cpu / max(len(reports), 1) / io_cpu
-            if io_cpu else None,
+            if io_cpu else None, "io_cpu_in_stream_ms": io_cpu_stream,
             "cpu_ms_per_frame": 1e3 * cpu / max(len(reports), 1), "parts_cpu_ms": parts_cpu,
             "cores": available_cores(),
             "load_avg": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,

@@ -176,7 +176,10 @@ def sequence_markdown(s: dict) -> list[str]:
     io = (f"; reading and writing a frame alone take {s['io_ms']:.0f} ms, the stream "
           f"{s['stream_vs_io']:.2f}x that") if s.get("stream_vs_io") else ""
     io_cpu = (f" (CPU: {s['stream_cpu_vs_io']:.2f}x the {s['io_cpu_ms']:.0f} ms reading and "
-              f"writing take alone)") if s.get("stream_cpu_vs_io") else ""
+              f"writing take alone"
+              + (f", which take {s['io_cpu_in_stream_ms']:.0f} ms in the stream"
+                 if s.get("io_cpu_in_stream_ms") is not None else "") + ")") \
+        if s.get("stream_cpu_vs_io") else ""
     lines = [f"Sequence (look {s['look']}, {s['frames']} frames, EXR read and write included"
              f"{mode}{load}): {s['ms_per_frame']:.0f} ms/frame ({s['fps']} fps) end to end; the same "
              f"parts one after another take {s['parts_ms']:.0f} ms, so the stream takes "
@@ -185,8 +188,11 @@ def sequence_markdown(s: dict) -> list[str]:
              f"for the parts alone{io_cpu}.", "",
              "Per frame (medians): wall ms alone and in the stream; of a step's stream ms, "
              "the host's (planning, enqueueing, waiting on reads back); CPU ms of the whole "
-             "process (a CPU device's threads included; a stream's read and write overlap "
-             "each other, so their CPU holds both).  Read includes decoding, write encoding.",
+             "process (a CPU device's threads included).  Read includes decoding, write "
+             "encoding; alone, each reads the stream's own frames or writes its output with "
+             "the stream's compression.  In the stream a frame's write and the next read "
+             "run side by side on the same codec threads, so their CPU is one figure, "
+             "\"read + write\": the stream's CPU less its renders' (the loop's own included).",
              "", "| part | alone ms | in stream ms | in stream / alone | host ms | "
              "CPU ms alone | CPU ms in stream |", "|---|---|---|---|---|---|---|"]
     for r in s["rows"]:

@@ -121,7 +121,7 @@ def read_channel(path, channel: str | None = None, *, view: str | None = None
     name = mask_channel(path, channel)
     f = _scan(path)
     part = _part_with(f, [name], view)
-    return _read_channels(f.path, part, [name])[name], part.data_window
+    return np.ascontiguousarray(_read_channels(f.path, part, [name])[name]), part.data_window
 
 
 def check_channel(path, channel: str | None = None) -> str:

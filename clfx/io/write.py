@@ -673,15 +673,19 @@ class _Source:
         self.path, self.out_path, self.inp = path, out_path, None
         self.stored = stored or {}
 
-    def rows(self, part: SourcePart, y0: int, y1: int, dtype, names: list[str]) -> np.ndarray:
-        """Channels ``names`` of rows ``y0..y1`` (inside the part's window) as stored: from
-        what the reader kept (`Layout.stored`) when it has them, else from the file."""
+    def rows(self, part: SourcePart, y0: int, y1: int, dtype, names: list[str],
+             out: np.ndarray) -> None:
+        """Channels ``names`` of rows ``y0..y1`` (inside the part's window) as stored, into
+        ``out`` (rows, width, len(names)): from what the reader kept (`Layout.stored`) when
+        it has them (each straight into its place: no stacked copy), else from the file."""
         kept = self.stored.get(part.index, {})
         if dtype == np.float32 and all(n in kept for n in names):
             a = y0 - part.data_window.y0
-            return np.stack([kept[n][a:a + y1 - y0] for n in names], axis=-1)
+            for j, n in enumerate(names):
+                out[..., j] = kept[n][a:a + y1 - y0]
+            return
         got = self._file_rows(part, y0, y1, dtype)
-        return got[..., [part.channels.index(n) for n in names]]
+        out[...] = got[..., [part.channels.index(n) for n in names]]
 
     def _file_rows(self, part: SourcePart, y0: int, y1: int, dtype) -> np.ndarray:
         if self.inp is None:
@@ -763,9 +767,13 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
                               if c in carried) else np.float32
 
     beauty = sum(len(names) for _, names, _, _ in subs)
+    # every channel covers the part's window: each row block is filled whole, no zeros first
+    whole = all(fr.data_window == window for fr, *_ in subs) and \
+        (not carried or sp.data_window == window)
 
     def rows(y0, y1):
-        block = np.zeros((y1 - y0, window.width, beauty + len(carried)), dtype)
+        block = (np.empty if whole else np.zeros)((y1 - y0, window.width,
+                                                    beauty + len(carried)), dtype)
         k = 0
         for fr, names, _, pixels in subs:
             _place(block, y0, window, pixels, fr.data_window, slice(k, k + len(names)))
@@ -774,9 +782,8 @@ def _part_rows(sp: SourcePart, window: Rect, subs: list, carried: list[str], sou
             w = sp.data_window
             a, b = max(y0, w.y0), min(y1, w.y1)
             if a < b:
-                got = source.rows(sp, a, b, dtype, carried)
                 x = w.x0 - window.x0
-                block[a - y0:b - y0, x:x + w.width, beauty:] = got
+                source.rows(sp, a, b, dtype, carried, block[a - y0:b - y0, x:x + w.width, beauty:])
         return block
     return rows
 

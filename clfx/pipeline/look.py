@@ -528,7 +528,9 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         The frame's windows, or a window an effect would grow it to, exceed the pixel limit.
     """
     stats = RunStats() if stats is None else stats
-    tiles = tile_pixels if tile_pixels is not None else limits.tile_pixels()
+    # 0 and None both mean whole frames: one key for the step's plan (`Plugin.planned`),
+    # else a batch's render (0) planned every step again beside its plan (None)
+    tiles = (tile_pixels if tile_pixels is not None else limits.tile_pixels()) or None
     report = FrameReport(frame=frame_number, input=frame.source,
                          values=look.values_at(frame_number))
     stamp = look.at_quality(quality).stamp(frame_number)   # the level rendered (one hash)

@@ -142,9 +142,11 @@ class BatchPlan:
                 return None
             frames = [frame]
         else:
+            # the passes the steps read, and the channels the output copies, nothing more
+            copies = job.output.lower().endswith(".exr") and io.passes_mode != "drop"
             frames = read_views(job.input, view=io.view, passes=self.passes,
-                                all_views=job.output.lower().endswith(".exr")
-                                and io.passes_mode != "drop",
+                                all_views=copies, keep=copies,
+                                needs=self.look.clips_used() & {"depth", "velocity"},
                                 colorspace=io.colorspace, working_space=io.working_space,
                                 depth_path=job.depth, velocity_path=job.velocity,
                                 notify=lambda m, k: notes.append(("warning", m, k)))
