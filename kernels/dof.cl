@@ -656,7 +656,9 @@ inline int dof_half_valid(global const int *tile_info, const int tiles_x, const 
  * gathered (dof_half_valid: at a half-resolution tile's edge the neighbouring tile's pixels
  * are the unblurred source; the weights of the gathered ones are renormalised: the pixel's
  * own half-resolution pixel, 3/4 x 3/4 of the weight, always is one); `lmin`, `lmax`: the
- * luminance range of the half-resolution pixels it reads, widened. */
+ * luminance range of the 4 half-resolution pixels it reads, widened (those not gathered
+ * too: a tile beside that is not at half resolution holds sharper pixels, a contrast that
+ * a dense table gathers again at full resolution). */
 inline float4 dof_upsample(global const float *hres, const int hpitch, const int hwidth,
                            const int hheight, const int hx0, const int hy0, const int x,
                            const int y, global const int *tile_info, const int tiles_x,
@@ -676,9 +678,8 @@ inline float4 dof_upsample(global const float *hres, const int hpitch, const int
                          dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y1)) != 0;
   const float4 l = (float4)(clfx_luminance(c00), clfx_luminance(c01), clfx_luminance(c10),
                             clfx_luminance(c11));
-  const float4 lo = select((float4)(INFINITY), l, ok), hi = select((float4)(-INFINITY), l, ok);
-  *lmin = fmin(*lmin, fmin(fmin(lo.x, lo.y), fmin(lo.z, lo.w)));
-  *lmax = fmax(*lmax, fmax(fmax(hi.x, hi.y), fmax(hi.z, hi.w)));
+  *lmin = fmin(*lmin, fmin(fmin(l.x, l.y), fmin(l.z, l.w)));
+  *lmax = fmax(*lmax, fmax(fmax(l.x, l.y), fmax(l.z, l.w)));
   /* weighted sums, no differences: finite values stay finite */
   if(all(ok))
     return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
