@@ -495,11 +495,11 @@ inline float4 dof_vis_lookup(const float *vmap, const float ax, const float ay,
  * the lens: the background seen through those rays (the far taps through the same lens
  * cells, on the other side of the pixel) is hidden, and the post's sharp shadow across a
  * light's bokeh behind it follows (issue 35). */
-inline void dof_vis_map(float *vmap, global const float *coc, const int base,
-                        const int ppitch, global const float *taps, const int first,
-                        const int count)
+inline int dof_vis_map(float *vmap, global const float *coc, const int base,
+                       const int ppitch, global const float *taps, const int first,
+                       const int count)
 {
-  for(int k = 0; k < 4 * VIS_G * VIS_G; k++) vmap[k] = 0.0f;
+  int any_block = 0;
   for(int i = first; i < first + count; i++)
   {
     const float8 tp = vload8(i, taps);
@@ -511,13 +511,21 @@ inline void dof_vis_map(float *vmap, global const float *coc, const int base,
     const float4 cov = clamp((arq - tp.s2) * inv_s + 0.5f, 0.0f, 1.0f);
     const float4 dep = select((float4)(0.0f),
                               cov * tp.s4 / (arq * arq) * (0.25f * VIS_G * VIS_G), blocks);
+    if(!any(dep > 0.0f)) continue;
+    if(!any_block)
+    {  /* the first blocking tap: the map is needed */
+      for(int k = 0; k < 4 * VIS_G * VIS_G; k++) vmap[k] = 0.0f;
+      any_block = 1;
+    }
     const int4 cell = dof_vis_cell(tp.s5 / rq, tp.s6 / rq);
     vmap[cell.s0] += dep.s0;
     vmap[cell.s1] += dep.s1;
     vmap[cell.s2] += dep.s2;
     vmap[cell.s3] += dep.s3;
   }
-  for(int k = 0; k < 4 * VIS_G * VIS_G; k++) vmap[k] = fmin(vmap[k], 1.0f);
+  if(any_block)
+    for(int k = 0; k < 4 * VIS_G * VIS_G; k++) vmap[k] = fmin(vmap[k], 1.0f);
+  return any_block;
 }
 
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
@@ -594,12 +602,16 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
        background is estimated by the far field without the map) */
     s->ffa += TO_REAL16(c * LANES(cov_f * norm));
     s->wfa += TO_REAL4(cov_f * norm);
-    norm *= select(dof_vis_lookup(vmap, tp.s5, tp.s6, rf), (float4)(1.0f), p_near);
-    const float4 rh = fmax(r0, 0.0f);
-    const float4 wh = clamp((rh - d_far) * inv_s + 0.5f, 0.0f, 1.0f)
-                      / fmax(CLFX_PI * rh * rh, 1.0f) * frac;
-    s->whid += TO_REAL4(select((float4)(0.0f), wh * dof_vis_lookup(vmap, tp.s5, tp.s6, rh),
-                               q_near & ~p_near));
+    if(any(~q_near & ~p_near))
+      norm *= select(dof_vis_lookup(vmap, tp.s5, tp.s6, rf), (float4)(1.0f), p_near);
+    if(any(q_near & ~p_near))
+    {
+      const float4 rh = fmax(r0, 0.0f);
+      const float4 wh = clamp((rh - d_far) * inv_s + 0.5f, 0.0f, 1.0f)
+                        / fmax(CLFX_PI * rh * rh, 1.0f) * frac;
+      s->whid += TO_REAL4(select((float4)(0.0f), wh * dof_vis_lookup(vmap, tp.s5, tp.s6, rh),
+                                 q_near & ~p_near));
+    }
   }
   float4 wf = cov_f * norm;
   s->fn += TO_REAL16(c * LANES(wn));
@@ -651,12 +663,10 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
 {
   const float16 c0 = c0_in * scale;
   float vbuf[4 * VIS_G * VIS_G];
-  const float *vmap = 0;
-  if(vis)
-  {
-    dof_vis_map(vbuf, coc, base, ppitch, taps, first, count);
-    vmap = vbuf;
-  }
+  /* no near tap of VIS_MIN_R or more covers any of the 4 pixels: no map (the far field as
+     without one) */
+  const int use_vis = vis && dof_vis_map(vbuf, coc, base, ppitch, taps, first, count);
+  const float *vmap = use_vis ? vbuf : 0;
   const int4 p_near = r0 < -NEAR_EPS;
   const int any_near = any(p_near);
   const float cap_s = cap * scale;
@@ -699,7 +709,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const REAL16 centre = TO_REAL16(c0);
   const REAL16 near = select(centre, s.fn * LANES(inv_n), LANES(s.wn_sum > tiny));
   REAL16 far = select(near, s.ff * LANES(inv_f), LANES(s.wf_sum > tiny));
-  if(vis)
+  if(use_vis)
   {  /* the visible cells' far taps, and the hidden background's share of the visible
         cells filled with the far field without the map */
     const REAL4 wt = s.wf_sum + s.whid;
