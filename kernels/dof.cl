@@ -474,16 +474,8 @@ inline float4 dof_vis_lookup(const float *vmap, const float ax, const float ay,
                              const float4 rq)
 {
   const float4 inv = 1.0f / fmax(rq, 1.0f);
-  /* bilinear over the cells' centres (clamped at the border) */
-  const float4 gx = clamp((ax * inv + 1.0f) * (0.5f * VIS_G) - 0.5f, 0.0f, VIS_G - 1.0f);
-  const float4 gy = clamp((ay * inv + 1.0f) * (0.5f * VIS_G) - 0.5f, 0.0f, VIS_G - 1.0f);
-  const int4 x0 = min(convert_int4_rtz(gx), VIS_G - 2), y0 = min(convert_int4_rtz(gy), VIS_G - 2);
-  const float4 fx = gx - convert_float4(x0), fy = gy - convert_float4(y0);
-  const int4 c = (int4)(0, 1, 2, 3) * (VIS_G * VIS_G) + y0 * VIS_G + x0;
-#define VIS_BL(k) ((vmap[c.k] * (1.0f - fx.k) + vmap[c.k + 1] * fx.k) * (1.0f - fy.k) \
-                   + (vmap[c.k + VIS_G] * (1.0f - fx.k) + vmap[c.k + VIS_G + 1] * fx.k) * fy.k)
-  const float4 b = (float4)(VIS_BL(s0), VIS_BL(s1), VIS_BL(s2), VIS_BL(s3));
-#undef VIS_BL
+  const int4 cell = dof_vis_cell(ax * inv, ay * inv);
+  const float4 b = (float4)(vmap[cell.s0], vmap[cell.s1], vmap[cell.s2], vmap[cell.s3]);
   return select((float4)(1.0f), fmax(1.0f - b, VIS_FLOOR), rq >= 1.0f);
 }
 
