@@ -657,7 +657,8 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   float vbuf[4 * VIS_G * VIS_G];
   /* no near tap of VIS_MIN_R or more covers any of the 4 pixels: no map (the far field as
      without one) */
-  const int use_vis = vis && dof_vis_map(vbuf, coc, base, ppitch, taps, first, count);
+  const int use_vis = vis && !all(r0 < -NEAR_EPS)     /* the map serves far pixels only */
+                      && dof_vis_map(vbuf, coc, base, ppitch, taps, first, count);
   const float *vmap = use_vis ? vbuf : 0;
   const int4 p_near = r0 < -NEAR_EPS;
   const int any_near = any(p_near);
