@@ -58,6 +58,10 @@
 #define VIS_MIN_R 8.0f    /* near taps of at least this radius block lens cells (a pixel of
                              offset moves a tap by at most one cell) */
 #define VIS_FLOOR 0.015625f   /* a far tap's weight keeps at least this much of itself */
+#define VIS_R0_LO 4.0f    /* pixels of a CoC radius up to this gather without the map, */
+#define VIS_R0_HI 8.0f    /* from this with it, in between its effect ramps in (a pixel's
+                             far taps all lie within its radius: under a few px they look
+                             alike whatever the lens cell) */
 
 inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, float offset)
 {
@@ -469,14 +473,15 @@ inline int4 dof_vis_cell(const float4 ux, const float4 uy)
 /* The visible fraction of the lens cell through which a far tap at aperture-space offset
  * (ax, ay) spread over radius rq (its far-field radius) reaches each of the 4 pixels (the ray
  * from the pixel through lens point u meets a layer of signed radius r at offset r u:
- * u = offset / rq); 1 under a radius of 1 px (no lens point to speak of). */
+ * u = offset / rq); 1 under a radius of 1 px (no lens point to speak of); `t`: the pixels'
+ * weights of the map (dof_vis_weight), 1 - t (1 - visible). */
 inline float4 dof_vis_lookup(const float *vmap, const float ax, const float ay,
-                             const float4 rq)
+                             const float4 rq, const float4 t)
 {
   const float4 inv = 1.0f / fmax(rq, 1.0f);
   const int4 cell = dof_vis_cell(ax * inv, ay * inv);
   const float4 b = (float4)(vmap[cell.s0], vmap[cell.s1], vmap[cell.s2], vmap[cell.s3]);
-  return select((float4)(1.0f), fmax(1.0f - b, VIS_FLOOR), rq >= 1.0f);
+  return select((float4)(1.0f), 1.0f - t * (1.0f - fmax(1.0f - b, VIS_FLOOR)), rq >= 1.0f);
 }
 
 /* The lens-visibility map of 4 pixels over the taps first..first+count: per pixel and cell
@@ -587,6 +592,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
 #endif
   float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near) * frac;
+  const float4 vt = clamp((r0 - VIS_R0_LO) * (1.0f / (VIS_R0_HI - VIS_R0_LO)), 0.0f, 1.0f);
   if(vmap)
   {
     /* a far p: each far tap through its lens cell's visible fraction; a near tap stands for
@@ -595,13 +601,13 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
     s->ffa += TO_REAL16(c * LANES(cov_f * norm));
     s->wfa += TO_REAL4(cov_f * norm);
     if(any(~q_near & ~p_near))
-      norm *= select(dof_vis_lookup(vmap, tp.s5, tp.s6, rf), (float4)(1.0f), p_near);
+      norm *= dof_vis_lookup(vmap, tp.s5, tp.s6, rf, vt);
     if(any(q_near & ~p_near))
     {
       const float4 rh = fmax(r0, 0.0f);
       const float4 wh = clamp((rh - d_far) * inv_s + 0.5f, 0.0f, 1.0f)
                         / fmax(CLFX_PI * rh * rh, 1.0f) * frac;
-      s->whid += TO_REAL4(select((float4)(0.0f), wh * dof_vis_lookup(vmap, tp.s5, tp.s6, rh),
+      s->whid += TO_REAL4(select((float4)(0.0f), wh * dof_vis_lookup(vmap, tp.s5, tp.s6, rh, vt),
                                  q_near & ~p_near));
     }
   }
@@ -657,7 +663,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   float vbuf[4 * VIS_G * VIS_G];
   /* no near tap of VIS_MIN_R or more covers any of the 4 pixels: no map (the far field as
      without one) */
-  const int use_vis = vis && !all(r0 < -NEAR_EPS)     /* the map serves far pixels only */
+  const int use_vis = vis && any(r0 > VIS_R0_LO)   /* the map serves far pixels only */
                       && dof_vis_map(vbuf, coc, base, ppitch, taps, first, count);
   const float *vmap = use_vis ? vbuf : 0;
   const int4 p_near = r0 < -NEAR_EPS;

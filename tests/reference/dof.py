@@ -24,6 +24,7 @@ TILE = 32
 VIS_G = 16          # lens-visibility map: VIS_G x VIS_G cells over the aperture (-1..1)
 VIS_MIN_R = 8.0     # near taps of at least this radius block the cells they are seen through
 VIS_FLOOR = 1.0 / 64   # a far tap keeps at least this fraction of its weight
+VIS_R0_LO, VIS_R0_HI = 4.0, 8.0   # pixels' radii over which the map's effect ramps in
 
 
 def coc_radius(depth, *, k_half, focus, clamp_r, offset=0.0):
@@ -200,26 +201,18 @@ def _vis_cell(ux, uy):
 
 
 def _vis_cells(vmap, ux, uy):
-    """Per pixel the blocked fraction at aperture position (ux, uy) (arrays over the image):
-    bilinear over the cells' centres, clamped at the border."""
-    def at(cx, cy):
-        cell = np.broadcast_to(cy * VIS_G + cx, vmap.shape[:2])
-        return np.take_along_axis(vmap, cell[..., None], axis=2)[..., 0]
-    gx = np.clip((ux + 1) * (0.5 * VIS_G) - 0.5, 0, VIS_G - 1)
-    gy = np.clip((uy + 1) * (0.5 * VIS_G) - 0.5, 0, VIS_G - 1)
-    x0 = np.minimum(np.floor(gx).astype(int), VIS_G - 2)
-    y0 = np.minimum(np.floor(gy).astype(int), VIS_G - 2)
-    fx, fy = gx - x0, gy - y0
-    return ((at(x0, y0) * (1 - fx) + at(x0 + 1, y0) * fx) * (1 - fy)
-            + (at(x0, y0 + 1) * (1 - fx) + at(x0 + 1, y0 + 1) * fx) * fy)
+    """Per pixel the blocked fraction of its cell of aperture position (ux, uy) (arrays over
+    the image)."""
+    cell = np.broadcast_to(_vis_cell(ux, uy), vmap.shape[:2])
+    return np.take_along_axis(vmap, cell[..., None], axis=2)[..., 0]
 
 
-def _visible(vmap, ax, ay, rad):
+def _visible(vmap, ax, ay, rad, t):
     """The visible fraction max(1 - blocked, VIS_FLOOR) of the lens point a / rad (1 where
-    rad < 1)."""
+    rad < 1), weighed by ``t``: 1 - t (1 - visible)."""
     rs = np.maximum(rad, 1.0)
-    return np.where(rad >= 1, np.maximum(1 - _vis_cells(vmap, ax / rs, ay / rs), VIS_FLOOR),
-                    1.0)
+    v = np.maximum(1 - _vis_cells(vmap, ax / rs, ay / rs), VIS_FLOOR)
+    return np.where(rad >= 1, 1 - t * (1 - v), 1.0)
 
 
 def vis_map(r, taps):
@@ -275,15 +268,16 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
     out = far (1 - a) + near a, a = clamp(alpha, 0, 1), each field normalised; empty fields
     fall back to the other field, then to the centre pixel.
 
-    Lens visibility (:func:`vis_map`, for pixels not in front of the focus plane): the ray
-    from p through lens point u (aperture radii) meets a layer of signed radius r at
-    p + r u, so a near tap (r_q <= -VIS_MIN_R) at aperture-space offset a blocks the lens
-    cells around u = a / r_q, and a far tap is seen through u = a / rf: with V(u) =
-    max(1 - blocked(u), VIS_FLOOR) (bilinear over the cells; 1 where the radius is under
-    1 px) the far field is (sum w V c + H F) / (sum w V + H), F the far field without the
-    map (sum w c / sum w), H = sum over near taps of clamp(r_p - d_far + 0.5, 0, 1) /
-    max(pi r_p^2, 1) V(a / r_p): the background hidden behind near pixels, seen through
-    the visible cells, estimated by F.
+    Lens visibility (:func:`vis_map`): the ray from p through lens point u (aperture
+    radii) meets a layer of signed radius r at p + r u, so a near tap (r_q <= -VIS_MIN_R)
+    at aperture-space offset a blocks the lens cell of u = a / r_q, and a far tap is seen
+    through u = a / rf.  With V(u) = 1 - t (1 - max(1 - blocked(u's cell), VIS_FLOOR))
+    (1 where the radius is under 1 px), t = clamp((r_p - VIS_R0_LO) / (VIS_R0_HI -
+    VIS_R0_LO), 0, 1), the far field of a pixel with r_p > VIS_R0_LO and a map is
+    (sum w V c + H F) / (sum w V + H): F the far field without the map (sum w c / sum w),
+    H = sum over near taps of clamp(r_p - d_far + 0.5, 0, 1) / max(pi r_p^2, 1) V(a / r_p),
+    the background hidden behind near pixels seen through the visible cells, estimated
+    by F.
 
     Mixed edge pixels (:func:`mixed_pixels` of the depth's radii; level-0 taps only): a
     mixed tap q (coverage a_q, radii rn_q, rf_q, d_q) is two taps, its far part
@@ -325,6 +319,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
         ffa = np.zeros(src.shape)
         wfa = np.zeros((h, w))
         whid = np.zeros((h, w))
+        vt = np.clip((r0 - VIS_R0_LO) / (VIS_R0_HI - VIS_R0_LO), 0, 1)
         fn = np.zeros(src.shape)
         ff = np.zeros(src.shape)
         wn_sum = np.zeros((h, w))
@@ -371,10 +366,10 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
                 norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1)) * fp
                 ffa += cp * (cov_f * norm)[..., None]
                 wfa += cov_f * norm
-                norm = norm * np.where(p_near, 1.0, _visible(vmap, ax, ay, rf))
+                norm = norm * _visible(vmap, ax, ay, rf, vt)
                 rh = np.maximum(r0, 0)
                 whid += np.where(q_near & ~p_near, ramp(rh - d_far) / np.maximum(
-                    math.pi * rh ** 2, 1) * fp * _visible(vmap, ax, ay, rh), 0.0)
+                    math.pi * rh ** 2, 1) * fp * _visible(vmap, ax, ay, rh, vt), 0.0)
                 wf = cov_f * norm
                 fill = np.where(p_near, cov_f - np.minimum(cov_q, cov_f), 0) * norm
                 lq = 0.2126 * cp[..., 0] + 0.7152 * cp[..., 1] + 0.0722 * cp[..., 2]
@@ -391,7 +386,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
                        near)
         wt = wf_sum + whid
         fa = ffa / np.where(wfa > tiny, wfa, 1.0)[..., None]
-        far = np.where(((wt > tiny) & (wfa > tiny) & vmap.any(axis=2))[..., None],
+        far = np.where(((wt > tiny) & (wfa > tiny) & vmap.any(axis=2) & (r0 > VIS_R0_LO))[..., None],
                        (ff + fa * whid[..., None]) / np.where(wt > tiny, wt, 1.0)[..., None], far)
         a = np.where(wf_sum > tiny, np.clip(alpha, 0, 1), 1.0)[..., None]
         return far * (1 - a) + near * a
