@@ -54,14 +54,6 @@
 #define DOF_CATEYE 0
 #endif
 #define CATEYE_MIN_FRAC 1e-3f   /* the open aperture's smallest fraction (normalisation) */
-#define VIS_G 16          /* lens-visibility map: VIS_G x VIS_G cells over the aperture */
-#define VIS_MIN_R 8.0f    /* near taps of at least this radius block lens cells (a pixel of
-                             offset moves a tap by at most one cell) */
-#define VIS_FLOOR 0.015625f   /* a far tap's weight keeps at least this much of itself */
-#define VIS_R0_LO 4.0f    /* pixels of a CoC radius up to this gather without the map, */
-#define VIS_R0_HI 8.0f    /* from this with it, in between its effect ramps in (a pixel's
-                             far taps all lie within its radius: under a few px they look
-                             alike whatever the lens cell) */
 
 inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, float offset)
 {
@@ -457,73 +449,7 @@ typedef struct
 {
   REAL16 fn, ff;
   REAL4 wn_sum, wf_sum, alpha;
-  REAL16 ffa;           /* with a lens-visibility map: the far field without it, */
-  REAL4 wfa, whid;      /* its weight, and the weight of the visible lens cells that look
-                           at the background hidden behind near pixels */
 } dof_sums;
-
-/* The lens-visibility map's cell of aperture position (ux, uy) (aperture radii, -1..1). */
-inline int4 dof_vis_cell(const float4 ux, const float4 uy)
-{
-  const int4 cx = clamp(convert_int4_rtn((ux + 1.0f) * (0.5f * VIS_G)), 0, VIS_G - 1);
-  const int4 cy = clamp(convert_int4_rtn((uy + 1.0f) * (0.5f * VIS_G)), 0, VIS_G - 1);
-  return (int4)(0, 1, 2, 3) * (VIS_G * VIS_G) + cy * VIS_G + cx;
-}
-
-/* The visible fraction of the lens cell through which a far tap at aperture-space offset
- * (ax, ay) spread over radius rq (its far-field radius) reaches each of the 4 pixels (the ray
- * from the pixel through lens point u meets a layer of signed radius r at offset r u:
- * u = offset / rq); 1 under a radius of 1 px (no lens point to speak of); `t`: the pixels'
- * weights of the map (dof_vis_weight), 1 - t (1 - visible). */
-inline float4 dof_vis_lookup(const float *vmap, const float ax, const float ay,
-                             const float4 rq, const float4 t)
-{
-  const float4 inv = 1.0f / fmax(rq, 1.0f);
-  const int4 cell = dof_vis_cell(ax * inv, ay * inv);
-  const float4 b = (float4)(vmap[cell.s0], vmap[cell.s1], vmap[cell.s2], vmap[cell.s3]);
-  return select((float4)(1.0f), 1.0f - t * (1.0f - fmax(1.0f - b, VIS_FLOOR)), rq >= 1.0f);
-}
-
-/* The lens-visibility map of 4 pixels over the taps first..first+count: per pixel and cell
- * of the aperture (VIS_G x VIS_G over -1..1, aperture radii) the fraction of it that near
- * taps of radius >= VIS_MIN_R block (a near tap at offset o of radius r < 0 is seen through
- * lens point o / r; it stands for `area` px, area / r^2 of the unit aperture), clamped to
- * 1.  A blurred foreground post blocks the rays of a background pixel through one side of
- * the lens: the background seen through those rays (the far taps through the same lens
- * cells, on the other side of the pixel) is hidden, and the post's sharp shadow across a
- * light's bokeh behind it follows (issue 35). */
-inline int dof_vis_map(float *vmap, global const float *coc, const int base,
-                       const int ppitch, global const float *taps, const int first,
-                       const int count)
-{
-  int any_block = 0;
-  for(int i = first; i < first + count; i++)
-  {
-    const float8 tp = vload8(i, taps);
-    const float4 rq = vload4(0, coc + base + (int)tp.s1 * ppitch + (int)tp.s0);
-    const int4 blocks = rq <= -VIS_MIN_R;
-    if(!any(blocks)) continue;
-    const float inv_s = as_float((127 - (int)tp.s7) << 23);
-    const float4 arq = fabs(rq);
-    const float4 cov = clamp((arq - tp.s2) * inv_s + 0.5f, 0.0f, 1.0f);
-    const float4 dep = select((float4)(0.0f),
-                              cov * tp.s4 / (arq * arq) * (0.25f * VIS_G * VIS_G), blocks);
-    if(!any(dep > 0.0f)) continue;
-    if(!any_block)
-    {  /* the first blocking tap: the map is needed */
-      for(int k = 0; k < 4 * VIS_G * VIS_G; k++) vmap[k] = 0.0f;
-      any_block = 1;
-    }
-    const int4 cell = dof_vis_cell(tp.s5 / rq, tp.s6 / rq);
-    vmap[cell.s0] += dep.s0;
-    vmap[cell.s1] += dep.s1;
-    vmap[cell.s2] += dep.s2;
-    vmap[cell.s3] += dep.s3;
-  }
-  if(any_block)
-    for(int k = 0; k < 4 * VIS_G * VIS_G; k++) vmap[k] = fmin(vmap[k], 1.0f);
-  return any_block;
-}
 
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
@@ -549,7 +475,7 @@ inline int dof_vis_map(float *vmap, global const float *coc, const int base,
  * 4 pixels whose radii are `r0` (`p_near`: r0 < -NEAR_EPS, `any_near`: any of them). */
 inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
                     const float8 tp, const float inv_s, const float4 r0, const int4 p_near,
-                    const int any_near, const float cap_s, const float *vmap CATEYE_ARGS)
+                    const int any_near, const float cap_s CATEYE_ARGS)
 {
   const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
   const float4 arq = fabs(rq);
@@ -591,26 +517,8 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
 #else
   const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
 #endif
-  float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near) * frac;
-  const float4 vt = clamp((r0 - VIS_R0_LO) * (1.0f / (VIS_R0_HI - VIS_R0_LO)), 0.0f, 1.0f);
-  if(vmap)
-  {
-    /* a far p: each far tap through its lens cell's visible fraction; a near tap stands for
-       background hidden behind it, seen through its cell as if at p's own radius (that
-       background is estimated by the far field without the map) */
-    s->ffa += TO_REAL16(c * LANES(cov_f * norm));
-    s->wfa += TO_REAL4(cov_f * norm);
-    if(any(~q_near & ~p_near))
-      norm *= dof_vis_lookup(vmap, tp.s5, tp.s6, rf, vt);
-    if(any(q_near & ~p_near))
-    {
-      const float4 rh = fmax(r0, 0.0f);
-      const float4 wh = clamp((rh - d_far) * inv_s + 0.5f, 0.0f, 1.0f)
-                        / fmax(CLFX_PI * rh * rh, 1.0f) * frac;
-      s->whid += TO_REAL4(select((float4)(0.0f), wh * dof_vis_lookup(vmap, tp.s5, tp.s6, rh, vt),
-                                 q_near & ~p_near));
-    }
-  }
+  const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near)
+                      * frac;
   float4 wf = cov_f * norm;
   s->fn += TO_REAL16(c * LANES(wn));
   if(any_near && any(p_near & ~q_near))
@@ -657,21 +565,14 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
                           const int first, const int count, const float cap,
                           const float scale, global const float *mixa,
                           global const float *mixr, global const float *mixd, const int mix,
-                          const int layer, const int vis CATEYE_ARGS)
+                          const int layer CATEYE_ARGS)
 {
   const float16 c0 = c0_in * scale;
-  float vbuf[4 * VIS_G * VIS_G];
-  /* no near tap of VIS_MIN_R or more covers any of the 4 pixels: no map (the far field as
-     without one) */
-  const int use_vis = vis && any(r0 > VIS_R0_LO)   /* the map serves far pixels only */
-                      && dof_vis_map(vbuf, coc, base, ppitch, taps, first, count);
-  const float *vmap = use_vis ? vbuf : 0;
   const int4 p_near = r0 < -NEAR_EPS;
   const int any_near = any(p_near);
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
-  dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0), (REAL16)(0),
-                (REAL4)(0), (REAL4)(0)};
+  dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
   for(int i = first; i < first + count; i++)
   {
     const float8 tp = vload8(i, taps);
@@ -683,7 +584,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
     if(!any(aq > 0.0f))
     {
-      dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s, vmap CATEYE_PASS);
+      dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
       continue;
     }
     /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
@@ -696,9 +597,9 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     if(layer && i == first) an = select(an, (float4)(layer == 2 ? 1.0f : 0.0f), sq);
     const int16 sq16 = LANES(sq);
     dof_tap(&s, select(c, c - d * LANES(aq), sq16), select(rq, rr.s1357, sq), one - an, tp,
-            inv_s, r0, p_near, any_near, cap_s, vmap CATEYE_PASS);
+            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
     dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
-            inv_s, r0, p_near, any_near, cap_s, vmap CATEYE_PASS);
+            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
   }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
   const REAL4 tiny = (REAL4)(1e-20);
@@ -707,15 +608,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const REAL4 inv_f = select((REAL4)(0), (REAL4)(1) / s.wf_sum, s.wf_sum > tiny);
   const REAL16 centre = TO_REAL16(c0);
   const REAL16 near = select(centre, s.fn * LANES(inv_n), LANES(s.wn_sum > tiny));
-  REAL16 far = select(near, s.ff * LANES(inv_f), LANES(s.wf_sum > tiny));
-  if(use_vis)
-  {  /* the visible cells' far taps, and the hidden background's share of the visible
-        cells filled with the far field without the map */
-    const REAL4 wt = s.wf_sum + s.whid;
-    const REAL16 fa = s.ffa * LANES(select((REAL4)(0), (REAL4)(1) / s.wfa, s.wfa > tiny));
-    far = select(far, (s.ff + fa * LANES(s.whid)) * LANES((REAL4)(1) / wt),
-                 LANES(wt > tiny && s.wfa > tiny));
-  }
+  const REAL16 far = select(near, s.ff * LANES(inv_f), LANES(s.wf_sum > tiny));
   const REAL16 mix_a = LANES(select(a, (REAL4)(1), s.wf_sum <= tiny));
   return far * ((REAL16)(1) - mix_a) + near * mix_a;   /* no difference: stays finite */
 }
@@ -733,16 +626,15 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                const float4 r0, global const float *taps, const int first,
                                const int count, const float cap, global const float *mixa,
                                global const float *mixr, global const float *mixd,
-                               const int mix, const int layer, const int vis CATEYE_ARGS)
+                               const int mix, const int layer CATEYE_ARGS)
 {
   const REAL16 out = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, first,
-                                 count, cap, 1.0f, mixa, mixr, mixd, mix, layer, vis
-                                 CATEYE_PASS);
+                                 count, cap, 1.0f, mixa, mixr, mixd, mix, layer CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
   const REAL16 s = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, first,
-                               count, cap, OVERFLOW_SCALE, mixa, mixr, mixd, mix, layer,
-                               vis CATEYE_PASS);
+                               count, cap, OVERFLOW_SCALE, mixa, mixr, mixd, mix, layer
+                               CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
 
@@ -911,7 +803,6 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     }
   }
   const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
-  const int vis = (info.s4 & 4) != 0;   /* a near blur of VIS_MIN_R or more within reach */
 #if DOF_CATEYE
   const float4 ce_x = cateye.s0 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s1;
   const float4 ce_y = (float4)(cateye.s2 * ((float)y + 0.5f) + cateye.s3);
@@ -936,7 +827,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   if(!twice)
   {
     float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first, count,
-                                cap, mixa, mixr, mixd, mix, 0, vis CATEYE_PASS);
+                                cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS);
     /* pixels in focus or nearly beside out-of-focus ones in a sparse table's group: a
        lattice's far field would give them their own pixel through its prefilter tent (an
        in-focus edge against a 41 px background went soft 2^L px deep); they take the sharp
@@ -944,8 +835,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     const int4 sharp4 = r >= -NEAR_EPS && r < sharp_r;
     if(info.s5 > 0 && first == info.s0 && any(sharp4))
       o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, info.s2,
-                                    info.s3, cap, mixa, mixr, mixd, mix, 0, vis
-                                    CATEYE_PASS),
+                                    info.s3, cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
                  LANES(sharp4));
     vstore16(o, 0, out);
     return;
@@ -956,11 +846,11 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const int16 sm16 = LANES(sm);
   const float16 o_far = dof_gather_safe(col, coc, ppitch, plane, base,
                                         select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
-                                        count, cap, mixa, mixr, mixd, 1, 1, vis CATEYE_PASS);
+                                        count, cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
   const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
-                                         taps, first, count, cap, mixa, mixr, mixd, 1, 2,
-                                         vis CATEYE_PASS);
+                                         taps, first, count, cap, mixa, mixr, mixd, 1, 2
+                                         CATEYE_PASS);
   vstore16(select(o_far, o_far * LANES(1.0f - am) + o_near * LANES(am), sm16), 0, out);
 }
 

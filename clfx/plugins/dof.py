@@ -340,9 +340,6 @@ CAP_FACTOR = 4.0
 background around, its colours capped at this many times the geometric mean luminance of
 the tiles around (so a light beside a blurred bar does not shine through it); the edge
 pixels repeated past the frame edge are capped the same way."""
-VIS_MIN_R = 8.0
-"""Near-field radius (px of the buffer gathered) from which a blurred foreground's taps block
-the lens cells they are seen through (``dof.cl``'s lens-visibility map, ``VIS_MIN_R``)."""
 MIXED_NOTE = " mixed edge pixels split"
 """The end of the report's line of the mixed edge pixels split (``dof_mixed``)."""
 
@@ -845,8 +842,7 @@ class Dof(Plugin):
         if half.any():
             hlevels = quantised_radius(np.where(half, 0.5 * radii, 0.0))
             half_l = lattice_level(float(hlevels.max()), lvl.lattice, lvl.dense_radius)
-            htaps, htiles, hrows = self._tile_table(
-                rt, hlevels, hlevels, np.where(half & (0.5 * near >= VIS_MIN_R), 4, 0), *common)
+            htaps, htiles, hrows = self._tile_table(rt, hlevels, hlevels, None, *common)
             hrows += (1 << half_l) - 1     # the half-resolution prefilter's tent
         # full resolution: sharp pixels gather over their own reach and the near field's,
         # out-of-focus ones take the half-resolution result where it is smooth
@@ -854,8 +850,7 @@ class Dof(Plugin):
                                                       if math.isfinite(lvl.sharp_radius)
                                                       else radii), 0.0)
         sharp = np.minimum(sharp, levels)
-        mode = (np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
-                + np.where(near >= VIS_MIN_R, 4, 0))
+        mode = np.where(half, 1, 0) + np.where(levels <= lvl.dense_radius, 2, 0)
         taps, tile_info, rows = self._tile_table(rt, levels, sharp, mode, *common,
                                                  core=lvl.sharp_radius)
         # rows a pixel reads: its farthest tap's, the prefilter's tent around it, or the

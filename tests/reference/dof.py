@@ -21,10 +21,6 @@ MIX_TOL = 0.25
 MIX_GAP = 2.0
 CAP_FACTOR = 4.0
 TILE = 32
-VIS_G = 16          # lens-visibility map: VIS_G x VIS_G cells over the aperture (-1..1)
-VIS_MIN_R = 8.0     # near taps of at least this radius block the cells they are seen through
-VIS_FLOOR = 1.0 / 64   # a far tap keeps at least this fraction of its weight
-VIS_R0_LO, VIS_R0_HI = 4.0, 8.0   # pixels' radii over which the map's effect ramps in
 
 
 def coc_radius(depth, *, k_half, focus, clamp_r, offset=0.0):
@@ -193,53 +189,6 @@ def padded_source(src, pad):
     return np.where(outside[..., None], out * k[..., None], out)
 
 
-def _vis_cell(ux, uy):
-    """The lens-visibility cell (0..VIS_G^2 - 1) of aperture position (ux, uy)."""
-    cx = np.clip(np.floor((ux + 1) * (0.5 * VIS_G)), 0, VIS_G - 1).astype(int)
-    cy = np.clip(np.floor((uy + 1) * (0.5 * VIS_G)), 0, VIS_G - 1).astype(int)
-    return cy * VIS_G + cx
-
-
-def _vis_cells(vmap, ux, uy):
-    """Per pixel the blocked fraction of its cell of aperture position (ux, uy) (arrays over
-    the image)."""
-    cell = np.broadcast_to(_vis_cell(ux, uy), vmap.shape[:2])
-    return np.take_along_axis(vmap, cell[..., None], axis=2)[..., 0]
-
-
-def _visible(vmap, ax, ay, rad, t):
-    """The visible fraction max(1 - blocked, VIS_FLOOR) of the lens point a / rad (1 where
-    rad < 1), weighed by ``t``: 1 - t (1 - visible)."""
-    rs = np.maximum(rad, 1.0)
-    v = np.maximum(1 - _vis_cells(vmap, ax / rs, ay / rs), VIS_FLOOR)
-    return np.where(rad >= 1, 1 - t * (1 - v), 1.0)
-
-
-def vis_map(r, taps):
-    """Per pixel of radii ``r`` and lens cell (VIS_G x VIS_G over the aperture, -1..1 in
-    aperture radii) the fraction blocked by the near taps of ``taps`` of radius <=
-    -VIS_MIN_R: a near tap at aperture-space offset a of radius r_q is seen through u =
-    a / r_q and stands for ``area`` px, area / r_q^2 of the unit aperture, weighed by its
-    coverage clamp(|r_q| - d_near + 0.5, 0, 1) (the lattice's ramp); clamped to 1."""
-    h, w = r.shape
-    ys, xs = np.mgrid[0:h, 0:w]
-    vmap = np.zeros((h, w, VIS_G * VIS_G))
-    flat = vmap.reshape(-1, VIS_G * VIS_G)
-    rows = np.arange(h * w)
-    for ox, oy, d_near, _, area, ax, ay, lv in taps:
-        rq = _clamped(r, ys + int(oy), xs + int(ox))
-        blocks = rq <= -VIS_MIN_R
-        if not blocks.any():
-            continue
-        arq = np.abs(rq)
-        cov = np.clip((arq - d_near) * 2.0 ** -lv + 0.5, 0, 1)
-        dep = np.where(blocks, cov * area / np.where(blocks, arq, 1.0) ** 2 * (0.25 * VIS_G ** 2),
-                       0.0)
-        rs = np.where(blocks, rq, -1.0)
-        np.add.at(flat, (rows, _vis_cell(ax / rs, ay / rs).ravel()), dep.ravel())
-    return np.minimum(vmap, 1.0)
-
-
 def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
         cateye_front=None, sharp_taps=None, sharp_radius=0.0):
     """Gather with near/far fields over ``taps`` ((n, 8) rows: ox, oy, d_near, d_far, area,
@@ -267,17 +216,6 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
     takes q's colour capped at :func:`hidden_caps` in luminance.
     out = far (1 - a) + near a, a = clamp(alpha, 0, 1), each field normalised; empty fields
     fall back to the other field, then to the centre pixel.
-
-    Lens visibility (:func:`vis_map`): the ray from p through lens point u (aperture
-    radii) meets a layer of signed radius r at p + r u, so a near tap (r_q <= -VIS_MIN_R)
-    at aperture-space offset a blocks the lens cell of u = a / r_q, and a far tap is seen
-    through u = a / rf.  With V(u) = 1 - t (1 - max(1 - blocked(u's cell), VIS_FLOOR))
-    (1 where the radius is under 1 px), t = clamp((r_p - VIS_R0_LO) / (VIS_R0_HI -
-    VIS_R0_LO), 0, 1), the far field of a pixel with r_p > VIS_R0_LO and a map is
-    (sum w V c + H F) / (sum w V + H): F the far field without the map (sum w c / sum w),
-    H = sum over near taps of clamp(r_p - d_far + 0.5, 0, 1) / max(pi r_p^2, 1) V(a / r_p),
-    the background hidden behind near pixels seen through the visible cells, estimated
-    by F.
 
     Mixed edge pixels (:func:`mixed_pixels` of the depth's radii; level-0 taps only): a
     mixed tap q (coverage a_q, radii rn_q, rf_q, d_q) is two taps, its far part
@@ -314,12 +252,7 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
         """Both fields of every pixel with radii ``r0`` (centre colours ``c0``) over
         ``taps``; ``layer`` 1 (2): a mixed pixel's own centre tap is only its far (near)
         part."""
-        vmap = vis_map(r, taps)
         p_near = r0 < -NEAR_EPS
-        ffa = np.zeros(src.shape)
-        wfa = np.zeros((h, w))
-        whid = np.zeros((h, w))
-        vt = np.clip((r0 - VIS_R0_LO) / (VIS_R0_HI - VIS_R0_LO), 0, 1)
         fn = np.zeros(src.shape)
         ff = np.zeros(src.shape)
         wn_sum = np.zeros((h, w))
@@ -364,12 +297,6 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
                     area_n = area_n * frac
                 wn = np.where(q_near, cov_n / np.maximum(area_n, 1), 0) * fp
                 norm = np.where(q_near, 0, 1 / np.maximum(math.pi * rf ** 2, 1)) * fp
-                ffa += cp * (cov_f * norm)[..., None]
-                wfa += cov_f * norm
-                norm = norm * _visible(vmap, ax, ay, rf, vt)
-                rh = np.maximum(r0, 0)
-                whid += np.where(q_near & ~p_near, ramp(rh - d_far) / np.maximum(
-                    math.pi * rh ** 2, 1) * fp * _visible(vmap, ax, ay, rh, vt), 0.0)
                 wf = cov_f * norm
                 fill = np.where(p_near, cov_f - np.minimum(cov_q, cov_f), 0) * norm
                 lq = 0.2126 * cp[..., 0] + 0.7152 * cp[..., 1] + 0.0722 * cp[..., 2]
@@ -384,10 +311,6 @@ def dof(src, depth, *, k_half, focus, clamp_r, taps, offset=0.0, cateye=None,
                         c0)
         far = np.where((wf_sum > tiny)[..., None], ff / np.maximum(wf_sum, tiny)[..., None],
                        near)
-        wt = wf_sum + whid
-        fa = ffa / np.where(wfa > tiny, wfa, 1.0)[..., None]
-        far = np.where(((wt > tiny) & (wfa > tiny) & vmap.any(axis=2) & (r0 > VIS_R0_LO))[..., None],
-                       (ff + fa * whid[..., None]) / np.where(wt > tiny, wt, 1.0)[..., None], far)
         a = np.where(wf_sum > tiny, np.clip(alpha, 0, 1), 1.0)[..., None]
         return far * (1 - a) + near * a
 
