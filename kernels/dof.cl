@@ -638,13 +638,31 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
 
+/* Whether half-resolution pixel (hx, hy) of the whole render's grid was gathered: its tile
+ * (`tile` full-resolution px, tile_info's mode bit 0) is a half-resolution one.  The other
+ * tiles' half-resolution pixels are the 2 x 2 box of the unblurred source (the half gather
+ * copies them): a sharp light there is not the blurred light of the tile beside it. */
+inline int dof_half_valid(global const int *tile_info, const int tiles_x, const int tiles_y,
+                          const int tile, const int hx, const int hy)
+{
+  const int tx = clfx_clampi(2 * hx / tile, 0, tiles_x - 1);
+  const int ty = clfx_clampi(2 * hy / tile, 0, tiles_y - 1);
+  return tile_info[(ty * tiles_x + tx) * 8 + 4] & 1;
+}
+
 /* Bilinear sample of the half-resolution result at full-resolution pixel (x, y) of the
  * whole render's grid (`hwidth` x `hheight`: the whole render's half-resolution size; `hres`
- * holds its rows from `hy0`, columns from `hx0`); `lmin`, `lmax`: the luminance range of
- * the 4 half-resolution pixels it reads, widened. */
+ * holds its rows from `hy0`, columns from `hx0`) over the half-resolution pixels that were
+ * gathered (dof_half_valid: at a half-resolution tile's edge the neighbouring tile's pixels
+ * are the unblurred source; the weights of the gathered ones are renormalised: the pixel's
+ * own half-resolution pixel, 3/4 x 3/4 of the weight, always is one); `lmin`, `lmax`: the
+ * luminance range of the 4 half-resolution pixels it reads, widened (those not gathered
+ * too: a tile beside that is not at half resolution holds sharper pixels, a contrast that
+ * a dense table gathers again at full resolution). */
 inline float4 dof_upsample(global const float *hres, const int hpitch, const int hwidth,
                            const int hheight, const int hx0, const int hy0, const int x,
-                           const int y, float *lmin, float *lmax)
+                           const int y, global const int *tile_info, const int tiles_x,
+                           const int tiles_y, const int tile, float *lmin, float *lmax)
 {
   const float hx = clamp(0.5f * ((float)x + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
   const float hy = clamp(0.5f * ((float)y + 0.5f) - 0.5f, 0.0f, (float)(hheight - 1));
@@ -654,12 +672,21 @@ inline float4 dof_upsample(global const float *hres, const int hpitch, const int
   const int r0 = (y0 - hy0) * hpitch - hx0, r1 = (y1 - hy0) * hpitch - hx0;
   const float4 c00 = vload4(r0 + x0, hres), c01 = vload4(r0 + x1, hres);
   const float4 c10 = vload4(r1 + x0, hres), c11 = vload4(r1 + x1, hres);
+  const int4 ok = (int4)(dof_half_valid(tile_info, tiles_x, tiles_y, tile, x0, y0),
+                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y0),
+                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x0, y1),
+                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y1)) != 0;
   const float4 l = (float4)(clfx_luminance(c00), clfx_luminance(c01), clfx_luminance(c10),
                             clfx_luminance(c11));
   *lmin = fmin(*lmin, fmin(fmin(l.x, l.y), fmin(l.z, l.w)));
   *lmax = fmax(*lmax, fmax(fmax(l.x, l.y), fmax(l.z, l.w)));
   /* weighted sums, no differences: finite values stay finite */
-  return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
+  if(all(ok))
+    return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
+  const float4 w = select((float4)(0.0f), (float4)((1.0f - fx) * (1.0f - fy), fx * (1.0f - fy),
+                                                   (1.0f - fx) * fy, fx * fy), ok);
+  const float4 wn = w / (w.x + w.y + w.z + w.w);
+  return c00 * wn.x + c01 * wn.y + c10 * wn.z + c11 * wn.w;
 }
 
 /* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
@@ -759,10 +786,14 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     float lmin = INFINITY, lmax = -INFINITY;
     float16 up;
     const int hx0 = hplace.s0, hy0 = hplace.s1;
-    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x, y, &lmin, &lmax);
-    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 1, y, &lmin, &lmax);
-    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 2, y, &lmin, &lmax);
-    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 3, y, &lmin, &lmax);
+    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x, y,
+                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
+    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 1, y,
+                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
+    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 2, y,
+                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
+    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 3, y,
+                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
     /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
     if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
                          <= refine)
