@@ -528,7 +528,8 @@ def render_frame(rt, look: Look, frame: Frame, *, frame_number: int = 0,
         The frame's windows, or a window an effect would grow it to, exceed the pixel limit.
     """
     stats = RunStats() if stats is None else stats
-    tiles = tile_pixels if tile_pixels is not None else limits.tile_pixels()
+    # 0 (a batch's RenderOptions: whole frames) is None: a plan is keyed by its band size
+    tiles = (tile_pixels if tile_pixels is not None else limits.tile_pixels()) or None
     report = FrameReport(frame=frame_number, input=frame.source,
                          values=look.values_at(frame_number))
     stamp = look.at_quality(quality).stamp(frame_number)   # the level rendered (one hash)
@@ -675,6 +676,7 @@ def render_tiled(rt, plugin: Plugin, p: Params, ctx: RenderContext, window: Rect
     (tests/contract/test_tiles.py)."""
     if plugin.whole_frame:
         return plugin.render(rt, p, ctx)
+    tile_pixels = tile_pixels or None   # 0 and None: whole, the plan's key (`Plugin.planned`)
     if ctx.tile_pixels != tile_pixels:
         ctx = ctx.over(tile_pixels=tile_pixels)
     bands = ctx.bands(window)
