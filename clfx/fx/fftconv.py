@@ -89,6 +89,7 @@ import hashlib
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -583,8 +584,6 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None) -> N
 
 @functools.lru_cache(maxsize=1)
 def _host_pool():
-    from concurrent.futures import ThreadPoolExecutor   # lazy: only a CPU device's float64
-
     return ThreadPoolExecutor(max_workers=max(1, os.cpu_count() or 1),
                               thread_name_prefix="clfx-fft")
 
