@@ -28,8 +28,9 @@ Algorithms
     Double-precision transforms.  On PoCL they cost 1.0-1.3x float32 and remove the float32
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
-    host's CPU they run in NumPy (pocketfft) on the mapped work buffer, in row and column
-    chunks on every core (:data:`HOST_FFT`, :func:`host_fft`): 0.55-0.6x VkFFT's CPU time,
+    host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
+    (no packed copy) and transformed in place in the mapped work buffer, in row and column
+    chunks on every core (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time,
     the same pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
@@ -114,11 +115,12 @@ KERNEL_FILE = "lib/fftconv.cl"
 CACHE_OWNERS = ("fftconv.plan", "fftconv.spectrum")
 """Owners of fftconv's entries in the runtime's cache (``rt.cache.clear(owner)``)."""
 HOST_FFT = True
-"""float64 transforms on a device that is the host's CPU (PoCL) run in NumPy's pocketfft, in
-place in the device's own work buffer (mapped: PoCL's buffers are host memory), one colour
-plane per core; elsewhere VkFFT.  Measured on 2 cores, the cinema look's glare at 1080p
-(3 planes of a 1372 x 2250 grid, forward and inverse): VkFFT 510-670 ms of CPU, NumPy
-250-330.  The result differs by float64 rounding only (`host_fft`)."""
+"""float64 transforms on a device that is the host's CPU (PoCL) run in NumPy's pocketfft, on
+the device's own buffers (mapped: PoCL's buffers are host memory), in chunks on every core;
+elsewhere VkFFT.  Measured on 2 cores (:func:`convolve` float64 of a whole 1080p frame with
+a 661 x 661 PSF, CPU ms, median of 5): VkFFT with its packed copy 495-670, NumPy 305-316
+(its transforms alone: 250-330 against VkFFT's 510-670 for 3 planes of 1372 x 2250, the
+cinema look's glare).  The result differs by float64 rounding only (`host_fft`)."""
 
 
 def host_fft(rt, precision: str) -> bool:
@@ -506,12 +508,13 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
     ex0, ey0 = effective.offset_in(dst.window)
     count = n1 * (n2 // 2 + 1)
     for c0 in range(0, nch, batch):
-        rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
-                  support.height, work, n1, n2 + 2, c0, batch, np.inf if split is None else split,
-                  local=None)
-        if on_host:
-            _host_convolve(rt, work, shape, spec, c0, support.height)
+        if on_host:    # the row transforms read the image itself: no packed copy
+            _host_convolve(rt, work, shape, spec, c0, img, (sx, sy, support.width,
+                                                            support.height))
         else:
+            rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
+                      support.height, work, n1, n2 + 2, c0, batch,
+                      np.inf if split is None else split, local=None)
             app.fft(arr)
             rt.launch(mul, (count,), work, spec, count, batch, spec_planes,
                       c0 if spec_planes > 1 else 0)
@@ -523,17 +526,31 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
         _gather(rt, dst, support, k, bright, precision="float32")
 
 
-def _host_convolve(rt, work, shape: tuple[int, int, int], spec: np.ndarray, c0: int,
-                   rows: int) -> None:
-    """The work buffer's ``shape`` = (batch, N1, N2 + 2) float64 planes (channels ``c0``..)
-    convolved in place on the host (:func:`host_fft`) with the spectra ``spec``
-    (:func:`_host_spectrum`); only the first ``rows`` rows may be non-zero."""
+def _host_convolve(rt, work, shape: tuple[int, int, int], spec: np.ndarray, c0: int, img,
+                   support: tuple[int, int, int, int]) -> None:
+    """Channels ``c0``.. of the device image ``img`` over ``support`` = (x, y, width, height)
+    (pixels of its buffer; non-finite values read as 0) convolved with the spectra ``spec``
+    (:func:`_host_spectrum`) on the host (:func:`host_fft`), into the work buffer's
+    ``shape`` = (batch, N1, N2 + 2) float64 planes, where ``fftconv_unpack`` reads them: the
+    padded planes ``fftconv_pack`` makes for VkFFT are never made."""
     cl = rt.cl
+    sx, sy, sw, sh = support
     planes, _ = cl.enqueue_map_buffer(rt.queue, work.buffer,
                                       cl.map_flags.READ | cl.map_flags.WRITE, 0, shape,
                                       np.float64)
     try:
-        _host_transform(planes, rows, spec[c0:c0 + shape[0]] if len(spec) > 1 else spec)
+        pixels, _ = cl.enqueue_map_buffer(rt.queue, img.buffer, cl.map_flags.READ, 0,
+                                          (max(img.height, 1), img.pitch, img.channels),
+                                          np.float32)
+        try:
+            def rows(b, r0, r1):
+                x = pixels[sy + r0:sy + r1, sx:sx + sw, c0 + b]
+                return np.where(np.isfinite(x), x, np.float32(0.0)).astype(np.float64)
+
+            _host_transform(planes, sh, spec[c0:c0 + shape[0]] if len(spec) > 1 else spec,
+                            rows)
+        finally:
+            pixels.base.release()
     finally:
         planes.base.release()
 
@@ -544,12 +561,15 @@ cache; the grid-sized temporaries of a whole-plane transform, several per plane,
 made: 215 MiB each at 8K)."""
 
 
-def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None) -> None:
+def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
+                    source=None) -> None:
     """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout VkFFT keeps): the
-    forward transform of the first ``rows`` rows' N2 reals (the rest are 0), then with
-    ``spec`` (1 or B spectra) the product and the inverse transform (N2 reals per row, the
-    1 / (N1 N2) on the inverse), without it the spectrum alone.  Row and column chunks of
-    :data:`HOST_CHUNK_BYTES` go to a thread each (NumPy's transforms release the GIL)."""
+    forward transform of the first ``rows`` rows' N2 reals (``source(b, r0, r1)``: plane
+    b's rows r0..r1, at most N2 values each, the rest 0; default ``planes`` itself; the
+    rows after ``rows`` are 0), then with ``spec`` (1 or B spectra) the product and the
+    inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse), without it the
+    spectrum alone.  Row and column chunks of :data:`HOST_CHUNK_BYTES` go to a thread each
+    (NumPy's transforms release the GIL)."""
     batch, n1, n2p = planes.shape
     n2 = n2p - 2
     cplx = planes.view(np.complex128)                # (B, N1, N2 / 2 + 1)
@@ -557,7 +577,8 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None) -> N
     col_step = max(1, HOST_CHUNK_BYTES // (n1 * 16))
 
     def forward_rows(b, r0, r1):
-        cplx[b, r0:r1] = np.fft.rfft(planes[b, r0:r1, :n2], axis=1)
+        x = planes[b, r0:r1, :n2] if source is None else source(b, r0, r1)
+        cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
 
     def columns(b, c0, c1):
         f = np.fft.fft(cplx[b, :, c0:c1], axis=0)
@@ -571,12 +592,16 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None) -> N
 
     def run(fn, n, step):
         tasks = [(b, i, min(i + step, n)) for b in range(batch) for i in range(0, n, step)]
+        if not tasks:
+            return
         if len(tasks) > 1:
             list(_host_pool().map(lambda t: fn(*t), tasks))
         else:
             fn(*tasks[0])
 
     run(forward_rows, rows, row_step)
+    if source is not None:
+        cplx[:, rows:] = 0.0
     run(columns, n2 // 2 + 1, col_step)
     if spec is not None:
         run(inverse_rows, n1, row_step)
