@@ -27,7 +27,11 @@ Algorithms
 ``precision="float64"``
     Double-precision transforms.  On PoCL they cost 1.0-1.3x float32 and remove the float32
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
-    shadows next to a 1e5 light, notes/hard-cases.md case 1).
+    shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
+    host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
+    (no packed copy) and transformed in place in the mapped work buffer, in row and column
+    chunks on every core (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time,
+    the same pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
     exactly by a gather over their list (deterministic, no atomics), so the float32 error
@@ -84,7 +88,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -108,6 +114,19 @@ glare batches its three channels; 4K transforms them one by one to bound memory)
 KERNEL_FILE = "lib/fftconv.cl"
 CACHE_OWNERS = ("fftconv.plan", "fftconv.spectrum")
 """Owners of fftconv's entries in the runtime's cache (``rt.cache.clear(owner)``)."""
+HOST_FFT = True
+"""float64 transforms on a device that is the host's CPU (PoCL) run in NumPy's pocketfft, on
+the device's own buffers (mapped: PoCL's buffers are host memory), in chunks on every core;
+elsewhere VkFFT.  Measured on 2 cores (:func:`convolve` float64 of a whole 1080p frame with
+a 661 x 661 PSF, CPU ms, median of 5): VkFFT with its packed copy 495-670, NumPy 305-316
+(its transforms alone: 250-330 against VkFFT's 510-670 for 3 planes of 1372 x 2250, the
+cinema look's glare).  The result differs by float64 rounding only (`host_fft`)."""
+
+
+def host_fft(rt, precision: str) -> bool:
+    """Whether ``precision`` transforms run on the host (:data:`HOST_FFT`): float64 on a
+    device that shares the host's cores."""
+    return HOST_FFT and precision == "float64" and bool(getattr(rt, "shares_host_cores", False))
 
 
 @dataclass
@@ -270,10 +289,26 @@ def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
     unless larger than :data:`SPECTRUM_CACHE_BYTES`."""
     k = _as_psf(psf)
     nbytes = k.shape[2] * n1 * (n2 + 2) * np.dtype(_real(precision)).itemsize
+    build = _host_spectrum if host_fft(rt, precision) else _spectrum
     if nbytes > SPECTRUM_CACHE_BYTES:
-        return _spectrum(rt, k, n1, n2, precision)   # too big to keep: this frame only
-    return rt.cache.get(("fftconv.spectrum", psf_digest(k), n1, n2, precision),
-                        lambda: _spectrum(rt, k, n1, n2, precision))
+        return build(rt, k, n1, n2, precision)   # too big to keep: this frame only
+    return rt.cache.get(("fftconv.spectrum", psf_digest(k), n1, n2, precision, build.__name__),
+                        lambda: build(rt, k, n1, n2, precision))
+
+
+def _host_spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
+    """`_spectrum` on the host (:func:`host_fft`): ``(planes x n1 x (n2 / 2 + 1) complex128
+    array, planes)``, each plane the r2c transform of the taps wrapped onto the grid
+    (coinciding taps add up), made in place (no grid-sized plane beside it)."""
+    kh, kw, planes = k.shape
+    ys = (np.arange(kh) - kh // 2) % n1
+    xs = (np.arange(kw) - kw // 2) % n2
+    out = np.zeros((planes, n1, n2 // 2 + 1), np.complex128)
+    real = out.view(np.float64)                      # (planes, n1, n2 + 2): the r2c layout
+    for p in range(planes):
+        np.add.at(real[p], (ys[:, None], xs[None, :]), k[..., p])
+    _host_transform(real, n1, None)
+    return out, planes
 
 
 def _spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
@@ -461,8 +496,10 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
     spec, spec_planes = spectrum or psf_spectrum(rt, k, n1, n2, precision)
     work = rt.buffer(batch * n1 * (n2 + 2) * itemsize)
     shape = (batch, n1, n2 + 2)
-    app = _plan(rt, shape, precision)
-    arr = _array(rt, work, shape, real)
+    on_host = host_fft(rt, precision)
+    if not on_host:
+        app = _plan(rt, shape, precision)
+        arr = _array(rt, work, shape, real)
     pack = _kernel(rt, "fftconv_pack", precision)
     mul = _kernel(rt, "fftconv_multiply", precision)
     unpack = _kernel(rt, "fftconv_unpack", precision)
@@ -471,18 +508,109 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
     ex0, ey0 = effective.offset_in(dst.window)
     count = n1 * (n2 // 2 + 1)
     for c0 in range(0, nch, batch):
-        rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
-                  support.height, work, n1, n2 + 2, c0, batch, np.inf if split is None else split,
-                  local=None)
-        app.fft(arr)
-        rt.launch(mul, (count,), work, spec, count, batch, spec_planes,
-                  c0 if spec_planes > 1 else 0)
-        app.ifft(arr)
+        if on_host:    # the row transforms read the image itself: no packed copy
+            _host_convolve(rt, work, shape, spec, c0, img, (sx, sy, support.width,
+                                                            support.height))
+        else:
+            rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
+                      support.height, work, n1, n2 + 2, c0, batch,
+                      np.inf if split is None else split, local=None)
+            app.fft(arr)
+            rt.launch(mul, (count,), work, spec, count, batch, spec_planes,
+                      c0 if spec_planes > 1 else 0)
+            app.ifft(arr)
         rt.launch(unpack, (dst.pitch, dst.height), work, n1, n2 + 2, n2, dst, dst.pitch,
                   dst.channels, dst.width, dst.height, dx, dy, ex0, ey0, ex0 + effective.width,
                   ey0 + effective.height, c0, batch)
     if bright is not None and bright[2]:
         _gather(rt, dst, support, k, bright, precision="float32")
+
+
+def _host_convolve(rt, work, shape: tuple[int, int, int], spec: np.ndarray, c0: int, img,
+                   support: tuple[int, int, int, int]) -> None:
+    """Channels ``c0``.. of the device image ``img`` over ``support`` = (x, y, width, height)
+    (pixels of its buffer; non-finite values read as 0) convolved with the spectra ``spec``
+    (:func:`_host_spectrum`) on the host (:func:`host_fft`), into the work buffer's
+    ``shape`` = (batch, N1, N2 + 2) float64 planes, where ``fftconv_unpack`` reads them: the
+    padded planes ``fftconv_pack`` makes for VkFFT are never made."""
+    cl = rt.cl
+    sx, sy, sw, sh = support
+    planes, _ = cl.enqueue_map_buffer(rt.queue, work.buffer,
+                                      cl.map_flags.READ | cl.map_flags.WRITE, 0, shape,
+                                      np.float64)
+    try:
+        pixels, _ = cl.enqueue_map_buffer(rt.queue, img.buffer, cl.map_flags.READ, 0,
+                                          (max(img.height, 1), img.pitch, img.channels),
+                                          np.float32)
+        try:
+            def rows(b, r0, r1):
+                x = pixels[sy + r0:sy + r1, sx:sx + sw, c0 + b]
+                return np.where(np.isfinite(x), x, np.float32(0.0)).astype(np.float64)
+
+            _host_transform(planes, sh, spec[c0:c0 + shape[0]] if len(spec) > 1 else spec,
+                            rows)
+        finally:
+            pixels.base.release()
+    finally:
+        planes.base.release()
+
+
+HOST_CHUNK_BYTES = 2 ** 21
+"""The rows or columns one host transform task takes at a time (their copies stay in
+cache; the grid-sized temporaries of a whole-plane transform, several per plane, are never
+made: 215 MiB each at 8K)."""
+
+
+def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
+                    source=None) -> None:
+    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout VkFFT keeps): the
+    forward transform of the first ``rows`` rows' N2 reals (``source(b, r0, r1)``: plane
+    b's rows r0..r1, at most N2 values each, the rest 0; default ``planes`` itself; the
+    rows after ``rows`` are 0), then with ``spec`` (1 or B spectra) the product and the
+    inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse), without it the
+    spectrum alone.  Row and column chunks of :data:`HOST_CHUNK_BYTES` go to a thread each
+    (NumPy's transforms release the GIL)."""
+    batch, n1, n2p = planes.shape
+    n2 = n2p - 2
+    cplx = planes.view(np.complex128)                # (B, N1, N2 / 2 + 1)
+    row_step = max(1, HOST_CHUNK_BYTES // (n2p * 8))
+    col_step = max(1, HOST_CHUNK_BYTES // (n1 * 16))
+
+    def forward_rows(b, r0, r1):
+        x = planes[b, r0:r1, :n2] if source is None else source(b, r0, r1)
+        cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
+
+    def columns(b, c0, c1):
+        f = np.fft.fft(cplx[b, :, c0:c1], axis=0)
+        if spec is not None:
+            f *= spec[b if len(spec) > 1 else 0, :, c0:c1]
+            f = np.fft.ifft(f, axis=0)
+        cplx[b, :, c0:c1] = f
+
+    def inverse_rows(b, r0, r1):
+        planes[b, r0:r1, :n2] = np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1)
+
+    def run(fn, n, step):
+        tasks = [(b, i, min(i + step, n)) for b in range(batch) for i in range(0, n, step)]
+        if not tasks:
+            return
+        if len(tasks) > 1:
+            list(_host_pool().map(lambda t: fn(*t), tasks))
+        else:
+            fn(*tasks[0])
+
+    run(forward_rows, rows, row_step)
+    if source is not None:
+        cplx[:, rows:] = 0.0
+    run(columns, n2 // 2 + 1, col_step)
+    if spec is not None:
+        run(inverse_rows, n1, row_step)
+
+
+@functools.lru_cache(maxsize=1)
+def _host_pool():
+    return ThreadPoolExecutor(max_workers=max(1, os.cpu_count() or 1),
+                              thread_name_prefix="clfx-fft")
 
 
 def _bright_pixels(rt, img, support, split, max_points):

@@ -246,8 +246,9 @@ def bin_points(points: np.ndarray, width: int, height: int, size: int,
 
 
 MAX_MARGIN = 512
-"""Largest zero margin (working-resolution pixels) given to the pass buffers; longer rays use
-bounds-tested taps instead."""
+"""Largest zero margin (working-resolution pixels) given to draft's and preview's pass
+buffers (`WorkLayout`); longer rays use bounds-tested taps instead.  Final's passes always
+test their bounds (`Streaks.streak_sum`)."""
 
 LOCAL = (64, 1)
 """Work-group of the pass kernel (measured fastest on PoCL here: 16 vs 20 ms per pass)."""
@@ -744,8 +745,8 @@ class Streaks(Plugin):
     def streak_sum(self, rt, p, fr: StreaksFrame, notes: list) -> StreakSum:
         """The frame's full-resolution streaks, computed once per plan: the Kawase passes of
         every ray over the whole frame's light, summed.  Draft and preview: `grid_sum`.
-        Final and reference: small frames run each pass over frame-sized buffers (zero
-        margins where the taps fit them); a frame over ``STREAM_PIXELS`` pixels streams
+        Final and reference: small frames run each pass over frame-sized buffers (taps
+        outside the frame read 0); a frame over ``STREAM_PIXELS`` pixels streams
         through in chunks of rows when that holds fewer rows on the device (`ring_rows`), and
         its sum waits on the host.  Both compute every pixel with the same float
         operations."""
@@ -758,19 +759,14 @@ class Streaks(Plugin):
         chunk = max(1, CHUNK_PIXELS // wp)
         rings = ring_rows(fr.rays, chunk, h)
         stream = streams(wp, h, rings, chunk)
-        if stream:
-            checked, margin = True, 0
-        else:
-            # zero margin wide enough for every tap (no bounds tests), unless the rays are so
-            # long that the margin would cost more than the tests
-            reach = 3 * TAPS ** (max(r.passes for r in fr.rays) - 1) + 2
-            margin = -(-reach // 4) * 4
-            checked = margin > MAX_MARGIN
-            if checked:
-                margin = 0
-        pitch = wp + 2 * margin
-        org = margin * pitch + margin
-        defines = {"fp64": lvl.fp64, "CHECKED": int(checked), "RING": int(stream),
+        # no zero margins: the taps test their bounds (a tap outside reads 0, as it read a
+        # margin's 0, so the floats are the same).  Margins made every buffer a size of its
+        # own (2312 x 1472 at 1080p) that the pool never held from one frame to the next: four
+        # fresh 52 MiB buffers a frame, paged in, zero-filled and copied; unpadded, they are
+        # the frame's size, which the pool keeps (`MAX_MARGIN` still sizes draft's and
+        # preview's grids)
+        pitch, org = wp, 0
+        defines = {"fp64": lvl.fp64, "CHECKED": 1, "RING": int(stream),
                    **fr.luminance_defines}
 
         peak_buf = rt.to_device(fr.peak[0])
@@ -804,22 +800,22 @@ class Streaks(Plugin):
                       y0, in_rows, out_rows, local=LOCAL)
 
         if not stream:
-            nbytes = pitch * (h + 2 * margin) * 16
+            nbytes = pitch * h * 16
             shared = len(fr.rays) > 1
             work = [rt.buffer(nbytes) for _ in range(3 + shared)]   # ping, pong, total(, bright)
-            for buf in work:
-                rt.cl.enqueue_fill_buffer(rt.queue, buf.buffer, np.float32(0.0), 0, nbytes)
             ping, pong, total = work[:3]
+            # every pass writes every pixel it reads later; the last pass of each ray adds
+            # into the total
+            rt.cl.enqueue_fill_buffer(rt.queue, total.buffer, np.float32(0.0), 0, nbytes)
             if shared:   # the bright pixels once for every ray (4 rays: 3 extractions saved,
                 bright(work[3], 0, h, 0)   # 39 ms of CPU at 960x540, for one more buffer)
             for ray in fr.rays:
-                # each ray starts from the bright pixels (passes write inside the zero
-                # margins only: a copy of the whole buffer is the extraction's every byte)
+                # each ray's first pass reads the bright pixels, which no pass writes
                 if shared:
-                    rt.cl.enqueue_copy(rt.queue, pong.buffer, work[3].buffer, byte_count=nbytes)
+                    cur = work[3]
                 else:
                     bright(pong, 0, h, 0)
-                cur = pong
+                    cur = pong
                 for n in range(ray.passes):
                     dst = total if n == ray.passes - 1 else (ping if cur is not ping else pong)
                     run_pass(ray, n, cur, dst, 0, h, 0, 0)

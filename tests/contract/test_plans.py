@@ -116,3 +116,19 @@ def test_the_plan_is_frozen_and_made_once_before_any_band(rt, name, monkeypatch)
         assert all(b.whole == renders[0].whole for b in renders)
     else:
         assert renders == [None]
+
+
+@pytest.mark.parametrize("name", [n for n in effects.EFFECTS
+                                  if effects.plugin(n).__class__.whole_frame is None])
+def test_whole_frames_of_a_batch_plan_once(rt, name, monkeypatch):
+    # a batch's tile_pixels 0 (RenderOptions: whole frames) is render_frame's None: the plan
+    # the step makes is the one its render reads (issue 37: every `clfx render` built
+    # streaks' whole streak sum twice a frame, dof's and motion blur's tiles twice)
+    cls = effects.plugin(name).__class__
+    calls = []
+    real_plan = cls.plan
+    monkeypatch.setattr(cls, "plan", lambda self, p, ctx: calls.append(1) or real_plan(self, p, ctx))
+    _, report = render_frame(rt, one_step(name), contract_frame(name), frame_number=7,
+                             tile_pixels=0)
+    assert report.steps[0].ran, report.explain()
+    assert len(calls) == 1, f"{name}: planned {len(calls)} times in one frame"

@@ -139,10 +139,41 @@ def test_spectrum_and_plans_live_in_the_runtime_cache(rt, rng):
     hits = rt.cache.hits
     b = run(rt, src, psf, win, win)
     assert spectra(rt) == held > 0 and rt.cache.hits > hits   # reused, not rebuilt
-    assert rt.cache.stats()["owners"].get("fftconv.plan", 0) > 0   # plans count bytes
+    run(rt, src, psf, win, win, precision="float32")              # VkFFT (float64: the host's
+    assert rt.cache.stats()["owners"].get("fftconv.plan", 0) > 0   # on PoCL); plans count bytes
     assert np.array_equal(a, b)       # determinism: identical bytes
     fftconv.clear_caches(rt)
     assert spectra(rt) == 0 and "fftconv.plan" not in rt.cache.stats()["owners"]
+
+
+def test_float64_transforms_of_a_cpu_device_run_on_the_host(rt, rng, monkeypatch):
+    # PoCL's buffers are host memory: NumPy's pocketfft transforms the image's rows into the
+    # work buffer (no packed copy) and it in place (55-65 % of VkFFT's CPU time for glare at
+    # 1080p), in row and column chunks; the same convolution as VkFFT's to float64
+    # rounding, every chunk size, one spectrum or three
+    assert rt.shares_host_cores                      # the tests run on PoCL
+    src, psf = hdr_scene(rng, 40, 56)
+    colour = np.stack([psf, psf[::-1], psf.T], -1)
+    win = Rect(2, 1, 58, 41)
+    launch = rt.launch
+    for k in (psf, colour):
+        out = fftconv.full_region(win, *k.shape[:2])
+        want = reference(src[..., :3], k, (win.x0, win.y0), (out.x0, out.y0, out.x1, out.y1))
+        fftconv.clear_caches(rt)
+        monkeypatch.setattr(fftconv, "HOST_FFT", False)
+        vkfft = run(rt, src, k, win, out, precision="float64")
+        monkeypatch.setattr(fftconv, "HOST_FFT", True)
+        launched = []
+        monkeypatch.setattr(rt, "launch", lambda knl, *a, **kw: launched.append(
+            knl.function_name) or launch(knl, *a, **kw))
+        for chunk in (fftconv.HOST_CHUNK_BYTES, 1):      # 1: a row or column per task
+            monkeypatch.setattr(fftconv, "HOST_CHUNK_BYTES", chunk)
+            fftconv.clear_caches(rt)
+            got = run(rt, src, k, win, out, precision="float64")
+            assert "fftconv.plan" not in rt.cache.stats()["owners"]   # no VkFFT plan
+            assert "fftconv_pack" not in launched     # the rows are read from the image
+            np.testing.assert_allclose(got, vkfft, rtol=1e-6, atol=1e-12 * want.max())
+            np.testing.assert_allclose(got[..., :3], want, rtol=1e-5, atol=1e-12 * want.max())
 
 
 def test_spectrum_over_the_byte_bound_is_not_kept(rt, rng, monkeypatch):

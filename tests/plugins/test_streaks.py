@@ -215,12 +215,40 @@ def test_huge_length_and_tiny_images(rt):
         assert np.isfinite(got).all() and got.min() >= 0.0
 
 
-def test_bounds_tested_taps_match_reference(rt, rng, monkeypatch):
-    # very long rays skip the zero margin and test every tap's bounds instead
+@pytest.mark.parametrize("quality", ["draft", "preview"])
+def test_bounds_tested_taps_match_reference(rt, rng, monkeypatch, quality):
+    # draft's and preview's grids: very long rays skip the zero margin and test every tap's
+    # bounds instead (final's and reference's passes always do)
     import clfx.plugins.streaks as mod
     monkeypatch.setattr(mod, "MAX_MARGIN", 0)
     src = scene(rng, (31, 45))
-    got, p = run(rt, src, "reference")
+    got, p = run(rt, src, quality)
+    want = reference(src, **p.as_dict(), factor=Streaks.descriptor.level(quality).factor)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+def test_final_passes_take_frame_sized_buffers(rt, rng, monkeypatch):
+    # final's pass buffers are the frame's size (taps test their bounds, no zero margin), so
+    # the pool holds them from one frame to the next: with margins, each was a size of its
+    # own (2312 x 1472 px at 1080p), four fresh 52 MiB buffers a frame, paged in and
+    # zero-filled; and no pass buffer is copied or filled whole but the total the rays add to
+    import pyopencl as cl
+    from clfx.plugins.streaks import MAX_SEEDS
+    src = scene(rng, (90, 160))
+    frame_bytes = 160 * 90 * 16
+    taken, filled, copied = [], [], []
+    take = rt.cache.take
+    monkeypatch.setattr(rt.cache, "take", lambda n: taken.append(n) or take(n))
+    fill, copy = cl.enqueue_fill_buffer, cl.enqueue_copy
+    monkeypatch.setattr(cl, "enqueue_fill_buffer",
+                        lambda q, b, pat, off, size, *a, **k: filled.append(size)
+                        or fill(q, b, pat, off, size, *a, **k))
+    monkeypatch.setattr(cl, "enqueue_copy", lambda q, dst, src_, **k: copied.append(
+        (type(dst).__name__, type(src_).__name__)) or copy(q, dst, src_, **k))
+    got, p = run(rt, src, "final", streaks=4, length=0.3)
+    assert {n for n in taken if n > frame_bytes} <= {MAX_SEEDS * 32}   # but the seeds' list
+    assert [n for n in filled if n >= frame_bytes] == [frame_bytes]     # the total alone
+    assert ("Buffer", "Buffer") not in copied
     want = reference(src, **p.as_dict())
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
 
