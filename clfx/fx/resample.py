@@ -536,7 +536,7 @@ class FootprintMap:
     and (h_x, h_y) as two float16 (see ``footprint_spread`` and ``footprint_window``), when
     every window lies inside the source and needs no sub-footprints.  Otherwise the quad's
     indices are -2 when all four outputs are 0 (black border: no source, or every window
-    outside the source) and -1 when the kernel renders it from its record (the record's index
+    outside the source, a split pixel's parts' windows too) and -1 when the kernel renders it from its record (the record's index
     in the quad's second int) in ``records`` (int32, (k, 56)): the quad index, 3 unused, the
     quad's E packed ints padded to 16 (a window that fits stands in for the others), a mode
     per pixel (0: the fast
@@ -570,7 +570,12 @@ class FootprintMap:
         fast = finite & (n == 1) & inside
         # the window's taps all outside the source: 0 with a black border
         outside = (ix + taps <= 0) | (ix >= width) | (iy + taps <= 0) | (iy >= height)
-        zero = ~finite | ((n == 1) & outside & (border == "black"))
+        # split pixels (n > 1): their parts' centres lie within s +- (|J11| + |J12|,
+        # |J21| + |J22|) / 2, each part's window within taps + 1 texels of its centre
+        rx = 0.5 * (np.abs(jp[..., 0, 0]) + np.abs(jp[..., 0, 1])) + taps + 1
+        ry = 0.5 * (np.abs(jp[..., 1, 0]) + np.abs(jp[..., 1, 1])) + taps + 1
+        far = (px + rx <= 0) | (px - rx >= width) | (py + ry <= 0) | (py - ry >= height)
+        zero = ~finite | ((((n == 1) & outside) | far) & (border == "black"))
         q_fast = fast.reshape(rows, quads, 4).all(axis=2)
         q_zero = zero.reshape(rows, quads, 4).all(axis=2) & ~q_fast
         base = (np.clip(iy, 0, None) * pitch + np.clip(ix, 0, None)) * 4
