@@ -80,10 +80,16 @@ class Footprint:
 FOOTPRINTS = {
     "quadratic": Footprint(0, 3, 1.3, 0.75, half_f=True),
     "bicubic": Footprint(1, 4, 1.0, 1.0 / 3.0),
-    "lanczos3": Footprint(2, 8, 1.0, 0.98),
+    "lanczos3": Footprint(2, 8, 1.0, 0.25),
 }
 """Footprint filters (draft, preview, final): 3-tap quadratic with a variance term, Keys
-bicubic blended with the cubic B-spline, the mean of two Lanczos-3 samples at +-h."""
+bicubic blended with the cubic B-spline, the mean of two Lanczos-3 samples at +-h.  The
+Lanczos pair's cap, 0.25 (h <= 1/2: one window takes a pixel up to W = 2 texels wide): with
+the texel's own box its response cos(2 pi f h) L(f) sinc(f) follows the box's sinc(W f) only
+while h is small (at h = 1/2 both are 0 at the source's Nyquist); at h = 0.86 (W = 3.1, the
+top rows of keystone's ``steep`` bench case) it passes -0.29 of Nyquist where the box passes
+-0.20, which aliases once minified (that case's rel. error at 320x180: 0.0691 at cap 0.98,
+0.0672 at 0.25, the reference level 0.0648).  Wider pixels split into n x n parts."""
 
 
 def kernel_defines(filter_name: str, border: str, sanitise: bool = True) -> dict:
@@ -530,7 +536,7 @@ class FootprintMap:
     and (h_x, h_y) as two float16 (see ``footprint_spread`` and ``footprint_window``), when
     every window lies inside the source and needs no sub-footprints.  Otherwise the quad's
     indices are -2 when all four outputs are 0 (black border: no source, or every window
-    outside the source) and -1 when the kernel renders it from its record (the record's index
+    outside the source, a split pixel's parts' windows too) and -1 when the kernel renders it from its record (the record's index
     in the quad's second int) in ``records`` (int32, (k, 56)): the quad index, 3 unused, the
     quad's E packed ints padded to 16 (a window that fits stands in for the others), a mode
     per pixel (0: the fast
@@ -564,7 +570,12 @@ class FootprintMap:
         fast = finite & (n == 1) & inside
         # the window's taps all outside the source: 0 with a black border
         outside = (ix + taps <= 0) | (ix >= width) | (iy + taps <= 0) | (iy >= height)
-        zero = ~finite | ((n == 1) & outside & (border == "black"))
+        # split pixels (n > 1): their parts' centres lie within s +- (|J11| + |J12|,
+        # |J21| + |J22|) / 2, each part's window within taps + 1 texels of its centre
+        rx = 0.5 * (np.abs(jp[..., 0, 0]) + np.abs(jp[..., 0, 1])) + taps + 1
+        ry = 0.5 * (np.abs(jp[..., 1, 0]) + np.abs(jp[..., 1, 1])) + taps + 1
+        far = (px + rx <= 0) | (px - rx >= width) | (py + ry <= 0) | (py - ry >= height)
+        zero = ~finite | ((((n == 1) & outside) | far) & (border == "black"))
         q_fast = fast.reshape(rows, quads, 4).all(axis=2)
         q_zero = zero.reshape(rows, quads, 4).all(axis=2) & ~q_fast
         base = (np.clip(iy, 0, None) * pitch + np.clip(ix, 0, None)) * 4

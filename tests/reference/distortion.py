@@ -21,14 +21,15 @@ import numpy as np
 FOOTPRINT_CONSTANTS = {
     "quadratic": (1.3, 0.75),
     "bicubic": (1.0, 1.0 / 3.0),
-    "lanczos3": (1.0, 0.98),
+    "lanczos3": (1.0, 0.25),
 }
 """Each footprint filter's (kappa, cap), the design's per-filter constants: kappa scales the
 variance the footprint adds (the draft's 3-tap quadratic attenuates high frequencies less
 than the box it stands for, so it takes 1.3 times the box's), cap is the most added
 variance (texels^2) one window of the filter holds (3 taps: 0.75, Keys' 4: 1/3, the 8-tap
-Lanczos pair: 0.98).  The oracle states them; tests/test_oracles.py checks that the host's
-table (clfx.fx.resample.FOOTPRINTS) says the same."""
+Lanczos pair: 0.25, h <= 1/2: two samples 2h apart stand for a box at most 2 texels wide).
+The oracle states them; tests/test_oracles.py checks that the host's table
+(clfx.fx.resample.FOOTPRINTS) says the same."""
 
 
 def mirror_index(i, n):
