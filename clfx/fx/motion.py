@@ -31,9 +31,9 @@ Warfare"; Guertin, McGuire & Nowrouzezahrai 2014)
    follows its own blur length (``ceil(length / spacing)``, capped per quality level); the
    samples use the midpoint rule (deterministic, exact for a linear image) unless the cap
    leaves them sparser than :data:`JITTER_SPACING_PX`, where a per-pixel jitter turns ghost
-   copies into grain.  Tiles shorter than :data:`CUBIC_MAX_PX` read colours through a
-   clamped cubic (one launch; sub-pixel smears take a closed form, below), the others
-   bilinearly (another).
+   copies into grain.  Tiles shorter than :data:`CUBIC_MAX_PX` (:data:`FINE_CUBIC_MAX_PX`
+   at final and reference) read colours through a clamped cubic (one launch; sub-pixel
+   smears take a closed form, below), the others bilinearly (another).
 4. *Gather*: each work-item shades 4 pixels sharing the tile's ``v_n``.  Pixel ``x`` takes N
    samples ``y_i = x - v_n t_i`` with ``t_i`` stratified over ``[t0, t1]`` (midpoint, or one
    per-pixel jitter: interleaved gradient noise, shifted per frame).  With
@@ -165,7 +165,7 @@ def _summary(lvl: MotionLevel) -> str:
     return (f"up to {lvl.max_samples} samples per pixel (one per {lvl.spacing:g} px of the "
             f"tile's blur length, {lvl.short_spacing or lvl.spacing:g} px under "
             f"{SHORT_MAX_PX:g} px), {'bilinear' if lvl.bilinear else 'nearest'} colour fetches "
-            f"(clamped cubic under {CUBIC_MAX_PX:g} px), "
+            f"(clamped cubic under {lvl.cubic_max_px:g} px), "
             f"{'float64' if lvl.fp64 else 'float32'} accumulation, midpoint rule"
             f"{f' (per-pixel jitter where samples are over {JITTER_SPACING_PX:g} px apart)' if lvl.jitter else ''}; "
             f"static tiles copied")
@@ -179,11 +179,35 @@ ended further from the truth on short blurs (issue 35: Cycles' slow scene at 320
 error 0.0243 draft, 0.0244 final, 0.0270 reference at spacings 1, 1/2, 1/4 px; 0.0243 at
 every level with a sample per pixel)."""
 
-SHORT_MAX_PX = 2.0
+SHORT_MAX_PX = 3.0
 """Blurs (px) under which tiles take :data:`SHORT_SPACING_PX`; longer ones keep the level's
 spacing: small HDR lights streaking 6.7 px (``fast_light`` at 320x180) need their samples
 (final 49.22 dB with them, 47.59 at a sample per pixel), as do Cycles' truck (0.0806 final,
-0.0785 reference)."""
+0.0785 reference).  It was 2 px: the layered bench's 2.5 px blurs (5 px/frame) then took
+2 and 4 samples per pixel at final and reference and ended worse than preview (rel. error
+0.0232 / 0.0233 / 0.0237 for preview / final / reference at 320x180; 0.0231 at both with a
+sample per pixel); on a band-limited texture moving 2.5-2.8 px in 8 directions the finer
+spacing won in 4 and lost in 4, summed RMSE 0.0344 final, 0.0354 reference against 0.0335
+at a sample per pixel (issue 35)."""
+
+
+FINE_CUBIC_MAX_PX = 12.0
+"""``final`` and ``reference``: tiles whose blur is shorter than this read through the clamped
+cubic (the faster levels: :data:`CUBIC_MAX_PX`).  A bilinear read at offset ``a`` blurs by
+the tent (variance ``a (1 - a)``).  At a sample per pixel (draft, preview) the reads of a
+pixel's neighbours land near one offset and their weights ``1 - a`` and ``a`` add up to one
+per pixel, so along a pixel axis the sum is the pixels' own box (no tent); at two or four
+samples per pixel they land at every offset and the sum converges to the box convolved with
+the tent: the finer levels blurred the texture more and ended worse than preview on Cycles'
+pan (9-10 px blurs: rel. error 0.0721 preview, 0.0736 final, 0.0733 reference at 320x180;
+through the cubic 0.0686 and 0.0683, log-PSNR 51.1 -> 51.9 and 51.9 dB) and on a band-limited
+texture moving 9-11 px in 5 of 9 directions (through the cubic final beats preview in all 9:
+RMSE 1.07x lower along the x axis, 2.2-3.3x on diagonals).  Longer blurs stay bilinear: up to 16 px, Cycles' truck's
+final went 0.0806 -> 0.0813 (the clamp's energy on streaking lights); up to 12, 0.0806.
+The clamp that keeps the cubic from ringing adds energy to an isolated hot pixel (6-12% on
+a single 1e5 pixel streaking 3-11 px; 0% on bilinear tiles), as it did under 8 px before.
+Cost: the cubic's 4 x 7 reads against bilinear's 2 x 5 on those tiles, the pan's final 184-191
+-> 226-229 ms of CPU (reference 345-350 -> 420-426; truck and spin unchanged, 320x180)."""
 
 
 LEVELS = {name: replace(lvl, summary=_summary(lvl)) for name, lvl in {
@@ -192,9 +216,10 @@ LEVELS = {name: replace(lvl, summary=_summary(lvl)) for name, lvl in {
     "preview": MotionLevel("", max_samples=16, spacing=1.0, bilinear=True,
                            short_spacing=SHORT_SPACING_PX),
     "final": MotionLevel("", max_samples=32, spacing=0.5, bilinear=True,
-                         short_spacing=SHORT_SPACING_PX),
+                         cubic_max_px=FINE_CUBIC_MAX_PX, short_spacing=SHORT_SPACING_PX),
     "reference": MotionLevel("", fp64=True, max_samples=256, spacing=0.25, bilinear=True,
-                             jitter=False, short_spacing=SHORT_SPACING_PX),
+                             jitter=False, cubic_max_px=FINE_CUBIC_MAX_PX,
+                             short_spacing=SHORT_SPACING_PX),
 }.items()}
 """The quality levels of the motion gather, declared once (summaries: motion_blur's)."""
 
