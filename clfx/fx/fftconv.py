@@ -590,27 +590,29 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
     def inverse_rows(b, r0, r1):
         planes[b, r0:r1, :n2] = np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1)
 
-    def run(fn, n, step):
-        tasks = [(b, i, min(i + step, n)) for b in range(batch) for i in range(0, n, step)]
-        if not tasks:
-            return
-        if len(tasks) > 1:
-            list(_host_pool().map(lambda t: fn(*t), tasks))
-        else:
-            fn(*tasks[0])
+    # the threads live as long as the transform: none is left behind in the caller's
+    # process (a refused frame starts none, tests/test_frame_limits.py)
+    with ThreadPoolExecutor(max_workers=_host_cores(), thread_name_prefix="clfx-fft") as pool:
+        def run(fn, n, step):
+            tasks = [(b, i, min(i + step, n)) for b in range(batch) for i in range(0, n, step)]
+            if len(tasks) > 1:
+                list(pool.map(lambda t: fn(*t), tasks))
+            elif tasks:
+                fn(*tasks[0])
 
-    run(forward_rows, rows, row_step)
-    if source is not None:
-        cplx[:, rows:] = 0.0
-    run(columns, n2 // 2 + 1, col_step)
-    if spec is not None:
-        run(inverse_rows, n1, row_step)
+        run(forward_rows, rows, row_step)
+        if source is not None:
+            cplx[:, rows:] = 0.0
+        run(columns, n2 // 2 + 1, col_step)
+        if spec is not None:
+            run(inverse_rows, n1, row_step)
 
 
-@functools.lru_cache(maxsize=1)
-def _host_pool():
-    return ThreadPoolExecutor(max_workers=max(1, os.cpu_count() or 1),
-                              thread_name_prefix="clfx-fft")
+def _host_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
 
 
 def _bright_pixels(rt, img, support, split, max_points):
