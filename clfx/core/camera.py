@@ -55,6 +55,19 @@ def image_distance(focal_length_mm: float, focus: float) -> float:
     return focal_length_mm * s / (s - focal_length_mm)
 
 
+def camera_rotation(yaw: float, pitch: float, roll: float = 0.0) -> np.ndarray:
+    """``C = R_y(yaw) R_x(pitch) R_z(roll)`` (radians): a turned camera's axes (columns) in
+    the frame of the unturned one (image axes: +x right, +y down, +z forward; yaw turns +z
+    towards +x, a positive pitch turns it upwards, roll turns +x towards +y)."""
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
+    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    rz = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    return ry @ rx @ rz
+
+
 def first_blade_angle(rotation_deg: float = 0.0) -> float:
     """Direction (radians, image coordinates: x right, y down) of the aperture polygon's first
     vertex: up (-y), turned ``rotation_deg`` degrees clockwise on screen."""

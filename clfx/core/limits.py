@@ -12,6 +12,11 @@ import re
 
 from clfx.core.errors import ClfxError
 
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
 def env_int(name: str, default: int, *, minimum: int | None = None) -> int:
     """The whole number in environment variable ``name`` (``default`` when unset or empty).
     ``1e3`` reads as 1000; anything else that is not a whole number (``abc``, ``1.5``), or one

@@ -88,13 +88,13 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from clfx.core.limits import available_cores
 from clfx.core.plugin import Level
 from clfx.core.rect import Rect
 from clfx.device import runtime
@@ -592,7 +592,8 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
 
     # the threads live as long as the transform: none is left behind in the caller's
     # process (a refused frame starts none, tests/test_frame_limits.py)
-    with ThreadPoolExecutor(max_workers=_host_cores(), thread_name_prefix="clfx-fft") as pool:
+    with ThreadPoolExecutor(max_workers=max(1, available_cores()),
+                            thread_name_prefix="clfx-fft") as pool:
         def run(fn, n, step):
             tasks = [(b, i, min(i + step, n)) for b in range(batch) for i in range(0, n, step)]
             if len(tasks) > 1:
@@ -606,13 +607,6 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
         run(columns, n2 // 2 + 1, col_step)
         if spec is not None:
             run(inverse_rows, n1, row_step)
-
-
-def _host_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the OS has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
 
 
 def _bright_pixels(rt, img, support, split, max_points):

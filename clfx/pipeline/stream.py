@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from clfx.core.errors import ClfxError
 from clfx.core import limits
-from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS
+from clfx.core.limits import OVERLAP_MAX_PIXELS, PREPARE_MAX_PIXELS, available_cores
 from clfx.io.read import codec_threads
 from clfx.pipeline.look import Look, RunStats, prepare
 from clfx.pipeline.options import RAW
@@ -47,11 +47,6 @@ IO_NICE = limits.env_int("CLFX_IO_NICE", 10, minimum=0)
 per thread; ``CLFX_IO_NICE``), so that on a CPU device I/O gives way to the effects.  0
 leaves the threads alone.  Phased streams do not lower priorities: that stalls when other
 processes want the CPU (docs/pipeline.md, "Sequences on one machine")."""
-
-
-def available_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the OS has one)."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 IO_CODEC_THREADS = 1

@@ -39,6 +39,7 @@ import math
 
 import numpy as np
 
+from clfx.core.camera import camera_rotation
 from clfx.core.plugin import ChoiceParam, Descriptor, FloatParam
 from clfx.fx.resample import BORDERS, FITS, fit_scale, rect_boundary
 from clfx.host import Plugin, register
@@ -54,12 +55,7 @@ MAX_ANGLE_DEG = 60.0
 def rotation(tilt_deg: float, swing_deg: float) -> np.ndarray:
     """``R = R_y(swing) R_x(tilt)``: the turned camera's axes in the plate camera's frame
     (+y down: a positive tilt turns the axis upwards, a positive swing to the right)."""
-    t, s = math.radians(tilt_deg), math.radians(swing_deg)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(t), -math.sin(t)],
-                   [0.0, math.sin(t), math.cos(t)]])
-    ry = np.array([[math.cos(s), 0.0, math.sin(s)], [0.0, 1.0, 0.0],
-                   [-math.sin(s), 0.0, math.cos(s)]])
-    return ry @ rx
+    return camera_rotation(math.radians(swing_deg), math.radians(tilt_deg))
 
 
 def geometry(p, camera, display_window, window, pixel_aspect, plate=None) -> dict:

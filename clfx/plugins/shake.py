@@ -47,6 +47,7 @@ from typing import Mapping
 
 import numpy as np
 
+from clfx.core.camera import camera_rotation
 from clfx.core.plugin import Descriptor, FloatParam, IntParam
 from clfx.fx.motion import LEVELS, MAX_RADIUS_PX, shutter_from
 from clfx.fx.noise import effect_seed, lowbias32
@@ -84,17 +85,6 @@ def angles(p, seed32: int, seconds) -> np.ndarray:
     return (amp * WEIGHT * np.sin(w * s + ph)).sum(-1)
 
 
-def orientation(yaw: float, pitch: float, roll: float) -> np.ndarray:
-    """``C = R_y(yaw) R_x(pitch) R_z(roll)``: the camera's axes in the world (columns)."""
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cr, sr = math.cos(roll), math.sin(roll)
-    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
-    rz = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
-    return ry @ rx @ rz
-
-
 def geometry(p, ctx) -> dict:
     """The frame's intrinsics, the open shutter ``(t0, t1)`` and the rotations ``M(t) = C(t)^T
     C(0)`` at its opening and closing (``turns``: M0 then M1, 18 floats, row-major)."""
@@ -104,8 +94,8 @@ def geometry(p, ctx) -> dict:
     t0, t1 = shutter_from(p, ctx.camera)
     seed32 = effect_seed(p.seed, ctx.seed, SHAKE_SALT)
     a = angles(p, seed32, (ctx.frame + np.array([0.0, t0, t1])) / p.fps)
-    c0 = orientation(*a[0])
-    turns = [orientation(*a[j]).T @ c0 for j in (1, 2)]
+    c0 = camera_rotation(*a[0])
+    turns = [camera_rotation(*a[j]).T @ c0 for j in (1, 2)]
     return dict(fx=fx, fy=fx * ctx.pixel_aspect, cx=cx, cy=cy, t0=t0, t1=t1, seed32=seed32,
                 angles=tuple(map(tuple, a)), turns=tuple(np.concatenate(
                     [m.ravel() for m in turns]).tolist()))
