@@ -15,7 +15,10 @@ from clfx.core.errors import ClfxError
 
 def available_cores() -> int:
     """The cores this process may run on (its CPU affinity where the OS has one)."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
 
 def env_int(name: str, default: int, *, minimum: int | None = None) -> int:
     """The whole number in environment variable ``name`` (``default`` when unset or empty).

@@ -29,10 +29,10 @@ from clfx.bench.cases.shared import (
     line_blur_per_pixel,
     texture,
 )
-from clfx.core.camera import Camera
+from clfx.core.camera import Camera, camera_rotation
 from clfx.fx.motion import shutter_from
 from clfx.fx.noise import effect_seed
-from clfx.plugins.shake import SHAKE_SALT, Shake, angles, orientation
+from clfx.plugins.shake import SHAKE_SALT, Shake, angles
 
 TRUTH_DEPENDS = ("clfx.plugins.shake",)
 """The truth turns the views by the plugin's angle signal: a change there rebuilds it."""
@@ -59,14 +59,14 @@ def truth_image(params: dict, camera: Camera, width: int, height: int,
     p = Shake.params(**params)
     fx, cx, cy, seed32 = _view(p, width, height, camera)
     t0, t1 = shutter_from(p, camera)
-    c0 = orientation(*angles(p, seed32, FRAME / p.fps))
+    c0 = camera_rotation(*angles(p, seed32, FRAME / p.fps))
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
     acc = np.zeros((height, width))
     n = ss * ss
     for k in range(n):
         oy, ox = (k // ss + 0.5) / ss, (k % ss + 0.5) / ss
         t = t0 + ((k * STRIDE) % n + 0.5) / n * (t1 - t0)
-        m = c0.T @ orientation(*angles(p, seed32, (FRAME + t) / p.fps))
+        m = c0.T @ camera_rotation(*angles(p, seed32, (FRAME + t) / p.fps))
         u, v = (xs + ox - cx) / fx, (ys + oy - cy) / fx
         q = np.tensordot(m, np.stack([u, v, np.ones_like(u)]), 1)
         acc += texture(q[0] / q[2] * fx + cx, q[1] / q[2] * fx + cy, width, height)
@@ -78,12 +78,12 @@ def image_velocity(params, camera: Camera, width: int, height: int) -> np.ndarra
     of the turned views, 1e-4 frame)."""
     p = params if not isinstance(params, dict) else Shake.params(**params)
     fx, cx, cy, seed32 = _view(p, width, height, camera)
-    c0 = orientation(*angles(p, seed32, FRAME / p.fps))
+    c0 = camera_rotation(*angles(p, seed32, FRAME / p.fps))
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64) + 0.5
     rays = np.stack([(xs - cx) / fx, (ys - cy) / fx, np.ones_like(xs)])
     pos = []
     for dt in (1e-4, -1e-4):
-        q = np.tensordot(orientation(*angles(p, seed32, (FRAME + dt) / p.fps)).T @ c0, rays, 1)
+        q = np.tensordot(camera_rotation(*angles(p, seed32, (FRAME + dt) / p.fps)).T @ c0, rays, 1)
         pos.append(np.stack([q[0] / q[2], q[1] / q[2]], -1) * fx)
     return ((pos[0] - pos[1]) / 2e-4).astype(np.float32)
 
