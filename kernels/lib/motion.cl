@@ -268,6 +268,7 @@ inline float4 mb_arc_dc(const float4 t, const float4 w)
 #define MB_ARC_TANGENT(f, b, t, w) \
   (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
 #define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
+#define SPLAT16I(m) (int16)((m).xxxx, (m).yyyy, (m).zzzz, (m).wwww)   /* a lane mask */
 
 /* Load the aux records of 4 sample positions (nearest pixel) as vectors. */
 #define MB_LOAD_AUX(ix, iy, VX, VY, Z, S) \
@@ -323,13 +324,13 @@ inline float mb_beta(const float len)
  * little light between pixels). */
 #define SHORT_SMOOTH 16.0f
 #define SHORT_KAPPA 0.05f
-inline float4 mb_short_smear(const float4 pm2, const float4 pm1, const float4 p0,
-                             const float4 pp1, const float4 pp2, const float len)
+inline float16 mb_short_smear(const float16 pm2, const float16 pm1, const float16 p0,
+                              const float16 pp1, const float16 pp2, const float16 len)
 {
-  const float4 d2 = pm1 + pp1 - 2.0f * p0;
-  const float4 e = fabs(pm1 - pp1) + fmin(fabs(pm2 - p0), fabs(pp2 - p0));
-  const float4 alt = clamp(1.0f - e / fmax(SHORT_KAPPA * fabs(d2), FLT_MIN), 0.0f, 1.0f);
-  const float smooth = len * len / SHORT_SMOOTH;
+  const float16 d2 = pm1 + pp1 - 2.0f * p0;
+  const float16 e = fabs(pm1 - pp1) + fmin(fabs(pm2 - p0), fabs(pp2 - p0));
+  const float16 alt = clamp(1.0f - e / fmax(SHORT_KAPPA * fabs(d2), FLT_MIN), 0.0f, 1.0f);
+  const float16 smooth = len * len / SHORT_SMOOTH;
   return p0 + (smooth + alt * (0.125f * len - smooth)) * d2;
 }
 
@@ -348,14 +349,14 @@ inline float4 mb_short_smear(const float4 pm2, const float4 pm1, const float4 p0
  *
  * mb_step_mean: the mean over [a, b] (cell coordinates, -1/2 .. 1/2) of the cumulative
  * integral G from the cell's left side of the step rebuilt from (pm, pk, pp). */
-inline float4 mb_step_mean(const float4 pm, const float4 pk, const float4 pp, const float a,
-                           const float b)
+inline float16 mb_step_mean(const float16 pm, const float16 pk, const float16 pp,
+                             const float16 a, const float16 b)
 {
-  const int4 mono = (pm - pk) * (pk - pp) > 0.0f;
-  const float4 l = select(pk, pm, mono), r = select(pk, pp, mono);
-  const float4 xe = select((float4)(0.0f), (r - pk) / select((float4)(1.0f), r - l, mono) - 0.5f,
-                           mono);
-  const float4 ra = fmax((float4)(a) - xe, 0.0f), rb = fmax((float4)(b) - xe, 0.0f);
+  const int16 mono = (pm - pk) * (pk - pp) > 0.0f;
+  const float16 l = select(pk, pm, mono), r = select(pk, pp, mono);
+  const float16 xe = select((float16)(0.0f),
+                            (r - pk) / select((float16)(1.0f), r - l, mono) - 0.5f, mono);
+  const float16 ra = fmax(a - xe, 0.0f), rb = fmax(b - xe, 0.0f);
   return (l * ((b + 0.5f) * (b + 0.5f) - (a + 0.5f) * (a + 0.5f)) * 0.5f
           + (r - l) * (rb * rb - ra * ra) * 0.5f) / (b - a);
 }
@@ -363,14 +364,14 @@ inline float4 mb_step_mean(const float4 pm, const float4 pk, const float4 pp, co
 /* The step model's smear of length len (centred shutter, len clamped to a pixel) of p0 with
  * the taps p-2 .. p2 along the motion: the mean over tau in [0, len / 2] of the cell shifted
  * by +tau (cell -1's right end enters) and by -tau (cell 1's left end). */
-inline float4 mb_step_smear(const float4 pm2, const float4 pm1, const float4 p0,
-                            const float4 pp1, const float4 pp2, const float len)
+inline float16 mb_step_smear(const float16 pm2, const float16 pm1, const float16 p0,
+                              const float16 pp1, const float16 pp2, const float16 len)
 {
-  const float h = 0.5f * fmin(len, 1.0f);
-  const float4 plus = pm1 - mb_step_mean(pm2, pm1, p0, 0.5f - h, 0.5f)
-                      + mb_step_mean(pm1, p0, pp1, 0.5f - h, 0.5f);
-  const float4 minus = mb_step_mean(p0, pp1, pp2, -0.5f, h - 0.5f) + p0
-                       - mb_step_mean(pm1, p0, pp1, -0.5f, h - 0.5f);
+  const float16 h = 0.5f * fmin(len, 1.0f), c = (float16)(0.5f);
+  const float16 plus = pm1 - mb_step_mean(pm2, pm1, p0, 0.5f - h, c)
+                       + mb_step_mean(pm1, p0, pp1, 0.5f - h, c);
+  const float16 minus = mb_step_mean(p0, pp1, pp2, -c, h - 0.5f) + p0
+                        - mb_step_mean(pm1, p0, pp1, -c, h - 0.5f);
   return 0.5f * (plus + minus);
 }
 
@@ -383,105 +384,20 @@ inline float4 mb_step_smear(const float4 pm2, const float4 pm1, const float4 p0,
 #define STEP_KAPPA 0.001f
 #define STEP_RAMP 0.1f
 #define STEP_MAX_PX 1.5f    /* smears up to a pixel take the step model, fading out by 1.5 px */
-inline float mb_stepness(const float4 pm2, const float4 pm1, const float4 p0, const float4 pp1,
-                         const float4 pp2)
+#define MB_RGB_SUM(v) ((v).s048c + (v).s159d + (v).s26ae)  /* per lane: dot(rgb, 1) */
+inline float4 mb_stepness(const float16 pm2, const float16 pm1, const float16 p0,
+                          const float16 pp1, const float16 pp2)
 {
-  const float3 one = (float3)(1.0f);
-  const float d0 = dot(pm1.xyz - pm2.xyz, one), d1 = dot(p0.xyz - pm1.xyz, one);
-  const float d2 = dot(pp1.xyz - p0.xyz, one), d3 = dot(pp2.xyz - pp1.xyz, one);
-  const float a0 = fabs(d0), a1 = fabs(d1), a2 = fabs(d2), a3 = fabs(d3);
-  const float lo = fmin(fmin(a0, a1), fmin(a2, a3)), hi = fmax(fmax(a0, a1), fmax(a2, a3));
-  const float s1 = d1 >= 0.0f ? 1.0f : -1.0f, s2 = d2 >= 0.0f ? 1.0f : -1.0f;
-  const float ramp = fmax(fmin(fmin(s1 * d0, a1), s1 * d2), fmin(fmin(s2 * d1, a2), s2 * d3));
-  const float scale = fmax(hi, FLT_MIN);
+  const float4 d0 = MB_RGB_SUM(pm1 - pm2), d1 = MB_RGB_SUM(p0 - pm1);
+  const float4 d2 = MB_RGB_SUM(pp1 - p0), d3 = MB_RGB_SUM(pp2 - pp1);
+  const float4 a0 = fabs(d0), a1 = fabs(d1), a2 = fabs(d2), a3 = fabs(d3);
+  const float4 lo = fmin(fmin(a0, a1), fmin(a2, a3)), hi = fmax(fmax(a0, a1), fmax(a2, a3));
+  const float4 s1 = select((float4)(-1.0f), (float4)(1.0f), d1 >= 0.0f);
+  const float4 s2 = select((float4)(-1.0f), (float4)(1.0f), d2 >= 0.0f);
+  const float4 ramp = fmax(fmin(fmin(s1 * d0, a1), s1 * d2), fmin(fmin(s2 * d1, a2), s2 * d3));
+  const float4 scale = fmax(hi, FLT_MIN);
   return clamp(1.0f - lo / fmax(STEP_KAPPA * hi, FLT_MIN), 0.0f, 1.0f)
          * clamp(1.0f - fmax(ramp, 0.0f) / (STEP_RAMP * scale), 0.0f, 1.0f);
-}
-
-/* The step model along one pixel axis (dx, dy) = (1, 0) or (0, 1) from the pixel (ix, iy):
- * the five pixels p-2 .. p2 (clamped to the image, times `scale`), a neighbour behind x
- * (depth z0) flattened (what x's moving edge reveals enters as it is, not as a step
- * continuing x's surface); *st: its stepness.  Returns the change of p0 under a box of
- * `len` px along the axis (0 when len is negligible). */
-inline float4 mb_step_axis(global const float *col, global const float *aux, const int pitch,
-                           const int w, const int row0, const int row1, const int ix,
-                           const int iy, const int dx, const int dy, const float4 p0,
-                           const float z0, const float len, const float scale, float *st,
-                           float4 *nm, float4 *np)
-{
-  float4 tap[4];
-  float behind[4];
-  for(int k = 0; k < 4; k++)
-  {
-    const int o = k < 2 ? k - 2 : k - 1;                          /* -2, -1, 1, 2 */
-    const int i = clfx_clampi(iy + o * dy, row0, row1 - 1) * pitch
-                  + clfx_clampi(ix + o * dx, 0, w - 1);
-    tap[k] = vload4(i, col) * scale;
-    const float z = vload4(i, aux).z;
-    behind[k] = clamp((z - z0) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
-  }
-  *st = mb_stepness(tap[0], tap[1], p0, tap[2], tap[3]);
-  *nm = tap[1];
-  *np = tap[2];
-  if(len < 1e-3f)
-    return (float4)(0.0f);
-  return mb_step_smear(tap[0] + (tap[1] - tap[0]) * behind[1], tap[1], p0, tap[2],
-                       tap[3] + (tap[2] - tap[3]) * behind[2], len) - p0;
-}
-
-/* The closed forms at the pixel centre (px, py) along (ux, uy), its colour p0 (times
- * `scale`), depth z0: the four taps read bilinearly, times `scale`; *q: how much of the
- * neighbourhood is x's own layer or behind it (a tap in front of x pulls it to 0).  Returns
- * mb_short_smear.  *step: the step model's smear, taken along the pixel axes (the smear's
- * parts len |ux| and len |uy|, their changes added: exact for edges along the pixel grid,
- * whatever the motion's direction, where taps read along u between pixels would mix the
- * patches), *st: its weight (the stepness of the axes that carry a fair part of it). */
-inline float4 mb_short_at(global const float *col, global const float *aux, const int pitch,
-                          const int w, const int row0, const int row1, const float px,
-                          const float py, const float ux, const float uy, const float4 p0,
-                          const float z0, const float len, const float scale, float *q,
-                          float4 *step, float *st)
-{
-  float4 tap[4];
-  float keep = 1.0f;
-  for(int k = 0; k < 4; k++)
-  {
-    const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
-    const float x = px + o * ux, y = py + o * uy;
-    tap[k] = mg_fetch_scaled(col, pitch, w, row0, row1, x, y, scale);
-    const int ix = clfx_clampi((int)clamp(floor(x), -1.0f, (float)w), 0, w - 1);
-    const int iy = clfx_clampi((int)clamp(floor(y), (float)(row0 - 1), (float)row1), row0,
-                               row1 - 1);
-    const float z = vload4(iy * pitch + ix, aux).z;
-    keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
-  }
-  *q = keep;
-  const int ix = clfx_clampi((int)clamp(floor(px), 0.0f, (float)(w - 1)), 0, w - 1);
-  const int iy = clfx_clampi((int)clamp(floor(py), (float)row0, (float)(row1 - 1)), row0,
-                             row1 - 1);
-  const float lx = len * fabs(ux), ly = len * fabs(uy);
-  float sx, sy;
-  float4 xm, xp, ym, yp;
-  const float4 ex = mb_step_axis(col, aux, pitch, w, row0, row1, ix, iy, 1, 0, p0, z0, lx,
-                                 scale, &sx, &xm, &xp);
-  const float4 ey = mb_step_axis(col, aux, pitch, w, row0, row1, ix, iy, 0, 1, p0, z0, ly,
-                                 scale, &sy, &ym, &yp);
-  /* the cross term of a diagonal smear (the pixel's box moved along the line overlaps the
-   * diagonal neighbour ahead, and the one behind, by lx ly / 24 on average): without it a
-   * corner of a checker took the colour across both edges twice */
-  const int ox = ux >= 0.0f ? 1 : -1, oy = uy >= 0.0f ? 1 : -1;
-  const float4 da = vload4(clfx_clampi(iy + oy, row0, row1 - 1) * pitch
-                           + clfx_clampi(ix + ox, 0, w - 1), col) * scale;
-  const float4 db = vload4(clfx_clampi(iy - oy, row0, row1 - 1) * pitch
-                           + clfx_clampi(ix - ox, 0, w - 1), col) * scale;
-  const float4 xa = ox > 0 ? xp : xm, xb = ox > 0 ? xm : xp;
-  const float4 ya = oy > 0 ? yp : ym, yb = oy > 0 ? ym : yp;
-  *step = p0 + ex + ey + (lx * ly / 24.0f) * ((da - xa - ya + p0) + (db - xb - yb + p0));
-  /* both axes that carry a fair part of the smear must look like steps */
-  const float gx = clamp(4.0f * lx / fmax(lx + ly, FLT_MIN), 0.0f, 1.0f);
-  const float gy = clamp(4.0f * ly / fmax(lx + ly, FLT_MIN), 0.0f, 1.0f);
-  *st = fmin(1.0f - gx * (1.0f - sx), 1.0f - gy * (1.0f - sy));
-  return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], len);
 }
 
 /* Colour at continuous position (px, py), clamp-to-edge, times `scale`: Catmull-Rom (4 x 4
@@ -600,6 +516,116 @@ inline float4 mb_fetch_linear(global const float *col, const int pitch, const in
                               const float beta)
 {
   return mg_fetch_scaled(col, pitch, w, row0, row1, px, py, scale);
+}
+
+/* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
+ * they lie side by side in memory (a run of one row: the common case), else one per lane. */
+inline float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
+                        const int row1, const int4 r, const int4 c)
+{
+  const int4 i = clamp(r, row0, row1 - 1) * pitch + clamp(c, 0, w - 1);
+  if(all(i - i.x == (int4)(0, 1, 2, 3)))
+    return vload16(0, buf + 4 * i.x);
+  return (float16)(vload4(i.x, buf), vload4(i.y, buf), vload4(i.z, buf), vload4(i.w, buf));
+}
+
+/* Colours at the lanes' positions (x, y), mg_fetch_scaled's: where the lanes sit at one
+ * offset (one row, one fraction, whole pixels apart) the quad fetch (2 x 5 loads), which
+ * then gives each lane the same value. */
+inline float16 mb_fetch_lanes(global const float *col, const int pitch, const int w,
+                              const int row0, const int row1, const float4 x, const float4 y,
+                              const float scale)
+{
+  const float4 u = x - 0.5f, fu = floor(u);
+  if(all(y == y.x) && all(u - fu == u.x - fu.x)
+     && all(fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f)))
+    return mb_fetch_quad_linear(col, pitch, w, row0, row1, x.x, y.x, scale, 0.0f);
+  return (float16)(mg_fetch_scaled(col, pitch, w, row0, row1, x.x, y.x, scale),
+                   mg_fetch_scaled(col, pitch, w, row0, row1, x.y, y.y, scale),
+                   mg_fetch_scaled(col, pitch, w, row0, row1, x.z, y.z, scale),
+                   mg_fetch_scaled(col, pitch, w, row0, row1, x.w, y.w, scale));
+}
+
+/* The step model along one pixel axis for the 4 lanes: the taps p-2, p-1, p1, p2 (times
+ * `scale`) and the depths zm, zp of p-1 and p1; a neighbour behind x (depth z0) flattened
+ * (what x's moving edge reveals enters as it is, not as a step continuing x's surface);
+ * *st: its stepness.  Returns the change of p0 under a box of `len` px along the axis (0
+ * where len is negligible). */
+inline float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 tp1,
+                            const float16 tp2, const float4 zm, const float4 zp,
+                            const float16 p0, const float4 z0, const float4 len, float4 *st)
+{
+  *st = mb_stepness(tm2, tm1, p0, tp1, tp2);
+  const int4 still = len < 1e-3f;
+  if(all(still))
+    return (float16)(0.0f);
+  const float4 bm = clamp((zm - z0) / (SOFT_Z * fmin(z0, zm)), 0.0f, 1.0f);
+  const float4 bp = clamp((zp - z0) / (SOFT_Z * fmin(z0, zp)), 0.0f, 1.0f);
+  const float16 d = mb_step_smear(tm2 + (tm1 - tm2) * SPLAT16(bm), tm1, p0, tp1,
+                                  tp2 + (tp1 - tp2) * SPLAT16(bp), SPLAT16(len)) - p0;
+  return select(d, (float16)(0.0f), SPLAT16I(still));
+}
+
+/* The closed forms at the centres of the quad's pixels (lanes `lane`, row fy) along
+ * (ux, uy), their colours p0 (times `scale`), depths z0, smear lengths len: the four taps
+ * read bilinearly, times `scale`; *q: how much of the neighbourhood is x's own layer or
+ * behind it (a tap in front of x pulls it to 0).  Returns mb_short_smear.  *step: the step
+ * model's smear, taken along the pixel axes (the smear's parts len |ux| and len |uy|, their
+ * changes added: exact for edges along the pixel grid, whatever the motion's direction,
+ * where taps read along u between pixels would mix the patches), *st: its weight (the
+ * stepness of the axes that carry a fair part of it).  The axes' taps sit at whole pixels
+ * whatever the direction: runs of the rows y-2 .. y+2. */
+inline float16 mb_short_quad(global const float *col, global const float *aux, const int pitch,
+                             const int w, const int row0, const int row1, const float4 lane,
+                             const float fy, const float4 ux, const float4 uy,
+                             const float16 p0, const float4 z0, const float4 len,
+                             const float scale, float4 *q, float16 *step, float4 *st)
+{
+  const float4 px = lane + 0.5f;
+  const float py = fy + 0.5f;
+  float16 tap[4];
+  float4 keep = (float4)(1.0f);
+  for(int k = 0; k < 4; k++)
+  {
+    const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
+    const float4 x = px + o * ux, y = py + o * uy;
+    tap[k] = mb_fetch_lanes(col, pitch, w, row0, row1, x, y, scale);
+    const int4 ix = convert_int4(clamp(floor(x), -1.0f, (float)w));
+    const int4 iy = convert_int4(clamp(floor(y), (float)(row0 - 1), (float)row1));
+    const float4 z = mb_lanes(aux, pitch, w, row0, row1, iy, ix).s26ae;
+    keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
+  }
+  *q = keep;
+  const int4 ix = clamp(convert_int4(clamp(floor(px), 0.0f, (float)(w - 1))), 0, w - 1);
+  const int4 iy = (int4)(clfx_clampi((int)clamp(floor(py), (float)row0, (float)(row1 - 1)),
+                                     row0, row1 - 1));
+  const float4 lx = len * fabs(ux), ly = len * fabs(uy);
+#define MB_LANES(b, dy, dx) mb_lanes(b, pitch, w, row0, row1, iy + (dy), ix + (dx))
+  float4 sx, sy;
+  const float16 xm1 = MB_LANES(col, 0, -1) * scale, xp1 = MB_LANES(col, 0, 1) * scale;
+  const float16 ym1 = MB_LANES(col, -1, 0) * scale, yp1 = MB_LANES(col, 1, 0) * scale;
+  const float16 ex = mb_step_axis(MB_LANES(col, 0, -2) * scale, xm1, xp1,
+                                  MB_LANES(col, 0, 2) * scale, MB_LANES(aux, 0, -1).s26ae,
+                                  MB_LANES(aux, 0, 1).s26ae, p0, z0, lx, &sx);
+  const float16 ey = mb_step_axis(MB_LANES(col, -2, 0) * scale, ym1, yp1,
+                                  MB_LANES(col, 2, 0) * scale, MB_LANES(aux, -1, 0).s26ae,
+                                  MB_LANES(aux, 1, 0).s26ae, p0, z0, ly, &sy);
+  /* the cross term of a diagonal smear (the pixel's box moved along the line overlaps the
+   * diagonal neighbour ahead, and the one behind, by lx ly / 24 on average): without it a
+   * corner of a checker took the colour across both edges twice */
+  const int4 ox = select((int4)(-1), (int4)(1), ux >= 0.0f);
+  const int4 oy = select((int4)(-1), (int4)(1), uy >= 0.0f);
+  const float16 da = MB_LANES(col, oy, ox) * scale, db = MB_LANES(col, -oy, -ox) * scale;
+#undef MB_LANES
+  const int16 fx = SPLAT16I(ox > 0), fwd_y = SPLAT16I(oy > 0);
+  const float16 xa = select(xm1, xp1, fx), xb = select(xp1, xm1, fx);
+  const float16 ya = select(ym1, yp1, fwd_y), yb = select(yp1, ym1, fwd_y);
+  *step = p0 + ex + ey + SPLAT16(lx * ly / 24.0f) * ((da - xa - ya + p0) + (db - xb - yb + p0));
+  /* both axes that carry a fair part of the smear must look like steps */
+  const float4 gx = clamp(4.0f * lx / fmax(lx + ly, FLT_MIN), 0.0f, 1.0f);
+  const float4 gy = clamp(4.0f * ly / fmax(lx + ly, FLT_MIN), 0.0f, 1.0f);
+  *st = fmin(1.0f - gx * (1.0f - sx), 1.0f - gy * (1.0f - sy));
+  return mb_short_smear(tap[0], tap[1], p0, tap[2], tap[3], SPLAT16(len));
 }
 
 #if CUBIC
@@ -762,27 +788,20 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
                             short_);
   if(any(wln > 0.0f))
   {
-    float wl[4], wll[4], gxl[4], gyl[4], gl[4], sl[4], zl[4];
-    vstore4(wsh, 0, wl); vstore4(wln, 0, wll); vstore4(gx, 0, gxl); vstore4(gy, 0, gyl);
-    vstore4(glen, 0, gl); vstore4(slen, 0, sl); vstore4(zx, 0, zl);
-    float cl[16], ol[16], dl[16];
-    vstore16(cc * scale, 0, cl);
-    vstore16(TO_FLOAT16(own), 0, ol);
-    vstore16((float16)(0.0f), 0, dl);
-    for(int l = 0; l < 4; l++)
-    {
-      if(wll[l] <= 0.0f) continue;
-      float q, st;
-      float4 step;
-      const float4 c = mb_short_at(col, aux, pitch, width, row0, row1,
-                                   lane.x + (float)l + 0.5f,
-                                   fy + 0.5f, gxl[l] / gl[l], gyl[l] / gl[l], vload4(l, cl),
-                                   zl[l], sl[l], scale, &q, &step, &st);
-      const float4 o = vload4(l, ol);
-      const float4 base = o + (c - o) * (wl[l] * q);
-      vstore4(base - o + (step - base) * (st * wll[l] * q), l, dl);
-    }
-    own += TO_REAL16(vload16(0, dl));
+    /* the quad at once; a lane without the closed forms gets a harmless direction and no
+     * change */
+    const int4 on = wln > 0.0f;
+    const float4 ux = select((float4)(1.0f), gx / glen, on);
+    const float4 uy = select((float4)(0.0f), gy / glen, on);
+    float4 q, st;
+    float16 step;
+    const float16 c = mb_short_quad(col, aux, pitch, width, row0, row1, lane, fy, ux, uy,
+                                    cc * scale, zx, select((float4)(0.0f), slen, on), scale,
+                                    &q, &step, &st);
+    const float16 o = TO_FLOAT16(own);
+    const float16 base = o + (c - o) * SPLAT16(wsh * q);
+    const float16 d = base - o + (step - base) * SPLAT16(st * wln * q);
+    own += TO_REAL16(select((float16)(0.0f), d, SPLAT16I(on)));
   }
   const REAL4 keep = one - cov;
   return F * (REAL16)(fscale.xxxx, fscale.yyyy, fscale.zzzz, fscale.wwww)
