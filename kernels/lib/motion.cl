@@ -62,7 +62,9 @@
 inline float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
                         const int row1, const int4 r, const int4 c)
 {
-  const int4 i = clamp(r, row0, row1 - 1) * pitch + clamp(c, 0, w - 1);
+  /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
+  const int4 i = clamp(r, (int4)(row0), (int4)(row1 - 1)) * pitch
+                 + clamp(c, (int4)(0), (int4)(w - 1));
   if(all(i - i.x == (int4)(0, 1, 2, 3)))
     return vload16(0, buf + 4 * i.x);
   return (float16)(vload4(i.x, buf), vload4(i.y, buf), vload4(i.z, buf), vload4(i.w, buf));
@@ -587,7 +589,8 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
     keep *= 1.0f - clamp((z0 - z) / (SOFT_Z * fmin(z0, z)), 0.0f, 1.0f);
   }
   *q = keep;
-  const int4 ix = clamp(convert_int4(clamp(floor(px), 0.0f, (float)(w - 1))), 0, w - 1);
+  const int4 ix = clamp(convert_int4(clamp(floor(px), 0.0f, (float)(w - 1))), (int4)(0),
+                        (int4)(w - 1));
   const int4 iy = (int4)(clfx_clampi((int)clamp(floor(py), (float)row0, (float)(row1 - 1)),
                                      row0, row1 - 1));
   const float4 lx = len * fabs(ux), ly = len * fabs(uy);
