@@ -356,6 +356,36 @@ def test_sub_pixel_smear_matches_the_oracle(rt, rng, speed, direction):
         np.testing.assert_allclose(flat, 0.37, rtol=1e-6, atol=0)
 
 
+@pytest.mark.parametrize("speed", [0.4, 0.9, 1.3])
+def test_sub_pixel_smears_of_mixed_directions_match_the_oracle_to_the_edges(rt, rng, speed):
+    """The closed forms run on a quad's four pixels at once (kernels/lib/motion.cl
+    mb_short_quad): lanes moving in different directions (here every pixel's differs from
+    its neighbours', one speed and one depth, so each pixel gets the oracle of its own
+    velocity) read their taps lane by lane, and the frame's edges and a width that is no
+    multiple of 4 clamp each lane's taps on its own: the whole frame matches."""
+    h, w = 22, 46
+    src = rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32)
+    src[4:12, 6:20] = 0.25                            # flat patches and pixel-aligned edges
+    src[14:20:2, 8:40] = 0.9
+    angles = np.radians([15.0, 100.0, 200.0, 290.0, 45.0])
+    which = (np.arange(w)[None, :] * 3 + np.arange(h)[:, None] * 2) % len(angles)
+    vels = [(speed * math.cos(a), speed * math.sin(a)) for a in angles]
+    vel = np.zeros((h, w, 2), np.float32)
+    for i, v in enumerate(vels):
+        vel[which == i] = v
+    t0, t1 = CENTRED.shutter_interval()
+    length = speed * (t1 - t0)
+    for q in ("draft", "final"):
+        lvl = MotionBlur.descriptor.quality[q]
+        spacing = lvl.short_spacing if length < SHORT_MAX_PX else lvl.spacing
+        n = int(np.clip(math.ceil(length / spacing), 2, lvl.max_samples))
+        want = np.zeros((h, w, 4))
+        for i, v in enumerate(vels):
+            want[which == i] = short_blur(src, np.float32(v), t0=t0, t1=t1, n=n)[which == i]
+        got = run(rt, src, vel, np.full((h, w), 3.0, np.float32), quality=q)
+        np.testing.assert_allclose(got, want, atol=2e-5, err_msg=q)
+
+
 def test_naive_baseline_is_the_per_pixel_line_blur(rng):
     src = smooth_texture(rng, 24, 31)
     vel = rng.normal(0.0, 6.0, (24, 31, 2)).astype(np.float32)
