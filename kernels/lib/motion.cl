@@ -57,19 +57,6 @@
 #define SOFT_Z 0.02f        /* relative depth difference over which "in front" fades in */
 #define MIN_SPEED 1e-3f     /* below this (px/frame) a pixel counts as static */
 
-/* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
- * they lie side by side in memory (a run of one row: the common case), else one per lane. */
-inline float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
-                        const int row1, const int4 r, const int4 c)
-{
-  /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
-  const int4 i = clamp(r, (int4)(row0), (int4)(row1 - 1)) * pitch
-                 + clamp(c, (int4)(0), (int4)(w - 1));
-  if(all(i - i.x == (int4)(0, 1, 2, 3)))
-    return vload16(0, buf + 4 * i.x);
-  return (float16)(vload4(i.x, buf), vload4(i.y, buf), vload4(i.z, buf), vload4(i.w, buf));
-}
-
 /* --- preparation ------------------------------------------------------------------------ */
 kernel void motion_prepare(global const float *vel, global const float *depth,
                            global float *aux, const int pitch, const int height,
@@ -125,6 +112,17 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
 #if CURVED
   float16 ownb = vload16(0, auxb + 4 * i);   /* the backward records follow the same choices */
 #endif
+  /* the 3 x 6 records around the quad (columns x-1 .. x+4, clamped; outside = no candidate) */
+  float vx[3][6], vy[3][6], z[3][6];
+  for(int r = 0; r < 3; r++)
+  {
+    const int yy = clfx_clampi(y + r - 1, 0, height - 1);
+    for(int c = 0; c < 6; c++)
+    {
+      const float4 q = vload4(yy * pitch + clfx_clampi(x + c - 1, 0, width - 1), aux);
+      vx[r][c] = q.x; vy[r][c] = q.y; z[r][c] = q.z;
+    }
+  }
   const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
   const float4 lanex = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
   float4 bz = az * (1.0f - SOFT_Z);
@@ -133,17 +131,15 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
     for(int dx = -1; dx <= 1; dx++)
     {
       if(dx == 0 && dy == 0) continue;
-      /* the neighbours' records (clamped; outside = no candidate, below) */
-      const float16 q = mb_lanes(aux, pitch, width, 0, height, (int4)(y + dy),
-                                 (int4)(x + dx) + (int4)(0, 1, 2, 3));
-      const float4 qz = q.s26ae;
+      const int r = dy + 1;
+      const float4 qz = (float4)(z[r][dx + 1], z[r][dx + 2], z[r][dx + 3], z[r][dx + 4]);
+      const float4 qvx = (float4)(vx[r][dx + 1], vx[r][dx + 2], vx[r][dx + 3], vx[r][dx + 4]);
+      const float4 qvy = (float4)(vy[r][dx + 1], vy[r][dx + 2], vy[r][dx + 3], vy[r][dx + 4]);
+      const float4 ex = qvx - ax, ey = qvy - ay;
       const int4 inside = (lanex + (float)dx >= 0.0f) & (lanex + (float)dx < (float)width) &
                           (int4)(-(int)(y + dy >= 0 && y + dy < height));
-      const int4 nearer = inside & (qz < bz);
-      if(!any(nearer))      /* the common case: one surface, or this neighbour behind */
-        continue;
-      const float4 ex = q.s048c - ax, ey = q.s159d - ay;
-      const int4 take = nearer & (sqrt(ex * ex + ey * ey) * duration >= MIN_BLUR);
+      const int4 take = inside & (qz < bz) &
+                        (sqrt(ex * ex + ey * ey) * duration >= MIN_BLUR);
       bz = select(bz, qz, take);
       bdx = select(bdx, (int4)(dx), take);
       bdy = select(bdy, (int4)(dy), take);
@@ -520,6 +516,19 @@ inline float4 mb_fetch_linear(global const float *col, const int pitch, const in
                               const float beta)
 {
   return mg_fetch_scaled(col, pitch, w, row0, row1, px, py, scale);
+}
+
+/* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
+ * they lie side by side in memory (a run of one row: the common case), else one per lane. */
+inline float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
+                        const int row1, const int4 r, const int4 c)
+{
+  /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
+  const int4 i = clamp(r, (int4)(row0), (int4)(row1 - 1)) * pitch
+                 + clamp(c, (int4)(0), (int4)(w - 1));
+  if(all(i - i.x == (int4)(0, 1, 2, 3)))
+    return vload16(0, buf + 4 * i.x);
+  return (float16)(vload4(i.x, buf), vload4(i.y, buf), vload4(i.z, buf), vload4(i.w, buf));
 }
 
 /* Colours at the lanes' positions (x, y), mg_fetch_scaled's: where the lanes sit at one
