@@ -6,6 +6,10 @@
  *   beyond the image its colours' luminance is capped as the hidden background's (dof_cap):
  *   what lies past the frame edge is a guess, and a light on the edge row must not become a
  *   streak of lights reaching a CoC radius past it (issue 35).
+ * dof_prepare, dof_edges and dof_mixed take 16 pixels per work-item, with vector loads and
+ *   stores where all 16 lie inside the image (and hold no depth edge): PoCL does not
+ *   vectorise one-pixel work-items (docs/performance.md), and a group of 4 took 4-5x the
+ *   time of a group of 16 on these passes.
  * dof_edges: the radii made edge-aware (see there).
  * dof_mixed: mixed edge pixels (a filtered beauty over a point-sampled depth), their
  *   coverage of the near layer and the two layers' radii and colours (see there); the
@@ -64,6 +68,15 @@ inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, f
   return clamp(r, -clamp_r, clamp_r);
 }
 
+/* dof_coc_radius of 16 depths (the same operations, lane by lane). */
+inline float16 dof_coc_radius16(float16 z, float k_half, float focus, float clamp_r,
+                                float offset)
+{
+  const int16 finite = (as_uint16(z) & 0x7f800000u) != (uint16)0x7f800000u;
+  const float16 r = select((float16)(k_half), k_half * (1.0f - focus / z), finite) + offset;
+  return clamp(select((float16)(offset), r, z > 0.0f), -clamp_r, clamp_r);
+}
+
 inline float dof_log_lum(float4 c)
 {
   return log1p(fmax(clfx_luminance(clfx_finite4_or_zero(c)), 0.0f));
@@ -93,19 +106,36 @@ kernel void dof_prepare(global const float *src, global const float *depth, cons
                         global const float *log_mean, const int tiles_x, const int tiles_y,
                         const int tile, const float cap_factor, const int gx0, const int gy0)
 {
-  const int qx = get_global_id(0), py = get_global_id(1);
-  if(py >= pheight || qx * 4 >= ppitch) return;
+  const int x = get_global_id(0) * 16, py = get_global_id(1);
+  if(py >= pheight || x >= ppitch) return;
   const int sy = clfx_clampi(py - pad, 0, height - 1);
+  if(sy == py - pad && x >= pad && x + 16 - pad <= width)
+  {  /* 16 pixels inside the image (most): vector loads, no cap */
+    const int i = sy * pitch + x - pad, o = py * ppitch + x;
+    const global float *s = src + i * 4;
+    vstore16(clfx_finite16_or_zero(vload16(0, s)), 0, col + o * 4);
+    vstore16(clfx_finite16_or_zero(vload16(1, s)), 1, col + o * 4);
+    vstore16(clfx_finite16_or_zero(vload16(2, s)), 2, col + o * 4);
+    vstore16(clfx_finite16_or_zero(vload16(3, s)), 3, col + o * 4);
+    vstore16(dof_coc_radius16(vload16(0, depth + i), k_half, focus, clamp_r, offset), 0,
+             coc + o);
+    return;
+  }
   const int ty = clfx_clampi((sy + gy0) / tile, 0, tiles_y - 1);
-  for(int l = 0; l < 4; l++)
+  int cap_tx = -1;   /* the tile whose cap `cap` holds */
+  float cap = 0.0f;
+  for(int px = x; px < min(x + 16, ppitch); px++)
   {
-    const int px = qx * 4 + l;
     const int sx = clfx_clampi(px - pad, 0, width - 1);
     float4 c = clfx_finite4_or_zero(vload4(sy * pitch + sx, src));
     if(sx != px - pad || sy != py - pad)
     {  /* past the frame edge: the edge pixel repeated, its highlights capped */
-      const float cap = dof_cap(log_mean, clfx_clampi((sx + gx0) / tile, 0, tiles_x - 1), ty,
-                                tiles_x, tiles_y, cap_factor);
+      const int tx = clfx_clampi((sx + gx0) / tile, 0, tiles_x - 1);
+      if(tx != cap_tx)
+      {
+        cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
+        cap_tx = tx;
+      }
       const float lum = clfx_luminance(c);
       if(lum > cap) c *= cap / lum;
     }
@@ -165,10 +195,20 @@ inline int4 dof_edge4(global const float *coc, const int ppitch, const int pad, 
   for(int dy = -1; dy <= 1; dy++)
   {
     const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
-    float v[6];
-    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
-    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
-    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
+    float4 l, rr;
+    if(x > 0 && x + 5 <= width)
+    {  /* the 6 radii x - 1 .. x + 4 inside the image */
+      l = vload4(0, row + x - 1);
+      rr = (float4)(l.s23, vload2(0, row + x + 3));
+    }
+    else
+    {
+      float v[6];
+      for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
+      l = (float4)(v[0], v[1], v[2], v[3]);
+      rr = (float4)(v[2], v[3], v[4], v[5]);
+    }
+    const float4 m = (float4)(l.s123, rr.s2);
     rmin = fmin(rmin, fmin(m, fmin(l, rr)));
     rmax = fmax(rmax, fmax(m, fmax(l, rr)));
     if(dy == 0) *centre = m;
@@ -176,22 +216,31 @@ inline int4 dof_edge4(global const float *coc, const int ppitch, const int pad, 
   return rmax - rmin >= EDGE_PX;
 }
 
-/* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 4 image pixels per work-item (the
- * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
- * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
- * between a near layer (r < mid-range) and a far one, its own being its centre sample's.
- * A pixel unlike its own layer (log luminance more than EDGE_TAU from the lower median of
- * its own layer's neighbours) takes the radius of the other layer's neighbour closest to it in log
- * luminance when that one is sharper: a light beside a blurred bar, its pixels sampled on
- * the bar, belongs to the sharp background (the antialiased beauty mixes the layers, the
- * point-sampled depth does not). */
-kernel void dof_edges(global const float *col, global const float *coc, global float *out,
-                      const int ppitch, const int pheight, const int pad, const int width,
-                      const int height)
+/* Image pixels (x..x + 15, y) when none of them is on a depth edge (their 3 x 3 radii span
+ * less than EDGE_PX) nor on the image border, their radii in `centre`; 0 otherwise (the
+ * 4-pixel path decides).  Most pixels: 16 per work-item, vector loads (dof_edge4's test). */
+inline int dof_quiet16(global const float *coc, const int ppitch, const int pad,
+                       const int width, const int height, const int x, const int y,
+                       float16 *centre)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  const int x = qx * 4;
-  if(x >= width || y >= height) return;
+  if(!(x > 0 && x + 17 <= width && y > 0 && y < height - 1)) return 0;
+  float16 rmin = (float16)(INFINITY), rmax = (float16)(-INFINITY);
+  for(int dy = -1; dy <= 1; dy++)
+  {
+    const global float *row = coc + (y + dy + pad) * ppitch + pad + x;
+    const float16 l = vload16(0, row - 1), m = vload16(0, row), rr = vload16(0, row + 1);
+    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
+    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
+    if(dy == 0) *centre = m;
+  }
+  return !any(rmax - rmin >= EDGE_PX);
+}
+
+/* dof_edges of image pixels (x..x + 3, y). */
+inline void dof_edges4(global const float *col, global const float *coc, global float *out,
+                       const int ppitch, const int pheight, const int pad, const int width,
+                       const int height, const int x, const int y)
+{
   float4 centre;
   const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
   float res[4] = {centre.s0, centre.s1, centre.s2, centre.s3};
@@ -207,6 +256,32 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
       for(int px = x0; px <= x1; px++)
         out[py * ppitch + px] = res[l];
   }
+}
+
+/* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 16 image pixels per work-item (the
+ * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
+ * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
+ * between a near layer (r < mid-range) and a far one, its own being its centre sample's.
+ * A pixel unlike its own layer (log luminance more than EDGE_TAU from the lower median of
+ * its own layer's neighbours) takes the radius of the other layer's neighbour closest to it in log
+ * luminance when that one is sharper: a light beside a blurred bar, its pixels sampled on
+ * the bar, belongs to the sharp background (the antialiased beauty mixes the layers, the
+ * point-sampled depth does not).  Most groups of 16 hold no depth edge (dof_quiet16: one
+ * vector pass); the others take dof_edges4. */
+kernel void dof_edges(global const float *col, global const float *coc, global float *out,
+                      const int ppitch, const int pheight, const int pad, const int width,
+                      const int height)
+{
+  const int x = get_global_id(0) * 16, y = get_global_id(1);
+  if(x >= width || y >= height) return;
+  float16 centre;
+  if(dof_quiet16(coc, ppitch, pad, width, height, x, y, &centre))
+  {
+    vstore16(centre, 0, out + (y + pad) * ppitch + x + pad);
+    return;
+  }
+  for(int x4 = x; x4 < min(x + 16, width); x4 += 4)
+    dof_edges4(col, coc, out, ppitch, pheight, pad, width, height, x4, y);
 }
 
 /* Mixed edge pixels: a renderer filters the beauty over the pixel but takes the depth at its
@@ -304,15 +379,13 @@ inline float dof_mix_split(global const float *col, global const float *coc, con
   return a;
 }
 
-kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
-                      global float *mixr, global float *mixd, const int ppitch,
-                      const int pheight, const int pad, const int width, const int height,
-                      const int y0, const int y1, global int *count, global int *flags,
-                      const int ftiles_x)
+/* dof_mixed of image pixels (x..x + 3, y). */
+inline void dof_mixed4(global const float *col, global const float *coc, global float *mixa,
+                       global float *mixr, global float *mixd, const int ppitch,
+                       const int pheight, const int pad, const int width, const int height,
+                       const int y0, const int y1, global int *count, global int *flags,
+                       const int ftiles_x, const int x, const int y)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  const int x = qx * 4;
-  if(x >= width || y >= height) return;
   /* only a 3 x 3 radius range of EDGE_PX or more can hold a depth edge */
   float4 centre;
   const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
@@ -345,6 +418,27 @@ kernel void dof_mixed(global const float *col, global const float *coc, global f
         }
       }
   }
+}
+
+/* 16 image pixels per work-item: most are no depth edge (dof_quiet16: none mixed), the rest
+ * take dof_mixed4. */
+kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
+                      global float *mixr, global float *mixd, const int ppitch,
+                      const int pheight, const int pad, const int width, const int height,
+                      const int y0, const int y1, global int *count, global int *flags,
+                      const int ftiles_x)
+{
+  const int x = get_global_id(0) * 16, y = get_global_id(1);
+  if(x >= width || y >= height) return;
+  float16 centre;
+  if(dof_quiet16(coc, ppitch, pad, width, height, x, y, &centre))
+  {
+    vstore16((float16)(0.0f), 0, mixa + (y + pad) * ppitch + x + pad);
+    return;
+  }
+  for(int x4 = x; x4 < min(x + 16, width); x4 += 4)
+    dof_mixed4(col, coc, mixa, mixr, mixd, ppitch, pheight, pad, width, height, y0, y1,
+               count, flags, ftiles_x, x4, y);
 }
 
 /* Per tile of the whole render's window (`width` x `height`, the grid the gather's tiles

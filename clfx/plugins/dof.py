@@ -954,12 +954,12 @@ class Dof(Plugin):
         coc0, coc = rt.image(padded, 1), rt.image(padded, 1)
         luma = ctx.luminance_defines     # log luminance of the working space
         prep = rt.kernel("dof.cl", "dof_prepare", fp64=lvl.fp64, **luma)
-        rt.launch(prep, (col.pitch // 4, padded.height), src, depth, src.pitch, w,
+        rt.launch(prep, (-(-col.pitch // 16), padded.height), src, depth, src.pitch, w,
                   h, col, coc0, col.pitch, padded.height, pad, k_half,
                   focus, clamp_r, g.offset, frame.log_mean, frame.tiles_x, frame.tiles_y,
                   TILE, CAP_FACTOR, src.window.x0 - whole.x0, src.window.y0 - whole.y0)
         prefilter(rt, col, padded.height, full_l)
-        rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 4), h),
+        rt.launch(rt.kernel("dof.cl", "dof_edges", fp64=lvl.fp64, **luma), (-(-w // 16), h),
                   col, coc0, coc, col.pitch, padded.height, pad, w, h,
                   local=(8, 4))
         del coc0
@@ -1008,7 +1008,7 @@ class Dof(Plugin):
         count = rt.to_device(np.zeros(1, np.int32))
         tx, ty = -(-w // TILE), -(-h // TILE)
         flags = rt.to_device(np.zeros(tx * ty, np.int32))
-        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (-(-w // 4), h), col, coc, mixa, mixr,
+        rt.launch(rt.kernel("dof.cl", "dof_mixed"), (-(-w // 16), h), col, coc, mixa, mixr,
                   mixd, col.pitch, padded.height, pad, w, h, y0,
                   y0 + rows, count, flags, tx, local=(8, 4))
         return (mixa, mixr, mixd, flags, tx, ty), count
