@@ -783,6 +783,72 @@ inline float4 dof_upsample(global const float *hres, const int hpitch, const int
   return c00 * wn.x + c01 * wn.y + c10 * wn.z + c11 * wn.w;
 }
 
+/* dof_upsample of full-resolution pixels (x..x + 3, y) (lanes s0123, s4567, ...): the same
+ * arithmetic per pixel, the half-resolution pixels they share (at most 4 columns of 2 rows),
+ * their luminance and whether they were gathered loaded and tested once. */
+inline float16 dof_upsample4(global const float *hres, const int hpitch, const int hwidth,
+                             const int hheight, const int hx0, const int hy0, const int x,
+                             const int y, global const int *tile_info, const int tiles_x,
+                             const int tiles_y, const int tile, float *lmin, float *lmax)
+{
+  const float hy = clamp(0.5f * ((float)y + 0.5f) - 0.5f, 0.0f, (float)(hheight - 1));
+  const int y0 = (int)hy, y1 = min(y0 + 1, hheight - 1);
+  const float fy = hy - (float)y0;
+  const int r0 = (y0 - hy0) * hpitch - hx0, r1 = (y1 - hy0) * hpitch - hx0;
+  int cx0[4], cx1[4];
+  float fx[4];
+  for(int l = 0; l < 4; l++)
+  {
+    const float hx = clamp(0.5f * ((float)(x + l) + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
+    cx0[l] = (int)hx;
+    cx1[l] = min(cx0[l] + 1, hwidth - 1);
+    fx[l] = hx - (float)cx0[l];
+  }
+  /* the columns cx0[0] .. cx1[3] (consecutive: hx steps by 1/2) */
+  const int c0 = cx0[0], n = cx1[3] - c0 + 1;
+  float4 a[4], b[4];
+  int va[4], vb[4];
+  float la[4], lb[4];
+  /* dof_half_valid of the 2 x n pixels */
+  const global int *mode0 = tile_info + clfx_clampi(2 * y0 / tile, 0, tiles_y - 1) * tiles_x * 8 + 4;
+  const global int *mode1 = tile_info + clfx_clampi(2 * y1 / tile, 0, tiles_y - 1) * tiles_x * 8 + 4;
+  for(int j = 0; j < n; j++)
+  {
+    a[j] = vload4(r0 + c0 + j, hres);
+    b[j] = vload4(r1 + c0 + j, hres);
+    const int t = clfx_clampi(2 * (c0 + j) / tile, 0, tiles_x - 1) * 8;
+    va[j] = mode0[t] & 1;
+    vb[j] = mode1[t] & 1;
+    la[j] = clfx_luminance(a[j]);
+    lb[j] = clfx_luminance(b[j]);
+    *lmin = fmin(*lmin, fmin(la[j], lb[j]));
+    *lmax = fmax(*lmax, fmax(la[j], lb[j]));
+  }
+  float16 out;
+  for(int l = 0; l < 4; l++)
+  {
+    const int i0 = cx0[l] - c0, i1 = cx1[l] - c0;
+    const float4 c00 = a[i0], c01 = a[i1], c10 = b[i0], c11 = b[i1];
+    const float f = fx[l];
+    const int4 ok = (int4)(va[i0], va[i1], vb[i0], vb[i1]) != 0;
+    float4 o;
+    if(all(ok))
+      o = (c00 * (1.0f - f) + c01 * f) * (1.0f - fy) + (c10 * (1.0f - f) + c11 * f) * fy;
+    else
+    {
+      const float4 w = select((float4)(0.0f), (float4)((1.0f - f) * (1.0f - fy), f * (1.0f - fy),
+                                                       (1.0f - f) * fy, f * fy), ok);
+      const float4 wn = w / (w.x + w.y + w.z + w.w);
+      o = c00 * wn.x + c01 * wn.y + c10 * wn.z + c11 * wn.w;
+    }
+    if(l == 0) out.s0123 = o;
+    else if(l == 1) out.s4567 = o;
+    else if(l == 2) out.s89ab = o;
+    else out.scdef = o;
+  }
+  return out;
+}
+
 /* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
  * the largest lattice levels of the two tables' taps (tap_table's column 7; 0: every tap
  * reads the image itself), the farthest x or y offset of a tap of the first (px); count 0
@@ -831,23 +897,11 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     return;
   }
   const float4 r = vload4(0, coc + base);
-  /* mixed edge pixels (dof_mixed) within the reach of the tile's table (info.s7, px; the
-     flag tiles of the buffer's image, clamped to it as the padding is): a dense table's
-     taps split them, and the 4 pixels are gathered twice, as their far and as their near
-     part (the table must serve both radii; a dense table's gather, not the half-resolution
-     result, where one of them is mixed) */
-  int mix = 0;
-  if(mtiles_x > 0)
-  {
-    const int bx = x - place.s2, by = y - place.s3, rch = info.s7;
-    const int fx0 = clfx_clampi(max(bx - rch, 0) / MIX_TILE, 0, mtiles_x - 1);
-    const int fx1 = clfx_clampi((bx + 3 + rch) / MIX_TILE, 0, mtiles_x - 1);
-    const int fy0 = clfx_clampi(max(by - rch, 0) / MIX_TILE, 0, mtiles_y - 1);
-    const int fy1 = clfx_clampi((by + rch) / MIX_TILE, 0, mtiles_y - 1);
-    for(int fy = fy0; fy <= fy1 && !mix; fy++)
-      for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
-  }
-  const float4 am = mix ? vload4(0, mixa + base) : (float4)(0.0f);
+  /* a mixed edge pixel among the 4 (dof_mixed; none in the half-resolution gather): they
+     are gathered twice, as their far and as their near part (the table must serve both
+     radii; a dense table's gather, not the half-resolution result, where one of them is
+     mixed) */
+  const float4 am = mtiles_x > 0 ? vload4(0, mixa + base) : (float4)(0.0f);
   const int4 sm = am > 0.0f;
   const int split = any(sm);
   float4 rn = r, rf = r;
@@ -878,16 +932,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   else if((info.s4 & 1) && all(fabs(r) >= low_r))
   {
     float lmin = INFINITY, lmax = -INFINITY;
-    float16 up;
-    const int hx0 = hplace.s0, hy0 = hplace.s1;
-    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 1, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 2, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 3, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
+    const float16 up = dof_upsample4(hres, hpitch, hwidth, hheight, hplace.s0, hplace.s1, x,
+                                     y, tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
     /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
     if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
                          <= refine)
@@ -895,6 +941,20 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
       vstore16(up, 0, out);
       return;
     }
+  }
+  /* mixed edge pixels within the reach of the tile's table (info.s7, px; the flag tiles
+     of the buffer's image, clamped to it as the padding is): a dense table's taps split
+     them (a pixel's own mixed flag lies within reach: `mix` is set wherever `am` is) */
+  int mix = 0;
+  if(mtiles_x > 0)
+  {
+    const int bx = x - place.s2, by = y - place.s3, rch = info.s7;
+    const int fx0 = clfx_clampi(max(bx - rch, 0) / MIX_TILE, 0, mtiles_x - 1);
+    const int fx1 = clfx_clampi((bx + 3 + rch) / MIX_TILE, 0, mtiles_x - 1);
+    const int fy0 = clfx_clampi(max(by - rch, 0) / MIX_TILE, 0, mtiles_y - 1);
+    const int fy1 = clfx_clampi((by + rch) / MIX_TILE, 0, mtiles_y - 1);
+    for(int fy = fy0; fy <= fy1 && !mix; fy++)
+      for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
   }
   const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
 #if DOF_CATEYE
