@@ -732,60 +732,21 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
 
-/* Whether half-resolution pixel (hx, hy) of the whole render's grid was gathered: its tile
- * (`tile` full-resolution px, tile_info's mode bit 0) is a half-resolution one.  The other
- * tiles' half-resolution pixels are the 2 x 2 box of the unblurred source (the half gather
- * copies them): a sharp light there is not the blurred light of the tile beside it. */
-inline int dof_half_valid(global const int *tile_info, const int tiles_x, const int tiles_y,
-                          const int tile, const int hx, const int hy)
-{
-  const int tx = clfx_clampi(2 * hx / tile, 0, tiles_x - 1);
-  const int ty = clfx_clampi(2 * hy / tile, 0, tiles_y - 1);
-  return tile_info[(ty * tiles_x + tx) * 8 + 4] & 1;
-}
-
 /* Bilinear sample of the half-resolution result at full-resolution pixel (x, y) of the
  * whole render's grid (`hwidth` x `hheight`: the whole render's half-resolution size; `hres`
  * holds its rows from `hy0`, columns from `hx0`) over the half-resolution pixels that were
- * gathered (dof_half_valid: at a half-resolution tile's edge the neighbouring tile's pixels
- * are the unblurred source; the weights of the gathered ones are renormalised: the pixel's
+ * gathered (their tile, `tile` full-resolution px, is a half-resolution one: tile_info's mode
+ * bit 0; the other tiles' half-resolution pixels are the 2 x 2 box of the unblurred source,
+ * copied by the half gather: at a half-resolution tile's edge a sharp light there is not the
+ * blurred light of the tile beside it; the weights of the gathered ones are renormalised: the pixel's
  * own half-resolution pixel, 3/4 x 3/4 of the weight, always is one); `lmin`, `lmax`: the
  * luminance range of the 4 half-resolution pixels it reads, widened (those not gathered
  * too: a tile beside that is not at half resolution holds sharper pixels, a contrast that
- * a dense table gathers again at full resolution). */
-inline float4 dof_upsample(global const float *hres, const int hpitch, const int hwidth,
-                           const int hheight, const int hx0, const int hy0, const int x,
-                           const int y, global const int *tile_info, const int tiles_x,
-                           const int tiles_y, const int tile, float *lmin, float *lmax)
-{
-  const float hx = clamp(0.5f * ((float)x + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
-  const float hy = clamp(0.5f * ((float)y + 0.5f) - 0.5f, 0.0f, (float)(hheight - 1));
-  const int x0 = (int)hx, y0 = (int)hy;
-  const int x1 = min(x0 + 1, hwidth - 1), y1 = min(y0 + 1, hheight - 1);
-  const float fx = hx - (float)x0, fy = hy - (float)y0;
-  const int r0 = (y0 - hy0) * hpitch - hx0, r1 = (y1 - hy0) * hpitch - hx0;
-  const float4 c00 = vload4(r0 + x0, hres), c01 = vload4(r0 + x1, hres);
-  const float4 c10 = vload4(r1 + x0, hres), c11 = vload4(r1 + x1, hres);
-  const int4 ok = (int4)(dof_half_valid(tile_info, tiles_x, tiles_y, tile, x0, y0),
-                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y0),
-                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x0, y1),
-                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y1)) != 0;
-  const float4 l = (float4)(clfx_luminance(c00), clfx_luminance(c01), clfx_luminance(c10),
-                            clfx_luminance(c11));
-  *lmin = fmin(*lmin, fmin(fmin(l.x, l.y), fmin(l.z, l.w)));
-  *lmax = fmax(*lmax, fmax(fmax(l.x, l.y), fmax(l.z, l.w)));
-  /* weighted sums, no differences: finite values stay finite */
-  if(all(ok))
-    return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
-  const float4 w = select((float4)(0.0f), (float4)((1.0f - fx) * (1.0f - fy), fx * (1.0f - fy),
-                                                   (1.0f - fx) * fy, fx * fy), ok);
-  const float4 wn = w / (w.x + w.y + w.z + w.w);
-  return c00 * wn.x + c01 * wn.y + c10 * wn.z + c11 * wn.w;
-}
-
-/* dof_upsample of full-resolution pixels (x..x + 3, y) (lanes s0123, s4567, ...): the same
- * arithmetic per pixel, the half-resolution pixels they share (at most 4 columns of 2 rows),
- * their luminance and whether they were gathered loaded and tested once. */
+ * a dense table gathers again at full resolution).
+ *
+ * Pixels (x..x + 3, y) in lanes s0123, s4567, ...: the half-resolution pixels they share (at
+ * most 4 columns of 2 rows), their luminance and whether they were gathered are loaded and
+ * tested once. */
 inline float16 dof_upsample4(global const float *hres, const int hpitch, const int hwidth,
                              const int hheight, const int hx0, const int hy0, const int x,
                              const int y, global const int *tile_info, const int tiles_x,
@@ -809,14 +770,14 @@ inline float16 dof_upsample4(global const float *hres, const int hpitch, const i
   float4 a[4], b[4];
   int va[4], vb[4];
   float la[4], lb[4];
-  /* dof_half_valid of the 2 x n pixels */
-  const global int *mode0 = tile_info + clfx_clampi(2 * y0 / tile, 0, tiles_y - 1) * tiles_x * 8 + 4;
-  const global int *mode1 = tile_info + clfx_clampi(2 * y1 / tile, 0, tiles_y - 1) * tiles_x * 8 + 4;
+  /* whether the 2 x n pixels were gathered: their tiles' mode bit 0 */
+  const global int *mode0 = tile_info + clfx_clampi(2 * y0 / tile, 0, tiles_y - 1) * tiles_x * 16 + 4;
+  const global int *mode1 = tile_info + clfx_clampi(2 * y1 / tile, 0, tiles_y - 1) * tiles_x * 16 + 4;
   for(int j = 0; j < n; j++)
   {
     a[j] = vload4(r0 + c0 + j, hres);
     b[j] = vload4(r1 + c0 + j, hres);
-    const int t = clfx_clampi(2 * (c0 + j) / tile, 0, tiles_x - 1) * 8;
+    const int t = clfx_clampi(2 * (c0 + j) / tile, 0, tiles_x - 1) * 16;
     va[j] = mode0[t] & 1;
     vb[j] = mode1[t] & 1;
     la[j] = clfx_luminance(a[j]);
@@ -849,10 +810,27 @@ inline float16 dof_upsample4(global const float *hres, const int hpitch, const i
   return out;
 }
 
-/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
- * the largest lattice levels of the two tables' taps (tap_table's column 7; 0: every tap
- * reads the image itself), the farthest x or y offset of a tap of the first (px); count 0
- * copies the sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
+/* How many of a table's first taps (`count` in all) can add anything to 4 pixels of radii
+ * `r0`: where none is in front of the focus plane, those within the largest of their radii
+ * (at least NEAR_EPS) and `near_r`, the tile's bound of the radii in front of the focus
+ * plane that its taps read (the host's tap_counts: `counts_n` entries from `counts` in
+ * tile_info, 0: no table).  The taps after them add exact zeros to every sum (a far tap
+ * spreads at most the pixel's radius, NEAR_EPS if it lies in front of it; a near tap at most
+ * its own): the same bits from fewer taps, mostly in-focus pixels beside a far background. */
+inline int dof_tap_count(global const int *tile_info, const int counts, const int counts_n,
+                         const float near_r, const float4 r0, const int count)
+{
+  if(counts_n == 0 || any(r0 < -NEAR_EPS)) return count;
+  const float r = fmax(fmax(fmax(r0.s0, r0.s1), fmax(r0.s2, r0.s3)), fmax(near_r, NEAR_EPS));
+  return min(tile_info[counts + min((int)ceil(2.0f * r), counts_n - 1)], count);
+}
+
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach,
+ * near bound, counts, counts length, sharp counts, sharp counts length, 0, 0, 0), 16 ints
+ * per tile, the tables' tap counts (dof_tap_count) after the tiles: the largest lattice
+ * levels of the two tables' taps (tap_table's column 7; 0: every tap reads the image
+ * itself), the farthest x or y offset of a tap of the first (px); count 0 copies the
+ * sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
  * pixel) gather with the sharp table (every pixel within sharp_r a far-field tap, the near
  * field around: tap_table's core), as do such pixels of a group gathered with a sparse
  * first table (level > 0); with mode bit 0,
@@ -888,7 +866,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   if(yd >= height || xd >= width) return;
   const int x = xd + place.s0, y = yd + place.s1;   /* the whole render's grid */
   const int tx = x / tile, ty = y / tile;
-  const int8 info = vload8(ty * tiles_x + tx, tile_info);
+  const int16 info = vload16(ty * tiles_x + tx, tile_info);
   const int base = (y - place.s3 + pad) * ppitch + x - place.s2 + pad;
   global float *out = dst + (yd * pitch + xd) * 4;
   if(info.s1 == 0)
@@ -911,7 +889,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     rn = select(r, rr.s0246, sm);
     rf = select(r, rr.s1357, sm);
   }
-  int first = info.s0, count = info.s1;
+  int first = info.s0, count = info.s1, counts = info.s9, counts_n = info.sa;
+  const float near_r = as_float(info.s8);
   /* a mixed pixel among the 4 is gathered twice with a dense table serving both its radii:
      the sharp one if both are in focus or nearly, else the full one; otherwise (a sparse
      table) as any pixel, at its own radius */
@@ -920,6 +899,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   {
     first = info.s2;
     count = info.s3;
+    counts = info.sb;
+    counts_n = info.sc;
     twice = 1;
   }
   else if(split && info.s5 == 0)
@@ -928,6 +909,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   {
     first = info.s2;
     count = info.s3;
+    counts = info.sb;
+    counts_n = info.sc;
   }
   else if((info.s4 & 1) && all(fabs(r) >= low_r))
   {
@@ -980,7 +963,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float16 c0 = vload16(0, col + base * 4);
   if(!twice)
   {
-    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first, count,
+    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first,
+                                dof_tap_count(tile_info, counts, counts_n, near_r, r, count),
                                 cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS);
     /* pixels in focus or nearly beside out-of-focus ones in a sparse table's group: a
        lattice's far field would give them their own pixel through its prefilter tent (an
@@ -989,7 +973,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     const int4 sharp4 = r >= -NEAR_EPS && r < sharp_r;
     if(info.s5 > 0 && first == info.s0 && any(sharp4))
       o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, info.s2,
-                                    info.s3, cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
+                                    dof_tap_count(tile_info, info.sb, info.sc, near_r, r,
+                                                  info.s3), cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
                  LANES(sharp4));
     vstore16(o, 0, out);
     return;
@@ -1000,10 +985,13 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const int16 sm16 = LANES(sm);
   const float16 o_far = dof_gather_safe(col, coc, ppitch, plane, base,
                                         select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
-                                        count, cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
+                                        dof_tap_count(tile_info, counts, counts_n, near_r, rf,
+                                                      count), cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
   const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
-                                         taps, first, count, cap, mixa, mixr, mixd, 1, 2
+                                         taps, first,
+                                         dof_tap_count(tile_info, counts, counts_n, near_r, rn,
+                                                       count), cap, mixa, mixr, mixd, 1, 2
                                          CATEYE_PASS);
   vstore16(select(o_far, o_far * LANES(1.0f - am) + o_near * LANES(am), sm16), 0, out);
 }
