@@ -574,12 +574,15 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
   const float4 arq = fabs(rq);
   const int4 q_near = rq < -NEAR_EPS;
-  /* near field: scatter-as-gather, the tap's light spread over its own CoC area */
+  /* near field: scatter-as-gather, the tap's light spread over its own CoC area (a tap
+     behind every pixel adds exact zeros: skipped, as is the far field of a tap in front of
+     every pixel, whose far weights are 0; the sums never hold -0, so the bits stay) */
 #if DOF_CATEYE
   const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
-  float4 wn = (float4)(0.0f);
+#endif
   if(any(q_near))
   {
+#if DOF_CATEYE
     const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
     float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
 #if DOF_CATEYE >= 2
@@ -588,13 +591,18 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
                                 1.0f));
 #endif
     const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
-    wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
-  }
+    const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f),
+                             q_near) * frac;
 #else
-  const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
-  float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);
+    const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
+    const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near)
+                      * frac;
 #endif
-  wn *= frac;
+    s->fn += TO_REAL16(c * LANES(wn));
+    s->wn_sum += TO_REAL4(wn);
+    s->alpha += TO_REAL4(wn * area);
+    if(all(q_near)) return;
+  }
   /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
      near p the far field is the background hidden behind it, estimated from the
      visible background within p's radius */
@@ -614,7 +622,6 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near)
                       * frac;
   float4 wf = cov_f * norm;
-  s->fn += TO_REAL16(c * LANES(wn));
   if(any_near && any(p_near & ~q_near))
   {
     /* behind a near p, the part of the coverage the tap's own CoC does not give is a
@@ -642,9 +649,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   }
   else
     s->ff += TO_REAL16(c * LANES(wf));
-  s->wn_sum += TO_REAL4(wn);
   s->wf_sum += TO_REAL4(wf);
-  s->alpha += TO_REAL4(wn * area);
 }
 /* The gather of 4 pixels at `base` (padded index) whose radii are `r0`, colours times
  * `scale`; `c0`: their colours, the result where every tap is rejected.  With `mix` (a
