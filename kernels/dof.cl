@@ -772,7 +772,8 @@ inline float16 dof_upsample4(global const float *hres, const int hpitch, const i
     const float4 lo = fmin(la, lb), hi = fmax(la, lb);
     *lmin = fmin(*lmin, fmin(fmin(lo.x, lo.y), fmin(lo.z, lo.w)));
     *lmax = fmax(*lmax, fmax(fmax(hi.x, hi.y), fmax(hi.z, hi.w)));
-    const int4 t = clamp(2 * (k + (int4)(0, 1, 2, 3)) / tile, 0, tiles_x - 1) * 16;
+    const int4 t = min(max(2 * (k + (int4)(0, 1, 2, 3)) / tile, (int4)(0)),
+                       (int4)(tiles_x - 1)) * 16;
     const int4 va = (int4)(mode0[t.x], mode0[t.y], mode0[t.z], mode0[t.w]) & 1;
     const int4 vb = (int4)(mode1[t.x], mode1[t.y], mode1[t.z], mode1[t.w]) & 1;
     if(all((va & vb) != 0))
