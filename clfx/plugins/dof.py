@@ -116,6 +116,12 @@ Warfare", simplified for offline use)
      geometric mean luminance of the tiles around (``dof_tile_cap``), so a sharp light does
      not shine through a blurred bar beside it.
    ``out = far (1 - alpha) + near alpha``.  Every tap rejected falls back to the centre pixel.
+   A table lists its taps nearest first, and the gather stops it where no tap can add light
+   any more (:func:`tap_counts`): where none of the 4 pixels lies in front of the focus
+   plane, at the largest of their radii and of the near-field radii its taps can read (per
+   tile, from the depth ranges of the tiles within their reach, with a float32 margin).  The
+   taps left out add exact zeros (the same bits): on the 1080p bench frame at final the
+   in-focus pixels' taps went from 4.1 to 0.5 million (groups of 4).
 6. Tiles whose every pixel is far out of focus (CoC radius above the level's
    ``half_res_radius``) are also gathered at half resolution (``dof_down2``: 2 x 2 box of
    colour, mean radius halved; the same gather with half the radius) and upsampled
@@ -128,7 +134,10 @@ Warfare", simplified for offline use)
    quarter of the sharp lamps of the tile beside it (up to 10x the truth on the issue 35
    Cycles case, where a sparse table does not gather them again).
 
-Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors).  Finite
+Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors); the
+per-pixel passes (``dof_prepare``, ``dof_edges``, ``dof_mixed``) take 16 pixels per work-item,
+with vector loads where they lie inside the image and hold no depth edge (PoCL does not
+vectorise those work-items itself).  Finite
 colours give finite results: a gather whose float sums overflow (values near 3e38) is taken
 again with every colour scaled by 2^-64, and the box and the bilinear weights are applied
 before summing.
