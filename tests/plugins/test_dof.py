@@ -8,6 +8,7 @@ from clfx.bench.groundtruth import render_truth
 from clfx.bench.scene import demo_scene, render_sharp
 from clfx.core.camera import Camera
 from clfx.core.plugin import QUALITY_LEVELS
+from clfx.core.rect import Rect
 from clfx.plugins import dof as dof_module
 from clfx.plugins.dof import LEVELS, Dof, quantised_radius, tap_counts, tap_table
 from tests.conftest import hard_shapes
@@ -143,6 +144,40 @@ def test_gather_leaves_out_only_taps_that_add_nothing(rt, monkeypatch, quality, 
     monkeypatch.setattr(dof_module, "tap_counts", lambda table: np.array([len(table)], np.int32))
     every = run(rt, src, depth, quality, cam, **params)
     assert np.array_equal(got.view(np.uint32), every.view(np.uint32))
+
+
+@pytest.mark.parametrize("case", ["hostile-depths", "pixel-aspect-2", "grown", "tiled"])
+def test_gather_leaves_out_only_taps_that_add_nothing_anywhere(rt, monkeypatch, case):
+    """The tiles' bound of the near-field radii holds for invalid depths (in focus, with an
+    axial-CA offset in front of it), non-square pixels (taps twice as far in rows), a data
+    window inside the display window (the render grown past it) and bands of a tiled
+    render: the same bits as every tap."""
+    src, depth = dof_scene()
+    kw, params = {}, {"axial_ca_red": 200.0}
+    if case == "hostile-depths":
+        # every valid depth ~1 px of CoC behind the focus plane, 0.2 px in red (its axial CA
+        # focuses 0.8 px in front): only the invalid depths lie in front of it, in red
+        depth[:] = 4.26
+        depth[5:20, 70:90] = np.nan
+        depth[30:40, 5:15] = 0.0
+        depth[60:70, 100:120] = -2.0
+        depth[80:, :30] = np.inf
+    elif case == "pixel-aspect-2":
+        kw = {"pixel_aspect": 2.0}
+    elif case == "grown":
+        h, w = depth.shape
+        kw = {"data_window": Rect(20, 10, 20 + w, 10 + h),
+              "display_window": Rect(0, 0, w + 40, h + 20)}
+    else:
+        kw = {"tile_pixels": 3000}
+    cam = CAM.updated(sensor_width=8.0)
+
+    def render():
+        return render_effect(rt, Dof(), Dof.params(**params), src, depth=depth, camera=cam,
+                             quality="final", **kw)
+    got = render()
+    monkeypatch.setattr(dof_module, "tap_counts", lambda table: np.array([len(table)], np.int32))
+    assert np.array_equal(got.view(np.uint32), render().view(np.uint32))
 
 
 # -- oracle --------------------------------------------------------------------------------
