@@ -567,42 +567,54 @@ typedef struct
  * dof_tap adds one tap of colour `c` and signed radius `rq` standing for the fraction `frac`
  * of its pixel (1; a part of a mixed edge pixel: its coverage, dof_mixed) to the sums of the
  * 4 pixels whose radii are `r0` (`p_near`: r0 < -NEAR_EPS, `any_near`: any of them). */
+/* dof_tap's near field: the tap's light (colour `c`, radius `arq` = |rq|, `q_near` where
+ * rq < -NEAR_EPS) spread over its own CoC area, standing for the fraction `frac`. */
+inline __attribute__((always_inline)) void dof_tap_near(dof_sums *s, const float16 c,
+                                                        const float4 arq, const int4 q_near,
+                                                        const float4 frac, const float8 tp,
+                                                        const float inv_s CATEYE_ARGS)
+{
+  const float d_near = tp.s2, area = tp.s4;
+#if DOF_CATEYE
+  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
+  const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
+  float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
+#if DOF_CATEYE >= 2
+  const float4 gnx = ax - cf_x * arq, gny = ay - cf_y * arq;
+  clip_n = fmin(clip_n, clamp((arq - sqrt(gnx * gnx + gny * gny)) * inv_s + 0.5f, 0.0f,
+                              1.0f));
+#endif
+  const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
+  const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f),
+                           q_near) * frac;
+#else
+  const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
+  const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near)
+                    * frac;
+#endif
+  s->fn += TO_REAL16(c * LANES(wn));
+  s->wn_sum += TO_REAL4(wn);
+  s->alpha += TO_REAL4(wn * area);
+}
+
 inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
                     const float8 tp, const float inv_s, const float4 r0, const int4 p_near,
                     const int any_near, const float cap_s CATEYE_ARGS)
 {
-  const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
+  const float d_far = tp.s3;
   const float4 arq = fabs(rq);
   const int4 q_near = rq < -NEAR_EPS;
   /* near field: scatter-as-gather, the tap's light spread over its own CoC area (a tap
      behind every pixel adds exact zeros: skipped, as is the far field of a tap in front of
      every pixel, whose far weights are 0; the sums never hold -0, so the bits stay) */
+  if(any(q_near))
+  {
+    dof_tap_near(s, c, arq, q_near, frac, tp, inv_s CATEYE_PASS);
+    if(all(q_near)) return;
+  }
 #if DOF_CATEYE
   const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
 #endif
-  if(any(q_near))
-  {
-#if DOF_CATEYE
-    const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-    float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
-#if DOF_CATEYE >= 2
-    const float4 gnx = ax - cf_x * arq, gny = ay - cf_y * arq;
-    clip_n = fmin(clip_n, clamp((arq - sqrt(gnx * gnx + gny * gny)) * inv_s + 0.5f, 0.0f,
-                                1.0f));
-#endif
-    const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
-    const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f),
-                             q_near) * frac;
-#else
-    const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
-    const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near)
-                      * frac;
-#endif
-    s->fn += TO_REAL16(c * LANES(wn));
-    s->wn_sum += TO_REAL4(wn);
-    s->alpha += TO_REAL4(wn * area);
-    if(all(q_near)) return;
-  }
   /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
      near p the far field is the background hidden behind it, estimated from the
      visible background within p's radius */
@@ -661,7 +673,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
                           const int plane, const int base,
                           const float16 c0_in, const float4 r0, global const float *taps,
-                          const int first, const int count, const float cap,
+                          const int first, const int2 count, const float cap,
                           const float scale, global const float *mixa,
                           global const float *mixr, global const float *mixd, const int mix,
                           const int layer CATEYE_ARGS)
@@ -672,7 +684,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
-  for(int i = first; i < first + count; i++)
+  for(int i = first; i < first + count.x; i++)
   {
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
@@ -700,6 +712,37 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
             inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
   }
+  /* the taps beyond the pixels' own radii (dof_tap_count): their far weights are 0, only
+     those in front of the focus plane add light (the same sums as dof_tap's) */
+  for(int i = first + count.x; i < first + count.y; i++)
+  {
+    const float8 tp = vload8(i, taps);
+    const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
+    const int lv = (int)tp.s7;
+    const float4 rq = vload4(0, coc + at);
+    const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+    const int4 sq = aq > 0.0f;
+    const int split = any(sq);
+    const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
+    const float4 rq_far = select(rq, rr.s1357, sq), rq_near = select(rq, rr.s0246, sq);
+    const int4 far_near = rq_far < -NEAR_EPS, near_near = rq_near < -NEAR_EPS;
+    if(!any(far_near) && !(split && any(near_near))) continue;
+    const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
+    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
+    if(!split)
+    {
+      dof_tap_near(&s, c, fabs(rq), far_near, one, tp, inv_s CATEYE_PASS);
+      continue;
+    }
+    const float16 d = vload16(0, mixd + at * 4) * scale;
+    const int16 sq16 = LANES(sq);
+    if(any(far_near))
+      dof_tap_near(&s, select(c, c - d * LANES(aq), sq16), fabs(rq_far), far_near, one - aq,
+                   tp, inv_s CATEYE_PASS);
+    if(any(near_near))
+      dof_tap_near(&s, select(c, c + d * LANES(one - aq), sq16), fabs(rq_near), near_near,
+                   aq, tp, inv_s CATEYE_PASS);
+  }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
   const REAL4 tiny = (REAL4)(1e-20);
   const REAL4 a = clamp(s.alpha, (REAL4)(0), (REAL4)(1));
@@ -723,7 +766,7 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                const int ppitch, const int plane, const int base,
                                const float16 c0,
                                const float4 r0, global const float *taps, const int first,
-                               const int count, const float cap, global const float *mixa,
+                               const int2 count, const float cap, global const float *mixa,
                                global const float *mixr, global const float *mixd,
                                const int mix, const int layer CATEYE_ARGS)
 {
@@ -846,12 +889,14 @@ inline float16 dof_upsample4(global const float *hres, const int hpitch, const i
  * tile_info, 0: no table).  The taps after them add exact zeros to every sum (a far tap
  * spreads at most the pixel's radius, NEAR_EPS if it lies in front of it; a near tap at most
  * its own): the same bits from fewer taps, mostly in-focus pixels beside a far background. */
-inline int dof_tap_count(global const int *tile_info, const int counts, const int counts_n,
-                         const float near_r, const float4 r0, const int count)
+inline int2 dof_tap_count(global const int *tile_info, const int counts, const int counts_n,
+                          const float near_r, const float4 r0, const int count)
 {
-  if(counts_n == 0 || any(r0 < -NEAR_EPS)) return count;
-  const float r = fmax(fmax(fmax(r0.s0, r0.s1), fmax(r0.s2, r0.s3)), fmax(near_r, NEAR_EPS));
-  return min(tile_info[counts + min((int)ceil(2.0f * r), counts_n - 1)], count);
+  if(counts_n == 0 || any(r0 < -NEAR_EPS)) return (int2)(count);
+  const float r = fmax(fmax(fmax(r0.s0, r0.s1), fmax(r0.s2, r0.s3)), NEAR_EPS);
+  const int own = min(tile_info[counts + min((int)ceil(2.0f * r), counts_n - 1)], count);
+  const float rn = fmax(r, near_r);
+  return (int2)(own, min(tile_info[counts + min((int)ceil(2.0f * rn), counts_n - 1)], count));
 }
 
 /* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach,
