@@ -883,12 +883,13 @@ inline float16 dof_upsample4(global const float *hres, const int hpitch, const i
 }
 
 /* How many of a table's first taps (`count` in all) can add anything to 4 pixels of radii
- * `r0`: where none is in front of the focus plane, those within the largest of their radii
- * (at least NEAR_EPS) and `near_r`, the tile's bound of the radii in front of the focus
- * plane that its taps read (the host's tap_counts: `counts_n` entries from `counts` in
- * tile_info, 0: no table).  The taps after them add exact zeros to every sum (a far tap
- * spreads at most the pixel's radius, NEAR_EPS if it lies in front of it; a near tap at most
- * its own): the same bits from fewer taps, mostly in-focus pixels beside a far background. */
+ * `r0`: where none is in front of the focus plane, .y: those within the largest of their
+ * radii (at least NEAR_EPS) and `near_r`, the tile's bound of the radii in front of the
+ * focus plane that its taps read; .x: those within their radii alone, the taps after which
+ * have no far weight (the host's tap_counts: `counts_n` entries from `counts` in tile_info,
+ * 0: no table).  The taps left out add exact zeros to every sum (a far tap spreads at most
+ * the pixel's radius, NEAR_EPS if it lies in front of it; a near tap at most its own): the
+ * same bits from fewer taps, mostly in-focus pixels beside a far background. */
 inline int2 dof_tap_count(global const int *tile_info, const int counts, const int counts_n,
                           const float near_r, const float4 r0, const int count)
 {
