@@ -6,6 +6,10 @@
  *   beyond the image its colours' luminance is capped as the hidden background's (dof_cap):
  *   what lies past the frame edge is a guess, and a light on the edge row must not become a
  *   streak of lights reaching a CoC radius past it (issue 35).
+ * dof_prepare, dof_edges and dof_mixed take 16 pixels per work-item, with vector loads and
+ *   stores where all 16 lie inside the image (and hold no depth edge): PoCL does not
+ *   vectorise one-pixel work-items (docs/performance.md), and a group of 4 took 4-5x the
+ *   time of a group of 16 on these passes.
  * dof_edges: the radii made edge-aware (see there).
  * dof_mixed: mixed edge pixels (a filtered beauty over a point-sampled depth), their
  *   coverage of the near layer and the two layers' radii and colours (see there); the
@@ -64,6 +68,15 @@ inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, f
   return clamp(r, -clamp_r, clamp_r);
 }
 
+/* dof_coc_radius of 16 depths (the same operations, lane by lane). */
+inline float16 dof_coc_radius16(float16 z, float k_half, float focus, float clamp_r,
+                                float offset)
+{
+  const int16 finite = (as_uint16(z) & 0x7f800000u) != (uint16)0x7f800000u;
+  const float16 r = select((float16)(k_half), k_half * (1.0f - focus / z), finite) + offset;
+  return clamp(select((float16)(offset), r, z > 0.0f), -clamp_r, clamp_r);
+}
+
 inline float dof_log_lum(float4 c)
 {
   return log1p(fmax(clfx_luminance(clfx_finite4_or_zero(c)), 0.0f));
@@ -93,19 +106,36 @@ kernel void dof_prepare(global const float *src, global const float *depth, cons
                         global const float *log_mean, const int tiles_x, const int tiles_y,
                         const int tile, const float cap_factor, const int gx0, const int gy0)
 {
-  const int qx = get_global_id(0), py = get_global_id(1);
-  if(py >= pheight || qx * 4 >= ppitch) return;
+  const int x = get_global_id(0) * 16, py = get_global_id(1);
+  if(py >= pheight || x >= ppitch) return;
   const int sy = clfx_clampi(py - pad, 0, height - 1);
+  if(sy == py - pad && x >= pad && x + 16 - pad <= width)
+  {  /* 16 pixels inside the image (most): vector loads, no cap */
+    const int i = sy * pitch + x - pad, o = py * ppitch + x;
+    const global float *s = src + i * 4;
+    vstore16(clfx_finite16_or_zero(vload16(0, s)), 0, col + o * 4);
+    vstore16(clfx_finite16_or_zero(vload16(1, s)), 1, col + o * 4);
+    vstore16(clfx_finite16_or_zero(vload16(2, s)), 2, col + o * 4);
+    vstore16(clfx_finite16_or_zero(vload16(3, s)), 3, col + o * 4);
+    vstore16(dof_coc_radius16(vload16(0, depth + i), k_half, focus, clamp_r, offset), 0,
+             coc + o);
+    return;
+  }
   const int ty = clfx_clampi((sy + gy0) / tile, 0, tiles_y - 1);
-  for(int l = 0; l < 4; l++)
+  int cap_tx = -1;   /* the tile whose cap `cap` holds */
+  float cap = 0.0f;
+  for(int px = x; px < min(x + 16, ppitch); px++)
   {
-    const int px = qx * 4 + l;
     const int sx = clfx_clampi(px - pad, 0, width - 1);
     float4 c = clfx_finite4_or_zero(vload4(sy * pitch + sx, src));
     if(sx != px - pad || sy != py - pad)
     {  /* past the frame edge: the edge pixel repeated, its highlights capped */
-      const float cap = dof_cap(log_mean, clfx_clampi((sx + gx0) / tile, 0, tiles_x - 1), ty,
-                                tiles_x, tiles_y, cap_factor);
+      const int tx = clfx_clampi((sx + gx0) / tile, 0, tiles_x - 1);
+      if(tx != cap_tx)
+      {
+        cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
+        cap_tx = tx;
+      }
       const float lum = clfx_luminance(c);
       if(lum > cap) c *= cap / lum;
     }
@@ -165,10 +195,20 @@ inline int4 dof_edge4(global const float *coc, const int ppitch, const int pad, 
   for(int dy = -1; dy <= 1; dy++)
   {
     const global float *row = coc + (clfx_clampi(y + dy, 0, height - 1) + pad) * ppitch + pad;
-    float v[6];
-    for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
-    const float4 l = (float4)(v[0], v[1], v[2], v[3]), m = (float4)(v[1], v[2], v[3], v[4]);
-    const float4 rr = (float4)(v[2], v[3], v[4], v[5]);
+    float4 l, rr;
+    if(x > 0 && x + 5 <= width)
+    {  /* the 6 radii x - 1 .. x + 4 inside the image */
+      l = vload4(0, row + x - 1);
+      rr = (float4)(l.s23, vload2(0, row + x + 3));
+    }
+    else
+    {
+      float v[6];
+      for(int k = 0; k < 6; k++) v[k] = row[clfx_clampi(x + k - 1, 0, width - 1)];
+      l = (float4)(v[0], v[1], v[2], v[3]);
+      rr = (float4)(v[2], v[3], v[4], v[5]);
+    }
+    const float4 m = (float4)(l.s123, rr.s2);
     rmin = fmin(rmin, fmin(m, fmin(l, rr)));
     rmax = fmax(rmax, fmax(m, fmax(l, rr)));
     if(dy == 0) *centre = m;
@@ -176,22 +216,31 @@ inline int4 dof_edge4(global const float *coc, const int ppitch, const int pad, 
   return rmax - rmin >= EDGE_PX;
 }
 
-/* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 4 image pixels per work-item (the
- * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
- * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
- * between a near layer (r < mid-range) and a far one, its own being its centre sample's.
- * A pixel unlike its own layer (log luminance more than EDGE_TAU from the lower median of
- * its own layer's neighbours) takes the radius of the other layer's neighbour closest to it in log
- * luminance when that one is sharper: a light beside a blurred bar, its pixels sampled on
- * the bar, belongs to the sharp background (the antialiased beauty mixes the layers, the
- * point-sampled depth does not). */
-kernel void dof_edges(global const float *col, global const float *coc, global float *out,
-                      const int ppitch, const int pheight, const int pad, const int width,
-                      const int height)
+/* Image pixels (x..x + 15, y) when none of them is on a depth edge (their 3 x 3 radii span
+ * less than EDGE_PX) nor on the image border, their radii in `centre`; 0 otherwise (the
+ * 4-pixel path decides).  Most pixels: 16 per work-item, vector loads (dof_edge4's test). */
+inline int dof_quiet16(global const float *coc, const int ppitch, const int pad,
+                       const int width, const int height, const int x, const int y,
+                       float16 *centre)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  const int x = qx * 4;
-  if(x >= width || y >= height) return;
+  if(!(x > 0 && x + 17 <= width && y > 0 && y < height - 1)) return 0;
+  float16 rmin = (float16)(INFINITY), rmax = (float16)(-INFINITY);
+  for(int dy = -1; dy <= 1; dy++)
+  {
+    const global float *row = coc + (y + dy + pad) * ppitch + pad + x;
+    const float16 l = vload16(0, row - 1), m = vload16(0, row), rr = vload16(0, row + 1);
+    rmin = fmin(rmin, fmin(m, fmin(l, rr)));
+    rmax = fmax(rmax, fmax(m, fmax(l, rr)));
+    if(dy == 0) *centre = m;
+  }
+  return !any(rmax - rmin >= EDGE_PX);
+}
+
+/* dof_edges of image pixels (x..x + 3, y). */
+inline void dof_edges4(global const float *col, global const float *coc, global float *out,
+                       const int ppitch, const int pheight, const int pad, const int width,
+                       const int height, const int x, const int y)
+{
   float4 centre;
   const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
   float res[4] = {centre.s0, centre.s1, centre.s2, centre.s3};
@@ -207,6 +256,32 @@ kernel void dof_edges(global const float *col, global const float *coc, global f
       for(int px = x0; px <= x1; px++)
         out[py * ppitch + px] = res[l];
   }
+}
+
+/* Edge-aware radii: `coc` (dof_prepare's) -> `out`, 16 image pixels per work-item (the
+ * padding takes the border pixels' radii: clamp-to-edge of the result).  Over the pixel's
+ * 3 x 3 neighbourhood, if the radii span EDGE_PX or more the pixel sits on a depth edge
+ * between a near layer (r < mid-range) and a far one, its own being its centre sample's.
+ * A pixel unlike its own layer (log luminance more than EDGE_TAU from the lower median of
+ * its own layer's neighbours) takes the radius of the other layer's neighbour closest to it in log
+ * luminance when that one is sharper: a light beside a blurred bar, its pixels sampled on
+ * the bar, belongs to the sharp background (the antialiased beauty mixes the layers, the
+ * point-sampled depth does not).  Most groups of 16 hold no depth edge (dof_quiet16: one
+ * vector pass); the others take dof_edges4. */
+kernel void dof_edges(global const float *col, global const float *coc, global float *out,
+                      const int ppitch, const int pheight, const int pad, const int width,
+                      const int height)
+{
+  const int x = get_global_id(0) * 16, y = get_global_id(1);
+  if(x >= width || y >= height) return;
+  float16 centre;
+  if(dof_quiet16(coc, ppitch, pad, width, height, x, y, &centre))
+  {
+    vstore16(centre, 0, out + (y + pad) * ppitch + x + pad);
+    return;
+  }
+  for(int x4 = x; x4 < min(x + 16, width); x4 += 4)
+    dof_edges4(col, coc, out, ppitch, pheight, pad, width, height, x4, y);
 }
 
 /* Mixed edge pixels: a renderer filters the beauty over the pixel but takes the depth at its
@@ -304,15 +379,13 @@ inline float dof_mix_split(global const float *col, global const float *coc, con
   return a;
 }
 
-kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
-                      global float *mixr, global float *mixd, const int ppitch,
-                      const int pheight, const int pad, const int width, const int height,
-                      const int y0, const int y1, global int *count, global int *flags,
-                      const int ftiles_x)
+/* dof_mixed of image pixels (x..x + 3, y). */
+inline void dof_mixed4(global const float *col, global const float *coc, global float *mixa,
+                       global float *mixr, global float *mixd, const int ppitch,
+                       const int pheight, const int pad, const int width, const int height,
+                       const int y0, const int y1, global int *count, global int *flags,
+                       const int ftiles_x, const int x, const int y)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  const int x = qx * 4;
-  if(x >= width || y >= height) return;
   /* only a 3 x 3 radius range of EDGE_PX or more can hold a depth edge */
   float4 centre;
   const int4 edge = dof_edge4(coc, ppitch, pad, width, height, x, y, &centre);
@@ -345,6 +418,27 @@ kernel void dof_mixed(global const float *col, global const float *coc, global f
         }
       }
   }
+}
+
+/* 16 image pixels per work-item: most are no depth edge (dof_quiet16: none mixed), the rest
+ * take dof_mixed4. */
+kernel void dof_mixed(global const float *col, global const float *coc, global float *mixa,
+                      global float *mixr, global float *mixd, const int ppitch,
+                      const int pheight, const int pad, const int width, const int height,
+                      const int y0, const int y1, global int *count, global int *flags,
+                      const int ftiles_x)
+{
+  const int x = get_global_id(0) * 16, y = get_global_id(1);
+  if(x >= width || y >= height) return;
+  float16 centre;
+  if(dof_quiet16(coc, ppitch, pad, width, height, x, y, &centre))
+  {
+    vstore16((float16)(0.0f), 0, mixa + (y + pad) * ppitch + x + pad);
+    return;
+  }
+  for(int x4 = x; x4 < min(x + 16, width); x4 += 4)
+    dof_mixed4(col, coc, mixa, mixr, mixd, ppitch, pheight, pad, width, height, y0, y1,
+               count, flags, ftiles_x, x4, y);
 }
 
 /* Per tile of the whole render's window (`width` x `height`, the grid the gather's tiles
@@ -473,34 +567,54 @@ typedef struct
  * dof_tap adds one tap of colour `c` and signed radius `rq` standing for the fraction `frac`
  * of its pixel (1; a part of a mixed edge pixel: its coverage, dof_mixed) to the sums of the
  * 4 pixels whose radii are `r0` (`p_near`: r0 < -NEAR_EPS, `any_near`: any of them). */
+/* dof_tap's near field: the tap's light (colour `c`, radius `arq` = |rq|, `q_near` where
+ * rq < -NEAR_EPS) spread over its own CoC area, standing for the fraction `frac`. */
+inline __attribute__((always_inline)) void dof_tap_near(dof_sums *s, const float16 c,
+                                                        const float4 arq, const int4 q_near,
+                                                        const float4 frac, const float8 tp,
+                                                        const float inv_s CATEYE_ARGS)
+{
+  const float d_near = tp.s2, area = tp.s4;
+#if DOF_CATEYE
+  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
+  const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
+  float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
+#if DOF_CATEYE >= 2
+  const float4 gnx = ax - cf_x * arq, gny = ay - cf_y * arq;
+  clip_n = fmin(clip_n, clamp((arq - sqrt(gnx * gnx + gny * gny)) * inv_s + 0.5f, 0.0f,
+                              1.0f));
+#endif
+  const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
+  const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f),
+                           q_near) * frac;
+#else
+  const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
+  const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near)
+                    * frac;
+#endif
+  s->fn += TO_REAL16(c * LANES(wn));
+  s->wn_sum += TO_REAL4(wn);
+  s->alpha += TO_REAL4(wn * area);
+}
+
 inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
                     const float8 tp, const float inv_s, const float4 r0, const int4 p_near,
                     const int any_near, const float cap_s CATEYE_ARGS)
 {
-  const float d_near = tp.s2, d_far = tp.s3, area = tp.s4;
+  const float d_far = tp.s3;
   const float4 arq = fabs(rq);
   const int4 q_near = rq < -NEAR_EPS;
-  /* near field: scatter-as-gather, the tap's light spread over its own CoC area */
-#if DOF_CATEYE
-  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
-  float4 wn = (float4)(0.0f);
+  /* near field: scatter-as-gather, the tap's light spread over its own CoC area (a tap
+     behind every pixel adds exact zeros: skipped, as is the far field of a tap in front of
+     every pixel, whose far weights are 0; the sums never hold -0, so the bits stay) */
   if(any(q_near))
   {
-    const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-    float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
-#if DOF_CATEYE >= 2
-    const float4 gnx = ax - cf_x * arq, gny = ay - cf_y * arq;
-    clip_n = fmin(clip_n, clamp((arq - sqrt(gnx * gnx + gny * gny)) * inv_s + 0.5f, 0.0f,
-                                1.0f));
-#endif
-    const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
-    wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f), q_near);
+    dof_tap_near(s, c, arq, q_near, frac, tp, inv_s CATEYE_PASS);
+    if(all(q_near)) return;
   }
-#else
-  const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
-  float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near);
+#if DOF_CATEYE
+  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
 #endif
-  wn *= frac;
   /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
      near p the far field is the background hidden behind it, estimated from the
      visible background within p's radius */
@@ -520,7 +634,6 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near)
                       * frac;
   float4 wf = cov_f * norm;
-  s->fn += TO_REAL16(c * LANES(wn));
   if(any_near && any(p_near & ~q_near))
   {
     /* behind a near p, the part of the coverage the tap's own CoC does not give is a
@@ -548,9 +661,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   }
   else
     s->ff += TO_REAL16(c * LANES(wf));
-  s->wn_sum += TO_REAL4(wn);
   s->wf_sum += TO_REAL4(wf);
-  s->alpha += TO_REAL4(wn * area);
 }
 /* The gather of 4 pixels at `base` (padded index) whose radii are `r0`, colours times
  * `scale`; `c0`: their colours, the result where every tap is rejected.  With `mix` (a
@@ -562,7 +673,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
                           const int plane, const int base,
                           const float16 c0_in, const float4 r0, global const float *taps,
-                          const int first, const int count, const float cap,
+                          const int first, const int2 count, const float cap,
                           const float scale, global const float *mixa,
                           global const float *mixr, global const float *mixd, const int mix,
                           const int layer CATEYE_ARGS)
@@ -573,7 +684,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
-  for(int i = first; i < first + count; i++)
+  for(int i = first; i < first + count.x; i++)
   {
     const float8 tp = vload8(i, taps);
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
@@ -601,6 +712,37 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
             inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
   }
+  /* the taps beyond the pixels' own radii (dof_tap_count): their far weights are 0, only
+     those in front of the focus plane add light (the same sums as dof_tap's) */
+  for(int i = first + count.x; i < first + count.y; i++)
+  {
+    const float8 tp = vload8(i, taps);
+    const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
+    const int lv = (int)tp.s7;
+    const float4 rq = vload4(0, coc + at);
+    const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+    const int4 sq = aq > 0.0f;
+    const int split = any(sq);
+    const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
+    const float4 rq_far = select(rq, rr.s1357, sq), rq_near = select(rq, rr.s0246, sq);
+    const int4 far_near = rq_far < -NEAR_EPS, near_near = rq_near < -NEAR_EPS;
+    if(!any(far_near) && !(split && any(near_near))) continue;
+    const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
+    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
+    if(!split)
+    {
+      dof_tap_near(&s, c, fabs(rq), far_near, one, tp, inv_s CATEYE_PASS);
+      continue;
+    }
+    const float16 d = vload16(0, mixd + at * 4) * scale;
+    const int16 sq16 = LANES(sq);
+    if(any(far_near))
+      dof_tap_near(&s, select(c, c - d * LANES(aq), sq16), fabs(rq_far), far_near, one - aq,
+                   tp, inv_s CATEYE_PASS);
+    if(any(near_near))
+      dof_tap_near(&s, select(c, c + d * LANES(one - aq), sq16), fabs(rq_near), near_near,
+                   aq, tp, inv_s CATEYE_PASS);
+  }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
   const REAL4 tiny = (REAL4)(1e-20);
   const REAL4 a = clamp(s.alpha, (REAL4)(0), (REAL4)(1));
@@ -624,7 +766,7 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                const int ppitch, const int plane, const int base,
                                const float16 c0,
                                const float4 r0, global const float *taps, const int first,
-                               const int count, const float cap, global const float *mixa,
+                               const int2 count, const float cap, global const float *mixa,
                                global const float *mixr, global const float *mixd,
                                const int mix, const int layer CATEYE_ARGS)
 {
@@ -638,61 +780,132 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
 }
 
-/* Whether half-resolution pixel (hx, hy) of the whole render's grid was gathered: its tile
- * (`tile` full-resolution px, tile_info's mode bit 0) is a half-resolution one.  The other
- * tiles' half-resolution pixels are the 2 x 2 box of the unblurred source (the half gather
- * copies them): a sharp light there is not the blurred light of the tile beside it. */
-inline int dof_half_valid(global const int *tile_info, const int tiles_x, const int tiles_y,
-                          const int tile, const int hx, const int hy)
-{
-  const int tx = clfx_clampi(2 * hx / tile, 0, tiles_x - 1);
-  const int ty = clfx_clampi(2 * hy / tile, 0, tiles_y - 1);
-  return tile_info[(ty * tiles_x + tx) * 8 + 4] & 1;
-}
-
 /* Bilinear sample of the half-resolution result at full-resolution pixel (x, y) of the
  * whole render's grid (`hwidth` x `hheight`: the whole render's half-resolution size; `hres`
  * holds its rows from `hy0`, columns from `hx0`) over the half-resolution pixels that were
- * gathered (dof_half_valid: at a half-resolution tile's edge the neighbouring tile's pixels
- * are the unblurred source; the weights of the gathered ones are renormalised: the pixel's
+ * gathered (their tile, `tile` full-resolution px, is a half-resolution one: tile_info's mode
+ * bit 0; the other tiles' half-resolution pixels are the 2 x 2 box of the unblurred source,
+ * copied by the half gather: at a half-resolution tile's edge a sharp light there is not the
+ * blurred light of the tile beside it; the weights of the gathered ones are renormalised: the pixel's
  * own half-resolution pixel, 3/4 x 3/4 of the weight, always is one); `lmin`, `lmax`: the
  * luminance range of the 4 half-resolution pixels it reads, widened (those not gathered
  * too: a tile beside that is not at half resolution holds sharper pixels, a contrast that
- * a dense table gathers again at full resolution). */
-inline float4 dof_upsample(global const float *hres, const int hpitch, const int hwidth,
-                           const int hheight, const int hx0, const int hy0, const int x,
-                           const int y, global const int *tile_info, const int tiles_x,
-                           const int tiles_y, const int tile, float *lmin, float *lmax)
+ * a dense table gathers again at full resolution).
+ *
+ * Pixels (x..x + 3, y) in lanes s0123, s4567, ...: the half-resolution pixels they share (at
+ * most 4 columns of 2 rows), their luminance and whether they were gathered are loaded and
+ * tested once. */
+inline float16 dof_upsample4(global const float *hres, const int hpitch, const int hwidth,
+                             const int hheight, const int hx0, const int hy0, const int x,
+                             const int y, global const int *tile_info, const int tiles_x,
+                             const int tiles_y, const int tile, float *lmin, float *lmax)
 {
-  const float hx = clamp(0.5f * ((float)x + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
   const float hy = clamp(0.5f * ((float)y + 0.5f) - 0.5f, 0.0f, (float)(hheight - 1));
-  const int x0 = (int)hx, y0 = (int)hy;
-  const int x1 = min(x0 + 1, hwidth - 1), y1 = min(y0 + 1, hheight - 1);
-  const float fx = hx - (float)x0, fy = hy - (float)y0;
+  const int y0 = (int)hy, y1 = min(y0 + 1, hheight - 1);
+  const float fy = hy - (float)y0;
   const int r0 = (y0 - hy0) * hpitch - hx0, r1 = (y1 - hy0) * hpitch - hx0;
-  const float4 c00 = vload4(r0 + x0, hres), c01 = vload4(r0 + x1, hres);
-  const float4 c10 = vload4(r1 + x0, hres), c11 = vload4(r1 + x1, hres);
-  const int4 ok = (int4)(dof_half_valid(tile_info, tiles_x, tiles_y, tile, x0, y0),
-                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y0),
-                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x0, y1),
-                         dof_half_valid(tile_info, tiles_x, tiles_y, tile, x1, y1)) != 0;
-  const float4 l = (float4)(clfx_luminance(c00), clfx_luminance(c01), clfx_luminance(c10),
-                            clfx_luminance(c11));
-  *lmin = fmin(*lmin, fmin(fmin(l.x, l.y), fmin(l.z, l.w)));
-  *lmax = fmax(*lmax, fmax(fmax(l.x, l.y), fmax(l.z, l.w)));
-  /* weighted sums, no differences: finite values stay finite */
-  if(all(ok))
-    return (c00 * (1.0f - fx) + c01 * fx) * (1.0f - fy) + (c10 * (1.0f - fx) + c11 * fx) * fy;
-  const float4 w = select((float4)(0.0f), (float4)((1.0f - fx) * (1.0f - fy), fx * (1.0f - fy),
-                                                   (1.0f - fx) * fy, fx * fy), ok);
-  const float4 wn = w / (w.x + w.y + w.z + w.w);
-  return c00 * wn.x + c01 * wn.y + c10 * wn.z + c11 * wn.w;
+  const global int *mode0 = tile_info + clfx_clampi(2 * y0 / tile, 0, tiles_y - 1) * tiles_x * 16 + 4;
+  const global int *mode1 = tile_info + clfx_clampi(2 * y1 / tile, 0, tiles_y - 1) * tiles_x * 16 + 4;
+  const int k = x / 2 - 1;
+  if(x % 4 == 0 && k >= 0 && k + 3 <= hwidth - 1)
+  {  /* most groups: columns x/2 - 1 .. x/2 + 2, the pixels' (0, 1), (1, 2), (1, 2), (2, 3)
+        at fx = 3/4, 1/4, 3/4, 1/4 (what the general path finds), as float16 lanes */
+    const float16 a = vload16(0, hres + (r0 + k) * 4), b = vload16(0, hres + (r1 + k) * 4);
+    const float4 la = dof_lum4(a), lb = dof_lum4(b);
+    const float4 lo = fmin(la, lb), hi = fmax(la, lb);
+    *lmin = fmin(*lmin, fmin(fmin(lo.x, lo.y), fmin(lo.z, lo.w)));
+    *lmax = fmax(*lmax, fmax(fmax(hi.x, hi.y), fmax(hi.z, hi.w)));
+    const int4 t = min(max(2 * (k + (int4)(0, 1, 2, 3)) / tile, (int4)(0)),
+                       (int4)(tiles_x - 1)) * 16;
+    const int4 va = (int4)(mode0[t.x], mode0[t.y], mode0[t.z], mode0[t.w]) & 1;
+    const int4 vb = (int4)(mode1[t.x], mode1[t.y], mode1[t.z], mode1[t.w]) & 1;
+    if(all((va & vb) != 0))
+    {
+      const float16 f = (float16)(0.75f, 0.75f, 0.75f, 0.75f, 0.25f, 0.25f, 0.25f, 0.25f,
+                                  0.75f, 0.75f, 0.75f, 0.75f, 0.25f, 0.25f, 0.25f, 0.25f);
+      const float16 al = (float16)(a.s0123, a.s4567, a.s4567, a.s89ab);
+      const float16 ar = (float16)(a.s4567, a.s89ab, a.s89ab, a.scdef);
+      const float16 bl = (float16)(b.s0123, b.s4567, b.s4567, b.s89ab);
+      const float16 br = (float16)(b.s4567, b.s89ab, b.s89ab, b.scdef);
+      return (al * (1.0f - f) + ar * f) * (1.0f - fy) + (bl * (1.0f - f) + br * f) * fy;
+    }
+  }
+  int cx0[4], cx1[4];
+  float fx[4];
+  for(int l = 0; l < 4; l++)
+  {
+    const float hx = clamp(0.5f * ((float)(x + l) + 0.5f) - 0.5f, 0.0f, (float)(hwidth - 1));
+    cx0[l] = (int)hx;
+    cx1[l] = min(cx0[l] + 1, hwidth - 1);
+    fx[l] = hx - (float)cx0[l];
+  }
+  /* the columns cx0[0] .. cx1[3] (consecutive: hx steps by 1/2) */
+  const int c0 = cx0[0], n = cx1[3] - c0 + 1;
+  float4 a[4], b[4];
+  int va[4], vb[4];
+  float la[4], lb[4];
+  /* whether the 2 x n pixels were gathered: their tiles' mode bit 0 */
+  for(int j = 0; j < n; j++)
+  {
+    a[j] = vload4(r0 + c0 + j, hres);
+    b[j] = vload4(r1 + c0 + j, hres);
+    const int t = clfx_clampi(2 * (c0 + j) / tile, 0, tiles_x - 1) * 16;
+    va[j] = mode0[t] & 1;
+    vb[j] = mode1[t] & 1;
+    la[j] = clfx_luminance(a[j]);
+    lb[j] = clfx_luminance(b[j]);
+    *lmin = fmin(*lmin, fmin(la[j], lb[j]));
+    *lmax = fmax(*lmax, fmax(la[j], lb[j]));
+  }
+  float16 out;
+  for(int l = 0; l < 4; l++)
+  {
+    const int i0 = cx0[l] - c0, i1 = cx1[l] - c0;
+    const float4 c00 = a[i0], c01 = a[i1], c10 = b[i0], c11 = b[i1];
+    const float f = fx[l];
+    const int4 ok = (int4)(va[i0], va[i1], vb[i0], vb[i1]) != 0;
+    float4 o;
+    if(all(ok))
+      o = (c00 * (1.0f - f) + c01 * f) * (1.0f - fy) + (c10 * (1.0f - f) + c11 * f) * fy;
+    else
+    {
+      const float4 w = select((float4)(0.0f), (float4)((1.0f - f) * (1.0f - fy), f * (1.0f - fy),
+                                                       (1.0f - f) * fy, f * fy), ok);
+      const float4 wn = w / (w.x + w.y + w.z + w.w);
+      o = c00 * wn.x + c01 * wn.y + c10 * wn.z + c11 * wn.w;
+    }
+    if(l == 0) out.s0123 = o;
+    else if(l == 1) out.s4567 = o;
+    else if(l == 2) out.s89ab = o;
+    else out.scdef = o;
+  }
+  return out;
 }
 
-/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach):
- * the largest lattice levels of the two tables' taps (tap_table's column 7; 0: every tap
- * reads the image itself), the farthest x or y offset of a tap of the first (px); count 0
- * copies the sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
+/* How many of a table's first taps (`count` in all) can add anything to 4 pixels of radii
+ * `r0`: where none is in front of the focus plane, .y: those within the largest of their
+ * radii (at least NEAR_EPS) and `near_r`, the tile's bound of the radii in front of the
+ * focus plane that its taps read; .x: those within their radii alone, the taps after which
+ * have no far weight (the host's tap_counts: `counts_n` entries from `counts` in tile_info,
+ * 0: no table).  The taps left out add exact zeros to every sum (a far tap spreads at most
+ * the pixel's radius, NEAR_EPS if it lies in front of it; a near tap at most its own): the
+ * same bits from fewer taps, mostly in-focus pixels beside a far background. */
+inline int2 dof_tap_count(global const int *tile_info, const int counts, const int counts_n,
+                          const float near_r, const float4 r0, const int count)
+{
+  if(counts_n == 0 || any(r0 < -NEAR_EPS)) return (int2)(count);
+  const float r = fmax(fmax(fmax(r0.s0, r0.s1), fmax(r0.s2, r0.s3)), NEAR_EPS);
+  const int own = min(tile_info[counts + min((int)ceil(2.0f * r), counts_n - 1)], count);
+  const float rn = fmax(r, near_r);
+  return (int2)(own, min(tile_info[counts + min((int)ceil(2.0f * rn), counts_n - 1)], count));
+}
+
+/* tile_info[t] = (first, count, sharp first, sharp count, mode, level, sharp level, reach,
+ * near bound, counts, counts length, sharp counts, sharp counts length, 0, 0, 0), 16 ints
+ * per tile, the tables' tap counts (dof_tap_count) after the tiles: the largest lattice
+ * levels of the two tables' taps (tap_table's column 7; 0: every tap reads the image
+ * itself), the farthest x or y offset of a tap of the first (px); count 0 copies the
+ * sanitised source.  4 pixels in focus or nearly (0 <= radius < sharp_r, no near
  * pixel) gather with the sharp table (every pixel within sharp_r a far-field tap, the near
  * field around: tap_table's core), as do such pixels of a group gathered with a sparse
  * first table (level > 0); with mode bit 0,
@@ -728,7 +941,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   if(yd >= height || xd >= width) return;
   const int x = xd + place.s0, y = yd + place.s1;   /* the whole render's grid */
   const int tx = x / tile, ty = y / tile;
-  const int8 info = vload8(ty * tiles_x + tx, tile_info);
+  const int16 info = vload16(ty * tiles_x + tx, tile_info);
   const int base = (y - place.s3 + pad) * ppitch + x - place.s2 + pad;
   global float *out = dst + (yd * pitch + xd) * 4;
   if(info.s1 == 0)
@@ -737,11 +950,59 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     return;
   }
   const float4 r = vload4(0, coc + base);
-  /* mixed edge pixels (dof_mixed) within the reach of the tile's table (info.s7, px; the
-     flag tiles of the buffer's image, clamped to it as the padding is): a dense table's
-     taps split them, and the 4 pixels are gathered twice, as their far and as their near
-     part (the table must serve both radii; a dense table's gather, not the half-resolution
-     result, where one of them is mixed) */
+  /* a mixed edge pixel among the 4 (dof_mixed; none in the half-resolution gather): they
+     are gathered twice, as their far and as their near part (the table must serve both
+     radii; a dense table's gather, not the half-resolution result, where one of them is
+     mixed) */
+  const float4 am = mtiles_x > 0 ? vload4(0, mixa + base) : (float4)(0.0f);
+  const int4 sm = am > 0.0f;
+  const int split = any(sm);
+  float4 rn = r, rf = r;
+  if(split)
+  {
+    const float8 rr = vload8(0, mixr + base * 2);   /* read where mixa > 0 only */
+    rn = select(r, rr.s0246, sm);
+    rf = select(r, rr.s1357, sm);
+  }
+  int first = info.s0, count = info.s1, counts = info.s9, counts_n = info.sa;
+  const float near_r = as_float(info.s8);
+  /* a mixed pixel among the 4 is gathered twice with a dense table serving both its radii:
+     the sharp one if both are in focus or nearly, else the full one; otherwise (a sparse
+     table) as any pixel, at its own radius */
+  int twice = 0;
+  if(split && all(fmin(rn, rf) >= -NEAR_EPS && fmax(rn, rf) < sharp_r) && info.s6 == 0)
+  {
+    first = info.s2;
+    count = info.s3;
+    counts = info.sb;
+    counts_n = info.sc;
+    twice = 1;
+  }
+  else if(split && info.s5 == 0)
+    twice = 1;
+  else if(all(r >= -NEAR_EPS && r < sharp_r))
+  {
+    first = info.s2;
+    count = info.s3;
+    counts = info.sb;
+    counts_n = info.sc;
+  }
+  else if((info.s4 & 1) && all(fabs(r) >= low_r))
+  {
+    float lmin = INFINITY, lmax = -INFINITY;
+    const float16 up = dof_upsample4(hres, hpitch, hwidth, hheight, hplace.s0, hplace.s1, x,
+                                     y, tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
+    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
+    if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
+                         <= refine)
+    {
+      vstore16(up, 0, out);
+      return;
+    }
+  }
+  /* mixed edge pixels within the reach of the tile's table (info.s7, px; the flag tiles
+     of the buffer's image, clamped to it as the padding is): a dense table's taps split
+     them (a pixel's own mixed flag lies within reach: `mix` is set wherever `am` is) */
   int mix = 0;
   if(mtiles_x > 0)
   {
@@ -752,55 +1013,6 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     const int fy1 = clfx_clampi((by + rch) / MIX_TILE, 0, mtiles_y - 1);
     for(int fy = fy0; fy <= fy1 && !mix; fy++)
       for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
-  }
-  const float4 am = mix ? vload4(0, mixa + base) : (float4)(0.0f);
-  const int4 sm = am > 0.0f;
-  const int split = any(sm);
-  float4 rn = r, rf = r;
-  if(split)
-  {
-    const float8 rr = vload8(0, mixr + base * 2);   /* read where mixa > 0 only */
-    rn = select(r, rr.s0246, sm);
-    rf = select(r, rr.s1357, sm);
-  }
-  int first = info.s0, count = info.s1;
-  /* a mixed pixel among the 4 is gathered twice with a dense table serving both its radii:
-     the sharp one if both are in focus or nearly, else the full one; otherwise (a sparse
-     table) as any pixel, at its own radius */
-  int twice = 0;
-  if(split && all(fmin(rn, rf) >= -NEAR_EPS && fmax(rn, rf) < sharp_r) && info.s6 == 0)
-  {
-    first = info.s2;
-    count = info.s3;
-    twice = 1;
-  }
-  else if(split && info.s5 == 0)
-    twice = 1;
-  else if(all(r >= -NEAR_EPS && r < sharp_r))
-  {
-    first = info.s2;
-    count = info.s3;
-  }
-  else if((info.s4 & 1) && all(fabs(r) >= low_r))
-  {
-    float lmin = INFINITY, lmax = -INFINITY;
-    float16 up;
-    const int hx0 = hplace.s0, hy0 = hplace.s1;
-    up.s0123 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    up.s4567 = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 1, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    up.s89ab = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 2, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    up.scdef = dof_upsample(hres, hpitch, hwidth, hheight, hx0, hy0, x + 3, y,
-                               tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
-    if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
-                         <= refine)
-    {
-      vstore16(up, 0, out);
-      return;
-    }
   }
   const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
 #if DOF_CATEYE
@@ -826,7 +1038,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float16 c0 = vload16(0, col + base * 4);
   if(!twice)
   {
-    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first, count,
+    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first,
+                                dof_tap_count(tile_info, counts, counts_n, near_r, r, count),
                                 cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS);
     /* pixels in focus or nearly beside out-of-focus ones in a sparse table's group: a
        lattice's far field would give them their own pixel through its prefilter tent (an
@@ -835,7 +1048,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     const int4 sharp4 = r >= -NEAR_EPS && r < sharp_r;
     if(info.s5 > 0 && first == info.s0 && any(sharp4))
       o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, info.s2,
-                                    info.s3, cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
+                                    dof_tap_count(tile_info, info.sb, info.sc, near_r, r,
+                                                  info.s3), cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
                  LANES(sharp4));
     vstore16(o, 0, out);
     return;
@@ -846,10 +1060,13 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const int16 sm16 = LANES(sm);
   const float16 o_far = dof_gather_safe(col, coc, ppitch, plane, base,
                                         select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
-                                        count, cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
+                                        dof_tap_count(tile_info, counts, counts_n, near_r, rf,
+                                                      count), cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
   const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
-                                         taps, first, count, cap, mixa, mixr, mixd, 1, 2
+                                         taps, first,
+                                         dof_tap_count(tile_info, counts, counts_n, near_r, rn,
+                                                       count), cap, mixa, mixr, mixd, 1, 2
                                          CATEYE_PASS);
   vstore16(select(o_far, o_far * LANES(1.0f - am) + o_near * LANES(am), sm16), 0, out);
 }

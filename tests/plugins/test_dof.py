@@ -8,7 +8,9 @@ from clfx.bench.groundtruth import render_truth
 from clfx.bench.scene import demo_scene, render_sharp
 from clfx.core.camera import Camera
 from clfx.core.plugin import QUALITY_LEVELS
-from clfx.plugins.dof import LEVELS, Dof, quantised_radius, tap_table
+from clfx.core.rect import Rect
+from clfx.plugins import dof as dof_module
+from clfx.plugins.dof import LEVELS, Dof, quantised_radius, tap_counts, tap_table
 from tests.conftest import hard_shapes
 from tests.reference import dof as reference
 from tests.effects import render_effect
@@ -91,6 +93,91 @@ def random_case(rng, shape, zmin=0.8, zmax=40.0):
     # blocky depth: layers with edges, like a real depth pass
     depth = np.repeat(np.repeat(depth[::4, ::4], 4, 0), 4, 1)[:shape[0], :shape[1]]
     return src, np.ascontiguousarray(depth)
+
+
+# -- taps that add nothing -----------------------------------------------------------------
+@pytest.mark.parametrize("table", [
+    tap_table(10.0, 32, dense=32.0),
+    tap_table(12.5, 32, 1.0, 6, -0.5 * math.pi, 0.3, dense=32.0, squeeze=1.5),
+    tap_table(60.0, 12, 2.0, dense=16.0, core=6.0),
+], ids=["disk", "hexagon-anamorphic", "lattice-core"])
+def test_tap_counts_hold_every_tap_a_radius_reaches(table):
+    counts = tap_counts(table)
+    far = np.minimum(table[:, 2].astype(np.float64), table[:, 3]) - 0.5 * np.exp2(table[:, 7])
+    assert counts[-1] == len(table) and np.all(np.diff(counts) >= 0)
+    for k, n in enumerate(counts):
+        # every tap left out lies beyond radius k / 2 plus its coverage ramp's half width
+        assert np.all(far[n:] >= 0.5 * k)
+        assert n == 0 or far[n - 1] < 0.5 * k
+
+def test_tap_counts_of_a_disk():
+    counts = tap_counts(tap_table(10.0, 32, dense=32.0))
+    assert counts[2] == 9      # radii up to 1 px: the 3 x 3 taps around the pixel
+    assert counts[0] == counts[1] == 1   # up to 1/2 px: the pixel itself
+
+
+def dof_scene(shape=(96, 128)):
+    """A far background (CoC ~10 px), an in-focus subject and a blurred near blob, with
+    highlights on each."""
+    h, w = shape
+    yy, xx = np.mgrid[:h, :w]
+    depth = np.full(shape, 60.0, np.float32)
+    depth[h // 4:3 * h // 4, w // 3:2 * w // 3] = 3.0                        # in focus
+    depth[(yy - h // 2) ** 2 + (xx - w // 6) ** 2 < (h // 6) ** 2] = 1.2      # near
+    src = np.full(shape + (4,), 0.2, np.float32)
+    src[::9, ::11, :3] = 40.0
+    src[..., 3] = 1.0
+    return src, depth
+
+
+@pytest.mark.parametrize("quality", ["draft", "final", "reference"])
+@pytest.mark.parametrize("params", [{}, {"optical_vignetting": 0.8, "anamorphic_squeeze": 1.5},
+                                    {"axial_ca_red": 60.0, "blades": 6}],
+                         ids=["plain", "cateye-anamorphic", "axial-ca"])
+def test_gather_leaves_out_only_taps_that_add_nothing(rt, monkeypatch, quality, params):
+    """The gather stops each table at the taps the pixels' radii and the near field reach
+    (tap_counts): the same bits as every tap of the table, on a frame with in-focus pixels
+    beside a far background and a near blob."""
+    src, depth = dof_scene()
+    cam = CAM.updated(sensor_width=8.0)
+    got = run(rt, src, depth, quality, cam, **params)
+    monkeypatch.setattr(dof_module, "tap_counts", lambda table: np.array([len(table)], np.int32))
+    every = run(rt, src, depth, quality, cam, **params)
+    assert np.array_equal(got.view(np.uint32), every.view(np.uint32))
+
+
+@pytest.mark.parametrize("case", ["hostile-depths", "pixel-aspect-2", "grown", "tiled"])
+def test_gather_leaves_out_only_taps_that_add_nothing_anywhere(rt, monkeypatch, case):
+    """The tiles' bound of the near-field radii holds for invalid depths (in focus, with an
+    axial-CA offset in front of it), non-square pixels (taps twice as far in rows), a data
+    window inside the display window (the render grown past it) and bands of a tiled
+    render: the same bits as every tap."""
+    src, depth = dof_scene()
+    kw, params = {}, {"axial_ca_red": 200.0}
+    if case == "hostile-depths":
+        # every valid depth ~1 px of CoC behind the focus plane, 0.2 px in red (its axial CA
+        # focuses 0.8 px in front): only the invalid depths lie in front of it, in red
+        depth[:] = 4.26
+        depth[5:20, 70:90] = np.nan
+        depth[30:40, 5:15] = 0.0
+        depth[60:70, 100:120] = -2.0
+        depth[80:, :30] = np.inf
+    elif case == "pixel-aspect-2":
+        kw = {"pixel_aspect": 2.0}
+    elif case == "grown":
+        h, w = depth.shape
+        kw = {"data_window": Rect(20, 10, 20 + w, 10 + h),
+              "display_window": Rect(0, 0, w + 40, h + 20)}
+    else:
+        kw = {"tile_pixels": 3000}
+    cam = CAM.updated(sensor_width=8.0)
+
+    def render():
+        return render_effect(rt, Dof(), Dof.params(**params), src, depth=depth, camera=cam,
+                             quality="final", **kw)
+    got = render()
+    monkeypatch.setattr(dof_module, "tap_counts", lambda table: np.array([len(table)], np.int32))
+    assert np.array_equal(got.view(np.uint32), render().view(np.uint32))
 
 
 # -- oracle --------------------------------------------------------------------------------
