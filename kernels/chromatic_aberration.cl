@@ -146,6 +146,57 @@ inline void ca_mix_store(global const float *src, global float *dst, global cons
            0, dst + quad * 16);
 }
 
+/* Bicubic (preview, final): the two bins in one pass.  The red bin's read feeds only the red
+ * channel and the blue bin's only blue (three-channel weights: channel_bins), so per pixel
+ * each footprint row is one float16 of 4 texels whose R lanes come from the red bin's
+ * row and B lanes from the blue bin's: one vertical sum, one horizontal weighting and one
+ * clamp for both (rs_fast4's RS_CUBIC does each bin on all 4 channels, twice the work).
+ * Every lane takes rs_fast4's operations in its order, so R and B are bit for bit its
+ * results; G and A lanes carry finite values the weights zero.  The clamp's bounds take
+ * min/max (the texels are finite: sanitised, or the frame has none).  1080p final:
+ * 56 -> 44 ms of CPU. */
+#if RS_FILTER == 1
+#define CA_BLEND(r, b) __builtin_shufflevector(r, b, 0, 1, 18, 3, 4, 5, 22, 7, 8, 9, 26, 11,   \
+                                               12, 13, 30, 15)
+/* pixel k's (red, -, blue, -) weights from the bins' per-pixel float4s */
+#define CA_W4(r, b, k) (float4)((r).s##k, 0.0f, (b).s##k, 0.0f)
+#define CA_ROW(j) rs_sanitise16(CA_BLEND(vload16(0, pr + (j) * row), vload16(0, pb + (j) * row)))
+#define CA_PIXEL(k, o) {                                                                     \
+    global const float *pr = src + br.s##k - row - 4, *pb = src + bb.s##k - row - 4;        \
+    const float16 a0 = CA_ROW(0), a1 = CA_ROW(1), a2 = CA_ROW(2), a3 = CA_ROW(3);            \
+    const float4 y0 = CA_W4(ry0, by0, k), y1 = CA_W4(ry1, by1, k);                          \
+    const float4 y2 = CA_W4(ry2, by2, k), y3 = CA_W4(ry3, by3, k);                          \
+    const float16 v = fma(a3, (float16)(y3, y3, y3, y3), fma(a2, (float16)(y2, y2, y2, y2),  \
+                      fma(a1, (float16)(y1, y1, y1, y1), a0 * (float16)(y0, y0, y0, y0))));  \
+    const float16 hs = v * (float16)(CA_W4(rx0, bx0, k), CA_W4(rx1, bx1, k),                 \
+                                     CA_W4(rx2, bx2, k), CA_W4(rx3, bx3, k));                \
+    const float4 lo = min(min(a1.s4567, a1.s89ab), min(a2.s4567, a2.s89ab));                \
+    const float4 hi = max(max(a1.s4567, a1.s89ab), max(a2.s4567, a2.s89ab));                \
+    o = clamp(RS_HSUM16(hs), lo, hi); }
+
+inline void ca_cubic_bins(global const float *src, int pitch, int w, int h, global const int *q,
+                          float4 *o0, float4 *o1, float4 *o2, float4 *o3)
+{
+  const int row = pitch * 4, off = RS_TAPS / 2 - 1;
+  /* rs_fast_quad's clamp: border quads (re-rendered later) read inside the image */
+  const int4 lo = (int4)(off * (pitch + 1) * 4);
+  const int4 hi = (int4)(((h - RS_TAPS + off) * pitch + (w - RS_TAPS + off)) * 4);
+  const int4 br = clamp(vload4(0, q), lo, hi), bb = clamp(vload4(3, q), lo, hi);
+  float8 r0, r1, r2, r3, b0, b1, b2, b3;    /* lanes 0-3 x, 4-7 y (rs_cubic_w4's formula) */
+  rs_cubic_w8(as_float8(vload8(0, q + 4)), &r0, &r1, &r2, &r3);
+  rs_cubic_w8(as_float8(vload8(0, q + 16)), &b0, &b1, &b2, &b3);
+  const float4 rx0 = r0.lo, rx1 = r1.lo, rx2 = r2.lo, rx3 = r3.lo;
+  const float4 ry0 = r0.hi, ry1 = r1.hi, ry2 = r2.hi, ry3 = r3.hi;
+  const float4 bx0 = b0.lo, bx1 = b1.lo, bx2 = b2.lo, bx3 = b3.lo;
+  const float4 by0 = b0.hi, by1 = b1.hi, by2 = b2.hi, by3 = b3.hi;
+  CA_PIXEL(0, *o0) CA_PIXEL(1, *o1) CA_PIXEL(2, *o2) CA_PIXEL(3, *o3)
+}
+#undef CA_PIXEL
+#undef CA_ROW
+#undef CA_W4
+#undef CA_BLEND
+#endif
+
 /* the map holds canvas rows row0 .. row0 + rows (all in a whole render) */
 kernel void chromatic_aberration_packed(global const float *src, global float *dst,
                                         global const int *map, global const float *weights,
@@ -154,10 +205,16 @@ kernel void chromatic_aberration_packed(global const float *src, global float *d
 {
   RS_BAND_PROLOGUE(src, pitch, dst, pitch, rows, row0, shift);
   const int entry = my * (pitch / 4) + qx, quad = y * (pitch / 4) + qx;
+#if RS_FILTER == 1
+  float4 o0, o1, o2, o3;  /* (red bin's R, -, blue bin's B, -) */
+  ca_cubic_bins(src, pitch, w, h, map + 24 * entry, &o0, &o1, &o2, &o3);
+  ca_mix_store(src, dst, weights, quad, o0, o1, o2, o3, o0, o1, o2, o3);
+#else
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fast_quad(src, pitch, w, h, map + 24 * entry, &r0, &r1, &r2, &r3);
   rs_fast_quad(src, pitch, w, h, map + 24 * entry + 12, &b0, &b1, &b2, &b3);
   ca_mix_store(src, dst, weights, quad, r0, r1, r2, r3, b0, b1, b2, b3);
+#endif
 }
 
 /* records of 20 ints: quad index (in canvas rows), 3 unused, then each map's 4 x and 4 y */
