@@ -403,6 +403,6 @@ class Grain(Plugin):
                   y0 - radius, seed, frame)
         rt.launch(knl("grain_blur_h"), (pitch // 4, rows), noise, tmp, weights, npitch, pitch,
                   rows)
-        rt.launch(knl("grain_apply"), (pitch // 4, height), src, dst, tmp, weights, pitch, height,
-                  ar, ag, ab, *tone)
+        rt.launch(knl("grain_apply"), (-(-pitch // 8), height), src, dst, tmp, weights, pitch,
+                  height, ar, ag, ab, *tone)   # 8 pixels a work-item
         return dst
