@@ -146,6 +146,18 @@ inline void ca_mix_store(global const float *src, global float *dst, global cons
            0, dst + quad * 16);
 }
 
+/* A quad of the packed map: both bins on all 4 channels, mixed by the weights (kept out of
+ * line: for the bicubic levels it is the rare exact path of chromatic_aberration_packed). */
+CLFX_COLD void ca_packed_quad(global const float *src, global float *dst, global const int *q,
+                              global const float *weights, const int pitch, const int w,
+                              const int h, const int quad)
+{
+  float4 r0, r1, r2, r3, b0, b1, b2, b3;
+  rs_fast_quad(src, pitch, w, h, q, &r0, &r1, &r2, &r3);
+  rs_fast_quad(src, pitch, w, h, q + 12, &b0, &b1, &b2, &b3);
+  ca_mix_store(src, dst, weights, quad, r0, r1, r2, r3, b0, b1, b2, b3);
+}
+
 /* Bicubic (preview, final): the two bins in one pass.  The red bin's read feeds only the red
  * channel and the blue bin's only blue (three-channel weights: channel_bins), so per pixel
  * each footprint row is one float16 of 4 texels whose R lanes come from the red bin's
@@ -153,8 +165,8 @@ inline void ca_mix_store(global const float *src, global float *dst, global cons
  * clamp for both (rs_fast4's RS_CUBIC does each bin on all 4 channels, twice the work).
  * Every lane takes rs_fast4's operations in its order, so R and B are bit for bit its
  * results; G and A lanes carry finite values the weights zero.  The clamp's bounds take
- * min/max (the texels are finite: sanitised, or the frame has none).  1080p final:
- * 64 -> 47 ms of CPU. */
+ * min/max (the texels are finite: sanitised, or the frame has none; a result at +-0,
+ * where the bounds' order of signed zeros could tell, is rendered again exactly). */
 #if RS_FILTER == 1
 #define CA_BLEND(r, b) __builtin_shufflevector(r, b, 0, 1, 18, 3, 4, 5, 22, 7, 8, 9, 26, 11,   \
                                                12, 13, 30, 15)
@@ -217,17 +229,65 @@ kernel void chromatic_aberration_packed(global const float *src, global float *d
 {
   RS_BAND_PROLOGUE(src, pitch, dst, pitch, rows, row0, shift);
   const int entry = my * (pitch / 4) + qx, quad = y * (pitch / 4) + qx;
-#if RS_FILTER == 1
-  float4 o0, o1, o2, o3;  /* (red bin's R, -, blue bin's B, -) */
-  ca_cubic_bins(src, pitch, w, h, map + 24 * entry, &o0, &o1, &o2, &o3);
-  ca_mix_store(src, dst, weights, quad, o0, o1, o2, o3, o0, o1, o2, o3);
-#else
   float4 r0, r1, r2, r3, b0, b1, b2, b3;
   rs_fast_quad(src, pitch, w, h, map + 24 * entry, &r0, &r1, &r2, &r3);
   rs_fast_quad(src, pitch, w, h, map + 24 * entry + 12, &b0, &b1, &b2, &b3);
   ca_mix_store(src, dst, weights, quad, r0, r1, r2, r3, b0, b1, b2, b3);
-#endif
 }
+
+#if RS_FILTER == 1
+/* Bicubic: the blended pass (ca_cubic_bins) over every quad.  ca_mix_store's sum
+ * wr * red + wg * green + wb * blue with the three-bin weights (0/1, channel_bins) is each
+ * channel's own value plus zeros, which this sum over the blended results is too, bit for
+ * bit, unless that value is +-0: its sign then follows the zeros' (the bins' other channels,
+ * not computed here).  Such quads (black or transparent pixels) are flagged (flags[entry] = 1;
+ * a store, not a branch: a branch in this kernel, even to an atomic, cost 15 %) and
+ * chromatic_aberration_packed_exact renders them again with both bins whole.  1080p final,
+ * CPU ms: 60-64 for chromatic_aberration_packed, 44-46 for this and 1 for the exact pass. */
+kernel void chromatic_aberration_packed_rb(global const float *src, global float *dst,
+                                           global const int *map, global uchar *flags,
+                                           global const float *weights, const int pitch,
+                                           const int w, const int h, const int row0,
+                                           const int rows, const int shift)
+{
+  RS_BAND_PROLOGUE(src, pitch, dst, pitch, rows, row0, shift);
+  const int entry = my * (pitch / 4) + qx, quad = y * (pitch / 4) + qx;
+  float4 o0, o1, o2, o3;  /* (red bin's R, -, blue bin's B, -) */
+  ca_cubic_bins(src, pitch, w, h, map + 24 * entry, &o0, &o1, &o2, &o3);
+  const float16 g = rs_sanitise16(vload16(0, src + quad * 16));
+  const float4 wr = vload4(0, weights), wg = vload4(1, weights), wb = vload4(2, weights);
+  const float16 t = (float16)(wr * o0 + wg * g.lo.lo + wb * o0, wr * o1 + wg * g.lo.hi + wb * o1,
+                              wr * o2 + wg * g.hi.lo + wb * o2, wr * o3 + wg * g.hi.hi + wb * o3);
+  vstore16(t, 0, dst + quad * 16);
+  /* a lane at +-0, tested lane by lane on the bits (PoCL's any() of a float16 compare, or
+   * of its halves OR-ed, cost 5-7 ms of CPU more at 1080p) */
+  const int16 z = as_int16(t) & 0x7fffffff;
+  flags[entry] = (uchar)((z.s0 == 0) | (z.s1 == 0) | (z.s2 == 0) | (z.s3 == 0) | (z.s4 == 0)
+                         | (z.s5 == 0) | (z.s6 == 0) | (z.s7 == 0) | (z.s8 == 0) | (z.s9 == 0)
+                         | (z.sa == 0) | (z.sb == 0) | (z.sc == 0) | (z.sd == 0) | (z.se == 0)
+                         | (z.sf == 0));
+}
+
+/* The flagged quads of chromatic_aberration_packed_rb through both bins (its arguments, one
+ * work-item per CA_EXACT_QUADS entries of the map). */
+#define CA_EXACT_QUADS 64
+kernel void chromatic_aberration_packed_exact(global const float *src, global float *dst,
+                                              global const int *map, global uchar *flags,
+                                              global const float *weights, const int pitch,
+                                              const int w, const int h, const int row0,
+                                              const int rows, const int shift)
+{
+  const int quads = pitch / 4, e0 = get_global_id(0) * CA_EXACT_QUADS;
+  const int e1 = min(e0 + CA_EXACT_QUADS, rows * quads);
+  if(e0 >= e1) return;
+  CLFX_CANVAS_ROWS(src, pitch, 4, shift);
+  CLFX_CANVAS_ROWS(dst, pitch, 4, shift);
+  for(int e = e0; e < e1; e++)
+    if(flags[e])
+      ca_packed_quad(src, dst, map + 24 * e, weights, pitch, w, h,
+                     (e / quads + row0) * quads + e % quads);
+}
+#endif
 
 /* records of 20 ints: quad index (in canvas rows), 3 unused, then each map's 4 x and 4 y */
 kernel void chromatic_aberration_packed_fix(global const float *src, global float *dst,
