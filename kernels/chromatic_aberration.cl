@@ -132,7 +132,8 @@ kernel void chromatic_aberration_apply(global const float *src, global float *ds
 /* Three-bin mode (NWAVE = 3, GREEN_IN_PLACE) at float levels: the two moving bins' source
  * points precomputed per parameter set as a packed map (clfx.fx.resample.PackedMap, 2 maps =
  * 24 ints per quad): a pure gather with no table reads, floor or checks per pixel; the
- * quads whose footprints leave the source follow in chromatic_aberration_packed_fix. */
+ * quads whose footprints leave the source follow in chromatic_aberration_packed_fix.  The
+ * bicubic levels take chromatic_aberration_packed_rb and _exact instead of _packed (below). */
 
 /* out = wr * red read + wg * green in place + wb * blue read, for the quad's 4 pixels */
 inline void ca_mix_store(global const float *src, global float *dst, global const float *weights,
