@@ -10,8 +10,10 @@
  * Draft runs grain_apply_white only: unfiltered white noise in one pass.
  *
  * Each work-item handles 4 consecutive pixels as one 16-lane vector (rows are padded to 4
- * pixels), so PoCL runs hashing, Box-Muller and the taps as vectors.  Lane 4k+3 (alpha)
- * carries zero noise and alpha is copied bit for bit.  COVERAGE=1 (clfx/fx/noise.py's
+ * pixels), so PoCL runs hashing, Box-Muller and the taps as vectors; grain_noise and
+ * grain_apply take two quads (8 pixels, two independent chains at a time; grain_apply's
+ * last quad of a row of pitch % 8 == 4 alone).  Lane 4k+3 (alpha) carries zero noise and
+ * alpha is copied bit for bit.  COVERAGE=1 (clfx/fx/noise.py's
  * coverage resolved to alpha) weights the grain by alpha.
  *
  * A build with CLFX_FP64 (the reference level, kernels/lib/precision.h) generates the noise,
@@ -143,13 +145,48 @@ inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, con
   return select(TO_FLOAT16(o), c0, alpha);
 }
 
+/* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two float16s, bit for bit two
+ * grain_white16: the float32 levels take both quads' logarithms, roots and sines as one
+ * 16-lane evaluation (grain_white16 runs them 8 lanes wide; at 1080p the noise cost
+ * 27 ms of CPU a frame that way, its long dependency chain per work-item idle half the time). */
+inline void grain_white32(uint seed, int frame, int x, int y, REAL16 *n0, REAL16 *n1)
+{
+#if REAL_IS_DOUBLE
+  *n0 = grain_white16(seed, frame, x, y);
+  *n1 = grain_white16(seed, frame, x + 4, y);
+#else
+  const float16 u0 = clfx_uniform16(seed, frame, x, y, 0);
+  const float16 u1 = clfx_uniform16(seed, frame, x + 4, y, 0);
+  float16 co;
+  const float16 r = sqrt(-2.0f * clfx_log16((float16)(u0.even, u1.even)));
+  const float16 si = clfx_sincos2pi16((float16)(u0.odd, u1.odd), &co);
+  const float16 a = r * co, b = r * si;
+#if MONO
+  *n0 = (float16)(a.s0, a.s0, a.s0, 0.0f, a.s2, a.s2, a.s2, 0.0f,
+                  a.s4, a.s4, a.s4, 0.0f, a.s6, a.s6, a.s6, 0.0f);
+  *n1 = (float16)(a.s8, a.s8, a.s8, 0.0f, a.sa, a.sa, a.sa, 0.0f,
+                  a.sc, a.sc, a.sc, 0.0f, a.se, a.se, a.se, 0.0f);
+#else
+  *n0 = (float16)(a.s0, b.s0, a.s1, 0.0f, a.s2, b.s2, a.s3, 0.0f,
+                  a.s4, b.s4, a.s5, 0.0f, a.s6, b.s6, a.s7, 0.0f);
+  *n1 = (float16)(a.s8, b.s8, a.s9, 0.0f, a.sa, b.sa, a.sb, 0.0f,
+                  a.sc, b.sc, a.sd, 0.0f, a.se, b.se, a.sf, 0.0f);
+#endif
+#endif
+}
+
+/* 8 pixels per work-item (npitch is a multiple of 8) */
 kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
                         const int fx0, const int fy0, const uint seed, const int frame)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= rows || qx * 4 >= npitch) return;
-  const int x = qx * 4;
-  vstore16(grain_white16(seed, frame, fx0 + x, fy0 + y), 0, noise + (size_t)(y * npitch + x) * 4);
+  if(y >= rows || qx * 8 >= npitch) return;
+  const int x = qx * 8;
+  REAL16 n0, n1;
+  grain_white32(seed, frame, fx0 + x, fy0 + y, &n0, &n1);
+  global REAL *p = noise + (size_t)(y * npitch + x) * 4;
+  vstore16(n0, 0, p);
+  vstore16(n1, 1, p);
 }
 
 /* sum_k w_k * v_k, k = 0..2R, for 4 pixels (16 lanes): v_k = vload16 at p + k * step
@@ -165,7 +202,26 @@ inline REAL16 grain_taps16(global const REAL *p, const size_t step, global const
   return acc;
 }
 
-/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x. */
+/* grain_taps16 for two quads at once, at p and p + 16 (the next 4 pixels): each sum takes
+ * grain_taps16's operations in its order, interleaved, so the two dependent chains of 2R + 1
+ * multiply-adds overlap (one chain a work-item left the core waiting on each add: 1080p
+ * grain_apply 36 -> 27.5 ms of CPU). */
+inline void grain_taps16x2(global const REAL *p, const size_t step, global const REAL *weights,
+                           REAL16 *a0, REAL16 *a1)
+{
+  REAL16 acc0 = (REAL16)(0), acc1 = (REAL16)(0);
+  for(int k = 0; k <= 2 * RADIUS; ++k)
+  {
+    const REAL4 w = vload4(k, weights);
+    acc0 += (REAL16)(w, w, w, w) * vload16(0, p + (size_t)k * step);
+    acc1 += (REAL16)(w, w, w, w) * vload16(1, p + (size_t)k * step);
+  }
+  *a0 = acc0;
+  *a1 = acc1;
+}
+
+/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x.  (8 pixels a
+ * work-item through grain_taps16x2 ran no faster here: memory-bound.) */
 kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global const REAL *weights,
                          const int npitch, const int pitch, const int rows)
 {
@@ -176,19 +232,28 @@ kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global cons
            tmp + (size_t)(y * pitch + x) * 4);
 }
 
-/* Vertical taps (tmp is offset by R rows) and the mix with the source. */
+/* Vertical taps (tmp is offset by R rows) and the mix with the source; 8 pixels a work-item
+ * (grain_taps16x2), the row's last quad alone where pitch % 8 == 4. */
 kernel void grain_apply(global const float *src, global float *dst, global const REAL *tmp,
                         global const REAL *weights, const int pitch, const int height,
                         const float ar, const float ag, const float ab, const float response,
                         const float grey, const float inv_grey)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= height || qx * 4 >= pitch) return;
-  const int x = qx * 4;
+  const int ox = get_global_id(0), y = get_global_id(1);
+  if(y >= height || ox * 8 >= pitch) return;
+  const int x = ox * 8;
   const size_t i = (size_t)(y * pitch + x) * 4;
-  const REAL16 acc = grain_taps16(tmp + i, (size_t)pitch * 4, weights);
-  vstore16(grain_mix16(vload16(0, src + i), acc, (REAL4)(ar, ag, ab, 0), response, grey,
-                              inv_grey), 0, dst + i);
+  const REAL4 amt = (REAL4)(ar, ag, ab, 0);
+  if(x + 4 < pitch)
+  {
+    REAL16 a0, a1;
+    grain_taps16x2(tmp + i, (size_t)pitch * 4, weights, &a0, &a1);
+    vstore16(grain_mix16(vload16(0, src + i), a0, amt, response, grey, inv_grey), 0, dst + i);
+    vstore16(grain_mix16(vload16(1, src + i), a1, amt, response, grey, inv_grey), 1, dst + i);
+  }
+  else
+    vstore16(grain_mix16(vload16(0, src + i), grain_taps16(tmp + i, (size_t)pitch * 4, weights),
+                         amt, response, grey, inv_grey), 0, dst + i);
 }
 
 /* Draft: white noise generated in place, one pass. */
@@ -205,3 +270,5 @@ kernel void grain_apply_white(global const float *src, global float *dst, const 
   vstore16(grain_mix16(vload16(0, src + i), n, (REAL4)(ar, ag, ab, 0), response, grey,
                               inv_grey), 0, dst + i);
 }
+
+

@@ -19,7 +19,8 @@ from clfx.device.runtime import BUILD_OPTIONS, is_pocl, kernel_dir
 
 PROBE_DEFINES = {
     "bleed.cl": [{}, {"RANK": 1}],                        # bleed_direct_mix / _separable_mix
-    "chromatic_aberration.cl": [{"NWAVE": 3, "LUTN": 64}],
+    "chromatic_aberration.cl": [{"NWAVE": 3, "LUTN": 64},        # + the bicubic-only pair
+                                {"NWAVE": 3, "LUTN": 64, "RS_FILTER": 1}],
     "lens.cl": [{}, {"LENS_MAPS": 1}],                    # lens_apply / lens_packed(_fix)
     "lib/analysis.cl": [{"TILE": 16}],
     "lib/image.cl": [{"CH": 4, "BORDER": 0}],

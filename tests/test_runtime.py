@@ -198,6 +198,51 @@ def test_reframe_zero_and_clamp(rt):
     assert c[0, 0] == a[0, 0] and c[-1, -1] == a[-1, -1] and np.array_equal(c[1:4, 1:5], a)
 
 
+def _reframe_reference(a, src: Rect, dst: Rect, border: str):
+    """Every pixel of ``dst`` (frame coordinates) from ``a`` over ``src``: copied where
+    covered, else 0 (zero) or the nearest source pixel (clamp)."""
+    ys = np.arange(dst.y0, dst.y1) - src.y0
+    xs = np.arange(dst.x0, dst.x1) - src.x0
+    out = a[np.clip(ys, 0, src.height - 1)][:, np.clip(xs, 0, src.width - 1)]
+    if border == "zero":
+        inside = ((ys >= 0) & (ys < src.height))[:, None] & ((xs >= 0) & (xs < src.width))[None]
+        out = np.where(inside if a.ndim == 2 else inside[..., None], out, 0.0)
+    return out
+
+
+@pytest.mark.parametrize("channels", [1, 2, 4])
+@pytest.mark.parametrize("border", ["zero", "clamp"])
+@pytest.mark.parametrize("dst", [Rect(9, 9, 36, 31), Rect(13, 12, 19, 15), Rect(11, 10, 29, 27),
+                                 Rect(3, 20, 14, 33), Rect(40, 40, 45, 41), Rect(10, 10, 30, 23)])
+def test_reframe_matches_reference_and_pads_with_zeros(rt, rng, channels, border, dst):
+    # 4 pixels a work-item: quads fully inside copy as vectors, the rest pixel by pixel
+    # (windows at every offset mod 4, partly outside, disjoint, and the source's own size)
+    src = Rect(10, 10, 30, 23)
+    a = rng.standard_normal(src.shape + ((channels,) if channels > 1 else ())).astype(np.float32)
+    img = rt.upload(a, src)
+    out = rt.reframe(img, dst, border)
+    np.testing.assert_array_equal(rt.download(out), _reframe_reference(a, src, dst, border))
+    raw = rt.from_device(out, np.float32, out.pitch * max(dst.height, 1) * channels)
+    assert not raw.reshape(-1, out.pitch, channels)[:, dst.width:].any()   # the row padding
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 37), (5, 64), (9, 130)])
+def test_sanitize_zeroes_and_counts_nonfinite_pixels(rt, rng, shape):
+    # 32 pixels a work-item: widths below, at and past a multiple of it; a clean frame too
+    a = rng.standard_normal(shape + (4,)).astype(np.float32)
+    img = rt.upload(a)
+    assert rt.sanitize(img) == 0 and np.array_equal(rt.download(img), a)
+    n = a.size // 4
+    idx = rng.choice(n, size=max(1, n // 7), replace=False)
+    bad = a.reshape(n, 4).copy()
+    bad[idx, rng.integers(0, 4, idx.size)] = rng.choice([np.nan, np.inf, -np.inf], idx.size)
+    bad[idx[:1], :] = np.nan                          # a pixel with every channel bad
+    bad = bad.reshape(a.shape)
+    img = rt.upload(bad)
+    assert rt.sanitize(img) == idx.size
+    np.testing.assert_array_equal(rt.download(img), np.where(np.isfinite(bad), bad, 0.0))
+
+
 def test_buffers_return_to_the_pool_and_idle_memory_is_capped(rt):
     import gc
 

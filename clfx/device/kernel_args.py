@@ -219,6 +219,14 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
             "buf src, buf dst, buf map, buf weights, int pitch, int w, int h, int row0, "
             "int rows, int shift"
         ),
+        "chromatic_aberration_packed_rb": (
+            "buf src, buf dst, buf map, buf flags, buf weights, int pitch, int w, int h, "
+            "int row0, int rows, int shift"
+        ),
+        "chromatic_aberration_packed_exact": (
+            "buf src, buf dst, buf map, buf flags, buf weights, int pitch, int w, int h, "
+            "int row0, int rows, int shift"
+        ),
         "chromatic_aberration_packed_fix": (
             "buf src, buf dst, buf records, int count, buf weights, int pitch, int w, int h, "
             "int row0, int rows, int shift"

@@ -748,8 +748,8 @@ class Runtime:
         knl = self.kernel("lib/image.cl", "image_reframe", CH=img.channels,
                           BORDER={"zero": 0, "clamp": 1}[border])
         dx, dy = window.x0 - img.window.x0, window.y0 - img.window.y0
-        self.launch(knl, (dst.pitch, window.height), img, img.pitch, img.width, img.height, dst,
-                    dst.pitch, window.width, window.height, dx, dy, local=None)
+        self.launch(knl, (dst.pitch // 4, window.height), img, img.pitch, img.width,   # quads
+                    img.height, dst, dst.pitch, window.width, window.height, dx, dy, local=None)
         return dst
 
     def paste(self, src: DeviceImage, dst: DeviceImage, rect: Rect) -> None:
@@ -772,7 +772,8 @@ class Runtime:
             return 0
         counter = self.to_device(np.zeros(1, np.int32))
         self.launch(self.kernel("lib/image.cl", "image_sanitize", CH=4, BORDER=0),
-                    (img.pitch // 4, img.height), img, img.pitch, img.height, counter)
+                    (-(-img.pitch // 32), img.height),   # 32 pixels a work-item
+                    img, img.pitch, img.height, counter)
         return int(self.from_device(counter, np.int32, 1)[0])
 
     def to_device(self, array: np.ndarray):

@@ -449,11 +449,11 @@ class DevicePackedMap:
 
 def launch_packed(rt, fast, fix, dmap: DevicePackedMap, filter_name: str, quads_x: int,
                   rows: int, head: tuple, tail: tuple):
-    """Enqueue a packed-map warp: ``fast`` over every quad, then ``fix`` over the border
-    quads of ``filter_name``.  Kernel arguments: ``fast(*head, entries, *tail)`` and
-    ``fix(*head, records, count, *tail)``."""
+    """Enqueue a packed-map warp: ``fast`` over every quad (None: the caller did), then
+    ``fix`` over the border quads of ``filter_name``.  Kernel arguments:
+    ``fast(*head, entries, *tail)`` and ``fix(*head, records, count, *tail)``."""
     code = FILTER_CODE[filter_name]
-    if dmap.fast_possible[code]:
+    if fast is not None and dmap.fast_possible[code]:
         rt.launch(fast, (quads_x, max(rows, 1)), *head, dmap.entries, *tail)
     buf, count = dmap.fixups[code]
     if count:

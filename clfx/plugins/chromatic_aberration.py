@@ -52,9 +52,9 @@ import numpy as np
 
 from clfx.core.plugin import BoolParam, ChoiceParam, Descriptor, FloatParam, Vec2Param
 from clfx.fx import spectral
-from clfx.fx.resample import (BORDERS, FILTER_TAPS, PackedMap, ResampleLevel, band_window,
-                              check_fold, fold_radius, kernel_defines, launch_packed, lut_lookup,
-                              pixel_centres, radial_lut)
+from clfx.fx.resample import (BORDERS, FILTER_CODE, FILTER_TAPS, PackedMap, ResampleLevel,
+                              band_window, check_fold, fold_radius, kernel_defines,
+                              launch_packed, lut_lookup, pixel_centres, radial_lut)
 from clfx.host import Plugin, register
 from clfx.kit.spectral import in_reference_basis
 from clfx.kit.warp import CanvasRows, canvas_context, frame_key, on_canvas, warp_region
@@ -205,6 +205,9 @@ def channel_points(p, display_window, window, pixel_aspect, rows=None, rgb_to_xy
 @register
 class ChromaticAberration(Plugin):
     whole_frame = None   # a tile computes its band's rows of the whole canvas (`on_canvas`)
+    blended_bins = True
+    """Three-bin bicubic levels: both bins in one pass (chromatic_aberration_packed_rb, the
+    same bits); False renders each bin whole (the tests' reference)."""
     descriptor = Descriptor(
         name="chromatic_aberration", label="Chromatic aberration", group="Lens",
         kernel="chromatic_aberration.cl",
@@ -334,13 +337,22 @@ class ChromaticAberration(Plugin):
         at = (canvas.width, canvas.height, rows.first, rows.count, rows.shift)
         if n == 3 and not double:
             dmap, wbuf = self.packed_maps(rt, p, geo, rows)
-            name = "chromatic_aberration_packed"
-            launch_packed(rt, rt.kernel("chromatic_aberration.cl", name, fp64=lvl.fp64,
-                                        CA_FAST=1, **defines),
-                          rt.kernel("chromatic_aberration.cl", name + "_fix", fp64=lvl.fp64,
-                                    CA_FAST=1, **defines),
-                          dmap, lvl.filter, src.pitch // 4, rows.count, (src, dst),
-                          (wbuf, src.pitch) + at)
+            knl = lambda name: rt.kernel("chromatic_aberration.cl", name, fp64=lvl.fp64,
+                                         CA_FAST=1, **defines)
+            fast, quads = knl("chromatic_aberration_packed"), src.pitch // 4
+            if (self.blended_bins and lvl.filter == "bicubic"
+                    and dmap.fast_possible[FILTER_CODE["bicubic"]]):
+                # both bins in one pass, then its flagged quads exactly (kernels/
+                # chromatic_aberration.cl); the border quads follow in launch_packed's fix
+                flags = rt.buffer(max(rows.count, 1) * quads)
+                args = (src, dst, dmap.entries, flags, wbuf, src.pitch) + at
+                rt.launch(knl("chromatic_aberration_packed_rb"), (quads, max(rows.count, 1)),
+                          *args)
+                rt.launch(knl("chromatic_aberration_packed_exact"),
+                          (-(-max(rows.count, 1) * quads // 64),), *args)
+                fast = None
+            launch_packed(rt, fast, knl("chromatic_aberration_packed_fix"), dmap, lvl.filter,
+                          quads, rows.count, (src, dst), (wbuf, src.pitch) + at)
             return dst
         luts, weights, (cx, cy, ax, ay), shift = self.tables(rt, p, geo, n, double)
         args = (src, dst, luts, weights, src.pitch, canvas.width, canvas.height, canvas.x0,

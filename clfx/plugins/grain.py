@@ -392,16 +392,17 @@ class Grain(Plugin):
         defines["RADIUS"] = radius
         real_bytes = 8 if use64 else 4
         rows = height + 2 * radius
-        npitch = -(-(pitch + 2 * radius) // 4) * 4   # every vload16 of the taps stays inside
+        # every vload16 of the taps stays inside; grain_noise writes 8 pixels a work-item
+        npitch = -(-(pitch + 2 * radius) // 8) * 8
         noise = rt.buffer(rows * npitch * 4 * real_bytes)
         tmp = rt.buffer(rows * pitch * 4 * real_bytes)
         def knl(name):
             return rt.kernel("grain.cl", name, fp64=lvl.fp64, **defines)
 
-        rt.launch(knl("grain_noise"), (npitch // 4, rows), noise, npitch, rows, x0 - radius,
+        rt.launch(knl("grain_noise"), (npitch // 8, rows), noise, npitch, rows, x0 - radius,
                   y0 - radius, seed, frame)
         rt.launch(knl("grain_blur_h"), (pitch // 4, rows), noise, tmp, weights, npitch, pitch,
                   rows)
-        rt.launch(knl("grain_apply"), (pitch // 4, height), src, dst, tmp, weights, pitch, height,
-                  ar, ag, ab, *tone)
+        rt.launch(knl("grain_apply"), (-(-pitch // 8), height), src, dst, tmp, weights, pitch,
+                  height, ar, ag, ab, *tone)   # 8 pixels a work-item
         return dst

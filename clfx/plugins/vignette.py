@@ -87,7 +87,8 @@ class Vignette(Plugin):
             ctx.notes.append(f"vignette: {nonfinite} non-finite pixel(s) set to 0")
         knl = rt.kernel("vignette.cl", "vignette_apply", fp64=self.level(ctx).fp64)
         dst = src.like()
-        rt.launch(knl, (src.pitch // 4, src.height), src, dst, src.pitch, src.height,
+        # 8 pixels a work-item
+        rt.launch(knl, (-(-src.pitch // 8), src.height), src, dst, src.pitch, src.height,
                   src.window.x0, src.window.y0, cx, cy, sx, sy, 1.0 / ctx.camera.focal_length,
                   p.natural, ax, ay, p.amount, p.radius, 1.0 / p.softness)
         return dst

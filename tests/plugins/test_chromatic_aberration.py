@@ -137,6 +137,25 @@ def test_packed_map_built_in_bands_is_the_whole_frame_map(rt, rng, monkeypatch):
     assert np.array_equal(banded, whole)
 
 
+@pytest.mark.parametrize("quality", ["preview", "final"])
+@pytest.mark.parametrize("tile_pixels", [None, 300])
+def test_blended_bins_are_both_bins_bit_for_bit(rt, rng, monkeypatch, quality, tile_pixels):
+    """The bicubic three-bin levels render both bins in one pass (kernels/
+    chromatic_aberration.cl, chromatic_aberration_packed_rb): the same bits as each bin
+    whole, signed zeros included (black and transparent pixels, -0 from a subtraction
+    upstream), NaN read as 0, odd sizes, whole or in bands."""
+    src = rng.uniform(-0.5, 2.0, (37, 45, 4)).astype(np.float32)
+    src[rng.random(src.shape) < 0.25] = 0.0
+    src[rng.random(src.shape) < 0.25] = -0.0
+    src[12:20, 5:30] = -0.0                          # a region of -0: every footprint all zeros
+    src[rng.random(src.shape) < 0.01] = np.nan
+    p = CA.params(**PARAMS, spectral=False)
+    blended = render_effect(rt, CA(), p, src, quality=quality, tile_pixels=tile_pixels)
+    monkeypatch.setattr(CA, "blended_bins", False)
+    whole = render_effect(rt, CA(), p, src, quality=quality, tile_pixels=tile_pixels)
+    assert np.array_equal(blended.view(np.uint32), whole.view(np.uint32))
+
+
 def test_matches_reference_in_acescg(rt, rng):
     # the Rec.709 model on the pixels carried into Rec.709 and back
     from clfx.io.colour import rgb_to_xyz
