@@ -41,10 +41,14 @@ _VECTORS = {"float4", "float8", "int4"}
 
 
 def _scatter_family(effect: str) -> dict[str, str]:
-    """The two kernels lib/scatter.h's ``SCATTER_KERNELS(effect)`` defines."""
+    """The three kernels lib/scatter.h's ``SCATTER_KERNELS(effect)`` defines."""
     return {
         f"{effect}_highlights": (
             "buf src, buf dst, int pitch, int height, float threshold, float knee, float boost"
+        ),
+        f"{effect}_highlights_at": (
+            "buf src, int spitch, int swidth, int sheight, int dx, int dy, buf dst, int pitch, "
+            "int width, int height, float threshold, float knee, float boost"
         ),
         f"{effect}_mix": (
             "buf src, int spitch, int swidth, int sheight, buf g, buf dst, int pitch, "
