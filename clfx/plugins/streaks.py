@@ -258,8 +258,10 @@ def raster(width: int, height: int, boxes: np.ndarray, u: tuple[float, float] = 
     b = b[box]
     ta, tb = np.full(len(y), float(t0)), np.full(len(y), float(t1))
     if uy != 0.0:   # the t that bring a row of the box to row y
-        ends = np.sort(np.stack([(y - b[:, 3]) / uy, (y - b[:, 1]) / uy]), axis=0)
-        ta, tb = np.maximum(ta, ends[0]), np.minimum(tb, ends[1])
+        top, bottom = (y - b[:, 3]) / uy, (y - b[:, 1]) / uy
+        if uy < 0.0:
+            top, bottom = bottom, top
+        ta, tb = np.maximum(ta, top), np.minimum(tb, bottom)
     c0 = np.ceil(b[:, 0] + np.minimum(ta * ux, tb * ux))
     c1 = np.floor(b[:, 2] + np.maximum(ta * ux, tb * ux))
     keep = (ta <= tb) & (c0 <= c1) & (c1 >= 0) & (c0 < width)
@@ -280,10 +282,8 @@ def merged(intervals: np.ndarray) -> np.ndarray:
     reach = np.maximum.accumulate(g1)
     first = np.ones(len(g0), bool)
     first[1:] = g0[1:] > reach[:-1]       # not within the runs before: a new run starts
-    run = np.cumsum(first) - 1
-    ends = np.zeros(int(run[-1]) + 1, np.int64)
-    np.maximum.at(ends, run, g1)
     starts = g0[first]
+    ends = np.maximum.reduceat(g1, np.flatnonzero(first))
     return np.stack([starts // row, starts % row, ends - starts // row * row], axis=1)
 
 
