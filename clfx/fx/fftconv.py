@@ -561,8 +561,10 @@ def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray
             try:
                 for c in range(nch):
                     def rows(b, r0, r1, c=c):
-                        x = pixels[sy + r0:sy + r1, sx:sx + sw, c]
-                        return np.where(np.isfinite(x), x, np.float32(0.0)).astype(np.float64)
+                        x = pixels[sy + r0:sy + r1, sx:sx + sw, c].astype(np.float64)
+                        if not np.isfinite(x.sum()):    # float32 values: no float64 overflow
+                            x[~np.isfinite(x)] = 0.0
+                        return x
 
                     def kept_rows(r0, r1, values, c=c):   # grid rows r0.. of one run
                         ys = r0 - gy[0] + y0 if r0 >= gy[0] else r0 + n1 - gy[0] + y0
@@ -633,7 +635,10 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
         x = real[b, r0:r1, :n2] if source is None else source(b, r0, r1)
         lit = x.any(axis=1)
         if lit.all():
-            cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
+            if source is not None:   # x is not the plane itself: straight into it
+                np.fft.rfft(x, n=n2, axis=1, out=cplx[b, r0:r1])
+            else:
+                cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
             return
         # a row of zeros transforms to zeros: glare's highlights leave a third of the rows
         # of their support dark at 1080p
@@ -641,12 +646,12 @@ def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
         cplx[b, r0:r1] = 0.0
         cplx[b, r0 + np.flatnonzero(lit)] = f
 
-    def columns(b, c0, c1):
-        f = np.fft.fft(cplx[b, :, c0:c1], axis=0)
+    def columns(b, c0, c1):    # in place (out=): no temporaries, no copies back
+        f = cplx[b, :, c0:c1]
+        np.fft.fft(f, axis=0, out=f)
         if spec is not None:
             f *= spec[b if len(spec) > 1 else 0, :, c0:c1]
-            f = np.fft.ifft(f, axis=0)
-        cplx[b, :, c0:c1] = f
+            np.fft.ifft(f, axis=0, out=f)
 
     def inverse_rows(b, r0, r1):
         real[b, r0:r1, :n2] = np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1)
