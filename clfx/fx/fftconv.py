@@ -29,9 +29,11 @@ Algorithms
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
     host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
-    (no packed copy) and transformed in place in the mapped work buffer, in row and column
-    chunks on every core (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time,
-    the same pixels to float64 rounding.
+    (no packed copy; rows of zeros skipped) and transformed a channel at a time in one
+    complex plane the runtime's cache keeps, in row and column chunks on every core, the
+    inverse rows of the kept output alone written into the mapped output (no unpacking
+    kernel) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
+    pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
     exactly by a gather over their list (deterministic, no atomics), so the float32 error

@@ -134,6 +134,21 @@ preview do not stream: their rays' working buffers are reduced 8 or 4 times alon
 float32) that is 506 MiB each for the sum and the extended light plus three working
 buffers of about 64 (draft) or 127 MiB (preview) and their zero margins: 1.2-1.4 GiB, against
 final's 352 MiB (computed from the sizes, not measured).
+
+Where the passes run (issue 37)
+-------------------------------
+At final and reference a frame that does not stream runs each ray's passes only over the
+row spans within its reach of the bright pixels: the seeds kernel marks the 8 px blocks of
+the source with streaking light (with a core rule it runs over a light's tiles alone), the
+host draws the seeds' windows (``streaks_dilate`` only past ``SEEDS_READ`` lights) and
+rasterises, row by row, the bright boxes (lit blocks no seed wholly gathered, and each
+seed's 2 x 2 splat) swept against the ray over its support and grown by its bilinear spread
+(`pass_spans`); the bright, pass and clear kernels take those spans in row order (tiles one
+by one cost 2-3 times as much per pixel on PoCL). What a pass reads outside them is cleared
+first, so stale buffers from the pool change nothing: the same bits as whole rows (the
+streamed path, `tests/plugins/test_streaks.py`).  1080p demo frame, cinema's streaks alone
+(4 rays of 275 px from 25 lights): kernels 460 -> 106 ms of CPU per frame (prof2), the
+passes 249 -> 12-40 ms; the look's streaks step 352 -> 68 ms.
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
