@@ -244,7 +244,9 @@ def _as_psf(psf) -> np.ndarray:
 def psf_digest(psf: np.ndarray) -> str:
     """Content hash of a PSF (cache key)."""
     k = np.ascontiguousarray(psf, np.float64)
-    return hashlib.sha1(k.tobytes() + repr(k.shape).encode()).hexdigest()
+    h = hashlib.sha1(k.reshape(-1).view(np.uint8))   # its bytes, without a copy of them
+    h.update(repr(k.shape).encode())
+    return h.hexdigest()
 
 
 def _real(precision: str):
