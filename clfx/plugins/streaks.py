@@ -142,13 +142,14 @@ row spans within its reach of the bright pixels: the seeds kernel marks the 8 px
 the source with streaking light (with a core rule it runs over a light's tiles alone), the
 host draws the seeds' windows (``streaks_dilate`` only past ``SEEDS_READ`` lights) and
 rasterises, row by row, the bright boxes (lit blocks no seed wholly gathered, and each
-seed's 2 x 2 splat) swept against the ray over its support and grown by its bilinear spread
-(`pass_spans`); the bright, pass and clear kernels take those spans in row order (tiles one
-by one cost 2-3 times as much per pixel on PoCL). What a pass reads outside them is cleared
-first, so stale buffers from the pool change nothing: the same bits as whole rows (the
-streamed path, `tests/plugins/test_streaks.py`).  1080p demo frame, cinema's streaks alone
-(4 rays of 275 px from 25 lights): kernels 460 -> 106 ms of CPU per frame (prof2), the
-passes 249 -> 12-40 ms; the look's streaks step 352 -> 68 ms.
+seed's 2 x 2 splat) swept against the ray over what each pass's light can reach (pass n:
+4^(n+1) - 1 steps) and grown by the bilinear spread so far (`pass_spans`); the bright, pass
+and clear kernels take those spans in row order (tiles one by one cost 2-3 times as much per
+pixel on PoCL). What the passes read outside them is cleared first, so stale buffers from
+the pool change nothing: the same bits as whole rows (the streamed path,
+`tests/plugins/test_streaks.py`).  1080p demo frame, cinema's streaks alone (4 rays of 275
+px from 25 lights): kernels 405-431 -> 63 ms of CPU per frame (prof2), the passes 249 -> 17
+ms; in the cinema look the streaks step 352 -> 68 ms.
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -337,16 +338,19 @@ def gathered_flags(rows: np.ndarray, width: int, height: int, radius: int) -> np
     return out
 
 
-def ray_spread(ray: Ray) -> tuple[int, int]:
-    """Pixels (x, y) a ray's passes spread its light across its line: one per pass whose
-    float32 taps (the kernel's ``s * step``) fall between pixels along that axis (each tap
-    reads the pixel past them as well); 0 for rays along the axes and the diagonals."""
-    out = [0, 0]
+def ray_spread(ray: Ray) -> list[tuple[int, int]]:
+    """Per pass, the pixels (x, y) a ray's passes up to it spread its light across its line:
+    one per pass whose float32 taps (the kernel's ``s * step``) fall between pixels along
+    that axis (each tap reads the pixel past them as well); 0 for rays along the axes and the
+    diagonals."""
+    out, sx, sy = [], 0, 0
     for n in range(ray.passes):
         for axis, step in enumerate((ray.sx, ray.sy)):
             taps = np.float32(step * TAPS ** n) * np.arange(1, TAPS, dtype=np.float32)
-            out[axis] += bool(np.any(taps != np.floor(taps)))
-    return out[0], out[1]
+            spreads = bool(np.any(taps != np.floor(taps)))
+            sx, sy = (sx + spreads, sy) if axis == 0 else (sx, sy + spreads)
+        out.append((sx, sy))
+    return out
 
 
 def pass_spans(lit: np.ndarray, gathered: np.ndarray | None, points: np.ndarray, ox: int,
@@ -378,18 +382,21 @@ def pass_spans(lit: np.ndarray, gathered: np.ndarray | None, points: np.ndarray,
     boxes += [ox, oy, ox, oy]
     at = np.floor(np.asarray(points, np.float64)[:, :2])
     boxes = np.concatenate([boxes, np.concatenate([at, at + 1.0], axis=1)])
-    out, reads = [], []
+    out, firsts = [], []
     for ray in rays:
-        support = ray.top * TAPS ** (ray.passes - 1)
+        u, spread, passes = (-ray.sx, -ray.sy), ray_spread(ray), []
+        for n in range(ray.passes):    # pass n: the light moved up to 4^(n+1) - 1 steps
+            support = (ray.top if n == ray.passes - 1 else TAPS) * TAPS ** n
+            mx, my = (m + 0.5 for m in spread[n])
+            passes.append(row_spans(raster(wp, h, boxes + [-mx, -my, mx, my], u,
+                                           (0.0, support - 1.0)), wp))
         ahead = (TAPS - 1) * TAPS ** (ray.passes - 1)
-        mx, my = (m + 0.5 for m in ray_spread(ray))
-        u = (-ray.sx, -ray.sy)
-        work = raster(wp, h, boxes + [-mx, -my, mx, my], u, (0.0, support - 1.0))
-        mx, my = mx + 4.0, my + 1.0
+        mx, my = spread[-1][0] + 4.5, spread[-1][1] + 1.5
         read = raster(wp, h, boxes + [-mx, -my, mx, my], u, (-float(ahead), support - 1.0))
-        reads.append(read)
-        out.append((row_spans(work, wp), row_spans(read, wp)))
-    return row_spans(raster(wp, h, boxes), wp), row_spans(np.concatenate(reads), wp), out
+        mx, my = spread[0][0] + 4.5, spread[0][1] + 1.5
+        firsts.append(raster(wp, h, boxes + [-mx, -my, mx, my], u, (-(TAPS - 1.0), TAPS - 1.0)))
+        out.append((passes, row_spans(read, wp)))
+    return row_spans(raster(wp, h, boxes), wp), row_spans(np.concatenate(firsts), wp), out
 
 
 def bin_points(points: np.ndarray, width: int, height: int, size: int,
@@ -1033,7 +1040,7 @@ class Streaks(Plugin):
                     cur = pong
                 for n in range(ray.passes):
                     dst = total if n == ray.passes - 1 else (ping if cur is not ping else pong)
-                    run_pass(ray, n, cur, dst, 0, h, 0, 0, spans)
+                    run_pass(ray, n, cur, dst, 0, h, 0, 0, spans[n])
                     cur = dst
             result = StreakSum(device=total, org=org, pitch=pitch)
         else:
