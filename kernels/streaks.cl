@@ -80,6 +80,31 @@ inline int2 streaks_ring(int y0, int rows)
 #define PEAK_TILE 32
 #endif
 
+/* TILED = 1 (final and reference, whole passes): a kernel runs over the row spans listed in
+ * `spans` (int4 (x0, y, x1, 0): pixels x0 <= x < x1 of row y, x0 a multiple of 4), one span
+ * per global row (axis 1), `px` pixels per work-item along axis 0; elsewhere the frame holds
+ * no light (seeds, bright pixels) or no streak (passes).  TILED = 0: axes 0, 1 are the
+ * whole grid.  BLOCK: the side (px) of the blocks the seeds mark in `lit`. */
+#ifndef TILED
+#define TILED 0
+#endif
+#ifndef BLOCK
+#define BLOCK 8
+#endif
+
+/* The work-item's (x in work-items of `px` pixels, y); past its span, x lies past every
+ * grid (the kernels' bounds tests return). */
+inline int2 streaks_item(global const int *spans, int px)
+{
+#if TILED
+  const int4 s = vload4(get_global_id(1), spans);
+  const int x = s.x + (int)get_global_id(0) * px;
+  return (int2)(x < s.z ? x / px : 1 << 28, s.y);
+#else
+  return (int2)((int)get_global_id(0), (int)get_global_id(1));
+#endif
+}
+
 /* The peak luminance of the light a source pixel belongs to (0 outside every light). */
 inline float streaks_peak(global const float *peak, int tiles_x, int tiles_y, int sx, int sy)
 {
@@ -121,7 +146,8 @@ inline float4 streaks_light(float4 c, float level, float source_color, float cor
  * of its own (the light is smaller than the window) gathers the streaking light of that
  * window into a point at its luminance-weighted centroid: seeds[i] = (x, y, centroid x,
  * centroid y, r, g, b, 0), source pixels; `count` counts the seeds (those past `cap` are
- * counted, not stored); flags[x, y] = 1 marks the seed. A streak is then as thin as
+ * counted, not stored); flags[x, y] = 1 marks the seed; lit[block] = 1 marks each BLOCK x
+ * BLOCK block of the source with streaking light.  A streak is then as thin as
  * diffraction draws it, whatever the light's size; an extended light (a window, the sky)
  * streaks pixel by pixel (streaks_bright). */
 kernel void streaks_seeds(global const float *src, const int src_pitch, const int src_w,
@@ -129,15 +155,20 @@ kernel void streaks_seeds(global const float *src, const int src_pitch, const in
                           const int tiles_x, const int tiles_y, const float core,
                           const float source_color, const float core_power, const int radius,
                           const float ring_share, global float *seeds,
-                          volatile global int *count, const int cap, global uchar *flags)
+                          volatile global int *count, const int cap, global uchar *flags,
+                          global const int *spans, volatile global int *lit)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
+  const int2 item = streaks_item(spans, 1);
+  const int x = item.x, y = item.y;
   if(x >= src_w || y >= src_h) return;
   const float4 c = clfx_load4(src, src_pitch, x, y);
   const float pk = streaks_peak(peak, tiles_x, tiles_y, x, y);
   const float4 h = streaks_light(c, streaks_level(peak, tiles_x, tiles_y, x, y, threshold, core),
                                  source_color, core_power, pk);
   if(!(h.x > 0.0f || h.y > 0.0f || h.z > 0.0f)) return;
+  /* the BLOCK x BLOCK blocks of the source that hold streaking light (no pixel elsewhere
+   * streaks or seeds): what final's passes are limited to */
+  atomic_or(lit + (y / BLOCK) * ((src_w + BLOCK - 1) / BLOCK) + x / BLOCK, 1);
   const float l0 = clfx_luminance(fmax(clfx_finite4_or_zero(c), (float4)0.0f));
   const float h0 = clfx_luminance(h);
   float4 sum = (float4)0.0f;
@@ -287,9 +318,10 @@ kernel void streaks_bright(global const float *src, const int src_pitch, const i
                            const float core_power, global const uchar *gathered,
                            global const float *points, global const int *bin_start,
                            global const int *bin_seed, const int bins_x, const int bin,
-                           const int y0, const int rows)
+                           const int y0, const int rows, global const int *spans)
 {
-  const int x = get_global_id(0), y = get_global_id(1) + y0;
+  const int2 item = streaks_item(spans, 1);
+  const int x = item.x, y = item.y + y0;
   if(x >= dst_wp || y >= dst_h) return;
   dst += 4 * org;
   const float inv = 1.0f / (float)(fx * fy);
@@ -379,9 +411,11 @@ kernel void streaks_pass(global const float *in, global float *out, const int or
                          const int pitch, const int wp, const int w, const int h,
                          const float step_x, const float step_y,
                          const float4 w0, const float4 w1, const float4 w2, const float4 w3,
-                         const int y0, const int in_rows, const int out_rows)
+                         const int y0, const int in_rows, const int out_rows,
+                         global const int *spans)
 {
-  const int qx = get_global_id(0), y = get_global_id(1) + y0;
+  const int2 item = streaks_item(spans, 4);
+  const int qx = item.x, y = item.y + y0;
   if(qx * 4 >= wp || y >= h) return;
   const int x = qx * 4;
   in += 4 * org;
@@ -465,7 +499,9 @@ kernel void streaks_expand(global const float *lo, const int org, const int pitc
 
 /* out = sanitised source (zero outside its window) + the full-resolution streak sum.  `out`
  * is the part of the output window from (dx0, dy0), its rows from row0 here; `streak` holds
- * rows r0.. of the streak sum (pitch s_pitch). */
+ * rows r0.. of the streak sum (pitch s_pitch).  4 pixels per work-item (dst_pitch is a
+ * multiple of 4): float16 where all 4 lie in the source and the output, else pixel by pixel
+ * (the same floats: scatter_source and scatter_add per channel). */
 kernel void streaks_compose(global const float *src, const int src_pitch, const int src_w,
                             const int src_h, const int ox, const int oy,
                             global const float *streak, const int org, const int s_pitch,
@@ -473,11 +509,37 @@ kernel void streaks_compose(global const float *src, const int src_pitch, const 
                             const int dst_w, const int dst_h, const int dx0, const int dy0,
                             const int row0)
 {
-  const int x = get_global_id(0), y = get_global_id(1) + row0;
+  const int x = get_global_id(0) * 4, y = get_global_id(1) + row0;
   streak += 4 * org;
   if(x >= dst_pitch || y >= dst_h) return;
-  if(x >= dst_w) { clfx_store4(dst, dst_pitch, x, y, (float4)0.0f); return; }
-  const float4 c = scatter_source(src, src_pitch, src_w, src_h, x - ox, y - oy);
-  const float4 s = clfx_load4(streak, s_pitch, x + dx0, y + dy0 - r0);
-  clfx_store4(dst, dst_pitch, x, y, scatter_add(c, s));
+  const int sx = x - ox, sy = y - oy;
+  global const float *s = streak + ((y + dy0 - r0) * s_pitch + x + dx0) * 4;
+  if(x + 4 <= dst_w && sx >= 0 && sx + 4 <= src_w && sy >= 0 && sy < src_h)
+  {
+    const float16 c = clfx_finite16_or_zero(vload16(0, src + (sy * src_pitch + sx) * 4));
+    const float16 r = clamp(c + vload16(0, s), -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
+    vstore16((float16)(r.s012, c.s3, r.s456, c.s7, r.s89a, c.sb, r.scde, c.sf), 0,
+             dst + (y * dst_pitch + x) * 4);
+    return;
+  }
+  for(int i = 0; i < 4; i++)
+  {
+    float4 o = (float4)0.0f;   /* the output's padding columns: 0 */
+    if(x + i < dst_w)
+      o = scatter_add(scatter_source(src, src_pitch, src_w, src_h, sx + i, sy),
+                      vload4(i, s));
+    clfx_store4(dst, dst_pitch, x + i, y, o);
+  }
+}
+
+/* Zero the row spans of `buf` (interior from `org`, rows `pitch` apart, wp x h) listed in
+ * `spans` (TILED = 1), 4 pixels per work-item: the parts of a pass buffer that a ray's
+ * passes read but do not write (they hold no streak), which an earlier ray or frame left
+ * set. */
+kernel void streaks_clear(global float *buf, const int org, const int pitch, const int wp,
+                          const int h, global const int *spans)
+{
+  const int2 item = streaks_item(spans, 4);
+  if(item.x * 4 >= wp || item.y >= h) return;
+  vstore16((float16)0.0f, 0, buf + (org + item.y * pitch + item.x * 4) * 4);
 }

@@ -64,7 +64,11 @@ EXTRA = {
     # "keep_overscan" keeps what the effects grow, "before" (effect, params) runs first.
     # r = 11 px > bleed's fused radius (10): bleed_highlights -> FFT -> bleed_mix; preview's
     # split gathers the 1e4 lights exactly (fftconv_count_bright, _compact_bright, _gather)
-    "bleed": [("preview", (106, 24), {"size": 0.1}, {})],
+    # threshold 5, 200 px wide: the support is the lights' tiles, not the frame (the scene's
+    # first light is 40 px in): its highlights are read from the source part
+    # (<effect>_highlights_at)
+    "bleed": [("preview", (106, 24), {"size": 0.1}, {}),
+              ("draft", (200, 24), {"size": 0.1, "threshold": 5.0}, {})],
     # trucking/dolly: camera_blur_velocity
     "camera_blur": [("draft", ODD, {"length": 0.05, "truck": [0.01, 0.0], "dolly": 0.01}, {})],
     # first ring >= 2 x 6 px (draft's ring_px): the pattern at reduced resolution (corona_down); ACEScg: the
@@ -77,9 +81,13 @@ EXTRA = {
     "dof": [("draft", (32, 16), {"coc_source": "max_blur", "max_blur": 0.25, "max_coc": 1.0,
                                 "focus_distance": 100.0},
              {"before": ("bleed", {"size": 0.02}), "keep_overscan": True})],
+    "glare": [("draft", (200, 24), {"size": 0.08, "threshold": 5.0}, {})],
     "lens_flare": [("draft", (W, H), {"model": "artistic", "threshold": 5.0}, {})],
-    # streaks' passes streamed in chunks of 3 rows through ring buffers, as at 8K (RING = 1)
-    "streaks": [("final", (W, H), {}, {"streaks_streamed": True})],
+    "soft_focus": [("draft", (200, 24), {"threshold": 5.0}, {})],
+    # streaks' passes streamed in chunks of 3 rows through ring buffers, as at 8K (RING = 1);
+    # more lights than the host draws the windows of: the seeds' flags grown on the device
+    "streaks": [("final", (W, H), {}, {"streaks_streamed": True}),
+                ("final", (W, H), {}, {"streaks_seeds_read": 0})],
 }
 
 
@@ -128,7 +136,7 @@ def effect_look(name: str, masked: bool, params: dict | None = None,
 
 def render(look, level: str, size, label: str, tile_pixels: int = 0,
            working_space: str | None = None, keep_overscan: bool = False,
-           streaks_streamed: bool = False) -> dict:
+           streaks_streamed: bool = False, streaks_seeds_read: int | None = None) -> dict:
     from clfx import api
     from clfx.device.runtime import Runtime
     import clfx.plugins.streaks as streaks
@@ -136,15 +144,17 @@ def render(look, level: str, size, label: str, tile_pixels: int = 0,
     t0 = time.perf_counter()
     rgba, depth, vel, channels = scene(*size)
     os.environ["CLFX_TILE_PIXELS"] = str(tile_pixels)   # 0: whole frames
-    kept = streaks.streams, streaks.CHUNK_PIXELS
+    kept = streaks.streams, streaks.CHUNK_PIXELS, streaks.SEEDS_READ
     if streaks_streamed:
         streaks.streams, streaks.CHUNK_PIXELS = (lambda *a: True), 3 * size[0]
+    if streaks_seeds_read is not None:
+        streaks.SEEDS_READ = streaks_seeds_read
     try:
         res = api.render_array(rgba, look, depth=depth, velocity=vel, channels=channels,
                                quality=level, frame=1, working_space=working_space,
                                keep_overscan=keep_overscan)
     finally:
-        streaks.streams, streaks.CHUNK_PIXELS = kept
+        streaks.streams, streaks.CHUNK_PIXELS, streaks.SEEDS_READ = kept
     rt = Runtime.get()
     rt.finish()
     rep = res.report.as_dict()

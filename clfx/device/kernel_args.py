@@ -41,10 +41,14 @@ _VECTORS = {"float4", "float8", "int4"}
 
 
 def _scatter_family(effect: str) -> dict[str, str]:
-    """The two kernels lib/scatter.h's ``SCATTER_KERNELS(effect)`` defines."""
+    """The three kernels lib/scatter.h's ``SCATTER_KERNELS(effect)`` defines."""
     return {
         f"{effect}_highlights": (
             "buf src, buf dst, int pitch, int height, float threshold, float knee, float boost"
+        ),
+        f"{effect}_highlights_at": (
+            "buf src, int spitch, int swidth, int sheight, int dx, int dy, buf dst, int pitch, "
+            "int width, int height, float threshold, float knee, float boost"
         ),
         f"{effect}_mix": (
             "buf src, int spitch, int swidth, int sheight, buf g, buf dst, int pitch, "
@@ -371,7 +375,8 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
         "streaks_seeds": (
             "buf src, int src_pitch, int src_w, int src_h, float threshold, buf peak, "
             "int tiles_x, int tiles_y, float core, float source_color, float core_power, "
-            "int radius, float ring_share, buf seeds, buf count, int cap, buf flags"
+            "int radius, float ring_share, buf seeds, buf count, int cap, buf flags, buf spans, "
+            "buf lit"
         ),
         "streaks_dilate": "buf in, buf out, int w, int h, int radius, int sx, int sy",
         "streaks_extended": (
@@ -384,12 +389,12 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
             "int dst_wp, int dst_h, int fx, int fy, float shear, int lead, int ox, int oy, "
             "float threshold, buf peak, int tiles_x, int tiles_y, float core, "
             "float source_color, float core_power, buf gathered, buf points, buf bin_start, "
-            "buf bin_seed, int bins_x, int bin, int y0, int rows"
+            "buf bin_seed, int bins_x, int bin, int y0, int rows, buf spans"
         ),
         "streaks_pass": (
             "buf in, buf out, int org, int pitch, int wp, int w, int h, float step_x, "
             "float step_y, float4 w0, float4 w1, float4 w2, float4 w3, int y0, int in_rows, "
-            "int out_rows"
+            "int out_rows, buf spans"
         ),
         "streaks_expand": (
             "buf lo, int org, int pitch, int lo_w, int lo_h, int f, int ext, float shear, "
@@ -400,6 +405,7 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
             "int s_pitch, int r0, buf dst, int dst_pitch, int dst_w, int dst_h, int dx0, "
             "int dy0, int row0"
         ),
+        "streaks_clear": "buf buf, int org, int pitch, int wp, int h, buf spans",
     },
     "vignette.cl": {
         "vignette_apply": (

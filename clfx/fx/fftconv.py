@@ -29,9 +29,11 @@ Algorithms
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
     host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
-    (no packed copy) and transformed in place in the mapped work buffer, in row and column
-    chunks on every core (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time,
-    the same pixels to float64 rounding.
+    (no packed copy; rows of zeros skipped) and transformed a channel at a time in one
+    complex plane the runtime's cache keeps, in row and column chunks on every core, the
+    inverse rows of the kept output alone written into the mapped output (no unpacking
+    kernel) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
+    pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
     exactly by a gather over their list (deterministic, no atomics), so the float32 error
@@ -242,7 +244,9 @@ def _as_psf(psf) -> np.ndarray:
 def psf_digest(psf: np.ndarray) -> str:
     """Content hash of a PSF (cache key)."""
     k = np.ascontiguousarray(psf, np.float64)
-    return hashlib.sha1(k.tobytes() + repr(k.shape).encode()).hexdigest()
+    h = hashlib.sha1(k.reshape(-1).view(np.uint8))   # its bytes, without a copy of them
+    h.update(repr(k.shape).encode())
+    return h.hexdigest()
 
 
 def _real(precision: str):
@@ -490,35 +494,33 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
         raise ValueError(f"FFT grid {grid} is smaller than the {need} this block needs")
     info.grid = (n1, n2)
     nch = 1 if img.channels == 1 else 3
-    real = _real(precision)
-    itemsize = np.dtype(real).itemsize
-    batch = nch if nch * n1 * (n2 + 2) * itemsize <= MAX_BATCH_BYTES else 1
     spec, spec_planes = spectrum or psf_spectrum(rt, k, n1, n2, precision)
-    work = rt.buffer(batch * n1 * (n2 + 2) * itemsize)
-    shape = (batch, n1, n2 + 2)
-    on_host = host_fft(rt, precision)
-    if not on_host:
-        app = _plan(rt, shape, precision)
-        arr = _array(rt, work, shape, real)
-    pack = _kernel(rt, "fftconv_pack", precision)
-    mul = _kernel(rt, "fftconv_multiply", precision)
-    unpack = _kernel(rt, "fftconv_unpack", precision)
     sx, sy = support.offset_in(img.window)
     dx, dy = dst.window.x0 - support.x0, dst.window.y0 - support.y0
     ex0, ey0 = effective.offset_in(dst.window)
+    if host_fft(rt, precision):   # the rows are read from the image, the result written
+        _host_convolve(rt, img, (sx, sy, support.width, support.height), spec, (n1, n2),
+                       dst, (dx, dy), (ex0, ey0, ex0 + effective.width, ey0 + effective.height))
+        return
+    real = _real(precision)
+    itemsize = np.dtype(real).itemsize
+    batch = nch if nch * n1 * (n2 + 2) * itemsize <= MAX_BATCH_BYTES else 1
+    work = rt.buffer(batch * n1 * (n2 + 2) * itemsize)
+    shape = (batch, n1, n2 + 2)
+    app = _plan(rt, shape, precision)
+    arr = _array(rt, work, shape, real)
+    pack = _kernel(rt, "fftconv_pack", precision)
+    mul = _kernel(rt, "fftconv_multiply", precision)
+    unpack = _kernel(rt, "fftconv_unpack", precision)
     count = n1 * (n2 // 2 + 1)
     for c0 in range(0, nch, batch):
-        if on_host:    # the row transforms read the image itself: no packed copy
-            _host_convolve(rt, work, shape, spec, c0, img, (sx, sy, support.width,
-                                                            support.height))
-        else:
-            rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
-                      support.height, work, n1, n2 + 2, c0, batch,
-                      np.inf if split is None else split, local=None)
-            app.fft(arr)
-            rt.launch(mul, (count,), work, spec, count, batch, spec_planes,
-                      c0 if spec_planes > 1 else 0)
-            app.ifft(arr)
+        rt.launch(pack, (n2 + 2, n1), img, img.pitch, img.channels, sx, sy, support.width,
+                  support.height, work, n1, n2 + 2, c0, batch,
+                  np.inf if split is None else split, local=None)
+        app.fft(arr)
+        rt.launch(mul, (count,), work, spec, count, batch, spec_planes,
+                  c0 if spec_planes > 1 else 0)
+        app.ifft(arr)
         rt.launch(unpack, (dst.pitch, dst.height), work, n1, n2 + 2, n2, dst, dst.pitch,
                   dst.channels, dst.width, dst.height, dx, dy, ex0, ey0, ex0 + effective.width,
                   ey0 + effective.height, c0, batch)
@@ -526,87 +528,161 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
         _gather(rt, dst, support, k, bright, precision="float32")
 
 
-def _host_convolve(rt, work, shape: tuple[int, int, int], spec: np.ndarray, c0: int, img,
-                   support: tuple[int, int, int, int]) -> None:
-    """Channels ``c0``.. of the device image ``img`` over ``support`` = (x, y, width, height)
-    (pixels of its buffer; non-finite values read as 0) convolved with the spectra ``spec``
-    (:func:`_host_spectrum`) on the host (:func:`host_fft`), into the work buffer's
-    ``shape`` = (batch, N1, N2 + 2) float64 planes, where ``fftconv_unpack`` reads them: the
-    padded planes ``fftconv_pack`` makes for VkFFT are never made."""
+def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray,
+                   grid: tuple[int, int], dst, offset: tuple[int, int],
+                   kept: tuple[int, int, int, int]) -> None:
+    """The colour channels of the device image ``img`` over ``support`` = (x, y, width,
+    height) (pixels of its buffer; non-finite values read as 0) convolved with the spectra
+    ``spec`` (:func:`_host_spectrum`, 1 or 3 planes) on the host (:func:`host_fft`), on the
+    ``grid`` = (N1, N2), into ``dst`` (mapped): its pixel (x, y) is the grid's ((x + dx) mod
+    N2, (y + dy) mod N1) (``offset`` = (dx, dy)) inside ``kept`` = (x0, y0, x1, y1), 0
+    elsewhere and in alpha.  One channel at a time in one grid-sized complex plane kept in
+    the runtime's cache (`_host_plane`); the inverse row transforms run for the rows kept
+    alone and write ``dst`` themselves: no padded planes for VkFFT, no float64 grid of
+    every channel (74 MiB at 1080p, a fresh allocation each frame once the pool evicted it,
+    ~50 ms of page faults), no unpacking kernel."""
     cl = rt.cl
+    n1, n2 = grid
     sx, sy, sw, sh = support
-    planes, _ = cl.enqueue_map_buffer(rt.queue, work.buffer,
-                                      cl.map_flags.READ | cl.map_flags.WRITE, 0, shape,
-                                      np.float64)
+    x0, y0, x1, y1 = kept
+    nch = 1 if img.channels == 1 else 3
+    rt.fill(dst, 0.0)
+    # the kept pixels' grid rows and columns: one run each, or two where they wrap
+    gy, gx = ((np.arange(lo, hi) + d) % n for lo, hi, d, n in ((y0, y1, offset[1], n1),
+                                                                 (x0, x1, offset[0], n2)))
+    runs = np.split(np.arange(y0, y1), np.flatnonzero(np.diff(gy) != 1) + 1)
+    cols = slice(gx[0], gx[0] + len(gx)) if len(gx) and gx[-1] - gx[0] == len(gx) - 1 \
+        else gx
+    shelf, plane = _host_plane(rt, n1, n2)
     try:
-        pixels, _ = cl.enqueue_map_buffer(rt.queue, img.buffer, cl.map_flags.READ, 0,
-                                          (max(img.height, 1), img.pitch, img.channels),
-                                          np.float32)
+        out, _ = cl.enqueue_map_buffer(rt.queue, dst.buffer, cl.map_flags.WRITE, 0,
+                                       (max(dst.height, 1), dst.pitch, dst.channels),
+                                       np.float32)
         try:
-            def rows(b, r0, r1):
-                x = pixels[sy + r0:sy + r1, sx:sx + sw, c0 + b]
-                return np.where(np.isfinite(x), x, np.float32(0.0)).astype(np.float64)
+            pixels, _ = cl.enqueue_map_buffer(rt.queue, img.buffer, cl.map_flags.READ, 0,
+                                              (max(img.height, 1), img.pitch, img.channels),
+                                              np.float32)
+            try:
+                for c in range(nch):
+                    def rows(b, r0, r1, c=c):
+                        x = pixels[sy + r0:sy + r1, sx:sx + sw, c].astype(np.float64)
+                        if not np.isfinite(x.sum()):    # float32 values: no float64 overflow
+                            x[~np.isfinite(x)] = 0.0
+                        return x
 
-            _host_transform(planes, sh, spec[c0:c0 + shape[0]] if len(spec) > 1 else spec,
-                            rows)
+                    def kept_rows(r0, r1, values, c=c):   # grid rows r0.. of one run
+                        ys = r0 - gy[0] + y0 if r0 >= gy[0] else r0 + n1 - gy[0] + y0
+                        out[ys:ys + r1 - r0, x0:x1, c] = values[:, cols]
+
+                    sink = ([(int(gy[r[0] - y0]), int(gy[r[-1] - y0]) + 1) for r in runs
+                             if len(r)], kept_rows)
+                    _host_transform(plane[None], sh, spec[c:c + 1] if len(spec) > 1 else spec,
+                                    rows, sink)
+            finally:
+                pixels.base.release()
         finally:
-            pixels.base.release()
+            out.base.release()
     finally:
-        planes.base.release()
+        if not shelf:   # back for the next call (none took its place meanwhile)
+            shelf.append(plane)
+
+
+def _host_plane(rt, n1: int, n2: int) -> tuple[list, np.ndarray]:
+    """(shelf, plane): an N1 x (N2 / 2 + 1) complex128 plane, the host transforms' work
+    (`_host_convolve`), taken off the shelf the runtime's cache keeps for this grid (its
+    pages touched when it is made: the cache counts that cost, so the pool's idle buffers
+    go before it), or a new one while another call holds it.  Put it back on the shelf
+    when done."""
+    def build():
+        plane = np.empty((n1, n2 // 2 + 1), np.complex128)
+        plane.fill(0.0)
+        return [plane]
+
+    shelf = rt.cache.get(("fftconv.host_plane", n1, n2), build)
+    try:
+        return shelf, shelf.pop()
+    except IndexError:
+        return shelf, np.empty((n1, n2 // 2 + 1), np.complex128)
 
 
 HOST_CHUNK_BYTES = 2 ** 21
-"""The rows or columns one host transform task takes at a time (their copies stay in
-cache; the grid-sized temporaries of a whole-plane transform, several per plane, are never
-made: 215 MiB each at 8K)."""
+"""The rows one host transform task takes at a time (their copies stay in cache; the
+grid-sized temporaries of a whole-plane transform, several per plane, are never made: 215
+MiB each at 8K)."""
+
+HOST_COLUMN_BYTES = 2 ** 19
+"""The columns one host transform task takes at a time: NumPy copies each column out and
+back, and these stay in the 2nd level cache (1080p glare, 1372-point columns, CPU of a
+plane's forward, product and inverse, min of 8: 36-38 ms in 16-32 columns, 41 in 95
+columns (2 MiB), 59 whole)."""
 
 
 def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
-                    source=None) -> None:
-    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout VkFFT keeps): the
-    forward transform of the first ``rows`` rows' N2 reals (``source(b, r0, r1)``: plane
-    b's rows r0..r1, at most N2 values each, the rest 0; default ``planes`` itself; the
-    rows after ``rows`` are 0), then with ``spec`` (1 or B spectra) the product and the
-    inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse), without it the
-    spectrum alone.  Row and column chunks of :data:`HOST_CHUNK_BYTES` go to a thread each
-    (NumPy's transforms release the GIL)."""
-    batch, n1, n2p = planes.shape
-    n2 = n2p - 2
-    cplx = planes.view(np.complex128)                # (B, N1, N2 / 2 + 1)
-    row_step = max(1, HOST_CHUNK_BYTES // (n2p * 8))
-    col_step = max(1, HOST_CHUNK_BYTES // (n1 * 16))
+                    source=None, sink=None) -> None:
+    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout VkFFT keeps, or B x
+    N1 x (N2 / 2 + 1) complex128): the forward transform of the first ``rows`` rows' N2
+    reals (``source(b, r0, r1)``: plane b's rows r0..r1, at most N2 values each, the rest 0;
+    default ``planes`` itself; the rows after ``rows`` are 0), then with ``spec`` (1 or B
+    spectra) the product and the inverse transform (N2 reals per row, the 1 / (N1 N2) on the
+    inverse), without it the spectrum alone.  ``sink`` = (runs, put): the inverse rows of
+    only the grid row runs [r0, r1) of ``runs``, handed to ``put(r0, r1, values)`` (one
+    plane; values (r1 - r0) x N2 float64) instead of written back.  Row and column chunks
+    of :data:`HOST_CHUNK_BYTES` go to a thread each (NumPy's transforms release the GIL)."""
+    cplx = planes if np.iscomplexobj(planes) else planes.view(np.complex128)
+    batch, n1, half = cplx.shape
+    n2 = 2 * (half - 1)
+    row_step = max(1, HOST_CHUNK_BYTES // (half * 16))
+    col_step = max(1, HOST_COLUMN_BYTES // (n1 * 16))
+    real = cplx.view(np.float64)
 
     def forward_rows(b, r0, r1):
-        x = planes[b, r0:r1, :n2] if source is None else source(b, r0, r1)
-        cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
+        x = real[b, r0:r1, :n2] if source is None else source(b, r0, r1)
+        lit = x.any(axis=1)
+        if lit.all():
+            if source is not None:   # x is not the plane itself: straight into it
+                np.fft.rfft(x, n=n2, axis=1, out=cplx[b, r0:r1])
+            else:
+                cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
+            return
+        # a row of zeros transforms to zeros: glare's highlights leave a third of the rows
+        # of their support dark at 1080p
+        f = np.fft.rfft(x[lit], n=n2, axis=1)     # before the zeros: x may be the plane
+        cplx[b, r0:r1] = 0.0
+        cplx[b, r0 + np.flatnonzero(lit)] = f
 
-    def columns(b, c0, c1):
-        f = np.fft.fft(cplx[b, :, c0:c1], axis=0)
+    def columns(b, c0, c1):    # in place (out=): no temporaries, no copies back
+        f = cplx[b, :, c0:c1]
+        np.fft.fft(f, axis=0, out=f)
         if spec is not None:
             f *= spec[b if len(spec) > 1 else 0, :, c0:c1]
-            f = np.fft.ifft(f, axis=0)
-        cplx[b, :, c0:c1] = f
+            np.fft.ifft(f, axis=0, out=f)
 
     def inverse_rows(b, r0, r1):
-        planes[b, r0:r1, :n2] = np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1)
+        real[b, r0:r1, :n2] = np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1)
+
+    def put_rows(b, r0, r1):
+        sink[1](r0, r1, np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1))
 
     # the threads live as long as the transform: none is left behind in the caller's
     # process (a refused frame starts none, tests/test_frame_limits.py)
     with ThreadPoolExecutor(max_workers=max(1, available_cores()),
                             thread_name_prefix="clfx-fft") as pool:
-        def run(fn, n, step):
-            tasks = [(b, i, min(i + step, n)) for b in range(batch) for i in range(0, n, step)]
+        def run(fn, spans, step):
+            tasks = [(b, i, min(i + step, hi)) for b in range(batch) for lo, hi in spans
+                     for i in range(lo, hi, step)]
             if len(tasks) > 1:
                 list(pool.map(lambda t: fn(*t), tasks))
             elif tasks:
                 fn(*tasks[0])
 
-        run(forward_rows, rows, row_step)
+        run(forward_rows, [(0, rows)], row_step)
         if source is not None:
             cplx[:, rows:] = 0.0
-        run(columns, n2 // 2 + 1, col_step)
-        if spec is not None:
-            run(inverse_rows, n1, row_step)
+        run(columns, [(0, half)], col_step)
+        if spec is not None and sink is not None:
+            run(put_rows, sink[0], row_step)
+        elif spec is not None:
+            run(inverse_rows, [(0, n1)], row_step)
 
 
 def _bright_pixels(rt, img, support, split, max_points):

@@ -153,12 +153,15 @@ class ScatterPlugin(SpreadRegions):
                              f"to 0 before the {taps[1]}x{taps[0]} PSF")
 
     # -- render ---------------------------------------------------------------------------
-    def spread_mixed(self, rt, p, ctx, k: np.ndarray, highlights, mix, split: float):
+    def spread_mixed(self, rt, p, ctx, k: np.ndarray, highlights, mix, split: float,
+                     highlights_at=None):
         """The effect's output: highlights spread by ``k`` and mixed back, block by block.
 
         ``highlights(src, h)`` launches the effect's highlight kernel (``h`` may be ``src``:
         the kernel works in place), ``mix(g, dst, rect)`` its mix over ``rect`` (``dst`` may
-        be ``g``).  :func:`clfx.fx.fftconv.spread` loads each block's highlights from the
+        be ``g``); ``highlights_at(src, h)``, where the effect has one, the highlights of the
+        part of ``src`` in ``h``'s window (0 outside it; else a copy of that part takes its
+        highlights in place).  :func:`clfx.fx.fftconv.spread` loads each block's highlights from the
         source and hands back each output block, mixed into the output at once: beside the
         source and the output only one block's buffers are on the device (one block, and
         the whole-frame highlight and spread images of old, when the one-grid FFT fits
@@ -172,6 +175,10 @@ class ScatterPlugin(SpreadRegions):
             if rect == src.window:
                 h = rt.image(src.window, 4)
                 highlights(src, h)
+                return h
+            if highlights_at is not None:    # read from the source: no copy of the part
+                h = rt.image(rect, 4)
+                highlights_at(src, h)
                 return h
             sub = rt.reframe(src, rect)      # a copy, replaced by its highlights in place
             highlights(sub, sub)
@@ -215,5 +222,13 @@ class ScatterPlugin(SpreadRegions):
                       src.height, g, dst, dst.pitch, dst.height, dx, dy, self.strength(p), tint,
                       p.threshold, p.knee, boost, boost > 0.0)
 
+        hl_at = rt.kernel(kfile, f"{name}_highlights_at", **ctx.luminance_defines)
+
+        def highlights_at(img, h):
+            dx, dy = h.window.offset_in(img.window)
+            rt.launch(hl_at, (h.pitch // 4, max(h.height, 1)), img, img.pitch, img.width,
+                      img.height, dx, dy, h, h.pitch, h.width, h.height, p.threshold, p.knee,
+                      boost)
+
         split = max(4.0 * p.threshold, SPLIT_RATIO * ctx.analysis.peak_luminance)
-        return self.spread_mixed(rt, p, ctx, k, highlights, mix, split)
+        return self.spread_mixed(rt, p, ctx, k, highlights, mix, split, highlights_at)

@@ -134,6 +134,22 @@ preview do not stream: their rays' working buffers are reduced 8 or 4 times alon
 float32) that is 506 MiB each for the sum and the extended light plus three working
 buffers of about 64 (draft) or 127 MiB (preview) and their zero margins: 1.2-1.4 GiB, against
 final's 352 MiB (computed from the sizes, not measured).
+
+Where the passes run (issue 37)
+-------------------------------
+At final and reference a frame that does not stream runs each ray's passes only over the
+row spans within its reach of the bright pixels: the seeds kernel marks the 8 px blocks of
+the source with streaking light (with a core rule it runs over a light's tiles alone), the
+host draws the seeds' windows (``streaks_dilate`` only past ``SEEDS_READ`` lights) and
+rasterises, row by row, the bright boxes (lit blocks no seed wholly gathered, and each
+seed's 2 x 2 splat) swept against the ray over what each pass's light can reach (pass n:
+4^(n+1) - 1 steps) and grown by the bilinear spread so far (`pass_spans`); the bright, pass
+and clear kernels take those spans in row order (tiles one by one cost 2-3 times as much per
+pixel on PoCL). What the passes read outside them is cleared first, so stale buffers from
+the pool change nothing: the same bits as whole rows (the streamed path,
+`tests/plugins/test_streaks.py`).  1080p demo frame, cinema's streaks alone (4 rays of 275
+px from 25 lights): kernels 405-431 -> 63 ms of CPU per frame (prof2), the passes 249 -> 17
+ms; in the cinema look the streaks step 352 -> 68 ms.
 References: M. Kawase, GDC 2003; T. Ritschel et al., "Temporal glare", Eurographics 2009.
 """
 from __future__ import annotations
@@ -218,6 +234,169 @@ MAX_SEEDS = 1 << 16
 
 BIN = 16
 """Working pixels per side of the blocks the seed points are listed by."""
+
+BLOCK = 8
+"""Side (px) of the blocks of the source the seeds mark with streaking light (issue 37):
+what final's and reference's whole passes are planned from (`pass_spans`)."""
+
+SPAN = 32
+"""Most pixels of a row span one work-group takes (`row_spans`: 8 work-items of a pass).
+Spans in row order cost what whole rows did per pixel; tiles taken one by one cost 2-3 times
+as much on PoCL (measured, a pass at 1080p: 13 ms of CPU whole, 13-17 in spans of 16-256
+px, 26-54 in tiles of 32 or 64 px)."""
+
+
+def block_boxes(mask: np.ndarray, block: int = BLOCK) -> np.ndarray:
+    """Inclusive pixel boxes (x0, y0, x1, y1) covering the blocks set in ``mask``: one per
+    run of set blocks along a row of blocks."""
+    edges = np.diff(np.pad(mask, ((0, 0), (1, 1))).astype(np.int8), axis=1)
+    rows, first = np.nonzero(edges == 1)
+    _, end = np.nonzero(edges == -1)
+    return np.stack([first * block, rows * block, end * block - 1, rows * block + block - 1],
+                    axis=1).astype(np.float64)
+
+
+def raster(width: int, height: int, boxes: np.ndarray, u: tuple[float, float] = (0.0, 0.0),
+           t: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """int64 (n, 3) row intervals (y, q0, q1) of the 4-pixel runs (a pass work-item's)
+    q0 <= q < q1 of row y holding a pixel of some box (n x 4: x0, y0, x1, y1, inclusive real
+    bounds) moved by t u for a real t in [t0, t1], within ``width`` x ``height``: row by row,
+    the box's rows at the t that bring them there, so a box swept along a diagonal ray is a
+    diagonal band, not its bounding box.  Unsorted; intervals may overlap (`merged`)."""
+    (ux, uy), (t0, t1) = u, t
+    b = np.asarray(boxes, np.float64).reshape(-1, 4)
+    lo, hi = min(t0 * uy, t1 * uy), max(t0 * uy, t1 * uy)
+    r0 = np.clip(np.ceil(b[:, 1] + lo), 0, height).astype(np.int64)
+    r1 = np.clip(np.floor(b[:, 3] + hi) + 1, 0, height).astype(np.int64)
+    count = np.maximum(r1 - r0, 0)
+    box = np.repeat(np.arange(len(b)), count)
+    y = r0[box] + np.arange(len(box)) - np.repeat(np.cumsum(count) - count, count)
+    b = b[box]
+    ta, tb = np.full(len(y), float(t0)), np.full(len(y), float(t1))
+    if uy != 0.0:   # the t that bring a row of the box to row y
+        top, bottom = (y - b[:, 3]) / uy, (y - b[:, 1]) / uy
+        if uy < 0.0:
+            top, bottom = bottom, top
+        ta, tb = np.maximum(ta, top), np.minimum(tb, bottom)
+    c0 = np.ceil(b[:, 0] + np.minimum(ta * ux, tb * ux))
+    c1 = np.floor(b[:, 2] + np.maximum(ta * ux, tb * ux))
+    keep = (ta <= tb) & (c0 <= c1) & (c1 >= 0) & (c0 < width)
+    c0 = np.clip(c0[keep], 0, width - 1).astype(np.int64)
+    c1 = np.clip(c1[keep], 0, width - 1).astype(np.int64)
+    return np.stack([y[keep], c0 // 4, c1 // 4 + 1], axis=1)
+
+
+def merged(intervals: np.ndarray) -> np.ndarray:
+    """Row intervals (y, q0, q1) (`raster`), overlapping or touching ones joined, in row
+    order."""
+    if not len(intervals):
+        return intervals.reshape(0, 3)
+    row = int(intervals[:, 2].max()) + 1
+    g0, g1 = (intervals[:, 0] * row + intervals[:, k] for k in (1, 2))
+    order = np.argsort(g0, kind="stable")
+    g0, g1 = g0[order], g1[order]
+    reach = np.maximum.accumulate(g1)
+    first = np.ones(len(g0), bool)
+    first[1:] = g0[1:] > reach[:-1]       # not within the runs before: a new run starts
+    starts = g0[first]
+    ends = np.maximum.reduceat(g1, np.flatnonzero(first))
+    return np.stack([starts // row, starts % row, ends - starts // row * row], axis=1)
+
+
+def row_spans(intervals: np.ndarray, width: int, span: int = SPAN) -> np.ndarray:
+    """int32 (n, 4) row spans (x0, y, x1, 0) of row intervals (`raster`) within ``width``,
+    at most ``span`` px each, in row order: the ``spans`` of the TILED kernels."""
+    iv = merged(intervals)
+    x0, x1 = iv[:, 1] * 4, np.minimum(iv[:, 2] * 4, width)
+    pieces = -(-(x1 - x0) // span)
+    run = np.repeat(np.arange(len(x0)), pieces)
+    k = np.arange(len(run)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    px0 = x0[run] + k * span
+    out = np.stack([px0, iv[run, 0], np.minimum(px0 + span, x1[run]), np.zeros_like(px0)],
+                   axis=1)
+    return np.ascontiguousarray(out, np.int32)
+
+
+def light_boxes(lights: np.ndarray, analysis_tile: int, width: int,
+                height: int) -> np.ndarray:
+    """Inclusive pixel boxes of the analysis tiles set in ``lights`` in a ``width`` x
+    ``height`` source (the last tile across and down also holds the pixels past the map:
+    `streaks_peak` clamps)."""
+    j, i = np.nonzero(lights)
+    a, (ty, tx) = analysis_tile, lights.shape
+    return np.stack([i * a, j * a, np.where(i == tx - 1, width, i * a + a) - 1,
+                     np.where(j == ty - 1, height, j * a + a) - 1], axis=1).astype(np.float64)
+
+
+def gathered_flags(rows: np.ndarray, width: int, height: int, radius: int) -> np.ndarray:
+    """uint8 (``height``, ``width``) flags of the pixels within ``radius`` px (Chebyshev) of
+    a seed (rows' peak x, y): the seeds' windows, what the kernel ``streaks_dilate`` grows
+    the seeds' own flags into."""
+    out = np.zeros((height, width), np.uint8)
+    for x, y in rows[:, :2].astype(np.int64):
+        out[max(y - radius, 0):y + radius + 1, max(x - radius, 0):x + radius + 1] = 1
+    return out
+
+
+def ray_spread(ray: Ray) -> list[tuple[int, int]]:
+    """Per pass, the pixels (x, y) a ray's passes up to it spread its light across its line:
+    one per pass whose float32 taps (the kernel's ``s * step``) fall between pixels along
+    that axis (each tap reads the pixel past them as well); 0 for rays along the axes and the
+    diagonals."""
+    out, sx, sy = [], 0, 0
+    for n in range(ray.passes):
+        for axis, step in enumerate((ray.sx, ray.sy)):
+            taps = np.float32(step * TAPS ** n) * np.arange(1, TAPS, dtype=np.float32)
+            spreads = bool(np.any(taps != np.floor(taps)))
+            sx, sy = (sx + spreads, sy) if axis == 0 else (sx, sy + spreads)
+        out.append((sx, sy))
+    return out
+
+
+def pass_spans(lit: np.ndarray, gathered: np.ndarray | None, points: np.ndarray, ox: int,
+               oy: int, size: tuple[int, int], wp: int, h: int, rays) -> tuple:
+    """Where final's and reference's whole passes run (`Streaks.streak_sum`), as row
+    spans (`row_spans`) of the ``wp`` x ``h`` working frame (the output window; the
+    source's ``size`` = (width, height) at (ox, oy) in it).
+
+    ``bright``: where the bright pixels can be: the source's ``lit`` ``BLOCK`` px blocks
+    (with streaking light) but those wholly inside the seeds' windows (``gathered``, the
+    source's flags where the host drew them, else None: every lit block), and the two
+    pixels each way of each seed's bilinear splat (``points``: x, y working pixels).
+    ``clear``: what the rays' first passes read of the bright pixels (the union of the
+    rays' ``read``).  Per ray, (``work``, ``read``): ``work`` where its streak can be, the
+    bright boxes swept against the ray over its support, grown by its spread (`ray_spread`)
+    and half a pixel (the float32 steps); its passes write all of it.  ``read``: all its
+    passes read, each pixel of ``work`` (up to 3 px past that band across: the runs of 4)
+    moved up to the last pass's farthest tap ahead (``(TAPS - 1) 4^(N - 1)`` steps, its taps
+    of weight 0 too) and by a bilinear pixel: zero where it is not ``work``."""
+    w, hs = size
+    if gathered is not None and lit.any():   # no bright pixel in a block a seed gathered
+        j, i = np.nonzero(lit)
+        ys = np.minimum(j[:, None] * BLOCK + np.arange(BLOCK), hs - 1)
+        xs = np.minimum(i[:, None] * BLOCK + np.arange(BLOCK), w - 1)
+        lit = lit.copy()
+        lit[j, i] = ~(gathered[ys[:, :, None], xs[:, None, :]] != 0).all(axis=(1, 2))
+    boxes = block_boxes(lit)
+    boxes[:, 2:] = np.minimum(boxes[:, 2:], [w - 1, hs - 1])
+    boxes += [ox, oy, ox, oy]
+    at = np.floor(np.asarray(points, np.float64)[:, :2])
+    boxes = np.concatenate([boxes, np.concatenate([at, at + 1.0], axis=1)])
+    out, firsts = [], []
+    for ray in rays:
+        u, spread, passes = (-ray.sx, -ray.sy), ray_spread(ray), []
+        for n in range(ray.passes):    # pass n: the light moved up to 4^(n+1) - 1 steps
+            support = (ray.top if n == ray.passes - 1 else TAPS) * TAPS ** n
+            mx, my = (m + 0.5 for m in spread[n])
+            passes.append(row_spans(raster(wp, h, boxes + [-mx, -my, mx, my], u,
+                                           (0.0, support - 1.0)), wp))
+        ahead = (TAPS - 1) * TAPS ** (ray.passes - 1)
+        mx, my = spread[-1][0] + 4.5, spread[-1][1] + 1.5
+        read = raster(wp, h, boxes + [-mx, -my, mx, my], u, (-float(ahead), support - 1.0))
+        mx, my = spread[0][0] + 4.5, spread[0][1] + 1.5
+        firsts.append(raster(wp, h, boxes + [-mx, -my, mx, my], u, (-(TAPS - 1.0), TAPS - 1.0)))
+        out.append((passes, row_spans(read, wp)))
+    return row_spans(raster(wp, h, boxes), wp), row_spans(np.concatenate(firsts), wp), out
 
 
 def bin_points(points: np.ndarray, width: int, height: int, size: int,
@@ -706,40 +885,61 @@ class Streaks(Plugin):
         """One point per compact light (kernel ``streaks_seeds``), sorted by its peak's
         position (a fixed order whatever the device's): the kernel's float32 rows (peak x, y,
         centroid x, y in source pixels, r, g, b, 0; `grid_points` places them on a working
-        grid); and the source-sized uint8 device flags of the pixels they gathered.
-        ``peak``: the per-tile peak map on the device; ``notes``: the step's, told when
-        lights are left out.  One wait for the count and the first
-        ``SEEDS_READ`` points (before the flags grow: a frame without seeds grows none); a
-        second read only for a frame with more lights."""
+        grid); the source-sized uint8 device flags of the pixels they gathered, and the same
+        on the host where the host drew them (else None); and the bool (blocks down, across)
+        mask of the source's ``BLOCK`` px blocks with streaking light.  ``peak``: the per-tile
+        peak map on the device; ``notes``: the step's, told when lights are left out.  With a
+        core rule only a light's tiles (``fr.peak`` > 0) can hold streaking light, and the
+        kernel runs over those alone.  One wait for the count, the lit blocks and the first
+        ``SEEDS_READ`` points; up to that many lights the host draws the windows the seeds
+        gathered (`gathered_flags`), a frame with more reads them all and grows the flags on
+        the device (``streaks_dilate``)."""
         src = fr.source
-        _, tiles_x, tiles_y = fr.peak
+        peak_map, tiles_x, tiles_y = fr.peak
         npx = src.width * src.height
-        flags = [rt.buffer(max(npx, 16)) for _ in range(2)]
-        # the seeds mark flags[0]; the dilation writes every pixel of the other
-        rt.cl.enqueue_fill_buffer(rt.queue, flags[0].buffer, np.uint8(0), 0, max(npx, 16))
+        lit_shape = (-(-src.height // BLOCK), -(-src.width // BLOCK))
+        lit = rt.to_device(np.zeros(lit_shape, np.int32))
+        flags = rt.buffer(max(npx, 16))   # the seeds mark it
+        rt.cl.enqueue_fill_buffer(rt.queue, flags.buffer, np.uint8(0), 0, max(npx, 16))
         count = rt.to_device(np.zeros(1, np.int32))
         seeds = rt.buffer(MAX_SEEDS * 32)
+        spans = None
+        if p.core > 0.0:   # light only in a light's tiles (streaks_level)
+            lights = np.asarray(peak_map).reshape(tiles_y, tiles_x) > 0.0
+            boxes = light_boxes(lights, fr.analysis_tile, src.width, src.height)
+            spans = row_spans(raster(src.width, src.height, boxes), src.width)
         knl = rt.kernel("streaks.cl", "streaks_seeds", PEAK_TILE=fr.analysis_tile,
-                        **fr.luminance_defines)
-        rt.launch(knl, (src.width, src.height), src, src.pitch, src.width,
-                  src.height, p.threshold, peak, tiles_x,
-                  tiles_y, p.core, p.source_color, self.core_power(p),
-                  fr.radius, RING_SHARE, seeds, count, MAX_SEEDS, flags[0])
+                        TILED=int(spans is not None), BLOCK=BLOCK, **fr.luminance_defines)
+        args = (src, src.pitch, src.width, src.height, p.threshold, peak, tiles_x, tiles_y,
+                p.core, p.source_color, self.core_power(p), fr.radius, RING_SHARE, seeds,
+                count, MAX_SEEDS, flags)
+        if spans is None:
+            rt.launch(knl, (src.width, src.height), *args, None, lit)
+        elif len(spans):
+            rt.launch(knl, (SPAN, len(spans)), *args, rt.to_device(spans), lit,
+                      local=(SPAN, 1))
         n_host, first = np.zeros(1, np.int32), np.empty((SEEDS_READ, 8), np.float32)
+        lit_host = np.empty(lit_shape, np.int32)
         rt.cl.enqueue_copy(rt.queue, n_host, count.buffer, is_blocking=False)
+        rt.cl.enqueue_copy(rt.queue, lit_host, lit.buffer, is_blocking=False)
         rt.cl.enqueue_copy(rt.queue, first, seeds.buffer, is_blocking=True)
         n = int(n_host[0])
-        if n:   # no seed: no flag to grow (the frame's flags stay 0)
+        if n > SEEDS_READ:   # the flags of every seed, those past MAX_SEEDS too, grown
+            grown = rt.buffer(max(npx, 16))
             dilate = rt.kernel("streaks.cl", "streaks_dilate")
-            for a, b, sx, sy in ((0, 1, 1, 0), (1, 0, 0, 1)):
-                rt.launch(dilate, (src.height if sx else src.width,), flags[a], flags[b],
+            for a, b, sx, sy in ((flags, grown, 1, 0), (grown, flags, 0, 1)):
+                rt.launch(dilate, (src.height if sx else src.width,), a, b,
                           src.width, src.height, fr.radius, sx, sy)
         if n > MAX_SEEDS:
             notes.append(f"streaks: {n} lights, only {MAX_SEEDS} (the first found) streak")
             n = MAX_SEEDS
         rows = first[:n] if n <= SEEDS_READ else \
             rt.from_device(seeds, np.float32, 8 * n).reshape(n, 8)
-        return rows[np.lexsort((rows[:, 0], rows[:, 1]))], flags[0]
+        drawn = None
+        if 0 < n <= SEEDS_READ:
+            drawn = gathered_flags(rows, src.width, src.height, fr.radius)
+            flags = rt.to_device(drawn)
+        return rows[np.lexsort((rows[:, 0], rows[:, 1]))], flags, drawn, lit_host > 0
 
     # render ---------------------------------------------------------------------------
     def streak_sum(self, rt, p, fr: StreaksFrame, notes: list) -> StreakSum:
@@ -767,10 +967,10 @@ class Streaks(Plugin):
         # preview's grids)
         pitch, org = wp, 0
         defines = {"fp64": lvl.fp64, "CHECKED": 1, "RING": int(stream),
-                   **fr.luminance_defines}
+                   "TILED": int(not stream), **fr.luminance_defines}
 
         peak_buf = rt.to_device(fr.peak[0])
-        rows, gathered = self.seed_points(rt, p, fr, peak_buf, notes)
+        rows, gathered, drawn, lit = self.seed_points(rt, p, fr, peak_buf, notes)
         points = grid_points(rows, ox, oy, 1, 1)
         starts, members = bin_points(points, wp, h, BIN)
         points_buf, starts_buf, members_buf = (rt.to_device(a) for a in (
@@ -786,39 +986,61 @@ class Streaks(Plugin):
                        -(-wp // BIN), BIN)
         step_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=0, **defines)
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
+        # the whole passes run over row spans (TILED), a streamed frame's over rows y0..
 
-        def bright(dst, y0, rows, ring):   # the bright pixels and points of rows y0..
-            rt.launch(bright_knl, (wp, rows), *bright_args, dst, org, pitch, wp,
-                      h, *bright_tail, y0, ring)
+        def launch(knl, px, rows, *args, spans=None):
+            if stream:
+                rt.launch(knl, (wp // px, rows), *args, None, local=LOCAL if px > 1 else None)
+            elif len(spans):
+                rt.launch(knl, (SPAN // px, len(spans)), *args, rt.to_device(spans),
+                          local=(SPAN // px, 1))
 
-        def run_pass(ray, n, src_buf, dst_buf, y0, rows, in_rows, out_rows):
+        def bright(dst, y0, rows, ring, spans=None):   # the bright pixels and points
+            launch(bright_knl, 1, rows, *bright_args, dst, org, pitch, wp,
+                   h, *bright_tail, y0, ring, spans=spans)
+
+        def run_pass(ray, n, src_buf, dst_buf, y0, rows, in_rows, out_rows, spans=None):
             b = TAPS ** n
-            rt.launch(accum_knl if n == ray.passes - 1 else step_knl, (wp // 4, rows), src_buf,
-                      dst_buf, org, pitch, wp, w, h,
-                      ray.sx * b, ray.sy * b,
-                      *ray.weights[n],
-                      y0, in_rows, out_rows, local=LOCAL)
+            launch(accum_knl if n == ray.passes - 1 else step_knl, 4, rows, src_buf,
+                   dst_buf, org, pitch, wp, w, h, ray.sx * b, ray.sy * b, *ray.weights[n],
+                   y0, in_rows, out_rows, spans=spans)
 
         if not stream:
+            # only the blocks within each ray's reach of the bright pixels (`pass_blocks`):
+            # the rest of the frame streaks nothing (issue 37: the cinema look's 4 rays of
+            # 275 px at 1080p streak 3.5 % of the frame's pixels)
+            bright_spans, bright_read, ray_spans = pass_spans(
+                lit, drawn, points, ox, oy, (src.width, src.height), wp, h, fr.rays)
+            clear_knl = rt.kernel("streaks.cl", "streaks_clear", TILED=1)
+
+            def clear(buf, spans):   # zeros where the passes read (before they write)
+                if len(spans):
+                    rt.launch(clear_knl, (SPAN // 4, len(spans)), buf, org, pitch, wp, h,
+                              rt.to_device(spans), local=(SPAN // 4, 1))
+
             nbytes = pitch * h * 16
             shared = len(fr.rays) > 1
             work = [rt.buffer(nbytes) for _ in range(3 + shared)]   # ping, pong, total(, bright)
             ping, pong, total = work[:3]
-            # every pass writes every pixel it reads later; the last pass of each ray adds
-            # into the total
+            # the last pass of each ray adds into the total; outside a ray's spans its passes
+            # write nothing, and what they read there is cleared first (the pool's buffers
+            # hold an earlier frame's or ray's streaks)
             rt.cl.enqueue_fill_buffer(rt.queue, total.buffer, np.float32(0.0), 0, nbytes)
             if shared:   # the bright pixels once for every ray (4 rays: 3 extractions saved,
-                bright(work[3], 0, h, 0)   # 39 ms of CPU at 960x540, for one more buffer)
-            for ray in fr.rays:
+                clear(work[3], bright_read)                 # 39 ms of CPU at 960x540)
+                bright(work[3], 0, h, 0, bright_spans)
+            for ray, (spans, read) in zip(fr.rays, ray_spans):
                 # each ray's first pass reads the bright pixels, which no pass writes
+                clear(ping, read)
+                clear(pong, read)
                 if shared:
                     cur = work[3]
                 else:
-                    bright(pong, 0, h, 0)
+                    bright(pong, 0, h, 0, bright_spans)
                     cur = pong
                 for n in range(ray.passes):
                     dst = total if n == ray.passes - 1 else (ping if cur is not ping else pong)
-                    run_pass(ray, n, cur, dst, 0, h, 0, 0)
+                    run_pass(ray, n, cur, dst, 0, h, 0, 0, spans[n])
                     cur = dst
             result = StreakSum(device=total, org=org, pitch=pitch)
         else:
@@ -879,7 +1101,7 @@ class Streaks(Plugin):
 
         peak_buf = rt.to_device(fr.peak[0])
         _, tiles_x, tiles_y = fr.peak
-        rows, gathered = self.seed_points(rt, p, fr, peak_buf, notes)
+        rows, gathered, _, _ = self.seed_points(rt, p, fr, peak_buf, notes)
         seeds = {}
         for g in {grid.layout: grid for grid, _, _ in plans}.values():
             points = grid_points(rows, ox + g.ex, oy + g.ey, g.fx, g.fy)
@@ -917,7 +1139,7 @@ class Streaks(Plugin):
                       grid.lead, ox + grid.ex, oy + grid.ey, p.threshold,
                       peak_buf, tiles_x, tiles_y,
                       p.core, p.source_color, self.core_power(p), gathered,
-                      *seeds[grid.layout], -(-lay.wp // BIN), BIN, 0, 0)
+                      *seeds[grid.layout], -(-lay.wp // BIN), BIN, 0, 0, None)
             cur = pong
             for n in range(passes):
                 last = n == passes - 1
@@ -925,7 +1147,7 @@ class Streaks(Plugin):
                 b = TAPS ** n
                 rt.launch(accum_knl if last else step_knl, (lay.wp // 4, lay.h), cur, dst,
                           lay.org, lay.pitch, lay.wp, grid.w, lay.h,
-                          grid.sx * b, grid.sy * b, *weights[n], 0, 0, 0,
+                          grid.sx * b, grid.sy * b, *weights[n], 0, 0, 0, None,
                           local=LOCAL)
                 cur = dst
             if k + 1 == len(plans) or plans[k + 1][0].line != grid.line:
@@ -953,7 +1175,7 @@ class Streaks(Plugin):
         knl = rt.kernel("streaks.cl", "streaks_compose", **fr.luminance_defines)
 
         def compose(buf, org, pitch, r0, row0, rows):
-            rt.launch(knl, (out.pitch, rows), src, src.pitch, src.width,
+            rt.launch(knl, (out.pitch // 4, rows), src, src.pitch, src.width,
                       src.height, ox, oy, buf, org, pitch,
                       r0, out, out.pitch,
                       band.width, row0 + rows, dx0, dy0, row0)

@@ -54,6 +54,62 @@ inline float4 scatter_highlight(float4 c, float threshold, float knee, float boo
   return rgb * scatter_knee_weight(lum, threshold, knee);
 }
 
+/* scatter_highlight of 4 pixels at once, one pixel per lane of each channel's float4 (r, g,
+ * b in and out): lane by lane the same operations, so the same roundings, in vector code
+ * (PoCL runs a work-item's scalar pixel loop unvectorised). */
+inline void scatter_highlight4(float4 *r, float4 *g, float4 *b, float threshold, float knee,
+                               float boost)
+{
+  float4 x = fmax(*r, 0.0f), y = fmax(*g, 0.0f), z = fmax(*b, 0.0f);
+  float4 lum = (CLFX_LUMA_R) * x + (CLFX_LUMA_G) * y + (CLFX_LUMA_B) * z;
+  if(boost > 0.0f)
+  {
+    const int4 on = lum > 0.0f;
+    const float4 e = lum / fmax(1.0f - lum * (1.0f - 1.0f / boost), 1.0f / boost);
+    const float4 f = e / lum;
+    x = select(x, x * f, on);
+    y = select(y, y * f, on);
+    z = select(z, z * f, on);
+    lum = select(lum, e, on);
+  }
+  float4 soft = (float4)0.0f;
+  if(knee > 0.0f)
+  {
+    const float4 k = clamp(lum - threshold + knee, 0.0f, 2.0f * knee);
+    soft = k * k / (4.0f * knee);
+  }
+  const float4 w = select((float4)0.0f, clamp(fmax(soft, lum - threshold) / lum, 0.0f, 1.0f),
+                          lum > 0.0f);
+  *r = x * w;
+  *g = y * w;
+  *b = z * w;
+}
+
+/* 4 pixels of src from (sx, sy) (pitch spitch, swidth x sheight), with non-finite pixels
+ * and those outside src set to 0. */
+inline float16 scatter_load4px(global const float *src, int spitch, int swidth, int sheight,
+                               int sx, int sy)
+{
+  if(sy < 0 || sy >= sheight) return (float16)0.0f;
+  if(sx >= 0 && sx + 4 <= swidth)
+    return clfx_finite_pixels16_or_zero(vload16(0, src + ((size_t)sy * spitch + sx) * 4));
+  float4 c[4];
+  for(int l = 0; l < 4; l++)
+    c[l] = (sx + l >= 0 && sx + l < swidth)
+           ? clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx + l, src)) : (float4)0.0f;
+  return (float16)(c[0], c[1], c[2], c[3]);
+}
+
+/* The highlights (alpha 0) of 4 sanitised pixels. */
+inline float16 scatter_highlights16(float16 c, float threshold, float knee, float boost)
+{
+  float4 r = c.s048c, g = c.s159d, b = c.s26ae;
+  scatter_highlight4(&r, &g, &b, threshold, knee, boost);
+  const float4 a = (float4)0.0f;
+  return (float16)(r.x, g.x, b.x, a.x, r.y, g.y, b.y, a.y, r.z, g.z, b.z, a.z,
+                   r.w, g.w, b.w, a.w);
+}
+
 /* src window -> highlight image of the same window, 4 pixels per work-item. */
 inline void scatter_highlights_body(global const float *src, global float *dst, const int pitch,
                                     const int height, const float threshold, const float knee,
@@ -62,18 +118,35 @@ inline void scatter_highlights_body(global const float *src, global float *dst, 
   const int qx = get_global_id(0), y = get_global_id(1);
   if(qx * 4 >= pitch || y >= height) return;
   const size_t i = ((size_t)y * pitch + qx * 4) * 4;
-  const float16 c = vload16(0, src + i);
-  const float4 h0 = scatter_highlight(clfx_finite_pixel_or_zero(c.s0123), threshold, knee, boost);
-  const float4 h1 = scatter_highlight(clfx_finite_pixel_or_zero(c.s4567), threshold, knee, boost);
-  const float4 h2 = scatter_highlight(clfx_finite_pixel_or_zero(c.s89ab), threshold, knee, boost);
-  const float4 h3 = scatter_highlight(clfx_finite_pixel_or_zero(c.scdef), threshold, knee, boost);
-  vstore16((float16)(h0, h1, h2, h3), 0, dst + i);
+  const float16 c = clfx_finite_pixels16_or_zero(vload16(0, src + i));
+  vstore16(scatter_highlights16(c, threshold, knee, boost), 0, dst + i);
+}
+
+/* The highlights of the part of src (spitch, swidth x sheight) from (dx, dy), into dst
+ * (pitch, `width` x `height`): dst (x, y) takes src (x + dx, y + dy); 0 outside src and in
+ * dst's padding columns.  What a reframed copy of src with its highlights taken in place
+ * held, without the copy. */
+inline void scatter_highlights_at_body(global const float *src, const int spitch,
+                                       const int swidth, const int sheight, const int dx,
+                                       const int dy, global float *dst, const int pitch,
+                                       const int width, const int height,
+                                       const float threshold, const float knee,
+                                       const float boost)
+{
+  const int qx = get_global_id(0), y = get_global_id(1);
+  if(qx * 4 >= pitch || y >= height) return;
+  const int x = qx * 4;
+  /* the padding columns read nothing: as the zeros of a reframed copy */
+  const int sw = min(swidth, width + dx);
+  const float16 c = scatter_load4px(src, spitch, sw, sheight, x + dx, y + dy);
+  vstore16(scatter_highlights16(c, threshold, knee, boost), 0, dst + ((size_t)y * pitch + x) * 4);
 }
 
 /* out window (>= src window): out = c + strength tint g, minus strength h (additive 0:
  * scene-linear glare family), nothing (1: additive) or strength tint h (2: halation's CONSERVE).
  * (dx, dy): out origin minus src origin; g shares the out window and pitch.  Sums beyond the
- * float range saturate at +-FLT_MAX: finite input gives finite output. */
+ * float range saturate at +-FLT_MAX: finite input gives finite output.  4 pixels per
+ * work-item, one per lane (scatter_highlight4). */
 inline void scatter_mix_body(global const float *src, const int spitch, const int swidth,
                              const int sheight, global const float *g, global float *dst,
                              const int pitch, const int height, const int dx, const int dy,
@@ -84,24 +157,27 @@ inline void scatter_mix_body(global const float *src, const int spitch, const in
   if(qx * 4 >= pitch || y >= height) return;
   const size_t i = ((size_t)y * pitch + qx * 4) * 4;
   const float16 gl = vload16(0, g + i);
-  const float4 gg[4] = {gl.s0123, gl.s4567, gl.s89ab, gl.scdef};
-  float4 o[4];
-  const int sy = y + dy;
-  for(int l = 0; l < 4; l++)
+  const float16 c = scatter_load4px(src, spitch, swidth, sheight, qx * 4 + dx, y + dy);
+  /* PSF >= 0 and h >= 0: clamp the FFT's round-off (~1e-16 x energy) at 0 */
+  const float4 st = strength * tint;
+  float4 r = c.s048c + st.x * fmax(gl.s048c, 0.0f);
+  float4 gg = c.s159d + st.y * fmax(gl.s159d, 0.0f);
+  float4 b = c.s26ae + st.z * fmax(gl.s26ae, 0.0f);
+  if(additive != 1)
   {
-    const int sx = qx * 4 + l + dx;
-    float4 c = (float4)(0.0f);
-    if(sx >= 0 && sx < swidth && sy >= 0 && sy < sheight)
-      c = clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx, src));
-    /* PSF >= 0 and h >= 0: clamp the FFT's round-off (~1e-16 x energy) at 0 */
-    float4 r = c + strength * tint * (float4)(fmax(gg[l].xyz, 0.0f), 0.0f);
-    if(additive == 0) r -= strength * scatter_highlight(c, threshold, knee, boost);
-    if(additive == 2) r -= strength * tint * scatter_highlight(c, threshold, knee, boost);
-    r = clamp(r, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
-    r.w = c.w;
-    o[l] = r;
+    float4 hr = c.s048c, hg = c.s159d, hb = c.s26ae;
+    scatter_highlight4(&hr, &hg, &hb, threshold, knee, boost);
+    const float4 k = additive == 0 ? (float4)strength : st;
+    r -= k.x * hr;
+    gg -= k.y * hg;
+    b -= k.z * hb;
   }
-  vstore16((float16)(o[0], o[1], o[2], o[3]), 0, dst + i);
+  r = clamp(r, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
+  gg = clamp(gg, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
+  b = clamp(b, -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
+  const float4 a = c.s37bf;
+  vstore16((float16)(r.x, gg.x, b.x, a.x, r.y, gg.y, b.y, a.y, r.z, gg.z, b.z, a.z,
+                     r.w, gg.w, b.w, a.w), 0, dst + i);
 }
 
 #define SCATTER_KERNELS(effect)                                                               \
@@ -119,6 +195,15 @@ kernel void effect##_mix(global const float *src, const int spitch, const int sw
 {                                                                                             \
   scatter_mix_body(src, spitch, swidth, sheight, g, dst, pitch, height, dx, dy, strength,     \
                    tint, threshold, knee, boost, additive);                                   \
+}                                                                                             \
+kernel void effect##_highlights_at(global const float *src, const int spitch,                 \
+                                   const int swidth, const int sheight, const int dx,         \
+                                   const int dy, global float *dst, const int pitch,          \
+                                   const int width, const int height, const float threshold,  \
+                                   const float knee, const float boost)                       \
+{                                                                                             \
+  scatter_highlights_at_body(src, spitch, swidth, sheight, dx, dy, dst, pitch, width, height, \
+                             threshold, knee, boost);                                         \
 }
 
 /* Hard-threshold bright-pass of one source pixel: RGB * max(lum - t, 0) / lum, non-finite

@@ -168,10 +168,13 @@ def test_float64_transforms_of_a_cpu_device_run_on_the_host(rt, rng, monkeypatch
             knl.function_name) or launch(knl, *a, **kw))
         for chunk in (fftconv.HOST_CHUNK_BYTES, 1):      # 1: a row or column per task
             monkeypatch.setattr(fftconv, "HOST_CHUNK_BYTES", chunk)
+            monkeypatch.setattr(fftconv, "HOST_COLUMN_BYTES", min(chunk, fftconv.HOST_COLUMN_BYTES))
             fftconv.clear_caches(rt)
             got = run(rt, src, k, win, out, precision="float64")
             assert "fftconv.plan" not in rt.cache.stats()["owners"]   # no VkFFT plan
             assert "fftconv_pack" not in launched     # the rows are read from the image
+            assert "fftconv_unpack" not in launched   # and the kept rows written to the output
+            assert rt.cache.stats()["owners"]["fftconv.host_plane"] > 0   # one plane, kept
             np.testing.assert_allclose(got, vkfft, rtol=1e-6, atol=1e-12 * want.max())
             np.testing.assert_allclose(got[..., :3], want, rtol=1e-5, atol=1e-12 * want.max())
 

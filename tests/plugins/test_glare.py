@@ -264,3 +264,46 @@ def test_glare_in_blocks_is_the_one_grid_glare(rt, rng, monkeypatch, quality):
         assert np.abs(got - want).max() <= 1e-6 * want.max()
         m = want[..., :3] >= 1e-3                 # hard-cases.md case 1, as one grid
         assert (np.abs(got - want)[..., :3][m] / want[..., :3][m]).max() <= 1e-4
+
+
+# -- issue 37: glare's CPU per frame ----------------------------------------------------------
+def test_glare_final_copies_no_highlights_and_unpacks_nothing(rt, rng, monkeypatch):
+    # the support's highlights come straight from the source (no reframed copy), the host's
+    # float64 transforms write the output themselves (no unpacking kernel) through one
+    # complex plane the cache keeps from one frame to the next
+    from clfx.fx import fftconv
+    src = scene(rng, 64, 96)
+    p = Glare.params(strength=0.2, size=0.3)
+    fftconv.clear_caches(rt)
+    launched = []
+    real = rt.launch
+    monkeypatch.setattr(rt, "launch", lambda knl, *a, **kw: launched.append(
+        knl.function_name) or real(knl, *a, **kw))
+    got = render_effect(rt, Glare(), p, src, quality="final")
+    assert "glare_highlights_at" in launched
+    assert not {"image_reframe", "fftconv_unpack", "fftconv_pack"} & set(launched)
+    assert rt.cache.stats()["owners"].get("fftconv.host_plane", 0) > 0
+    again = render_effect(rt, Glare(), p, src, quality="final")
+    assert np.array_equal(got.view(np.uint32), again.view(np.uint32))
+    want = oracle(src, p)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("rect", [Rect(3, 2, 21, 13), Rect(-5, -3, 14, 9), Rect(20, 10, 40, 30)])
+def test_highlights_at_are_a_reframed_copys_highlights(rt, rng, rect):
+    # <effect>_highlights_at over a part of the source (past its edges too) gives the bits
+    # of the highlights taken in place of a reframed copy of that part
+    src = rng.uniform(-1.0, 6.0, (17, 29, 4)).astype(np.float32)
+    src[4, 5, 1], src[6, 7, 0] = np.nan, np.inf
+    img = rt.upload(src)
+    args = (1.0, 0.5, 0.0)
+    sub = rt.reframe(img, rect)
+    hl = rt.kernel("glare.cl", "glare_highlights")
+    rt.launch(hl, (sub.pitch // 4, sub.height), sub, sub, sub.pitch, sub.height, *args)
+    h = rt.image(rect, 4)
+    dx, dy = rect.offset_in(img.window)
+    rt.launch(rt.kernel("glare.cl", "glare_highlights_at"), (h.pitch // 4, h.height), img,
+              img.pitch, img.width, img.height, dx, dy, h, h.pitch, h.width, h.height, *args)
+    want = rt.from_device(sub, np.float32, sub.pitch * sub.height * 4)
+    got = rt.from_device(h, np.float32, h.pitch * h.height * 4)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))

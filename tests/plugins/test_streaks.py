@@ -716,3 +716,74 @@ def test_star_filter_spikes_do_not_fan_out_the_star_rays():
             for r in (15, 25) for a in range(360)]
     lit = np.mean(np.array(ring) > 1e-3 * np.max(ring))
     assert lit < 0.25, lit
+
+
+# -- issue 37: final's passes over the spans within each ray's reach ---------------------------
+def test_final_passes_run_only_within_the_rays_reach_of_the_lights(rt, monkeypatch):
+    # a small light in a 256 x 192 frame: the rays' passes (and the bright pixels, the seeds)
+    # run over row spans near it, not over the frame's rows; the streaks the same bits as the
+    # whole rows' (streamed below), and the oracle's
+    import clfx.plugins.streaks as mod
+    src = np.zeros((192, 256, 4), np.float32)
+    src[..., 3] = 1.0
+    src[150:153, 40:43, :3] = 900.0
+    p = Streaks.params(**{**PARAMS, "length": 0.1, "streaks": 4})
+    launched = []
+    real = rt.launch
+
+    def spy(knl, size, *a, **kw):
+        launched.append((knl.function_name, int(np.prod(size)) * (4 if knl.function_name in (
+            "streaks_pass", "streaks_clear") else 1)))
+        return real(knl, size, *a, **kw)
+
+    monkeypatch.setattr(rt, "launch", spy)
+    got = render_effect(rt, Streaks(), p, src)
+    px = {name: max(n for k, n in launched if k == name) for name, _ in launched}
+    assert px["streaks_pass"] < 0.15 * 256 * 192      # the whole rows: 256 x 192 per pass
+    assert px["streaks_bright"] < 0.02 * 256 * 192 and px["streaks_seeds"] <= 32 * 32
+    assert "streaks_dilate" not in px                  # the host draws the seeds' windows
+    monkeypatch.setattr(rt, "launch", real)
+    monkeypatch.setattr(mod, "streams", lambda *a: True)
+    whole = render_effect(rt, Streaks(), p, src)
+    assert np.array_equal(got.view(np.uint32), whole.view(np.uint32))
+    want = reference(src, **p.as_dict())
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("kw", [dict(core=0.0, angle=17.0, length=0.3),
+                                dict(core=0.0, mode="aperture", blades=7, length=0.2),
+                                dict(angle=100.0, length=0.5, streaks=3)],
+                         ids=["core0", "core0-aperture", "steep"])
+def test_spans_give_the_whole_rows_bits_after_another_frame(rt, rng, monkeypatch, kw):
+    # what a ray's passes read outside its spans is cleared first: a frame after one with
+    # lights elsewhere (the pool's buffers hold its streaks) has the bits of the whole rows;
+    # core 0: the seeds run over the whole frame and mark the blocks with light
+    import clfx.plugins.streaks as mod
+    p = Streaks.params(**{**PARAMS, **kw})
+    cam = Camera(blades=7)
+    other = lights(rng, (61, 133))[::-1, ::-1].copy()
+    src = lights(rng, (61, 133))
+    src[40:44, 100:103, :3] = -5.0                     # negatives and a NaN near a light
+    src[41, 101, 1] = np.nan
+    render_effect(rt, Streaks(), p, other, camera=cam)
+    got = render_effect(rt, Streaks(), p, src, camera=cam)
+    monkeypatch.setattr(mod, "streams", lambda *a: True)
+    whole = render_effect(rt, Streaks(), p, src, camera=cam)
+    assert np.array_equal(got.view(np.uint32), whole.view(np.uint32))
+
+
+def test_pass_spans_cover_each_rays_streak():
+    # the row spans of a ray hold every pixel its streak can reach: a box swept along the
+    # ray, row by row (a diagonal band, not its bounding box)
+    import clfx.plugins.streaks as mod
+    iv = mod.raster(64, 48, np.array([[10.0, 30.0, 11.0, 31.0]]), (1.0, -1.0), (0.0, 20.0))
+    cover = np.zeros((48, 16), bool)
+    for y, q0, q1 in iv:
+        cover[y, q0:q1] = True
+    for k in range(21):                                 # the box's pixels, k steps on
+        for x, y in ((10, 30), (11, 31), (10, 31), (11, 30)):
+            assert cover[y - k, (x + k) // 4]
+    assert cover.sum() < 0.2 * cover.size
+    spans = mod.row_spans(iv, 64)
+    assert (spans[:, 0] % 4 == 0).all() and (spans[:, 2] - spans[:, 0] <= mod.SPAN).all()
+    assert (np.diff(spans[:, 1]) >= 0).all()           # row order
