@@ -370,3 +370,48 @@ def test_a_device_without_float64_says_so_once_and_reference_still_renders(rt, m
     err = [line for line in capfd.readouterr().err.splitlines() if "float64" in line]
     assert len(err) == 1, err
     assert "has no float64 (cl_khr_fp64)" in err[0] and "reference" in err[0]
+
+
+@pytest.mark.parametrize("size, want", [
+    ((241, 1088), (241, 1)),     # grain_noise at 1080p: PoCL 3.1 chose (1, 136), columns
+    ((493, 1128), (493, 1)),     # dof_prepare before round 1: PoCL chose (1, 1128)
+    ((60, 34), (60, 1)),         # dof_tile_cap: PoCL ran the whole grid as one group
+    ((8, 2255), (8, 5)),         # narrow rows stacked, up to GROUP_ITEMS work-items
+    ((32, 10), (32, 1)),         # few rows: still one group per row
+    ((4000, 2), (1000, 1)),      # two long rows: split so every core gets groups
+    ((1920, 1080), (960, 1)),    # a row wider than the device's groups: its largest part
+    ((4072,), (509,)), ((4071,), (177,)), ((7,), (1,)),
+])
+def test_row_groups_are_whole_rows_that_divide_the_grid(size, want):
+    got = runtime.row_groups(size, 1024, (1024, 1024, 1024), 2)
+    assert got == want
+    assert all(g % l == 0 for g, l in zip(size, got))
+    groups = np.prod([g // l for g, l in zip(size, got)])
+    assert groups >= min(8, np.prod(size))
+
+
+def test_row_groups_leave_3d_grids_to_the_device():
+    assert runtime.row_groups((8, 8, 8), 4096, (4096,) * 3, 2) is None
+
+
+def test_launch_without_a_local_size_runs_rows_in_groups_on_a_cpu(rt, tmp_path, monkeypatch):
+    """A launch that names no work-group size gets row groups on a CPU device
+    (runtime.row_groups): an odd width no longer makes PoCL 3.1 run one group for the whole
+    grid (241 x 12 here: one thread) or groups one column wide; every work-item still runs
+    once."""
+    (tmp_path / "probe.cl").write_text(
+        "kernel void probe(global int *o)\n"
+        "{ const int i = get_global_id(1) * get_global_size(0) + get_global_id(0);\n"
+        "  o[4 * i] = get_local_size(0); o[4 * i + 1] = get_local_size(1);\n"
+        "  o[4 * i + 2] = get_num_groups(0) * get_num_groups(1); o[4 * i + 3] = i; }\n")
+    monkeypatch.setattr(rt, "kernel_dir", tmp_path)
+    knl = rt.kernel("probe.cl", "probe", arg_types="buf o")
+    out = rt.to_device(np.full(4 * 241 * 12, -1, np.int32))
+    rt.launch(knl, (241, 12), out)
+    got = np.empty(4 * 241 * 12, np.int32)
+    rt.cl.enqueue_copy(rt.queue, got, out.buffer)
+    rt.finish()
+    got = got.reshape(-1, 4)
+    np.testing.assert_array_equal(got[:, 3], np.arange(241 * 12))
+    if rt.shares_host_cores:
+        assert tuple(got[0, :2]) == (241, 1) and got[0, 2] == 12

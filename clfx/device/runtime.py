@@ -422,6 +422,57 @@ class DeviceImage:
         return self.runtime.image(window or self.window, channels or self.channels)
 
 
+
+GROUPS_PER_UNIT = 4
+""":func:`row_groups` leaves at least this many work-groups per compute unit where the grid
+allows, so no core idles behind another's last group."""
+
+GROUP_ITEMS = 64
+"""Rows narrower than this are stacked into one work-group (:func:`row_groups`) up to this
+many work-items."""
+
+
+def _divisor_at_most(n: int, cap: int) -> int:
+    """The largest divisor of ``n`` that is at most ``cap`` (1 at least)."""
+    for d in range(max(1, min(n, cap)), 0, -1):
+        if n % d == 0:
+            return d
+    return 1
+
+
+def row_groups(global_size: tuple, max_items: int, max_sizes: tuple,
+               units: int) -> tuple | None:
+    """The work-group size for a launch of ``global_size`` (x first) that names none, on a CPU
+    device: whole rows (x) per group, rows narrower than ``GROUP_ITEMS`` stacked, at least
+    ``GROUPS_PER_UNIT`` groups per compute unit where the grid has them; always an exact
+    divisor of the global size, so the grid is unchanged.  None (the device chooses) for
+    3-D grids.
+
+    A CPU device runs a group's work-items in a loop on one thread: a group along a row walks
+    memory in order, and every core gets groups.  PoCL 3.1's own choice
+    (``pocl_default_local_size_optimizer``) keeps a dimension's size a multiple of
+    gcd(global, 8), and where that is 1 (an odd width) it sets the group's width to 1: the
+    cinema look's grain_noise at 1080p, (241, 1088), ran in groups of (1, 136), one column
+    each (24.0 ms of CPU; whole rows 21.0); dof_prepare at (493, 1128) in (1, 1128), 2.5x
+    slower than at 496 wide.  Where the whole grid fits one group (dof_tile_cap, (60, 34))
+    it ran on one thread (wall 5.0 ms; in rows 2.0)."""
+    if len(global_size) not in (1, 2):
+        return None
+    gx = int(global_size[0])
+    gy = int(global_size[1]) if len(global_size) == 2 else 1
+    want = GROUPS_PER_UNIT * max(1, int(units))
+    cap_x = max(1, min(max_items, int(max_sizes[0])))
+    # a row's worth, or its largest part that leaves `want` groups when rows are few
+    lx = _divisor_at_most(gx, min(cap_x, max(1, gx * gy // want)))
+    if len(global_size) == 1:
+        return (lx,)
+    ly = 1
+    if lx == gx and lx < GROUP_ITEMS:
+        cap_y = min(GROUP_ITEMS // lx, max(1, gy // want), int(max_sizes[1]), max_items // lx)
+        ly = _divisor_at_most(gy, max(1, cap_y))
+    return (lx, ly)
+
+
 class Runtime:
     """An OpenCL context, queue, program cache and buffer pool for one process.
 
@@ -451,6 +502,8 @@ class Runtime:
         self._kernels: dict = {}
         self._signatures: dict = {}
         """Each kernel's declaration and dtypes, by its handle (``Kernel.int_ptr``)."""
+        self._groups: dict = {}
+        """:meth:`_row_groups`'s answers, by kernel handle and global size."""
         self._lock = threading.RLock()
         self.kernel_dir = kernel_dir()
         self.builds: list[BuildRecord] = []
@@ -637,6 +690,8 @@ class Runtime:
         gsize = tuple(max(1, int(n)) for n in global_size)
         if local is not None:
             gsize = tuple(-(-g // l) * l for g, l in zip(gsize, local))
+        elif self.shares_host_cores:
+            local = self._row_groups(knl, gsize)
         ev = knl(self.queue, gsize, local, *self._checked_args(knl, args))
         # Submit now: PoCL 3.1 (pthread) left a kernel queued behind a running one for up
         # to ~4 ms more at random (distortion draft at 1080p, two kernels: 5.0 or 9.3 ms;
@@ -645,6 +700,27 @@ class Runtime:
         if wait:
             ev.wait()
         return ev
+
+    def _row_groups(self, knl, gsize: tuple) -> tuple | None:
+        """The work-group size of a launch that leaves it to the device, on a CPU device
+        (:func:`row_groups`, per kernel and global size)."""
+        key = (knl.int_ptr, gsize)
+        try:
+            return self._groups[key]
+        except KeyError:
+            pass
+        try:
+            most = int(knl.get_work_group_info(self.cl.kernel_work_group_info.WORK_GROUP_SIZE,
+                                               self.device))
+        except self.cl.Error:
+            most = int(self.device.max_work_group_size)
+        local = row_groups(gsize, min(most, int(self.device.max_work_group_size)),
+                           tuple(int(n) for n in self.device.max_work_item_sizes),
+                           self.compute_units)
+        if len(self._groups) > 4096:
+            self._groups.clear()
+        self._groups[key] = local
+        return local
 
     def _checked_args(self, knl, args) -> list:
         """``args`` for ``knl``'s enqueue, checked against its declaration: buffers (a
