@@ -399,13 +399,13 @@ def test_launch_without_a_local_size_runs_rows_in_groups_on_a_cpu(rt, tmp_path, 
     (runtime.row_groups): an odd width no longer makes PoCL 3.1 run one group for the whole
     grid (241 x 12 here: one thread) or groups one column wide; every work-item still runs
     once."""
-    (tmp_path / "probe.cl").write_text(
-        "kernel void probe(global int *o)\n"
+    (tmp_path / "groups.cl").write_text(
+        "kernel void groups_probe(global int *o)\n"
         "{ const int i = get_global_id(1) * get_global_size(0) + get_global_id(0);\n"
         "  o[4 * i] = get_local_size(0); o[4 * i + 1] = get_local_size(1);\n"
         "  o[4 * i + 2] = get_num_groups(0) * get_num_groups(1); o[4 * i + 3] = i; }\n")
     monkeypatch.setattr(rt, "kernel_dir", tmp_path)
-    knl = rt.kernel("probe.cl", "probe", arg_types="buf o")
+    knl = rt.kernel("groups.cl", "groups_probe", arg_types="buf o")
     out = rt.to_device(np.full(4 * 241 * 12, -1, np.int32))
     rt.launch(knl, (241, 12), out)
     got = np.empty(4 * 241 * 12, np.int32)
