@@ -697,9 +697,6 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const int any_near = dof_any4(p_near);
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
-  /* the farthest a tap's light spreads to a pixel, beyond its own radius: a near pixel's
-     (its far field reaches max(|rq|, |r0|); a far pixel's at most |rq|) */
-  const float4 r_near = select((float4)(0.0f), -r0, p_near);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
   for(int i = first; i < first + count.x; i++)
   {
@@ -711,10 +708,6 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
     if(!dof_any4(aq > 0.0f))
     {
-      /* a tap that covers none of the 4 pixels adds exact zeros (its near ramp at |rq|,
-         its far ramp at rf <= max(|rq|, r_near): both 0 at or below this bound; its colour
-         is finite): skipped before its colour's load */
-      if(dof_all4((fmax(fabs(rq), r_near) - fmin(tp.s2, tp.s3)) * inv_s + 0.5f <= 0.0f)) continue;
       const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4)
                         * scale;
       dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
