@@ -519,6 +519,20 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
 
 #define LANES(v) ((v).s0000111122223333)
 
+/* any() / all() of an int4 mask (-1 / 0 lanes) as vector ORs / ANDs and one test: PoCL's
+ * builtins test the lanes one by one, a branch each, in the gather's per-tap tests. */
+inline int dof_any4(int4 m)
+{
+  m |= m.s2301;
+  return (m.s0 | m.s1) < 0;
+}
+
+inline int dof_all4(int4 m)
+{
+  m &= m.s2301;
+  return (m.s0 & m.s1) < 0;
+}
+
 /* Luminance of the 4 pixels of a float16. */
 inline float4 dof_lum4(float16 c)
 {
@@ -607,10 +621,10 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   /* near field: scatter-as-gather, the tap's light spread over its own CoC area (a tap
      behind every pixel adds exact zeros: skipped, as is the far field of a tap in front of
      every pixel, whose far weights are 0; the sums never hold -0, so the bits stay) */
-  if(any(q_near))
+  if(dof_any4(q_near))
   {
     dof_tap_near(s, c, arq, q_near, frac, tp, inv_s CATEYE_PASS);
-    if(all(q_near)) return;
+    if(dof_all4(q_near)) return;
   }
 #if DOF_CATEYE
   const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
@@ -634,7 +648,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near)
                       * frac;
   float4 wf = cov_f * norm;
-  if(any_near && any(p_near & ~q_near))
+  if(any_near && dof_any4(p_near & ~q_near))
   {
     /* behind a near p, the part of the coverage the tap's own CoC does not give is a
        guess at hidden background: its highlights are capped (a light beside a blurred
@@ -680,7 +694,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
 {
   const float16 c0 = c0_in * scale;
   const int4 p_near = r0 < -NEAR_EPS;
-  const int any_near = any(p_near);
+  const int any_near = dof_any4(p_near);
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
@@ -690,14 +704,16 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
     const int lv = (int)tp.s7;
     const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
-    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     const float4 rq = vload4(0, coc + at);
     const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
-    if(!any(aq > 0.0f))
+    if(!dof_any4(aq > 0.0f))
     {
+      const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4)
+                        * scale;
       dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
       continue;
     }
+    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
        C + (1 - a) d at the near layer's, each standing for its coverage (the first tap is
        the centre: in one of a mixed pixel's two gathers only that gather's part) */
@@ -722,11 +738,11 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float4 rq = vload4(0, coc + at);
     const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
     const int4 sq = aq > 0.0f;
-    const int split = any(sq);
+    const int split = dof_any4(sq);
     const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
     const float4 rq_far = select(rq, rr.s1357, sq), rq_near = select(rq, rr.s0246, sq);
     const int4 far_near = rq_far < -NEAR_EPS, near_near = rq_near < -NEAR_EPS;
-    if(!any(far_near) && !(split && any(near_near))) continue;
+    if(!dof_any4(far_near) && !(split && dof_any4(near_near))) continue;
     const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
     const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     if(!split)
@@ -736,10 +752,10 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     }
     const float16 d = vload16(0, mixd + at * 4) * scale;
     const int16 sq16 = LANES(sq);
-    if(any(far_near))
+    if(dof_any4(far_near))
       dof_tap_near(&s, select(c, c - d * LANES(aq), sq16), fabs(rq_far), far_near, one - aq,
                    tp, inv_s CATEYE_PASS);
-    if(any(near_near))
+    if(dof_any4(near_near))
       dof_tap_near(&s, select(c, c + d * LANES(one - aq), sq16), fabs(rq_near), near_near,
                    aq, tp, inv_s CATEYE_PASS);
   }

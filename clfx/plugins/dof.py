@@ -817,7 +817,8 @@ class Dof(Plugin):
                             **ctx.luminance_defines), (tx, ty),
                   src, src.pitch, src.window.x0 - window.x0,
                   src.window.y0 - window.y0, src.width, src.height,
-                  window.width, window.height, TILE, tx, ty, log_mean)
+                  window.width, window.height, TILE, tx, ty, log_mean,
+                  local=(8, 2))   # without: PoCL runs the 60 x 34 tiles of 1080p as one group
         offsets = lens.offsets()
         gathers = tuple(self._plan_gather(rt, p, ctx, plan, tiles, off) for off in offsets)
         said = [gathers[0].note]

@@ -116,6 +116,28 @@ def test_tap_counts_of_a_disk():
     assert counts[0] == counts[1] == 1   # up to 1/2 px: the pixel itself
 
 
+def test_gather_mask_tests_match_any_and_all(rt, tmp_path):
+    """dof_any4 / dof_all4 (the gather's branch-free per-tap tests) agree with OpenCL's
+    any() / all() on every mask of 4 lanes."""
+    from pathlib import Path
+
+    from clfx.device.runtime import Runtime
+
+    dof_cl = Path(__file__).resolve().parents[2] / "kernels" / "dof.cl"
+    (tmp_path / "probe.cl").write_text(
+        f'#include "{dof_cl}"\n'
+        "kernel void probe(global int *out) {\n"
+        "  const int i = get_global_id(0);\n"
+        "  const int4 m = -(int4)(i & 1, (i >> 1) & 1, (i >> 2) & 1, (i >> 3) & 1);\n"
+        "  out[2 * i] = dof_any4(m) == any(m); out[2 * i + 1] = dof_all4(m) == all(m); }\n")
+    probe = Runtime(device=rt.device)
+    probe.kernel_dir = tmp_path
+    knl = probe.kernel("probe.cl", "probe", arg_types="buf out")
+    out = probe.to_device(np.zeros(32, np.int32))
+    probe.launch(knl, (16,), out, wait=True)
+    assert probe.from_device(out, np.int32, 32).tolist() == [1] * 32
+
+
 def dof_scene(shape=(96, 128)):
     """A far background (CoC ~10 px), an in-focus subject and a blurred near blob, with
     highlights on each."""
