@@ -741,7 +741,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
         const float4 rho = clamp(0.5f + fmin(ay - t0 * sy, t1 * sy - ay) / hell, 0.0f, 1.0f)
 #endif
                          * clamp(1.5f - perp, 0.0f, 1.0f)
-                         * clamp(len / MIN_BLUR - 1.0f, 0.0f, 1.0f);  /* static pixels never occlude */
+                         * clamp(len / MIN_BLUR - 1.0f, 0.0f, 1.0f);  /* statics never occlude */
         const float4 wf = f * rho * (ell / fmax(len, hell));
         if(any(wf > 0.0f))
         {
