@@ -29,10 +29,12 @@ Algorithms
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
     host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
-    (no packed copy; rows of zeros skipped) and transformed a channel at a time in one
-    complex plane the runtime's cache keeps, in row and column chunks on every core, the
-    inverse rows of the kept output alone written into the mapped output (no unpacking
-    kernel) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
+    (no packed copy; rows of zeros skipped) and transformed in complex planes the runtime's
+    cache keeps (one per core, up to a channel each: :func:`host_planes_in_flight`), in row
+    and column chunks on every core, the channels' passes side by side so that no core waits
+    at the end of a pass (`_run_lanes`), the inverse rows of the kept output alone written
+    into the mapped output (no unpacking kernel, no fill: the tasks zero what they do not
+    write) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
     pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
