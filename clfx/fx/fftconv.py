@@ -29,10 +29,12 @@ Algorithms
     error floor (~1e-7 x total energy spread over every pixel: 1-7 % relative error in 1e-2
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
     host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
-    (no packed copy; rows of zeros skipped) and transformed a channel at a time in one
-    complex plane the runtime's cache keeps, in row and column chunks on every core, the
-    inverse rows of the kept output alone written into the mapped output (no unpacking
-    kernel) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
+    (no packed copy; rows of zeros skipped) and transformed in complex planes the runtime's
+    cache keeps (one per core, up to a channel each: :func:`host_planes_in_flight`), in row
+    and column chunks on every core, the channels' passes side by side so that no core waits
+    at the end of a pass (`_run_lanes`), the inverse rows of the kept output alone written
+    into the mapped output (no unpacking kernel, no fill: the tasks zero what they do not
+    write) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
     pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
@@ -90,6 +92,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
@@ -536,24 +539,27 @@ def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray
     ``spec`` (:func:`_host_spectrum`, 1 or 3 planes) on the host (:func:`host_fft`), on the
     ``grid`` = (N1, N2), into ``dst`` (mapped): its pixel (x, y) is the grid's ((x + dx) mod
     N2, (y + dy) mod N1) (``offset`` = (dx, dy)) inside ``kept`` = (x0, y0, x1, y1), 0
-    elsewhere and in alpha.  One channel at a time in one grid-sized complex plane kept in
-    the runtime's cache (`_host_plane`); the inverse row transforms run for the rows kept
-    alone and write ``dst`` themselves: no padded planes for VkFFT, no float64 grid of
-    every channel (74 MiB at 1080p, a fresh allocation each frame once the pool evicted it,
-    ~50 ms of page faults), no unpacking kernel."""
+    elsewhere and in alpha.
+
+    Each channel's passes run in grid-sized complex planes kept in the runtime's cache
+    (`_host_planes`), :func:`host_planes_in_flight` channels at once (`_run_lanes`: a
+    channel's forward rows start while another's columns finish, so no core waits at a
+    pass's end); the inverse row transforms run for the rows kept alone and write ``dst``
+    themselves, and the tasks zero what they do not write (no fill of ``dst`` before, no
+    serial pass): no padded planes for VkFFT, no unpacking kernel."""
     cl = rt.cl
     n1, n2 = grid
     sx, sy, sw, sh = support
     x0, y0, x1, y1 = kept
     nch = 1 if img.channels == 1 else 3
-    rt.fill(dst, 0.0)
     # the kept pixels' grid rows and columns: one run each, or two where they wrap
     gy, gx = ((np.arange(lo, hi) + d) % n for lo, hi, d, n in ((y0, y1, offset[1], n1),
                                                                  (x0, x1, offset[0], n2)))
     runs = np.split(np.arange(y0, y1), np.flatnonzero(np.diff(gy) != 1) + 1)
     cols = slice(gx[0], gx[0] + len(gx)) if len(gx) and gx[-1] - gx[0] == len(gx) - 1 \
         else gx
-    shelf, plane = _host_plane(rt, n1, n2)
+    spans = [(int(gy[r[0] - y0]), int(gy[r[-1] - y0]) + 1) for r in runs if len(r)]
+    shelf, planes, shelved = _host_planes(rt, n1, n2, host_planes_in_flight(n1, n2, nch))
     try:
         out, _ = cl.enqueue_map_buffer(rt.queue, dst.buffer, cl.map_flags.WRITE, 0,
                                        (max(dst.height, 1), dst.pitch, dst.channels),
@@ -563,46 +569,93 @@ def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray
                                               (max(img.height, 1), img.pitch, img.channels),
                                               np.float32)
             try:
-                for c in range(nch):
-                    def rows(b, r0, r1, c=c):
+                def channel(c):
+                    def rows(r0, r1):
                         x = pixels[sy + r0:sy + r1, sx:sx + sw, c].astype(np.float64)
                         if not np.isfinite(x.sum()):    # float32 values: no float64 overflow
                             x[~np.isfinite(x)] = 0.0
                         return x
 
-                    def kept_rows(r0, r1, values, c=c):   # grid rows r0.. of one run
+                    def kept_rows(r0, r1, values):   # grid rows r0.. of one run
                         ys = r0 - gy[0] + y0 if r0 >= gy[0] else r0 + n1 - gy[0] + y0
-                        out[ys:ys + r1 - r0, x0:x1, c] = values[:, cols]
+                        block = out[ys:ys + r1 - r0]
+                        block[:, x0:x1, c] = values[:, cols]
+                        if c == 0:    # alpha (the channels past the colour ones) is 0
+                            block[:, x0:x1, nch:] = 0.0
+                    return rows, kept_rows, spec[c] if len(spec) > 1 else spec[0]
 
-                    sink = ([(int(gy[r[0] - y0]), int(gy[r[-1] - y0]) + 1) for r in runs
-                             if len(r)], kept_rows)
-                    _host_transform(plane[None], sh, spec[c:c + 1] if len(spec) > 1 else spec,
-                                    rows, sink)
+                lanes = [[] for _ in planes]
+                for c in range(nch):
+                    rows, sink, s = channel(c)
+                    lanes[c % len(planes)] += _host_passes(planes[c % len(planes)], sh, s,
+                                                           rows, (spans, sink))
+                lanes.append([_zero_outside(out, kept)])
+                _run_lanes(lanes)
             finally:
                 pixels.base.release()
         finally:
             out.base.release()
     finally:
-        if not shelf:   # back for the next call (none took its place meanwhile)
-            shelf.append(plane)
+        shelf.extend(shelved)   # back for the next call
 
 
-def _host_plane(rt, n1: int, n2: int) -> tuple[list, np.ndarray]:
-    """(shelf, plane): an N1 x (N2 / 2 + 1) complex128 plane, the host transforms' work
-    (`_host_convolve`), taken off the shelf the runtime's cache keeps for this grid (its
-    pages touched when it is made: the cache counts that cost, so the pool's idle buffers
-    go before it), or a new one while another call holds it.  Put it back on the shelf
-    when done."""
+def _zero_outside(out: np.ndarray, kept: tuple[int, int, int, int]) -> list:
+    """Tasks that zero the mapped image ``out`` (height x pitch x channels) outside ``kept`` =
+    (x0, y0, x1, y1): whole rows above and below, the columns left and right of it (the row
+    padding included)."""
+    x0, y0, x1, y1 = kept
+    height, pitch, channels = out.shape
+    step = max(1, HOST_CHUNK_BYTES // (pitch * channels * 4))
+
+    def zero(r0, r1):
+        inside = out[max(r0, y0):min(r1, y1)]
+        inside[:, :x0] = 0.0
+        inside[:, x1:] = 0.0
+        out[r0:min(r1, y0)] = 0.0
+        out[max(r0, y1):r1] = 0.0
+
+    if x0 <= 0 and x1 >= pitch:   # only whole rows
+        spans = [(0, y0), (y1, height)]
+    else:
+        spans = [(0, height)]
+    return [functools.partial(zero, r, min(r + step, hi)) for lo, hi in spans
+            for r in range(lo, hi, step)]
+
+
+HOST_PLANE_BYTES = 2 ** 27
+"""Most bytes of the complex planes one host convolution transforms channels in at once
+(:func:`host_planes_in_flight`): 1080p glare's 1372 x 1126 complex128 planes are 24.7 MiB
+(2 on 2 cores, 3 on more), 4K's (~3300 x 2476) 130 MiB: one, its channels one after another."""
+
+
+def host_planes_in_flight(n1: int, n2: int, channels: int) -> int:
+    """How many channels a host convolution on an (N1, N2) grid transforms at once: one per
+    core, at most ``channels``, within :data:`HOST_PLANE_BYTES` (at least one)."""
+    plane = n1 * (n2 // 2 + 1) * 16
+    return max(1, min(channels, available_cores(), HOST_PLANE_BYTES // plane))
+
+
+def _host_planes(rt, n1: int, n2: int, count: int) -> tuple[list, list[np.ndarray], list]:
+    """(shelf, planes, shelved): ``count`` N1 x (N2 / 2 + 1) complex128 planes, the host
+    transforms' work (`_host_convolve`), taken off the shelf the runtime's cache keeps for
+    this grid (their pages touched when they are made: the cache counts that cost, so the
+    pool's idle buffers go before them; ``shelved``: those taken), or new ones while another
+    call holds them.  Put ``shelved`` back on the shelf when done."""
     def build():
-        plane = np.empty((n1, n2 // 2 + 1), np.complex128)
-        plane.fill(0.0)
-        return [plane]
+        planes = [np.empty((n1, n2 // 2 + 1), np.complex128) for _ in range(count)]
+        for plane in planes:
+            plane.fill(0.0)
+        return planes
 
-    shelf = rt.cache.get(("fftconv.host_plane", n1, n2), build)
-    try:
-        return shelf, shelf.pop()
-    except IndexError:
-        return shelf, np.empty((n1, n2 // 2 + 1), np.complex128)
+    shelf = rt.cache.get(("fftconv.host_plane", n1, n2, count), build)
+    shelved = []
+    while len(shelved) < count:
+        try:
+            shelved.append(shelf.pop())
+        except IndexError:
+            break
+    fresh = [np.empty((n1, n2 // 2 + 1), np.complex128) for _ in range(count - len(shelved))]
+    return shelf, shelved + fresh, shelved
 
 
 HOST_CHUNK_BYTES = 2 ** 21
@@ -617,72 +670,132 @@ plane's forward, product and inverse, min of 8: 36-38 ms in 16-32 columns, 41 in
 columns (2 MiB), 59 whole)."""
 
 
-def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None,
-                    source=None, sink=None) -> None:
+def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None) -> None:
     """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout VkFFT keeps, or B x
     N1 x (N2 / 2 + 1) complex128): the forward transform of the first ``rows`` rows' N2
-    reals (``source(b, r0, r1)``: plane b's rows r0..r1, at most N2 values each, the rest 0;
-    default ``planes`` itself; the rows after ``rows`` are 0), then with ``spec`` (1 or B
-    spectra) the product and the inverse transform (N2 reals per row, the 1 / (N1 N2) on the
-    inverse), without it the spectrum alone.  ``sink`` = (runs, put): the inverse rows of
-    only the grid row runs [r0, r1) of ``runs``, handed to ``put(r0, r1, values)`` (one
-    plane; values (r1 - r0) x N2 float64) instead of written back.  Row and column chunks
-    of :data:`HOST_CHUNK_BYTES` go to a thread each (NumPy's transforms release the GIL)."""
+    reals (the rows after ``rows`` read as 0), then with ``spec`` (1 or B spectra) the
+    product and the inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse),
+    without it the spectrum alone: :func:`_host_passes` of each plane, the planes at once
+    (`_run_lanes`)."""
     cplx = planes if np.iscomplexobj(planes) else planes.view(np.complex128)
-    batch, n1, half = cplx.shape
+    _run_lanes([_host_passes(cplx[b], rows, None if spec is None else
+                             spec[b if len(spec) > 1 else 0]) for b in range(len(cplx))])
+
+
+def _host_passes(cplx: np.ndarray, rows: int, spec: np.ndarray | None, source=None,
+                 sink=None) -> list[list]:
+    """The passes over one N1 x (N2 / 2 + 1) complex128 plane, in order, each a list of tasks
+    (callables; a pass's tasks may run at once, after the previous pass's): the forward
+    transform of the first ``rows`` rows' N2 reals (``source(r0, r1)``: rows r0..r1, at most
+    N2 values each, the rest 0; default the plane's own reals, the r2c layout; the rows after
+    ``rows`` read as 0), then with ``spec`` the product and the inverse transform (N2 reals
+    per row, the 1 / (N1 N2) on the inverse) written back, without it the spectrum alone.
+    ``sink`` = (runs, put): the inverse rows of only the grid row runs [r0, r1) of ``runs``,
+    handed to ``put(r0, r1, values)`` (values (r1 - r0) x N2 float64) instead of written
+    back.  Row chunks of :data:`HOST_CHUNK_BYTES` and column chunks of
+    :data:`HOST_COLUMN_BYTES` are a task each (NumPy's transforms release the GIL).  Every
+    row and column is transformed alone, so the chunks change no bit of the result."""
+    n1, half = cplx.shape
     n2 = 2 * (half - 1)
     row_step = max(1, HOST_CHUNK_BYTES // (half * 16))
     col_step = max(1, HOST_COLUMN_BYTES // (n1 * 16))
     real = cplx.view(np.float64)
 
-    def forward_rows(b, r0, r1):
-        x = real[b, r0:r1, :n2] if source is None else source(b, r0, r1)
-        lit = x.any(axis=1)
-        if lit.all():
-            if source is not None:   # x is not the plane itself: straight into it
-                np.fft.rfft(x, n=n2, axis=1, out=cplx[b, r0:r1])
-            else:
-                cplx[b, r0:r1] = np.fft.rfft(x, n=n2, axis=1)
+    def forward_rows(r0, r1):
+        if source is None:   # the plane's own reals: transformed before any row is written
+            x = real[r0:r1, :n2]
+            lit = x.any(axis=1)
+            f = np.fft.rfft(x if lit.all() else x[lit], n=n2, axis=1)
+            cplx[r0:r1][~lit] = 0.0
+            cplx[r0 + np.flatnonzero(lit)] = f
             return
+        x = source(r0, r1)
         # a row of zeros transforms to zeros: glare's highlights leave a third of the rows
-        # of their support dark at 1080p
-        f = np.fft.rfft(x[lit], n=n2, axis=1)     # before the zeros: x may be the plane
-        cplx[b, r0:r1] = 0.0
-        cplx[b, r0 + np.flatnonzero(lit)] = f
+        # of their support dark at 1080p; each run of lit rows is transformed into the plane
+        lit = x.any(axis=1)
+        cplx[r0:r1][~lit] = 0.0
+        edges = np.flatnonzero(np.diff(lit, prepend=False, append=False))
+        for a, b in zip(edges[::2], edges[1::2]):
+            np.fft.rfft(x[a:b], n=n2, axis=1, out=cplx[r0 + a:r0 + b])
 
-    def columns(b, c0, c1):    # in place (out=): no temporaries, no copies back
-        f = cplx[b, :, c0:c1]
+    def columns(c0, c1):    # in place (out=): no temporaries, no copies back
+        f = cplx[:, c0:c1]
+        f[rows:] = 0.0
         np.fft.fft(f, axis=0, out=f)
         if spec is not None:
-            f *= spec[b if len(spec) > 1 else 0, :, c0:c1]
+            f *= spec[:, c0:c1]
             np.fft.ifft(f, axis=0, out=f)
 
-    def inverse_rows(b, r0, r1):
-        real[b, r0:r1, :n2] = np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1)
+    def inverse_rows(r0, r1):
+        real[r0:r1, :n2] = np.fft.irfft(cplx[r0:r1], n=n2, axis=1)
 
-    def put_rows(b, r0, r1):
-        sink[1](r0, r1, np.fft.irfft(cplx[b, r0:r1], n=n2, axis=1))
+    def put_rows(r0, r1):
+        sink[1](r0, r1, np.fft.irfft(cplx[r0:r1], n=n2, axis=1))
 
-    # the threads live as long as the transform: none is left behind in the caller's
-    # process (a refused frame starts none, tests/test_frame_limits.py)
-    with ThreadPoolExecutor(max_workers=max(1, available_cores()),
-                            thread_name_prefix="clfx-fft") as pool:
-        def run(fn, spans, step):
-            tasks = [(b, i, min(i + step, hi)) for b in range(batch) for lo, hi in spans
-                     for i in range(lo, hi, step)]
-            if len(tasks) > 1:
-                list(pool.map(lambda t: fn(*t), tasks))
-            elif tasks:
-                fn(*tasks[0])
+    def tasks(fn, spans, step):
+        return [functools.partial(fn, i, min(i + step, hi)) for lo, hi in spans
+                for i in range(lo, hi, step)]
 
-        run(forward_rows, [(0, rows)], row_step)
-        if source is not None:
-            cplx[:, rows:] = 0.0
-        run(columns, [(0, half)], col_step)
-        if spec is not None and sink is not None:
-            run(put_rows, sink[0], row_step)
-        elif spec is not None:
-            run(inverse_rows, [(0, n1)], row_step)
+    passes = [tasks(forward_rows, [(0, rows)], row_step),
+              tasks(columns, [(0, half)], col_step)]
+    if spec is not None:
+        passes.append(tasks(put_rows, sink[0], row_step) if sink is not None
+                      else tasks(inverse_rows, [(0, n1)], row_step))
+    return passes
+
+
+def _run_lanes(lanes: list[list[list]]) -> None:
+    """Run ``lanes`` (each a list of passes, a pass a list of tasks: callables) on every
+    core: a lane's passes one after another, each pass's tasks at once, the lanes side by
+    side, so a core that finishes its part of one lane's pass takes another lane's tasks
+    rather than wait.  The first error stops every lane (no new task starts) and is raised
+    once the running tasks are done.  The threads live as long as the call: none is left
+    behind in the caller's process (a refused frame starts none, tests/test_frame_limits.py)."""
+    lanes = [[p for p in lane if p] for lane in lanes]
+    lanes = [lane for lane in lanes if lane]
+    workers = max(1, available_cores())
+    if workers == 1 or sum(len(p) for lane in lanes for p in lane) <= 1:
+        for lane in lanes:
+            for task in (t for p in lane for t in p):
+                task()
+        return
+    lock = threading.Lock()
+    errors: list[BaseException] = []
+    finished = threading.Event()
+    active = [len(lanes)]
+
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="clfx-fft") as pool:
+        def start(lane, i):
+            if i == len(lane) or errors:
+                with lock:
+                    active[0] -= 1
+                    if not active[0]:
+                        finished.set()
+                return
+            left = [len(lane[i])]
+
+            def run(task):
+                try:
+                    if not errors:
+                        task()
+                except BaseException as exc:   # raised in the caller, below
+                    with lock:
+                        errors.append(exc)
+                with lock:
+                    left[0] -= 1
+                    last = not left[0]
+                if last:
+                    start(lane, i + 1)
+
+            for task in lane[i]:
+                pool.submit(run, task)
+
+        if lanes:
+            for lane in lanes:
+                start(lane, 0)
+            finished.wait()
+    if errors:
+        raise errors[0]
 
 
 def _bright_pixels(rt, img, support, split, max_points):

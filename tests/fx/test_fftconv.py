@@ -289,3 +289,64 @@ def test_block_shape_bounds_the_grid_and_keeps_small_frames_whole():
     b1, b2 = fftconv.block_shape(12000, 12000, 6001, 6001)
     n = fftconv.fft_size(6000 + fftconv.MIN_BLOCK)
     assert n * n > fftconv.MAX_BLOCK_CELLS and b1 == n - 6000 and b1 >= fftconv.MIN_BLOCK
+
+
+def test_host_transform_zeroes_what_it_does_not_write_without_a_fill(rt, rng, monkeypatch):
+    # the host convolution writes the kept pixels' colour and zeroes the rest of its output
+    # (alpha, the rows and columns no light reaches, the row padding) in its own tasks: no
+    # fill of the whole output before (8 ms of one core at 1080p), whatever the pool's
+    # buffer held
+    src, psf = hdr_scene(rng, 21, 30)
+    win = Rect(2, 1, 32, 22)
+    out = fftconv.full_region(win, *psf.shape).grown(3)
+    out = Rect(out.x0, out.y0, out.x1 + 2, out.y1)          # width 2 past a multiple of 4
+    want = reference(src[..., :3], psf, (win.x0, win.y0), (out.x0, out.y0, out.x1, out.y1))
+    image, fills = rt.image, []
+
+    def poisoned(window, channels=4):                       # a reused buffer's old contents
+        img = image(window, channels)
+        rt.cl.enqueue_fill_buffer(rt.queue, img.buffer, np.float32(np.nan), 0, img.nbytes)
+        return img
+
+    monkeypatch.setattr(rt, "image", poisoned)
+    monkeypatch.setattr(rt, "fill", lambda img, value=0.0: fills.append(img) or img)
+    src_img = image(win, 4)
+    rt.cl.enqueue_copy(rt.queue, src_img.buffer, np.ascontiguousarray(np.pad(
+        src, ((0, 0), (0, src_img.pitch - src.shape[1]), (0, 0)))))
+    dst = fftconv.convolve(rt, src_img, psf, out_window=out, precision="float64")
+    assert fills == []
+    raw = rt.from_device(dst, np.float32, dst.nbytes // 4).reshape(out.height, dst.pitch, 4)
+    assert dst.pitch > out.width and not raw[:, out.width:].any()     # padding: 0
+    assert not raw[..., 3].any()                                        # alpha: 0
+    np.testing.assert_allclose(raw[:, :out.width, :3], want, rtol=1e-5,
+                               atol=1e-12 * want.max())
+    assert want[0].max() == 0.0 and not raw[0].any()                    # no light: 0
+
+
+def test_host_lanes_overlap_keep_each_lanes_order_and_stop_at_an_error(monkeypatch):
+    # the channels' passes run as lanes on one pool: a lane's next pass waits for its own
+    # pass only, so another lane's tasks fill the cores meanwhile (no core idles at the end
+    # of a pass); an error stops every lane and leaves no thread behind
+    import threading
+
+    monkeypatch.setattr(fftconv, "available_cores", lambda: 2)
+    met, order = threading.Event(), []
+
+    def waits():         # lane 0's first pass ends only once lane 1's first pass has run
+        assert met.wait(10)
+        order.append("a0")
+
+    lanes = [[[waits], [lambda: order.append("a1")] * 3],
+             [[lambda: met.set() or order.append("b0")], [lambda: order.append("b1")]]]
+    fftconv._run_lanes(lanes)
+    assert sorted(order) == sorted(["a0", "a1", "a1", "a1", "b0", "b1"])
+    assert order.index("b0") < order.index("a0") < order.index("a1")
+
+    def fails():
+        raise ValueError("bad chunk")
+
+    ran = []
+    with pytest.raises(ValueError, match="bad chunk"):
+        fftconv._run_lanes([[[fails], [lambda: ran.append(1)]], [[lambda: None]]])
+    assert ran == []
+    assert not [t for t in threading.enumerate() if t.name.startswith("clfx-fft")]
