@@ -35,46 +35,6 @@
 
 SCATTER_KERNELS(bleed)
 
-/* Sanitised source pixel at source coordinates (sx, sy); 0 outside the source. */
-inline float4 bleed_source(global const float *src, int spitch, int swidth, int sheight,
-                           int sx, int sy)
-{
-  if(sx < 0 || sx >= swidth || sy < 0 || sy >= sheight) return (float4)(0.0f);
-  return clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx, src));
-}
-
-/* Source pixels (sx .. sx + 3, sy), sanitised, 0 outside the source: one unaligned float16
- * load inside, per-pixel loads at the borders. */
-inline float16 bleed_source16(global const float *src, int spitch, int swidth, int sheight,
-                              int sx, int sy)
-{
-  if(sy < 0 || sy >= sheight || sx + 3 < 0 || sx >= swidth) return (float16)(0.0f);
-  if(sx >= 0 && sx + 3 < swidth)
-    return clfx_finite_pixels16_or_zero(vload16(0, src + ((size_t)sy * spitch + sx) * 4));
-  return (float16)(bleed_source(src, spitch, swidth, sheight, sx, sy),
-                   bleed_source(src, spitch, swidth, sheight, sx + 1, sy),
-                   bleed_source(src, spitch, swidth, sheight, sx + 2, sy),
-                   bleed_source(src, spitch, swidth, sheight, sx + 3, sy));
-}
-
-/* scatter_highlight (scene-linear, boost 0) of 4 sanitised RGBA pixels, lanes = pixels. */
-inline float16 bleed_highlight16(float16 c, float threshold, float knee)
-{
-  const float4 r = fmax(c.s048c, 0.0f), g = fmax(c.s159d, 0.0f), b = fmax(c.s26ae, 0.0f);
-  const float4 lum = (CLFX_LUMA_R) * r + (CLFX_LUMA_G) * g + (CLFX_LUMA_B) * b;
-  float4 soft = (float4)(0.0f);
-  if(knee > 0.0f)
-  {
-    const float4 t = clamp(lum - threshold + knee, 0.0f, 2.0f * knee);
-    soft = t * t / (4.0f * knee);
-  }
-  float4 w = clamp(fmax(soft, lum - threshold) / lum, 0.0f, 1.0f);
-  w = select((float4)(0.0f), w, isgreater(lum, 0.0f));   /* 0 / 0 at black pixels */
-  const float4 rw = r * w, gw = g * w, bw = b * w;
-  return (float16)(rw.x, gw.x, bw.x, 0.0f, rw.y, gw.y, bw.y, 0.0f,
-                   rw.z, gw.z, bw.z, 0.0f, rw.w, gw.w, bw.w, 0.0f);
-}
-
 /* Highlights on the padded grid: hp pixel (X, Y) holds h of source pixel (X - ox, Y - oy)
  * (0 outside the source).  One work-item: 4 pixels x ROWS rows; flags[by * (hpitch / 4) + qx]
  * = 1 if any of them is non-zero. */
@@ -90,8 +50,8 @@ kernel void bleed_pad_highlights(global const float *src, const int spitch, cons
   {
     const int y = by * ROWS + r;
     if(y >= hheight) break;
-    const float16 c = bleed_source16(src, spitch, swidth, sheight, qx * 4 - ox, y - oy);
-    const float16 h = bleed_highlight16(c, threshold, knee);
+    const float16 c = scatter_load4px(src, spitch, swidth, sheight, qx * 4 - ox, y - oy);
+    const float16 h = scatter_highlights16(c, threshold, knee, 0.0f);
     hit |= h != (float16)(0.0f);
     vstore16(h, 0, hp + ((size_t)y * hpitch + qx * 4) * 4);
   }
@@ -117,14 +77,14 @@ kernel void bleed_active(global const uchar *flags, const int fpitch, const int 
 
 /* One output quad: out = c - strength h + strength tint max(g, 0), alpha from c (lib/scatter.h's
  * model), saturated at +-FLT_MAX (finite input, finite output).  h is the centre highlight
- * (bit-identical to scatter_highlight(c)) and has alpha 0; the tint has alpha 0, so alpha is
+ * (scatter_highlights16, boost 0) and has alpha 0; the tint has alpha 0, so alpha is
  * c's exactly. */
 inline void bleed_store_mixed(global const float *src, int spitch, int swidth, int sheight,
                               global float *dst, int pitch, int x, int y, int dx, int dy,
                               float16 g, float16 h, float strength, float4 tint)
 {
   const float16 tint16 = (float16)(tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f, tint.xyz, 0.0f);
-  const float16 c = bleed_source16(src, spitch, swidth, sheight, x + dx, y + dy);
+  const float16 c = scatter_load4px(src, spitch, swidth, sheight, x + dx, y + dy);
   const float16 o = c + strength * tint16 * fmax(g, 0.0f) - strength * h;
   vstore16(clamp(o, -SCATTER_FLT_MAX, SCATTER_FLT_MAX), 0, dst + ((size_t)y * pitch + x) * 4);
 }
@@ -135,7 +95,7 @@ inline void bleed_copy_rows(global const float *src, int spitch, int swidth, int
                             global float *dst, int pitch, int x, int y0, int y1, int dx, int dy)
 {
   for(int y = y0; y < y1; y++)
-    vstore16(bleed_source16(src, spitch, swidth, sheight, x + dx, y + dy), 0,
+    vstore16(scatter_load4px(src, spitch, swidth, sheight, x + dx, y + dy), 0,
              dst + ((size_t)y * pitch + x) * 4);
 }
 

@@ -706,14 +706,12 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
     const float4 rq = vload4(0, coc + at);
     const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     if(!dof_any4(aq > 0.0f))
     {
-      const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4)
-                        * scale;
       dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
       continue;
     }
-    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
     /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
        C + (1 - a) d at the near layer's, each standing for its coverage (the first tap is
        the centre: in one of a mixed pixel's two gathers only that gather's part) */

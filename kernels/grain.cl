@@ -270,5 +270,3 @@ kernel void grain_apply_white(global const float *src, global float *dst, const 
   vstore16(grain_mix16(vload16(0, src + i), n, (REAL4)(ar, ag, ab, 0), response, grey,
                               inv_grey), 0, dst + i);
 }
-
-

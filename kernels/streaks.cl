@@ -513,13 +513,13 @@ kernel void streaks_compose(global const float *src, const int src_pitch, const 
   streak += 4 * org;
   if(x >= dst_pitch || y >= dst_h) return;
   const int sx = x - ox, sy = y - oy;
-  global const float *s = streak + ((y + dy0 - r0) * s_pitch + x + dx0) * 4;
+  global const float *s = streak + ((size_t)(y + dy0 - r0) * s_pitch + x + dx0) * 4;
   if(x + 4 <= dst_w && sx >= 0 && sx + 4 <= src_w && sy >= 0 && sy < src_h)
   {
-    const float16 c = clfx_finite16_or_zero(vload16(0, src + (sy * src_pitch + sx) * 4));
+    const float16 c = clfx_finite16_or_zero(vload16(0, src + ((size_t)sy * src_pitch + sx) * 4));
     const float16 r = clamp(c + vload16(0, s), -SCATTER_FLT_MAX, SCATTER_FLT_MAX);
     vstore16((float16)(r.s012, c.s3, r.s456, c.s7, r.s89a, c.sb, r.scde, c.sf), 0,
-             dst + (y * dst_pitch + x) * 4);
+             dst + ((size_t)y * dst_pitch + x) * 4);
     return;
   }
   for(int i = 0; i < 4; i++)

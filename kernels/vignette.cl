@@ -13,10 +13,9 @@
 #include "lib/precision.h"
 
 /* The gains of 8 pixels (one REAL8 per quantity: the float levels' arithmetic on 8 lanes,
- * half the instructions of 4 pixels twice) applied to the 4 pixels of quad k (0 or 1). */
-inline float16 vignette_quad(const float16 c, const float8 g, const int k)
+ * half the instructions of 4 pixels twice): the gains q of a quad's 4 pixels applied to c. */
+inline float16 vignette_quad(const float16 c, const float4 q)
 {
-  const float4 q = k == 0 ? g.lo : g.hi;
   return (float16)(c.s0 * q.x, c.s1 * q.x, c.s2 * q.x, c.s3, c.s4 * q.y, c.s5 * q.y, c.s6 * q.y,
                    c.s7, c.s8 * q.z, c.s9 * q.z, c.sa * q.z, c.sb, c.sc * q.w, c.sd * q.w,
                    c.se * q.w, c.sf);
@@ -53,9 +52,9 @@ kernel void vignette_apply(global const float *src, global float *dst, const int
   const REAL8 art = (REAL)1 - (REAL)amount * t * t * ((REAL)3 - (REAL)2 * t);
 
   const float8 g = TO_FLOAT8(clamp(nat * art, (REAL)0, (REAL)1));
-  vstore16(vignette_quad(clfx_finite16_or_zero(vload16(0, src + i * 4)), g, 0), 0,
+  vstore16(vignette_quad(clfx_finite16_or_zero(vload16(0, src + i * 4)), g.lo), 0,
            dst + i * 4);
   if(ox * 8 + 4 < pitch)
-    vstore16(vignette_quad(clfx_finite16_or_zero(vload16(1, src + i * 4)), g, 1), 1,
+    vstore16(vignette_quad(clfx_finite16_or_zero(vload16(1, src + i * 4)), g.hi), 1,
              dst + i * 4);
 }

@@ -408,10 +408,7 @@ def test_launch_without_a_local_size_runs_rows_in_groups_on_a_cpu(rt, tmp_path, 
     knl = rt.kernel("groups.cl", "groups_probe", arg_types="buf o")
     out = rt.to_device(np.full(4 * 241 * 12, -1, np.int32))
     rt.launch(knl, (241, 12), out)
-    got = np.empty(4 * 241 * 12, np.int32)
-    rt.cl.enqueue_copy(rt.queue, got, out.buffer)
-    rt.finish()
-    got = got.reshape(-1, 4)
+    got = rt.from_device(out, np.int32, 4 * 241 * 12).reshape(-1, 4)
     np.testing.assert_array_equal(got[:, 3], np.arange(241 * 12))
     if rt.shares_host_cores:
         assert tuple(got[0, :2]) == (241, 1) and got[0, 2] == 12

@@ -422,7 +422,6 @@ class DeviceImage:
         return self.runtime.image(window or self.window, channels or self.channels)
 
 
-
 GROUPS_PER_UNIT = 4
 """:func:`row_groups` leaves at least this many work-groups per compute unit where the grid
 allows, so no core idles behind another's last group."""
@@ -714,7 +713,7 @@ class Runtime:
                                                self.device))
         except self.cl.Error:
             most = int(self.device.max_work_group_size)
-        local = row_groups(gsize, min(most, int(self.device.max_work_group_size)),
+        local = row_groups(gsize, most,
                            tuple(int(n) for n in self.device.max_work_item_sizes),
                            self.compute_units)
         if len(self._groups) > 4096:

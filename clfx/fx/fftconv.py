@@ -314,7 +314,7 @@ def _host_spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
     real = out.view(np.float64)                      # (planes, n1, n2 + 2): the r2c layout
     for p in range(planes):
         np.add.at(real[p], (ys[:, None], xs[None, :]), k[..., p])
-    _host_transform(real, n1, None)
+    _host_spectra(real)
     return out, planes
 
 
@@ -670,29 +670,24 @@ plane's forward, product and inverse, min of 8: 36-38 ms in 16-32 columns, 41 in
 columns (2 MiB), 59 whole)."""
 
 
-def _host_transform(planes: np.ndarray, rows: int, spec: np.ndarray | None) -> None:
-    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout VkFFT keeps, or B x
-    N1 x (N2 / 2 + 1) complex128): the forward transform of the first ``rows`` rows' N2
-    reals (the rows after ``rows`` read as 0), then with ``spec`` (1 or B spectra) the
-    product and the inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse),
-    without it the spectrum alone: :func:`_host_passes` of each plane, the planes at once
-    (`_run_lanes`)."""
-    cplx = planes if np.iscomplexobj(planes) else planes.view(np.complex128)
-    _run_lanes([_host_passes(cplx[b], rows, None if spec is None else
-                             spec[b if len(spec) > 1 else 0]) for b in range(len(cplx))])
+def _host_spectra(planes: np.ndarray) -> None:
+    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout): each plane's
+    forward transform (its N1 rows' N2 reals), as complex128 (B x N1 x (N2 / 2 + 1)):
+    :func:`_host_passes` of each plane, the planes at once (`_run_lanes`)."""
+    cplx = planes.view(np.complex128)
+    _run_lanes([_host_passes(cplx[b], cplx.shape[1]) for b in range(len(cplx))])
 
 
-def _host_passes(cplx: np.ndarray, rows: int, spec: np.ndarray | None, source=None,
+def _host_passes(cplx: np.ndarray, rows: int, spec: np.ndarray | None = None, source=None,
                  sink=None) -> list[list]:
     """The passes over one N1 x (N2 / 2 + 1) complex128 plane, in order, each a list of tasks
     (callables; a pass's tasks may run at once, after the previous pass's): the forward
     transform of the first ``rows`` rows' N2 reals (``source(r0, r1)``: rows r0..r1, at most
     N2 values each, the rest 0; default the plane's own reals, the r2c layout; the rows after
-    ``rows`` read as 0), then with ``spec`` the product and the inverse transform (N2 reals
-    per row, the 1 / (N1 N2) on the inverse) written back, without it the spectrum alone.
-    ``sink`` = (runs, put): the inverse rows of only the grid row runs [r0, r1) of ``runs``,
-    handed to ``put(r0, r1, values)`` (values (r1 - r0) x N2 float64) instead of written
-    back.  Row chunks of :data:`HOST_CHUNK_BYTES` and column chunks of
+    ``rows`` read as 0), then with ``spec`` and ``sink`` = (runs, put) the product and the
+    inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse) of only the grid
+    row runs [r0, r1) of ``runs``, handed to ``put(r0, r1, values)`` (values (r1 - r0) x N2
+    float64); without them the spectrum alone.  Row chunks of :data:`HOST_CHUNK_BYTES` and column chunks of
     :data:`HOST_COLUMN_BYTES` are a task each (NumPy's transforms release the GIL).  Every
     row and column is transformed alone, so the chunks change no bit of the result."""
     n1, half = cplx.shape
@@ -726,9 +721,6 @@ def _host_passes(cplx: np.ndarray, rows: int, spec: np.ndarray | None, source=No
             f *= spec[:, c0:c1]
             np.fft.ifft(f, axis=0, out=f)
 
-    def inverse_rows(r0, r1):
-        real[r0:r1, :n2] = np.fft.irfft(cplx[r0:r1], n=n2, axis=1)
-
     def put_rows(r0, r1):
         sink[1](r0, r1, np.fft.irfft(cplx[r0:r1], n=n2, axis=1))
 
@@ -739,8 +731,7 @@ def _host_passes(cplx: np.ndarray, rows: int, spec: np.ndarray | None, source=No
     passes = [tasks(forward_rows, [(0, rows)], row_step),
               tasks(columns, [(0, half)], col_step)]
     if spec is not None:
-        passes.append(tasks(put_rows, sink[0], row_step) if sink is not None
-                      else tasks(inverse_rows, [(0, n1)], row_step))
+        passes.append(tasks(put_rows, sink[0], row_step))
     return passes
 
 

@@ -302,7 +302,7 @@ class DofFrame:
     @staticmethod
     def half_rows(top: int, bottom: int) -> tuple[int, int]:
         """The half-resolution rows (grid, from 0) that the bilinear upsampling of rows
-        ``top``..``bottom`` (grid) reads (``dof_upsample``), not cut to the frame."""
+        ``top``..``bottom`` (grid) reads (``dof_upsample4``), not cut to the frame."""
         return (top - 1) // 2, (bottom + 1) // 2 + 1
 
 
@@ -817,8 +817,7 @@ class Dof(Plugin):
                             **ctx.luminance_defines), (tx, ty),
                   src, src.pitch, src.window.x0 - window.x0,
                   src.window.y0 - window.y0, src.width, src.height,
-                  window.width, window.height, TILE, tx, ty, log_mean,
-                  local=(8, 2))   # without: PoCL runs the 60 x 34 tiles of 1080p as one group
+                  window.width, window.height, TILE, tx, ty, log_mean)
         offsets = lens.offsets()
         gathers = tuple(self._plan_gather(rt, p, ctx, plan, tiles, off) for off in offsets)
         said = [gathers[0].note]
@@ -914,7 +913,7 @@ class Dof(Plugin):
                          htiles, rows, hrows, note)
 
     def _tile_table(self, rt, levels, sharp, mode, lvl, aspect, blades, first, roundness,
-                    squeeze, core=0.0, near=None, tile=TILE):
+                    squeeze, *, near, core=0.0, tile=TILE):
         """``dof_gather``'s tap table and per-tile table (on the device): per tile (16 ints)
         the table of radius ``levels``, that of radius ``sharp`` for pixels in focus (with
         the :func:`tap_table` ``core``: their own radius's, below it), ``mode`` (bit 0:
@@ -936,21 +935,20 @@ class Dof(Plugin):
                 reach = int(np.abs(table[start:start + n, :2]).max())
                 tiles[..., 7][(info[0, ..., 0] == start) & (info[0, ..., 1] == n)] = reach
         counts = []
-        if near is not None:
-            # a tap reads radii up to 2 px beyond its pixel (dof_edges' 3 x 3, dof_mixed's
-            # split from its 3 x 3 edge-aware radii)
-            span = int(math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile))
-            bound = dilate_tiles(np.asarray(near, np.float64), span).astype(np.float32)
-            tiles[..., 8] = bound.view(np.int32)
-            at = tiles.size
-            for start, n in sorted({tuple(v) for v in info[:, ..., :2].reshape(-1, 2).tolist()}):
-                if n:
-                    c = tap_counts(table[start:start + n])
-                    for t in (0, 1):
-                        hit = (info[t, ..., 0] == start) & (info[t, ..., 1] == n)
-                        tiles[..., 9 + 2 * t][hit], tiles[..., 10 + 2 * t][hit] = at, len(c)
-                    counts.append(c)
-                    at += len(c)
+        # a tap reads radii up to 2 px beyond its pixel (dof_edges' 3 x 3, dof_mixed's
+        # split from its 3 x 3 edge-aware radii)
+        span = int(math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile))
+        bound = dilate_tiles(np.asarray(near, np.float64), span).astype(np.float32)
+        tiles[..., 8] = bound.view(np.int32)
+        at = tiles.size
+        for start, n in sorted({tuple(v) for v in info[:, ..., :2].reshape(-1, 2).tolist()}):
+            if n:
+                c = tap_counts(table[start:start + n])
+                for t in (0, 1):
+                    hit = (info[t, ..., 0] == start) & (info[t, ..., 1] == n)
+                    tiles[..., 9 + 2 * t][hit], tiles[..., 10 + 2 * t][hit] = at, len(c)
+                counts.append(c)
+                at += len(c)
         flat = np.concatenate([tiles.ravel()] + counts).astype(np.int32)
         return rt.to_device(table), rt.to_device(flat), int(np.abs(table[:, 1]).max())
 

@@ -988,11 +988,18 @@ class Streaks(Plugin):
         accum_knl = rt.kernel("streaks.cl", "streaks_pass", ACCUM=1, **defines)
         # the whole passes run over row spans (TILED), a streamed frame's over rows y0..
 
+        uploaded = {}   # each span table on the device once a frame (they stay alive here)
+
+        def spans_buffer(spans):
+            if id(spans) not in uploaded:
+                uploaded[id(spans)] = rt.to_device(spans)
+            return uploaded[id(spans)]
+
         def launch(knl, px, rows, *args, spans=None):
             if stream:
                 rt.launch(knl, (wp // px, rows), *args, None, local=LOCAL if px > 1 else None)
             elif len(spans):
-                rt.launch(knl, (SPAN // px, len(spans)), *args, rt.to_device(spans),
+                rt.launch(knl, (SPAN // px, len(spans)), *args, spans_buffer(spans),
                           local=(SPAN // px, 1))
 
         def bright(dst, y0, rows, ring, spans=None):   # the bright pixels and points
@@ -1006,7 +1013,7 @@ class Streaks(Plugin):
                    y0, in_rows, out_rows, spans=spans)
 
         if not stream:
-            # only the blocks within each ray's reach of the bright pixels (`pass_blocks`):
+            # only the row spans within each ray's reach of the bright pixels (`pass_spans`):
             # the rest of the frame streaks nothing (issue 37: the cinema look's 4 rays of
             # 275 px at 1080p streak 3.5 % of the frame's pixels)
             bright_spans, bright_read, ray_spans = pass_spans(
@@ -1016,7 +1023,7 @@ class Streaks(Plugin):
             def clear(buf, spans):   # zeros where the passes read (before they write)
                 if len(spans):
                     rt.launch(clear_knl, (SPAN // 4, len(spans)), buf, org, pitch, wp, h,
-                              rt.to_device(spans), local=(SPAN // 4, 1))
+                              spans_buffer(spans), local=(SPAN // 4, 1))
 
             nbytes = pitch * h * 16
             shared = len(fr.rays) > 1

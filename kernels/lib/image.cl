@@ -4,8 +4,8 @@
  * source covers are copied, the others are filled by the border mode (BORDER 0 = zero,
  * 1 = clamp to the nearest source pixel), the row padding is zero.  dx, dy = origin of dst
  * minus origin of src.
- * glare's highlights copy a frame-sized window each frame (kit/scatter.py), so it is
- * vectorised: 4 pixels a work-item.
+ * Halation's spread, the warps' and the motion family's bands reframe frame-sized windows
+ * every frame, so it is vectorised: 4 pixels a work-item.
  */
 #include "lib/common.h"
 
@@ -49,7 +49,7 @@ inline void image_reframe_pixel(global const float *src, const int src_pitch, co
 
 /* 4 destination pixels per work-item (dst_pitch is a multiple of 4): a quad whose pixels
  * and sources all lie inside is one vector copy, the others go pixel by pixel (a scalar
- * work-item per pixel cost glare's 1856 x 896 copy 12-16 ms of CPU a 1080p frame). */
+ * work-item per pixel cost a 1856 x 896 copy 12-16 ms of CPU on a 1080p frame). */
 kernel void image_reframe(global const float *src, const int src_pitch, const int src_w,
                           const int src_h, global float *dst, const int dst_pitch,
                           const int dst_w, const int dst_h, const int dx, const int dy)
@@ -115,4 +115,3 @@ kernel void image_rgb_matrix(global const float *src, global float *dst, const i
   const float4 rgb = (float4)(c.x, c.y, c.z, 0.0f);
   vstore4((float4)(dot(r0, rgb), dot(r1, rgb), dot(r2, rgb), c.w), i, dst);
 }
-

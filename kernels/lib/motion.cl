@@ -324,8 +324,7 @@ inline float mb_beta(const float len)
  * little light between pixels).
  * These closed forms run on a quad's 4 pixels at once (mb_short_quad): colours as float16,
  * lane-major RGBA x 4, a lane's scalars splatted over its RGBA (SPLAT16); per element the
- * same float maths as one pixel's (bit-identical to the lane-by-lane form of issue 37's
- * base, aee508e). */
+ * same float maths as one pixel's. */
 #define SHORT_SMOOTH 16.0f
 #define SHORT_KAPPA 0.05f
 inline float16 mb_short_smear(const float16 pm2, const float16 pm1, const float16 p0,

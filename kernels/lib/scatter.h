@@ -9,8 +9,9 @@
  *   scene-linear: out = c - strength h + strength tint (PSF * h)  (energy moves, kept);
  *   display-referred: out = c + strength tint (PSF * h)            (classic additive glow).
  * Non-finite input pixels become 0 (black, alpha 0) and do not spread.
- * SCATTER_KERNELS(effect) defines the family's two kernels, <effect>_highlights and
- * <effect>_mix, with the same arguments for every effect.
+ * SCATTER_KERNELS(effect) defines the family's three kernels, <effect>_highlights,
+ * <effect>_highlights_at (of a part of the source, without a reframed copy) and <effect>_mix,
+ * with the same arguments for every effect.
  *
  * Corona, streaks and lens flare threshold hard (scatter_bright) and compose
  * source + light with scatter_source (non-finite channels set to 0).
@@ -28,35 +29,9 @@ inline int scatter_pixel_finite(float4 c)
 }
 
 
-inline float scatter_knee_weight(float lum, float threshold, float knee)
-{
-  if(!(lum > 0.0f)) return 0.0f;
-  float soft = 0.0f;
-  if(knee > 0.0f)
-  {
-    const float x = clamp(lum - threshold + knee, 0.0f, 2.0f * knee);
-    soft = x * x / (4.0f * knee);
-  }
-  return clamp(fmax(soft, lum - threshold) / lum, 0.0f, 1.0f);
-}
-
-/* The light that scatters from one (sanitised) pixel; alpha 0. boost <= 0: scene-linear. */
-inline float4 scatter_highlight(float4 c, float threshold, float knee, float boost)
-{
-  float4 rgb = (float4)(fmax(c.x, 0.0f), fmax(c.y, 0.0f), fmax(c.z, 0.0f), 0.0f);
-  float lum = clfx_luminance(rgb);
-  if(boost > 0.0f && lum > 0.0f)
-  {
-    const float e = lum / fmax(1.0f - lum * (1.0f - 1.0f / boost), 1.0f / boost);
-    rgb *= e / lum;
-    lum = e;
-  }
-  return rgb * scatter_knee_weight(lum, threshold, knee);
-}
-
-/* scatter_highlight of 4 pixels at once, one pixel per lane of each channel's float4 (r, g,
- * b in and out): lane by lane the same operations, so the same roundings, in vector code
- * (PoCL runs a work-item's scalar pixel loop unvectorised). */
+/* The light that scatters from 4 sanitised pixels (the model above; boost <= 0:
+ * scene-linear), one pixel per lane of each channel's float4 (r, g, b in and out): vector
+ * code, as PoCL runs a work-item's scalar pixel loop unvectorised. */
 inline void scatter_highlight4(float4 *r, float4 *g, float4 *b, float threshold, float knee,
                                float boost)
 {
@@ -85,19 +60,27 @@ inline void scatter_highlight4(float4 *r, float4 *g, float4 *b, float threshold,
   *b = z * w;
 }
 
-/* 4 pixels of src from (sx, sy) (pitch spitch, swidth x sheight), with non-finite pixels
- * and those outside src set to 0. */
+/* Source pixel (sx, sy) (pitch spitch, swidth x sheight), 0 where any channel is not finite
+ * (the glare family's rule; scatter_source zeroes channels alone) and outside the source. */
+inline float4 scatter_load_px(global const float *src, int spitch, int swidth, int sheight,
+                              int sx, int sy)
+{
+  if(sx < 0 || sx >= swidth || sy < 0 || sy >= sheight) return (float4)(0.0f);
+  return clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx, src));
+}
+
+/* Source pixels (sx .. sx + 3, sy), sanitised, 0 outside the source: one unaligned float16
+ * load inside, per-pixel loads at the borders. */
 inline float16 scatter_load4px(global const float *src, int spitch, int swidth, int sheight,
                                int sx, int sy)
 {
-  if(sy < 0 || sy >= sheight) return (float16)0.0f;
-  if(sx >= 0 && sx + 4 <= swidth)
+  if(sy < 0 || sy >= sheight || sx + 3 < 0 || sx >= swidth) return (float16)(0.0f);
+  if(sx >= 0 && sx + 3 < swidth)
     return clfx_finite_pixels16_or_zero(vload16(0, src + ((size_t)sy * spitch + sx) * 4));
-  float4 c[4];
-  for(int l = 0; l < 4; l++)
-    c[l] = (sx + l >= 0 && sx + l < swidth)
-           ? clfx_finite_pixel_or_zero(vload4((size_t)sy * spitch + sx + l, src)) : (float4)0.0f;
-  return (float16)(c[0], c[1], c[2], c[3]);
+  return (float16)(scatter_load_px(src, spitch, swidth, sheight, sx, sy),
+                   scatter_load_px(src, spitch, swidth, sheight, sx + 1, sy),
+                   scatter_load_px(src, spitch, swidth, sheight, sx + 2, sy),
+                   scatter_load_px(src, spitch, swidth, sheight, sx + 3, sy));
 }
 
 /* The highlights (alpha 0) of 4 sanitised pixels. */
