@@ -304,17 +304,26 @@ def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
 
 
 def _host_spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
-    """`_spectrum` on the host (:func:`host_fft`): ``(planes x n1 x (n2 / 2 + 1) complex128
+    """`_spectrum` on the host (:func:`host_fft`): ``(planes x (n2 / 2 + 1) x n1 complex128
     array, planes)``, each plane the r2c transform of the taps wrapped onto the grid
-    (coinciding taps add up), made in place (no grid-sized plane beside it)."""
+    (coinciding taps add up), transposed (a column's values side by side, as
+    `_host_passes`' column tasks multiply them), made in the host transforms' own work
+    planes (`_host_planes`: no grid-sized plane beside them)."""
     kh, kw, planes = k.shape
     ys = (np.arange(kh) - kh // 2) % n1
     xs = (np.arange(kw) - kw // 2) % n2
-    out = np.zeros((planes, n1, n2 // 2 + 1), np.complex128)
-    real = out.view(np.float64)                      # (planes, n1, n2 + 2): the r2c layout
-    for p in range(planes):
-        np.add.at(real[p], (ys[:, None], xs[None, :]), k[..., p])
-    _host_spectra(real)
+    out = np.empty((planes, n2 // 2 + 1, n1), np.complex128)
+    shelf, work, shelved = _host_planes(rt, n1, n2, host_planes_in_flight(n1, n2, 3))
+    try:
+        for p0 in range(0, planes, len(work)):
+            group = work[:min(len(work), planes - p0)]
+            for p, plane in enumerate(group, p0):
+                real = plane.view(np.float64)     # (n1, n2 + 2): the r2c layout
+                real.fill(0.0)
+                np.add.at(real, (ys[:, None], xs[None, :]), k[..., p])
+            _run_lanes([_host_passes(group, n1, spectra=out[p0:p0 + len(group)])])
+    finally:
+        shelf.extend(shelved)
     return out, planes
 
 
@@ -677,39 +686,35 @@ plane's forward, product and inverse, min of 8: 36-38 ms in 16-32 columns, 41 in
 columns (2 MiB), 59 whole)."""
 
 
-def _host_spectra(planes: np.ndarray) -> None:
-    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout): each plane's
-    forward transform (its N1 rows' N2 reals), as complex128 (B x N1 x (N2 / 2 + 1)):
-    :func:`_host_passes` of the planes (`_run_lanes`)."""
-    cplx = planes.view(np.complex128)
-    _run_lanes([_host_passes(list(cplx), cplx.shape[1])])
-
-
 def _host_passes(planes: list[np.ndarray], rows: int, specs: list | None = None,
-                 sources: list | None = None, sink=None) -> list[list]:
+                 sources: list | None = None, sink=None, spectra=None) -> list[list]:
     """The passes over N1 x (N2 / 2 + 1) complex128 ``planes`` (one per channel), in order,
     each a list of tasks (callables; a pass's tasks may run at once, after the previous
     pass's): the forward transform of the first ``rows`` rows' N2 reals of every plane
     (``sources[p](r0, r1, x)`` writes plane p's rows r0..r1 into x[:, :width], at most N2
     values each, and leaves the rest of x, 0, alone; default the plane's own reals, the r2c
-    layout; the rows after ``rows`` read as 0), then with ``specs`` (one per plane) and
-    ``sink`` = (runs, puts) the product and the inverse transform (N2 reals per row, the 1 /
-    (N1 N2) on the inverse) of only the grid row runs [r0, r1) of ``runs``, handed to
-    ``puts[p](r0, r1, values)`` (values (r1 - r0) x N2 float64, valid during the call);
-    without them the spectra alone.  A row task takes :data:`HOST_CHUNK_BYTES` of rows of
-    every plane (the image's rows read and the output's written once while in cache), a
-    column task :data:`HOST_COLUMN_BYTES` of columns of one plane (NumPy's transforms
-    release the GIL).  Every row and column is transformed alone, so the chunks change no
-    bit of the result."""
+    layout; the rows after ``rows`` read as 0), then with ``specs`` (one per plane, each
+    (N2 / 2 + 1) x N1: :func:`_host_spectrum`) and ``sink`` = (runs, puts) the product and
+    the inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse) of only the
+    grid row runs [r0, r1) of ``runs``, handed to ``puts[p](r0, r1, values)`` (values (r1 -
+    r0) x N2 float64, valid during the call); without them the spectra alone, written into
+    ``spectra`` (planes x (N2 / 2 + 1) x N1, transposed).
+
+    A row task takes :data:`HOST_CHUNK_BYTES` of rows of every plane (the image's rows read
+    and the output's written once, while in cache); a column task :data:`HOST_COLUMN_BYTES`
+    of columns of one plane, copied side by side into a buffer of the task's thread, where
+    their transforms and the product run on contiguous values, and only the rows the
+    inverse row pass reads go back (NumPy's transforms release the GIL).  Every row and
+    column is transformed alone, so the chunks change no bit of the result."""
     n1, half = planes[0].shape
     n2 = 2 * (half - 1)
     row_step = max(1, HOST_CHUNK_BYTES // (half * 16 * len(planes)))
     col_step = max(1, HOST_COLUMN_BYTES // (n1 * 16))
-    local = threading.local()   # each thread's row buffers, made once a call
+    local = threading.local()   # each thread's buffers, made once a call
 
-    def scratch(name: str) -> np.ndarray:
+    def scratch(name: str, shape, dtype) -> np.ndarray:
         if not hasattr(local, name):   # zeros: the forward rows' padding stays 0
-            setattr(local, name, np.zeros((row_step, n2), np.float64))
+            setattr(local, name, np.zeros(shape, dtype))
         return getattr(local, name)
 
     def forward_rows(r0, r1):
@@ -721,7 +726,7 @@ def _host_passes(planes: list[np.ndarray], rows: int, specs: list | None = None,
                 cplx[r0:r1][~lit] = 0.0
                 cplx[r0 + np.flatnonzero(lit)] = f
                 continue
-            x = scratch("rows")[:r1 - r0]
+            x = scratch("rows", (row_step, n2), np.float64)[:r1 - r0]
             sources[p](r0, r1, x)
             # a row of zeros transforms to zeros: glare's highlights leave a third of the
             # rows of their support dark at 1080p; each run of lit rows is transformed into
@@ -732,16 +737,22 @@ def _host_passes(planes: list[np.ndarray], rows: int, specs: list | None = None,
             for a, b in zip(edges[::2], edges[1::2]):
                 np.fft.rfft(x[a:b], axis=1, out=cplx[r0 + a:r0 + b])
 
-    def columns(p, c0, c1):    # in place (out=): no temporaries, no copies back
+    def columns(p, c0, c1):
         f = planes[p][:, c0:c1]
-        f[rows:] = 0.0
-        np.fft.fft(f, axis=0, out=f)
-        if specs is not None:
-            f *= specs[p][:, c0:c1]
-            np.fft.ifft(f, axis=0, out=f)
+        t = scratch("columns", (col_step, n1), np.complex128)[:c1 - c0]
+        np.copyto(t[:, :rows], f[:rows].T)
+        t[:, rows:] = 0.0
+        np.fft.fft(t, axis=1, out=t)
+        if specs is None:
+            spectra[p][c0:c1] = t
+            return
+        t *= specs[p][c0:c1]
+        np.fft.ifft(t, axis=1, out=t)
+        for r0, r1 in sink[0]:
+            np.copyto(f[r0:r1], t[:, r0:r1].T)
 
     def put_rows(r0, r1):
-        values = scratch("values")[:r1 - r0]
+        values = scratch("values", (row_step, n2), np.float64)[:r1 - r0]
         for p, cplx in enumerate(planes):
             np.fft.irfft(cplx[r0:r1], n=n2, axis=1, out=values)
             sink[1][p](r0, r1, values)
