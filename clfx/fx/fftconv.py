@@ -30,12 +30,13 @@ Algorithms
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
     host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
     (no packed copy; rows of zeros skipped) and transformed in complex planes the runtime's
-    cache keeps (one per core, up to a channel each: :func:`host_planes_in_flight`), in row
-    and column chunks on every core, the channels' passes side by side so that no core waits
-    at the end of a pass (`_run_lanes`), the inverse rows of the kept output alone written
-    into the mapped output (no unpacking kernel, no fill: the tasks zero what they do not
-    write) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
-    pixels to float64 rounding.
+    cache keeps (every channel's at once where they fit: :func:`host_planes_in_flight`), in
+    row and column chunks on every core: a row task reads its rows once for every channel,
+    a column task transforms and multiplies a contiguous copy of its columns (the PSF
+    spectrum is kept transposed for it), an inverse row task writes every channel of its
+    kept output rows into the mapped output (no unpacking kernel, no fill: the tasks zero
+    what they do not write) (:data:`HOST_FFT`, :func:`host_fft`): 0.35-0.5x VkFFT's CPU time,
+    the same pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
     exactly by a gather over their list (deterministic, no atomics), so the float32 error
@@ -125,7 +126,8 @@ the device's own buffers (mapped: PoCL's buffers are host memory), in chunks on 
 elsewhere VkFFT.  Measured on 2 cores (:func:`convolve` float64 of a whole 1080p frame with
 a 661 x 661 PSF, CPU ms, median of 5): VkFFT with its packed copy 495-670, NumPy 305-316
 (its transforms alone: 250-330 against VkFFT's 510-670 for 3 planes of 1372 x 2250, the
-cinema look's glare).  The result differs by float64 rounding only (`host_fft`)."""
+cinema look's glare; issue 37's passes over every channel at once: 220-260).  The result
+differs by float64 rounding only (`host_fft`)."""
 
 
 def host_fft(rt, precision: str) -> bool:
@@ -680,10 +682,11 @@ grid-sized temporaries of a whole-plane transform, several per plane, are never 
 MiB each at 8K)."""
 
 HOST_COLUMN_BYTES = 2 ** 19
-"""The columns one host transform task takes at a time: NumPy copies each column out and
-back, and these stay in the 2nd level cache (1080p glare, 1372-point columns, CPU of a
-plane's forward, product and inverse, min of 8: 36-38 ms in 16-32 columns, 41 in 95
-columns (2 MiB), 59 whole)."""
+"""The columns one host transform task takes at a time, copied side by side into the task's
+buffer, which stays in the 2nd level cache through the forward transform, the product and
+the inverse (1080p glare, 1372-point columns, CPU of a plane's: 36-38 ms in 16-32 strided
+columns, 41 in 95 (2 MiB), 59 whole; contiguous copies of 23: 30-33, the same with 8-64,
+2^18-2^20 bytes within the noise)."""
 
 
 def _host_passes(planes: list[np.ndarray], rows: int, specs: list | None = None,
