@@ -30,12 +30,13 @@ Algorithms
     shadows next to a 1e5 light, notes/hard-cases.md case 1).  Where the device is the
     host's CPU they run in NumPy (pocketfft), the image's rows read from its mapped buffer
     (no packed copy; rows of zeros skipped) and transformed in complex planes the runtime's
-    cache keeps (one per core, up to a channel each: :func:`host_planes_in_flight`), in row
-    and column chunks on every core, the channels' passes side by side so that no core waits
-    at the end of a pass (`_run_lanes`), the inverse rows of the kept output alone written
-    into the mapped output (no unpacking kernel, no fill: the tasks zero what they do not
-    write) (:data:`HOST_FFT`, :func:`host_fft`): 0.5-0.65x VkFFT's CPU time, the same
-    pixels to float64 rounding.
+    cache keeps (every channel's at once where they fit: :func:`host_planes_in_flight`), in
+    row and column chunks on every core: a row task reads its rows once for every channel,
+    a column task transforms and multiplies a contiguous copy of its columns (the PSF
+    spectrum is kept transposed for it), an inverse row task writes every channel of its
+    kept output rows into the mapped output (no unpacking kernel, no fill: the tasks zero
+    what they do not write) (:data:`HOST_FFT`, :func:`host_fft`): 0.35-0.5x VkFFT's CPU time,
+    the same pixels to float64 rounding.
 ``threshold_split`` (float32 only)
     Pixels whose largest channel exceeds the split level are left out of the FFT and added
     exactly by a gather over their list (deterministic, no atomics), so the float32 error
@@ -125,7 +126,8 @@ the device's own buffers (mapped: PoCL's buffers are host memory), in chunks on 
 elsewhere VkFFT.  Measured on 2 cores (:func:`convolve` float64 of a whole 1080p frame with
 a 661 x 661 PSF, CPU ms, median of 5): VkFFT with its packed copy 495-670, NumPy 305-316
 (its transforms alone: 250-330 against VkFFT's 510-670 for 3 planes of 1372 x 2250, the
-cinema look's glare).  The result differs by float64 rounding only (`host_fft`)."""
+cinema look's glare; issue 37's passes over every channel at once: 220-260).  The result
+differs by float64 rounding only (`host_fft`)."""
 
 
 def host_fft(rt, precision: str) -> bool:
@@ -304,17 +306,26 @@ def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
 
 
 def _host_spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
-    """`_spectrum` on the host (:func:`host_fft`): ``(planes x n1 x (n2 / 2 + 1) complex128
+    """`_spectrum` on the host (:func:`host_fft`): ``(planes x (n2 / 2 + 1) x n1 complex128
     array, planes)``, each plane the r2c transform of the taps wrapped onto the grid
-    (coinciding taps add up), made in place (no grid-sized plane beside it)."""
+    (coinciding taps add up), transposed (a column's values side by side, as
+    `_host_passes`' column tasks multiply them), made in the host transforms' own work
+    planes (`_host_planes`: no grid-sized plane beside them)."""
     kh, kw, planes = k.shape
     ys = (np.arange(kh) - kh // 2) % n1
     xs = (np.arange(kw) - kw // 2) % n2
-    out = np.zeros((planes, n1, n2 // 2 + 1), np.complex128)
-    real = out.view(np.float64)                      # (planes, n1, n2 + 2): the r2c layout
-    for p in range(planes):
-        np.add.at(real[p], (ys[:, None], xs[None, :]), k[..., p])
-    _host_spectra(real)
+    out = np.empty((planes, n2 // 2 + 1, n1), np.complex128)
+    shelf, work, shelved = _host_planes(rt, n1, n2, host_planes_in_flight(n1, n2, 3))
+    try:
+        for p0 in range(0, planes, len(work)):
+            group = work[:min(len(work), planes - p0)]
+            for p, plane in enumerate(group, p0):
+                real = plane.view(np.float64)     # (n1, n2 + 2): the r2c layout
+                real.fill(0.0)
+                np.add.at(real, (ys[:, None], xs[None, :]), k[..., p])
+            _run_lanes([_host_passes(group, n1, spectra=out[p0:p0 + len(group)])])
+    finally:
+        shelf.extend(shelved)
     return out, planes
 
 
@@ -541,12 +552,13 @@ def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray
     N2, (y + dy) mod N1) (``offset`` = (dx, dy)) inside ``kept`` = (x0, y0, x1, y1), 0
     elsewhere and in alpha.
 
-    Each channel's passes run in grid-sized complex planes kept in the runtime's cache
-    (`_host_planes`), :func:`host_planes_in_flight` channels at once (`_run_lanes`: a
-    channel's forward rows start while another's columns finish, so no core waits at a
-    pass's end); the inverse row transforms run for the rows kept alone and write ``dst``
-    themselves, and the tasks zero what they do not write (no fill of ``dst`` before, no
-    serial pass): no padded planes for VkFFT, no unpacking kernel."""
+    The channels are transformed in grid-sized complex planes kept in the runtime's cache
+    (`_host_planes`), :func:`host_planes_in_flight` of them at once, each pass over all of
+    them (`_host_passes`: a row task reads its rows of the image once for every channel and
+    the inverse row task writes every channel of its output rows, alpha included, while
+    they are in cache); the inverse row transforms run for the rows kept alone, and the
+    tasks zero what they do not write (no fill of ``dst`` before, no serial pass): no
+    padded planes for VkFFT, no unpacking kernel."""
     cl = rt.cl
     n1, n2 = grid
     sx, sy, sw, sh = support
@@ -559,7 +571,8 @@ def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray
     cols = slice(gx[0], gx[0] + len(gx)) if len(gx) and gx[-1] - gx[0] == len(gx) - 1 \
         else gx
     spans = [(int(gy[r[0] - y0]), int(gy[r[-1] - y0]) + 1) for r in runs if len(r)]
-    shelf, planes, shelved = _host_planes(rt, n1, n2, host_planes_in_flight(n1, n2, nch))
+    group = host_planes_in_flight(n1, n2, nch)
+    shelf, planes, shelved = _host_planes(rt, n1, n2, group)
     try:
         out, _ = cl.enqueue_map_buffer(rt.queue, dst.buffer, cl.map_flags.WRITE, 0,
                                        (max(dst.height, 1), dst.pitch, dst.channels),
@@ -569,28 +582,32 @@ def _host_convolve(rt, img, support: tuple[int, int, int, int], spec: np.ndarray
                                               (max(img.height, 1), img.pitch, img.channels),
                                               np.float32)
             try:
-                def channel(c):
-                    def rows(r0, r1):
-                        x = pixels[sy + r0:sy + r1, sx:sx + sw, c].astype(np.float64)
+                def rows(c):
+                    def load(r0, r1, x):    # support rows r0..r1 of channel c into x[:, :sw]
+                        x = x[:, :sw]
+                        np.copyto(x, pixels[sy + r0:sy + r1, sx:sx + sw, c])
                         if not np.isfinite(x.sum()):    # float32 values: no float64 overflow
                             x[~np.isfinite(x)] = 0.0
-                        return x
+                    return load
 
-                    def kept_rows(r0, r1, values):   # grid rows r0.. of one run
+                def kept_rows(c):
+                    def put(r0, r1, values):   # grid rows r0.. of one run
                         ys = r0 - gy[0] + y0 if r0 >= gy[0] else r0 + n1 - gy[0] + y0
                         block = out[ys:ys + r1 - r0]
                         block[:, x0:x1, c] = values[:, cols]
                         if c == 0:    # alpha (the channels past the colour ones) is 0
                             block[:, x0:x1, nch:] = 0.0
-                    return rows, kept_rows, spec[c] if len(spec) > 1 else spec[0]
+                    return put
 
-                lanes = [[] for _ in planes]
-                for c in range(nch):
-                    rows, sink, s = channel(c)
-                    lanes[c % len(planes)] += _host_passes(planes[c % len(planes)], sh, s,
-                                                           rows, (spans, sink))
-                lanes.append([_zero_outside(out, kept)])
-                _run_lanes(lanes)
+                passes = []
+                for c0 in range(0, nch, group):   # each group of channels in turn
+                    chans = range(c0, min(c0 + group, nch))
+                    passes += _host_passes(planes[:len(chans)], sh,
+                                           [spec[c] if len(spec) > 1 else spec[0]
+                                            for c in chans],
+                                           [rows(c) for c in chans],
+                                           (spans, [kept_rows(c) for c in chans]))
+                _run_lanes([passes, [_zero_outside(out, kept)]])
             finally:
                 pixels.base.release()
         finally:
@@ -625,14 +642,15 @@ def _zero_outside(out: np.ndarray, kept: tuple[int, int, int, int]) -> list:
 HOST_PLANE_BYTES = 2 ** 27
 """Most bytes of the complex planes one host convolution transforms channels in at once
 (:func:`host_planes_in_flight`): 1080p glare's 1372 x 1126 complex128 planes are 24.7 MiB
-(2 on 2 cores, 3 on more), 4K's (~3300 x 2476) 130 MiB: one, its channels one after another."""
+(all three at once), 4K's (~3300 x 2476) 130 MiB: one, its channels one after another."""
 
 
 def host_planes_in_flight(n1: int, n2: int, channels: int) -> int:
-    """How many channels a host convolution on an (N1, N2) grid transforms at once: one per
-    core, at most ``channels``, within :data:`HOST_PLANE_BYTES` (at least one)."""
+    """How many channels a host convolution on an (N1, N2) grid transforms at once (each
+    pass over all of them, its tasks on every core): at most ``channels``, within
+    :data:`HOST_PLANE_BYTES` (at least one)."""
     plane = n1 * (n2 // 2 + 1) * 16
-    return max(1, min(channels, available_cores(), HOST_PLANE_BYTES // plane))
+    return max(1, min(channels, HOST_PLANE_BYTES // plane))
 
 
 def _host_planes(rt, n1: int, n2: int, count: int) -> tuple[list, list[np.ndarray], list]:
@@ -664,73 +682,93 @@ grid-sized temporaries of a whole-plane transform, several per plane, are never 
 MiB each at 8K)."""
 
 HOST_COLUMN_BYTES = 2 ** 19
-"""The columns one host transform task takes at a time: NumPy copies each column out and
-back, and these stay in the 2nd level cache (1080p glare, 1372-point columns, CPU of a
-plane's forward, product and inverse, min of 8: 36-38 ms in 16-32 columns, 41 in 95
-columns (2 MiB), 59 whole)."""
+"""The columns one host transform task takes at a time, copied side by side into the task's
+buffer, which stays in the 2nd level cache through the forward transform, the product and
+the inverse (1080p glare, 1372-point columns, CPU of a plane's: 36-38 ms in 16-32 strided
+columns, 41 in 95 (2 MiB), 59 whole; contiguous copies of 23: 30-33, the same with 8-64,
+2^18-2^20 bytes within the noise)."""
 
 
-def _host_spectra(planes: np.ndarray) -> None:
-    """In place on ``planes`` (B x N1 x (N2 + 2) float64, the r2c layout): each plane's
-    forward transform (its N1 rows' N2 reals), as complex128 (B x N1 x (N2 / 2 + 1)):
-    :func:`_host_passes` of each plane, the planes at once (`_run_lanes`)."""
-    cplx = planes.view(np.complex128)
-    _run_lanes([_host_passes(cplx[b], cplx.shape[1]) for b in range(len(cplx))])
+def _host_passes(planes: list[np.ndarray], rows: int, specs: list | None = None,
+                 sources: list | None = None, sink=None, spectra=None) -> list[list]:
+    """The passes over N1 x (N2 / 2 + 1) complex128 ``planes`` (one per channel), in order,
+    each a list of tasks (callables; a pass's tasks may run at once, after the previous
+    pass's): the forward transform of the first ``rows`` rows' N2 reals of every plane
+    (``sources[p](r0, r1, x)`` writes plane p's rows r0..r1 into x[:, :width], at most N2
+    values each, and leaves the rest of x, 0, alone; default the plane's own reals, the r2c
+    layout; the rows after ``rows`` read as 0), then with ``specs`` (one per plane, each
+    (N2 / 2 + 1) x N1: :func:`_host_spectrum`) and ``sink`` = (runs, puts) the product and
+    the inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse) of only the
+    grid row runs [r0, r1) of ``runs``, handed to ``puts[p](r0, r1, values)`` (values (r1 -
+    r0) x N2 float64, valid during the call); without them the spectra alone, written into
+    ``spectra`` (planes x (N2 / 2 + 1) x N1, transposed).
 
-
-def _host_passes(cplx: np.ndarray, rows: int, spec: np.ndarray | None = None, source=None,
-                 sink=None) -> list[list]:
-    """The passes over one N1 x (N2 / 2 + 1) complex128 plane, in order, each a list of tasks
-    (callables; a pass's tasks may run at once, after the previous pass's): the forward
-    transform of the first ``rows`` rows' N2 reals (``source(r0, r1)``: rows r0..r1, at most
-    N2 values each, the rest 0; default the plane's own reals, the r2c layout; the rows after
-    ``rows`` read as 0), then with ``spec`` and ``sink`` = (runs, put) the product and the
-    inverse transform (N2 reals per row, the 1 / (N1 N2) on the inverse) of only the grid
-    row runs [r0, r1) of ``runs``, handed to ``put(r0, r1, values)`` (values (r1 - r0) x N2
-    float64); without them the spectrum alone.  Row chunks of :data:`HOST_CHUNK_BYTES` and column chunks of
-    :data:`HOST_COLUMN_BYTES` are a task each (NumPy's transforms release the GIL).  Every
-    row and column is transformed alone, so the chunks change no bit of the result."""
-    n1, half = cplx.shape
+    A row task takes :data:`HOST_CHUNK_BYTES` of rows of every plane (the image's rows read
+    and the output's written once, while in cache); a column task :data:`HOST_COLUMN_BYTES`
+    of columns of one plane, copied side by side into a buffer of the task's thread, where
+    their transforms and the product run on contiguous values, and only the rows the
+    inverse row pass reads go back (NumPy's transforms release the GIL).  Every row and
+    column is transformed alone, so the chunks change no bit of the result."""
+    n1, half = planes[0].shape
     n2 = 2 * (half - 1)
-    row_step = max(1, HOST_CHUNK_BYTES // (half * 16))
+    row_step = max(1, HOST_CHUNK_BYTES // (half * 16 * len(planes)))
     col_step = max(1, HOST_COLUMN_BYTES // (n1 * 16))
-    real = cplx.view(np.float64)
+    local = threading.local()   # each thread's buffers, made once a call
+
+    def scratch(name: str, shape, dtype) -> np.ndarray:
+        if not hasattr(local, name):   # zeros: the forward rows' padding stays 0
+            setattr(local, name, np.zeros(shape, dtype))
+        return getattr(local, name)
 
     def forward_rows(r0, r1):
-        if source is None:   # the plane's own reals: transformed before any row is written
-            x = real[r0:r1, :n2]
+        for p, cplx in enumerate(planes):
+            if sources is None:   # the plane's own reals: transformed before a row is written
+                x = cplx.view(np.float64)[r0:r1, :n2]
+                lit = x.any(axis=1)
+                f = np.fft.rfft(x if lit.all() else x[lit], n=n2, axis=1)
+                cplx[r0:r1][~lit] = 0.0
+                cplx[r0 + np.flatnonzero(lit)] = f
+                continue
+            x = scratch("rows", (row_step, n2), np.float64)[:r1 - r0]
+            sources[p](r0, r1, x)
+            # a row of zeros transforms to zeros: glare's highlights leave a third of the
+            # rows of their support dark at 1080p; each run of lit rows is transformed into
+            # the plane (whole padded rows: 40 % less than NumPy's own padding of each row)
             lit = x.any(axis=1)
-            f = np.fft.rfft(x if lit.all() else x[lit], n=n2, axis=1)
             cplx[r0:r1][~lit] = 0.0
-            cplx[r0 + np.flatnonzero(lit)] = f
-            return
-        x = source(r0, r1)
-        # a row of zeros transforms to zeros: glare's highlights leave a third of the rows
-        # of their support dark at 1080p; each run of lit rows is transformed into the plane
-        lit = x.any(axis=1)
-        cplx[r0:r1][~lit] = 0.0
-        edges = np.flatnonzero(np.diff(lit, prepend=False, append=False))
-        for a, b in zip(edges[::2], edges[1::2]):
-            np.fft.rfft(x[a:b], n=n2, axis=1, out=cplx[r0 + a:r0 + b])
+            edges = np.flatnonzero(np.diff(lit, prepend=False, append=False))
+            for a, b in zip(edges[::2], edges[1::2]):
+                np.fft.rfft(x[a:b], axis=1, out=cplx[r0 + a:r0 + b])
 
-    def columns(c0, c1):    # in place (out=): no temporaries, no copies back
-        f = cplx[:, c0:c1]
-        f[rows:] = 0.0
-        np.fft.fft(f, axis=0, out=f)
-        if spec is not None:
-            f *= spec[:, c0:c1]
-            np.fft.ifft(f, axis=0, out=f)
+    def columns(p, c0, c1):
+        f = planes[p][:, c0:c1]
+        t = scratch("columns", (col_step, n1), np.complex128)[:c1 - c0]
+        np.copyto(t[:, :rows], f[:rows].T)
+        t[:, rows:] = 0.0
+        np.fft.fft(t, axis=1, out=t)
+        if specs is None:
+            spectra[p][c0:c1] = t
+            return
+        t *= specs[p][c0:c1]
+        np.fft.ifft(t, axis=1, out=t)
+        for r0, r1 in sink[0]:
+            np.copyto(f[r0:r1], t[:, r0:r1].T)
 
     def put_rows(r0, r1):
-        sink[1](r0, r1, np.fft.irfft(cplx[r0:r1], n=n2, axis=1))
+        values = scratch("values", (row_step, n2), np.float64)[:r1 - r0]
+        for p, cplx in enumerate(planes):
+            np.fft.irfft(cplx[r0:r1], n=n2, axis=1, out=values)
+            sink[1][p](r0, r1, values)
 
     def tasks(fn, spans, step):
         return [functools.partial(fn, i, min(i + step, hi)) for lo, hi in spans
                 for i in range(lo, hi, step)]
 
+    # the planes' tasks of a column chunk side by side: one spectrum's chunk stays in cache
     passes = [tasks(forward_rows, [(0, rows)], row_step),
-              tasks(columns, [(0, half)], col_step)]
-    if spec is not None:
+              [functools.partial(columns, p, c, min(c + col_step, half))
+               for c in range(0, half, col_step) for p in range(len(planes))]]
+    if specs is not None:
         passes.append(tasks(put_rows, sink[0], row_step))
     return passes
 

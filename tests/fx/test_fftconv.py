@@ -350,3 +350,65 @@ def test_host_lanes_overlap_keep_each_lanes_order_and_stop_at_an_error(monkeypat
         fftconv._run_lanes([[[fails], [lambda: ran.append(1)]], [[lambda: None]]])
     assert ran == []
     assert not [t for t in threading.enumerate() if t.name.startswith("clfx-fft")]
+
+
+def test_host_passes_take_every_channel_in_each_row_task(monkeypatch):
+    # issue 37: a row task reads its rows of the image for every channel and an inverse row
+    # task writes every channel of its output rows (one pass over the RGBA rows while they
+    # are in cache, not one a channel); the channels are transformed at once whatever the
+    # cores (within HOST_PLANE_BYTES: 1080p glare's three 24.7 MiB planes); the same bits as
+    # one plane transformed alone
+    monkeypatch.setattr(fftconv, "available_cores", lambda: 2)
+    assert fftconv.host_planes_in_flight(1372, 2250, 3) == 3
+    assert fftconv.host_planes_in_flight(3300, 4950, 3) == 1      # 4K: one at a time
+    rng = np.random.default_rng(5)
+    n1, n2, rows = 12, 10, 7
+    src = rng.uniform(size=(3, rows, n2 - 3))
+    src[:, 2] = 0.0                                               # a dark row
+    specs = [np.ascontiguousarray(rng.uniform(size=(n1, n2 // 2 + 1)).T + 0j)
+             for _ in range(3)]
+    calls, got = [], np.zeros((3, n1, n2))
+
+    def source(c):
+        def load(r0, r1, x):
+            calls.append(("load", c, r0))
+            x[:, :src.shape[2]] = src[c, r0:r1]
+        return load
+
+    def sink(c):
+        def put(r0, r1, values):
+            calls.append(("put", c, r0))
+            got[c, r0:r1] = values
+        return put
+
+    monkeypatch.setattr(fftconv, "HOST_CHUNK_BYTES", 2 * 6 * 16 * 3)   # two rows a task
+    planes = [np.zeros((n1, n2 // 2 + 1), np.complex128) for _ in range(3)]
+    passes = fftconv._host_passes(planes, rows, specs, [source(c) for c in range(3)],
+                                  ([(0, n1)], [sink(c) for c in range(3)]))
+    assert len(passes[0]) == 4 and len(passes[2]) == 6         # row chunks, not x 3
+    fftconv._run_lanes([passes])
+    for kind in ("load", "put"):
+        seen = [(c, r0) for k, c, r0 in calls if k == kind]
+        for r0 in {r0 for _, r0 in seen}:       # each task: every channel, in order
+            i = seen.index((0, r0))
+            assert seen[i:i + 3] == [(0, r0), (1, r0), (2, r0)]
+    for c in range(3):
+        x = np.zeros((n1, n2))
+        x[:rows, :src.shape[2]] = src[c]
+        want = np.fft.irfft2(np.fft.rfft2(x) * specs[c].T, s=(n1, n2))
+        np.testing.assert_allclose(got[c], want, rtol=0, atol=1e-13)
+
+
+def test_host_spectrum_is_transposed_for_the_column_tasks(rt, rng):
+    # the column tasks multiply contiguous values: the host spectrum is kept as (planes,
+    # N2 / 2 + 1, N1), each column's values side by side, made in the transforms' own
+    # planes (taken from and put back on the runtime's shelf)
+    k = rng.uniform(size=(5, 7, 3))
+    n1, n2 = 12, 16
+    spec, planes = fftconv._host_spectrum(rt, k, n1, n2, "float64")
+    assert planes == 3 and spec.shape == (3, n2 // 2 + 1, n1) and spec.flags.c_contiguous
+    for p in range(3):
+        grid = np.zeros((n1, n2))
+        np.add.at(grid, ((np.arange(5) - 2)[:, None] % n1, (np.arange(7) - 3)[None] % n2),
+                  k[..., p])
+        np.testing.assert_allclose(spec[p], np.fft.rfft2(grid).T, rtol=0, atol=1e-13)
