@@ -148,15 +148,18 @@ inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, con
 /* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two float16s, bit for bit two
  * grain_white16: the float32 levels take both quads' logarithms, roots and sines as one
  * 16-lane evaluation (grain_white16 runs them 8 lanes wide; at 1080p the noise cost
- * 27 ms of CPU a frame that way, its long dependency chain per work-item idle half the time). */
-inline void grain_white32(uint seed, int frame, int x, int y, REAL16 *n0, REAL16 *n1)
+ * 27 ms of CPU a frame that way, its long dependency chain per work-item idle half the time).
+ * Always inlined: PoCL kept it out of line, its two outputs through the stack (1080p: with
+ * clfx_uniform32's shared hashes, grain_noise 18-23 -> 15.5-20.5 ms of CPU). */
+inline __attribute__((always_inline)) void grain_white32(uint seed, int frame, int x, int y,
+                                                       REAL16 *n0, REAL16 *n1)
 {
 #if REAL_IS_DOUBLE
   *n0 = grain_white16(seed, frame, x, y);
   *n1 = grain_white16(seed, frame, x + 4, y);
 #else
-  const float16 u0 = clfx_uniform16(seed, frame, x, y, 0);
-  const float16 u1 = clfx_uniform16(seed, frame, x + 4, y, 0);
+  float16 u0, u1;
+  clfx_uniform32(seed, frame, x, y, 0, &u0, &u1);
   float16 co;
   const float16 r = sqrt(-2.0f * clfx_log16((float16)(u0.even, u1.even)));
   const float16 si = clfx_sincos2pi16((float16)(u0.odd, u1.odd), &co);
