@@ -565,6 +565,12 @@ inline void fp_bspline_w8(float8 t, float8 *w0, float8 *w1, float8 *w2, float8 *
 #ifndef FP_PREFETCH_AHEAD
 #define FP_PREFETCH_AHEAD 24
 #endif
+/* 1: the lanczos3 fast path takes its shortcuts (one weight set where both coincide, the
+ * 2x2 clamp), 0: every quad through the general forms: the same pixels, bit for bit (a
+ * test builds both) */
+#ifndef FP_SHORTCUTS
+#define FP_SHORTCUTS 1
+#endif
 
 #if !REAL_IS_DOUBLE
 /* One axis: the weights of the window's FP_TAPS taps from the fraction f and spread h. */
@@ -821,7 +827,7 @@ inline __attribute__((always_inline)) void fp_fast_quad_at(global const float *s
    * the same weights, for half the divisions and polynomials) */
   float16 g0, g1, g2, g3, g4, g5;
   const float8 f8s = (float8)(fx, fy), p8s = (float8)(px - flx, py - fly);
-  if(all(p8s == f8s)) {
+  if(FP_SHORTCUTS && all(p8s == f8s)) {
     float8 k0, k1, k2, k3, k4, k5;
     rs_lanczos_w8(f8s, &k0, &k1, &k2, &k3, &k4, &k5);
     g0 = (float16)(k0.lo, k0.lo, k0.hi, k0.hi); g1 = (float16)(k1.lo, k1.lo, k1.hi, k1.hi);
@@ -855,7 +861,7 @@ inline __attribute__((always_inline)) void fp_fast_quad_at(global const float *s
       lo = min(lo, m); hi = max(hi, m); } }
 #define FP_PIXEL(k, o) {                                                                     \
     global const float *p = src + base.s##k;                                                 \
-    const int yb = cy1.s##k, xb = cx1.s##k, wide = xb > 3 || yb > 3;                         \
+    const int yb = cy1.s##k, xb = cx1.s##k, wide = !FP_SHORTCUTS || xb > 3 || yb > 3;        \
     const int16 cm = lane <= (int16)xb;                                                      \
     float16 va = (float16)0.0f, vb = (float16)0.0f;                                          \
     float16 lo = (float16)INFINITY, hi = (float16)-INFINITY;                                 \
