@@ -843,7 +843,7 @@ inline __attribute__((always_inline)) void fp_fast_quad_at(global const float *s
   r0 = g0.scdef; r1 = g1.scdef; r2 = g2.scdef; r3 = g3.scdef; r4 = g4.scdef; r5 = g5.scdef;
   FP_MERGE8(fly, y)
   /* the clamp: taps 2 .. ceil(u + h) = ceil(f + 2 + 2h) along each axis (u - h = f + 2).
-   * Mostly the 2x2 texels 2..3 of rows 2..3 (f > 0, f + 2h <= 1: 90 % of the pixels of
+   * Mostly the 2x2 texels 2..3 of rows 2..3 (f + 2h <= 1: 98 % of the fast pixels of
    * distortion at 1080p), two float8 rows of 2 texels, the same minima and maxima in the
    * same order as the general form: texels 2..5 of each row as one float16, those beyond
    * the range read as texel 2 (its row reductions cost as much as the row's taps) */
