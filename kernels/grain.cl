@@ -148,15 +148,18 @@ inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, con
 /* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two float16s, bit for bit two
  * grain_white16: the float32 levels take both quads' logarithms, roots and sines as one
  * 16-lane evaluation (grain_white16 runs them 8 lanes wide; at 1080p the noise cost
- * 27 ms of CPU a frame that way, its long dependency chain per work-item idle half the time). */
-inline void grain_white32(uint seed, int frame, int x, int y, REAL16 *n0, REAL16 *n1)
+ * 27 ms of CPU a frame that way, its long dependency chain per work-item idle half the time).
+ * Always inlined: PoCL kept it out of line, its two outputs through the stack (1080p: with
+ * clfx_uniform32's shared hashes, grain_noise 18-23 -> 15.5-20.5 ms of CPU). */
+inline __attribute__((always_inline)) void grain_white32(uint seed, int frame, int x, int y,
+                                                       REAL16 *n0, REAL16 *n1)
 {
 #if REAL_IS_DOUBLE
   *n0 = grain_white16(seed, frame, x, y);
   *n1 = grain_white16(seed, frame, x + 4, y);
 #else
-  const float16 u0 = clfx_uniform16(seed, frame, x, y, 0);
-  const float16 u1 = clfx_uniform16(seed, frame, x + 4, y, 0);
+  float16 u0, u1;
+  clfx_uniform32(seed, frame, x, y, 0, &u0, &u1);
   float16 co;
   const float16 r = sqrt(-2.0f * clfx_log16((float16)(u0.even, u1.even)));
   const float16 si = clfx_sincos2pi16((float16)(u0.odd, u1.odd), &co);
@@ -256,17 +259,27 @@ kernel void grain_apply(global const float *src, global float *dst, global const
                          amt, response, grey, inv_grey), 0, dst + i);
 }
 
-/* Draft: white noise generated in place, one pass. */
+/* Draft: white noise generated in place, one pass; 8 pixels a work-item (grain_white32:
+ * 1080p 42-55 -> 34-39 ms of CPU, the same pixels), the row's last quad alone where
+ * pitch % 8 == 4. */
 kernel void grain_apply_white(global const float *src, global float *dst, const int pitch,
                               const int height, const int fx0, const int fy0, const uint seed,
                               const int frame, const float ar, const float ag, const float ab,
                               const float response, const float grey, const float inv_grey)
 {
-  const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= height || qx * 4 >= pitch) return;
-  const int x = qx * 4;
+  const int ox = get_global_id(0), y = get_global_id(1);
+  if(y >= height || ox * 8 >= pitch) return;
+  const int x = ox * 8;
   const size_t i = (size_t)(y * pitch + x) * 4;
-  const REAL16 n = grain_white16(seed, frame, fx0 + x, fy0 + y);
-  vstore16(grain_mix16(vload16(0, src + i), n, (REAL4)(ar, ag, ab, 0), response, grey,
-                              inv_grey), 0, dst + i);
+  const REAL4 amt = (REAL4)(ar, ag, ab, 0);
+  if(x + 4 < pitch)
+  {
+    REAL16 n0, n1;
+    grain_white32(seed, frame, fx0 + x, fy0 + y, &n0, &n1);
+    vstore16(grain_mix16(vload16(0, src + i), n0, amt, response, grey, inv_grey), 0, dst + i);
+    vstore16(grain_mix16(vload16(1, src + i), n1, amt, response, grey, inv_grey), 1, dst + i);
+  }
+  else
+    vstore16(grain_mix16(vload16(0, src + i), grain_white16(seed, frame, fx0 + x, fy0 + y),
+                         amt, response, grey, inv_grey), 0, dst + i);
 }

@@ -384,8 +384,9 @@ class Grain(Plugin):
         if truncation is None or max(sigmas) < 1e-6:
             # draft, or size 0: the filter is the single tap 1, so skip the two passes
             knl = rt.kernel("grain.cl", "grain_apply_white", fp64=lvl.fp64, **defines)
-            rt.launch(knl, (pitch // 4, height), src, dst, pitch, height, x0, y0, seed, frame, ar,
-                      ag, ab, *tone)
+            # 8 pixels a work-item
+            rt.launch(knl, (-(-pitch // 8), height), src, dst, pitch, height, x0, y0, seed,
+                      frame, ar, ag, ab, *tone)
             return dst
 
         radius, weights = self._device_weights(rt, sigmas, truncation, use64)

@@ -96,4 +96,18 @@ inline float16 clfx_uniform16(uint seed, int frame, int x, int y, int c0)
   return clfx_stream16(clfx_hash_xy16(seed, frame, x, y), c0);
 }
 
+/* clfx_uniform16 at x (*u0) and x + 4 (*u1), bit for bit: the per-pixel hashes of the 8
+ * pixels 8 lanes wide, once each (clfx_hash_xy16 runs them on 16 lanes, each value 4 times:
+ * 1080p grain_noise 22.6 -> 20.5 ms of CPU). */
+inline void clfx_uniform32(uint seed, int frame, int x, int y, int c0, float16 *u0, float16 *u1)
+{
+  const uint prefix = clfx_hash(clfx_hash(seed ^ 0x9e3779b9u) ^ (uint)frame);
+  uint8 h = (uint8)(prefix) ^ ((uint8)((uint)x) + (uint8)(0, 1, 2, 3, 4, 5, 6, 7));
+  CLFX_LOWBIAS32(h);
+  h ^= (uint8)((uint)y * 0x85ebca6bu);
+  CLFX_LOWBIAS32(h);
+  *u0 = clfx_stream16(shuffle(h, (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3)), c0);
+  *u1 = clfx_stream16(shuffle(h, (uint16)(4, 4, 4, 4, 5, 5, 5, 5, 6, 6, 6, 6, 7, 7, 7, 7)), c0);
+}
+
 #endif

@@ -430,6 +430,32 @@ def test_streaming_stores_give_the_same_pixels(rt, rng, monkeypatch, quality):
     assert built_with_streaming(rt, "distortion.cl")
 
 
+@pytest.mark.parametrize("coeffs", [dict(k1=-0.45, k2=0.1, fit="none"), dict(k1=-0.02),
+                                    dict(amount=0.25)])
+def test_lanczos_shortcuts_give_the_general_forms_pixels(rt, rng, monkeypatch, coeffs):
+    """Final's fast path takes shortcuts (kernels/lib/resample.h, FP_SHORTCUTS): one 8-wide
+    weight evaluation where a quad's two Lanczos sample sets coincide (h = 0) and the 2x2
+    clamp from two short rows; built without them, every quad goes through the general
+    forms.  On warps with magnified and minified quads, over a plate with +0 and -0 areas
+    (the clamp's signed zeros), both builds give the same pixels, bit for bit."""
+    src = smooth_image(rng, 61, 90)
+    src[10:24, 30:50] = 0.0
+    src[30:44, 20:40] = -0.0
+    src[40:50, 60:80, :3] *= np.where(rng.uniform(size=(10, 20, 1)) < 0.5, -1e-3, 1e-3)
+    p = Distortion.params(**coeffs)
+    fast = render_effect(rt, Distortion(), p, src, quality="final", camera=CAM)
+    kernel = rt.kernel
+
+    def general(file, name, *args, **defines):
+        return kernel(file, name, *args, **defines, FP_SHORTCUTS=0)
+
+    monkeypatch.setattr(rt, "kernel", general)
+    rt.cache.clear()
+    slow = render_effect(rt, Distortion(), p, src, quality="final", camera=CAM)
+    assert any(k[0] == "distortion.cl" and ("FP_SHORTCUTS", "0") in k[1] for k in rt._programs)
+    assert np.array_equal(fast.view(np.uint32), slow.view(np.uint32))
+
+
 # -- tight data windows: the output grows to where the element lands -----------------------
 TIGHT_DISPLAY, TIGHT_DATA = Rect(0, 0, 128, 96), Rect(58, 40, 112, 84)
 """A frame and an element's bounding box right of and below its centre (Beachball's ball:

@@ -129,6 +129,27 @@ def test_device_hash_equals_reference_hash(rt):
     np.testing.assert_array_equal(out, expect.astype(np.float32))
 
 
+def test_eight_pixel_uniforms_equal_the_scalar_hash(rt):
+    """fastmath.h's clfx_uniform32 (grain's 8 pixels a work-item, their per-pixel hashes
+    shared 8 lanes wide) is clfx_uniform at x .. x + 7, channels c0 .. c0 + 3, bit for bit."""
+    src = """#include "lib/fastmath.h"
+    kernel void k(global float *o, const uint seed, const int frame) {
+      const int i = get_global_id(0);
+      float16 u0, u1;
+      clfx_uniform32(seed, frame, 8 * i - 37, 3 * i - 100, i % 5, &u0, &u1);
+      vstore16(u0, 2 * i, o);
+      vstore16(u1, 2 * i + 1, o);
+    }"""
+    prg = rt.cl.Program(rt.ctx, src).build(options=[f"-I{rt.kernel_dir}"])
+    out = np.empty((64, 8, 4), np.float32)
+    buf = rt.cl.Buffer(rt.ctx, rt.cl.mem_flags.WRITE_ONLY, out.nbytes)
+    prg.k(rt.queue, (64,), None, buf, np.uint32(0xDEADBEEF), np.int32(-5))
+    rt.cl.enqueue_copy(rt.queue, out, buf)
+    i, px, c = np.meshgrid(np.arange(64), np.arange(8), np.arange(4), indexing="ij")
+    expect = reference_uniform(0xDEADBEEF, -5, 8 * i - 37 + px, 3 * i - 100, i % 5 + c)
+    np.testing.assert_array_equal(out, expect.astype(np.float32))
+
+
 # -- the model's statistics -------------------------------------------------------------------
 def test_film_terms_size_in_pixels():
     """diameter (um on the negative) -> pixels through the format width and display width."""
