@@ -254,7 +254,7 @@ class DofGather:
     half: np.ndarray          # per tile: gathered at half resolution
     half_l: int               # the half-resolution pyramid's depth
     pad: int                  # the padded buffers' border (px)
-    taps: object              # device tap table and per-tile table of the full-res gather
+    taps: object              # (device tap table, its column stride) and per-tile table of the full-res gather
     tiles: object
     htaps: object             # ... of the half-resolution gather (None without)
     htiles: object
@@ -950,7 +950,13 @@ class Dof(Plugin):
                 counts.append(c)
                 at += len(c)
         flat = np.concatenate([tiles.ravel()] + counts).astype(np.int32)
-        return rt.to_device(table), rt.to_device(flat), int(np.abs(table[:, 1]).max())
+        # the rows, then the columns (4 floats of padding each: a block of 4 taps reads
+        # float4s of a column from any tap)
+        n4 = len(table) + 4
+        cols = np.zeros((8, n4), np.float32)
+        cols[:, :len(table)] = table.T
+        return ((rt.to_device(np.concatenate([table.ravel(), cols.ravel()])), np.int32(n4)),
+                rt.to_device(flat), int(np.abs(table[:, 1]).max()))
 
     # -- render ----------------------------------------------------------------------------
     def render(self, rt, p, ctx):
@@ -1090,7 +1096,7 @@ class Dof(Plugin):
         hres_args = ((hres, hres.pitch, half_size[0], half_size[1])
                      if hres is not None else (dst, dst.pitch, 1, 1))
         rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, col.pitch, pad,
-                  dst, dst.pitch, dst.width, dst.height, taps, tiles,
+                  dst, dst.pitch, dst.width, dst.height, *taps, tiles,
                   frame.log_mean, frame.tiles_x, frame.tiles_y, tile,
                   CAP_FACTOR, *hres_args, lvl.refine, lvl.half_res_radius, lvl.sharp_radius,
                   cateye, plane, place, (*hplace, 0, 0),
