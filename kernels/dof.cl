@@ -1100,7 +1100,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                        global const float *log_mean,
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
-                       const int hwidth, const int hheight, const float refine,
+                       const int hwidth, const int hheight, const float4 refine,
                        const float low_r, const float sharp_r, const float8 cateye,
                        const int plane,
                        const int4 place, const int4 hplace, global const float *mixa,
@@ -1163,9 +1163,12 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     float lmin = INFINITY, lmax = -INFINITY;
     const float16 up = dof_upsample4(hres, hpitch, hwidth, hheight, hplace.s0, hplace.s1, x,
                                      y, tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
-    if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
-                         <= refine)
+    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees; the
+       logarithm only where the ratio lies within 1e-4 of exp(refine) (refine.s12: below
+       and above; the same test elsewhere, without a logarithm per group) */
+    const float ratio = (1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f));
+    if(!(info.s4 & 2) || ratio <= refine.s1
+       || (!(ratio > refine.s2) && native_log(ratio) <= refine.s0))
     {
       vstore16(up, 0, out);
       return;
@@ -1185,7 +1188,9 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     for(int fy = fy0; fy <= fy1 && !mix; fy++)
       for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
   }
-  const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
+  /* the cap of hidden background: read only where a pixel lies in front of the focus plane */
+  const float cap = dof_any4(fmin(r, fmin(rn, rf)) < -NEAR_EPS)
+                    ? dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor) : 0.0f;
 #if DOF_CATEYE
   const float4 ce_x = cateye.s0 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s1;
   const float4 ce_y = (float4)(cateye.s2 * ((float)y + 0.5f) + cateye.s3);

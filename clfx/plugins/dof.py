@@ -173,6 +173,7 @@ from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE, analyse  # dof's tiles are the shared analysis's
 from clfx.host import Plugin, StepPlan, read_only, register
 
+FLT_MAX = float(np.finfo(np.float32).max)
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
 BAND_PIXELS = 1 << 22
 """Pixels per band of the analysis of a frame grown past its data window (`Dof.frame`)."""
@@ -491,6 +492,19 @@ def dilate_tiles(t: np.ndarray, reach: int) -> np.ndarray:
             xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
             out[yd, xd] = np.maximum(out[yd, xd], t[ys, xs])
     return out
+
+
+def refine_bounds(refine: float) -> tuple[float, float, float, float]:
+    """``dof_gather``'s refine float4: the level's ``refine`` (a log-luminance span), and the
+    ratios within 1e-4 of ``exp(refine)`` below and above which the span is known without
+    its logarithm (the kernel takes one only between them; ``native_log`` is far more
+    accurate than that)."""
+    if refine == math.inf:
+        return (refine, math.inf, math.inf, 0.0)
+    e = math.exp(min(refine, 700.0))
+    if e * (1.0 + 1e-4) > FLT_MAX:    # every finite ratio lies below, an infinite one not
+        return (refine, FLT_MAX, FLT_MAX, 0.0)
+    return (refine, e * (1.0 - 1e-4), e * (1.0 + 1e-4), 0.0)
 
 
 def prefilter(rt, col, pheight: int, levels: int) -> None:
@@ -1098,6 +1112,7 @@ class Dof(Plugin):
         rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, col.pitch, pad,
                   dst, dst.pitch, dst.width, dst.height, *taps, tiles,
                   frame.log_mean, frame.tiles_x, frame.tiles_y, tile,
-                  CAP_FACTOR, *hres_args, lvl.refine, lvl.half_res_radius, lvl.sharp_radius,
+                  CAP_FACTOR, *hres_args, refine_bounds(lvl.refine), lvl.half_res_radius,
+                  lvl.sharp_radius,
                   cateye, plane, place, (*hplace, 0, 0),
                   *(mix or (coc, coc, coc, coc, 0, 0)), local=LOCAL)
