@@ -24,10 +24,12 @@
  *   1..L after plane 0, the tents that the sparse lattices of taps sample.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
  *   same pattern of integer tap offsets, so every tap is a vload16 + vload4 and the weights
- *   are float4 vectors (PoCL does not vectorise one-pixel work-items).  Per tile (host
- *   table): copy, gather, or (tiles far out of focus) bilinear upsampling of the
- *   half-resolution gather, gathered again at full resolution where that is not smooth
- *   (the rim of a bokeh disk, a sharp pixel).
+ *   are float4 vectors (PoCL does not vectorise one-pixel work-items), 4 taps at a time
+ *   (float16 weights, dof_taps) unless a mixed edge pixel is within reach (tap by tap,
+ *   dof_tap).  Per tile (host table): copy, gather, or (tiles far out of focus) bilinear
+ *   upsampling of the half-resolution gather, gathered again at full resolution where that
+ *   is not smooth (the rim of a bokeh disk, a sharp pixel).
+ *   DOF_TAP_BY_TAP=1 gathers every group tap by tap: the same bits (tests/plugins/test_dof.py).
  *
  * Build variants (compile-time, nothing in the hot loop when off):
  *   DOF_CATEYE=1: optical vignetting; every tap's coverage is also clipped by the barrel
@@ -57,7 +59,10 @@
 #ifndef DOF_CATEYE
 #define DOF_CATEYE 0
 #endif
-#define CATEYE_MIN_FRAC 1e-3f   /* the open aperture's smallest fraction (normalisation) */
+#define CATEYE_MIN_FRAC 1e-3f
+#ifndef DOF_TAP_BY_TAP
+#define DOF_TAP_BY_TAP 0   /* 1: every gather tap by tap (the blocks' check: the same bits) */
+#endif   /* the open aperture's smallest fraction (normalisation) */
 
 inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, float offset)
 {
@@ -805,7 +810,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
   const int end1 = first + count.x, end2 = first + count.y;
-  if(!mix)
+  if(!mix && !DOF_TAP_BY_TAP)
   {
     const float16 r016 = PIXELS(r0);
     const int16 p_near16 = PIXELS(p_near);
@@ -860,7 +865,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
       const int lv = (int)tp.s7;
       const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
       const float4 rq = vload4(0, coc + at);
-      const float4 aq = lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+      const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
       const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
       if(!dof_any4(aq > 0.0f))
       {
@@ -888,7 +893,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
       const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
       const int lv = (int)tp.s7;
       const float4 rq = vload4(0, coc + at);
-      const float4 aq = lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+      const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
       const int4 sq = aq > 0.0f;
       const int split = dof_any4(sq);
       const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
