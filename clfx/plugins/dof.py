@@ -134,7 +134,10 @@ Warfare", simplified for offline use)
    quarter of the sharp lamps of the tile beside it (up to 10x the truth on the issue 35
    Cycles case, where a sparse table does not gather them again).
 
-Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors); the
+Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors), 4 taps
+at a time (their weights for the 4 pixels as float16 lanes, each tap's sums added in table
+order: the same bits as tap by tap) unless a mixed edge pixel is within reach (tap by tap:
+a split pixel is two taps); the
 per-pixel passes (``dof_prepare``, ``dof_edges``, ``dof_mixed``) take 16 pixels per work-item,
 with vector loads where they lie inside the image and hold no depth edge (PoCL does not
 vectorise those work-items itself).  Finite
