@@ -945,7 +945,10 @@ class Dof(Plugin):
         tiles = np.zeros(levels.shape + (16,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
-        level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
+        def level(radii):   # lattice_level of each tile's radius (a handful of distinct ones)
+            values, where = np.unique(radii, return_inverse=True)
+            return np.array([lattice_level(r, lvl.lattice, lvl.dense_radius)
+                             for r in values.tolist()], np.int32)[where].reshape(radii.shape)
         tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
         for start, n in {tuple(v) for v in info[0, ..., :2].reshape(-1, 2).tolist()}:
             if n:
