@@ -24,10 +24,12 @@
  *   1..L after plane 0, the tents that the sparse lattices of taps sample.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
  *   same pattern of integer tap offsets, so every tap is a vload16 + vload4 and the weights
- *   are float4 vectors (PoCL does not vectorise one-pixel work-items).  Per tile (host
- *   table): copy, gather, or (tiles far out of focus) bilinear upsampling of the
- *   half-resolution gather, gathered again at full resolution where that is not smooth
- *   (the rim of a bokeh disk, a sharp pixel).
+ *   are float4 vectors (PoCL does not vectorise one-pixel work-items), 4 taps at a time
+ *   (float16 weights, dof_taps) unless a mixed edge pixel is within reach (tap by tap,
+ *   dof_tap).  Per tile (host table): copy, gather, or (tiles far out of focus) bilinear
+ *   upsampling of the half-resolution gather, gathered again at full resolution where that
+ *   is not smooth (the rim of a bokeh disk, a sharp pixel).
+ *   DOF_TAP_BY_TAP=1 gathers every group tap by tap: the same bits (tests/plugins/test_dof.py).
  *
  * Build variants (compile-time, nothing in the hot loop when off):
  *   DOF_CATEYE=1: optical vignetting; every tap's coverage is also clipped by the barrel
@@ -57,7 +59,10 @@
 #ifndef DOF_CATEYE
 #define DOF_CATEYE 0
 #endif
-#define CATEYE_MIN_FRAC 1e-3f   /* the open aperture's smallest fraction (normalisation) */
+#define CATEYE_MIN_FRAC 1e-3f
+#ifndef DOF_TAP_BY_TAP
+#define DOF_TAP_BY_TAP 0   /* 1: every gather tap by tap (the blocks' check: the same bits) */
+#endif   /* the open aperture's smallest fraction (normalisation) */
 
 inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, float offset)
 {
@@ -543,12 +548,47 @@ inline float4 dof_lum4(float16 c)
 #define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 cf_x, \
                     const float4 cf_y, const float4 ce_frac
 #define CATEYE_PASS , ce_x, ce_y, cf_x, cf_y, ce_frac
+#define DOF_CE_ARGS(T) , const T ax, const T ay, const T ce_x, const T ce_y, const T cf_x, \
+                       const T cf_y, const T ce_frac
+#define DOF_CE_PASS(ax, ay, PIX) , ax, ay, PIX(ce_x), PIX(ce_y), PIX(cf_x), PIX(cf_y), \
+                                 PIX(ce_frac)
+#define DOF_CE_IN , ax, ay, ce_x, ce_y, cf_x, cf_y, ce_frac
 #elif DOF_CATEYE
 #define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 ce_frac
 #define CATEYE_PASS , ce_x, ce_y, ce_frac
+#define DOF_CE_ARGS(T) , const T ax, const T ay, const T ce_x, const T ce_y, const T ce_frac
+#define DOF_CE_PASS(ax, ay, PIX) , ax, ay, PIX(ce_x), PIX(ce_y), PIX(ce_frac)
+#define DOF_CE_IN , ax, ay, ce_x, ce_y, ce_frac
 #else
 #define CATEYE_ARGS
 #define CATEYE_PASS
+#define DOF_CE_ARGS(T)
+#define DOF_CE_PASS(ax, ay, PIX)
+#define DOF_CE_IN
+#endif
+/* The cat-eye clip of a coverage (radius `r`, ramps of width 1 / `inv_s`): `clip` that of
+ * the barrel circle(s), ex = ax OP ce_x r (ey likewise; the second circle's gx, gy), and
+ * DOF_COV_CLIP a coverage clipped by it; without DOF_CATEYE nothing. */
+#define DOF_CLIP(ex, ey, r) clamp(((r) - sqrt((ex) * (ex) + (ey) * (ey))) * inv_s + 0.5f, \
+                                  0.0f, 1.0f)
+#if DOF_CATEYE
+#define DOF_CLIPS(T, clip, ex, ey, gx, gy, r, OP) \
+  const T ex = ax OP ce_x * (r), ey = ay OP ce_y * (r); \
+  T clip = DOF_CLIP(ex, ey, r); \
+  DOF_CLIP2(T, clip, gx, gy, r, OP)
+#define DOF_COV_CLIP(cov, clip) fmin(cov, clip)
+#define DOF_CE_FRAC * ce_frac
+#else
+#define DOF_CLIPS(T, clip, ex, ey, gx, gy, r, OP)
+#define DOF_COV_CLIP(cov, clip) cov
+#define DOF_CE_FRAC
+#endif
+#if DOF_CATEYE >= 2
+#define DOF_CLIP2(T, clip, gx, gy, r, OP) \
+  const T gx = ax OP cf_x * (r), gy = ay OP cf_y * (r); \
+  clip = fmin(clip, DOF_CLIP(gx, gy, r));
+#else
+#define DOF_CLIP2(T, clip, gx, gy, r, OP)
 #endif
 
 /* The gather's running sums of 4 pixels: near and far fields' colours and weights, the
@@ -559,13 +599,34 @@ typedef struct
   REAL4 wn_sum, wf_sum, alpha;
 } dof_sums;
 
+/* A per-pixel float4 in every slot of a block of taps (lane 4 t + p: slot t, pixel p; LANES
+ * puts a per-slot float4 in every pixel's lane), and slot t's float4 of a float16. */
+#define PIXELS(v) ((v).s0123012301230123)
+#define SLOT(v, t) ((t) == 0 ? (v).s0123 : (t) == 1 ? (v).s4567 : (t) == 2 ? (v).s89ab \
+                                                                         : (v).scdef)
+
+/* dof_any4 / dof_all4 of an int16 mask. */
+inline int dof_any16(const int16 m)
+{
+  const int8 h = m.lo | m.hi;
+  return dof_any4(h.lo | h.hi);
+}
+
+inline int dof_all16(const int16 m)
+{
+  const int8 h = m.lo & m.hi;
+  return dof_all4(h.lo & h.hi);
+}
+
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
  * distance in aperture units for a near tap (shape upright at o) and a far tap (shape at -o);
  * aperture area the tap stands for (px^2); the offset in aperture space (x times the
  * anamorphic squeeze, y over the pixel aspect: px of the CoC radius); the tap's lattice
  * level L: its colour is read from plane L of the prefilter pyramid (`plane` pixels after
  * plane 0, `col`), and its coverage ramps are 2^L px wide (`inv_s` = 2^-L; a lattice of
- * spacing 2^L: the tents interpolate the ramp).  A table mixes levels where the pixels in
+ * spacing 2^L: the tents interpolate the ramp).  The rows are followed by the same table
+ * column by column (each column `n4` floats: the table's taps and 4 of padding), which a
+ * block of 4 taps reads as float4s.  A table mixes levels where the pixels in
  * focus or nearly of a tile within reach of a large near-field blur gather (tap_table's
  * `core`): a lattice serving the near field only (far distance "never") and the every-pixel
  * taps of the pixel's own small radius serving the far field only (near distance "never").
@@ -578,116 +639,166 @@ typedef struct
  * `cap_s`: the largest luminance a colour may have where it fills in the background hidden
  * behind a blurred foreground pixel (beyond its own CoC's reach).
  *
- * dof_tap adds one tap of colour `c` and signed radius `rq` standing for the fraction `frac`
- * of its pixel (1; a part of a mixed edge pixel: its coverage, dof_mixed) to the sums of the
- * 4 pixels whose radii are `r0` (`p_near`: r0 < -NEAR_EPS, `any_near`: any of them). */
-/* dof_tap's near field: the tap's light (colour `c`, radius `arq` = |rq|, `q_near` where
- * rq < -NEAR_EPS) spread over its own CoC area, standing for the fraction `frac`. */
+ * The weights below are written once for two shapes of lanes (DOF_WEIGHTS): float4, one
+ * tap's weights for the 4 pixels (dof_tap), and float16, 4 taps' (dof_taps: slot t = lanes
+ * 4 t + p, pixel p).  Per tap: radius `rq` (`arq` = |rq|, `q_near` where rq < -NEAR_EPS),
+ * standing for the fraction `frac` of its pixel (1; a part of a mixed edge pixel: its
+ * coverage, dof_mixed), table columns `d_near`, `d_far`, `inv_s` (and `ax`, `ay`); the 4
+ * pixels' radii `r0` (`p_near`: r0 < -NEAR_EPS). */
+#define DOF_WEIGHTS(T, IT, SUF) \
+/* near field: the tap's light spread over its own CoC area */ \
+inline __attribute__((always_inline)) T dof_near_w##SUF( \
+    const T arq, const IT q_near, const T frac, const T d_near, const T inv_s DOF_CE_ARGS(T)) \
+{ \
+  DOF_CLIPS(T, clip_n, enx, eny, gnx, gny, arq, -) \
+  const T cov_n = DOF_COV_CLIP(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n); \
+  return select((T)(0.0f), cov_n / fmax(CLFX_PI * arq * arq DOF_CE_FRAC, 1.0f), q_near) \
+         * frac; \
+} \
+/* far field: `wf` the weight sums', `wk` the colours'.  A tap behind p spreads at most p's \
+   own radius (p occludes it); for a near p the far field is the background hidden behind \
+   it, estimated from the visible background within p's radius; with `cap_it`, the part of \
+   the coverage behind a near p that the tap's own CoC does not give is a guess at hidden \
+   background: its highlights are capped (`k`: the colour's scale), so a light beside a \
+   blurred bar does not shine through it. */ \
+inline __attribute__((always_inline)) void dof_far_w##SUF( \
+    const T rq, const T arq, const IT q_near, const T frac, const T d_far, const T inv_s, \
+    const T r0, const IT p_near, const int cap_it, const T k, T *wf, T *wk DOF_CE_ARGS(T)) \
+{ \
+  const T rf = select(select(arq, fmin(arq, fmax(r0, 0.0f)), rq > r0), fmax(arq, fabs(r0)), \
+                      p_near); \
+  DOF_CLIPS(T, clip_f, efx, efy, gfx, gfy, rf, +) \
+  const T cov_f = DOF_COV_CLIP(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_f); \
+  const T norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (T)(0.0f), q_near) * frac; \
+  T w = cov_f * norm; \
+  if(!cap_it) \
+  { \
+    *wf = *wk = w; \
+    return; \
+  } \
+  DOF_CLIPS(T, clip_q, eqx, eqy, gqx, gqy, arq, +) \
+  const T cov_q = fmin(DOF_COV_CLIP(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_q), \
+                       cov_f); \
+  const T w_fill = select((T)(0.0f), (cov_f - cov_q) * norm, p_near); \
+  w -= w_fill; \
+  *wk = w + w_fill * k; \
+  *wf = w + w_fill; \
+}
+DOF_WEIGHTS(float4, int4, 4)
+DOF_WEIGHTS(float16, int16, 16)
+#undef DOF_WEIGHTS
+#define DOF_SAME(v) (v)
+#define DOF_CAP_K(lum) fmin(1.0f, cap_s / fmax(lum, 1e-30f))
+
+/* dof_tap's near field (the tap's colour `c`). */
 inline __attribute__((always_inline)) void dof_tap_near(dof_sums *s, const float16 c,
                                                         const float4 arq, const int4 q_near,
                                                         const float4 frac, const float8 tp,
                                                         const float inv_s CATEYE_ARGS)
 {
-  const float d_near = tp.s2, area = tp.s4;
-#if DOF_CATEYE
-  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
-  const float4 enx = ax - ce_x * arq, eny = ay - ce_y * arq;
-  float4 clip_n = clamp((arq - sqrt(enx * enx + eny * eny)) * inv_s + 0.5f, 0.0f, 1.0f);
-#if DOF_CATEYE >= 2
-  const float4 gnx = ax - cf_x * arq, gny = ay - cf_y * arq;
-  clip_n = fmin(clip_n, clamp((arq - sqrt(gnx * gnx + gny * gny)) * inv_s + 0.5f, 0.0f,
-                              1.0f));
-#endif
-  const float4 cov_n = fmin(clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f), clip_n);
-  const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq * ce_frac, 1.0f),
-                           q_near) * frac;
-#else
-  const float4 cov_n = clamp((arq - d_near) * inv_s + 0.5f, 0.0f, 1.0f);
-  const float4 wn = select((float4)(0.0f), cov_n / fmax(CLFX_PI * arq * arq, 1.0f), q_near)
-                    * frac;
-#endif
+  const float4 wn = dof_near_w4(arq, q_near, frac, (float4)(tp.s2), (float4)(inv_s)
+                                DOF_CE_PASS((float4)(tp.s5), (float4)(tp.s6), DOF_SAME));
   s->fn += TO_REAL16(c * LANES(wn));
   s->wn_sum += TO_REAL4(wn);
-  s->alpha += TO_REAL4(wn * area);
+  s->alpha += TO_REAL4(wn * tp.s4);
 }
 
-inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c, const float4 rq, const float4 frac,
-                    const float8 tp, const float inv_s, const float4 r0, const int4 p_near,
-                    const int any_near, const float cap_s CATEYE_ARGS)
+/* One tap (table row `tp`) of colour `c` to the sums of the 4 pixels whose radii are `r0`
+ * (`any_near`: any of them in front of the focus plane); the gather of 4 pixels within
+ * reach of a mixed edge pixel goes tap by tap (dof_gather4).  A tap behind every pixel adds
+ * exact zeros to the near field, one in front of every pixel to the far field: skipped. */
+inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
+                                                   const float4 rq, const float4 frac,
+                                                   const float8 tp, const float inv_s,
+                                                   const float4 r0, const int4 p_near,
+                                                   const int any_near, const float cap_s
+                                                   CATEYE_ARGS)
 {
-  const float d_far = tp.s3;
   const float4 arq = fabs(rq);
   const int4 q_near = rq < -NEAR_EPS;
-  /* near field: scatter-as-gather, the tap's light spread over its own CoC area (a tap
-     behind every pixel adds exact zeros: skipped, as is the far field of a tap in front of
-     every pixel, whose far weights are 0; the sums never hold -0, so the bits stay) */
   if(dof_any4(q_near))
   {
     dof_tap_near(s, c, arq, q_near, frac, tp, inv_s CATEYE_PASS);
     if(dof_all4(q_near)) return;
   }
-#if DOF_CATEYE
-  const float ax = tp.s5, ay = tp.s6;   /* aperture-space offset */
-#endif
-  /* far field: a tap behind p spreads at most p's own radius (p occludes it); for a
-     near p the far field is the background hidden behind it, estimated from the
-     visible background within p's radius */
-  const float4 rf = select(select(arq, fmin(arq, fmax(r0, 0.0f)), rq > r0), fmax(arq, fabs(r0)),
-                           p_near);
-#if DOF_CATEYE
-  const float4 efx = ax + ce_x * rf, efy = ay + ce_y * rf;
-  float4 clip_f = clamp((rf - sqrt(efx * efx + efy * efy)) * inv_s + 0.5f, 0.0f, 1.0f);
-#if DOF_CATEYE >= 2
-  const float4 gfx = ax + cf_x * rf, gfy = ay + cf_y * rf;
-  clip_f = fmin(clip_f, clamp((rf - sqrt(gfx * gfx + gfy * gfy)) * inv_s + 0.5f, 0.0f, 1.0f));
-#endif
-  const float4 cov_f = fmin(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_f);
-#else
-  const float4 cov_f = clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f);
-#endif
-  const float4 norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (float4)(0.0f), q_near)
-                      * frac;
-  float4 wf = cov_f * norm;
-  if(any_near && dof_any4(p_near & ~q_near))
-  {
-    /* behind a near p, the part of the coverage the tap's own CoC does not give is a
-       guess at hidden background: its highlights are capped (a light beside a blurred
-       bar must not shine through it) */
-#if DOF_CATEYE
-    const float4 eqx = ax + ce_x * arq, eqy = ay + ce_y * arq;
-    float4 clip_q = clamp((arq - sqrt(eqx * eqx + eqy * eqy)) * inv_s + 0.5f, 0.0f, 1.0f);
-#if DOF_CATEYE >= 2
-    const float4 gqx = ax + cf_x * arq, gqy = ay + cf_y * arq;
-    clip_q = fmin(clip_q, clamp((arq - sqrt(gqx * gqx + gqy * gqy)) * inv_s + 0.5f, 0.0f,
-                                1.0f));
-#endif
-    const float4 cov_q = fmin(fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_q),
-                              cov_f);
-#else
-    const float4 cov_q = fmin(clamp((arq - d_far) * inv_s + 0.5f, 0.0f, 1.0f), cov_f);
-#endif
-    const float4 w_fill = select((float4)(0.0f), (cov_f - cov_q) * norm, p_near);
-    const float4 lum = dof_lum4(c);
-    const float4 k = fmin(1.0f, cap_s / fmax(lum, 1e-30f));
-    wf -= w_fill;
-    s->ff += TO_REAL16(c * LANES(wf + w_fill * k));
-    wf += w_fill;
-  }
-  else
-    s->ff += TO_REAL16(c * LANES(wf));
+  const int cap_it = any_near && dof_any4(p_near & ~q_near);
+  float4 wf, wk;
+  dof_far_w4(rq, arq, q_near, frac, (float4)(tp.s3), (float4)(inv_s), r0, p_near, cap_it,
+             cap_it ? DOF_CAP_K(dof_lum4(c)) : (float4)(0.0f), &wf, &wk
+             DOF_CE_PASS((float4)(tp.s5), (float4)(tp.s6), DOF_SAME));
+  s->ff += TO_REAL16(c * LANES(wk));
   s->wf_sum += TO_REAL4(wf);
 }
+
+/* Slot t's near-field (far-field) sums of weights `w` (the far colours' `wk`) where `use`
+ * says, in slot order. */
+#define DOF_ADD_NEAR(t, c) \
+  if(use.s##t) \
+  { \
+    s->fn += TO_REAL16((c) * LANES(SLOT(wn, t))); \
+    s->wn_sum += TO_REAL4(SLOT(wn, t)); \
+    s->alpha += TO_REAL4(SLOT(wn, t) * area.s##t); \
+  }
+#define DOF_ADD_FAR(t, c) \
+  if(use.s##t) \
+  { \
+    s->ff += TO_REAL16((c) * LANES(SLOT(wk, t))); \
+    s->wf_sum += TO_REAL4(SLOT(wf, t)); \
+  }
+
+/* The gather's taps 4 at a time (slots 0-3), the weights of all 4 as float16 lanes (one
+ * tap's weights are 4 lanes of a 16-lane machine otherwise) and each slot's sums added in
+ * slot order: the same sums in the same order as tap by tap.  Slot t: colour `ct`, radius
+ * `rq` (its lanes), added where `use` says (a slot not added, or a field a slot adds
+ * nothing to beside those it does, adds exact zeros or nothing: the sums never hold -0).
+ * dof_taps_near: the near field only (the taps beyond the pixels' own radii). */
+inline __attribute__((always_inline)) void dof_taps_near(
+    dof_sums *s, const float16 c0, const float16 c1, const float16 c2, const float16 c3,
+    const float16 rq, const int4 use, const float16 d_near, const float4 area,
+    const float16 inv_s DOF_CE_ARGS(float16))
+{
+  const float16 wn = dof_near_w16(fabs(rq), rq < -NEAR_EPS, (float16)(1.0f), d_near, inv_s
+                                  DOF_CE_IN);
+  DOF_ADD_NEAR(0, c0) DOF_ADD_NEAR(1, c1) DOF_ADD_NEAR(2, c2) DOF_ADD_NEAR(3, c3)
+}
+
+inline __attribute__((always_inline)) void dof_taps(
+    dof_sums *s, const float16 c0, const float16 c1, const float16 c2, const float16 c3,
+    const float16 rq, const int4 use, const float16 d_near, const float16 d_far,
+    const float4 area, const float16 inv_s, const float16 r0, const int16 p_near,
+    const int any_near, const float cap_s DOF_CE_ARGS(float16))
+{
+  const float16 arq = fabs(rq);
+  const int16 q_near = rq < -NEAR_EPS;
+  if(dof_any16(q_near))
+  {
+    const float16 wn = dof_near_w16(arq, q_near, (float16)(1.0f), d_near, inv_s DOF_CE_IN);
+    DOF_ADD_NEAR(0, c0) DOF_ADD_NEAR(1, c1) DOF_ADD_NEAR(2, c2) DOF_ADD_NEAR(3, c3)
+    if(dof_all16(q_near)) return;
+  }
+  const int cap_it = any_near && dof_any16(p_near & ~q_near);
+  const float16 lum = cap_it ? (float16)(dof_lum4(c0), dof_lum4(c1), dof_lum4(c2),
+                                         dof_lum4(c3)) : (float16)(0.0f);
+  float16 wf, wk;
+  dof_far_w16(rq, arq, q_near, (float16)(1.0f), d_far, inv_s, r0, p_near, cap_it,
+              DOF_CAP_K(lum), &wf, &wk DOF_CE_IN);
+  DOF_ADD_FAR(0, c0) DOF_ADD_FAR(1, c1) DOF_ADD_FAR(2, c2) DOF_ADD_FAR(3, c3)
+}
+#undef DOF_ADD_NEAR
+#undef DOF_ADD_FAR
+
 /* The gather of 4 pixels at `base` (padded index) whose radii are `r0`, colours times
  * `scale`; `c0`: their colours, the result where every tap is rejected.  With `mix` (a
  * table over the full-resolution image), mixed edge pixels among its level-0 taps are split
  * into their near and far parts (dof_mixed: near coverage `mixa`, near and far radii
  * `mixr`, near minus far colour `mixd`), each part a tap of its own radius standing for its
  * coverage; `layer` 1 (2): at the centre tap a mixed pixel stands for its far (near) part
- * only (the two gathers of a mixed pixel, dof_gather). */
+ * only (the two gathers of a mixed pixel, dof_gather): those go tap by tap (dof_tap), the
+ * others 4 taps at a time (dof_taps; `n4`: the table's column stride). */
 inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
                           const int plane, const int base,
                           const float16 c0_in, const float4 r0, global const float *taps,
-                          const int first, const int2 count, const float cap,
+                          const int n4, const int first, const int2 count, const float cap,
                           const float scale, global const float *mixa,
                           global const float *mixr, global const float *mixd, const int mix,
                           const int layer CATEYE_ARGS)
@@ -698,64 +809,113 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
-  for(int i = first; i < first + count.x; i++)
+  const int end1 = first + count.x, end2 = first + count.y;
+  if(!mix && !DOF_TAP_BY_TAP)
   {
-    const float8 tp = vload8(i, taps);
-    const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
-    const int lv = (int)tp.s7;
-    const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
-    const float4 rq = vload4(0, coc + at);
-    const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
-    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
-    if(!dof_any4(aq > 0.0f))
+    const float16 r016 = PIXELS(r0);
+    const int16 p_near16 = PIXELS(p_near);
+    global const float *cols = taps + 8 * (n4 - 4);   /* the table column by column */
+    /* a block: the taps from `i` in slots 0-3 (`use`: those before `end`; those after are
+       read, not added: every table's taps lie within the padding, the columns' padding is
+       tap 0) */
+#define DOF_BLOCK(end) \
+    const int4 use = (int4)(i) + (int4)(0, 1, 2, 3) < (int4)(end); \
+    const int4 lv = convert_int4(vload4(0, cols + 7 * n4 + i)); \
+    const int4 at = base + convert_int4(vload4(0, cols + n4 + i)) * ppitch \
+                    + convert_int4(vload4(0, cols + i)); \
+    const float16 rq = (float16)(vload4(0, coc + at.s0), vload4(0, coc + at.s1), \
+                                 vload4(0, coc + at.s2), vload4(0, coc + at.s3)); \
+    const float16 inv_s = LANES(as_float4((127 - lv) << 23));   /* 2^-L, exactly */
+#define DOF_COLOUR(t) \
+    (vload16(0, col + ((size_t)lv.s##t * (size_t)plane + (size_t)at.s##t) * 4) * scale)
+#define DOF_COLUMN(k) vload4(0, cols + (k) * n4 + i)
+    for(int i = first; i < end1; i += 4)
     {
-      dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
-      continue;
+      DOF_BLOCK(end1)
+      dof_taps(&s, DOF_COLOUR(0), DOF_COLOUR(1), DOF_COLOUR(2), DOF_COLOUR(3), rq, use,
+               LANES(DOF_COLUMN(2)), LANES(DOF_COLUMN(3)), DOF_COLUMN(4), inv_s, r016,
+               p_near16, any_near, cap_s
+               DOF_CE_PASS(LANES(DOF_COLUMN(5)), LANES(DOF_COLUMN(6)), PIXELS));
     }
-    /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
-       C + (1 - a) d at the near layer's, each standing for its coverage (the first tap is
-       the centre: in one of a mixed pixel's two gathers only that gather's part) */
-    const int4 sq = aq > 0.0f;
-    const float8 rr = vload8(0, mixr + at * 2);
-    const float16 d = vload16(0, mixd + at * 4) * scale;
-    float4 an = aq;
-    if(layer && i == first) an = select(an, (float4)(layer == 2 ? 1.0f : 0.0f), sq);
-    const int16 sq16 = LANES(sq);
-    dof_tap(&s, select(c, c - d * LANES(aq), sq16), select(rq, rr.s1357, sq), one - an, tp,
-            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
-    dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
-            inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
+    /* the taps beyond the pixels' own radii (dof_tap_count): their far weights are 0, only
+       those in front of the focus plane add light */
+    for(int i = end1; i < end2; i += 4)
+    {
+      DOF_BLOCK(end2)
+      const int16 q = rq < -NEAR_EPS;
+      const int4 near = use & ((int4)(dof_any4(q.s0123), dof_any4(q.s4567),
+                                      dof_any4(q.s89ab), dof_any4(q.scdef)) != 0);
+      if(!dof_any4(near)) continue;
+      const float16 zero = (float16)(0.0f);
+      dof_taps_near(&s, near.s0 ? DOF_COLOUR(0) : zero, near.s1 ? DOF_COLOUR(1) : zero,
+                    near.s2 ? DOF_COLOUR(2) : zero, near.s3 ? DOF_COLOUR(3) : zero, rq, near,
+                    LANES(DOF_COLUMN(2)), DOF_COLUMN(4), inv_s
+                    DOF_CE_PASS(LANES(DOF_COLUMN(5)), LANES(DOF_COLUMN(6)), PIXELS));
+    }
+#undef DOF_BLOCK
+#undef DOF_COLOUR
+#undef DOF_COLUMN
   }
-  /* the taps beyond the pixels' own radii (dof_tap_count): their far weights are 0, only
-     those in front of the focus plane add light (the same sums as dof_tap's) */
-  for(int i = first + count.x; i < first + count.y; i++)
+  else
   {
-    const float8 tp = vload8(i, taps);
-    const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
-    const int lv = (int)tp.s7;
-    const float4 rq = vload4(0, coc + at);
-    const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
-    const int4 sq = aq > 0.0f;
-    const int split = dof_any4(sq);
-    const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
-    const float4 rq_far = select(rq, rr.s1357, sq), rq_near = select(rq, rr.s0246, sq);
-    const int4 far_near = rq_far < -NEAR_EPS, near_near = rq_near < -NEAR_EPS;
-    if(!dof_any4(far_near) && !(split && dof_any4(near_near))) continue;
-    const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
-    const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
-    if(!split)
+    for(int i = first; i < end1; i++)
     {
-      dof_tap_near(&s, c, fabs(rq), far_near, one, tp, inv_s CATEYE_PASS);
-      continue;
+      const float8 tp = vload8(i, taps);
+      const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
+      const int lv = (int)tp.s7;
+      const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
+      const float4 rq = vload4(0, coc + at);
+      const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+      const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
+      if(!dof_any4(aq > 0.0f))
+      {
+        dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
+        continue;
+      }
+      /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
+         C + (1 - a) d at the near layer's, each standing for its coverage (the first tap is
+         the centre: in one of a mixed pixel's two gathers only that gather's part) */
+      const int4 sq = aq > 0.0f;
+      const float8 rr = vload8(0, mixr + at * 2);
+      const float16 d = vload16(0, mixd + at * 4) * scale;
+      float4 an = aq;
+      if(layer && i == first) an = select(an, (float4)(layer == 2 ? 1.0f : 0.0f), sq);
+      const int16 sq16 = LANES(sq);
+      dof_tap(&s, select(c, c - d * LANES(aq), sq16), select(rq, rr.s1357, sq), one - an, tp,
+              inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
+      dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
+              inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
     }
-    const float16 d = vload16(0, mixd + at * 4) * scale;
-    const int16 sq16 = LANES(sq);
-    if(dof_any4(far_near))
-      dof_tap_near(&s, select(c, c - d * LANES(aq), sq16), fabs(rq_far), far_near, one - aq,
-                   tp, inv_s CATEYE_PASS);
-    if(dof_any4(near_near))
-      dof_tap_near(&s, select(c, c + d * LANES(one - aq), sq16), fabs(rq_near), near_near,
-                   aq, tp, inv_s CATEYE_PASS);
+    /* the taps beyond the pixels' own radii: only those in front of the focus plane */
+    for(int i = end1; i < end2; i++)
+    {
+      const float8 tp = vload8(i, taps);
+      const int at = base + (int)tp.s1 * ppitch + (int)tp.s0;
+      const int lv = (int)tp.s7;
+      const float4 rq = vload4(0, coc + at);
+      const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
+      const int4 sq = aq > 0.0f;
+      const int split = dof_any4(sq);
+      const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
+      const float4 rq_far = select(rq, rr.s1357, sq), rq_near = select(rq, rr.s0246, sq);
+      const int4 far_near = rq_far < -NEAR_EPS, near_near = rq_near < -NEAR_EPS;
+      if(!dof_any4(far_near) && !(split && dof_any4(near_near))) continue;
+      const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
+      const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
+      if(!split)
+      {
+        dof_tap_near(&s, c, fabs(rq), far_near, one, tp, inv_s CATEYE_PASS);
+        continue;
+      }
+      const float16 d = vload16(0, mixd + at * 4) * scale;
+      const int16 sq16 = LANES(sq);
+      if(dof_any4(far_near))
+        dof_tap_near(&s, select(c, c - d * LANES(aq), sq16), fabs(rq_far), far_near, one - aq,
+                     tp, inv_s CATEYE_PASS);
+      if(dof_any4(near_near))
+        dof_tap_near(&s, select(c, c + d * LANES(one - aq), sq16), fabs(rq_near), near_near,
+                     aq, tp, inv_s CATEYE_PASS);
+    }
   }
   /* normalise each field; every tap rejected -> the centre pixel (no 0/0) */
   const REAL4 tiny = (REAL4)(1e-20);
@@ -779,16 +939,17 @@ inline int dof_all_finite16(float16 v)
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                const int ppitch, const int plane, const int base,
                                const float16 c0,
-                               const float4 r0, global const float *taps, const int first,
+                               const float4 r0, global const float *taps, const int n4,
+                               const int first,
                                const int2 count, const float cap, global const float *mixa,
                                global const float *mixr, global const float *mixd,
                                const int mix, const int layer CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, first,
+  const REAL16 out = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, n4, first,
                                  count, cap, 1.0f, mixa, mixr, mixd, mix, layer CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, first,
+  const REAL16 s = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, n4, first,
                                count, cap, OVERFLOW_SCALE, mixa, mixr, mixd, mix, layer
                                CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
@@ -940,10 +1101,11 @@ inline int2 dof_tap_count(global const int *tile_info, const int counts, const i
 kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
                        const int pad, global float *dst, const int pitch,
                        const int width, const int height, global const float *taps,
-                       global const int *tile_info, global const float *log_mean,
+                       const int taps_n4, global const int *tile_info,
+                       global const float *log_mean,
                        const int tiles_x, const int tiles_y, const int tile,
                        const float cap_factor, global const float *hres, const int hpitch,
-                       const int hwidth, const int hheight, const float refine,
+                       const int hwidth, const int hheight, const float4 refine,
                        const float low_r, const float sharp_r, const float8 cateye,
                        const int plane,
                        const int4 place, const int4 hplace, global const float *mixa,
@@ -1006,9 +1168,12 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     float lmin = INFINITY, lmax = -INFINITY;
     const float16 up = dof_upsample4(hres, hpitch, hwidth, hheight, hplace.s0, hplace.s1, x,
                                      y, tile_info, tiles_x, tiles_y, tile, &lmin, &lmax);
-    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees */
-    if(!(info.s4 & 2) || native_log((1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f)))
-                         <= refine)
+    /* log(1 + max) - log(1 + min): the contrast an eye (and the log error) sees; the
+       logarithm only where the ratio lies within 1e-4 of exp(refine) (refine.s12: below
+       and above; the same test elsewhere, without a logarithm per group) */
+    const float ratio = (1.0f + fmax(lmax, 0.0f)) / (1.0f + fmax(lmin, 0.0f));
+    if(!(info.s4 & 2) || ratio <= refine.s1
+       || (!(ratio > refine.s2) && native_log(ratio) <= refine.s0))
     {
       vstore16(up, 0, out);
       return;
@@ -1028,7 +1193,9 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     for(int fy = fy0; fy <= fy1 && !mix; fy++)
       for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
   }
-  const float cap = dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor);
+  /* the cap of hidden background: read only where a pixel lies in front of the focus plane */
+  const float cap = dof_any4(fmin(r, fmin(rn, rf)) < -NEAR_EPS)
+                    ? dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor) : 0.0f;
 #if DOF_CATEYE
   const float4 ce_x = cateye.s0 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s1;
   const float4 ce_y = (float4)(cateye.s2 * ((float)y + 0.5f) + cateye.s3);
@@ -1052,7 +1219,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float16 c0 = vload16(0, col + base * 4);
   if(!twice)
   {
-    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, first,
+    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, taps_n4, first,
                                 dof_tap_count(tile_info, counts, counts_n, near_r, r, count),
                                 cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS);
     /* pixels in focus or nearly beside out-of-focus ones in a sparse table's group: a
@@ -1061,7 +1228,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
        table's gather (every pixel within sharp_r), as a group of 4 such pixels does */
     const int4 sharp4 = r >= -NEAR_EPS && r < sharp_r;
     if(info.s5 > 0 && first == info.s0 && any(sharp4))
-      o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, info.s2,
+      o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, taps_n4, info.s2,
                                     dof_tap_count(tile_info, info.sb, info.sc, near_r, r,
                                                   info.s3), cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
                  LANES(sharp4));
@@ -1073,12 +1240,13 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
   const float16 dm = vload16(0, mixd + base * 4);
   const int16 sm16 = LANES(sm);
   const float16 o_far = dof_gather_safe(col, coc, ppitch, plane, base,
-                                        select(c0, c0 - dm * LANES(am), sm16), rf, taps, first,
+                                        select(c0, c0 - dm * LANES(am), sm16), rf, taps, taps_n4,
+                                        first,
                                         dof_tap_count(tile_info, counts, counts_n, near_r, rf,
                                                       count), cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
   const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
-                                         taps, first,
+                                         taps, taps_n4, first,
                                          dof_tap_count(tile_info, counts, counts_n, near_r, rn,
                                                        count), cap, mixa, mixr, mixd, 1, 2
                                          CATEYE_PASS);

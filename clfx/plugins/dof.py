@@ -134,7 +134,10 @@ Warfare", simplified for offline use)
    quarter of the sharp lamps of the tile beside it (up to 10x the truth on the issue 35
    Cycles case, where a sparse table does not gather them again).
 
-Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors); the
+Each work-item gathers 4 adjacent pixels with shared tap offsets (float16 vectors), 4 taps
+at a time (their weights for the 4 pixels as float16 lanes, each tap's sums added in table
+order: the same bits as tap by tap) unless a mixed edge pixel is within reach (tap by tap:
+a split pixel is two taps); the
 per-pixel passes (``dof_prepare``, ``dof_edges``, ``dof_mixed``) take 16 pixels per work-item,
 with vector loads where they lie inside the image and hold no depth edge (PoCL does not
 vectorise those work-items itself).  Finite
@@ -173,6 +176,7 @@ from clfx.core.rect import Rect
 from clfx.fx.analysis import TILE, analyse  # dof's tiles are the shared analysis's
 from clfx.host import Plugin, StepPlan, read_only, register
 
+FLT_MAX = float(np.finfo(np.float32).max)
 LOCAL = (8, 4)      # work-group: 32 x 4 pixels, one tile wide
 BAND_PIXELS = 1 << 22
 """Pixels per band of the analysis of a frame grown past its data window (`Dof.frame`)."""
@@ -254,7 +258,7 @@ class DofGather:
     half: np.ndarray          # per tile: gathered at half resolution
     half_l: int               # the half-resolution pyramid's depth
     pad: int                  # the padded buffers' border (px)
-    taps: object              # device tap table and per-tile table of the full-res gather
+    taps: object              # (device tap table, its column stride) and per-tile table of the full-res gather
     tiles: object
     htaps: object             # ... of the half-resolution gather (None without)
     htiles: object
@@ -491,6 +495,19 @@ def dilate_tiles(t: np.ndarray, reach: int) -> np.ndarray:
             xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
             out[yd, xd] = np.maximum(out[yd, xd], t[ys, xs])
     return out
+
+
+def refine_bounds(refine: float) -> tuple[float, float, float, float]:
+    """``dof_gather``'s refine float4: the level's ``refine`` (a log-luminance span), and the
+    ratios within 1e-4 of ``exp(refine)`` below and above which the span is known without
+    its logarithm (the kernel takes one only between them; ``native_log`` is far more
+    accurate than that)."""
+    if refine == math.inf:
+        return (refine, math.inf, math.inf, 0.0)
+    e = math.exp(min(refine, 700.0))
+    if e * (1.0 + 1e-4) > FLT_MAX:    # every finite ratio lies below, an infinite one not
+        return (refine, FLT_MAX, FLT_MAX, 0.0)
+    return (refine, e * (1.0 - 1e-4), e * (1.0 + 1e-4), 0.0)
 
 
 def prefilter(rt, col, pheight: int, levels: int) -> None:
@@ -928,7 +945,10 @@ class Dof(Plugin):
         tiles = np.zeros(levels.shape + (16,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
-        level = np.vectorize(lambda r: lattice_level(r, lvl.lattice, lvl.dense_radius))
+        def level(radii):   # lattice_level of each tile's radius (a handful of distinct ones)
+            values, where = np.unique(radii, return_inverse=True)
+            return np.array([lattice_level(r, lvl.lattice, lvl.dense_radius)
+                             for r in values.tolist()], np.int32)[where].reshape(radii.shape)
         tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
         for start, n in {tuple(v) for v in info[0, ..., :2].reshape(-1, 2).tolist()}:
             if n:
@@ -950,7 +970,13 @@ class Dof(Plugin):
                 counts.append(c)
                 at += len(c)
         flat = np.concatenate([tiles.ravel()] + counts).astype(np.int32)
-        return rt.to_device(table), rt.to_device(flat), int(np.abs(table[:, 1]).max())
+        # the rows, then the columns (4 floats of padding each: a block of 4 taps reads
+        # float4s of a column from any tap)
+        n4 = len(table) + 4
+        cols = np.zeros((8, n4), np.float32)
+        cols[:, :len(table)] = table.T
+        return ((rt.to_device(np.concatenate([table.ravel(), cols.ravel()])), np.int32(n4)),
+                rt.to_device(flat), int(np.abs(table[:, 1]).max()))
 
     # -- render ----------------------------------------------------------------------------
     def render(self, rt, p, ctx):
@@ -1090,8 +1116,9 @@ class Dof(Plugin):
         hres_args = ((hres, hres.pitch, half_size[0], half_size[1])
                      if hres is not None else (dst, dst.pitch, 1, 1))
         rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, col.pitch, pad,
-                  dst, dst.pitch, dst.width, dst.height, taps, tiles,
+                  dst, dst.pitch, dst.width, dst.height, *taps, tiles,
                   frame.log_mean, frame.tiles_x, frame.tiles_y, tile,
-                  CAP_FACTOR, *hres_args, lvl.refine, lvl.half_res_radius, lvl.sharp_radius,
+                  CAP_FACTOR, *hres_args, refine_bounds(lvl.refine), lvl.half_res_radius,
+                  lvl.sharp_radius,
                   cateye, plane, place, (*hplace, 0, 0),
                   *(mix or (coc, coc, coc, coc, 0, 0)), local=LOCAL)

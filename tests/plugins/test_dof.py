@@ -168,6 +168,50 @@ def test_gather_leaves_out_only_taps_that_add_nothing(rt, monkeypatch, quality, 
     assert np.array_equal(got.view(np.uint32), every.view(np.uint32))
 
 
+@pytest.mark.parametrize("quality", ["draft", "final", "reference"])
+@pytest.mark.parametrize("params", [{}, {"optical_vignetting": 0.8, "anamorphic_squeeze": 1.5},
+                                    {"optical_vignetting": 0.6, "optical_vignetting_front": 0.6,
+                                     "axial_ca_red": 60.0, "blades": 6}],
+                         ids=["plain", "cateye-anamorphic", "both-rims-axial-ca"])
+def test_blocks_of_four_taps_give_the_bits_of_tap_by_tap(rt, monkeypatch, quality, params):
+    """The gather adds 4 taps at a time (float16 weights, each tap's sums in table order)
+    where no mixed edge pixel is within reach: the same bits as its build that goes tap by
+    tap (DOF_TAP_BY_TAP), on a frame with in-focus pixels beside a far background and a
+    near blob (near and far fields, the hidden background's cap, tables stopped mid-block,
+    sparse lattices, both resolutions, the cat-eye variants)."""
+    src, depth = dof_scene((96, 160))
+    depth[60:, 100:] = 0.6              # a large near blur: sparse lattice tables
+    cam = CAM.updated(sensor_width=8.0)
+    blocks = run(rt, src, depth, quality, cam, **params)
+    kernel = rt.kernel
+
+    def tap_by_tap(file, name, *args, **defines):
+        if name == "dof_gather":
+            defines["DOF_TAP_BY_TAP"] = 1
+        return kernel(file, name, *args, **defines)
+    monkeypatch.setattr(rt, "kernel", tap_by_tap)
+    every = run(rt, src, depth, quality, cam, **params)
+    assert np.array_equal(blocks.view(np.uint32), every.view(np.uint32))
+
+
+@pytest.mark.parametrize("refine", [0.15, 0.5, 1.0, 100.0, math.inf])
+def test_refine_bounds_decide_as_the_logarithm(refine):
+    """dof_gather takes a logarithm only for luminance ratios within 1e-4 of exp(refine)
+    (refine_bounds): below the lower bound the ratio always passes the refine test, above
+    the upper one it always fails, as log(ratio) <= refine decides (infinite ratios too)."""
+    _, lo, hi, _ = (np.float32(v) for v in dof_module.refine_bounds(refine))
+    e = math.exp(min(refine, 80.0))
+    ratios = np.concatenate([np.float32(e) * np.linspace(0.99, 1.01, 2001, dtype=np.float32),
+                             np.array([1.0, 3.4e38, np.inf], np.float32)])
+    with np.errstate(over="ignore"):
+        for ratio in ratios:
+            want = bool(np.log(np.float64(ratio)) <= refine)
+            if ratio <= lo:
+                assert want, (ratio, lo)
+            elif ratio > hi:
+                assert not want, (ratio, hi)
+
+
 @pytest.mark.parametrize("case", ["hostile-depths", "pixel-aspect-2", "grown", "tiled"])
 def test_gather_leaves_out_only_taps_that_add_nothing_anywhere(rt, monkeypatch, case):
     """The tiles' bound of the near-field radii holds for invalid depths (in focus, with an
