@@ -198,11 +198,13 @@ kernel void motion_sanitize(global const float *src, global float *dst, const in
  * whatever part of it `aux` holds: canvas rows from row0 on, CLFX_CANVAS_ROWS); this launch
  * computes the tile rows from ty0 on, whose pixel rows the buffer holds.  A record: (vx, vy,
  * |v|, 0) of the tile's fastest pixel (the first in scan order among equals), and in `tiles_b` its
- * backward motion (bx, by) from `auxb` (CURVED; else unused). */
+ * backward motion (bx, by) from `auxb` (CURVED; else unused); in `zrange` the (smallest,
+ * largest) depth of the tile's pixels (the host's front-free test, motion_gather). */
 kernel void motion_tilemax(global const float *aux, global const float *auxb,
-                           global float *tiles, global float *tiles_b, const int pitch,
-                           const int width, const int height, const int row0,
-                           const int tiles_x, const int tiles_y, const int ty0, const int k)
+                           global float *tiles, global float *tiles_b, global float *zrange,
+                           const int pitch, const int width, const int height,
+                           const int row0, const int tiles_x, const int tiles_y,
+                           const int ty0, const int k)
 {
   const int tx = get_global_id(0), ty = ty0 + get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
@@ -210,14 +212,18 @@ kernel void motion_tilemax(global const float *aux, global const float *auxb,
   const int x0 = tx * k, y0 = ty * k;
   const int x1 = min(x0 + k, width), y1 = min(y0 + k, height);
   float4 best = (float4)(0.0f);
+  float zlo = INFINITY, zhi = -INFINITY;
   int at = -1;
   for(int y = y0; y < y1; y++)
     for(int x = x0; x < x1; x++)
     {
       const float4 a = vload4((size_t)y * pitch + x, aux);
       if(a.w > best.z) { best = (float4)(a.x, a.y, a.w, 0.0f); at = y * pitch + x; }
+      zlo = fmin(zlo, a.z);
+      zhi = fmax(zhi, a.z);
     }
   vstore4(best, ty * tiles_x + tx, tiles);
+  vstore2((float2)(zlo, zhi), ty * tiles_x + tx, zrange);
 #if CURVED
   CLFX_CANVAS_ROWS(auxb, pitch, 4, row0);
   vstore2(at >= 0 ? vload2(0, auxb + 4 * (size_t)at) : (float2)(0.0f), ty * tiles_x + tx,
@@ -577,7 +583,7 @@ inline float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 
 /* The closed forms at the centres of the quad's pixels (lanes `lane`, row fy) along
  * (ux, uy), their colours p0 (times `scale`), depths z0, smear lengths len: the four taps
  * read bilinearly, times `scale`; *q: how much of the neighbourhood is x's own layer or
- * behind it (a tap in front of x pulls it to 0).  Returns mb_short_smear.  *step: the step
+ * behind it (a tap in front of x pulls it to 0; `clear`: the tile is front-free, 1).  Returns mb_short_smear.  *step: the step
  * model's smear, taken along the pixel axes (the smear's parts len |ux| and len |uy|, their
  * changes added: exact for edges along the pixel grid, whatever the motion's direction,
  * where taps read along u between pixels would mix the patches), *st: its weight (the
@@ -587,7 +593,8 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
                              const int w, const int row0, const int row1, const float4 lane,
                              const float fy, const float4 ux, const float4 uy,
                              const float16 p0, const float4 z0, const float4 len,
-                             const float scale, float4 *q, float16 *step, float4 *st)
+                             const float scale, const int clear, float4 *q, float16 *step,
+                             float4 *st)
 {
   const float4 px = lane + 0.5f;
   const float py = fy + 0.5f;
@@ -598,6 +605,8 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
     const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
     const float4 x = px + o * ux, y = py + o * uy;
     tap[k] = mb_fetch_lanes(col, pitch, w, row0, row1, x, y, scale);
+    if(clear)
+      continue;   /* no tap in front of x: each factor is 1 */
     const int4 ix = convert_int4(clamp(floor(x), -1.0f, (float)w));
     const int4 iy = convert_int4(clamp(floor(y), (float)(row0 - 1), (float)row1));
     const float4 z = mb_lanes(aux, pitch, w, row0, row1, iy, ix).s26ae;
@@ -674,9 +683,10 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
                                  const int pitch, const int width, const int row0,
                                  const int row1, const float4 vn, const float4 lane, const float fy,
                                  const float16 cc, const float4 vxx, const float4 vxy,
-                                 const float4 zx, const int any_moving, const float t0,
-                                 const float t1, const float dt, const int n, const float ell,
-                                 const float hell, const float4 jit, const float scale)
+                                 const float4 zx, const int any_moving, const int clear,
+                                 const float t0, const float t1, const float dt, const int n,
+                                 const float ell, const float hell, const float4 jit,
+                                 const float scale)
 {
   REAL16 F = (REAL16)(0), S = (REAL16)(0);
   REAL4 aF = (REAL4)(0), aS = (REAL4)(0);
@@ -699,7 +709,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     const float4 t = t0 + ((float)i + jit) * dt;
     float4 vyx, vyy, zy, sy;
 
-    /* occluders, along v_n */
+    /* occluders, along v_n (none in a front-free tile) */
+    if(!clear)
     {
 #if CURVED
       /* an occluder moves along the path of the tile's fastest pixel: the one over x at
@@ -762,6 +773,12 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 #else
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
+      if(clear)   /* no sample in front of x: every weight is 1 */
+      {
+        aS += TO_REAL4((float4)(1.0f));
+        S += TO_REAL16(MB_FETCH4(px, py, same_v, beta_x));
+        continue;
+      }
       const int4 ix = clamp(convert_int4(floor(px)), (int4)(0), (int4)(width - 1));
       const int4 iy = clamp(convert_int4(floor(py)), (int4)(row0), (int4)(row1 - 1));
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
@@ -809,7 +826,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     float16 step;
     const float16 c = mb_short_quad(col, aux, pitch, width, row0, row1, lane, fy, ux, uy,
                                     cc * scale, zx, select((float4)(0.0f), slen, on), scale,
-                                    &q, &step, &st);
+                                    clear, &q, &step, &st);
     const float16 o = TO_FLOAT16(own);
     const float16 base = o + (c - o) * SPLAT16(wsh * q);
     const float16 d = base - o + (step - base) * SPLAT16(st * wln * q);
@@ -820,8 +837,12 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
          + own * (REAL16)(keep.xxxx, keep.yyyy, keep.zzzz, keep.wwww);
 }
 
-/* tiles: (tx, ty, samples, jitter) per moving tile (jitter 0: the midpoint rule, exact for the
- * few, dense samples of a short blur; 1: per-pixel jitter where samples are sparse);
+/* tiles: (tx, ty, samples, flags) per moving tile; flags bit 0, jitter (0: the midpoint rule,
+ * exact for the few, dense samples of a short blur; 1: per-pixel jitter where samples are
+ * sparse); bit 1, front-free: no pixel the tile's samples and closed-form taps can reach lies
+ * in front of any of its pixels (the host's test on the tiles' depth ranges, motion_tilemax),
+ * so every soft depth test would give 0 (the occluders' weights, the own set's and the
+ * taps' rejections): the occluder set is skipped and the own set taken without them;
  * k: tile size (multiple of 4); qpt = k * k / 4.  The buffers hold the canvas rows
  * row0 <= y < row1 (CLFX_CANVAS_ROWS: a band of a tiled render and its margin; 0 and the
  * canvas's height in a whole render); the rows band0 <= y < band1 are written.  nmax_b: the
@@ -843,7 +864,7 @@ kernel void motion_gather(global const float *col, global const float *aux,
   if(tile >= ntiles) return;
   const int r = gid - tile * qpt, qrow = k / 4;
   const int tx = tiles[4 * tile], ty = tiles[4 * tile + 1], n = tiles[4 * tile + 2];
-  const int jittered = tiles[4 * tile + 3];
+  const int flags = tiles[4 * tile + 3], jittered = flags & 1, clear = flags & 2;
   const int x = tx * k + (r % qrow) * 4, y = ty * k + r / qrow;
   if(y < band0 || y >= band1 || x >= pitch) return;
   CLFX_CANVAS_ROWS(col, pitch, 4, row0);
@@ -881,8 +902,8 @@ kernel void motion_gather(global const float *col, global const float *aux,
   {
     out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
                                         vn, lane, fy, cc, vxx,
-                                        vxy, zx, any_moving, t0, t1, dt, n, ell, hell, jit,
-                                        scale));
+                                        vxy, zx, any_moving, clear, t0, t1, dt, n, ell, hell,
+                                        jit, scale));
     if(!any((as_int16(out) & 0x7f800000) == 0x7f800000)) break;
     scale = 0.5f / (float)n;
   }
