@@ -53,6 +53,10 @@
 #define CURVED 0            /* 1: a backward motion pass too (aux_b): paths are quadratics */
 #endif
 
+/* the gather's pieces, inlined: the first pass of motion_gather runs them with scale 1, which
+ * then folds away (x * 1 is x exactly) */
+#define MB_INLINE inline __attribute__((always_inline))
+
 #define BIG_DEPTH 1e30f     /* sanitised "no surface / invalid depth": behind everything */
 #define SOFT_Z 0.02f        /* relative depth difference over which "in front" fades in */
 #define MIN_SPEED 1e-3f     /* below this (px/frame) a pixel counts as static */
@@ -449,7 +453,7 @@ inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int
 /* The same at the 4 positions (px + k, py), k = 0..3, of a quad whose lanes share one
  * offset: the 4 x 7 pixels the lanes' taps cover are loaded once (28 loads, not 64) and the
  * weights computed once. */
-inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
+MB_INLINE float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
                                    const int row0, const int row1, const float px,
                                    const float py, const float scale, const float beta)
 {
@@ -486,7 +490,7 @@ inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, con
 
 /* Bilinear (BILINEAR) or nearest at the 4 positions (px + k, py) of a quad sharing one
  * offset: 2 x 5 loads (4 for nearest), as mg_fetch_scaled per lane. */
-inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
+MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
                                     const int row0, const int row1, const float px,
                                     const float py, const float scale, const float beta)
 {
@@ -532,7 +536,7 @@ inline float4 mb_fetch_linear(global const float *col, const int pitch, const in
 
 /* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
  * they lie side by side in memory (a run of one row: the common case), else one per lane. */
-inline float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
+MB_INLINE float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
                         const int row1, const int4 r, const int4 c)
 {
   /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
@@ -546,7 +550,7 @@ inline float16 mb_lanes(global const float *buf, const int pitch, const int w, c
 /* Colours at the lanes' positions (x, y), mg_fetch_scaled's: where the lanes sit at one
  * offset (one row, one fraction, whole pixels apart) the quad fetch (2 x 5 loads), which
  * then gives each lane the same value. */
-inline float16 mb_fetch_lanes(global const float *col, const int pitch, const int w,
+MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const int w,
                               const int row0, const int row1, const float4 x, const float4 y,
                               const float scale)
 {
@@ -565,7 +569,7 @@ inline float16 mb_fetch_lanes(global const float *col, const int pitch, const in
  * (what x's moving edge reveals enters as it is, not as a step continuing x's surface);
  * *st: its stepness.  Returns the change of p0 under a box of `len` px along the axis (0
  * where len is negligible). */
-inline float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 tp1,
+MB_INLINE float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 tp1,
                             const float16 tp2, const float4 zm, const float4 zp,
                             const float16 p0, const float4 z0, const float4 len, float4 *st)
 {
@@ -589,7 +593,7 @@ inline float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 
  * where taps read along u between pixels would mix the patches), *st: its weight (the
  * stepness of the axes that carry a fair part of it).  The axes' taps sit at whole pixels
  * whatever the direction: runs of the rows y-2 .. y+2. */
-inline float16 mb_short_quad(global const float *col, global const float *aux, const int pitch,
+MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux, const int pitch,
                              const int w, const int row0, const int row1, const float4 lane,
                              const float fy, const float4 ux, const float4 uy,
                              const float16 p0, const float4 z0, const float4 len,
@@ -677,7 +681,7 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
  *    smear y + v_y [t0, t1] passes over x; weight = source length per sample / smear length
  *    (scatter as gather), so their summed weight is the fraction of the shutter they cover x.
  * out = occluders (normalised if they overlap) + (1 - their coverage) x own-velocity layer. */
-inline REAL16 motion_gather_quad(global const float *col, global const float *aux,
+MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float *aux,
                                  global const float *auxb, const float2 bn,
                                  const float4 bxx, const float4 bxy,
                                  const int pitch, const int width, const int row0,
@@ -837,6 +841,24 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
          + own * (REAL16)(keep.xxxx, keep.yyyy, keep.zzzz, keep.wwww);
 }
 
+/* motion_gather_quad at a `scale` under 1 (one copy, out of line: motion_gather's second pass,
+ * after an overflow), as float */
+__attribute__((noinline))
+float16 motion_gather_scaled(global const float *col, global const float *aux,
+                             global const float *auxb, const float2 bn, const float4 bxx,
+                             const float4 bxy, const int pitch, const int width, const int row0,
+                             const int row1, const float4 vn, const float4 lane, const float fy,
+                             const float16 cc, const float4 vxx, const float4 vxy,
+                             const float4 zx, const int any_moving, const int clear,
+                             const float t0, const float t1, const float dt, const int n,
+                             const float ell, const float hell, const float4 jit,
+                             const float scale)
+{
+  return TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
+                                       vn, lane, fy, cc, vxx, vxy, zx, any_moving, clear, t0,
+                                       t1, dt, n, ell, hell, jit, scale));
+}
+
 /* tiles: (tx, ty, samples, flags) per moving tile; flags bit 0, jitter (0: the midpoint rule,
  * exact for the few, dense samples of a short blur; 1: per-pixel jitter where samples are
  * sparse); bit 1, front-free: no pixel the tile's samples and closed-form taps can reach lies
@@ -896,18 +918,16 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const float4 jit = jittered ? mg_jitter(lane, fy, frame) : (float4)(0.5f);
   const int any_moving = any(sx * (t1 - t0) >= MIN_BLUR);
 
-  float scale = 1.0f;
-  float16 out;
-  for(int pass = 0; pass < 2; pass++)   /* the second pass only after an overflow */
+  float16 out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0,
+                                              row1, vn, lane, fy, cc, vxx, vxy, zx, any_moving,
+                                              clear, t0, t1, dt, n, ell, hell, jit, 1.0f));
+  if(any((as_int16(out) & 0x7f800000) == 0x7f800000))   /* overflowed: the second pass */
   {
-    out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
-                                        vn, lane, fy, cc, vxx,
-                                        vxy, zx, any_moving, clear, t0, t1, dt, n, ell, hell,
-                                        jit, scale));
-    if(!any((as_int16(out) & 0x7f800000) == 0x7f800000)) break;
-    scale = 0.5f / (float)n;
-  }
-  if(scale != 1.0f)
+    const float scale = 0.5f / (float)n;
+    out = motion_gather_scaled(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1, vn, lane,
+                               fy, cc, vxx, vxy, zx, any_moving, clear, t0, t1, dt, n, ell,
+                               hell, jit, scale);
     out = clamp(out / scale, -FLT_MAX, FLT_MAX);
+  }
   vstore16(out, 0, dst + base * 4);
 }
