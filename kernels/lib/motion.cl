@@ -116,20 +116,39 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
 #if CURVED
   float16 ownb = vload16(0, auxb + 4 * i);   /* the backward records follow the same choices */
 #endif
-  /* the 3 x 6 records around the quad (columns x-1 .. x+4, clamped; outside = no candidate) */
+  /* the 3 x 6 records around the quad (columns x-1 .. x+4; rows and the outer columns
+   * clamped, the quad's own columns read up to the pitch, which motion_prepare fills;
+   * outside the image = no candidate) */
   float vx[3][6], vy[3][6], z[3][6];
+  float4 zlo = (float4)(INFINITY);
   for(int r = 0; r < 3; r++)
   {
-    const int yy = clfx_clampi(y + r - 1, 0, height - 1);
-    for(int c = 0; c < 6; c++)
-    {
-      const float4 q = vload4(yy * pitch + clfx_clampi(x + c - 1, 0, width - 1), aux);
-      vx[r][c] = q.x; vy[r][c] = q.y; z[r][c] = q.z;
-    }
+    const int row = clfx_clampi(y + r - 1, 0, height - 1) * pitch;
+    const float4 ql = vload4(row + clfx_clampi(x - 1, 0, width - 1), aux);
+    const float16 qm = vload16(0, aux + 4 * (row + x));
+    const float4 qr = vload4(row + clfx_clampi(x + 4, 0, width - 1), aux);
+    vx[r][0] = ql.x; vy[r][0] = ql.y; z[r][0] = ql.z;
+    vx[r][1] = qm.s0; vy[r][1] = qm.s1; z[r][1] = qm.s2;
+    vx[r][2] = qm.s4; vy[r][2] = qm.s5; z[r][2] = qm.s6;
+    vx[r][3] = qm.s8; vy[r][3] = qm.s9; z[r][3] = qm.sa;
+    vx[r][4] = qm.sc; vy[r][4] = qm.sd; z[r][4] = qm.se;
+    vx[r][5] = qr.x; vy[r][5] = qr.y; z[r][5] = qr.z;
+    zlo = fmin(zlo, fmin(qm.s26ae, (float4)(ql.z, qr.z, ql.z, qr.z)));
   }
   const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
   const float4 lanex = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
   float4 bz = az * (1.0f - SOFT_Z);
+  /* the common case: no record around lies in front of any of the 4 pixels (each neighbour's
+   * test below needs qz < bz): the records stay as they are */
+  const float2 zlo2 = fmin(zlo.xy, zlo.zw), bz2 = fmax(bz.xy, bz.zw);
+  if(fmin(zlo2.x, zlo2.y) >= fmax(bz2.x, bz2.y))
+  {
+    vstore16(own, 0, out + 4 * i);
+#if CURVED
+    vstore16(ownb, 0, outb + 4 * i);
+#endif
+    return;
+  }
   int4 bdx = (int4)(0), bdy = (int4)(0);
   for(int dy = -1; dy <= 1; dy++)
     for(int dx = -1; dx <= 1; dx++)
