@@ -485,24 +485,35 @@ MB_INLINE float16 mb_fetch_quad_cubic(global const float *col, const int pitch, 
   const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
   const int x4 = clfx_clampi(iu + 3, 0, w - 1), x5 = clfx_clampi(iu + 4, 0, w - 1);
   const int x6 = clfx_clampi(iu + 5, 0, w - 1);
+  const int run = x0 == iu - 1 && x6 == iu + 5;   /* the 7 columns side by side */
   float16 acc = (float16)(0.0f), lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
   for(int j = 0; j < 4; j++)
   {
     const int row = clfx_clampi(iv - 1 + j, row0, row1 - 1) * pitch;
-    const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
-    const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
-    const float4 c4 = vload4(row + x4, col) * scale, c5 = vload4(row + x5, col) * scale;
-    const float4 c6 = vload4(row + x6, col) * scale;
+    /* r_k: the taps k of the 4 lanes, (c_k, c_k+1, c_k+2, c_k+3) */
+    float16 r0, r1, r2, r3;
+    if(run)
+    {
+      global const float *p = col + 4 * (row + x0);
+      r0 = vload16(0, p) * scale; r1 = vload16(0, p + 4) * scale;
+      r2 = vload16(0, p + 8) * scale; r3 = vload16(0, p + 12) * scale;
+    }
+    else
+    {
+      const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
+      const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
+      const float4 c4 = vload4(row + x4, col) * scale, c5 = vload4(row + x5, col) * scale;
+      const float4 c6 = vload4(row + x6, col) * scale;
+      r0 = (float16)(c0, c1, c2, c3); r1 = (float16)(c1, c2, c3, c4);
+      r2 = (float16)(c2, c3, c4, c5); r3 = (float16)(c3, c4, c5, c6);
+    }
     if(j == 1 || j == 2)
     {
-      lo = fmin(lo, (float16)(fmin(c1, c2), fmin(c2, c3), fmin(c3, c4), fmin(c4, c5)));
-      hi = fmax(hi, (float16)(fmax(c1, c2), fmax(c2, c3), fmax(c3, c4), fmax(c4, c5)));
+      lo = fmin(lo, fmin(r1, r2));
+      hi = fmax(hi, fmax(r1, r2));
     }
     const float wj = j == 0 ? wy.x : j == 1 ? wy.y : j == 2 ? wy.z : wy.w;
-    acc += wj * (float16)(wx.x * c0 + wx.y * c1 + wx.z * c2 + wx.w * c3,
-                          wx.x * c1 + wx.y * c2 + wx.z * c3 + wx.w * c4,
-                          wx.x * c2 + wx.y * c3 + wx.z * c4 + wx.w * c5,
-                          wx.x * c3 + wx.y * c4 + wx.z * c5 + wx.w * c6);
+    acc += wj * (wx.x * r0 + wx.y * r1 + wx.z * r2 + wx.w * r3);
   }
   return clamp(acc, lo, hi);
 }
@@ -524,14 +535,25 @@ MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch,
   const int x0 = clfx_clampi(iu, 0, w - 1), x1 = clfx_clampi(iu + 1, 0, w - 1);
   const int x2 = clfx_clampi(iu + 2, 0, w - 1), x3 = clfx_clampi(iu + 3, 0, w - 1);
   const int x4 = clfx_clampi(iu + 4, 0, w - 1);
-  const float4 t0 = vload4(ya + x0, col) * scale, t1 = vload4(ya + x1, col) * scale;
-  const float4 t2 = vload4(ya + x2, col) * scale, t3 = vload4(ya + x3, col) * scale;
-  const float4 t4 = vload4(ya + x4, col) * scale;
-  const float4 b0 = vload4(yb + x0, col) * scale, b1 = vload4(yb + x1, col) * scale;
-  const float4 b2 = vload4(yb + x2, col) * scale, b3 = vload4(yb + x3, col) * scale;
-  const float4 b4 = vload4(yb + x4, col) * scale;
-  const float16 top = (float16)(t0, t1, t2, t3), top1 = (float16)(t1, t2, t3, t4);
-  const float16 bot = (float16)(b0, b1, b2, b3), bot1 = (float16)(b1, b2, b3, b4);
+  float16 top, top1, bot, bot1;
+  if(x0 == iu && x4 == iu + 4)   /* the 5 columns side by side: runs of the two rows */
+  {
+    top = vload16(0, col + 4 * (ya + x0)) * scale;
+    top1 = vload16(0, col + 4 * (ya + x1)) * scale;
+    bot = vload16(0, col + 4 * (yb + x0)) * scale;
+    bot1 = vload16(0, col + 4 * (yb + x1)) * scale;
+  }
+  else
+  {
+    const float4 t0 = vload4(ya + x0, col) * scale, t1 = vload4(ya + x1, col) * scale;
+    const float4 t2 = vload4(ya + x2, col) * scale, t3 = vload4(ya + x3, col) * scale;
+    const float4 t4 = vload4(ya + x4, col) * scale;
+    const float4 b0 = vload4(yb + x0, col) * scale, b1 = vload4(yb + x1, col) * scale;
+    const float4 b2 = vload4(yb + x2, col) * scale, b3 = vload4(yb + x3, col) * scale;
+    const float4 b4 = vload4(yb + x4, col) * scale;
+    top = (float16)(t0, t1, t2, t3); top1 = (float16)(t1, t2, t3, t4);
+    bot = (float16)(b0, b1, b2, b3); bot1 = (float16)(b1, b2, b3, b4);
+  }
   const float16 tt = top + (top1 - top) * ax, bb = bot + (bot1 - bot) * ax;
   return tt + (bb - tt) * ay;
 #else
@@ -642,15 +664,18 @@ MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux
                                      row0, row1 - 1));
   const float4 lx = len * fabs(ux), ly = len * fabs(uy);
 #define MB_LANES(b, dy, dx) mb_lanes(b, pitch, w, row0, row1, iy + (dy), ix + (dx))
-  float4 sx, sy;
   const float16 xm1 = MB_LANES(col, 0, -1) * scale, xp1 = MB_LANES(col, 0, 1) * scale;
   const float16 ym1 = MB_LANES(col, -1, 0) * scale, yp1 = MB_LANES(col, 1, 0) * scale;
-  const float16 ex = mb_step_axis(MB_LANES(col, 0, -2) * scale, xm1, xp1,
-                                  MB_LANES(col, 0, 2) * scale, MB_LANES(aux, 0, -1).s26ae,
-                                  MB_LANES(aux, 0, 1).s26ae, p0, z0, lx, &sx);
-  const float16 ey = mb_step_axis(MB_LANES(col, -2, 0) * scale, ym1, yp1,
-                                  MB_LANES(col, 2, 0) * scale, MB_LANES(aux, -1, 0).s26ae,
-                                  MB_LANES(aux, 1, 0).s26ae, p0, z0, ly, &sy);
+  /* an axis no lane's smear crosses (a motion along the other axis) changes nothing and
+   * weighs nothing in *st below (its g is 0): neither its step nor its stepness is taken */
+  float4 sx = (float4)(0.0f), sy = (float4)(0.0f);
+  float16 ex = (float16)(0.0f), ey = (float16)(0.0f);
+  if(!all(lx == 0.0f))
+    ex = mb_step_axis(MB_LANES(col, 0, -2) * scale, xm1, xp1, MB_LANES(col, 0, 2) * scale,
+                      MB_LANES(aux, 0, -1).s26ae, MB_LANES(aux, 0, 1).s26ae, p0, z0, lx, &sx);
+  if(!all(ly == 0.0f))
+    ey = mb_step_axis(MB_LANES(col, -2, 0) * scale, ym1, yp1, MB_LANES(col, 2, 0) * scale,
+                      MB_LANES(aux, -1, 0).s26ae, MB_LANES(aux, 1, 0).s26ae, p0, z0, ly, &sy);
   /* the cross term of a diagonal smear (the pixel's box moved along the line overlaps the
    * diagonal neighbour ahead, and the one behind, by lx ly / 24 on average): without it a
    * corner of a checker took the colour across both edges twice */
