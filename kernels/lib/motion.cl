@@ -435,41 +435,7 @@ inline float4 mb_stepness(const float16 pm2, const float16 pm1, const float16 p0
          * clamp(1.0f - fmax(ramp, 0.0f) / (STEP_RAMP * scale), 0.0f, 1.0f);
 }
 
-/* Colour at continuous position (px, py), clamp-to-edge, times `scale`: Catmull-Rom (4 x 4
- * taps) clamped per channel to the 2 x 2 pixels around the position.  Short blurs integrate
- * the image over under a pixel or a few: bilinear reconstruction blurs every sample by up
- * to a quarter pixel more (as much again as a one-pixel smear), the cubic keeps the detail;
- * the clamp stops its negative lobes ringing around HDR lights. */
-inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int w,
-                             const int row0, const int row1, const float px, const float py,
-                             const float scale,
-                             const float beta)
-{
-  const float u = px - 0.5f, v = py - 0.5f;
-  const float fu = floor(u), fv = floor(v);
-  const float4 wx = mb_cubic_weights(u - fu, beta), wy = mb_cubic_weights(v - fv, beta);
-  const int iu = (int)clamp(fu, -2.0f, (float)w);
-  const int iv = (int)clamp(fv, (float)(row0 - 2), (float)row1);
-  const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
-  const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
-  float4 acc = (float4)(0.0f), lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
-  for(int j = 0; j < 4; j++)
-  {
-    const int row = clfx_clampi(iv - 1 + j, row0, row1 - 1) * pitch;
-    const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
-    const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
-    if(j == 1 || j == 2)
-    {
-      lo = fmin(lo, fmin(c1, c2));
-      hi = fmax(hi, fmax(c1, c2));
-    }
-    const float wj = j == 0 ? wy.x : j == 1 ? wy.y : j == 2 ? wy.z : wy.w;
-    acc += wj * (wx.x * c0 + wx.y * c1 + wx.z * c2 + wx.w * c3);
-  }
-  return clamp(acc, lo, hi);
-}
-
-/* The same at the 4 positions (px + k, py), k = 0..3, of a quad whose lanes share one
+/* mb_fetch4_cubic at the 4 positions (px + k, py), k = 0..3, of a quad whose lanes share one
  * offset: the 4 x 7 pixels the lanes' taps cover are loaded once (28 loads, not 64) and the
  * weights computed once. */
 MB_INLINE float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
@@ -566,13 +532,82 @@ MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch,
 #endif
 }
 
-/* mg_fetch_scaled with the (unused) blend of the cubic fetch's signature */
-inline float4 mb_fetch_linear(global const float *col, const int pitch, const int w,
-                              const int row0, const int row1, const float px, const float py,
-                              const float scale,
-                              const float beta)
+/* The pixels at flat indices i of the 4 lanes, times `scale`, lane-major */
+#define MB_GATHER4(buf, i, scale) \
+  ((float16)(vload4((i).x, buf), vload4((i).y, buf), vload4((i).z, buf), vload4((i).w, buf)) \
+   * (scale))
+
+/* mg_fetch_scaled at the 4 lanes' own positions (px, py) at once: per element the same
+ * operations, the lanes' arithmetic in one float16 */
+MB_INLINE float16 mb_fetch4_linear(global const float *col, const int pitch, const int w,
+                                   const int row0, const int row1, const float4 px,
+                                   const float4 py, const float scale)
 {
-  return mg_fetch_scaled(col, pitch, w, row0, row1, px, py, scale);
+#if BILINEAR
+  const float4 u = px - 0.5f, v = py - 0.5f;
+  const float4 fu = floor(u), fv = floor(v);
+  const float4 ax = u - fu, ay = v - fv;
+  const int4 iu = convert_int4(clamp(fu, -1.0f, (float)w));
+  const int4 iv = convert_int4(clamp(fv, (float)(row0 - 1), (float)row1));
+  const int4 xa = clamp(iu, (int4)(0), (int4)(w - 1)), xb = clamp(iu + 1, (int4)(0), (int4)(w - 1));
+  const int4 ya = clamp(iv, (int4)(row0), (int4)(row1 - 1)) * pitch;
+  const int4 yb = clamp(iv + 1, (int4)(row0), (int4)(row1 - 1)) * pitch;
+  const float16 c00 = MB_GATHER4(col, ya + xa, scale), c10 = MB_GATHER4(col, ya + xb, scale);
+  const float16 c01 = MB_GATHER4(col, yb + xa, scale), c11 = MB_GATHER4(col, yb + xb, scale);
+  const float16 top = c00 + (c10 - c00) * SPLAT16(ax), bot = c01 + (c11 - c01) * SPLAT16(ax);
+  return top + (bot - top) * SPLAT16(ay);
+#else
+  const int4 x = convert_int4(clamp(floor(px), 0.0f, (float)(w - 1)));
+  const int4 y = convert_int4(clamp(floor(py), (float)row0, (float)(row1 - 1)));
+  return MB_GATHER4(col, y * pitch + x, scale);
+#endif
+}
+
+/* Colours at the 4 lanes' own continuous positions (px, py), clamp-to-edge, times `scale`:
+ * Catmull-Rom (4 x 4 taps, blended with the tent by `beta`, mb_cubic_weights) clamped per
+ * channel to the 2 x 2 pixels around each position.  Short blurs integrate the image over
+ * under a pixel or a few: bilinear reconstruction blurs every sample by up to a quarter pixel
+ * more (as much again as a one-pixel smear), the cubic keeps the detail; the clamp stops its
+ * negative lobes ringing around HDR lights.  The lanes' arithmetic in one float16, as
+ * mb_fetch4_linear. */
+MB_INLINE float16 mb_fetch4_cubic(global const float *col, const int pitch, const int w,
+                                  const int row0, const int row1, const float4 px,
+                                  const float4 py, const float scale, const float4 beta)
+{
+  const float4 u = px - 0.5f, v = py - 0.5f;
+  const float4 fu = floor(u), fv = floor(v);
+  /* the taps' weights, tap k of the 4 lanes in wxk: mb_cubic_weights per lane, term for
+   * term (lin + (cr - lin) beta, lin's zeros included) */
+  const float4 a = u - fu, a2 = a * a, a3 = a2 * a;
+  const float4 b = v - fv, b2 = b * b, b3 = b2 * b;
+  const float4 wx0 = 0.0f + ((-0.5f * a3 + a2 - 0.5f * a) - 0.0f) * beta;
+  const float4 wx1 = (1.0f - a) + ((1.5f * a3 - 2.5f * a2 + 1.0f) - (1.0f - a)) * beta;
+  const float4 wx2 = a + ((-1.5f * a3 + 2.0f * a2 + 0.5f * a) - a) * beta;
+  const float4 wx3 = 0.0f + ((0.5f * a3 - 0.5f * a2) - 0.0f) * beta;
+  const float4 wy[4] = {0.0f + ((-0.5f * b3 + b2 - 0.5f * b) - 0.0f) * beta,
+                        (1.0f - b) + ((1.5f * b3 - 2.5f * b2 + 1.0f) - (1.0f - b)) * beta,
+                        b + ((-1.5f * b3 + 2.0f * b2 + 0.5f * b) - b) * beta,
+                        0.0f + ((0.5f * b3 - 0.5f * b2) - 0.0f) * beta};
+  const int4 iu = convert_int4(clamp(fu, -2.0f, (float)w));
+  const int4 iv = convert_int4(clamp(fv, (float)(row0 - 2), (float)row1));
+  const int4 lo_x = (int4)(0), hi_x = (int4)(w - 1);
+  const int4 x0 = clamp(iu - 1, lo_x, hi_x), x1 = clamp(iu, lo_x, hi_x);
+  const int4 x2 = clamp(iu + 1, lo_x, hi_x), x3 = clamp(iu + 2, lo_x, hi_x);
+  float16 acc = (float16)(0.0f), lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+  for(int j = 0; j < 4; j++)
+  {
+    const int4 row = clamp(iv - 1 + j, (int4)(row0), (int4)(row1 - 1)) * pitch;
+    const float16 c0 = MB_GATHER4(col, row + x0, scale), c1 = MB_GATHER4(col, row + x1, scale);
+    const float16 c2 = MB_GATHER4(col, row + x2, scale), c3 = MB_GATHER4(col, row + x3, scale);
+    if(j == 1 || j == 2)
+    {
+      lo = fmin(lo, fmin(c1, c2));
+      hi = fmax(hi, fmax(c1, c2));
+    }
+    acc += SPLAT16(wy[j]) * (SPLAT16(wx0) * c0 + SPLAT16(wx1) * c1 + SPLAT16(wx2) * c2
+                             + SPLAT16(wx3) * c3);
+  }
+  return clamp(acc, lo, hi);
 }
 
 /* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
@@ -599,10 +634,7 @@ MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const
   if(all(y == y.x) && all(u - fu == u.x - fu.x)
      && all(fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f)))
     return mb_fetch_quad_linear(col, pitch, w, row0, row1, x.x, y.x, scale, 0.0f);
-  return (float16)(mg_fetch_scaled(col, pitch, w, row0, row1, x.x, y.x, scale),
-                   mg_fetch_scaled(col, pitch, w, row0, row1, x.y, y.y, scale),
-                   mg_fetch_scaled(col, pitch, w, row0, row1, x.z, y.z, scale),
-                   mg_fetch_scaled(col, pitch, w, row0, row1, x.w, y.w, scale));
+  return mb_fetch4_linear(col, pitch, w, row0, row1, x, y, scale);
 }
 
 /* The step model along one pixel axis for the 4 lanes: the taps p-2, p-1, p1, p2 (times
@@ -695,10 +727,11 @@ MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux
 }
 
 #if CUBIC
-#define MB_FETCH mb_fetch_cubic
+#define MB_FETCH_LANES mb_fetch4_cubic
 #define MB_FETCH_QUAD mb_fetch_quad_cubic
 #else
-#define MB_FETCH mb_fetch_linear
+#define MB_FETCH_LANES(col, pitch, w, row0, row1, px, py, scale, beta) \
+  mb_fetch4_linear(col, pitch, w, row0, row1, px, py, scale)
 #define MB_FETCH_QUAD mb_fetch_quad_linear
 #endif
 
@@ -707,10 +740,7 @@ MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux
  * (px.x + k, py.x). */
 #define MB_FETCH4(px, py, same, beta) \
   ((same) ? MB_FETCH_QUAD(col, pitch, width, row0, row1, (px).x, (py).x, scale, (beta).x) : \
-   (float16)(MB_FETCH(col, pitch, width, row0, row1, (px).x, (py).x, scale, (beta).x), \
-             MB_FETCH(col, pitch, width, row0, row1, (px).y, (py).y, scale, (beta).y), \
-             MB_FETCH(col, pitch, width, row0, row1, (px).z, (py).z, scale, (beta).z), \
-             MB_FETCH(col, pitch, width, row0, row1, (px).w, (py).w, scale, (beta).w)))
+   MB_FETCH_LANES(col, pitch, width, row0, row1, px, py, scale, beta))
 
 /* The gather of the 4 pixels of one work-item (lanes `lane`, row fy; centre colours cc, own
  * velocities (vxx, vxy), depths zx), every colour sample times `scale` (the result too).
