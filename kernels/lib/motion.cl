@@ -915,24 +915,6 @@ MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float 
          + own * (REAL16)(keep.xxxx, keep.yyyy, keep.zzzz, keep.wwww);
 }
 
-/* motion_gather_quad at a `scale` under 1 (one copy, out of line: motion_gather's second pass,
- * after an overflow), as float */
-__attribute__((noinline))
-float16 motion_gather_scaled(global const float *col, global const float *aux,
-                             global const float *auxb, const float2 bn, const float4 bxx,
-                             const float4 bxy, const int pitch, const int width, const int row0,
-                             const int row1, const float4 vn, const float4 lane, const float fy,
-                             const float16 cc, const float4 vxx, const float4 vxy,
-                             const float4 zx, const int any_moving, const int clear,
-                             const float t0, const float t1, const float dt, const int n,
-                             const float ell, const float hell, const float4 jit,
-                             const float scale)
-{
-  return TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
-                                       vn, lane, fy, cc, vxx, vxy, zx, any_moving, clear, t0,
-                                       t1, dt, n, ell, hell, jit, scale));
-}
-
 /* tiles: (tx, ty, samples, flags) per moving tile; flags bit 0, jitter (0: the midpoint rule,
  * exact for the few, dense samples of a short blur; 1: per-pixel jitter where samples are
  * sparse); bit 1, front-free: no pixel the tile's samples and closed-form taps can reach lies
@@ -998,9 +980,9 @@ kernel void motion_gather(global const float *col, global const float *aux,
   if(any((as_int16(out) & 0x7f800000) == 0x7f800000))   /* overflowed: the second pass */
   {
     const float scale = 0.5f / (float)n;
-    out = motion_gather_scaled(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1, vn, lane,
-                               fy, cc, vxx, vxy, zx, any_moving, clear, t0, t1, dt, n, ell,
-                               hell, jit, scale);
+    out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
+                                        vn, lane, fy, cc, vxx, vxy, zx, any_moving, clear, t0,
+                                        t1, dt, n, ell, hell, jit, scale));
     out = clamp(out / scale, -FLT_MAX, FLT_MAX);
   }
   vstore16(out, 0, dst + base * 4);
