@@ -27,7 +27,11 @@ Warfare"; Guertin, McGuire & Nowrouzezahrai 2014)
    3 x 3 tiles: the dominant velocity ``v_n`` of every pixel that can reach into the tile.
 3. *Classification*: the small NeighborMax grid is read back; tiles whose ``v_n`` smears less
    than :data:`MIN_BLUR_PX` are skipped outright (the output starts as a copy of the input),
-   the others form compact lists, and the gather runs over them only.  A tile's sample count
+   the others form compact lists, and the gather runs over them only.  A tile is
+   *front-free* when its largest depth is at most the smallest of every tile its reads reach
+   (TileMax also keeps each tile's depth range; :func:`_front_free`): no sample lies in front
+   of any of its pixels, each soft depth test below would give exactly 0, and the gather skips
+   the occluder set and the tests (the same bits for less work).  A tile's sample count
    follows its own blur length (``ceil(length / spacing)``, capped per quality level); the
    samples use the midpoint rule (deterministic, exact for a linear image) unless the cap
    leaves them sparser than :data:`JITTER_SPACING_PX`, where a per-pixel jitter turns ghost
@@ -345,9 +349,9 @@ def path_reach(t0: float, t1: float, curved: bool) -> float:
 @dataclass(frozen=True)
 class TileGrid:
     """The frame's velocity tiles (TileMax, NeighborMax on a grid of ``k`` px from the canvas's
-    origin) and the host's classification of the moving ones: what every band of a tiled
-    render reads (built once a frame in the step's plan, :func:`tile_grid`), or a whole render
-    builds from its own buffers.  ``nmax_b``: the backward motion of each NeighborMax
+    origin) and the host's classification of the moving ones (samples, jitter, front-free,
+    blur length): what every band of a tiled render reads (built once a frame in the step's
+    plan, :func:`tile_grid`), or a whole render builds from its own buffers.  ``nmax_b``: the backward motion of each NeighborMax
     record's pixel.  Immutable: the host arrays are read-only."""
 
     k: int

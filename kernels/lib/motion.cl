@@ -6,10 +6,11 @@
  *                            the maximum speed VMAX, depth sanitised (invalid -> BIG_DEPTH);
  *                            writes aux = (vx, vy, z, |v|) per pixel
  *   motion_dilate            per 4 pixels, with a depth pass: an antialiased rim pixel of a
- *                            small bright surface in front (a light) takes its motion
+ *                            small bright surface in front (a light) takes its motion (quads
+ *                            with nothing in front around them are copied)
  *   motion_sanitize          per 4 pixels: non-finite colour components -> 0 (only when the
  *                            analysis counted some)
- *   motion_tilemax           per K x K tile: the velocity of largest magnitude
+ *   motion_tilemax           per K x K tile: the velocity of largest magnitude, the depth range
  *   motion_neighbormax       per tile: the largest over the 3 x 3 neighbouring tiles
  *   motion_gather            per 4 pixels of the *moving* tiles only (compact tile lists built
  *                            on the host): N samples along the neighbourhood's dominant
