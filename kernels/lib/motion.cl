@@ -235,19 +235,45 @@ kernel void motion_tilemax(global const float *aux, global const float *auxb,
   CLFX_CANVAS_ROWS(aux, pitch, 4, row0);
   const int x0 = tx * k, y0 = ty * k;
   const int x1 = min(x0 + k, width), y1 = min(y0 + k, height);
-  float4 best = (float4)(0.0f);
-  float zlo = INFINITY, zhi = -INFINITY;
-  int at = -1;
+  /* the fastest pixel: the largest |v| (over 0), the first in scan order among equals, i.e.
+   * the smallest index; 4 columns at a time (lane l: the columns x0 + l mod 4, each lane's
+   * first maximum), the columns past the last whole 4 (the image's right edge) one by one */
+  const int xq = x0 + ((x1 - x0) & ~3);
+  float4 lw = (float4)(0.0f), zlo4 = (float4)(INFINITY), zhi4 = (float4)(-INFINITY);
+  int4 lat = (int4)(-1);
+  float tw = 0.0f;
+  int tat = -1;
   for(int y = y0; y < y1; y++)
-    for(int x = x0; x < x1; x++)
+  {
+    for(int x = x0; x < xq; x += 4)
+    {
+      const float16 a = vload16(0, aux + 4 * ((size_t)y * pitch + x));
+      const int4 take = a.s37bf > lw;
+      lw = select(lw, a.s37bf, take);
+      lat = select(lat, (int4)(y * pitch + x) + (int4)(0, 1, 2, 3), take);
+      zlo4 = fmin(zlo4, a.s26ae);
+      zhi4 = fmax(zhi4, a.s26ae);
+    }
+    for(int x = xq; x < x1; x++)
     {
       const float4 a = vload4((size_t)y * pitch + x, aux);
-      if(a.w > best.z) { best = (float4)(a.x, a.y, a.w, 0.0f); at = y * pitch + x; }
-      zlo = fmin(zlo, a.z);
-      zhi = fmax(zhi, a.z);
+      if(a.w > tw) { tw = a.w; tat = y * pitch + x; }
+      zlo4.x = fmin(zlo4.x, a.z);
+      zhi4.x = fmax(zhi4.x, a.z);
     }
-  vstore4(best, ty * tiles_x + tx, tiles);
-  vstore2((float2)(zlo, zhi), ty * tiles_x + tx, zrange);
+  }
+  float bw = tw;
+  int at = tat;
+  for(int l = 0; l < 4; l++)
+  {
+    const float w = l == 0 ? lw.x : l == 1 ? lw.y : l == 2 ? lw.z : lw.w;
+    const int i = l == 0 ? lat.x : l == 1 ? lat.y : l == 2 ? lat.z : lat.w;
+    if(w > bw || (w == bw && i >= 0 && i < at)) { bw = w; at = i; }
+  }
+  const float4 a = at >= 0 ? vload4((size_t)at, aux) : (float4)(0.0f);
+  vstore4((float4)(a.x, a.y, a.w, 0.0f), ty * tiles_x + tx, tiles);
+  vstore2((float2)(fmin(fmin(zlo4.x, zlo4.y), fmin(zlo4.z, zlo4.w)),
+                   fmax(fmax(zhi4.x, zhi4.y), fmax(zhi4.z, zhi4.w))), ty * tiles_x + tx, zrange);
 #if CURVED
   CLFX_CANVAS_ROWS(auxb, pitch, 4, row0);
   vstore2(at >= 0 ? vload2(0, auxb + 4 * (size_t)at) : (float2)(0.0f), ty * tiles_x + tx,

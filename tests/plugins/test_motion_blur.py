@@ -685,3 +685,43 @@ def test_rim_dilation_matches_the_oracle(rt, rng):
     assert (want_z != depth).sum() >= 20                       # rims moved with their lights
     np.testing.assert_array_equal(got[..., :2], want_v.astype(np.float32))
     np.testing.assert_array_equal(got[..., 2], want_z.astype(np.float32))
+
+
+@pytest.mark.parametrize("curved", [False, True])
+def test_tilemax_takes_the_first_fastest_pixel_and_the_depth_range(rt, rng, curved):
+    """TileMax's record is the tile's fastest pixel's (vx, vy, |v|), the first in scan order
+    among equal speeds (here many: speeds from 4 values), its backward motion with it
+    (CURVED), and each tile's smallest and largest depth; on a width that ends mid-tile and
+    mid-quad (the kernel's 4 columns at a time and the columns after), a still tile too."""
+    from clfx.fx import motion
+
+    h, w, k = 37, 45, 8
+    aux = np.zeros((h, w, 4), np.float32)
+    speed = rng.choice(np.array([0.0, 1.0, 2.0, 3.0], np.float32), (h, w))
+    angle = rng.uniform(0.0, 2.0 * np.pi, (h, w))
+    aux[..., 0], aux[..., 1] = speed * np.cos(angle), speed * np.sin(angle)
+    aux[..., 2] = rng.uniform(1.0, 50.0, (h, w))
+    aux[..., 3] = speed
+    aux[:8, :8, 3] = aux[:8, :8, 0] = aux[:8, :8, 1] = 0.0          # a still tile
+    back = rng.uniform(-5.0, 5.0, (h, w, 4)).astype(np.float32)
+    defines = motion._defines(motion.LEVELS["final"], True, curved)
+    tx, ty, bufs = motion._grid_buffers(rt, w, h, k, curved)
+    img = rt.upload(aux)
+    motion._tilemax(rt, defines, img, rt.upload(back) if curved else bufs[1], bufs, img.pitch,
+                    w, h, 0, tx, ty, 0, ty, k)
+    tiles = rt.from_device(bufs[0], np.float32, tx * ty * 4).reshape(ty, tx, 4)
+    zr = rt.from_device(bufs[2], np.float32, tx * ty * 2).reshape(ty, tx, 2)
+    if curved:
+        tb = rt.from_device(bufs[1], np.float32, tx * ty * 2).reshape(ty, tx, 2)
+    for j in range(ty):
+        for i in range(tx):
+            blk = aux[j * k:(j + 1) * k, i * k:(i + 1) * k]
+            s = blk[..., 3].ravel()
+            first = int(np.argmax(s))              # numpy: the first among equals
+            y, x = divmod(first, blk.shape[1])
+            want = (blk[y, x, 0], blk[y, x, 1], s[first], 0.0) if s[first] > 0 else (0,) * 4
+            np.testing.assert_array_equal(tiles[j, i], np.float32(want), err_msg=(j, i))
+            np.testing.assert_array_equal(zr[j, i], (blk[..., 2].min(), blk[..., 2].max()))
+            if curved:
+                wb = back[j * k + y, i * k + x, :2] if s[first] > 0 else (0.0, 0.0)
+                np.testing.assert_array_equal(tb[j, i], wb, err_msg=(j, i))
