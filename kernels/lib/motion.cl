@@ -117,11 +117,34 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
 #if CURVED
   float16 ownb = vload16(0, auxb + 4 * i);   /* the backward records follow the same choices */
 #endif
-  /* the 3 x 6 records around the quad (columns x-1 .. x+4; rows and the outer columns
-   * clamped, the quad's own columns read up to the pitch, which motion_prepare fills;
-   * outside the image = no candidate) */
+  const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
+  float4 bz = az * (1.0f - SOFT_Z);
+  /* the common case: no record of the 3 x 6 around the quad (columns x-1 .. x+4, rows and
+   * the outer columns clamped, the quad's own columns read up to the pitch, which
+   * motion_prepare fills) lies in front of any of the 4 pixels (each neighbour's test below
+   * needs qz < bz): the records stay as they are */
+  {
+    const int up = clfx_clampi(y - 1, 0, height - 1) * pitch, row = y * pitch;
+    const int down = clfx_clampi(y + 1, 0, height - 1) * pitch;
+    const int xl = clfx_clampi(x - 1, 0, width - 1), xr = clfx_clampi(x + 4, 0, width - 1);
+    const float4 zq = fmin(fmin(vload16(0, aux + 4 * (up + x)).s26ae,
+                                vload16(0, aux + 4 * (down + x)).s26ae), az);
+    const float4 ze = fmin((float4)(aux[4 * (up + xl) + 2], aux[4 * (row + xl) + 2],
+                                    aux[4 * (down + xl) + 2], aux[4 * (up + xr) + 2]),
+                           (float4)(aux[4 * (row + xr) + 2], aux[4 * (down + xr) + 2],
+                                    INFINITY, INFINITY));
+    const float4 zlo = fmin(zq, ze);
+    const float2 zlo2 = fmin(zlo.xy, zlo.zw), bz2 = fmax(bz.xy, bz.zw);
+    if(fmin(zlo2.x, zlo2.y) >= fmax(bz2.x, bz2.y))
+    {
+      vstore16(own, 0, out + 4 * i);
+#if CURVED
+      vstore16(ownb, 0, outb + 4 * i);
+#endif
+      return;
+    }
+  }
   float vx[3][6], vy[3][6], z[3][6];
-  float4 zlo = (float4)(INFINITY);
   for(int r = 0; r < 3; r++)
   {
     const int row = clfx_clampi(y + r - 1, 0, height - 1) * pitch;
@@ -134,22 +157,8 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
     vx[r][3] = qm.s8; vy[r][3] = qm.s9; z[r][3] = qm.sa;
     vx[r][4] = qm.sc; vy[r][4] = qm.sd; z[r][4] = qm.se;
     vx[r][5] = qr.x; vy[r][5] = qr.y; z[r][5] = qr.z;
-    zlo = fmin(zlo, fmin(qm.s26ae, (float4)(ql.z, qr.z, ql.z, qr.z)));
   }
-  const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
   const float4 lanex = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
-  float4 bz = az * (1.0f - SOFT_Z);
-  /* the common case: no record around lies in front of any of the 4 pixels (each neighbour's
-   * test below needs qz < bz): the records stay as they are */
-  const float2 zlo2 = fmin(zlo.xy, zlo.zw), bz2 = fmax(bz.xy, bz.zw);
-  if(fmin(zlo2.x, zlo2.y) >= fmax(bz2.x, bz2.y))
-  {
-    vstore16(own, 0, out + 4 * i);
-#if CURVED
-    vstore16(ownb, 0, outb + 4 * i);
-#endif
-    return;
-  }
   int4 bdx = (int4)(0), bdy = (int4)(0);
   for(int dy = -1; dy <= 1; dy++)
     for(int dx = -1; dx <= 1; dx++)
