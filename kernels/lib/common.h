@@ -133,6 +133,20 @@ inline float clfx_luminance(float4 c)
   return (CLFX_LUMA_R) * c.x + (CLFX_LUMA_G) * c.y + (CLFX_LUMA_B) * c.z;
 }
 
+/* any() / all() of a 4-lane compare (true lanes -1): PoCL tests any() and all() lane by lane,
+ * a branch each; these OR / AND the lanes and test once. */
+inline int clfx_any4(int4 m)
+{
+  m |= m.s2301;
+  return (m.s0 | m.s1) < 0;
+}
+
+inline int clfx_all4(int4 m)
+{
+  m &= m.s2301;
+  return (m.s0 & m.s1) < 0;
+}
+
 inline int clfx_clampi(int v, int lo, int hi)
 {
   return min(max(v, lo), hi);

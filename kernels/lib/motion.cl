@@ -177,7 +177,7 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
       bdx = select(bdx, (int4)(dx), take);
       bdy = select(bdy, (int4)(dy), take);
     }
-  if(any((bdx | bdy) != 0))   /* rare: a nearer moving neighbour; test the colours */
+  if(clfx_any4((bdx | bdy) != 0))   /* rare: a nearer moving neighbour; test the colours */
   {
     float a16[16];
     vstore16(own, 0, a16);
@@ -654,7 +654,7 @@ MB_INLINE float16 mb_lanes(global const float *buf, const int pitch, const int w
   /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
   const int4 i = clamp(r, (int4)(row0), (int4)(row1 - 1)) * pitch
                  + clamp(c, (int4)(0), (int4)(w - 1));
-  if(all(i - i.x == (int4)(0, 1, 2, 3)))
+  if(clfx_all4(i - i.x == (int4)(0, 1, 2, 3)))
     return vload16(0, buf + 4 * i.x);
   return (float16)(vload4(i.x, buf), vload4(i.y, buf), vload4(i.z, buf), vload4(i.w, buf));
 }
@@ -667,8 +667,8 @@ MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const
                               const float scale)
 {
   const float4 u = x - 0.5f, fu = floor(u);
-  if(all(y == y.x) && all(u - fu == u.x - fu.x)
-     && all(fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f)))
+  if(clfx_all4((y == y.x) & (u - fu == u.x - fu.x)
+                & (fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f))))
     return mb_fetch_quad_linear(col, pitch, w, row0, row1, x.x, y.x, scale, 0.0f);
   return mb_fetch4_linear(col, pitch, w, row0, row1, x, y, scale);
 }
@@ -684,7 +684,7 @@ MB_INLINE float16 mb_step_axis(const float16 tm2, const float16 tm1, const float
 {
   *st = mb_stepness(tm2, tm1, p0, tp1, tp2);
   const int4 still = len < 1e-3f;
-  if(all(still))
+  if(clfx_all4(still))
     return (float16)(0.0f);
   const float4 bm = clamp((zm - z0) / (SOFT_Z * fmin(z0, zm)), 0.0f, 1.0f);
   const float4 bp = clamp((zp - z0) / (SOFT_Z * fmin(z0, zp)), 0.0f, 1.0f);
@@ -738,10 +738,10 @@ MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux
    * weighs nothing in *st below (its g is 0): neither its step nor its stepness is taken */
   float4 sx = (float4)(0.0f), sy = (float4)(0.0f);
   float16 ex = (float16)(0.0f), ey = (float16)(0.0f);
-  if(!all(lx == 0.0f))
+  if(!clfx_all4(lx == 0.0f))
     ex = mb_step_axis(MB_LANES(col, 0, -2) * scale, xm1, xp1, MB_LANES(col, 0, 2) * scale,
                       MB_LANES(aux, 0, -1).s26ae, MB_LANES(aux, 0, 1).s26ae, p0, z0, lx, &sx);
-  if(!all(ly == 0.0f))
+  if(!clfx_all4(ly == 0.0f))
     ey = mb_step_axis(MB_LANES(col, -2, 0) * scale, ym1, yp1, MB_LANES(col, 2, 0) * scale,
                       MB_LANES(aux, -1, 0).s26ae, MB_LANES(aux, 1, 0).s26ae, p0, z0, ly, &sy);
   /* the cross term of a diagonal smear (the pixel's box moved along the line overlaps the
@@ -806,9 +806,9 @@ MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float 
   REAL4 aF = (REAL4)(0), aS = (REAL4)(0);
   /* lanes whose samples sit at one offset (no jitter; for the own set, one velocity) read
    * their colours together */
-  const int same_t = all(jit == jit.x);
-  const int same_v = same_t && all(vxx == vxx.x) && all(vxy == vxy.x)
-                     && all(bxx == bxx.x) && all(bxy == bxy.x);
+  const int same_t = clfx_all4(jit == jit.x);
+  const int same_v = same_t && clfx_all4((vxx == vxx.x) & (vxy == vxy.x) & (bxx == bxx.x)
+                                         & (bxy == bxy.x));
   const float4 beta_n = (float4)(mb_beta(vn.z * (t1 - t0)));         /* along v_n */
 #if CURVED
   const float4 wn = mb_turn((float4)(vn.x), (float4)(vn.y), (float4)(bn.x), (float4)(bn.y));
@@ -839,7 +839,7 @@ MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float 
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 f = clamp(rel, 0.0f, 1.0f);
-      if(any(f > 0.0f))   /* else every weight is 0: nothing here lies in front of x */
+      if(clfx_any4(f > 0.0f))   /* else every weight is 0: nothing here lies in front of x */
       {
         const float4 len = (t1 - t0) * sy;                     /* y's smear length */
 #if CURVED
@@ -867,7 +867,7 @@ MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float 
                          * clamp(1.5f - perp, 0.0f, 1.0f)
                          * clamp(len / MIN_BLUR - 1.0f, 0.0f, 1.0f);  /* statics never occlude */
         const float4 wf = f * rho * (ell / fmax(len, hell));
-        if(any(wf > 0.0f))
+        if(clfx_any4(wf > 0.0f))
         {
           const float16 c = SPLAT16(wf) * MB_FETCH4(px, py, same_t, beta_n);  /* rounded, summed */
           aF += TO_REAL4(wf);
@@ -929,7 +929,7 @@ MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float 
   const float4 wln = select((float4)(0.0f),
                             clamp((STEP_MAX_PX - slen) / (STEP_MAX_PX - 1.0f), 0.0f, 1.0f),
                             short_);
-  if(any(wln > 0.0f))
+  if(clfx_any4(wln > 0.0f))
   {
     /* the quad at once; a lane without the closed forms gets a harmless direction and no
      * change */
@@ -1008,12 +1008,14 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const float ell = vn.z * dt;                 /* source length per occluder sample, px */
   const float hell = fmax(ell, 1e-3f);
   const float4 jit = jittered ? mg_jitter(lane, fy, frame) : (float4)(0.5f);
-  const int any_moving = any(sx * (t1 - t0) >= MIN_BLUR);
+  const int any_moving = clfx_any4(sx * (t1 - t0) >= MIN_BLUR);
 
   float16 out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0,
                                               row1, vn, lane, fy, cc, vxx, vxy, zx, any_moving,
                                               clear, t0, t1, dt, n, ell, hell, jit, 1.0f));
-  if(any((as_int16(out) & 0x7f800000) == 0x7f800000))   /* overflowed: the second pass */
+  const int16 inf = (as_int16(out) & 0x7f800000) == 0x7f800000;
+  const int8 inf8 = inf.lo | inf.hi;
+  if(clfx_any4(inf8.lo | inf8.hi))   /* overflowed: the second pass */
   {
     const float scale = 0.5f / (float)n;
     out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
