@@ -351,8 +351,9 @@ class TileGrid:
     """The frame's velocity tiles (TileMax, NeighborMax on a grid of ``k`` px from the canvas's
     origin) and the host's classification of the moving ones (samples, jitter, front-free,
     blur length): what every band of a tiled render reads (built once a frame in the step's
-    plan, :func:`tile_grid`), or a whole render builds from its own buffers.  ``nmax_b``: the backward motion of each NeighborMax
-    record's pixel.  Immutable: the host arrays are read-only."""
+    plan, :func:`tile_grid`), or a whole render builds from its own buffers.  ``nmax_b``:
+    the backward motion of each NeighborMax record's pixel.  Immutable: the host arrays are
+    read-only."""
 
     k: int
     tiles_x: int

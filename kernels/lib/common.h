@@ -133,8 +133,8 @@ inline float clfx_luminance(float4 c)
   return (CLFX_LUMA_R) * c.x + (CLFX_LUMA_G) * c.y + (CLFX_LUMA_B) * c.z;
 }
 
-/* any() / all() of a 4-lane compare (true lanes -1): PoCL tests any() and all() lane by lane,
- * a branch each; these OR / AND the lanes and test once. */
+/* any() / all() of an int4 mask (-1 / 0 lanes) as vector ORs / ANDs and one test: PoCL's
+ * builtins test the lanes one by one, a branch each. */
 inline int clfx_any4(int4 m)
 {
   m |= m.s2301;

@@ -475,8 +475,8 @@ inline float4 mb_stepness(const float16 pm2, const float16 pm1, const float16 p0
  * offset: the 4 x 7 pixels the lanes' taps cover are loaded once (28 loads, not 64) and the
  * weights computed once. */
 MB_INLINE float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
-                                   const int row0, const int row1, const float px,
-                                   const float py, const float scale, const float beta)
+                                      const int row0, const int row1, const float px,
+                                      const float py, const float scale, const float beta)
 {
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
@@ -523,8 +523,8 @@ MB_INLINE float16 mb_fetch_quad_cubic(global const float *col, const int pitch, 
 /* Bilinear (BILINEAR) or nearest at the 4 positions (px + k, py) of a quad sharing one
  * offset: 2 x 5 loads (4 for nearest), as mg_fetch_scaled per lane. */
 MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
-                                    const int row0, const int row1, const float px,
-                                    const float py, const float scale, const float beta)
+                                       const int row0, const int row1, const float px,
+                                       const float py, const float scale, const float beta)
 {
 #if BILINEAR
   const float u = px - 0.5f, v = py - 0.5f;
@@ -576,8 +576,8 @@ MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch,
 /* mg_fetch_scaled at the 4 lanes' own positions (px, py) at once: per element the same
  * operations, the lanes' arithmetic in one float16 */
 MB_INLINE float16 mb_fetch4_linear(global const float *col, const int pitch, const int w,
-                                   const int row0, const int row1, const float4 px,
-                                   const float4 py, const float scale)
+                                   const int row0, const int row1, const float4 px, const float4 py,
+                                   const float scale)
 {
 #if BILINEAR
   const float4 u = px - 0.5f, v = py - 0.5f;
@@ -607,8 +607,8 @@ MB_INLINE float16 mb_fetch4_linear(global const float *col, const int pitch, con
  * negative lobes ringing around HDR lights.  The lanes' arithmetic in one float16, as
  * mb_fetch4_linear. */
 MB_INLINE float16 mb_fetch4_cubic(global const float *col, const int pitch, const int w,
-                                  const int row0, const int row1, const float4 px,
-                                  const float4 py, const float scale, const float4 beta)
+                                  const int row0, const int row1, const float4 px, const float4 py,
+                                  const float scale, const float4 beta)
 {
   const float4 u = px - 0.5f, v = py - 0.5f;
   const float4 fu = floor(u), fv = floor(v);
@@ -649,7 +649,7 @@ MB_INLINE float16 mb_fetch4_cubic(global const float *col, const int pitch, cons
 /* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
  * they lie side by side in memory (a run of one row: the common case), else one per lane. */
 MB_INLINE float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
-                        const int row1, const int4 r, const int4 c)
+                           const int row1, const int4 r, const int4 c)
 {
   /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
   const int4 i = clamp(r, (int4)(row0), (int4)(row1 - 1)) * pitch
@@ -663,8 +663,8 @@ MB_INLINE float16 mb_lanes(global const float *buf, const int pitch, const int w
  * offset (one row, one fraction, whole pixels apart) the quad fetch (2 x 5 loads), which
  * then gives each lane the same value. */
 MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const int w,
-                              const int row0, const int row1, const float4 x, const float4 y,
-                              const float scale)
+                                 const int row0, const int row1, const float4 x, const float4 y,
+                                 const float scale)
 {
   const float4 u = x - 0.5f, fu = floor(u);
   if(clfx_all4((y == y.x) & (u - fu == u.x - fu.x)
@@ -679,8 +679,8 @@ MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const
  * *st: its stepness.  Returns the change of p0 under a box of `len` px along the axis (0
  * where len is negligible). */
 MB_INLINE float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 tp1,
-                            const float16 tp2, const float4 zm, const float4 zp,
-                            const float16 p0, const float4 z0, const float4 len, float4 *st)
+                               const float16 tp2, const float4 zm, const float4 zp,
+                               const float16 p0, const float4 z0, const float4 len, float4 *st)
 {
   *st = mb_stepness(tm2, tm1, p0, tp1, tp2);
   const int4 still = len < 1e-3f;
@@ -696,18 +696,17 @@ MB_INLINE float16 mb_step_axis(const float16 tm2, const float16 tm1, const float
 /* The closed forms at the centres of the quad's pixels (lanes `lane`, row fy) along
  * (ux, uy), their colours p0 (times `scale`), depths z0, smear lengths len: the four taps
  * read bilinearly, times `scale`; *q: how much of the neighbourhood is x's own layer or
- * behind it (a tap in front of x pulls it to 0; `clear`: the tile is front-free, 1).  Returns mb_short_smear.  *step: the step
- * model's smear, taken along the pixel axes (the smear's parts len |ux| and len |uy|, their
- * changes added: exact for edges along the pixel grid, whatever the motion's direction,
- * where taps read along u between pixels would mix the patches), *st: its weight (the
- * stepness of the axes that carry a fair part of it).  The axes' taps sit at whole pixels
- * whatever the direction: runs of the rows y-2 .. y+2. */
+ * behind it (a tap in front of x pulls it to 0; `clear`: the tile is front-free, 1).
+ * Returns mb_short_smear.  *step: the step model's smear, taken along the pixel axes (the
+ * smear's parts len |ux| and len |uy|, their changes added: exact for edges along the pixel
+ * grid, whatever the motion's direction, where taps read along u between pixels would mix
+ * the patches), *st: its weight (the stepness of the axes that carry a fair part of it).
+ * The axes' taps sit at whole pixels whatever the direction: runs of the rows y-2 .. y+2. */
 MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux, const int pitch,
-                             const int w, const int row0, const int row1, const float4 lane,
-                             const float fy, const float4 ux, const float4 uy,
-                             const float16 p0, const float4 z0, const float4 len,
-                             const float scale, const int clear, float4 *q, float16 *step,
-                             float4 *st)
+                                const int w, const int row0, const int row1, const float4 lane,
+                                const float fy, const float4 ux, const float4 uy, const float16 p0,
+                                const float4 z0, const float4 len, const float scale,
+                                const int clear, float4 *q, float16 *step, float4 *st)
 {
   const float4 px = lane + 0.5f;
   const float py = fy + 0.5f;
@@ -792,15 +791,14 @@ MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux
  *    (scatter as gather), so their summed weight is the fraction of the shutter they cover x.
  * out = occluders (normalised if they overlap) + (1 - their coverage) x own-velocity layer. */
 MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float *aux,
-                                 global const float *auxb, const float2 bn,
-                                 const float4 bxx, const float4 bxy,
-                                 const int pitch, const int width, const int row0,
-                                 const int row1, const float4 vn, const float4 lane, const float fy,
-                                 const float16 cc, const float4 vxx, const float4 vxy,
-                                 const float4 zx, const int any_moving, const int clear,
-                                 const float t0, const float t1, const float dt, const int n,
-                                 const float ell, const float hell, const float4 jit,
-                                 const float scale)
+                                    global const float *auxb, const float2 bn, const float4 bxx,
+                                    const float4 bxy, const int pitch, const int width,
+                                    const int row0, const int row1, const float4 vn,
+                                    const float4 lane, const float fy, const float16 cc,
+                                    const float4 vxx, const float4 vxy, const float4 zx,
+                                    const int any_moving, const int clear, const float t0,
+                                    const float t1, const float dt, const int n, const float ell,
+                                    const float hell, const float4 jit, const float scale)
 {
   REAL16 F = (REAL16)(0), S = (REAL16)(0);
   REAL4 aF = (REAL4)(0), aS = (REAL4)(0);
