@@ -524,19 +524,9 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
 
 #define LANES(v) ((v).s0000111122223333)
 
-/* any() / all() of an int4 mask (-1 / 0 lanes) as vector ORs / ANDs and one test: PoCL's
- * builtins test the lanes one by one, a branch each, in the gather's per-tap tests. */
-inline int dof_any4(int4 m)
-{
-  m |= m.s2301;
-  return (m.s0 | m.s1) < 0;
-}
-
-inline int dof_all4(int4 m)
-{
-  m &= m.s2301;
-  return (m.s0 & m.s1) < 0;
-}
+/* any() / all() of an int4 mask in the gather's per-tap tests: lib/common.h's one test */
+#define dof_any4 clfx_any4
+#define dof_all4 clfx_all4
 
 /* Luminance of the 4 pixels of a float16. */
 inline float4 dof_lum4(float16 c)

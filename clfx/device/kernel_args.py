@@ -161,8 +161,8 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
         ),
         "motion_sanitize": "buf src, buf dst, int pitch, int height",
         "motion_tilemax": (
-            "buf aux, buf auxb, buf tiles, buf tiles_b, int pitch, int width, int height, "
-            "int row0, int tiles_x, int tiles_y, int ty0, int k"
+            "buf aux, buf auxb, buf tiles, buf tiles_b, buf zrange, int pitch, int width, "
+            "int height, int row0, int tiles_x, int tiles_y, int ty0, int k"
         ),
         "motion_neighbormax": (
             "buf tiles, buf tiles_b, buf nmax, buf nmax_b, int tiles_x, int tiles_y"

@@ -27,7 +27,11 @@ Warfare"; Guertin, McGuire & Nowrouzezahrai 2014)
    3 x 3 tiles: the dominant velocity ``v_n`` of every pixel that can reach into the tile.
 3. *Classification*: the small NeighborMax grid is read back; tiles whose ``v_n`` smears less
    than :data:`MIN_BLUR_PX` are skipped outright (the output starts as a copy of the input),
-   the others form compact lists, and the gather runs over them only.  A tile's sample count
+   the others form compact lists, and the gather runs over them only.  A tile is
+   *front-free* when its largest depth is at most the smallest of every tile its reads reach
+   (TileMax also keeps each tile's depth range; :func:`_front_free`): no sample lies in front
+   of any of its pixels, each soft depth test below would give exactly 0, and the gather skips
+   the occluder set and the tests (the same bits for less work).  A tile's sample count
    follows its own blur length (``ceil(length / spacing)``, capped per quality level); the
    samples use the midpoint rule (deterministic, exact for a linear image) unless the cap
    leaves them sparser than :data:`JITTER_SPACING_PX`, where a per-pixel jitter turns ghost
@@ -345,10 +349,11 @@ def path_reach(t0: float, t1: float, curved: bool) -> float:
 @dataclass(frozen=True)
 class TileGrid:
     """The frame's velocity tiles (TileMax, NeighborMax on a grid of ``k`` px from the canvas's
-    origin) and the host's classification of the moving ones: what every band of a tiled
-    render reads (built once a frame in the step's plan, :func:`tile_grid`), or a whole render
-    builds from its own buffers.  ``nmax_b``: the backward motion of each NeighborMax
-    record's pixel.  Immutable: the host arrays are read-only."""
+    origin) and the host's classification of the moving ones (samples, jitter, front-free,
+    blur length): what every band of a tiled render reads (built once a frame in the step's
+    plan, :func:`tile_grid`), or a whole render builds from its own buffers.  ``nmax_b``:
+    the backward motion of each NeighborMax record's pixel.  Immutable: the host arrays are
+    read-only."""
 
     k: int
     tiles_x: int
@@ -359,11 +364,12 @@ class TileGrid:
     ys: np.ndarray
     n: np.ndarray
     jitter: np.ndarray
+    front_free: np.ndarray
     length: np.ndarray
     stats: BlurStats
 
     def __post_init__(self):
-        for a in (self.xs, self.ys, self.n, self.jitter, self.length):
+        for a in (self.xs, self.ys, self.n, self.jitter, self.front_free, self.length):
             a.flags.writeable = False
 
 
@@ -413,15 +419,34 @@ def _geometry(t0, t1, max_radius_px, peak_speed):
 
 
 def _grid_buffers(rt, w, h, k, curved):
+    """The tile grid's size and buffers: TileMax records, their backward motion (CURVED) and
+    the tiles' depth ranges."""
     tx, ty = -(-w // k), -(-h // k)
-    pair = (rt.buffer(tx * ty * 16), rt.buffer(tx * ty * 8) if curved else rt.buffer(16))
-    return tx, ty, pair
+    bufs = (rt.buffer(tx * ty * 16), rt.buffer(tx * ty * 8) if curved else rt.buffer(16),
+            rt.buffer(tx * ty * 8))
+    return tx, ty, bufs
 
 
 def _tilemax(rt, defines, aux, auxb, tiles, pitch, w, h, row0, tx, ty, ty0, ty1, k):
     rt.launch(rt.kernel(KERNEL, "motion_tilemax", **defines), (tx, ty1 - ty0), aux, auxb,
-              tiles[0], tiles[1], pitch, w, h, row0, tx, ty,
-              ty0, k)
+              *tiles, pitch, w, h, row0, tx, ty, ty0, k)
+
+
+def _front_free(zrange: np.ndarray, k: int, reach: float) -> np.ndarray:
+    """Per tile: no pixel the gather's samples (within ``reach`` px of their pixel) or the
+    closed forms' taps (2 px) can read lies in front of any of the tile's pixels: the
+    tile's largest depth is at most the smallest of the tiles around it, so every soft
+    depth test of its gather gives exactly 0 (kernels/lib/motion.cl, motion_gather).
+    ``zrange``: (tiles_y, tiles_x, 2) smallest and largest depth per tile.  A sample at
+    ``x + 0.5 - d`` reads the pixel ``floor`` of it, within ``floor(|d| + 0.5)`` px of ``x``
+    (a little slack for the float32 clamp of the speeds)."""
+    px = max(math.floor(reach * (1.0 + 1e-4) + 0.5), 2)
+    m = -(-px // k)                                   # tiles around a tile the reads reach
+    lo = np.pad(zrange[..., 0], m, constant_values=np.inf)
+    ty, tx = zrange.shape[:2]
+    rows = np.min([lo[i:i + ty] for i in range(2 * m + 1)], axis=0)
+    near = np.min([rows[:, j:j + tx] for j in range(2 * m + 1)], axis=0)
+    return zrange[..., 1] <= near
 
 
 def _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved) -> TileGrid:
@@ -430,17 +455,20 @@ def _classified(rt, defines, tiles, tx, ty, k, radius, t0, t1, level, curved) ->
     nmax_b = rt.buffer(tx * ty * 8) if curved else rt.buffer(16)
     rt.launch(rt.kernel(KERNEL, "motion_neighbormax", **defines), (tx, ty), tiles[0],
               tiles[1], nmax, nmax_b, tx, ty)
-    # Classification on the host: a few thousand floats, the only read-back.
+    # Classification on the host: a few thousand floats, the only read-backs.
     nm = rt.from_device(nmax, np.float32, tx * ty * 4).reshape(ty, tx, 4)
     length = nm[..., 2].astype(np.float64) * (t1 - t0)     # blur length of the tile's v_n
     ys, xs = np.nonzero(length >= MIN_BLUR_PX)
     length = length[ys, xs]
+    zrange = rt.from_device(tiles[2], np.float32, tx * ty * 2).reshape(ty, tx, 2)
+    reach_t = reach_factor(t0, t1)
+    free = _front_free(zrange, k, path_reach(t0, t1, curved) * radius / reach_t)[ys, xs]
     spacing = np.where(length < min(level.cubic_max_px, SHORT_MAX_PX),
                        level.short_spacing or level.spacing, level.spacing)
     n = np.clip(np.ceil(length / spacing), 2, level.max_samples).astype(np.int32)
     jitter = (level.jitter & (length / n > JITTER_SPACING_PX)).astype(np.int32)
     stats = BlurStats(k, radius, tx * ty, int(xs.size), int(n.max()) if n.size else 0)
-    return TileGrid(k, tx, ty, nmax, nmax_b, xs, ys, n, jitter, length, stats)
+    return TileGrid(k, tx, ty, nmax, nmax_b, xs, ys, n, jitter, free, length, stats)
 
 
 def tile_grid(rt, rows_of, *, width: int, height: int, t0: float, t1: float,
@@ -537,8 +565,9 @@ def reconstruct(rt, src, velocity, depth=None, *, t0: float, t1: float, max_radi
     for part, cubic in ((sel & short, 1), (sel & ~short, 0)):
         if not part.any():       # one launch per fetch filter
             continue
-        table = rt.to_device(np.stack([grid.xs[part], grid.ys[part], grid.n[part],
-                                       grid.jitter[part]], axis=1).astype(np.int32).ravel())
+        flags = grid.jitter[part] | (grid.front_free[part].astype(np.int32) << 1)
+        table = rt.to_device(np.stack([grid.xs[part], grid.ys[part], grid.n[part], flags],
+                                      axis=1).astype(np.int32).ravel())
         count = int(part.sum())
         rt.launch(rt.kernel(KERNEL, "motion_gather", CUBIC=cubic, **defines),
                   (count * qpt,), col, aux, auxb, grid.nmax, grid.nmax_b, table, count,

@@ -133,6 +133,20 @@ inline float clfx_luminance(float4 c)
   return (CLFX_LUMA_R) * c.x + (CLFX_LUMA_G) * c.y + (CLFX_LUMA_B) * c.z;
 }
 
+/* any() / all() of an int4 mask (-1 / 0 lanes) as vector ORs / ANDs and one test: PoCL's
+ * builtins test the lanes one by one, a branch each. */
+inline int clfx_any4(int4 m)
+{
+  m |= m.s2301;
+  return (m.s0 | m.s1) < 0;
+}
+
+inline int clfx_all4(int4 m)
+{
+  m &= m.s2301;
+  return (m.s0 & m.s1) < 0;
+}
+
 inline int clfx_clampi(int v, int lo, int hi)
 {
   return min(max(v, lo), hi);

@@ -6,10 +6,11 @@
  *                            the maximum speed VMAX, depth sanitised (invalid -> BIG_DEPTH);
  *                            writes aux = (vx, vy, z, |v|) per pixel
  *   motion_dilate            per 4 pixels, with a depth pass: an antialiased rim pixel of a
- *                            small bright surface in front (a light) takes its motion
+ *                            small bright surface in front (a light) takes its motion (quads
+ *                            with nothing in front around them are copied)
  *   motion_sanitize          per 4 pixels: non-finite colour components -> 0 (only when the
  *                            analysis counted some)
- *   motion_tilemax           per K x K tile: the velocity of largest magnitude
+ *   motion_tilemax           per K x K tile: the velocity of largest magnitude, the depth range
  *   motion_neighbormax       per tile: the largest over the 3 x 3 neighbouring tiles
  *   motion_gather            per 4 pixels of the *moving* tiles only (compact tile lists built
  *                            on the host): N samples along the neighbourhood's dominant
@@ -52,6 +53,10 @@
 #ifndef CURVED
 #define CURVED 0            /* 1: a backward motion pass too (aux_b): paths are quadratics */
 #endif
+
+/* the gather's pieces, inlined: the first pass of motion_gather runs them with scale 1, which
+ * then folds away (x * 1 is x exactly) */
+#define MB_INLINE inline __attribute__((always_inline))
 
 #define BIG_DEPTH 1e30f     /* sanitised "no surface / invalid depth": behind everything */
 #define SOFT_Z 0.02f        /* relative depth difference over which "in front" fades in */
@@ -112,20 +117,48 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
 #if CURVED
   float16 ownb = vload16(0, auxb + 4 * i);   /* the backward records follow the same choices */
 #endif
-  /* the 3 x 6 records around the quad (columns x-1 .. x+4, clamped; outside = no candidate) */
+  const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
+  float4 bz = az * (1.0f - SOFT_Z);
+  /* the common case: no record of the 3 x 6 around the quad (columns x-1 .. x+4, rows and
+   * the outer columns clamped, the quad's own columns read up to the pitch, which
+   * motion_prepare fills) lies in front of any of the 4 pixels (each neighbour's test below
+   * needs qz < bz): the records stay as they are */
+  {
+    const int up = clfx_clampi(y - 1, 0, height - 1) * pitch, row = y * pitch;
+    const int down = clfx_clampi(y + 1, 0, height - 1) * pitch;
+    const int xl = clfx_clampi(x - 1, 0, width - 1), xr = clfx_clampi(x + 4, 0, width - 1);
+    const float4 zq = fmin(fmin(vload16(0, aux + 4 * (up + x)).s26ae,
+                                vload16(0, aux + 4 * (down + x)).s26ae), az);
+    const float4 ze = fmin((float4)(aux[4 * (up + xl) + 2], aux[4 * (row + xl) + 2],
+                                    aux[4 * (down + xl) + 2], aux[4 * (up + xr) + 2]),
+                           (float4)(aux[4 * (row + xr) + 2], aux[4 * (down + xr) + 2],
+                                    INFINITY, INFINITY));
+    const float4 zlo = fmin(zq, ze);
+    const float2 zlo2 = fmin(zlo.xy, zlo.zw), bz2 = fmax(bz.xy, bz.zw);
+    if(fmin(zlo2.x, zlo2.y) >= fmax(bz2.x, bz2.y))
+    {
+      vstore16(own, 0, out + 4 * i);
+#if CURVED
+      vstore16(ownb, 0, outb + 4 * i);
+#endif
+      return;
+    }
+  }
   float vx[3][6], vy[3][6], z[3][6];
   for(int r = 0; r < 3; r++)
   {
-    const int yy = clfx_clampi(y + r - 1, 0, height - 1);
-    for(int c = 0; c < 6; c++)
-    {
-      const float4 q = vload4(yy * pitch + clfx_clampi(x + c - 1, 0, width - 1), aux);
-      vx[r][c] = q.x; vy[r][c] = q.y; z[r][c] = q.z;
-    }
+    const int row = clfx_clampi(y + r - 1, 0, height - 1) * pitch;
+    const float4 ql = vload4(row + clfx_clampi(x - 1, 0, width - 1), aux);
+    const float16 qm = vload16(0, aux + 4 * (row + x));
+    const float4 qr = vload4(row + clfx_clampi(x + 4, 0, width - 1), aux);
+    vx[r][0] = ql.x; vy[r][0] = ql.y; z[r][0] = ql.z;
+    vx[r][1] = qm.s0; vy[r][1] = qm.s1; z[r][1] = qm.s2;
+    vx[r][2] = qm.s4; vy[r][2] = qm.s5; z[r][2] = qm.s6;
+    vx[r][3] = qm.s8; vy[r][3] = qm.s9; z[r][3] = qm.sa;
+    vx[r][4] = qm.sc; vy[r][4] = qm.sd; z[r][4] = qm.se;
+    vx[r][5] = qr.x; vy[r][5] = qr.y; z[r][5] = qr.z;
   }
-  const float4 ax = own.s048c, ay = own.s159d, az = own.s26ae;
   const float4 lanex = (float4)(x) + (float4)(0.0f, 1.0f, 2.0f, 3.0f);
-  float4 bz = az * (1.0f - SOFT_Z);
   int4 bdx = (int4)(0), bdy = (int4)(0);
   for(int dy = -1; dy <= 1; dy++)
     for(int dx = -1; dx <= 1; dx++)
@@ -144,7 +177,7 @@ kernel void motion_dilate(global const float *aux, global const float *col, glob
       bdx = select(bdx, (int4)(dx), take);
       bdy = select(bdy, (int4)(dy), take);
     }
-  if(any((bdx | bdy) != 0))   /* rare: a nearer moving neighbour; test the colours */
+  if(clfx_any4((bdx | bdy) != 0))   /* rare: a nearer moving neighbour; test the colours */
   {
     float a16[16];
     vstore16(own, 0, a16);
@@ -198,26 +231,58 @@ kernel void motion_sanitize(global const float *src, global float *dst, const in
  * whatever part of it `aux` holds: canvas rows from row0 on, CLFX_CANVAS_ROWS); this launch
  * computes the tile rows from ty0 on, whose pixel rows the buffer holds.  A record: (vx, vy,
  * |v|, 0) of the tile's fastest pixel (the first in scan order among equals), and in `tiles_b` its
- * backward motion (bx, by) from `auxb` (CURVED; else unused). */
+ * backward motion (bx, by) from `auxb` (CURVED; else unused); in `zrange` the (smallest,
+ * largest) depth of the tile's pixels (the host's front-free test, motion_gather). */
 kernel void motion_tilemax(global const float *aux, global const float *auxb,
-                           global float *tiles, global float *tiles_b, const int pitch,
-                           const int width, const int height, const int row0,
-                           const int tiles_x, const int tiles_y, const int ty0, const int k)
+                           global float *tiles, global float *tiles_b, global float *zrange,
+                           const int pitch, const int width, const int height,
+                           const int row0, const int tiles_x, const int tiles_y,
+                           const int ty0, const int k)
 {
   const int tx = get_global_id(0), ty = ty0 + get_global_id(1);
   if(tx >= tiles_x || ty >= tiles_y) return;
   CLFX_CANVAS_ROWS(aux, pitch, 4, row0);
   const int x0 = tx * k, y0 = ty * k;
   const int x1 = min(x0 + k, width), y1 = min(y0 + k, height);
-  float4 best = (float4)(0.0f);
-  int at = -1;
+  /* the fastest pixel: the largest |v| (over 0), the first in scan order among equals, i.e.
+   * the smallest index; 4 columns at a time (lane l: the columns x0 + l mod 4, each lane's
+   * first maximum), the columns past the last whole 4 (the image's right edge) one by one */
+  const int xq = x0 + ((x1 - x0) & ~3);
+  float4 lw = (float4)(0.0f), zlo4 = (float4)(INFINITY), zhi4 = (float4)(-INFINITY);
+  int4 lat = (int4)(-1);
+  float tw = 0.0f;
+  int tat = -1;
   for(int y = y0; y < y1; y++)
-    for(int x = x0; x < x1; x++)
+  {
+    for(int x = x0; x < xq; x += 4)
+    {
+      const float16 a = vload16(0, aux + 4 * ((size_t)y * pitch + x));
+      const int4 take = a.s37bf > lw;
+      lw = select(lw, a.s37bf, take);
+      lat = select(lat, (int4)(y * pitch + x) + (int4)(0, 1, 2, 3), take);
+      zlo4 = fmin(zlo4, a.s26ae);
+      zhi4 = fmax(zhi4, a.s26ae);
+    }
+    for(int x = xq; x < x1; x++)
     {
       const float4 a = vload4((size_t)y * pitch + x, aux);
-      if(a.w > best.z) { best = (float4)(a.x, a.y, a.w, 0.0f); at = y * pitch + x; }
+      if(a.w > tw) { tw = a.w; tat = y * pitch + x; }
+      zlo4.x = fmin(zlo4.x, a.z);
+      zhi4.x = fmax(zhi4.x, a.z);
     }
-  vstore4(best, ty * tiles_x + tx, tiles);
+  }
+  float bw = tw;
+  int at = tat;
+  for(int l = 0; l < 4; l++)
+  {
+    const float w = l == 0 ? lw.x : l == 1 ? lw.y : l == 2 ? lw.z : lw.w;
+    const int i = l == 0 ? lat.x : l == 1 ? lat.y : l == 2 ? lat.z : lat.w;
+    if(w > bw || (w == bw && i >= 0 && i < at)) { bw = w; at = i; }
+  }
+  const float4 a = at >= 0 ? vload4((size_t)at, aux) : (float4)(0.0f);
+  vstore4((float4)(a.x, a.y, a.w, 0.0f), ty * tiles_x + tx, tiles);
+  vstore2((float2)(fmin(fmin(zlo4.x, zlo4.y), fmin(zlo4.z, zlo4.w)),
+                   fmax(fmax(zhi4.x, zhi4.y), fmax(zhi4.z, zhi4.w))), ty * tiles_x + tx, zrange);
 #if CURVED
   CLFX_CANVAS_ROWS(auxb, pitch, 4, row0);
   vstore2(at >= 0 ? vload2(0, auxb + 4 * (size_t)at) : (float2)(0.0f), ty * tiles_x + tx,
@@ -406,46 +471,12 @@ inline float4 mb_stepness(const float16 pm2, const float16 pm1, const float16 p0
          * clamp(1.0f - fmax(ramp, 0.0f) / (STEP_RAMP * scale), 0.0f, 1.0f);
 }
 
-/* Colour at continuous position (px, py), clamp-to-edge, times `scale`: Catmull-Rom (4 x 4
- * taps) clamped per channel to the 2 x 2 pixels around the position.  Short blurs integrate
- * the image over under a pixel or a few: bilinear reconstruction blurs every sample by up
- * to a quarter pixel more (as much again as a one-pixel smear), the cubic keeps the detail;
- * the clamp stops its negative lobes ringing around HDR lights. */
-inline float4 mb_fetch_cubic(global const float *col, const int pitch, const int w,
-                             const int row0, const int row1, const float px, const float py,
-                             const float scale,
-                             const float beta)
-{
-  const float u = px - 0.5f, v = py - 0.5f;
-  const float fu = floor(u), fv = floor(v);
-  const float4 wx = mb_cubic_weights(u - fu, beta), wy = mb_cubic_weights(v - fv, beta);
-  const int iu = (int)clamp(fu, -2.0f, (float)w);
-  const int iv = (int)clamp(fv, (float)(row0 - 2), (float)row1);
-  const int x0 = clfx_clampi(iu - 1, 0, w - 1), x1 = clfx_clampi(iu, 0, w - 1);
-  const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
-  float4 acc = (float4)(0.0f), lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
-  for(int j = 0; j < 4; j++)
-  {
-    const int row = clfx_clampi(iv - 1 + j, row0, row1 - 1) * pitch;
-    const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
-    const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
-    if(j == 1 || j == 2)
-    {
-      lo = fmin(lo, fmin(c1, c2));
-      hi = fmax(hi, fmax(c1, c2));
-    }
-    const float wj = j == 0 ? wy.x : j == 1 ? wy.y : j == 2 ? wy.z : wy.w;
-    acc += wj * (wx.x * c0 + wx.y * c1 + wx.z * c2 + wx.w * c3);
-  }
-  return clamp(acc, lo, hi);
-}
-
-/* The same at the 4 positions (px + k, py), k = 0..3, of a quad whose lanes share one
+/* mb_fetch4_cubic at the 4 positions (px + k, py), k = 0..3, of a quad whose lanes share one
  * offset: the 4 x 7 pixels the lanes' taps cover are loaded once (28 loads, not 64) and the
  * weights computed once. */
-inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
-                                   const int row0, const int row1, const float px,
-                                   const float py, const float scale, const float beta)
+MB_INLINE float16 mb_fetch_quad_cubic(global const float *col, const int pitch, const int w,
+                                      const int row0, const int row1, const float px,
+                                      const float py, const float scale, const float beta)
 {
   const float u = px - 0.5f, v = py - 0.5f;
   const float fu = floor(u), fv = floor(v);
@@ -456,33 +487,44 @@ inline float16 mb_fetch_quad_cubic(global const float *col, const int pitch, con
   const int x2 = clfx_clampi(iu + 1, 0, w - 1), x3 = clfx_clampi(iu + 2, 0, w - 1);
   const int x4 = clfx_clampi(iu + 3, 0, w - 1), x5 = clfx_clampi(iu + 4, 0, w - 1);
   const int x6 = clfx_clampi(iu + 5, 0, w - 1);
+  const int run = x0 == iu - 1 && x6 == iu + 5;   /* the 7 columns side by side */
   float16 acc = (float16)(0.0f), lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
   for(int j = 0; j < 4; j++)
   {
     const int row = clfx_clampi(iv - 1 + j, row0, row1 - 1) * pitch;
-    const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
-    const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
-    const float4 c4 = vload4(row + x4, col) * scale, c5 = vload4(row + x5, col) * scale;
-    const float4 c6 = vload4(row + x6, col) * scale;
+    /* r_k: the taps k of the 4 lanes, (c_k, c_k+1, c_k+2, c_k+3) */
+    float16 r0, r1, r2, r3;
+    if(run)
+    {
+      global const float *p = col + 4 * (row + x0);
+      r0 = vload16(0, p) * scale; r1 = vload16(0, p + 4) * scale;
+      r2 = vload16(0, p + 8) * scale; r3 = vload16(0, p + 12) * scale;
+    }
+    else
+    {
+      const float4 c0 = vload4(row + x0, col) * scale, c1 = vload4(row + x1, col) * scale;
+      const float4 c2 = vload4(row + x2, col) * scale, c3 = vload4(row + x3, col) * scale;
+      const float4 c4 = vload4(row + x4, col) * scale, c5 = vload4(row + x5, col) * scale;
+      const float4 c6 = vload4(row + x6, col) * scale;
+      r0 = (float16)(c0, c1, c2, c3); r1 = (float16)(c1, c2, c3, c4);
+      r2 = (float16)(c2, c3, c4, c5); r3 = (float16)(c3, c4, c5, c6);
+    }
     if(j == 1 || j == 2)
     {
-      lo = fmin(lo, (float16)(fmin(c1, c2), fmin(c2, c3), fmin(c3, c4), fmin(c4, c5)));
-      hi = fmax(hi, (float16)(fmax(c1, c2), fmax(c2, c3), fmax(c3, c4), fmax(c4, c5)));
+      lo = fmin(lo, fmin(r1, r2));
+      hi = fmax(hi, fmax(r1, r2));
     }
     const float wj = j == 0 ? wy.x : j == 1 ? wy.y : j == 2 ? wy.z : wy.w;
-    acc += wj * (float16)(wx.x * c0 + wx.y * c1 + wx.z * c2 + wx.w * c3,
-                          wx.x * c1 + wx.y * c2 + wx.z * c3 + wx.w * c4,
-                          wx.x * c2 + wx.y * c3 + wx.z * c4 + wx.w * c5,
-                          wx.x * c3 + wx.y * c4 + wx.z * c5 + wx.w * c6);
+    acc += wj * (wx.x * r0 + wx.y * r1 + wx.z * r2 + wx.w * r3);
   }
   return clamp(acc, lo, hi);
 }
 
 /* Bilinear (BILINEAR) or nearest at the 4 positions (px + k, py) of a quad sharing one
  * offset: 2 x 5 loads (4 for nearest), as mg_fetch_scaled per lane. */
-inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
-                                    const int row0, const int row1, const float px,
-                                    const float py, const float scale, const float beta)
+MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch, const int w,
+                                       const int row0, const int row1, const float px,
+                                       const float py, const float scale, const float beta)
 {
 #if BILINEAR
   const float u = px - 0.5f, v = py - 0.5f;
@@ -495,14 +537,25 @@ inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, co
   const int x0 = clfx_clampi(iu, 0, w - 1), x1 = clfx_clampi(iu + 1, 0, w - 1);
   const int x2 = clfx_clampi(iu + 2, 0, w - 1), x3 = clfx_clampi(iu + 3, 0, w - 1);
   const int x4 = clfx_clampi(iu + 4, 0, w - 1);
-  const float4 t0 = vload4(ya + x0, col) * scale, t1 = vload4(ya + x1, col) * scale;
-  const float4 t2 = vload4(ya + x2, col) * scale, t3 = vload4(ya + x3, col) * scale;
-  const float4 t4 = vload4(ya + x4, col) * scale;
-  const float4 b0 = vload4(yb + x0, col) * scale, b1 = vload4(yb + x1, col) * scale;
-  const float4 b2 = vload4(yb + x2, col) * scale, b3 = vload4(yb + x3, col) * scale;
-  const float4 b4 = vload4(yb + x4, col) * scale;
-  const float16 top = (float16)(t0, t1, t2, t3), top1 = (float16)(t1, t2, t3, t4);
-  const float16 bot = (float16)(b0, b1, b2, b3), bot1 = (float16)(b1, b2, b3, b4);
+  float16 top, top1, bot, bot1;
+  if(x0 == iu && x4 == iu + 4)   /* the 5 columns side by side: runs of the two rows */
+  {
+    top = vload16(0, col + 4 * (ya + x0)) * scale;
+    top1 = vload16(0, col + 4 * (ya + x1)) * scale;
+    bot = vload16(0, col + 4 * (yb + x0)) * scale;
+    bot1 = vload16(0, col + 4 * (yb + x1)) * scale;
+  }
+  else
+  {
+    const float4 t0 = vload4(ya + x0, col) * scale, t1 = vload4(ya + x1, col) * scale;
+    const float4 t2 = vload4(ya + x2, col) * scale, t3 = vload4(ya + x3, col) * scale;
+    const float4 t4 = vload4(ya + x4, col) * scale;
+    const float4 b0 = vload4(yb + x0, col) * scale, b1 = vload4(yb + x1, col) * scale;
+    const float4 b2 = vload4(yb + x2, col) * scale, b3 = vload4(yb + x3, col) * scale;
+    const float4 b4 = vload4(yb + x4, col) * scale;
+    top = (float16)(t0, t1, t2, t3); top1 = (float16)(t1, t2, t3, t4);
+    bot = (float16)(b0, b1, b2, b3); bot1 = (float16)(b1, b2, b3, b4);
+  }
   const float16 tt = top + (top1 - top) * ax, bb = bot + (bot1 - bot) * ax;
   return tt + (bb - tt) * ay;
 #else
@@ -515,24 +568,93 @@ inline float16 mb_fetch_quad_linear(global const float *col, const int pitch, co
 #endif
 }
 
-/* mg_fetch_scaled with the (unused) blend of the cubic fetch's signature */
-inline float4 mb_fetch_linear(global const float *col, const int pitch, const int w,
-                              const int row0, const int row1, const float px, const float py,
-                              const float scale,
-                              const float beta)
+/* The pixels at flat indices i of the 4 lanes, times `scale`, lane-major */
+#define MB_GATHER4(buf, i, scale) \
+  ((float16)(vload4((i).x, buf), vload4((i).y, buf), vload4((i).z, buf), vload4((i).w, buf)) \
+   * (scale))
+
+/* mg_fetch_scaled at the 4 lanes' own positions (px, py) at once: per element the same
+ * operations, the lanes' arithmetic in one float16 */
+MB_INLINE float16 mb_fetch4_linear(global const float *col, const int pitch, const int w,
+                                   const int row0, const int row1, const float4 px, const float4 py,
+                                   const float scale)
 {
-  return mg_fetch_scaled(col, pitch, w, row0, row1, px, py, scale);
+#if BILINEAR
+  const float4 u = px - 0.5f, v = py - 0.5f;
+  const float4 fu = floor(u), fv = floor(v);
+  const float4 ax = u - fu, ay = v - fv;
+  const int4 iu = convert_int4(clamp(fu, -1.0f, (float)w));
+  const int4 iv = convert_int4(clamp(fv, (float)(row0 - 1), (float)row1));
+  const int4 xa = clamp(iu, (int4)(0), (int4)(w - 1)), xb = clamp(iu + 1, (int4)(0), (int4)(w - 1));
+  const int4 ya = clamp(iv, (int4)(row0), (int4)(row1 - 1)) * pitch;
+  const int4 yb = clamp(iv + 1, (int4)(row0), (int4)(row1 - 1)) * pitch;
+  const float16 c00 = MB_GATHER4(col, ya + xa, scale), c10 = MB_GATHER4(col, ya + xb, scale);
+  const float16 c01 = MB_GATHER4(col, yb + xa, scale), c11 = MB_GATHER4(col, yb + xb, scale);
+  const float16 top = c00 + (c10 - c00) * SPLAT16(ax), bot = c01 + (c11 - c01) * SPLAT16(ax);
+  return top + (bot - top) * SPLAT16(ay);
+#else
+  const int4 x = convert_int4(clamp(floor(px), 0.0f, (float)(w - 1)));
+  const int4 y = convert_int4(clamp(floor(py), (float)row0, (float)(row1 - 1)));
+  return MB_GATHER4(col, y * pitch + x, scale);
+#endif
+}
+
+/* Colours at the 4 lanes' own continuous positions (px, py), clamp-to-edge, times `scale`:
+ * Catmull-Rom (4 x 4 taps, blended with the tent by `beta`, mb_cubic_weights) clamped per
+ * channel to the 2 x 2 pixels around each position.  Short blurs integrate the image over
+ * under a pixel or a few: bilinear reconstruction blurs every sample by up to a quarter pixel
+ * more (as much again as a one-pixel smear), the cubic keeps the detail; the clamp stops its
+ * negative lobes ringing around HDR lights.  The lanes' arithmetic in one float16, as
+ * mb_fetch4_linear. */
+MB_INLINE float16 mb_fetch4_cubic(global const float *col, const int pitch, const int w,
+                                  const int row0, const int row1, const float4 px, const float4 py,
+                                  const float scale, const float4 beta)
+{
+  const float4 u = px - 0.5f, v = py - 0.5f;
+  const float4 fu = floor(u), fv = floor(v);
+  /* the taps' weights, tap k of the 4 lanes in wxk: mb_cubic_weights per lane, term for
+   * term (lin + (cr - lin) beta, lin's zeros included) */
+  const float4 a = u - fu, a2 = a * a, a3 = a2 * a;
+  const float4 b = v - fv, b2 = b * b, b3 = b2 * b;
+  const float4 wx0 = 0.0f + ((-0.5f * a3 + a2 - 0.5f * a) - 0.0f) * beta;
+  const float4 wx1 = (1.0f - a) + ((1.5f * a3 - 2.5f * a2 + 1.0f) - (1.0f - a)) * beta;
+  const float4 wx2 = a + ((-1.5f * a3 + 2.0f * a2 + 0.5f * a) - a) * beta;
+  const float4 wx3 = 0.0f + ((0.5f * a3 - 0.5f * a2) - 0.0f) * beta;
+  const float4 wy[4] = {0.0f + ((-0.5f * b3 + b2 - 0.5f * b) - 0.0f) * beta,
+                        (1.0f - b) + ((1.5f * b3 - 2.5f * b2 + 1.0f) - (1.0f - b)) * beta,
+                        b + ((-1.5f * b3 + 2.0f * b2 + 0.5f * b) - b) * beta,
+                        0.0f + ((0.5f * b3 - 0.5f * b2) - 0.0f) * beta};
+  const int4 iu = convert_int4(clamp(fu, -2.0f, (float)w));
+  const int4 iv = convert_int4(clamp(fv, (float)(row0 - 2), (float)row1));
+  const int4 lo_x = (int4)(0), hi_x = (int4)(w - 1);
+  const int4 x0 = clamp(iu - 1, lo_x, hi_x), x1 = clamp(iu, lo_x, hi_x);
+  const int4 x2 = clamp(iu + 1, lo_x, hi_x), x3 = clamp(iu + 2, lo_x, hi_x);
+  float16 acc = (float16)(0.0f), lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+  for(int j = 0; j < 4; j++)
+  {
+    const int4 row = clamp(iv - 1 + j, (int4)(row0), (int4)(row1 - 1)) * pitch;
+    const float16 c0 = MB_GATHER4(col, row + x0, scale), c1 = MB_GATHER4(col, row + x1, scale);
+    const float16 c2 = MB_GATHER4(col, row + x2, scale), c3 = MB_GATHER4(col, row + x3, scale);
+    if(j == 1 || j == 2)
+    {
+      lo = fmin(lo, fmin(c1, c2));
+      hi = fmax(hi, fmax(c1, c2));
+    }
+    acc += SPLAT16(wy[j]) * (SPLAT16(wx0) * c0 + SPLAT16(wx1) * c1 + SPLAT16(wx2) * c2
+                             + SPLAT16(wx3) * c3);
+  }
+  return clamp(acc, lo, hi);
 }
 
 /* The pixels (r, c) of the 4 lanes, clamped to the rows held and the image: one vload16 where
  * they lie side by side in memory (a run of one row: the common case), else one per lane. */
-inline float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
-                        const int row1, const int4 r, const int4 c)
+MB_INLINE float16 mb_lanes(global const float *buf, const int pitch, const int w, const int row0,
+                           const int row1, const int4 r, const int4 c)
 {
   /* vector bounds: Oclgrind misread clamp(int4, int, int) (reads off the buffer) */
   const int4 i = clamp(r, (int4)(row0), (int4)(row1 - 1)) * pitch
                  + clamp(c, (int4)(0), (int4)(w - 1));
-  if(all(i - i.x == (int4)(0, 1, 2, 3)))
+  if(clfx_all4(i - i.x == (int4)(0, 1, 2, 3)))
     return vload16(0, buf + 4 * i.x);
   return (float16)(vload4(i.x, buf), vload4(i.y, buf), vload4(i.z, buf), vload4(i.w, buf));
 }
@@ -540,18 +662,15 @@ inline float16 mb_lanes(global const float *buf, const int pitch, const int w, c
 /* Colours at the lanes' positions (x, y), mg_fetch_scaled's: where the lanes sit at one
  * offset (one row, one fraction, whole pixels apart) the quad fetch (2 x 5 loads), which
  * then gives each lane the same value. */
-inline float16 mb_fetch_lanes(global const float *col, const int pitch, const int w,
-                              const int row0, const int row1, const float4 x, const float4 y,
-                              const float scale)
+MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const int w,
+                                 const int row0, const int row1, const float4 x, const float4 y,
+                                 const float scale)
 {
   const float4 u = x - 0.5f, fu = floor(u);
-  if(all(y == y.x) && all(u - fu == u.x - fu.x)
-     && all(fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f)))
+  if(clfx_all4((y == y.x) & (u - fu == u.x - fu.x)
+                & (fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f))))
     return mb_fetch_quad_linear(col, pitch, w, row0, row1, x.x, y.x, scale, 0.0f);
-  return (float16)(mg_fetch_scaled(col, pitch, w, row0, row1, x.x, y.x, scale),
-                   mg_fetch_scaled(col, pitch, w, row0, row1, x.y, y.y, scale),
-                   mg_fetch_scaled(col, pitch, w, row0, row1, x.z, y.z, scale),
-                   mg_fetch_scaled(col, pitch, w, row0, row1, x.w, y.w, scale));
+  return mb_fetch4_linear(col, pitch, w, row0, row1, x, y, scale);
 }
 
 /* The step model along one pixel axis for the 4 lanes: the taps p-2, p-1, p1, p2 (times
@@ -559,13 +678,13 @@ inline float16 mb_fetch_lanes(global const float *col, const int pitch, const in
  * (what x's moving edge reveals enters as it is, not as a step continuing x's surface);
  * *st: its stepness.  Returns the change of p0 under a box of `len` px along the axis (0
  * where len is negligible). */
-inline float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 tp1,
-                            const float16 tp2, const float4 zm, const float4 zp,
-                            const float16 p0, const float4 z0, const float4 len, float4 *st)
+MB_INLINE float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 tp1,
+                               const float16 tp2, const float4 zm, const float4 zp,
+                               const float16 p0, const float4 z0, const float4 len, float4 *st)
 {
   *st = mb_stepness(tm2, tm1, p0, tp1, tp2);
   const int4 still = len < 1e-3f;
-  if(all(still))
+  if(clfx_all4(still))
     return (float16)(0.0f);
   const float4 bm = clamp((zm - z0) / (SOFT_Z * fmin(z0, zm)), 0.0f, 1.0f);
   const float4 bp = clamp((zp - z0) / (SOFT_Z * fmin(z0, zp)), 0.0f, 1.0f);
@@ -577,17 +696,17 @@ inline float16 mb_step_axis(const float16 tm2, const float16 tm1, const float16 
 /* The closed forms at the centres of the quad's pixels (lanes `lane`, row fy) along
  * (ux, uy), their colours p0 (times `scale`), depths z0, smear lengths len: the four taps
  * read bilinearly, times `scale`; *q: how much of the neighbourhood is x's own layer or
- * behind it (a tap in front of x pulls it to 0).  Returns mb_short_smear.  *step: the step
- * model's smear, taken along the pixel axes (the smear's parts len |ux| and len |uy|, their
- * changes added: exact for edges along the pixel grid, whatever the motion's direction,
- * where taps read along u between pixels would mix the patches), *st: its weight (the
- * stepness of the axes that carry a fair part of it).  The axes' taps sit at whole pixels
- * whatever the direction: runs of the rows y-2 .. y+2. */
-inline float16 mb_short_quad(global const float *col, global const float *aux, const int pitch,
-                             const int w, const int row0, const int row1, const float4 lane,
-                             const float fy, const float4 ux, const float4 uy,
-                             const float16 p0, const float4 z0, const float4 len,
-                             const float scale, float4 *q, float16 *step, float4 *st)
+ * behind it (a tap in front of x pulls it to 0; `clear`: the tile is front-free, 1).
+ * Returns mb_short_smear.  *step: the step model's smear, taken along the pixel axes (the
+ * smear's parts len |ux| and len |uy|, their changes added: exact for edges along the pixel
+ * grid, whatever the motion's direction, where taps read along u between pixels would mix
+ * the patches), *st: its weight (the stepness of the axes that carry a fair part of it).
+ * The axes' taps sit at whole pixels whatever the direction: runs of the rows y-2 .. y+2. */
+MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux, const int pitch,
+                                const int w, const int row0, const int row1, const float4 lane,
+                                const float fy, const float4 ux, const float4 uy, const float16 p0,
+                                const float4 z0, const float4 len, const float scale,
+                                const int clear, float4 *q, float16 *step, float4 *st)
 {
   const float4 px = lane + 0.5f;
   const float py = fy + 0.5f;
@@ -598,6 +717,8 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
     const float o = k < 2 ? (float)(k - 2) : (float)(k - 1);     /* -2, -1, 1, 2 */
     const float4 x = px + o * ux, y = py + o * uy;
     tap[k] = mb_fetch_lanes(col, pitch, w, row0, row1, x, y, scale);
+    if(clear)
+      continue;   /* no tap in front of x: each factor is 1 */
     const int4 ix = convert_int4(clamp(floor(x), -1.0f, (float)w));
     const int4 iy = convert_int4(clamp(floor(y), (float)(row0 - 1), (float)row1));
     const float4 z = mb_lanes(aux, pitch, w, row0, row1, iy, ix).s26ae;
@@ -610,15 +731,18 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
                                      row0, row1 - 1));
   const float4 lx = len * fabs(ux), ly = len * fabs(uy);
 #define MB_LANES(b, dy, dx) mb_lanes(b, pitch, w, row0, row1, iy + (dy), ix + (dx))
-  float4 sx, sy;
   const float16 xm1 = MB_LANES(col, 0, -1) * scale, xp1 = MB_LANES(col, 0, 1) * scale;
   const float16 ym1 = MB_LANES(col, -1, 0) * scale, yp1 = MB_LANES(col, 1, 0) * scale;
-  const float16 ex = mb_step_axis(MB_LANES(col, 0, -2) * scale, xm1, xp1,
-                                  MB_LANES(col, 0, 2) * scale, MB_LANES(aux, 0, -1).s26ae,
-                                  MB_LANES(aux, 0, 1).s26ae, p0, z0, lx, &sx);
-  const float16 ey = mb_step_axis(MB_LANES(col, -2, 0) * scale, ym1, yp1,
-                                  MB_LANES(col, 2, 0) * scale, MB_LANES(aux, -1, 0).s26ae,
-                                  MB_LANES(aux, 1, 0).s26ae, p0, z0, ly, &sy);
+  /* an axis no lane's smear crosses (a motion along the other axis) changes nothing and
+   * weighs nothing in *st below (its g is 0): neither its step nor its stepness is taken */
+  float4 sx = (float4)(0.0f), sy = (float4)(0.0f);
+  float16 ex = (float16)(0.0f), ey = (float16)(0.0f);
+  if(!clfx_all4(lx == 0.0f))
+    ex = mb_step_axis(MB_LANES(col, 0, -2) * scale, xm1, xp1, MB_LANES(col, 0, 2) * scale,
+                      MB_LANES(aux, 0, -1).s26ae, MB_LANES(aux, 0, 1).s26ae, p0, z0, lx, &sx);
+  if(!clfx_all4(ly == 0.0f))
+    ey = mb_step_axis(MB_LANES(col, -2, 0) * scale, ym1, yp1, MB_LANES(col, 2, 0) * scale,
+                      MB_LANES(aux, -1, 0).s26ae, MB_LANES(aux, 1, 0).s26ae, p0, z0, ly, &sy);
   /* the cross term of a diagonal smear (the pixel's box moved along the line overlaps the
    * diagonal neighbour ahead, and the one behind, by lx ly / 24 on average): without it a
    * corner of a checker took the colour across both edges twice */
@@ -638,10 +762,11 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
 }
 
 #if CUBIC
-#define MB_FETCH mb_fetch_cubic
+#define MB_FETCH_LANES mb_fetch4_cubic
 #define MB_FETCH_QUAD mb_fetch_quad_cubic
 #else
-#define MB_FETCH mb_fetch_linear
+#define MB_FETCH_LANES(col, pitch, w, row0, row1, px, py, scale, beta) \
+  mb_fetch4_linear(col, pitch, w, row0, row1, px, py, scale)
 #define MB_FETCH_QUAD mb_fetch_quad_linear
 #endif
 
@@ -650,10 +775,7 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
  * (px.x + k, py.x). */
 #define MB_FETCH4(px, py, same, beta) \
   ((same) ? MB_FETCH_QUAD(col, pitch, width, row0, row1, (px).x, (py).x, scale, (beta).x) : \
-   (float16)(MB_FETCH(col, pitch, width, row0, row1, (px).x, (py).x, scale, (beta).x), \
-             MB_FETCH(col, pitch, width, row0, row1, (px).y, (py).y, scale, (beta).y), \
-             MB_FETCH(col, pitch, width, row0, row1, (px).z, (py).z, scale, (beta).z), \
-             MB_FETCH(col, pitch, width, row0, row1, (px).w, (py).w, scale, (beta).w)))
+   MB_FETCH_LANES(col, pitch, width, row0, row1, px, py, scale, beta))
 
 /* The gather of the 4 pixels of one work-item (lanes `lane`, row fy; centre colours cc, own
  * velocities (vxx, vxy), depths zx), every colour sample times `scale` (the result too).
@@ -668,23 +790,23 @@ inline float16 mb_short_quad(global const float *col, global const float *aux, c
  *    smear y + v_y [t0, t1] passes over x; weight = source length per sample / smear length
  *    (scatter as gather), so their summed weight is the fraction of the shutter they cover x.
  * out = occluders (normalised if they overlap) + (1 - their coverage) x own-velocity layer. */
-inline REAL16 motion_gather_quad(global const float *col, global const float *aux,
-                                 global const float *auxb, const float2 bn,
-                                 const float4 bxx, const float4 bxy,
-                                 const int pitch, const int width, const int row0,
-                                 const int row1, const float4 vn, const float4 lane, const float fy,
-                                 const float16 cc, const float4 vxx, const float4 vxy,
-                                 const float4 zx, const int any_moving, const float t0,
-                                 const float t1, const float dt, const int n, const float ell,
-                                 const float hell, const float4 jit, const float scale)
+MB_INLINE REAL16 motion_gather_quad(global const float *col, global const float *aux,
+                                    global const float *auxb, const float2 bn, const float4 bxx,
+                                    const float4 bxy, const int pitch, const int width,
+                                    const int row0, const int row1, const float4 vn,
+                                    const float4 lane, const float fy, const float16 cc,
+                                    const float4 vxx, const float4 vxy, const float4 zx,
+                                    const int any_moving, const int clear, const float t0,
+                                    const float t1, const float dt, const int n, const float ell,
+                                    const float hell, const float4 jit, const float scale)
 {
   REAL16 F = (REAL16)(0), S = (REAL16)(0);
   REAL4 aF = (REAL4)(0), aS = (REAL4)(0);
   /* lanes whose samples sit at one offset (no jitter; for the own set, one velocity) read
    * their colours together */
-  const int same_t = all(jit == jit.x);
-  const int same_v = same_t && all(vxx == vxx.x) && all(vxy == vxy.x)
-                     && all(bxx == bxx.x) && all(bxy == bxy.x);
+  const int same_t = clfx_all4(jit == jit.x);
+  const int same_v = same_t && clfx_all4((vxx == vxx.x) & (vxy == vxy.x) & (bxx == bxx.x)
+                                         & (bxy == bxy.x));
   const float4 beta_n = (float4)(mb_beta(vn.z * (t1 - t0)));         /* along v_n */
 #if CURVED
   const float4 wn = mb_turn((float4)(vn.x), (float4)(vn.y), (float4)(bn.x), (float4)(bn.y));
@@ -699,7 +821,8 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     const float4 t = t0 + ((float)i + jit) * dt;
     float4 vyx, vyy, zy, sy;
 
-    /* occluders, along v_n */
+    /* occluders, along v_n (none in a front-free tile) */
+    if(!clear)
     {
 #if CURVED
       /* an occluder moves along the path of the tile's fastest pixel: the one over x at
@@ -714,7 +837,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
       const float4 rel = (zx - zy) / (SOFT_Z * fmin(zx, zy));
       const float4 f = clamp(rel, 0.0f, 1.0f);
-      if(any(f > 0.0f))   /* else every weight is 0: nothing here lies in front of x */
+      if(clfx_any4(f > 0.0f))   /* else every weight is 0: nothing here lies in front of x */
       {
         const float4 len = (t1 - t0) * sy;                     /* y's smear length */
 #if CURVED
@@ -742,7 +865,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
                          * clamp(1.5f - perp, 0.0f, 1.0f)
                          * clamp(len / MIN_BLUR - 1.0f, 0.0f, 1.0f);  /* statics never occlude */
         const float4 wf = f * rho * (ell / fmax(len, hell));
-        if(any(wf > 0.0f))
+        if(clfx_any4(wf > 0.0f))
         {
           const float16 c = SPLAT16(wf) * MB_FETCH4(px, py, same_t, beta_n);  /* rounded, summed */
           aF += TO_REAL4(wf);
@@ -762,6 +885,12 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
 #else
       const float4 px = lane + 0.5f - vxx * t, py = fy + 0.5f - vxy * t;
 #endif
+      if(clear)   /* no sample in front of x: every weight is 1 */
+      {
+        aS += TO_REAL4((float4)(1.0f));
+        S += TO_REAL16(MB_FETCH4(px, py, same_v, beta_x));
+        continue;
+      }
       const int4 ix = clamp(convert_int4(floor(px)), (int4)(0), (int4)(width - 1));
       const int4 iy = clamp(convert_int4(floor(py)), (int4)(row0), (int4)(row1 - 1));
       MB_LOAD_AUX(ix, iy, vyx, vyy, zy, sy);
@@ -798,7 +927,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
   const float4 wln = select((float4)(0.0f),
                             clamp((STEP_MAX_PX - slen) / (STEP_MAX_PX - 1.0f), 0.0f, 1.0f),
                             short_);
-  if(any(wln > 0.0f))
+  if(clfx_any4(wln > 0.0f))
   {
     /* the quad at once; a lane without the closed forms gets a harmless direction and no
      * change */
@@ -809,7 +938,7 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
     float16 step;
     const float16 c = mb_short_quad(col, aux, pitch, width, row0, row1, lane, fy, ux, uy,
                                     cc * scale, zx, select((float4)(0.0f), slen, on), scale,
-                                    &q, &step, &st);
+                                    clear, &q, &step, &st);
     const float16 o = TO_FLOAT16(own);
     const float16 base = o + (c - o) * SPLAT16(wsh * q);
     const float16 d = base - o + (step - base) * SPLAT16(st * wln * q);
@@ -820,8 +949,12 @@ inline REAL16 motion_gather_quad(global const float *col, global const float *au
          + own * (REAL16)(keep.xxxx, keep.yyyy, keep.zzzz, keep.wwww);
 }
 
-/* tiles: (tx, ty, samples, jitter) per moving tile (jitter 0: the midpoint rule, exact for the
- * few, dense samples of a short blur; 1: per-pixel jitter where samples are sparse);
+/* tiles: (tx, ty, samples, flags) per moving tile; flags bit 0, jitter (0: the midpoint rule,
+ * exact for the few, dense samples of a short blur; 1: per-pixel jitter where samples are
+ * sparse); bit 1, front-free: no pixel the tile's samples and closed-form taps can reach lies
+ * in front of any of its pixels (the host's test on the tiles' depth ranges, motion_tilemax),
+ * so every soft depth test would give 0 (the occluders' weights, the own set's and the
+ * taps' rejections): the occluder set is skipped and the own set taken without them;
  * k: tile size (multiple of 4); qpt = k * k / 4.  The buffers hold the canvas rows
  * row0 <= y < row1 (CLFX_CANVAS_ROWS: a band of a tiled render and its margin; 0 and the
  * canvas's height in a whole render); the rows band0 <= y < band1 are written.  nmax_b: the
@@ -843,7 +976,7 @@ kernel void motion_gather(global const float *col, global const float *aux,
   if(tile >= ntiles) return;
   const int r = gid - tile * qpt, qrow = k / 4;
   const int tx = tiles[4 * tile], ty = tiles[4 * tile + 1], n = tiles[4 * tile + 2];
-  const int jittered = tiles[4 * tile + 3];
+  const int flags = tiles[4 * tile + 3], jittered = flags & 1, clear = flags & 2;
   const int x = tx * k + (r % qrow) * 4, y = ty * k + r / qrow;
   if(y < band0 || y >= band1 || x >= pitch) return;
   CLFX_CANVAS_ROWS(col, pitch, 4, row0);
@@ -873,20 +1006,20 @@ kernel void motion_gather(global const float *col, global const float *aux,
   const float ell = vn.z * dt;                 /* source length per occluder sample, px */
   const float hell = fmax(ell, 1e-3f);
   const float4 jit = jittered ? mg_jitter(lane, fy, frame) : (float4)(0.5f);
-  const int any_moving = any(sx * (t1 - t0) >= MIN_BLUR);
+  const int any_moving = clfx_any4(sx * (t1 - t0) >= MIN_BLUR);
 
-  float scale = 1.0f;
-  float16 out;
-  for(int pass = 0; pass < 2; pass++)   /* the second pass only after an overflow */
+  float16 out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0,
+                                              row1, vn, lane, fy, cc, vxx, vxy, zx, any_moving,
+                                              clear, t0, t1, dt, n, ell, hell, jit, 1.0f));
+  const int16 inf = (as_int16(out) & 0x7f800000) == 0x7f800000;
+  const int8 inf8 = inf.lo | inf.hi;
+  if(clfx_any4(inf8.lo | inf8.hi))   /* overflowed: the second pass */
   {
+    const float scale = 0.5f / (float)n;
     out = TO_FLOAT16(motion_gather_quad(col, aux, auxb, bn, bxx, bxy, pitch, width, row0, row1,
-                                        vn, lane, fy, cc, vxx,
-                                        vxy, zx, any_moving, t0, t1, dt, n, ell, hell, jit,
-                                        scale));
-    if(!any((as_int16(out) & 0x7f800000) == 0x7f800000)) break;
-    scale = 0.5f / (float)n;
-  }
-  if(scale != 1.0f)
+                                        vn, lane, fy, cc, vxx, vxy, zx, any_moving, clear, t0,
+                                        t1, dt, n, ell, hell, jit, scale));
     out = clamp(out / scale, -FLT_MAX, FLT_MAX);
+  }
   vstore16(out, 0, dst + base * 4);
 }

@@ -582,3 +582,146 @@ def test_slow_fine_checker_beats_the_naive_line_blur_at_every_level(rt):
     errs = [got[q]["rel_rmse"] for q in QUALITIES]
     assert all(b <= a * (1 + 1e-4) for a, b in zip(errs, errs[1:])), errs
     assert errs[2] <= 1.05 * errs[3], errs
+
+
+# -- issue 37: the gather's CPU ------------------------------------------------------------------
+def _layered_scene(rng, h=64, w=90):
+    """A sub-pixel pan of a far textured wall (0.9 px/frame), a near card moving fast across
+    it, a static sky at infinity down the right side, and a mid-depth patch creeping."""
+    src = (smooth_texture(rng, h, w) * 2.0).astype(np.float32)
+    vel = uniform((h, w), (0.9, 0.0))
+    depth = np.full((h, w), 20.0, np.float32)
+    depth[18:34, 20:44], vel[18:34, 20:44] = 3.0, (26.0, -6.0)
+    depth[44:56, 8:30], vel[44:56, 8:30] = 8.0, (0.0, 0.7)
+    depth[:, 72:], vel[:, 72:] = np.inf, 0.0
+    return src, vel, depth
+
+
+@pytest.mark.parametrize("quality", QUALITIES)
+@pytest.mark.parametrize("curved", [False, True])
+def test_front_free_tiles_render_as_if_every_depth_test_ran(rt, rng, monkeypatch, quality,
+                                                             curved):
+    """Issue 37: tiles where nothing the gather reads lies in front of any of their pixels
+    (the tiles' depth ranges, clfx.fx.motion._front_free) skip the occluder set and the soft
+    depth tests, each of which gives exactly 0 there: the frame is the one every test runs
+    for, bit for bit, on a plate with both kinds of tiles, short (cubic) and long ones."""
+    from clfx.fx import motion
+
+    src, vel, depth = _layered_scene(rng)
+    back = None
+    if curved:   # a gentle turn: the backward motion rotated by 10 degrees
+        c, s = math.cos(0.17), math.sin(0.17)
+        back = np.stack([c * vel[..., 0] - s * vel[..., 1], s * vel[..., 0] + c * vel[..., 1]],
+                        -1).astype(np.float32)
+    seen = []
+    real = motion._front_free
+
+    def spy(*a):
+        seen.append(real(*a))
+        return seen[-1]
+
+    def render():
+        return render_effect(rt, MotionBlur(), MotionBlur.params(), src, velocity=vel,
+                             velocity_back=back, depth=depth, quality=quality, camera=CENTRED)
+
+    monkeypatch.setattr(motion, "_front_free", spy)
+    got = render()
+    free = np.concatenate([f.ravel() for f in seen])
+    assert free.any() and not free.all(), free
+    monkeypatch.setattr(motion, "_front_free", lambda z, k, reach: np.zeros(z.shape[:2], bool))
+    np.testing.assert_array_equal(got, render())
+
+
+def test_front_free_needs_the_whole_reach_behind_the_tile():
+    """A tile is front-free when its largest depth is at most the smallest of every tile its
+    reads reach: one tile around it while the reach fits in a tile, two beyond."""
+    from clfx.fx.motion import _front_free
+
+    zr = np.full((6, 8, 2), 10.0, np.float32)
+    zr[3, 4] = 2.0                         # a near tile
+    zr[0, 0] = (5.0, 10.0)                 # a tile with its own nearer pixels
+    want = np.ones((6, 8), bool)
+    want[2:5, 3:6] = False
+    want[3, 4] = True                      # nothing lies in front of the near tile itself
+    want[0, 0] = want[0, 1] = want[1, 0] = want[1, 1] = False
+    np.testing.assert_array_equal(_front_free(zr, 8, 8.0), want)
+    np.testing.assert_array_equal(_front_free(zr, 8, 0.2), want)   # the taps' 2 px
+    want[1:6, 2:7] = False                 # a read 9 px away: two tiles around
+    want[3, 4] = True
+    want[0:3, 0:3] = False
+    np.testing.assert_array_equal(_front_free(zr, 8, 8.6), want)
+
+
+def test_rim_dilation_matches_the_oracle(rt, rng):
+    """The rim dilation (motion_dilate) against its oracle, record for record: small bright
+    lights moving over a dark wall and a nearer static bar, some on the image's edges, on a
+    width that is not a multiple of 4 (most quads take the kernel's no-candidate path)."""
+    from clfx.fx import motion
+    from tests.reference.motion_blur import rim_dilation
+
+    h, w = 29, 45
+    col = np.zeros((h, w, 4), np.float32)
+    col[..., :3] = rng.uniform(0.01, 0.03, (h, w, 3))
+    col[..., 3] = 1.0
+    vel = uniform((h, w), (0.0, 0.0))
+    depth = np.full((h, w), 30.0, np.float32)
+    depth[20:23, :] = 12.0                                     # a nearer static bar
+    for y, x, v in ((5, 7, (9.0, 2.0)), (0, 20, (-6.0, 0.0)), (13, 44, (0.0, 7.0)),
+                    (21, 30, (5.0, 5.0)), (28, 0, (8.0, -3.0)), (10, 26, (4.0, 0.0))):
+        col[y, x, :3] = 50.0                                   # the light
+        vel[y, x], depth[y, x] = v, 4.0
+        for dy in (-1, 0, 1):                                  # its antialiased rim
+            for dx in (-1, 0, 1):
+                yy, xx = y + dy, x + dx
+                if (dy or dx) and 0 <= yy < h and 0 <= xx < w:
+                    col[yy, xx, :3] = rng.uniform(2.0, 9.0)
+    col[10, 27, :3] = 0.2      # a rim pixel too dark to take the light's motion
+    duration = 0.5
+    aux, _ = motion._prepared(rt, rt.upload(col), rt.upload(vel), rt.upload(depth), None,
+                              motion._defines(motion.LEVELS["final"], True, False), 1e3,
+                              duration)
+    got = aux.download()
+    want_v, want_z = rim_dilation(vel, depth, col, duration)
+    assert (want_z != depth).sum() >= 20                       # rims moved with their lights
+    np.testing.assert_array_equal(got[..., :2], want_v.astype(np.float32))
+    np.testing.assert_array_equal(got[..., 2], want_z.astype(np.float32))
+
+
+@pytest.mark.parametrize("curved", [False, True])
+def test_tilemax_takes_the_first_fastest_pixel_and_the_depth_range(rt, rng, curved):
+    """TileMax's record is the tile's fastest pixel's (vx, vy, |v|), the first in scan order
+    among equal speeds (here many: speeds from 4 values), its backward motion with it
+    (CURVED), and each tile's smallest and largest depth; on a width that ends mid-tile and
+    mid-quad (the kernel's 4 columns at a time and the columns after), a still tile too."""
+    from clfx.fx import motion
+
+    h, w, k = 37, 45, 8
+    aux = np.zeros((h, w, 4), np.float32)
+    speed = rng.choice(np.array([0.0, 1.0, 2.0, 3.0], np.float32), (h, w))
+    angle = rng.uniform(0.0, 2.0 * np.pi, (h, w))
+    aux[..., 0], aux[..., 1] = speed * np.cos(angle), speed * np.sin(angle)
+    aux[..., 2] = rng.uniform(1.0, 50.0, (h, w))
+    aux[..., 3] = speed
+    aux[:8, :8, 3] = aux[:8, :8, 0] = aux[:8, :8, 1] = 0.0          # a still tile
+    back = rng.uniform(-5.0, 5.0, (h, w, 4)).astype(np.float32)
+    defines = motion._defines(motion.LEVELS["final"], True, curved)
+    tx, ty, bufs = motion._grid_buffers(rt, w, h, k, curved)
+    img = rt.upload(aux)
+    motion._tilemax(rt, defines, img, rt.upload(back) if curved else bufs[1], bufs, img.pitch,
+                    w, h, 0, tx, ty, 0, ty, k)
+    tiles = rt.from_device(bufs[0], np.float32, tx * ty * 4).reshape(ty, tx, 4)
+    zr = rt.from_device(bufs[2], np.float32, tx * ty * 2).reshape(ty, tx, 2)
+    if curved:
+        tb = rt.from_device(bufs[1], np.float32, tx * ty * 2).reshape(ty, tx, 2)
+    for j in range(ty):
+        for i in range(tx):
+            blk = aux[j * k:(j + 1) * k, i * k:(i + 1) * k]
+            s = blk[..., 3].ravel()
+            first = int(np.argmax(s))              # numpy: the first among equals
+            y, x = divmod(first, blk.shape[1])
+            want = (blk[y, x, 0], blk[y, x, 1], s[first], 0.0) if s[first] > 0 else (0,) * 4
+            np.testing.assert_array_equal(tiles[j, i], np.float32(want), err_msg=(j, i))
+            np.testing.assert_array_equal(zr[j, i], (blk[..., 2].min(), blk[..., 2].max()))
+            if curved:
+                wb = back[j * k + y, i * k + x, :2] if s[first] > 0 else (0.0, 0.0)
+                np.testing.assert_array_equal(tb[j, i], wb, err_msg=(j, i))

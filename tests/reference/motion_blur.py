@@ -216,3 +216,47 @@ def naive_blur(src, velocity, *, t0, t1, n=256):
     for t in _times(t0, t1, n):
         acc += bilinear(src, xs - v[..., 0] * t, ys - v[..., 1] * t)
     return acc / n
+
+
+SOFT_Z = 0.02         # relative depth difference over which "in front" fades in
+DILATE_RATIO = 10.0   # a rim pixel is this many times brighter than the background beside it
+MIN_BLUR = 0.1        # px over the shutter: slower relative motion is no motion
+
+
+def rim_dilation(velocity, depth, rgb, duration):
+    """Which (velocity, depth) each pixel's record carries after the rim dilation: a pixel
+    ``p`` of an antialiased rim, mostly the colour of a small bright surface ``q`` in front of
+    it, takes ``q``'s motion and depth.  ``q`` is the nearest of the 8 neighbours that lie in
+    front of ``p`` (depth under ``(1 - SOFT_Z)`` of ``p``'s) and move differently (at least
+    ``MIN_BLUR`` px apart over ``duration`` frames), the first in scan order (rows, then
+    columns) among equal depths; ``p`` takes it when the neighbour ``b`` on the other side,
+    ``p - (q - p)``, lies at ``p``'s depth or behind, ``p`` is more than ``DILATE_RATIO``
+    times brighter than ``b`` (RGB sums) and ``q`` brighter than ``p``.  Returns the new
+    (h, w, 2) velocity and (h, w) depth; velocities and depths are taken as given (finite,
+    positive depths)."""
+    v = np.asarray(velocity, np.float64)
+    z = np.asarray(depth, np.float64)
+    lum = np.asarray(rgb, np.float64)[..., :3].sum(-1)
+    h, w = z.shape
+    out_v, out_z = v.copy(), z.copy()
+    for y in range(h):
+        for x in range(w):
+            best, at = z[y, x] * (1.0 - SOFT_Z), None
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    qy, qx = y + dy, x + dx
+                    if (dx, dy) == (0, 0) or not (0 <= qy < h and 0 <= qx < w):
+                        continue
+                    moves = math.hypot(*(v[qy, qx] - v[y, x])) * duration >= MIN_BLUR
+                    if z[qy, qx] < best and moves:
+                        best, at = z[qy, qx], (qy, qx)
+            if at is None:
+                continue
+            by, bx = 2 * y - at[0], 2 * x - at[1]
+            if not (0 <= by < h and 0 <= bx < w):
+                continue
+            if (z[by, bx] >= z[y, x] * (1.0 - SOFT_Z)
+                    and lum[y, x] - lum[by, bx] > DILATE_RATIO * max(lum[by, bx], 0.0)
+                    and lum[at] > lum[y, x]):
+                out_v[y, x], out_z[y, x] = v[at], z[at]
+    return out_v, out_z
