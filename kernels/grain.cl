@@ -84,107 +84,6 @@ inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 #endif
 }
 
-/* The tone model of clfx/plugins/grain.py, with grey = the exposure reference E and n the
- * unit grain field:
- *   e   = clamp(v / E, 0, cap)            relative exposure (MONO: the luminance's)
- *   D   = FOG + GAMMA log10(1 + e / TOE)  density on the characteristic curve
- *   s   = amt_c (D / D(1))^response       log-exposure deviation (Nutting: response 0.5)
- *   out = v + E (e_c + TOE) (exp(s n - s^2 / 2) - 1)
- * COVERAGE: out = v + alpha (out - v) where alpha < 1 (lib/coverage.h's rule), so the empty
- * background of a CG element stays empty.  Non-finite values become 0 first (they must not
- * spread); alpha is copied unchanged (0 if it was not finite); the result is clamped to the
- * float range.
- *
- * It runs on 8 pixels as planes of one channel each (R, G, B: 24 lanes where 4 RGBA pixels
- * a float16 took 32, alpha's zero noise through the whole model; the same operations on
- * every colour lane, so the same bits).  grain_density8: (D / D(1))^response of the
- * density's exposure ed; MONO evaluates it once for the three channels. */
-inline REAL8 grain_density8(const REAL8 ed, const REAL response)
-{
-  const REAL8 x = (REAL)1 + ed * (REAL)(1.0 / GRAIN_TOE);
-  /* D / D(1); the response's common values are build variants (no pow) */
-#if REAL_IS_DOUBLE
-  const REAL8 dr = ((REAL)GRAIN_FOG + (REAL)(GRAIN_GAMMA * 0.4342944819032518) * log(x))
-                 * (REAL)(1.0 / GRAIN_D_GREY);
-#else
-  const float8 dr = ((float)GRAIN_FOG + (float)(GRAIN_GAMMA * 0.4342944819032518)
-                     * clfx_log8(x)) * (float)(1.0 / GRAIN_D_GREY);
-#endif
-#if RESPONSE_MODE == 0
-  return (REAL8)((REAL)1);
-#elif RESPONSE_MODE == 1
-  return sqrt(dr);
-#elif RESPONSE_MODE == 2
-  return dr;
-#elif REAL_IS_DOUBLE
-  return pow(dr, (REAL8)(response));
-#else
-  return clfx_exp2_8(response * 1.44269504f * clfx_log8(dr));
-#endif
-}
-
-/* One channel's output: cs its clamped value, e its relative exposure, q its density term,
- * n its grain, cov alpha clamped to [0, 1] (COVERAGE). */
-inline float8 grain_tone8(const REAL8 cs, const REAL8 e, const REAL8 q, const REAL8 n,
-                          const REAL amt, const REAL grey, const REAL8 cov)
-{
-  const REAL8 s = amt * q;
-  const REAL8 ex = s * n - (REAL)0.5 * s * s;
-#if REAL_IS_DOUBLE
-  const REAL8 f = exp(clamp(ex, (REAL)GRAIN_EXP_MIN, (REAL)GRAIN_EXP_MAX));
-#else
-  const float8 f = clfx_exp8(clamp(ex, (float)GRAIN_EXP_MIN, (float)GRAIN_EXP_MAX));
-#endif
-  const REAL8 dev = grey * (e + (REAL)GRAIN_TOE) * (f - (REAL)1);
-  const REAL8 noisy = cs + dev;
-#if COVERAGE
-  const REAL8 o = select(cs + cov * (noisy - cs), noisy, cov >= (REAL)1);
-#else
-  const REAL8 o = noisy;
-#endif
-  return TO_FLOAT8(clamp(o, (REAL)(-FLT_MAX), (REAL)FLT_MAX));
-}
-
-/* |v| clamped to the cap, in REAL */
-#define GRAIN_CS8(v) TO_REAL8(clamp((v), (float8)(-GRAIN_VALUE_CAP), (float8)GRAIN_VALUE_CAP))
-
-/* The tone model on 8 RGBA pixels c0, c1 (x .. x + 7) with their grain in planes nr, ng,
- * nb; the outputs in *o0, *o1. */
-inline __attribute__((always_inline)) void grain_mix8x3(
-    const float16 c0, const float16 c1, const REAL8 nr, const REAL8 ng, const REAL8 nb,
-    const REAL4 amt, const REAL response, const REAL grey, const REAL inv_grey,
-    float16 *o0, float16 *o1)
-{
-  const float16 f0 = clfx_finite16_or_zero(c0), f1 = clfx_finite16_or_zero(c1);
-  const float8 alpha = (float8)(f0.s37bf, f1.s37bf);
-  const REAL8 rs = GRAIN_CS8((float8)(f0.s048c, f1.s048c));
-  const REAL8 gs = GRAIN_CS8((float8)(f0.s159d, f1.s159d));
-  const REAL8 bs = GRAIN_CS8((float8)(f0.s26ae, f1.s26ae));
-  const REAL8 re = clamp(rs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
-  const REAL8 ge = clamp(gs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
-  const REAL8 be = clamp(bs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
-#if MONO
-  const REAL8 lum = (REAL)(CLFX_LUMA_R) * re + (REAL)(CLFX_LUMA_G) * ge
-                  + (REAL)(CLFX_LUMA_B) * be;
-  const REAL8 rq = grain_density8(max(lum, (REAL)0), response), gq = rq, bq = rq;
-#else
-  const REAL8 rq = grain_density8(re, response), gq = grain_density8(ge, response);
-  const REAL8 bq = grain_density8(be, response);
-#endif
-#if COVERAGE
-  const REAL8 cov = TO_REAL8(clamp(alpha, 0.0f, 1.0f));
-#else
-  const REAL8 cov = (REAL8)((REAL)1);
-#endif
-  const float8 r = grain_tone8(rs, re, rq, nr, amt.x, grey, cov);
-  const float8 g = grain_tone8(gs, ge, gq, ng, amt.y, grey, cov);
-  const float8 b = grain_tone8(bs, be, bq, nb, amt.z, grey, cov);
-  *o0 = (float16)(r.s0, g.s0, b.s0, alpha.s0, r.s1, g.s1, b.s1, alpha.s1,
-                  r.s2, g.s2, b.s2, alpha.s2, r.s3, g.s3, b.s3, alpha.s3);
-  *o1 = (float16)(r.s4, g.s4, b.s4, alpha.s4, r.s5, g.s5, b.s5, alpha.s5,
-                  r.s6, g.s6, b.s6, alpha.s6, r.s7, g.s7, b.s7, alpha.s7);
-}
-
 /* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two float16s, bit for bit two
  * grain_white16: the float32 levels take both quads' logarithms, roots and sines as one
  * 16-lane evaluation (grain_white16 runs them 8 lanes wide; at 1080p the noise cost
@@ -218,6 +117,121 @@ inline __attribute__((always_inline)) void grain_white32(uint seed, int frame, i
 #endif
 }
 
+/* The tone model of clfx/plugins/grain.py, with grey = the exposure reference E and n the
+ * unit grain field:
+ *   e   = clamp(v / E, 0, cap)            relative exposure (MONO: the luminance's)
+ *   D   = FOG + GAMMA log10(1 + e / TOE)  density on the characteristic curve
+ *   s   = amt_c (D / D(1))^response       log-exposure deviation (Nutting: response 0.5)
+ *   out = v + E (e_c + TOE) (exp(s n - s^2 / 2) - 1)
+ * COVERAGE: out = v + alpha (out - v) where alpha < 1 (lib/coverage.h's rule), so the empty
+ * background of a CG element stays empty.  Non-finite values become 0 first (they must not
+ * spread); alpha is copied unchanged (0 if it was not finite); the result is clamped to the
+ * float range.
+ *
+ * It runs on 16 pixels as three planes of one channel each (R, G, B; 48 lanes where RGBA
+ * took 64 with alpha's zero noise through the whole model; the same operations on every
+ * colour lane, so the same bits).  grain_density16: (D / D(1))^response of the density's
+ * exposure ed; MONO evaluates it once for the three channels. */
+inline REAL16 grain_density16(const REAL16 ed, const REAL response)
+{
+  const REAL16 x = (REAL)1 + ed * (REAL)(1.0 / GRAIN_TOE);
+  /* D / D(1); the response's common values are build variants (no pow) */
+#if REAL_IS_DOUBLE
+  const REAL16 dr = ((REAL)GRAIN_FOG + (REAL)(GRAIN_GAMMA * 0.4342944819032518) * log(x))
+                  * (REAL)(1.0 / GRAIN_D_GREY);
+#else
+  const float16 dr = ((float)GRAIN_FOG + (float)(GRAIN_GAMMA * 0.4342944819032518)
+                      * clfx_log16(x)) * (float)(1.0 / GRAIN_D_GREY);
+#endif
+#if RESPONSE_MODE == 0
+  return (REAL16)((REAL)1);
+#elif RESPONSE_MODE == 1
+  return sqrt(dr);
+#elif RESPONSE_MODE == 2
+  return dr;
+#elif REAL_IS_DOUBLE
+  return pow(dr, (REAL16)(response));
+#else
+  return clfx_exp2_16(response * 1.44269504f * clfx_log16(dr));
+#endif
+}
+
+/* One channel's output: cs its clamped value, e its relative exposure, q its density term,
+ * n its grain, cov alpha clamped to [0, 1] (COVERAGE). */
+inline float16 grain_tone16(const REAL16 cs, const REAL16 e, const REAL16 q, const REAL16 n,
+                            const REAL amt, const REAL grey, const REAL16 cov)
+{
+  const REAL16 s = amt * q;
+  const REAL16 ex = s * n - (REAL)0.5 * s * s;
+#if REAL_IS_DOUBLE
+  const REAL16 f = exp(clamp(ex, (REAL)GRAIN_EXP_MIN, (REAL)GRAIN_EXP_MAX));
+#else
+  const float16 f = clfx_exp16(clamp(ex, (float)GRAIN_EXP_MIN, (float)GRAIN_EXP_MAX));
+#endif
+  const REAL16 dev = grey * (e + (REAL)GRAIN_TOE) * (f - (REAL)1);
+  const REAL16 noisy = cs + dev;
+#if COVERAGE
+  const REAL16 o = select(cs + cov * (noisy - cs), noisy, cov >= (REAL)1);
+#else
+  const REAL16 o = noisy;
+#endif
+  return TO_FLOAT16(clamp(o, (REAL)(-FLT_MAX), (REAL)FLT_MAX));
+}
+
+/* |v| clamped to the cap, in REAL */
+#define GRAIN_CS16(v) TO_REAL16(clamp((v), (float16)(-GRAIN_VALUE_CAP), (float16)GRAIN_VALUE_CAP))
+
+/* The tone model on 16 RGBA pixels *c0 .. *c3 (x .. x + 15) with their grain in planes nr,
+ * ng, nb; the outputs in place (alpha copied). */
+inline __attribute__((always_inline)) void grain_mix16x3(
+    float16 *c0, float16 *c1, float16 *c2, float16 *c3, const REAL16 nr, const REAL16 ng, const REAL16 nb, const REAL4 amt,
+    const REAL response, const REAL grey, const REAL inv_grey)
+{
+  const float16 f0 = clfx_finite16_or_zero(*c0), f1 = clfx_finite16_or_zero(*c1);
+  const float16 f2 = clfx_finite16_or_zero(*c2), f3 = clfx_finite16_or_zero(*c3);
+  /* to planes by two-source shuffles: (r, g) pairs of 8 pixels, (b, alpha) pairs */
+  const float16 rg0 = (float16)(f0.s0145, f0.s89cd, f1.s0145, f1.s89cd);
+  const float16 rg1 = (float16)(f2.s0145, f2.s89cd, f3.s0145, f3.s89cd);
+  const float16 ba0 = (float16)(f0.s2367, f0.sabef, f1.s2367, f1.sabef);
+  const float16 ba1 = (float16)(f2.s2367, f2.sabef, f3.s2367, f3.sabef);
+  const REAL16 rs = GRAIN_CS16((float16)(rg0.even, rg1.even));
+  const REAL16 gs = GRAIN_CS16((float16)(rg0.odd, rg1.odd));
+  const REAL16 bs = GRAIN_CS16((float16)(ba0.even, ba1.even));
+  const REAL16 re = clamp(rs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+  const REAL16 ge = clamp(gs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+  const REAL16 be = clamp(bs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+#if MONO
+  const REAL16 lum = (REAL)(CLFX_LUMA_R) * re + (REAL)(CLFX_LUMA_G) * ge
+                   + (REAL)(CLFX_LUMA_B) * be;
+  const REAL16 rq = grain_density16(max(lum, (REAL)0), response), gq = rq, bq = rq;
+#else
+  const REAL16 rq = grain_density16(re, response), gq = grain_density16(ge, response);
+  const REAL16 bq = grain_density16(be, response);
+#endif
+#if COVERAGE
+  const REAL16 cov = TO_REAL16(clamp((float16)(ba0.odd, ba1.odd), 0.0f, 1.0f));
+#else
+  const REAL16 cov = (REAL16)((REAL)1);
+#endif
+  const float16 r = grain_tone16(rs, re, rq, nr, amt.x, grey, cov);
+  const float16 g = grain_tone16(gs, ge, gq, ng, amt.y, grey, cov);
+  const float16 b = grain_tone16(bs, be, bq, nb, amt.z, grey, cov);
+  /* back to RGBA: (r, g) pairs, then with b into each quad's RGB; alpha as it was */
+  const float16 org0 = (float16)(r.s0, g.s0, r.s1, g.s1, r.s2, g.s2, r.s3, g.s3,
+                                 r.s4, g.s4, r.s5, g.s5, r.s6, g.s6, r.s7, g.s7);
+  const float16 org1 = (float16)(r.s8, g.s8, r.s9, g.s9, r.sa, g.sa, r.sb, g.sb,
+                                 r.sc, g.sc, r.sd, g.sd, r.se, g.se, r.sf, g.sf);
+  const int16 is_alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
+  *c0 = select((float16)(org0.s01, b.s0, b.s0, org0.s23, b.s1, b.s1, org0.s45, b.s2, b.s2,
+                          org0.s67, b.s3, b.s3), f0, is_alpha);
+  *c1 = select((float16)(org0.s89, b.s4, b.s4, org0.sab, b.s5, b.s5, org0.scd, b.s6, b.s6,
+                          org0.sef, b.s7, b.s7), f1, is_alpha);
+  *c2 = select((float16)(org1.s01, b.s8, b.s8, org1.s23, b.s9, b.s9, org1.s45, b.sa, b.sa,
+                          org1.s67, b.sb, b.sb), f2, is_alpha);
+  *c3 = select((float16)(org1.s89, b.sc, b.sc, org1.sab, b.sd, b.sd, org1.scd, b.se, b.se,
+                          org1.sef, b.sf, b.sf), f3, is_alpha);
+}
+
 /* The three colour planes of 8 pixels' noise from grain_white32's RGBA lanes (alpha's 0s
  * dropped). */
 #define GRAIN_PLANES(n0, n1, r, g, b)                                                          \
@@ -242,91 +256,98 @@ kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
   vstore8(b, 0, p + 2 * plane);
 }
 
-/* sum_k w_k.c * v_k, k = 0..2R, for 8 pixels of the three planes at p (plane apart): v_k =
- * vload8 at p + k * step (step = one pixel for the horizontal pass, one row for the vertical
- * one).  Per lane grain_taps16's operations in its order (RGBA lanes, one chain); three
- * independent chains here. */
-inline __attribute__((always_inline)) void grain_taps8x3(
+/* sum_k w_k.c * v_k, k = 0..2R, for 16 pixels of the three planes at p (plane apart): v_k =
+ * vload16 at p + k * step (step = one pixel for the horizontal pass, one row for the
+ * vertical one).  Per lane the operations of the RGBA form's taps in their order; three
+ * independent chains. */
+inline __attribute__((always_inline)) void grain_taps16x3(
     global const REAL *p, const size_t plane, const size_t step, global const REAL *weights,
-    REAL8 *r, REAL8 *g, REAL8 *b)
+    REAL16 *r, REAL16 *g, REAL16 *b)
 {
-  REAL8 ar = (REAL8)(0), ag = (REAL8)(0), ab = (REAL8)(0);
+  REAL16 ar = (REAL16)(0), ag = (REAL16)(0), ab = (REAL16)(0);
   for(int k = 0; k <= 2 * RADIUS; ++k)
   {
     const REAL4 w = vload4(k, weights);
     global const REAL *q = p + (size_t)k * step;
-    ar += w.x * vload8(0, q);
-    ag += w.y * vload8(0, q + plane);
-    ab += w.z * vload8(0, q + 2 * plane);
+    ar += w.x * vload16(0, q);
+    ag += w.y * vload16(0, q + plane);
+    ab += w.z * vload16(0, q + 2 * plane);
   }
   *r = ar;
   *g = ag;
   *b = ab;
 }
 
-/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x; 8 pixels of
- * each plane a work-item (tpitch is a multiple of 8). */
+/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x; 16 pixels
+ * of each plane a work-item (tpitch is a multiple of 16). */
 kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global const REAL *weights,
                          const int npitch, const int tpitch, const int rows)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= rows || qx * 8 >= tpitch) return;
-  const int x = qx * 8;
-  REAL8 r, g, b;
-  grain_taps8x3(noise + (size_t)y * npitch + x, (size_t)rows * npitch, 1, weights, &r, &g, &b);
+  if(y >= rows || qx * 16 >= tpitch) return;
+  const int x = qx * 16;
+  REAL16 r, g, b;
+  grain_taps16x3(noise + (size_t)y * npitch + x, (size_t)rows * npitch, 1, weights, &r, &g, &b);
   const size_t plane = (size_t)rows * tpitch;
   global REAL *o = tmp + (size_t)y * tpitch + x;
-  vstore8(r, 0, o);
-  vstore8(g, 0, o + plane);
-  vstore8(b, 0, o + 2 * plane);
+  vstore16(r, 0, o);
+  vstore16(g, 0, o + plane);
+  vstore16(b, 0, o + 2 * plane);
 }
 
-/* The 8 RGBA source pixels at i (the second quad zeros where pitch % 8 == 4 and this is the
- * row's last: rows are padded to 4 pixels only), their grain mixed in, stored back. */
-inline __attribute__((always_inline)) void grain_store8(
-    global const float *src, global float *dst, const size_t i, const int whole,
-    const REAL8 r, const REAL8 g, const REAL8 b, const REAL4 amt, const REAL response,
+/* The 16 RGBA source pixels at i with their grain mixed in, stored back: rows are padded to
+ * 4 pixels only, so the row's last 16 store only its quads < quads. */
+inline __attribute__((always_inline)) void grain_store16(
+    global const float *src, global float *dst, const size_t i, const int quads,
+    const REAL16 r, const REAL16 g, const REAL16 b, const REAL4 amt, const REAL response,
     const REAL grey, const REAL inv_grey)
 {
-  const float16 c0 = vload16(0, src + i);
-  const float16 c1 = whole ? vload16(1, src + i) : (float16)(0.0f);
-  float16 o0, o1;
-  grain_mix8x3(c0, c1, r, g, b, amt, response, grey, inv_grey, &o0, &o1);
-  vstore16(o0, 0, dst + i);
-  if(whole)
-    vstore16(o1, 1, dst + i);
+  /* no branch in the loads: the tail loads its last quad again */
+  float16 c0 = vload16(0, src + i), c1 = vload16(min(1, quads - 1), src + i);
+  float16 c2 = vload16(min(2, quads - 1), src + i), c3 = vload16(quads - 1, src + i);
+  grain_mix16x3(&c0, &c1, &c2, &c3, r, g, b, amt, response, grey, inv_grey);
+  vstore16(c0, 0, dst + i);
+  if(quads > 1)
+    vstore16(c1, 1, dst + i);
+  if(quads > 2)
+    vstore16(c2, 2, dst + i);
+  if(quads > 3)
+    vstore16(c3, 3, dst + i);
 }
 
-/* Vertical taps (tmp is offset by R rows, tpitch a multiple of 8) and the mix with the
- * source; 8 pixels a work-item (grain_taps8x3). */
+/* Vertical taps (tmp is offset by R rows, tpitch a multiple of 16) and the mix with the
+ * source; 16 pixels a work-item (grain_taps16x3). */
 kernel void grain_apply(global const float *src, global float *dst, global const REAL *tmp,
                         global const REAL *weights, const int pitch, const int tpitch,
                         const int height, const float ar, const float ag, const float ab,
                         const float response, const float grey, const float inv_grey)
 {
   const int ox = get_global_id(0), y = get_global_id(1);
-  if(y >= height || ox * 8 >= pitch) return;
-  const int x = ox * 8;
-  REAL8 r, g, b;
-  grain_taps8x3(tmp + (size_t)y * tpitch + x, (size_t)(height + 2 * RADIUS) * tpitch,
-                (size_t)tpitch, weights, &r, &g, &b);
-  grain_store8(src, dst, (size_t)(y * pitch + x) * 4, x + 4 < pitch, r, g, b,
-               (REAL4)(ar, ag, ab, 0), response, grey, inv_grey);
+  if(y >= height || ox * 16 >= pitch) return;
+  const int x = ox * 16;
+  REAL16 r, g, b;
+  grain_taps16x3(tmp + (size_t)y * tpitch + x, (size_t)(height + 2 * RADIUS) * tpitch,
+                 (size_t)tpitch, weights, &r, &g, &b);
+  grain_store16(src, dst, (size_t)(y * pitch + x) * 4, min(4, (pitch - x) / 4), r, g, b,
+                (REAL4)(ar, ag, ab, 0), response, grey, inv_grey);
 }
 
-/* Draft: white noise generated in place, one pass; 8 pixels a work-item (grain_white32:
- * 1080p 42-55 -> 34-39 ms of CPU, the same pixels). */
+/* Draft: white noise generated in place, one pass; 16 pixels a work-item (grain_white32
+ * twice). */
 kernel void grain_apply_white(global const float *src, global float *dst, const int pitch,
                               const int height, const int fx0, const int fy0, const uint seed,
                               const int frame, const float ar, const float ag, const float ab,
                               const float response, const float grey, const float inv_grey)
 {
   const int ox = get_global_id(0), y = get_global_id(1);
-  if(y >= height || ox * 8 >= pitch) return;
-  const int x = ox * 8;
-  REAL16 n0, n1;
+  if(y >= height || ox * 16 >= pitch) return;
+  const int x = ox * 16;
+  REAL16 n0, n1, n2, n3;
   grain_white32(seed, frame, fx0 + x, fy0 + y, &n0, &n1);
-  GRAIN_PLANES(n0, n1, r, g, b);
-  grain_store8(src, dst, (size_t)(y * pitch + x) * 4, x + 4 < pitch, r, g, b,
-               (REAL4)(ar, ag, ab, 0), response, grey, inv_grey);
+  grain_white32(seed, frame, fx0 + x + 8, fy0 + y, &n2, &n3);
+  const REAL16 r = (REAL16)(n0.s048c, n1.s048c, n2.s048c, n3.s048c);
+  const REAL16 g = (REAL16)(n0.s159d, n1.s159d, n2.s159d, n3.s159d);
+  const REAL16 b = (REAL16)(n0.s26ae, n1.s26ae, n2.s26ae, n3.s26ae);
+  grain_store16(src, dst, (size_t)(y * pitch + x) * 4, min(4, (pitch - x) / 4), r, g, b,
+                (REAL4)(ar, ag, ab, 0), response, grey, inv_grey);
 }

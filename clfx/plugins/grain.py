@@ -385,8 +385,8 @@ class Grain(Plugin):
         if truncation is None or max(sigmas) < 1e-6:
             # draft, or size 0: the filter is the single tap 1, so skip the two passes
             knl = rt.kernel("grain.cl", "grain_apply_white", fp64=lvl.fp64, **defines)
-            # 8 pixels a work-item
-            rt.launch(knl, (-(-pitch // 8), height), src, dst, pitch, height, x0, y0, seed,
+            # 16 pixels a work-item
+            rt.launch(knl, (-(-pitch // 16), height), src, dst, pitch, height, x0, y0, seed,
                       frame, ar, ag, ab, *tone)
             return dst
 
@@ -394,9 +394,9 @@ class Grain(Plugin):
         defines["RADIUS"] = radius
         real_bytes = 8 if use64 else 4
         rows = height + 2 * radius
-        # three planes (R, G, B: alpha has no grain) 8 pixels a work-item: tmp rows of whole
-        # 8s, noise rows wide enough for their taps' vload8s
-        tpitch = -(-pitch // 8) * 8
+        # three planes (R, G, B: alpha has no grain), 16 pixels a work-item: tmp rows of whole
+        # 16s, noise rows (written 8 pixels a work-item) wide enough for their taps' vload16s
+        tpitch = -(-pitch // 16) * 16
         npitch = tpitch + -(-2 * radius // 8) * 8
         noise = rt.buffer(3 * rows * npitch * real_bytes)
         tmp = rt.buffer(3 * rows * tpitch * real_bytes)
@@ -405,8 +405,8 @@ class Grain(Plugin):
 
         rt.launch(knl("grain_noise"), (npitch // 8, rows), noise, npitch, rows, x0 - radius,
                   y0 - radius, seed, frame)
-        rt.launch(knl("grain_blur_h"), (tpitch // 8, rows), noise, tmp, weights, npitch,
+        rt.launch(knl("grain_blur_h"), (tpitch // 16, rows), noise, tmp, weights, npitch,
                   tpitch, rows)
-        rt.launch(knl("grain_apply"), (tpitch // 8, height), src, dst, tmp, weights, pitch,
+        rt.launch(knl("grain_apply"), (tpitch // 16, height), src, dst, tmp, weights, pitch,
                   tpitch, height, ar, ag, ab, *tone)
         return dst
