@@ -216,20 +216,22 @@ inline __attribute__((always_inline)) void grain_mix16x3(
   const float16 r = grain_tone16(rs, re, rq, nr, amt.x, grey, cov);
   const float16 g = grain_tone16(gs, ge, gq, ng, amt.y, grey, cov);
   const float16 b = grain_tone16(bs, be, bq, nb, amt.z, grey, cov);
-  /* back to RGBA: (r, g) pairs, then with b into each quad's RGB; alpha as it was */
-  const float16 org0 = (float16)(r.s0, g.s0, r.s1, g.s1, r.s2, g.s2, r.s3, g.s3,
-                                 r.s4, g.s4, r.s5, g.s5, r.s6, g.s6, r.s7, g.s7);
-  const float16 org1 = (float16)(r.s8, g.s8, r.s9, g.s9, r.sa, g.sa, r.sb, g.sb,
-                                 r.sc, g.sc, r.sd, g.sd, r.se, g.se, r.sf, g.sf);
+  /* back to RGBA: (r, g) pairs, then each quad's RGB with b (one shuffle each: clang's
+   * __builtin_shufflevector; vector literals of mixed parts lowered to ~7 shuffles a quad);
+   * alpha as it was */
+  const float16 org0 = __builtin_shufflevector(r, g, 0, 16, 1, 17, 2, 18, 3, 19,
+                                               4, 20, 5, 21, 6, 22, 7, 23);
+  const float16 org1 = __builtin_shufflevector(r, g, 8, 24, 9, 25, 10, 26, 11, 27,
+                                               12, 28, 13, 29, 14, 30, 15, 31);
   const int16 is_alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  *c0 = select((float16)(org0.s01, b.s0, b.s0, org0.s23, b.s1, b.s1, org0.s45, b.s2, b.s2,
-                          org0.s67, b.s3, b.s3), f0, is_alpha);
-  *c1 = select((float16)(org0.s89, b.s4, b.s4, org0.sab, b.s5, b.s5, org0.scd, b.s6, b.s6,
-                          org0.sef, b.s7, b.s7), f1, is_alpha);
-  *c2 = select((float16)(org1.s01, b.s8, b.s8, org1.s23, b.s9, b.s9, org1.s45, b.sa, b.sa,
-                          org1.s67, b.sb, b.sb), f2, is_alpha);
-  *c3 = select((float16)(org1.s89, b.sc, b.sc, org1.sab, b.sd, b.sd, org1.scd, b.se, b.se,
-                          org1.sef, b.sf, b.sf), f3, is_alpha);
+  *c0 = select(__builtin_shufflevector(org0, b, 0, 1, 16, 16, 2, 3, 17, 17,
+                                       4, 5, 18, 18, 6, 7, 19, 19), f0, is_alpha);
+  *c1 = select(__builtin_shufflevector(org0, b, 8, 9, 20, 20, 10, 11, 21, 21,
+                                       12, 13, 22, 22, 14, 15, 23, 23), f1, is_alpha);
+  *c2 = select(__builtin_shufflevector(org1, b, 0, 1, 24, 24, 2, 3, 25, 25,
+                                       4, 5, 26, 26, 6, 7, 27, 27), f2, is_alpha);
+  *c3 = select(__builtin_shufflevector(org1, b, 8, 9, 28, 28, 10, 11, 29, 29,
+                                       12, 13, 30, 30, 14, 15, 31, 31), f3, is_alpha);
 }
 
 /* The three colour planes of 8 pixels' noise from grain_white32's RGBA lanes (alpha's 0s
