@@ -6,15 +6,17 @@
  *                  output window grown by RADIUS on every side (X, Y = frame coordinates, so
  *                  a crop or an overscan render sees the same noise at the same pixel);
  *   grain_blur_h   separable Gaussian along x, per-channel weights;
- *   grain_apply    the same along y, then the tone model (grain_mix8x3) on RGB.
+ *   grain_apply    the same along y, then the tone model (grain_mix16x3) on RGB.
  * Draft runs grain_apply_white only: unfiltered white noise in one pass.
  *
  * Alpha carries no grain, so the noise and the blurred noise are three planes (R, G, B) and
- * the tone model runs on colour lanes only (grain_mix8x3); alpha is copied bit for bit.
- * Each work-item handles 8 consecutive pixels: the noise's hashing and Box-Muller as 16-lane
- * vectors (grain_white32), the taps and the tone model as 8-lane planes (three independent
- * chains).  Source rows are padded to 4 pixels only: the last 8 of a row of pitch % 8 == 4
- * load and store one quad.  COVERAGE=1 (clfx/fx/noise.py's coverage resolved to alpha)
+ * the tone model runs on colour lanes only (grain_mix16x3: 48 lanes for 16 pixels where RGBA
+ * vectors took 64); alpha is copied bit for bit.  grain_noise handles 8 pixels a work-item
+ * (hashing and Box-Muller as 16-lane vectors, grain_white32), the others 16: the taps and
+ * the tone model as float16 planes (PoCL runs a float16 in one AVX-512 register; float8
+ * planes took 3 ymm operations where an RGBA float16 of 4 pixels took 2 zmm for 8), three
+ * independent chains.  Source rows are padded to 4 pixels only: the last 16 of a row load
+ * and store its whole quads.  COVERAGE=1 (clfx/fx/noise.py's coverage resolved to alpha)
  * weights the grain by alpha.
  *
  * A build with CLFX_FP64 (the reference level, kernels/lib/precision.h) generates the noise,
