@@ -5,16 +5,21 @@
  *   grain_noise    white Gaussian noise N(0, 1) per (seed, frame, X, Y, channel) over the
  *                  output window grown by RADIUS on every side (X, Y = frame coordinates, so
  *                  a crop or an overscan render sees the same noise at the same pixel);
- *   grain_blur_h   separable Gaussian along x, per-channel weights (float4 per tap);
- *   grain_apply    the same along y, then the tone model (grain_mix16) on RGB.
+ *   grain_blur_h   separable Gaussian along x, per-channel weights;
+ *   grain_apply    the same along y, then the tone model (grain_mix16x3) on RGB.
  * Draft runs grain_apply_white only: unfiltered white noise in one pass.
  *
- * Each work-item handles 4 consecutive pixels as one 16-lane vector (rows are padded to 4
- * pixels), so PoCL runs hashing, Box-Muller and the taps as vectors; grain_noise and
- * grain_apply take two quads (8 pixels, two independent chains at a time; grain_apply's
- * last quad of a row of pitch % 8 == 4 alone).  Lane 4k+3 (alpha) carries zero noise and
- * alpha is copied bit for bit.  COVERAGE=1 (clfx/fx/noise.py's
- * coverage resolved to alpha) weights the grain by alpha.
+ * Alpha carries no grain, so the noise and the blurred noise are three planes (R, G, B) and
+ * the tone model runs on colour lanes only (grain_mix16x3: 48 lanes for 16 pixels where RGBA
+ * vectors took 64); alpha is copied bit for bit.  grain_noise handles 8 pixels a work-item
+ * (hashing and Box-Muller as 16-lane vectors, grain_white32), the others 16: the taps and
+ * the tone model as float16 planes (PoCL runs a float16 in one AVX-512 register; float8
+ * planes took 3 ymm operations where an RGBA float16 of 4 pixels took 2 zmm for 8), three
+ * independent chains (1080p, CPU ms against the RGBA form: grain_apply 28.6 -> 20.3,
+ * grain_blur_h 9.8 -> 5.0, draft's grain_apply_white 40.7 -> 32.4; monochrome's apply
+ * 26.1 -> 15.7, its density term once for three channels).  Source rows are padded to 4
+ * pixels only: the last 16 of a row load and store its whole quads.  COVERAGE=1 (clfx/fx/noise.py's coverage resolved to alpha)
+ * weights the grain by alpha.
  *
  * A build with CLFX_FP64 (the reference level, kernels/lib/precision.h) generates the noise,
  * stores the intermediate buffers and accumulates the taps in double precision.
@@ -83,68 +88,6 @@ inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 #endif
 }
 
-/* The tone model of clfx/plugins/grain.py on 4 RGBA pixels, with grey = the exposure
- * reference E and n the unit grain field:
- *   e   = clamp(v / E, 0, cap)            relative exposure (MONO: the luminance's)
- *   D   = FOG + GAMMA log10(1 + e / TOE)  density on the characteristic curve
- *   s   = amt_c (D / D(1))^response       log-exposure deviation (Nutting: response 0.5)
- *   out = v + E (e_c + TOE) (exp(s n - s^2 / 2) - 1)
- * COVERAGE: out = v + alpha (out - v) where alpha < 1 (clfx_cover16), so the empty
- * background of a CG element stays empty.  Non-finite values become 0 first (they must not
- * spread); alpha is copied unchanged (0 if it was not finite); the result is clamped to the
- * float range. */
-inline float16 grain_mix16(const float16 c, const REAL16 n, const REAL4 amt, const REAL response,
-                           const REAL grey, const REAL inv_grey)
-{
-  const float16 c0 = clfx_finite16_or_zero(c);
-  const REAL16 cs = TO_REAL16(clamp(c0, (float16)(-GRAIN_VALUE_CAP), (float16)GRAIN_VALUE_CAP));
-  const REAL16 e = clamp(cs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
-#if MONO
-  const REAL4 lum = (REAL)(CLFX_LUMA_R) * e.s048c + (REAL)(CLFX_LUMA_G) * e.s159d
-                  + (REAL)(CLFX_LUMA_B) * e.s26ae;
-  const REAL4 l = max(lum, (REAL)0);
-  const REAL16 ed = (REAL16)(l.x, l.x, l.x, l.x, l.y, l.y, l.y, l.y,
-                             l.z, l.z, l.z, l.z, l.w, l.w, l.w, l.w);
-#else
-  const REAL16 ed = e;
-#endif
-  const REAL16 x = (REAL)1 + ed * (REAL)(1.0 / GRAIN_TOE);
-  /* D / D(1); the response's common values are build variants (no pow) */
-#if REAL_IS_DOUBLE
-  const REAL16 dr = ((REAL)GRAIN_FOG + (REAL)(GRAIN_GAMMA * 0.4342944819032518) * log(x))
-                  * (REAL)(1.0 / GRAIN_D_GREY);
-#else
-  const float16 dr = ((float)GRAIN_FOG + (float)(GRAIN_GAMMA * 0.4342944819032518)
-                      * clfx_log16(x)) * (float)(1.0 / GRAIN_D_GREY);
-#endif
-#if RESPONSE_MODE == 0
-  const REAL16 q = (REAL16)((REAL)1);
-#elif RESPONSE_MODE == 1
-  const REAL16 q = sqrt(dr);
-#elif RESPONSE_MODE == 2
-  const REAL16 q = dr;
-#elif REAL_IS_DOUBLE
-  const REAL16 q = pow(dr, (REAL16)(response));
-#else
-  const float16 q = clfx_exp2_16(response * 1.44269504f * clfx_log16(dr));
-#endif
-  const REAL16 s = (REAL16)(amt, amt, amt, amt) * q;
-  const REAL16 ex = s * n - (REAL)0.5 * s * s;
-#if REAL_IS_DOUBLE
-  const REAL16 f = exp(clamp(ex, (REAL)GRAIN_EXP_MIN, (REAL)GRAIN_EXP_MAX));
-#else
-  const float16 f = clfx_exp16(clamp(ex, (float)GRAIN_EXP_MIN, (float)GRAIN_EXP_MAX));
-#endif
-  const REAL16 dev = grey * (e + (REAL)GRAIN_TOE) * (f - (REAL)1);
-#if COVERAGE
-  const REAL16 o = clamp(clfx_cover16(cs, cs + dev, c0), (REAL)(-FLT_MAX), (REAL)FLT_MAX);
-#else
-  const REAL16 o = clamp(cs + dev, (REAL)(-FLT_MAX), (REAL)FLT_MAX);
-#endif
-  const int16 alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  return select(TO_FLOAT16(o), c0, alpha);
-}
-
 /* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two float16s, bit for bit two
  * grain_white16: the float32 levels take both quads' logarithms, roots and sines as one
  * 16-lane evaluation (grain_white16 runs them 8 lanes wide; at 1080p the noise cost
@@ -178,7 +121,131 @@ inline __attribute__((always_inline)) void grain_white32(uint seed, int frame, i
 #endif
 }
 
-/* 8 pixels per work-item (npitch is a multiple of 8) */
+/* The tone model of clfx/plugins/grain.py, with grey = the exposure reference E and n the
+ * unit grain field:
+ *   e   = clamp(v / E, 0, cap)            relative exposure (MONO: the luminance's)
+ *   D   = FOG + GAMMA log10(1 + e / TOE)  density on the characteristic curve
+ *   s   = amt_c (D / D(1))^response       log-exposure deviation (Nutting: response 0.5)
+ *   out = v + E (e_c + TOE) (exp(s n - s^2 / 2) - 1)
+ * COVERAGE: out = v + alpha (out - v) where alpha < 1 (lib/coverage.h's rule), so the empty
+ * background of a CG element stays empty.  Non-finite values become 0 first (they must not
+ * spread); alpha is copied unchanged (0 if it was not finite); the result is clamped to the
+ * float range.
+ *
+ * It runs on 16 pixels as three planes of one channel each (R, G, B; 48 lanes where RGBA
+ * took 64 with alpha's zero noise through the whole model; the same operations on every
+ * colour lane, so the same bits).  grain_density16: (D / D(1))^response of the density's
+ * exposure ed; MONO evaluates it once for the three channels. */
+inline REAL16 grain_density16(const REAL16 ed, const REAL response)
+{
+  const REAL16 x = (REAL)1 + ed * (REAL)(1.0 / GRAIN_TOE);
+  /* D / D(1); the response's common values are build variants (no pow) */
+#if REAL_IS_DOUBLE
+  const REAL16 dr = ((REAL)GRAIN_FOG + (REAL)(GRAIN_GAMMA * 0.4342944819032518) * log(x))
+                  * (REAL)(1.0 / GRAIN_D_GREY);
+#else
+  const float16 dr = ((float)GRAIN_FOG + (float)(GRAIN_GAMMA * 0.4342944819032518)
+                      * clfx_log16(x)) * (float)(1.0 / GRAIN_D_GREY);
+#endif
+#if RESPONSE_MODE == 0
+  return (REAL16)((REAL)1);
+#elif RESPONSE_MODE == 1
+  return sqrt(dr);
+#elif RESPONSE_MODE == 2
+  return dr;
+#elif REAL_IS_DOUBLE
+  return pow(dr, (REAL16)(response));
+#else
+  return clfx_exp2_16(response * 1.44269504f * clfx_log16(dr));
+#endif
+}
+
+/* One channel's output: cs its clamped value, e its relative exposure, q its density term,
+ * n its grain, cov alpha clamped to [0, 1] (COVERAGE). */
+inline float16 grain_tone16(const REAL16 cs, const REAL16 e, const REAL16 q, const REAL16 n,
+                            const REAL amt, const REAL grey, const REAL16 cov)
+{
+  const REAL16 s = amt * q;
+  const REAL16 ex = s * n - (REAL)0.5 * s * s;
+#if REAL_IS_DOUBLE
+  const REAL16 f = exp(clamp(ex, (REAL)GRAIN_EXP_MIN, (REAL)GRAIN_EXP_MAX));
+#else
+  const float16 f = clfx_exp16(clamp(ex, (float)GRAIN_EXP_MIN, (float)GRAIN_EXP_MAX));
+#endif
+  const REAL16 dev = grey * (e + (REAL)GRAIN_TOE) * (f - (REAL)1);
+  const REAL16 noisy = cs + dev;
+#if COVERAGE
+  const REAL16 o = select(cs + cov * (noisy - cs), noisy, cov >= (REAL)1);
+#else
+  const REAL16 o = noisy;
+#endif
+  return TO_FLOAT16(clamp(o, (REAL)(-FLT_MAX), (REAL)FLT_MAX));
+}
+
+/* |v| clamped to the cap, in REAL */
+#define GRAIN_CS16(v) TO_REAL16(clamp((v), (float16)(-GRAIN_VALUE_CAP), (float16)GRAIN_VALUE_CAP))
+
+/* The tone model on 16 RGBA pixels *c0 .. *c3 (x .. x + 15) with their grain in planes nr,
+ * ng, nb; the outputs in place (alpha copied). */
+inline __attribute__((always_inline)) void grain_mix16x3(
+    float16 *c0, float16 *c1, float16 *c2, float16 *c3, const REAL16 nr, const REAL16 ng, const REAL16 nb, const REAL4 amt,
+    const REAL response, const REAL grey, const REAL inv_grey)
+{
+  const float16 f0 = clfx_finite16_or_zero(*c0), f1 = clfx_finite16_or_zero(*c1);
+  const float16 f2 = clfx_finite16_or_zero(*c2), f3 = clfx_finite16_or_zero(*c3);
+  /* to planes by two-source shuffles: (r, g) pairs of 8 pixels, (b, alpha) pairs */
+  const float16 rg0 = (float16)(f0.s0145, f0.s89cd, f1.s0145, f1.s89cd);
+  const float16 rg1 = (float16)(f2.s0145, f2.s89cd, f3.s0145, f3.s89cd);
+  const float16 ba0 = (float16)(f0.s2367, f0.sabef, f1.s2367, f1.sabef);
+  const float16 ba1 = (float16)(f2.s2367, f2.sabef, f3.s2367, f3.sabef);
+  const REAL16 rs = GRAIN_CS16((float16)(rg0.even, rg1.even));
+  const REAL16 gs = GRAIN_CS16((float16)(rg0.odd, rg1.odd));
+  const REAL16 bs = GRAIN_CS16((float16)(ba0.even, ba1.even));
+  const REAL16 re = clamp(rs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+  const REAL16 ge = clamp(gs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+  const REAL16 be = clamp(bs * inv_grey, (REAL)0, (REAL)GRAIN_VALUE_CAP);
+#if MONO
+  const REAL16 lum = (REAL)(CLFX_LUMA_R) * re + (REAL)(CLFX_LUMA_G) * ge
+                   + (REAL)(CLFX_LUMA_B) * be;
+  const REAL16 rq = grain_density16(max(lum, (REAL)0), response), gq = rq, bq = rq;
+#else
+  const REAL16 rq = grain_density16(re, response), gq = grain_density16(ge, response);
+  const REAL16 bq = grain_density16(be, response);
+#endif
+#if COVERAGE
+  const REAL16 cov = TO_REAL16(clamp((float16)(ba0.odd, ba1.odd), 0.0f, 1.0f));
+#else
+  const REAL16 cov = (REAL16)((REAL)1);
+#endif
+  const float16 r = grain_tone16(rs, re, rq, nr, amt.x, grey, cov);
+  const float16 g = grain_tone16(gs, ge, gq, ng, amt.y, grey, cov);
+  const float16 b = grain_tone16(bs, be, bq, nb, amt.z, grey, cov);
+  /* back to RGBA: (r, g) pairs, then each quad's RGB with b (one shuffle each: clang's
+   * __builtin_shufflevector; vector literals of mixed parts lowered to ~7 shuffles a quad);
+   * alpha as it was */
+  const float16 org0 = __builtin_shufflevector(r, g, 0, 16, 1, 17, 2, 18, 3, 19,
+                                               4, 20, 5, 21, 6, 22, 7, 23);
+  const float16 org1 = __builtin_shufflevector(r, g, 8, 24, 9, 25, 10, 26, 11, 27,
+                                               12, 28, 13, 29, 14, 30, 15, 31);
+  const int16 is_alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
+  *c0 = select(__builtin_shufflevector(org0, b, 0, 1, 16, 16, 2, 3, 17, 17,
+                                       4, 5, 18, 18, 6, 7, 19, 19), f0, is_alpha);
+  *c1 = select(__builtin_shufflevector(org0, b, 8, 9, 20, 20, 10, 11, 21, 21,
+                                       12, 13, 22, 22, 14, 15, 23, 23), f1, is_alpha);
+  *c2 = select(__builtin_shufflevector(org1, b, 0, 1, 24, 24, 2, 3, 25, 25,
+                                       4, 5, 26, 26, 6, 7, 27, 27), f2, is_alpha);
+  *c3 = select(__builtin_shufflevector(org1, b, 8, 9, 28, 28, 10, 11, 29, 29,
+                                       12, 13, 30, 30, 14, 15, 31, 31), f3, is_alpha);
+}
+
+/* The three colour planes of 8 pixels' noise from grain_white32's RGBA lanes (alpha's 0s
+ * dropped). */
+#define GRAIN_PLANES(n0, n1, r, g, b)                                                          \
+  const REAL8 r = (REAL8)((n0).s048c, (n1).s048c), g = (REAL8)((n0).s159d, (n1).s159d),      \
+              b = (REAL8)((n0).s26ae, (n1).s26ae)
+
+/* Noise, tmp: three planes (R, G, B) of rows x npitch (tpitch) values, plane c at offset
+ * c * rows * npitch.  8 pixels per work-item (npitch is a multiple of 8). */
 kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
                         const int fx0, const int fy0, const uint seed, const int frame)
 {
@@ -187,99 +254,106 @@ kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
   const int x = qx * 8;
   REAL16 n0, n1;
   grain_white32(seed, frame, fx0 + x, fy0 + y, &n0, &n1);
-  global REAL *p = noise + (size_t)(y * npitch + x) * 4;
-  vstore16(n0, 0, p);
-  vstore16(n1, 1, p);
+  GRAIN_PLANES(n0, n1, r, g, b);
+  const size_t plane = (size_t)rows * npitch;
+  global REAL *p = noise + (size_t)y * npitch + x;
+  vstore8(r, 0, p);
+  vstore8(g, 0, p + plane);
+  vstore8(b, 0, p + 2 * plane);
 }
 
-/* sum_k w_k * v_k, k = 0..2R, for 4 pixels (16 lanes): v_k = vload16 at p + k * step
- * (step = one pixel for the horizontal pass, one row for the vertical one). */
-inline REAL16 grain_taps16(global const REAL *p, const size_t step, global const REAL *weights)
+/* sum_k w_k.c * v_k, k = 0..2R, for 16 pixels of the three planes at p (plane apart): v_k =
+ * vload16 at p + k * step (step = one pixel for the horizontal pass, one row for the
+ * vertical one).  Per lane the operations of the RGBA form's taps in their order; three
+ * independent chains. */
+inline __attribute__((always_inline)) void grain_taps16x3(
+    global const REAL *p, const size_t plane, const size_t step, global const REAL *weights,
+    REAL16 *r, REAL16 *g, REAL16 *b)
 {
-  REAL16 acc = (REAL16)(0);
+  REAL16 ar = (REAL16)(0), ag = (REAL16)(0), ab = (REAL16)(0);
   for(int k = 0; k <= 2 * RADIUS; ++k)
   {
     const REAL4 w = vload4(k, weights);
-    acc += (REAL16)(w, w, w, w) * vload16(0, p + (size_t)k * step);
+    global const REAL *q = p + (size_t)k * step;
+    ar += w.x * vload16(0, q);
+    ag += w.y * vload16(0, q + plane);
+    ab += w.z * vload16(0, q + 2 * plane);
   }
-  return acc;
+  *r = ar;
+  *g = ag;
+  *b = ab;
 }
 
-/* grain_taps16 for two quads at once, at p and p + 16 (the next 4 pixels): each sum takes
- * grain_taps16's operations in its order, interleaved, so the two dependent chains of 2R + 1
- * multiply-adds overlap (one chain a work-item left the core waiting on each add: 1080p
- * grain_apply 36 -> 27.5 ms of CPU). */
-inline void grain_taps16x2(global const REAL *p, const size_t step, global const REAL *weights,
-                           REAL16 *a0, REAL16 *a1)
-{
-  REAL16 acc0 = (REAL16)(0), acc1 = (REAL16)(0);
-  for(int k = 0; k <= 2 * RADIUS; ++k)
-  {
-    const REAL4 w = vload4(k, weights);
-    acc0 += (REAL16)(w, w, w, w) * vload16(0, p + (size_t)k * step);
-    acc1 += (REAL16)(w, w, w, w) * vload16(1, p + (size_t)k * step);
-  }
-  *a0 = acc0;
-  *a1 = acc1;
-}
-
-/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x.  (8 pixels a
- * work-item through grain_taps16x2 ran no faster here: memory-bound.) */
+/* tmp(x, y) = sum_k w_k * noise(x + k, y), k = 0..2R: noise is offset by R in x; 16 pixels
+ * of each plane a work-item (tpitch is a multiple of 16). */
 kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global const REAL *weights,
-                         const int npitch, const int pitch, const int rows)
+                         const int npitch, const int tpitch, const int rows)
 {
   const int qx = get_global_id(0), y = get_global_id(1);
-  if(y >= rows || qx * 4 >= pitch) return;
-  const int x = qx * 4;
-  vstore16(grain_taps16(noise + (size_t)(y * npitch + x) * 4, 4, weights), 0,
-           tmp + (size_t)(y * pitch + x) * 4);
+  if(y >= rows || qx * 16 >= tpitch) return;
+  const int x = qx * 16;
+  REAL16 r, g, b;
+  grain_taps16x3(noise + (size_t)y * npitch + x, (size_t)rows * npitch, 1, weights, &r, &g, &b);
+  const size_t plane = (size_t)rows * tpitch;
+  global REAL *o = tmp + (size_t)y * tpitch + x;
+  vstore16(r, 0, o);
+  vstore16(g, 0, o + plane);
+  vstore16(b, 0, o + 2 * plane);
 }
 
-/* Vertical taps (tmp is offset by R rows) and the mix with the source; 8 pixels a work-item
- * (grain_taps16x2), the row's last quad alone where pitch % 8 == 4. */
+/* The 16 RGBA source pixels at i with their grain mixed in, stored back: rows are padded to
+ * 4 pixels only, so the row's last 16 store only its quads < quads. */
+inline __attribute__((always_inline)) void grain_store16(
+    global const float *src, global float *dst, const size_t i, const int quads,
+    const REAL16 r, const REAL16 g, const REAL16 b, const REAL4 amt, const REAL response,
+    const REAL grey, const REAL inv_grey)
+{
+  /* no branch in the loads: the tail loads its last quad again */
+  float16 c0 = vload16(0, src + i), c1 = vload16(min(1, quads - 1), src + i);
+  float16 c2 = vload16(min(2, quads - 1), src + i), c3 = vload16(quads - 1, src + i);
+  grain_mix16x3(&c0, &c1, &c2, &c3, r, g, b, amt, response, grey, inv_grey);
+  vstore16(c0, 0, dst + i);
+  if(quads > 1)
+    vstore16(c1, 1, dst + i);
+  if(quads > 2)
+    vstore16(c2, 2, dst + i);
+  if(quads > 3)
+    vstore16(c3, 3, dst + i);
+}
+
+/* Vertical taps (tmp is offset by R rows, tpitch a multiple of 16) and the mix with the
+ * source; 16 pixels a work-item (grain_taps16x3). */
 kernel void grain_apply(global const float *src, global float *dst, global const REAL *tmp,
-                        global const REAL *weights, const int pitch, const int height,
-                        const float ar, const float ag, const float ab, const float response,
-                        const float grey, const float inv_grey)
+                        global const REAL *weights, const int pitch, const int tpitch,
+                        const int height, const float ar, const float ag, const float ab,
+                        const float response, const float grey, const float inv_grey)
 {
   const int ox = get_global_id(0), y = get_global_id(1);
-  if(y >= height || ox * 8 >= pitch) return;
-  const int x = ox * 8;
-  const size_t i = (size_t)(y * pitch + x) * 4;
-  const REAL4 amt = (REAL4)(ar, ag, ab, 0);
-  if(x + 4 < pitch)
-  {
-    REAL16 a0, a1;
-    grain_taps16x2(tmp + i, (size_t)pitch * 4, weights, &a0, &a1);
-    vstore16(grain_mix16(vload16(0, src + i), a0, amt, response, grey, inv_grey), 0, dst + i);
-    vstore16(grain_mix16(vload16(1, src + i), a1, amt, response, grey, inv_grey), 1, dst + i);
-  }
-  else
-    vstore16(grain_mix16(vload16(0, src + i), grain_taps16(tmp + i, (size_t)pitch * 4, weights),
-                         amt, response, grey, inv_grey), 0, dst + i);
+  if(y >= height || ox * 16 >= pitch) return;
+  const int x = ox * 16;
+  REAL16 r, g, b;
+  grain_taps16x3(tmp + (size_t)y * tpitch + x, (size_t)(height + 2 * RADIUS) * tpitch,
+                 (size_t)tpitch, weights, &r, &g, &b);
+  grain_store16(src, dst, (size_t)(y * pitch + x) * 4, min(4, (pitch - x) / 4), r, g, b,
+                (REAL4)(ar, ag, ab, 0), response, grey, inv_grey);
 }
 
-/* Draft: white noise generated in place, one pass; 8 pixels a work-item (grain_white32:
- * 1080p 42-55 -> 34-39 ms of CPU, the same pixels), the row's last quad alone where
- * pitch % 8 == 4. */
+/* Draft: white noise generated in place, one pass; 16 pixels a work-item (grain_white32
+ * twice). */
 kernel void grain_apply_white(global const float *src, global float *dst, const int pitch,
                               const int height, const int fx0, const int fy0, const uint seed,
                               const int frame, const float ar, const float ag, const float ab,
                               const float response, const float grey, const float inv_grey)
 {
   const int ox = get_global_id(0), y = get_global_id(1);
-  if(y >= height || ox * 8 >= pitch) return;
-  const int x = ox * 8;
-  const size_t i = (size_t)(y * pitch + x) * 4;
-  const REAL4 amt = (REAL4)(ar, ag, ab, 0);
-  if(x + 4 < pitch)
-  {
-    REAL16 n0, n1;
-    grain_white32(seed, frame, fx0 + x, fy0 + y, &n0, &n1);
-    vstore16(grain_mix16(vload16(0, src + i), n0, amt, response, grey, inv_grey), 0, dst + i);
-    vstore16(grain_mix16(vload16(1, src + i), n1, amt, response, grey, inv_grey), 1, dst + i);
-  }
-  else
-    vstore16(grain_mix16(vload16(0, src + i), grain_white16(seed, frame, fx0 + x, fy0 + y),
-                         amt, response, grey, inv_grey), 0, dst + i);
+  if(y >= height || ox * 16 >= pitch) return;
+  const int x = ox * 16;
+  REAL16 n0, n1, n2, n3;
+  grain_white32(seed, frame, fx0 + x, fy0 + y, &n0, &n1);
+  grain_white32(seed, frame, fx0 + x + 8, fy0 + y, &n2, &n3);
+  const REAL16 r = (REAL16)(n0.s048c, n1.s048c, n2.s048c, n3.s048c);
+  const REAL16 g = (REAL16)(n0.s159d, n1.s159d, n2.s159d, n3.s159d);
+  const REAL16 b = (REAL16)(n0.s26ae, n1.s26ae, n2.s26ae, n3.s26ae);
+  grain_store16(src, dst, (size_t)(y * pitch + x) * 4, min(4, (pitch - x) / 4), r, g, b,
+                (REAL4)(ar, ag, ab, 0), response, grey, inv_grey);
 }

@@ -287,10 +287,10 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
     "glare.cl": _scatter_family("glare"),
     "grain.cl": {
         "grain_noise": "buf noise, int npitch, int rows, int fx0, int fy0, uint seed, int frame",
-        "grain_blur_h": "buf noise, buf tmp, buf weights, int npitch, int pitch, int rows",
+        "grain_blur_h": "buf noise, buf tmp, buf weights, int npitch, int tpitch, int rows",
         "grain_apply": (
-            "buf src, buf dst, buf tmp, buf weights, int pitch, int height, float ar, float ag, "
-            "float ab, float response, float grey, float inv_grey"
+            "buf src, buf dst, buf tmp, buf weights, int pitch, int tpitch, int height, "
+            "float ar, float ag, float ab, float response, float grey, float inv_grey"
         ),
         "grain_apply_white": (
             "buf src, buf dst, int pitch, int height, int fx0, int fy0, uint seed, int frame, "

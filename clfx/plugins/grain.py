@@ -101,8 +101,9 @@ Migration from version 1 (pixel-sized grain in absolute linear units):
 
 Quality levels: every level draws the same white noise (levels compare pixel by pixel) and
 differs only in the filter: draft none (white noise, one pass), preview truncated at 2 s,
-final at 4 s, reference at 6 s in float64.  On the device four pixels are one 16-lane vector;
-float32 levels use polynomial log / sin / cos / exp2 (relative error ~2e-7).  Film grain and
+final at 4 s, reference at 6 s in float64.  On the device the colour channels run as planes
+of 8 pixels (alpha has no grain); float32 levels use polynomial log / sin / cos / exp2
+(relative error ~2e-7).  Film grain and
 digital sensor noise are separate effects (``sensor_noise``).
 
 References: Newson, Delon, Galerne 2017, "A stochastic film grain model for
@@ -384,8 +385,8 @@ class Grain(Plugin):
         if truncation is None or max(sigmas) < 1e-6:
             # draft, or size 0: the filter is the single tap 1, so skip the two passes
             knl = rt.kernel("grain.cl", "grain_apply_white", fp64=lvl.fp64, **defines)
-            # 8 pixels a work-item
-            rt.launch(knl, (-(-pitch // 8), height), src, dst, pitch, height, x0, y0, seed,
+            # 16 pixels a work-item
+            rt.launch(knl, (-(-pitch // 16), height), src, dst, pitch, height, x0, y0, seed,
                       frame, ar, ag, ab, *tone)
             return dst
 
@@ -393,17 +394,19 @@ class Grain(Plugin):
         defines["RADIUS"] = radius
         real_bytes = 8 if use64 else 4
         rows = height + 2 * radius
-        # every vload16 of the taps stays inside; grain_noise writes 8 pixels a work-item
-        npitch = -(-(pitch + 2 * radius) // 8) * 8
-        noise = rt.buffer(rows * npitch * 4 * real_bytes)
-        tmp = rt.buffer(rows * pitch * 4 * real_bytes)
+        # three planes (R, G, B: alpha has no grain), 16 pixels a work-item: tmp rows of whole
+        # 16s, noise rows (written 8 pixels a work-item) wide enough for their taps' vload16s
+        tpitch = -(-pitch // 16) * 16
+        npitch = tpitch + -(-2 * radius // 8) * 8
+        noise = rt.buffer(3 * rows * npitch * real_bytes)
+        tmp = rt.buffer(3 * rows * tpitch * real_bytes)
         def knl(name):
             return rt.kernel("grain.cl", name, fp64=lvl.fp64, **defines)
 
         rt.launch(knl("grain_noise"), (npitch // 8, rows), noise, npitch, rows, x0 - radius,
                   y0 - radius, seed, frame)
-        rt.launch(knl("grain_blur_h"), (pitch // 4, rows), noise, tmp, weights, npitch, pitch,
-                  rows)
-        rt.launch(knl("grain_apply"), (-(-pitch // 8), height), src, dst, tmp, weights, pitch,
-                  height, ar, ag, ab, *tone)   # 8 pixels a work-item
+        rt.launch(knl("grain_blur_h"), (tpitch // 16, rows), noise, tmp, weights, npitch,
+                  tpitch, rows)
+        rt.launch(knl("grain_apply"), (tpitch // 16, height), src, dst, tmp, weights, pitch,
+                  tpitch, height, ar, ag, ab, *tone)
         return dst

@@ -2,8 +2,8 @@
  *
  * PoCL's libm calls (log, sincos, pow, exp) run lane by lane; these polynomial versions are
  * pure arithmetic, so a work-item handling 16 lanes runs them as SIMD (3-10x faster here).
- * CLFX_DEFINE_FASTMATH(N) defines clfx_logN, clfx_sincos2piN and clfx_exp2_N for floatN;
- * a kernel file instantiates the widths it needs.  clfx_uniform16 (and its two halves,
+ * CLFX_DEFINE_FASTMATH(N) defines clfx_logN, clfx_sincos2piN, clfx_exp2_N and clfx_expN for
+ * floatN; a kernel file instantiates the widths it needs.  clfx_uniform16 (and its two halves,
  * clfx_hash_xy16 and clfx_stream16) is the 16-lane form of common.h's clfx_uniform, bit
  * for bit.
  */
@@ -50,20 +50,19 @@ inline float##N clfx_exp2_##N(const float##N x)                                 
   const float##N p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f   \
                      + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));      \
   return p * as_float##N((convert_int##N(k) + 127) << 23);                                     \
-}
-
-/* exp(x) on 16 lanes for x * log2(e) in [-126, 126] (clamped): clfx_exp2_16's polynomial with
- * the rounding to the nearest integer done by the 1.5 * 2^23 trick (PoCL expands rint() into
- * a dozen instructions); bit for bit clfx_exp2_16(x * log2 e) there. */
-inline float16 clfx_exp16(const float16 x)
-{
-  const float16 xc = clamp(x * 1.44269504f, -126.0f, 126.0f);
-  const float16 big = xc + 12582912.0f;                /* 1.5 * 2^23: k in the low bits */
-  const float16 k = big - 12582912.0f;
-  const float16 t = (xc - k) * 0.69314718f;
-  const float16 p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f
-                    + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));
-  return p * as_float16((as_int16(big) - 0x4B400000 + 127) << 23);
+}                                                                                              \
+/* exp(x) for x * log2(e) in [-126, 126] (clamped): clfx_exp2_N's polynomial with the          \
+ * rounding to the nearest integer done by the 1.5 * 2^23 trick (PoCL expands rint() into      \
+ * a dozen instructions); bit for bit clfx_exp2_N(x * log2 e) there. */                        \
+inline float##N clfx_exp##N(const float##N x)                                                  \
+{                                                                                              \
+  const float##N xc = clamp(x * 1.44269504f, -126.0f, 126.0f);                                 \
+  const float##N big = xc + 12582912.0f;                /* 1.5 * 2^23: k in the low bits */    \
+  const float##N k = big - 12582912.0f;                                                        \
+  const float##N t = (xc - k) * 0.69314718f;                                                   \
+  const float##N p = 1.0f + t * (1.0f + t * (0.5f + t * (1.6666667e-1f + t * (4.1666667e-2f    \
+                    + t * (8.3333333e-3f + t * (1.3888889e-3f + t * 1.9841270e-4f))))));       \
+  return p * as_float##N((as_int##N(big) - 0x4B400000 + 127) << 23);                           \
 }
 
 /* clfx_hash (lowbias32) on 16 lanes at once. */

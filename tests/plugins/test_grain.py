@@ -362,6 +362,45 @@ def test_crop_gives_same_values_at_same_frame_coordinates(rt, rng, quality):
     assert crop.tobytes() == np.ascontiguousarray(full[7:28, 13:43]).tobytes()
 
 
+@pytest.mark.parametrize("quality", LEVELS)
+@pytest.mark.parametrize("width", (44, 48, 52, 60))
+@pytest.mark.parametrize("kind", ("colour", "monochrome", "coverage"))
+def test_every_row_tail_gives_the_wider_frames_values(rt, rng, quality, width, kind):
+    """A work-item takes 16 pixels and rows are padded to 4 only: a row ending 4, 8 or 12
+    pixels into its last 16 (and one ending on a whole 16) gets, pixel for pixel, what the
+    same frame pixels get inside a wider render, alpha copied."""
+    full_src = rng.uniform(0.0, 1.0, (21, 80, 4)).astype(np.float32)
+    full_src[..., 3] = rng.uniform(-0.2, 1.2, (21, 80)) if kind == "coverage" else 1.0
+    kw = dict(amount=0.1, size=2.0, middle_grey=0.18, monochrome=kind == "monochrome",
+              coverage="alpha" if kind == "coverage" else "ignore")
+    full, _ = run(rt, full_src, quality, frame=7, data_window=Rect(100, 50, 180, 71), **kw)
+    crop, _ = run(rt, np.ascontiguousarray(full_src[:, 8:8 + width]), quality, frame=7,
+                  data_window=Rect(108, 50, 108 + width, 71), **kw)
+    assert crop.tobytes() == np.ascontiguousarray(full[:, 8:8 + width]).tobytes()
+    assert crop[..., 3].tobytes() == full_src[:, 8:8 + width, 3].tobytes()
+
+
+def test_the_filtered_noise_carries_no_alpha(rt, rng, monkeypatch):
+    """Alpha gets no grain, so the noise and its blurred copy hold R, G and B only: 12 bytes
+    a pixel each in float32 (RGBA lanes took 16, a quarter of the taps' and the tone model's
+    work on zeros)."""
+    src = rng.uniform(0.0, 1.0, (30, 400, 4)).astype(np.float32)
+    sizes = []
+    real_buffer = type(rt).buffer
+
+    def buffer(self, nbytes):
+        sizes.append(int(nbytes))
+        return real_buffer(self, nbytes)
+
+    monkeypatch.setattr(type(rt), "buffer", buffer)
+    _, p = run(rt, src, "final", amount=0.1, size=2.0, middle_grey=0.18)
+    radius, _ = grain_weights(grain_sigmas_px(p, DISPLAY_2K.width, S35.sensor_width), 4.0)
+    rows = 30 + 2 * radius
+    big = sorted(sizes)[-2:]            # the noise and the blurred noise
+    assert len(sizes) >= 2 and min(big) >= rows * 400 * 12
+    assert sum(big) <= 2 * rows * (400 + 2 * radius + 24) * 12
+
+
 # -- coverage ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("quality", LEVELS)
 def test_transparent_pixels_get_no_grain_and_partial_alpha_its_share(rt, rng, quality):
