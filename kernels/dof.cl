@@ -522,28 +522,6 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
   hcoc[y * hpitch + x] = 0.5f * dot(w, r) / dot(w, (float4)1.0f);
 }
 
-/* The far field's norm: 1 / the area (px^2) of a CoC of radius `r` (>= 0), at least 1 px
- * (dof_inv_area's buffer of the taps', dof_gather4's of the pixels'). */
-#define DOF_INV_AREA(r) (1.0f / fmax(CLFX_PI * (r) * (r), 1.0f))
-
-/* DOF_INV_AREA of the `n` radii |coc| -> `inva` (the gather's far-field norms of its taps:
- * one division a pixel, not one a tap and pixel), 16 a work-item. */
-kernel void dof_inv_area(global const float *coc, global float *inva, const int n)
-{
-  const int i = get_global_id(0) * 16;
-  if(i + 16 <= n)
-  {
-    const float16 r = fabs(vload16(0, coc + i));
-    vstore16(DOF_INV_AREA(r), 0, inva + i);
-    return;
-  }
-  for(int j = i; j < n; j++)
-  {
-    const float r = fabs(coc[j]);
-    inva[j] = DOF_INV_AREA(r);
-  }
-}
-
 #define LANES(v) ((v).s0000111122223333)
 
 /* any() / all() of an int4 mask (-1 / 0 lanes) as vector ORs / ANDs and one test: PoCL's
@@ -682,21 +660,16 @@ inline __attribute__((always_inline)) T dof_near_w##SUF( \
    it, estimated from the visible background within p's radius; with `cap_it`, the part of \
    the coverage behind a near p that the tap's own CoC does not give is a guess at hidden \
    background: its highlights are capped (`k`: the colour's scale), so a light beside a \
-   blurred bar does not shine through it.  The norm 1 / max(pi rf^2, 1) (DOF_INV_AREA) from \
-   the tap's `ia_q` and the pixels' `ia_p0` (of max(r0, 0)), `ia_pa` (of |r0|): it falls as \
-   the radius grows, so that of a min (max) of radii is the max (min) of theirs, bit for \
-   bit, and rf's selection gives it without a division. */ \
+   blurred bar does not shine through it. */ \
 inline __attribute__((always_inline)) void dof_far_w##SUF( \
     const T rq, const T arq, const IT q_near, const T frac, const T d_far, const T inv_s, \
-    const T r0, const IT p_near, const int cap_it, const T k, const T ia_q, const T ia_p0, \
-    const T ia_pa, T *wf, T *wk DOF_CE_ARGS(T)) \
+    const T r0, const IT p_near, const int cap_it, const T k, T *wf, T *wk DOF_CE_ARGS(T)) \
 { \
   const T rf = select(select(arq, fmin(arq, fmax(r0, 0.0f)), rq > r0), fmax(arq, fabs(r0)), \
                       p_near); \
   DOF_CLIPS(T, clip_f, efx, efy, gfx, gfy, rf, +) \
   const T cov_f = DOF_COV_CLIP(clamp((rf - d_far) * inv_s + 0.5f, 0.0f, 1.0f), clip_f); \
-  const T ia_f = select(select(ia_q, fmax(ia_q, ia_p0), rq > r0), fmin(ia_q, ia_pa), p_near); \
-  const T norm = select(ia_f, (T)(0.0f), q_near) * frac; \
+  const T norm = select(1.0f / fmax(CLFX_PI * rf * rf, 1.0f), (T)(0.0f), q_near) * frac; \
   T w = cov_f * norm; \
   if(!cap_it) \
   { \
@@ -738,9 +711,8 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
                                                    const float4 rq, const float4 frac,
                                                    const float8 tp, const float inv_s,
                                                    const float4 r0, const int4 p_near,
-                                                   const int any_near, const float cap_s,
-                                                   const float4 ia_q, const float4 ia_p0,
-                                                   const float4 ia_pa CATEYE_ARGS)
+                                                   const int any_near, const float cap_s
+                                                   CATEYE_ARGS)
 {
   const float4 arq = fabs(rq);
   const int4 q_near = rq < -NEAR_EPS;
@@ -752,7 +724,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
   const int cap_it = any_near && dof_any4(p_near & ~q_near);
   float4 wf, wk;
   dof_far_w4(rq, arq, q_near, frac, (float4)(tp.s3), (float4)(inv_s), r0, p_near, cap_it,
-             cap_it ? DOF_CAP_K(dof_lum4(c)) : (float4)(0.0f), ia_q, ia_p0, ia_pa, &wf, &wk
+             cap_it ? DOF_CAP_K(dof_lum4(c)) : (float4)(0.0f), &wf, &wk
              DOF_CE_PASS((float4)(tp.s5), (float4)(tp.s6), DOF_SAME));
   s->ff += TO_REAL16(c * LANES(wk));
   s->wf_sum += TO_REAL4(wf);
@@ -794,8 +766,7 @@ inline __attribute__((always_inline)) void dof_taps(
     dof_sums *s, const float16 c0, const float16 c1, const float16 c2, const float16 c3,
     const float16 rq, const int4 use, const float16 d_near, const float16 d_far,
     const float4 area, const float16 inv_s, const float16 r0, const int16 p_near,
-    const int any_near, const float cap_s, const float16 ia_q, const float16 ia_p0,
-    const float16 ia_pa DOF_CE_ARGS(float16))
+    const int any_near, const float cap_s DOF_CE_ARGS(float16))
 {
   const float16 arq = fabs(rq);
   const int16 q_near = rq < -NEAR_EPS;
@@ -810,7 +781,7 @@ inline __attribute__((always_inline)) void dof_taps(
                                          dof_lum4(c3)) : (float16)(0.0f);
   float16 wf, wk;
   dof_far_w16(rq, arq, q_near, (float16)(1.0f), d_far, inv_s, r0, p_near, cap_it,
-              DOF_CAP_K(lum), ia_q, ia_p0, ia_pa, &wf, &wk DOF_CE_IN);
+              DOF_CAP_K(lum), &wf, &wk DOF_CE_IN);
   DOF_ADD_FAR(0, c0) DOF_ADD_FAR(1, c1) DOF_ADD_FAR(2, c2) DOF_ADD_FAR(3, c3)
 }
 #undef DOF_ADD_NEAR
@@ -824,8 +795,8 @@ inline __attribute__((always_inline)) void dof_taps(
  * coverage; `layer` 1 (2): at the centre tap a mixed pixel stands for its far (near) part
  * only (the two gathers of a mixed pixel, dof_gather): those go tap by tap (dof_tap), the
  * others 4 taps at a time (dof_taps; `n4`: the table's column stride). */
-inline REAL16 dof_gather4(global const float *col, global const float *coc,
-                          global const float *inva, const int ppitch, const int plane, const int base,
+inline REAL16 dof_gather4(global const float *col, global const float *coc, const int ppitch,
+                          const int plane, const int base,
                           const float16 c0_in, const float4 r0, global const float *taps,
                           const int n4, const int first, const int2 count, const float cap,
                           const float scale, global const float *mixa,
@@ -837,14 +808,12 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc,
   const int any_near = dof_any4(p_near);
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
-  const float4 ia_p0 = DOF_INV_AREA(fmax(r0, 0.0f)), ia_pa = DOF_INV_AREA(fabs(r0));
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
   const int end1 = first + count.x, end2 = first + count.y;
   if(!mix && !DOF_TAP_BY_TAP)
   {
     const float16 r016 = PIXELS(r0);
     const int16 p_near16 = PIXELS(p_near);
-    const float16 ia_p016 = PIXELS(ia_p0), ia_pa16 = PIXELS(ia_pa);
     global const float *cols = taps + 8 * (n4 - 4);   /* the table column by column */
     /* a block: the taps from `i` in slots 0-3 (`use`: those before `end`; those after are
        read, not added: every table's taps lie within the padding, the columns' padding is
@@ -863,11 +832,9 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc,
     for(int i = first; i < end1; i += 4)
     {
       DOF_BLOCK(end1)
-      const float16 ia_q = (float16)(vload4(0, inva + at.s0), vload4(0, inva + at.s1),
-                                     vload4(0, inva + at.s2), vload4(0, inva + at.s3));
       dof_taps(&s, DOF_COLOUR(0), DOF_COLOUR(1), DOF_COLOUR(2), DOF_COLOUR(3), rq, use,
                LANES(DOF_COLUMN(2)), LANES(DOF_COLUMN(3)), DOF_COLUMN(4), inv_s, r016,
-               p_near16, any_near, cap_s, ia_q, ia_p016, ia_pa16
+               p_near16, any_near, cap_s
                DOF_CE_PASS(LANES(DOF_COLUMN(5)), LANES(DOF_COLUMN(6)), PIXELS));
     }
     /* the taps beyond the pixels' own radii (dof_tap_count): their far weights are 0, only
@@ -900,11 +867,9 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc,
       const float4 rq = vload4(0, coc + at);
       const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
       const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
-      const float4 ia_q = vload4(0, inva + at);
       if(!dof_any4(aq > 0.0f))
       {
-        dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s, ia_q, ia_p0, ia_pa
-                CATEYE_PASS);
+        dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
         continue;
       }
       /* a mixed pixel: its far part C - a d at the far layer's radius and its near part
@@ -917,11 +882,9 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc,
       if(layer && i == first) an = select(an, (float4)(layer == 2 ? 1.0f : 0.0f), sq);
       const int16 sq16 = LANES(sq);
       dof_tap(&s, select(c, c - d * LANES(aq), sq16), select(rq, rr.s1357, sq), one - an, tp,
-              inv_s, r0, p_near, any_near, cap_s,
-              select(ia_q, DOF_INV_AREA(fabs(rr.s1357)), sq), ia_p0, ia_pa CATEYE_PASS);
+              inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
       dof_tap(&s, select(c, c + d * LANES(one - aq), sq16), select(rq, rr.s0246, sq), an, tp,
-              inv_s, r0, p_near, any_near, cap_s,
-              select(ia_q, DOF_INV_AREA(fabs(rr.s0246)), sq), ia_p0, ia_pa CATEYE_PASS);
+              inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
     }
     /* the taps beyond the pixels' own radii: only those in front of the focus plane */
     for(int i = end1; i < end2; i++)
@@ -974,7 +937,7 @@ inline int dof_all_finite16(float16 v)
 /* The gather of 4 pixels, taken again with scaled colours if float sums overflowed. */
 
 inline float16 dof_gather_safe(global const float *col, global const float *coc,
-                               global const float *inva, const int ppitch, const int plane, const int base,
+                               const int ppitch, const int plane, const int base,
                                const float16 c0,
                                const float4 r0, global const float *taps, const int n4,
                                const int first,
@@ -982,11 +945,11 @@ inline float16 dof_gather_safe(global const float *col, global const float *coc,
                                global const float *mixr, global const float *mixd,
                                const int mix, const int layer CATEYE_ARGS)
 {
-  const REAL16 out = dof_gather4(col, coc, inva, ppitch, plane, base, c0, r0, taps, n4, first,
+  const REAL16 out = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, n4, first,
                                  count, cap, 1.0f, mixa, mixr, mixd, mix, layer CATEYE_PASS);
   const float16 o = TO_FLOAT16(clamp(out, (REAL16)(-FLT_MAX), (REAL16)(FLT_MAX)));
   if(dof_all_finite16(o)) return o;
-  const REAL16 s = dof_gather4(col, coc, inva, ppitch, plane, base, c0, r0, taps, n4, first,
+  const REAL16 s = dof_gather4(col, coc, ppitch, plane, base, c0, r0, taps, n4, first,
                                count, cap, OVERFLOW_SCALE, mixa, mixr, mixd, mix, layer
                                CATEYE_PASS);
   return clamp(TO_FLOAT16(s) * (1.0f / OVERFLOW_SCALE), -FLT_MAX, FLT_MAX);
@@ -1135,8 +1098,7 @@ inline int2 dof_tap_count(global const int *tile_info, const int counts, const i
  * (x + s0, y + s1), `col` / `coc` pixel (x, y) grid pixel (x + s2, y + s3); `hplace.s01`:
  * the grid pixel (half resolution) of `hres` pixel (0, 0).  A whole render: all 0; a band of
  * a tiled render: its rows of the whole render's grid (clfx/plugins/dof.py). */
-kernel void dof_gather(global const float *col, global const float *coc,
-                       global const float *inva, const int ppitch,
+kernel void dof_gather(global const float *col, global const float *coc, const int ppitch,
                        const int pad, global float *dst, const int pitch,
                        const int width, const int height, global const float *taps,
                        const int taps_n4, global const int *tile_info,
@@ -1257,7 +1219,7 @@ kernel void dof_gather(global const float *col, global const float *coc,
   const float16 c0 = vload16(0, col + base * 4);
   if(!twice)
   {
-    float16 o = dof_gather_safe(col, coc, inva, ppitch, plane, base, c0, r, taps, taps_n4, first,
+    float16 o = dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, taps_n4, first,
                                 dof_tap_count(tile_info, counts, counts_n, near_r, r, count),
                                 cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS);
     /* pixels in focus or nearly beside out-of-focus ones in a sparse table's group: a
@@ -1266,7 +1228,7 @@ kernel void dof_gather(global const float *col, global const float *coc,
        table's gather (every pixel within sharp_r), as a group of 4 such pixels does */
     const int4 sharp4 = r >= -NEAR_EPS && r < sharp_r;
     if(info.s5 > 0 && first == info.s0 && any(sharp4))
-      o = select(o, dof_gather_safe(col, coc, inva, ppitch, plane, base, c0, r, taps, taps_n4, info.s2,
+      o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, taps_n4, info.s2,
                                     dof_tap_count(tile_info, info.sb, info.sc, near_r, r,
                                                   info.s3), cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
                  LANES(sharp4));
@@ -1277,12 +1239,12 @@ kernel void dof_gather(global const float *col, global const float *coc,
      blended by its coverage */
   const float16 dm = vload16(0, mixd + base * 4);
   const int16 sm16 = LANES(sm);
-  const float16 o_far = dof_gather_safe(col, coc, inva, ppitch, plane, base,
+  const float16 o_far = dof_gather_safe(col, coc, ppitch, plane, base,
                                         select(c0, c0 - dm * LANES(am), sm16), rf, taps, taps_n4,
                                         first,
                                         dof_tap_count(tile_info, counts, counts_n, near_r, rf,
                                                       count), cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
-  const float16 o_near = dof_gather_safe(col, coc, inva, ppitch, plane, base,
+  const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
                                          taps, taps_n4, first,
                                          dof_tap_count(tile_info, counts, counts_n, near_r, rn,

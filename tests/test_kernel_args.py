@@ -203,7 +203,7 @@ def _retyped(name: str, index: int, new: str) -> dict[str, KernelArgs]:
 
 
 @pytest.mark.parametrize("declared, said", [
-    (_retyped("dof_gather", 16, "int"), "dof_gather parameter 17 (cap_factor): float"),
+    (_retyped("dof_gather", 15, "int"), "dof_gather parameter 16 (cap_factor): float"),
     (_retyped("vignette_apply", 0, "int"), "vignette_apply parameter 1 (src): a global"),
     (_retyped("motion_gather", 6, "buf"), "motion_gather parameter 7 (ntiles): a private"),
     (_retyped("motion_dilate", 7, "int"), "motion_dilate parameter 8 (auxb): a global"),

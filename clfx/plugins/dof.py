@@ -1115,11 +1115,7 @@ class Dof(Plugin):
         (:meth:`_mixed`) the gather splits, None: none (the half-resolution gather)."""
         hres_args = ((hres, hres.pitch, half_size[0], half_size[1])
                      if hres is not None else (dst, dst.pitch, 1, 1))
-        # the far field's norm of every radius (dof_inv_area: one division a pixel)
-        inva = rt.image(Rect.from_size(coc.pitch, coc.height), 1)
-        n = coc.pitch * coc.height
-        rt.launch(rt.kernel("dof.cl", "dof_inv_area"), (-(-n // 16),), coc, inva, n)
-        rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, inva, col.pitch, pad,
+        rt.launch(knl, (-(-dst.width // 4), dst.height), col, coc, col.pitch, pad,
                   dst, dst.pitch, dst.width, dst.height, *taps, tiles,
                   frame.log_mean, frame.tiles_x, frame.tiles_y, tile,
                   CAP_FACTOR, *hres_args, refine_bounds(lvl.refine), lvl.half_res_radius,
