@@ -497,6 +497,41 @@ def dilate_tiles(t: np.ndarray, reach: int) -> np.ndarray:
     return out
 
 
+def near_bounds(near: np.ndarray, table: np.ndarray, tile: int) -> np.ndarray:
+    """Per tile of ``tile`` px, the bound of the radii in front of the focus plane that can
+    light its pixels through the near field: the largest ``near`` (px per tile) of a tile
+    that a tap of ``table`` (:func:`tap_table`) can read from it at an aperture distance
+    within that tile's own ``near``.  A near tap adds light only within its own radius (its
+    coverage ramp, ``d_near - s / 2`` with ``s = 2^L`` its lattice spacing, below ``|r|``),
+    so a tile whose near radii fall short of every tap reaching it is left out: a small
+    near blur far away no longer holds the table's every tap (the loop beyond the pixels'
+    own radii, dof_tap_count).  A tap from a group of 4 pixels (up to x + 3 of its tile's
+    last pixel) reads radii up to 2 px around it (dof_edges' 3 x 3, dof_mixed's split)."""
+    near = np.asarray(near, np.float64)
+    ox, oy = table[:, 0].astype(np.int64), table[:, 1].astype(np.int64)
+    reach = np.minimum(table[:, 2].astype(np.float64), NEVER) - 0.5 * np.exp2(table[:, 7])
+    # the tile offsets (dx, dy) a tap's read lands in: ox in [dx T - T - 4, dx T + T + 1]
+    # (oy likewise, a margin wider than the rows need); per offset its taps' least reach
+    lo_x, lo_y = -((tile + 1 - ox) // tile), -((tile + 1 - oy) // tile)
+    span = int(max(np.abs(lo_x).max(), np.abs(lo_y).max())) + 3
+    least = np.full((2 * span + 1, 2 * span + 1), np.inf)
+    for kx in range(3):
+        for ky in range(3):
+            dx, dy = lo_x + kx, lo_y + ky
+            hit = (dx * tile - tile - 4 <= ox) & (dy * tile - tile - 4 <= oy)
+            np.minimum.at(least, (dy[hit] + span, dx[hit] + span), reach[hit])
+    out = np.zeros_like(near)
+    h, w = near.shape
+    for dy, dx in zip(*np.nonzero(least < np.inf)):
+        cut = least[dy, dx] - 1e-3       # a float32 rounding's margin
+        dy, dx = int(dy) - span, int(dx) - span
+        ys, yd = slice(max(0, dy), h + min(0, dy)), slice(max(0, -dy), h + min(0, -dy))
+        xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
+        there = near[ys, xs]
+        out[yd, xd] = np.maximum(out[yd, xd], np.where(there >= cut, there, 0.0))
+    return out
+
+
 def refine_bounds(refine: float) -> tuple[float, float, float, float]:
     """``dof_gather``'s refine float4: the level's ``refine`` (a log-luminance span), and the
     ratios within 1e-4 of ``exp(refine)`` below and above which the span is known without
@@ -955,10 +990,7 @@ class Dof(Plugin):
                 reach = int(np.abs(table[start:start + n, :2]).max())
                 tiles[..., 7][(info[0, ..., 0] == start) & (info[0, ..., 1] == n)] = reach
         counts = []
-        # a tap reads radii up to 2 px beyond its pixel (dof_edges' 3 x 3, dof_mixed's
-        # split from its 3 x 3 edge-aware radii)
-        span = int(math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile))
-        bound = dilate_tiles(np.asarray(near, np.float64), span).astype(np.float32)
+        bound = near_bounds(near, table, tile).astype(np.float32)
         tiles[..., 8] = bound.view(np.int32)
         at = tiles.size
         for start, n in sorted({tuple(v) for v in info[:, ..., :2].reshape(-1, 2).tolist()}):
