@@ -525,6 +525,8 @@ def near_bounds(near: np.ndarray, table: np.ndarray, tile: int) -> np.ndarray:
     for dy, dx in zip(*np.nonzero(least < np.inf)):
         cut = least[dy, dx] - 1e-3       # a float32 rounding's margin
         dy, dx = int(dy) - span, int(dx) - span
+        if abs(dy) >= h or abs(dx) >= w:
+            continue
         ys, yd = slice(max(0, dy), h + min(0, dy)), slice(max(0, -dy), h + min(0, -dy))
         xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
         there = near[ys, xs]
