@@ -508,6 +508,11 @@ def near_bounds(near: np.ndarray, table: np.ndarray, tile: int) -> np.ndarray:
     own radii, dof_tap_count).  A tap from a group of 4 pixels (up to x + 3 of its tile's
     last pixel) reads radii up to 2 px around it (dof_edges' 3 x 3, dof_mixed's split)."""
     near = np.asarray(near, np.float64)
+    # taps within a tile's neighbours: every one of those lies within the centre tap's
+    # reach (its own near radius lights it), the bound is their largest near radius
+    span = int(math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile))
+    if span <= 1:
+        return dilate_tiles(near, span)
     ox, oy = table[:, 0].astype(np.int64), table[:, 1].astype(np.int64)
     reach = np.minimum(table[:, 2].astype(np.float64), NEVER) - 0.5 * np.exp2(table[:, 7])
     # the tile offsets (dx, dy) a tap's read lands in: ox in [dx T - T - 4, dx T + T + 1]

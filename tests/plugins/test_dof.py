@@ -268,7 +268,8 @@ def _near_bound_oracle(near, table, tile):
 @pytest.mark.parametrize("table", [
     tap_table(40.0, 32, dense=64.0),
     tap_table(30.0, 12, 2.0, 6, -0.5 * math.pi, 0.3, dense=8.0, squeeze=1.5, core=4.0),
-], ids=["disk", "lattice-hexagon-anamorphic-core"])
+    tap_table(12.0, 32, dense=32.0),
+], ids=["disk", "lattice-hexagon-anamorphic-core", "within-the-neighbours"])
 def test_near_bounds_hold_every_near_radius_a_tap_can_take(rng, table):
     """The tiles' bound of the near radii their taps can be lit by (near_bounds) is at least
     every such radius (a brute-force walk over taps and the tiles they read), and leaves out
@@ -282,7 +283,8 @@ def test_near_bounds_hold_every_near_radius_a_tap_can_take(rng, table):
     lone = np.full((6, 9), 1e-3)
     lone[0, 0] = 3.0
     got = dof_module.near_bounds(lone, table, 16)
-    assert got[0, 0] == 3.0 and got[5, 8] == 1e-3     # the table reaches it, its light not
+    if np.abs(table[:, :2]).max() > 60:               # the table reaches it, its light not
+        assert got[0, 0] == 3.0 and got[5, 8] == 1e-3
 
 
 def _span_bound(near, table, tile):
