@@ -505,8 +505,8 @@ def near_bounds(near: np.ndarray, table: np.ndarray, tile: int) -> np.ndarray:
     coverage ramp, ``d_near - s / 2`` with ``s = 2^L`` its lattice spacing, below ``|r|``),
     so a tile whose near radii fall short of every tap reaching it is left out: a small
     near blur far away no longer holds the table's every tap (the loop beyond the pixels'
-    own radii, dof_tap_count).  A tap from a group of 4 pixels (up to x + 3 of its tile's
-    last pixel) reads radii up to 2 px around it (dof_edges' 3 x 3, dof_mixed's split)."""
+    own radii, dof_tap_count).  A tap reads radii up to 2 px around it (dof_edges' 3 x 3,
+    dof_mixed's split), from any pixel of the tile (a margin of 3 px more in x and rows)."""
     near = np.asarray(near, np.float64)
     # taps within a tile's neighbours: every one of those lies within the centre tap's
     # reach (its own near radius lights it), the bound is their largest near radius

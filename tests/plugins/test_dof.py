@@ -248,8 +248,8 @@ def test_gather_leaves_out_only_taps_that_add_nothing_anywhere(rt, monkeypatch, 
 
 def _near_bound_oracle(near, table, tile):
     """Per tile, the largest near radius of a tile a tap can read (within 2 px of where it
-    lands from any pixel of a group of 4 starting in the tile) and light from it: that
-    tile's radius above the tap's near distance less half its lattice spacing."""
+    lands from any pixel of the tile: a group of 4 lies in one tile) and light from it:
+    that tile's radius above the tap's near distance less half its lattice spacing."""
     h, w = near.shape
     reach = table[:, 2].astype(np.float64) - 0.5 * np.exp2(table[:, 7])
     out = np.zeros_like(near)
@@ -259,7 +259,7 @@ def _near_bound_oracle(near, table, tile):
                 for y in range(max(0, (ty * tile + oy - 2) // tile),
                                min(h - 1, (ty * tile + tile - 1 + oy + 2) // tile) + 1):
                     for x in range(max(0, (tx * tile + ox - 2) // tile),
-                                   min(w - 1, (tx * tile + tile + 2 + ox + 2) // tile) + 1):
+                                   min(w - 1, (tx * tile + tile - 1 + ox + 2) // tile) + 1):
                         if near[y, x] > e:
                             out[ty, tx] = max(out[ty, tx], near[y, x])
     return out
