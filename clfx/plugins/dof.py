@@ -1109,7 +1109,7 @@ class Dof(Plugin):
             colh = rt.image(Rect.from_size(hpadded.width, hpadded.height * (1 + g.half_l)), 4)
             coch = rt.image(hpadded, 1)
             rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
-                      (colh.pitch, hpadded.height), col, coc, col.pitch, padded.height,
+                      (-(-colh.pitch // 4), hpadded.height), col, coc, col.pitch, padded.height,
                       colh, coch, colh.pitch, hpadded.height)
             prefilter(rt, colh, hpadded.height, g.half_l)
             # the half-resolution rows this band's upsampling reads (row0 is even:
