@@ -60,6 +60,9 @@
 #define DOF_CATEYE 0
 #endif
 #define CATEYE_MIN_FRAC 1e-3f
+#ifndef DOF_DOWN2_PIXELWISE
+#define DOF_DOWN2_PIXELWISE 0   /* 1: dof_down2 pixel by pixel (its check: the same bits) */
+#endif
 #ifndef DOF_TAP_BY_TAP
 #define DOF_TAP_BY_TAP 0   /* 1: every gather tap by tap (the blocks' check: the same bits) */
 #endif   /* the open aperture's smallest fraction (normalisation) */
@@ -534,7 +537,7 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
 {
   const int x = get_global_id(0) * 4, y = get_global_id(1);
   if(x >= hpitch || y >= hheight) return;
-  if(2 * x + 8 > ppitch || x + 4 > hpitch)
+  if(DOF_DOWN2_PIXELWISE || 2 * x + 8 > ppitch || x + 4 > hpitch)
   {
     for(int j = x; j < min(x + 4, hpitch); j++)
       dof_down2_px(col, coc, ppitch, pheight, hcol, hcoc, hpitch, j, y);

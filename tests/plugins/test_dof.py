@@ -314,6 +314,33 @@ def test_gather_leaves_out_a_small_near_blur_far_away(rt, monkeypatch):
     assert np.array_equal(got.view(np.uint32), run(rt, src, depth, "final", cam).view(np.uint32))
 
 
+def test_down2_gives_the_bits_of_its_pixel_by_pixel_build(rt, rng):
+    """dof_down2 takes 4 half-resolution pixels a work-item (float16 colours, float4
+    luminance weights, dot(w, r) as PoCL's): the same bits as its build that goes pixel by
+    pixel (DOF_DOWN2_PIXELWISE), over lit, dark, even and huge boxes, the rows' clamped
+    ends and an odd height."""
+    h, w = 9, 62
+    col = rng.uniform(0.0, 4.0, (h, w, 4)).astype(np.float32)
+    col[:, :8] = 0.0                                    # dark boxes: the plain mean
+    col[2:4, 8:16] = 0.7                                # even boxes
+    col[4:6, 16:24, :3] = np.float32(3e38)              # near FLT_MAX
+    col[::3, 30:50:3, :3] *= 1e4                        # lights beside dim pixels
+    coc = rng.uniform(-30.0, 30.0, (h, w)).astype(np.float32)
+    src, radii = rt.upload(col), rt.upload(coc)
+    assert src.pitch == radii.pitch
+
+    def down2(**defines):
+        half = (-(-h // 2), -(-w // 2) + 2)     # past the row's end: clamped reads
+        hcol, hcoc = rt.image(half, 4), rt.image(half, 1)
+        rt.launch(rt.kernel("dof.cl", "dof_down2", **defines),
+                  (-(-hcol.pitch // 4), hcol.height), src, radii, src.pitch, h, hcol, hcoc,
+                  hcol.pitch, hcol.height)
+        return (rt.from_device(hcol, np.float32, hcol.pitch * hcol.height * 4),
+                rt.from_device(hcoc, np.float32, hcoc.pitch * hcoc.height))
+    for got, want in zip(down2(), down2(DOF_DOWN2_PIXELWISE=1)):
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
 # -- oracle --------------------------------------------------------------------------------
 @pytest.mark.parametrize("quality", ["preview", "reference"])
 @pytest.mark.parametrize("shape", [(17, 31), (40, 52), (64, 48)])
