@@ -19,7 +19,8 @@
  *   blurred foreground (dof_cap).
  * dof_down2: the 2 x 2 box of the padded colour and its radius (halved: half-res px),
  *   weighted by each pixel's luminance (and evenly), each term scaled before the sum so
- *   that finite values stay finite.
+ *   that finite values stay finite; 4 half-res pixels a work-item (DOF_DOWN2_PIXELWISE=1:
+ *   one at a time, the same bits).
  * dof_prefilter: one pass of the binomial a-trous pyramid of the padded colour: planes
  *   1..L after plane 0, the tents that the sparse lattices of taps sample.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
