@@ -19,7 +19,8 @@
  *   blurred foreground (dof_cap).
  * dof_down2: the 2 x 2 box of the padded colour and its radius (halved: half-res px),
  *   weighted by each pixel's luminance (and evenly), each term scaled before the sum so
- *   that finite values stay finite.
+ *   that finite values stay finite; 4 half-res pixels a work-item (DOF_DOWN2_PIXELWISE=1:
+ *   one at a time, the same bits).
  * dof_prefilter: one pass of the binomial a-trous pyramid of the padded colour: planes
  *   1..L after plane 0, the tents that the sparse lattices of taps sample.
  * dof_gather: each work-item gathers 4 horizontally adjacent pixels (one float16) over the
@@ -60,6 +61,9 @@
 #define DOF_CATEYE 0
 #endif
 #define CATEYE_MIN_FRAC 1e-3f
+#ifndef DOF_DOWN2_PIXELWISE
+#define DOF_DOWN2_PIXELWISE 0   /* 1: dof_down2 pixel by pixel (its check: the same bits) */
+#endif
 #ifndef DOF_TAP_BY_TAP
 #define DOF_TAP_BY_TAP 0   /* 1: every gather tap by tap (the blocks' check: the same bits) */
 #endif   /* the open aperture's smallest fraction (normalisation) */
@@ -495,12 +499,11 @@ kernel void dof_prefilter(global const float *src, const int src_off, global flo
   vstore4(c, dst_off + y * ppitch + x, dst);
 }
 
-kernel void dof_down2(global const float *col, global const float *coc, const int ppitch,
-                      const int pheight, global float *hcol, global float *hcoc,
-                      const int hpitch, const int hheight)
+/* dof_down2's half-resolution pixel (x, y). */
+inline void dof_down2_px(global const float *col, global const float *coc, const int ppitch,
+                         const int pheight, global float *hcol, global float *hcoc,
+                         const int hpitch, const int x, const int y)
 {
-  const int x = get_global_id(0), y = get_global_id(1);
-  if(x >= hpitch || y >= hheight) return;
   const int x0 = min(2 * x, ppitch - 1), x1 = min(2 * x + 1, ppitch - 1);
   const int y0 = min(2 * y, pheight - 1), y1 = min(2 * y + 1, pheight - 1);
   const float4 c = 0.25f * vload4(y0 * ppitch + x0, col) + 0.25f * vload4(y0 * ppitch + x1, col)
@@ -520,6 +523,52 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
   const float4 w = m > 0.0f && m <= FLT_MAX ? l / m + 0.01f : (float4)1.0f;
   const float4 r = (float4)(coc[i00], coc[i01], coc[i10], coc[i11]);
   hcoc[y * hpitch + x] = 0.5f * dot(w, r) / dot(w, (float4)1.0f);
+}
+
+/* The luminance of 4 pixels' colours (float16: pixel p's RGBA in lanes 4 p..4 p + 3),
+ * clfx_luminance's operations lane by lane. */
+#define DOF_LUM4(v) ((CLFX_LUMA_R) * (v).s048c + (CLFX_LUMA_G) * (v).s159d \
+                     + (CLFX_LUMA_B) * (v).s26ae)
+
+/* 4 half-resolution pixels a work-item: dof_down2_px's operations lane by lane (dot(w, r)
+ * as PoCL's: unfused products, added in pairs), away from the rows' clamped ends. */
+kernel void dof_down2(global const float *col, global const float *coc, const int ppitch,
+                      const int pheight, global float *hcol, global float *hcoc,
+                      const int hpitch, const int hheight)
+{
+  const int x = get_global_id(0) * 4, y = get_global_id(1);
+  if(x >= hpitch || y >= hheight) return;
+  if(DOF_DOWN2_PIXELWISE || 2 * x + 8 > ppitch || x + 4 > hpitch)
+  {
+    for(int j = x; j < min(x + 4, hpitch); j++)
+      dof_down2_px(col, coc, ppitch, pheight, hcol, hcoc, hpitch, j, y);
+    return;
+  }
+  const int i0 = min(2 * y, pheight - 1) * ppitch + 2 * x;
+  const int i1 = min(2 * y + 1, pheight - 1) * ppitch + 2 * x;
+  const float16 a0 = vload16(0, col + i0 * 4), b0 = vload16(1, col + i0 * 4);
+  const float16 a1 = vload16(0, col + i1 * 4), b1 = vload16(1, col + i1 * 4);
+  /* the 4 boxes' top left, top right, bottom left and bottom right pixels */
+  const float16 p00 = (float16)(a0.s0123, a0.s89ab, b0.s0123, b0.s89ab);
+  const float16 p01 = (float16)(a0.s4567, a0.scdef, b0.s4567, b0.scdef);
+  const float16 p10 = (float16)(a1.s0123, a1.s89ab, b1.s0123, b1.s89ab);
+  const float16 p11 = (float16)(a1.s4567, a1.scdef, b1.s4567, b1.scdef);
+  vstore16(0.25f * p00 + 0.25f * p01 + 0.25f * p10 + 0.25f * p11, 0,
+           hcol + (y * hpitch + x) * 4);
+  const float4 l00 = fmax(DOF_LUM4(p00), 0.0f), l01 = fmax(DOF_LUM4(p01), 0.0f);
+  const float4 l10 = fmax(DOF_LUM4(p10), 0.0f), l11 = fmax(DOF_LUM4(p11), 0.0f);
+  const float4 m = fmax(fmax(l00, l01), fmax(l10, l11));
+  const int4 lit = m > 0.0f && m <= FLT_MAX;
+  const float4 one = (float4)(1.0f);
+  const float4 w00 = select(one, l00 / m + 0.01f, lit), w01 = select(one, l01 / m + 0.01f, lit);
+  const float4 w10 = select(one, l10 / m + 0.01f, lit), w11 = select(one, l11 / m + 0.01f, lit);
+  const float8 r0 = vload8(0, coc + i0), r1 = vload8(0, coc + i1);
+  const float4 q00 = w00 * r0.s0246;   /* products on their own: not fused into the sums */
+  const float4 q01 = w01 * r0.s1357;
+  const float4 q10 = w10 * r1.s0246;
+  const float4 q11 = w11 * r1.s1357;
+  vstore4(0.5f * ((q00 + q01) + (q10 + q11)) / ((w00 + w01) + (w10 + w11)), 0,
+          hcoc + y * hpitch + x);
 }
 
 #define LANES(v) ((v).s0000111122223333)

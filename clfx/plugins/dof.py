@@ -119,7 +119,8 @@ Warfare", simplified for offline use)
    A table lists its taps nearest first, and the gather stops it where no tap can add light
    any more (:func:`tap_counts`): where none of the 4 pixels lies in front of the focus
    plane, at the largest of their radii and of the near-field radii its taps can read (per
-   tile, from the depth ranges of the tiles within their reach, with a float32 margin).  The
+   tile, from the depth ranges of the tiles within their reach whose near radius reaches
+   back to a tap that reads them, :func:`near_bounds`, with a float32 margin).  The
    taps left out add exact zeros (the same bits): on the 1080p bench frame at final the
    in-focus pixels' taps went from 4.1 to 0.5 million (groups of 4).
 6. Tiles whose every pixel is far out of focus (CoC radius above the level's
@@ -494,6 +495,48 @@ def dilate_tiles(t: np.ndarray, reach: int) -> np.ndarray:
             ys, yd = slice(max(0, dy), h + min(0, dy)), slice(max(0, -dy), h + min(0, -dy))
             xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
             out[yd, xd] = np.maximum(out[yd, xd], t[ys, xs])
+    return out
+
+
+def near_bounds(near: np.ndarray, table: np.ndarray, tile: int) -> np.ndarray:
+    """Per tile of ``tile`` px, the bound of the radii in front of the focus plane that can
+    light its pixels through the near field: the largest ``near`` (px per tile) of a tile
+    that a tap of ``table`` (:func:`tap_table`) can read from it at an aperture distance
+    within that tile's own ``near``.  A near tap adds light only within its own radius (its
+    coverage ramp, ``d_near - s / 2`` with ``s = 2^L`` its lattice spacing, below ``|r|``),
+    so a tile whose near radii fall short of every tap reaching it is left out: a small
+    near blur far away no longer holds the table's every tap (the loop beyond the pixels'
+    own radii, dof_tap_count).  A tap reads radii up to 2 px around it (dof_edges' 3 x 3,
+    dof_mixed's split), from any pixel of the tile (a margin of 3 px more in x and rows)."""
+    near = np.asarray(near, np.float64)
+    # taps within a tile's neighbours: every one of those lies within the centre tap's
+    # reach (its own near radius lights it), the bound is their largest near radius
+    span = int(math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile))
+    if span <= 1:
+        return dilate_tiles(near, span)
+    ox, oy = table[:, 0].astype(np.int64), table[:, 1].astype(np.int64)
+    reach = np.minimum(table[:, 2].astype(np.float64), NEVER) - 0.5 * np.exp2(table[:, 7])
+    # the tile offsets (dx, dy) a tap's read lands in: ox in [dx T - T - 4, dx T + T + 1]
+    # (oy likewise, a margin wider than the rows need); per offset its taps' least reach
+    lo_x, lo_y = -((tile + 1 - ox) // tile), -((tile + 1 - oy) // tile)
+    span = int(max(np.abs(lo_x).max(), np.abs(lo_y).max())) + 3
+    least = np.full((2 * span + 1, 2 * span + 1), np.inf)
+    for kx in range(3):
+        for ky in range(3):
+            dx, dy = lo_x + kx, lo_y + ky
+            hit = (dx * tile - tile - 4 <= ox) & (dy * tile - tile - 4 <= oy)
+            np.minimum.at(least, (dy[hit] + span, dx[hit] + span), reach[hit])
+    out = np.zeros_like(near)
+    h, w = near.shape
+    for dy, dx in zip(*np.nonzero(least < np.inf)):
+        cut = least[dy, dx] - 1e-3       # a float32 rounding's margin
+        dy, dx = int(dy) - span, int(dx) - span
+        if abs(dy) >= h or abs(dx) >= w:
+            continue
+        ys, yd = slice(max(0, dy), h + min(0, dy)), slice(max(0, -dy), h + min(0, -dy))
+        xs, xd = slice(max(0, dx), w + min(0, dx)), slice(max(0, -dx), w + min(0, -dx))
+        there = near[ys, xs]
+        out[yd, xd] = np.maximum(out[yd, xd], np.where(there >= cut, there, 0.0))
     return out
 
 
@@ -937,8 +980,8 @@ class Dof(Plugin):
         take the half-resolution result where it is smooth, bit 1: gather again where it is
         not), the two tables' lattice levels, the farthest offset (x or y, px) of a tap of
         the first (sharp <= levels), the bound of the radii in front of the focus plane that
-        its taps can read (float bits; ``near``, px per tile of ``tile`` px, dilated over
-        the tiles its taps reach), where the two tables' tap counts lie (:func:`tap_counts`,
+        its taps can read and be lit by (float bits; :func:`near_bounds` of ``near``, px per
+        tile of ``tile`` px), where the two tables' tap counts lie (:func:`tap_counts`,
         after the tiles) and their lengths; and the farthest row offset of a tap."""
         table, info = self.tap_tables(rt, np.stack([levels, sharp]), lvl, aspect, blades, first,
                                       roundness, squeeze, cores=(0.0, core))
@@ -955,10 +998,7 @@ class Dof(Plugin):
                 reach = int(np.abs(table[start:start + n, :2]).max())
                 tiles[..., 7][(info[0, ..., 0] == start) & (info[0, ..., 1] == n)] = reach
         counts = []
-        # a tap reads radii up to 2 px beyond its pixel (dof_edges' 3 x 3, dof_mixed's
-        # split from its 3 x 3 edge-aware radii)
-        span = int(math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile))
-        bound = dilate_tiles(np.asarray(near, np.float64), span).astype(np.float32)
+        bound = near_bounds(near, table, tile).astype(np.float32)
         tiles[..., 8] = bound.view(np.int32)
         at = tiles.size
         for start, n in sorted({tuple(v) for v in info[:, ..., :2].reshape(-1, 2).tolist()}):
@@ -1069,7 +1109,7 @@ class Dof(Plugin):
             colh = rt.image(Rect.from_size(hpadded.width, hpadded.height * (1 + g.half_l)), 4)
             coch = rt.image(hpadded, 1)
             rt.launch(rt.kernel("dof.cl", "dof_down2", fp64=lvl.fp64, **luma),
-                      (colh.pitch, hpadded.height), col, coc, col.pitch, padded.height,
+                      (-(-colh.pitch // 4), hpadded.height), col, coc, col.pitch, padded.height,
                       colh, coch, colh.pitch, hpadded.height)
             prefilter(rt, colh, hpadded.height, g.half_l)
             # the half-resolution rows this band's upsampling reads (row0 is even:

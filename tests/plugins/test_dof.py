@@ -246,6 +246,101 @@ def test_gather_leaves_out_only_taps_that_add_nothing_anywhere(rt, monkeypatch, 
     assert np.array_equal(got.view(np.uint32), render().view(np.uint32))
 
 
+def _near_bound_oracle(near, table, tile):
+    """Per tile, the largest near radius of a tile a tap can read (within 2 px of where it
+    lands from any pixel of the tile: a group of 4 lies in one tile) and light from it:
+    that tile's radius above the tap's near distance less half its lattice spacing."""
+    h, w = near.shape
+    reach = table[:, 2].astype(np.float64) - 0.5 * np.exp2(table[:, 7])
+    out = np.zeros_like(near)
+    for ty in range(h):
+        for tx in range(w):
+            for (ox, oy), e in zip(table[:, :2].astype(int), reach):
+                for y in range(max(0, (ty * tile + oy - 2) // tile),
+                               min(h - 1, (ty * tile + tile - 1 + oy + 2) // tile) + 1):
+                    for x in range(max(0, (tx * tile + ox - 2) // tile),
+                                   min(w - 1, (tx * tile + tile - 1 + ox + 2) // tile) + 1):
+                        if near[y, x] > e:
+                            out[ty, tx] = max(out[ty, tx], near[y, x])
+    return out
+
+
+@pytest.mark.parametrize("table", [
+    tap_table(40.0, 32, dense=64.0),
+    tap_table(30.0, 12, 2.0, 6, -0.5 * math.pi, 0.3, dense=8.0, squeeze=1.5, core=4.0),
+    tap_table(12.0, 32, dense=32.0),
+], ids=["disk", "lattice-hexagon-anamorphic-core", "within-the-neighbours"])
+def test_near_bounds_hold_every_near_radius_a_tap_can_take(rng, table):
+    """The tiles' bound of the near radii their taps can be lit by (near_bounds) is at least
+    every such radius (a brute-force walk over taps and the tiles they read), and leaves out
+    a small near blur that no tap reaching it lets light."""
+    near = np.where(rng.uniform(size=(6, 9)) < 0.3, rng.uniform(0.0, 40.0, (6, 9)), 1e-3)
+    near[0, 0] = 3.0                                  # small, 8 tiles from the far corner
+    for tile in (16, 32):
+        got = dof_module.near_bounds(near, table, tile)
+        assert np.all(got >= _near_bound_oracle(near, table, tile))
+        assert np.all(got <= near.max())
+    lone = np.full((6, 9), 1e-3)
+    lone[0, 0] = 3.0
+    got = dof_module.near_bounds(lone, table, 16)
+    if np.abs(table[:, :2]).max() > 60:               # the table reaches it, its light not
+        assert got[0, 0] == 3.0 and got[5, 8] == 1e-3
+
+
+def _span_bound(near, table, tile):
+    """The bound before near_bounds: every tile within the table's span."""
+    span = math.ceil((float(np.abs(table[:, :2]).max()) + 2.0) / tile)
+    grown = dof_module.dilate_tiles(np.pad(near, span), span)
+    return grown[span:-span, span:-span]
+
+
+def test_gather_leaves_out_a_small_near_blur_far_away(rt, monkeypatch):
+    """A wide background blur (taps 2 tiles out) and a small near blur at the frame's far
+    side: the tiles between take fewer taps (near_bounds), the same bits as every tap."""
+    src, depth = dof_scene((64, 256))
+    depth[:] = 60.0
+    depth[16:48, 96:200] = 3.0                  # in focus
+    depth[28:36, 240:248] = 2.8                 # a small near blur (~4 px)
+    cam = CAM.updated(sensor_width=1.0)         # the background: taps 2 tiles out
+    seen = []
+    bounds = dof_module.near_bounds
+    monkeypatch.setattr(dof_module, "near_bounds",
+                        lambda near, table, tile: seen.append(
+                            (bounds(near, table, tile), _span_bound(near, table, tile)))
+                        or seen[-1][0])
+    got = run(rt, src, depth, "final", cam)
+    assert any(np.any(new < old) for new, old in seen)
+    monkeypatch.setattr(dof_module, "tap_counts", lambda table: np.array([len(table)], np.int32))
+    assert np.array_equal(got.view(np.uint32), run(rt, src, depth, "final", cam).view(np.uint32))
+
+
+def test_down2_gives_the_bits_of_its_pixel_by_pixel_build(rt, rng):
+    """dof_down2 takes 4 half-resolution pixels a work-item (float16 colours, float4
+    luminance weights, dot(w, r) as PoCL's): the same bits as its build that goes pixel by
+    pixel (DOF_DOWN2_PIXELWISE), over lit, dark, even and huge boxes, the rows' clamped
+    ends and an odd height."""
+    h, w = 9, 62
+    col = rng.uniform(0.0, 4.0, (h, w, 4)).astype(np.float32)
+    col[:, :8] = 0.0                                    # dark boxes: the plain mean
+    col[2:4, 8:16] = 0.7                                # even boxes
+    col[4:6, 16:24, :3] = np.float32(3e38)              # near FLT_MAX
+    col[::3, 30:50:3, :3] *= 1e4                        # lights beside dim pixels
+    coc = rng.uniform(-30.0, 30.0, (h, w)).astype(np.float32)
+    src, radii = rt.upload(col), rt.upload(coc)
+    assert src.pitch == radii.pitch
+
+    def down2(**defines):
+        half = (-(-h // 2), -(-w // 2) + 2)     # past the row's end: clamped reads
+        hcol, hcoc = rt.image(half, 4), rt.image(half, 1)
+        rt.launch(rt.kernel("dof.cl", "dof_down2", **defines),
+                  (-(-hcol.pitch // 4), hcol.height), src, radii, src.pitch, h, hcol, hcoc,
+                  hcol.pitch, hcol.height)
+        return (rt.from_device(hcol, np.float32, hcol.pitch * hcol.height * 4),
+                rt.from_device(hcoc, np.float32, hcoc.pitch * hcoc.height))
+    for got, want in zip(down2(), down2(DOF_DOWN2_PIXELWISE=1)):
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
 # -- oracle --------------------------------------------------------------------------------
 @pytest.mark.parametrize("quality", ["preview", "reference"])
 @pytest.mark.parametrize("shape", [(17, 31), (40, 52), (64, 48)])
