@@ -849,7 +849,12 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
   const int end1 = first + count.x, end2 = first + count.y;
-  if(!mix && !DOF_TAP_BY_TAP)
+#if DOF_TAP_BY_TAP
+  const int blocks = 0;
+#else
+  const int blocks = !mix;   /* (a constant operand of && draws a compiler warning) */
+#endif
+  if(blocks)
   {
     const float16 r016 = PIXELS(r0);
     const int16 p_near16 = PIXELS(p_near);
