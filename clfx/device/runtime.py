@@ -871,7 +871,17 @@ class Runtime:
         return int(self.from_device(counter, np.int32, 1)[0])
 
     def to_device(self, array: np.ndarray):
-        """A pooled raw buffer holding a copy of a small host array (weights, tables)."""
+        """A pooled raw buffer holding a copy of a small host array (weights, tables).  Up to
+        :data:`QUEUED_UPLOAD_BYTES` the array is copied on the host and its upload queued (the
+        buffer holds its event, and the event the copy): a blocking write waits for every
+        kernel queued before it, so the host could not plan ahead while they ran (streaks'
+        span tables between its passes)."""
+        if 0 < np.asarray(array).nbytes <= QUEUED_UPLOAD_BYTES:
+            a = np.array(array, order="C")                # the caller may change its array
+            holder = self.buffer(a.nbytes)
+            holder.pending = self.cl.enqueue_copy(self.queue, holder.buffer, a,
+                                                  is_blocking=False)
+            return holder
         a = np.ascontiguousarray(array)
         holder = self.buffer(a.nbytes)
         self.cl.enqueue_copy(self.queue, holder.buffer, a)
@@ -884,6 +894,10 @@ class Runtime:
 
 
 _BUFFER, _FLOAT, _VECTOR = "buffer", "float", "vector"
+
+QUEUED_UPLOAD_BYTES = 2 ** 20
+"""Largest host array `Runtime.to_device` copies and uploads without waiting (tables, spans,
+weights); larger ones are written at once (no host copy of a map)."""
 
 
 def _arg_check(dtype: np.dtype | None):
@@ -932,13 +946,16 @@ def _scalar(value, dtype: np.dtype, decl, index: int):
 
 
 class _PooledBuffer:
-    """Keeps a pooled ``cl.Buffer`` alive; its finaliser returns the buffer to the pool."""
+    """Keeps a pooled ``cl.Buffer`` alive; its finaliser returns the buffer to the pool.
+    ``pending``: the event of its queued upload (`Runtime.to_device`), which keeps the host
+    copy alive (the queue is in order: whoever takes the buffer next runs after it)."""
 
-    __slots__ = ("buffer", "nbytes", "__weakref__")
+    __slots__ = ("buffer", "nbytes", "pending", "__weakref__")
 
     def __init__(self, buffer, nbytes):
         self.buffer = buffer
         self.nbytes = nbytes
+        self.pending = None
 
 
 def no_device_message(reports: list[DeviceReport], selector: str | None) -> str:
