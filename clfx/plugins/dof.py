@@ -390,7 +390,9 @@ def lattice_levels(radii: np.ndarray, lattice: int, dense: float) -> np.ndarray:
     distinct radius: a frame's tiles hold a handful (``np.vectorize`` called it for each of
     1080p's ~8000 tiles a frame: ~4 ms of host time before any gather could start)."""
     values, inverse = np.unique(np.asarray(radii, np.float64), return_inverse=True)
-    per = np.array([lattice_level(float(r), lattice, dense) for r in values], np.int64)
+    per = np.empty(len(values), np.int64)
+    for i, r in enumerate(values.tolist()):
+        per[i] = lattice_level(r, lattice, dense)
     return per[inverse].reshape(np.shape(radii))
 
 
