@@ -388,7 +388,7 @@ def lattice_level(radius: float, lattice: int, dense: float) -> int:
 def lattice_levels(radii: np.ndarray, lattice: int, dense: float) -> np.ndarray:
     """:func:`lattice_level` of each of ``radii`` (int64, their shape), worked out once per
     distinct radius: a frame's tiles hold a handful (``np.vectorize`` called it for each of
-    1080p's ~8000 tiles a frame: ~4 ms of host time before any gather could start)."""
+    1080p's 2040 tiles, 1.5 ms a call and four calls a frame, before any gather could start)."""
     values, inverse = np.unique(np.asarray(radii, np.float64), return_inverse=True)
     per = np.empty(len(values), np.int64)
     for i, r in enumerate(values.tolist()):
