@@ -65,3 +65,36 @@ def test_cinema_1080p_peak_memory_stays_below_the_documented_budget(rt, tmp_path
     assert peak < budget, f"peak {peak:.0f} MiB over the budget {budget:.0f} MiB"
     assert np.isfinite(peak) and peak > 100     # measured something real
     # (before issue 10: 866 MiB here, over the 806 MiB budget)
+
+
+@pytest.mark.slow
+def test_a_1080p_cinema_sequence_allocates_no_buffer_after_its_first_frames(rt, monkeypatch):
+    """Issue 37: with the default pool (``CLFX_POOL_MB``) the 1080p cinema look's buffers,
+    maps and spectra stay between frames: a frame takes every buffer from the pool.  At 512
+    MiB four frame-sized buffers were freed at each frame's end and made again (~18700 page
+    faults, ~100 ms of CPU a frame)."""
+    from clfx.bench.looks import demo_frame
+    from clfx.device.cache import DEFAULT_BUDGET_BYTES, DeviceCache
+    from clfx.pipeline.look import render_frame
+    from clfx.pipeline.presets import load_look
+
+    monkeypatch.setattr(rt, "cache", DeviceCache(rt.ctx, DEFAULT_BUDGET_BYTES))
+    made = []
+    take = rt.cache.take
+
+    def counted(nbytes):
+        before = rt.cache.device_bytes
+        buf = take(nbytes)
+        if rt.cache.device_bytes > before:
+            made.append(nbytes)
+        return buf
+
+    monkeypatch.setattr(rt.cache, "take", counted)
+    frame, look = demo_frame(1920, 1080), load_look("cinema")
+    for quality in ("final", "preview"):
+        for _ in range(2):            # the first frame builds; the second may find a size new
+            render_frame(rt, look, frame, frame_number=1, quality=quality)
+        del made[:]
+        render_frame(rt, look, frame, frame_number=2, quality=quality)
+        assert made == [], f"{quality}: {len(made)} buffers made again ({sum(made) >> 20} MiB)"
+    assert rt.cache.nbytes <= rt.cache.max_bytes

@@ -262,6 +262,30 @@ def test_buffers_return_to_the_pool_and_idle_memory_is_capped(rt):
     assert pool.take(300) is c and pool.take(400) is b
 
 
+def test_small_uploads_are_queued_on_a_copy_and_large_ones_written_at_once(rt, monkeypatch):
+    """Issue 37: `to_device` of a table does not wait for the kernels queued before it (a
+    blocking write did: 19 waits a 1080p cinema frame, the device idle while the host went
+    on); it uploads a copy, so the caller may reuse its array at once."""
+    import numpy as np
+
+    from clfx.device import runtime as runtime_module
+
+    blocking = []
+    copy = rt.cl.enqueue_copy
+    monkeypatch.setattr(rt.cl, "enqueue_copy", lambda *a, **kw: blocking.append(
+        kw.get("is_blocking", True)) or copy(*a, **kw))
+    table = np.arange(1000, dtype=np.int32)
+    held = rt.to_device(table)
+    table[:] = -1                                   # reused before the upload ran
+    assert blocking == [False] and held.pending is not None
+    assert np.array_equal(rt.from_device(held, np.int32, 1000), np.arange(1000))
+    monkeypatch.setattr(runtime_module, "QUEUED_UPLOAD_BYTES", 1024)
+    del blocking[:]
+    big = rt.to_device(np.ones(1000, np.float32))   # over the bound: written at once
+    assert blocking == [True] and big.pending is None
+    assert np.array_equal(rt.from_device(big, np.float32, 1000), np.ones(1000, np.float32))
+
+
 def test_pocl_threads_pinned_by_default_where_every_core_is_ours(monkeypatch):
     import os
 

@@ -247,7 +247,7 @@ def _as_psf(psf) -> np.ndarray:
 
 
 def psf_digest(psf: np.ndarray) -> str:
-    """Content hash of a PSF (cache key)."""
+    """Content hash of a PSF (cache key; 3 ms for 1080p glare's 661 x 661 taps)."""
     k = np.ascontiguousarray(psf, np.float64)
     h = hashlib.sha1(k.reshape(-1).view(np.uint8))   # its bytes, without a copy of them
     h.update(repr(k.shape).encode())
@@ -292,16 +292,36 @@ def _array(rt, holder, shape, dtype):
     return cla.Array(rt.queue, shape, dtype, data=holder.buffer)
 
 
-def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str):
+DIGEST_NBYTES = 256
+"""What a remembered PSF hash (:func:`psf_id`) counts for in the runtime's cache."""
+
+
+def psf_id(rt, k: np.ndarray, key=None) -> str:
+    """The hash of the PSF ``k`` (kh, kw, planes) that its spectra are cached under
+    (:func:`psf_digest`).  With a ``key``, a name of its values that the caller keeps
+    (``clfx.kit.scatter.ScatterPlugin.psf_key``: the key its PSF is cached under; equal keys
+    must mean equal PSFs), hashed once per key and shape and remembered in ``rt.cache`` (a
+    PSF cut to its reach, :func:`reachable`, is its centre: the shape tells the cuts apart):
+    1080p glare hashed its 661 x 661 taps every frame (3 ms).  The spectra stay keyed by
+    content: a new key with the same PSF (a keyframed strength) finds them."""
+    if key is None:
+        return psf_digest(k)
+    return rt.cache.get(("fftconv.spectrum", "psf digest", key, k.shape),
+                        lambda: psf_digest(k), nbytes=DIGEST_NBYTES)
+
+
+def psf_spectrum(rt, psf: np.ndarray, n1: int, n2: int, precision: str, key=None):
     """``(buffer, planes)``: a device buffer with the r2c spectrum of ``psf`` placed with its
-    centre at (0, 0) (planes: 1 or 3), cached by (PSF hash, grid, precision) in ``rt.cache``
-    unless larger than :data:`SPECTRUM_CACHE_BYTES`."""
+    centre at (0, 0) (planes: 1 or 3), cached by (PSF, grid, precision) in ``rt.cache``
+    unless larger than :data:`SPECTRUM_CACHE_BYTES` (``key``: a name of the PSF's values,
+    :func:`psf_id`)."""
     k = _as_psf(psf)
     nbytes = k.shape[2] * n1 * (n2 + 2) * np.dtype(_real(precision)).itemsize
     build = _host_spectrum if host_fft(rt, precision) else _spectrum
     if nbytes > SPECTRUM_CACHE_BYTES:
         return build(rt, k, n1, n2, precision)   # too big to keep: this frame only
-    return rt.cache.get(("fftconv.spectrum", psf_digest(k), n1, n2, precision, build.__name__),
+    return rt.cache.get(("fftconv.spectrum", psf_id(rt, k, key), n1, n2, precision,
+                         build.__name__),
                         lambda: build(rt, k, n1, n2, precision))
 
 
@@ -462,10 +482,11 @@ def convolve(rt, img, psf, *, out_window: Rect | None = None, support: Rect | No
 
 
 def _convolve(rt, img, k, support, out_window, method, precision, split, max_points, info,
-              grid=None, spectrum=None, half=None):
+              grid=None, spectrum=None, half=None, psf_key=None):
     """:func:`convolve` once its arguments are checked; ``grid``, ``spectrum`` (the PSF's,
     on that grid) and ``half`` (the half-resolution block) are a block's
-    (:func:`convolve_blocks`): the same for every block of a frame."""
+    (:func:`convolve_blocks`): the same for every block of a frame; ``psf_key`` names ``k``'s
+    values (:func:`psf_id`)."""
     kh, kw = k.shape[:2]
     dst = rt.image(out_window, img.channels)
     effective = out_window.intersect(full_region(support, kh, kw))
@@ -474,10 +495,10 @@ def _convolve(rt, img, k, support, out_window, method, precision, split, max_poi
     if method == "direct":
         _direct(rt, img, k, support, effective, dst, precision)
     elif method == "half":
-        _half(rt, img, k, support, effective, dst, info, grid, spectrum, half)
+        _half(rt, img, k, support, effective, dst, info, grid, spectrum, half, psf_key)
     else:
         _fft(rt, img, k, support, effective, dst, precision, split, max_points, info, grid,
-             spectrum)
+             spectrum, psf_key)
     return dst
 
 
@@ -491,7 +512,7 @@ def _too_many_bright(rt, info, split, max_points):
 
 
 def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info, grid=None,
-         spectrum=None):
+         spectrum=None, psf_key=None):
     kh, kw, planes = k.shape
     if split is not None and precision == "float32":
         bright = _bright_pixels(rt, img, support, float(split), max_points)
@@ -508,7 +529,7 @@ def _fft(rt, img, k, support, effective, dst, precision, split, max_points, info
         raise ValueError(f"FFT grid {grid} is smaller than the {need} this block needs")
     info.grid = (n1, n2)
     nch = 1 if img.channels == 1 else 3
-    spec, spec_planes = spectrum or psf_spectrum(rt, k, n1, n2, precision)
+    spec, spec_planes = spectrum or psf_spectrum(rt, k, n1, n2, precision, psf_key)
     sx, sy = support.offset_in(img.window)
     dx, dy = dst.window.x0 - support.x0, dst.window.y0 - support.y0
     ex0, ey0 = effective.offset_in(dst.window)
@@ -924,13 +945,20 @@ def half_window(support: Rect, effective: Rect) -> Rect:
                 math.floor((ax1 - 1.5) / 2) + 2, math.floor((ay1 - 1.5) / 2) + 2)
 
 
-def half_psf(rt, k: np.ndarray) -> np.ndarray:
-    """The half-resolution PSF, once per PSF (host matrix products: 40 ms for a 397 px PSF)."""
-    return rt.cache.get(("fftconv.spectrum", "half psf", psf_digest(k)),
+def half_psf(rt, k: np.ndarray, key=None) -> np.ndarray:
+    """The half-resolution PSF, once per PSF (host matrix products: 40 ms for a 397 px PSF;
+    ``key``: :func:`psf_id`)."""
+    return rt.cache.get(("fftconv.spectrum", "half psf", psf_id(rt, k, key)),
                         lambda: tent_downsample(k))
 
 
-def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, hi=None):
+def _half_key(key, k: np.ndarray):
+    """The name of the half-resolution PSF of ``k``, the PSF named ``key`` (None: none)."""
+    return None if key is None else ("half psf", key, k.shape)
+
+
+def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, hi=None,
+          psf_key=None):
     """One pyramid level; ``hi``: the half-resolution pixels to build (a block's; default
     all of the support's), from the full-resolution pixels of ``img`` they sum."""
     hw, hh = -(-support.width // 2), -(-support.height // 2)
@@ -943,10 +971,10 @@ def _half(rt, img, k, support, effective, dst, info, grid=None, spectrum=None, h
               min(support.height - 2 * hi.y0, 2 * hi.height), half_in, half_in.pitch, hi.width,
               hi.height)
     hout = half_window(support, effective)
-    kh2 = half_psf(rt, k)
+    kh2 = half_psf(rt, k, psf_key)
     sub = ConvolveInfo()
     half_out = _convolve(rt, half_in, _as_psf(kh2), hi, hout, "fft", "float32", None, 0, sub,
-                         grid, spectrum)
+                         grid, spectrum, psf_key=_half_key(psf_key, k))
     info.grid = sub.grid
     ex0, ey0 = effective.offset_in(dst.window)
     rt.launch(_kernel(rt, "fftconv_up2"), (dst.pitch, dst.height), half_out, half_out.pitch,
@@ -1012,7 +1040,7 @@ def block_shape(height: int, width: int, kh: int, kw: int,
     return best[1]
 
 
-def _one_grid_fits(rt, method, k, support, effective, out_window) -> bool:
+def _one_grid_fits(rt, method, k, support, effective, out_window, psf_key=None) -> bool:
     """Whether a single-block convolution's one work grid fits :data:`MAX_BLOCK_CELLS` (and
     its FFT axes :data:`MAX_FFT_AXIS`)."""
     kh, kw = k.shape[:2]
@@ -1020,7 +1048,7 @@ def _one_grid_fits(rt, method, k, support, effective, out_window) -> bool:
         return (out_window.width + kw + 3) * (out_window.height + kh - 1) <= MAX_BLOCK_CELLS
     if method == "half":
         hs = Rect(0, 0, -(-support.width // 2), -(-support.height // 2))
-        k2 = _as_psf(half_psf(rt, k)).shape[:2]
+        k2 = _as_psf(half_psf(rt, k, psf_key)).shape[:2]
         hout = half_window(support, effective)
         n1, n2 = fft_grid(hs, hout.intersect(full_region(hs, *k2)), *k2)
     else:
@@ -1041,7 +1069,7 @@ def _block_rects(out_window: Rect, anchor: tuple[int, int], b1: int, b2: int) ->
 def convolve_blocks(rt, img, psf, *, out_window: Rect, support: Rect | None = None,
                     method: str = "fft", precision: str = "float64",
                     threshold_split: float | None = None, split_max_points: int = 256,
-                    info: ConvolveInfo | None = None, emit=None):
+                    info: ConvolveInfo | None = None, emit=None, psf_key=None):
     """:func:`convolve` in output blocks, so its device memory is bounded by the block
     (:data:`MAX_BLOCK_CELLS`), not by the frame.
 
@@ -1063,6 +1091,10 @@ def convolve_blocks(rt, img, psf, *, out_window: Rect, support: Rect | None = No
         ``emit(rect, g)`` receives each block's result (``rect``: blocks cover
         ``out_window`` once, in row order; a block no light reaches gets zeros); default:
         assembled into one image, returned.
+    psf_key : hashable, optional
+        A name of ``psf``'s values kept by the caller (equal keys, equal PSFs: the key its
+        PSF is cached under): its bytes are hashed for its spectra's cache key once per key
+        (:func:`psf_id`), not on each call (3 ms a frame for 1080p glare's PSF).
     Others : as :func:`convolve`.
 
     Returns
@@ -1085,13 +1117,14 @@ def convolve_blocks(rt, img, psf, *, out_window: Rect, support: Rect | None = No
     if support.empty or effective.empty:
         emit(out_window, rt.fill(rt.image(out_window, channels), 0.0))
         return kept and kept.image
-    if _one_grid_fits(rt, method, k, support, effective, out_window):
+    if _one_grid_fits(rt, method, k, support, effective, out_window, psf_key):
         info.blocks = 1
         emit(out_window, _convolve(rt, load(support), k, support, out_window, method,
-                                   precision, threshold_split, split_max_points, info))
+                                   precision, threshold_split, split_max_points, info,
+                                   psf_key=psf_key))
         return kept and kept.image
     _blocked(rt, load, k, support, effective, out_window, method, precision, threshold_split,
-             split_max_points, info, emit, channels)
+             split_max_points, info, emit, channels, psf_key)
     return kept and kept.image
 
 
@@ -1112,12 +1145,12 @@ class _Assembled:
 
 
 def _blocked(rt, load, k, support, effective, out_window, method, precision, split,
-             max_points, info, emit, channels):
+             max_points, info, emit, channels, psf_key=None):
     """The blocks of :func:`convolve_blocks` (the one-grid work is over the cap)."""
     kh, kw = k.shape[:2]
     anchor = (effective.x0, effective.y0)
     if method == "half":
-        k2 = _as_psf(half_psf(rt, k))
+        k2 = _as_psf(half_psf(rt, k, psf_key))
         hh, hw = k2.shape[:2]
         half_all = Rect(0, 0, -(-support.width // 2), -(-support.height // 2))
         b1, b2 = block_shape(-(-effective.height // 2) + 2, -(-effective.width // 2) + 2,
@@ -1156,9 +1189,9 @@ def _blocked(rt, load, k, support, effective, out_window, method, precision, spl
         info.bright_pixels, max_points = bright, bright
     info.precision = precision
     if method == "fft":
-        spectrum = psf_spectrum(rt, k, *grid, precision)   # held for every block
+        spectrum = psf_spectrum(rt, k, *grid, precision, psf_key)   # held for every block
     elif method == "half":
-        spectrum = psf_spectrum(rt, k2, *grid, "float32")
+        spectrum = psf_spectrum(rt, k2, *grid, "float32", _half_key(psf_key, k))
     sub = ConvolveInfo()
     for rect, src, hi, _ in blocks:
         if src is None:   # no light reaches this block
@@ -1167,7 +1200,7 @@ def _blocked(rt, load, k, support, effective, out_window, method, precision, spl
         part_support = support if method == "half" else src
         emit(rect, _convolve(rt, load(src), k, part_support, rect, method, precision, split,
                              max_points, sub, grid if method != "direct" else None, spectrum,
-                             hi))
+                             hi, psf_key))
     info.grid = grid
     info.notes.append(f"{info.blocks} blocks of {b2}x{b1} px (FFT grid {grid[1]}x{grid[0]})"
                       if method != "direct" else f"{info.blocks} blocks of {b2}x{b1} px")
@@ -1232,7 +1265,8 @@ def _fp(wanted: bool) -> str:
 
 
 def spread(rt, img, psf, level: SpreadLevel, *, out_window: Rect, support: Rect | None = None,
-           split_level: float | None = None, info: ConvolveInfo | None = None, emit=None):
+           split_level: float | None = None, info: ConvolveInfo | None = None, emit=None,
+           psf_key=None):
     """Convolve with the algorithm a quality ``level`` (:data:`LEVELS`) calls for.
 
     PSFs of at most 21 x 21 taps: direct gather (float32; float64 with ``small_fp64``).
@@ -1241,14 +1275,15 @@ def spread(rt, img, psf, level: SpreadLevel, *, out_window: Rect, support: Rect 
     float64 when there are more than 64), "fft" (float64 with ``fp64``), or a direct gather
     when output px x taps <= ``direct_max_work``.  In output blocks past
     :data:`MAX_BLOCK_CELLS` (:func:`convolve_blocks`: ``img`` may be a loader, ``emit`` take
-    the blocks).
+    the blocks, ``psf_key`` name the PSF's values: :func:`psf_id`).
     """
     k = _as_psf(psf)
     window = support if support is not None else getattr(img, "window", None)
     if window is not None:
         k = reachable(k, window, out_window)
     taps = k.shape[0] * k.shape[1]
-    common = dict(out_window=out_window, support=support, info=info, emit=emit)
+    common = dict(out_window=out_window, support=support, info=info, emit=emit,
+                  psf_key=psf_key)
     if taps <= DIRECT_MAX_TAPS:
         # small kernels: a direct gather beats any transform
         return convolve_blocks(rt, img, k, method="direct", precision=_fp(level.small_fp64),

@@ -130,11 +130,20 @@ class ScatterPlugin(SpreadRegions):
         ``reach`` = (dy, dx) when ``clfx.fx.psf.windowed`` (normalised as the whole)."""
         raise NotImplementedError
 
-    def psf(self, p, ctx) -> np.ndarray:
-        """The PSF for this parameter set and frame size (kept in the runtime's cache)."""
+    def psf_key(self, p, ctx) -> tuple:
+        """The key :meth:`psf` keeps the PSF under in the runtime's cache: everything it is
+        built from (the parameters, radius, reach, frame width and camera), so it names the
+        PSF's values; its spectra are cached under it too (``psf_key`` of
+        :func:`clfx.fx.fftconv.spread`), not under a hash of its bytes."""
         r = self.radius_px(p, ctx)
         reach = check_psf(self.descriptor.name, r, ctx, self.output_window(p, ctx))
-        key = (f"{self.descriptor.name}.psf", p.hash_hex(), r, reach, ctx.width_px, ctx.camera)
+        return (f"{self.descriptor.name}.psf", p.hash_hex(), r, reach, ctx.width_px, ctx.camera)
+
+    def psf(self, p, ctx, key: tuple | None = None) -> np.ndarray:
+        """The PSF for this parameter set and frame size (kept in the runtime's cache under
+        ``key``, :meth:`psf_key`)."""
+        key = key or self.psf_key(p, ctx)
+        _, _, r, reach, *_ = key
         return ctx.runtime.cache.get(key, lambda: self.build_psf(p, ctx, r, reach))
 
     def raw_level(self, p, ctx) -> float:
@@ -154,8 +163,9 @@ class ScatterPlugin(SpreadRegions):
 
     # -- render ---------------------------------------------------------------------------
     def spread_mixed(self, rt, p, ctx, k: np.ndarray, highlights, mix, split: float,
-                     highlights_at=None):
-        """The effect's output: highlights spread by ``k`` and mixed back, block by block.
+                     highlights_at=None, psf_key: tuple | None = None):
+        """The effect's output: highlights spread by ``k`` (the PSF :meth:`psf` keeps under
+        ``psf_key``, when given) and mixed back, block by block.
 
         ``highlights(src, h)`` launches the effect's highlight kernel (``h`` may be ``src``:
         the kernel works in place), ``mix(g, dst, rect)`` its mix over ``rect`` (``dst`` may
@@ -196,14 +206,15 @@ class ScatterPlugin(SpreadRegions):
         info = fftconv.ConvolveInfo()
         fftconv.spread(rt, load, k, self.level(ctx), out_window=out_window,
                        support=self.highlight_support(p, ctx), split_level=split, info=info,
-                       emit=emit)
+                       emit=emit, psf_key=psf_key)
         ctx.notes.extend(f"{self.descriptor.name}: {note}" for note in info.notes)
         return out[0]
 
     def render(self, rt, p, ctx):
         name, kfile = self.descriptor.name, self.descriptor.kernel
         src = ctx.source
-        k = self.psf(p, ctx)
+        key = self.psf_key(p, ctx)
+        k = self.psf(p, ctx, key)
         boost = self.boost(p, ctx)
         self.note_nonfinite(ctx, k.shape[:2])
         from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; `clfx looks` loads this module
@@ -231,4 +242,4 @@ class ScatterPlugin(SpreadRegions):
                       boost)
 
         split = max(4.0 * p.threshold, SPLIT_RATIO * ctx.analysis.peak_luminance)
-        return self.spread_mixed(rt, p, ctx, k, highlights, mix, split, highlights_at)
+        return self.spread_mixed(rt, p, ctx, k, highlights, mix, split, highlights_at, key)

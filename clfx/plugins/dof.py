@@ -390,6 +390,17 @@ def lattice_level(radius: float, lattice: int, dense: float) -> int:
     return max(1, int(math.ceil(math.log2(radius / max(lattice, 1)) - 1e-9)))
 
 
+def lattice_levels(radii: np.ndarray, lattice: int, dense: float) -> np.ndarray:
+    """:func:`lattice_level` of each of ``radii`` (int64, their shape), worked out once per
+    distinct radius: a frame's tiles hold a handful (``np.vectorize`` called it for each of
+    1080p's 2040 tiles, 1.5 ms a call and four calls a frame, before any gather could start)."""
+    values, inverse = np.unique(np.asarray(radii, np.float64), return_inverse=True)
+    per = np.empty(len(values), np.int64)
+    for i, r in enumerate(values.tolist()):
+        per[i] = lattice_level(r, lattice, dense)
+    return per[inverse].reshape(np.shape(radii))
+
+
 NEVER = 1e30
 """A tap's near or far distance that no coverage reaches: the tap serves the other field only."""
 
@@ -988,11 +999,8 @@ class Dof(Plugin):
         tiles = np.zeros(levels.shape + (16,), np.int32)
         tiles[..., :2], tiles[..., 2:4] = info[0, ..., :2], info[1, ..., :2]
         tiles[..., 4] = 0 if mode is None else mode
-        def level(radii):   # lattice_level of each tile's radius (a handful of distinct ones)
-            values, where = np.unique(radii, return_inverse=True)
-            return np.array([lattice_level(r, lvl.lattice, lvl.dense_radius)
-                             for r in values.tolist()], np.int32)[where].reshape(radii.shape)
-        tiles[..., 5], tiles[..., 6] = level(levels), level(sharp)
+        tiles[..., 5] = lattice_levels(levels, lvl.lattice, lvl.dense_radius)
+        tiles[..., 6] = lattice_levels(sharp, lvl.lattice, lvl.dense_radius)
         for start, n in {tuple(v) for v in info[0, ..., :2].reshape(-1, 2).tolist()}:
             if n:
                 reach = int(np.abs(table[start:start + n, :2]).max())

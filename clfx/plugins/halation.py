@@ -296,7 +296,8 @@ class Halation(ScatterPlugin, Plugin):
     def render(self, rt, p, ctx):
         s = self.settings(p, ctx)
         src, kfile = ctx.source, self.descriptor.kernel
-        k = self.psf(p, ctx)
+        key = self.psf_key(p, ctx)
+        k = self.psf(p, ctx, key)
         self.note_nonfinite(ctx, k.shape[:2])
         from pyopencl import cltypes  # lazy: pyopencl is ~0.2 s; listing the effects loads this module
 
@@ -315,7 +316,7 @@ class Halation(ScatterPlugin, Plugin):
                       p.threshold, p.knee)
 
         split = max(4.0 * p.threshold, 1e-3 * ctx.analysis.peak_luminance)
-        dst = self.spread_mixed(rt, p, ctx, k, highlights, mix, split)
+        dst = self.spread_mixed(rt, p, ctx, k, highlights, mix, split, psf_key=key)
         ctx.notes.append(f"halation: {p.stock}, strength {s.strength:g}, PSF radius "
                          f"{s.radius_px} px ({'bare back' if s.bare_back else 'backed'}), "
                          f"{'conserved' if p.conserve else 'added'}")

@@ -412,3 +412,46 @@ def test_host_spectrum_is_transposed_for_the_column_tasks(rt, rng):
         np.add.at(grid, ((np.arange(5) - 2)[:, None] % n1, (np.arange(7) - 3)[None] % n2),
                   k[..., p])
         np.testing.assert_allclose(spec[p], np.fft.rfft2(grid).T, rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("quality", ["final", "draft", "preview"])
+def test_a_named_psf_is_hashed_once_per_name_and_its_spectra_follow_its_values(rt, rng,
+                                                                             monkeypatch,
+                                                                             quality):
+    """Issue 37: a PSF that its caller names (``psf_key``: the key the glare family caches it
+    under) is hashed once per name, not on every frame (3 ms of SHA-1 at 1080p); the
+    spectra stay keyed by the PSF's values, so another PSF under another name, or the same
+    name cut to a smaller reach, gets its own, bit for bit the unnamed call's."""
+    hashed = []
+    digest = fftconv.psf_digest
+    monkeypatch.setattr(fftconv, "psf_digest", lambda k: hashed.append(k.shape) or digest(k))
+    src = rng.uniform(0.0, 1.0, (6, 40, 4)).astype(np.float32)
+    src[3, 11, :3] = 40.0
+    win = Rect.from_size(40, 6)
+    img = rt.upload(src, win)
+    y, x = np.mgrid[-16:17, -16:17]
+    a = 1.0 / (np.hypot(x, y) + 0.5) ** 3
+    b = np.exp(-np.hypot(x, y) / 4.0)
+    level = fftconv.LEVELS[quality]
+
+    def spread(k, out=fftconv.full_region(win, 33, 33), **kw):
+        return fftconv.spread(rt, img, k, level, out_window=out, split_level=10.0,
+                              **kw).download().view(np.uint32)
+
+    fftconv.clear_caches(rt)
+    plain_a, plain_b = spread(a), spread(b)
+    plain_cut = spread(a, win)          # 6 rows reach only the PSF's central 15: a cut PSF
+    assert len(plain_a.shape) == 3 and not np.array_equal(plain_a, plain_b)
+    fftconv.clear_caches(rt)
+    del hashed[:]
+    assert np.array_equal(spread(a, psf_key=("test.psf", "a")), plain_a)
+    first = len(hashed)                 # the PSF (and draft's half-resolution one)
+    assert first >= 1
+    for _ in range(2):                  # named again: no hash, the same spectra
+        assert np.array_equal(spread(a, psf_key=("test.psf", "a")), plain_a)
+    assert len(hashed) == first
+    # another PSF under another name: its own spectra, not a's
+    assert np.array_equal(spread(b, psf_key=("test.psf", "b")), plain_b)
+    # the same name, cut to a smaller reach: its own hash and spectrum
+    assert np.array_equal(spread(a, win, psf_key=("test.psf", "a")), plain_cut)
+    assert len(hashed) > first and (15, 33, 1) in hashed

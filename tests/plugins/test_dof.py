@@ -116,6 +116,19 @@ def test_tap_counts_of_a_disk():
     assert counts[0] == counts[1] == 1   # up to 1/2 px: the pixel itself
 
 
+def test_lattice_levels_of_a_tile_grid_are_each_radius_lattice_level():
+    """The per-tile table's lattice levels (issue 37: once per distinct radius, not per
+    tile) are :func:`lattice_level` of each tile's radius, the dense boundary and exact
+    powers of two included."""
+    radii = quantised_radius(np.linspace(0.0, 300.0, 4002)).reshape(58, 69)
+    radii[0, :6] = (0.0, 16.0, 16.5, 32.0, 64.0, 256.0)
+    for lattice, dense in ((12, 16.0), (32, 32.0), (8, 0.0)):
+        levels = dof_module.lattice_levels(radii, lattice, dense)
+        want = [[dof_module.lattice_level(float(r), lattice, dense) for r in row] for row in radii]
+        assert levels.shape == radii.shape and levels.dtype == np.int64
+        np.testing.assert_array_equal(levels, want)
+
+
 def test_gather_mask_tests_match_any_and_all(rt, tmp_path):
     """dof_any4 / dof_all4 (the gather's branch-free per-tap tests) agree with OpenCL's
     any() / all() on every mask of 4 lanes."""

@@ -307,3 +307,36 @@ def test_highlights_at_are_a_reframed_copys_highlights(rt, rng, rect):
     want = rt.from_device(sub, np.float32, sub.pitch * sub.height * 4)
     got = rt.from_device(h, np.float32, h.pitch * h.height * 4)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+@pytest.mark.parametrize("quality", ["final", "draft"])
+def test_glare_spectra_follow_the_psf_and_are_not_rehashed_each_frame(rt, rng, monkeypatch,
+                                                                    quality):
+    """Issue 37: glare's PSF spectra are found by the PSF's cache key (its bytes hashed
+    once, not every frame: 3 ms at 1080p); a frame whose PSF changes (size, shape, field of
+    view) renders as a cold cache would, and a frame whose PSF does not (strength) reuses
+    the spectra."""
+    from clfx.fx import fftconv
+
+    hashed = []
+    digest = fftconv.psf_digest
+    monkeypatch.setattr(fftconv, "psf_digest", lambda k: hashed.append(k.shape) or digest(k))
+    src = scene(rng)
+    frames = [Glare.params(strength=0.2, size=0.3), Glare.params(strength=0.2, size=0.4),
+              Glare.params(strength=0.2, size=0.4, psf="gaussians"),
+              Glare.params(strength=0.2, size=0.4, fov=30.0),
+              Glare.params(strength=0.5, size=0.4, fov=30.0)]
+    cold = []
+    for p in frames:
+        fftconv.clear_caches(rt)
+        rt.cache.clear("glare.psf")
+        cold.append(render_effect(rt, Glare(), p, src, quality=quality))
+    for p, want in zip(frames, cold):           # one warm cache from frame to frame
+        np.testing.assert_array_equal(render_effect(rt, Glare(), p, src, quality=quality), want)
+    assert not np.array_equal(cold[0], cold[1]) and not np.array_equal(cold[1], cold[2])
+    assert not np.array_equal(cold[2], cold[3])
+    del hashed[:]
+    spectra = rt.cache.misses
+    for p, want in zip(frames, cold):           # again: nothing hashed, nothing built
+        np.testing.assert_array_equal(render_effect(rt, Glare(), p, src, quality=quality), want)
+    assert hashed == [] and rt.cache.misses == spectra

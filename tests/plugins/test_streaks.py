@@ -787,3 +787,25 @@ def test_pass_spans_cover_each_rays_streak():
     spans = mod.row_spans(iv, 64)
     assert (spans[:, 0] % 4 == 0).all() and (spans[:, 2] - spans[:, 0] <= mod.SPAN).all()
     assert (np.diff(spans[:, 1]) >= 0).all()           # row order
+
+
+def test_job_spans_are_each_jobs_own_row_spans(rng):
+    # issue 37: final's plan rasters a ray's passes at once (`job_spans`); each job's spans
+    # are the ones its parts give alone, joined: the same spans, so the same pixels
+    import clfx.plugins.streaks as mod
+    boxes = np.floor(rng.uniform(-20.0, 120.0, (9, 2)))
+    boxes = np.concatenate([boxes, boxes + rng.integers(0, 12, (9, 2))], axis=1)
+    parts = [(0, boxes, (0.0, 0.0), (0.0, 0.0)),
+             (2, boxes[:4] + [-1.5, -0.5, 1.5, 0.5], (1.0, -0.5), (0.0, 63.0)),
+             (1, boxes, (0.0, 1.0), (-15.0, 15.0)),
+             (2, boxes[4:], (-0.75, 1.0), (-3.0, 40.0)),
+             (3, boxes[:0], (1.0, 0.0), (0.0, 5.0))]           # no box: no span
+    got = mod.job_spans(128, 100, parts, 5)
+    assert len(got) == 5 and got[4].shape == (0, 4)
+    for job, spans in enumerate(got):
+        alone = [mod.raster(128, 100, b, u, t) for j, b, u, t in parts if j == job]
+        want = mod.row_spans(np.concatenate(alone) if alone else np.zeros((0, 3), np.int64),
+                             128)
+        assert spans.dtype == want.dtype == np.int32
+        np.testing.assert_array_equal(spans, want)
+    assert all(len(got[j]) for j in (0, 1, 2))
