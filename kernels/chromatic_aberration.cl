@@ -169,12 +169,12 @@ CLFX_COLD void ca_packed_quad(global const float *src, global float *dst, global
  * min/max (the texels are finite: sanitised, or the frame has none; a result at +-0,
  * where the bounds' order of signed zeros could tell, is rendered again exactly). */
 #if RS_FILTER == 1
-#define CA_BLEND(r, b) __builtin_shufflevector(r, b, 0, 1, 18, 3, 4, 5, 22, 7, 8, 9, 26, 11,   \
-                                               12, 13, 30, 15)
+#define CA_BLEND(r, b) CLFX_SHUFFLE16(r, b, 0, 1, 18, 3, 4, 5, 22, 7, 8, 9, 26, 11,   \
+                                      12, 13, 30, 15)
 /* the quad's (red, 0, blue, 0) weights, pixel k in lanes 4k..4k+3, from the bins' per-pixel
  * float4s; CA_W4 picks pixel k's */
-#define CA_WQ(r, b) __builtin_shufflevector((float8)(r, b), (float8)(0.0f), 0, 8, 4, 8, 1, 8, 5, \
-                                            8, 2, 8, 6, 8, 3, 8, 7, 8)
+#define CA_WQ(r, b) CLFX_SHUFFLE16((float8)(r, b), (float8)(0.0f), 0, 8, 4, 8, 1, 8, 5, \
+                                   8, 2, 8, 6, 8, 3, 8, 7, 8)
 #define CA_W4_0(v) (v).s0123
 #define CA_W4_1(v) (v).s4567
 #define CA_W4_2(v) (v).s89ab
@@ -196,10 +196,10 @@ CLFX_COLD void ca_packed_quad(global const float *src, global float *dst, global
 
 /* always inlined: PoCL kept it out of line, its outputs through the stack (1080p final:
  * 37 -> 35.5 ms of CPU) */
-inline __attribute__((always_inline)) void ca_cubic_bins(global const float *src, int pitch,
-                                                       int w, int h, global const int *q,
-                                                       float4 *o0, float4 *o1, float4 *o2,
-                                                       float4 *o3)
+CLFX_INLINE void ca_cubic_bins(global const float *src, int pitch,
+                               int w, int h, global const int *q,
+                               float4 *o0, float4 *o1, float4 *o2,
+                               float4 *o3)
 {
   const int row = pitch * 4, off = RS_TAPS / 2 - 1;
   /* rs_fast_quad's clamp: border quads (re-rendered later) read inside the image */

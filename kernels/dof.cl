@@ -60,13 +60,13 @@
 #ifndef DOF_CATEYE
 #define DOF_CATEYE 0
 #endif
-#define CATEYE_MIN_FRAC 1e-3f
+#define CATEYE_MIN_FRAC 1e-3f   /* the open aperture's smallest fraction (normalisation) */
 #ifndef DOF_DOWN2_PIXELWISE
 #define DOF_DOWN2_PIXELWISE 0   /* 1: dof_down2 pixel by pixel (its check: the same bits) */
 #endif
 #ifndef DOF_TAP_BY_TAP
 #define DOF_TAP_BY_TAP 0   /* 1: every gather tap by tap (the blocks' check: the same bits) */
-#endif   /* the open aperture's smallest fraction (normalisation) */
+#endif
 
 inline float dof_coc_radius(float z, float k_half, float focus, float clamp_r, float offset)
 {
@@ -527,8 +527,10 @@ inline void dof_down2_px(global const float *col, global const float *coc, const
 
 /* The luminance of 4 pixels' colours (float16: pixel p's RGBA in lanes 4 p..4 p + 3),
  * clfx_luminance's operations lane by lane. */
-#define DOF_LUM4(v) ((CLFX_LUMA_R) * (v).s048c + (CLFX_LUMA_G) * (v).s159d \
-                     + (CLFX_LUMA_B) * (v).s26ae)
+inline float4 dof_lum4(float16 c)
+{
+  return (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
+}
 
 /* 4 half-resolution pixels a work-item: dof_down2_px's operations lane by lane (dot(w, r)
  * as PoCL's: unfused products, added in pairs), away from the rows' clamped ends. */
@@ -555,8 +557,8 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
   const float16 p11 = (float16)(a1.s4567, a1.scdef, b1.s4567, b1.scdef);
   vstore16(0.25f * p00 + 0.25f * p01 + 0.25f * p10 + 0.25f * p11, 0,
            hcol + (y * hpitch + x) * 4);
-  const float4 l00 = fmax(DOF_LUM4(p00), 0.0f), l01 = fmax(DOF_LUM4(p01), 0.0f);
-  const float4 l10 = fmax(DOF_LUM4(p10), 0.0f), l11 = fmax(DOF_LUM4(p11), 0.0f);
+  const float4 l00 = fmax(dof_lum4(p00), 0.0f), l01 = fmax(dof_lum4(p01), 0.0f);
+  const float4 l10 = fmax(dof_lum4(p10), 0.0f), l11 = fmax(dof_lum4(p11), 0.0f);
   const float4 m = fmax(fmax(l00, l01), fmax(l10, l11));
   const int4 lit = m > 0.0f && m <= FLT_MAX;
   const float4 one = (float4)(1.0f);
@@ -572,16 +574,6 @@ kernel void dof_down2(global const float *col, global const float *coc, const in
 }
 
 #define LANES(v) ((v).s0000111122223333)
-
-/* any() / all() of an int4 mask in the gather's per-tap tests: lib/common.h's one test */
-#define dof_any4 clfx_any4
-#define dof_all4 clfx_all4
-
-/* Luminance of the 4 pixels of a float16. */
-inline float4 dof_lum4(float16 c)
-{
-  return (CLFX_LUMA_R) * c.s048c + (CLFX_LUMA_G) * c.s159d + (CLFX_LUMA_B) * c.s26ae;
-}
 
 #if DOF_CATEYE >= 2
 #define CATEYE_ARGS , const float4 ce_x, const float4 ce_y, const float4 cf_x, \
@@ -644,17 +636,17 @@ typedef struct
 #define SLOT(v, t) ((t) == 0 ? (v).s0123 : (t) == 1 ? (v).s4567 : (t) == 2 ? (v).s89ab \
                                                                          : (v).scdef)
 
-/* dof_any4 / dof_all4 of an int16 mask. */
+/* clfx_any4 / clfx_all4 of an int16 mask. */
 inline int dof_any16(const int16 m)
 {
   const int8 h = m.lo | m.hi;
-  return dof_any4(h.lo | h.hi);
+  return clfx_any4(h.lo | h.hi);
 }
 
 inline int dof_all16(const int16 m)
 {
   const int8 h = m.lo & m.hi;
-  return dof_all4(h.lo & h.hi);
+  return clfx_all4(h.lo & h.hi);
 }
 
 /* Taps (host table, clfx/plugins/dof.py tap_table): 8 floats each: integer offset x, y;
@@ -686,7 +678,7 @@ inline int dof_all16(const int16 m)
  * pixels' radii `r0` (`p_near`: r0 < -NEAR_EPS). */
 #define DOF_WEIGHTS(T, IT, SUF) \
 /* near field: the tap's light spread over its own CoC area */ \
-inline __attribute__((always_inline)) T dof_near_w##SUF( \
+CLFX_INLINE T dof_near_w##SUF( \
     const T arq, const IT q_near, const T frac, const T d_near, const T inv_s DOF_CE_ARGS(T)) \
 { \
   DOF_CLIPS(T, clip_n, enx, eny, gnx, gny, arq, -) \
@@ -700,7 +692,7 @@ inline __attribute__((always_inline)) T dof_near_w##SUF( \
    the coverage behind a near p that the tap's own CoC does not give is a guess at hidden \
    background: its highlights are capped (`k`: the colour's scale), so a light beside a \
    blurred bar does not shine through it. */ \
-inline __attribute__((always_inline)) void dof_far_w##SUF( \
+CLFX_INLINE void dof_far_w##SUF( \
     const T rq, const T arq, const IT q_near, const T frac, const T d_far, const T inv_s, \
     const T r0, const IT p_near, const int cap_it, const T k, T *wf, T *wk DOF_CE_ARGS(T)) \
 { \
@@ -730,10 +722,10 @@ DOF_WEIGHTS(float16, int16, 16)
 #define DOF_CAP_K(lum) fmin(1.0f, cap_s / fmax(lum, 1e-30f))
 
 /* dof_tap's near field (the tap's colour `c`). */
-inline __attribute__((always_inline)) void dof_tap_near(dof_sums *s, const float16 c,
-                                                        const float4 arq, const int4 q_near,
-                                                        const float4 frac, const float8 tp,
-                                                        const float inv_s CATEYE_ARGS)
+CLFX_INLINE void dof_tap_near(dof_sums *s, const float16 c,
+                              const float4 arq, const int4 q_near,
+                              const float4 frac, const float8 tp,
+                              const float inv_s CATEYE_ARGS)
 {
   const float4 wn = dof_near_w4(arq, q_near, frac, (float4)(tp.s2), (float4)(inv_s)
                                 DOF_CE_PASS((float4)(tp.s5), (float4)(tp.s6), DOF_SAME));
@@ -746,21 +738,21 @@ inline __attribute__((always_inline)) void dof_tap_near(dof_sums *s, const float
  * (`any_near`: any of them in front of the focus plane); the gather of 4 pixels within
  * reach of a mixed edge pixel goes tap by tap (dof_gather4).  A tap behind every pixel adds
  * exact zeros to the near field, one in front of every pixel to the far field: skipped. */
-inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
-                                                   const float4 rq, const float4 frac,
-                                                   const float8 tp, const float inv_s,
-                                                   const float4 r0, const int4 p_near,
-                                                   const int any_near, const float cap_s
-                                                   CATEYE_ARGS)
+CLFX_INLINE void dof_tap(dof_sums *s, const float16 c,
+                         const float4 rq, const float4 frac,
+                         const float8 tp, const float inv_s,
+                         const float4 r0, const int4 p_near,
+                         const int any_near, const float cap_s
+                         CATEYE_ARGS)
 {
   const float4 arq = fabs(rq);
   const int4 q_near = rq < -NEAR_EPS;
-  if(dof_any4(q_near))
+  if(clfx_any4(q_near))
   {
     dof_tap_near(s, c, arq, q_near, frac, tp, inv_s CATEYE_PASS);
-    if(dof_all4(q_near)) return;
+    if(clfx_all4(q_near)) return;
   }
-  const int cap_it = any_near && dof_any4(p_near & ~q_near);
+  const int cap_it = any_near && clfx_any4(p_near & ~q_near);
   float4 wf, wk;
   dof_far_w4(rq, arq, q_near, frac, (float4)(tp.s3), (float4)(inv_s), r0, p_near, cap_it,
              cap_it ? DOF_CAP_K(dof_lum4(c)) : (float4)(0.0f), &wf, &wk
@@ -791,7 +783,7 @@ inline __attribute__((always_inline)) void dof_tap(dof_sums *s, const float16 c,
  * `rq` (its lanes), added where `use` says (a slot not added, or a field a slot adds
  * nothing to beside those it does, adds exact zeros or nothing: the sums never hold -0).
  * dof_taps_near: the near field only (the taps beyond the pixels' own radii). */
-inline __attribute__((always_inline)) void dof_taps_near(
+CLFX_INLINE void dof_taps_near(
     dof_sums *s, const float16 c0, const float16 c1, const float16 c2, const float16 c3,
     const float16 rq, const int4 use, const float16 d_near, const float4 area,
     const float16 inv_s DOF_CE_ARGS(float16))
@@ -801,7 +793,7 @@ inline __attribute__((always_inline)) void dof_taps_near(
   DOF_ADD_NEAR(0, c0) DOF_ADD_NEAR(1, c1) DOF_ADD_NEAR(2, c2) DOF_ADD_NEAR(3, c3)
 }
 
-inline __attribute__((always_inline)) void dof_taps(
+CLFX_INLINE void dof_taps(
     dof_sums *s, const float16 c0, const float16 c1, const float16 c2, const float16 c3,
     const float16 rq, const int4 use, const float16 d_near, const float16 d_far,
     const float4 area, const float16 inv_s, const float16 r0, const int16 p_near,
@@ -844,7 +836,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
 {
   const float16 c0 = c0_in * scale;
   const int4 p_near = r0 < -NEAR_EPS;
-  const int any_near = dof_any4(p_near);
+  const int any_near = clfx_any4(p_near);
   const float cap_s = cap * scale;
   const float4 one = (float4)(1.0f);
   dof_sums s = {(REAL16)(0), (REAL16)(0), (REAL4)(0), (REAL4)(0), (REAL4)(0)};
@@ -887,9 +879,9 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
     {
       DOF_BLOCK(end2)
       const int16 q = rq < -NEAR_EPS;
-      const int4 near = use & ((int4)(dof_any4(q.s0123), dof_any4(q.s4567),
-                                      dof_any4(q.s89ab), dof_any4(q.scdef)) != 0);
-      if(!dof_any4(near)) continue;
+      const int4 near = use & ((int4)(clfx_any4(q.s0123), clfx_any4(q.s4567),
+                                      clfx_any4(q.s89ab), clfx_any4(q.scdef)) != 0);
+      if(!clfx_any4(near)) continue;
       const float16 zero = (float16)(0.0f);
       dof_taps_near(&s, near.s0 ? DOF_COLOUR(0) : zero, near.s1 ? DOF_COLOUR(1) : zero,
                     near.s2 ? DOF_COLOUR(2) : zero, near.s3 ? DOF_COLOUR(3) : zero, rq, near,
@@ -911,7 +903,7 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
       const float4 rq = vload4(0, coc + at);
       const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
       const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
-      if(!dof_any4(aq > 0.0f))
+      if(!clfx_any4(aq > 0.0f))
       {
         dof_tap(&s, c, rq, one, tp, inv_s, r0, p_near, any_near, cap_s CATEYE_PASS);
         continue;
@@ -939,11 +931,11 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
       const float4 rq = vload4(0, coc + at);
       const float4 aq = mix && lv == 0 ? vload4(0, mixa + at) : (float4)(0.0f);
       const int4 sq = aq > 0.0f;
-      const int split = dof_any4(sq);
+      const int split = clfx_any4(sq);
       const float8 rr = split ? vload8(0, mixr + at * 2) : (float8)(0.0f);
       const float4 rq_far = select(rq, rr.s1357, sq), rq_near = select(rq, rr.s0246, sq);
       const int4 far_near = rq_far < -NEAR_EPS, near_near = rq_near < -NEAR_EPS;
-      if(!dof_any4(far_near) && !(split && dof_any4(near_near))) continue;
+      if(!clfx_any4(far_near) && !(split && clfx_any4(near_near))) continue;
       const float inv_s = as_float((127 - lv) << 23);     /* 2^-L, exactly */
       const float16 c = vload16(0, col + ((size_t)lv * (size_t)plane + (size_t)at) * 4) * scale;
       if(!split)
@@ -953,10 +945,10 @@ inline REAL16 dof_gather4(global const float *col, global const float *coc, cons
       }
       const float16 d = vload16(0, mixd + at * 4) * scale;
       const int16 sq16 = LANES(sq);
-      if(dof_any4(far_near))
+      if(clfx_any4(far_near))
         dof_tap_near(&s, select(c, c - d * LANES(aq), sq16), fabs(rq_far), far_near, one - aq,
                      tp, inv_s CATEYE_PASS);
-      if(dof_any4(near_near))
+      if(clfx_any4(near_near))
         dof_tap_near(&s, select(c, c + d * LANES(one - aq), sq16), fabs(rq_near), near_near,
                      aq, tp, inv_s CATEYE_PASS);
     }
@@ -1238,7 +1230,7 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
       for(int fx = fx0; fx <= fx1; fx++) mix |= mflags[fy * mtiles_x + fx];
   }
   /* the cap of hidden background: read only where a pixel lies in front of the focus plane */
-  const float cap = dof_any4(fmin(r, fmin(rn, rf)) < -NEAR_EPS)
+  const float cap = clfx_any4(fmin(r, fmin(rn, rf)) < -NEAR_EPS)
                     ? dof_cap(log_mean, tx, ty, tiles_x, tiles_y, cap_factor) : 0.0f;
 #if DOF_CATEYE
   const float4 ce_x = cateye.s0 * ((float)x + (float4)(0.5f, 1.5f, 2.5f, 3.5f)) + cateye.s1;
@@ -1274,7 +1266,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
     if(info.s5 > 0 && first == info.s0 && any(sharp4))
       o = select(o, dof_gather_safe(col, coc, ppitch, plane, base, c0, r, taps, taps_n4, info.s2,
                                     dof_tap_count(tile_info, info.sb, info.sc, near_r, r,
-                                                  info.s3), cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
+                                                  info.s3),
+                                    cap, mixa, mixr, mixd, mix, 0 CATEYE_PASS),
                  LANES(sharp4));
     vstore16(o, 0, out);
     return;
@@ -1287,7 +1280,8 @@ kernel void dof_gather(global const float *col, global const float *coc, const i
                                         select(c0, c0 - dm * LANES(am), sm16), rf, taps, taps_n4,
                                         first,
                                         dof_tap_count(tile_info, counts, counts_n, near_r, rf,
-                                                      count), cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
+                                                      count),
+                                        cap, mixa, mixr, mixd, 1, 1 CATEYE_PASS);
   const float16 o_near = dof_gather_safe(col, coc, ppitch, plane, base,
                                          select(c0, c0 + dm * LANES(1.0f - am), sm16), rn,
                                          taps, taps_n4, first,

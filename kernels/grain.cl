@@ -18,8 +18,8 @@
  * independent chains (1080p, CPU ms against the RGBA form: grain_apply 28.6 -> 20.3,
  * grain_blur_h 9.8 -> 5.0, draft's grain_apply_white 40.7 -> 32.4; monochrome's apply
  * 26.1 -> 15.7, its density term once for three channels).  Source rows are padded to 4
- * pixels only: the last 16 of a row load and store its whole quads.  COVERAGE=1 (clfx/fx/noise.py's coverage resolved to alpha)
- * weights the grain by alpha.
+ * pixels only: the last 16 of a row load and store its whole quads.  COVERAGE=1
+ * (clfx/fx/noise.py's coverage resolved to alpha) weights the grain by alpha.
  *
  * A build with CLFX_FP64 (the reference level, kernels/lib/precision.h) generates the noise,
  * stores the intermediate buffers and accumulates the taps in double precision.
@@ -61,41 +61,40 @@
 #endif
 
 #include "lib/fastmath.h"
-CLFX_DEFINE_FASTMATH(8)
 CLFX_DEFINE_FASTMATH(16)
 
-/* Unit Gaussian white noise for 4 pixels (Box-Muller): per pixel the uniforms of channels
- * (0, 1) give R = r cos, G = r sin; channels (2, 3) give B = r cos.  MONO: R = G = B. */
+#if REAL_IS_DOUBLE
+/* Unit Gaussian white noise for 4 pixels (Box-Muller) in float64 (the reference level);
+ * the lanes as grain_white32 lays them out. */
 inline REAL16 grain_white16(uint seed, int frame, int x, int y)
 {
   const REAL16 u = TO_REAL16(clfx_uniform16(seed, frame, x, y, 0));
   REAL8 co;
-#if REAL_IS_DOUBLE
   const REAL8 r = sqrt((REAL)(-2) * log(u.even));
   const REAL8 si = sincos((REAL)6.283185307179586 * u.odd, &co);
-#else
-  const REAL8 r = sqrt(-2.0f * clfx_log8(u.even));
-  const REAL8 si = clfx_sincos2pi8(u.odd, &co);
-#endif
-  const REAL8 a = r * co, b = r * si;
+  const REAL8 a = r * co;
   const REAL z = (REAL)0;
 #if MONO
+  (void)si;
   return (REAL16)(a.s0, a.s0, a.s0, z, a.s2, a.s2, a.s2, z,
                   a.s4, a.s4, a.s4, z, a.s6, a.s6, a.s6, z);
 #else
+  const REAL8 b = r * si;
   return (REAL16)(a.s0, b.s0, a.s1, z, a.s2, b.s2, a.s3, z,
                   a.s4, b.s4, a.s5, z, a.s6, b.s6, a.s7, z);
 #endif
 }
+#endif
 
-/* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two float16s, bit for bit two
- * grain_white16: the float32 levels take both quads' logarithms, roots and sines as one
- * 16-lane evaluation (grain_white16 runs them 8 lanes wide; at 1080p the noise cost
- * 27 ms of CPU a frame that way, its long dependency chain per work-item idle half the time).
- * Always inlined: PoCL kept it out of line, its two outputs through the stack (1080p: with
- * clfx_uniform32's shared hashes, grain_noise 18-23 -> 15.5-20.5 ms of CPU). */
-inline __attribute__((always_inline)) void grain_white32(uint seed, int frame, int x, int y,
-                                                       REAL16 *n0, REAL16 *n1)
+/* Unit Gaussian white noise for 8 pixels (x .. x + 7) as two REAL16s (Box-Muller): per pixel
+ * the uniforms of channels (0, 1) give R = r cos, G = r sin; channels (2, 3) give B = r cos;
+ * MONO: R = G = B; alpha 0.  float64: grain_white16 a quad at a time.  float32: both quads'
+ * logarithms, roots and sines as one 16-lane evaluation (8 lanes wide, a quad at a time, the
+ * noise cost 27 ms of CPU a 1080p frame, its long dependency chain per work-item idle half
+ * the time).  Always inlined: PoCL kept it out of line, its two outputs through the stack
+ * (1080p: with clfx_uniform32's shared hashes, grain_noise 18-23 -> 15.5-20.5 ms of CPU). */
+CLFX_INLINE void grain_white32(uint seed, int frame, int x, int y,
+                               REAL16 *n0, REAL16 *n1)
 {
 #if REAL_IS_DOUBLE
   *n0 = grain_white16(seed, frame, x, y);
@@ -106,13 +105,15 @@ inline __attribute__((always_inline)) void grain_white32(uint seed, int frame, i
   float16 co;
   const float16 r = sqrt(-2.0f * clfx_log16((float16)(u0.even, u1.even)));
   const float16 si = clfx_sincos2pi16((float16)(u0.odd, u1.odd), &co);
-  const float16 a = r * co, b = r * si;
+  const float16 a = r * co;
 #if MONO
+  (void)si;
   *n0 = (float16)(a.s0, a.s0, a.s0, 0.0f, a.s2, a.s2, a.s2, 0.0f,
                   a.s4, a.s4, a.s4, 0.0f, a.s6, a.s6, a.s6, 0.0f);
   *n1 = (float16)(a.s8, a.s8, a.s8, 0.0f, a.sa, a.sa, a.sa, 0.0f,
                   a.sc, a.sc, a.sc, 0.0f, a.se, a.se, a.se, 0.0f);
 #else
+  const float16 b = r * si;
   *n0 = (float16)(a.s0, b.s0, a.s1, 0.0f, a.s2, b.s2, a.s3, 0.0f,
                   a.s4, b.s4, a.s5, 0.0f, a.s6, b.s6, a.s7, 0.0f);
   *n1 = (float16)(a.s8, b.s8, a.s9, 0.0f, a.sa, b.sa, a.sb, 0.0f,
@@ -182,13 +183,14 @@ inline float16 grain_tone16(const REAL16 cs, const REAL16 e, const REAL16 q, con
   return TO_FLOAT16(clamp(o, (REAL)(-FLT_MAX), (REAL)FLT_MAX));
 }
 
-/* |v| clamped to the cap, in REAL */
+/* v clamped to [-cap, cap], in REAL */
 #define GRAIN_CS16(v) TO_REAL16(clamp((v), (float16)(-GRAIN_VALUE_CAP), (float16)GRAIN_VALUE_CAP))
 
 /* The tone model on 16 RGBA pixels *c0 .. *c3 (x .. x + 15) with their grain in planes nr,
  * ng, nb; the outputs in place (alpha copied). */
-inline __attribute__((always_inline)) void grain_mix16x3(
-    float16 *c0, float16 *c1, float16 *c2, float16 *c3, const REAL16 nr, const REAL16 ng, const REAL16 nb, const REAL4 amt,
+CLFX_INLINE void grain_mix16x3(
+    float16 *c0, float16 *c1, float16 *c2, float16 *c3, const REAL16 nr, const REAL16 ng,
+    const REAL16 nb, const REAL4 amt,
     const REAL response, const REAL grey, const REAL inv_grey)
 {
   const float16 f0 = clfx_finite16_or_zero(*c0), f1 = clfx_finite16_or_zero(*c1);
@@ -220,22 +222,22 @@ inline __attribute__((always_inline)) void grain_mix16x3(
   const float16 r = grain_tone16(rs, re, rq, nr, amt.x, grey, cov);
   const float16 g = grain_tone16(gs, ge, gq, ng, amt.y, grey, cov);
   const float16 b = grain_tone16(bs, be, bq, nb, amt.z, grey, cov);
-  /* back to RGBA: (r, g) pairs, then each quad's RGB with b (one shuffle each: clang's
-   * __builtin_shufflevector; vector literals of mixed parts lowered to ~7 shuffles a quad);
+  /* back to RGBA: (r, g) pairs, then each quad's RGB with b (one shuffle each:
+   * CLFX_SHUFFLE16; vector literals of mixed parts lowered to ~7 shuffles a quad);
    * alpha as it was */
-  const float16 org0 = __builtin_shufflevector(r, g, 0, 16, 1, 17, 2, 18, 3, 19,
-                                               4, 20, 5, 21, 6, 22, 7, 23);
-  const float16 org1 = __builtin_shufflevector(r, g, 8, 24, 9, 25, 10, 26, 11, 27,
-                                               12, 28, 13, 29, 14, 30, 15, 31);
+  const float16 org0 = CLFX_SHUFFLE16(r, g, 0, 16, 1, 17, 2, 18, 3, 19,
+                                      4, 20, 5, 21, 6, 22, 7, 23);
+  const float16 org1 = CLFX_SHUFFLE16(r, g, 8, 24, 9, 25, 10, 26, 11, 27,
+                                      12, 28, 13, 29, 14, 30, 15, 31);
   const int16 is_alpha = (int16)(0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, -1);
-  *c0 = select(__builtin_shufflevector(org0, b, 0, 1, 16, 16, 2, 3, 17, 17,
-                                       4, 5, 18, 18, 6, 7, 19, 19), f0, is_alpha);
-  *c1 = select(__builtin_shufflevector(org0, b, 8, 9, 20, 20, 10, 11, 21, 21,
-                                       12, 13, 22, 22, 14, 15, 23, 23), f1, is_alpha);
-  *c2 = select(__builtin_shufflevector(org1, b, 0, 1, 24, 24, 2, 3, 25, 25,
-                                       4, 5, 26, 26, 6, 7, 27, 27), f2, is_alpha);
-  *c3 = select(__builtin_shufflevector(org1, b, 8, 9, 28, 28, 10, 11, 29, 29,
-                                       12, 13, 30, 30, 14, 15, 31, 31), f3, is_alpha);
+  *c0 = select(CLFX_SHUFFLE16(org0, b, 0, 1, 16, 16, 2, 3, 17, 17,
+                              4, 5, 18, 18, 6, 7, 19, 19), f0, is_alpha);
+  *c1 = select(CLFX_SHUFFLE16(org0, b, 8, 9, 20, 20, 10, 11, 21, 21,
+                              12, 13, 22, 22, 14, 15, 23, 23), f1, is_alpha);
+  *c2 = select(CLFX_SHUFFLE16(org1, b, 0, 1, 24, 24, 2, 3, 25, 25,
+                              4, 5, 26, 26, 6, 7, 27, 27), f2, is_alpha);
+  *c3 = select(CLFX_SHUFFLE16(org1, b, 8, 9, 28, 28, 10, 11, 29, 29,
+                              12, 13, 30, 30, 14, 15, 31, 31), f3, is_alpha);
 }
 
 /* The three colour planes of 8 pixels' noise from grain_white32's RGBA lanes (alpha's 0s
@@ -266,7 +268,7 @@ kernel void grain_noise(global REAL *noise, const int npitch, const int rows,
  * vload16 at p + k * step (step = one pixel for the horizontal pass, one row for the
  * vertical one).  Per lane the operations of the RGBA form's taps in their order; three
  * independent chains. */
-inline __attribute__((always_inline)) void grain_taps16x3(
+CLFX_INLINE void grain_taps16x3(
     global const REAL *p, const size_t plane, const size_t step, global const REAL *weights,
     REAL16 *r, REAL16 *g, REAL16 *b)
 {
@@ -303,7 +305,7 @@ kernel void grain_blur_h(global const REAL *noise, global REAL *tmp, global cons
 
 /* The 16 RGBA source pixels at i with their grain mixed in, stored back: rows are padded to
  * 4 pixels only, so the row's last 16 store only its quads < quads. */
-inline __attribute__((always_inline)) void grain_store16(
+CLFX_INLINE void grain_store16(
     global const float *src, global float *dst, const size_t i, const int quads,
     const REAL16 r, const REAL16 g, const REAL16 b, const REAL4 amt, const REAL response,
     const REAL grey, const REAL inv_grey)

@@ -276,7 +276,8 @@ KERNEL_ARGS: dict[str, dict[str, str]] = {
         ),
         "dof_gather": (
             "buf col, buf coc, int ppitch, int pad, buf dst, int pitch, int width, int height, "
-            "buf taps, int taps_n4, buf tile_info, buf log_mean, int tiles_x, int tiles_y, int tile, "
+            "buf taps, int taps_n4, buf tile_info, buf log_mean, int tiles_x, int tiles_y, "
+            "int tile, "
             "float cap_factor, buf hres, int hpitch, int hwidth, int hheight, float4 refine, "
             "float low_r, float sharp_r, float8 cateye, int plane, int4 place, int4 hplace, "
             "buf mixa, buf mixr, "

@@ -335,6 +335,8 @@ def _host_spectrum(rt, k: np.ndarray, n1: int, n2: int, precision: str):
     ys = (np.arange(kh) - kh // 2) % n1
     xs = (np.arange(kw) - kw // 2) % n2
     out = np.empty((planes, n2 // 2 + 1, n1), np.complex128)
+    # the RGB convolutions' own planes (the shelf is kept by their count: 3 channels), not a
+    # second set of grid-sized planes for a 1-plane PSF
     shelf, work, shelved = _host_planes(rt, n1, n2, host_planes_in_flight(n1, n2, 3))
     try:
         for p0 in range(0, planes, len(work)):

@@ -259,7 +259,8 @@ class DofGather:
     half: np.ndarray          # per tile: gathered at half resolution
     half_l: int               # the half-resolution pyramid's depth
     pad: int                  # the padded buffers' border (px)
-    taps: object              # (device tap table, its column stride) and per-tile table of the full-res gather
+    taps: object              # (device tap table, its column stride) and per-tile table
+                              # of the full-res gather
     tiles: object
     htaps: object             # ... of the half-resolution gather (None without)
     htiles: object

@@ -101,9 +101,9 @@ Migration from version 1 (pixel-sized grain in absolute linear units):
 
 Quality levels: every level draws the same white noise (levels compare pixel by pixel) and
 differs only in the filter: draft none (white noise, one pass), preview truncated at 2 s,
-final at 4 s, reference at 6 s in float64.  On the device the colour channels run as planes
-of 8 pixels (alpha has no grain); float32 levels use polynomial log / sin / cos / exp2
-(relative error ~2e-7).  Film grain and
+final at 4 s, reference at 6 s in float64.  On the device the colour channels run as
+float16 planes, 16 pixels a work-item (noise: 8; alpha has no grain); float32 levels use
+polynomial log / sin / cos / exp2 (relative error ~2e-7).  Film grain and
 digital sensor noise are separate effects (``sensor_noise``).
 
 References: Newson, Delon, Galerne 2017, "A stochastic film grain model for

@@ -42,6 +42,31 @@
 #define CLFX_COLD
 #endif
 
+/* Always inlined where the compiler has the attribute: PoCL (LLVM 15) kept some vector helpers
+ * out of line and passed their outputs through the stack (ca_cubic_bins, grain_white32;
+ * `perf report --sort dso,sym` shows such a helper as its own symbol).  Elsewhere plain
+ * inline: the compiler decides. */
+#if defined(__has_attribute)
+#if __has_attribute(always_inline)
+#define CLFX_INLINE inline __attribute__((always_inline))
+#endif
+#endif
+#ifndef CLFX_INLINE
+#define CLFX_INLINE inline
+#endif
+
+/* A 16-lane shuffle of a and b (lanes of a then b) with constant indices: clang's builtin
+ * where the compiler has it (one instruction; vector literals of mixed parts came out as ~7
+ * shuffles on PoCL), else OpenCL's shuffle2 with the same indices as its mask. */
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_shufflevector)
+#define CLFX_SHUFFLE16(a, b, ...) __builtin_shufflevector(a, b, __VA_ARGS__)
+#endif
+#endif
+#ifndef CLFX_SHUFFLE16
+#define CLFX_SHUFFLE16(a, b, ...) shuffle2(a, b, (uint16)(__VA_ARGS__))
+#endif
+
 /* Streaming stores, where the host asks for them (CLFX_STREAM_STORES: an output of at least
  * half the device's global memory cache, on a CPU device: clfx.device.runtime
  * Runtime.streams_stores).  A whole 64-byte line written without first reading it in

@@ -56,7 +56,7 @@
 
 /* the gather's pieces, inlined: the first pass of motion_gather runs them with scale 1, which
  * then folds away (x * 1 is x exactly) */
-#define MB_INLINE inline __attribute__((always_inline))
+#define MB_INLINE CLFX_INLINE
 
 #define BIG_DEPTH 1e30f     /* sanitised "no surface / invalid depth": behind everything */
 #define SOFT_Z 0.02f        /* relative depth difference over which "in front" fades in */

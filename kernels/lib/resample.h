@@ -742,10 +742,10 @@ inline void fp_prefetch_quad(global const float *src, int pitch, global const in
  * f8 = (f_x of the 4 pixels, f_y of the 4) and spreads hh = (h_x, h_y) of each pixel
  * interleaved, as a packed quad holds them (a kernel with an affine map passes its own:
  * breathing.cl). */
-inline __attribute__((always_inline)) void fp_fast_quad_at(global const float *src, int pitch,
-                                                           int4 base, float8 f8, float8 hh,
-                                                           float4 *o0, float4 *o1,
-                                                           float4 *o2, float4 *o3)
+CLFX_INLINE void fp_fast_quad_at(global const float *src, int pitch,
+                                 int4 base, float8 f8, float8 hh,
+                                 float4 *o0, float4 *o1,
+                                 float4 *o2, float4 *o3)
 {
   const int row = pitch * 4;
   const float4 fx = f8.lo, fy = f8.hi;
@@ -897,9 +897,9 @@ inline __attribute__((always_inline)) void fp_fast_quad_at(global const float *s
 }
 
 /* The fast path of a packed quad q (FP_Q_INTS ints of a packed map). */
-inline __attribute__((always_inline)) void fp_fast_quad(global const float *src, int pitch,
-                                                        global const int *q, float4 *o0,
-                                                        float4 *o1, float4 *o2, float4 *o3)
+CLFX_INLINE void fp_fast_quad(global const float *src, int pitch,
+                              global const int *q, float4 *o0,
+                              float4 *o1, float4 *o2, float4 *o3)
 {
 #if FP_Q_INTS == 12
   const float8 f8 = vload_half8(0, (global const half *)(q + 4));  /* (f_x, f_y) */

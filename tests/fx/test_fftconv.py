@@ -1,3 +1,5 @@
+import threading
+
 import numpy as np
 import pytest
 
@@ -327,7 +329,6 @@ def test_host_lanes_overlap_keep_each_lanes_order_and_stop_at_an_error(monkeypat
     # the channels' passes run as lanes on one pool: a lane's next pass waits for its own
     # pass only, so another lane's tasks fill the cores meanwhile (no core idles at the end
     # of a pass); an error stops every lane and leaves no thread behind
-    import threading
 
     monkeypatch.setattr(fftconv, "available_cores", lambda: 2)
     met, order = threading.Event(), []
@@ -371,13 +372,13 @@ def test_host_passes_take_every_channel_in_each_row_task(monkeypatch):
 
     def source(c):
         def load(r0, r1, x):
-            calls.append(("load", c, r0))
+            calls.append(("load", c, r0, threading.get_ident()))
             x[:, :src.shape[2]] = src[c, r0:r1]
         return load
 
     def sink(c):
         def put(r0, r1, values):
-            calls.append(("put", c, r0))
+            calls.append(("put", c, r0, threading.get_ident()))
             got[c, r0:r1] = values
         return put
 
@@ -387,11 +388,11 @@ def test_host_passes_take_every_channel_in_each_row_task(monkeypatch):
                                   ([(0, n1)], [sink(c) for c in range(3)]))
     assert len(passes[0]) == 4 and len(passes[2]) == 6         # row chunks, not x 3
     fftconv._run_lanes([passes])
-    for kind in ("load", "put"):
-        seen = [(c, r0) for k, c, r0 in calls if k == kind]
-        for r0 in {r0 for _, r0 in seen}:       # each task: every channel, in order
-            i = seen.index((0, r0))
-            assert seen[i:i + 3] == [(0, r0), (1, r0), (2, r0)]
+    for kind in ("load", "put"):   # each task (the tasks run at once on 2 threads, their
+        for r0 in {r for k, _, r, _ in calls if k == kind}:   # calls interleaved): every
+            task = [(c, t) for k, c, r, t in calls if k == kind and r == r0]   # channel in
+            assert [c for c, _ in task] == [0, 1, 2]                           # order, on
+            assert len({t for _, t in task}) == 1                              # one thread
     for c in range(3):
         x = np.zeros((n1, n2))
         x[:rows, :src.shape[2]] = src[c]

@@ -130,8 +130,8 @@ def test_lattice_levels_of_a_tile_grid_are_each_radius_lattice_level():
 
 
 def test_gather_mask_tests_match_any_and_all(rt, tmp_path):
-    """dof_any4 / dof_all4 (the gather's branch-free per-tap tests) agree with OpenCL's
-    any() / all() on every mask of 4 lanes."""
+    """lib/common.h's clfx_any4 / clfx_all4 (the dof and motion gathers' branch-free
+    per-tap tests) agree with OpenCL's any() / all() on every mask of 4 lanes."""
     from pathlib import Path
 
     from clfx.device.runtime import Runtime
@@ -142,7 +142,7 @@ def test_gather_mask_tests_match_any_and_all(rt, tmp_path):
         "kernel void probe(global int *out) {\n"
         "  const int i = get_global_id(0);\n"
         "  const int4 m = -(int4)(i & 1, (i >> 1) & 1, (i >> 2) & 1, (i >> 3) & 1);\n"
-        "  out[2 * i] = dof_any4(m) == any(m); out[2 * i + 1] = dof_all4(m) == all(m); }\n")
+        "  out[2 * i] = clfx_any4(m) == any(m); out[2 * i + 1] = clfx_all4(m) == all(m); }\n")
     probe = Runtime(device=rt.device)
     probe.kernel_dir = tmp_path
     knl = probe.kernel("probe.cl", "probe", arg_types="buf out")
@@ -296,6 +296,7 @@ def test_near_bounds_hold_every_near_radius_a_tap_can_take(rng, table):
     lone = np.full((6, 9), 1e-3)
     lone[0, 0] = 3.0
     got = dof_module.near_bounds(lone, table, 16)
+    assert got[0, 4] == 1e-3    # within the old bound's span (_span_bound: 3.0), out of its light
     if np.abs(table[:, :2]).max() > 60:               # the table reaches it, its light not
         assert got[0, 0] == 3.0 and got[5, 8] == 1e-3
 
