@@ -33,10 +33,7 @@ inline REAL16 cb_path_sum(global const float *col, const int pitch, const int wi
     /* inverse rotation, then inverse scale, back to window coordinates */
     const float4 rx = (c * qx + s * qy) * inv_k + cx - (float)x0;
     const float4 ry = (-s * qx + c * qy) * inv_k + cy - (float)y0;
-    const float16 v = (float16)(mg_fetch_scaled(col, pitch, width, row0, row1, rx.x, ry.x, scale),
-                                mg_fetch_scaled(col, pitch, width, row0, row1, rx.y, ry.y, scale),
-                                mg_fetch_scaled(col, pitch, width, row0, row1, rx.z, ry.z, scale),
-                                mg_fetch_scaled(col, pitch, width, row0, row1, rx.w, ry.w, scale));
+    const float16 v = mg_fetch4_scaled(col, pitch, width, row0, row1, rx, ry, scale);
     acc += TO_REAL16(v);
   }
   return acc;

@@ -332,7 +332,6 @@ inline float4 mb_arc_dc(const float4 t, const float4 w)
 #define MB_ARC(f, b, t, w) ARC_PATH(float4, mb_arc_a(t, w), mb_arc_c(t, w), (f) + (b), (f) - (b))
 #define MB_ARC_TANGENT(f, b, t, w) \
   (mb_arc_da(t, w) * 0.5f * ((f) + (b)) + mb_arc_dc(t, w) * 0.5f * ((f) - (b)))
-#define SPLAT16(w) (float16)((w).xxxx, (w).yyyy, (w).zzzz, (w).wwww)
 #define SPLAT16I(m) (int16)((m).xxxx, (m).yyyy, (m).zzzz, (m).wwww)   /* a lane mask */
 
 /* Load the aux records of 4 sample positions (nearest pixel) as vectors. */
@@ -568,44 +567,13 @@ MB_INLINE float16 mb_fetch_quad_linear(global const float *col, const int pitch,
 #endif
 }
 
-/* The pixels at flat indices i of the 4 lanes, times `scale`, lane-major */
-#define MB_GATHER4(buf, i, scale) \
-  ((float16)(vload4((i).x, buf), vload4((i).y, buf), vload4((i).z, buf), vload4((i).w, buf)) \
-   * (scale))
-
-/* mg_fetch_scaled at the 4 lanes' own positions (px, py) at once: per element the same
- * operations, the lanes' arithmetic in one float16 */
-MB_INLINE float16 mb_fetch4_linear(global const float *col, const int pitch, const int w,
-                                   const int row0, const int row1, const float4 px, const float4 py,
-                                   const float scale)
-{
-#if BILINEAR
-  const float4 u = px - 0.5f, v = py - 0.5f;
-  const float4 fu = floor(u), fv = floor(v);
-  const float4 ax = u - fu, ay = v - fv;
-  const int4 iu = convert_int4(clamp(fu, -1.0f, (float)w));
-  const int4 iv = convert_int4(clamp(fv, (float)(row0 - 1), (float)row1));
-  const int4 xa = clamp(iu, (int4)(0), (int4)(w - 1)), xb = clamp(iu + 1, (int4)(0), (int4)(w - 1));
-  const int4 ya = clamp(iv, (int4)(row0), (int4)(row1 - 1)) * pitch;
-  const int4 yb = clamp(iv + 1, (int4)(row0), (int4)(row1 - 1)) * pitch;
-  const float16 c00 = MB_GATHER4(col, ya + xa, scale), c10 = MB_GATHER4(col, ya + xb, scale);
-  const float16 c01 = MB_GATHER4(col, yb + xa, scale), c11 = MB_GATHER4(col, yb + xb, scale);
-  const float16 top = c00 + (c10 - c00) * SPLAT16(ax), bot = c01 + (c11 - c01) * SPLAT16(ax);
-  return top + (bot - top) * SPLAT16(ay);
-#else
-  const int4 x = convert_int4(clamp(floor(px), 0.0f, (float)(w - 1)));
-  const int4 y = convert_int4(clamp(floor(py), (float)row0, (float)(row1 - 1)));
-  return MB_GATHER4(col, y * pitch + x, scale);
-#endif
-}
-
 /* Colours at the 4 lanes' own continuous positions (px, py), clamp-to-edge, times `scale`:
  * Catmull-Rom (4 x 4 taps, blended with the tent by `beta`, mb_cubic_weights) clamped per
  * channel to the 2 x 2 pixels around each position.  Short blurs integrate the image over
  * under a pixel or a few: bilinear reconstruction blurs every sample by up to a quarter pixel
  * more (as much again as a one-pixel smear), the cubic keeps the detail; the clamp stops its
  * negative lobes ringing around HDR lights.  The lanes' arithmetic in one float16, as
- * mb_fetch4_linear. */
+ * mg_fetch4_scaled. */
 MB_INLINE float16 mb_fetch4_cubic(global const float *col, const int pitch, const int w,
                                   const int row0, const int row1, const float4 px, const float4 py,
                                   const float scale, const float4 beta)
@@ -633,8 +601,8 @@ MB_INLINE float16 mb_fetch4_cubic(global const float *col, const int pitch, cons
   for(int j = 0; j < 4; j++)
   {
     const int4 row = clamp(iv - 1 + j, (int4)(row0), (int4)(row1 - 1)) * pitch;
-    const float16 c0 = MB_GATHER4(col, row + x0, scale), c1 = MB_GATHER4(col, row + x1, scale);
-    const float16 c2 = MB_GATHER4(col, row + x2, scale), c3 = MB_GATHER4(col, row + x3, scale);
+    const float16 c0 = MG_GATHER4(col, row + x0, scale), c1 = MG_GATHER4(col, row + x1, scale);
+    const float16 c2 = MG_GATHER4(col, row + x2, scale), c3 = MG_GATHER4(col, row + x3, scale);
     if(j == 1 || j == 2)
     {
       lo = fmin(lo, fmin(c1, c2));
@@ -670,7 +638,7 @@ MB_INLINE float16 mb_fetch_lanes(global const float *col, const int pitch, const
   if(clfx_all4((y == y.x) & (u - fu == u.x - fu.x)
                 & (fu - fu.x == (float4)(0.0f, 1.0f, 2.0f, 3.0f))))
     return mb_fetch_quad_linear(col, pitch, w, row0, row1, x.x, y.x, scale, 0.0f);
-  return mb_fetch4_linear(col, pitch, w, row0, row1, x, y, scale);
+  return mg_fetch4_scaled(col, pitch, w, row0, row1, x, y, scale);
 }
 
 /* The step model along one pixel axis for the 4 lanes: the taps p-2, p-1, p1, p2 (times
@@ -766,7 +734,7 @@ MB_INLINE float16 mb_short_quad(global const float *col, global const float *aux
 #define MB_FETCH_QUAD mb_fetch_quad_cubic
 #else
 #define MB_FETCH_LANES(col, pitch, w, row0, row1, px, py, scale, beta) \
-  mb_fetch4_linear(col, pitch, w, row0, row1, px, py, scale)
+  mg_fetch4_scaled(col, pitch, w, row0, row1, px, py, scale)
 #define MB_FETCH_QUAD mb_fetch_quad_linear
 #endif
 
